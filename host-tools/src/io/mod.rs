@@ -1,0 +1,1 @@
+//! File input/output: FRF (CSV, UFF58), signal CSV, atomic writes.

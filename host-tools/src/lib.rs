@@ -1,0 +1,7 @@
+//! The `dynocomp` host tool as a library: one module per stage of the signal
+//! chain, data flowing one way (io → fit → kalman → realize → quantize →
+//! image → report), plus the simulator and the offline compensator.
+
+pub mod frf;
+pub mod io;
+pub mod simulate;

@@ -1,0 +1,1 @@
+//! Synthetic dynamometers, impact tests and milling forces with known truth.

@@ -1,0 +1,595 @@
+//! The coefficient image: one versioned, position-independent, CRC-protected
+//! binary blob per box (DESIGN.md, "The coefficient image").
+//!
+//! The byte layout is documented in `docs/image-format.md`; this module is its
+//! only implementation. All multi-byte fields are little-endian.
+//!
+//! Parsing never panics on any input: every read goes through bounds-checked
+//! accessors, and every failure is a typed [`ImageError`]. Validation order:
+//! length → magic → version → declared length → CRC → structure → ranges →
+//! stability. A single flipped bit anywhere is caught by the CRC-32.
+
+use crate::kernel::{AxisFilter, FilterError, Section, MAX_SECTIONS};
+use crate::AXES;
+
+/// Magic bytes at offset 0.
+pub const MAGIC: [u8; 4] = *b"DCIM";
+/// The format version this code writes and reads.
+pub const FORMAT_VERSION: u16 = 1;
+/// Size of the fixed header (bytes before the first axis block).
+pub const HEADER_LEN: usize = 64;
+/// Size of an axis block without its sections.
+pub const AXIS_HEADER_LEN: usize = 56;
+/// Size of one section record (8 × f32).
+pub const SECTION_LEN: usize = 32;
+/// Size of the trailing CRC.
+pub const CRC_LEN: usize = 4;
+/// Largest possible image (3 axes × 24 sections).
+pub const MAX_IMAGE_LEN: usize = HEADER_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN) + CRC_LEN;
+/// Smallest valid image (1 axis, 0 sections).
+pub const MIN_IMAGE_LEN: usize = HEADER_LEN + AXIS_HEADER_LEN + CRC_LEN;
+
+/// Accepted sample-rate range of an image (Hz). The box itself narrows this
+/// to what its hardware supports.
+pub const FS_RANGE_HZ: core::ops::RangeInclusive<u32> = 1_000..=1_000_000;
+/// Largest declared output latency (samples).
+pub const MAX_LATENCY_SAMPLES: u16 = 1024;
+
+/// Image flag: the image holds an offline-only design (e.g. parallel
+/// elaboration); the box must never run it.
+pub const FLAG_OFFLINE_ONLY: u8 = 0x01;
+const KNOWN_FLAGS: u8 = FLAG_OFFLINE_ONLY;
+
+/// The CRC used: CRC-32/ISO-HDLC (the zlib/PNG/Ethernet CRC-32).
+pub const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+/// How the compensator was designed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum DesignMethod {
+    /// Not produced by the design pipeline (hand-made, test or placeholder).
+    Manual = 0,
+    /// Vector fitting + ZOH + discrete Riccati (the default).
+    VectorFitting = 1,
+    /// The seed paper's RFP + damped Gauss-Newton + continuous Riccati + Tustin.
+    Paper = 2,
+}
+
+impl DesignMethod {
+    fn from_u8(v: u8) -> Option<Self> {
+        match v {
+            0 => Some(Self::Manual),
+            1 => Some(Self::VectorFitting),
+            2 => Some(Self::Paper),
+            _ => None,
+        }
+    }
+}
+
+/// Conversion between converter codes and newtons for one axis.
+///
+/// `force_n = (adc_code − adc_offset_code) · newton_per_code` and
+/// `dac_code = dac_offset_code + force_n · dac_code_per_newton`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AxisScaling {
+    /// ADC code that corresponds to 0 N (codes).
+    pub adc_offset_code: f32,
+    /// Input gain (N per ADC code).
+    pub newton_per_code: f32,
+    /// Output gain (DAC codes per N).
+    pub dac_code_per_newton: f32,
+    /// DAC code that represents 0 N (codes).
+    pub dac_offset_code: f32,
+}
+
+impl AxisScaling {
+    /// ADC code → force (N).
+    #[inline]
+    pub fn code_to_newton(&self, code: u16) -> f32 {
+        (f32::from(code) - self.adc_offset_code) * self.newton_per_code
+    }
+}
+
+/// Design summary of one axis, carried for `inspect` and the box's status.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AxisSummary {
+    /// Order of the fitted sensor model G(s).
+    pub model_order: u16,
+    /// Normalized RMS fit error of G over the coherent band (fraction, 0.01 = 1 %).
+    pub fit_nrmse: f32,
+    /// Lower edge of the achieved flat band (|H·G| within ±5 %, ±5°), Hz.
+    pub flat_lo_hz: f32,
+    /// Upper edge of the achieved flat band, Hz.
+    pub flat_hi_hz: f32,
+    /// Noise gain: output noise RMS / input noise RMS for white noise (ratio).
+    pub noise_gain: f32,
+    /// Process-noise intensity Q of the force random walk (N²/sample).
+    pub q: f64,
+    /// Measurement-noise variance R (N²).
+    pub r: f64,
+}
+
+/// One axis of an image: which axis, its scaling, filter and summary.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AxisImage {
+    /// Axis index (0 = x, 1 = y, 2 = z).
+    pub axis: u8,
+    /// Code ↔ newton conversion.
+    pub scaling: AxisScaling,
+    /// The compensator.
+    pub filter: AxisFilter,
+    /// Design summary.
+    pub summary: AxisSummary,
+}
+
+/// A decoded, validated coefficient image.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CoeffImage {
+    /// Sample rate the filters were designed for (Hz).
+    pub fs_hz: u32,
+    /// Declared output latency of the compensated force (samples).
+    pub latency_samples: u16,
+    /// Flags (`FLAG_*`).
+    pub flags: u8,
+    /// Design method.
+    pub method: DesignMethod,
+    /// SHA-256 of the FRF file the design came from (zeros if none).
+    pub source_sha256: [u8; 32],
+    /// Creation time, seconds since the Unix epoch (0 if unknown).
+    pub created_unix_s: u64,
+    /// Per-axis content; `None` for an axis the image does not cover.
+    pub axes: [Option<AxisImage>; AXES],
+}
+
+/// Why an image was rejected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ImageError {
+    /// Fewer bytes than the smallest image or than the declared length.
+    Truncated {
+        /// Bytes needed.
+        needed: u32,
+        /// Bytes present.
+        have: u32,
+    },
+    /// The magic bytes are wrong (erased flash, not an image).
+    BadMagic,
+    /// A format version this code does not read.
+    UnsupportedVersion(u16),
+    /// The declared header length is not [`HEADER_LEN`].
+    BadHeaderLength(u16),
+    /// The declared total length is out of range or disagrees with the contents.
+    BadLength(u32),
+    /// CRC mismatch.
+    BadCrc {
+        /// CRC stored in the image.
+        stored: u32,
+        /// CRC computed over the image.
+        computed: u32,
+    },
+    /// Sample rate outside [`FS_RANGE_HZ`].
+    SampleRateOutOfRange(u32),
+    /// Latency above [`MAX_LATENCY_SAMPLES`].
+    LatencyOutOfRange(u16),
+    /// No axis, or unknown axis bits set.
+    BadAxisMask(u8),
+    /// Unknown flag bits set.
+    UnknownFlags(u8),
+    /// Unknown design method code.
+    UnknownMethod(u8),
+    /// Reserved bytes are not zero.
+    ReservedNotZero,
+    /// An axis block names a different axis than expected from the mask.
+    AxisMismatch {
+        /// Expected axis index.
+        expected: u8,
+        /// Axis index found.
+        found: u8,
+    },
+    /// More than [`MAX_SECTIONS`] sections on an axis.
+    TooManySections {
+        /// Axis index.
+        axis: u8,
+        /// Declared count.
+        count: u8,
+    },
+    /// A scaling value is non-finite or zero where it must not be.
+    BadScaling {
+        /// Axis index.
+        axis: u8,
+    },
+    /// A summary value is non-finite or negative.
+    BadSummary {
+        /// Axis index.
+        axis: u8,
+    },
+    /// A filter coefficient is non-finite (section index; 255 for `d`).
+    NonFiniteCoefficient {
+        /// Axis index.
+        axis: u8,
+        /// Section index.
+        section: u8,
+    },
+    /// A section has a pole on or outside the unit circle.
+    UnstableSection {
+        /// Axis index.
+        axis: u8,
+        /// Section index.
+        section: u8,
+    },
+    /// Output buffer too small (encoding only).
+    BufferTooSmall {
+        /// Bytes needed.
+        needed: u32,
+    },
+}
+
+impl core::fmt::Display for ImageError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        use ImageError::*;
+        match *self {
+            Truncated { needed, have } => write!(f, "image truncated: {have} bytes, need {needed}"),
+            BadMagic => write!(f, "not a dynocomp coefficient image (bad magic)"),
+            UnsupportedVersion(v) => write!(f, "unsupported image format version {v} (this build reads {FORMAT_VERSION})"),
+            BadHeaderLength(l) => write!(f, "bad header length {l} (expected {HEADER_LEN})"),
+            BadLength(l) => write!(f, "declared image length {l} is inconsistent with its contents"),
+            BadCrc { stored, computed } => write!(f, "CRC mismatch: stored {stored:#010x}, computed {computed:#010x} (image corrupted)"),
+            SampleRateOutOfRange(fs) => write!(f, "sample rate {fs} Hz outside {}..={} Hz", FS_RANGE_HZ.start(), FS_RANGE_HZ.end()),
+            LatencyOutOfRange(l) => write!(f, "declared latency {l} samples exceeds {MAX_LATENCY_SAMPLES}"),
+            BadAxisMask(m) => write!(f, "bad axis mask {m:#04x}"),
+            UnknownFlags(fl) => write!(f, "unknown flag bits {fl:#04x}"),
+            UnknownMethod(m) => write!(f, "unknown design method code {m}"),
+            ReservedNotZero => write!(f, "reserved header bytes are not zero"),
+            AxisMismatch { expected, found } => write!(f, "axis block for axis {found} where axis {expected} was expected"),
+            TooManySections { axis, count } => write!(f, "axis {axis}: {count} sections exceeds the maximum {MAX_SECTIONS}"),
+            BadScaling { axis } => write!(f, "axis {axis}: scaling values non-finite or zero gain"),
+            BadSummary { axis } => write!(f, "axis {axis}: design summary has non-finite or negative values"),
+            NonFiniteCoefficient { axis, section } => write!(f, "axis {axis}: section {section} has a non-finite coefficient"),
+            UnstableSection { axis, section } => write!(f, "axis {axis}: section {section} has a pole on or outside the unit circle"),
+            BufferTooSmall { needed } => write!(f, "output buffer too small, need {needed} bytes"),
+        }
+    }
+}
+
+/// Bounds-checked little-endian reader; every read returns `None` past the end.
+struct Reader<'a> {
+    buf: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn bytes<const N: usize>(&mut self) -> Option<[u8; N]> {
+        let end = self.pos.checked_add(N)?;
+        let out: [u8; N] = self.buf.get(self.pos..end)?.try_into().ok()?;
+        self.pos = end;
+        Some(out)
+    }
+    fn u8(&mut self) -> Option<u8> {
+        self.bytes::<1>().map(|b| b[0])
+    }
+    fn u16(&mut self) -> Option<u16> {
+        self.bytes().map(u16::from_le_bytes)
+    }
+    fn u32(&mut self) -> Option<u32> {
+        self.bytes().map(u32::from_le_bytes)
+    }
+    fn u64(&mut self) -> Option<u64> {
+        self.bytes().map(u64::from_le_bytes)
+    }
+    fn f32(&mut self) -> Option<f32> {
+        self.bytes().map(f32::from_le_bytes)
+    }
+    fn f64(&mut self) -> Option<f64> {
+        self.bytes().map(f64::from_le_bytes)
+    }
+}
+
+/// Bounds-checked little-endian writer.
+struct Writer<'a> {
+    buf: &'a mut [u8],
+    pos: usize,
+}
+
+impl Writer<'_> {
+    fn put(&mut self, bytes: &[u8]) {
+        // Callers check the total length first; out-of-range writes are dropped
+        // rather than panicking.
+        if let Some(dst) = self.buf.get_mut(self.pos..self.pos + bytes.len()) {
+            dst.copy_from_slice(bytes);
+        }
+        self.pos += bytes.len();
+    }
+}
+
+/// Total image length for a given set of per-axis section counts.
+pub fn encoded_len(image: &CoeffImage) -> usize {
+    HEADER_LEN
+        + image
+            .axes
+            .iter()
+            .flatten()
+            .map(|a| AXIS_HEADER_LEN + a.filter.sections().len() * SECTION_LEN)
+            .sum::<usize>()
+        + CRC_LEN
+}
+
+/// Read the declared total length from an image header without validating
+/// the rest (used to find an image's end inside a flash slot).
+pub fn declared_len(bytes: &[u8]) -> Option<usize> {
+    let mut r = Reader { buf: bytes, pos: 8 };
+    r.u32().map(|v| v as usize)
+}
+
+impl CoeffImage {
+    /// Axis mask: bit i set when axis i is present.
+    pub fn axis_mask(&self) -> u8 {
+        self.axes
+            .iter()
+            .enumerate()
+            .filter(|(_, a)| a.is_some())
+            .fold(0, |m, (i, _)| m | (1 << i))
+    }
+
+    /// Whether the image is marked offline-only (never run in the box).
+    pub fn is_offline_only(&self) -> bool {
+        self.flags & FLAG_OFFLINE_ONLY != 0
+    }
+
+    /// An identifier of the image's content: its CRC-32.
+    pub fn id(&self) -> u32 {
+        let mut buf = [0u8; MAX_IMAGE_LEN];
+        match self.encode(&mut buf) {
+            Ok(n) => u32::from_le_bytes([buf[n - 4], buf[n - 3], buf[n - 2], buf[n - 1]]),
+            Err(_) => 0,
+        }
+    }
+
+    /// Encode into `buf`; returns the number of bytes written.
+    ///
+    /// The image is validated first (the same checks as [`parse`](Self::parse)),
+    /// so an encoded image always parses back to an equal value.
+    pub fn encode(&self, buf: &mut [u8]) -> Result<usize, ImageError> {
+        self.validate()?;
+        let len = encoded_len(self);
+        if buf.len() < len {
+            return Err(ImageError::BufferTooSmall { needed: len as u32 });
+        }
+        let mut w = Writer { buf, pos: 0 };
+        w.put(&MAGIC);
+        w.put(&FORMAT_VERSION.to_le_bytes());
+        w.put(&(HEADER_LEN as u16).to_le_bytes());
+        w.put(&(len as u32).to_le_bytes());
+        w.put(&self.fs_hz.to_le_bytes());
+        w.put(&self.latency_samples.to_le_bytes());
+        w.put(&[self.axis_mask(), self.flags, self.method as u8, 0, 0, 0]);
+        w.put(&self.source_sha256);
+        w.put(&self.created_unix_s.to_le_bytes());
+        for a in self.axes.iter().flatten() {
+            let secs = a.filter.sections();
+            w.put(&[a.axis, secs.len() as u8]);
+            w.put(&a.summary.model_order.to_le_bytes());
+            let s = &a.scaling;
+            for v in [s.adc_offset_code, s.newton_per_code, s.dac_code_per_newton, s.dac_offset_code, a.filter.d()] {
+                w.put(&v.to_le_bytes());
+            }
+            let m = &a.summary;
+            for v in [m.fit_nrmse, m.flat_lo_hz, m.flat_hi_hz, m.noise_gain] {
+                w.put(&v.to_le_bytes());
+            }
+            w.put(&m.q.to_le_bytes());
+            w.put(&m.r.to_le_bytes());
+            for sec in secs {
+                for v in sec.delta.iter().chain(&sec.b).chain(&sec.c) {
+                    w.put(&v.to_le_bytes());
+                }
+            }
+        }
+        let crc = CRC32.checksum(w.buf.get(..w.pos).unwrap_or(&[]));
+        w.put(&crc.to_le_bytes());
+        Ok(w.pos)
+    }
+
+    /// Check the semantic rules every image must satisfy.
+    fn validate(&self) -> Result<(), ImageError> {
+        if !FS_RANGE_HZ.contains(&self.fs_hz) {
+            return Err(ImageError::SampleRateOutOfRange(self.fs_hz));
+        }
+        if self.latency_samples > MAX_LATENCY_SAMPLES {
+            return Err(ImageError::LatencyOutOfRange(self.latency_samples));
+        }
+        if self.flags & !KNOWN_FLAGS != 0 {
+            return Err(ImageError::UnknownFlags(self.flags));
+        }
+        if self.axis_mask() == 0 {
+            return Err(ImageError::BadAxisMask(0));
+        }
+        for (i, a) in self.axes.iter().enumerate() {
+            let Some(a) = a else { continue };
+            let axis = i as u8;
+            if a.axis != axis {
+                return Err(ImageError::AxisMismatch { expected: axis, found: a.axis });
+            }
+            let s = &a.scaling;
+            let finite = [s.adc_offset_code, s.newton_per_code, s.dac_code_per_newton, s.dac_offset_code]
+                .iter()
+                .all(|v| v.is_finite());
+            if !finite || s.newton_per_code == 0.0 || s.dac_code_per_newton == 0.0 {
+                return Err(ImageError::BadScaling { axis });
+            }
+            let m = &a.summary;
+            let ok = [m.fit_nrmse, m.flat_lo_hz, m.flat_hi_hz, m.noise_gain]
+                .iter()
+                .all(|v| v.is_finite() && *v >= 0.0)
+                && m.q.is_finite()
+                && m.q >= 0.0
+                && m.r.is_finite()
+                && m.r >= 0.0;
+            if !ok {
+                return Err(ImageError::BadSummary { axis });
+            }
+            if !a.filter.d().is_finite() {
+                return Err(ImageError::NonFiniteCoefficient { axis, section: 255 });
+            }
+            for (j, sec) in a.filter.sections().iter().enumerate() {
+                let section = j as u8;
+                if !sec.is_finite() {
+                    return Err(ImageError::NonFiniteCoefficient { axis, section });
+                }
+                if !sec.is_stable() {
+                    return Err(ImageError::UnstableSection { axis, section });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Parse and validate an image that occupies exactly `bytes`.
+    pub fn parse(bytes: &[u8]) -> Result<CoeffImage, ImageError> {
+        let have = bytes.len() as u32;
+        if bytes.len() < MIN_IMAGE_LEN {
+            return Err(ImageError::Truncated { needed: MIN_IMAGE_LEN as u32, have });
+        }
+        let mut r = Reader { buf: bytes, pos: 0 };
+        let truncated = ImageError::Truncated { needed: MIN_IMAGE_LEN as u32, have };
+        if r.bytes::<4>() != Some(MAGIC) {
+            return Err(ImageError::BadMagic);
+        }
+        let version = r.u16().ok_or(truncated)?;
+        if version != FORMAT_VERSION {
+            return Err(ImageError::UnsupportedVersion(version));
+        }
+        let header_len = r.u16().ok_or(truncated)?;
+        if usize::from(header_len) != HEADER_LEN {
+            return Err(ImageError::BadHeaderLength(header_len));
+        }
+        let total = r.u32().ok_or(truncated)?;
+        if (total as usize) < MIN_IMAGE_LEN || total as usize > MAX_IMAGE_LEN {
+            return Err(ImageError::BadLength(total));
+        }
+        if bytes.len() < total as usize {
+            return Err(ImageError::Truncated { needed: total, have });
+        }
+        if bytes.len() > total as usize {
+            return Err(ImageError::BadLength(total));
+        }
+        let body_len = total as usize - CRC_LEN;
+        let body = bytes.get(..body_len).ok_or(truncated)?;
+        let stored = Reader { buf: bytes, pos: body_len }.u32().ok_or(truncated)?;
+        let computed = CRC32.checksum(body);
+        if stored != computed {
+            return Err(ImageError::BadCrc { stored, computed });
+        }
+
+        // From here on the bytes are exactly what an encoder wrote; what
+        // remains are structural and semantic checks.
+        let mut r = Reader { buf: body, pos: 12 };
+        let bad_len = ImageError::BadLength(total);
+        let fs_hz = r.u32().ok_or(bad_len)?;
+        let latency_samples = r.u16().ok_or(bad_len)?;
+        let mask = r.u8().ok_or(bad_len)?;
+        let flags = r.u8().ok_or(bad_len)?;
+        let method_code = r.u8().ok_or(bad_len)?;
+        if r.bytes::<3>().ok_or(bad_len)? != [0; 3] {
+            return Err(ImageError::ReservedNotZero);
+        }
+        let source_sha256 = r.bytes::<32>().ok_or(bad_len)?;
+        let created_unix_s = r.u64().ok_or(bad_len)?;
+        if mask == 0 || mask & !0b111 != 0 {
+            return Err(ImageError::BadAxisMask(mask));
+        }
+        let method = DesignMethod::from_u8(method_code).ok_or(ImageError::UnknownMethod(method_code))?;
+
+        let mut axes: [Option<AxisImage>; AXES] = [None; AXES];
+        for (i, slot) in axes.iter_mut().enumerate() {
+            if mask & (1 << i) == 0 {
+                continue;
+            }
+            let expected = i as u8;
+            let axis = r.u8().ok_or(bad_len)?;
+            if axis != expected {
+                return Err(ImageError::AxisMismatch { expected, found: axis });
+            }
+            let count = r.u8().ok_or(bad_len)?;
+            if usize::from(count) > MAX_SECTIONS {
+                return Err(ImageError::TooManySections { axis, count });
+            }
+            let model_order = r.u16().ok_or(bad_len)?;
+            let scaling = AxisScaling {
+                adc_offset_code: r.f32().ok_or(bad_len)?,
+                newton_per_code: r.f32().ok_or(bad_len)?,
+                dac_code_per_newton: r.f32().ok_or(bad_len)?,
+                dac_offset_code: r.f32().ok_or(bad_len)?,
+            };
+            let d = r.f32().ok_or(bad_len)?;
+            let summary = AxisSummary {
+                model_order,
+                fit_nrmse: r.f32().ok_or(bad_len)?,
+                flat_lo_hz: r.f32().ok_or(bad_len)?,
+                flat_hi_hz: r.f32().ok_or(bad_len)?,
+                noise_gain: r.f32().ok_or(bad_len)?,
+                q: r.f64().ok_or(bad_len)?,
+                r: r.f64().ok_or(bad_len)?,
+            };
+            let mut sections = [Section::default(); MAX_SECTIONS];
+            for sec in sections.iter_mut().take(usize::from(count)) {
+                let mut v = [0f32; 8];
+                for x in v.iter_mut() {
+                    *x = r.f32().ok_or(bad_len)?;
+                }
+                *sec = Section {
+                    delta: [v[0], v[1], v[2], v[3]],
+                    b: [v[4], v[5]],
+                    c: [v[6], v[7]],
+                };
+            }
+            let filter = AxisFilter::new(sections.get(..usize::from(count)).unwrap_or(&[]), d).map_err(|e| match e {
+                FilterError::TooManySections => ImageError::TooManySections { axis, count },
+                FilterError::NonFinite(s) => ImageError::NonFiniteCoefficient {
+                    axis,
+                    section: if s >= MAX_SECTIONS { 255 } else { s as u8 },
+                },
+                FilterError::Unstable(s) => ImageError::UnstableSection { axis, section: s as u8 },
+            })?;
+            *slot = Some(AxisImage { axis, scaling, filter, summary });
+        }
+        if r.pos != body.len() {
+            return Err(bad_len);
+        }
+        let image = CoeffImage {
+            fs_hz,
+            latency_samples,
+            flags,
+            method,
+            source_sha256,
+            created_unix_s,
+            axes,
+        };
+        image.validate()?;
+        Ok(image)
+    }
+
+    /// Parse an image stored at the start of a larger region (a flash slot):
+    /// the declared length selects the prefix, the rest is ignored.
+    pub fn parse_prefix(region: &[u8]) -> Result<CoeffImage, ImageError> {
+        let have = region.len() as u32;
+        if region.len() < MIN_IMAGE_LEN {
+            return Err(ImageError::Truncated { needed: MIN_IMAGE_LEN as u32, have });
+        }
+        if region.get(..4) != Some(&MAGIC[..]) {
+            return Err(ImageError::BadMagic);
+        }
+        let len = declared_len(region).unwrap_or(0);
+        if !(MIN_IMAGE_LEN..=MAX_IMAGE_LEN).contains(&len) {
+            // Let `parse` report version/header problems first.
+            return Self::parse(region.get(..MIN_IMAGE_LEN).unwrap_or(region))
+                .and(Err(ImageError::BadLength(len as u32)));
+        }
+        match region.get(..len) {
+            Some(prefix) => Self::parse(prefix),
+            None => Err(ImageError::Truncated { needed: len as u32, have }),
+        }
+    }
+}

@@ -1,0 +1,240 @@
+//! The compensator kernel: a fixed-capacity LTI filter in modal block-diagonal
+//! "delta" form (DESIGN.md, signal chain step 6).
+//!
+//! Per axis the compensator is a discrete state-space filter of order ≤ 2·[`MAX_SECTIONS`]
+//! realized as independent 2x2 sections (real Schur blocks of the filter matrix).
+//! Section `i` holds `Δ_i = A_i − I`, `b_i` and `c_i`; one sample is
+//!
+//! ```text
+//! y[k]      = d·u[k] + Σ_i c_i · x_i[k]
+//! x_i[k+1]  = x_i[k] + (Δ_i · x_i[k] + b_i · u[k])
+//! ```
+//!
+//! Storing `A − I` instead of `A` keeps the pole positions of slow modes
+//! (e.g. 100 Hz at 51.2 kHz, where `A ≈ I`) representable in f32: the small
+//! numbers are stored with full relative precision instead of being rounded
+//! against 1.0.
+//!
+//! A first-order (real-pole) section is a 2x2 section whose second state is
+//! unused: `Δ12 = Δ21 = b2 = c2 = 0` and `Δ22 = −1` (a pole at z = 0, so the
+//! unused state stays exactly 0). Two real poles can share one section as a
+//! triangular block.
+//!
+//! Configuration ([`AxisFilter`]) is kept apart from state ([`AxisState`]), as in
+//! QUARTIQ's `idsp`: coefficients can be swapped without touching the state
+//! layout, and the state can be reset alone.
+
+/// Maximum number of 2x2 sections per axis (filter order ≤ 48).
+pub const MAX_SECTIONS: usize = 24;
+
+/// Magnitude above which the output is treated as a runaway filter (N).
+///
+/// A stable filter driven by a ±full-scale dynamometer signal (≤ 2·10^4 N for a
+/// 9257-class table) stays far below this; reaching it means non-finite or
+/// diverging state.
+pub const RUNAWAY_LIMIT_N: f32 = 1.0e7;
+
+/// One 2x2 section of the modal realization.
+///
+/// Units: `u` and `y` are forces in N; the states are scaled by the host tool
+/// (balanced per section) and carry no physical unit.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Section {
+    /// `A − I` of this block, row-major `[Δ11, Δ12, Δ21, Δ22]`.
+    pub delta: [f32; 4],
+    /// Input column `b` of this block.
+    pub b: [f32; 2],
+    /// Output row `c` of this block.
+    pub c: [f32; 2],
+}
+
+impl Section {
+    /// A section that holds a single real pole `p` (z-domain), input gain `b`
+    /// and output gain `c`: `Δ = p − 1`, second state unused.
+    pub fn first_order(pole: f32, b: f32, c: f32) -> Self {
+        Section {
+            delta: [pole - 1.0, 0.0, 0.0, -1.0],
+            b: [b, 0.0],
+            c: [c, 0.0],
+        }
+    }
+
+    /// Whether every coefficient is finite.
+    pub fn is_finite(&self) -> bool {
+        self.delta
+            .iter()
+            .chain(self.b.iter())
+            .chain(self.c.iter())
+            .all(|v| v.is_finite())
+    }
+
+    /// Whether the block's poles (eigenvalues of `I + Δ`) lie strictly inside
+    /// the unit circle. See [`poles_within`](Self::poles_within).
+    pub fn is_stable(&self) -> bool {
+        self.poles_within(1.0)
+    }
+
+    /// Whether both poles of the block lie strictly inside the circle of
+    /// radius `r` (0 < r ≤ 1), by the Jury criterion on the characteristic
+    /// polynomial `P(z) = z² − tr(A)·z + det(A)` scaled to that circle:
+    /// `P(r) > 0`, `P(−r) > 0` and `|det A| < r²`.
+    ///
+    /// Evaluated in f64 from the stored f32 values, and written in terms of
+    /// `tΔ = tr Δ`, `dΔ = det Δ` and `e = r − 1` so that poles next to
+    /// `z = 1` keep their precision: `P(r) = e² − tΔ·e + dΔ`,
+    /// `det A = 1 + tΔ + dΔ`.
+    pub fn poles_within(&self, r: f64) -> bool {
+        let [d11, d12, d21, d22] = self.delta.map(f64::from);
+        let t = d11 + d22;
+        let d = d11 * d22 - d12 * d21;
+        let e = r - 1.0;
+        let p_plus = e * e - t * e + d;
+        let p_minus = r * r + (2.0 + t) * r + 1.0 + t + d;
+        let det_a = 1.0 + t + d;
+        p_plus > 0.0 && p_minus > 0.0 && det_a.abs() < r * r
+    }
+}
+
+/// Error building an [`AxisFilter`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FilterError {
+    /// More sections than [`MAX_SECTIONS`].
+    TooManySections,
+    /// A coefficient is NaN or infinite (section index; `MAX_SECTIONS` for `d`).
+    NonFinite(usize),
+    /// A section has a pole on or outside the unit circle (section index).
+    Unstable(usize),
+}
+
+/// Coefficients of one axis's compensator (configuration, no state).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AxisFilter {
+    sections: [Section; MAX_SECTIONS],
+    len: usize,
+    d: f32,
+}
+
+impl AxisFilter {
+    /// Build a filter from its sections and direct term `d`, rejecting
+    /// non-finite coefficients and unstable sections.
+    pub fn new(sections: &[Section], d: f32) -> Result<Self, FilterError> {
+        if sections.len() > MAX_SECTIONS {
+            return Err(FilterError::TooManySections);
+        }
+        if !d.is_finite() {
+            return Err(FilterError::NonFinite(MAX_SECTIONS));
+        }
+        let mut all = [Section::default(); MAX_SECTIONS];
+        for (i, (dst, s)) in all.iter_mut().zip(sections).enumerate() {
+            if !s.is_finite() {
+                return Err(FilterError::NonFinite(i));
+            }
+            if !s.is_stable() {
+                return Err(FilterError::Unstable(i));
+            }
+            *dst = *s;
+        }
+        Ok(AxisFilter {
+            sections: all,
+            len: sections.len(),
+            d,
+        })
+    }
+
+    /// A pure gain `y = d·u` (no sections).
+    pub fn gain(d: f32) -> Result<Self, FilterError> {
+        Self::new(&[], d)
+    }
+
+    /// The active sections.
+    pub fn sections(&self) -> &[Section] {
+        // `len ≤ MAX_SECTIONS` is established by `new`, the only constructor.
+        self.sections.get(..self.len).unwrap_or(&[])
+    }
+
+    /// Direct feed-through term `d`.
+    pub fn d(&self) -> f32 {
+        self.d
+    }
+
+    /// Filter order (number of states in use, counting padded first-order
+    /// sections as two).
+    pub fn order(&self) -> usize {
+        2 * self.len
+    }
+
+    /// One sample: returns `y[k]` and advances the state (the module equation).
+    ///
+    /// No allocation, no panics, O(sections) multiply-adds.
+    #[inline]
+    pub fn step(&self, state: &mut AxisState, u: f32) -> f32 {
+        let mut y = self.d * u;
+        for (s, x) in self.sections().iter().zip(state.x.iter_mut()) {
+            let [x1, x2] = *x;
+            y += s.c[0] * x1 + s.c[1] * x2;
+            let dx1 = s.delta[0] * x1 + s.delta[1] * x2 + s.b[0] * u;
+            let dx2 = s.delta[2] * x1 + s.delta[3] * x2 + s.b[1] * u;
+            *x = [x1 + dx1, x2 + dx2];
+        }
+        y
+    }
+
+    /// [`step`](Self::step) with the runaway guard: if the output is non-finite
+    /// or exceeds [`RUNAWAY_LIMIT_N`], the state is reset, the reset is counted
+    /// in `state.nonfinite_resets`, and `None` is returned (the caller decides
+    /// what to output for that sample, e.g. the raw force).
+    #[inline]
+    pub fn step_guarded(&self, state: &mut AxisState, u: f32) -> Option<f32> {
+        let y = self.step(state, u);
+        // `!(a <= b)` is also true for NaN.
+        if !(y.abs() <= RUNAWAY_LIMIT_N) {
+            state.reset();
+            state.nonfinite_resets = state.nonfinite_resets.wrapping_add(1);
+            None
+        } else {
+            Some(y)
+        }
+    }
+
+    /// Filter a block: `output[k] = step(input[k])` for the common length of
+    /// the two slices.
+    pub fn process(&self, state: &mut AxisState, input: &[f32], output: &mut [f32]) {
+        for (u, y) in input.iter().zip(output.iter_mut()) {
+            *y = self.step(state, *u);
+        }
+    }
+
+    /// Filter a block in place.
+    pub fn process_in_place(&self, state: &mut AxisState, signal: &mut [f32]) {
+        for v in signal.iter_mut() {
+            *v = self.step(state, *v);
+        }
+    }
+}
+
+/// Filter memory of one axis (state, no configuration).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AxisState {
+    /// Section states `x_i = [x_i1, x_i2]`.
+    pub x: [[f32; 2]; MAX_SECTIONS],
+    /// How many times the runaway guard has reset this state.
+    pub nonfinite_resets: u32,
+}
+
+impl Default for AxisState {
+    fn default() -> Self {
+        AxisState {
+            x: [[0.0; 2]; MAX_SECTIONS],
+            nonfinite_resets: 0,
+        }
+    }
+}
+
+impl AxisState {
+    /// Zero the filter memory (the reset counter is kept).
+    pub fn reset(&mut self) {
+        self.x = [[0.0; 2]; MAX_SECTIONS];
+    }
+}

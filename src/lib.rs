@@ -1,0 +1,24 @@
+//! dynocomp core: everything the compensator box and the host tool share.
+//!
+//! * [`kernel`]: the fixed-size, per-axis compensator in modal block-diagonal
+//!   "delta" form. This is the only implementation of the filter arithmetic;
+//!   the firmware, `dynocomp compensate`, the simulator and every test call it.
+//! * [`image`]: the versioned, CRC-protected coefficient image (codec).
+//! * [`sample`]: the body of the sample interrupt as a pure function
+//!   `(ADC codes, coefficients, state) -> (DAC codes, flags)`.
+//!
+//! The crate is `no_std`, allocation-free and free of `unsafe`, so the same
+//! code runs on the STM32G474 and under `std` in the host tests.
+#![no_std]
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+pub mod image;
+pub mod kernel;
+pub mod sample;
+
+/// Number of force axes the box handles (Fx, Fy, Fz).
+pub const AXES: usize = 3;
+
+/// Axis names in image/order: index 0 = x, 1 = y, 2 = z.
+pub const AXIS_NAMES: [&str; AXES] = ["x", "y", "z"];

@@ -1,0 +1,176 @@
+//! The body of the box's sample interrupt as a pure function (DESIGN.md,
+//! "Firmware"): `(raw ADC codes, coefficients, state) -> (DAC codes, flags)`.
+//!
+//! The firmware's interrupt handler only reads the three ADC results, calls
+//! [`process_sample`] and writes the three DAC registers; everything that can
+//! go wrong on the sample path (saturation, runaway state, missing or invalid
+//! coefficients) is decided here, where host tests exercise it.
+
+use crate::image::{CoeffImage, ImageError};
+use crate::kernel::AxisState;
+use crate::AXES;
+
+/// Largest code of the 12-bit ADC.
+pub const ADC_MAX_CODE: u16 = 4095;
+/// Largest code of the 12-bit DAC.
+pub const DAC_MAX_CODE: u16 = 4095;
+/// Sample rates the box hardware supports (Hz).
+pub const BOX_FS_RANGE_HZ: core::ops::RangeInclusive<u32> = 10_000..=200_000;
+
+/// Why the box is in bypass (raw forces out).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum BypassReason {
+    /// No image in either flash slot.
+    NoImage,
+    /// The stored image failed validation.
+    InvalidImage(ImageError),
+    /// The image is marked offline-only (e.g. parallel elaboration).
+    OfflineOnly,
+    /// The image's sample rate is outside [`BOX_FS_RANGE_HZ`].
+    UnsupportedSampleRate(u32),
+    /// Bypass requested by the user (button or USB command).
+    User,
+}
+
+/// What the sample path does.
+#[derive(Clone, Copy, Debug)]
+pub enum Mode<'a> {
+    /// Run the compensator of this (validated) image.
+    Compensate(&'a CoeffImage),
+    /// Copy the raw ADC codes to the DAC.
+    Bypass(BypassReason),
+}
+
+/// Decide the sample path's mode from the result of loading the image and
+/// the user's bypass switch. Only a validated, inline-capable image at a
+/// supported rate is ever run.
+pub fn select_mode(loaded: Option<&Result<CoeffImage, ImageError>>, user_bypass: bool) -> Mode<'_> {
+    match loaded {
+        None => Mode::Bypass(BypassReason::NoImage),
+        Some(Err(e)) => Mode::Bypass(BypassReason::InvalidImage(*e)),
+        Some(Ok(img)) if img.is_offline_only() => Mode::Bypass(BypassReason::OfflineOnly),
+        Some(Ok(img)) if !BOX_FS_RANGE_HZ.contains(&img.fs_hz) => {
+            Mode::Bypass(BypassReason::UnsupportedSampleRate(img.fs_hz))
+        }
+        Some(Ok(_)) if user_bypass => Mode::Bypass(BypassReason::User),
+        Some(Ok(img)) => Mode::Compensate(img),
+    }
+}
+
+/// Event counters of the sample path. Wrapping u32 counters (≈ 11.6 h of
+/// samples at 100 kHz before the sample counter wraps).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Counters {
+    /// Samples processed.
+    pub samples: u32,
+    /// Missed deadlines: samples that arrived before the previous one was done.
+    pub overruns: u32,
+    /// Samples with the ADC at a rail, per axis.
+    pub saturated: [u32; AXES],
+}
+
+/// All mutable state of the sample path: filter memory per axis plus counters.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SampleState {
+    /// Filter state per axis (also counts non-finite resets).
+    pub axes: [AxisState; AXES],
+    /// Event counters.
+    pub counters: Counters,
+}
+
+impl SampleState {
+    /// Record `n` missed deadlines (called by the interrupt shell).
+    pub fn note_overruns(&mut self, n: u32) {
+        self.counters.overruns = self.counters.overruns.wrapping_add(n);
+    }
+
+    /// Reset the filter memory of every axis (counters are kept), e.g. after a
+    /// coefficient swap or when leaving bypass.
+    pub fn reset_filters(&mut self) {
+        for a in self.axes.iter_mut() {
+            a.reset();
+        }
+    }
+}
+
+/// Per-sample flags (bit set), streamed with each sample.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SampleFlags(pub u8);
+
+impl SampleFlags {
+    /// Bit of "axis i ADC at a rail" (i = 0..3).
+    pub const fn saturated(axis: usize) -> u8 {
+        1 << axis
+    }
+    /// Bit of "axis i state was reset by the runaway guard" (i = 0..3).
+    pub const fn reset(axis: usize) -> u8 {
+        1 << (3 + axis)
+    }
+    /// Bit of "this sample was passed through in bypass".
+    pub const BYPASS: u8 = 1 << 6;
+
+    /// Whether a bit is set.
+    pub fn has(&self, bit: u8) -> bool {
+        self.0 & bit != 0
+    }
+}
+
+/// Round a DAC value to the nearest code and clamp it to `0..=DAC_MAX_CODE`
+/// (NaN maps to 0). No panics.
+#[inline]
+pub fn to_dac_code(value: f32) -> u16 {
+    let v = value + 0.5;
+    if !(v >= 0.0) {
+        0
+    } else if v >= f32::from(DAC_MAX_CODE) {
+        DAC_MAX_CODE
+    } else {
+        v as u16
+    }
+}
+
+/// One sample of the box: ADC codes in, DAC codes and flags out.
+///
+/// * Bypass: each DAC code is the ADC code (12 bit → 12 bit), i.e. the raw
+///   charge-amplifier signal passes through at the front end's own scale.
+/// * Compensate: per axis the code is scaled to N, filtered by the axis's
+///   compensator and scaled to a DAC code. An axis absent from the image is
+///   passed through raw. If the runaway guard fires, that axis's state is
+///   reset, the event counted and flagged, and the raw force is output for
+///   that sample.
+///
+/// ADC codes at 0 or [`ADC_MAX_CODE`] are flagged and counted as saturated
+/// in both modes.
+pub fn process_sample(codes: [u16; AXES], mode: Mode<'_>, state: &mut SampleState) -> ([u16; AXES], SampleFlags) {
+    let mut flags = 0u8;
+    let mut out = codes;
+    state.counters.samples = state.counters.samples.wrapping_add(1);
+    for (i, &code) in codes.iter().enumerate() {
+        if code == 0 || code >= ADC_MAX_CODE {
+            flags |= SampleFlags::saturated(i);
+            state.counters.saturated[i] = state.counters.saturated[i].wrapping_add(1);
+        }
+    }
+    match mode {
+        Mode::Bypass(_) => flags |= SampleFlags::BYPASS,
+        Mode::Compensate(img) => {
+            for (i, ((axis_img, axis_state), dac)) in img.axes.iter().zip(state.axes.iter_mut()).zip(out.iter_mut()).enumerate() {
+                let Some(a) = axis_img else { continue };
+                let code = codes[i];
+                let force_n = a.scaling.code_to_newton(code);
+                let y = match a.filter.step_guarded(axis_state, force_n) {
+                    Some(y) => y,
+                    None => {
+                        flags |= SampleFlags::reset(i);
+                        force_n
+                    }
+                };
+                *dac = to_dac_code(a.scaling.dac_offset_code + y * a.scaling.dac_code_per_newton);
+            }
+        }
+    }
+    (out, SampleFlags(flags))
+}
