@@ -2,6 +2,8 @@
 //! chain, data flowing one way (io → fit → kalman → realize → quantize →
 //! image → report), plus the simulator and the offline compensator.
 
+pub mod compensate;
 pub mod frf;
+pub mod inspect;
 pub mod io;
 pub mod simulate;

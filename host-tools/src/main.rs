@@ -1,1 +1,89 @@
-fn main(){}
+//! `dynocomp`: design, inspect, flash and apply dynamometer compensators.
+//! The command-line contract is in DESIGN.md ("CLI contract").
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use dynocomp::{compensate, inspect, io};
+
+#[derive(Parser)]
+#[command(name = "dynocomp", version, about = "Dynamic compensation of piezoelectric cutting-force dynamometers")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Show what a coefficient image holds.
+    Inspect {
+        /// Coefficient image (.dcimg).
+        image: PathBuf,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Compensate a recorded force file offline, bit-exact with the box.
+    Compensate {
+        /// Coefficient image (.dcimg).
+        #[arg(long)]
+        coeffs: PathBuf,
+        /// Input force CSV (columns [t_s,] fx, fy, fz in N; any subset).
+        #[arg(long)]
+        input: PathBuf,
+        /// Output force CSV (same columns), written atomically.
+        #[arg(long)]
+        output: PathBuf,
+        /// Keep the box's timing: do not shift the output back by the image's
+        /// declared latency.
+        #[arg(long)]
+        raw_timing: bool,
+    },
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Inspect { image, json } => {
+            let img = io::image_file::read_image(&image)?;
+            let report = inspect::report(&img);
+            if json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                print!("{}", inspect::render(&report));
+            }
+        }
+        Command::Compensate { coeffs, input, output, raw_timing } => {
+            let img = io::image_file::read_image(&coeffs)?;
+            let source = input.display().to_string();
+            let rec = io::signal_csv::read_signal_csv(&input)?;
+            compensate::check_sample_rate(&img, &rec, &source)?;
+            let out = compensate::compensate_record(&img, &rec, raw_timing, &source)?;
+            io::signal_csv::write_signal_csv(&output, &out)?;
+            eprintln!(
+                "compensated {} samples x {} axes at {} Hz (latency {} samples{}) -> {}",
+                rec.len(),
+                rec.channels.len(),
+                img.fs_hz,
+                img.latency_samples,
+                if raw_timing { ", not removed" } else { ", removed" },
+                output.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // One line: the context chain joined, outermost first.
+            let msg: Vec<String> = e.chain().map(|c| c.to_string()).collect();
+            eprintln!("error: {}", msg.join(": "));
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,174 @@
+//! `dynocomp inspect`: what an image holds, for people and for scripts.
+
+use dynocomp_core::image::{CoeffImage, DesignMethod};
+use serde::Serialize;
+use std::fmt::Write;
+
+use crate::frf::axis_name;
+
+/// Per-axis part of the inspection report.
+#[derive(Debug, Serialize)]
+pub struct AxisReport {
+    /// Axis letter.
+    pub axis: &'static str,
+    /// Number of 2x2 sections in the compensator.
+    pub sections: usize,
+    /// Compensator order (states).
+    pub filter_order: usize,
+    /// Order of the fitted sensor model.
+    pub model_order: u16,
+    /// ADC code at 0 N.
+    pub adc_offset_code: f32,
+    /// N per ADC code.
+    pub newton_per_code: f32,
+    /// DAC codes per N.
+    pub dac_code_per_newton: f32,
+    /// DAC code at 0 N.
+    pub dac_offset_code: f32,
+    /// Normalized RMS fit error (fraction).
+    pub fit_nrmse: f32,
+    /// Flat band (Hz).
+    pub flat_band_hz: [f32; 2],
+    /// White-noise gain (ratio).
+    pub noise_gain: f32,
+    /// Process noise intensity Q.
+    pub q: f64,
+    /// Measurement noise variance R (N²).
+    pub r: f64,
+    /// Largest pole radius of the compensator (z-plane).
+    pub max_pole_radius: f64,
+}
+
+/// Inspection report of a whole image.
+#[derive(Debug, Serialize)]
+pub struct InspectReport {
+    /// Image format version.
+    pub format_version: u16,
+    /// Image id (its CRC-32).
+    pub image_id: String,
+    /// Sample rate (Hz).
+    pub fs_hz: u32,
+    /// Declared latency (samples).
+    pub latency_samples: u16,
+    /// Whether the image is offline-only (the box never runs it).
+    pub offline_only: bool,
+    /// Whether the box would run it inline.
+    pub runs_in_box: bool,
+    /// Design method.
+    pub method: &'static str,
+    /// SHA-256 of the source FRF file.
+    pub source_sha256: String,
+    /// Creation time (Unix seconds).
+    pub created_unix_s: u64,
+    /// Axes.
+    pub axes: Vec<AxisReport>,
+}
+
+fn method_name(m: DesignMethod) -> &'static str {
+    match m {
+        DesignMethod::Manual => "manual",
+        DesignMethod::VectorFitting => "vf",
+        DesignMethod::Paper => "paper",
+    }
+}
+
+/// Largest pole radius over all sections (eigenvalues of I + Δ, in f64).
+pub fn max_pole_radius(sections: &[dynocomp_core::kernel::Section]) -> f64 {
+    sections
+        .iter()
+        .map(|s| {
+            let [d11, d12, d21, d22] = s.delta.map(f64::from);
+            let (a, b, c, d) = (1.0 + d11, d12, d21, 1.0 + d22);
+            let tr = a + d;
+            let det = a * d - b * c;
+            let disc = tr * tr / 4.0 - det;
+            if disc >= 0.0 {
+                let r = disc.sqrt();
+                (tr / 2.0 + r).abs().max((tr / 2.0 - r).abs())
+            } else {
+                det.max(0.0).sqrt()
+            }
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Build the report.
+pub fn report(image: &CoeffImage) -> InspectReport {
+    let axes = image
+        .axes
+        .iter()
+        .flatten()
+        .map(|a| AxisReport {
+            axis: axis_name(a.axis as usize),
+            sections: a.filter.sections().len(),
+            filter_order: a.filter.order(),
+            model_order: a.summary.model_order,
+            adc_offset_code: a.scaling.adc_offset_code,
+            newton_per_code: a.scaling.newton_per_code,
+            dac_code_per_newton: a.scaling.dac_code_per_newton,
+            dac_offset_code: a.scaling.dac_offset_code,
+            fit_nrmse: a.summary.fit_nrmse,
+            flat_band_hz: [a.summary.flat_lo_hz, a.summary.flat_hi_hz],
+            noise_gain: a.summary.noise_gain,
+            q: a.summary.q,
+            r: a.summary.r,
+            max_pole_radius: max_pole_radius(a.filter.sections()),
+        })
+        .collect();
+    let loaded = Ok(*image);
+    let box_mode = dynocomp_core::sample::select_mode(Some(&loaded), false);
+    InspectReport {
+        format_version: dynocomp_core::image::FORMAT_VERSION,
+        image_id: format!("{:08x}", image.id()),
+        fs_hz: image.fs_hz,
+        latency_samples: image.latency_samples,
+        offline_only: image.is_offline_only(),
+        runs_in_box: matches!(box_mode, dynocomp_core::sample::Mode::Compensate(_)),
+        method: method_name(image.method),
+        source_sha256: image.source_sha256.iter().map(|b| format!("{b:02x}")).collect(),
+        created_unix_s: image.created_unix_s,
+        axes,
+    }
+}
+
+/// Human-readable rendering of the report.
+pub fn render(r: &InspectReport) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "image {}  format v{}  method {}", r.image_id, r.format_version, r.method);
+    let _ = writeln!(
+        s,
+        "fs {} Hz  latency {} samples ({:.1} µs)",
+        r.fs_hz,
+        r.latency_samples,
+        f64::from(r.latency_samples) * 1e6 / f64::from(r.fs_hz)
+    );
+    if r.offline_only {
+        let _ = writeln!(s, "OFFLINE ONLY: this image is for `dynocomp compensate`; the box refuses to run it");
+    } else if !r.runs_in_box {
+        let _ = writeln!(s, "the box cannot run this image inline (sample rate outside its 10-200 kHz range)");
+    }
+    let _ = writeln!(s, "source sha256 {}", r.source_sha256);
+    let _ = writeln!(
+        s,
+        "{:<4} {:>4} {:>5} {:>6} {:>8} {:>17} {:>6} {:>10} {:>10} {:>10}",
+        "axis", "sec", "order", "model", "fit err", "flat band (Hz)", "noise", "Q", "R (N²)", "max |p|"
+    );
+    for a in &r.axes {
+        let _ = writeln!(
+            s,
+            "{:<4} {:>4} {:>5} {:>6} {:>7.2}% {:>8.0}-{:<8.0} {:>6.2} {:>10.3e} {:>10.3e} {:>10.7}",
+            a.axis,
+            a.sections,
+            a.filter_order,
+            a.model_order,
+            a.fit_nrmse * 100.0,
+            a.flat_band_hz[0],
+            a.flat_band_hz[1],
+            a.noise_gain,
+            a.q,
+            a.r,
+            a.max_pole_radius
+        );
+    }
+    s
+}

@@ -1,0 +1,147 @@
+//! The interrupt body as a pure function: bypass decisions, scaling,
+//! saturation and the runaway guard.
+
+mod common;
+use common::*;
+use dynocomp_core::image::{CoeffImage, ImageError, FLAG_OFFLINE_ONLY, MAX_IMAGE_LEN};
+use dynocomp_core::kernel::AxisFilter;
+use dynocomp_core::sample::*;
+
+fn encoded(img: &CoeffImage) -> Vec<u8> {
+    let mut buf = vec![0u8; MAX_IMAGE_LEN];
+    let n = img.encode(&mut buf).unwrap();
+    buf.truncate(n);
+    buf
+}
+
+#[test]
+fn absent_image_leaves_the_box_in_bypass_with_raw_codes_out() {
+    let mode = select_mode(None, false);
+    assert!(matches!(mode, Mode::Bypass(BypassReason::NoImage)));
+    let mut st = SampleState::default();
+    for codes in [[0u16, 2048, 4095], [1, 2, 3], [4000, 100, 2047]] {
+        let (dac, flags) = process_sample(codes, mode, &mut st);
+        assert_eq!(dac, codes);
+        assert!(flags.has(SampleFlags::BYPASS));
+    }
+}
+
+#[test]
+fn corrupted_image_leaves_the_box_in_bypass() {
+    let (blocks, d) = filter_24(51_200.0);
+    let bytes = encoded(&image_with(kernel_filter(&blocks, d), &[0, 1, 2], 51_200));
+    // flash slot holding the image with one flipped bit, as the firmware reads it
+    let mut slot = vec![0xFFu8; 8192];
+    slot[..bytes.len()].copy_from_slice(&bytes);
+    slot[200] ^= 0x10;
+    let loaded = CoeffImage::parse_prefix(&slot);
+    assert!(matches!(loaded, Err(ImageError::BadCrc { .. })));
+    let mode = select_mode(Some(&loaded), false);
+    assert!(matches!(mode, Mode::Bypass(BypassReason::InvalidImage(ImageError::BadCrc { .. }))));
+    let mut st = SampleState::default();
+    let (dac, flags) = process_sample([1234, 2345, 3456], mode, &mut st);
+    assert_eq!(dac, [1234, 2345, 3456]);
+    assert!(flags.has(SampleFlags::BYPASS));
+    // an erased slot reads as "no image" in spirit: bad magic, bypass
+    let erased = CoeffImage::parse_prefix(&vec![0xFFu8; 8192]);
+    assert!(matches!(select_mode(Some(&erased), false), Mode::Bypass(BypassReason::InvalidImage(ImageError::BadMagic))));
+}
+
+#[test]
+fn offline_only_unsupported_rate_and_user_bypass_are_never_run() {
+    let f = AxisFilter::gain(2.0).unwrap();
+    let mut img = image_with(f, &[0], 51_200);
+    img.flags = FLAG_OFFLINE_ONLY;
+    assert!(matches!(select_mode(Some(&Ok(img)), false), Mode::Bypass(BypassReason::OfflineOnly)));
+    let img = image_with(f, &[0], 5_000);
+    assert!(matches!(select_mode(Some(&Ok(img)), false), Mode::Bypass(BypassReason::UnsupportedSampleRate(5_000))));
+    let img = image_with(f, &[0], 51_200);
+    assert!(matches!(select_mode(Some(&Ok(img)), true), Mode::Bypass(BypassReason::User)));
+    assert!(matches!(select_mode(Some(&Ok(img)), false), Mode::Compensate(_)));
+}
+
+#[test]
+fn compensation_scales_codes_to_newtons_and_back() {
+    // gain-2 "compensator" on x only; scaling from common::image_with:
+    // force = (code − 2048)·2.5 N, dac = 2048 + 0.4·y
+    let img = image_with(AxisFilter::gain(2.0).unwrap(), &[0], 51_200);
+    let loaded = Ok(img);
+    let mode = select_mode(Some(&loaded), false);
+    let mut st = SampleState::default();
+    let (dac, flags) = process_sample([2148, 1000, 3000], mode, &mut st);
+    // x: force = 100·2.5 = 250 N, y = 500 N, dac = 2048 + 200 = 2248
+    assert_eq!(dac[0], 2248);
+    // y and z are not in the image: raw codes pass through
+    assert_eq!(&dac[1..], &[1000, 3000]);
+    assert_eq!(flags, SampleFlags(0));
+    // output clamps at the DAC rails instead of wrapping
+    let (dac, _) = process_sample([4000, 2048, 2048], mode, &mut st);
+    assert_eq!(dac[0], DAC_MAX_CODE);
+    let (dac, _) = process_sample([100, 2048, 2048], mode, &mut st);
+    assert_eq!(dac[0], 0);
+    assert_eq!(st.counters.samples, 3);
+}
+
+#[test]
+fn compensated_output_follows_the_kernel_response() {
+    // The sample path applies the kernel: a unit step of 100 codes (250 N) on
+    // a filter with a known DC gain converges to that gain times 250 N.
+    let blk = mode_block(2_500.0, 0.05, 51_200.0, [1.0, 0.0]);
+    // DC gain of the block: c (I − A)^-1 b, computed in f64
+    let (a, b) = (blk.a, blk.b);
+    let det = (1.0 - a[0][0]) * (1.0 - a[1][1]) - a[0][1] * a[1][0];
+    let x1 = ((1.0 - a[1][1]) * b[0] + a[0][1] * b[1]) / det;
+    let dc = blk.c[0] * x1;
+    let img = image_with(kernel_filter(&[blk], 0.0), &[2], 51_200);
+    let loaded = Ok(img);
+    let mode = select_mode(Some(&loaded), false);
+    let mut st = SampleState::default();
+    let mut last = [0u16; 3];
+    for _ in 0..20_000 {
+        last = process_sample([2048, 2048, 2148], mode, &mut st).0;
+    }
+    let expected = 2048.0 + 0.4 * dc * 250.0;
+    assert!((f64::from(last[2]) - expected).abs() <= 0.5 + 1e-9, "dac {} expected {expected}", last[2]);
+}
+
+#[test]
+fn saturation_is_flagged_and_counted_in_both_modes() {
+    let img = image_with(AxisFilter::gain(1.0).unwrap(), &[0, 1, 2], 51_200);
+    let loaded = Ok(img);
+    for mode in [select_mode(Some(&loaded), false), select_mode(None, false)] {
+        let mut st = SampleState::default();
+        let (_, flags) = process_sample([0, ADC_MAX_CODE, 2000], mode, &mut st);
+        assert!(flags.has(SampleFlags::saturated(0)));
+        assert!(flags.has(SampleFlags::saturated(1)));
+        assert!(!flags.has(SampleFlags::saturated(2)));
+        assert_eq!(st.counters.saturated, [1, 1, 0]);
+    }
+}
+
+#[test]
+fn runaway_state_is_reset_flagged_counted_and_raw_force_output() {
+    let (blocks, d) = filter_24(51_200.0);
+    let img = image_with(kernel_filter(&blocks, d), &[0, 1, 2], 51_200);
+    let loaded = Ok(img);
+    let mode = select_mode(Some(&loaded), false);
+    let mut st = SampleState::default();
+    st.axes[1].x[5][0] = f32::INFINITY;
+    let (dac, flags) = process_sample([2048, 2148, 2048], mode, &mut st);
+    assert!(flags.has(SampleFlags::reset(1)));
+    assert!(!flags.has(SampleFlags::reset(0)));
+    assert_eq!(st.axes[1].nonfinite_resets, 1);
+    // raw force 250 N → dac 2048 + 0.4·250 = 2148
+    assert_eq!(dac[1], 2148);
+    st.note_overruns(2);
+    assert_eq!(st.counters.overruns, 2);
+}
+
+#[test]
+fn dac_rounding_is_total() {
+    assert_eq!(to_dac_code(f32::NAN), 0);
+    assert_eq!(to_dac_code(-3.0), 0);
+    assert_eq!(to_dac_code(1e30), DAC_MAX_CODE);
+    assert_eq!(to_dac_code(f32::INFINITY), DAC_MAX_CODE);
+    assert_eq!(to_dac_code(1.49), 1);
+    assert_eq!(to_dac_code(1.5), 2);
+}
