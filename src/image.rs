@@ -9,7 +9,7 @@
 //! length → magic → version → declared length → CRC → structure → ranges →
 //! stability. A single flipped bit anywhere is caught by the CRC-32.
 
-use crate::kernel::{AxisFilter, FilterError, Section, MAX_SECTIONS};
+use crate::kernel::{AxisFilter, FilterError, Section, MAX_FIR, MAX_SECTIONS};
 use crate::AXES;
 
 /// Magic bytes at offset 0.
@@ -18,15 +18,17 @@ pub const MAGIC: [u8; 4] = *b"DCIM";
 pub const FORMAT_VERSION: u16 = 1;
 /// Size of the fixed header (bytes before the first axis block).
 pub const HEADER_LEN: usize = 64;
-/// Size of an axis block without its sections.
-pub const AXIS_HEADER_LEN: usize = 56;
+/// Size of an axis block without its sections and FIR taps.
+pub const AXIS_HEADER_LEN: usize = 60;
+/// Size of one FIR tap (f32).
+pub const TAP_LEN: usize = 4;
 /// Size of one section record (8 × f32).
 pub const SECTION_LEN: usize = 32;
 /// Size of the trailing CRC.
 pub const CRC_LEN: usize = 4;
 /// Largest possible image (3 axes × 24 sections).
-pub const MAX_IMAGE_LEN: usize = HEADER_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN) + CRC_LEN;
-/// Smallest valid image (1 axis, 0 sections).
+pub const MAX_IMAGE_LEN: usize = HEADER_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN + MAX_FIR * TAP_LEN) + CRC_LEN;
+/// Smallest valid image (1 axis, 0 sections, no taps).
 pub const MIN_IMAGE_LEN: usize = HEADER_LEN + AXIS_HEADER_LEN + CRC_LEN;
 
 /// Accepted sample-rate range of an image (Hz). The box itself narrows this
@@ -189,6 +191,20 @@ pub enum ImageError {
         /// Axis index found.
         found: u8,
     },
+    /// More than [`MAX_FIR`] FIR taps on an axis.
+    TooManyTaps {
+        /// Axis index.
+        axis: u8,
+        /// Declared count.
+        count: u8,
+    },
+    /// An FIR tap is non-finite.
+    NonFiniteTap {
+        /// Axis index.
+        axis: u8,
+        /// Tap index (0 = delay 1).
+        tap: u8,
+    },
     /// More than [`MAX_SECTIONS`] sections on an axis.
     TooManySections {
         /// Axis index.
@@ -244,6 +260,8 @@ impl core::fmt::Display for ImageError {
             UnknownMethod(m) => write!(f, "unknown design method code {m}"),
             ReservedNotZero => write!(f, "reserved header bytes are not zero"),
             AxisMismatch { expected, found } => write!(f, "axis block for axis {found} where axis {expected} was expected"),
+            TooManyTaps { axis, count } => write!(f, "axis {axis}: {count} FIR taps exceeds the maximum {MAX_FIR}"),
+            NonFiniteTap { axis, tap } => write!(f, "axis {axis}: FIR tap {tap} is non-finite"),
             TooManySections { axis, count } => write!(f, "axis {axis}: {count} sections exceeds the maximum {MAX_SECTIONS}"),
             BadScaling { axis } => write!(f, "axis {axis}: scaling values non-finite or zero gain"),
             BadSummary { axis } => write!(f, "axis {axis}: design summary has non-finite or negative values"),
@@ -311,7 +329,7 @@ pub fn encoded_len(image: &CoeffImage) -> usize {
             .axes
             .iter()
             .flatten()
-            .map(|a| AXIS_HEADER_LEN + a.filter.sections().len() * SECTION_LEN)
+            .map(|a| AXIS_HEADER_LEN + a.filter.sections().len() * SECTION_LEN + a.filter.fir().len() * TAP_LEN)
             .sum::<usize>()
         + CRC_LEN
 }
@@ -369,8 +387,10 @@ impl CoeffImage {
         w.put(&self.created_unix_s.to_le_bytes());
         for a in self.axes.iter().flatten() {
             let secs = a.filter.sections();
-            w.put(&[a.axis, secs.len() as u8]);
+            let taps = a.filter.fir();
+            w.put(&[a.axis, secs.len() as u8, taps.len() as u8, 0]);
             w.put(&a.summary.model_order.to_le_bytes());
+            w.put(&[0, 0]);
             let s = &a.scaling;
             for v in [s.adc_offset_code, s.newton_per_code, s.dac_code_per_newton, s.dac_offset_code, a.filter.d()] {
                 w.put(&v.to_le_bytes());
@@ -385,6 +405,9 @@ impl CoeffImage {
                 for v in sec.delta.iter().chain(&sec.b).chain(&sec.c) {
                     w.put(&v.to_le_bytes());
                 }
+            }
+            for h in taps {
+                w.put(&h.to_le_bytes());
             }
         }
         let crc = CRC32.checksum(w.buf.get(..w.pos).unwrap_or(&[]));
@@ -432,6 +455,9 @@ impl CoeffImage {
             }
             if !a.filter.d().is_finite() {
                 return Err(ImageError::NonFiniteCoefficient { axis, section: 255 });
+            }
+            if let Some(tap) = a.filter.fir().iter().position(|h| !h.is_finite()) {
+                return Err(ImageError::NonFiniteTap { axis, tap: tap as u8 });
             }
             for (j, sec) in a.filter.sections().iter().enumerate() {
                 let section = j as u8;
@@ -516,7 +542,17 @@ impl CoeffImage {
             if usize::from(count) > MAX_SECTIONS {
                 return Err(ImageError::TooManySections { axis, count });
             }
+            let n_taps = r.u8().ok_or(bad_len)?;
+            if usize::from(n_taps) > MAX_FIR {
+                return Err(ImageError::TooManyTaps { axis, count: n_taps });
+            }
+            if r.u8().ok_or(bad_len)? != 0 {
+                return Err(ImageError::ReservedNotZero);
+            }
             let model_order = r.u16().ok_or(bad_len)?;
+            if r.u16().ok_or(bad_len)? != 0 {
+                return Err(ImageError::ReservedNotZero);
+            }
             let scaling = AxisScaling {
                 adc_offset_code: r.f32().ok_or(bad_len)?,
                 newton_per_code: r.f32().ok_or(bad_len)?,
@@ -545,13 +581,21 @@ impl CoeffImage {
                     c: [v[6], v[7]],
                 };
             }
-            let filter = AxisFilter::new(sections.get(..usize::from(count)).unwrap_or(&[]), d).map_err(|e| match e {
+            let mut taps = [0f32; MAX_FIR];
+            for h in taps.iter_mut().take(usize::from(n_taps)) {
+                *h = r.f32().ok_or(bad_len)?;
+            }
+            let secs = sections.get(..usize::from(count)).unwrap_or(&[]);
+            let fir = taps.get(..usize::from(n_taps)).unwrap_or(&[]);
+            let filter = AxisFilter::with_fir(secs, d, fir).map_err(|e| match e {
                 FilterError::TooManySections => ImageError::TooManySections { axis, count },
                 FilterError::NonFinite(s) => ImageError::NonFiniteCoefficient {
                     axis,
                     section: if s >= MAX_SECTIONS { 255 } else { s as u8 },
                 },
                 FilterError::Unstable(s) => ImageError::UnstableSection { axis, section: s as u8 },
+                FilterError::TooManyTaps => ImageError::TooManyTaps { axis, count: n_taps },
+                FilterError::NonFiniteTap(t) => ImageError::NonFiniteTap { axis, tap: t as u8 },
             })?;
             *slot = Some(AxisImage { axis, scaling, filter, summary });
         }

@@ -6,9 +6,14 @@
 //! Section `i` holds `Δ_i = A_i − I`, `b_i` and `c_i`; one sample is
 //!
 //! ```text
-//! y[k]      = d·u[k] + Σ_i c_i · x_i[k]
+//! y[k]      = d·u[k] + Σ_i c_i · x_i[k] + Σ_{j=1..m} h_j · u[k−j]
 //! x_i[k+1]  = x_i[k] + (Δ_i · x_i[k] + b_i · u[k])
 //! ```
+//!
+//! The short FIR part `h_1..h_m` (m ≤ [`MAX_FIR`]) carries the compensator's
+//! fast poles (|z| ≲ 0.3, including the exact poles at z = 0 of a fixed-lag
+//! smoother's delay chain), whose modal split would be ill-conditioned; their
+//! impulse response is exactly finite or negligible after m samples.
 //!
 //! Storing `A − I` instead of `A` keeps the pole positions of slow modes
 //! (e.g. 100 Hz at 51.2 kHz, where `A ≈ I`) representable in f32: the small
@@ -26,6 +31,9 @@
 
 /// Maximum number of 2x2 sections per axis (filter order ≤ 48).
 pub const MAX_SECTIONS: usize = 24;
+
+/// Maximum number of FIR taps (delays 1..=16 samples) per axis.
+pub const MAX_FIR: usize = 16;
 
 /// Magnitude above which the output is treated as a runaway filter (N).
 ///
@@ -106,6 +114,10 @@ pub enum FilterError {
     NonFinite(usize),
     /// A section has a pole on or outside the unit circle (section index).
     Unstable(usize),
+    /// More FIR taps than [`MAX_FIR`].
+    TooManyTaps,
+    /// An FIR tap is NaN or infinite (tap index, 0 = delay 1).
+    NonFiniteTap(usize),
 }
 
 /// Coefficients of one axis's compensator (configuration, no state).
@@ -114,12 +126,30 @@ pub struct AxisFilter {
     sections: [Section; MAX_SECTIONS],
     len: usize,
     d: f32,
+    fir: [f32; MAX_FIR],
+    fir_len: usize,
 }
 
 impl AxisFilter {
     /// Build a filter from its sections and direct term `d`, rejecting
     /// non-finite coefficients and unstable sections.
     pub fn new(sections: &[Section], d: f32) -> Result<Self, FilterError> {
+        Self::with_fir(sections, d, &[])
+    }
+
+    /// Build a filter from sections, direct term `d` and FIR taps
+    /// `fir[j−1] = h_j` (delay j samples).
+    pub fn with_fir(sections: &[Section], d: f32, fir: &[f32]) -> Result<Self, FilterError> {
+        if fir.len() > MAX_FIR {
+            return Err(FilterError::TooManyTaps);
+        }
+        let mut taps = [0.0; MAX_FIR];
+        for (j, (dst, h)) in taps.iter_mut().zip(fir).enumerate() {
+            if !h.is_finite() {
+                return Err(FilterError::NonFiniteTap(j));
+            }
+            *dst = *h;
+        }
         if sections.len() > MAX_SECTIONS {
             return Err(FilterError::TooManySections);
         }
@@ -140,6 +170,8 @@ impl AxisFilter {
             sections: all,
             len: sections.len(),
             d,
+            fir: taps,
+            fir_len: fir.len(),
         })
     }
 
@@ -154,15 +186,20 @@ impl AxisFilter {
         self.sections.get(..self.len).unwrap_or(&[])
     }
 
+    /// FIR taps `h_1..h_m` (delays 1..m samples).
+    pub fn fir(&self) -> &[f32] {
+        self.fir.get(..self.fir_len).unwrap_or(&[])
+    }
+
     /// Direct feed-through term `d`.
     pub fn d(&self) -> f32 {
         self.d
     }
 
     /// Filter order (number of states in use, counting padded first-order
-    /// sections as two).
+    /// sections as two, plus the FIR delay line).
     pub fn order(&self) -> usize {
-        2 * self.len
+        2 * self.len + self.fir_len
     }
 
     /// One sample: returns `y[k]` and advances the state (the module equation).
@@ -177,6 +214,16 @@ impl AxisFilter {
             let dx1 = s.delta[0] * x1 + s.delta[1] * x2 + s.b[0] * u;
             let dx2 = s.delta[2] * x1 + s.delta[3] * x2 + s.b[1] * u;
             *x = [x1 + dx1, x2 + dx2];
+        }
+        let m = self.fir_len.min(MAX_FIR);
+        if m > 0 {
+            let (taps, hist) = (&self.fir[..m], &mut state.fir_hist[..m]);
+            for (h, past) in taps.iter().zip(hist.iter()) {
+                y += h * past;
+            }
+            // hist[j] holds u[k−1−j]; shift in u[k].
+            hist.rotate_right(1);
+            hist[0] = u;
         }
         y
     }
@@ -219,6 +266,8 @@ impl AxisFilter {
 pub struct AxisState {
     /// Section states `x_i = [x_i1, x_i2]`.
     pub x: [[f32; 2]; MAX_SECTIONS],
+    /// Past inputs of the FIR part: `fir_hist[j] = u[k−1−j]`.
+    pub fir_hist: [f32; MAX_FIR],
     /// How many times the runaway guard has reset this state.
     pub nonfinite_resets: u32,
 }
@@ -227,6 +276,7 @@ impl Default for AxisState {
     fn default() -> Self {
         AxisState {
             x: [[0.0; 2]; MAX_SECTIONS],
+            fir_hist: [0.0; MAX_FIR],
             nonfinite_resets: 0,
         }
     }
@@ -236,5 +286,6 @@ impl AxisState {
     /// Zero the filter memory (the reset counter is kept).
     pub fn reset(&mut self) {
         self.x = [[0.0; 2]; MAX_SECTIONS];
+        self.fir_hist = [0.0; MAX_FIR];
     }
 }

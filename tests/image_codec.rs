@@ -3,7 +3,7 @@
 mod common;
 use common::*;
 use dynocomp_core::image::*;
-use dynocomp_core::kernel::{AxisFilter, Section};
+use dynocomp_core::kernel::{AxisFilter, Section, MAX_FIR};
 use proptest::prelude::*;
 
 fn encode(img: &CoeffImage) -> Vec<u8> {
@@ -18,6 +18,14 @@ fn full_image() -> CoeffImage {
     image_with(kernel_filter(&blocks, d), &[0, 1, 2], 51_200)
 }
 
+/// Like `full_image`, with `taps` FIR taps on every axis.
+fn image_with_taps(taps: usize) -> CoeffImage {
+    let (blocks, d) = filter_24(51_200.0);
+    let secs: Vec<Section> = blocks.iter().map(to_section).collect();
+    let fir: Vec<f32> = (0..taps).map(|j| 0.1 / (j as f32 + 1.0)).collect();
+    image_with(AxisFilter::with_fir(&secs, d as f32, &fir).unwrap(), &[0, 1, 2], 51_200)
+}
+
 /// Recompute the trailing CRC after deliberately editing a field, so that a
 /// test reaches the semantic check behind the CRC.
 fn fix_crc(bytes: &mut [u8]) {
@@ -28,13 +36,13 @@ fn fix_crc(bytes: &mut [u8]) {
 
 #[test]
 fn round_trip_preserves_every_field() {
-    let mut img = full_image();
+    let mut img = image_with_taps(5);
     img.latency_samples = 6;
     img.method = DesignMethod::VectorFitting;
     img.axes[1] = None;
     let bytes = encode(&img);
     assert_eq!(bytes.len(), encoded_len(&img));
-    assert_eq!(bytes.len(), HEADER_LEN + 2 * (AXIS_HEADER_LEN + 24 * SECTION_LEN) + CRC_LEN);
+    assert_eq!(bytes.len(), HEADER_LEN + 2 * (AXIS_HEADER_LEN + 24 * SECTION_LEN + 5 * TAP_LEN) + CRC_LEN);
     assert_eq!(&bytes[..4], b"DCIM");
     let back = CoeffImage::parse(&bytes).expect("parse");
     assert_eq!(back, img);
@@ -49,7 +57,7 @@ fn round_trip_preserves_every_field() {
 
 #[test]
 fn max_size_image_fits_the_declared_maximum() {
-    let bytes = encode(&full_image());
+    let bytes = encode(&image_with_taps(MAX_FIR));
     assert_eq!(bytes.len(), MAX_IMAGE_LEN);
     assert!(MAX_IMAGE_LEN <= 8 * 1024, "must fit one 8 KiB flash slot");
 }
@@ -66,7 +74,7 @@ fn parse_prefix_reads_an_image_inside_an_erased_flash_slot() {
 
 #[test]
 fn every_single_bit_flip_is_rejected() {
-    let bytes = encode(&full_image());
+    let bytes = encode(&image_with_taps(3));
     let mut flipped = bytes.clone();
     for i in 0..bytes.len() * 8 {
         flipped[i / 8] ^= 1 << (i % 8);
@@ -79,7 +87,7 @@ fn every_single_bit_flip_is_rejected() {
 
 #[test]
 fn every_truncation_is_rejected() {
-    let mut img = full_image();
+    let mut img = image_with_taps(4);
     img.axes[0] = None;
     let bytes = encode(&img);
     for n in 0..bytes.len() {
@@ -133,9 +141,14 @@ fn semantic_errors_behind_a_valid_crc_are_rejected() {
     b[HEADER_LEN + 1] = 25;
     fix_crc(&mut b);
     assert!(matches!(CoeffImage::parse(&b), Err(ImageError::TooManySections { .. })));
-    // zero input gain
+    // too many FIR taps
     let mut b = bytes.clone();
-    b[HEADER_LEN + 8..HEADER_LEN + 12].copy_from_slice(&0f32.to_le_bytes());
+    b[HEADER_LEN + 2] = 17;
+    fix_crc(&mut b);
+    assert!(matches!(CoeffImage::parse(&b), Err(ImageError::TooManyTaps { .. })));
+    // zero input gain (newton_per_code at axis offset 12)
+    let mut b = bytes.clone();
+    b[HEADER_LEN + 12..HEADER_LEN + 16].copy_from_slice(&0f32.to_le_bytes());
     fix_crc(&mut b);
     assert_eq!(CoeffImage::parse(&b), Err(ImageError::BadScaling { axis: 0 }));
 }
@@ -172,10 +185,11 @@ fn arb_image() -> impl Strategy<Value = CoeffImage> {
         1u8..8,
         proptest::collection::vec(arb_section(), 0..=24),
         -5.0f32..5.0,
+        proptest::collection::vec(-1.0f32..1.0, 0..=MAX_FIR),
     )
-        .prop_map(|(fs, lat, mask, secs, d)| {
+        .prop_map(|(fs, lat, mask, secs, d, fir)| {
             let secs: Vec<Section> = secs.into_iter().filter(|s| s.is_stable()).collect();
-            let filter = AxisFilter::new(&secs, d).unwrap();
+            let filter = AxisFilter::with_fir(&secs, d, &fir).unwrap();
             let axes: Vec<usize> = (0..3).filter(|i| mask & (1 << i) != 0).collect();
             let mut img = image_with(filter, &axes, fs);
             img.latency_samples = lat;

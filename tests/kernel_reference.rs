@@ -179,3 +179,21 @@ fn unstable_or_nonfinite_sections_are_refused() {
     assert!(slow.is_stable());
     assert!(!slow.poles_within(1.0 - 1e-6));
 }
+
+#[test]
+fn fir_part_delays_and_weights_past_inputs() {
+    // y[k] = 0.5·u[k] + 2·u[k−1] − 1·u[k−3]: an impulse gives exactly the taps
+    let f = AxisFilter::with_fir(&[], 0.5, &[2.0, 0.0, -1.0]).unwrap();
+    let mut st = AxisState::default();
+    let mut input = vec![0.0f32; 8];
+    input[0] = 1.0;
+    let mut out = vec![0.0f32; 8];
+    f.process(&mut st, &input, &mut out);
+    assert_eq!(out, vec![0.5, 2.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0]);
+    // the FIR history is state: reset clears it
+    f.step(&mut st, 3.0);
+    st.reset();
+    assert_eq!(f.step(&mut st, 0.0), 0.0);
+    assert!(AxisFilter::with_fir(&[], 0.0, &[0.0; 17]).is_err());
+    assert!(AxisFilter::with_fir(&[], 0.0, &[f32::NAN]).is_err());
+}
