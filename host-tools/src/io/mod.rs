@@ -3,3 +3,25 @@
 pub mod atomic;
 pub mod signal_csv;
 pub mod image_file;
+pub mod frf_csv;
+pub mod uff;
+
+/// Read an FRF file: `.csv` as FRF CSV, `.uff` / `.unv` / `.uf` as UFF 58/58b,
+/// any other extension by content (a first non-blank line `-1` means UFF).
+pub fn read_frf(path: &std::path::Path) -> anyhow::Result<crate::frf::Frf> {
+    use anyhow::Context;
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("csv") => frf_csv::read_frf_csv(path),
+        Some("uff" | "unv" | "uf") => uff::read_uff58(path),
+        _ => {
+            let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+            let source = path.display().to_string();
+            if uff::looks_like_uff(&bytes) {
+                uff::parse_uff58(&bytes, &source)
+            } else {
+                frf_csv::parse_frf_csv_bytes(&bytes, &source)
+            }
+        }
+    }
+}

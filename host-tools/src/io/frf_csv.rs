@@ -1,0 +1,360 @@
+//! FRF CSV import/export (DESIGN.md, "CLI contract").
+//!
+//! Format: one header row, then one row per frequency line:
+//!
+//! ```text
+//! freq_hz,x_re,x_im,x_coh,y_re,y_im,z_re,z_im,z_coh
+//! 0.0,1.0,0.0,0.0,...
+//! ```
+//!
+//! `freq_hz` (Hz, strictly ascending, uniform or not), then for each axis
+//! present (x, y, z) `<a>_re`, `<a>_im` (the FRF, N/N) and optionally `<a>_coh`
+//! (coherence γ², 0..=1). Column names are case-insensitive and may be quoted;
+//! the delimiter is `,` (`;` or a tab are accepted when the header uses them);
+//! blank lines are ignored. Every error names the file, the line and, for a
+//! value, the column.
+
+use std::io::Write;
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Context, Result};
+use num_complex::Complex64;
+
+use crate::frf::{axis_name, AxisFrf, Frf};
+
+/// Coherence values this far outside [0, 1] are taken as rounding of the
+/// exporting analyser and clamped; anything further out is an error.
+pub(crate) const COHERENCE_SLACK: f64 = 1e-6;
+
+/// Read an FRF CSV file.
+pub fn read_frf_csv(path: &Path) -> Result<Frf> {
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    parse_frf_csv_bytes(&bytes, &path.display().to_string())
+}
+
+/// Parse FRF CSV from raw bytes (must be UTF-8); `source` names the input in errors.
+pub fn parse_frf_csv_bytes(bytes: &[u8], source: &str) -> Result<Frf> {
+    match std::str::from_utf8(bytes) {
+        Ok(text) => parse_frf_csv(text, source),
+        Err(e) => {
+            let off = e.valid_up_to();
+            let line = 1 + bytes[..off].iter().filter(|&&b| b == b'\n').count();
+            bail!(
+                "{source}: line {line}: not a text (UTF-8) CSV file (invalid byte at offset {off})"
+            )
+        }
+    }
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Re,
+    Im,
+    Coh,
+}
+
+/// Parse FRF CSV text; `source` names the input (file name) in error messages.
+pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l))
+        .filter(|(_, l)| !l.trim().is_empty());
+    let Some((hline, header)) = lines.next() else {
+        bail!("{source}: empty file (expected a header row starting with freq_hz)");
+    };
+    let delim = if header.contains(',') {
+        ','
+    } else if header.contains(';') {
+        ';'
+    } else if header.contains('\t') {
+        '\t'
+    } else {
+        ','
+    };
+
+    // Header: map each column to freq or (axis, kind).
+    let mut freq_col: Option<usize> = None;
+    let mut cols: Vec<Option<(usize, Kind)>> = Vec::new();
+    // slot[axis][kind] = column index
+    let mut slot = [[None::<usize>; 3]; 3];
+    for (c, raw) in header.split(delim).enumerate() {
+        let name = unquote(raw).to_ascii_lowercase();
+        let colno = c + 1;
+        if name == "freq_hz" {
+            if let Some(prev) = freq_col {
+                bail!(
+                    "{source}: line {hline}, column {colno}: duplicate column freq_hz (also column {})",
+                    prev + 1
+                );
+            }
+            freq_col = Some(c);
+            cols.push(None);
+            continue;
+        }
+        let parsed = name.split_once('_').and_then(|(a, k)| {
+            let axis = match a {
+                "x" => 0,
+                "y" => 1,
+                "z" => 2,
+                _ => return None,
+            };
+            let kind = match k {
+                "re" => Kind::Re,
+                "im" => Kind::Im,
+                "coh" => Kind::Coh,
+                _ => return None,
+            };
+            Some((axis, kind))
+        });
+        let Some((axis, kind)) = parsed else {
+            bail!(
+                "{source}: line {hline}, column {colno}: unknown column name {:?} \
+                 (expected freq_hz, then <a>_re, <a>_im and optionally <a>_coh for a = x, y, z)",
+                unquote(raw)
+            );
+        };
+        let k = kind as usize;
+        if let Some(prev) = slot[axis][k] {
+            bail!(
+                "{source}: line {hline}, column {colno}: duplicate column {name} (also column {}): \
+                 axis {} given twice",
+                prev + 1,
+                axis_name(axis)
+            );
+        }
+        slot[axis][k] = Some(c);
+        cols.push(Some((axis, kind)));
+    }
+    if freq_col.is_none() {
+        bail!("{source}: line {hline}: missing column freq_hz in the header");
+    }
+    let mut present = Vec::new();
+    for (axis, s) in slot.iter().enumerate() {
+        let a = axis_name(axis);
+        match (s[0], s[1], s[2]) {
+            (None, None, None) => {}
+            (Some(_), Some(_), _) => present.push(axis),
+            (Some(c), None, _) => bail!(
+                "{source}: line {hline}: column {a}_re (column {}) has no matching {a}_im column",
+                c + 1
+            ),
+            (None, Some(c), _) => bail!(
+                "{source}: line {hline}: column {a}_im (column {}) has no matching {a}_re column",
+                c + 1
+            ),
+            (None, None, Some(c)) => bail!(
+                "{source}: line {hline}: column {a}_coh (column {}) without {a}_re and {a}_im columns",
+                c + 1
+            ),
+        }
+    }
+    if present.is_empty() {
+        bail!("{source}: line {hline}: no FRF columns in the header (expected x_re/x_im, y_re/y_im or z_re/z_im)");
+    }
+
+    let ncols = cols.len();
+    let mut freq: Vec<f64> = Vec::new();
+    let mut re = [Vec::new(), Vec::new(), Vec::new()];
+    let mut im = [Vec::new(), Vec::new(), Vec::new()];
+    let mut coh = [Vec::new(), Vec::new(), Vec::new()];
+    for (lineno, line) in lines {
+        let fields: Vec<&str> = line.split(delim).collect();
+        if fields.len() != ncols {
+            bail!(
+                "{source}: line {lineno}: {} fields, but the header has {ncols} columns",
+                fields.len()
+            );
+        }
+        for (c, raw) in fields.iter().enumerate() {
+            let colname = match cols[c] {
+                None => "freq_hz".to_string(),
+                Some((a, k)) => format!(
+                    "{}_{}",
+                    axis_name(a),
+                    match k {
+                        Kind::Re => "re",
+                        Kind::Im => "im",
+                        Kind::Coh => "coh",
+                    }
+                ),
+            };
+            let at = || format!("{source}: line {lineno}, column {} ({colname})", c + 1);
+            let tok = unquote(raw);
+            if tok.is_empty() {
+                bail!("{}: empty value", at());
+            }
+            let v: f64 = tok
+                .parse()
+                .map_err(|_| anyhow!("{}: cannot read {:?} as a number", at(), tok))?;
+            if !v.is_finite() {
+                bail!("{}: value {tok} is not finite (NaN or infinite)", at());
+            }
+            match cols[c] {
+                None => {
+                    if v < 0.0 {
+                        bail!("{}: negative frequency {v} Hz", at());
+                    }
+                    if let Some(&prev) = freq.last() {
+                        if v <= prev {
+                            bail!(
+                                "{}: frequency {v} Hz is not greater than the previous line's {prev} Hz \
+                                 (frequencies must be strictly ascending)",
+                                at()
+                            );
+                        }
+                    }
+                    freq.push(v);
+                }
+                Some((a, Kind::Re)) => re[a].push(v),
+                Some((a, Kind::Im)) => im[a].push(v),
+                Some((a, Kind::Coh)) => {
+                    if !(-COHERENCE_SLACK..=1.0 + COHERENCE_SLACK).contains(&v) {
+                        bail!("{}: coherence {v} outside [0, 1]", at());
+                    }
+                    coh[a].push(v.clamp(0.0, 1.0));
+                }
+            }
+        }
+    }
+    if freq.is_empty() {
+        bail!("{source}: no data rows after the header (line {hline})");
+    }
+    let axes = present
+        .into_iter()
+        .map(|a| AxisFrf {
+            axis: a,
+            frf: re[a]
+                .iter()
+                .zip(&im[a])
+                .map(|(&r, &i)| Complex64::new(r, i))
+                .collect(),
+            coherence: slot[a][Kind::Coh as usize].map(|_| std::mem::take(&mut coh[a])),
+        })
+        .collect();
+    Ok(Frf {
+        freq_hz: freq,
+        axes,
+    })
+}
+
+/// Trim blanks and one pair of surrounding double quotes.
+fn unquote(s: &str) -> &str {
+    let t = s.trim();
+    t.strip_prefix('"')
+        .and_then(|t| t.strip_suffix('"'))
+        .map(str::trim)
+        .unwrap_or(t)
+}
+
+/// Write an FRF CSV file atomically (nothing is left behind on error).
+/// Values are written in Rust's shortest round-trip form: reading the file
+/// back gives bit-identical values.
+pub fn write_frf_csv(path: &Path, frf: &Frf) -> Result<()> {
+    let text =
+        frf_csv_to_string(frf).with_context(|| format!("{}: not written", path.display()))?;
+    super::atomic::write_atomic(path, |w: &mut dyn Write| {
+        w.write_all(text.as_bytes())?;
+        Ok(())
+    })
+}
+
+/// The FRF CSV text of `frf` (validated as [`write_frf_csv`] does).
+pub fn frf_csv_to_string(frf: &Frf) -> Result<String> {
+    validate_frf(frf)?;
+    let mut s = String::from("freq_hz");
+    for a in &frf.axes {
+        let n = axis_name(a.axis);
+        s.push_str(&format!(",{n}_re,{n}_im"));
+        if a.coherence.is_some() {
+            s.push_str(&format!(",{n}_coh"));
+        }
+    }
+    s.push('\n');
+    for (i, f) in frf.freq_hz.iter().enumerate() {
+        s.push_str(&format!("{f:?}"));
+        for a in &frf.axes {
+            s.push_str(&format!(",{:?},{:?}", a.frf[i].re, a.frf[i].im));
+            if let Some(c) = &a.coherence {
+                s.push_str(&format!(",{:?}", c[i]));
+            }
+        }
+        s.push('\n');
+    }
+    Ok(s)
+}
+
+/// Check an [`Frf`] before writing it: at least one axis, axes x/y/z ascending
+/// and unique, lengths matching the frequency lines, finite values, strictly
+/// ascending non-negative frequencies, coherence within [0, 1].
+pub(crate) fn validate_frf(frf: &Frf) -> Result<()> {
+    let n = frf.freq_hz.len();
+    if n == 0 {
+        bail!("FRF has no frequency lines");
+    }
+    if frf.axes.is_empty() {
+        bail!("FRF has no axis");
+    }
+    for (i, &f) in frf.freq_hz.iter().enumerate() {
+        if !f.is_finite() || f < 0.0 {
+            bail!("frequency line {i}: {f} Hz is not a finite non-negative frequency");
+        }
+        if i > 0 && f <= frf.freq_hz[i - 1] {
+            bail!(
+                "frequency line {i}: {f} Hz is not greater than line {}'s {} Hz (must be strictly ascending)",
+                i - 1,
+                frf.freq_hz[i - 1]
+            );
+        }
+    }
+    let mut prev: Option<usize> = None;
+    for a in &frf.axes {
+        if a.axis > 2 {
+            bail!("axis index {} is not x, y or z", a.axis);
+        }
+        if let Some(p) = prev {
+            if a.axis <= p {
+                bail!(
+                    "axes must be unique and ascending (axis {} after {})",
+                    axis_name(a.axis),
+                    axis_name(p)
+                );
+            }
+        }
+        prev = Some(a.axis);
+        let name = axis_name(a.axis);
+        if a.frf.len() != n {
+            bail!(
+                "axis {name}: {} FRF values for {n} frequency lines",
+                a.frf.len()
+            );
+        }
+        if let Some(i) = a
+            .frf
+            .iter()
+            .position(|v| !v.re.is_finite() || !v.im.is_finite())
+        {
+            bail!(
+                "axis {name}: FRF value at line {i} ({} Hz) is not finite",
+                frf.freq_hz[i]
+            );
+        }
+        if let Some(c) = &a.coherence {
+            if c.len() != n {
+                bail!(
+                    "axis {name}: {} coherence values for {n} frequency lines",
+                    c.len()
+                );
+            }
+            if let Some(i) = c.iter().position(|v| !(0.0..=1.0).contains(v)) {
+                bail!(
+                    "axis {name}: coherence {} at line {i} ({} Hz) outside [0, 1]",
+                    c[i],
+                    frf.freq_hz[i]
+                );
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,1158 @@
+//! Universal File Format dataset 58 ("function at nodal DOF") FRF import/export,
+//! ASCII (58) and binary (58b), as exported by LMS Testlab / Simcenter, m+p,
+//! B&K and pyuff (DESIGN.md, "CLI contract").
+//!
+//! A UFF file is a sequence of blocks, each between two `    -1` lines; the
+//! line after the opening `-1` holds the dataset number (`58`, or `58b ...` for
+//! binary). Datasets other than 58 (151 header, 164 units, geometry, ...) are
+//! skipped. In a dataset 58:
+//!
+//! * function type 4 (FRF) and 6 (coherence) are used, others are skipped;
+//! * the axis comes from the response direction (record 6): 1/2/3 = +X/+Y/+Z.
+//!   A negative direction (-1/-2/-3) flips the sign of the FRF (not of the
+//!   coherence); a negative reference direction does too, so the FRF returned is
+//!   always +axis response over +axis force. Cross-axis FRFs (reference axis ≠
+//!   response axis) and rotational directions are skipped (the baseline is SISO);
+//! * ordinate data types 2/4 (real single/double) and 5/6 (complex
+//!   single/double); even abscissa (min + i·increment, record 7) or uneven
+//!   (abscissa stored with every value);
+//! * the abscissa must be frequency (record 8 specific data type 18, or
+//!   unknown/general, units Hz if labelled), and FRF numerator and denominator
+//!   forces (records 9/10: reaction or excitation force, or unknown/general):
+//!   anything else (e.g. an accelerance) is refused with a message saying so.
+//!
+//! Binary 58b: the header line `58b byte_order fp_format n_ascii_lines n_bytes
+//! 0 0 0 0` is followed by the 11 ASCII records and then the raw values (byte
+//! order 1 = little, 2 = big endian; IEEE 754 only). The data size is computed
+//! from record 7 (some writers, pyuff among them, put a wrong `n_bytes`), and
+//! the closing `-1` may follow directly or after a line break. With an uneven
+//! abscissa the abscissa values have the precision of the ordinate (pyuff's
+//! convention). ASCII numbers are read split at blanks, falling back to the
+//! fixed Fortran field widths (E13.5 / E20.12) when fields touch.
+//!
+//! Every error is one line naming the file, the line, the dataset and record,
+//! and the problem. Parsers never panic, whatever the input.
+
+use std::io::Write;
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Context, Result};
+use num_complex::Complex64;
+
+use super::frf_csv::{validate_frf, COHERENCE_SLACK};
+use crate::frf::{axis_name, AxisFrf, Frf};
+
+/// Read an FRF (+ coherence) from a UFF file with datasets 58/58b.
+pub fn read_uff58(path: &Path) -> Result<Frf> {
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    parse_uff58(&bytes, &path.display().to_string())
+}
+
+/// True if the first non-blank line of `bytes` is a UFF block delimiter `-1`.
+pub fn looks_like_uff(bytes: &[u8]) -> bool {
+    let mut cur = Cursor {
+        data: bytes,
+        pos: 0,
+    };
+    while let Some((_, line)) = cur.next_line() {
+        let t = trim(line);
+        if !t.is_empty() {
+            return t == b"-1";
+        }
+    }
+    false
+}
+
+// ---------------------------------------------------------------------------
+// Reading
+
+struct Cursor<'a> {
+    data: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Cursor<'a> {
+    /// Next line (without `\n` / `\r\n`) and the offset of its first byte.
+    fn next_line(&mut self) -> Option<(usize, &'a [u8])> {
+        if self.pos >= self.data.len() {
+            return None;
+        }
+        let start = self.pos;
+        let rest = &self.data[start..];
+        let (line, adv) = match rest.iter().position(|&b| b == b'\n') {
+            Some(i) => (&rest[..i], i + 1),
+            None => (rest, rest.len()),
+        };
+        self.pos += adv;
+        Some((start, line.strip_suffix(b"\r").unwrap_or(line)))
+    }
+}
+
+/// 1-based line number of byte offset `off`.
+fn line_of(data: &[u8], off: usize) -> usize {
+    1 + data[..off.min(data.len())]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
+}
+
+fn is_blank(b: u8) -> bool {
+    b.is_ascii_whitespace() || b == 0 || b == 0x1a
+}
+
+fn trim(mut b: &[u8]) -> &[u8] {
+    while let [first, rest @ ..] = b {
+        if is_blank(*first) {
+            b = rest;
+        } else {
+            break;
+        }
+    }
+    while let [rest @ .., last] = b {
+        if is_blank(*last) {
+            b = rest;
+        } else {
+            break;
+        }
+    }
+    b
+}
+
+/// A short printable rendering of a line for error messages.
+fn show(line: &[u8]) -> String {
+    let s = String::from_utf8_lossy(line);
+    let s = s.trim();
+    let mut out: String = s
+        .chars()
+        .take(40)
+        .map(|c| if c.is_control() { '?' } else { c })
+        .collect();
+    if s.chars().count() > 40 {
+        out.push('…');
+    }
+    format!("{out:?}")
+}
+
+/// The fixed-width field `[start, start + width)` of a record, trimmed.
+fn field(line: &[u8], start: usize, width: usize) -> Option<&str> {
+    let end = (start + width).min(line.len());
+    let bytes = line.get(start..end)?;
+    std::str::from_utf8(bytes).ok().map(str::trim)
+}
+
+fn parse_int(s: &str) -> Option<i64> {
+    s.trim().parse().ok()
+}
+
+/// A Fortran-style real: `1.5E+03`, `1.5e3`, `1.5D+03`, `15`.
+fn parse_real(s: &str) -> Option<f64> {
+    let s = s.trim();
+    if s.is_empty() {
+        return None;
+    }
+    if s.contains(['D', 'd']) {
+        s.replace(['D', 'd'], "e").parse().ok()
+    } else {
+        s.parse().ok()
+    }
+}
+
+fn tokens(line: &[u8]) -> Vec<&str> {
+    std::str::from_utf8(line)
+        .map(|s| s.split_whitespace().collect())
+        .unwrap_or_default()
+}
+
+/// Where we are, for error messages.
+struct Ctx<'a> {
+    source: &'a str,
+    data: &'a [u8],
+    no: usize,
+    line: usize,
+}
+
+impl Ctx<'_> {
+    /// `file: line L: dataset #k (58 at line S), <what>`
+    fn at(&self, off: usize, what: &str) -> String {
+        format!(
+            "{}: line {}: dataset #{} (58, starting line {}), {what}",
+            self.source,
+            line_of(self.data, off),
+            self.no,
+            self.line
+        )
+    }
+}
+
+#[derive(Clone, Copy)]
+struct BinHeader {
+    big_endian: bool,
+    n_ascii_lines: usize,
+    n_bytes: Option<u64>,
+}
+
+/// Parse the fields after `58b` (format I6,I6,I12,I12,...; blanks as fallback).
+fn parse_bin_header(rest: &[u8], ctx: &Ctx, off: usize) -> Result<BinHeader> {
+    let fixed = (
+        field(rest, 0, 6).and_then(parse_int),
+        field(rest, 6, 6).and_then(parse_int),
+        field(rest, 12, 12).and_then(parse_int),
+        field(rest, 24, 12).and_then(parse_int),
+    );
+    let (bo, fp, nl, nb) = match fixed {
+        (Some(a), Some(b), Some(c), d) => (a, b, c, d),
+        _ => {
+            let t = tokens(rest);
+            let get = |i: usize| t.get(i).and_then(|s| parse_int(s));
+            match (get(0), get(1), get(2)) {
+                (Some(a), Some(b), Some(c)) => (a, b, c, get(3)),
+                _ => bail!(
+                    "{}: cannot read byte order, floating point format and number of ASCII lines \
+                     from the 58b header {}",
+                    ctx.at(off, "binary header"),
+                    show(rest)
+                ),
+            }
+        }
+    };
+    let big_endian = match bo {
+        1 => false,
+        2 => true,
+        _ => bail!(
+            "{}: byte order {bo} unknown (1 = little endian, 2 = big endian)",
+            ctx.at(off, "binary header")
+        ),
+    };
+    if fp != 2 {
+        bail!(
+            "{}: floating point format {fp} not supported (only 2 = IEEE 754; 1 = DEC VMS, 3 = IBM 370)",
+            ctx.at(off, "binary header")
+        );
+    }
+    if !(11..=1000).contains(&nl) {
+        bail!(
+            "{}: {nl} ASCII lines declared, dataset 58 has 11 (records 1 to 11)",
+            ctx.at(off, "binary header")
+        );
+    }
+    Ok(BinHeader {
+        big_endian,
+        n_ascii_lines: nl as usize,
+        n_bytes: nb.and_then(|v| u64::try_from(v).ok()),
+    })
+}
+
+/// Find a closing `-1` at `pos` (after optional blanks / line breaks); return
+/// the offset after its line.
+fn closing_at(data: &[u8], mut pos: usize) -> Option<usize> {
+    while pos < data.len() && matches!(data[pos], b' ' | b'\r' | b'\n') {
+        pos += 1;
+    }
+    if data.get(pos..pos + 2)? != b"-1" {
+        return None;
+    }
+    pos += 2;
+    while pos < data.len() && data[pos] != b'\n' {
+        if !is_blank(data[pos]) {
+            return None;
+        }
+        pos += 1;
+    }
+    Some((pos + 1).min(data.len()))
+}
+
+/// Skip a dataset other than 58 up to and including its closing `-1`.
+fn skip_other(
+    cur: &mut Cursor,
+    ctx: &Ctx,
+    num: u64,
+    binary: bool,
+    rest: &[u8],
+    id_off: usize,
+) -> Result<()> {
+    if binary {
+        // Another binary dataset: n_ascii_lines ASCII lines, then n_bytes.
+        if let Ok(h) = parse_bin_header(rest, ctx, id_off) {
+            if let Some(nb) = h.n_bytes {
+                for _ in 0..h.n_ascii_lines {
+                    if cur.next_line().is_none() {
+                        break;
+                    }
+                }
+                let end = usize::try_from(nb)
+                    .ok()
+                    .and_then(|nb| cur.pos.checked_add(nb));
+                if let Some(next) = end.and_then(|e| closing_at(cur.data, e)) {
+                    cur.pos = next;
+                    return Ok(());
+                }
+            }
+        }
+        // Fall back to looking for the closing line.
+    }
+    while let Some((_, line)) = cur.next_line() {
+        if trim(line) == b"-1" {
+            return Ok(());
+        }
+    }
+    bail!(
+        "{}: line {}: dataset #{} (type {num}) is not closed by a '    -1' line before the end of the file",
+        ctx.source,
+        ctx.line,
+        ctx.no
+    )
+}
+
+fn spec_type_name(t: i64) -> &'static str {
+    match t {
+        0 => "unknown",
+        1 => "general",
+        2 => "stress",
+        3 => "strain",
+        5 => "temperature",
+        6 => "heat flux",
+        8 => "displacement",
+        9 => "reaction force",
+        11 => "velocity",
+        12 => "acceleration",
+        13 => "excitation force",
+        15 => "pressure",
+        16 => "mass",
+        17 => "time",
+        18 => "frequency",
+        19 => "rpm",
+        20 => "order",
+        _ => "an unlisted quantity",
+    }
+}
+
+fn function_type_name(t: i64) -> &'static str {
+    match t {
+        0 => "general",
+        1 => "time response",
+        2 => "auto spectrum",
+        3 => "cross spectrum",
+        4 => "FRF",
+        5 => "transmissibility",
+        6 => "coherence",
+        7 => "auto correlation",
+        8 => "cross correlation",
+        9 => "PSD",
+        12 => "spectrum",
+        18 => "mode indicator function",
+        26 => "multiple coherence",
+        _ => "other",
+    }
+}
+
+/// Units labels that are obviously not a force (FRF ordinate must be N/N).
+fn obviously_not_force(label: &str) -> bool {
+    let l = label.trim().to_ascii_lowercase();
+    if l.is_empty() || l == "none" {
+        return false;
+    }
+    const NOT: [&str; 12] = [
+        "m/s", "mm", "µm", "um", "in/", "/s", "s^2", "pa", "mv", "v/", "g/", "m/n",
+    ];
+    NOT.iter().any(|p| l.contains(p)) || ["g", "m", "v", "in", "s", "rad"].contains(&l.as_str())
+}
+
+/// Data characteristics record (8 to 11): specific data type and units label.
+fn data_characteristics(line: &[u8]) -> (Option<i64>, String) {
+    let spec = field(line, 0, 10)
+        .and_then(parse_int)
+        .or_else(|| tokens(line).first().and_then(|t| parse_int(t)));
+    let units = field(line, 46, 21).unwrap_or("").to_string();
+    (spec, units)
+}
+
+enum Found58 {
+    Skipped(String),
+    Frf {
+        axis: usize,
+        freq: Vec<f64>,
+        frf: Vec<Complex64>,
+    },
+    Coh {
+        axis: usize,
+        freq: Vec<f64>,
+        coh: Vec<f64>,
+    },
+}
+
+/// Parse one dataset 58 whose id line was just read.
+fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found58> {
+    let data = cur.data;
+    let n_ascii = bin.map_or(11, |b| b.n_ascii_lines);
+    let mut recs: Vec<(usize, &[u8])> = Vec::with_capacity(11);
+    for r in 0..n_ascii {
+        let Some((off, line)) = cur.next_line() else {
+            bail!(
+                "{}: line {}: dataset #{} (58, starting line {}), record {}: the file ends inside the dataset header",
+                ctx.source,
+                line_of(data, data.len()),
+                ctx.no,
+                ctx.line,
+                r + 1
+            );
+        };
+        if bin.is_none() && trim(line) == b"-1" {
+            bail!(
+                "{}: the dataset ends ('-1') before its 11 header records",
+                ctx.at(off, &format!("record {}", r + 1))
+            );
+        }
+        if r < 11 {
+            recs.push((off, line));
+        }
+    }
+
+    // Record 6: DOF identification, Format(2(I5,I10),2(1X,10A1,I10,I4)).
+    let (off6, r6) = recs[5];
+    let fixed6 = (
+        field(r6, 0, 5).and_then(parse_int),
+        field(r6, 51, 4).and_then(parse_int),
+        field(r6, 76, 4).and_then(parse_int),
+    );
+    let (func_type, rsp_dir, ref_dir) = match fixed6 {
+        (Some(f), Some(d), Some(r)) => (f, d, r),
+        _ => {
+            let t = tokens(r6);
+            let get = |i: usize| t.get(i).and_then(|s| parse_int(s));
+            match (get(0), get(6), get(9)) {
+                (Some(f), Some(d), Some(r)) if t.len() == 10 => (f, d, r),
+                _ => bail!(
+                    "{}: cannot read function type, response direction and reference direction from {}",
+                    ctx.at(off6, "record 6"),
+                    show(r6)
+                ),
+            }
+        }
+    };
+
+    // Record 7: data form, Format(3I10,3E13.5).
+    let (off7, r7) = recs[6];
+    let fixed7 = (
+        field(r7, 0, 10).and_then(parse_int),
+        field(r7, 10, 10).and_then(parse_int),
+        field(r7, 20, 10).and_then(parse_int),
+        field(r7, 30, 13).and_then(parse_real),
+        field(r7, 43, 13).and_then(parse_real),
+    );
+    let (ord_type, num_pts, spacing, x_min, x_inc) = match fixed7 {
+        (Some(a), Some(b), Some(c), Some(d), Some(e)) => (a, b, c, d, e),
+        _ => {
+            let t = tokens(r7);
+            let gi = |i: usize| t.get(i).and_then(|s| parse_int(s));
+            let gr = |i: usize| t.get(i).and_then(|s| parse_real(s));
+            match (gi(0), gi(1), gi(2), gr(3), gr(4)) {
+                (Some(a), Some(b), Some(c), Some(d), Some(e)) => (a, b, c, d, e),
+                _ => bail!(
+                    "{}: cannot read ordinate data type, number of points, spacing, abscissa minimum \
+                     and increment from {}",
+                    ctx.at(off7, "record 7"),
+                    show(r7)
+                ),
+            }
+        }
+    };
+    let (complex, double) = match ord_type {
+        2 => (false, false),
+        4 => (false, true),
+        5 => (true, false),
+        6 => (true, true),
+        _ => bail!(
+            "{}: ordinate data type {ord_type} not supported (2/4 = real single/double, 5/6 = complex single/double)",
+            ctx.at(off7, "record 7")
+        ),
+    };
+    let even = match spacing {
+        1 => true,
+        0 => false,
+        _ => bail!(
+            "{}: abscissa spacing {spacing} is neither 0 (uneven) nor 1 (even)",
+            ctx.at(off7, "record 7")
+        ),
+    };
+    if num_pts < 1 {
+        bail!(
+            "{}: number of data points is {num_pts}: no data",
+            ctx.at(off7, "record 7")
+        );
+    }
+    let per_point = usize::from(!even) + if complex { 2 } else { 1 };
+    let total = usize::try_from(num_pts)
+        .ok()
+        .and_then(|n| n.checked_mul(per_point))
+        .filter(|&t| t <= data.len())
+        .ok_or_else(|| {
+            anyhow!(
+                "{}: {num_pts} data points declared, more than the file can hold",
+                ctx.at(off7, "record 7")
+            )
+        })?;
+
+    // Which datasets we use.
+    let axis = match rsp_dir.abs() {
+        d @ 1..=3 => Some((d - 1) as usize),
+        _ => None,
+    };
+    let skip = if func_type != 4 && func_type != 6 {
+        Some(format!(
+            "dataset #{} at line {}: function type {func_type} ({})",
+            ctx.no,
+            ctx.line,
+            function_type_name(func_type)
+        ))
+    } else if axis.is_none() {
+        Some(format!(
+            "dataset #{} at line {}: response direction {rsp_dir} is not a translation (±1/±2/±3)",
+            ctx.no, ctx.line
+        ))
+    } else if ref_dir != 0 && ref_dir.abs() != rsp_dir.abs() {
+        Some(format!(
+            "dataset #{} at line {}: cross-axis {} (response direction {rsp_dir}, reference direction {ref_dir})",
+            ctx.no,
+            ctx.line,
+            function_type_name(func_type)
+        ))
+    } else {
+        None
+    };
+
+    // Record 12: the data values, with the offset of the line (ASCII) or
+    // of the value itself (binary) for error messages.
+    let mut vals: Vec<f64> = Vec::with_capacity(total.min(1 << 20));
+    let mut offs: Vec<usize> = Vec::with_capacity(total.min(1 << 20));
+    match bin {
+        Some(h) => {
+            let elem = if double { 8 } else { 4 };
+            let start = cur.pos;
+            let need = total * elem; // total <= data.len(), no overflow
+            let avail = data.len() - start;
+            if avail < need {
+                bail!(
+                    "{}: record 7 declares {num_pts} points, {need} bytes of binary data, but only {avail} bytes follow",
+                    ctx.at(start, "record 12")
+                );
+            }
+            let Some(next) = closing_at(data, start + need) else {
+                bail!(
+                    "{}: no closing '    -1' after the {need} bytes of binary data declared by record 7 \
+                     (the 58b header says {} bytes)",
+                    ctx.at(start + need, "record 12"),
+                    h.n_bytes.map_or("?".to_string(), |b| b.to_string())
+                );
+            };
+            if skip.is_none() {
+                for (i, chunk) in data[start..start + need].chunks_exact(elem).enumerate() {
+                    let v = match (double, h.big_endian) {
+                        (true, false) => {
+                            chunk.try_into().map(f64::from_le_bytes).unwrap_or(f64::NAN)
+                        }
+                        (true, true) => {
+                            chunk.try_into().map(f64::from_be_bytes).unwrap_or(f64::NAN)
+                        }
+                        (false, false) => chunk
+                            .try_into()
+                            .map(f32::from_le_bytes)
+                            .map_or(f64::NAN, f64::from),
+                        (false, true) => chunk
+                            .try_into()
+                            .map(f32::from_be_bytes)
+                            .map_or(f64::NAN, f64::from),
+                    };
+                    vals.push(v);
+                    offs.push(start + i * elem);
+                }
+            }
+            cur.pos = next;
+        }
+        None => {
+            let widths: &[usize] = match (double, even, complex) {
+                (false, _, _) => &[13],
+                (true, true, _) => &[20],
+                (true, false, false) => &[13, 20],
+                (true, false, true) => &[13, 20, 20],
+            };
+            let mut closed = false;
+            while let Some((off, line)) = cur.next_line() {
+                let t = trim(line);
+                if t == b"-1" {
+                    closed = true;
+                    break;
+                }
+                if skip.is_some() || t.is_empty() {
+                    continue;
+                }
+                read_numbers(line, widths, &mut vals).map_err(|tok| {
+                    anyhow!(
+                        "{}: cannot read {} as a number",
+                        ctx.at(off, "record 12"),
+                        show(tok.as_bytes())
+                    )
+                })?;
+                offs.resize(vals.len(), off);
+                if vals.len() > total {
+                    bail!(
+                        "{}: more values than the {num_pts} points declared in record 7 ({total} values)",
+                        ctx.at(off, "record 12")
+                    );
+                }
+            }
+            if !closed {
+                bail!(
+                    "{}: the dataset is not closed by a '    -1' line before the end of the file",
+                    ctx.at(data.len(), "record 12")
+                );
+            }
+            if skip.is_none() && vals.len() < total {
+                bail!(
+                    "{}: {} values, but record 7 declares {num_pts} points ({total} values)",
+                    ctx.at(offs.last().copied().unwrap_or(off7), "record 12"),
+                    vals.len()
+                );
+            }
+        }
+    }
+    if let Some(note) = skip {
+        return Ok(Found58::Skipped(note));
+    }
+    let axis = axis.unwrap_or(0);
+
+    // Units: the abscissa must be frequency, an FRF force over force.
+    let (off8, r8) = recs[7];
+    let (abs_type, abs_units) = data_characteristics(r8);
+    if let Some(t) = abs_type.filter(|t| ![0, 1, 18].contains(t)) {
+        bail!(
+            "{}: the abscissa is {} (specific data type {t}), not frequency",
+            ctx.at(off8, "record 8"),
+            spec_type_name(t)
+        );
+    }
+    let au = abs_units.to_ascii_lowercase();
+    if !au.is_empty() && au != "none" && !au.contains("hz") {
+        bail!(
+            "{}: abscissa units {abs_units:?} are not Hz",
+            ctx.at(off8, "record 8")
+        );
+    }
+    if func_type == 4 {
+        for (r, part) in [(8usize, "numerator"), (9, "denominator")] {
+            let (off, line) = recs[r];
+            let (t, units) = data_characteristics(line);
+            if let Some(t) = t.filter(|t| ![0, 1, 9, 13].contains(t)) {
+                bail!(
+                    "{}: the FRF {part} is {} (specific data type {t}), not a force: \
+                     dynocomp needs the dynamometer's force/force FRF (N/N)",
+                    ctx.at(off, &format!("record {}", r + 1)),
+                    spec_type_name(t)
+                );
+            }
+            if obviously_not_force(&units) {
+                bail!(
+                    "{}: the FRF {part} units {units:?} are not a force: \
+                     dynocomp needs the dynamometer's force/force FRF (N/N)",
+                    ctx.at(off, &format!("record {}", r + 1))
+                );
+            }
+        }
+    }
+
+    // Every value finite.
+    if let Some(i) = vals.iter().position(|v| !v.is_finite()) {
+        let what = if bin.is_some() {
+            format!(
+                "record 12 (binary value {} at byte offset {})",
+                i + 1,
+                offs[i]
+            )
+        } else {
+            "record 12".to_string()
+        };
+        bail!(
+            "{}: value {} is {} (values must be finite)",
+            ctx.at(offs[i], &what),
+            i + 1,
+            vals[i]
+        );
+    }
+
+    // Abscissa.
+    let n = total / per_point;
+    let freq: Vec<f64> = if even {
+        if x_min < 0.0 || !x_min.is_finite() {
+            bail!(
+                "{}: abscissa minimum {x_min} Hz is not a non-negative frequency",
+                ctx.at(off7, "record 7")
+            );
+        }
+        if n > 1 && !(x_inc > 0.0 && x_inc.is_finite()) {
+            bail!(
+                "{}: abscissa increment {x_inc} Hz must be positive (frequencies strictly ascending)",
+                ctx.at(off7, "record 7")
+            );
+        }
+        (0..n).map(|i| x_min + i as f64 * x_inc).collect()
+    } else {
+        let f: Vec<f64> = vals.iter().step_by(per_point).copied().collect();
+        for i in 0..f.len() {
+            let o = offs[i * per_point];
+            if f[i] < 0.0 {
+                bail!("{}: negative frequency {} Hz", ctx.at(o, "record 12"), f[i]);
+            }
+            if i > 0 && f[i] <= f[i - 1] {
+                bail!(
+                    "{}: frequency {} Hz is not greater than the previous point's {} Hz \
+                     (frequencies must be strictly ascending)",
+                    ctx.at(o, "record 12"),
+                    f[i],
+                    f[i - 1]
+                );
+            }
+        }
+        f
+    };
+    let first = usize::from(!even);
+    let ord = |k: usize, j: usize| vals[k * per_point + first + j];
+
+    if func_type == 4 {
+        // H = (s_rsp · response) / (s_ref · force): undo the direction signs.
+        let sign = rsp_dir.signum() * if ref_dir < 0 { -1 } else { 1 };
+        let s = sign as f64;
+        let frf = (0..n)
+            .map(|k| {
+                let v = if complex {
+                    Complex64::new(ord(k, 0), ord(k, 1))
+                } else {
+                    Complex64::new(ord(k, 0), 0.0)
+                };
+                v * s
+            })
+            .collect();
+        Ok(Found58::Frf { axis, freq, frf })
+    } else {
+        let mut coh = Vec::with_capacity(n);
+        for k in 0..n {
+            let o = offs[k * per_point];
+            let c = ord(k, 0);
+            if complex && ord(k, 1) != 0.0 {
+                bail!(
+                    "{}: coherence at point {} has a non-zero imaginary part {}",
+                    ctx.at(o, "record 12"),
+                    k + 1,
+                    ord(k, 1)
+                );
+            }
+            if !(-COHERENCE_SLACK..=1.0 + COHERENCE_SLACK).contains(&c) {
+                bail!(
+                    "{}: coherence {c} at point {} ({} Hz) outside [0, 1]",
+                    ctx.at(o, "record 12"),
+                    k + 1,
+                    freq[k]
+                );
+            }
+            coh.push(c.clamp(0.0, 1.0));
+        }
+        Ok(Found58::Coh { axis, freq, coh })
+    }
+}
+
+/// Numbers of one ASCII data line: split at blanks; if a token does not
+/// parse (fields touching), the line is cut at the fixed Fortran widths.
+/// On failure returns the offending token.
+fn read_numbers(
+    line: &[u8],
+    widths: &[usize],
+    out: &mut Vec<f64>,
+) -> std::result::Result<(), String> {
+    let Ok(text) = std::str::from_utf8(line) else {
+        return Err(String::from_utf8_lossy(line).into_owned());
+    };
+    let mut tmp = Vec::new();
+    let mut bad = None;
+    for t in text.split_whitespace() {
+        match parse_real(t) {
+            Some(v) => tmp.push(v),
+            None => {
+                bad = Some(t.to_string());
+                break;
+            }
+        }
+    }
+    if bad.is_none() {
+        out.extend(tmp);
+        return Ok(());
+    }
+    // Fixed widths.
+    tmp.clear();
+    let b = text.as_bytes();
+    let mut pos = 0;
+    let mut k = 0;
+    while pos < b.len() {
+        let w = widths[k % widths.len()];
+        let end = (pos + w).min(b.len());
+        let f = text.get(pos..end).unwrap_or("");
+        if !f.trim().is_empty() {
+            match parse_real(f) {
+                Some(v) => tmp.push(v),
+                None => return Err(bad.unwrap_or_else(|| f.trim().to_string())),
+            }
+        }
+        pos = end;
+        k += 1;
+    }
+    out.extend(tmp);
+    Ok(())
+}
+
+/// Parse a UFF file (ASCII and/or binary datasets) from memory; `source`
+/// names the input in error messages.
+pub fn parse_uff58(bytes: &[u8], source: &str) -> Result<Frf> {
+    if trim(bytes).is_empty() {
+        bail!("{source}: empty file");
+    }
+    struct Item {
+        no: usize,
+        line: usize,
+        axis: usize,
+        freq: Vec<f64>,
+        what: &'static str,
+    }
+    let mut cur = Cursor {
+        data: bytes,
+        pos: 0,
+    };
+    let mut set_no = 0usize;
+    let mut skipped: Vec<String> = Vec::new();
+    let mut frfs: [Option<(Item, Vec<Complex64>)>; 3] = [None, None, None];
+    let mut cohs: [Option<(Item, Vec<f64>)>; 3] = [None, None, None];
+    while let Some((off, line)) = cur.next_line() {
+        let t = trim(line);
+        if t.is_empty() {
+            continue;
+        }
+        let start_line = line_of(bytes, off);
+        if t != b"-1" {
+            bail!(
+                "{source}: line {start_line}: expected '    -1' opening a UFF dataset, found {}",
+                show(t)
+            );
+        }
+        // The dataset number line; a lone trailing "-1" ends the file.
+        let (id_off, id) = loop {
+            match cur.next_line() {
+                Some((o, l)) if !trim(l).is_empty() => break (o, l),
+                Some(_) => continue,
+                None => bail!("{source}: line {start_line}: the file ends after '-1' (dataset number missing)"),
+            }
+        };
+        let idt = trim(id);
+        let digits = idt.iter().take_while(|b| b.is_ascii_digit()).count();
+        let num: Option<u64> = std::str::from_utf8(&idt[..digits])
+            .ok()
+            .and_then(|s| s.parse().ok());
+        let Some(num) = num.filter(|_| digits <= 6) else {
+            bail!(
+                "{source}: line {}: expected a dataset number after '-1', found {}",
+                line_of(bytes, id_off),
+                show(idt)
+            );
+        };
+        let rest = &idt[digits..];
+        let binary = matches!(rest.first(), Some(b'b' | b'B'));
+        let rest = if binary { &rest[1..] } else { rest };
+        set_no += 1;
+        let ctx = Ctx {
+            source,
+            data: bytes,
+            no: set_no,
+            line: start_line,
+        };
+        if num != 58 {
+            skip_other(&mut cur, &ctx, num, binary, rest, id_off)?;
+            skipped.push(format!(
+                "dataset #{set_no} at line {start_line}: type {num}"
+            ));
+            continue;
+        }
+        let bin = if binary {
+            Some(parse_bin_header(rest, &ctx, id_off)?)
+        } else {
+            None
+        };
+        let item = |axis: usize, freq: Vec<f64>, what: &'static str| Item {
+            no: set_no,
+            line: start_line,
+            axis,
+            freq,
+            what,
+        };
+        match parse58(&mut cur, &ctx, bin)? {
+            Found58::Skipped(note) => skipped.push(note),
+            Found58::Frf { axis, freq, frf } => {
+                if let Some((p, _)) = &frfs[axis] {
+                    bail!(
+                        "{source}: line {start_line}: dataset #{set_no} is a second FRF for axis {} \
+                         (the first is dataset #{} at line {}): duplicate axis",
+                        axis_name(axis),
+                        p.no,
+                        p.line
+                    );
+                }
+                frfs[axis] = Some((item(axis, freq, "FRF"), frf));
+            }
+            Found58::Coh { axis, freq, coh } => {
+                if let Some((p, _)) = &cohs[axis] {
+                    bail!(
+                        "{source}: line {start_line}: dataset #{set_no} is a second coherence for axis {} \
+                         (the first is dataset #{} at line {}): duplicate axis",
+                        axis_name(axis),
+                        p.no,
+                        p.line
+                    );
+                }
+                cohs[axis] = Some((item(axis, freq, "coherence"), coh));
+            }
+        }
+    }
+    if set_no == 0 {
+        bail!("{source}: no UFF dataset found");
+    }
+    // The reference frequency lines: the first FRF in the file.
+    let Some(reference) = frfs
+        .iter()
+        .flatten()
+        .map(|(it, _)| it)
+        .min_by_key(|it| it.no)
+    else {
+        let mut msg = format!(
+            "{source}: no FRF found (dataset 58 with function type 4 and response direction ±1, ±2 or ±3)"
+        );
+        if !skipped.is_empty() {
+            let shown: Vec<&str> = skipped.iter().take(4).map(String::as_str).collect();
+            msg.push_str(&format!("; skipped {}", shown.join("; ")));
+            if skipped.len() > 4 {
+                msg.push_str(&format!("; and {} more", skipped.len() - 4));
+            }
+        }
+        bail!(msg);
+    };
+    let check = |it: &Item| -> Result<()> {
+        let (a, b) = (&reference.freq, &it.freq);
+        let head = || {
+            format!(
+                "{source}: line {}: dataset #{} ({} {})",
+                it.line,
+                it.no,
+                it.what,
+                axis_name(it.axis)
+            )
+        };
+        if a.len() != b.len() {
+            bail!(
+                "{}: {} frequency lines, but dataset #{} (FRF {}, line {}) has {}: \
+                 all datasets must share the same frequency lines",
+                head(),
+                b.len(),
+                reference.no,
+                axis_name(reference.axis),
+                reference.line,
+                a.len()
+            );
+        }
+        let scale = a
+            .last()
+            .copied()
+            .unwrap_or(0.0)
+            .abs()
+            .max(b.last().copied().unwrap_or(0.0).abs());
+        if let Some(i) = (0..a.len()).find(|&i| (a[i] - b[i]).abs() > 1e-6 * scale) {
+            bail!(
+                "{}: frequency line {} is {} Hz, but {} Hz in dataset #{} (FRF {}, line {}): \
+                 all datasets must share the same frequency lines",
+                head(),
+                i + 1,
+                b[i],
+                a[i],
+                reference.no,
+                axis_name(reference.axis),
+                reference.line
+            );
+        }
+        Ok(())
+    };
+    for axis in 0..3 {
+        if let Some((it, _)) = &frfs[axis] {
+            check(it)?;
+        }
+        if let Some((it, _)) = &cohs[axis] {
+            if frfs[axis].is_none() {
+                bail!(
+                    "{source}: line {}: dataset #{} is a coherence for axis {} but the file has no FRF for axis {}",
+                    it.line,
+                    it.no,
+                    axis_name(axis),
+                    axis_name(axis)
+                );
+            }
+            check(it)?;
+        }
+    }
+    let freq_hz = reference.freq.clone();
+    let mut axes = Vec::new();
+    for axis in 0..3 {
+        if let Some((_, frf)) = frfs[axis].take() {
+            let coherence = cohs[axis].take().map(|(_, c)| c);
+            axes.push(AxisFrf {
+                axis,
+                frf,
+                coherence,
+            });
+        }
+    }
+    Ok(Frf { freq_hz, axes })
+}
+
+// ---------------------------------------------------------------------------
+// Writing
+
+/// Write `frf` as UFF datasets 58 (ASCII) or 58b (binary, little endian,
+/// IEEE 754 double), atomically: per axis an FRF (function type 4, complex
+/// double) and, if present, its coherence (function type 6, real double);
+/// response and reference direction +1/+2/+3, node 1. The frequency lines must
+/// be evenly spaced (the abscissa is written as minimum and increment, with 7
+/// significant digits).
+pub fn write_uff58(path: &Path, frf: &Frf, binary: bool) -> Result<()> {
+    let bytes = uff58_to_bytes(frf, binary)
+        .map_err(|e| anyhow!("{}: not written: {e:#}", path.display()))?;
+    super::atomic::write_atomic(path, |w: &mut dyn Write| {
+        w.write_all(&bytes)?;
+        Ok(())
+    })
+}
+
+/// The bytes [`write_uff58`] writes.
+pub fn uff58_to_bytes(frf: &Frf, binary: bool) -> Result<Vec<u8>> {
+    validate_frf(frf)?;
+    let f = &frf.freq_hz;
+    let n = f.len();
+    let f0 = f[0];
+    let df = if n > 1 {
+        (f[n - 1] - f0) / (n - 1) as f64
+    } else {
+        1.0
+    };
+    if let Some(i) = (0..n).find(|&i| (f[i] - (f0 + i as f64 * df)).abs() > 1e-6 * df) {
+        bail!(
+            "UFF 58 export requires evenly spaced frequency lines, but line {} is {} Hz where a spacing of \
+             {df} Hz from {f0} Hz puts {} Hz (use the CSV format for uneven lines)",
+            i + 1,
+            f[i],
+            f0 + i as f64 * df
+        );
+    }
+    let mut out = Vec::new();
+    let mut func_id = 0;
+    for a in &frf.axes {
+        let dir = a.axis as i64 + 1;
+        func_id += 1;
+        let vals: Vec<f64> = a.frf.iter().flat_map(|v| [v.re, v.im]).collect();
+        write_dataset(
+            &mut out, 4, func_id, dir, a.axis, 6, n, f0, df, &vals, binary,
+        );
+        if let Some(c) = &a.coherence {
+            func_id += 1;
+            write_dataset(&mut out, 6, func_id, dir, a.axis, 4, n, f0, df, c, binary);
+        }
+    }
+    Ok(out)
+}
+
+/// Fortran `Ew.d`: `d` decimals, two- (or three-) digit exponent, right-aligned in `w`.
+fn fmt_e(x: f64, decimals: usize, width: usize) -> String {
+    let s = format!("{x:.decimals$e}");
+    let (mant, exp) = s.split_once('e').unwrap_or((&s, "0"));
+    let exp: i32 = exp.parse().unwrap_or(0);
+    let body = format!("{mant}e{}{:02}", if exp < 0 { '-' } else { '+' }, exp.abs());
+    format!("{body:>width$}")
+}
+
+#[allow(clippy::too_many_arguments)]
+fn write_dataset(
+    out: &mut Vec<u8>,
+    func_type: i64,
+    func_id: i64,
+    dir: i64,
+    axis: usize,
+    ord_type: i64,
+    n: usize,
+    f0: f64,
+    df: f64,
+    vals: &[f64],
+    binary: bool,
+) {
+    let (what, num, den) = if func_type == 4 {
+        ("FRF", (9, "Force", "N"), (13, "Force", "N"))
+    } else {
+        ("coherence", (0, "Coherence", "NONE"), (0, "NONE", "NONE"))
+    };
+    let mut s = String::new();
+    s.push_str(&format!("{:>6}\n", -1));
+    if binary {
+        s.push_str(&format!(
+            "{:>6}b{:>6}{:>6}{:>12}{:>12}{:>6}{:>6}{:>12}{:>12}\n",
+            58,
+            1,
+            2,
+            11,
+            vals.len() * 8,
+            0,
+            0,
+            0,
+            0
+        ));
+    } else {
+        s.push_str(&format!("{:>6}{:74}\n", 58, ""));
+    }
+    let id1 = format!("dynocomp {what} {}", axis_name(axis));
+    for id in [id1.as_str(), "NONE", "NONE", "NONE", "NONE"] {
+        s.push_str(&format!("{id:<80}\n"));
+    }
+    s.push_str(&format!(
+        "{:>5}{:>10}{:>5}{:>10} {:>10}{:>10}{:>4} {:>10}{:>10}{:>4}\n",
+        func_type, func_id, 0, 0, "DYN", 1, dir, "HAMMER", 1, dir
+    ));
+    s.push_str(&format!(
+        "{:>10}{:>10}{:>10}{}{}{}\n",
+        ord_type,
+        n,
+        1,
+        fmt_e(f0, 6, 13),
+        fmt_e(df, 6, 13),
+        fmt_e(0.0, 6, 13)
+    ));
+    for (spec, label, units) in [(18, "Frequency", "Hz"), num, den, (0, "NONE", "NONE")] {
+        s.push_str(&format!(
+            "{:>10}{:>5}{:>5}{:>5} {:<20} {:<20}\n",
+            spec, 0, 0, 0, label, units
+        ));
+    }
+    out.extend_from_slice(s.as_bytes());
+    if binary {
+        for v in vals {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    } else {
+        let mut line = String::new();
+        for chunk in vals.chunks(4) {
+            line.clear();
+            for v in chunk {
+                line.push_str(&fmt_e(*v, 12, 20));
+            }
+            line.push('\n');
+            out.extend_from_slice(line.as_bytes());
+        }
+    }
+    out.extend_from_slice(format!("{:>6}\n", -1).as_bytes());
+}
