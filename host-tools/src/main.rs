@@ -41,6 +41,9 @@ enum Command {
         #[arg(long)]
         raw_timing: bool,
     },
+    /// Simulate a dynamometer, an impact test and a milling record with known
+    /// true force (for demos and tests).
+    Simulate(dynocomp::simulate::SimulateArgs),
 }
 
 fn run(cli: Cli) -> Result<()> {
@@ -71,6 +74,7 @@ fn run(cli: Cli) -> Result<()> {
                 output.display()
             );
         }
+        Command::Simulate(args) => dynocomp::simulate::run(&args)?,
     }
     Ok(())
 }

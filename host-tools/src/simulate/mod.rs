@@ -1,1 +1,201 @@
 //! Synthetic dynamometers, impact tests and milling forces with known truth.
+//!
+//! The simulator is the project's ground truth: it is computed in f64 and is
+//! independent of the compensator (it never calls `dynocomp_core`'s kernel).
+//!
+//! - [`dynamometer`]: modal models G(s) with unit DC gain per axis, random or
+//!   explicit, their FRF and exact (first-order-hold) time response;
+//! - [`impact`]: simulated impact-hammer tests (H1 and coherence from averaged
+//!   spectra);
+//! - [`milling`]: mechanistic milling forces (Altintas) with helix, runout,
+//!   ramp-in and chatter;
+//! - [`measurement`]: measurement noise (variance R) and ADC quantization;
+//! - [`simulate`]: all of it from one seed; [`run`] writes the files of
+//!   `dynocomp simulate`.
+//!
+//! Time records: the true force is generated at `fs·oversample`, passed through
+//! each axis's model at that rate (exact for a force linear between the fine
+//! samples), and both truth and dynamometer output are then taken every
+//! `oversample`-th sample, so `measured[k]` is the continuous model's response
+//! at `t_k = k/fs` and `true[k]` the force at the same instant.
+
+pub mod cli;
+pub mod dynamometer;
+pub mod impact;
+pub mod measurement;
+pub mod milling;
+
+pub use cli::{run, SimulateArgs};
+pub use dynamometer::{Dynamometer, Hold, Mode, ModeRanges, ModeStep, MultiAxisDynamometer};
+pub use impact::{h1_random_error, impact_freqs, impact_test, impact_test_all, impact_test_axis, ImpactParams};
+pub use measurement::MeasurementParams;
+pub use milling::{milling_force, Chatter, MillingMode, MillingParams};
+
+use anyhow::{bail, Result};
+use serde::{Deserialize, Serialize};
+
+use crate::frf::Frf;
+
+/// Everything the simulator needs besides the seed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SimParams {
+    /// Output sample rate (Hz).
+    pub fs_hz: f64,
+    /// Length of the cutting record (s).
+    pub duration_s: f64,
+    /// Length of the idle (no engagement) record (s).
+    pub idle_duration_s: f64,
+    /// Internal oversampling of the true force and the model (≥ 1).
+    pub oversample: usize,
+    /// Measurement noise and ADC.
+    pub measurement: MeasurementParams,
+    /// Ranges of the random dynamometer modes.
+    pub modes: ModeRanges,
+    /// Impact test.
+    pub impact: ImpactParams,
+    /// Cutting conditions.
+    pub milling: MillingParams,
+}
+
+impl Default for SimParams {
+    fn default() -> Self {
+        Self {
+            fs_hz: 51_200.0,
+            duration_s: 1.0,
+            idle_duration_s: 1.0,
+            oversample: 8,
+            measurement: MeasurementParams::default(),
+            modes: ModeRanges::default(),
+            impact: ImpactParams::default(),
+            milling: MillingParams::default(),
+        }
+    }
+}
+
+impl SimParams {
+    /// Check the parameters; the error names the offending one.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.fs_hz.is_finite() && self.fs_hz > 0.0) {
+            bail!("simulate: sample rate fs = {} Hz must be > 0", self.fs_hz);
+        }
+        if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
+            bail!("simulate: duration = {} s must be > 0", self.duration_s);
+        }
+        if !(self.idle_duration_s.is_finite() && self.idle_duration_s >= 0.0) {
+            bail!("simulate: idle duration = {} s must be ≥ 0", self.idle_duration_s);
+        }
+        if self.oversample == 0 || self.oversample > 64 {
+            bail!("simulate: oversample = {} must be in 1..=64", self.oversample);
+        }
+        let m = &self.measurement;
+        if !(m.noise_variance_n2.is_finite() && m.noise_variance_n2 >= 0.0) {
+            bail!("simulate: noise variance = {} N² must be ≥ 0", m.noise_variance_n2);
+        }
+        if m.adc_bits > 32 || (m.adc_bits > 0 && !(m.adc_range_n.is_finite() && m.adc_range_n > 0.0)) {
+            bail!("simulate: ADC {} bits over ±{} N is not valid (bits ≤ 32, range > 0)", m.adc_bits, m.adc_range_n);
+        }
+        let i = &self.impact;
+        if i.n_lines < 2 || !(i.df_hz.is_finite() && i.df_hz > 0.0) || i.n_impacts == 0 {
+            bail!("simulate: impact test needs ≥ 2 lines, df > 0 and ≥ 1 impact (got {} lines, df {} Hz, {} impacts)", i.n_lines, i.df_hz, i.n_impacts);
+        }
+        if !(i.hammer_cutoff_hz.is_finite() && i.hammer_cutoff_hz > 0.0) {
+            bail!("simulate: hammer cutoff = {} Hz must be > 0", i.hammer_cutoff_hz);
+        }
+        self.milling.validate()?;
+        if let Some(ch) = &self.milling.chatter {
+            if ch.freq_hz >= self.fs_hz / 2.0 {
+                bail!("simulate: chatter frequency {} Hz is not below fs/2 = {} Hz", ch.freq_hz, self.fs_hz / 2.0);
+            }
+        }
+        Ok(())
+    }
+
+    /// Number of output samples of the cutting record.
+    pub fn n_samples(&self) -> usize {
+        (self.duration_s * self.fs_hz).round().max(1.0) as usize
+    }
+
+    /// Number of output samples of the idle record.
+    pub fn n_idle_samples(&self) -> usize {
+        (self.idle_duration_s * self.fs_hz).round() as usize
+    }
+}
+
+/// All simulated data, on a common time base `t_s[k] = k/fs_hz`.
+#[derive(Clone, Debug)]
+pub struct SimOutput {
+    /// Seed that produced it.
+    pub seed: u64,
+    /// Parameters that produced it.
+    pub params: SimParams,
+    /// The true dynamometer.
+    pub dyno: MultiAxisDynamometer,
+    /// Simulated impact test of the three axes (H1 and coherence).
+    pub frf: Frf,
+    /// Sample times (s).
+    pub t_s: Vec<f64>,
+    /// True applied force (N), x/y/z.
+    pub truth: [Vec<f64>; 3],
+    /// Noise-free dynamometer output (N), x/y/z.
+    pub clean: [Vec<f64>; 3],
+    /// Measured force: dynamometer output + noise, quantized (N), x/y/z.
+    pub measured: [Vec<f64>; 3],
+    /// Idle record (noise and quantization only), x/y/z.
+    pub idle: [Vec<f64>; 3],
+}
+
+/// Independent stream seeds derived from the user's seed (splitmix64 of seed ⊕ tag),
+/// so that each part of the simulation has its own reproducible randomness.
+pub fn sub_seed(seed: u64, tag: u64) -> u64 {
+    let mut z = seed ^ tag.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+const TAG_DYNO: u64 = 1;
+const TAG_IMPACT: u64 = 2;
+const TAG_NOISE: u64 = 10; // + axis
+const TAG_IDLE: u64 = 20; // + axis
+
+/// Measure `force` (defined at `fs·oversample`) with `dyn_` at that rate and
+/// keep every `oversample`-th sample: returns (truth, clean output) at fs.
+pub fn measure_decimated(dyn_: &Dynamometer, force_fine: &[f64], fs_hz: f64, oversample: usize) -> (Vec<f64>, Vec<f64>) {
+    let os = oversample.max(1);
+    let y = dyn_.measure(force_fine, fs_hz * os as f64);
+    let truth = force_fine.iter().step_by(os).copied().collect();
+    let clean = y.iter().step_by(os).copied().collect();
+    (truth, clean)
+}
+
+/// Run the whole simulation for `seed`: a random three-axis dynamometer, its
+/// impact test, the milling force, the measured and idle records.
+pub fn simulate(seed: u64, params: &SimParams) -> Result<SimOutput> {
+    params.validate()?;
+    let dyno = MultiAxisDynamometer::random(sub_seed(seed, TAG_DYNO), params);
+    simulate_with(seed, params, dyno)
+}
+
+/// As [`simulate`], with a given dynamometer.
+pub fn simulate_with(seed: u64, params: &SimParams, dyno: MultiAxisDynamometer) -> Result<SimOutput> {
+    params.validate()?;
+    let ip = &params.impact;
+    let frf = impact_test_all(&dyno, ip.n_lines, ip.df_hz, sub_seed(seed, TAG_IMPACT), ip);
+    let n = params.n_samples();
+    let os = params.oversample;
+    let n_fine = (n - 1) * os + 1;
+    let fine = milling_force(&params.milling, params.fs_hz * os as f64, n_fine);
+    let mut truth: [Vec<f64>; 3] = Default::default();
+    let mut clean: [Vec<f64>; 3] = Default::default();
+    let mut measured: [Vec<f64>; 3] = Default::default();
+    let mut idle: [Vec<f64>; 3] = Default::default();
+    for a in 0..3 {
+        let (t, c) = measure_decimated(dyno.axis(a), &fine[a], params.fs_hz, os);
+        measured[a] = params.measurement.apply(&c, sub_seed(seed, TAG_NOISE + a as u64));
+        idle[a] = params.measurement.idle(params.n_idle_samples(), sub_seed(seed, TAG_IDLE + a as u64));
+        truth[a] = t;
+        clean[a] = c;
+    }
+    let t_s = (0..n).map(|k| k as f64 / params.fs_hz).collect();
+    Ok(SimOutput { seed, params: params.clone(), dyno, frf, t_s, truth, clean, measured, idle })
+}

@@ -1,0 +1,277 @@
+//! `dynocomp simulate`: arguments and the files it writes.
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+use super::{simulate, Chatter, MillingMode, Mode, SimOutput, SimParams};
+use crate::frf::axis_name;
+use crate::io::frf_csv::write_frf_csv;
+use crate::io::signal_csv::{write_signal_csv, SignalRecord};
+use crate::io::uff::write_uff58;
+
+/// Arguments of `dynocomp simulate`. Every option left out takes its value
+/// from [`SimParams::default`].
+#[derive(clap::Args, Clone, Debug)]
+pub struct SimulateArgs {
+    /// Output directory (created if missing): frf.uff, frf.csv, measured.csv,
+    /// true_force.csv, idle.csv, truth.json.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Seed of every random choice (dynamometer, impact test, noise).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Sample rate (Hz) [default: 51200].
+    #[arg(long)]
+    pub fs: Option<f64>,
+    /// Length of the cutting record (s) [default: 1].
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Length of the idle record (s) [default: 1].
+    #[arg(long)]
+    pub idle_duration: Option<f64>,
+    /// Internal oversampling of force and model [default: 8].
+    #[arg(long)]
+    pub oversample: Option<usize>,
+    /// Spindle speed (rpm) [default: 4125].
+    #[arg(long)]
+    pub spindle_rpm: Option<f64>,
+    /// Number of teeth [default: 4].
+    #[arg(long)]
+    pub teeth: Option<usize>,
+    /// Tool diameter (mm) [default: 10].
+    #[arg(long)]
+    pub diameter: Option<f64>,
+    /// Helix angle (degrees) [default: 30].
+    #[arg(long)]
+    pub helix: Option<f64>,
+    /// Axial depth of cut ap (mm) [default: 2].
+    #[arg(long)]
+    pub axial_depth: Option<f64>,
+    /// Radial depth of cut ae (mm) [default: 3].
+    #[arg(long)]
+    pub radial_depth: Option<f64>,
+    /// Feed per tooth (mm) [default: 0.05].
+    #[arg(long)]
+    pub feed_per_tooth: Option<f64>,
+    /// Up milling instead of down milling.
+    #[arg(long)]
+    pub up_milling: bool,
+    /// Runout: radial offset of the tool axis (µm) [default: 5].
+    #[arg(long)]
+    pub runout_um: Option<f64>,
+    /// Revolutions of ramp-in [default: 2].
+    #[arg(long)]
+    pub ramp_in_revs: Option<f64>,
+    /// Add regenerative chatter at this frequency (Hz).
+    #[arg(long)]
+    pub chatter_hz: Option<f64>,
+    /// Final chatter vibration amplitude (mm) [default: 0.01].
+    #[arg(long)]
+    pub chatter_amplitude: Option<f64>,
+    /// Time at which chatter reaches half its amplitude (s) [default: duration/2].
+    #[arg(long)]
+    pub chatter_onset: Option<f64>,
+    /// Measurement noise variance R (N²) [default: 0.05].
+    #[arg(long)]
+    pub noise_variance: Option<f64>,
+    /// ADC resolution (bits, 0 = none) [default: 16].
+    #[arg(long)]
+    pub adc_bits: Option<u32>,
+    /// ADC full scale ±N [default: 2000].
+    #[arg(long)]
+    pub adc_range: Option<f64>,
+    /// Impact test: number of frequency lines from 0 Hz [default: 4097].
+    #[arg(long)]
+    pub frf_lines: Option<usize>,
+    /// Impact test: line spacing (Hz) [default: 1].
+    #[arg(long)]
+    pub frf_df: Option<f64>,
+    /// Impact test: number of averaged impacts [default: 7].
+    #[arg(long)]
+    pub impacts: Option<usize>,
+    /// Impact test: hammer spectrum cutoff (Hz) [default: 3000].
+    #[arg(long)]
+    pub hammer_cutoff: Option<f64>,
+}
+
+impl SimulateArgs {
+    /// The simulation parameters these arguments select.
+    pub fn params(&self) -> SimParams {
+        let mut p = SimParams::default();
+        let set = |dst: &mut f64, v: Option<f64>| {
+            if let Some(v) = v {
+                *dst = v;
+            }
+        };
+        set(&mut p.fs_hz, self.fs);
+        set(&mut p.duration_s, self.duration);
+        set(&mut p.idle_duration_s, self.idle_duration);
+        if let Some(v) = self.oversample {
+            p.oversample = v;
+        }
+        let m = &mut p.milling;
+        set(&mut m.spindle_rpm, self.spindle_rpm);
+        if let Some(v) = self.teeth {
+            m.teeth = v;
+        }
+        set(&mut m.diameter_mm, self.diameter);
+        set(&mut m.helix_deg, self.helix);
+        set(&mut m.axial_depth_mm, self.axial_depth);
+        set(&mut m.radial_depth_mm, self.radial_depth);
+        set(&mut m.feed_per_tooth_mm, self.feed_per_tooth);
+        if self.up_milling {
+            m.mode = MillingMode::Up;
+        }
+        if let Some(v) = self.runout_um {
+            m.runout_mm = v * 1e-3;
+        }
+        set(&mut m.ramp_in_revs, self.ramp_in_revs);
+        if let Some(f) = self.chatter_hz {
+            let duration = p.duration_s;
+            m.chatter = Some(Chatter {
+                freq_hz: f,
+                amplitude_mm: self.chatter_amplitude.unwrap_or(0.01),
+                onset_s: self.chatter_onset.unwrap_or(duration / 2.0),
+                growth_s: duration / 20.0,
+            });
+        }
+        set(&mut p.measurement.noise_variance_n2, self.noise_variance);
+        if let Some(v) = self.adc_bits {
+            p.measurement.adc_bits = v;
+        }
+        set(&mut p.measurement.adc_range_n, self.adc_range);
+        if let Some(v) = self.frf_lines {
+            p.impact.n_lines = v;
+        }
+        set(&mut p.impact.df_hz, self.frf_df);
+        if let Some(v) = self.impacts {
+            p.impact.n_impacts = v;
+        }
+        set(&mut p.impact.hammer_cutoff_hz, self.hammer_cutoff);
+        p
+    }
+}
+
+/// One axis of `truth.json`.
+#[derive(Serialize)]
+struct TruthAxis {
+    axis: &'static str,
+    dc_gain: f64,
+    main_fn_hz: f64,
+    modes: Vec<Mode>,
+}
+
+/// Content of `truth.json`.
+#[derive(Serialize)]
+struct Truth<'a> {
+    format: &'static str,
+    version: u32,
+    seed: u64,
+    fs_hz: f64,
+    n_samples: usize,
+    n_idle_samples: usize,
+    tooth_passing_hz: f64,
+    spindle_hz: f64,
+    /// How the model sees the force between fine samples.
+    hold: &'static str,
+    noise_variance_n2: f64,
+    adc_lsb_n: f64,
+    expected_idle_variance_n2: f64,
+    axes: Vec<TruthAxis>,
+    params: &'a SimParams,
+    files: [&'static str; 6],
+}
+
+fn truth_json(out: &SimOutput) -> Result<String> {
+    let p = &out.params;
+    let t = Truth {
+        format: "dynocomp-simulate-truth",
+        version: 1,
+        seed: out.seed,
+        fs_hz: p.fs_hz,
+        n_samples: out.t_s.len(),
+        n_idle_samples: out.idle[0].len(),
+        tooth_passing_hz: p.milling.tooth_passing_hz(),
+        spindle_hz: p.milling.spindle_hz(),
+        hold: "foh",
+        noise_variance_n2: p.measurement.noise_variance_n2,
+        adc_lsb_n: p.measurement.lsb_n(),
+        expected_idle_variance_n2: p.measurement.expected_idle_variance(),
+        axes: (0..3)
+            .map(|a| {
+                let d = out.dyno.axis(a);
+                TruthAxis { axis: axis_name(a), dc_gain: d.dc_gain(), main_fn_hz: d.main_mode().fn_hz, modes: d.modes.clone() }
+            })
+            .collect(),
+        params: p,
+        files: ["frf.uff", "frf.csv", "measured.csv", "true_force.csv", "idle.csv", "truth.json"],
+    };
+    Ok(serde_json::to_string_pretty(&t)?)
+}
+
+fn record(t_s: Option<&[f64]>, ch: &[Vec<f64>; 3]) -> SignalRecord {
+    SignalRecord { t_s: t_s.map(|t| t.to_vec()), channels: (0..3).map(|a| (a, ch[a].clone())).collect() }
+}
+
+/// Write the output files of `out` into `dir` (created if missing).
+pub fn write_outputs(dir: &Path, out: &SimOutput) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create output directory", dir.display()))?;
+    let t_idle: Vec<f64> = (0..out.idle[0].len()).map(|k| k as f64 / out.params.fs_hz).collect();
+    write_uff58(&dir.join("frf.uff"), &out.frf, false)?;
+    write_frf_csv(&dir.join("frf.csv"), &out.frf)?;
+    write_signal_csv(&dir.join("measured.csv"), &record(Some(&out.t_s), &out.measured))?;
+    write_signal_csv(&dir.join("true_force.csv"), &record(Some(&out.t_s), &out.truth))?;
+    write_signal_csv(&dir.join("idle.csv"), &record(Some(&t_idle), &out.idle))?;
+    let json = truth_json(out)?;
+    crate::io::atomic::write_bytes_atomic(&dir.join("truth.json"), format!("{json}\n").as_bytes())?;
+    Ok(())
+}
+
+/// `dynocomp simulate`: simulate and write the files into `args.out`; a
+/// summary goes to stderr.
+pub fn run(args: &SimulateArgs) -> Result<()> {
+    let params = args.params();
+    let out = simulate(args.seed, &params)?;
+    write_outputs(&args.out, &out)?;
+    let p = &out.params;
+    eprintln!(
+        "simulate: seed {}, fs {} Hz, {} samples ({} s), oversample {}",
+        out.seed,
+        p.fs_hz,
+        out.t_s.len(),
+        p.duration_s,
+        p.oversample
+    );
+    let m = &p.milling;
+    eprintln!(
+        "  milling: {} rpm, {} teeth, tooth_passing_hz {:.2} Hz (spindle {:.2} Hz), ap {} mm, ae {} mm, {:?}, runout {} µm{}",
+        m.spindle_rpm,
+        m.teeth,
+        m.tooth_passing_hz(),
+        m.spindle_hz(),
+        m.axial_depth_mm,
+        m.radial_depth_mm,
+        m.mode,
+        m.runout_mm * 1e3,
+        m.chatter.as_ref().map(|c| format!(", chatter {} Hz", c.freq_hz)).unwrap_or_default()
+    );
+    for a in 0..3 {
+        let modes: Vec<String> =
+            out.dyno.axis(a).modes.iter().map(|md| format!("{:.0} Hz ζ {:.3} r {:+.3}", md.fn_hz, md.zeta, md.residue)).collect();
+        let peak = out.truth[a].iter().fold(0.0f64, |acc, v| acc.max(v.abs()));
+        eprintln!("  axis {}: peak true force {:.1} N; modes: {}", axis_name(a), peak, modes.join(", "));
+    }
+    eprintln!(
+        "  noise R {} N², ADC {} bits ±{} N (LSB {:.4} N); impact test {} lines × {} Hz, {} impacts",
+        p.measurement.noise_variance_n2,
+        p.measurement.adc_bits,
+        p.measurement.adc_range_n,
+        p.measurement.lsb_n(),
+        p.impact.n_lines,
+        p.impact.df_hz,
+        p.impact.n_impacts
+    );
+    eprintln!("  wrote {}/{{frf.uff, frf.csv, measured.csv, true_force.csv, idle.csv, truth.json}}", args.out.display());
+    Ok(())
+}
