@@ -6,8 +6,10 @@
 //!
 //! Parsing never panics on any input: every read goes through bounds-checked
 //! accessors, and every failure is a typed [`ImageError`]. Validation order:
-//! length → magic → version → declared length → CRC → structure → ranges →
-//! stability. A single flipped bit anywhere is caught by the CRC-32.
+//! length → magic → version → declared length → CRC → per-axis structure
+//! (counts, reserved bytes, finiteness and stability of each section) →
+//! header and scaling ranges. A single flipped bit anywhere is caught by the
+//! CRC-32. `docs/image-format.md` lists every step.
 
 use crate::kernel::{AxisFilter, FilterError, Section, MAX_FIR, MAX_SECTIONS};
 use crate::AXES;
@@ -26,7 +28,7 @@ pub const TAP_LEN: usize = 4;
 pub const SECTION_LEN: usize = 32;
 /// Size of the trailing CRC.
 pub const CRC_LEN: usize = 4;
-/// Largest possible image (3 axes × 24 sections).
+/// Largest possible image (3 axes × 24 sections × 16 FIR taps).
 pub const MAX_IMAGE_LEN: usize = HEADER_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN + MAX_FIR * TAP_LEN) + CRC_LEN;
 /// Smallest valid image (1 axis, 0 sections, no taps).
 pub const MIN_IMAGE_LEN: usize = HEADER_LEN + AXIS_HEADER_LEN + CRC_LEN;
@@ -258,7 +260,7 @@ impl core::fmt::Display for ImageError {
             BadAxisMask(m) => write!(f, "bad axis mask {m:#04x}"),
             UnknownFlags(fl) => write!(f, "unknown flag bits {fl:#04x}"),
             UnknownMethod(m) => write!(f, "unknown design method code {m}"),
-            ReservedNotZero => write!(f, "reserved header bytes are not zero"),
+            ReservedNotZero => write!(f, "reserved bytes (header or axis block) are not zero"),
             AxisMismatch { expected, found } => write!(f, "axis block for axis {found} where axis {expected} was expected"),
             TooManyTaps { axis, count } => write!(f, "axis {axis}: {count} FIR taps exceeds the maximum {MAX_FIR}"),
             NonFiniteTap { axis, tap } => write!(f, "axis {axis}: FIR tap {tap} is non-finite"),
@@ -322,7 +324,7 @@ impl Writer<'_> {
     }
 }
 
-/// Total image length for a given set of per-axis section counts.
+/// Total image length of an image (header, axis blocks, sections, taps, CRC).
 pub fn encoded_len(image: &CoeffImage) -> usize {
     HEADER_LEN
         + image

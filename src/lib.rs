@@ -16,6 +16,7 @@
 pub mod image;
 pub mod kernel;
 pub mod sample;
+pub mod shell;
 
 /// Number of force axes the box handles (Fx, Fy, Fz).
 pub const AXES: usize = 3;

@@ -157,9 +157,9 @@ pub fn process_sample(codes: [u16; AXES], mode: Mode<'_>, state: &mut SampleStat
     match mode {
         Mode::Bypass(_) => flags |= SampleFlags::BYPASS,
         Mode::Compensate(img) => {
-            for (i, ((axis_img, axis_state), dac)) in img.axes.iter().zip(state.axes.iter_mut()).zip(out.iter_mut()).enumerate() {
+            let lanes = img.axes.iter().zip(state.axes.iter_mut()).zip(out.iter_mut()).zip(codes.iter());
+            for (i, (((axis_img, axis_state), dac), &code)) in lanes.enumerate() {
                 let Some(a) = axis_img else { continue };
-                let code = codes[i];
                 let force_n = a.scaling.code_to_newton(code);
                 let y = match a.filter.step_guarded(axis_state, force_n) {
                     Some(y) => y,
