@@ -28,7 +28,7 @@ pub const TAP_LEN: usize = 4;
 pub const SECTION_LEN: usize = 32;
 /// Size of the trailing CRC.
 pub const CRC_LEN: usize = 4;
-/// Largest possible image (3 axes × 24 sections × 16 FIR taps).
+/// Largest possible image (3 axes × 24 sections × 24 FIR taps).
 pub const MAX_IMAGE_LEN: usize = HEADER_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN + MAX_FIR * TAP_LEN) + CRC_LEN;
 /// Smallest valid image (1 axis, 0 sections, no taps).
 pub const MIN_IMAGE_LEN: usize = HEADER_LEN + AXIS_HEADER_LEN + CRC_LEN;

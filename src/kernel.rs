@@ -13,7 +13,7 @@
 //! The short FIR part `h_1..h_m` (m ≤ [`MAX_FIR`]) carries the compensator's
 //! fast poles (|z| ≲ 0.3, including the exact poles at z = 0 of a fixed-lag
 //! smoother's delay chain), whose modal split would be ill-conditioned; their
-//! impulse response is exactly finite or negligible after m samples.
+//! impulse response is exactly finite or negligible after m samples (m ≤ 24).
 //!
 //! Storing `A − I` instead of `A` keeps the pole positions of slow modes
 //! (e.g. 100 Hz at 51.2 kHz, where `A ≈ I`) representable in f32: the small
@@ -32,8 +32,8 @@
 /// Maximum number of 2x2 sections per axis (filter order ≤ 48).
 pub const MAX_SECTIONS: usize = 24;
 
-/// Maximum number of FIR taps (delays 1..=16 samples) per axis.
-pub const MAX_FIR: usize = 16;
+/// Maximum number of FIR taps (delays 1..=24 samples) per axis.
+pub const MAX_FIR: usize = 24;
 
 /// Magnitude above which the output is treated as a runaway filter (N).
 ///

@@ -143,7 +143,7 @@ fn semantic_errors_behind_a_valid_crc_are_rejected() {
     assert!(matches!(CoeffImage::parse(&b), Err(ImageError::TooManySections { .. })));
     // too many FIR taps
     let mut b = bytes.clone();
-    b[HEADER_LEN + 2] = 17;
+    b[HEADER_LEN + 2] = (MAX_FIR + 1) as u8;
     fix_crc(&mut b);
     assert!(matches!(CoeffImage::parse(&b), Err(ImageError::TooManyTaps { .. })));
     // zero input gain (newton_per_code at axis offset 12)

@@ -194,6 +194,6 @@ fn fir_part_delays_and_weights_past_inputs() {
     f.step(&mut st, 3.0);
     st.reset();
     assert_eq!(f.step(&mut st, 0.0), 0.0);
-    assert!(AxisFilter::with_fir(&[], 0.0, &[0.0; 17]).is_err());
+    assert!(AxisFilter::with_fir(&[], 0.0, &[0.0; dynocomp_core::kernel::MAX_FIR + 1]).is_err());
     assert!(AxisFilter::with_fir(&[], 0.0, &[f32::NAN]).is_err());
 }

@@ -3,7 +3,15 @@
 //! image → report), plus the simulator and the offline compensator.
 
 pub mod compensate;
+pub mod design;
+pub mod design_cmd;
+pub mod fit;
 pub mod frf;
 pub mod inspect;
 pub mod io;
+pub mod kalman;
+pub mod metrics;
+pub mod quantize;
+pub mod realize;
+pub mod report;
 pub mod simulate;

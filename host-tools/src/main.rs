@@ -17,6 +17,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Design a compensator from a measured FRF and write its coefficient image.
+    Design(dynocomp::design_cmd::DesignArgs),
     /// Show what a coefficient image holds.
     Inspect {
         /// Coefficient image (.dcimg).
@@ -75,6 +77,7 @@ fn run(cli: Cli) -> Result<()> {
             );
         }
         Command::Simulate(args) => dynocomp::simulate::run(&args)?,
+        Command::Design(args) => dynocomp::design_cmd::run(&args)?,
     }
     Ok(())
 }

@@ -25,6 +25,12 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()
         write(&mut w).with_context(|| format!("{}: not written", path.display()))?;
         w.flush().with_context(|| format!("{}: write failed", path.display()))?;
     }
+    // tempfile creates 0600 files; outputs are ordinary files (0644).
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let _ = tmp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644));
+    }
     tmp.as_file()
         .sync_all()
         .with_context(|| format!("{}: sync failed", path.display()))?;

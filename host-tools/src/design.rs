@@ -1,0 +1,357 @@
+//! `dynocomp design`: FRF → fit → Kalman → realization → verified f32
+//! filter, per axis, and the image that carries them.
+//!
+//! **Q criterion (declared).** q is chosen to minimize the predicted
+//! relative error variance of the compensated force inside the coherent band
+//! [f_lo, f_hi], for a force with a flat spectrum of RMS `force_rms` (N) in
+//! that band and white measurement noise of variance R:
+//!
+//! J(q) = mean_f |H(f)·Ĝ(f)·e^{j2πfL/fs} − 1|²  +  (2R/fs)·(f_hi − f_lo)/force_rms² · mean_f |H(f)|²
+//!
+//! (distortion of the force + amplified noise inside the band, both relative
+//! to the force variance), subject to the white-noise gain of H staying below
+//! `max_noise_gain`. √J is reported as the predicted in-band error.
+
+use anyhow::{bail, Context, Result};
+use dynocomp_core::kernel::AxisFilter;
+use num_complex::Complex64;
+use std::f64::consts::PI;
+
+use crate::fit::vf::{coherence_weights, vector_fit, VfOptions};
+use crate::fit::{relative_rms_error, PoleResidueModel};
+use crate::frf::{axis_name, AxisFrf};
+use crate::kalman::{self, KalmanDesign, StateSpace};
+use crate::quantize::{self, Verification};
+use crate::realize::{self, ModalRealization};
+
+/// Design options shared by all axes.
+#[derive(Clone, Debug)]
+pub struct DesignOptions {
+    /// Sample rate of the box (Hz).
+    pub fs_hz: f64,
+    /// Fixed lag L of the smoother = declared output latency (samples).
+    pub lag: usize,
+    /// Assumed RMS of the cutting force inside the band (N), for the Q criterion.
+    pub force_rms: f64,
+    /// Upper limit of the white-noise gain of the compensator (ratio).
+    pub max_noise_gain: f64,
+    /// Coherence γ² at or above which a line counts as coherent.
+    pub coherence_threshold: f64,
+    /// Fix q instead of searching (N²/sample).
+    pub q_override: Option<f64>,
+    /// Vector fitting options.
+    pub vf: VfOptions,
+}
+
+impl Default for DesignOptions {
+    fn default() -> Self {
+        DesignOptions {
+            fs_hz: 51_200.0,
+            lag: 4,
+            force_rms: 100.0,
+            max_noise_gain: 30.0,
+            coherence_threshold: 0.9,
+            q_override: None,
+            vf: VfOptions::default(),
+        }
+    }
+}
+
+/// Everything designed for one axis.
+#[derive(Clone, Debug)]
+pub struct AxisDesign {
+    /// Axis index.
+    pub axis: usize,
+    /// Fitted sensor model.
+    pub model: PoleResidueModel,
+    /// Order search trace of the fit: (order, weighted RMS error).
+    pub order_trace: Vec<(usize, f64)>,
+    /// Relative RMS fit error over the coherent band.
+    pub fit_nrmse: f64,
+    /// Coherent band (Hz).
+    pub coherent_band_hz: (f64, f64),
+    /// Kalman design (f64).
+    pub kalman: KalmanDesign,
+    /// Realization (f64).
+    pub realization: ModalRealization,
+    /// The f32 filter that goes into the image.
+    pub filter: AxisFilter,
+    /// Verification of the f32 filter.
+    pub verification: Verification,
+    /// Flat band: |H·Ĝ| within ±5 % and ±5° of the pure delay (Hz), with the
+    /// fitted model Ĝ over the coherent band (the fit error is reported apart).
+    pub flat_band_hz: (f64, f64),
+    /// White-noise gain of the compensator (ratio of RMS).
+    pub noise_gain: f64,
+    /// Predicted in-band relative RMS error √J (fraction).
+    pub predicted_error: f64,
+    /// Evaluations of J during the q search: (q, J).
+    pub q_trace: Vec<(f64, f64)>,
+}
+
+/// The coherent band: from the first to the last line of the longest run of
+/// lines whose coherence (median over ±5 lines) is at least `threshold`.
+/// Without coherence, the whole measured band.
+pub fn coherent_band(freq_hz: &[f64], coherence: Option<&[f64]>, threshold: f64) -> (f64, f64) {
+    let n = freq_hz.len();
+    let Some(c) = coherence else {
+        return (freq_hz[0], freq_hz[n - 1]);
+    };
+    let ok: Vec<bool> = (0..n)
+        .map(|i| {
+            let lo = i.saturating_sub(5);
+            let hi = (i + 6).min(n);
+            let mut w: Vec<f64> = c[lo..hi].to_vec();
+            w.sort_by(f64::total_cmp);
+            w[w.len() / 2] >= threshold
+        })
+        .collect();
+    let (mut best, mut start) = ((0, 0), None);
+    for i in 0..=n {
+        let good = i < n && ok[i];
+        match (good, start) {
+            (true, None) => start = Some(i),
+            (false, Some(s)) => {
+                if i - s > best.1 - best.0 {
+                    best = (s, i);
+                }
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if best.1 == best.0 {
+        return (freq_hz[0], freq_hz[0]);
+    }
+    (freq_hz[best.0], freq_hz[best.1 - 1])
+}
+
+/// White-noise gain of H: sqrt(Σ h_k²) = RMS of |H| over 0..fs/2 (Parseval).
+pub fn noise_gain(response: impl Fn(f64) -> Complex64, fs_hz: f64) -> f64 {
+    let n = 512;
+    let s: f64 = (0..n)
+        .map(|i| response((i as f64 + 0.5) / n as f64 * fs_hz / 2.0).norm_sqr())
+        .sum();
+    (s / n as f64).sqrt()
+}
+
+/// The flat band of H·G: from the first line of `mask` up to the last line
+/// before the first masked line where |H·G·e^{jωL/fs}| leaves 1 ± 5 % or its
+/// phase leaves ±5°.
+pub fn flat_band(
+    response: impl Fn(f64) -> Complex64,
+    freq_hz: &[f64],
+    frf: &[Complex64],
+    mask: &[bool],
+    lag: usize,
+    fs_hz: f64,
+) -> (f64, f64) {
+    let mut lo = None;
+    let mut hi = 0.0;
+    for ((f, g), m) in freq_hz.iter().zip(frf).zip(mask) {
+        if !*m {
+            continue;
+        }
+        let e = response(*f) * g * Complex64::from_polar(1.0, 2.0 * PI * f * lag as f64 / fs_hz);
+        let ok = (e.norm() - 1.0).abs() <= 0.05 && e.arg().abs() <= 5f64.to_radians();
+        if !ok {
+            break;
+        }
+        lo.get_or_insert(*f);
+        hi = *f;
+    }
+    match lo {
+        Some(l) => (l, hi),
+        None => (0.0, 0.0),
+    }
+}
+
+struct Objective<'a> {
+    model: &'a PoleResidueModel,
+    grid: Vec<(f64, Complex64)>,
+    opts: &'a DesignOptions,
+    r: f64,
+    band_width: f64,
+}
+
+impl Objective<'_> {
+    /// (J, noise gain, design) for one q; J = ∞ when the design fails or the
+    /// noise-gain limit is exceeded.
+    fn eval(&self, q: f64) -> (f64, f64, Option<KalmanDesign>) {
+        let Ok(d) = kalman::design(self.model, self.opts.fs_hz, q, self.r, self.opts.lag) else {
+            return (f64::INFINITY, f64::NAN, None);
+        };
+        let fs = self.opts.fs_hz;
+        let ss = &d.compensator;
+        let ng = noise_gain(|f| ss.freq_response(f, fs), fs);
+        let (mut dist, mut amp) = (0.0, 0.0);
+        for (f, g) in &self.grid {
+            let h = ss.freq_response(*f, fs);
+            let e = h * g * Complex64::from_polar(1.0, 2.0 * PI * f * self.opts.lag as f64 / fs) - 1.0;
+            dist += e.norm_sqr();
+            amp += h.norm_sqr();
+        }
+        let n = self.grid.len() as f64;
+        let noise_term = 2.0 * self.r / fs * self.band_width / (self.opts.force_rms * self.opts.force_rms);
+        let j = dist / n + noise_term * amp / n;
+        if ng > self.opts.max_noise_gain {
+            return (f64::INFINITY, ng, Some(d));
+        }
+        (j, ng, Some(d))
+    }
+}
+
+/// Choose q by the declared criterion: a coarse scan over decades, then a
+/// golden-section refinement on log10 q around the best decade.
+fn choose_q(obj: &Objective, trace: &mut Vec<(f64, f64)>) -> Result<(f64, KalmanDesign, f64, f64)> {
+    let base = obj.r.log10();
+    let mut best: Option<(f64, f64)> = None; // (log q, J)
+    for i in -2..=14 {
+        let lq = base + i as f64;
+        let (j, _, _) = obj.eval(10f64.powf(lq));
+        trace.push((10f64.powf(lq), j));
+        if j.is_finite() && best.is_none_or(|b| j < b.1) {
+            best = Some((lq, j));
+        }
+    }
+    let Some((lq0, _)) = best else {
+        bail!(
+            "no q gives a valid compensator within the noise-gain limit {}; raise --max-noise-gain or check R",
+            obj.opts.max_noise_gain
+        );
+    };
+    let (mut a, mut b) = (lq0 - 1.0, lq0 + 1.0);
+    let gr = (5f64.sqrt() - 1.0) / 2.0;
+    let mut x1 = b - gr * (b - a);
+    let mut x2 = a + gr * (b - a);
+    let mut f1 = obj.eval(10f64.powf(x1)).0;
+    let mut f2 = obj.eval(10f64.powf(x2)).0;
+    trace.push((10f64.powf(x1), f1));
+    trace.push((10f64.powf(x2), f2));
+    for _ in 0..12 {
+        if f1 < f2 {
+            b = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = b - gr * (b - a);
+            f1 = obj.eval(10f64.powf(x1)).0;
+            trace.push((10f64.powf(x1), f1));
+        } else {
+            a = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = a + gr * (b - a);
+            f2 = obj.eval(10f64.powf(x2)).0;
+            trace.push((10f64.powf(x2), f2));
+        }
+    }
+    let candidates = [(lq0, ()), (x1, ()), (x2, ())];
+    let mut chosen: Option<(f64, KalmanDesign, f64, f64)> = None;
+    for (lq, _) in candidates {
+        let q = 10f64.powf(lq);
+        let (j, ng, d) = obj.eval(q);
+        if let Some(d) = d {
+            if j.is_finite() && chosen.as_ref().is_none_or(|c| j < c.2) {
+                chosen = Some((q, d, j, ng));
+            }
+        }
+    }
+    chosen.ok_or_else(|| anyhow::anyhow!("q search failed"))
+}
+
+/// Design one axis from its FRF and measurement noise variance R (N²).
+pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions) -> Result<AxisDesign> {
+    let name = axis_name(frf.axis);
+    let coh = frf.coherence.as_deref();
+    let band = coherent_band(freq_hz, coh, opts.coherence_threshold);
+    if band.1 <= band.0 {
+        bail!("axis {name}: no coherent band (coherence ≥ {} nowhere); repeat the impact test", opts.coherence_threshold);
+    }
+    if band.1 > opts.fs_hz / 2.0 {
+        bail!("axis {name}: the FRF band reaches {} Hz, beyond the Nyquist frequency of fs = {} Hz", band.1, opts.fs_hz);
+    }
+    let weights = coherence_weights(&frf.frf, coh);
+    let vf = vector_fit(freq_hz, &frf.frf, &weights, &opts.vf).with_context(|| format!("axis {name}: fit"))?;
+    let model = vf.model;
+    if !model.is_stable() {
+        bail!("axis {name}: fitted model is unstable");
+    }
+    let in_band: Vec<bool> = freq_hz.iter().map(|f| *f >= band.0 && *f <= band.1).collect();
+    let mask: Vec<bool> = match coh {
+        Some(c) => in_band.iter().zip(c).map(|(b, c)| *b && *c >= opts.coherence_threshold).collect(),
+        None => in_band.clone(),
+    };
+    let fit_nrmse = relative_rms_error(&model, freq_hz, &frf.frf, &mask);
+    let dc = model.frf(0.0).norm();
+    if !(0.2..5.0).contains(&dc) {
+        bail!("axis {name}: fitted static gain |G(0)| = {dc:.3} N/N; the FRF must be force/force (N/N), check units and calibration");
+    }
+
+    let n_grid = 200;
+    let grid: Vec<(f64, Complex64)> = (0..n_grid)
+        .map(|i| {
+            let f = band.0 + (band.1 - band.0) * (i as f64 + 0.5) / n_grid as f64;
+            (f, model.frf(f))
+        })
+        .collect();
+    let obj = Objective {
+        model: &model,
+        grid,
+        opts,
+        r,
+        band_width: band.1 - band.0,
+    };
+    let mut q_trace = Vec::new();
+    let (_q, kal, j, ng) = match opts.q_override {
+        Some(q) => {
+            let (j, ng, d) = obj.eval(q);
+            let d = d.ok_or_else(|| anyhow::anyhow!("axis {name}: no valid compensator for q = {q}"))?;
+            (q, d, j, ng)
+        }
+        None => choose_q(&obj, &mut q_trace).with_context(|| format!("axis {name}"))?,
+    };
+    // Of the valid realizations, keep the one whose f32 rounding deviates
+    // least from the f64 design (each is fully verified by `quantize`).
+    let candidates = realize::realize_candidates(&kal.compensator).with_context(|| format!("axis {name}: realization"))?;
+    let mut best: Option<(ModalRealization, AxisFilter, Verification)> = None;
+    let mut last_err = None;
+    for r in candidates {
+        match quantize::quantize(&r, &kal.compensator, opts.fs_hz, band.1) {
+            Ok((f, v)) => {
+                if best.as_ref().is_none_or(|b| v.freq_error < b.2.freq_error) {
+                    best = Some((r, f, v));
+                }
+            }
+            Err(e) => last_err = Some(e),
+        }
+    }
+    let Some((realization, filter, verification)) = best else {
+        let e = last_err.unwrap_or_else(|| anyhow::anyhow!("no realization"));
+        return Err(e).with_context(|| format!("axis {name}: quantization"));
+    };
+    let fs = opts.fs_hz;
+    // Against the fitted model, not the raw lines: an H1 line with γ² = 0.97
+    // from 7 averages has ~5 % random error, as large as the tolerance.
+    let model_frf: Vec<Complex64> = freq_hz.iter().map(|f| model.frf(*f)).collect();
+    let flat = flat_band(|f| quantize::filter_response(&filter, f, fs), freq_hz, &model_frf, &in_band, opts.lag, fs);
+    Ok(AxisDesign {
+        axis: frf.axis,
+        model,
+        order_trace: vf.order_trace,
+        fit_nrmse,
+        coherent_band_hz: band,
+        kalman: kal,
+        realization,
+        filter,
+        verification,
+        flat_band_hz: flat,
+        noise_gain: ng,
+        predicted_error: j.sqrt(),
+        q_trace,
+    })
+}
+
+/// The compensator of a design as a state space (f64), for tests and reports.
+pub fn compensator(d: &AxisDesign) -> &StateSpace {
+    &d.kalman.compensator
+}

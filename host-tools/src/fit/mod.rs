@@ -1,0 +1,104 @@
+//! Fitting a rational model G(s) to a measured FRF (DESIGN.md, step 1).
+//!
+//! The model is in real pole-residue form,
+//! `G(s) = d + Σ_real r/(s − p) + Σ_pairs [r/(s − p) + r̄/(s − p̄)]`,
+//! s in rad/s, G in N/N.
+
+pub mod vf;
+
+use num_complex::Complex64;
+use std::f64::consts::PI;
+
+/// One term of a pole-residue model.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Term {
+    /// A real pole `p` (rad/s, p < 0) with real residue `r` (rad/s).
+    Real {
+        /// Pole (rad/s).
+        pole: f64,
+        /// Residue (rad/s).
+        residue: f64,
+    },
+    /// A complex-conjugate pair, represented by the pole with Im > 0.
+    Pair {
+        /// Pole with positive imaginary part (rad/s).
+        pole: Complex64,
+        /// Residue of `pole`; its conjugate belongs to the conjugate pole.
+        residue: Complex64,
+    },
+}
+
+/// A fitted sensor model G(s) in pole-residue form.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoleResidueModel {
+    /// Pole-residue terms.
+    pub terms: Vec<Term>,
+    /// Direct term d (N/N).
+    pub d: f64,
+}
+
+impl PoleResidueModel {
+    /// Model order (number of poles, counting a pair as two).
+    pub fn order(&self) -> usize {
+        self.terms.iter().map(|t| if matches!(t, Term::Real { .. }) { 1 } else { 2 }).sum()
+    }
+
+    /// G(s) at complex frequency `s` (rad/s).
+    pub fn eval_s(&self, s: Complex64) -> Complex64 {
+        let mut g = Complex64::new(self.d, 0.0);
+        for t in &self.terms {
+            match *t {
+                Term::Real { pole, residue } => g += residue / (s - pole),
+                Term::Pair { pole, residue } => g += residue / (s - pole) + residue.conj() / (s - pole.conj()),
+            }
+        }
+        g
+    }
+
+    /// G(j·2π·f) at frequency `f_hz` (Hz).
+    pub fn frf(&self, f_hz: f64) -> Complex64 {
+        self.eval_s(Complex64::new(0.0, 2.0 * PI * f_hz))
+    }
+
+    /// Whether every pole has a negative real part.
+    pub fn is_stable(&self) -> bool {
+        self.terms.iter().all(|t| match t {
+            Term::Real { pole, .. } => *pole < 0.0,
+            Term::Pair { pole, .. } => pole.re < 0.0,
+        })
+    }
+
+    /// Natural frequencies (Hz) and damping ratios of the pairs, ascending.
+    pub fn modes(&self) -> Vec<(f64, f64)> {
+        let mut m: Vec<(f64, f64)> = self
+            .terms
+            .iter()
+            .filter_map(|t| match t {
+                Term::Pair { pole, .. } => {
+                    let wn = pole.norm();
+                    Some((wn / (2.0 * PI), -pole.re / wn))
+                }
+                _ => None,
+            })
+            .collect();
+        m.sort_by(|a, b| a.0.total_cmp(&b.0));
+        m
+    }
+}
+
+/// Relative RMS error of a model against measured lines, over the lines
+/// selected by `mask`: sqrt(mean(|Ĝ − G|² / |G|²)).
+pub fn relative_rms_error(model: &PoleResidueModel, freq_hz: &[f64], frf: &[Complex64], mask: &[bool]) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for ((f, g), m) in freq_hz.iter().zip(frf).zip(mask) {
+        if *m && g.norm() > 0.0 {
+            sum += (model.frf(*f) - g).norm_sqr() / g.norm_sqr();
+            n += 1;
+        }
+    }
+    if n == 0 {
+        f64::NAN
+    } else {
+        (sum / n as f64).sqrt()
+    }
+}

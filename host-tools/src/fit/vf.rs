@@ -1,0 +1,405 @@
+//! Relaxed vector fitting in real pole-residue form (Gustavsen & Semlyen
+//! 1999; Gustavsen 2006, "Improving the pole relocating properties of vector
+//! fitting"), with coherence weights and automatic order selection.
+//!
+//! Frequencies are normalized by ω_s = 2π·f_max for conditioning; the model
+//! is scaled back at the end (p = p'·ω_s, r = r'·ω_s).
+
+use anyhow::{bail, Result};
+use nalgebra::{DMatrix, DVector};
+use num_complex::Complex64;
+use std::f64::consts::PI;
+
+use super::{PoleResidueModel, Term};
+
+/// Options of the fit.
+#[derive(Clone, Debug)]
+pub struct VfOptions {
+    /// Highest model order tried (even).
+    pub max_order: usize,
+    /// Pole-relocation iterations per order.
+    pub iterations: usize,
+    /// Stop raising the order when the weighted error improved by less than
+    /// this fraction over two consecutive orders.
+    pub improvement_tol: f64,
+    /// Lines used for pole relocation: every `decimate`-th line (the final
+    /// residue fit uses all lines).
+    pub decimate: usize,
+}
+
+impl Default for VfOptions {
+    fn default() -> Self {
+        VfOptions {
+            max_order: 24,
+            iterations: 8,
+            improvement_tol: 0.03,
+            decimate: 4,
+        }
+    }
+}
+
+/// Result of the fit, with the order search trace.
+#[derive(Clone, Debug)]
+pub struct VfResult {
+    /// The chosen model.
+    pub model: PoleResidueModel,
+    /// Weighted RMS residual of the chosen model, sqrt(Σw|Ĝ−G|²/Σw|G|²).
+    pub weighted_rms: f64,
+    /// `(order, weighted_rms)` of every order tried.
+    pub order_trace: Vec<(usize, f64)>,
+}
+
+/// Coherence weights w = γ²/((1 − γ²)·|H|²) (DESIGN.md step 1): the inverse
+/// of the variance of the H1 estimate relative to |H|. γ² is capped at
+/// 0.999 so perfect-coherence lines do not get infinite weight; without
+/// coherence the weight is 1/|H|² (relative error).
+pub fn coherence_weights(frf: &[Complex64], coherence: Option<&[f64]>) -> Vec<f64> {
+    frf.iter()
+        .enumerate()
+        .map(|(k, h)| {
+            let h2 = h.norm_sqr();
+            if h2 <= 0.0 || !h2.is_finite() {
+                return 0.0;
+            }
+            match coherence {
+                Some(c) => {
+                    let g = c[k].clamp(0.0, 0.999);
+                    g / ((1.0 - g) * h2)
+                }
+                None => 1.0 / h2,
+            }
+        })
+        .collect()
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Pole {
+    p: Complex64,
+    pair: bool,
+}
+
+fn n_cols(poles: &[Pole]) -> usize {
+    poles.iter().map(|p| if p.pair { 2 } else { 1 }).sum()
+}
+
+/// Basis functions φ_j(s) of the real pole-residue form at one frequency.
+fn basis_row(s: Complex64, poles: &[Pole], out: &mut Vec<Complex64>) {
+    out.clear();
+    let j = Complex64::new(0.0, 1.0);
+    for p in poles {
+        if p.pair {
+            let a = 1.0 / (s - p.p);
+            let b = 1.0 / (s - p.p.conj());
+            out.push(a + b);
+            out.push(j * a - j * b);
+        } else {
+            out.push(1.0 / (s - p.p.re));
+        }
+    }
+}
+
+/// Solve min ‖A x − b‖ by QR after column equilibration.
+fn lstsq(mut a: DMatrix<f64>, b: DVector<f64>) -> Result<DVector<f64>> {
+    let ncols = a.ncols();
+    let mut scale = vec![1.0; ncols];
+    for (j, sc) in scale.iter_mut().enumerate() {
+        let n = a.column(j).norm();
+        if n > 0.0 {
+            *sc = 1.0 / n;
+            a.column_mut(j).scale_mut(1.0 / n);
+        }
+    }
+    let qr = a.qr();
+    let qtb = qr.q().transpose() * b;
+    let r = qr.r();
+    let diag_max = r.diagonal().iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let diag_min = r.diagonal().iter().fold(f64::INFINITY, |m, v| m.min(v.abs()));
+    if !(diag_min > diag_max * 1e-13) {
+        bail!("vector fitting: least-squares system is rank deficient (R diagonal range {diag_min:.1e}..{diag_max:.1e}); reduce the model order or check the FRF");
+    }
+    let x = r
+        .solve_upper_triangular(&qtb)
+        .ok_or_else(|| anyhow::anyhow!("vector fitting: singular least-squares system"))?;
+    Ok(DVector::from_iterator(ncols, x.iter().zip(&scale).map(|(v, s)| v * s)))
+}
+
+/// One pole relocation: returns the zeros of σ(s) as new poles (stable).
+fn relocate(s: &[Complex64], h: &[Complex64], sw: &[f64], poles: &[Pole]) -> Result<Vec<Pole>> {
+    let n = n_cols(poles);
+    let k = s.len();
+    let cols = 2 * n + 2;
+    let mut a = DMatrix::<f64>::zeros(2 * k + 1, cols);
+    let mut rhs = DVector::<f64>::zeros(2 * k + 1);
+    let mut row = Vec::with_capacity(n);
+    let mut sum_phi = vec![0.0; n];
+    for i in 0..k {
+        basis_row(s[i], poles, &mut row);
+        let w = sw[i];
+        for j in 0..n {
+            let v = row[j] * w;
+            a[(2 * i, j)] = v.re;
+            a[(2 * i + 1, j)] = v.im;
+            let m = -row[j] * h[i] * w;
+            a[(2 * i, n + 1 + j)] = m.re;
+            a[(2 * i + 1, n + 1 + j)] = m.im;
+            sum_phi[j] += row[j].re;
+        }
+        a[(2 * i, n)] = w;
+        let m = -h[i] * w;
+        a[(2 * i, 2 * n + 1)] = m.re;
+        a[(2 * i + 1, 2 * n + 1)] = m.im;
+    }
+    // Relaxation (Gustavsen 2006): Re Σ_k σ(s_k) = K, scaled like the data.
+    let scale = (h.iter().zip(sw).map(|(h, w)| (h * w).norm_sqr()).sum::<f64>()).sqrt() / k as f64;
+    for j in 0..n {
+        a[(2 * k, n + 1 + j)] = scale * sum_phi[j];
+    }
+    a[(2 * k, 2 * n + 1)] = scale * k as f64;
+    rhs[2 * k] = scale * k as f64;
+    let x = lstsq(a, rhs)?;
+    let c_t: Vec<f64> = (0..n).map(|j| x[n + 1 + j]).collect();
+    let mut d_t = x[2 * n + 1];
+    if d_t.abs() < 1e-8 {
+        d_t = 1e-8f64.copysign(d_t);
+    }
+    // Zeros of σ: eigenvalues of A − b·c̃ᵀ/d̃ in real form.
+    let mut m = DMatrix::<f64>::zeros(n, n);
+    let mut b = vec![0.0; n];
+    let mut col = 0;
+    for p in poles {
+        if p.pair {
+            m[(col, col)] = p.p.re;
+            m[(col, col + 1)] = p.p.im;
+            m[(col + 1, col)] = -p.p.im;
+            m[(col + 1, col + 1)] = p.p.re;
+            b[col] = 2.0;
+            col += 2;
+        } else {
+            m[(col, col)] = p.p.re;
+            b[col] = 1.0;
+            col += 1;
+        }
+    }
+    for r in 0..n {
+        for c in 0..n {
+            m[(r, c)] -= b[r] * c_t[c] / d_t;
+        }
+    }
+    let eig = m.complex_eigenvalues();
+    Ok(classify(eig.iter().copied()))
+}
+
+/// Turn eigenvalues into stable poles: flip unstable ones (Re > 0 → −Re),
+/// keep one representative (Im > 0) per conjugate pair.
+fn classify(eig: impl Iterator<Item = Complex64>) -> Vec<Pole> {
+    let mut out = Vec::new();
+    for mut z in eig {
+        if z.re > 0.0 {
+            z.re = -z.re;
+        }
+        if z.re == 0.0 {
+            z.re = -1e-6 * z.norm().max(1e-6);
+        }
+        if z.im.abs() <= 1e-9 * z.norm().max(1e-300) {
+            out.push(Pole { p: Complex64::new(z.re, 0.0), pair: false });
+        } else if z.im > 0.0 {
+            out.push(Pole { p: z, pair: true });
+        }
+    }
+    out.sort_by(|a, b| a.p.im.total_cmp(&b.p.im).then(a.p.re.total_cmp(&b.p.re)));
+    out
+}
+
+/// Residues and direct term for fixed poles (weighted linear least squares).
+fn residues(s: &[Complex64], h: &[Complex64], sw: &[f64], poles: &[Pole]) -> Result<(Vec<f64>, f64)> {
+    let n = n_cols(poles);
+    let k = s.len();
+    let mut a = DMatrix::<f64>::zeros(2 * k, n + 1);
+    let mut rhs = DVector::<f64>::zeros(2 * k);
+    let mut row = Vec::with_capacity(n);
+    for i in 0..k {
+        basis_row(s[i], poles, &mut row);
+        let w = sw[i];
+        for j in 0..n {
+            a[(2 * i, j)] = (row[j] * w).re;
+            a[(2 * i + 1, j)] = (row[j] * w).im;
+        }
+        a[(2 * i, n)] = w;
+        rhs[2 * i] = (h[i] * w).re;
+        rhs[2 * i + 1] = (h[i] * w).im;
+    }
+    let x = lstsq(a, rhs)?;
+    Ok(((0..n).map(|j| x[j]).collect(), x[n]))
+}
+
+fn to_model(poles: &[Pole], c: &[f64], d: f64, w_scale: f64) -> PoleResidueModel {
+    let mut terms = Vec::with_capacity(poles.len());
+    let mut j = 0;
+    for p in poles {
+        if p.pair {
+            terms.push(Term::Pair {
+                pole: p.p * w_scale,
+                residue: Complex64::new(c[j], c[j + 1]) * w_scale,
+            });
+            j += 2;
+        } else {
+            terms.push(Term::Real { pole: p.p.re * w_scale, residue: c[j] * w_scale });
+            j += 1;
+        }
+    }
+    PoleResidueModel { terms, d }
+}
+
+fn weighted_rms(model: &PoleResidueModel, freq_hz: &[f64], h: &[Complex64], w: &[f64]) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for ((f, h), w) in freq_hz.iter().zip(h).zip(w) {
+        num += w * (model.frf(*f) - h).norm_sqr();
+        den += w * h.norm_sqr();
+    }
+    (num / den).sqrt()
+}
+
+/// Fit a model of a fixed (even) order.
+pub fn fit_order(freq_hz: &[f64], h: &[Complex64], weights: &[f64], order: usize, opts: &VfOptions) -> Result<PoleResidueModel> {
+    let f_max = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
+    if f_max <= 0.0 {
+        bail!("vector fitting needs positive frequencies");
+    }
+    let w_scale = 2.0 * PI * f_max;
+    let s_all: Vec<Complex64> = freq_hz.iter().map(|f| Complex64::new(0.0, 2.0 * PI * f / w_scale)).collect();
+    let sw_all: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
+    let step = opts.decimate.max(1);
+    let idx: Vec<usize> = (0..freq_hz.len()).step_by(step).collect();
+    let s: Vec<Complex64> = idx.iter().map(|&i| s_all[i]).collect();
+    let hs: Vec<Complex64> = idx.iter().map(|&i| h[i]).collect();
+    let sw: Vec<f64> = idx.iter().map(|&i| sw_all[i]).collect();
+
+    // Starting poles: linearly spaced pairs over the band, 1 % damping.
+    let n_pairs = (order / 2).max(1);
+    let f_min = freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(f_max / 100.0) / f_max;
+    let mut poles: Vec<Pole> = (0..n_pairs)
+        .map(|i| {
+            let beta = if n_pairs == 1 { 0.5 } else { f_min + (1.0 - f_min) * i as f64 / (n_pairs - 1) as f64 };
+            Pole { p: Complex64::new(-beta / 100.0, beta), pair: true }
+        })
+        .collect();
+    for _ in 0..opts.iterations {
+        let new = relocate(&s, &hs, &sw, &poles)?;
+        let moved = new.len() != poles.len()
+            || new.iter().zip(&poles).any(|(a, b)| (a.p - b.p).norm() > 1e-9 * b.p.norm().max(1e-3));
+        poles = new;
+        if !moved {
+            break;
+        }
+    }
+    let (c, d) = residues(&s_all, h, &sw_all, &poles)?;
+    Ok(to_model(&poles, &c, d, w_scale))
+}
+
+/// Fit with automatic order selection: orders 2, 4, … up to `max_order`;
+/// stop when two consecutive orders improve the weighted error by less than
+/// `improvement_tol`, and take the smallest order within that tolerance of the
+/// best. Negligible pairs (peak contribution < 10⁻³ of |G| in band) are
+/// skimmed and the residues refitted.
+pub fn vector_fit(freq_hz: &[f64], h: &[Complex64], weights: &[f64], opts: &VfOptions) -> Result<VfResult> {
+    if freq_hz.len() < 8 {
+        bail!("vector fitting needs at least 8 frequency lines, got {}", freq_hz.len());
+    }
+    let mut trace = Vec::new();
+    let mut models: Vec<(usize, PoleResidueModel, f64)> = Vec::new();
+    let mut stall = 0;
+    let mut order = 2;
+    while order <= opts.max_order {
+        let m = fit_order(freq_hz, h, weights, order, opts)?;
+        let e = weighted_rms(&m, freq_hz, h, weights);
+        trace.push((order, e));
+        let best_before = models.iter().map(|x| x.2).fold(f64::INFINITY, f64::min);
+        models.push((order, m, e));
+        if e.is_finite() && e > best_before * (1.0 - opts.improvement_tol) {
+            stall += 1;
+            if stall >= 2 {
+                break;
+            }
+        } else {
+            stall = 0;
+        }
+        order += 2;
+    }
+    let best = models.iter().map(|x| x.2).filter(|e| e.is_finite()).fold(f64::INFINITY, f64::min);
+    if !best.is_finite() {
+        bail!("vector fitting failed at every order");
+    }
+    let chosen = models
+        .into_iter()
+        .find(|x| x.2 <= best * (1.0 + opts.improvement_tol))
+        .expect("the best model is within tolerance of itself");
+    let model = skim(freq_hz, h, weights, chosen.1)?;
+    let e = weighted_rms(&model, freq_hz, h, weights);
+    Ok(VfResult { model, weighted_rms: e, order_trace: trace })
+}
+
+/// Damping below which a fitted pair is taken as spurious: no mounted
+/// dynamometer or machine mode is that lightly damped (real ones: 1-6 %).
+pub const MIN_MODE_DAMPING: f64 = 1e-3;
+/// Near the band edge (above this fraction of f_max) a pair must be damped
+/// at least [`EDGE_MODE_DAMPING`]: VF parks poles there to absorb the
+/// truncation of out-of-band modes.
+const EDGE_FRACTION: f64 = 0.97;
+const EDGE_MODE_DAMPING: f64 = 5e-3;
+
+/// Remove pairs whose contribution is negligible everywhere in the band, and
+/// spurious lightly damped pairs (ζ < [`MIN_MODE_DAMPING`], or ζ < 0.5 % at
+/// the band edge), and real poles below the lowest measured line, then refit
+/// the residues of the rest.
+fn skim(freq_hz: &[f64], h: &[Complex64], weights: &[f64], model: PoleResidueModel) -> Result<PoleResidueModel> {
+    let f_top = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
+    let f_low = freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0);
+    let keep: Vec<bool> = model
+        .terms
+        .iter()
+        .map(|t| {
+            // A real pole below the lowest measured line cannot be
+            // identified from the data; it would become a near-integrator.
+            if let Term::Real { pole, .. } = t {
+                if pole.abs() / (2.0 * PI) < f_low {
+                    return false;
+                }
+            }
+            if let Term::Pair { pole, .. } = t {
+                let wn = pole.norm();
+                let zeta = -pole.re / wn;
+                let f_n = wn / (2.0 * PI);
+                if zeta < MIN_MODE_DAMPING || (f_n > EDGE_FRACTION * f_top && zeta < EDGE_MODE_DAMPING) {
+                    return false;
+                }
+            }
+            freq_hz.iter().zip(h).any(|(f, g)| {
+                let s = Complex64::new(0.0, 2.0 * PI * f);
+                let c = match *t {
+                    Term::Real { pole, residue } => residue / (s - pole),
+                    Term::Pair { pole, residue } => residue / (s - pole) + residue.conj() / (s - pole.conj()),
+                };
+                c.norm() > 1e-3 * g.norm()
+            })
+        })
+        .collect();
+    if keep.iter().all(|k| *k) {
+        return Ok(model);
+    }
+    let f_max = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
+    let w_scale = 2.0 * PI * f_max;
+    let poles: Vec<Pole> = model
+        .terms
+        .iter()
+        .zip(&keep)
+        .filter(|(_, k)| **k)
+        .map(|(t, _)| match *t {
+            Term::Real { pole, .. } => Pole { p: Complex64::new(pole / w_scale, 0.0), pair: false },
+            Term::Pair { pole, .. } => Pole { p: pole / w_scale, pair: true },
+        })
+        .collect();
+    let s: Vec<Complex64> = freq_hz.iter().map(|f| Complex64::new(0.0, 2.0 * PI * f / w_scale)).collect();
+    let sw: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
+    let (c, d) = residues(&s, h, &sw, &poles)?;
+    Ok(to_model(&poles, &c, d, w_scale))
+}

@@ -1,0 +1,62 @@
+//! Accuracy scoring of compensated forces against a known true force.
+//!
+//! **NRMSE (as reported everywhere in this project):** both signals are
+//! low-passed at `f_max` with a zero-phase FFT brick-wall filter, the first
+//! and last 5 % of the record are dropped (edge effects of the circular
+//! filter and the start-up of the compensator), and
+//! `NRMSE = RMS(ŝ − s) / (max s − min s)` over what remains, i.e. normalized
+//! by the peak-to-peak range of the band-limited true force. The error RMS
+//! relative to the true force's standard deviation is reported beside it.
+
+use rustfft::{num_complex::Complex64, FftPlanner};
+
+/// Zero-phase brick-wall low-pass at `f_max_hz` via FFT (circular).
+pub fn lowpass(x: &[f64], fs_hz: f64, f_max_hz: f64) -> Vec<f64> {
+    let n = x.len();
+    if n == 0 {
+        return Vec::new();
+    }
+    let mut planner = FftPlanner::<f64>::new();
+    let fwd = planner.plan_fft_forward(n);
+    let inv = planner.plan_fft_inverse(n);
+    let mut buf: Vec<Complex64> = x.iter().map(|v| Complex64::new(*v, 0.0)).collect();
+    fwd.process(&mut buf);
+    for (k, v) in buf.iter_mut().enumerate() {
+        let f = (k.min(n - k)) as f64 * fs_hz / n as f64;
+        if f > f_max_hz {
+            *v = Complex64::new(0.0, 0.0);
+        }
+    }
+    inv.process(&mut buf);
+    buf.iter().map(|v| v.re / n as f64).collect()
+}
+
+/// Error figures of an estimate against the truth (see the module doc).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Accuracy {
+    /// RMS error / peak-to-peak of the truth.
+    pub nrmse: f64,
+    /// RMS error / standard deviation of the truth.
+    pub rel_to_std: f64,
+    /// RMS error (N).
+    pub rms_error_n: f64,
+}
+
+/// Score `estimate` against `truth`, both sampled at `fs_hz`, below `f_max_hz`.
+pub fn accuracy(estimate: &[f64], truth: &[f64], fs_hz: f64, f_max_hz: f64) -> Accuracy {
+    let n = estimate.len().min(truth.len());
+    let e = lowpass(&estimate[..n], fs_hz, f_max_hz);
+    let t = lowpass(&truth[..n], fs_hz, f_max_hz);
+    let skip = n / 20;
+    let (e, t) = (&e[skip..n - skip], &t[skip..n - skip]);
+    let m = t.len() as f64;
+    let rms = (e.iter().zip(t).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / m).sqrt();
+    let (lo, hi) = t.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+    let mean = t.iter().sum::<f64>() / m;
+    let std = (t.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / m).sqrt();
+    Accuracy {
+        nrmse: rms / (hi - lo),
+        rel_to_std: rms / std,
+        rms_error_n: rms,
+    }
+}

@@ -1,0 +1,156 @@
+//! Rounding a realization to the kernel's f32 coefficients and verifying the
+//! result before it may be written (DESIGN.md step 7).
+//!
+//! Checks, each with a reason on failure:
+//! * every f32 section stable with margin (pole radius ≤ 1 − [`POLE_MARGIN`]);
+//! * pole displacement by rounding, relative to the pole's distance from
+//!   z = 1 (what sets a mode's frequency and damping);
+//! * frequency response of the f32 filter against the f64 design over the
+//!   band (relative to the design's peak response);
+//! * a time-domain run of the real f32 core kernel against an f64 simulation
+//!   of the design (relative to the design's output RMS).
+
+use anyhow::{bail, Result};
+use dynocomp_core::kernel::{AxisFilter, AxisState, Section};
+use num_complex::Complex64;
+
+use crate::kalman::StateSpace;
+use crate::realize::{section_response, ModalRealization};
+
+/// Required distance of every f32 pole from the unit circle.
+pub const POLE_MARGIN: f64 = 1e-7;
+/// Largest accepted relative frequency-response error of the f32 filter.
+pub const MAX_FREQ_ERROR: f64 = 1e-4;
+/// Largest accepted relative time-domain error of the f32 kernel.
+pub const MAX_TIME_ERROR: f64 = 1e-4;
+/// Largest accepted pole displacement relative to |1 − λ|.
+pub const MAX_POLE_SHIFT: f64 = 1e-4;
+
+/// Verification figures of a quantized filter.
+#[derive(Clone, Debug)]
+pub struct Verification {
+    /// Largest pole radius of the f32 sections.
+    pub max_pole_radius: f64,
+    /// Largest relative pole displacement by rounding.
+    pub max_pole_shift: f64,
+    /// Largest |H32 − H64| / max|H64| over the checked band.
+    pub freq_error: f64,
+    /// Largest |y32 − y64| / rms(y64) of the time-domain run.
+    pub time_error: f64,
+}
+
+fn round_section(s: &crate::realize::Section64) -> Section {
+    Section {
+        delta: s.delta.map(|v| v as f32),
+        b: s.b.map(|v| v as f32),
+        c: s.c.map(|v| v as f32),
+    }
+}
+
+fn eig2(delta: [f64; 4]) -> [Complex64; 2] {
+    let (a, b, c, d) = (1.0 + delta[0], delta[1], delta[2], 1.0 + delta[3]);
+    let tr = a + d;
+    let disc = Complex64::new((a - d) * (a - d) / 4.0 + b * c, 0.0).sqrt();
+    [tr / 2.0 + disc, tr / 2.0 - disc]
+}
+
+/// Frequency response of the f32 filter, evaluated in f64 from its
+/// coefficients.
+pub fn filter_response(f: &AxisFilter, f_hz: f64, fs_hz: f64) -> Complex64 {
+    let z = Complex64::from_polar(1.0, 2.0 * std::f64::consts::PI * f_hz / fs_hz);
+    let mut h = Complex64::new(f64::from(f.d()), 0.0);
+    for s in f.sections() {
+        h += section_response(s.delta.map(f64::from), s.b.map(f64::from), s.c.map(f64::from), z);
+    }
+    let mut zp = 1.0 / z;
+    for tap in f.fir() {
+        h += zp * f64::from(*tap);
+        zp /= z;
+    }
+    h
+}
+
+/// A deterministic broadband test signal: a log chirp over the band plus a
+/// pseudo-random sequence, unit RMS scale (N).
+pub fn test_signal(n: usize, fs_hz: f64, f_hi: f64) -> Vec<f64> {
+    let mut state: u64 = 0x2545_F491_4F6C_DD1D;
+    let f_lo = 10.0f64;
+    let dur = n as f64 / fs_hz;
+    (0..n)
+        .map(|k| {
+            let t = k as f64 / fs_hz;
+            let ratio = (f_hi / f_lo).max(1.0001);
+            let phase = 2.0 * std::f64::consts::PI * f_lo * dur / ratio.ln() * (ratio.powf(t / dur) - 1.0);
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let noise = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            phase.sin() + noise
+        })
+        .collect()
+}
+
+/// Round to f32 and verify against the f64 design `ss` over 0..`f_band_hz`.
+pub fn quantize(real: &ModalRealization, ss: &StateSpace, fs_hz: f64, f_band_hz: f64) -> Result<(AxisFilter, Verification)> {
+    let sections: Vec<Section> = real.sections.iter().map(round_section).collect();
+    let fir: Vec<f32> = real.fir.iter().map(|v| *v as f32).collect();
+    let filter = AxisFilter::with_fir(&sections, real.d as f32, &fir)
+        .map_err(|e| anyhow::anyhow!("the f32 compensator is invalid ({e:?}); its poles do not survive rounding"))?;
+    // stability margin and pole displacement
+    let mut max_radius = 0.0f64;
+    let mut max_shift = 0.0f64;
+    for (s64, s32) in real.sections.iter().zip(filter.sections()) {
+        let e64 = eig2(s64.delta);
+        let e32 = eig2(s32.delta.map(f64::from));
+        for (p64, p32) in e64.iter().zip(e32.iter()) {
+            max_radius = max_radius.max(p32.norm());
+            let shift = e32.iter().map(|q| (q - p64).norm()).fold(f64::INFINITY, f64::min) / (1.0 - p64).norm().max(1e-300);
+            let _ = p32;
+            max_shift = max_shift.max(shift);
+        }
+        if !s32.poles_within(1.0 - POLE_MARGIN) {
+            bail!("quantized compensator has a pole within {POLE_MARGIN:e} of the unit circle; refusing to write it");
+        }
+    }
+    if !(max_shift <= MAX_POLE_SHIFT) {
+        bail!("rounding to f32 moves a compensator pole by {max_shift:.1e} of its distance from z = 1 (limit {MAX_POLE_SHIFT:e})");
+    }
+    // frequency response over the band (and a little beyond)
+    let n_grid = 400;
+    let mut peak = 0.0f64;
+    let mut worst = 0.0f64;
+    for i in 0..=n_grid {
+        let f = f_band_hz * i as f64 / n_grid as f64;
+        let h64 = ss.freq_response(f, fs_hz);
+        let h32 = filter_response(&filter, f, fs_hz);
+        peak = peak.max(h64.norm());
+        worst = worst.max((h32 - h64).norm());
+    }
+    let freq_error = worst / peak;
+    if !(freq_error <= MAX_FREQ_ERROR) {
+        bail!("f32 compensator deviates from the f64 design by {freq_error:.1e} of its peak response (limit {MAX_FREQ_ERROR:e})");
+    }
+    // time domain through the real kernel
+    let u = test_signal(20_000, fs_hz, f_band_hz);
+    let y64 = ss.simulate(&u);
+    let mut st = AxisState::default();
+    let rms = (y64.iter().map(|v| v * v).sum::<f64>() / y64.len() as f64).sqrt();
+    let time_error = u
+        .iter()
+        .zip(&y64)
+        .map(|(u, y)| (f64::from(filter.step(&mut st, *u as f32)) - y).abs())
+        .fold(0.0, f64::max)
+        / rms;
+    if !(time_error <= MAX_TIME_ERROR) {
+        bail!("f32 kernel output deviates from the f64 design by {time_error:.1e} of its RMS (limit {MAX_TIME_ERROR:e})");
+    }
+    Ok((
+        filter,
+        Verification {
+            max_pole_radius: max_radius,
+            max_pole_shift: max_shift,
+            freq_error,
+            time_error,
+        },
+    ))
+}
