@@ -141,8 +141,8 @@ fn thresholds(moduli: &[f64]) -> Vec<f64> {
 }
 
 /// Every valid realization of a compensator, one per candidate split of the
-/// poles into a fast (FIR) and a slow (modal) cluster, best-conditioned
-/// first. The caller picks the one that survives f32 rounding best. Fails
+/// poles into a fast (FIR) and a slow (modal) cluster, most accurate (f64,
+/// against the dense transfer function) first. The caller picks the one that survives f32 rounding best. Fails
 /// with the reason of the last attempt when no split works.
 pub fn realize_candidates(ss: &StateSpace) -> Result<Vec<ModalRealization>> {
     let moduli: Vec<f64> = ss.a.complex_eigenvalues().iter().map(|z| z.norm()).collect();
@@ -157,11 +157,27 @@ pub fn realize_candidates(ss: &StateSpace) -> Result<Vec<ModalRealization>> {
     if out.is_empty() {
         return Err(last_err.unwrap_or_else(|| anyhow::anyhow!("realization: no eigenvalues")));
     }
-    out.sort_by(|a, b| (a.decoupling_norm * a.modal_condition).total_cmp(&(b.decoupling_norm * b.modal_condition)));
-    Ok(out)
+    // Rank by measured accuracy: the largest deviation of the realization's
+    // response from the dense transfer function over 0..fs/2 (relative to
+    // its peak), on a grid in normalized frequency.
+    let mut scored: Vec<(f64, ModalRealization)> = out
+        .into_iter()
+        .map(|r| {
+            let (mut worst, mut peak) = (0.0f64, 0.0f64);
+            for i in 0..=256 {
+                let f = 0.5 * i as f64 / 256.0;
+                let h = ss.freq_response(f, 1.0);
+                peak = peak.max(h.norm());
+                worst = worst.max((r.freq_response(f, 1.0) - h).norm());
+            }
+            (worst / peak, r)
+        })
+        .collect();
+    scored.sort_by(|a, b| a.0.total_cmp(&b.0));
+    Ok(scored.into_iter().map(|x| x.1).collect())
 }
 
-/// The best-conditioned realization (see [`realize_candidates`]).
+/// The most accurate realization (see [`realize_candidates`]).
 pub fn realize(ss: &StateSpace) -> Result<ModalRealization> {
     Ok(realize_candidates(ss)?.swap_remove(0))
 }

@@ -310,7 +310,13 @@ pub fn vector_fit(freq_hz: &[f64], h: &[Complex64], weights: &[f64], opts: &VfOp
     let mut stall = 0;
     let mut order = 2;
     while order <= opts.max_order {
-        let m = fit_order(freq_hz, h, weights, order, opts)?;
+        // An order above what the data support makes the relocation
+        // least-squares rank deficient (clean data): that ends the search.
+        let m = match fit_order(freq_hz, h, weights, order, opts) {
+            Ok(m) => m,
+            Err(e) if models.is_empty() => return Err(e),
+            Err(_) => break,
+        };
         let e = weighted_rms(&m, freq_hz, h, weights);
         trace.push((order, e));
         let best_before = models.iter().map(|x| x.2).fold(f64::INFINITY, f64::min);
