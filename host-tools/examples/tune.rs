@@ -16,9 +16,7 @@ fn main() -> anyhow::Result<()> {
         let fs = p.fs_hz;
         for ax in 0..3 {
             let frf = sim.frf.axis(ax).unwrap();
-            let idle = &sim.idle[ax];
-            let mean = idle.iter().sum::<f64>() / idle.len() as f64;
-            let r = idle.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / idle.len() as f64;
+            let r = dynocomp::metrics::sample_variance(&sim.idle[ax]);
             let opts = DesignOptions { lag, force_rms, fs_hz: fs, ..Default::default() };
             let t0 = std::time::Instant::now();
             let d = match design_axis(&sim.frf.freq_hz, frf, r, &opts) {

@@ -20,7 +20,7 @@ use std::f64::consts::PI;
 use crate::fit::vf::{coherence_weights, vector_fit, VfOptions};
 use crate::fit::{relative_rms_error, PoleResidueModel};
 use crate::frf::{axis_name, AxisFrf};
-use crate::kalman::{self, KalmanDesign, StateSpace};
+use crate::kalman::{self, KalmanDesign};
 use crate::quantize::{self, Verification};
 use crate::realize::{self, ModalRealization};
 
@@ -205,7 +205,7 @@ impl Objective<'_> {
 /// golden-section refinement on log10 q around the best decade.
 fn choose_q(obj: &Objective, trace: &mut Vec<(f64, f64)>) -> Result<(f64, KalmanDesign, f64, f64)> {
     let base = obj.r.log10();
-    let mut best: Option<(f64, f64)> = None; // (log q, J)
+    let mut best: Option<(f64, f64)> = None; // (log10 q, J)
     for i in -2..=14 {
         let lq = base + i as f64;
         let (j, _, _) = obj.eval(10f64.powf(lq));
@@ -214,7 +214,7 @@ fn choose_q(obj: &Objective, trace: &mut Vec<(f64, f64)>) -> Result<(f64, Kalman
             best = Some((lq, j));
         }
     }
-    let Some((lq0, _)) = best else {
+    let Some((lq0, j0)) = best else {
         bail!(
             "no q gives a valid compensator within the noise-gain limit {}; raise --max-noise-gain or check R",
             obj.opts.max_noise_gain
@@ -245,18 +245,18 @@ fn choose_q(obj: &Objective, trace: &mut Vec<(f64, f64)>) -> Result<(f64, Kalman
             trace.push((10f64.powf(x2), f2));
         }
     }
-    let candidates = [(lq0, ()), (x1, ()), (x2, ())];
-    let mut chosen: Option<(f64, KalmanDesign, f64, f64)> = None;
-    for (lq, _) in candidates {
-        let q = 10f64.powf(lq);
-        let (j, ng, d) = obj.eval(q);
-        if let Some(d) = d {
-            if j.is_finite() && chosen.as_ref().is_none_or(|c| j < c.2) {
-                chosen = Some((q, d, j, ng));
-            }
+    // The best of the coarse optimum and the final bracket (first wins a
+    // tie); its J is known, only its design is computed again.
+    let mut pick = (lq0, j0);
+    for (lq, j) in [(x1, f1), (x2, f2)] {
+        if j.is_finite() && j < pick.1 {
+            pick = (lq, j);
         }
     }
-    chosen.ok_or_else(|| anyhow::anyhow!("q search failed"))
+    let q = 10f64.powf(pick.0);
+    let (j, ng, d) = obj.eval(q);
+    let d = d.ok_or_else(|| anyhow::anyhow!("q search failed"))?;
+    Ok((q, d, j, ng))
 }
 
 /// Design one axis from its FRF and measurement noise variance R (N²).
@@ -349,9 +349,4 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         predicted_error: j.sqrt(),
         q_trace,
     })
-}
-
-/// The compensator of a design as a state space (f64), for tests and reports.
-pub fn compensator(d: &AxisDesign) -> &StateSpace {
-    &d.kalman.compensator
 }

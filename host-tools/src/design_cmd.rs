@@ -130,8 +130,7 @@ fn noise_variances(args: &DesignArgs, frf: &Frf) -> Result<[Option<f64>; 3]> {
                 if x.len() < 100 {
                     bail!("{}: only {} samples; an idle record needs at least 100 to estimate R", path.display(), x.len());
                 }
-                let mean = x.iter().sum::<f64>() / x.len() as f64;
-                let var = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (x.len() - 1) as f64;
+                let var = crate::metrics::sample_variance(x);
                 if !(var > 0.0) {
                     bail!("{}: column f{} has zero variance; is it a real idle record?", path.display(), axis_name(a.axis));
                 }

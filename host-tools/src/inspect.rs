@@ -76,19 +76,8 @@ fn method_name(m: DesignMethod) -> &'static str {
 pub fn max_pole_radius(sections: &[dynocomp_core::kernel::Section]) -> f64 {
     sections
         .iter()
-        .map(|s| {
-            let [d11, d12, d21, d22] = s.delta.map(f64::from);
-            let (a, b, c, d) = (1.0 + d11, d12, d21, 1.0 + d22);
-            let tr = a + d;
-            let det = a * d - b * c;
-            let disc = tr * tr / 4.0 - det;
-            if disc >= 0.0 {
-                let r = disc.sqrt();
-                (tr / 2.0 + r).abs().max((tr / 2.0 - r).abs())
-            } else {
-                det.max(0.0).sqrt()
-            }
-        })
+        .flat_map(|s| crate::realize::section_poles(s.delta.map(f64::from)))
+        .map(|p| p.norm())
         .fold(0.0, f64::max)
 }
 

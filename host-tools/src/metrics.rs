@@ -31,6 +31,13 @@ pub fn lowpass(x: &[f64], fs_hz: f64, f_max_hz: f64) -> Vec<f64> {
     buf.iter().map(|v| v.re / n as f64).collect()
 }
 
+/// Unbiased sample variance (n − 1), e.g. R (N²) from an idle record.
+pub fn sample_variance(x: &[f64]) -> f64 {
+    let n = x.len() as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)
+}
+
 /// Error figures of an estimate against the truth (see the module doc).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Accuracy {

@@ -15,7 +15,7 @@ use dynocomp_core::kernel::{AxisFilter, AxisState, Section};
 use num_complex::Complex64;
 
 use crate::kalman::StateSpace;
-use crate::realize::{section_response, ModalRealization};
+use crate::realize::{section_poles, section_response, ModalRealization};
 
 /// Required distance of every f32 pole from the unit circle.
 pub const POLE_MARGIN: f64 = 1e-7;
@@ -45,13 +45,6 @@ fn round_section(s: &crate::realize::Section64) -> Section {
         b: s.b.map(|v| v as f32),
         c: s.c.map(|v| v as f32),
     }
-}
-
-fn eig2(delta: [f64; 4]) -> [Complex64; 2] {
-    let (a, b, c, d) = (1.0 + delta[0], delta[1], delta[2], 1.0 + delta[3]);
-    let tr = a + d;
-    let disc = Complex64::new((a - d) * (a - d) / 4.0 + b * c, 0.0).sqrt();
-    [tr / 2.0 + disc, tr / 2.0 - disc]
 }
 
 /// Frequency response of the f32 filter, evaluated in f64 from its
@@ -100,12 +93,13 @@ pub fn quantize(real: &ModalRealization, ss: &StateSpace, fs_hz: f64, f_band_hz:
     let mut max_radius = 0.0f64;
     let mut max_shift = 0.0f64;
     for (s64, s32) in real.sections.iter().zip(filter.sections()) {
-        let e64 = eig2(s64.delta);
-        let e32 = eig2(s32.delta.map(f64::from));
-        for (p64, p32) in e64.iter().zip(e32.iter()) {
+        let e64 = section_poles(s64.delta);
+        let e32 = section_poles(s32.delta.map(f64::from));
+        for p32 in &e32 {
             max_radius = max_radius.max(p32.norm());
+        }
+        for p64 in &e64 {
             let shift = e32.iter().map(|q| (q - p64).norm()).fold(f64::INFINITY, f64::min) / (1.0 - p64).norm().max(1e-300);
-            let _ = p32;
             max_shift = max_shift.max(shift);
         }
         if !s32.poles_within(1.0 - POLE_MARGIN) {

@@ -82,6 +82,15 @@ pub fn section_response(delta: [f64; 4], b: [f64; 2], c: [f64; 2], z: Complex64)
     x1 * c[0] + x2 * c[1]
 }
 
+/// Poles of one 2x2 section: eigenvalues of I + Δ (z-plane), with the
+/// discriminant formed as ((a − d)/2)² + b·c to avoid cancellation.
+pub fn section_poles(delta: [f64; 4]) -> [Complex64; 2] {
+    let (a, b, c, d) = (1.0 + delta[0], delta[1], delta[2], 1.0 + delta[3]);
+    let tr = a + d;
+    let disc = Complex64::new((a - d) * (a - d) / 4.0 + b * c, 0.0).sqrt();
+    [tr / 2.0 + disc, tr / 2.0 - disc]
+}
+
 /// Poles at or beyond this modulus always go to the modal sections (an FIR of
 /// 24 taps cannot carry them: 0.6^24 ≈ 5e-6).
 const RHO_FAST_MAX: f64 = 0.6;

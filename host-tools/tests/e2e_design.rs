@@ -7,7 +7,7 @@ use dynocomp::compensate::compensate_record;
 use dynocomp::design::{design_axis, AxisDesign, DesignOptions};
 use dynocomp::design_cmd::build_image;
 use dynocomp::io::signal_csv::SignalRecord;
-use dynocomp::metrics::accuracy;
+use dynocomp::metrics::{accuracy, sample_variance};
 use dynocomp::simulate::{simulate, SimOutput, SimParams};
 
 const FS: f64 = 51_200.0;
@@ -22,15 +22,10 @@ fn sim(seed: u64, rpm: f64, teeth: usize) -> SimOutput {
     simulate(seed, &p).expect("simulate")
 }
 
-fn idle_variance(x: &[f64]) -> f64 {
-    let m = x.iter().sum::<f64>() / x.len() as f64;
-    x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (x.len() - 1) as f64
-}
-
 fn design_all(s: &SimOutput, lag: usize) -> Vec<AxisDesign> {
     let opts = DesignOptions { lag, fs_hz: FS, ..Default::default() };
     (0..3)
-        .map(|ax| design_axis(&s.frf.freq_hz, s.frf.axis(ax).unwrap(), idle_variance(&s.idle[ax]), &opts).unwrap_or_else(|e| panic!("axis {ax}: {e:#}")))
+        .map(|ax| design_axis(&s.frf.freq_hz, s.frf.axis(ax).unwrap(), sample_variance(&s.idle[ax]), &opts).unwrap_or_else(|e| panic!("axis {ax}: {e:#}")))
         .collect()
 }
 

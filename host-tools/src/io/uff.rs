@@ -888,32 +888,28 @@ pub fn parse_uff58(bytes: &[u8], source: &str) -> Result<Frf> {
             freq,
             what,
         };
+        // Store a dataset for its axis, refusing a second one of the same kind.
+        fn store<T>(slot: &mut Option<(Item, T)>, new: (Item, T), source: &str) -> Result<()> {
+            if let Some((p, _)) = slot {
+                let n = &new.0;
+                bail!(
+                    "{source}: line {}: dataset #{} is a second {} for axis {} \
+                     (the first is dataset #{} at line {}): duplicate axis",
+                    n.line,
+                    n.no,
+                    n.what,
+                    axis_name(n.axis),
+                    p.no,
+                    p.line
+                );
+            }
+            *slot = Some(new);
+            Ok(())
+        }
         match parse58(&mut cur, &ctx, bin)? {
             Found58::Skipped(note) => skipped.push(note),
-            Found58::Frf { axis, freq, frf } => {
-                if let Some((p, _)) = &frfs[axis] {
-                    bail!(
-                        "{source}: line {start_line}: dataset #{set_no} is a second FRF for axis {} \
-                         (the first is dataset #{} at line {}): duplicate axis",
-                        axis_name(axis),
-                        p.no,
-                        p.line
-                    );
-                }
-                frfs[axis] = Some((item(axis, freq, "FRF"), frf));
-            }
-            Found58::Coh { axis, freq, coh } => {
-                if let Some((p, _)) = &cohs[axis] {
-                    bail!(
-                        "{source}: line {start_line}: dataset #{set_no} is a second coherence for axis {} \
-                         (the first is dataset #{} at line {}): duplicate axis",
-                        axis_name(axis),
-                        p.no,
-                        p.line
-                    );
-                }
-                cohs[axis] = Some((item(axis, freq, "coherence"), coh));
-            }
+            Found58::Frf { axis, freq, frf } => store(&mut frfs[axis], (item(axis, freq, "FRF"), frf), source)?,
+            Found58::Coh { axis, freq, coh } => store(&mut cohs[axis], (item(axis, freq, "coherence"), coh), source)?,
         }
     }
     if set_no == 0 {
