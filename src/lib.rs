@@ -6,6 +6,10 @@
 //! * [`image`]: the versioned, CRC-protected coefficient image (codec).
 //! * [`sample`]: the body of the sample interrupt as a pure function
 //!   `(ADC codes, coefficients, state) -> (DAC codes, flags)`.
+//! * [`protocol`]: USB messages and framing (postcard + CRC-32 + COBS).
+//! * [`link`]: the box's request handler (pure state machine over the store).
+//! * [`store`]: the power-fail-safe A/B coefficient store on NOR flash.
+//! * [`handoff`]: lock-free switch of the running image at a sample boundary.
 //!
 //! The crate is `no_std`, allocation-free and free of `unsafe`, so the same
 //! code runs on the STM32G474 and under `std` in the host tests.
@@ -13,10 +17,14 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+pub mod handoff;
 pub mod image;
 pub mod kernel;
+pub mod link;
+pub mod protocol;
 pub mod sample;
 pub mod shell;
+pub mod store;
 
 /// Number of force axes the box handles (Fx, Fy, Fz).
 pub const AXES: usize = 3;

@@ -18,7 +18,7 @@ pub const DAC_MAX_CODE: u16 = 4095;
 pub const BOX_FS_RANGE_HZ: core::ops::RangeInclusive<u32> = 10_000..=200_000;
 
 /// Why the box is in bypass (raw forces out).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum BypassReason {
     /// No image in either flash slot.
@@ -49,12 +49,32 @@ pub fn select_mode(loaded: Option<&Result<CoeffImage, ImageError>>, user_bypass:
     match loaded {
         None => Mode::Bypass(BypassReason::NoImage),
         Some(Err(e)) => Mode::Bypass(BypassReason::InvalidImage(*e)),
-        Some(Ok(img)) if img.is_offline_only() => Mode::Bypass(BypassReason::OfflineOnly),
-        Some(Ok(img)) if !BOX_FS_RANGE_HZ.contains(&img.fs_hz) => {
-            Mode::Bypass(BypassReason::UnsupportedSampleRate(img.fs_hz))
-        }
-        Some(Ok(_)) if user_bypass => Mode::Bypass(BypassReason::User),
-        Some(Ok(img)) => Mode::Compensate(img),
+        Some(Ok(img)) => image_mode(img, user_bypass),
+    }
+}
+
+/// [`select_mode`] for the coefficient store's result (`Store::boot` /
+/// `Store::load_active`: a verified image, or why there is none). The
+/// image checks are repeated here, so an image that is not runnable still
+/// never runs, whoever produced the result.
+pub fn select_stored_mode(stored: &Result<CoeffImage, BypassReason>, user_bypass: bool) -> Mode<'_> {
+    match stored {
+        Err(r) => Mode::Bypass(*r),
+        Ok(img) => image_mode(img, user_bypass),
+    }
+}
+
+/// The mode of a parsed image: offline-only and out-of-range rates are never
+/// run; otherwise the user's bypass decides.
+fn image_mode(img: &CoeffImage, user_bypass: bool) -> Mode<'_> {
+    if img.is_offline_only() {
+        Mode::Bypass(BypassReason::OfflineOnly)
+    } else if !BOX_FS_RANGE_HZ.contains(&img.fs_hz) {
+        Mode::Bypass(BypassReason::UnsupportedSampleRate(img.fs_hz))
+    } else if user_bypass {
+        Mode::Bypass(BypassReason::User)
+    } else {
+        Mode::Compensate(img)
     }
 }
 

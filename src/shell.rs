@@ -9,13 +9,22 @@
 //!   rings the ADCs write into: which sample is the newest complete one and
 //!   how many were skipped (overruns), from the DMA channels' remaining-count
 //!   registers alone.
-//! * [`choose_image`], [`box_sample_rate`]: which flash slot's coefficient
-//!   image the box uses, and the sample rate it runs at.
+//! * [`box_sample_rate`]: the sample rate the box runs at. (Which flash
+//!   slot's image it uses is the coefficient store's boot rule,
+//!   [`crate::store`].)
+//! * [`adc_oversampling`]: the ADCs' hardware oversampling ratio and the
+//!   sample interrupt's delay for a sample rate (RM0440 timing arithmetic).
+//! * [`AutoZero`], [`apply_adc_offsets`]: offset auto-zero on command.
+//! * [`led_state`], [`led_on`]: the status LED's state and blink patterns.
+//! * [`SamplePath`]: the sample interrupt's decisions (mode, filter resets,
+//!   auto-zero) around [`process_sample`].
 //!
 //! Nothing here touches hardware, allocates or panics.
 
-use crate::image::{CoeffImage, ImageError};
-use crate::sample::Mode;
+use crate::image::CoeffImage;
+use crate::sample::{
+    process_sample, select_stored_mode, BypassReason, Mode, SampleFlags, SampleState,
+};
 
 /// Clock of the sample timer (TIM2 on APB1, prescaler 1) with the box's
 /// 170 MHz system clock.
@@ -215,7 +224,7 @@ impl RingCursor {
 }
 
 /// A coefficient-image flash slot.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Slot {
     /// Slot A (first 8 KiB of the last 16 KiB of flash).
@@ -224,57 +233,440 @@ pub enum Slot {
     B,
 }
 
-/// The image the box loads and where it came from.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SlotChoice {
-    /// Input to [`select_mode`](crate::sample::select_mode): `None` if both
-    /// slots are empty, the first valid image, or the error to report.
-    pub loaded: Option<Result<CoeffImage, ImageError>>,
-    /// Slot the image (or the reported error) belongs to.
-    pub slot: Option<Slot>,
-}
-
-/// Pick the coefficient image from the parse results of slots A and B
-/// (`CoeffImage::parse_prefix` on each slot's bytes).
-///
-/// Interim policy until the sequence-numbered store exists: a valid A wins,
-/// then a valid B. A slot that is not an image at all ([`ImageError::BadMagic`],
-/// e.g. erased flash) counts as empty; if both are empty the result is `None`
-/// (bypass, "no image"). Otherwise the error of the first non-empty slot is
-/// reported (bypass, "invalid image").
-pub fn choose_image(
-    a: Result<CoeffImage, ImageError>,
-    b: Result<CoeffImage, ImageError>,
-) -> SlotChoice {
-    match (a, b) {
-        (Ok(img), _) => SlotChoice {
-            loaded: Some(Ok(img)),
-            slot: Some(Slot::A),
-        },
-        (_, Ok(img)) => SlotChoice {
-            loaded: Some(Ok(img)),
-            slot: Some(Slot::B),
-        },
-        (Err(ImageError::BadMagic), Err(ImageError::BadMagic)) => SlotChoice {
-            loaded: None,
-            slot: None,
-        },
-        (Err(ImageError::BadMagic), Err(e)) => SlotChoice {
-            loaded: Some(Err(e)),
-            slot: Some(Slot::B),
-        },
-        (Err(e), _) => SlotChoice {
-            loaded: Some(Err(e)),
-            slot: Some(Slot::A),
-        },
-    }
-}
-
 /// The sample rate the box runs at in `mode`: the image's rate when
 /// compensating, [`DEFAULT_FS_HZ`] in bypass.
 pub fn box_sample_rate(mode: &Mode<'_>) -> u32 {
     match mode {
         Mode::Compensate(img) => img.fs_hz,
         Mode::Bypass(_) => DEFAULT_FS_HZ,
+    }
+}
+
+// ------------------------------------------------------ ADC oversampling --
+
+/// ADC kernel clock of the box: synchronous HCLK/4 (`ADCx_CCR.CKMODE = 11`)
+/// at 170 MHz.
+pub const BOX_ADC_CLOCK_HZ: u32 = 42_500_000;
+
+/// Sampling time of the box's ADC channels (`ADC_SMPRx = 24.5 cycles`), in
+/// half ADC clock cycles.
+pub const BOX_SAMPLE_HALF_CYCLES: u32 = 49;
+
+/// Successive-approximation time of a 12-bit conversion, 12.5 ADC clock
+/// cycles (RM0440 §21.4.16, "Timing": t_CONV = t_SMPL + t_SAR, t_SAR = 12.5
+/// cycles at 12 bit), in half cycles.
+pub const SAR_12BIT_HALF_CYCLES: u32 = 25;
+
+/// Largest hardware oversampling ratio (RM0440 §21.4.30, `ADC_CFGR2.OVSR` =
+/// 7 → 256×).
+pub const MAX_OVERSAMPLING_RATIO: u16 = 256;
+
+/// The oversampled conversions of one trigger may take at most this fraction
+/// (1/`OVERSAMPLING_WINDOW_DIVISOR`) of the sample period. It bounds the extra
+/// delay of the averaged sample (its centroid lies half a window after the
+/// trigger) to 1/8 of a period and leaves the rest of the period to the
+/// sample interrupt.
+pub const OVERSAMPLING_WINDOW_DIVISOR: u64 = 4;
+
+/// Time from the end of the last conversion to the sample interrupt: trigger
+/// latency (a few ADC cycles), the DMA transfer and margin. With one
+/// conversion (0.87 µs) it gives the 2.07 µs interrupt offset.
+pub const ADC_DONE_MARGIN_NS: u32 = 1_200;
+
+/// Hardware oversampling of the sample path's ADCs (RM0440 §21.4.30,
+/// "Oversampler"): on each trigger the ADC makes `ratio` conversions back to
+/// back (`ADC_CFGR2.TROVS = 0`), sums them and shifts the sum right by
+/// `shift` bits, so the 12-bit result is their mean (truncated). It lowers
+/// the white ADC noise by √ratio at the same 12-bit code scale, so the
+/// images' ADC-code → N scaling is unchanged.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Oversampling {
+    /// Conversions averaged per sample (1 = oversampling off, else 2..=256).
+    pub ratio: u16,
+    /// `ADC_CFGR2.OVSR` (ratio = 2^(ovsr + 1)); meaningless when `ratio == 1`.
+    pub ovsr: u8,
+    /// `ADC_CFGR2.OVSS`: right shift of the sum, log2(ratio).
+    pub shift: u8,
+    /// Duration of the `ratio` conversions after the trigger (ns, rounded up).
+    pub window_ns: u32,
+    /// Delay from the trigger to the sample interrupt (ns): window + margin.
+    pub irq_delay_ns: u32,
+}
+
+impl Oversampling {
+    /// Whether `ADC_CFGR2.ROVSE` must be set.
+    pub fn enabled(&self) -> bool {
+        self.ratio > 1
+    }
+
+    /// Delay of the averaged sample against the trigger instant (ns): the
+    /// centroid of the conversions' sampling instants, (ratio − 1)/2 conversion
+    /// times. A pure delay the compensator does not know about (phase lag
+    /// 360° · f · delay).
+    pub fn centroid_delay_ns(&self) -> u32 {
+        if self.ratio <= 1 {
+            return 0;
+        }
+        let per = u64::from(self.window_ns) / u64::from(self.ratio);
+        (per * (u64::from(self.ratio) - 1) / 2) as u32
+    }
+}
+
+/// Hardware oversampling for sample rate `fs_hz`: the largest power-of-two
+/// ratio whose conversions (`ratio · (t_SMPL + t_SAR)` at `adc_clk_hz`, with
+/// `sample_half_cycles` = t_SMPL in half cycles and the 12-bit t_SAR) fit in
+/// 1/[`OVERSAMPLING_WINDOW_DIVISOR`] of the period.
+///
+/// With the box's numbers (42.5 MHz, 24.5 + 12.5 cycles = 870.6 ns per
+/// conversion): 10 kHz → 16×, 25.6 kHz → 8×, 51.2 kHz → 4×, 100 kHz → 2×,
+/// 200 kHz → 1× (off).
+///
+/// `None` if `fs_hz` or the clock is 0, or if even one conversion plus
+/// [`ADC_DONE_MARGIN_NS`] does not fit in half a period (the rate is too high
+/// for the ADC).
+pub fn adc_oversampling(
+    fs_hz: u32,
+    adc_clk_hz: u32,
+    sample_half_cycles: u32,
+) -> Option<Oversampling> {
+    if fs_hz == 0 || adc_clk_hz == 0 {
+        return None;
+    }
+    let half_cycles_per_conv = u64::from(sample_half_cycles) + u64::from(SAR_12BIT_HALF_CYCLES);
+    // Window of `ratio` conversions in ns, rounded up:
+    // ratio · half_cycles / (2 · f_adc) · 1e9.
+    let window_ns = |ratio: u64| {
+        (ratio * half_cycles_per_conv * 1_000_000_000).div_ceil(2 * u64::from(adc_clk_hz))
+    };
+    // Period rounded down: the budgets below err on the safe side.
+    let period_ns = 1_000_000_000 / u64::from(fs_hz);
+    let budget_ns = period_ns / OVERSAMPLING_WINDOW_DIVISOR;
+
+    let mut ratio = 1u64;
+    while ratio < u64::from(MAX_OVERSAMPLING_RATIO) && window_ns(ratio * 2) <= budget_ns {
+        ratio *= 2;
+    }
+    let window = window_ns(ratio);
+    let irq_delay = window + u64::from(ADC_DONE_MARGIN_NS);
+    if irq_delay * 2 > period_ns {
+        return None;
+    }
+    let shift = ratio.trailing_zeros() as u8;
+    Some(Oversampling {
+        ratio: ratio as u16,
+        ovsr: shift.saturating_sub(1),
+        shift,
+        window_ns: window as u32,
+        irq_delay_ns: irq_delay as u32,
+    })
+}
+
+// ------------------------------------------------------ offset auto-zero --
+
+/// Largest number of samples one auto-zero may average (the per-axis sums of
+/// 12-bit codes stay below 2^32).
+pub const AUTO_ZERO_MAX_SAMPLES: u32 = 65_535;
+
+/// Why an auto-zero was refused or gave no result.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum AutoZeroError {
+    /// The sample count is 0 or above [`AUTO_ZERO_MAX_SAMPLES`].
+    BadCount(u32),
+    /// An auto-zero is already running.
+    Busy,
+    /// An axis hit an ADC rail during the averaging (axis index 0..3): the
+    /// mean of a clipped signal is not its offset. Unload the dynamometer
+    /// and check the charge amplifier range, then retry.
+    Saturated(u8),
+}
+
+/// Offset auto-zero of the ADC inputs (the charge amplifiers' drift): on
+/// command, the mean raw code of each axis over `n` samples becomes the
+/// axis's new `adc_offset_code` (the code of 0 N). The gain stays the
+/// image's. A pure state machine the sample interrupt feeds one sample at a
+/// time; the result is applied between two samples with
+/// [`apply_adc_offsets`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct AutoZero {
+    target: u32,
+    seen: u32,
+    sum: [u32; crate::AXES],
+    saturated: u8,
+}
+
+impl AutoZero {
+    /// An idle auto-zero.
+    pub const fn new() -> Self {
+        AutoZero {
+            target: 0,
+            seen: 0,
+            sum: [0; crate::AXES],
+            saturated: 0,
+        }
+    }
+
+    /// Whether an averaging is under way.
+    pub fn is_running(&self) -> bool {
+        self.target != 0
+    }
+
+    /// Start averaging the next `n` samples.
+    pub fn start(&mut self, n: u32) -> Result<(), AutoZeroError> {
+        if self.is_running() {
+            return Err(AutoZeroError::Busy);
+        }
+        if n == 0 || n > AUTO_ZERO_MAX_SAMPLES {
+            return Err(AutoZeroError::BadCount(n));
+        }
+        *self = AutoZero {
+            target: n,
+            ..AutoZero::new()
+        };
+        Ok(())
+    }
+
+    /// Feed one sample's raw ADC codes. Returns `None` while idle or
+    /// averaging; after the `n`-th sample, the per-axis mean code (exact
+    /// integer quotient plus remainder fraction) or the first saturated
+    /// axis, and goes idle.
+    pub fn feed(
+        &mut self,
+        codes: [u16; crate::AXES],
+    ) -> Option<Result<[f32; crate::AXES], AutoZeroError>> {
+        if !self.is_running() {
+            return None;
+        }
+        for (axis, (&code, sum)) in codes.iter().zip(self.sum.iter_mut()).enumerate() {
+            if code == 0 || code >= crate::sample::ADC_MAX_CODE {
+                self.saturated |= 1 << axis;
+            }
+            *sum = sum.saturating_add(u32::from(code));
+        }
+        self.seen += 1;
+        if self.seen < self.target {
+            return None;
+        }
+        let n = self.target;
+        let done = *self;
+        *self = AutoZero::new();
+        if done.saturated != 0 {
+            return Some(Err(AutoZeroError::Saturated(
+                done.saturated.trailing_zeros() as u8,
+            )));
+        }
+        Some(Ok(done
+            .sum
+            .map(|s| (s / n) as f32 + (s % n) as f32 / n as f32)))
+    }
+}
+
+/// Set the ADC offset (code of 0 N) of every axis present in `img` to
+/// `offsets` (from [`AutoZero`]); returns the mask of axes changed (bit i =
+/// axis i). Call between two samples and reset the filter state after it:
+/// the offset step would otherwise ring through the compensator.
+pub fn apply_adc_offsets(img: &mut CoeffImage, offsets: [f32; crate::AXES]) -> u8 {
+    let mut mask = 0u8;
+    for (i, (axis, &off)) in img.axes.iter_mut().zip(offsets.iter()).enumerate() {
+        if let Some(a) = axis {
+            a.scaling.adc_offset_code = off;
+            mask |= 1 << i;
+        }
+    }
+    mask
+}
+
+// ------------------------------------------------------------- status LED --
+
+/// What the status LED shows, most urgent first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LedState {
+    /// The sample path is not running, or it missed deadlines, found a late
+    /// conversion or a stopped DMA, or reset a runaway filter state in the
+    /// last second: fast blink (5 Hz).
+    Fault,
+    /// An ADC input hit a rail in the last second (overload): double blink.
+    Saturated,
+    /// Bypass (raw forces out): long on, short off.
+    Bypass,
+    /// Compensating: short blink once a second.
+    Running,
+}
+
+/// Ticks (100 ms each) of one LED pattern.
+pub const LED_PATTERN_TICKS: u32 = 10;
+
+/// The LED state from the last second's events (fault beats saturation
+/// beats mode).
+pub fn led_state(started: bool, fault: bool, saturated: bool, compensating: bool) -> LedState {
+    if !started || fault {
+        LedState::Fault
+    } else if saturated {
+        LedState::Saturated
+    } else if compensating {
+        LedState::Running
+    } else {
+        LedState::Bypass
+    }
+}
+
+/// LED level at tick `tick` (taken modulo [`LED_PATTERN_TICKS`]) of `state`'s
+/// pattern.
+pub fn led_on(state: LedState, tick: u32) -> bool {
+    let t = tick % LED_PATTERN_TICKS;
+    match state {
+        LedState::Running => t == 0,
+        LedState::Bypass => t != 0,
+        LedState::Saturated => t == 0 || t == 2,
+        LedState::Fault => t % 2 == 0,
+    }
+}
+
+// ------------------------------------------------------- image switch --
+
+/// How the box starts running a newly committed image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ImageSwitch {
+    /// Same sample rate: hand it to the sample interrupt, which switches
+    /// between two samples (`handoff::ImageHandoff`), no reboot.
+    AtSampleBoundary,
+    /// Different sample rate: the sample timer and the ADC oversampling are
+    /// set up at boot, so the box reboots and the boot scan runs the new
+    /// (newest valid) slot at its rate.
+    Reboot {
+        /// Rate the sample path runs at now (Hz).
+        from_hz: u32,
+        /// Rate of the new image (Hz).
+        to_hz: u32,
+    },
+}
+
+/// How to switch from the sample path running at `running_fs_hz` to `new`.
+pub fn image_switch(running_fs_hz: u32, new: &CoeffImage) -> ImageSwitch {
+    if new.fs_hz == running_fs_hz {
+        ImageSwitch::AtSampleBoundary
+    } else {
+        ImageSwitch::Reboot {
+            from_hz: running_fs_hz,
+            to_hz: new.fs_hz,
+        }
+    }
+}
+
+/// `major.minor.patch` of a version string such as `env!("CARGO_PKG_VERSION")`
+/// (each part saturates at 255; a missing or non-numeric part reads as 0,
+/// a pre-release suffix is ignored), for the status message.
+pub const fn parse_version(v: &str) -> [u8; 3] {
+    let b = v.as_bytes();
+    let mut out = [0u8; 3];
+    let mut part = 0;
+    let mut i = 0;
+    let mut acc: u32 = 0;
+    while i < b.len() && part < 3 {
+        let c = b[i];
+        if c == b'.' {
+            out[part] = if acc > 255 { 255 } else { acc as u8 };
+            part += 1;
+            acc = 0;
+        } else if c.is_ascii_digit() {
+            acc = acc * 10 + (c - b'0') as u32;
+            if acc > 255 {
+                acc = 256;
+            }
+        } else {
+            break;
+        }
+        i += 1;
+    }
+    if part < 3 {
+        out[part] = if acc > 255 { 255 } else { acc as u8 };
+    }
+    out
+}
+
+// ------------------------------------------------- the interrupt's logic --
+
+/// What one sample did, besides updating the state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TickOutput {
+    /// DAC codes to write (x, y, z).
+    pub dac: [u16; crate::AXES],
+    /// Flags of the sample (saturation, runaway reset, bypass).
+    pub flags: SampleFlags,
+    /// Whether the compensator ran.
+    pub compensating: bool,
+    /// An auto-zero finished with this sample: the new offsets (codes,
+    /// applied to the image's axes from this sample on, with the filters
+    /// reset) or why it failed.
+    pub auto_zero: Option<Result<[f32; crate::AXES], AutoZeroError>>,
+}
+
+/// Everything the sample interrupt decides, as a pure state machine
+/// (DESIGN.md, "Firmware": the handler is a thin shell). The firmware's TIM2
+/// handler reads the three ADC codes, calls [`tick`](Self::tick) with the
+/// active image buffer, writes [`TickOutput::dac`] and publishes counters.
+///
+/// * Leaving bypass (user or image) and switching to a new image
+///   ([`on_image_switch`](Self::on_image_switch)) start the filters from
+///   rest: stale state means nothing to the new mode or image.
+/// * An auto-zero ([`request_auto_zero`](Self::request_auto_zero)) averages
+///   the raw codes of the next `n` samples, then sets the image's ADC offsets
+///   between two samples and resets the filters.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SamplePath {
+    /// Filter state and counters.
+    pub state: SampleState,
+    auto_zero: AutoZero,
+    was_compensating: bool,
+}
+
+impl SamplePath {
+    /// A sample path at rest, in bypass until the first compensated sample.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// A new image is active from the next sample on.
+    pub fn on_image_switch(&mut self) {
+        self.state.reset_filters();
+        self.auto_zero = AutoZero::new();
+    }
+
+    /// Start an offset auto-zero over the next `n` samples.
+    pub fn request_auto_zero(&mut self, n: u32) -> Result<(), AutoZeroError> {
+        self.auto_zero.start(n)
+    }
+
+    /// One sample: raw ADC `codes`, the active image buffer `stored` (its ADC
+    /// offsets change when an auto-zero completes), the user's bypass switch.
+    pub fn tick(
+        &mut self,
+        codes: [u16; crate::AXES],
+        stored: &mut Result<CoeffImage, BypassReason>,
+        user_bypass: bool,
+    ) -> TickOutput {
+        let auto_zero = self.auto_zero.feed(codes);
+        if let Some(Ok(offsets)) = auto_zero {
+            if let Ok(img) = stored.as_mut() {
+                apply_adc_offsets(img, offsets);
+                self.state.reset_filters();
+            }
+        }
+        let mode = select_stored_mode(stored, user_bypass);
+        let compensating = matches!(mode, Mode::Compensate(_));
+        if compensating && !self.was_compensating {
+            self.state.reset_filters();
+        }
+        self.was_compensating = compensating;
+        let (dac, flags) = process_sample(codes, mode, &mut self.state);
+        TickOutput {
+            dac,
+            flags,
+            compensating,
+            auto_zero,
+        }
     }
 }

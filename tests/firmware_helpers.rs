@@ -1,10 +1,9 @@
 //! Host tests of the firmware shell's pure helpers (`dynocomp_core::shell`):
-//! sample-timer divider, DMA ring bookkeeping (overrun counting) and the
-//! flash-slot choice the box makes at boot.
+//! sample-timer divider, DMA ring bookkeeping (overrun counting), the sample
+//! rate the box runs at, and the other shell helpers.
 
 mod common;
 use common::image_with;
-use dynocomp_core::image::ImageError;
 use dynocomp_core::kernel::AxisFilter;
 use dynocomp_core::sample::{select_mode, BypassReason, Mode, SampleState, BOX_FS_RANGE_HZ};
 use dynocomp_core::shell::*;
@@ -262,58 +261,12 @@ proptest! {
 }
 
 // ---------------------------------------------------------------- slots --
+// Which slot's image the box runs is the coefficient store's boot rule
+// (dynocomp_core::store), tested on a simulated flash in
+// host-tools/tests/store_power_fail.rs.
 
 fn valid(fs: u32) -> dynocomp_core::image::CoeffImage {
     image_with(AxisFilter::gain(1.0).unwrap(), &[0, 1, 2], fs)
-}
-
-#[test]
-fn slot_a_wins_then_slot_b() {
-    let a = valid(51_200);
-    let b = valid(100_000);
-    let ch = choose_image(Ok(a), Ok(b));
-    assert_eq!(ch.slot, Some(Slot::A));
-    assert_eq!(ch.loaded, Some(Ok(a)));
-
-    let ch = choose_image(Err(ImageError::BadMagic), Ok(b));
-    assert_eq!((ch.slot, ch.loaded), (Some(Slot::B), Some(Ok(b))));
-
-    let bad_crc = ImageError::BadCrc {
-        stored: 1,
-        computed: 2,
-    };
-    let ch = choose_image(Err(bad_crc), Ok(b));
-    assert_eq!((ch.slot, ch.loaded), (Some(Slot::B), Some(Ok(b))));
-}
-
-#[test]
-fn empty_slots_mean_no_image() {
-    let ch = choose_image(Err(ImageError::BadMagic), Err(ImageError::BadMagic));
-    assert_eq!(ch.loaded, None);
-    assert_eq!(ch.slot, None);
-    assert!(matches!(
-        select_mode(ch.loaded.as_ref(), false),
-        Mode::Bypass(BypassReason::NoImage)
-    ));
-}
-
-#[test]
-fn the_first_real_error_is_reported() {
-    let e_a = ImageError::BadCrc {
-        stored: 1,
-        computed: 2,
-    };
-    let e_b = ImageError::UnsupportedVersion(9);
-    let ch = choose_image(Err(e_a), Err(e_b));
-    assert_eq!((ch.slot, ch.loaded), (Some(Slot::A), Some(Err(e_a))));
-    let ch = choose_image(Err(ImageError::BadMagic), Err(e_b));
-    assert_eq!((ch.slot, ch.loaded), (Some(Slot::B), Some(Err(e_b))));
-    assert!(matches!(
-        select_mode(ch.loaded.as_ref(), false),
-        Mode::Bypass(BypassReason::InvalidImage(ImageError::UnsupportedVersion(
-            9
-        )))
-    ));
 }
 
 #[test]
@@ -331,4 +284,398 @@ fn the_box_runs_at_the_image_rate_or_the_default() {
     ));
     assert_eq!(box_sample_rate(&mode), DEFAULT_FS_HZ);
     assert!(BOX_FS_RANGE_HZ.contains(&DEFAULT_FS_HZ));
+}
+
+// ------------------------------------------------------- oversampling --
+
+/// Independent reference in f64 from RM0440's numbers: one 12-bit conversion
+/// takes 24.5 (sampling) + 12.5 (SAR) = 37 ADC cycles at 42.5 MHz; the
+/// largest power-of-two ratio ≤ 256 whose conversions fit in a quarter period
+/// less `margin_s` (the code works in whole nanoseconds, rounding the period
+/// down and the conversion time up, so within 2 ns of a boundary it may
+/// pick the smaller ratio).
+fn reference_ratio_with_margin(fs: f64, margin_s: f64) -> u16 {
+    let t_conv = 37.0 / 42.5e6;
+    let mut ratio = 1u16;
+    while ratio < 256 && f64::from(ratio * 2) * t_conv <= 0.25 / fs - margin_s {
+        ratio *= 2;
+    }
+    ratio
+}
+
+fn reference_ratio(fs: f64) -> u16 {
+    reference_ratio_with_margin(fs, 0.0)
+}
+
+#[test]
+fn oversampling_ratios_of_the_box_rates() {
+    let os = |fs| adc_oversampling(fs, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES).unwrap();
+    // 870.588 ns per conversion; quarter periods 25 µs, 9.77 µs, 4.88 µs,
+    // 2.5 µs, 1.25 µs.
+    let table = [
+        (10_000u32, 16u16),
+        (25_600, 8),
+        (51_200, 4),
+        (100_000, 2),
+        (200_000, 1),
+    ];
+    for (fs, ratio) in table {
+        let o = os(fs);
+        assert_eq!(o.ratio, ratio, "fs {fs}");
+        assert_eq!(o.ratio, reference_ratio(f64::from(fs)), "fs {fs}");
+    }
+    let o = os(51_200);
+    // 4 × 870.588 ns = 3482.35 ns, rounded up; + 1.2 µs margin.
+    assert_eq!(o.window_ns, 3_483);
+    assert_eq!(o.irq_delay_ns, 4_683);
+    assert_eq!((o.ovsr, o.shift), (1, 2));
+    assert!(o.enabled());
+    // The averaged sample lies 1.5 conversions after the trigger.
+    assert_eq!(o.centroid_delay_ns(), 1_305);
+    let off = os(200_000);
+    assert!(!off.enabled());
+    assert_eq!(
+        (off.window_ns, off.irq_delay_ns, off.centroid_delay_ns()),
+        (871, 2_071, 0)
+    );
+}
+
+#[test]
+fn oversampling_refuses_rates_the_adc_cannot_follow() {
+    assert_eq!(
+        adc_oversampling(0, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES),
+        None
+    );
+    assert_eq!(adc_oversampling(10_000, 0, BOX_SAMPLE_HALF_CYCLES), None);
+    // 0.87 µs + 1.2 µs must fit in half a period: 240 kHz (2.08 µs) does, 250 kHz does not.
+    assert!(adc_oversampling(240_000, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES).is_some());
+    assert_eq!(
+        adc_oversampling(250_000, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES),
+        None
+    );
+    // Very low rates stop at the hardware's 256×.
+    let slow = adc_oversampling(100, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES).unwrap();
+    assert_eq!((slow.ratio, slow.ovsr, slow.shift), (256, 7, 8));
+}
+
+proptest! {
+    #[test]
+    fn oversampling_fits_the_period_and_the_timer(fs in BOX_FS_RANGE_HZ) {
+        let o = adc_oversampling(fs, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES).unwrap();
+        let exact = reference_ratio(f64::from(fs));
+        let conservative = reference_ratio_with_margin(f64::from(fs), 2e-9);
+        prop_assert!(o.ratio == exact || o.ratio == conservative, "fs {} ratio {} vs {}", fs, o.ratio, exact);
+        prop_assert_eq!(u32::from(o.ratio), 1u32 << o.shift);
+        if o.enabled() {
+            prop_assert_eq!(u32::from(o.ratio), 2u32 << o.ovsr);
+        }
+        // The shifted sum of `ratio` full-scale codes is still a 12-bit code.
+        prop_assert!((u32::from(o.ratio) * 4095) >> o.shift <= 4095);
+        // Window within a quarter period, interrupt within half a period, and
+        // the sample timer can place the interrupt there.
+        let period_ns = 1e9 / f64::from(fs);
+        prop_assert!(f64::from(o.window_ns) <= period_ns / 4.0 + 1.0);
+        let d = timer_divider(BOX_TIMER_CLOCK_HZ, fs, ARR_MAX_32).unwrap();
+        let at = compare_offset_ticks(&d, BOX_TIMER_CLOCK_HZ, o.irq_delay_ns).unwrap();
+        prop_assert!(f64::from(at) / f64::from(BOX_TIMER_CLOCK_HZ) * 1e9 >= f64::from(o.irq_delay_ns));
+    }
+}
+
+// ---------------------------------------------------------- auto-zero --
+
+#[test]
+fn auto_zero_averages_each_axis_exactly() {
+    let mut az = AutoZero::new();
+    assert_eq!(az.feed([1, 2, 3]), None, "idle: no result");
+    az.start(7).unwrap();
+    assert!(az.is_running());
+    // x constant, y alternates, z a ramp: means computed in f64.
+    let mut sums = [0f64; 3];
+    let mut result = None;
+    for k in 0..7u16 {
+        let codes = [2100, 2000 + (k % 2) * 3, 1900 + k];
+        for (s, c) in sums.iter_mut().zip(codes) {
+            *s += f64::from(c);
+        }
+        let r = az.feed(codes);
+        if k < 6 {
+            assert_eq!(r, None);
+        } else {
+            result = r;
+        }
+    }
+    let offsets = result.unwrap().unwrap();
+    for (o, s) in offsets.iter().zip(sums) {
+        assert!(
+            (f64::from(*o) - s / 7.0).abs() < 2.5e-4,
+            "{o} vs {}",
+            s / 7.0
+        );
+    }
+    assert!(!az.is_running());
+    assert_eq!(az.feed([1, 2, 3]), None);
+}
+
+#[test]
+fn auto_zero_refuses_bad_counts_overlap_and_clipped_inputs() {
+    let mut az = AutoZero::new();
+    assert_eq!(az.start(0), Err(AutoZeroError::BadCount(0)));
+    assert_eq!(
+        az.start(AUTO_ZERO_MAX_SAMPLES + 1),
+        Err(AutoZeroError::BadCount(65_536))
+    );
+    az.start(3).unwrap();
+    assert_eq!(az.start(3), Err(AutoZeroError::Busy));
+    assert_eq!(az.feed([2000, 2000, 2000]), None);
+    assert_eq!(az.feed([2000, 4095, 0]), None);
+    // The first clipped axis is reported, and no offset comes out.
+    assert_eq!(
+        az.feed([2000, 2000, 2000]),
+        Some(Err(AutoZeroError::Saturated(1)))
+    );
+    // Idle again: a new averaging may start.
+    az.start(AUTO_ZERO_MAX_SAMPLES).unwrap();
+    let mut last = None;
+    for _ in 0..AUTO_ZERO_MAX_SAMPLES {
+        last = az.feed([4094, 1, 2048]);
+    }
+    assert_eq!(
+        last,
+        Some(Ok([4094.0, 1.0, 2048.0])),
+        "largest window does not overflow"
+    );
+}
+
+#[test]
+fn auto_zero_makes_the_resting_input_read_zero_newton() {
+    use dynocomp_core::sample::process_sample;
+    // Pass-through compensator (gain 1) on x and z; image scaling from
+    // common::image_with: force = (code − 2048)·2.5 N, dac = 2048 + 0.4·y.
+    let mut img = image_with(AxisFilter::gain(1.0).unwrap(), &[0, 2], 51_200);
+    let rest = [2110u16, 1990, 2003];
+    {
+        let loaded = Ok(img);
+        let mut st = SampleState::default();
+        let (dac, _) = process_sample(rest, select_mode(Some(&loaded), false), &mut st);
+        // Before: the drift shows as force (x: 62 codes · 2.5 N = 155 N → +62 DAC codes).
+        assert_eq!(dac, [2110, 1990, 2003]);
+    }
+    let mut az = AutoZero::new();
+    az.start(16).unwrap();
+    let mut out = None;
+    for _ in 0..16 {
+        out = az.feed(rest);
+    }
+    let mask = apply_adc_offsets(&mut img, out.unwrap().unwrap());
+    assert_eq!(mask, 0b101, "only axes in the image change");
+    let loaded = Ok(img);
+    let mut st = SampleState::default();
+    let (dac, _) = process_sample(rest, select_mode(Some(&loaded), false), &mut st);
+    // x, z: 0 N → DAC offset code; y is not compensated and passes through raw.
+    assert_eq!(dac, [2048, 1990, 2048]);
+    // Gain is the image's: 10 codes above rest = 25 N = 10 DAC codes.
+    let (dac, _) = process_sample(
+        [2120, 1990, 1993],
+        select_mode(Some(&loaded), false),
+        &mut st,
+    );
+    assert_eq!(dac, [2058, 1990, 2038]);
+}
+
+// ---------------------------------------------------------------- LED --
+
+#[test]
+fn led_state_priorities() {
+    // (started, fault, saturated, compensating)
+    assert_eq!(led_state(false, false, false, true), LedState::Fault);
+    assert_eq!(led_state(true, true, true, true), LedState::Fault);
+    assert_eq!(led_state(true, false, true, true), LedState::Saturated);
+    assert_eq!(led_state(true, false, true, false), LedState::Saturated);
+    assert_eq!(led_state(true, false, false, true), LedState::Running);
+    assert_eq!(led_state(true, false, false, false), LedState::Bypass);
+}
+
+#[test]
+fn led_patterns_are_the_documented_ones_and_distinct() {
+    let pattern = |s| -> String {
+        (0..LED_PATTERN_TICKS)
+            .map(|t| if led_on(s, t) { '#' } else { '.' })
+            .collect()
+    };
+    // docs/firmware.md, "Status LED" (100 ms per character).
+    assert_eq!(pattern(LedState::Running), "#.........");
+    assert_eq!(pattern(LedState::Bypass), ".#########");
+    assert_eq!(pattern(LedState::Saturated), "#.#.......");
+    assert_eq!(pattern(LedState::Fault), "#.#.#.#.#.");
+    // Periodic in the tick counter.
+    for s in [
+        LedState::Running,
+        LedState::Bypass,
+        LedState::Saturated,
+        LedState::Fault,
+    ] {
+        for t in 0..3 * LED_PATTERN_TICKS {
+            assert_eq!(led_on(s, t), led_on(s, t % LED_PATTERN_TICKS));
+        }
+    }
+}
+
+// ------------------------------------------------- image switch, version --
+
+#[test]
+fn a_new_image_at_the_running_rate_switches_without_reboot() {
+    assert_eq!(
+        image_switch(51_200, &valid(51_200)),
+        ImageSwitch::AtSampleBoundary
+    );
+    assert_eq!(
+        image_switch(51_200, &valid(100_000)),
+        ImageSwitch::Reboot {
+            from_hz: 51_200,
+            to_hz: 100_000
+        }
+    );
+}
+
+#[test]
+fn firmware_version_parts() {
+    assert_eq!(parse_version("0.1.0"), [0, 1, 0]);
+    assert_eq!(parse_version("12.34.56"), [12, 34, 56]);
+    assert_eq!(parse_version("1.2.3-rc.1"), [1, 2, 3]);
+    assert_eq!(parse_version("1.999.3"), [1, 255, 3]);
+    assert_eq!(parse_version("7"), [7, 0, 0]);
+    assert_eq!(parse_version(""), [0, 0, 0]);
+    const V: [u8; 3] = parse_version(env!("CARGO_PKG_VERSION"));
+    assert_eq!(V, [0, 1, 0]);
+}
+
+// ------------------------------------------------- the interrupt's logic --
+
+use common::{kernel_filter, mode_block};
+use dynocomp_core::image::CoeffImage;
+use dynocomp_core::sample::{process_sample, SampleFlags};
+
+/// An image whose x axis has memory (a 2.5 kHz mode at 51.2 kHz), so a
+/// filter reset shows in the output.
+fn image_with_memory(f_hz: f64) -> CoeffImage {
+    let blk = mode_block(f_hz, 0.05, 51_200.0, [1.0, 0.0]);
+    image_with(kernel_filter(&[blk], 0.5), &[0], 51_200)
+}
+
+fn codes(k: u16) -> [u16; 3] {
+    [2048 + (k * 37) % 200, 2000, 2100]
+}
+
+/// DAC codes of samples `ks` through `path` (compensating).
+fn run(
+    path: &mut SamplePath,
+    stored: &mut Result<CoeffImage, BypassReason>,
+    ks: std::ops::Range<u16>,
+) -> Vec<[u16; 3]> {
+    ks.map(|k| path.tick(codes(k), stored, false).dac).collect()
+}
+
+#[test]
+fn leaving_bypass_starts_the_filters_from_rest() {
+    let mut stored = Ok(image_with_memory(2_500.0));
+    let mut path = SamplePath::new();
+    for k in 0..50 {
+        assert!(path.tick(codes(k), &mut stored, false).compensating);
+    }
+    for k in 50..60 {
+        let out = path.tick(codes(k), &mut stored, true);
+        assert!(!out.compensating && out.flags.has(SampleFlags::BYPASS));
+        assert_eq!(out.dac, codes(k), "bypass passes the raw codes");
+    }
+    let after = run(&mut path, &mut stored, 60..110);
+    // Truth: the same samples through a sample path that starts at rest.
+    assert_eq!(after, run(&mut SamplePath::new(), &mut stored, 60..110));
+    // And it matters: carrying the state over the bypass gives other output.
+    let mut st = SampleState::default();
+    let loaded = Ok(stored.unwrap());
+    let mode = select_mode(Some(&loaded), false);
+    let carried: Vec<_> = (0..110)
+        .filter(|k| !(50..60).contains(k))
+        .map(|k| process_sample(codes(k), mode, &mut st).0)
+        .skip(50)
+        .collect();
+    assert_ne!(after, carried);
+}
+
+#[test]
+fn a_new_image_starts_from_rest() {
+    let mut stored = Ok(image_with_memory(2_500.0));
+    let mut path = SamplePath::new();
+    run(&mut path, &mut stored, 0..40);
+    stored = Ok(image_with_memory(3_100.0));
+    path.on_image_switch();
+    let after = run(&mut path, &mut stored, 40..90);
+    assert_eq!(after, run(&mut SamplePath::new(), &mut stored, 40..90));
+    // The new image is the one running: the old one gives other output.
+    let mut old = Ok(image_with_memory(2_500.0));
+    assert_ne!(after, run(&mut SamplePath::new(), &mut old, 40..90));
+    // The counters survive the switch.
+    assert_eq!(path.state.counters.samples, 90);
+}
+
+#[test]
+fn auto_zero_in_the_sample_path() {
+    // Pass-through gain on x and z (dac = code while the offset is 2048).
+    let mut stored = Ok(image_with(AxisFilter::gain(1.0).unwrap(), &[0, 2], 51_200));
+    let rest = [2110u16, 1990, 2003];
+    let mut path = SamplePath::new();
+    path.request_auto_zero(8).unwrap();
+    assert_eq!(path.request_auto_zero(8), Err(AutoZeroError::Busy));
+    for _ in 0..7 {
+        let out = path.tick(rest, &mut stored, false);
+        assert_eq!(out.auto_zero, None);
+        assert_eq!(out.dac, rest, "old offsets until the average is complete");
+    }
+    let out = path.tick(rest, &mut stored, false);
+    assert_eq!(out.auto_zero, Some(Ok([2110.0, 1990.0, 2003.0])));
+    // From this sample on the resting input reads 0 N on the image's axes.
+    assert_eq!(out.dac, [2048, 1990, 2048]);
+    let axis_x = stored.as_ref().unwrap().axes[0].unwrap();
+    assert_eq!(axis_x.scaling.adc_offset_code, 2110.0);
+    assert_eq!(path.tick(rest, &mut stored, false).dac, [2048, 1990, 2048]);
+
+    // Clipped input: refused, offsets unchanged.
+    path.request_auto_zero(2).unwrap();
+    path.tick([4095, 1990, 2003], &mut stored, false);
+    let out = path.tick(rest, &mut stored, false);
+    assert_eq!(out.auto_zero, Some(Err(AutoZeroError::Saturated(0))));
+    assert_eq!(
+        stored.as_ref().unwrap().axes[0]
+            .unwrap()
+            .scaling
+            .adc_offset_code,
+        2110.0
+    );
+
+    // Without an image the average is still reported; nothing to apply.
+    let mut none: Result<CoeffImage, BypassReason> = Err(BypassReason::NoImage);
+    path.request_auto_zero(1).unwrap();
+    let out = path.tick(rest, &mut none, false);
+    assert_eq!(out.auto_zero, Some(Ok([2110.0, 1990.0, 2003.0])));
+    assert_eq!(out.dac, rest);
+    assert_eq!(none, Err(BypassReason::NoImage));
+}
+
+#[test]
+fn an_image_switch_cancels_a_running_auto_zero() {
+    let mut stored = Ok(image_with(AxisFilter::gain(1.0).unwrap(), &[0], 51_200));
+    let mut path = SamplePath::new();
+    path.request_auto_zero(4).unwrap();
+    path.tick([2100, 2000, 2000], &mut stored, false);
+    path.on_image_switch();
+    for _ in 0..4 {
+        assert_eq!(
+            path.tick([2100, 2000, 2000], &mut stored, false).auto_zero,
+            None
+        );
+    }
+    assert_eq!(
+        stored.unwrap().axes[0].unwrap().scaling.adc_offset_code,
+        2048.0
+    );
 }

@@ -145,3 +145,61 @@ fn dac_rounding_is_total() {
     assert_eq!(to_dac_code(1.49), 1);
     assert_eq!(to_dac_code(1.5), 2);
 }
+
+#[test]
+fn the_box_rate_range_is_10_to_200_khz_inclusive() {
+    let f = AxisFilter::gain(1.0).unwrap();
+    for (fs, runs) in [
+        (9_999u32, false),
+        (10_000, true),
+        (51_200, true),
+        (200_000, true),
+        (200_001, false),
+    ] {
+        let img = Ok(image_with(f, &[0], fs));
+        let mode = select_mode(Some(&img), false);
+        assert_eq!(matches!(mode, Mode::Compensate(_)), runs, "fs {fs}");
+        if !runs {
+            assert!(
+                matches!(mode, Mode::Bypass(BypassReason::UnsupportedSampleRate(r)) if r == fs)
+            );
+        }
+    }
+}
+
+#[test]
+fn stored_results_select_the_same_modes() {
+    // The store's boot result: a reason is passed through, an image gets the
+    // same checks as a parsed slot.
+    let f = AxisFilter::gain(2.0).unwrap();
+    let none: Result<CoeffImage, BypassReason> = Err(BypassReason::NoImage);
+    assert!(matches!(
+        select_stored_mode(&none, false),
+        Mode::Bypass(BypassReason::NoImage)
+    ));
+    let bad = Err(BypassReason::InvalidImage(ImageError::BadMagic));
+    assert!(matches!(
+        select_stored_mode(&bad, true),
+        Mode::Bypass(BypassReason::InvalidImage(ImageError::BadMagic))
+    ));
+    let mut offline = image_with(f, &[0], 51_200);
+    offline.flags = FLAG_OFFLINE_ONLY;
+    assert!(matches!(
+        select_stored_mode(&Ok(offline), false),
+        Mode::Bypass(BypassReason::OfflineOnly)
+    ));
+    let slow = Ok(image_with(f, &[0], 5_000));
+    assert!(matches!(
+        select_stored_mode(&slow, false),
+        Mode::Bypass(BypassReason::UnsupportedSampleRate(5_000))
+    ));
+    let good = Ok(image_with(f, &[0], 51_200));
+    assert!(matches!(
+        select_stored_mode(&good, true),
+        Mode::Bypass(BypassReason::User)
+    ));
+    match select_stored_mode(&good, false) {
+        Mode::Compensate(img) => assert_eq!(Ok(*img), good),
+        m => panic!("expected compensate, got {m:?}"),
+    }
+}
