@@ -2,14 +2,18 @@
 //! from the charge amplifiers, runs the compensator of the coefficient image
 //! in flash and outputs the compensated forces on three DACs.
 //!
-//! * Boot: 170 MHz from the 24 MHz HSE crystal; read coefficient slots A and
-//!   B (`slots.rs`), pick the image, decide the mode with
-//!   `dynocomp_core::sample::select_mode` and say over defmt why the box is
-//!   in bypass if it is.
-//! * Sample path (`sampler.rs`): TIM2 → ADC1/2/3 → DMA rings → TIM2 interrupt
-//!   (highest priority) → `process_sample` → DAC1 CH1/CH2, DAC2 CH1.
-//! * Thread-mode tasks: status (defmt every second, LED, watchdog) and the
-//!   user button (toggles bypass).
+//! * Boot: 170 MHz from the 24 MHz HSE crystal (48 MHz USB clock from
+//!   HSI48, trimmed by the CRS from the host's start-of-frame); open the A/B
+//!   coefficient store on the internal flash (`dynocomp_core::store`): the
+//!   newest valid slot wins, none valid = bypass; say over defmt why the box
+//!   is in bypass if it is.
+//! * Sample path (`sampler.rs`): TIM2 → ADC1/2/3 (hardware oversampling) →
+//!   DMA rings → TIM2 interrupt (highest priority) → `process_sample` → DAC1
+//!   CH1/CH2, DAC2 CH1; offset auto-zero, image switch at a sample boundary,
+//!   stream queue.
+//! * Thread-mode tasks: status (defmt every second, LED, watchdog), the
+//!   user button (toggles bypass) and USB CDC (`usb.rs`: status, stream,
+//!   bypass, auto-zero, coefficient upload).
 //!
 //! See docs/firmware.md for pins, wiring, build and run.
 #![no_std]
@@ -17,29 +21,36 @@
 
 mod sampler;
 mod slots;
+mod usb;
 
 use defmt::{error, info, warn};
-use dynocomp_core::sample::{select_mode, BypassReason, Mode};
-use dynocomp_core::shell::{box_sample_rate, Slot, DEFAULT_FS_HZ};
+use dynocomp_core::sample::{select_stored_mode, BypassReason, Mode};
+use dynocomp_core::shell::{
+    box_sample_rate, led_on, led_state, LedState, Slot, DEFAULT_FS_HZ, LED_PATTERN_TICKS,
+};
+use dynocomp_core::store::{Layout, Store};
 use embassy_executor::Spawner;
 use embassy_stm32::exti::{self, ExtiInput};
+use embassy_stm32::flash::Flash;
 use embassy_stm32::gpio::{Level, Output, Pull, Speed};
 use embassy_stm32::interrupt::{self, InterruptExt, Priority};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, peripherals, Config, Peri};
 use embassy_time::{Duration, Ticker, Timer};
-use sampler::{Hardware, Sampler, Snapshot, TELEMETRY, USER_BYPASS};
+use heapless::spsc::Queue;
+use sampler::{Hardware, Sampler, Snapshot, StreamItem, STREAM_QUEUE_LEN, TELEMETRY, USER_BYPASS};
 use {defmt_rtt as _, panic_probe as _};
 
 bind_interrupts!(struct Irqs {
     EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
+    USB_LP => embassy_stm32::usb::InterruptHandler<peripherals::USB>;
 });
 
 /// Status LED period and pattern resolution.
 const TICK: Duration = Duration::from_millis(100);
-/// Ticks per status report (1 s).
-const TICKS_PER_REPORT: u32 = 10;
+/// Ticks per status report (1 s) = one LED pattern.
+const TICKS_PER_REPORT: u32 = LED_PATTERN_TICKS;
 /// Watchdog timeout: the status task pets it only while samples flow.
 const WATCHDOG_TIMEOUT_US: u32 = 1_000_000;
 /// Button debounce time.
@@ -83,6 +94,12 @@ fn clock_config() -> Config {
     config.rcc.ahb_pre = AHBPrescaler::DIV1;
     config.rcc.apb1_pre = APBPrescaler::DIV1;
     config.rcc.apb2_pre = APBPrescaler::DIV1;
+    // USB: 48 MHz from HSI48, kept on frequency by the CRS from the host's
+    // 1 kHz start-of-frame packets (RM0440 §7.2.4, §8).
+    config.rcc.hsi48 = Some(embassy_stm32::rcc::Hsi48Config {
+        sync_from_usb: true,
+    });
+    config.rcc.mux.clk48sel = embassy_stm32::rcc::mux::Clk48sel::HSI48;
     // Nothing of embassy's own DMA use may compete with the sample interrupt.
     config.bdma_interrupt_priority = Priority::P6;
     config
@@ -95,16 +112,41 @@ async fn main(spawner: Spawner) {
     // (TIM3) and the button (EXTI15_10) below it.
     interrupt::TIM3.set_priority(Priority::P4);
     interrupt::EXTI15_10.set_priority(Priority::P6);
+    interrupt::USB_LP.set_priority(Priority::P6);
     info!("dynocomp box {} starting", env!("CARGO_PKG_VERSION"));
 
-    // ---- coefficient image and mode
-    let choice = slots::load();
-    let boot_mode = select_mode(choice.loaded.as_ref(), false);
+    // ---- coefficient store and mode
+    let flash = Flash::new_blocking(p.FLASH);
+    let mut store = if slots::memory_x_matches_store() {
+        match Store::open(flash, Layout::STM32G474RE) {
+            Ok(st) => Some(st),
+            Err(e) => {
+                error!("coefficient store: flash geometry refused: {}", e);
+                None
+            }
+        }
+    } else {
+        error!("memory.x slot symbols disagree with dynocomp_core::store; store not opened");
+        None
+    };
+    let (image, slot) = match store.as_mut() {
+        Some(st) => {
+            let boot = st.boot();
+            (boot.image, boot.active.map(|a| a.slot))
+        }
+        None => (Err(BypassReason::NoImage), None),
+    };
+    let ecc = slots::FLASH_ECC_ERRORS.load(core::sync::atomic::Ordering::Relaxed);
+    if ecc != 0 {
+        warn!("{} flash double-ECC error(s) while scanning the slots (torn write); that slot is ignored", ecc);
+    }
+    let boot_mode = select_stored_mode(&image, false);
     let reason = match boot_mode {
         Mode::Compensate(img) => {
             info!(
-                "compensating: slot {}, fs = {} Hz, latency {} samples, axes mask {=u8:#05b}",
-                choice.slot,
+                "compensating: slot {}, image {=u32:#010x}, fs = {} Hz, latency {} samples, axes mask {=u8:#05b}",
+                slot,
+                img.id(),
                 img.fs_hz,
                 img.latency_samples,
                 img.axis_mask()
@@ -130,13 +172,14 @@ async fn main(spawner: Spawner) {
         }
     };
     info!(
-        "sampling at {} Hz: TIM2 PSC={} ARR={}, actual {=u64} mHz ({=i64} ppm), IRQ at tick {}",
+        "sampling at {} Hz: TIM2 PSC={} ARR={}, actual {=u64} mHz ({=i64} ppm), IRQ at tick {}; ADC oversampling {}x",
         timing.fs_hz,
         timing.divider.psc,
         timing.divider.arr,
         timing.actual_fs_millihz,
         timing.error_ppm,
-        timing.irq_at_tick
+        timing.irq_at_tick,
+        timing.oversampling.ratio
     );
     let hw = Hardware {
         adc1: p.ADC1,
@@ -155,7 +198,11 @@ async fn main(spawner: Spawner) {
         fy_out: p.PA5,
         fz_out: p.PA6,
     };
-    let started = match sampler::start(hw, &timing, Sampler::new(choice.loaded)) {
+    let queue: &'static mut Queue<StreamItem, STREAM_QUEUE_LEN> =
+        defmt::unwrap!(cortex_m::singleton!(: Queue<StreamItem, STREAM_QUEUE_LEN> = Queue::new()));
+    let (producer, consumer) = queue.split();
+    let usb_image = image;
+    let started = match sampler::start(hw, &timing, image, Sampler::new(producer)) {
         Ok(()) => {
             info!("sample path running");
             true
@@ -168,7 +215,7 @@ async fn main(spawner: Spawner) {
 
     let boot = BootInfo {
         reason,
-        slot: choice.slot,
+        slot,
         fs_hz: timing.fs_hz,
     };
 
@@ -184,26 +231,19 @@ async fn main(spawner: Spawner) {
     };
     spawner.spawn(defmt::unwrap!(status_task(boot, led, watchdog, started)));
     spawner.spawn(defmt::unwrap!(button_task(p.PC13, p.EXTI13)));
-}
 
-/// What the LED shows.
-#[derive(Clone, Copy, PartialEq, Eq, defmt::Format)]
-enum Health {
-    /// Compensating, no faults in the last second: short blink every second.
-    Running,
-    /// Bypass (raw forces out), no faults: long on, short off.
-    Bypass,
-    /// Overruns, late conversions, DMA or ADC faults or state resets in the
-    /// last second, or the sample path is not running: fast blink.
-    Fault,
-}
-
-/// LED level for `tick` (0..TICKS_PER_REPORT) of the pattern.
-fn led_on(health: Health, tick: u32) -> bool {
-    match health {
-        Health::Running => tick == 0,
-        Health::Bypass => tick != 0,
-        Health::Fault => tick % 2 == 0,
+    // ---- USB (needs the store; without it the box still samples)
+    if let Some(store) = store {
+        let driver = embassy_stm32::usb::Driver::new(p.USB, Irqs, p.PA12, p.PA11);
+        // In a static, not in the task's future (the store holds a 3 KiB
+        // read-back buffer, the image copy another 3 KiB).
+        let link = defmt::unwrap!(cortex_m::singleton!(: usb::Link = usb::Link {
+            store,
+            image: usb_image,
+            fs_hz: timing.fs_hz,
+            stream: consumer,
+        }));
+        spawner.spawn(defmt::unwrap!(usb::usb_task(driver, link)));
     }
 }
 
@@ -212,7 +252,7 @@ fn led_on(health: Health, tick: u32) -> bool {
 #[embassy_executor::task]
 async fn status_task(
     boot: BootInfo,
-    mut led: Output<'static>,
+    mut led_pin: Output<'static>,
     mut watchdog: Option<IndependentWatchdog<'static, peripherals::IWDG>>,
     started: bool,
 ) {
@@ -221,11 +261,7 @@ async fn status_task(
     let mut last = Snapshot::default();
     let mut last_tick_samples = 0u32;
     let mut adc_ovr = [0u32; 3];
-    let mut health = if started {
-        Health::Bypass
-    } else {
-        Health::Fault
-    };
+    let mut shown = led_state(started, false, false, false);
     loop {
         ticker.next().await;
         let now = TELEMETRY.snapshot();
@@ -249,13 +285,8 @@ async fn status_task(
                 || now.late != last.late
                 || now.dma_faults != last.dma_faults
                 || now.resets != last.resets;
-            health = if !started || faults {
-                Health::Fault
-            } else if now.compensating {
-                Health::Running
-            } else {
-                Health::Bypass
-            };
+            let saturated = now.saturated != last.saturated;
+            shown = led_state(started, faults, saturated, now.compensating);
             let mode_reason = if now.compensating {
                 None
             } else if USER_BYPASS.load(core::sync::atomic::Ordering::Relaxed) {
@@ -288,15 +319,15 @@ async fn status_task(
                     adc_ovr
                 ),
             }
-            if health == Health::Fault {
-                warn!("fault in the last second: {}", health);
+            if matches!(shown, LedState::Fault | LedState::Saturated) {
+                warn!("in the last second: {}", shown);
             }
             last = now;
         }
-        if led_on(health, tick) {
-            led.set_high();
+        if led_on(shown, tick) {
+            led_pin.set_high();
         } else {
-            led.set_low();
+            led_pin.set_low();
         }
     }
 }

@@ -4,7 +4,7 @@
 //!  TIM2 update ──TRGO──► ADC1 (PA0, IN1,  Fx) ──DMA1 CH1 (DMAMUX req 5)──► ring X ┐
 //!     │                  ADC2 (PA1, IN2,  Fy) ──DMA1 CH2 (DMAMUX req 36)─► ring Y ├─► TIM2 IRQ
 //!     │                  ADC3 (PB0, IN12, Fz) ──DMA1 CH3 (DMAMUX req 37)─► ring Z ┘   (CC1, P0)
-//!     └─ CC1 match, CONVERSION_DELAY_NS after the update ─────────────────────────────────┘
+//!     └─ CC1 match, Oversampling::irq_delay_ns after the update ──────────────────────────┘
 //!  TIM2 IRQ: read newest codes ─► dynocomp_core::sample::process_sample ─► DAC1 CH1 (PA4),
 //!            DAC1 CH2 (PA5), DAC2 CH1 (PA6)
 //! ```
@@ -18,7 +18,7 @@
 //! * Each ADC's DMA request (`ADC_CFGR.DMAEN = 1`, `DMACFG = 1` circular)
 //!   moves its 12-bit result into its own circular ring of [`RING_LEN`]
 //!   half-words (`DMA_CCRx.CIRC = 1`, `MINC = 1`). No DMA interrupts.
-//! * The same timer's capture/compare 1 event fires [`CONVERSION_DELAY_NS`]
+//! * The same timer's capture/compare 1 event fires `Oversampling::irq_delay_ns`
 //!   after the update, when the three conversions and transfers are done,
 //!   and raises the TIM2 interrupt at the highest priority (P0). The handler
 //!   is the thin shell of DESIGN.md: it reads the three DMA counters
@@ -36,8 +36,17 @@
 //! at a fixed time after each trigger, on three ADCs started by one event.
 //! embassy still does clocks, RCC enables, GPIO/EXTI, the watchdog and time.
 //!
-//! All `unsafe` of the firmware is in this module and `slots.rs`, each with
-//! its justification.
+//! * ADC hardware oversampling (`ADC_CFGR2`), the interrupt delay and the
+//!   timer setting come from pure core functions (`shell::adc_oversampling`,
+//!   `timer_divider`, `compare_offset_ticks`); the per-sample decisions
+//!   (mode, filter resets on leaving bypass or on an image switch, auto-zero)
+//!   are `shell::SamplePath::tick` around `sample::process_sample`, and the
+//!   switch itself is `handoff::ImageHandoff`. The handler only moves data
+//!   between them, the registers and the atomics.
+//!
+//! All `unsafe` of the firmware is in this module, each use with its
+//! justification (plus the NMI handler in `slots.rs`, an `unsafe fn` by
+//! cortex-m-rt's rule, with a safe body).
 
 use core::cell::UnsafeCell;
 use core::mem::MaybeUninit;
@@ -46,22 +55,28 @@ use core::sync::atomic::{
     Ordering::{Acquire, Relaxed, Release},
 };
 
-use dynocomp_core::image::{CoeffImage, ImageError};
-use dynocomp_core::sample::{process_sample, select_mode, Mode, SampleState};
+use dynocomp_core::handoff::ImageHandoff;
+use dynocomp_core::image::CoeffImage;
+use dynocomp_core::protocol::{StatusCounters, StreamSample};
+use dynocomp_core::sample::{BypassReason, SampleState};
 use dynocomp_core::shell::{
-    compare_offset_ticks, timer_divider, RingCursor, TimerDivider, ARR_MAX_32, BOX_TIMER_CLOCK_HZ,
+    adc_oversampling, compare_offset_ticks, timer_divider, Oversampling, RingCursor, SamplePath,
+    TimerDivider, ARR_MAX_32, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES, BOX_TIMER_CLOCK_HZ,
 };
 use dynocomp_core::AXES;
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::pac;
-use embassy_stm32::pac::adc::vals::{Adcaldif, Dmacfg, Dmaen, Exten, Ovrmod, Res, SampleTime};
+use embassy_stm32::pac::adc::vals::{
+    Adcaldif, Dmacfg, Dmaen, Exten, Ovrmod, Res, SampleTime, Trovs,
+};
 use embassy_stm32::pac::adccommon::vals::Ckmode;
 use embassy_stm32::pac::bdma::vals::{Dir, Pl, Size};
 use embassy_stm32::pac::dac::vals::Mode as DacMode;
 use embassy_stm32::pac::gpio::vals::{Moder, Pupdr};
 use embassy_stm32::pac::timer::vals::Mms;
 use embassy_stm32::{peripherals, rcc, Peri};
+use heapless::spsc::Producer;
 
 /// Entries per DMA ring. The interrupt may be held off (critical sections of
 /// the lower-priority code, debugger) for up to `RING_LEN - 1` samples
@@ -69,14 +84,15 @@ use embassy_stm32::{peripherals, rcc, Peri};
 pub const RING_LEN: u16 = 32;
 const RING: usize = RING_LEN as usize;
 
-/// Delay from the conversion trigger to the sample interrupt. The
-/// conversion takes (24.5 + 12.5) ADC cycles at 42.5 MHz = 0.87 µs plus a
-/// few cycles of trigger latency and DMA transfer; 2 µs leaves margin.
-pub const CONVERSION_DELAY_NS: u32 = 2_000;
-
 /// ADC sampling time (`ADC_SMPRx.SMPy`): 24.5 cycles = 0.58 µs, enough for a
-/// low-impedance (op-amp) front end; see docs/firmware.md.
+/// low-impedance (op-amp) front end; see docs/firmware.md. Must agree with
+/// `dynocomp_core::shell::BOX_SAMPLE_HALF_CYCLES` (49 half cycles), from
+/// which the oversampling ratio and the interrupt delay are computed.
 const SAMPLE_TIME: SampleTime = SampleTime::CYCLES24_5;
+const _: () = assert!(BOX_SAMPLE_HALF_CYCLES == 49);
+
+/// Streamed samples the interrupt can queue for the USB task.
+pub const STREAM_QUEUE_LEN: usize = 128;
 /// `ADC_CFGR.EXTSEL` of `tim2_trgo` (adc_ext_trg11) for ADC1..ADC5 (RM0440
 /// "ADC1/ADC2/ADC3/ADC4/ADC5 - External triggers for regular channels").
 const EXTSEL_TIM2_TRGO: u8 = 11;
@@ -131,6 +147,8 @@ pub enum StartError {
     Dac(u8, u8),
     /// The DMA rings were linked into CCM SRAM, which the DMA cannot reach.
     RingsNotDmaReachable(u32),
+    /// `start` was called twice.
+    AlreadyRunning,
 }
 
 /// Timing the sample path runs with.
@@ -142,22 +160,29 @@ pub struct Timing {
     pub divider: TimerDivider,
     /// Counter value of the sample interrupt (TIM2_CCR1).
     pub irq_at_tick: u32,
+    /// ADC hardware oversampling and the trigger-to-interrupt delay.
+    pub oversampling: Oversampling,
     /// Rate obtained (mHz).
     pub actual_fs_millihz: u64,
     /// Rate error (ppm).
     pub error_ppm: i64,
 }
 
-/// Timer setting for `fs_hz` on the 170 MHz TIM2.
+/// Timer and ADC setting for `fs_hz` on the 170 MHz TIM2 and the 42.5 MHz
+/// ADCs: oversampling ratio and interrupt delay from
+/// `dynocomp_core::shell::adc_oversampling`.
 pub fn timing_for(fs_hz: u32) -> Result<Timing, StartError> {
     let divider =
         timer_divider(BOX_TIMER_CLOCK_HZ, fs_hz, ARR_MAX_32).ok_or(StartError::Rate(fs_hz))?;
-    let irq_at_tick = compare_offset_ticks(&divider, BOX_TIMER_CLOCK_HZ, CONVERSION_DELAY_NS)
+    let oversampling = adc_oversampling(fs_hz, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES)
+        .ok_or(StartError::Rate(fs_hz))?;
+    let irq_at_tick = compare_offset_ticks(&divider, BOX_TIMER_CLOCK_HZ, oversampling.irq_delay_ns)
         .ok_or(StartError::Rate(fs_hz))?;
     Ok(Timing {
         fs_hz,
         divider,
         irq_at_tick,
+        oversampling,
         actual_fs_millihz: divider.actual_fs_millihz(BOX_TIMER_CLOCK_HZ),
         error_ppm: divider.error_ppm(BOX_TIMER_CLOCK_HZ, fs_hz),
     })
@@ -165,11 +190,19 @@ pub fn timing_for(fs_hz: u32) -> Result<Timing, StartError> {
 
 // ------------------------------------------------------------ telemetry --
 
-/// Set by the button task (and later USB): force bypass.
+/// Set by the button task and the USB `SetBypass` request: force bypass.
 pub static USER_BYPASS: AtomicBool = AtomicBool::new(false);
 
-/// Counters the interrupt publishes for the status task (relaxed atomics:
-/// single-word stores, no locking on the sample path).
+/// Set by the USB task (`AutoZero` request): average this many samples for
+/// an offset auto-zero (0 = no request). Taken by the interrupt.
+pub static AUTO_ZERO_REQUEST: AtomicU32 = AtomicU32::new(0);
+
+/// Streaming decimation the USB task asks for (0 = not streaming): the
+/// interrupt queues every sample whose index is a multiple of it.
+pub static STREAM_DECIMATION: AtomicU32 = AtomicU32::new(0);
+
+/// Counters the interrupt publishes for the status and USB tasks (relaxed
+/// atomics: single-word stores, no locking on the sample path).
 pub struct Telemetry {
     /// Samples processed.
     pub samples: AtomicU32,
@@ -181,10 +214,18 @@ pub struct Telemetry {
     pub dma_faults: AtomicU32,
     /// Samples with the ADC at a rail, per axis.
     pub saturated: [AtomicU32; AXES],
-    /// Runaway-guard state resets, all axes.
-    pub resets: AtomicU32,
+    /// Runaway-guard state resets, per axis.
+    pub resets: [AtomicU32; AXES],
+    /// Streamed samples dropped because the USB queue was full.
+    pub stream_dropped: AtomicU32,
     /// Whether the last sample ran the compensator.
     pub compensating: AtomicBool,
+    /// Completed auto-zeros (the offsets below belong to the latest).
+    pub auto_zero_done: AtomicU32,
+    /// Refused or failed auto-zeros (busy, input at a rail).
+    pub auto_zero_failed: AtomicU32,
+    /// ADC offsets (code of 0 N, f32 bits) of the latest auto-zero.
+    pub auto_zero_offsets: [AtomicU32; AXES],
 }
 
 /// The published counters.
@@ -194,8 +235,12 @@ pub static TELEMETRY: Telemetry = Telemetry {
     late: AtomicU32::new(0),
     dma_faults: AtomicU32::new(0),
     saturated: [AtomicU32::new(0), AtomicU32::new(0), AtomicU32::new(0)],
-    resets: AtomicU32::new(0),
+    resets: [AtomicU32::new(0), AtomicU32::new(0), AtomicU32::new(0)],
+    stream_dropped: AtomicU32::new(0),
     compensating: AtomicBool::new(false),
+    auto_zero_done: AtomicU32::new(0),
+    auto_zero_failed: AtomicU32::new(0),
+    auto_zero_offsets: [AtomicU32::new(0), AtomicU32::new(0), AtomicU32::new(0)],
 };
 
 /// A copy of [`TELEMETRY`] at one instant (fields read one by one).
@@ -206,23 +251,38 @@ pub struct Snapshot {
     pub late: u32,
     pub dma_faults: u32,
     pub saturated: [u32; AXES],
-    pub resets: u32,
+    pub resets: [u32; AXES],
+    pub stream_dropped: u32,
     pub compensating: bool,
+    pub auto_zero_done: u32,
+    pub auto_zero_failed: u32,
+}
+
+fn load3(a: &[AtomicU32; AXES]) -> [u32; AXES] {
+    let [x, y, z] = a;
+    [x.load(Relaxed), y.load(Relaxed), z.load(Relaxed)]
 }
 
 impl Telemetry {
     /// Read all counters.
     pub fn snapshot(&self) -> Snapshot {
-        let [x, y, z] = &self.saturated;
         Snapshot {
             samples: self.samples.load(Relaxed),
             overruns: self.overruns.load(Relaxed),
             late: self.late.load(Relaxed),
             dma_faults: self.dma_faults.load(Relaxed),
-            saturated: [x.load(Relaxed), y.load(Relaxed), z.load(Relaxed)],
-            resets: self.resets.load(Relaxed),
+            saturated: load3(&self.saturated),
+            resets: load3(&self.resets),
+            stream_dropped: self.stream_dropped.load(Relaxed),
             compensating: self.compensating.load(Relaxed),
+            auto_zero_done: self.auto_zero_done.load(Relaxed),
+            auto_zero_failed: self.auto_zero_failed.load(Relaxed),
         }
+    }
+
+    /// ADC offsets of the latest auto-zero (codes).
+    pub fn auto_zero_offsets(&self) -> [f32; AXES] {
+        load3(&self.auto_zero_offsets).map(f32::from_bits)
     }
 
     fn publish(&self, st: &SampleState, compensating: bool) {
@@ -232,39 +292,115 @@ impl Telemetry {
         for (dst, &src) in self.saturated.iter().zip(c.saturated.iter()) {
             dst.store(src, Relaxed);
         }
-        let resets = st
-            .axes
-            .iter()
-            .fold(0u32, |acc, a| acc.wrapping_add(a.nonfinite_resets));
-        self.resets.store(resets, Relaxed);
+        for (dst, a) in self.resets.iter().zip(st.axes.iter()) {
+            dst.store(a.nonfinite_resets, Relaxed);
+        }
         self.compensating.store(compensating, Relaxed);
     }
 }
 
+impl Snapshot {
+    /// The counters of the USB status reply.
+    pub fn status_counters(&self) -> StatusCounters {
+        StatusCounters {
+            samples: self.samples,
+            overruns: self.overruns,
+            saturated: self.saturated,
+            nonfinite_resets: self.resets,
+            stream_dropped: self.stream_dropped,
+        }
+    }
+}
+
+// ------------------------------------------------------- image buffers --
+
+/// What the store gave: a verified image, or why the box is in bypass.
+pub type Stored = Result<CoeffImage, BypassReason>;
+
+/// The two coefficient-image buffers of `dynocomp_core::handoff`: the
+/// interrupt uses `[HANDOFF.active()]`, the USB task fills the other one.
+struct ImageBuffers([UnsafeCell<MaybeUninit<Stored>>; 2]);
+// SAFETY: accesses follow the ImageHandoff protocol (see `hand_over` and
+// `Sampler::on_tick`): the USB task writes only the buffer `writable()`
+// returns, which the interrupt does not use, and the interrupt reads (and,
+// for an auto-zero, writes) only the active one.
+unsafe impl Sync for ImageBuffers {}
+static IMAGES: ImageBuffers = ImageBuffers([
+    UnsafeCell::new(MaybeUninit::uninit()),
+    UnsafeCell::new(MaybeUninit::uninit()),
+]);
+/// Which buffer the interrupt uses; a new image is switched in between two
+/// samples.
+static HANDOFF: ImageHandoff = ImageHandoff::new(0);
+
+/// USB task: hand a verified image to the sample interrupt, which switches
+/// to it at the next sample boundary (and resets the filter state). Returns
+/// `false` if the previous switch is still pending (retry after a sample
+/// period) or the sample path is not running.
+pub fn hand_over(image: CoeffImage) -> bool {
+    if !SAMPLER_READY.load(Acquire) {
+        return false;
+    }
+    let Some(i) = HANDOFF.writable() else {
+        return false;
+    };
+    let Some(buf) = IMAGES.0.get(i) else {
+        return false;
+    };
+    // SAFETY: `i` is the spare buffer: no switch is pending, so the
+    // interrupt uses the other one and will not look at this one until
+    // `publish` (Release) below. Only this task calls `hand_over`.
+    unsafe { (*buf.get()).write(Ok(image)) };
+    HANDOFF.publish(i)
+}
+
 // ---------------------------------------------------- interrupt context --
+
+/// One streamed sample, as queued by the interrupt.
+#[derive(Clone, Copy, Debug)]
+pub struct StreamItem {
+    /// Sample index (the sample counter after this sample).
+    pub index: u32,
+    /// The decimation it was taken with (index step to the next one).
+    pub step: u32,
+    /// Codes in/out and flags.
+    pub sample: StreamSample,
+}
 
 /// Everything the sample interrupt owns.
 pub struct Sampler {
-    loaded: Option<Result<CoeffImage, ImageError>>,
-    state: SampleState,
+    path: SamplePath,
     cursor: RingCursor,
-    was_compensating: bool,
+    stream: Producer<'static, StreamItem>,
 }
 
 impl Sampler {
-    /// The sample path for the loaded image (or its absence / error).
-    pub fn new(loaded: Option<Result<CoeffImage, ImageError>>) -> Self {
+    /// The sample path; streamed samples go to `stream`.
+    pub fn new(stream: Producer<'static, StreamItem>) -> Self {
         Sampler {
-            loaded,
-            state: SampleState::default(),
+            path: SamplePath::new(),
             cursor: RingCursor::new(RING_LEN),
-            was_compensating: false,
+            stream,
         }
     }
 
     /// One sample interrupt, given the three DMA counters. Never panics.
+    /// The decisions are `dynocomp_core::shell::SamplePath`'s (host-tested);
+    /// this only moves data between it, the registers and the atomics.
     #[inline(always)]
     fn on_tick(&mut self, ndtr: [u16; AXES]) {
+        // A new image: switch between two samples.
+        if HANDOFF.take().is_some() {
+            self.path.on_image_switch();
+        }
+        let Some(buf) = IMAGES.0.get(HANDOFF.active()) else {
+            return;
+        };
+        // SAFETY: the active buffer was initialised (by `start` or by
+        // `hand_over` before its publish), and only this handler, which
+        // cannot preempt itself, accesses it until a later switch.
+        let stored = unsafe { (*buf.get()).assume_init_mut() };
+
         let Some(step) = self.cursor.advance(&ndtr) else {
             TELEMETRY.dma_faults.fetch_add(1, Relaxed);
             return;
@@ -275,26 +411,52 @@ impl Sampler {
             TELEMETRY.late.fetch_add(1, Relaxed);
             return;
         }
-        self.state.note_overruns(step.missed());
+        self.path.state.note_overruns(step.missed());
         let codes = read_codes(step.newest);
 
-        let mode = select_mode(self.loaded.as_ref(), USER_BYPASS.load(Relaxed));
-        let compensating = matches!(mode, Mode::Compensate(_));
-        if compensating && !self.was_compensating {
-            // Leaving bypass: start the filters from rest, not from stale state.
-            self.state.reset_filters();
+        let request = AUTO_ZERO_REQUEST.swap(0, Relaxed);
+        if request != 0 && self.path.request_auto_zero(request).is_err() {
+            TELEMETRY.auto_zero_failed.fetch_add(1, Relaxed);
         }
-        self.was_compensating = compensating;
+        let out = self.path.tick(codes, stored, USER_BYPASS.load(Relaxed));
+        write_dacs(out.dac);
+        TELEMETRY.publish(&self.path.state, out.compensating);
+        match out.auto_zero {
+            Some(Ok(offsets)) => {
+                for (dst, o) in TELEMETRY.auto_zero_offsets.iter().zip(offsets) {
+                    dst.store(o.to_bits(), Relaxed);
+                }
+                TELEMETRY.auto_zero_done.fetch_add(1, Relaxed);
+            }
+            Some(Err(_)) => {
+                TELEMETRY.auto_zero_failed.fetch_add(1, Relaxed);
+            }
+            None => {}
+        }
 
-        let (dac, _flags) = process_sample(codes, mode, &mut self.state);
-        write_dacs(dac);
-        TELEMETRY.publish(&self.state, compensating);
+        // Stream every `decimation`-th sample; a full queue is counted.
+        let decimation = STREAM_DECIMATION.load(Relaxed);
+        let index = self.path.state.counters.samples;
+        if decimation != 0 && index % decimation == 0 {
+            let item = StreamItem {
+                index,
+                step: decimation,
+                sample: StreamSample {
+                    raw: codes,
+                    out: out.dac,
+                    flags: out.flags.0,
+                },
+            };
+            if self.stream.enqueue(item).is_err() {
+                TELEMETRY.stream_dropped.fetch_add(1, Relaxed);
+            }
+        }
     }
 }
 
 /// Storage that only the TIM2 interrupt touches once the sampler is running.
-/// Uninitialised (in .bss/.uninit, not a 3.5 KiB `.data` copy in flash)
-/// until `start` writes it and sets `SAMPLER_READY`.
+/// Uninitialised (in .bss/.uninit, not a `.data` copy in flash) until
+/// `start` writes it and sets `SAMPLER_READY`.
 struct IsrOwned(UnsafeCell<MaybeUninit<Sampler>>);
 // SAFETY: written once by `start` before the TIM2 interrupt is enabled, then
 // accessed only from the TIM2 handler, which cannot preempt itself.
@@ -361,10 +523,10 @@ fn TIM2() {
     // sample's deadline is missed (it is processed late, or skipped and then
     // also counted by the ring cursor as a separate sample).
     if tim.sr().read().ccif(0) {
-        sampler.state.note_overruns(1);
+        sampler.path.state.note_overruns(1);
         TELEMETRY
             .overruns
-            .store(sampler.state.counters.overruns, Relaxed);
+            .store(sampler.path.state.counters.overruns, Relaxed);
     }
 }
 
@@ -391,8 +553,8 @@ fn adc_wake(adc: pac::adc::Adc) {
 }
 
 /// Calibrate (single-ended), enable, and configure one channel, triggered by
-/// TIM2 TRGO, results to circular DMA.
-fn adc_setup(adc: pac::adc::Adc, n: u8, channel: u8) -> Result<(), StartError> {
+/// TIM2 TRGO, with hardware oversampling `os`, results to circular DMA.
+fn adc_setup(adc: pac::adc::Adc, n: u8, channel: u8, os: &Oversampling) -> Result<(), StartError> {
     adc.cr().modify(|w| {
         w.set_adcaldif(Adcaldif::SINGLE_ENDED);
         w.set_adcal(true);
@@ -429,6 +591,15 @@ fn adc_setup(adc: pac::adc::Adc, n: u8, channel: u8) -> Result<(), StartError> {
         w.set_dmacfg(Dmacfg::CIRCULAR);
         w.set_ovrmod(Ovrmod::OVERWRITE);
     });
+    // Regular oversampling (RM0440 §21.4.30): `ratio` conversions back to
+    // back per trigger (TROVS = 0), sum >> shift = their 12-bit mean; one
+    // DMA request per oversampled result.
+    adc.cfgr2().write(|w| {
+        w.set_rovse(os.enabled());
+        w.set_ovsr(os.ovsr);
+        w.set_ovss(os.shift);
+        w.set_trovs(Trovs::AUTOMATIC);
+    });
     Ok(())
 }
 
@@ -452,8 +623,14 @@ fn dma_setup(ch: usize, request: u8, adc: pac::adc::Adc, axis: usize) {
     });
 }
 
-/// Bring up DACs, ADCs, DMA and TIM2 and start sampling at `timing`.
-pub fn start(_hw: Hardware, timing: &Timing, sampler: Sampler) -> Result<(), StartError> {
+/// Bring up DACs, ADCs, DMA and TIM2 and start sampling at `timing` with
+/// the store's boot result `image` (a verified image or the bypass reason).
+pub fn start(
+    _hw: Hardware,
+    timing: &Timing,
+    image: Stored,
+    sampler: Sampler,
+) -> Result<(), StartError> {
     // The DMA cannot reach CCM SRAM (0x2001_8000.., RM0440 §2.1 bus matrix).
     let rings = ring_addr(0);
     if rings >= 0x2001_8000 {
@@ -519,9 +696,10 @@ pub fn start(_hw: Hardware, timing: &Timing, sampler: Sampler) -> Result<(), Sta
     }
     // t_ADCVREG_STUP = 20 µs (datasheet); 25 µs at 170 MHz.
     cortex_m::asm::delay(170 * 25);
-    adc_setup(pac::ADC1, 1, 1)?; // PA0 = ADC1_IN1
-    adc_setup(pac::ADC2, 2, 2)?; // PA1 = ADC2_IN2
-    adc_setup(pac::ADC3, 3, 12)?; // PB0 = ADC3_IN12
+    let os = &timing.oversampling;
+    adc_setup(pac::ADC1, 1, 1, os)?; // PA0 = ADC1_IN1
+    adc_setup(pac::ADC2, 2, 2, os)?; // PA1 = ADC2_IN2
+    adc_setup(pac::ADC3, 3, 12, os)?; // PB0 = ADC3_IN12
 
     dma_setup(DMA_CH[0], DMAREQ_ADC1, pac::ADC1, 0);
     dma_setup(DMA_CH[1], DMAREQ_ADC2, pac::ADC2, 1);
@@ -548,11 +726,19 @@ pub fn start(_hw: Hardware, timing: &Timing, sampler: Sampler) -> Result<(), Sta
 
     if SAMPLER_READY.load(Acquire) {
         // `start` consumed `Hardware`, which exists once: cannot happen.
-        return Ok(());
+        return Err(StartError::AlreadyRunning);
     }
+    let Some(first) = IMAGES.0.get(HANDOFF.active()) else {
+        return Err(StartError::AlreadyRunning);
+    };
     // SAFETY: SAMPLER_READY is false and the TIM2 interrupt is not enabled,
-    // so nothing else accesses SAMPLER; after the flag only the handler does.
-    unsafe { (*SAMPLER.0.get()).write(sampler) };
+    // so nothing else accesses SAMPLER or the image buffers (`hand_over`
+    // refuses until SAMPLER_READY); after the flag only the handler uses
+    // SAMPLER and the active buffer.
+    unsafe {
+        (*first.get()).write(image);
+        (*SAMPLER.0.get()).write(sampler);
+    }
     SAMPLER_READY.store(true, Release);
 
     // Arm the ADCs: each now converts on every TIM2 TRGO rising edge.

@@ -1,22 +1,17 @@
 //! The two coefficient-image flash slots, as declared in `memory.x`
 //! (`COEFF_A` at 0x0807_C000, `COEFF_B` at 0x0807_E000, 8 KiB each).
 //!
-//! The slot addresses come from the linker symbols `__coeff_slot_{a,b}_{start,end}`
-//! so this file, `memory.x` and docs/firmware.md cannot drift apart silently;
-//! the expected addresses are also checked at boot.
+//! The coefficient store (`dynocomp_core::store`, reading and writing
+//! through embassy-stm32's flash driver) has the same addresses as
+//! constants; this module checks them against the linker symbols
+//! `__coeff_slot_{a,b}_{start,end}` at boot, so `memory.x`, the store and
+//! docs/firmware.md cannot drift apart silently. It also holds the NMI
+//! handler for flash double-ECC errors (reads of a torn slot).
 
-use dynocomp_core::image::{CoeffImage, ImageError, MAX_IMAGE_LEN};
-use dynocomp_core::shell::{choose_image, SlotChoice};
+use core::sync::atomic::{AtomicU32, Ordering};
 
-/// Expected start of slot A (memory.x).
-pub const SLOT_A_ADDR: usize = 0x0807_C000;
-/// Expected start of slot B (memory.x).
-pub const SLOT_B_ADDR: usize = 0x0807_E000;
-/// Size of one slot.
-pub const SLOT_LEN: usize = 8 * 1024;
-
-// A slot must hold the largest image the codec can produce.
-const _: () = assert!(MAX_IMAGE_LEN <= SLOT_LEN);
+use dynocomp_core::store::{SLOT_A_ADDR, SLOT_B_ADDR, SLOT_LEN};
+use embassy_stm32::pac;
 
 extern "C" {
     static __coeff_slot_a_start: u8;
@@ -25,75 +20,42 @@ extern "C" {
     static __coeff_slot_b_end: u8;
 }
 
-/// The bytes of a slot, from its linker symbols.
-///
-/// Returns `None` if the symbols disagree with [`SLOT_A_ADDR`]/[`SLOT_B_ADDR`]
-/// and [`SLOT_LEN`] (memory.x edited without this file).
-fn slot(start: *const u8, end: *const u8, expected: usize) -> Option<&'static [u8]> {
-    let (s, e) = (start as usize, end as usize);
-    if s != expected || e.wrapping_sub(s) != SLOT_LEN {
-        return None;
-    }
-    // SAFETY: `start..end` is the COEFF_A / COEFF_B region of memory.x, inside
-    // the 512 KiB on-chip flash that is always mapped and readable; it is
-    // never written by the CPU while this shared slice exists (there is no
-    // flash writer in this firmware yet; the future store must drop the
-    // slices or copy the image out before erasing). u8 has no alignment or
-    // validity requirements, so any flash content is a valid `[u8]`.
-    Some(unsafe { core::slice::from_raw_parts(start, SLOT_LEN) })
-}
-
-/// Slot A's bytes (`None` if memory.x and this firmware disagree).
-pub fn slot_a() -> Option<&'static [u8]> {
-    // Only the addresses of the linker symbols are taken, never their values.
-    let (s, e) = (
+/// Whether the linker's slot regions are the store's (start and length of
+/// both slots). Only the symbols' addresses are taken, never their values.
+pub fn memory_x_matches_store() -> bool {
+    let span = |s: *const u8, e: *const u8| (s as usize, (e as usize).wrapping_sub(s as usize));
+    let a = span(
         core::ptr::addr_of!(__coeff_slot_a_start),
         core::ptr::addr_of!(__coeff_slot_a_end),
     );
-    slot(s, e, SLOT_A_ADDR)
-}
-
-/// Slot B's bytes (`None` if memory.x and this firmware disagree).
-pub fn slot_b() -> Option<&'static [u8]> {
-    // Only the addresses of the linker symbols are taken, never their values.
-    let (s, e) = (
+    let b = span(
         core::ptr::addr_of!(__coeff_slot_b_start),
         core::ptr::addr_of!(__coeff_slot_b_end),
     );
-    slot(s, e, SLOT_B_ADDR)
+    a == (SLOT_A_ADDR as usize, SLOT_LEN as usize) && b == (SLOT_B_ADDR as usize, SLOT_LEN as usize)
 }
 
-fn parse(bytes: Option<&'static [u8]>) -> Result<CoeffImage, ImageError> {
-    match bytes {
-        Some(b) => CoeffImage::parse_prefix(b),
-        // Misplaced slot: report it as "not an image" rather than reading
-        // from an address nobody agreed on.
-        None => {
-            defmt::error!("coefficient slot symbols disagree with memory.x; slot ignored");
-            Err(ImageError::BadMagic)
-        }
-    }
-}
+/// Double ECC errors the NMI handler caught on flash reads.
+pub static FLASH_ECC_ERRORS: AtomicU32 = AtomicU32::new(0);
 
-/// Read and validate both slots and pick the image (A, then B).
-pub fn load() -> SlotChoice {
-    let a = parse(slot_a());
-    let b = parse(slot_b());
-    match &a {
-        Ok(img) => defmt::info!(
-            "slot A: valid image, fs = {} Hz, id {=u32:#010x}",
-            img.fs_hz,
-            img.id()
-        ),
-        Err(e) => defmt::info!("slot A: {}", e),
+/// NMI. A read of a flash double word whose programming was cut by a power
+/// loss can fail the ECC check twice over; that raises the NMI (RM0440
+/// §3.3.4, `FLASH_ECCR.ECCD`). Count it, clear the flag and return: the read
+/// delivers wrong data, which the store's header/CRC checks reject, so the
+/// torn slot counts as invalid and the box boots the other slot or bypass
+/// instead of hanging in the default handler. Any other NMI source (none is
+/// enabled) resets the box.
+#[cortex_m_rt::exception]
+unsafe fn NonMaskableInt() {
+    let eccr = pac::FLASH.eccr().read();
+    if eccr.eccd() || eccr.eccd2() {
+        // rc_w1 flags: writing 1 clears them.
+        pac::FLASH.eccr().modify(|w| {
+            w.set_eccd(true);
+            w.set_eccd2(true);
+        });
+        FLASH_ECC_ERRORS.fetch_add(1, Ordering::Relaxed);
+    } else {
+        cortex_m::peripheral::SCB::sys_reset();
     }
-    match &b {
-        Ok(img) => defmt::info!(
-            "slot B: valid image, fs = {} Hz, id {=u32:#010x}",
-            img.fs_hz,
-            img.id()
-        ),
-        Err(e) => defmt::info!("slot B: {}", e),
-    }
-    choose_image(a, b)
 }
