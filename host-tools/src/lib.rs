@@ -5,6 +5,8 @@
 pub mod compensate;
 pub mod design;
 pub mod design_cmd;
+pub mod flash_serial;
+pub mod flash_probe;
 pub mod fit;
 pub mod frf;
 pub mod inspect;
@@ -14,4 +16,8 @@ pub mod metrics;
 pub mod quantize;
 pub mod realize;
 pub mod report;
+pub mod serial_link;
+pub mod sim_flash;
 pub mod simulate;
+pub mod stream;
+pub mod virtual_box;

@@ -46,6 +46,38 @@ enum Command {
     /// Simulate a dynamometer, an impact test and a milling record with known
     /// true force (for demos and tests).
     Simulate(dynocomp::simulate::SimulateArgs),
+    /// Write a coefficient image into the box: through a debug probe
+    /// (--probe) or over the box's USB port (--serial PORT).
+    Flash(FlashArgs),
+    /// Record the box's stream of raw and compensated forces to CSV.
+    Stream(dynocomp::stream::StreamArgs),
+    /// A simulated box on a pseudo-terminal (tests and demos): the box's
+    /// protocol handler and coefficient store on a simulated flash.
+    #[command(hide = true)]
+    VirtualBox(dynocomp::virtual_box::VirtualBoxArgs),
+}
+
+/// `dynocomp flash IMAGE [--probe [--chip CHIP] [--slot S] | --serial PORT] [--dry-run]`.
+#[derive(clap::Args)]
+struct FlashArgs {
+    /// Coefficient image (.dcimg).
+    image: PathBuf,
+    /// Write through a debug probe (probe-rs), with verify.
+    #[arg(long, conflicts_with = "serial")]
+    probe: bool,
+    /// Upload over the box's USB serial port (e.g. /dev/ttyACM0).
+    #[arg(long, value_name = "PORT")]
+    serial: Option<String>,
+    /// probe-rs chip name (with --probe).
+    #[arg(long, default_value = dynocomp::flash_probe::DEFAULT_CHIP)]
+    chip: String,
+    /// Slot to write (with --probe).
+    #[arg(long, value_enum, default_value = "auto")]
+    slot: dynocomp::flash_probe::SlotArg,
+    /// With --probe: plan the write against a simulated probe, touch no
+    /// hardware.
+    #[arg(long, conflicts_with = "serial")]
+    dry_run: bool,
 }
 
 fn run(cli: Cli) -> Result<()> {
@@ -78,6 +110,18 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Simulate(args) => dynocomp::simulate::run(&args)?,
         Command::Design(args) => dynocomp::design_cmd::run(&args)?,
+        Command::Flash(a) => match (&a.serial, a.probe || a.dry_run) {
+            (Some(port), _) => dynocomp::flash_serial::run(&a.image, port)?,
+            (None, true) => dynocomp::flash_probe::run(&a.image, &a.chip, a.slot, a.dry_run)?,
+            (None, false) => anyhow::bail!("flash: give --probe (debug probe) or --serial PORT (USB)"),
+        },
+        Command::Stream(args) => {
+            dynocomp::stream::run(&args)?;
+        }
+        Command::VirtualBox(args) => {
+            let code = dynocomp::virtual_box::run(&args)?;
+            std::process::exit(code);
+        }
     }
     Ok(())
 }

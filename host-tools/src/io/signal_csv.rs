@@ -56,6 +56,11 @@ fn column_axis(name: &str) -> Option<usize> {
     }
 }
 
+/// Columns a force record may carry besides t_s, fx, fy, fz, which the
+/// reader checks as numbers and otherwise ignores: the raw (uncompensated)
+/// forces that `dynocomp stream` records next to the compensated ones.
+pub const IGNORED_COLUMNS: [&str; 3] = ["raw_fx", "raw_fy", "raw_fz"];
+
 /// Read a force record from `path`.
 pub fn read_signal_csv(path: &Path) -> Result<SignalRecord> {
     let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
@@ -69,7 +74,14 @@ pub fn parse_signal_csv(text: &str, source: &str) -> Result<SignalRecord> {
     let names: Vec<String> = header.split(',').map(|s| s.trim().trim_matches('"').to_ascii_lowercase()).collect();
     let mut has_time = false;
     let mut axes = Vec::new();
+    // Data column of each CSV column (None: time or an ignored column).
+    let mut slot_of: Vec<Option<usize>> = Vec::with_capacity(names.len());
     for (col, name) in names.iter().enumerate() {
+        if IGNORED_COLUMNS.contains(&name.as_str()) {
+            slot_of.push(None);
+            continue;
+        }
+        slot_of.push(column_axis(name).map(|_| axes.len()));
         if name == "t_s" {
             if col != 0 {
                 bail!("{source}: line 1, column {}: `t_s` must be the first column", col + 1);
@@ -115,8 +127,8 @@ pub fn parse_signal_csv(text: &str, source: &str) -> Result<SignalRecord> {
                     }
                 }
                 t_s.push(v);
-            } else {
-                data[col - usize::from(has_time)].push(v);
+            } else if let Some(slot) = slot_of[col] {
+                data[slot].push(v);
             }
         }
     }

@@ -1,0 +1,189 @@
+//! The host side of the box's USB protocol (`dynocomp_core::protocol`):
+//! open a serial port (the box's CDC port, or the virtual box's
+//! pseudo-terminal), send requests, wait for their replies, collect stream
+//! frames.
+
+use std::collections::VecDeque;
+use std::io::{Read, Write};
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, bail, Context, Result};
+use dynocomp_core::protocol::{
+    decode_message, encode_frame, BoxMessage, FrameDecoder, LinkError, Reply, Request, RequestFrame, Status,
+    StreamFrame, MAX_FRAME,
+};
+
+/// How long the host waits for a reply by default. An upload commit reads
+/// back and verifies the image (a few ms on the box); erasing a slot takes
+/// up to ~100 ms.
+pub const REPLY_TIMEOUT: Duration = Duration::from_secs(3);
+
+/// Byte transport: a serial port, or anything that reads and writes.
+pub trait Transport: Read + Write + Send {}
+impl<T: Read + Write + Send> Transport for T {}
+
+/// A connection to a box.
+pub struct Link {
+    port: Box<dyn Transport>,
+    name: String,
+    decoder: FrameDecoder,
+    next_id: u16,
+    /// Stream frames received while waiting for replies.
+    pub stream: VecDeque<StreamFrame>,
+    /// Replies with id 0 (frames the box could not read) seen so far.
+    pub unreadable_replies: Vec<LinkError>,
+    /// Reply timeout.
+    pub timeout: Duration,
+}
+
+/// Open a serial port in raw mode (8N1, no flow control; the baud rate is
+/// irrelevant for USB CDC and pseudo-terminals).
+pub fn open_port(path: &str) -> Result<Box<dyn Transport>> {
+    let port = serialport::new(path, 115_200)
+        .timeout(Duration::from_millis(20))
+        .open()
+        .with_context(|| format!("{path}: cannot open serial port"))?;
+    Ok(Box::new(port))
+}
+
+impl Link {
+    /// Connect through a serial port path.
+    pub fn open(path: &str) -> Result<Link> {
+        Ok(Link::new(open_port(path)?, path))
+    }
+
+    /// Wrap a transport (`name` appears in error messages).
+    pub fn new(port: Box<dyn Transport>, name: &str) -> Link {
+        Link {
+            port,
+            name: name.to_string(),
+            decoder: FrameDecoder::new(),
+            next_id: 1,
+            stream: VecDeque::new(),
+            unreadable_replies: Vec::new(),
+            timeout: REPLY_TIMEOUT,
+        }
+    }
+
+    /// Send raw bytes (tests: malformed frames).
+    pub fn send_raw(&mut self, bytes: &[u8]) -> Result<()> {
+        let gone = || format!("{}: write failed (box unplugged or stopped?)", self.name);
+        self.port.write_all(bytes).with_context(gone)?;
+        self.port.flush().with_context(gone)
+    }
+
+    /// Send a request without waiting; returns its id.
+    pub fn send(&mut self, request: Request<'_>) -> Result<u16> {
+        let id = self.next_id;
+        self.next_id = self.next_id.wrapping_add(1).max(1);
+        let mut buf = [0u8; MAX_FRAME];
+        let n = encode_frame(&RequestFrame { id, request }, &mut buf)
+            .map_err(|e| anyhow!("{}: request does not fit a frame: {e:?}", self.name))?;
+        self.send_raw(&buf[..n])?;
+        Ok(id)
+    }
+
+    /// Read what is available (up to `wait`) and return the decoded box
+    /// messages; undecodable frames are skipped and counted as garbage.
+    pub fn poll(&mut self, wait: Duration) -> Result<Vec<BoxMessage>> {
+        let mut buf = [0u8; 4096];
+        let n = match self.port.read(&mut buf) {
+            Ok(0) => {
+                std::thread::sleep(wait.min(Duration::from_millis(5)));
+                0
+            }
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut || e.kind() == std::io::ErrorKind::WouldBlock => 0,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => 0,
+            Err(e) => return Err(anyhow!("{}: read failed: {e} (box unplugged or stopped?)", self.name)),
+        };
+        let mut out = Vec::new();
+        self.decoder.push(&buf[..n], |r| {
+            if let Some(m) = r.ok().and_then(decode_message::<BoxMessage>) {
+                out.push(m);
+            }
+        });
+        Ok(out)
+    }
+
+    /// Send `request` and wait for its reply; stream frames that arrive
+    /// meanwhile are queued in [`stream`](Self::stream).
+    pub fn request(&mut self, request: Request<'_>) -> Result<Reply> {
+        let id = self.send(request)?;
+        let deadline = Instant::now() + self.timeout;
+        let mut answer = None;
+        loop {
+            // Keep every message of the batch (stream frames may follow the
+            // reply in the same read).
+            for m in self.poll(Duration::from_millis(5))? {
+                match m {
+                    BoxMessage::Reply { id: rid, reply } if rid == id && answer.is_none() => answer = Some(reply),
+                    BoxMessage::Reply { id: 0, reply: Reply::Error(e) } => {
+                        self.unreadable_replies.push(e);
+                    }
+                    BoxMessage::Reply { .. } => {}
+                    BoxMessage::Stream(f) => self.stream.push_back(f),
+                }
+            }
+            if let Some(reply) = answer {
+                return Ok(reply);
+            }
+            if Instant::now() > deadline {
+                bail!("{}: no reply from the box within {:.1} s (is it running this firmware?)", self.name, self.timeout.as_secs_f64());
+            }
+        }
+    }
+
+    /// Send `request` and require an `Ack`.
+    pub fn command(&mut self, request: Request<'_>) -> Result<()> {
+        match self.request(request)? {
+            Reply::Ack => Ok(()),
+            Reply::Error(e) => bail!("{}: box refused {}: {}", self.name, request_name(&request), describe_error(&e)),
+            other => bail!("{}: unexpected reply to {}: {other:?}", self.name, request_name(&request)),
+        }
+    }
+
+    /// The box's status.
+    pub fn status(&mut self) -> Result<Status> {
+        match self.request(Request::GetStatus)? {
+            Reply::Status(s) => Ok(s),
+            Reply::Error(e) => bail!("{}: status request refused: {}", self.name, describe_error(&e)),
+            other => bail!("{}: unexpected reply to GetStatus: {other:?}", self.name),
+        }
+    }
+}
+
+/// Name of a request for messages.
+pub fn request_name(r: &Request<'_>) -> &'static str {
+    match r {
+        Request::GetStatus => "GetStatus",
+        Request::SetBypass(_) => "SetBypass",
+        Request::StartStream { .. } => "StartStream",
+        Request::StopStream => "StopStream",
+        Request::UploadBegin { .. } => "UploadBegin",
+        Request::UploadChunk { .. } => "UploadChunk",
+        Request::UploadCommit => "UploadCommit",
+        Request::AutoZero => "AutoZero",
+    }
+}
+
+/// One-line explanation of a box error.
+pub fn describe_error(e: &LinkError) -> String {
+    match e {
+        LinkError::Frame(f) => format!("the box could not read our frame ({f:?})"),
+        LinkError::Malformed => "the box could not decode our message (protocol version mismatch?)".into(),
+        LinkError::NoUpload => "no upload in progress".into(),
+        LinkError::BadDecimation => "decimation must be at least 1".into(),
+        LinkError::UploadTooLarge { len, max } => format!("image of {len} bytes does not fit a slot (max {max})"),
+        LinkError::OutOfOrder { expected, got } => format!("chunk at offset {got}, box expected {expected}"),
+        LinkError::ChunkTooLong { len } => format!("chunk beyond the declared length {len}"),
+        LinkError::Incomplete { received, len } => format!("commit after {received} of {len} bytes"),
+        LinkError::CrcMismatch { declared, computed } => {
+            format!("image corrupted in transfer: CRC {computed:#010x} read back, {declared:#010x} declared")
+        }
+        LinkError::Image(i) => format!("invalid image: {i}"),
+        LinkError::NotRunnable(r) => format!("the box cannot run this image: {r:?}"),
+        LinkError::Flash(f) => format!("flash write failed: {f:?}"),
+        LinkError::UploadAborted => "the upload was aborted; start again".into(),
+    }
+}
