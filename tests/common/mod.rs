@@ -101,3 +101,11 @@ pub fn image_with(filter: AxisFilter, axes: &[usize], fs_hz: u32) -> CoeffImage 
     }
     img
 }
+
+/// The encoded bytes of a valid image.
+pub fn encode_image(img: &CoeffImage) -> Vec<u8> {
+    let mut buf = vec![0u8; dynocomp_core::image::MAX_IMAGE_LEN];
+    let n = img.encode(&mut buf).expect("encode test image");
+    buf.truncate(n);
+    buf
+}

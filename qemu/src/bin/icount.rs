@@ -1,0 +1,309 @@
+//! Instruction counts per sample on the emulated Cortex-M4F (issue #6).
+//!
+//! Run under `qemu-system-arm -M mps2-an386 -icount shift=0` (see
+//! `scripts/qemu_icount.sh`). Why the count is exact: with `-icount shift=0`
+//! QEMU's virtual clock advances exactly 1 ns per executed guest instruction
+//! (and with icount, reads of a timer are made precise to the instruction:
+//! QEMU ends the translation block at the I/O access). SysTick counts that
+//! virtual clock at the board's 25 MHz core clock, 1 tick per 40 ns = 40
+//! instructions. Each case runs `SAMPLES` samples between two SysTick reads,
+//! so the quantization error of the mean is ≤ 2·40/`SAMPLES` = 0.02
+//! instructions per sample; the code paths have no data-dependent branches,
+//! so the true per-sample count is an integer and rounding the mean gives it
+//! exactly. The calibration case (two functions that differ only by 100
+//! NOPs) must differ by exactly 100.00, which checks the 40 ns tick.
+//!
+//! Every case calls a `#[inline(never)]` function per sample, as the
+//! interrupt handler would; the "empty" case (same loop, a function that
+//! only returns its input) is subtracted to give the net count of the body.
+//!
+//! Cases, all f32, same code generation as the box firmware (opt-level 3,
+//! fat LTO):
+//! * `kernel Sxx`: `dynocomp_core::kernel::AxisFilter::step` with xx 2x2
+//!   sections, no FIR (filter order n = 2·xx).
+//! * `dense Sxx`: the dense (n+1)x(n+1) state-space update of the seed
+//!   paper's eq. (6) form, [x'; y] = [A B; C D]·[x; u], for the same order:
+//!   every one of the (n+1)² products is computed (the matrix is the
+//!   block-diagonal [A B; C D] of the same sections; a dense update does not
+//!   know its zeros, so values do not change the count).
+//! * `idsp df1 Sxx`: QUARTIQ `idsp` 0.23 `Cascade<[Biquad<f32>; xx]>` (direct
+//!   form I cascade, shared delay lines) — xx biquads = the same order.
+//! * `idsp df2t Sxx`: xx `idsp` `Biquad<f32>`s in transposed direct form II,
+//!   applied in a loop.
+//! * `kernel S24+F24`: the box's full axis (24 sections + 24 FIR taps).
+//! * `process_sample 3x(S24+F24)`: `dynocomp_core::sample::process_sample`,
+//!   the pure body of the sample interrupt: 3 ADC codes → N, three full
+//!   axes with the runaway guard, → DAC codes, flags and counters; and the
+//!   same with 3 sections + 19 taps, the size `dynocomp design` chose for the
+//!   bundled example.
+#![no_std]
+#![no_main]
+
+use core::hint::black_box;
+use cortex_m_rt::entry;
+use cortex_m_semihosting::hprintln;
+use dsp_process::SplitProcess;
+use dynocomp_core::image::{AxisImage, AxisScaling, AxisSummary, CoeffImage, DesignMethod};
+use dynocomp_core::kernel::{AxisFilter, AxisState, Section};
+use dynocomp_core::sample::{process_sample, Mode, SampleState};
+use dynocomp_core::AXES;
+use dynocomp_qemu::{success, Ticks};
+use idsp::iir::{Biquad, Cascade, DirectForm, DirectForm2Transposed};
+
+/// Samples per case.
+const SAMPLES: u32 = 4096;
+/// Instructions per SysTick tick: 40 ns at 25 MHz, 1 ns per instruction.
+const INSNS_PER_TICK: u32 = 40;
+
+/// A stable 2x2 section (poles 0.99 ± 0.05j·k); the values do not change
+/// the instruction count (no data-dependent branches), only keep it stable.
+fn section(i: usize) -> Section {
+    let w = 0.001 + 0.0015 * i as f32;
+    Section { delta: [-0.002, w, -w, -0.002], b: [0.1, 0.0], c: [0.5, -0.2] }
+}
+
+fn kernel_filter(sections: usize, taps: usize) -> AxisFilter {
+    let mut secs = [Section::default(); 24];
+    for (i, s) in secs.iter_mut().enumerate() {
+        *s = section(i);
+    }
+    let mut fir = [0.0f32; 24];
+    for (j, h) in fir.iter_mut().enumerate() {
+        *h = 0.1 / (j as f32 + 1.0);
+    }
+    match AxisFilter::with_fir(&secs[..sections], 0.25, &fir[..taps]) {
+        Ok(f) => f,
+        Err(_) => dynocomp_qemu::fail("icount: test filter rejected"),
+    }
+}
+
+/// Input sample k (varied, finite, well inside the runaway limit).
+#[inline(always)]
+fn input(k: u32) -> f32 {
+    ((k.wrapping_mul(2_654_435_761) >> 20) as f32) - 2048.0
+}
+
+/// Run `body` once per sample between two SysTick reads; instructions per sample.
+#[inline(always)]
+fn measure(ticks: &Ticks, mut body: impl FnMut(f32) -> f32) -> f32 {
+    let mut acc = 0.0f32;
+    let t0 = ticks.now();
+    for k in 0..SAMPLES {
+        acc += body(input(k));
+    }
+    let t1 = ticks.now();
+    black_box(acc);
+    (Ticks::elapsed(t0, t1) * INSNS_PER_TICK) as f32 / SAMPLES as f32
+}
+
+#[inline(never)]
+fn empty_call(u: f32) -> f32 {
+    black_box(u)
+}
+
+#[inline(never)]
+fn nop100(u: f32) -> f32 {
+    // SAFETY: 100 NOPs, no memory or register effects.
+    unsafe { core::arch::asm!(".rept 100", "nop", ".endr", options(nomem, nostack, preserves_flags)) };
+    black_box(u)
+}
+
+#[inline(never)]
+fn nop200(u: f32) -> f32 {
+    // SAFETY: 200 NOPs, no memory or register effects.
+    unsafe { core::arch::asm!(".rept 200", "nop", ".endr", options(nomem, nostack, preserves_flags)) };
+    black_box(u)
+}
+
+#[inline(never)]
+fn kernel_step(f: &AxisFilter, st: &mut AxisState, u: f32) -> f32 {
+    f.step(st, u)
+}
+
+#[inline(never)]
+fn kernel_step_guarded(f: &AxisFilter, st: &mut AxisState, u: f32) -> f32 {
+    f.step_guarded(st, u).unwrap_or(u)
+}
+
+/// Dense eq. (6) update with N1 = n + 1: `z = [x; u]`, `[x'; y] = M z`.
+#[inline(never)]
+fn dense_step<const N1: usize>(m: &[[f32; N1]; N1], x: &mut [f32; N1], u: f32) -> f32 {
+    x[N1 - 1] = u;
+    let mut out = [0.0f32; N1];
+    for (o, row) in out.iter_mut().zip(m.iter()) {
+        let mut s = 0.0f32;
+        for (a, z) in row.iter().zip(x.iter()) {
+            s += a * z;
+        }
+        *o = s;
+    }
+    x[..N1 - 1].copy_from_slice(&out[..N1 - 1]);
+    out[N1 - 1]
+}
+
+/// The block-diagonal [I+Δ b; c d] of `kernel_filter`'s sections, dense.
+fn dense_matrix<const N1: usize>() -> [[f32; N1]; N1] {
+    let n = N1 - 1;
+    let mut m = [[0.0f32; N1]; N1];
+    for i in 0..n / 2 {
+        let s = section(i);
+        let (r0, r1) = (2 * i, 2 * i + 1);
+        m[r0][r0] = 1.0 + s.delta[0];
+        m[r0][r1] = s.delta[1];
+        m[r1][r0] = s.delta[2];
+        m[r1][r1] = 1.0 + s.delta[3];
+        m[r0][n] = s.b[0];
+        m[r1][n] = s.b[1];
+        m[n][r0] = s.c[0];
+        m[n][r1] = s.c[1];
+    }
+    m[n][n] = 0.25;
+    m
+}
+
+fn measure_dense<const N1: usize>(ticks: &Ticks) -> f32 {
+    let m = dense_matrix::<N1>();
+    let mut x = [0.0f32; N1];
+    measure(ticks, |u| dense_step(black_box(&m), &mut x, u))
+}
+
+/// A stable biquad: poles of z² − 1.6 z + 0.8 (|z| = 0.89).
+const BIQUAD: [f32; 5] = [0.1, 0.2, 0.1, 1.6, -0.8];
+
+#[inline(never)]
+fn idsp_df1<const S: usize>(c: &Cascade<[Biquad<f32>; S]>, st: &mut DirectForm<f32, S>, u: f32) -> f32 {
+    c.process(st, u)
+}
+
+fn measure_idsp_df1<const S: usize>(ticks: &Ticks) -> f32 {
+    let c = Cascade(core::array::from_fn::<_, S, _>(|_| Biquad { ba: BIQUAD }));
+    let mut st = DirectForm::<f32, S> { x: [0.0; 2], y: [[0.0; 2]; S] };
+    measure(ticks, |u| idsp_df1(black_box(&c), &mut st, u))
+}
+
+#[inline(never)]
+fn idsp_df2t<const S: usize>(c: &[Biquad<f32>; S], st: &mut [DirectForm2Transposed<f32>; S], u: f32) -> f32 {
+    c.iter().zip(st.iter_mut()).fold(u, |x, (b, s)| b.process(s, x))
+}
+
+fn measure_idsp_df2t<const S: usize>(ticks: &Ticks) -> f32 {
+    let c: [Biquad<f32>; S] = core::array::from_fn(|_| Biquad { ba: BIQUAD });
+    let mut st: [DirectForm2Transposed<f32>; S] = core::array::from_fn(|_| DirectForm2Transposed::default());
+    measure(ticks, |u| idsp_df2t(black_box(&c), &mut st, u))
+}
+
+fn box_image(sections: usize, taps: usize) -> CoeffImage {
+    let filter = kernel_filter(sections, taps);
+    let mut img = CoeffImage {
+        fs_hz: 100_000,
+        latency_samples: 4,
+        flags: 0,
+        method: DesignMethod::Manual,
+        source_sha256: [0; 32],
+        created_unix_s: 0,
+        axes: [None; AXES],
+    };
+    for (a, slot) in img.axes.iter_mut().enumerate() {
+        *slot = Some(AxisImage {
+            axis: a as u8,
+            scaling: AxisScaling {
+                adc_offset_code: 2048.0,
+                newton_per_code: 2.5,
+                dac_code_per_newton: 0.4,
+                dac_offset_code: 2048.0,
+            },
+            filter,
+            summary: AxisSummary::default(),
+        });
+    }
+    img
+}
+
+#[inline(never)]
+fn sample_isr_body(img: &CoeffImage, st: &mut SampleState, code: u16) -> u16 {
+    let (dac, flags) = process_sample([code, code ^ 0x155, code ^ 0x2AA], Mode::Compensate(img), st);
+    dac[0] ^ dac[1] ^ dac[2] ^ u16::from(flags.0)
+}
+
+fn report(name: &str, per_sample: f32, empty: f32, states: u32) {
+    let net = per_sample - empty;
+    if states > 0 {
+        hprintln!(
+            "{:<28} {:>8.2} per call  {:>8.2} net  {:>6.2} net/state",
+            name,
+            per_sample,
+            net,
+            net / states as f32
+        );
+    } else {
+        hprintln!("{:<28} {:>8.2} per call  {:>8.2} net", name, per_sample, net);
+    }
+}
+
+#[entry]
+fn main() -> ! {
+    let cp = match cortex_m::Peripherals::take() {
+        Some(p) => p,
+        None => dynocomp_qemu::fail("icount: peripherals taken"),
+    };
+    let ticks = Ticks::start(cp.SYST);
+    hprintln!("instructions per sample, mean of {} samples (QEMU -icount shift=0, SysTick 40 insn/tick)", SAMPLES);
+
+    let empty = measure(&ticks, empty_call);
+    report("empty call (loop overhead)", empty, empty, 0);
+    // Two functions that differ only by 100 NOPs: must differ by exactly 100.
+    let nops = measure(&ticks, nop200) - measure(&ticks, nop100);
+    hprintln!("{:<28} {:>8.2} (must be 100.00)", "calibration: 200-100 NOPs", nops);
+    if (nops - 100.0).abs() > 0.05 {
+        dynocomp_qemu::fail("icount: calibration failed, SysTick is not 40 instructions per tick (run with -icount shift=0)");
+    }
+
+    for &s in &[8usize, 16, 24] {
+        let f = kernel_filter(s, 0);
+        let mut st = AxisState::default();
+        let k = measure(&ticks, |u| kernel_step(black_box(&f), &mut st, u));
+        let name = match s {
+            8 => "kernel S8 (n=16)",
+            16 => "kernel S16 (n=32)",
+            _ => "kernel S24 (n=48)",
+        };
+        report(name, k, empty, 2 * s as u32);
+    }
+    report("dense eq.(6) S8 (17x17)", measure_dense::<17>(&ticks), empty, 16);
+    report("dense eq.(6) S16 (33x33)", measure_dense::<33>(&ticks), empty, 32);
+    report("dense eq.(6) S24 (49x49)", measure_dense::<49>(&ticks), empty, 48);
+    report("idsp df1 cascade S8", measure_idsp_df1::<8>(&ticks), empty, 16);
+    report("idsp df1 cascade S16", measure_idsp_df1::<16>(&ticks), empty, 32);
+    report("idsp df1 cascade S24", measure_idsp_df1::<24>(&ticks), empty, 48);
+    report("idsp df2t loop S8", measure_idsp_df2t::<8>(&ticks), empty, 16);
+    report("idsp df2t loop S16", measure_idsp_df2t::<16>(&ticks), empty, 32);
+    report("idsp df2t loop S24", measure_idsp_df2t::<24>(&ticks), empty, 48);
+
+    let full = kernel_filter(24, 24);
+    let mut st = AxisState::default();
+    report("kernel S24+F24 (n=72)", measure(&ticks, |u| kernel_step(black_box(&full), &mut st, u)), empty, 72);
+    let mut st = AxisState::default();
+    report(
+        "kernel S24+F24 guarded",
+        measure(&ticks, |u| kernel_step_guarded(black_box(&full), &mut st, u)),
+        empty,
+        72,
+    );
+    for (name, sections, taps) in [
+        ("process_sample 3x(S24+F24)", 24, 24),
+        ("process_sample 3x(S3+F19)", 3, 19),
+    ] {
+        let img = box_image(sections, taps);
+        let mut sst = SampleState::default();
+        report(
+            name,
+            measure(&ticks, |u| f32::from(sample_isr_body(black_box(&img), &mut sst, (u as i32 + 2048) as u16))),
+            empty,
+            0,
+        );
+    }
+    let f = kernel_filter(3, 19);
+    let mut st = AxisState::default();
+    report("kernel S3+F19 (n=25)", measure(&ticks, |u| kernel_step(black_box(&f), &mut st, u)), empty, 25);
+    success()
+}

@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# The README's test command: installs what the tests need, then runs them all.
+# - the thumbv7em-none-eabihf target (rust-toolchain.toml names it; older
+#   rustup versions do not install it by themselves),
+# - qemu-system-arm (Debian's package) for tests/qemu_bit_exact.rs, which
+#   runs the kernel on an emulated Cortex-M4F and fails if QEMU is missing.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+rustup target add thumbv7em-none-eabihf
+
+if ! command -v qemu-system-arm >/dev/null 2>&1; then
+    echo "test.sh: installing qemu-system-arm (Debian package)"
+    sudo=""
+    if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+    $sudo apt-get update -qq
+    $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends qemu-system-arm
+fi
+
+cargo test --workspace "$@"
