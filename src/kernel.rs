@@ -11,9 +11,16 @@
 //! ```
 //!
 //! The short FIR part `h_1..h_m` (m ≤ [`MAX_FIR`]) carries the compensator's
-//! fast poles (|z| ≲ 0.3, including the exact poles at z = 0 of a fixed-lag
+//! fast poles (|z| ≲ 0.5, including the exact poles at z = 0 of a fixed-lag
 //! smoother's delay chain), whose modal split would be ill-conditioned; their
 //! impulse response is exactly finite or negligible after m samples (m ≤ 24).
+//! A fast pole left in a section next to that cluster has a large residue
+//! that the taps cancel, and the sum's terms grow far beyond the output
+//! (the host tool checks this: `quantize::term_growth`).
+//!
+//! [`AxisFilter::step`] is the box's per-sample path;
+//! [`AxisFilter::process_block`] computes the same numbers, bit for bit,
+//! with the loops interchanged for offline throughput.
 //!
 //! Storing `A − I` instead of `A` keeps the pole positions of slow modes
 //! (e.g. 100 Hz at 51.2 kHz, where `A ≈ I`) representable in f32: the small
@@ -249,11 +256,133 @@ impl AxisFilter {
     }
 
     /// Filter a block: `output[k] = step(input[k])` for the common length of
-    /// the two slices.
+    /// the two slices (by [`process_block`](Self::process_block)).
     pub fn process(&self, state: &mut AxisState, input: &[f32], output: &mut [f32]) {
-        for (u, y) in input.iter().zip(output.iter_mut()) {
-            *y = self.step(state, *u);
+        self.process_block(state, input, output);
+    }
+
+    /// Filter a block, bit-identical to calling [`step`](Self::step) on each
+    /// sample in turn (`output[k] = step(input[k])` for the common length of
+    /// the slices; the state is left as after the last of those steps).
+    ///
+    /// The loops are interchanged for throughput (the module equation, same
+    /// arithmetic): every output starts as `d·u[k]`; then each section runs
+    /// over the whole block with its coefficients and state in registers,
+    /// adding `c_i·x_i[k]` to `output[k]`; then the FIR taps `h_j·u[k−j]`
+    /// are added to [`FIR_LANES`] outputs at a time held in registers (the
+    /// lanes are independent, so the compiler vectorizes them). Each `output[k]` so
+    /// receives exactly the additions of `step`, in the same order
+    /// (d·u, section 0, 1, …, tap 1, 2, …), and no product is fused, so the
+    /// result is the same to the bit (`tests/kernel_block.rs`). Sections run
+    /// four at a time (independent state recurrences in flight), the block in
+    /// chunks of [`BLOCK_CHUNK`] samples (the chunk stays in L1 cache).
+    ///
+    /// No guard: a non-finite or runaway output is returned as computed (use
+    /// [`process_block_guarded`](Self::process_block_guarded) for the
+    /// runaway guard of [`step_guarded`](Self::step_guarded)). No allocation,
+    /// no panics.
+    pub fn process_block(&self, state: &mut AxisState, input: &[f32], output: &mut [f32]) {
+        let n = input.len().min(output.len());
+        for (u, y) in input[..n].chunks(BLOCK_CHUNK).zip(output[..n].chunks_mut(BLOCK_CHUNK)) {
+            self.process_chunk(state, u, y);
         }
+    }
+
+    /// One chunk of [`process_block`](Self::process_block); `input` and
+    /// `output` have the same length.
+    fn process_chunk(&self, state: &mut AxisState, input: &[f32], output: &mut [f32]) {
+        for (y, u) in output.iter_mut().zip(input) {
+            *y = self.d * u;
+        }
+        let len = self.len.min(MAX_SECTIONS);
+        let (sections, states) = (&self.sections[..len], &mut state.x[..len]);
+        // Four at a time, then the remaining 1-3 together (never padded: an
+        // added zero section would turn a −0.0 output into +0.0).
+        for (s, x) in sections.chunks(4).zip(states.chunks_mut(4)) {
+            match s.len() {
+                4 => sections_over_block::<4>(s, x, input, output),
+                3 => sections_over_block::<3>(s, x, input, output),
+                2 => sections_over_block::<2>(s, x, input, output),
+                _ => sections_over_block::<1>(s, x, input, output),
+            }
+        }
+        // FIR: tap h_{j+1} multiplies u[k−1−j]: for k ≤ j that is
+        // fir_hist[j−k] (the previous chunk), otherwise input[k−1−j].
+        let m = self.fir_len.min(MAX_FIR);
+        let n = input.len();
+        let taps = &self.fir[..m];
+        // Samples k < m reach back into the history: tap by tap.
+        let head = m.min(n);
+        for (j, h) in taps.iter().enumerate() {
+            let from_hist = (j + 1).min(head);
+            for (y, past) in output[..from_hist].iter_mut().zip(state.fir_hist[..=j].iter().rev()) {
+                *y += h * past;
+            }
+            for (y, past) in output[from_hist..head].iter_mut().zip(input) {
+                *y += h * past;
+            }
+        }
+        // Samples k ≥ m: FIR_LANES outputs at a time stay in registers while
+        // every tap is added to them (in tap order for each sample).
+        let mut lanes = output[head..].chunks_exact_mut(FIR_LANES);
+        for (i, y) in (&mut lanes).enumerate() {
+            let k0 = head + i * FIR_LANES;
+            let mut acc = [0.0f32; FIR_LANES];
+            acc.copy_from_slice(y);
+            for (j, h) in taps.iter().enumerate() {
+                let past = &input[k0 - 1 - j..k0 - 1 - j + FIR_LANES];
+                for (a, u) in acc.iter_mut().zip(past) {
+                    *a += h * u;
+                }
+            }
+            y.copy_from_slice(&acc);
+        }
+        let rest = lanes.into_remainder();
+        let k0 = n - rest.len();
+        for (i, y) in rest.iter_mut().enumerate() {
+            for (j, h) in taps.iter().enumerate() {
+                *y += h * input[k0 + i - 1 - j];
+            }
+        }
+        // fir_hist[j] ← u[n−1−j]: the newest inputs, then the older history.
+        if n >= m {
+            for (dst, u) in state.fir_hist[..m].iter_mut().zip(input.iter().rev()) {
+                *dst = *u;
+            }
+        } else {
+            state.fir_hist.copy_within(..m - n, n);
+            for (dst, u) in state.fir_hist[..n].iter_mut().zip(input.iter().rev()) {
+                *dst = *u;
+            }
+        }
+    }
+
+    /// [`process_block`](Self::process_block) with the runaway guard of
+    /// [`step_guarded`](Self::step_guarded), with the sample path's
+    /// fallback: `output[k] = step_guarded(input[k]).unwrap_or(input[k])`
+    /// (the raw force where the guard reset the state). Returns the number of
+    /// resets in this block (also counted in `state.nonfinite_resets`).
+    ///
+    /// The guard cannot act inside the interchanged loops (a reset at sample
+    /// k changes every later sample of every section), so the block is run
+    /// from a copy of the state and checked afterwards; if any output is
+    /// non-finite or beyond [`RUNAWAY_LIMIT_N`], the copy is discarded and
+    /// the block is re-run sample by sample with `step_guarded`. Either way
+    /// the outputs and the final state are those of the per-sample path.
+    pub fn process_block_guarded(&self, state: &mut AxisState, input: &[f32], output: &mut [f32]) -> u32 {
+        let n = input.len().min(output.len());
+        let mut trial = *state;
+        self.process_block(&mut trial, &input[..n], &mut output[..n]);
+        // `!(a <= b)` is also true for NaN.
+        if output[..n].iter().all(|y| y.abs() <= RUNAWAY_LIMIT_N) {
+            *state = trial;
+            return 0;
+        }
+        let before = state.nonfinite_resets;
+        for (u, y) in input[..n].iter().zip(output[..n].iter_mut()) {
+            *y = self.step_guarded(state, *u).unwrap_or(*u);
+        }
+        state.nonfinite_resets.wrapping_sub(before)
     }
 
     /// Filter a block in place.
@@ -263,6 +392,39 @@ impl AxisFilter {
         }
     }
 }
+
+/// Samples per chunk of [`AxisFilter::process_block`]: input and output of a
+/// chunk (2 × 2 KiB) stay in L1 cache while every section and tap passes
+/// over them.
+pub const BLOCK_CHUNK: usize = 512;
+
+/// `N` sections (`sections.len() == N`) of the module equation over a whole block: `output[k] +=
+/// c_i·x_i[k]` for i = 0..N in order, then `x_i` advances, exactly as in
+/// [`AxisFilter::step`] (same expressions, so the same roundings). Running N
+/// independent sections per sample keeps N state recurrences in flight.
+#[inline(always)]
+fn sections_over_block<const N: usize>(sections: &[Section], states: &mut [[f32; 2]], input: &[f32], output: &mut [f32]) {
+    let s: [Section; N] = core::array::from_fn(|i| sections.get(i).copied().unwrap_or_default());
+    let mut x: [[f32; 2]; N] = core::array::from_fn(|i| states.get(i).copied().unwrap_or_default());
+    for (y, &u) in output.iter_mut().zip(input) {
+        let mut acc = *y;
+        for (s, x) in s.iter().zip(x.iter_mut()) {
+            let [x1, x2] = *x;
+            acc += s.c[0] * x1 + s.c[1] * x2;
+            let dx1 = s.delta[0] * x1 + s.delta[1] * x2 + s.b[0] * u;
+            let dx2 = s.delta[2] * x1 + s.delta[3] * x2 + s.b[1] * u;
+            *x = [x1 + dx1, x2 + dx2];
+        }
+        *y = acc;
+    }
+    for (dst, x) in states.iter_mut().zip(x) {
+        *dst = x;
+    }
+}
+
+/// Outputs per register block of the FIR part in
+/// [`AxisFilter::process_block`].
+const FIR_LANES: usize = 8;
 
 /// Filter memory of one axis (state, no configuration).
 #[derive(Clone, Copy, Debug, PartialEq)]

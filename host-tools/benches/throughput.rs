@@ -68,10 +68,20 @@ fn bench_compensate(c: &mut Criterion) {
     g.throughput(Throughput::Elements(input.len() as u64));
     let label_x = format!("example x (S{}+F{})", example_x.sections().len(), example_x.fir().len());
     for (name, f) in [(label_x.as_str(), &example_x), ("S24+F24", &full)] {
-        g.bench_function(name, |b| {
+        g.bench_function(format!("block {name}"), |b| {
             b.iter(|| {
                 let mut st = AxisState::default();
-                f.process(&mut st, black_box(&input), &mut out);
+                f.process_block(&mut st, black_box(&input), &mut out);
+                black_box(&out);
+            })
+        });
+        // The box's path: `step` per sample (bit-identical outputs).
+        g.bench_function(format!("step {name}"), |b| {
+            b.iter(|| {
+                let mut st = AxisState::default();
+                for (u, y) in black_box(&input).iter().zip(out.iter_mut()) {
+                    *y = f.step(&mut st, *u);
+                }
                 black_box(&out);
             })
         });

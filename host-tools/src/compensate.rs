@@ -1,10 +1,11 @@
 //! Offline compensation of recorded forces through the core kernel
-//! (`dynocomp compensate`), bit-exact with the box: the same f32 kernel code,
-//! the same coefficients, sample by sample.
+//! (`dynocomp compensate`), bit-exact with the box: the same f32 kernel code
+//! (its block path, bit-identical to the box's per-sample `step`), the same
+//! coefficients; one thread per axis.
 
 use anyhow::{bail, Result};
 use dynocomp_core::image::CoeffImage;
-use dynocomp_core::kernel::AxisState;
+use dynocomp_core::kernel::{AxisFilter, AxisState};
 
 use crate::frf::axis_name;
 use crate::io::signal_csv::SignalRecord;
@@ -40,7 +41,7 @@ pub fn check_sample_rate(image: &CoeffImage, rec: &SignalRecord, source: &str) -
 /// last L output samples are estimates made with that held input.
 pub fn compensate_record(image: &CoeffImage, rec: &SignalRecord, raw_timing: bool, source: &str) -> Result<SignalRecord> {
     let latency = if raw_timing { 0 } else { usize::from(image.latency_samples) };
-    let mut channels = Vec::with_capacity(rec.channels.len());
+    let mut jobs = Vec::with_capacity(rec.channels.len());
     for (axis, samples) in &rec.channels {
         let Some(axis_img) = image.axes.get(*axis).copied().flatten() else {
             bail!(
@@ -49,21 +50,41 @@ pub fn compensate_record(image: &CoeffImage, rec: &SignalRecord, raw_timing: boo
                 image.axes.iter().flatten().map(|a| axis_name(a.axis as usize)).collect::<Vec<_>>().join(", ")
             );
         };
-        let filter = axis_img.filter;
-        let mut state = AxisState::default();
-        let mut out = Vec::with_capacity(samples.len());
-        let last = samples.last().copied().unwrap_or(0.0);
-        let input = samples.iter().copied().chain(std::iter::repeat(last).take(latency));
-        for (k, u) in input.enumerate() {
-            let y = filter.step(&mut state, u as f32);
-            if !y.is_finite() {
-                bail!("{source}: compensated f{} became non-finite at sample {k}; the image is unusable for this record", axis_name(*axis));
-            }
-            if k >= latency {
-                out.push(f64::from(y));
-            }
+        jobs.push((*axis, axis_img.filter, samples));
+    }
+    // One thread per axis (the axes are independent).
+    let results: Vec<(usize, Result<Vec<f64>, usize>)> = std::thread::scope(|scope| {
+        let handles: Vec<_> = jobs
+            .iter()
+            .map(|(axis, filter, samples)| (*axis, scope.spawn(move || compensate_axis(filter, samples, latency))))
+            .collect();
+        handles
+            .into_iter()
+            .map(|(axis, h)| (axis, h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))))
+            .collect()
+    });
+    let mut channels = Vec::with_capacity(results.len());
+    for (axis, out) in results {
+        match out {
+            Ok(out) => channels.push((axis, out)),
+            Err(k) => bail!("{source}: compensated f{} became non-finite at sample {k}; the image is unusable for this record", axis_name(axis)),
         }
-        channels.push((*axis, out));
     }
     Ok(SignalRecord { t_s: rec.t_s.clone(), channels })
+}
+
+/// One axis through the core kernel's block path (bit-identical to stepping
+/// it sample by sample, as the box does), the input followed by `latency`
+/// copies of its last value, and the first `latency` outputs dropped.
+/// Err(k): the first sample k (counting the fed samples) whose output is
+/// non-finite.
+fn compensate_axis(filter: &AxisFilter, samples: &[f64], latency: usize) -> Result<Vec<f64>, usize> {
+    let last = samples.last().copied().unwrap_or(0.0);
+    let input: Vec<f32> = samples.iter().copied().chain(std::iter::repeat_n(last, latency)).map(|u| u as f32).collect();
+    let mut y = vec![0.0f32; input.len()];
+    filter.process_block(&mut AxisState::default(), &input, &mut y);
+    if let Some(k) = y.iter().position(|v| !v.is_finite()) {
+        return Err(k);
+    }
+    Ok(y.iter().skip(latency).map(|&v| f64::from(v)).collect())
 }

@@ -20,7 +20,7 @@ use std::f64::consts::PI;
 use crate::fit::vf::{coherence_weights, vector_fit, VfOptions};
 use crate::fit::{relative_rms_error, PoleResidueModel};
 use crate::frf::{axis_name, AxisFrf};
-use crate::kalman::{self, KalmanDesign};
+use crate::kalman::{self, KalmanDesign, StateSpace};
 use crate::quantize::{self, Verification};
 use crate::realize::{self, ModalRealization};
 
@@ -310,25 +310,8 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         }
         None => choose_q(&obj, &mut q_trace).with_context(|| format!("axis {name}"))?,
     };
-    // Of the valid realizations, keep the one whose f32 rounding deviates
-    // least from the f64 design (each is fully verified by `quantize`).
-    let candidates = realize::realize_candidates(&kal.compensator).with_context(|| format!("axis {name}: realization"))?;
-    let mut best: Option<(ModalRealization, AxisFilter, Verification)> = None;
-    let mut last_err = None;
-    for r in candidates {
-        match quantize::quantize(&r, &kal.compensator, opts.fs_hz, band.1) {
-            Ok((f, v)) => {
-                if best.as_ref().is_none_or(|b| v.freq_error < b.2.freq_error) {
-                    best = Some((r, f, v));
-                }
-            }
-            Err(e) => last_err = Some(e),
-        }
-    }
-    let Some((realization, filter, verification)) = best else {
-        let e = last_err.unwrap_or_else(|| anyhow::anyhow!("no realization"));
-        return Err(e).with_context(|| format!("axis {name}: quantization"));
-    };
+    let (realization, filter, verification) =
+        choose_realization(&kal.compensator, opts.fs_hz, band.1).with_context(|| format!("axis {name}"))?;
     let fs = opts.fs_hz;
     // Against the fitted model, not the raw lines: an H1 line with γ² = 0.97
     // from 7 averages has ~5 % random error, as large as the tolerance.
@@ -349,4 +332,26 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         predicted_error: j.sqrt(),
         q_trace,
     })
+}
+
+/// Realize the compensator `ss` and round it to f32: of the valid
+/// realizations (one per fast/slow pole split, `realize::realize_candidates`),
+/// each fully verified by `quantize` over 0..`f_band_hz`, keep the one whose
+/// f32 kernel deviates least from the f64 design, coefficients and kernel
+/// arithmetic (`Verification::score`).
+pub fn choose_realization(ss: &StateSpace, fs_hz: f64, f_band_hz: f64) -> Result<(ModalRealization, AxisFilter, Verification)> {
+    let candidates = realize::realize_candidates(ss).context("realization")?;
+    let mut best: Option<(ModalRealization, AxisFilter, Verification)> = None;
+    let mut last_err = None;
+    for r in candidates {
+        match quantize::quantize(&r, ss, fs_hz, f_band_hz) {
+            Ok((f, v)) => {
+                if best.as_ref().is_none_or(|b| v.score() < b.2.score()) {
+                    best = Some((r, f, v));
+                }
+            }
+            Err(e) => last_err = Some(e),
+        }
+    }
+    best.ok_or_else(|| last_err.unwrap_or_else(|| anyhow::anyhow!("no realization")).context("quantization"))
 }

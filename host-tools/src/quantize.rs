@@ -37,7 +37,63 @@ pub struct Verification {
     pub freq_error: f64,
     /// Largest |y32 − y64| / rms(y64) of the time-domain run.
     pub time_error: f64,
+    /// Scaling of the realization: the largest ℓ1 norm of the impulse
+    /// response of one part (a section's c_i·x_i, the FIR sum, or d) over
+    /// the ℓ1 norm of the whole filter's impulse response (see
+    /// [`term_growth`]).
+    pub term_growth: f64,
 }
+
+impl Verification {
+    /// The figure candidates are ranked by: the larger of the frequency
+    /// error (coefficient rounding) and the time error (coefficient and
+    /// arithmetic rounding through the real kernel).
+    pub fn score(&self) -> f64 {
+        self.freq_error.max(self.time_error)
+    }
+}
+
+/// How much larger than the output a part of the kernel's sum can get:
+/// max_part ‖g_part‖₁ / ‖h‖₁, with g_part the impulse response of one part
+/// of the module equation of `dynocomp_core::kernel` (a section's c_i·x_i,
+/// the FIR taps, or d) and h = d + Σ parts that of the filter (each
+/// ‖·‖₁ is the largest output of that part for |u| ≤ 1). The kernel's f32
+/// rounding error is ≈ ε_f32 times the sum of the parts' magnitudes, so
+/// this factor multiplies it; 1 means no part exceeds the output.
+/// Evaluated in f64 from the f32 coefficients, until every section's state
+/// has decayed by 10⁻¹⁴ (at most [`TERM_GROWTH_MAX_LEN`] samples).
+pub fn term_growth(f: &AxisFilter) -> f64 {
+    let secs = f.sections();
+    let mut x: Vec<[f64; 2]> = secs.iter().map(|s| s.b.map(f64::from)).collect();
+    let x0: f64 = x.iter().map(|v| v[0].abs() + v[1].abs()).fold(0.0, f64::max);
+    let mut l1_parts: Vec<f64> = vec![0.0; secs.len()];
+    let fir = f.fir();
+    let mut l1_total = f64::from(f.d()).abs();
+    for j in 1..=TERM_GROWTH_MAX_LEN {
+        // h_j = Σ_i c_i A_i^{j−1} b_i + h_fir_j
+        let mut h = fir.get(j - 1).map_or(0.0, |v| f64::from(*v));
+        let mut alive = 0.0f64;
+        for ((s, xi), l1) in secs.iter().zip(x.iter_mut()).zip(l1_parts.iter_mut()) {
+            let [c1, c2] = s.c.map(f64::from);
+            let g = c1 * xi[0] + c2 * xi[1];
+            *l1 += g.abs();
+            h += g;
+            let [d11, d12, d21, d22] = s.delta.map(f64::from);
+            *xi = [xi[0] + d11 * xi[0] + d12 * xi[1], xi[1] + d21 * xi[0] + d22 * xi[1]];
+            alive = alive.max(xi[0].abs() + xi[1].abs());
+        }
+        l1_total += h.abs();
+        if j > fir.len() && alive <= 1e-14 * x0 {
+            break;
+        }
+    }
+    let l1_fir: f64 = fir.iter().map(|v| f64::from(*v).abs()).sum();
+    let worst = l1_parts.iter().copied().fold(l1_fir.max(f64::from(f.d()).abs()), f64::max);
+    worst / l1_total.max(f64::MIN_POSITIVE)
+}
+
+/// Longest impulse response evaluated by [`term_growth`] (samples).
+pub const TERM_GROWTH_MAX_LEN: usize = 1 << 20;
 
 fn round_section(s: &crate::realize::Section64) -> Section {
     Section {
@@ -145,6 +201,7 @@ pub fn quantize(real: &ModalRealization, ss: &StateSpace, fs_hz: f64, f_band_hz:
             max_pole_shift: max_shift,
             freq_error,
             time_error,
+            term_growth: term_growth(&filter),
         },
     ))
 }

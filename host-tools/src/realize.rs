@@ -94,8 +94,18 @@ pub fn section_poles(delta: [f64; 4]) -> [Complex64; 2] {
 /// Poles at or beyond this modulus always go to the modal sections (an FIR of
 /// 24 taps cannot carry them: 0.6^24 ≈ 5e-6).
 const RHO_FAST_MAX: f64 = 0.6;
-/// Required relative size of the FIR truncation tail.
+/// Required relative size of the FIR truncation tail (of Σ|h_j|).
 const FIR_TAIL_TOL: f64 = 1e-7;
+/// Largest relative truncation tail accepted at the full length
+/// [`MAX_FIR`], when [`FIR_TAIL_TOL`] would need more taps. The tail adds at
+/// most tail·max|u| to the output, ≤ 1e-6 of Σ|h_j|·max|u| here: the size
+/// of f32 rounding of a well-scaled filter (16 ε_f32). It lets a fast pole
+/// pair up to |z| ≈ 0.5 join the FIR instead of a section; split from a
+/// cluster of poles near z = 0 (the smoother's delay chain), such a pair has
+/// a residue ∝ 1/|z|^(cluster size) that the FIR taps must cancel, so its
+/// section and the taps sum terms 10³ times the output (issue #6: axis y of
+/// the bundled example, 1.6e-4 of peak-to-peak lost to f32 rounding).
+const FIR_TAIL_TOL_FULL: f64 = 1e-6;
 /// Largest acceptable modal-transform condition number.
 const MAX_MODAL_CONDITION: f64 = 1e8;
 
@@ -285,8 +295,12 @@ fn realize_split(ss: &StateSpace, rho: f64) -> Result<ModalRealization> {
             }
             len = l + 1;
         }
+        let full_tail: f64 = taps[MAX_FIR..].iter().map(|h| h.norm()).sum();
+        if len > MAX_FIR && full_tail <= FIR_TAIL_TOL_FULL * total {
+            len = MAX_FIR;
+        }
         if len > MAX_FIR {
-            let tail: f64 = taps[MAX_FIR..].iter().map(|h| h.norm()).sum();
+            let tail = full_tail;
             bail!(
                 "realization: the fast poles need more than {MAX_FIR} FIR taps (tail {:.1e} of the response); reduce the lag",
                 tail / total
