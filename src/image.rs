@@ -10,6 +10,14 @@
 //! (counts, reserved bytes, finiteness and stability of each section) →
 //! header and scaling ranges. A single flipped bit anywhere is caught by the
 //! CRC-32. `docs/image-format.md` lists every step.
+//!
+//! Two kinds of image share the envelope (magic, header, CRC):
+//! * version 1, [`CoeffImage`]: one compensator per axis, what the box runs;
+//! * version 2, [`ParallelImage`]: parallel elaboration (paper §3.3), one
+//!   compensator per band and axis plus the band edges. **Offline only**:
+//!   [`CoeffImage::parse`] and [`CoeffImage::parse_prefix`] refuse it from its
+//!   version field ([`ImageError::ParallelOfflineOnly`]), so the box never
+//!   runs any part of it, and it always carries [`FLAG_OFFLINE_ONLY`].
 
 use crate::kernel::{AxisFilter, FilterError, Section, MAX_FIR, MAX_SECTIONS};
 use crate::AXES;
@@ -32,6 +40,18 @@ pub const CRC_LEN: usize = 4;
 pub const MAX_IMAGE_LEN: usize = HEADER_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN + MAX_FIR * TAP_LEN) + CRC_LEN;
 /// Smallest valid image (1 axis, 0 sections, no taps).
 pub const MIN_IMAGE_LEN: usize = HEADER_LEN + AXIS_HEADER_LEN + CRC_LEN;
+
+/// Format version of a parallel-elaboration image ([`ParallelImage`]):
+/// several band compensators per axis, offline only.
+pub const PARALLEL_FORMAT_VERSION: u16 = 2;
+/// Most bands in a parallel-elaboration image.
+pub const MAX_BANDS: usize = 8;
+/// Size of one band record of a parallel image (lo_hz, hi_hz as f32).
+pub const BAND_RECORD_LEN: usize = 8;
+/// Largest possible parallel image ([`MAX_BANDS`] bands × 3 full axes). It
+/// is larger than a flash slot: parallel images only live in files.
+pub const MAX_PARALLEL_IMAGE_LEN: usize =
+    HEADER_LEN + MAX_BANDS * (BAND_RECORD_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN + MAX_FIR * TAP_LEN)) + CRC_LEN;
 
 /// Accepted sample-rate range of an image (Hz). The box itself narrows this
 /// to what its hardware supports.
@@ -243,6 +263,24 @@ pub enum ImageError {
         /// Bytes needed.
         needed: u32,
     },
+    /// A parallel-elaboration image (format version 2) where a box-runnable
+    /// image (version 1) is expected: it is offline only, the box never runs it.
+    ParallelOfflineOnly,
+    /// A parallel image without [`FLAG_OFFLINE_ONLY`].
+    ParallelNotOfflineOnly,
+    /// A parallel image with 0 or more than [`MAX_BANDS`] bands.
+    BadBandCount(u8),
+    /// A band's edges are non-finite, empty, above Nyquist, or not above the
+    /// previous band's upper edge.
+    BadBand {
+        /// Band index (0 = lowest).
+        band: u8,
+    },
+    /// A band covers different axes than the first band.
+    BandAxesDiffer {
+        /// Band index.
+        band: u8,
+    },
 }
 
 impl core::fmt::Display for ImageError {
@@ -270,6 +308,14 @@ impl core::fmt::Display for ImageError {
             NonFiniteCoefficient { axis, section } => write!(f, "axis {axis}: section {section} has a non-finite coefficient"),
             UnstableSection { axis, section } => write!(f, "axis {axis}: section {section} has a pole on or outside the unit circle"),
             BufferTooSmall { needed } => write!(f, "output buffer too small, need {needed} bytes"),
+            ParallelOfflineOnly => write!(
+                f,
+                "parallel-elaboration image (format {PARALLEL_FORMAT_VERSION}): offline only, run it with `dynocomp compensate`; the box never runs it"
+            ),
+            ParallelNotOfflineOnly => write!(f, "parallel-elaboration image without the offline-only flag"),
+            BadBandCount(n) => write!(f, "parallel image with {n} bands (allowed 1..={MAX_BANDS})"),
+            BadBand { band } => write!(f, "band {band}: edges non-finite, empty, above Nyquist or overlapping the previous band"),
+            BandAxesDiffer { band } => write!(f, "band {band} covers other axes than band 0"),
         }
     }
 }
@@ -324,16 +370,14 @@ impl Writer<'_> {
     }
 }
 
+/// Length of one axis block with its sections and taps (bytes).
+fn axis_block_len(a: &AxisImage) -> usize {
+    AXIS_HEADER_LEN + a.filter.sections().len() * SECTION_LEN + a.filter.fir().len() * TAP_LEN
+}
+
 /// Total image length of an image (header, axis blocks, sections, taps, CRC).
 pub fn encoded_len(image: &CoeffImage) -> usize {
-    HEADER_LEN
-        + image
-            .axes
-            .iter()
-            .flatten()
-            .map(|a| AXIS_HEADER_LEN + a.filter.sections().len() * SECTION_LEN + a.filter.fir().len() * TAP_LEN)
-            .sum::<usize>()
-        + CRC_LEN
+    HEADER_LEN + image.axes.iter().flatten().map(axis_block_len).sum::<usize>() + CRC_LEN
 }
 
 /// Read the declared total length from an image header without validating
@@ -343,14 +387,292 @@ pub fn declared_len(bytes: &[u8]) -> Option<usize> {
     r.u32().map(|v| v as usize)
 }
 
+/// Read the format version (bytes 4..6) of something that starts with the
+/// image magic; `None` if it does not.
+pub fn peek_version(bytes: &[u8]) -> Option<u16> {
+    if bytes.get(..4) != Some(&MAGIC[..]) {
+        return None;
+    }
+    Reader { buf: bytes, pos: 4 }.u16()
+}
+
+/// The fields of the 64-byte header after `total_len` (offsets 12..64).
+struct Header {
+    fs_hz: u32,
+    latency_samples: u16,
+    mask: u8,
+    flags: u8,
+    method_code: u8,
+    /// Bytes 21..24: reserved (zero) in version 1; byte 21 is the band count
+    /// in version 2.
+    extra: [u8; 3],
+    source_sha256: [u8; 32],
+    created_unix_s: u64,
+}
+
+/// Check everything up to and including the CRC (steps 1-8 of
+/// `docs/image-format.md` §8) and return the body (all bytes before the CRC).
+fn envelope(bytes: &[u8], version: u16, max_len: usize) -> Result<&[u8], ImageError> {
+    let have = bytes.len() as u32;
+    if bytes.len() < MIN_IMAGE_LEN {
+        return Err(ImageError::Truncated { needed: MIN_IMAGE_LEN as u32, have });
+    }
+    let mut r = Reader { buf: bytes, pos: 0 };
+    let truncated = ImageError::Truncated { needed: MIN_IMAGE_LEN as u32, have };
+    if r.bytes::<4>() != Some(MAGIC) {
+        return Err(ImageError::BadMagic);
+    }
+    let v = r.u16().ok_or(truncated)?;
+    if v != version {
+        return Err(if v == PARALLEL_FORMAT_VERSION { ImageError::ParallelOfflineOnly } else { ImageError::UnsupportedVersion(v) });
+    }
+    let header_len = r.u16().ok_or(truncated)?;
+    if usize::from(header_len) != HEADER_LEN {
+        return Err(ImageError::BadHeaderLength(header_len));
+    }
+    let total = r.u32().ok_or(truncated)?;
+    if (total as usize) < MIN_IMAGE_LEN || total as usize > max_len {
+        return Err(ImageError::BadLength(total));
+    }
+    if bytes.len() < total as usize {
+        return Err(ImageError::Truncated { needed: total, have });
+    }
+    if bytes.len() > total as usize {
+        return Err(ImageError::BadLength(total));
+    }
+    let body_len = total as usize - CRC_LEN;
+    let body = bytes.get(..body_len).ok_or(truncated)?;
+    let stored = Reader { buf: bytes, pos: body_len }.u32().ok_or(truncated)?;
+    let computed = CRC32.checksum(body);
+    if stored != computed {
+        return Err(ImageError::BadCrc { stored, computed });
+    }
+    Ok(body)
+}
+
+/// Read header bytes 12..64 (the envelope has been checked).
+fn read_header(r: &mut Reader<'_>, bad_len: ImageError) -> Result<Header, ImageError> {
+    Ok(Header {
+        fs_hz: r.u32().ok_or(bad_len)?,
+        latency_samples: r.u16().ok_or(bad_len)?,
+        mask: r.u8().ok_or(bad_len)?,
+        flags: r.u8().ok_or(bad_len)?,
+        method_code: r.u8().ok_or(bad_len)?,
+        extra: r.bytes::<3>().ok_or(bad_len)?,
+        source_sha256: r.bytes::<32>().ok_or(bad_len)?,
+        created_unix_s: r.u64().ok_or(bad_len)?,
+    })
+}
+
+/// Write the 64-byte header.
+fn write_header(w: &mut Writer<'_>, version: u16, len: usize, h: &Header) {
+    w.put(&MAGIC);
+    w.put(&version.to_le_bytes());
+    w.put(&(HEADER_LEN as u16).to_le_bytes());
+    w.put(&(len as u32).to_le_bytes());
+    w.put(&h.fs_hz.to_le_bytes());
+    w.put(&h.latency_samples.to_le_bytes());
+    w.put(&[h.mask, h.flags, h.method_code]);
+    w.put(&h.extra);
+    w.put(&h.source_sha256);
+    w.put(&h.created_unix_s.to_le_bytes());
+}
+
+/// The CRC stored at the end of the `n` encoded bytes in `buf` (0 if the
+/// encoding failed): the image id.
+fn stored_crc(buf: &[u8], n: Result<usize, ImageError>) -> u32 {
+    n.ok()
+        .and_then(|n| Reader { buf, pos: n.checked_sub(CRC_LEN)? }.u32())
+        .unwrap_or(0)
+}
+
+/// Append the CRC of everything written so far; returns the total length.
+fn finish_crc(w: &mut Writer<'_>) -> usize {
+    let crc = CRC32.checksum(w.buf.get(..w.pos).unwrap_or(&[]));
+    w.put(&crc.to_le_bytes());
+    w.pos
+}
+
+/// Write one axis block (header, sections, taps).
+fn write_axis(w: &mut Writer<'_>, a: &AxisImage) {
+    let secs = a.filter.sections();
+    let taps = a.filter.fir();
+    w.put(&[a.axis, secs.len() as u8, taps.len() as u8, 0]);
+    w.put(&a.summary.model_order.to_le_bytes());
+    w.put(&[0, 0]);
+    let s = &a.scaling;
+    for v in [s.adc_offset_code, s.newton_per_code, s.dac_code_per_newton, s.dac_offset_code, a.filter.d()] {
+        w.put(&v.to_le_bytes());
+    }
+    let m = &a.summary;
+    for v in [m.fit_nrmse, m.flat_lo_hz, m.flat_hi_hz, m.noise_gain] {
+        w.put(&v.to_le_bytes());
+    }
+    w.put(&m.q.to_le_bytes());
+    w.put(&m.r.to_le_bytes());
+    for sec in secs {
+        for v in sec.delta.iter().chain(&sec.b).chain(&sec.c) {
+            w.put(&v.to_le_bytes());
+        }
+    }
+    for h in taps {
+        w.put(&h.to_le_bytes());
+    }
+}
+
+/// Read one axis block that must belong to axis `expected` (checks 12a-12g).
+fn read_axis(r: &mut Reader<'_>, expected: u8, bad_len: ImageError) -> Result<AxisImage, ImageError> {
+    let axis = r.u8().ok_or(bad_len)?;
+    if axis != expected {
+        return Err(ImageError::AxisMismatch { expected, found: axis });
+    }
+    let count = r.u8().ok_or(bad_len)?;
+    if usize::from(count) > MAX_SECTIONS {
+        return Err(ImageError::TooManySections { axis, count });
+    }
+    let n_taps = r.u8().ok_or(bad_len)?;
+    if usize::from(n_taps) > MAX_FIR {
+        return Err(ImageError::TooManyTaps { axis, count: n_taps });
+    }
+    if r.u8().ok_or(bad_len)? != 0 {
+        return Err(ImageError::ReservedNotZero);
+    }
+    let model_order = r.u16().ok_or(bad_len)?;
+    if r.u16().ok_or(bad_len)? != 0 {
+        return Err(ImageError::ReservedNotZero);
+    }
+    let scaling = AxisScaling {
+        adc_offset_code: r.f32().ok_or(bad_len)?,
+        newton_per_code: r.f32().ok_or(bad_len)?,
+        dac_code_per_newton: r.f32().ok_or(bad_len)?,
+        dac_offset_code: r.f32().ok_or(bad_len)?,
+    };
+    let d = r.f32().ok_or(bad_len)?;
+    let summary = AxisSummary {
+        model_order,
+        fit_nrmse: r.f32().ok_or(bad_len)?,
+        flat_lo_hz: r.f32().ok_or(bad_len)?,
+        flat_hi_hz: r.f32().ok_or(bad_len)?,
+        noise_gain: r.f32().ok_or(bad_len)?,
+        q: r.f64().ok_or(bad_len)?,
+        r: r.f64().ok_or(bad_len)?,
+    };
+    let mut sections = [Section::default(); MAX_SECTIONS];
+    for sec in sections.iter_mut().take(usize::from(count)) {
+        let mut v = [0f32; 8];
+        for x in v.iter_mut() {
+            *x = r.f32().ok_or(bad_len)?;
+        }
+        *sec = Section {
+            delta: [v[0], v[1], v[2], v[3]],
+            b: [v[4], v[5]],
+            c: [v[6], v[7]],
+        };
+    }
+    let mut taps = [0f32; MAX_FIR];
+    for h in taps.iter_mut().take(usize::from(n_taps)) {
+        *h = r.f32().ok_or(bad_len)?;
+    }
+    let secs = sections.get(..usize::from(count)).unwrap_or(&[]);
+    let fir = taps.get(..usize::from(n_taps)).unwrap_or(&[]);
+    let filter = AxisFilter::with_fir(secs, d, fir).map_err(|e| match e {
+        FilterError::TooManySections => ImageError::TooManySections { axis, count },
+        FilterError::NonFinite(s) => ImageError::NonFiniteCoefficient {
+            axis,
+            section: if s >= MAX_SECTIONS { 255 } else { s as u8 },
+        },
+        FilterError::Unstable(s) => ImageError::UnstableSection { axis, section: s as u8 },
+        FilterError::TooManyTaps => ImageError::TooManyTaps { axis, count: n_taps },
+        FilterError::NonFiniteTap(t) => ImageError::NonFiniteTap { axis, tap: t as u8 },
+    })?;
+    Ok(AxisImage { axis, scaling, filter, summary })
+}
+
+/// Read the axis blocks of `mask` (x, then y, then z).
+fn read_axes(r: &mut Reader<'_>, mask: u8, bad_len: ImageError) -> Result<[Option<AxisImage>; AXES], ImageError> {
+    let mut axes: [Option<AxisImage>; AXES] = [None; AXES];
+    for (i, slot) in axes.iter_mut().enumerate() {
+        if mask & (1 << i) != 0 {
+            *slot = Some(read_axis(r, i as u8, bad_len)?);
+        }
+    }
+    Ok(axes)
+}
+
+/// Axis mask of an axis array: bit i set when axis i is present.
+fn mask_of(axes: &[Option<AxisImage>; AXES]) -> u8 {
+    axes.iter()
+        .enumerate()
+        .filter(|(_, a)| a.is_some())
+        .fold(0, |m, (i, _)| m | (1 << i))
+}
+
+/// Header checks shared by both versions (steps 14-16).
+fn validate_header(fs_hz: u32, latency_samples: u16, flags: u8) -> Result<(), ImageError> {
+    if !FS_RANGE_HZ.contains(&fs_hz) {
+        return Err(ImageError::SampleRateOutOfRange(fs_hz));
+    }
+    if latency_samples > MAX_LATENCY_SAMPLES {
+        return Err(ImageError::LatencyOutOfRange(latency_samples));
+    }
+    if flags & !KNOWN_FLAGS != 0 {
+        return Err(ImageError::UnknownFlags(flags));
+    }
+    Ok(())
+}
+
+/// Per-axis semantic checks (steps 17-18 plus the repeated structural ones).
+fn validate_axes(axes: &[Option<AxisImage>; AXES]) -> Result<(), ImageError> {
+    if mask_of(axes) == 0 {
+        return Err(ImageError::BadAxisMask(0));
+    }
+    for (i, a) in axes.iter().enumerate() {
+        let Some(a) = a else { continue };
+        let axis = i as u8;
+        if a.axis != axis {
+            return Err(ImageError::AxisMismatch { expected: axis, found: a.axis });
+        }
+        let s = &a.scaling;
+        let finite = [s.adc_offset_code, s.newton_per_code, s.dac_code_per_newton, s.dac_offset_code]
+            .iter()
+            .all(|v| v.is_finite());
+        if !finite || s.newton_per_code == 0.0 || s.dac_code_per_newton == 0.0 {
+            return Err(ImageError::BadScaling { axis });
+        }
+        let m = &a.summary;
+        let ok = [m.fit_nrmse, m.flat_lo_hz, m.flat_hi_hz, m.noise_gain]
+            .iter()
+            .all(|v| v.is_finite() && *v >= 0.0)
+            && m.q.is_finite()
+            && m.q >= 0.0
+            && m.r.is_finite()
+            && m.r >= 0.0;
+        if !ok {
+            return Err(ImageError::BadSummary { axis });
+        }
+        if !a.filter.d().is_finite() {
+            return Err(ImageError::NonFiniteCoefficient { axis, section: 255 });
+        }
+        if let Some(tap) = a.filter.fir().iter().position(|h| !h.is_finite()) {
+            return Err(ImageError::NonFiniteTap { axis, tap: tap as u8 });
+        }
+        for (j, sec) in a.filter.sections().iter().enumerate() {
+            let section = j as u8;
+            if !sec.is_finite() {
+                return Err(ImageError::NonFiniteCoefficient { axis, section });
+            }
+            if !sec.is_stable() {
+                return Err(ImageError::UnstableSection { axis, section });
+            }
+        }
+    }
+    Ok(())
+}
+
 impl CoeffImage {
     /// Axis mask: bit i set when axis i is present.
     pub fn axis_mask(&self) -> u8 {
-        self.axes
-            .iter()
-            .enumerate()
-            .filter(|(_, a)| a.is_some())
-            .fold(0, |m, (i, _)| m | (1 << i))
+        mask_of(&self.axes)
     }
 
     /// Whether the image is marked offline-only (never run in the box).
@@ -361,9 +683,20 @@ impl CoeffImage {
     /// An identifier of the image's content: its CRC-32.
     pub fn id(&self) -> u32 {
         let mut buf = [0u8; MAX_IMAGE_LEN];
-        match self.encode(&mut buf) {
-            Ok(n) => u32::from_le_bytes([buf[n - 4], buf[n - 3], buf[n - 2], buf[n - 1]]),
-            Err(_) => 0,
+        let n = self.encode(&mut buf);
+        stored_crc(&buf, n)
+    }
+
+    fn header(&self) -> Header {
+        Header {
+            fs_hz: self.fs_hz,
+            latency_samples: self.latency_samples,
+            mask: self.axis_mask(),
+            flags: self.flags,
+            method_code: self.method as u8,
+            extra: [0; 3],
+            source_sha256: self.source_sha256,
+            created_unix_s: self.created_unix_s,
         }
     }
 
@@ -378,239 +711,49 @@ impl CoeffImage {
             return Err(ImageError::BufferTooSmall { needed: len as u32 });
         }
         let mut w = Writer { buf, pos: 0 };
-        w.put(&MAGIC);
-        w.put(&FORMAT_VERSION.to_le_bytes());
-        w.put(&(HEADER_LEN as u16).to_le_bytes());
-        w.put(&(len as u32).to_le_bytes());
-        w.put(&self.fs_hz.to_le_bytes());
-        w.put(&self.latency_samples.to_le_bytes());
-        w.put(&[self.axis_mask(), self.flags, self.method as u8, 0, 0, 0]);
-        w.put(&self.source_sha256);
-        w.put(&self.created_unix_s.to_le_bytes());
+        write_header(&mut w, FORMAT_VERSION, len, &self.header());
         for a in self.axes.iter().flatten() {
-            let secs = a.filter.sections();
-            let taps = a.filter.fir();
-            w.put(&[a.axis, secs.len() as u8, taps.len() as u8, 0]);
-            w.put(&a.summary.model_order.to_le_bytes());
-            w.put(&[0, 0]);
-            let s = &a.scaling;
-            for v in [s.adc_offset_code, s.newton_per_code, s.dac_code_per_newton, s.dac_offset_code, a.filter.d()] {
-                w.put(&v.to_le_bytes());
-            }
-            let m = &a.summary;
-            for v in [m.fit_nrmse, m.flat_lo_hz, m.flat_hi_hz, m.noise_gain] {
-                w.put(&v.to_le_bytes());
-            }
-            w.put(&m.q.to_le_bytes());
-            w.put(&m.r.to_le_bytes());
-            for sec in secs {
-                for v in sec.delta.iter().chain(&sec.b).chain(&sec.c) {
-                    w.put(&v.to_le_bytes());
-                }
-            }
-            for h in taps {
-                w.put(&h.to_le_bytes());
-            }
+            write_axis(&mut w, a);
         }
-        let crc = CRC32.checksum(w.buf.get(..w.pos).unwrap_or(&[]));
-        w.put(&crc.to_le_bytes());
-        Ok(w.pos)
+        Ok(finish_crc(&mut w))
     }
 
     /// Check the semantic rules every image must satisfy.
     fn validate(&self) -> Result<(), ImageError> {
-        if !FS_RANGE_HZ.contains(&self.fs_hz) {
-            return Err(ImageError::SampleRateOutOfRange(self.fs_hz));
-        }
-        if self.latency_samples > MAX_LATENCY_SAMPLES {
-            return Err(ImageError::LatencyOutOfRange(self.latency_samples));
-        }
-        if self.flags & !KNOWN_FLAGS != 0 {
-            return Err(ImageError::UnknownFlags(self.flags));
-        }
-        if self.axis_mask() == 0 {
-            return Err(ImageError::BadAxisMask(0));
-        }
-        for (i, a) in self.axes.iter().enumerate() {
-            let Some(a) = a else { continue };
-            let axis = i as u8;
-            if a.axis != axis {
-                return Err(ImageError::AxisMismatch { expected: axis, found: a.axis });
-            }
-            let s = &a.scaling;
-            let finite = [s.adc_offset_code, s.newton_per_code, s.dac_code_per_newton, s.dac_offset_code]
-                .iter()
-                .all(|v| v.is_finite());
-            if !finite || s.newton_per_code == 0.0 || s.dac_code_per_newton == 0.0 {
-                return Err(ImageError::BadScaling { axis });
-            }
-            let m = &a.summary;
-            let ok = [m.fit_nrmse, m.flat_lo_hz, m.flat_hi_hz, m.noise_gain]
-                .iter()
-                .all(|v| v.is_finite() && *v >= 0.0)
-                && m.q.is_finite()
-                && m.q >= 0.0
-                && m.r.is_finite()
-                && m.r >= 0.0;
-            if !ok {
-                return Err(ImageError::BadSummary { axis });
-            }
-            if !a.filter.d().is_finite() {
-                return Err(ImageError::NonFiniteCoefficient { axis, section: 255 });
-            }
-            if let Some(tap) = a.filter.fir().iter().position(|h| !h.is_finite()) {
-                return Err(ImageError::NonFiniteTap { axis, tap: tap as u8 });
-            }
-            for (j, sec) in a.filter.sections().iter().enumerate() {
-                let section = j as u8;
-                if !sec.is_finite() {
-                    return Err(ImageError::NonFiniteCoefficient { axis, section });
-                }
-                if !sec.is_stable() {
-                    return Err(ImageError::UnstableSection { axis, section });
-                }
-            }
-        }
-        Ok(())
+        validate_header(self.fs_hz, self.latency_samples, self.flags)?;
+        validate_axes(&self.axes)
     }
 
     /// Parse and validate an image that occupies exactly `bytes`.
+    ///
+    /// A parallel-elaboration image (format version 2) is refused with
+    /// [`ImageError::ParallelOfflineOnly`]: read it with
+    /// [`ParallelImage::parse`].
     pub fn parse(bytes: &[u8]) -> Result<CoeffImage, ImageError> {
-        let have = bytes.len() as u32;
-        if bytes.len() < MIN_IMAGE_LEN {
-            return Err(ImageError::Truncated { needed: MIN_IMAGE_LEN as u32, have });
-        }
-        let mut r = Reader { buf: bytes, pos: 0 };
-        let truncated = ImageError::Truncated { needed: MIN_IMAGE_LEN as u32, have };
-        if r.bytes::<4>() != Some(MAGIC) {
-            return Err(ImageError::BadMagic);
-        }
-        let version = r.u16().ok_or(truncated)?;
-        if version != FORMAT_VERSION {
-            return Err(ImageError::UnsupportedVersion(version));
-        }
-        let header_len = r.u16().ok_or(truncated)?;
-        if usize::from(header_len) != HEADER_LEN {
-            return Err(ImageError::BadHeaderLength(header_len));
-        }
-        let total = r.u32().ok_or(truncated)?;
-        if (total as usize) < MIN_IMAGE_LEN || total as usize > MAX_IMAGE_LEN {
-            return Err(ImageError::BadLength(total));
-        }
-        if bytes.len() < total as usize {
-            return Err(ImageError::Truncated { needed: total, have });
-        }
-        if bytes.len() > total as usize {
-            return Err(ImageError::BadLength(total));
-        }
-        let body_len = total as usize - CRC_LEN;
-        let body = bytes.get(..body_len).ok_or(truncated)?;
-        let stored = Reader { buf: bytes, pos: body_len }.u32().ok_or(truncated)?;
-        let computed = CRC32.checksum(body);
-        if stored != computed {
-            return Err(ImageError::BadCrc { stored, computed });
-        }
-
+        let body = envelope(bytes, FORMAT_VERSION, MAX_IMAGE_LEN)?;
         // From here on the bytes are exactly what an encoder wrote; what
         // remains are structural and semantic checks.
+        let bad_len = ImageError::BadLength(bytes.len() as u32);
         let mut r = Reader { buf: body, pos: 12 };
-        let bad_len = ImageError::BadLength(total);
-        let fs_hz = r.u32().ok_or(bad_len)?;
-        let latency_samples = r.u16().ok_or(bad_len)?;
-        let mask = r.u8().ok_or(bad_len)?;
-        let flags = r.u8().ok_or(bad_len)?;
-        let method_code = r.u8().ok_or(bad_len)?;
-        if r.bytes::<3>().ok_or(bad_len)? != [0; 3] {
+        let h = read_header(&mut r, bad_len)?;
+        if h.extra != [0; 3] {
             return Err(ImageError::ReservedNotZero);
         }
-        let source_sha256 = r.bytes::<32>().ok_or(bad_len)?;
-        let created_unix_s = r.u64().ok_or(bad_len)?;
-        if mask == 0 || mask & !0b111 != 0 {
-            return Err(ImageError::BadAxisMask(mask));
+        if h.mask == 0 || h.mask & !0b111 != 0 {
+            return Err(ImageError::BadAxisMask(h.mask));
         }
-        let method = DesignMethod::from_u8(method_code).ok_or(ImageError::UnknownMethod(method_code))?;
-
-        let mut axes: [Option<AxisImage>; AXES] = [None; AXES];
-        for (i, slot) in axes.iter_mut().enumerate() {
-            if mask & (1 << i) == 0 {
-                continue;
-            }
-            let expected = i as u8;
-            let axis = r.u8().ok_or(bad_len)?;
-            if axis != expected {
-                return Err(ImageError::AxisMismatch { expected, found: axis });
-            }
-            let count = r.u8().ok_or(bad_len)?;
-            if usize::from(count) > MAX_SECTIONS {
-                return Err(ImageError::TooManySections { axis, count });
-            }
-            let n_taps = r.u8().ok_or(bad_len)?;
-            if usize::from(n_taps) > MAX_FIR {
-                return Err(ImageError::TooManyTaps { axis, count: n_taps });
-            }
-            if r.u8().ok_or(bad_len)? != 0 {
-                return Err(ImageError::ReservedNotZero);
-            }
-            let model_order = r.u16().ok_or(bad_len)?;
-            if r.u16().ok_or(bad_len)? != 0 {
-                return Err(ImageError::ReservedNotZero);
-            }
-            let scaling = AxisScaling {
-                adc_offset_code: r.f32().ok_or(bad_len)?,
-                newton_per_code: r.f32().ok_or(bad_len)?,
-                dac_code_per_newton: r.f32().ok_or(bad_len)?,
-                dac_offset_code: r.f32().ok_or(bad_len)?,
-            };
-            let d = r.f32().ok_or(bad_len)?;
-            let summary = AxisSummary {
-                model_order,
-                fit_nrmse: r.f32().ok_or(bad_len)?,
-                flat_lo_hz: r.f32().ok_or(bad_len)?,
-                flat_hi_hz: r.f32().ok_or(bad_len)?,
-                noise_gain: r.f32().ok_or(bad_len)?,
-                q: r.f64().ok_or(bad_len)?,
-                r: r.f64().ok_or(bad_len)?,
-            };
-            let mut sections = [Section::default(); MAX_SECTIONS];
-            for sec in sections.iter_mut().take(usize::from(count)) {
-                let mut v = [0f32; 8];
-                for x in v.iter_mut() {
-                    *x = r.f32().ok_or(bad_len)?;
-                }
-                *sec = Section {
-                    delta: [v[0], v[1], v[2], v[3]],
-                    b: [v[4], v[5]],
-                    c: [v[6], v[7]],
-                };
-            }
-            let mut taps = [0f32; MAX_FIR];
-            for h in taps.iter_mut().take(usize::from(n_taps)) {
-                *h = r.f32().ok_or(bad_len)?;
-            }
-            let secs = sections.get(..usize::from(count)).unwrap_or(&[]);
-            let fir = taps.get(..usize::from(n_taps)).unwrap_or(&[]);
-            let filter = AxisFilter::with_fir(secs, d, fir).map_err(|e| match e {
-                FilterError::TooManySections => ImageError::TooManySections { axis, count },
-                FilterError::NonFinite(s) => ImageError::NonFiniteCoefficient {
-                    axis,
-                    section: if s >= MAX_SECTIONS { 255 } else { s as u8 },
-                },
-                FilterError::Unstable(s) => ImageError::UnstableSection { axis, section: s as u8 },
-                FilterError::TooManyTaps => ImageError::TooManyTaps { axis, count: n_taps },
-                FilterError::NonFiniteTap(t) => ImageError::NonFiniteTap { axis, tap: t as u8 },
-            })?;
-            *slot = Some(AxisImage { axis, scaling, filter, summary });
-        }
+        let method = DesignMethod::from_u8(h.method_code).ok_or(ImageError::UnknownMethod(h.method_code))?;
+        let axes = read_axes(&mut r, h.mask, bad_len)?;
         if r.pos != body.len() {
             return Err(bad_len);
         }
         let image = CoeffImage {
-            fs_hz,
-            latency_samples,
-            flags,
+            fs_hz: h.fs_hz,
+            latency_samples: h.latency_samples,
+            flags: h.flags,
             method,
-            source_sha256,
-            created_unix_s,
+            source_sha256: h.source_sha256,
+            created_unix_s: h.created_unix_s,
             axes,
         };
         image.validate()?;
@@ -619,6 +762,11 @@ impl CoeffImage {
 
     /// Parse an image stored at the start of a larger region (a flash slot):
     /// the declared length selects the prefix, the rest is ignored.
+    ///
+    /// A parallel-elaboration image (version 2) gives
+    /// [`ImageError::ParallelOfflineOnly`] from its version field alone,
+    /// before its length or anything else is read: the box never runs any
+    /// part of it.
     pub fn parse_prefix(region: &[u8]) -> Result<CoeffImage, ImageError> {
         let have = region.len() as u32;
         if region.len() < MIN_IMAGE_LEN {
@@ -637,5 +785,222 @@ impl CoeffImage {
             Some(prefix) => Self::parse(prefix),
             None => Err(ImageError::Truncated { needed: len as u32, have }),
         }
+    }
+}
+
+/// One band of a parallel-elaboration image: the band's edges and, per axis,
+/// the compensator designed for that band (paper §3.3).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BandImage {
+    /// Lower edge of the band the compensator was designed for (Hz).
+    pub lo_hz: f32,
+    /// Upper edge (Hz).
+    pub hi_hz: f32,
+    /// Per-axis compensator of this band; every band covers the same axes.
+    pub axes: [Option<AxisImage>; AXES],
+}
+
+/// A parallel-elaboration image (format version 2, paper §3.3): one
+/// compensator per band and axis. **Offline only**: `dynocomp compensate`
+/// splits a record into the bands with zero-phase filters, runs each band
+/// through its own compensator and sums. The box never runs it: the core
+/// refuses version 2 in [`CoeffImage::parse`] and
+/// [`CoeffImage::parse_prefix`] ([`ImageError::ParallelOfflineOnly`]), and the
+/// flag [`FLAG_OFFLINE_ONLY`] is mandatory.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParallelImage {
+    /// Sample rate the filters were designed for (Hz).
+    pub fs_hz: u32,
+    /// Declared output latency of every band's compensator (samples).
+    pub latency_samples: u16,
+    /// Flags (`FLAG_*`); always contains [`FLAG_OFFLINE_ONLY`].
+    pub flags: u8,
+    /// Design method of the band compensators.
+    pub method: DesignMethod,
+    /// SHA-256 of the FRF file the design came from (zeros if none).
+    pub source_sha256: [u8; 32],
+    /// Creation time, seconds since the Unix epoch (0 if unknown).
+    pub created_unix_s: u64,
+    bands: [BandImage; MAX_BANDS],
+    n_bands: usize,
+}
+
+/// Total length of a parallel image (bytes).
+pub fn parallel_encoded_len(image: &ParallelImage) -> usize {
+    HEADER_LEN
+        + image
+            .bands()
+            .iter()
+            .map(|b| BAND_RECORD_LEN + b.axes.iter().flatten().map(axis_block_len).sum::<usize>())
+            .sum::<usize>()
+        + CRC_LEN
+}
+
+impl ParallelImage {
+    /// Build and validate a parallel image from its bands (ascending, not
+    /// overlapping, 1..=[`MAX_BANDS`], all with the same axes). The flag
+    /// [`FLAG_OFFLINE_ONLY`] is set.
+    pub fn new(
+        fs_hz: u32,
+        latency_samples: u16,
+        method: DesignMethod,
+        source_sha256: [u8; 32],
+        created_unix_s: u64,
+        bands: &[BandImage],
+    ) -> Result<Self, ImageError> {
+        if bands.is_empty() || bands.len() > MAX_BANDS {
+            return Err(ImageError::BadBandCount(bands.len().min(255) as u8));
+        }
+        let empty = BandImage { lo_hz: 0.0, hi_hz: 0.0, axes: [None; AXES] };
+        let mut all = [empty; MAX_BANDS];
+        for (dst, b) in all.iter_mut().zip(bands) {
+            *dst = *b;
+        }
+        let img = ParallelImage {
+            fs_hz,
+            latency_samples,
+            flags: FLAG_OFFLINE_ONLY,
+            method,
+            source_sha256,
+            created_unix_s,
+            bands: all,
+            n_bands: bands.len(),
+        };
+        img.validate()?;
+        Ok(img)
+    }
+
+    /// The bands, lowest first.
+    pub fn bands(&self) -> &[BandImage] {
+        self.bands.get(..self.n_bands).unwrap_or(&[])
+    }
+
+    /// Axis mask (the same for every band).
+    pub fn axis_mask(&self) -> u8 {
+        self.bands().first().map(|b| mask_of(&b.axes)).unwrap_or(0)
+    }
+
+    /// Band `k` as a stand-alone version-1 image value (with
+    /// [`FLAG_OFFLINE_ONLY`] set), e.g. to run it through the same offline
+    /// code as any other image.
+    pub fn band_image(&self, k: usize) -> Option<CoeffImage> {
+        self.bands().get(k).map(|b| CoeffImage {
+            fs_hz: self.fs_hz,
+            latency_samples: self.latency_samples,
+            flags: self.flags | FLAG_OFFLINE_ONLY,
+            method: self.method,
+            source_sha256: self.source_sha256,
+            created_unix_s: self.created_unix_s,
+            axes: b.axes,
+        })
+    }
+
+    /// An identifier of the image's content: its CRC-32.
+    pub fn id(&self) -> u32 {
+        let mut buf = [0u8; MAX_PARALLEL_IMAGE_LEN];
+        let n = self.encode(&mut buf);
+        stored_crc(&buf, n)
+    }
+
+    fn validate(&self) -> Result<(), ImageError> {
+        validate_header(self.fs_hz, self.latency_samples, self.flags)?;
+        if self.flags & FLAG_OFFLINE_ONLY == 0 {
+            return Err(ImageError::ParallelNotOfflineOnly);
+        }
+        if self.n_bands == 0 || self.n_bands > MAX_BANDS {
+            return Err(ImageError::BadBandCount(self.n_bands.min(255) as u8));
+        }
+        let mask = self.axis_mask();
+        let nyquist = self.fs_hz as f32 / 2.0;
+        let mut prev_hi = 0.0f32;
+        for (k, b) in self.bands().iter().enumerate() {
+            let band = k as u8;
+            let edges_ok = b.lo_hz.is_finite() && b.hi_hz.is_finite() && b.lo_hz >= prev_hi && b.hi_hz > b.lo_hz && b.hi_hz <= nyquist;
+            if !edges_ok {
+                return Err(ImageError::BadBand { band });
+            }
+            prev_hi = b.hi_hz;
+            if mask_of(&b.axes) != mask {
+                return Err(ImageError::BandAxesDiffer { band });
+            }
+            validate_axes(&b.axes)?;
+        }
+        Ok(())
+    }
+
+    /// Encode into `buf`; returns the number of bytes written. Validated
+    /// first, so an encoded image always parses back to an equal value.
+    pub fn encode(&self, buf: &mut [u8]) -> Result<usize, ImageError> {
+        self.validate()?;
+        let len = parallel_encoded_len(self);
+        if buf.len() < len {
+            return Err(ImageError::BufferTooSmall { needed: len as u32 });
+        }
+        let mut w = Writer { buf, pos: 0 };
+        let h = Header {
+            fs_hz: self.fs_hz,
+            latency_samples: self.latency_samples,
+            mask: self.axis_mask(),
+            flags: self.flags,
+            method_code: self.method as u8,
+            extra: [self.n_bands as u8, 0, 0],
+            source_sha256: self.source_sha256,
+            created_unix_s: self.created_unix_s,
+        };
+        write_header(&mut w, PARALLEL_FORMAT_VERSION, len, &h);
+        for b in self.bands() {
+            w.put(&b.lo_hz.to_le_bytes());
+            w.put(&b.hi_hz.to_le_bytes());
+        }
+        for b in self.bands() {
+            for a in b.axes.iter().flatten() {
+                write_axis(&mut w, a);
+            }
+        }
+        Ok(finish_crc(&mut w))
+    }
+
+    /// Parse and validate a parallel image that occupies exactly `bytes`
+    /// (`docs/image-format.md` §12). Never panics.
+    pub fn parse(bytes: &[u8]) -> Result<ParallelImage, ImageError> {
+        let body = envelope(bytes, PARALLEL_FORMAT_VERSION, MAX_PARALLEL_IMAGE_LEN)?;
+        let bad_len = ImageError::BadLength(bytes.len() as u32);
+        let mut r = Reader { buf: body, pos: 12 };
+        let h = read_header(&mut r, bad_len)?;
+        let n_bands = usize::from(h.extra[0]);
+        if h.extra[1..] != [0, 0] {
+            return Err(ImageError::ReservedNotZero);
+        }
+        if n_bands == 0 || n_bands > MAX_BANDS {
+            return Err(ImageError::BadBandCount(h.extra[0]));
+        }
+        if h.mask == 0 || h.mask & !0b111 != 0 {
+            return Err(ImageError::BadAxisMask(h.mask));
+        }
+        let method = DesignMethod::from_u8(h.method_code).ok_or(ImageError::UnknownMethod(h.method_code))?;
+        let empty = BandImage { lo_hz: 0.0, hi_hz: 0.0, axes: [None; AXES] };
+        let mut bands = [empty; MAX_BANDS];
+        for b in bands.iter_mut().take(n_bands) {
+            b.lo_hz = r.f32().ok_or(bad_len)?;
+            b.hi_hz = r.f32().ok_or(bad_len)?;
+        }
+        for b in bands.iter_mut().take(n_bands) {
+            b.axes = read_axes(&mut r, h.mask, bad_len)?;
+        }
+        if r.pos != body.len() {
+            return Err(bad_len);
+        }
+        let image = ParallelImage {
+            fs_hz: h.fs_hz,
+            latency_samples: h.latency_samples,
+            flags: h.flags,
+            method,
+            source_sha256: h.source_sha256,
+            created_unix_s: h.created_unix_s,
+            bands,
+            n_bands,
+        };
+        image.validate()?;
+        Ok(image)
     }
 }

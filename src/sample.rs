@@ -25,7 +25,9 @@ pub enum BypassReason {
     NoImage,
     /// The stored image failed validation.
     InvalidImage(ImageError),
-    /// The image is marked offline-only (e.g. parallel elaboration).
+    /// The image is offline-only: a version-1 image with `FLAG_OFFLINE_ONLY`,
+    /// or a parallel-elaboration image (version 2), which the box refuses
+    /// from its version field before reading anything else.
     OfflineOnly,
     /// The image's sample rate is outside [`BOX_FS_RANGE_HZ`].
     UnsupportedSampleRate(u32),
@@ -48,6 +50,7 @@ pub enum Mode<'a> {
 pub fn select_mode(loaded: Option<&Result<CoeffImage, ImageError>>, user_bypass: bool) -> Mode<'_> {
     match loaded {
         None => Mode::Bypass(BypassReason::NoImage),
+        Some(Err(ImageError::ParallelOfflineOnly)) => Mode::Bypass(BypassReason::OfflineOnly),
         Some(Err(e)) => Mode::Bypass(BypassReason::InvalidImage(*e)),
         Some(Ok(img)) => image_mode(img, user_bypass),
     }

@@ -1,10 +1,17 @@
-//! Offline compensation of recorded forces through the core kernel
-//! (`dynocomp compensate`), bit-exact with the box: the same f32 kernel code
-//! (its block path, bit-identical to the box's per-sample `step`), the same
-//! coefficients; one thread per axis.
+//! Offline compensation of recorded forces (`dynocomp compensate`):
+//!
+//! * a box image (format 1) runs through the core kernel, bit-exact with the
+//!   box: the same f32 kernel code (its block path, bit-identical to the box's
+//!   per-sample `step`), the same coefficients, one thread per axis
+//!   ([`compensate_record`]);
+//! * a parallel-elaboration image (format 2, offline only) splits the record
+//!   into its bands with zero-phase filters, runs each band through its own
+//!   compensator (the same kernel) and sums ([`compensate_parallel`]);
+//! * `--offline` runs the fixed-interval smoother of [`crate::smoother`]
+//!   instead (f64, zero lag, offline only).
 
-use anyhow::{bail, Result};
-use dynocomp_core::image::CoeffImage;
+use anyhow::{bail, Context, Result};
+use dynocomp_core::image::{CoeffImage, ParallelImage};
 use dynocomp_core::kernel::{AxisFilter, AxisState};
 
 use crate::frf::axis_name;
@@ -15,19 +22,7 @@ pub const FS_TOLERANCE: f64 = 1e-4;
 
 /// Check a record's `t_s` column (if any) against the image's sample rate.
 pub fn check_sample_rate(image: &CoeffImage, rec: &SignalRecord, source: &str) -> Result<()> {
-    if let Some((fs, jitter)) = rec.sample_rate_from_time() {
-        let want = f64::from(image.fs_hz);
-        if ((fs - want) / want).abs() > FS_TOLERANCE {
-            bail!(
-                "{source}: column t_s implies a sample rate of {fs:.3} Hz, but the image was designed for {want} Hz; \
-                 resample the record or design for its rate"
-            );
-        }
-        if jitter > 0.01 {
-            bail!("{source}: column t_s is not uniformly spaced (a step deviates {:.1} % from the mean)", jitter * 100.0);
-        }
-    }
-    Ok(())
+    check_rate(image.fs_hz, rec, source)
 }
 
 /// Compensate every force column of `rec` with the image's compensator for
@@ -87,4 +82,55 @@ fn compensate_axis(filter: &AxisFilter, samples: &[f64], latency: usize) -> Resu
         return Err(k);
     }
     Ok(y.iter().skip(latency).map(|&v| f64::from(v)).collect())
+}
+
+/// Parallel elaboration (paper §3.3), **offline only**: split every force
+/// column into the image's bands with the zero-phase crossovers of
+/// [`crate::bandsplit`], run band k through band k's compensator with
+/// [`compensate_record`] (the core kernel, as for any image), and sum the
+/// bands. The split adds no phase and its bands sum to the input, so the
+/// result differs from the input only by what the band compensators do.
+pub fn compensate_parallel(image: &ParallelImage, rec: &SignalRecord, raw_timing: bool, source: &str) -> Result<SignalRecord> {
+    let edges: Vec<(f64, f64)> = image.bands().iter().map(|b| (f64::from(b.lo_hz), f64::from(b.hi_hz))).collect();
+    let crossovers = crate::bandsplit::crossovers(&edges)?;
+    let fs = f64::from(image.fs_hz);
+    // split[c][k]: column c, band k
+    let split: Vec<Vec<Vec<f64>>> = rec
+        .channels
+        .iter()
+        .map(|(_, x)| crate::bandsplit::split(x, fs, &crossovers))
+        .collect::<Result<_>>()?;
+    let mut sum: Vec<(usize, Vec<f64>)> = rec.channels.iter().map(|(a, x)| (*a, vec![0.0; x.len()])).collect();
+    for k in 0..image.bands().len() {
+        let band_img = image.band_image(k).ok_or_else(|| anyhow::anyhow!("band {k} missing"))?;
+        let band_rec = SignalRecord {
+            t_s: None,
+            channels: rec.channels.iter().zip(&split).map(|((a, _), s)| (*a, s[k].clone())).collect(),
+        };
+        let out = compensate_record(&band_img, &band_rec, raw_timing, source)
+            .with_context(|| format!("band {k} ({:.0}-{:.0} Hz)", edges[k].0, edges[k].1))?;
+        for ((_, acc), (_, y)) in sum.iter_mut().zip(&out.channels) {
+            for (a, v) in acc.iter_mut().zip(y) {
+                *a += v;
+            }
+        }
+    }
+    Ok(SignalRecord { t_s: rec.t_s.clone(), channels: sum })
+}
+
+/// Check a record's `t_s` column (if any) against a sample rate (Hz).
+pub fn check_rate(fs_hz: u32, rec: &SignalRecord, source: &str) -> Result<()> {
+    if let Some((fs, jitter)) = rec.sample_rate_from_time() {
+        let want = f64::from(fs_hz);
+        if ((fs - want) / want).abs() > FS_TOLERANCE {
+            bail!(
+                "{source}: column t_s implies a sample rate of {fs:.3} Hz, but the image was designed for {want} Hz; \
+                 resample the record or design for its rate"
+            );
+        }
+        if jitter > 0.01 {
+            bail!("{source}: column t_s is not uniformly spaced (a step deviates {:.1} % from the mean)", jitter * 100.0);
+        }
+    }
+    Ok(())
 }

@@ -17,10 +17,13 @@ use dynocomp_core::kernel::AxisFilter;
 use num_complex::Complex64;
 use std::f64::consts::PI;
 
+use crate::bands::{band_mask, Band};
+use crate::fit::rfp::{paper_weights, rfp_fit, RationalTf, RfpOptions};
 use crate::fit::vf::{coherence_weights, vector_fit, VfOptions};
 use crate::fit::{relative_rms_error, PoleResidueModel};
 use crate::frf::{axis_name, AxisFrf};
 use crate::kalman::{self, KalmanDesign, StateSpace};
+use crate::paper::{self, PaperDiagnostics};
 use crate::quantize::{self, Verification};
 use crate::realize::{self, ModalRealization};
 
@@ -41,6 +44,30 @@ pub struct DesignOptions {
     pub q_override: Option<f64>,
     /// Vector fitting options.
     pub vf: VfOptions,
+    /// Fitting method.
+    pub method: FitMethod,
+    /// Fitting bands (paper §3.2); empty = the whole coherent band. With
+    /// bands, the fit, the q criterion and the flat band use the band lines.
+    pub bands: Vec<Band>,
+}
+
+/// Weight of an out-of-band line relative to its coherence weight when the
+/// default method fits bands (the paper's method drops those lines).
+pub const VF_OUT_OF_BAND_WEIGHT: f64 = 1e-2;
+
+/// Which fit and Kalman formulation designs the compensator.
+#[derive(Clone, Debug)]
+pub enum FitMethod {
+    /// Default: vector fitting, discrete FOH Kalman fixed-lag smoother.
+    Vf,
+    /// The seed paper: RFP + damped Gauss–Newton, companion form, continuous
+    /// Riccati, Tustin with prewarping (latency 0).
+    Paper {
+        /// Numerator and denominator orders of eq. (1).
+        rfp: RfpOptions,
+        /// Tustin prewarp frequency (Hz); `None` = centre of the fitted band.
+        prewarp_hz: Option<f64>,
+    },
 }
 
 impl Default for DesignOptions {
@@ -53,6 +80,8 @@ impl Default for DesignOptions {
             coherence_threshold: 0.9,
             q_override: None,
             vf: VfOptions::default(),
+            method: FitMethod::Vf,
+            bands: Vec::new(),
         }
     }
 }
@@ -87,6 +116,23 @@ pub struct AxisDesign {
     pub predicted_error: f64,
     /// Evaluations of J during the q search: (q, J).
     pub q_trace: Vec<(f64, f64)>,
+    /// Fitting bands used (empty = whole coherent band).
+    pub bands: Vec<Band>,
+    /// Relative RMS fit error on coherent lines outside the bands (NaN
+    /// without bands or without such lines).
+    pub fit_nrmse_out_of_band: f64,
+    /// The paper's fitted transfer function and diagnostics (`--method paper`).
+    pub paper: Option<(RationalTf, PaperDiagnostics)>,
+}
+
+impl AxisDesign {
+    /// Fitted response Ĝ(j2πf): the paper's B/A itself, else the pole-residue model.
+    pub fn fitted_frf(&self, f_hz: f64) -> Complex64 {
+        match &self.paper {
+            Some((tf, _)) => tf.frf(f_hz),
+            None => self.model.frf(f_hz),
+        }
+    }
 }
 
 /// The coherent band: from the first to the last line of the longest run of
@@ -167,7 +213,8 @@ pub fn flat_band(
 }
 
 struct Objective<'a> {
-    model: &'a PoleResidueModel,
+    design: &'a dyn Fn(f64) -> Result<KalmanDesign>,
+    lag: usize,
     grid: Vec<(f64, Complex64)>,
     opts: &'a DesignOptions,
     r: f64,
@@ -178,7 +225,7 @@ impl Objective<'_> {
     /// (J, noise gain, design) for one q; J = ∞ when the design fails or the
     /// noise-gain limit is exceeded.
     fn eval(&self, q: f64) -> (f64, f64, Option<KalmanDesign>) {
-        let Ok(d) = kalman::design(self.model, self.opts.fs_hz, q, self.r, self.opts.lag) else {
+        let Ok(d) = (self.design)(q) else {
             return (f64::INFINITY, f64::NAN, None);
         };
         let fs = self.opts.fs_hz;
@@ -187,7 +234,7 @@ impl Objective<'_> {
         let (mut dist, mut amp) = (0.0, 0.0);
         for (f, g) in &self.grid {
             let h = ss.freq_response(*f, fs);
-            let e = h * g * Complex64::from_polar(1.0, 2.0 * PI * f * self.opts.lag as f64 / fs) - 1.0;
+            let e = h * g * Complex64::from_polar(1.0, 2.0 * PI * f * self.lag as f64 / fs) - 1.0;
             dist += e.norm_sqr();
             amp += h.norm_sqr();
         }
@@ -206,9 +253,13 @@ impl Objective<'_> {
 fn choose_q(obj: &Objective, trace: &mut Vec<(f64, f64)>) -> Result<(f64, KalmanDesign, f64, f64)> {
     let base = obj.r.log10();
     let mut best: Option<(f64, f64)> = None; // (log10 q, J)
+    let mut lowest_gain = f64::INFINITY;
+    let mut designed = 0;
     for i in -2..=14 {
         let lq = base + i as f64;
-        let (j, _, _) = obj.eval(10f64.powf(lq));
+        let (j, ng, d) = obj.eval(10f64.powf(lq));
+        designed += usize::from(d.is_some());
+        lowest_gain = lowest_gain.min(ng);
         trace.push((10f64.powf(lq), j));
         if j.is_finite() && best.is_none_or(|b| j < b.1) {
             best = Some((lq, j));
@@ -216,7 +267,7 @@ fn choose_q(obj: &Objective, trace: &mut Vec<(f64, f64)>) -> Result<(f64, Kalman
     }
     let Some((lq0, j0)) = best else {
         bail!(
-            "no q gives a valid compensator within the noise-gain limit {}; raise --max-noise-gain or check R",
+            "no q gives a valid compensator within the noise-gain limit {} ({designed} of 17 trial q designed, lowest noise gain {lowest_gain:.1}); raise --max-noise-gain or check R",
             obj.opts.max_noise_gain
         );
     };
@@ -259,6 +310,33 @@ fn choose_q(obj: &Objective, trace: &mut Vec<(f64, f64)>) -> Result<(f64, Kalman
     Ok((q, d, j, ng))
 }
 
+/// The fitted model of one axis, by either method.
+struct Fitted {
+    model: PoleResidueModel,
+    order_trace: Vec<(usize, f64)>,
+    paper: Option<(RationalTf, PaperDiagnostics)>,
+}
+
+impl Fitted {
+    fn frf(&self, f_hz: f64) -> Complex64 {
+        match &self.paper {
+            Some((tf, _)) => tf.frf(f_hz),
+            None => self.model.frf(f_hz),
+        }
+    }
+}
+
+/// `n` frequencies spread over `bands` in proportion to their widths (Hz).
+fn band_grid(bands: &[(f64, f64)], n: usize) -> Vec<f64> {
+    let total: f64 = bands.iter().map(|b| b.1 - b.0).sum();
+    let mut out = Vec::with_capacity(n + bands.len());
+    for b in bands {
+        let k = ((n as f64 * (b.1 - b.0) / total).round() as usize).max(4);
+        out.extend((0..k).map(|i| b.0 + (b.1 - b.0) * (i as f64 + 0.5) / k as f64));
+    }
+    out
+}
+
 /// Design one axis from its FRF and measurement noise variance R (N²).
 pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions) -> Result<AxisDesign> {
     let name = axis_name(frf.axis);
@@ -270,57 +348,124 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
     if band.1 > opts.fs_hz / 2.0 {
         bail!("axis {name}: the FRF band reaches {} Hz, beyond the Nyquist frequency of fs = {} Hz", band.1, opts.fs_hz);
     }
-    let weights = coherence_weights(&frf.frf, coh);
-    let vf = vector_fit(freq_hz, &frf.frf, &weights, &opts.vf).with_context(|| format!("axis {name}: fit"))?;
-    let model = vf.model;
-    if !model.is_stable() {
-        bail!("axis {name}: fitted model is unstable");
-    }
     let in_band: Vec<bool> = freq_hz.iter().map(|f| *f >= band.0 && *f <= band.1).collect();
-    let mask: Vec<bool> = match coh {
+    let coherent: Vec<bool> = match coh {
         Some(c) => in_band.iter().zip(c).map(|(b, c)| *b && *c >= opts.coherence_threshold).collect(),
         None => in_band.clone(),
     };
-    let fit_nrmse = relative_rms_error(&model, freq_hz, &frf.frf, &mask);
-    let dc = model.frf(0.0).norm();
-    if !(0.2..5.0).contains(&dc) {
-        bail!("axis {name}: fitted static gain |G(0)| = {dc:.3} N/N; the FRF must be force/force (N/N), check units and calibration");
+    // Lines where the compensator must be accurate: the fitting bands, or
+    // the whole coherent band.
+    let (eval_band, target, out_of_band): (Vec<bool>, Vec<bool>, Vec<bool>) = if opts.bands.is_empty() {
+        (in_band.clone(), coherent.clone(), vec![false; freq_hz.len()])
+    } else {
+        let bm = band_mask(freq_hz, &opts.bands);
+        let target = bm.iter().zip(&coherent).map(|(b, c)| *b && *c).collect();
+        let out = bm.iter().zip(&coherent).map(|(b, c)| !*b && *c).collect();
+        (bm, target, out)
+    };
+    if target.iter().filter(|m| **m).count() < 8 {
+        bail!("axis {name}: fewer than 8 coherent FRF lines inside the fitting bands; widen the bands or check that they lie inside the coherent band {:.0}–{:.0} Hz", band.0, band.1);
+    }
+    let fitted = match &opts.method {
+        FitMethod::Vf => {
+            let mut weights = coherence_weights(&frf.frf, coh);
+            if !opts.bands.is_empty() {
+                for (w, b) in weights.iter_mut().zip(&eval_band) {
+                    if !*b {
+                        *w *= VF_OUT_OF_BAND_WEIGHT;
+                    }
+                }
+            }
+            let vf = vector_fit(freq_hz, &frf.frf, &weights, &opts.vf).with_context(|| format!("axis {name}: fit"))?;
+            if !vf.model.is_stable() {
+                bail!("axis {name}: fitted model is unstable");
+            }
+            Fitted { model: vf.model, order_trace: vf.order_trace, paper: None }
+        }
+        FitMethod::Paper { rfp, .. } => {
+            let fit_mask: Vec<bool> = if opts.bands.is_empty() { in_band.clone() } else { eval_band.clone() };
+            let weights = paper_weights(coh, &fit_mask);
+            let fit = rfp_fit(freq_hz, &frf.frf, &weights, rfp).with_context(|| format!("axis {name}: paper fit (RFP + Gauss–Newton)"))?;
+            let diag = PaperDiagnostics { rfp_condition: fit.rfp_condition, jacobian_condition: fit.jacobian_condition, ..Default::default() };
+            let model = fit.tf.to_pole_residue().with_context(|| format!("axis {name}: paper fit"))?;
+            Fitted { model, order_trace: vec![(fit.tf.na(), fit.final_error)], paper: Some((fit.tf, diag)) }
+        }
+    };
+    let fit_nrmse = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, &target);
+    let fit_nrmse_out_of_band = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, &out_of_band);
+    // The static gain is checked when the fit covers the start of the
+    // coherent band (a band-pass segment of parallel elaboration does not).
+    let fits_static = opts.bands.is_empty() || opts.bands.iter().any(|b| b.contains(band.0));
+    let dc = fitted.frf(0.0).norm();
+    if fits_static && !(0.2..5.0).contains(&dc) {
+        bail!("axis {name}: fitted static gain |G(0)| = {dc:.3} N/N; the FRF must be force/force (N/N), check units and calibration (with fitting bands: include the static band)");
     }
 
-    let n_grid = 200;
-    let grid: Vec<(f64, Complex64)> = (0..n_grid)
-        .map(|i| {
-            let f = band.0 + (band.1 - band.0) * (i as f64 + 0.5) / n_grid as f64;
-            (f, model.frf(f))
-        })
-        .collect();
+    let ranges: Vec<(f64, f64)> = if opts.bands.is_empty() { vec![band] } else { opts.bands.iter().map(|b| (b.lo_hz, b.hi_hz)).collect() };
+    let f_top = ranges.iter().map(|b| b.1).fold(0.0, f64::max);
+    let grid: Vec<(f64, Complex64)> = band_grid(&ranges, 200).into_iter().map(|f| (f, fitted.frf(f))).collect();
+    let lag = if fitted.paper.is_some() { 0 } else { opts.lag };
+    let prewarp_hz = match &opts.method {
+        FitMethod::Paper { prewarp_hz: Some(p), .. } => *p,
+        _ => 0.5 * (ranges[0].0 + f_top),
+    };
+    let design_fn = |q: f64| -> Result<KalmanDesign> {
+        match &fitted.paper {
+            Some((tf, _)) => paper::design(tf, opts.fs_hz, q, r, prewarp_hz, &mut PaperDiagnostics::default()),
+            None => kalman::design(&fitted.model, opts.fs_hz, q, r, opts.lag),
+        }
+    };
     let obj = Objective {
-        model: &model,
+        design: &design_fn,
+        lag,
         grid,
         opts,
         r,
-        band_width: band.1 - band.0,
+        band_width: ranges.iter().map(|b| b.1 - b.0).sum(),
     };
     let mut q_trace = Vec::new();
-    let (_q, kal, j, ng) = match opts.q_override {
+    let chosen = match opts.q_override {
         Some(q) => {
             let (j, ng, d) = obj.eval(q);
-            let d = d.ok_or_else(|| anyhow::anyhow!("axis {name}: no valid compensator for q = {q}"))?;
-            (q, d, j, ng)
+            match d {
+                Some(d) => Ok((q, d, j, ng)),
+                None => design_fn(q).map(|d| (q, d, j, ng)).with_context(|| format!("axis {name}: no valid compensator for q = {q}")),
+            }
         }
-        None => choose_q(&obj, &mut q_trace).with_context(|| format!("axis {name}"))?,
+        None => choose_q(&obj, &mut q_trace),
+    };
+    let (_q, kal, j, ng) = match (chosen, &fitted.paper) {
+        (Ok(c), _) => c,
+        // The paper's path: say why the design failed (rank, conditions),
+        // from a design at a mid-range q.
+        (Err(e), Some(_)) => {
+            return Err(match design_fn(10f64.powf(r.log10() + 6.0)) {
+                Err(why) => e.context(format!("axis {name}: at q = 1e6·R: {why:#}")),
+                Ok(_) => e.context(format!("axis {name}")),
+            });
+        }
+        (Err(e), None) => return Err(e).with_context(|| format!("axis {name}")),
+    };
+    // The paper's diagnostics of the chosen design (the fit's conditions stay).
+    let paper = match &fitted.paper {
+        Some((tf, diag)) => {
+            let mut diag = diag.clone();
+            paper::design(tf, opts.fs_hz, kal.q, r, prewarp_hz, &mut diag)?;
+            Some((tf.clone(), diag))
+        }
+        None => None,
     };
     let (realization, filter, verification) =
-        choose_realization(&kal.compensator, opts.fs_hz, band.1).with_context(|| format!("axis {name}"))?;
+        choose_realization(&kal.compensator, opts.fs_hz, f_top).with_context(|| format!("axis {name}"))?;
     let fs = opts.fs_hz;
     // Against the fitted model, not the raw lines: an H1 line with γ² = 0.97
     // from 7 averages has ~5 % random error, as large as the tolerance.
-    let model_frf: Vec<Complex64> = freq_hz.iter().map(|f| model.frf(*f)).collect();
-    let flat = flat_band(|f| quantize::filter_response(&filter, f, fs), freq_hz, &model_frf, &in_band, opts.lag, fs);
+    let model_frf: Vec<Complex64> = freq_hz.iter().map(|f| fitted.frf(*f)).collect();
+    let flat = flat_band(|f| quantize::filter_response(&filter, f, fs), freq_hz, &model_frf, &eval_band, lag, fs);
     Ok(AxisDesign {
         axis: frf.axis,
-        model,
-        order_trace: vf.order_trace,
+        model: fitted.model.clone(),
+        order_trace: fitted.order_trace.clone(),
         fit_nrmse,
         coherent_band_hz: band,
         kalman: kal,
@@ -331,6 +476,9 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         noise_gain: ng,
         predicted_error: j.sqrt(),
         q_trace,
+        bands: opts.bands.clone(),
+        fit_nrmse_out_of_band,
+        paper,
     })
 }
 

@@ -10,9 +10,118 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use crate::design::{design_axis, AxisDesign, DesignOptions};
+use crate::bands::{self, Band};
+use crate::design::{design_axis, AxisDesign, DesignOptions, FitMethod};
+use crate::fit::rfp::RfpOptions;
 use crate::frf::{axis_name, Frf};
 use crate::io;
+use crate::paper::PaperDiagnostics;
+
+/// Fitting bands (paper §3.2), shared by `design` and `compare`.
+#[derive(Args, Debug, Clone, Default)]
+pub struct BandArgs {
+    /// Spindle speed (rev/min): with --teeth, bands around the tooth-passing
+    /// frequency rpm/60·Z and its harmonics.
+    #[arg(long, requires = "teeth")]
+    pub spindle_rpm: Option<f64>,
+    /// Number of teeth Z of the cutter (with --spindle-rpm).
+    #[arg(long, requires = "spindle_rpm")]
+    pub teeth: Option<u32>,
+    /// Harmonics of the tooth-passing frequency to fit (1 = TPF only).
+    #[arg(long, default_value_t = 4)]
+    pub harmonics: u32,
+    /// Half-width of each harmonic band, relative to its centre frequency.
+    #[arg(long, default_value_t = 0.1)]
+    pub band_width: f64,
+    /// A fitting band LO:HI in Hz (repeatable).
+    #[arg(long = "band", value_name = "LO:HI")]
+    pub band: Vec<String>,
+    /// Find the bands a posteriori from the spectrum of this measured force
+    /// record (signal CSV), including non-harmonic peaks such as chatter.
+    #[arg(long, value_name = "RECORD")]
+    pub bands_from: Option<PathBuf>,
+}
+
+impl BandArgs {
+    /// Tooth-passing frequency (Hz), when --spindle-rpm and --teeth are given.
+    pub fn tooth_passing_hz(&self) -> Option<f64> {
+        Some(bands::tooth_passing_hz(self.spindle_rpm?, self.teeth?))
+    }
+
+    /// The validated bands for this FRF and sample rate (empty = whole band).
+    /// With any band, a static band from the first FRF line up to a quarter
+    /// of the lowest band is added: the mean cutting force needs it, and the
+    /// Kalman filter's force state is only observable through G(0).
+    pub fn resolve(&self, frf: &Frf, fs_hz: f64) -> Result<Vec<Band>> {
+        let max_hz = frf.freq_hz[frf.freq_hz.len() - 1].min(fs_hz / 2.0);
+        let mut out = Vec::new();
+        if let (Some(rpm), Some(z)) = (self.spindle_rpm, self.teeth) {
+            out.extend(bands::from_tooth_passing(rpm, z, self.harmonics, self.band_width, max_hz)?);
+        }
+        for b in &self.band {
+            out.push(bands::parse_band(b)?);
+        }
+        if let Some(path) = &self.bands_from {
+            let rec = io::signal_csv::read_signal_csv(path)?;
+            let rate = match rec.sample_rate_from_time() {
+                Some((r, _)) => r,
+                None => fs_hz,
+            };
+            for (axis, x) in &rec.channels {
+                let found = bands::from_record_spectrum(x, rate, max_hz, &bands::SpectrumPeakOptions::default())
+                    .with_context(|| format!("{}: column f{}", path.display(), axis_name(*axis)))?;
+                out.extend(found.into_iter().map(|b| Band { label: format!("f{} {}", axis_name(*axis), b.label), ..b }));
+            }
+        }
+        if out.is_empty() {
+            return Ok(out);
+        }
+        let n = frf.freq_hz.len();
+        let first = frf.freq_hz[0];
+        let lowest = out.iter().map(|b| b.lo_hz).fold(f64::INFINITY, f64::min);
+        let static_hi = (0.25 * lowest).max(frf.freq_hz[4.min(n - 1)]);
+        out.push(Band { lo_hz: first, hi_hz: static_hi, label: "static".into() });
+        let spacing = (frf.freq_hz[n - 1] - first) / (n - 1) as f64;
+        bands::validate(out, max_hz, 3.0 * spacing)
+    }
+}
+
+/// The paper's method (`--method paper`).
+#[derive(Args, Debug, Clone)]
+pub struct PaperArgs {
+    /// Numerator and denominator orders NB:NA of the paper's fit (eq. (1)).
+    #[arg(long, default_value = "6:8", value_name = "NB:NA")]
+    pub paper_orders: String,
+    /// Tustin prewarp frequency (Hz); default: the tooth-passing frequency if
+    /// given, else the centre of the fitted band.
+    #[arg(long)]
+    pub prewarp_hz: Option<f64>,
+}
+
+impl PaperArgs {
+    /// Parse --paper-orders.
+    pub fn orders(&self) -> Result<(usize, usize)> {
+        let bad = || anyhow::anyhow!("--paper-orders `{}`: expected NB:NA, e.g. 6:8 (numerator ≤ denominator order)", self.paper_orders);
+        let (nb, na) = self.paper_orders.split_once(':').ok_or_else(bad)?;
+        let (nb, na): (usize, usize) = (nb.trim().parse().map_err(|_| bad())?, na.trim().parse().map_err(|_| bad())?);
+        if na == 0 || nb > na || na > 40 {
+            return Err(bad());
+        }
+        Ok((nb, na))
+    }
+
+    /// The fit method for these arguments (`tooth_passing_hz` is the default prewarp).
+    pub fn method(&self, tooth_passing_hz: Option<f64>, fs_hz: f64) -> Result<FitMethod> {
+        let (nb, na) = self.orders()?;
+        let prewarp_hz = self.prewarp_hz.or(tooth_passing_hz);
+        if let Some(p) = prewarp_hz {
+            if !(p > 0.0 && p < fs_hz / 2.0) {
+                bail!("--prewarp-hz {p}: must lie between 0 and the Nyquist frequency {} Hz", fs_hz / 2.0);
+            }
+        }
+        Ok(FitMethod::Paper { rfp: RfpOptions { nb, na, ..Default::default() }, prewarp_hz })
+    }
+}
 
 /// Arguments of `dynocomp design` (DESIGN.md, CLI contract).
 #[derive(Args, Debug, Clone)]
@@ -32,9 +141,10 @@ pub struct DesignArgs {
     /// Measurement-noise variance R (N²), for all axes.
     #[arg(long)]
     pub noise_variance: Option<f64>,
-    /// Declared output latency L (samples): the fixed lag of the smoother.
-    #[arg(long, default_value_t = 4)]
-    pub latency: usize,
+    /// Declared output latency L (samples): the fixed lag of the smoother
+    /// (default 4; the paper's method has no lag and accepts only 0).
+    #[arg(long)]
+    pub latency: Option<usize>,
     /// Assumed RMS of the cutting force inside the band (N), for the Q criterion.
     #[arg(long, default_value_t = 100.0)]
     pub force_rms: f64,
@@ -47,9 +157,22 @@ pub struct DesignArgs {
     /// Force at ADC/DAC full scale (N): ±full scale maps to codes 0..4095.
     #[arg(long, default_value_t = 5000.0)]
     pub full_scale: f64,
-    /// Design method (only `vf`, the default, in this version).
-    #[arg(long, default_value = "vf")]
+    /// Design method: `vf` (default: vector fitting, fixed-lag Kalman
+    /// smoother) or `paper` (the seed paper: RFP + Gauss–Newton, continuous
+    /// Riccati, Tustin with prewarping).
+    #[arg(long, default_value = "vf", value_parser = ["vf", "paper"])]
     pub method: String,
+    /// Options of `--method paper`.
+    #[command(flatten)]
+    pub paper: PaperArgs,
+    /// Fitting bands.
+    #[command(flatten)]
+    pub bands: BandArgs,
+    /// Parallel elaboration (paper §3.3, offline only): one compensator per
+    /// band in one image (format 2) that `compensate` runs band by band
+    /// after a zero-phase split; the box never runs it. Needs bands.
+    #[arg(long)]
+    pub parallel: bool,
     /// Write plots and an index.html into this directory.
     #[arg(long)]
     pub report: Option<PathBuf>,
@@ -97,6 +220,12 @@ pub struct AxisJson {
     pub modes: Vec<(f64, f64)>,
     /// Design time of this axis (s).
     pub design_time_s: f64,
+    /// Relative RMS fit error on coherent lines outside the bands (null
+    /// without bands).
+    pub fit_nrmse_out_of_band: Option<f64>,
+    /// Condition numbers, observability rank, Riccati residual and prewarp
+    /// frequency of `--method paper`.
+    pub paper: Option<PaperDiagnostics>,
 }
 
 /// Machine-readable summary of the whole design.
@@ -112,15 +241,19 @@ pub struct DesignJson {
     pub latency_samples: usize,
     /// Method.
     pub method: &'static str,
+    /// Fitting bands (empty = whole coherent band).
+    pub bands: Vec<Band>,
     /// Axes.
     pub axes: Vec<AxisJson>,
     /// Total design time (s).
     pub design_time_s: f64,
 }
 
-fn noise_variances(args: &DesignArgs, frf: &Frf) -> Result<[Option<f64>; 3]> {
+/// Measurement-noise variance R (N²) per axis of `frf`: the variance of
+/// each column of the `idle` record, or `noise_variance` for all axes.
+pub fn noise_variances(idle: Option<&std::path::Path>, noise_variance: Option<f64>, frf: &Frf) -> Result<[Option<f64>; 3]> {
     let mut r = [None; 3];
-    match (&args.idle, args.noise_variance) {
+    match (idle, noise_variance) {
         (Some(path), _) => {
             let rec = io::signal_csv::read_signal_csv(path)?;
             for a in &frf.axes {
@@ -150,7 +283,8 @@ fn noise_variances(args: &DesignArgs, frf: &Frf) -> Result<[Option<f64>; 3]> {
     Ok(r)
 }
 
-/// Build the image from the per-axis designs.
+/// Build the image from the per-axis designs (method Paper when they were
+/// designed by `--method paper`).
 pub fn build_image(designs: &[AxisDesign], fs_hz: u32, latency: usize, full_scale_n: f64, source_sha256: [u8; 32]) -> Result<CoeffImage> {
     let mut axes = [None; 3];
     let newton_per_code = (2.0 * full_scale_n / 4096.0) as f32;
@@ -180,7 +314,7 @@ pub fn build_image(designs: &[AxisDesign], fs_hz: u32, latency: usize, full_scal
         fs_hz,
         latency_samples: u16::try_from(latency).context("latency too large")?,
         flags: 0,
-        method: DesignMethod::VectorFitting,
+        method: if designs.iter().any(|d| d.paper.is_some()) { DesignMethod::Paper } else { DesignMethod::VectorFitting },
         source_sha256,
         created_unix_s: std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
@@ -191,13 +325,16 @@ pub fn build_image(designs: &[AxisDesign], fs_hz: u32, latency: usize, full_scal
 }
 
 /// One-screen text summary.
-pub fn render_summary(designs: &[AxisDesign], fs: f64, latency: usize, image: &str, id: u32) -> String {
+pub fn render_summary(designs: &[AxisDesign], fs: f64, latency: usize, image: &str, id: u32, method: &str) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "image {image} (id {id:08x}): fs {fs} Hz, latency {latency} samples ({:.1} µs), method vf",
+        "image {image} (id {id:08x}): fs {fs} Hz, latency {latency} samples ({:.1} µs), method {method}",
         latency as f64 * 1e6 / fs
     );
+    if let Some(d) = designs.first().filter(|d| !d.bands.is_empty()) {
+        let _ = writeln!(s, "fitting bands: {}", bands::describe(&d.bands));
+    }
     let _ = writeln!(
         s,
         "{:<4} {:>5} {:>7} {:>13} {:>10} {:>9} {:>15} {:>6} {:>7} {:>7}",
@@ -222,6 +359,11 @@ pub fn render_summary(designs: &[AxisDesign], fs: f64, latency: usize, image: &s
             d.filter.fir().len()
         );
     }
+    for d in designs {
+        if let Some((tf, p)) = &d.paper {
+            let _ = writeln!(s, "{}", paper_line(d.axis, tf.nb(), tf.na(), p));
+        }
+    }
     let _ = writeln!(
         s,
         "flat band: |H·Ĝ| within ±5 % and ±5° of the pure {latency}-sample delay (fitted model Ĝ); noise: white-noise gain; pred.: predicted in-band RMS error for a flat force spectrum"
@@ -229,30 +371,58 @@ pub fn render_summary(designs: &[AxisDesign], fs: f64, latency: usize, image: &s
     s
 }
 
+/// One line of the paper's diagnostics for an axis.
+pub fn paper_line(axis: usize, nb: usize, na: usize, p: &PaperDiagnostics) -> String {
+    format!(
+        "{} paper {nb}:{na}: cond RFP {:.1e}, GN {:.1e}, companion {:.1e}; observability rank {}/{} (cond {:.1e}); CARE residual {:.1e}; Tustin prewarp {:.1} Hz; frequency scale {:.1} Hz",
+        axis_name(axis),
+        p.rfp_condition,
+        p.jacobian_condition,
+        p.companion_condition,
+        p.observability_rank,
+        p.observability_dim,
+        p.observability_condition,
+        p.care_residual,
+        p.prewarp_hz,
+        p.frequency_scale_hz
+    )
+}
+
 /// Run `dynocomp design`.
 pub fn run(args: &DesignArgs) -> Result<()> {
-    if args.method != "vf" {
-        bail!("--method {}: only `vf` is available in this version", args.method);
-    }
+    let paper = args.method == "paper";
+    let latency = match (paper, args.latency) {
+        (true, Some(l)) if l != 0 => bail!("--latency {l}: the paper's method (a Kalman filter, not a smoother) has no lag; omit --latency or give 0"),
+        (true, _) => 0,
+        (false, l) => l.unwrap_or(4),
+    };
     if !(args.fs.is_finite() && args.fs >= 1_000.0 && args.fs <= 1_000_000.0 && args.fs.fract() == 0.0) {
         bail!("--fs {}: the sample rate must be a whole number of Hz in 1000..=1000000", args.fs);
     }
-    if args.latency > 16 {
-        bail!("--latency {}: at most 16 samples", args.latency);
+    if latency > 16 {
+        bail!("--latency {}: at most 16 samples", latency);
     }
     let t0 = Instant::now();
     let bytes = std::fs::read(&args.frf).with_context(|| format!("{}: cannot read", args.frf.display()))?;
     let sha: [u8; 32] = Sha256::digest(&bytes).into();
     let frf = io::read_frf(&args.frf)?;
-    let r = noise_variances(args, &frf)?;
+    let r = noise_variances(args.idle.as_deref(), args.noise_variance, &frf)?;
+    let bands = args.bands.resolve(&frf, args.fs).with_context(|| format!("{}", args.frf.display()))?;
+    let method = if paper { args.paper.method(args.bands.tooth_passing_hz(), args.fs)? } else { FitMethod::Vf };
     let opts = DesignOptions {
         fs_hz: args.fs,
-        lag: args.latency,
+        lag: latency,
         force_rms: args.force_rms,
         max_noise_gain: args.max_noise_gain,
         vf: crate::fit::vf::VfOptions { max_order: args.max_order, ..Default::default() },
+        method,
+        bands: bands.clone(),
         ..Default::default()
     };
+    let method_name = if paper { "paper" } else { "vf" };
+    if args.parallel {
+        return crate::parallel::run(args, &frf, &r, &opts, &bands, latency, sha);
+    }
     let mut designs = Vec::new();
     let mut times = Vec::new();
     for a in &frf.axes {
@@ -265,10 +435,15 @@ pub fn run(args: &DesignArgs) -> Result<()> {
         times.push(dt);
         designs.push(d);
     }
-    let image = build_image(&designs, args.fs as u32, args.latency, args.full_scale, sha)?;
+    let image = build_image(&designs, args.fs as u32, latency, args.full_scale, sha)?;
     io::image_file::write_image(&args.out, &image)?;
+    if !paper {
+        // The model sidecar of `compensate --offline` (crate::smoother).
+        let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model)).collect();
+        crate::smoother::write_sidecar(&args.out, &crate::smoother::ModelSidecar::new(&image, &models))?;
+    }
     let id = image.id();
-    let summary = render_summary(&designs, args.fs, args.latency, &args.out.display().to_string(), id);
+    let summary = render_summary(&designs, args.fs, latency, &args.out.display().to_string(), id, method_name);
     if let Some(dir) = &args.report {
         let files = crate::report::write_report(dir, &frf, &designs, args.fs, &summary)?;
         eprintln!("report: {} files in {} (open index.html)", files.len(), dir.display());
@@ -278,8 +453,9 @@ pub fn run(args: &DesignArgs) -> Result<()> {
             image: args.out.display().to_string(),
             image_id: format!("{id:08x}"),
             fs_hz: args.fs,
-            latency_samples: args.latency,
-            method: "vf",
+            latency_samples: latency,
+            method: method_name,
+            bands,
             design_time_s: t0.elapsed().as_secs_f64(),
             axes: designs
                 .iter()
@@ -303,6 +479,8 @@ pub fn run(args: &DesignArgs) -> Result<()> {
                     max_pole_radius: d.verification.max_pole_radius,
                     modes: d.model.modes(),
                     design_time_s: *t,
+                    fit_nrmse_out_of_band: (!d.bands.is_empty() && d.fit_nrmse_out_of_band.is_finite()).then_some(d.fit_nrmse_out_of_band),
+                    paper: d.paper.as_ref().map(|p| p.1.clone()),
                 })
                 .collect(),
         };

@@ -1,6 +1,7 @@
 //! `dynocomp inspect`: what an image holds, for people and for scripts.
 
-use dynocomp_core::image::{CoeffImage, DesignMethod};
+use anyhow::Result;
+use dynocomp_core::image::{AxisImage, CoeffImage, DesignMethod, ParallelImage, PARALLEL_FORMAT_VERSION};
 use serde::Serialize;
 use std::fmt::Write;
 
@@ -60,7 +61,25 @@ pub struct InspectReport {
     pub source_sha256: String,
     /// Creation time (Unix seconds).
     pub created_unix_s: u64,
-    /// Axes.
+    /// Why the box never runs it, when it is offline only, e.g.
+    /// `parallel elaboration, 3 bands: 900-1300 Hz, …`.
+    pub offline_reason: Option<String>,
+    /// Axes (of a box image; empty for a parallel image, see `bands`).
+    pub axes: Vec<AxisReport>,
+    /// Bands of a parallel-elaboration image (empty otherwise), lowest first.
+    pub bands: Vec<BandReport>,
+}
+
+/// One band of a parallel-elaboration image.
+#[derive(Debug, Serialize)]
+pub struct BandReport {
+    /// Band edges the compensators were designed for (Hz).
+    pub band_hz: [f32; 2],
+    /// Zero-phase split of `compensate`: the band's share of the record
+    /// runs from `split_hz[0]` to `split_hz[1]` (crossovers, Hz; 0 and
+    /// Nyquist at the ends).
+    pub split_hz: [f64; 2],
+    /// Per-axis compensators of the band.
     pub axes: Vec<AxisReport>,
 }
 
@@ -81,11 +100,8 @@ pub fn max_pole_radius(sections: &[dynocomp_core::kernel::Section]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Build the report.
-pub fn report(image: &CoeffImage) -> InspectReport {
-    let axes = image
-        .axes
-        .iter()
+fn axis_reports(axes: &[Option<AxisImage>]) -> Vec<AxisReport> {
+    axes.iter()
         .flatten()
         .map(|a| AxisReport {
             axis: axis_name(a.axis as usize),
@@ -103,7 +119,12 @@ pub fn report(image: &CoeffImage) -> InspectReport {
             r: a.summary.r,
             max_pole_radius: max_pole_radius(a.filter.sections()),
         })
-        .collect();
+        .collect()
+}
+
+/// Build the report of a box image (format 1).
+pub fn report(image: &CoeffImage) -> InspectReport {
+    let axes = axis_reports(&image.axes);
     let loaded = Ok(*image);
     let box_mode = dynocomp_core::sample::select_mode(Some(&loaded), false);
     InspectReport {
@@ -116,8 +137,43 @@ pub fn report(image: &CoeffImage) -> InspectReport {
         method: method_name(image.method),
         source_sha256: image.source_sha256.iter().map(|b| format!("{b:02x}")).collect(),
         created_unix_s: image.created_unix_s,
+        offline_reason: image.is_offline_only().then(|| "marked offline only (flag 0x01)".to_string()),
         axes,
+        bands: Vec::new(),
     }
+}
+
+/// Build the report of a parallel-elaboration image (format 2): offline
+/// only, with its bands and the zero-phase split `compensate` uses.
+pub fn report_parallel(image: &ParallelImage) -> Result<InspectReport> {
+    let edges: Vec<(f64, f64)> = image.bands().iter().map(|b| (f64::from(b.lo_hz), f64::from(b.hi_hz))).collect();
+    let cross = crate::bandsplit::crossovers(&edges)?;
+    let nyquist = f64::from(image.fs_hz) / 2.0;
+    let bands: Vec<BandReport> = image
+        .bands()
+        .iter()
+        .enumerate()
+        .map(|(k, b)| BandReport {
+            band_hz: [b.lo_hz, b.hi_hz],
+            split_hz: [if k == 0 { 0.0 } else { cross[k - 1] }, cross.get(k).copied().unwrap_or(nyquist)],
+            axes: axis_reports(&b.axes),
+        })
+        .collect();
+    let list = bands.iter().map(|b| format!("{:.0}-{:.0} Hz", b.band_hz[0], b.band_hz[1])).collect::<Vec<_>>().join(", ");
+    Ok(InspectReport {
+        format_version: PARALLEL_FORMAT_VERSION,
+        image_id: format!("{:08x}", image.id()),
+        fs_hz: image.fs_hz,
+        latency_samples: image.latency_samples,
+        offline_only: true,
+        runs_in_box: false,
+        method: method_name(image.method),
+        source_sha256: image.source_sha256.iter().map(|b| format!("{b:02x}")).collect(),
+        created_unix_s: image.created_unix_s,
+        offline_reason: Some(format!("parallel elaboration, {} bands: {list}", bands.len())),
+        axes: Vec::new(),
+        bands,
+    })
 }
 
 /// Human-readable rendering of the report.
@@ -132,17 +188,34 @@ pub fn render(r: &InspectReport) -> String {
         f64::from(r.latency_samples) * 1e6 / f64::from(r.fs_hz)
     );
     if r.offline_only {
-        let _ = writeln!(s, "OFFLINE ONLY: this image is for `dynocomp compensate`; the box refuses to run it");
+        let why = r.offline_reason.as_deref().unwrap_or("marked offline only");
+        let _ = writeln!(s, "offline only: {why}");
+        let _ = writeln!(s, "this image is for `dynocomp compensate`; the box never runs it (it stays in bypass, reason OfflineOnly)");
     } else if !r.runs_in_box {
         let _ = writeln!(s, "the box cannot run this image inline (sample rate outside its 10-200 kHz range)");
     }
     let _ = writeln!(s, "source sha256 {}", r.source_sha256);
+    if r.bands.is_empty() {
+        render_axes(&mut s, &r.axes);
+    }
+    for (k, b) in r.bands.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "band {k}: designed for {:.0}-{:.0} Hz, zero-phase split {:.0}-{:.0} Hz",
+            b.band_hz[0], b.band_hz[1], b.split_hz[0], b.split_hz[1]
+        );
+        render_axes(&mut s, &b.axes);
+    }
+    s
+}
+
+fn render_axes(s: &mut String, axes: &[AxisReport]) {
     let _ = writeln!(
         s,
         "{:<4} {:>4} {:>5} {:>6} {:>8} {:>17} {:>6} {:>10} {:>10} {:>10}",
         "axis", "sec", "order", "model", "fit err", "flat band (Hz)", "noise", "Q", "R (N²)", "max |p|"
     );
-    for a in &r.axes {
+    for a in axes {
         let _ = writeln!(
             s,
             "{:<4} {:>4} {:>5} {:>6} {:>7.2}% {:>8.0}-{:<8.0} {:>6.2} {:>10.3e} {:>10.3e} {:>10.7}",
@@ -159,5 +232,4 @@ pub fn render(r: &InspectReport) -> String {
             a.max_pole_radius
         );
     }
-    s
 }

@@ -2,6 +2,9 @@
 //! chain, data flowing one way (io → fit → kalman → realize → quantize →
 //! image → report), plus the simulator and the offline compensator.
 
+pub mod bands;
+pub mod bandsplit;
+pub mod compare;
 pub mod compensate;
 pub mod design;
 pub mod design_cmd;
@@ -13,11 +16,14 @@ pub mod inspect;
 pub mod io;
 pub mod kalman;
 pub mod metrics;
+pub mod parallel;
+pub mod paper;
 pub mod quantize;
 pub mod realize;
 pub mod report;
 pub mod serial_link;
 pub mod sim_flash;
 pub mod simulate;
+pub mod smoother;
 pub mod stream;
 pub mod virtual_box;

@@ -19,6 +19,9 @@ struct Cli {
 enum Command {
     /// Design a compensator from a measured FRF and write its coefficient image.
     Design(dynocomp::design_cmd::DesignArgs),
+    /// Compare the seed paper's method (whole band, band-fitted, parallel)
+    /// with the default method on the same FRF: tables and plots.
+    Compare(dynocomp::compare::CompareArgs),
     /// Show what a coefficient image holds.
     Inspect {
         /// Coefficient image (.dcimg).
@@ -27,7 +30,9 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Compensate a recorded force file offline, bit-exact with the box.
+    /// Compensate a recorded force file offline: bit-exact with the box, or
+    /// band by band for a parallel-elaboration image, or with the zero-lag
+    /// fixed-interval smoother (`--offline`).
     Compensate {
         /// Coefficient image (.dcimg).
         #[arg(long)]
@@ -42,6 +47,11 @@ enum Command {
         /// declared latency.
         #[arg(long)]
         raw_timing: bool,
+        /// Offline only: zero-lag fixed-interval (Rauch-Tung-Striebel
+        /// equivalent) smoother in f64 instead of the box's causal filter.
+        /// Needs the model sidecar `<image>.model.json` that `design` writes.
+        #[arg(long, conflicts_with = "raw_timing")]
+        offline: bool,
     },
     /// Simulate a dynamometer, an impact test and a milling record with known
     /// true force (for demos and tests).
@@ -83,28 +93,45 @@ struct FlashArgs {
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Inspect { image, json } => {
-            let img = io::image_file::read_image(&image)?;
-            let report = inspect::report(&img);
+            let report = match io::image_file::read_any_image(&image)? {
+                io::image_file::AnyImage::Inline(img) => inspect::report(&img),
+                io::image_file::AnyImage::Parallel(p) => inspect::report_parallel(&p)?,
+            };
             if json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else {
                 print!("{}", inspect::render(&report));
             }
         }
-        Command::Compensate { coeffs, input, output, raw_timing } => {
-            let img = io::image_file::read_image(&coeffs)?;
+        Command::Compensate { coeffs, input, output, raw_timing, offline } => {
+            let img = io::image_file::read_any_image(&coeffs)?;
             let source = input.display().to_string();
             let rec = io::signal_csv::read_signal_csv(&input)?;
-            compensate::check_sample_rate(&img, &rec, &source)?;
-            let out = compensate::compensate_record(&img, &rec, raw_timing, &source)?;
+            compensate::check_rate(img.fs_hz(), &rec, &source)?;
+            let (out, how) = match (&img, offline) {
+                (io::image_file::AnyImage::Inline(i), false) => {
+                    let how = format!("box filter, latency {} samples{}", i.latency_samples, if raw_timing { ", not removed" } else { ", removed" });
+                    (compensate::compensate_record(i, &rec, raw_timing, &source)?, how)
+                }
+                (io::image_file::AnyImage::Parallel(p), false) => {
+                    let how = format!("parallel elaboration, {} bands, zero-phase split (offline only)", p.bands().len());
+                    (compensate::compensate_parallel(p, &rec, raw_timing, &source)?, how)
+                }
+                (io::image_file::AnyImage::Inline(i), true) => {
+                    let sidecar = dynocomp::smoother::read_sidecar(&coeffs, i)?;
+                    (dynocomp::smoother::smooth_record(i, &sidecar, &rec, &source)?, "fixed-interval smoother, zero lag (offline only)".to_string())
+                }
+                (io::image_file::AnyImage::Parallel(_), true) => anyhow::bail!(
+                    "{}: --offline needs a box image (format 1) and its model sidecar; this is a parallel-elaboration image",
+                    coeffs.display()
+                ),
+            };
             io::signal_csv::write_signal_csv(&output, &out)?;
             eprintln!(
-                "compensated {} samples x {} axes at {} Hz (latency {} samples{}) -> {}",
+                "compensated {} samples x {} axes at {} Hz ({how}) -> {}",
                 rec.len(),
                 rec.channels.len(),
-                img.fs_hz,
-                img.latency_samples,
-                if raw_timing { ", not removed" } else { ", removed" },
+                img.fs_hz(),
                 output.display()
             );
         }
@@ -122,6 +149,7 @@ fn run(cli: Cli) -> Result<()> {
             let code = dynocomp::virtual_box::run(&args)?;
             std::process::exit(code);
         }
+        Command::Compare(args) => dynocomp::compare::run(&args)?,
     }
     Ok(())
 }

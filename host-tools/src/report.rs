@@ -36,7 +36,7 @@ use crate::io::atomic::write_bytes_atomic;
 use crate::quantize::filter_response;
 
 /// Font family of all plot text (resolved by the SVG viewer).
-const FONT: &str = "sans-serif";
+pub(crate) const FONT: &str = "sans-serif";
 
 const C_MEASURED: RGBColor = RGBColor(31, 119, 180);
 const C_MODEL: RGBColor = RGBColor(214, 39, 40);
@@ -45,14 +45,16 @@ const C_COH: RGBColor = RGBColor(44, 140, 44);
 const C_TOL: RGBColor = RGBColor(230, 120, 0);
 const C_COH_BAND: RGBColor = RGBColor(150, 150, 150);
 const C_FLAT_BAND: RGBColor = RGBColor(44, 160, 44);
+/// Fitting bands (paper §3.2), shaded on the FRF and compensated plots.
+pub(crate) const C_FIT_BAND: RGBColor = RGBColor(148, 103, 189);
 
 /// One axis in index.html: heading and its plots (file, title, caption).
 type Section = (String, Vec<(String, String, String)>);
 
 /// One report file: its name in the report directory and its content.
-struct Page {
-    name: String,
-    content: String,
+pub(crate) struct Page {
+    pub(crate) name: String,
+    pub(crate) content: String,
 }
 
 /// Write the report of `designs` into `dir` (created if missing): three SVG
@@ -78,9 +80,11 @@ pub fn write_report(dir: &Path, frf: &Frf, designs: &[AxisDesign], fs_hz: f64, s
             (
                 format!("{name}_frf_fit.svg"),
                 format!("Axis {name}: measured FRF and fitted model"),
-                "Magnitude and phase of the measured FRF G (impact test) with the fitted pole-residue model Ĝ, \
-                 and the coherence γ². Shaded: the coherent band used for the design."
-                    .to_string(),
+                format!(
+                    "Magnitude and phase of the measured FRF G (impact test) with the fitted model Ĝ, \
+                     and the coherence γ². Shaded: the coherent band used for the design{}.",
+                    if d.bands.is_empty() { String::new() } else { format!(" and, in violet, the fitting bands ({})", crate::bands::describe(&d.bands)) }
+                ),
                 plot_frf_fit(&frf.freq_hz, meas, d).with_context(|| format!("report: axis {name}: FRF plot"))?,
             ),
             (
@@ -127,7 +131,7 @@ pub fn write_report(dir: &Path, frf: &Frf, designs: &[AxisDesign], fs_hz: f64, s
 /// Create `dir` if needed and write `pages` atomically; on error remove what
 /// this call created (files that did not exist before, and `dir` if it was
 /// created here and is empty again).
-fn write_pages(dir: &Path, pages: &[Page]) -> Result<Vec<PathBuf>> {
+pub(crate) fn write_pages(dir: &Path, pages: &[Page]) -> Result<Vec<PathBuf>> {
     let dir_existed = dir.is_dir();
     if !dir_existed {
         std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the report directory", dir.display()))?;
@@ -213,10 +217,10 @@ fn index_html(summary: &str, sections: &[Section]) -> String {
 
 // ------------------------------------------------------------ plot helpers
 
-type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;
-type Chart<'a> = ChartContext<'a, SVGBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+pub(crate) type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;
+pub(crate) type Chart<'a> = ChartContext<'a, SVGBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
-fn perr<E: std::fmt::Display>(e: E) -> anyhow::Error {
+pub(crate) fn perr<E: std::fmt::Display>(e: E) -> anyhow::Error {
     anyhow!("plotting failed: {e}")
 }
 
@@ -284,14 +288,14 @@ fn clip_segments(points: &[(f64, f64)], lo: f64, hi: f64, max_jump: f64) -> Vec<
 }
 
 /// (min, max) of the finite values, or `None`.
-fn finite_range(v: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
+pub(crate) fn finite_range(v: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
     v.filter(|x| x.is_finite()).fold(None, |acc, x| match acc {
         None => Some((x, x)),
         Some((a, b)) => Some((a.min(x), b.max(x))),
     })
 }
 
-fn pad_range((lo, hi): (f64, f64), frac: f64, min_span: f64) -> (f64, f64) {
+pub(crate) fn pad_range((lo, hi): (f64, f64), frac: f64, min_span: f64) -> (f64, f64) {
     let span = (hi - lo).max(min_span);
     let mid = 0.5 * (lo + hi);
     (mid - 0.5 * span - frac * span, mid + 0.5 * span + frac * span)
@@ -307,7 +311,7 @@ fn wrap_deg(z: Complex64) -> f64 {
 
 /// Draw a line (clipped to the chart's y range) with a legend entry.
 #[allow(clippy::too_many_arguments)]
-fn draw_line<'a>(
+pub(crate) fn draw_line<'a>(
     chart: &mut Chart<'a>,
     pts: &[(f64, f64)],
     (ylo, yhi): (f64, f64),
@@ -346,7 +350,7 @@ fn draw_line<'a>(
 }
 
 /// Shade the x interval `band` over the chart's full y range.
-fn shade<'a>(
+pub(crate) fn shade<'a>(
     chart: &mut Chart<'a>,
     band: (f64, f64),
     (xlo, xhi): (f64, f64),
@@ -367,7 +371,16 @@ fn shade<'a>(
     Ok(())
 }
 
-fn legend<'a>(chart: &mut Chart<'a>, pos: SeriesLabelPosition) -> Result<()> {
+/// Shade each fitting band (labelled once when `labelled`).
+pub(crate) fn shade_bands<'a>(chart: &mut Chart<'a>, bands: &[crate::bands::Band], x: (f64, f64), y: (f64, f64), labelled: bool) -> Result<()> {
+    for (i, b) in bands.iter().enumerate() {
+        let label = if labelled && i == 0 { "fitting bands" } else { "" };
+        shade(chart, (b.lo_hz, b.hi_hz), x, y, C_FIT_BAND, 0.18, label)?;
+    }
+    Ok(())
+}
+
+pub(crate) fn legend<'a>(chart: &mut Chart<'a>, pos: SeriesLabelPosition) -> Result<()> {
     chart
         .configure_series_labels()
         .position(pos)
@@ -379,7 +392,7 @@ fn legend<'a>(chart: &mut Chart<'a>, pos: SeriesLabelPosition) -> Result<()> {
         .map_err(perr)
 }
 
-fn build_chart<'a>(area: &Area<'a>, caption: &str, x: (f64, f64), y: (f64, f64)) -> Result<Chart<'a>> {
+pub(crate) fn build_chart<'a>(area: &Area<'a>, caption: &str, x: (f64, f64), y: (f64, f64)) -> Result<Chart<'a>> {
     ChartBuilder::on(area)
         .margin_top(6)
         .margin_bottom(4)
@@ -392,7 +405,7 @@ fn build_chart<'a>(area: &Area<'a>, caption: &str, x: (f64, f64), y: (f64, f64))
         .map_err(perr)
 }
 
-fn mesh<'a>(
+pub(crate) fn mesh<'a>(
     chart: &mut Chart<'a>,
     xdesc: &str,
     ydesc: &str,
@@ -416,7 +429,7 @@ fn mesh<'a>(
         .map_err(perr)
 }
 
-fn hz(v: &f64) -> String {
+pub(crate) fn hz(v: &f64) -> String {
     format!("{v:.0}")
 }
 
@@ -444,7 +457,7 @@ fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> 
     let name = axis_name(d.axis);
     let xr = (freq[0], *freq.last().unwrap_or(&freq[0]));
     let xr = if xr.1 > xr.0 { xr } else { (xr.0, xr.0 + 1.0) };
-    let model: Vec<Complex64> = freq.iter().map(|f| d.model.frf(*f)).collect();
+    let model: Vec<Complex64> = freq.iter().map(|f| d.fitted_frf(*f)).collect();
     let mag_m: Vec<(f64, f64)> = freq.iter().zip(&meas.frf).map(|(f, g)| (*f, db(*g))).collect();
     let mag_f: Vec<(f64, f64)> = freq.iter().zip(&model).map(|(f, g)| (*f, db(*g))).collect();
     let ph_m: Vec<(f64, f64)> = freq.iter().zip(&meas.frf).map(|(f, g)| (*f, wrap_deg(*g))).collect();
@@ -459,9 +472,10 @@ fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> 
         let root = SVGBackend::with_string(&mut buf, (1100, 980)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
         let title = format!(
-            "Axis {name} — measured FRF and fitted model (order {}, fit error {:.2} % in the coherent band)",
+            "Axis {name} — measured FRF and fitted model (order {}, fit error {:.2} % in the {})",
             d.model.order(),
-            100.0 * d.fit_nrmse
+            100.0 * d.fit_nrmse,
+            if d.bands.is_empty() { "coherent band" } else { "fitting bands" }
         );
         let root = root.titled(&title, (FONT, 20)).map_err(perr)?;
         let (top, rest) = root.split_vertically(380);
@@ -471,6 +485,7 @@ fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> 
         let mut c = build_chart(&top, &format!("Magnitude |G| ({band_txt})"), xr, yr_mag)?;
         mesh(&mut c, "Frequency (Hz)", "|G| (dB re 1 N/N)", &hz, &|v| format!("{v:.0}"), 7)?;
         shade(&mut c, band, xr, yr_mag, C_COH_BAND, 0.15, "coherent band")?;
+        shade_bands(&mut c, &d.bands, xr, yr_mag, true)?;
         draw_line(&mut c, &mag_m, yr_mag, f64::INFINITY, C_MEASURED, 1, false, "measured G")?;
         draw_line(&mut c, &mag_f, yr_mag, f64::INFINITY, C_MODEL, 2, false, "fitted model Ĝ")?;
         legend(&mut c, SeriesLabelPosition::UpperLeft)?;
@@ -479,6 +494,7 @@ fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> 
         let mut c = build_chart(&midp, "Phase ∠G (wrapped)", xr, yr_ph)?;
         mesh(&mut c, "Frequency (Hz)", "Phase (°)", &hz, &|v| format!("{v:.0}"), 9)?;
         shade(&mut c, band, xr, yr_ph, C_COH_BAND, 0.15, "")?;
+        shade_bands(&mut c, &d.bands, xr, yr_ph, false)?;
         draw_line(&mut c, &ph_m, yr_ph, 180.0, C_MEASURED, 1, false, "measured G")?;
         draw_line(&mut c, &ph_f, yr_ph, 180.0, C_MODEL, 2, false, "fitted model Ĝ")?;
         legend(&mut c, SeriesLabelPosition::LowerLeft)?;
@@ -487,6 +503,7 @@ fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> 
         let mut c = build_chart(&bot, &format!("Coherence γ² ({band_txt})"), xr, yr_c)?;
         mesh(&mut c, "Frequency (Hz)", "γ²", &hz, &|v| format!("{v:.1}"), 6)?;
         shade(&mut c, band, xr, yr_c, C_COH_BAND, 0.15, "coherent band")?;
+        shade_bands(&mut c, &d.bands, xr, yr_c, true)?;
         match &meas.coherence {
             Some(coh) => {
                 let pts: Vec<(f64, f64)> = freq.iter().zip(coh).map(|(f, c)| (*f, *c)).collect();
@@ -517,7 +534,7 @@ fn plot_compensated(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Re
     let h: Vec<Complex64> =
         freq.iter().map(|f| filter_response(&d.filter, *f, fs) * Complex64::from_polar(1.0, 2.0 * PI * f * lag / fs)).collect();
     let hg: Vec<Complex64> = h.iter().zip(&meas.frf).map(|(h, g)| h * g).collect();
-    let hg_model: Vec<Complex64> = h.iter().zip(freq).map(|(h, f)| h * d.model.frf(*f)).collect();
+    let hg_model: Vec<Complex64> = h.iter().zip(freq).map(|(h, f)| h * d.fitted_frf(*f)).collect();
     let g = &meas.frf;
 
     let mag_g_db: Vec<(f64, f64)> = freq.iter().zip(g).map(|(f, z)| (*f, db(*z))).collect();
@@ -550,6 +567,7 @@ fn plot_compensated(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Re
         mesh(&mut c, "Frequency (Hz)", "Magnitude (dB)", &hz, &|v| format!("{v:.0}"), 7)?;
         shade(&mut c, band, xr, yr_db, C_COH_BAND, 0.12, "coherent band")?;
         shade(&mut c, flat, xr, yr_db, C_FLAT_BAND, 0.13, "flat band (±5 %, ±5°)")?;
+        shade_bands(&mut c, &d.bands, xr, yr_db, true)?;
         draw_line(&mut c, &mag_g_db, yr_db, f64::INFINITY, C_RAW, 2, false, "uncompensated |G|")?;
         draw_line(&mut c, &mag_hg_db, yr_db, f64::INFINITY, C_MEASURED, 1, false, "compensated |H·G|")?;
         legend(&mut c, SeriesLabelPosition::UpperLeft)?;
@@ -559,6 +577,7 @@ fn plot_compensated(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Re
         mesh(&mut c, "Frequency (Hz)", "|H·G| (N/N)", &hz, &|v| format!("{v:.2}"), 9)?;
         shade(&mut c, band, xr, yr_m, C_COH_BAND, 0.12, "")?;
         shade(&mut c, flat, xr, yr_m, C_FLAT_BAND, 0.13, "")?;
+        shade_bands(&mut c, &d.bands, xr, yr_m, false)?;
         draw_line(&mut c, &tol(1.05), yr_m, f64::INFINITY, C_TOL, 2, true, "±5 % tolerance")?;
         draw_line(&mut c, &tol(0.95), yr_m, f64::INFINITY, C_TOL, 2, true, "")?;
         draw_line(&mut c, &mag_g, yr_m, f64::INFINITY, C_RAW, 2, false, "uncompensated |G|")?;
@@ -571,6 +590,7 @@ fn plot_compensated(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Re
         mesh(&mut c, "Frequency (Hz)", "Phase (°)", &hz, &|v| format!("{v:.0}"), 9)?;
         shade(&mut c, band, xr, yr_p, C_COH_BAND, 0.12, "")?;
         shade(&mut c, flat, xr, yr_p, C_FLAT_BAND, 0.13, "")?;
+        shade_bands(&mut c, &d.bands, xr, yr_p, false)?;
         draw_line(&mut c, &tol(5.0), yr_p, f64::INFINITY, C_TOL, 2, true, "±5° tolerance")?;
         draw_line(&mut c, &tol(-5.0), yr_p, f64::INFINITY, C_TOL, 2, true, "")?;
         draw_line(&mut c, &ph_g, yr_p, 180.0, C_RAW, 2, false, "uncompensated ∠G")?;

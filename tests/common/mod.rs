@@ -109,3 +109,11 @@ pub fn encode_image(img: &CoeffImage) -> Vec<u8> {
     buf.truncate(n);
     buf
 }
+
+/// Recompute the trailing CRC after deliberately editing a field, so that a
+/// test reaches the semantic check behind the CRC.
+pub fn fix_crc(bytes: &mut [u8]) {
+    let n = bytes.len();
+    let crc = dynocomp_core::image::CRC32.checksum(&bytes[..n - 4]);
+    bytes[n - 4..].copy_from_slice(&crc.to_le_bytes());
+}

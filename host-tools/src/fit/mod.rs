@@ -4,6 +4,7 @@
 //! `G(s) = d + Σ_real r/(s − p) + Σ_pairs [r/(s − p) + r̄/(s − p̄)]`,
 //! s in rad/s, G in N/N.
 
+pub mod rfp;
 pub mod vf;
 
 use num_complex::Complex64;
@@ -86,13 +87,14 @@ impl PoleResidueModel {
     }
 }
 
-/// Relative RMS error of a model against measured lines, over the lines
-/// selected by `mask`: sqrt(mean(|Ĝ − G|² / |G|²)).
-pub fn relative_rms_error(model: &PoleResidueModel, freq_hz: &[f64], frf: &[Complex64], mask: &[bool]) -> f64 {
+/// Relative RMS error of a model Ĝ(f) (f in Hz) against measured lines,
+/// over the lines selected by `mask`: sqrt(mean(|Ĝ − G|² / |G|²)); NaN when
+/// no line is selected.
+pub fn relative_rms_error(model: impl Fn(f64) -> Complex64, freq_hz: &[f64], frf: &[Complex64], mask: &[bool]) -> f64 {
     let (mut sum, mut n) = (0.0, 0usize);
     for ((f, g), m) in freq_hz.iter().zip(frf).zip(mask) {
         if *m && g.norm() > 0.0 {
-            sum += (model.frf(*f) - g).norm_sqr() / g.norm_sqr();
+            sum += (model(*f) - g).norm_sqr() / g.norm_sqr();
             n += 1;
         }
     }

@@ -1,7 +1,9 @@
 //! Coefficient image files (`.dcimg`): the core codec plus file handling.
+//! Format 1 is what the box runs; format 2 (parallel elaboration) is offline
+//! only and is read with [`read_any_image`].
 
 use anyhow::{Context, Result};
-use dynocomp_core::image::{CoeffImage, MAX_IMAGE_LEN};
+use dynocomp_core::image::{peek_version, CoeffImage, ImageError, ParallelImage, MAX_IMAGE_LEN, MAX_PARALLEL_IMAGE_LEN, PARALLEL_FORMAT_VERSION};
 use std::path::Path;
 
 use crate::io::atomic::write_bytes_atomic;
@@ -27,4 +29,66 @@ pub fn write_image(path: &Path, image: &CoeffImage) -> Result<()> {
     let back = CoeffImage::parse(&bytes).map_err(|e| anyhow::anyhow!("{}: encoded image does not parse: {e}", path.display()))?;
     anyhow::ensure!(back == *image, "{}: encoded image does not decode to the design", path.display());
     write_bytes_atomic(path, &bytes)
+}
+
+/// Any coefficient image file: a box-runnable image (format 1) or a
+/// parallel-elaboration image (format 2, offline only).
+// One value per command run: the size difference of the variants (a box
+// image is ~2.7 KiB) does not matter.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Debug)]
+pub enum AnyImage {
+    /// One compensator per axis (what the box runs).
+    Inline(CoeffImage),
+    /// One compensator per band and axis; offline only (paper §3.3).
+    Parallel(Box<ParallelImage>),
+}
+
+impl AnyImage {
+    /// The image id (its CRC-32).
+    pub fn id(&self) -> u32 {
+        match self {
+            AnyImage::Inline(i) => i.id(),
+            AnyImage::Parallel(p) => p.id(),
+        }
+    }
+
+    /// Sample rate (Hz).
+    pub fn fs_hz(&self) -> u32 {
+        match self {
+            AnyImage::Inline(i) => i.fs_hz,
+            AnyImage::Parallel(p) => p.fs_hz,
+        }
+    }
+
+    /// Source FRF hash.
+    pub fn source_sha256(&self) -> [u8; 32] {
+        match self {
+            AnyImage::Inline(i) => i.source_sha256,
+            AnyImage::Parallel(p) => p.source_sha256,
+        }
+    }
+}
+
+/// Read and validate an image file of either format (chosen by its version
+/// field).
+pub fn read_any_image(path: &Path) -> Result<AnyImage> {
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let bad = |e: ImageError| anyhow::anyhow!("{}: invalid coefficient image: {e}", path.display());
+    if peek_version(&bytes) == Some(PARALLEL_FORMAT_VERSION) {
+        Ok(AnyImage::Parallel(Box::new(ParallelImage::parse(&bytes).map_err(bad)?)))
+    } else {
+        Ok(AnyImage::Inline(CoeffImage::parse(&bytes).map_err(bad)?))
+    }
+}
+
+/// Encode a parallel image, check that it decodes to the same value, and
+/// write it atomically.
+pub fn write_parallel_image(path: &Path, image: &ParallelImage) -> Result<()> {
+    let mut buf = vec![0u8; MAX_PARALLEL_IMAGE_LEN];
+    let n = image.encode(&mut buf).map_err(|e| anyhow::anyhow!("cannot encode parallel image: {e}"))?;
+    buf.truncate(n);
+    let back = ParallelImage::parse(&buf).map_err(|e| anyhow::anyhow!("{}: encoded parallel image does not parse: {e}", path.display()))?;
+    anyhow::ensure!(back == *image, "{}: encoded parallel image does not decode to the design", path.display());
+    write_bytes_atomic(path, &buf)
 }

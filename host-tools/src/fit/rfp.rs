@@ -1,0 +1,374 @@
+//! The seed paper's fit (§3, eq. (1)): a rational fraction polynomial
+//!
+//! `G(s) = B(s)/A(s) = (b_0 + b_1 s' + … + b_nb s'^nb) / (a_0 + a_1 s' + … + s'^na)`,
+//! `s' = s/ω_0` (frequency rescaling, ω_0 in rad/s),
+//!
+//! estimated in two steps, as MATLAB `invfreqs` does:
+//!
+//! 1. **Initial estimate** (rational fraction polynomial, Richardson &
+//!    Formenti 1982; the linearized "equation error" of Levy 1959): minimize
+//!    `Σ w_k |B(s'_k) − G_k A(s'_k)|²`, linear in the coefficients. Richardson
+//!    and Formenti solve it through orthogonal (Forsythe) polynomials to
+//!    avoid the normal equations; here the same least-squares problem is
+//!    solved by SVD of the power-basis matrix, whose condition number is
+//!    reported: it is the paper's "poorly conditioned" diagnostic (§3.1).
+//!    Unstable roots of A are reflected into the left half-plane.
+//! 2. **Damped Gauss–Newton** refinement of the weighted output error
+//!    `Σ w_k |B(s'_k)/A(s'_k) − G_k|²` (Dennis & Schnabel), halving the step
+//!    until the error decreases and A stays stable.
+//!
+//! The weights are the coherence γ² of each line (paper §3: "the coherence
+//! functions has been taken as weight"), zero outside the fitting bands.
+
+// `!(x < limit)` on purpose: a NaN residual or condition number must fail
+// the check, as in kalman.rs and quantize.rs.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use anyhow::{bail, Result};
+use nalgebra::{DMatrix, DVector};
+use num_complex::Complex64;
+use std::f64::consts::PI;
+
+use super::{PoleResidueModel, Term};
+
+/// Condition number above which the fit's least-squares matrix counts as
+/// numerically singular (≈ 1/(√ε·…)): a solution then carries no digits.
+pub const MAX_CONDITION: f64 = 1e12;
+
+/// A rational transfer function in rescaled frequency `s' = s/ω_0` (eq. (1)).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RationalTf {
+    /// Numerator coefficients b_0..b_nb, ascending powers of s' (N/N).
+    pub b: Vec<f64>,
+    /// Denominator coefficients a_0..a_na, ascending powers of s', monic (a_na = 1).
+    pub a: Vec<f64>,
+    /// Frequency scale ω_0 (rad/s).
+    pub omega_scale: f64,
+}
+
+/// Evaluate a polynomial with ascending real coefficients at complex `x`.
+pub fn poly_eval(c: &[f64], x: Complex64) -> Complex64 {
+    c.iter().rev().fold(Complex64::new(0.0, 0.0), |acc, &v| acc * x + v)
+}
+
+/// Roots of a monic polynomial (ascending coefficients), as the eigenvalues
+/// of its companion matrix (nalgebra).
+pub fn poly_roots(a: &[f64]) -> Vec<Complex64> {
+    let n = a.len() - 1;
+    if n == 0 {
+        return Vec::new();
+    }
+    let lead = a[n];
+    let m = DMatrix::<f64>::from_fn(n, n, |i, j| if i == 0 { -a[n - 1 - j] / lead } else if i == j + 1 { 1.0 } else { 0.0 });
+    m.complex_eigenvalues().iter().copied().collect()
+}
+
+/// Monic real polynomial (ascending) with the given roots (conjugates paired).
+pub fn poly_from_roots(roots: &[Complex64]) -> Vec<f64> {
+    let mut c = vec![Complex64::new(1.0, 0.0)];
+    for r in roots {
+        let mut next = vec![Complex64::new(0.0, 0.0); c.len() + 1];
+        for (i, v) in c.iter().enumerate() {
+            next[i + 1] += v;
+            next[i] -= v * r;
+        }
+        c = next;
+    }
+    c.iter().map(|v| v.re).collect()
+}
+
+impl RationalTf {
+    /// Numerator order nb.
+    pub fn nb(&self) -> usize {
+        self.b.len() - 1
+    }
+
+    /// Denominator order na (the model order).
+    pub fn na(&self) -> usize {
+        self.a.len() - 1
+    }
+
+    /// G(s) at complex frequency `s` (rad/s).
+    pub fn eval_s(&self, s: Complex64) -> Complex64 {
+        let x = s / self.omega_scale;
+        poly_eval(&self.b, x) / poly_eval(&self.a, x)
+    }
+
+    /// G(j·2π·f) at `f_hz` (Hz).
+    pub fn frf(&self, f_hz: f64) -> Complex64 {
+        self.eval_s(Complex64::new(0.0, 2.0 * PI * f_hz))
+    }
+
+    /// Poles (rad/s).
+    pub fn poles(&self) -> Vec<Complex64> {
+        poly_roots(&self.a).into_iter().map(|p| p * self.omega_scale).collect()
+    }
+
+    /// Whether every pole has a negative real part.
+    pub fn is_stable(&self) -> bool {
+        poly_roots(&self.a).iter().all(|p| p.re < 0.0)
+    }
+
+    /// The same G(s) in pole-residue form (for reports and evaluation):
+    /// residue of pole p = ω_0·B(p')/A'(p'). Fails on (numerically) repeated
+    /// poles, where partial fractions do not exist.
+    pub fn to_pole_residue(&self) -> Result<PoleResidueModel> {
+        let roots = poly_roots(&self.a);
+        let da: Vec<f64> = self.a.iter().enumerate().skip(1).map(|(i, v)| i as f64 * v).collect();
+        let (mut b, d) = (self.b.clone(), if self.nb() == self.na() { self.b[self.nb()] } else { 0.0 });
+        if self.nb() == self.na() {
+            // strictly proper part: B − d·A
+            for (bi, ai) in b.iter_mut().zip(&self.a) {
+                *bi -= d * ai;
+            }
+        }
+        if self.nb() > self.na() {
+            bail!("numerator order {} above denominator order {}: improper transfer function", self.nb(), self.na());
+        }
+        let mut terms = Vec::new();
+        for p in &roots {
+            let dp = poly_eval(&da, *p);
+            if dp.norm() < 1e-10 * (1.0 + p.norm()).powi(self.na() as i32 - 1) {
+                bail!("repeated pole near {:.1} Hz: no partial-fraction form", (p * self.omega_scale).norm() / (2.0 * PI));
+            }
+            let r = poly_eval(&b, *p) / dp * self.omega_scale;
+            let pole = p * self.omega_scale;
+            if p.im.abs() <= 1e-9 * p.norm().max(1e-300) {
+                terms.push(Term::Real { pole: pole.re, residue: r.re });
+            } else if p.im > 0.0 {
+                terms.push(Term::Pair { pole, residue: r });
+            }
+        }
+        Ok(PoleResidueModel { terms, d })
+    }
+}
+
+/// Options of the paper's fit.
+#[derive(Clone, Debug)]
+pub struct RfpOptions {
+    /// Numerator order nb.
+    pub nb: usize,
+    /// Denominator order na.
+    pub na: usize,
+    /// Gauss–Newton iterations at most (invfreqs default: 30).
+    pub max_iterations: usize,
+    /// Stop when the relative decrease of the error is below this.
+    pub tol: f64,
+}
+
+impl Default for RfpOptions {
+    fn default() -> Self {
+        RfpOptions { nb: 6, na: 8, max_iterations: 30, tol: 1e-9 }
+    }
+}
+
+/// Result of the fit with its conditioning diagnostics.
+#[derive(Clone, Debug)]
+pub struct RfpFit {
+    /// Fitted transfer function.
+    pub tf: RationalTf,
+    /// Condition number of the RFP (linearized) least-squares matrix.
+    pub rfp_condition: f64,
+    /// Condition number of the Gauss–Newton Jacobian at the solution
+    /// (large: more poles than the data support, near pole-zero cancellation).
+    pub jacobian_condition: f64,
+    /// Weighted output error sqrt(Σw|Ĝ−G|²/Σw|G|²) of the initial estimate.
+    pub initial_error: f64,
+    /// The same after Gauss–Newton.
+    pub final_error: f64,
+    /// Gauss–Newton iterations done.
+    pub iterations: usize,
+    /// Unstable roots reflected in the initial estimate.
+    pub reflected_poles: usize,
+}
+
+/// Condition number σ_max/σ_min of a matrix (∞ when singular).
+pub fn condition_number(m: &DMatrix<f64>) -> f64 {
+    let sv = m.singular_values();
+    let max = sv.iter().copied().fold(0.0, f64::max);
+    let min = sv.iter().copied().fold(f64::INFINITY, f64::min);
+    if min > 0.0 {
+        max / min
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// Least squares by SVD with its condition number; columns are scaled to
+/// unit norm first (the condition reported is that of the scaled problem,
+/// i.e. what no diagonal rescaling can remove).
+fn lstsq(m: DMatrix<f64>, rhs: &DVector<f64>) -> Result<(DVector<f64>, f64)> {
+    let scale: Vec<f64> = m.column_iter().map(|c| c.norm().max(f64::MIN_POSITIVE)).collect();
+    let mut ms = m;
+    for (j, s) in scale.iter().enumerate() {
+        ms.column_mut(j).scale_mut(1.0 / s);
+    }
+    let cond = condition_number(&ms);
+    let svd = ms.svd(true, true);
+    let x = svd.solve(rhs, 0.0).map_err(|e| anyhow::anyhow!("least squares: {e}"))?;
+    Ok((DVector::from_iterator(x.len(), x.iter().zip(&scale).map(|(v, s)| v / s)), cond))
+}
+
+/// Weighted relative output error sqrt(Σw|Ĝ−G|²/Σw|G|²).
+fn output_error(tf_b: &[f64], tf_a: &[f64], xs: &[Complex64], h: &[Complex64], w: &[f64]) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for ((x, g), wk) in xs.iter().zip(h).zip(w) {
+        num += wk * (poly_eval(tf_b, *x) / poly_eval(tf_a, *x) - g).norm_sqr();
+        den += wk * g.norm_sqr();
+    }
+    (num / den).sqrt()
+}
+
+/// Fit eq. (1) to the lines `freq_hz`/`h` with weights `w` (zero = unused),
+/// frequencies rescaled by ω_0 = 2π·(highest weighted line) (module doc).
+pub fn rfp_fit(freq_hz: &[f64], h: &[Complex64], w: &[f64], opts: &RfpOptions) -> Result<RfpFit> {
+    let (nb, na) = (opts.nb, opts.na);
+    if na == 0 || nb > na {
+        bail!("--paper-orders {nb}:{na}: need 1 ≤ denominator order and numerator order ≤ denominator order");
+    }
+    let used: Vec<usize> = (0..freq_hz.len()).filter(|&k| w[k] > 0.0 && h[k].norm() > 0.0).collect();
+    let unknowns = nb + 1 + na;
+    if 2 * used.len() < 2 * unknowns {
+        bail!("{} weighted lines cannot determine {unknowns} coefficients of a {nb}:{na} fit: widen the bands or lower the orders", used.len());
+    }
+    let f_max = used.iter().map(|&k| freq_hz[k]).fold(0.0, f64::max);
+    let omega_scale = 2.0 * PI * f_max;
+    let xs: Vec<Complex64> = used.iter().map(|&k| Complex64::new(0.0, freq_hz[k] / f_max)).collect();
+    let hs: Vec<Complex64> = used.iter().map(|&k| h[k]).collect();
+    let ws: Vec<f64> = used.iter().map(|&k| w[k]).collect();
+
+    // 1. RFP / Levy: rows sqrt(w)·[x^i (i ≤ nb) | −G x^i (i < na)] = sqrt(w)·G x^na.
+    let m = used.len();
+    let mut mat = DMatrix::<f64>::zeros(2 * m, unknowns);
+    let mut rhs = DVector::<f64>::zeros(2 * m);
+    for (k, ((x, g), wk)) in xs.iter().zip(&hs).zip(&ws).enumerate() {
+        let sw = wk.sqrt();
+        let mut xp = Complex64::new(1.0, 0.0);
+        for i in 0..=na {
+            if i <= nb {
+                mat[(2 * k, i)] = sw * xp.re;
+                mat[(2 * k + 1, i)] = sw * xp.im;
+            }
+            let gx = g * xp;
+            if i < na {
+                mat[(2 * k, nb + 1 + i)] = -sw * gx.re;
+                mat[(2 * k + 1, nb + 1 + i)] = -sw * gx.im;
+            } else {
+                rhs[2 * k] = sw * gx.re;
+                rhs[2 * k + 1] = sw * gx.im;
+            }
+            xp *= x;
+        }
+    }
+    let (theta, rfp_condition) = lstsq(mat, &rhs)?;
+    if !(rfp_condition < MAX_CONDITION) || theta.iter().any(|v| !v.is_finite()) {
+        bail!(
+            "rational fraction polynomial fit {nb}:{na} over {:.0}–{f_max:.0} Hz is ill-conditioned: condition number {rfp_condition:.2e} (limit {MAX_CONDITION:.0e}); lower the orders or fit narrower bands (--band, --spindle-rpm)",
+            used.iter().map(|&k| freq_hz[k]).fold(f64::INFINITY, f64::min)
+        );
+    }
+    let b0: Vec<f64> = theta.iter().take(nb + 1).copied().collect();
+    let mut a0: Vec<f64> = theta.iter().skip(nb + 1).copied().collect();
+    a0.push(1.0);
+    // Reflect unstable roots (invfreqs does the same to its initial estimate).
+    let roots = poly_roots(&a0);
+    let reflected_poles = roots.iter().filter(|r| r.re >= 0.0).count();
+    let a0 = if reflected_poles > 0 {
+        poly_from_roots(&roots.iter().map(|r| if r.re >= 0.0 { Complex64::new(-r.re.abs().max(1e-6 * r.norm()), r.im) } else { *r }).collect::<Vec<_>>())
+    } else {
+        a0
+    };
+    let initial_error = output_error(&b0, &a0, &xs, &hs, &ws);
+
+    // 2. Damped Gauss–Newton on the output error; parameters [b_0..b_nb, a_0..a_{na−1}].
+    let (mut b, mut a) = (b0, a0);
+    let mut err = initial_error;
+    let mut iterations = 0;
+    let mut jacobian_condition = f64::NAN;
+    for it in 1..=opts.max_iterations {
+        iterations = it;
+        let mut jac = DMatrix::<f64>::zeros(2 * m, unknowns);
+        let mut res = DVector::<f64>::zeros(2 * m);
+        for (k, ((x, g), wk)) in xs.iter().zip(&hs).zip(&ws).enumerate() {
+            let sw = wk.sqrt();
+            let (bv, av) = (poly_eval(&b, *x), poly_eval(&a, *x));
+            let e = sw * (g - bv / av);
+            res[2 * k] = e.re;
+            res[2 * k + 1] = e.im;
+            let mut xp = Complex64::new(1.0, 0.0);
+            for i in 0..na {
+                if i <= nb {
+                    let d = sw * xp / av;
+                    jac[(2 * k, i)] = d.re;
+                    jac[(2 * k + 1, i)] = d.im;
+                }
+                let d = -sw * bv * xp / (av * av);
+                jac[(2 * k, nb + 1 + i)] = d.re;
+                jac[(2 * k + 1, nb + 1 + i)] = d.im;
+                xp *= x;
+            }
+            if nb == na {
+                let d = sw * xp / av;
+                jac[(2 * k, nb)] = d.re;
+                jac[(2 * k + 1, nb)] = d.im;
+            }
+        }
+        let (step, cond) = lstsq(jac, &res)?;
+        jacobian_condition = cond;
+        let mut lambda = 1.0;
+        let mut accepted = false;
+        for _ in 0..20 {
+            let bt: Vec<f64> = b.iter().enumerate().map(|(i, v)| v + lambda * step[i]).collect();
+            let mut at: Vec<f64> = (0..na).map(|i| a[i] + lambda * step[nb + 1 + i]).collect();
+            at.push(1.0);
+            let et = output_error(&bt, &at, &xs, &hs, &ws);
+            if et.is_finite() && et < err && poly_roots(&at).iter().all(|r| r.re < 0.0) {
+                let improvement = (err - et) / err;
+                b = bt;
+                a = at;
+                err = et;
+                accepted = improvement > opts.tol;
+                break;
+            }
+            lambda *= 0.5;
+        }
+        if !accepted {
+            break;
+        }
+    }
+    // An ill-conditioned Jacobian (near pole-zero cancellation: more poles
+    // than the data support) is reported, not fatal: the SVD step is the
+    // minimum-norm one, and what breaks downstream (observability, Riccati)
+    // is checked there.
+    let tf = RationalTf { b, a, omega_scale };
+    if !tf.is_stable() {
+        bail!("the {nb}:{na} fit has unstable poles after Gauss–Newton; lower the orders or fit narrower bands");
+    }
+    Ok(RfpFit { tf, rfp_condition, jacobian_condition, initial_error, final_error: err, iterations, reflected_poles })
+}
+
+/// Paper fit weights: coherence γ² per line (1 without coherence), zero
+/// where `mask` is false.
+pub fn paper_weights(coherence: Option<&[f64]>, mask: &[bool]) -> Vec<f64> {
+    mask.iter()
+        .enumerate()
+        .map(|(k, m)| if *m { coherence.map_or(1.0, |c| c[k].clamp(0.0, 1.0)) } else { 0.0 })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn polynomial_roots_round_trip() {
+        let roots = [Complex64::new(-0.1, 0.9), Complex64::new(-0.1, -0.9), Complex64::new(-0.5, 0.0)];
+        let a = poly_from_roots(&roots);
+        assert_eq!(a.len(), 4);
+        let mut back = poly_roots(&a);
+        back.sort_by(|x, y| x.im.total_cmp(&y.im));
+        for (r, t) in back.iter().zip([roots[1], roots[2], roots[0]]) {
+            assert!((r - t).norm() < 1e-12, "{r} vs {t}");
+        }
+    }
+}

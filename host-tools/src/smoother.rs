@@ -1,0 +1,294 @@
+//! Offline zero-phase estimation of recorded forces (`dynocomp compensate
+//! --offline`): a fixed-interval smoother. **Offline only**: every estimate
+//! uses the whole record, past and future, so it has no lag and no place in
+//! the box.
+//!
+//! **Model.** The same augmented plant as the box's compensator
+//! ([`crate::kalman`], DESIGN.md steps 2-3): the fitted G(s) discretized with
+//! a first-order hold, the applied force a random walk F_{k+1} = F_k + w_k,
+//! E[w²] = q, measurement y_k = c·x_k + v_k, E[v²] = R, with q and R the
+//! values the design chose and stored in the image (`inspect` shows them).
+//! The image does not hold G(s) itself, so `dynocomp design` writes it next
+//! to the image as a sidecar `<image>.model.json` ([`ModelSidecar`]), tied to
+//! the image by its id (CRC-32) and the source FRF's SHA-256;
+//! `compensate --offline` refuses a missing or foreign sidecar. Only the
+//! default method (vf) writes a sidecar; `--method paper` images (continuous
+//! Q, Tustin) are refused by `--offline` with a message saying so.
+//!
+//! **Smoother.** Steady-state Kalman filter forward, then the modified
+//! Bryson–Frazier backward pass (Bierman 1977), which gives the same
+//! estimates as the Rauch–Tung–Striebel smoother without inverting any
+//! covariance. With P the prior covariance of the filter DARE (solved and
+//! residual-checked by [`kalman::solve_filter_dare`]), S = cᵀPc + R,
+//! K = Pc/S, C̃ = I − K cᵀ:
+//!
+//! ```text
+//! forward:   e_k = y_k − cᵀ x⁻_k,   x⁻_{k+1} = A (x⁻_k + K e_k),   x⁻_0 = 0
+//! backward:  λ̂_{N−1} = 0
+//!            λ̃_k = −c e_k / S + C̃ᵀ λ̂_k,   x̂_k|N = x⁻_k − P λ̃_k,   λ̂_{k−1} = Aᵀ λ̃_k
+//! ```
+//!
+//! The backward recursion runs through (A C̃)ᵀ, whose spectral radius is the
+//! (checked, < 1) closed-loop radius of the filter, so it is stable. The
+//! force estimate is the F_k component of x̂_k|N (N).
+//!
+//! Computed in f64 on the host. It is an estimator, not the box's filter:
+//! the box's arithmetic stays in the core kernel only.
+
+use anyhow::{bail, Context, Result};
+use nalgebra::{DMatrix, DVector};
+use num_complex::Complex64;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+use crate::fit::{PoleResidueModel, Term};
+use crate::frf::axis_name;
+use crate::io::signal_csv::SignalRecord;
+use crate::kalman;
+use dynocomp_core::image::{CoeffImage, DesignMethod};
+
+/// Format tag of the model sidecar.
+pub const SIDECAR_FORMAT: &str = "dynocomp-model/1";
+
+/// One pole-residue term of a sidecar model (rad/s).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum TermJson {
+    /// Real pole p (rad/s) with real residue r (rad/s).
+    Real {
+        /// Pole (rad/s).
+        pole: f64,
+        /// Residue (rad/s).
+        residue: f64,
+    },
+    /// Complex pair: the pole with Im > 0 and its residue, as [re, im] (rad/s).
+    Pair {
+        /// Pole [re, im] (rad/s).
+        pole: [f64; 2],
+        /// Residue [re, im] (rad/s).
+        residue: [f64; 2],
+    },
+}
+
+/// The fitted sensor model G(s) of one axis.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AxisModelJson {
+    /// Axis letter (x, y, z).
+    pub axis: String,
+    /// Direct term d (N/N).
+    pub d: f64,
+    /// Pole-residue terms.
+    pub terms: Vec<TermJson>,
+}
+
+/// The sidecar `<image>.model.json` written by `dynocomp design`: the fitted
+/// model per axis, tied to one image.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelSidecar {
+    /// Always [`SIDECAR_FORMAT`].
+    pub format: String,
+    /// Id (CRC-32, 8 hex digits) of the image this model belongs to.
+    pub image_id: String,
+    /// SHA-256 of the source FRF file (hex), as in the image.
+    pub source_sha256: String,
+    /// Sample rate of the image (Hz).
+    pub fs_hz: f64,
+    /// Models per axis.
+    pub axes: Vec<AxisModelJson>,
+}
+
+/// Path of the model sidecar of an image: `<image>.model.json`.
+pub fn sidecar_path(image: &Path) -> PathBuf {
+    let mut s = image.as_os_str().to_owned();
+    s.push(".model.json");
+    PathBuf::from(s)
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+impl ModelSidecar {
+    /// Sidecar for `image` with the given per-axis models `(axis, model)`.
+    pub fn new(image: &CoeffImage, models: &[(usize, &PoleResidueModel)]) -> Self {
+        let axes = models
+            .iter()
+            .map(|(axis, m)| AxisModelJson {
+                axis: axis_name(*axis).to_string(),
+                d: m.d,
+                terms: m
+                    .terms
+                    .iter()
+                    .map(|t| match *t {
+                        Term::Real { pole, residue } => TermJson::Real { pole, residue },
+                        Term::Pair { pole, residue } => TermJson::Pair { pole: [pole.re, pole.im], residue: [residue.re, residue.im] },
+                    })
+                    .collect(),
+            })
+            .collect();
+        ModelSidecar {
+            format: SIDECAR_FORMAT.into(),
+            image_id: format!("{:08x}", image.id()),
+            source_sha256: hex(&image.source_sha256),
+            fs_hz: f64::from(image.fs_hz),
+            axes,
+        }
+    }
+
+    /// The model of `axis`, validated (finite, stable poles with Im ≥ 0).
+    pub fn model(&self, axis: usize, source: &str) -> Result<PoleResidueModel> {
+        let name = axis_name(axis);
+        let Some(a) = self.axes.iter().find(|a| a.axis == name) else {
+            bail!("{source}: no model for axis {name}; re-run `dynocomp design` for this axis");
+        };
+        let terms = a
+            .terms
+            .iter()
+            .map(|t| match t {
+                TermJson::Real { pole, residue } => Term::Real { pole: *pole, residue: *residue },
+                TermJson::Pair { pole, residue } => Term::Pair {
+                    pole: Complex64::new(pole[0], pole[1]),
+                    residue: Complex64::new(residue[0], residue[1]),
+                },
+            })
+            .collect();
+        let model = PoleResidueModel { terms, d: a.d };
+        let finite = a.d.is_finite()
+            && a.terms.iter().all(|t| match t {
+                TermJson::Real { pole, residue } => pole.is_finite() && residue.is_finite(),
+                TermJson::Pair { pole, residue } => pole.iter().chain(residue).all(|v| v.is_finite()) && pole[1] > 0.0,
+            });
+        if !finite || !model.is_stable() {
+            bail!("{source}: axis {name}: the model has non-finite values or unstable poles; re-run `dynocomp design`");
+        }
+        Ok(model)
+    }
+}
+
+/// Write the sidecar of `image` (at `image_path`) atomically.
+pub fn write_sidecar(image_path: &Path, sidecar: &ModelSidecar) -> Result<()> {
+    let path = sidecar_path(image_path);
+    let text = serde_json::to_string_pretty(sidecar)?;
+    crate::io::atomic::write_bytes_atomic(&path, text.as_bytes())
+}
+
+/// Read the sidecar of the image at `image_path` and check that it belongs
+/// to `image` (id, source hash, rate).
+pub fn read_sidecar(image_path: &Path, image: &CoeffImage) -> Result<ModelSidecar> {
+    if image.method != DesignMethod::VectorFitting {
+        bail!(
+            "{}: --offline needs an image designed with the default method (vf): the smoother uses its discrete-time q and R and fitted model",
+            image_path.display()
+        );
+    }
+    let path = sidecar_path(image_path);
+    let shown = path.display().to_string();
+    let text = std::fs::read_to_string(&path).with_context(|| {
+        format!("{shown}: cannot read the model sidecar that --offline needs (`dynocomp design` writes it next to the image)")
+    })?;
+    let s: ModelSidecar = serde_json::from_str(&text).with_context(|| format!("{shown}: not a valid model sidecar"))?;
+    if s.format != SIDECAR_FORMAT {
+        bail!("{shown}: format `{}`, expected `{SIDECAR_FORMAT}`", s.format);
+    }
+    let id = format!("{:08x}", image.id());
+    if s.image_id != id || s.source_sha256 != hex(&image.source_sha256) || s.fs_hz != f64::from(image.fs_hz) {
+        bail!(
+            "{shown}: belongs to image {} (source {}), not to {} (image {id}); re-run `dynocomp design` to write both together",
+            s.image_id,
+            s.source_sha256.get(..12).unwrap_or(&s.source_sha256),
+            image_path.display()
+        );
+    }
+    Ok(s)
+}
+
+/// The steady-state fixed-interval smoother of one axis (module doc).
+#[derive(Clone, Debug)]
+pub struct Smoother {
+    a: DMatrix<f64>,
+    c: DVector<f64>,
+    p: DMatrix<f64>,
+    k: DVector<f64>,
+    s: f64,
+    force_index: usize,
+    /// Relative residual of the DARE solution.
+    pub dare_residual: f64,
+    /// Spectral radius of A(I − K cᵀ), the backward recursion's matrix (transposed).
+    pub closed_loop_radius: f64,
+}
+
+impl Smoother {
+    /// Build the smoother for model G(s), sample rate `fs_hz` (Hz), process
+    /// noise q (N²/sample) and measurement noise R (N²).
+    pub fn new(model: &PoleResidueModel, fs_hz: f64, q: f64, r: f64) -> Result<Self> {
+        if !(q > 0.0 && q.is_finite() && r > 0.0 && r.is_finite()) {
+            bail!("smoother needs q > 0 and R > 0 (got q = {q}, R = {r}); the image's design summary holds them");
+        }
+        let plant = kalman::augmented_plant(model, fs_hz, 0);
+        let qm = &plant.g * plant.g.transpose() * q;
+        let sol = kalman::solve_filter_dare(&plant.a, &plant.c, &qm, r)?;
+        let s = (plant.c.transpose() * &sol.p * &plant.c)[(0, 0)] + r;
+        let k = &sol.p * &plant.c / s;
+        let n = plant.a.nrows();
+        let closed = &plant.a * (DMatrix::<f64>::identity(n, n) - &k * plant.c.transpose());
+        let radius = closed.complex_eigenvalues().iter().map(|z| z.norm()).fold(0.0, f64::max);
+        if radius.is_nan() || radius >= 1.0 {
+            bail!("smoother: the filter's closed loop is not stable (spectral radius {radius:.9}); the model may be unobservable");
+        }
+        Ok(Smoother {
+            a: plant.a,
+            c: plant.c,
+            p: sol.p,
+            k,
+            s,
+            force_index: plant.n_plant,
+            dare_residual: sol.residual,
+            closed_loop_radius: radius,
+        })
+    }
+
+    /// Smoothed force estimate F̂_k|N (N) for every sample of `y` (N).
+    pub fn smooth(&self, y: &[f64]) -> Vec<f64> {
+        let n = self.a.nrows();
+        let mut prior = DVector::<f64>::zeros(n);
+        let mut priors: Vec<DVector<f64>> = Vec::with_capacity(y.len());
+        let mut innov: Vec<f64> = Vec::with_capacity(y.len());
+        for &yk in y {
+            let e = yk - self.c.dot(&prior);
+            priors.push(prior.clone());
+            innov.push(e);
+            prior = &self.a * (&prior + &self.k * e);
+        }
+        let p_row = self.p.row(self.force_index).transpose();
+        let mut lambda_hat = DVector::<f64>::zeros(n);
+        let mut out = vec![0.0; y.len()];
+        for k in (0..y.len()).rev() {
+            // λ̃ = −c e/S + (I − K cᵀ)ᵀ λ̂ = −c e/S + λ̂ − c (Kᵀ λ̂)
+            let kl = self.k.dot(&lambda_hat);
+            let lambda_tilde = &lambda_hat - &self.c * (innov[k] / self.s + kl);
+            out[k] = priors[k][self.force_index] - p_row.dot(&lambda_tilde);
+            lambda_hat = self.a.tr_mul(&lambda_tilde);
+        }
+        out
+    }
+}
+
+/// `compensate --offline`: smooth every force column of `rec` with the
+/// model of its axis from the sidecar and q, R from the image.
+pub fn smooth_record(image: &CoeffImage, sidecar: &ModelSidecar, rec: &SignalRecord, source: &str) -> Result<SignalRecord> {
+    let mut channels = Vec::with_capacity(rec.channels.len());
+    for (axis, y) in &rec.channels {
+        let Some(a) = image.axes.get(*axis).copied().flatten() else {
+            bail!("{source}: column f{} has no compensator (and no q, R) in the image; drop the column or design for that axis", axis_name(*axis));
+        };
+        let model = sidecar.model(*axis, source)?;
+        let sm = Smoother::new(&model, f64::from(image.fs_hz), a.summary.q, a.summary.r)
+            .with_context(|| format!("{source}: axis {}", axis_name(*axis)))?;
+        let out = sm.smooth(y);
+        if let Some(k) = out.iter().position(|v| !v.is_finite()) {
+            bail!("{source}: smoothed f{} became non-finite at sample {k}", axis_name(*axis));
+        }
+        channels.push((*axis, out));
+    }
+    Ok(SignalRecord { t_s: rec.t_s.clone(), channels })
+}

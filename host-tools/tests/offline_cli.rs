@@ -1,0 +1,82 @@
+//! The offline-only modes through the binary on the bundled example:
+//! `design` writes the model sidecar, `compensate --offline` needs it and
+//! refuses a missing one without leaving output; `design --parallel` writes
+//! a format-2 image that `inspect` reports as offline only and `compensate`
+//! runs band by band.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn example(name: &str) -> String {
+    format!("{}/../data/example/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+fn dynocomp(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_dynocomp")).args(args).output().expect("run dynocomp");
+    (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("dynocomp-offline-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[test]
+fn offline_smoother_needs_the_sidecar_of_its_image() {
+    let img = tmp("box.dcimg");
+    let (frf, idle, measured) = (example("frf.uff"), example("idle.csv"), example("measured.csv"));
+    let (ok, _, err) = dynocomp(&["design", "--frf", &frf, "--fs", "51200", "--idle", &idle, "--out", img.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    let sidecar = tmp("box.dcimg.model.json");
+    assert!(sidecar.exists(), "design must write the model sidecar");
+    let out = tmp("smoothed.csv");
+    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img.to_str().unwrap(), "--input", &measured, "--output", out.to_str().unwrap(), "--offline"]);
+    assert!(ok, "{err}");
+    assert!(err.contains("fixed-interval smoother"), "{err}");
+    let text = std::fs::read_to_string(&out).unwrap();
+    assert_eq!(text.lines().count(), std::fs::read_to_string(&measured).unwrap().lines().count());
+
+    // without the sidecar: a one-line error naming it, and no output file
+    std::fs::remove_file(&sidecar).unwrap();
+    let out2 = tmp("smoothed2.csv");
+    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img.to_str().unwrap(), "--input", &measured, "--output", out2.to_str().unwrap(), "--offline"]);
+    assert!(!ok);
+    assert!(err.contains("box.dcimg.model.json") && err.trim().lines().count() == 1, "{err}");
+    assert!(!out2.exists(), "no output may be left behind");
+    // --offline and --raw-timing exclude each other
+    let (ok, _, _) = dynocomp(&["compensate", "--coeffs", img.to_str().unwrap(), "--input", &measured, "--output", out2.to_str().unwrap(), "--offline", "--raw-timing"]);
+    assert!(!ok);
+}
+
+#[test]
+fn parallel_design_is_offline_only_and_runs_in_compensate() {
+    let img = tmp("par.dcimg");
+    let (frf, idle, measured) = (example("frf.uff"), example("idle.csv"), example("measured.csv"));
+    let (ok, stdout, err) = dynocomp(&[
+        "design", "--frf", &frf, "--fs", "51200", "--idle", &idle, "--out", img.to_str().unwrap(), "--parallel", "--spindle-rpm", "16500", "--teeth", "4",
+        "--harmonics", "2",
+    ]);
+    assert!(ok, "{err}");
+    assert!(stdout.contains("OFFLINE ONLY"), "{stdout}");
+    let (ok, text, err) = dynocomp(&["inspect", img.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    assert!(text.contains("format v2") && text.contains("offline only: parallel elaboration, 3 bands: 0-248 Hz, 990-1210 Hz, 1980-2420 Hz"), "{text}");
+    let (ok, json, _) = dynocomp(&["inspect", img.to_str().unwrap(), "--json"]);
+    assert!(ok);
+    let j: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!((j["offline_only"].as_bool(), j["runs_in_box"].as_bool()), (Some(true), Some(false)));
+    assert_eq!(j["bands"].as_array().unwrap().len(), 3);
+    let out = tmp("par.csv");
+    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img.to_str().unwrap(), "--input", &measured, "--output", out.to_str().unwrap()]);
+    assert!(ok && err.contains("parallel elaboration, 3 bands"), "{err}");
+    // the smoother needs a box image
+    let out2 = tmp("par2.csv");
+    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img.to_str().unwrap(), "--input", &measured, "--output", out2.to_str().unwrap(), "--offline"]);
+    assert!(!ok && err.contains("parallel-elaboration image"), "{err}");
+    assert!(!out2.exists());
+    // --parallel without bands is refused
+    let (ok, _, err) = dynocomp(&["design", "--frf", &frf, "--fs", "51200", "--idle", &idle, "--out", tmp("nob.dcimg").to_str().unwrap(), "--parallel"]);
+    assert!(!ok && err.contains("--parallel needs bands"), "{err}");
+    assert!(!tmp("nob.dcimg").exists());
+}

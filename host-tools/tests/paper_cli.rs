@@ -1,0 +1,107 @@
+//! `dynocomp design --method paper`, the band flags and `dynocomp compare`
+//! through the binary, on the bundled example.
+
+use dynocomp::io::image_file::read_image;
+use dynocomp_core::image::DesignMethod;
+use std::path::PathBuf;
+use std::process::Command;
+
+fn example(name: &str) -> String {
+    format!("{}/../data/example/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+fn dynocomp(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_dynocomp")).args(args).output().expect("run dynocomp");
+    (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("dynocomp-paper-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[test]
+fn paper_method_writes_a_paper_image_with_the_bands_and_diagnostics() {
+    let out = tmp("paper.dcimg");
+    let frf = example("frf.uff");
+    let idle = example("idle.csv");
+    let (ok, stdout, stderr) = dynocomp(&[
+        "design", "--frf", &frf, "--fs", "51200", "--idle", &idle, "--out", out.to_str().unwrap(), "--method", "paper", "--paper-orders", "2:4",
+        "--spindle-rpm", "16500", "--teeth", "4", "--harmonics", "1", "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let img = read_image(&out).unwrap();
+    assert_eq!(img.method, DesignMethod::Paper);
+    assert_eq!(img.latency_samples, 0);
+    let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(j["method"], "paper");
+    let bands = j["bands"].as_array().unwrap();
+    assert_eq!(bands.len(), 2, "static band and the TPF band: {bands:?}");
+    assert!(bands.iter().any(|b| b["lo_hz"].as_f64().unwrap() <= 1100.0 && b["hi_hz"].as_f64().unwrap() >= 1100.0));
+    for a in j["axes"].as_array().unwrap() {
+        let p = &a["paper"];
+        assert_eq!(p["observability_rank"], p["observability_dim"], "{p}");
+        assert_eq!(p["prewarp_hz"].as_f64().unwrap(), 1100.0, "the TPF is the default prewarp frequency");
+        assert!(p["care_residual"].as_f64().unwrap() < 1e-8);
+        assert_eq!(a["model_order"], 4);
+    }
+}
+
+#[test]
+fn bad_paper_and_band_flags_fail_with_one_line_and_write_nothing() {
+    let frf = example("frf.uff");
+    let idle = example("idle.csv");
+    for (extra, expect) in [
+        (vec!["--method", "paper", "--latency", "4"], "--latency 4"),
+        (vec!["--method", "paper", "--paper-orders", "8:6"], "--paper-orders `8:6`"),
+        (vec!["--band", "5000:6000"], "5000.0..6000.0 Hz: starts above the usable band"),
+        (vec!["--band", "800-1200"], "--band `800-1200`: expected LO:HI"),
+        (vec!["--method", "paper", "--prewarp-hz", "30000"], "--prewarp-hz 30000"),
+    ] {
+        let out = tmp("bad.dcimg");
+        let _ = std::fs::remove_file(&out);
+        let mut args = vec!["design", "--frf", &frf, "--fs", "51200", "--idle", &idle, "--out", out.to_str().unwrap()];
+        args.extend(extra.iter().copied());
+        let (ok, _, stderr) = dynocomp(&args);
+        assert!(!ok, "{extra:?} must fail");
+        assert!(stderr.contains(expect), "{extra:?}: expected `{expect}` in: {stderr}");
+        assert_eq!(stderr.lines().filter(|l| l.starts_with("error:")).count(), 1, "{stderr}");
+        assert!(!out.exists(), "{extra:?} left an output file");
+    }
+}
+
+#[test]
+fn compare_reports_every_method_per_axis_and_failures_as_rows() {
+    let dir = tmp("compare");
+    let (ok, stdout, stderr) = dynocomp(&[
+        "compare", "--frf", &example("frf.uff"), "--fs", "51200", "--idle", &example("idle.csv"), "--spindle-rpm", "16500", "--teeth", "4",
+        "--harmonics", "3", "--out-dir", dir.to_str().unwrap(), "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let axes = j["axes"].as_array().unwrap();
+    assert_eq!(axes.len(), 3);
+    for ax in axes {
+        let rows = ax["rows"].as_array().unwrap();
+        let names: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
+        assert_eq!(names, ["paper, whole band", "paper, band-fitted", "paper, parallel", "default (vf), whole band", "default (vf), band-weighted"]);
+        for r in rows {
+            // a row either has a diagnostic or all its figures
+            match r["diagnostic"].as_str() {
+                Some(d) => assert!(!d.is_empty() && r["order"].is_null()),
+                None => {
+                    assert!(r["order"].as_u64().unwrap() > 0);
+                    assert!(r["compensated_error_in_band"].as_f64().unwrap().is_finite());
+                    assert!(r["noise_gain"].as_f64().unwrap() <= 30.0 + 1e-9);
+                }
+            }
+        }
+        // the default method designs on every axis of the example
+        assert!(rows[3]["diagnostic"].is_null(), "{}", rows[3]);
+        let name = ax["axis"].as_str().unwrap();
+        let svg = std::fs::read_to_string(dir.join(format!("{name}_compare.svg"))).unwrap();
+        assert!(svg.contains("<svg") && svg.contains("fitting bands"));
+    }
+    assert!(dir.join("compare.json").exists() && dir.join("compare.txt").exists());
+}
