@@ -5,21 +5,12 @@
 //! runs band by band.
 
 use std::path::PathBuf;
-use std::process::Command;
 
-fn example(name: &str) -> String {
-    format!("{}/../data/example/{name}", env!("CARGO_MANIFEST_DIR"))
-}
-
-fn dynocomp(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_dynocomp")).args(args).output().expect("run dynocomp");
-    (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
-}
+mod cli_common;
+use cli_common::{dynocomp, example};
 
 fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dynocomp-offline-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
+    cli_common::tmp("offline-cli", name)
 }
 
 #[test]

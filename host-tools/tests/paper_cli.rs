@@ -4,21 +4,12 @@
 use dynocomp::io::image_file::read_image;
 use dynocomp_core::image::DesignMethod;
 use std::path::PathBuf;
-use std::process::Command;
 
-fn example(name: &str) -> String {
-    format!("{}/../data/example/{name}", env!("CARGO_MANIFEST_DIR"))
-}
-
-fn dynocomp(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_dynocomp")).args(args).output().expect("run dynocomp");
-    (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
-}
+mod cli_common;
+use cli_common::{dynocomp, example};
 
 fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dynocomp-paper-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
+    cli_common::tmp("paper-cli", name)
 }
 
 #[test]
