@@ -405,7 +405,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     let t0 = Instant::now();
     let bytes = std::fs::read(&args.frf).with_context(|| format!("{}: cannot read", args.frf.display()))?;
     let sha: [u8; 32] = Sha256::digest(&bytes).into();
-    let frf = io::read_frf(&args.frf)?;
+    let frf = io::parse_frf(&args.frf, &bytes)?;
     let r = noise_variances(args.idle.as_deref(), args.noise_variance, &frf)?;
     let bands = args.bands.resolve(&frf, args.fs).with_context(|| format!("{}", args.frf.display()))?;
     let method = if paper { args.paper.method(args.bands.tooth_passing_hz(), args.fs)? } else { FitMethod::Vf };

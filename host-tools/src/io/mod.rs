@@ -10,18 +10,20 @@ pub mod uff;
 /// any other extension by content (a first non-blank line `-1` means UFF).
 pub fn read_frf(path: &std::path::Path) -> anyhow::Result<crate::frf::Frf> {
     use anyhow::Context;
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    parse_frf(path, &bytes)
+}
+
+/// Parse the bytes of the FRF file `path` (read by the caller, e.g. to hash
+/// the very bytes that are parsed): the format follows from the extension
+/// (`.csv`; `.uff`, `.unv`, `.uf`), otherwise from the content.
+pub fn parse_frf(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<crate::frf::Frf> {
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let source = path.display().to_string();
     match ext.as_deref() {
-        Some("csv") => frf_csv::read_frf_csv(path),
-        Some("uff" | "unv" | "uf") => uff::read_uff58(path),
-        _ => {
-            let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-            let source = path.display().to_string();
-            if uff::looks_like_uff(&bytes) {
-                uff::parse_uff58(&bytes, &source)
-            } else {
-                frf_csv::parse_frf_csv_bytes(&bytes, &source)
-            }
-        }
+        Some("csv") => frf_csv::parse_frf_csv_bytes(bytes, &source),
+        Some("uff" | "unv" | "uf") => uff::parse_uff58(bytes, &source),
+        _ if uff::looks_like_uff(bytes) => uff::parse_uff58(bytes, &source),
+        _ => frf_csv::parse_frf_csv_bytes(bytes, &source),
     }
 }
