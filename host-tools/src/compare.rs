@@ -33,7 +33,7 @@ use std::time::Instant;
 
 use crate::bands::{band_mask, Band};
 use crate::design::{coherent_band, design_axis, flat_band, AxisDesign, DesignOptions, FitMethod};
-use crate::design_cmd::{noise_variances, BandArgs, PaperArgs};
+use crate::design_cmd::{BandArgs, DesignInputArgs, PaperArgs};
 use crate::fit::relative_rms_error;
 use crate::frf::{axis_name, AxisFrf, Frf};
 use crate::io;
@@ -43,27 +43,12 @@ use crate::quantize::filter_response;
 /// Arguments of `dynocomp compare`.
 #[derive(Args, Debug, Clone)]
 pub struct CompareArgs {
-    /// Measured FRF: UFF58 (.uff/.unv) or CSV.
-    #[arg(long)]
-    pub frf: PathBuf,
-    /// Sample rate of the box (Hz).
-    #[arg(long)]
-    pub fs: f64,
-    /// Idle record (signal CSV): R per axis is its variance.
-    #[arg(long, conflicts_with = "noise_variance")]
-    pub idle: Option<PathBuf>,
-    /// Measurement-noise variance R (N²), for all axes.
-    #[arg(long)]
-    pub noise_variance: Option<f64>,
+    /// The FRF, sample rate, noise and Q-criterion inputs (as for `design`).
+    #[command(flatten)]
+    pub input: DesignInputArgs,
     /// Latency L of the default method (samples).
     #[arg(long, default_value_t = 4)]
     pub latency: usize,
-    /// Assumed RMS of the cutting force inside the band (N), for the Q criterion.
-    #[arg(long, default_value_t = 100.0)]
-    pub force_rms: f64,
-    /// Upper limit of the compensator's white-noise gain.
-    #[arg(long, default_value_t = 30.0)]
-    pub max_noise_gain: f64,
     /// Options of the paper's method.
     #[command(flatten)]
     pub paper: PaperArgs,
@@ -498,15 +483,13 @@ pub fn plot_axis(freq: &[f64], ax: &AxisComparison, bands: &[Band]) -> Result<St
 
 /// Run the comparison (no output files).
 pub fn compare(args: &CompareArgs, frf: &Frf) -> Result<Comparison> {
-    if !(args.fs.is_finite() && args.fs >= 1_000.0 && args.fs <= 1_000_000.0 && args.fs.fract() == 0.0) {
-        anyhow::bail!("--fs {}: the sample rate must be a whole number of Hz in 1000..=1000000", args.fs);
-    }
-    let r = noise_variances(args.idle.as_deref(), args.noise_variance, frf)?;
-    let bands = args.bands.resolve(frf, args.fs).with_context(|| format!("{}", args.frf.display()))?;
+    args.input.check_fs()?;
+    let r = args.input.noise_variances(frf)?;
+    let bands = args.bands.resolve(frf, args.input.fs).with_context(|| format!("{}", args.input.frf.display()))?;
     let setup = CompareSetup {
         freq_hz: &frf.freq_hz,
-        base: DesignOptions { fs_hz: args.fs, lag: args.latency, force_rms: args.force_rms, max_noise_gain: args.max_noise_gain, ..Default::default() },
-        paper: args.paper.method(args.bands.tooth_passing_hz(), args.fs)?,
+        base: DesignOptions { fs_hz: args.input.fs, lag: args.latency, force_rms: args.input.force_rms, max_noise_gain: args.input.max_noise_gain, ..Default::default() },
+        paper: args.paper.method(args.bands.tooth_passing_hz(), args.input.fs)?,
         bands: bands.clone(),
     };
     let mut axes = Vec::new();
@@ -514,12 +497,12 @@ pub fn compare(args: &CompareArgs, frf: &Frf) -> Result<Comparison> {
         eprintln!("comparing axis {}…", axis_name(a.axis));
         axes.push(compare_axis(&setup, a, r[a.axis].expect("R for every FRF axis")));
     }
-    Ok(Comparison { frf: args.frf.display().to_string(), fs_hz: args.fs, bands, axes })
+    Ok(Comparison { frf: args.input.frf.display().to_string(), fs_hz: args.input.fs, bands, axes })
 }
 
 /// Run `dynocomp compare`.
 pub fn run(args: &CompareArgs) -> Result<()> {
-    let frf = io::read_frf(&args.frf)?;
+    let frf = io::read_frf(&args.input.frf)?;
     let c = compare(args, &frf)?;
     let text = render(&c);
     let json = serde_json::to_string_pretty(&c)?;

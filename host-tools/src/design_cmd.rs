@@ -123,34 +123,59 @@ impl PaperArgs {
     }
 }
 
-/// Arguments of `dynocomp design` (DESIGN.md, CLI contract).
+/// The inputs `design` and `compare` share: the measured FRF, the box's
+/// sample rate, the noise model and the assumptions of the Q criterion.
 #[derive(Args, Debug, Clone)]
-pub struct DesignArgs {
+pub struct DesignInputArgs {
     /// Measured FRF: UFF58 (.uff/.unv) or CSV.
     #[arg(long)]
     pub frf: PathBuf,
     /// Sample rate of the box (Hz).
     #[arg(long)]
     pub fs: f64,
-    /// Output coefficient image (.dcimg), written atomically.
-    #[arg(long)]
-    pub out: PathBuf,
     /// Idle record (cutting without engagement, signal CSV): R per axis is its variance.
     #[arg(long, conflicts_with = "noise_variance")]
     pub idle: Option<PathBuf>,
     /// Measurement-noise variance R (N²), for all axes.
     #[arg(long)]
     pub noise_variance: Option<f64>,
-    /// Declared output latency L (samples): the fixed lag of the smoother
-    /// (default 4; the paper's method has no lag and accepts only 0).
-    #[arg(long)]
-    pub latency: Option<usize>,
     /// Assumed RMS of the cutting force inside the band (N), for the Q criterion.
     #[arg(long, default_value_t = 100.0)]
     pub force_rms: f64,
     /// Upper limit of the compensator's white-noise gain.
     #[arg(long, default_value_t = 30.0)]
     pub max_noise_gain: f64,
+}
+
+impl DesignInputArgs {
+    /// `--fs` must be a whole number of Hz that an image can hold.
+    pub fn check_fs(&self) -> Result<()> {
+        let fs = self.fs;
+        if !(fs.is_finite() && (1_000.0..=1_000_000.0).contains(&fs) && fs.fract() == 0.0) {
+            bail!("--fs {fs}: the sample rate must be a whole number of Hz in 1000..=1000000");
+        }
+        Ok(())
+    }
+
+    /// R per axis (N²) from `--idle` or `--noise-variance`.
+    pub fn noise_variances(&self, frf: &Frf) -> Result<[Option<f64>; 3]> {
+        noise_variances(self.idle.as_deref(), self.noise_variance, frf)
+    }
+}
+
+/// Arguments of `dynocomp design` (DESIGN.md, CLI contract).
+#[derive(Args, Debug, Clone)]
+pub struct DesignArgs {
+    /// The FRF, sample rate, noise and Q-criterion inputs.
+    #[command(flatten)]
+    pub input: DesignInputArgs,
+    /// Output coefficient image (.dcimg), written atomically.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Declared output latency L (samples): the fixed lag of the smoother
+    /// (default 4; the paper's method has no lag and accepts only 0).
+    #[arg(long)]
+    pub latency: Option<usize>,
     /// Highest model order the fit may use.
     #[arg(long, default_value_t = 24)]
     pub max_order: usize,
@@ -396,24 +421,22 @@ pub fn run(args: &DesignArgs) -> Result<()> {
         (true, _) => 0,
         (false, l) => l.unwrap_or(4),
     };
-    if !(args.fs.is_finite() && args.fs >= 1_000.0 && args.fs <= 1_000_000.0 && args.fs.fract() == 0.0) {
-        bail!("--fs {}: the sample rate must be a whole number of Hz in 1000..=1000000", args.fs);
-    }
+    args.input.check_fs()?;
     if latency > 16 {
         bail!("--latency {}: at most 16 samples", latency);
     }
     let t0 = Instant::now();
-    let bytes = std::fs::read(&args.frf).with_context(|| format!("{}: cannot read", args.frf.display()))?;
+    let bytes = std::fs::read(&args.input.frf).with_context(|| format!("{}: cannot read", args.input.frf.display()))?;
     let sha: [u8; 32] = Sha256::digest(&bytes).into();
-    let frf = io::parse_frf(&args.frf, &bytes)?;
-    let r = noise_variances(args.idle.as_deref(), args.noise_variance, &frf)?;
-    let bands = args.bands.resolve(&frf, args.fs).with_context(|| format!("{}", args.frf.display()))?;
-    let method = if paper { args.paper.method(args.bands.tooth_passing_hz(), args.fs)? } else { FitMethod::Vf };
+    let frf = io::parse_frf(&args.input.frf, &bytes)?;
+    let r = args.input.noise_variances(&frf)?;
+    let bands = args.bands.resolve(&frf, args.input.fs).with_context(|| format!("{}", args.input.frf.display()))?;
+    let method = if paper { args.paper.method(args.bands.tooth_passing_hz(), args.input.fs)? } else { FitMethod::Vf };
     let opts = DesignOptions {
-        fs_hz: args.fs,
+        fs_hz: args.input.fs,
         lag: latency,
-        force_rms: args.force_rms,
-        max_noise_gain: args.max_noise_gain,
+        force_rms: args.input.force_rms,
+        max_noise_gain: args.input.max_noise_gain,
         vf: crate::fit::vf::VfOptions { max_order: args.max_order, ..Default::default() },
         method,
         bands: bands.clone(),
@@ -429,13 +452,13 @@ pub fn run(args: &DesignArgs) -> Result<()> {
         let ta = Instant::now();
         eprint!("designing axis {} ({} lines)… ", axis_name(a.axis), frf.freq_hz.len());
         let rv = r[a.axis].expect("R set for every FRF axis");
-        let d = design_axis(&frf.freq_hz, a, rv, &opts).with_context(|| format!("{}", args.frf.display()))?;
+        let d = design_axis(&frf.freq_hz, a, rv, &opts).with_context(|| format!("{}", args.input.frf.display()))?;
         let dt = ta.elapsed().as_secs_f64();
         eprintln!("order {}, q {:.3e}, {:.0} ms", d.model.order(), d.kalman.q, dt * 1e3);
         times.push(dt);
         designs.push(d);
     }
-    let image = build_image(&designs, args.fs as u32, latency, args.full_scale, sha)?;
+    let image = build_image(&designs, args.input.fs as u32, latency, args.full_scale, sha)?;
     io::image_file::write_image(&args.out, &image)?;
     if !paper {
         // The model sidecar of `compensate --offline` (crate::smoother).
@@ -443,16 +466,16 @@ pub fn run(args: &DesignArgs) -> Result<()> {
         crate::smoother::write_sidecar(&args.out, &crate::smoother::ModelSidecar::new(&image, &models))?;
     }
     let id = image.id();
-    let summary = render_summary(&designs, args.fs, latency, &args.out.display().to_string(), id, method_name);
+    let summary = render_summary(&designs, args.input.fs, latency, &args.out.display().to_string(), id, method_name);
     if let Some(dir) = &args.report {
-        let files = crate::report::write_report(dir, &frf, &designs, args.fs, &summary)?;
+        let files = crate::report::write_report(dir, &frf, &designs, args.input.fs, &summary)?;
         eprintln!("report: {} files in {} (open index.html)", files.len(), dir.display());
     }
     if args.json {
         let j = DesignJson {
             image: args.out.display().to_string(),
             image_id: format!("{id:08x}"),
-            fs_hz: args.fs,
+            fs_hz: args.input.fs,
             latency_samples: latency,
             method: method_name,
             bands,

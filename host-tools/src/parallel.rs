@@ -103,8 +103,8 @@ pub fn run(
     sha: [u8; 32],
 ) -> Result<()> {
     let t0 = std::time::Instant::now();
-    let per_band = design_parallel(frf, r, opts, bands).with_context(|| format!("{}", args.frf.display()))?;
-    let image = build_parallel_image(&per_band, bands, args.fs as u32, latency, args.full_scale, sha)?;
+    let per_band = design_parallel(frf, r, opts, bands).with_context(|| format!("{}", args.input.frf.display()))?;
+    let image = build_parallel_image(&per_band, bands, args.input.fs as u32, latency, args.full_scale, sha)?;
     crate::io::image_file::write_parallel_image(&args.out, &image)?;
     let id = image.id();
     let method = if args.method == "paper" { "paper" } else { "vf" };
@@ -152,7 +152,7 @@ pub fn run(
             "image_id": format!("{id:08x}"),
             "offline_only": true,
             "parallel_bands": j,
-            "fs_hz": args.fs,
+            "fs_hz": args.input.fs,
             "latency_samples": latency,
             "method": method,
             "design_time_s": t0.elapsed().as_secs_f64(),
@@ -162,7 +162,7 @@ pub fn run(
         println!("parallel-elaboration image {shown} (id {id:08x}), OFFLINE ONLY (the box never runs it), {} bands:", bands.len());
         for (k, (b, ds)) in bands.iter().zip(&per_band).enumerate() {
             println!("band {k}: {:.0}-{:.0} Hz ({})", b.lo_hz, b.hi_hz, b.label);
-            print!("{}", crate::design_cmd::render_summary(ds, args.fs, latency, &shown, id, method));
+            print!("{}", crate::design_cmd::render_summary(ds, args.input.fs, latency, &shown, id, method));
         }
         eprintln!("designed in {:.0} ms", t0.elapsed().as_secs_f64() * 1e3);
     }
