@@ -4,30 +4,14 @@
 //! definition (RMS error / peak-to-peak of the band-limited truth).
 
 use dynocomp::compensate::compensate_record;
-use dynocomp::design::{design_axis, AxisDesign, DesignOptions};
+use dynocomp::design::AxisDesign;
 use dynocomp::design_cmd::build_image;
 use dynocomp::io::signal_csv::SignalRecord;
-use dynocomp::metrics::{accuracy, sample_variance};
-use dynocomp::simulate::{simulate, SimOutput, SimParams};
+use dynocomp::metrics::accuracy;
+use dynocomp::simulate::SimOutput;
 
-const FS: f64 = 51_200.0;
-const F_MAX: f64 = 4_000.0;
-
-fn sim(seed: u64, rpm: f64, teeth: usize) -> SimOutput {
-    let mut p = SimParams::default();
-    p.duration_s = 0.4;
-    p.idle_duration_s = 0.3;
-    p.milling.spindle_rpm = rpm;
-    p.milling.teeth = teeth;
-    simulate(seed, &p).expect("simulate")
-}
-
-fn design_all(s: &SimOutput, lag: usize) -> Vec<AxisDesign> {
-    let opts = DesignOptions { lag, fs_hz: FS, ..Default::default() };
-    (0..3)
-        .map(|ax| design_axis(&s.frf.freq_hz, s.frf.axis(ax).unwrap(), sample_variance(&s.idle[ax]), &opts).unwrap_or_else(|e| panic!("axis {ax}: {e:#}")))
-        .collect()
-}
+mod sim_common;
+use sim_common::{design_all, sim, FS, F_MAX};
 
 /// Compensate the measured record with an image built from `designs` (the
 /// same path as `dynocomp compensate`); (compensated NRMSE, raw NRMSE) per axis.
