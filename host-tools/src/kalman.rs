@@ -23,6 +23,25 @@ use num_complex::Complex64;
 
 use crate::fit::{PoleResidueModel, Term};
 
+/// c (pI − A)⁻¹ b + d at the complex point p (z for a discrete system, jω
+/// for a continuous one), by an LU solve; NaN if pI − A is singular.
+pub fn resolvent_response(a: &DMatrix<f64>, b: &DVector<f64>, c: &DVector<f64>, d: f64, p: Complex64) -> Complex64 {
+    let n = a.nrows();
+    let m = DMatrix::<Complex64>::from_fn(n, n, |i, j| {
+        let v = Complex64::new(-a[(i, j)], 0.0);
+        if i == j {
+            v + p
+        } else {
+            v
+        }
+    });
+    let rhs = DVector::<Complex64>::from_iterator(n, b.iter().map(|v| Complex64::new(*v, 0.0)));
+    match m.lu().solve(&rhs) {
+        Some(x) => x.iter().zip(c.iter()).map(|(x, c)| x * c).sum::<Complex64>() + d,
+        None => Complex64::new(f64::NAN, f64::NAN),
+    }
+}
+
 /// A discrete SISO state-space system (f64).
 #[derive(Clone, Debug)]
 pub struct StateSpace {
@@ -39,21 +58,8 @@ pub struct StateSpace {
 impl StateSpace {
     /// H(z) = c (zI − A)⁻¹ b + d at z = e^{j·2π·f/fs}.
     pub fn freq_response(&self, f_hz: f64, fs_hz: f64) -> Complex64 {
-        let n = self.a.nrows();
         let z = Complex64::from_polar(1.0, 2.0 * std::f64::consts::PI * f_hz / fs_hz);
-        let m = DMatrix::<Complex64>::from_fn(n, n, |i, j| {
-            let a = Complex64::new(-self.a[(i, j)], 0.0);
-            if i == j {
-                a + z
-            } else {
-                a
-            }
-        });
-        let rhs = DVector::<Complex64>::from_iterator(n, self.b.iter().map(|v| Complex64::new(*v, 0.0)));
-        match m.lu().solve(&rhs) {
-            Some(x) => x.iter().zip(self.c.iter()).map(|(x, c)| x * c).sum::<Complex64>() + self.d,
-            None => Complex64::new(f64::NAN, f64::NAN),
-        }
+        resolvent_response(&self.a, &self.b, &self.c, self.d, z)
     }
 
     /// Simulate in f64: y[k] = c x + d u, x ← A x + b u.

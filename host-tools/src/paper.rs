@@ -314,19 +314,5 @@ pub fn design(tf: &RationalTf, fs_hz: f64, q: f64, r: f64, prewarp_hz: f64, diag
 
 /// Continuous response C (jωI − A)⁻¹ B + D of `ss` at ω (rad per time unit).
 pub fn continuous_response(ss: &ContinuousSs, omega: f64) -> num_complex::Complex64 {
-    use num_complex::Complex64;
-    let n = ss.a.nrows();
-    let m = DMatrix::<Complex64>::from_fn(n, n, |i, j| {
-        let v = Complex64::new(-ss.a[(i, j)], 0.0);
-        if i == j {
-            v + Complex64::new(0.0, omega)
-        } else {
-            v
-        }
-    });
-    let rhs = DVector::<Complex64>::from_iterator(n, ss.b.iter().map(|v| Complex64::new(*v, 0.0)));
-    match m.lu().solve(&rhs) {
-        Some(x) => x.iter().zip(ss.c.iter()).map(|(x, c)| x * c).sum::<Complex64>() + ss.d,
-        None => Complex64::new(f64::NAN, f64::NAN),
-    }
+    crate::kalman::resolvent_response(&ss.a, &ss.b, &ss.c, ss.d, num_complex::Complex64::new(0.0, omega))
 }
