@@ -281,6 +281,15 @@ pub enum ImageError {
         /// Band index.
         band: u8,
     },
+    /// A section is neither a conjugate pair in real normal form nor
+    /// diagonal, the shapes the kernel runs (`FilterError::NotModal`).
+    /// Last on purpose: the variant index is on the USB wire.
+    NotModalSection {
+        /// Axis index.
+        axis: u8,
+        /// Section index.
+        section: u8,
+    },
 }
 
 impl core::fmt::Display for ImageError {
@@ -307,6 +316,10 @@ impl core::fmt::Display for ImageError {
             BadSummary { axis } => write!(f, "axis {axis}: design summary has non-finite or negative values"),
             NonFiniteCoefficient { axis, section } => write!(f, "axis {axis}: section {section} has a non-finite coefficient"),
             UnstableSection { axis, section } => write!(f, "axis {axis}: section {section} has a pole on or outside the unit circle"),
+            NotModalSection { axis, section } => write!(
+                f,
+                "axis {axis}: section {section} is neither a normal-form pole pair (Δ11 = Δ22, Δ21 = −Δ12, b2 = 0) nor diagonal"
+            ),
             BufferTooSmall { needed } => write!(f, "output buffer too small, need {needed} bytes"),
             ParallelOfflineOnly => write!(
                 f,
@@ -584,6 +597,7 @@ fn read_axis(r: &mut Reader<'_>, expected: u8, bad_len: ImageError) -> Result<Ax
         FilterError::Unstable(s) => ImageError::UnstableSection { axis, section: s as u8 },
         FilterError::TooManyTaps => ImageError::TooManyTaps { axis, count: n_taps },
         FilterError::NonFiniteTap(t) => ImageError::NonFiniteTap { axis, tap: t as u8 },
+        FilterError::NotModal(s) => ImageError::NotModalSection { axis, section: s as u8 },
     })?;
     Ok(AxisImage { axis, scaling, filter, summary })
 }

@@ -133,6 +133,14 @@ fn semantic_errors_behind_a_valid_crc_are_rejected() {
     b[first_section..first_section + 4].copy_from_slice(&0.5f32.to_le_bytes());
     fix_crc(&mut b);
     assert_eq!(CoeffImage::parse(&b), Err(ImageError::UnstableSection { axis: 0, section: 0 }));
+    // a stable section of a shape the kernel does not run: Δ21 changed so the
+    // block is triangular (neither a normal-form pair nor diagonal)
+    let mut b = bytes.clone();
+    let d12 = f32::from_le_bytes(b[first_section + 4..first_section + 8].try_into().unwrap());
+    let d21 = if d12 == 0.0 { 1.0e-3f32 } else { 0.0 };
+    b[first_section + 8..first_section + 12].copy_from_slice(&d21.to_le_bytes());
+    fix_crc(&mut b);
+    assert_eq!(CoeffImage::parse(&b), Err(ImageError::NotModalSection { axis: 0, section: 0 }));
     // section count larger than the maximum
     let mut b = bytes.clone();
     b[HEADER_LEN + 1] = 25;

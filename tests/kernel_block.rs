@@ -8,19 +8,20 @@
 use dynocomp_core::kernel::{AxisFilter, AxisState, Section, BLOCK_CHUNK, MAX_FIR, MAX_SECTIONS};
 use proptest::prelude::*;
 
-/// A stable section: a conjugate pair r·e^{±jθ} (rotation form), a
-/// first-order section (second state unused), or two real poles in a
-/// triangular block; b, c of mixed sign and magnitude.
+/// A stable section of each shape the kernel runs: a conjugate pair
+/// r·e^{±jθ} (normal form, b = [β, 0]), a first-order section (second state
+/// unused), or two real poles in a diagonal block; b, c of mixed sign and
+/// magnitude, zeros included (a state with b·c = 0 is dropped).
 fn arb_section() -> impl Strategy<Value = Section> {
     let gain = prop_oneof![-2.0f32..2.0, -500.0f32..500.0, Just(0.0f32)];
     (0u8..3, 0.0f32..0.9999, 0.0f32..std::f32::consts::PI, -0.99f32..0.99, -1.0f32..1.0, gain.clone(), gain.clone(), gain.clone(), gain)
         .prop_map(|(kind, r, th, p2, t, b1, b2, c1, c2)| match kind {
             0 => {
                 let (re, im) = (r * th.cos(), r * th.sin());
-                Section { delta: [re - 1.0, im, -im, re - 1.0], b: [b1, b2], c: [c1, c2] }
+                Section { delta: [re - 1.0, im, -im, re - 1.0], b: [b1, 0.0], c: [c1, c2] }
             }
             1 => Section::first_order(r * th.cos(), b1, c1),
-            _ => Section { delta: [r - 1.0, t, 0.0, p2 - 1.0], b: [b1, b2], c: [c1, c2] },
+            _ => Section { delta: [r * t.abs() - 1.0, 0.0, 0.0, p2 - 1.0], b: [b1, b2], c: [c1, c2] },
         })
         .prop_filter("stable", Section::is_stable)
 }
@@ -57,7 +58,7 @@ fn input(seed: u64, n: usize) -> Vec<f32> {
 
 fn state_bits(st: &AxisState) -> (Vec<u32>, Vec<u32>, u32) {
     (
-        st.x.iter().flatten().map(|v| v.to_bits()).collect(),
+        st.x.iter().flatten().chain(&st.x_real).map(|v| v.to_bits()).collect(),
         st.fir_hist.iter().map(|v| v.to_bits()).collect(),
         st.nonfinite_resets,
     )

@@ -2,7 +2,7 @@
 
 mod common;
 use common::*;
-use dynocomp_core::kernel::{AxisFilter, AxisState, Section, RUNAWAY_LIMIT_N};
+use dynocomp_core::kernel::{AxisFilter, AxisState, FilterError, Section, RUNAWAY_LIMIT_N};
 
 /// Dense f64 state-space recursion x[k+1] = A x[k] + B u[k], y = C x + D u of
 /// the block-diagonal filter, in standard (not delta) form.
@@ -154,7 +154,7 @@ fn guard_resets_nonfinite_and_runaway_state_and_counts_it() {
     st.x[0][0] = f32::NAN;
     assert_eq!(filter.step_guarded(&mut st, 1.0), None);
     assert_eq!(st.nonfinite_resets, 1);
-    assert!(st.x.iter().all(|x| x[0] == 0.0 && x[1] == 0.0), "state not reset");
+    assert!(st.x.iter().all(|x| x[0] == 0.0 && x[1] == 0.0) && st.x_real.iter().all(|x| *x == 0.0), "state not reset");
     st.x[3][1] = 1.0e12; // runaway (finite but absurd)
     assert_eq!(filter.step_guarded(&mut st, 1.0), None);
     assert_eq!(st.nonfinite_resets, 2);
@@ -178,6 +178,21 @@ fn unstable_or_nonfinite_sections_are_refused() {
     let slow = Section::first_order(1.0 - 1e-7, 1.0, 1.0);
     assert!(slow.is_stable());
     assert!(!slow.poles_within(1.0 - 1e-6));
+}
+
+#[test]
+fn sections_the_kernel_does_not_run_are_refused() {
+    let pair = Section { delta: [-0.01, 0.05, -0.05, -0.01], b: [1.0, 0.0], c: [1.0, 0.5] };
+    let diagonal = Section { delta: [-0.01, 0.0, 0.0, -0.2], b: [1.0, 2.0], c: [1.0, 0.5] };
+    assert!(AxisFilter::new(&[pair, diagonal], 0.0).is_ok());
+    let triangular = Section { delta: [-0.01, 0.3, 0.0, -0.2], ..diagonal };
+    let skewed = Section { delta: [-0.01, 0.05, -0.04, -0.01], ..pair };
+    let unequal_sigma = Section { delta: [-0.01, 0.05, -0.05, -0.02], ..pair };
+    let input_on_both = Section { b: [1.0, 0.1], ..pair };
+    for bad in [triangular, skewed, unequal_sigma, input_on_both] {
+        assert!(bad.is_stable() && bad.is_finite());
+        assert_eq!(AxisFilter::new(&[pair, bad], 0.0), Err(FilterError::NotModal(1)), "{bad:?}");
+    }
 }
 
 #[test]

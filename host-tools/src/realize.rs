@@ -14,8 +14,11 @@
 //! 5. Slow cluster → eigenvectors of the triangular T11 by back substitution
 //!    (the modal transform; its condition number is checked), residues
 //!    ρ_i = ĉ_i·b̂_i, and one real 2x2 section per conjugate pair
-//!    (A = [[σ, ω], [−ω, σ]], b = [β, 0], c = [2 Re ρ, 2 Im ρ]/β, β = √(2|ρ|)),
-//!    real poles two to a section.
+//!    (Δ = A − I = [[σ, ω], [−ω, σ]], b = [1, 0], c = [2 Re ρ, 2 Im ρ]),
+//!    real poles two to a diagonal section (b = 1, c = ρ): the two shapes the
+//!    kernel runs (`dynocomp_core::kernel`). Unit input gain makes the
+//!    kernel's folding of b into c exact; f32 rounding is relative, so the
+//!    state's scale does not matter for accuracy.
 
 use anyhow::{bail, Result};
 use dynocomp_core::kernel::{MAX_FIR, MAX_SECTIONS};
@@ -370,20 +373,16 @@ fn realize_split(ss: &StateSpace, rho: f64) -> Result<ModalRealization> {
         }
         used[j] = true;
         let (lam, res) = if lam.im > 0.0 { (lam, res) } else { (eig[j].0, eig[j].1) };
-        let beta = (2.0 * res.norm()).sqrt().max(1e-30);
         sections.push(Section64 {
             delta: [lam.re - 1.0, lam.im, -lam.im, lam.re - 1.0],
-            b: [beta, 0.0],
-            c: [2.0 * res.re / beta, 2.0 * res.im / beta],
+            b: [1.0, 0.0],
+            c: [2.0 * res.re, 2.0 * res.im],
         });
         poles.push(lam);
         poles.push(lam.conj());
     }
     for pair in reals.chunks(2) {
-        let mk = |(p, r): (f64, f64)| {
-            let beta = r.abs().sqrt().max(1e-30);
-            (p - 1.0, beta, r / beta)
-        };
+        let mk = |(p, r): (f64, f64)| (p - 1.0, 1.0, r);
         let (d1, b1, c1) = mk(pair[0]);
         poles.push(Complex64::new(pair[0].0, 0.0));
         let sec = if let Some(&second) = pair.get(1) {
