@@ -19,7 +19,7 @@
 //!
 //! ```text
 //! y[k]   = d·u[k] + Σ_pairs (c₁·x₁[k] + c₂·x₂[k]) + Σ_reals c·x[k] + Σ_{j=1..m} h_j·u[k−j]
-//! pair:  x₁[k+1] = x₁ + ((ω·x₂ + u) + σ·x₁)
+//! pair:  x₁[k+1] = x₁ + ((σ·x₁ + ω·x₂) + u)
 //!        x₂[k+1] = x₂ + (σ·x₂ − ω·x₁)               (x₁, x₂ of sample k)
 //! real:  x[k+1]  = x + (σ·x + u)
 //! ```
@@ -31,10 +31,9 @@
 //! directly would round twice there and, for a slow mode driven by a steady
 //! force, bias it: the 24-section step response of `tests/kernel_reference.rs`
 //! then deviates 1.1·10⁻⁵ of its peak from the f64 reference instead of
-//! 1.9·10⁻⁶. That is 9 float operations (`vmla` is an unfused
+//! 2.1·10⁻⁶. That is 9 float operations (`vmla` is an unfused
 //! multiply-add, so the M4 and x86-64 round alike), 6 loads and 2 stores per
-//! pair on the Cortex-M4F, and a loop-carried chain of one multiply and two
-//! additions per state on the host. BENCHMARKS.md has the instruction counts.
+//! pair on the Cortex-M4F. BENCHMARKS.md has the instruction counts.
 //!
 //! The short FIR part `h_1..h_m` (m ≤ [`MAX_FIR`]) carries the compensator's
 //! fast poles (|z| ≲ 0.5, including the exact poles at z = 0 of a fixed-lag
@@ -501,7 +500,7 @@ pub const BLOCK_CHUNK: usize = 512;
 fn pair_update(p: &PairCoeffs, [x1, x2]: [f32; 2], u: f32, y: &mut f32) -> [f32; 2] {
     *y += p.c1 * x1;
     *y += p.c2 * x2;
-    let d1 = (p.omega * x2 + u) + p.sigma * x1;
+    let d1 = (p.sigma * x1 + p.omega * x2) + u;
     let d2 = p.sigma * x2 - p.omega * x1;
     [x1 + d1, x2 + d2]
 }
