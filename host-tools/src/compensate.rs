@@ -47,15 +47,22 @@ pub fn compensate_record(image: &CoeffImage, rec: &SignalRecord, raw_timing: boo
         };
         jobs.push((*axis, axis_img.filter, samples));
     }
-    // One thread per axis (the axes are independent).
+    // The axes are independent: all but the last on threads of their own,
+    // the last on this thread (one axis spawns nothing).
     let results: Vec<(usize, Result<Vec<f64>, usize>)> = std::thread::scope(|scope| {
-        let handles: Vec<_> = jobs
+        let (last, others) = match jobs.split_last() {
+            Some((last, others)) => (Some(last), others),
+            None => (None, &jobs[..]),
+        };
+        let handles: Vec<_> = others
             .iter()
             .map(|(axis, filter, samples)| (*axis, scope.spawn(move || compensate_axis(filter, samples, latency))))
             .collect();
+        let last = last.map(|(axis, filter, samples)| (*axis, compensate_axis(filter, samples, latency)));
         handles
             .into_iter()
             .map(|(axis, h)| (axis, h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))))
+            .chain(last)
             .collect()
     });
     let mut channels = Vec::with_capacity(results.len());
@@ -78,10 +85,16 @@ fn compensate_axis(filter: &AxisFilter, samples: &[f64], latency: usize) -> Resu
     let input: Vec<f32> = samples.iter().copied().chain(std::iter::repeat_n(last, latency)).map(|u| u as f32).collect();
     let mut y = vec![0.0f32; input.len()];
     filter.process_block(&mut AxisState::default(), &input, &mut y);
-    if let Some(k) = y.iter().position(|v| !v.is_finite()) {
-        return Err(k);
+    let mut out = Vec::with_capacity(samples.len());
+    for (k, &v) in y.iter().enumerate() {
+        if !v.is_finite() {
+            return Err(k);
+        }
+        if k >= latency {
+            out.push(f64::from(v));
+        }
     }
-    Ok(y.iter().skip(latency).map(|&v| f64::from(v)).collect())
+    Ok(out)
 }
 
 /// Parallel elaboration (paper §3.3), **offline only**: split every force
