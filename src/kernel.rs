@@ -178,32 +178,56 @@ struct RealCoeffs {
 /// Most real poles per axis (two per diagonal section).
 pub const MAX_REAL_POLES: usize = 2 * MAX_SECTIONS;
 
-/// The kernel form of `s`: `Ok(true)` for a pair (pushed to `pairs`),
-/// `Ok(false)` for a diagonal section (its live states pushed to `reals`).
-fn split_section(
-    s: &Section,
-    pairs: &mut [PairCoeffs; MAX_SECTIONS],
-    n_pairs: &mut usize,
-    reals: &mut [RealCoeffs; MAX_REAL_POLES],
-    n_reals: &mut usize,
-) -> Result<(), ()> {
-    let [d11, d12, d21, d22] = s.delta;
-    if d12 == 0.0 && d21 == 0.0 {
-        for (sigma, (b, c)) in [d11, d22].into_iter().zip(s.b.into_iter().zip(s.c)) {
-            let c = b * c;
-            if c != 0.0 {
-                *reals.get_mut(*n_reals).ok_or(())? = RealCoeffs { sigma, c };
-                *n_reals += 1;
+/// The sections in the form the kernel computes them: the pairs and the
+/// live real poles, each in section order.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct KernelForm {
+    pairs: [PairCoeffs; MAX_SECTIONS],
+    n_pairs: usize,
+    reals: [RealCoeffs; MAX_REAL_POLES],
+    n_reals: usize,
+}
+
+impl KernelForm {
+    const EMPTY: Self = KernelForm {
+        pairs: [PairCoeffs { sigma: 0.0, omega: 0.0, c1: 0.0, c2: 0.0 }; MAX_SECTIONS],
+        n_pairs: 0,
+        reals: [RealCoeffs { sigma: 0.0, c: 0.0 }; MAX_REAL_POLES],
+        n_reals: 0,
+    };
+
+    /// Append section `s`: a normal-form pair, or the states of a diagonal
+    /// section with `b·c ≠ 0`. `Err` for any other shape (or, unreachable
+    /// with ≤ [`MAX_SECTIONS`] sections, no room left).
+    fn push(&mut self, s: &Section) -> Result<(), ()> {
+        let [d11, d12, d21, d22] = s.delta;
+        if d12 == 0.0 && d21 == 0.0 {
+            for (sigma, (b, c)) in [d11, d22].into_iter().zip(s.b.into_iter().zip(s.c)) {
+                let c = b * c;
+                if c != 0.0 {
+                    *self.reals.get_mut(self.n_reals).ok_or(())? = RealCoeffs { sigma, c };
+                    self.n_reals += 1;
+                }
             }
+            Ok(())
+        } else if d11 == d22 && d21 == -d12 && s.b[1] == 0.0 {
+            let beta = s.b[0];
+            *self.pairs.get_mut(self.n_pairs).ok_or(())? = PairCoeffs { sigma: d11, omega: d12, c1: beta * s.c[0], c2: beta * s.c[1] };
+            self.n_pairs += 1;
+            Ok(())
+        } else {
+            Err(())
         }
-        Ok(())
-    } else if d11 == d22 && d21 == -d12 && s.b[1] == 0.0 {
-        let beta = s.b[0];
-        *pairs.get_mut(*n_pairs).ok_or(())? = PairCoeffs { sigma: d11, omega: d12, c1: beta * s.c[0], c2: beta * s.c[1] };
-        *n_pairs += 1;
-        Ok(())
-    } else {
-        Err(())
+    }
+
+    /// The pairs, in section order.
+    fn pairs(&self) -> &[PairCoeffs] {
+        &self.pairs[..self.n_pairs.min(MAX_SECTIONS)]
+    }
+
+    /// The live real poles, in section order.
+    fn reals(&self) -> &[RealCoeffs] {
+        &self.reals[..self.n_reals.min(MAX_REAL_POLES)]
     }
 }
 
@@ -213,12 +237,8 @@ pub struct AxisFilter {
     /// The sections as given (the image's records).
     sections: [Section; MAX_SECTIONS],
     len: usize,
-    /// The kernel form of the pair sections, in section order.
-    pairs: [PairCoeffs; MAX_SECTIONS],
-    n_pairs: usize,
-    /// The kernel form of the diagonal sections' live states, in order.
-    reals: [RealCoeffs; MAX_REAL_POLES],
-    n_reals: usize,
+    /// What the kernel computes from `sections`.
+    form: KernelForm,
     d: f32,
     fir: [f32; MAX_FIR],
     fir_len: usize,
@@ -252,9 +272,7 @@ impl AxisFilter {
             return Err(FilterError::NonFinite(MAX_SECTIONS));
         }
         let mut all = [Section::default(); MAX_SECTIONS];
-        let mut pairs = [PairCoeffs::default(); MAX_SECTIONS];
-        let mut reals = [RealCoeffs::default(); MAX_REAL_POLES];
-        let (mut n_pairs, mut n_reals) = (0, 0);
+        let mut form = KernelForm::EMPTY;
         for (i, (dst, s)) in all.iter_mut().zip(sections).enumerate() {
             if !s.is_finite() {
                 return Err(FilterError::NonFinite(i));
@@ -262,16 +280,13 @@ impl AxisFilter {
             if !s.is_stable() {
                 return Err(FilterError::Unstable(i));
             }
-            split_section(s, &mut pairs, &mut n_pairs, &mut reals, &mut n_reals).map_err(|()| FilterError::NotModal(i))?;
+            form.push(s).map_err(|()| FilterError::NotModal(i))?;
             *dst = *s;
         }
         Ok(AxisFilter {
             sections: all,
             len: sections.len(),
-            pairs,
-            n_pairs,
-            reals,
-            n_reals,
+            form,
             d,
             fir: taps,
             fir_len: fir.len(),
@@ -305,24 +320,16 @@ impl AxisFilter {
         2 * self.len + self.fir_len
     }
 
-    /// States the kernel updates per sample: two per pair, one per live real
-    /// pole, one per FIR tap.
-    pub fn live_states(&self) -> usize {
-        2 * self.n_pairs + self.n_reals + self.fir_len
-    }
-
     /// One sample: returns `y[k]` and advances the state (the module equation).
     ///
     /// No allocation, no panics, O(sections) multiply-adds.
     #[inline]
     pub fn step(&self, state: &mut AxisState, u: f32) -> f32 {
         let mut y = self.d * u;
-        let pairs = &self.pairs[..self.n_pairs.min(MAX_SECTIONS)];
-        for (p, x) in pairs.iter().zip(state.x.iter_mut()) {
+        for (p, x) in self.form.pairs().iter().zip(state.x.iter_mut()) {
             *x = pair_update(p, *x, u, &mut y);
         }
-        let reals = &self.reals[..self.n_reals.min(MAX_REAL_POLES)];
-        for (r, x) in reals.iter().zip(state.x_real.iter_mut()) {
+        for (r, x) in self.form.reals().iter().zip(state.x_real.iter_mut()) {
             *x = real_update(r, *x, u, &mut y);
         }
         // hist[j] holds u[k−1−j]. One pass accumulates h_{j+1}·u[k−1−j] in
@@ -397,10 +404,9 @@ impl AxisFilter {
         for (y, u) in output.iter_mut().zip(input) {
             *y = self.d * u;
         }
-        let n_pairs = self.n_pairs.min(MAX_SECTIONS);
-        over_chunks(&self.pairs[..n_pairs], &mut state.x[..n_pairs], input, output, pair_update);
-        let n_reals = self.n_reals.min(MAX_REAL_POLES);
-        over_chunks(&self.reals[..n_reals], &mut state.x_real[..n_reals], input, output, real_update);
+        let (pairs, reals) = (self.form.pairs(), self.form.reals());
+        over_chunks(pairs, &mut state.x[..pairs.len()], input, output, pair_update);
+        over_chunks(reals, &mut state.x_real[..reals.len()], input, output, real_update);
         // FIR: tap h_{j+1} multiplies u[k−1−j]: for k ≤ j that is
         // fir_hist[j−k] (the previous chunk), otherwise input[k−1−j].
         let m = self.fir_len.min(MAX_FIR);
