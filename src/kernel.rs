@@ -401,12 +401,24 @@ impl AxisFilter {
     /// One chunk of [`process_block`](Self::process_block); `input` and
     /// `output` have the same length.
     fn process_chunk(&self, state: &mut AxisState, input: &[f32], output: &mut [f32]) {
+        self.start_chunk(input, output);
+        let (pairs, reals) = (self.form.pairs(), self.form.reals());
+        over_chunks(Lanes::new(pairs, &mut state.x, input, output), pair_update);
+        over_chunks(Lanes::new(reals, &mut state.x_real, input, output), real_update);
+        self.fir_chunk(state, input, output);
+    }
+
+    /// First term of every output of a chunk: `output[k] = d·u[k]`.
+    fn start_chunk(&self, input: &[f32], output: &mut [f32]) {
         for (y, u) in output.iter_mut().zip(input) {
             *y = self.d * u;
         }
-        let (pairs, reals) = (self.form.pairs(), self.form.reals());
-        over_chunks(pairs, &mut state.x[..pairs.len()], input, output, pair_update);
-        over_chunks(reals, &mut state.x_real[..reals.len()], input, output, real_update);
+    }
+
+    /// Last terms of every output of a chunk: the FIR taps `h_j·u[k−j]`
+    /// (in tap order for each sample), and the FIR history moved on by the
+    /// chunk; `input` and `output` have the same length.
+    fn fir_chunk(&self, state: &mut AxisState, input: &[f32], output: &mut [f32]) {
         // FIR: tap h_{j+1} multiplies u[k−1−j]: for k ≤ j that is
         // fir_hist[j−k] (the previous chunk), otherwise input[k−1−j].
         let m = self.fir_len.min(MAX_FIR);
@@ -494,6 +506,178 @@ impl AxisFilter {
     }
 }
 
+/// One axis's filter, state and block for [`process_blocks`].
+pub struct BlockJob<'a> {
+    /// The axis's compensator.
+    pub filter: &'a AxisFilter,
+    /// Its state, carried on from the previous block.
+    pub state: &'a mut AxisState,
+    /// Input forces (N).
+    pub input: &'a [f32],
+    /// Compensated forces (N), as many as the shorter of the two slices.
+    pub output: &'a mut [f32],
+}
+
+/// Axes per lockstep pass of [`process_blocks`]: one per f32 lane of a
+/// 128-bit vector.
+pub const LOCKSTEP_AXES: usize = 4;
+
+/// One sample of every axis of a lockstep pass (lane a = axis a).
+type Lane = [f32; LOCKSTEP_AXES];
+
+/// Pair i of every axis of a lockstep pass, lane a holding axis a's pair i
+/// (struct of arrays, so that one vector operation serves all lanes).
+///
+/// A lane whose axis has fewer pairs is idle: σ = ω = 0, c₁ = c₂ = −0.0,
+/// and its input is masked to +0.0 (`live` = 0), so its state stays +0.0
+/// and it adds (−0.0)·(+0.0) = −0.0 to its `y`, which leaves every `y`
+/// unchanged (IEEE 754: y + (−0.0) = y, also for y = −0.0). An added +0.0
+/// would not: −0.0 + (+0.0) = +0.0.
+#[derive(Clone, Copy)]
+struct PairLanes {
+    sigma: Lane,
+    omega: Lane,
+    c1: Lane,
+    c2: Lane,
+    /// Input mask: all ones for a live lane, 0 for an idle one.
+    live: [u32; LOCKSTEP_AXES],
+}
+
+impl Default for PairLanes {
+    fn default() -> Self {
+        PairLanes { sigma: [0.0; 4], omega: [0.0; 4], c1: [-0.0; 4], c2: [-0.0; 4], live: [0; 4] }
+    }
+}
+
+/// Real pole j of every axis of a lockstep pass; idle lanes as in
+/// [`PairLanes`].
+#[derive(Clone, Copy)]
+struct RealLanes {
+    sigma: Lane,
+    c: Lane,
+    live: [u32; LOCKSTEP_AXES],
+}
+
+impl Default for RealLanes {
+    fn default() -> Self {
+        RealLanes { sigma: [0.0; 4], c: [-0.0; 4], live: [0; 4] }
+    }
+}
+
+/// `u` of a live lane, +0.0 in an idle one.
+#[inline(always)]
+fn masked(u: f32, live: u32) -> f32 {
+    f32::from_bits(u.to_bits() & live)
+}
+
+/// [`pair_update`] in every lane (the same function per lane, so the same
+/// roundings; the lanes are independent, so the compiler vectorizes them).
+#[inline(always)]
+fn pair_update_lanes(p: &PairLanes, [x1, x2]: [Lane; 2], u: Lane, y: &mut Lane) -> [Lane; 2] {
+    let mut next = [[0.0; LOCKSTEP_AXES]; 2];
+    for l in 0..LOCKSTEP_AXES {
+        let c = PairCoeffs { sigma: p.sigma[l], omega: p.omega[l], c1: p.c1[l], c2: p.c2[l] };
+        [next[0][l], next[1][l]] = pair_update(&c, [x1[l], x2[l]], masked(u[l], p.live[l]), &mut y[l]);
+    }
+    next
+}
+
+/// [`real_update`] in every lane.
+#[inline(always)]
+fn real_update_lanes(r: &RealLanes, x: Lane, u: Lane, y: &mut Lane) -> Lane {
+    core::array::from_fn(|l| {
+        let c = RealCoeffs { sigma: r.sigma[l], c: r.c[l] };
+        real_update(&c, x[l], masked(u[l], r.live[l]), &mut y[l])
+    })
+}
+
+/// Several axes' blocks: each job's outputs and final state are those of
+/// its own [`AxisFilter::process_block`], bit for bit (so those of stepping
+/// it sample by sample), for any filters and block lengths. No allocation,
+/// no panics.
+///
+/// Why: a pair's state recurrence is serial in time (a multiply and three
+/// dependent additions per sample), and a typical design has only a few
+/// pairs per axis, so one axis alone leaves most of a core idle waiting on
+/// that latency. Here up to [`LOCKSTEP_AXES`] axes run in lockstep, one per
+/// vector lane: lane a computes axis a's pair i exactly as
+/// [`AxisFilter::step`] does (its `d·u`, then its pairs, then its real
+/// poles, in order; lanes of an axis with fewer pairs are idle and add
+/// exactly nothing, see [`PairLanes`]), so one vector operation advances
+/// the same recurrence of every axis. The FIR taps then run per axis as in
+/// `process_block`. Over the group's common length the axes run in
+/// lockstep; each longer block's rest runs alone.
+pub fn process_blocks(jobs: &mut [BlockJob<'_>]) {
+    for group in jobs.chunks_mut(LOCKSTEP_AXES) {
+        match group {
+            [one] => one.filter.process_block(one.state, one.input, one.output),
+            _ => lockstep(group),
+        }
+    }
+}
+
+/// [`process_blocks`] for ≤ [`LOCKSTEP_AXES`] jobs in lockstep.
+fn lockstep(jobs: &mut [BlockJob<'_>]) {
+    let k = jobs.len().min(LOCKSTEP_AXES);
+    let jobs = &mut jobs[..k];
+    let n = jobs.iter().map(|j| j.input.len().min(j.output.len())).min().unwrap_or(0);
+    let mut pairs = [PairLanes::default(); MAX_SECTIONS];
+    let mut reals = [RealLanes::default(); MAX_REAL_POLES];
+    let mut x = [[[0.0; LOCKSTEP_AXES]; 2]; MAX_SECTIONS];
+    let mut x_real = [[0.0; LOCKSTEP_AXES]; MAX_REAL_POLES];
+    let mut d = [0.0; LOCKSTEP_AXES];
+    let (mut n_pairs, mut n_reals) = (0, 0);
+    for (l, job) in jobs.iter().enumerate() {
+        d[l] = job.filter.d;
+        let (jp, jr) = (job.filter.form.pairs(), job.filter.form.reals());
+        n_pairs = n_pairs.max(jp.len());
+        n_reals = n_reals.max(jr.len());
+        for ((lanes, xi), (p, [x1, x2])) in pairs.iter_mut().zip(x.iter_mut()).zip(jp.iter().zip(job.state.x)) {
+            (lanes.sigma[l], lanes.omega[l], lanes.c1[l], lanes.c2[l], lanes.live[l]) = (p.sigma, p.omega, p.c1, p.c2, u32::MAX);
+            (xi[0][l], xi[1][l]) = (x1, x2);
+        }
+        for ((lanes, xj), (r, xr)) in reals.iter_mut().zip(x_real.iter_mut()).zip(jr.iter().zip(job.state.x_real)) {
+            (lanes.sigma[l], lanes.c[l], lanes.live[l]) = (r.sigma, r.c, u32::MAX);
+            xj[l] = xr;
+        }
+    }
+    let mut u = [[0.0; LOCKSTEP_AXES]; BLOCK_CHUNK];
+    let mut y = [[0.0; LOCKSTEP_AXES]; BLOCK_CHUNK];
+    let mut start = 0;
+    while start < n {
+        let len = (n - start).min(BLOCK_CHUNK);
+        let (u, y) = (&mut u[..len], &mut y[..len]);
+        for (l, job) in jobs.iter().enumerate() {
+            for (lane, v) in u.iter_mut().zip(&job.input[start..start + len]) {
+                lane[l] = *v;
+            }
+        }
+        for (y, u) in y.iter_mut().zip(u.iter()) {
+            *y = core::array::from_fn(|l| d[l] * u[l]);
+        }
+        over_chunks(Lanes::new(&pairs[..n_pairs], &mut x, u, y), pair_update_lanes);
+        over_chunks(Lanes::new(&reals[..n_reals], &mut x_real, u, y), real_update_lanes);
+        for (l, job) in jobs.iter_mut().enumerate() {
+            let out = &mut job.output[start..start + len];
+            for (dst, lane) in out.iter_mut().zip(y.iter()) {
+                *dst = lane[l];
+            }
+            job.filter.fir_chunk(job.state, &job.input[start..start + len], out);
+        }
+        start += len;
+    }
+    for (l, job) in jobs.iter_mut().enumerate() {
+        let (np, nr) = (job.filter.form.pairs().len(), job.filter.form.reals().len());
+        for (dst, xi) in job.state.x[..np].iter_mut().zip(&x) {
+            *dst = [xi[0][l], xi[1][l]];
+        }
+        for (dst, xj) in job.state.x_real[..nr].iter_mut().zip(&x_real) {
+            *dst = xj[l];
+        }
+        job.filter.process_block(job.state, &job.input[n..], &mut job.output[n..]);
+    }
+}
+
 /// Samples per chunk of [`AxisFilter::process_block`]: input and output of a
 /// chunk (2 × 2 KiB) stay in L1 cache while every section and tap passes
 /// over them.
@@ -519,48 +703,76 @@ fn real_update(r: &RealCoeffs, x: f32, u: f32, y: &mut f32) -> f32 {
     x + (r.sigma * x + u)
 }
 
+/// Pairs or real poles (`coeffs`, with their `states`) and the chunk they
+/// run over: `output[k]` receives their updates for `input[k]`. A sample
+/// `S` is one axis's f32, or [`Lane`] for the lockstep path.
+struct Lanes<'a, C, X, S> {
+    coeffs: &'a [C],
+    states: &'a mut [X],
+    input: &'a [S],
+    output: &'a mut [S],
+}
+
+impl<'a, C, X, S> Lanes<'a, C, X, S> {
+    /// `states` is cut to the length of `coeffs`; `input` and `output` to
+    /// their common length.
+    fn new(coeffs: &'a [C], states: &'a mut [X], input: &'a [S], output: &'a mut [S]) -> Self {
+        let len = coeffs.len().min(states.len());
+        let n = input.len().min(output.len());
+        Lanes { coeffs: &coeffs[..len], states: &mut states[..len], input: &input[..n], output: &mut output[..n] }
+    }
+
+    /// Up to four of the pairs (or real poles), in order, with the next
+    /// ones left in `self`; `None` when none are left.
+    fn split_four(&mut self) -> Option<Lanes<'_, C, X, S>> {
+        if self.coeffs.is_empty() {
+            return None;
+        }
+        let k = self.coeffs.len().min(4);
+        let (c, rest) = self.coeffs.split_at(k);
+        self.coeffs = rest;
+        let (x, rest) = core::mem::take(&mut self.states).split_at_mut(k);
+        self.states = rest;
+        Some(Lanes { coeffs: c, states: x, input: self.input, output: &mut *self.output })
+    }
+}
+
 /// [`over_block`] four at a time, then the remaining 1-3 together (never
 /// padded: an added zero term would turn a −0.0 output into +0.0).
 #[inline(always)]
-fn over_chunks<C: Copy + Default, X: Copy + Default>(
-    coeffs: &[C],
-    states: &mut [X],
-    input: &[f32],
-    output: &mut [f32],
-    update: impl Fn(&C, X, f32, &mut f32) -> X + Copy,
+fn over_chunks<C: Copy + Default, X: Copy + Default, S: Copy>(
+    mut lanes: Lanes<'_, C, X, S>,
+    update: impl Fn(&C, X, S, &mut S) -> X + Copy,
 ) {
-    for (c, x) in coeffs.chunks(4).zip(states.chunks_mut(4)) {
-        match c.len() {
-            4 => over_block::<4, _, _>(c, x, input, output, update),
-            3 => over_block::<3, _, _>(c, x, input, output, update),
-            2 => over_block::<2, _, _>(c, x, input, output, update),
-            _ => over_block::<1, _, _>(c, x, input, output, update),
+    while let Some(four) = lanes.split_four() {
+        match four.coeffs.len() {
+            4 => over_block::<4, _, _, _>(four, update),
+            3 => over_block::<3, _, _, _>(four, update),
+            2 => over_block::<2, _, _, _>(four, update),
+            _ => over_block::<1, _, _, _>(four, update),
         }
     }
 }
 
-/// `N` pairs or real poles (`coeffs.len() == N`) over a whole block:
+/// `N` pairs or real poles (`lanes.coeffs.len() == N`) over a whole chunk:
 /// `output[k]` receives each one's `update` in order, exactly as in
 /// [`AxisFilter::step`] (same function, so the same roundings). Running N
 /// independent recurrences per sample keeps N of them in flight.
 #[inline(always)]
-fn over_block<const N: usize, C: Copy + Default, X: Copy + Default>(
-    coeffs: &[C],
-    states: &mut [X],
-    input: &[f32],
-    output: &mut [f32],
-    update: impl Fn(&C, X, f32, &mut f32) -> X,
+fn over_block<const N: usize, C: Copy + Default, X: Copy + Default, S: Copy>(
+    lanes: Lanes<'_, C, X, S>,
+    update: impl Fn(&C, X, S, &mut S) -> X,
 ) {
-    let c: [C; N] = core::array::from_fn(|i| coeffs.get(i).copied().unwrap_or_default());
-    let mut x: [X; N] = core::array::from_fn(|i| states.get(i).copied().unwrap_or_default());
-    for (y, &u) in output.iter_mut().zip(input) {
+    let c: [C; N] = core::array::from_fn(|i| lanes.coeffs.get(i).copied().unwrap_or_default());
+    let mut x: [X; N] = core::array::from_fn(|i| lanes.states.get(i).copied().unwrap_or_default());
+    for (y, &u) in lanes.output.iter_mut().zip(lanes.input) {
         let mut acc = *y;
         for (c, x) in c.iter().zip(x.iter_mut()) {
             *x = update(c, *x, u, &mut acc);
         }
         *y = acc;
     }
-    for (dst, x) in states.iter_mut().zip(x) {
+    for (dst, x) in lanes.states.iter_mut().zip(x) {
         *dst = x;
     }
 }

@@ -10,7 +10,7 @@ use dynocomp::compensate::compensate_record;
 use dynocomp::design_cmd::{run, DesignArgs};
 use dynocomp::io::image_file::read_image;
 use dynocomp::io::signal_csv::{read_signal_csv, SignalRecord};
-use dynocomp_core::kernel::{AxisFilter, AxisState, Section, MAX_FIR, MAX_SECTIONS};
+use dynocomp_core::kernel::{process_blocks, AxisFilter, AxisState, BlockJob, Section, MAX_FIR, MAX_SECTIONS};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 
@@ -86,6 +86,33 @@ fn bench_compensate(c: &mut Criterion) {
             })
         });
     }
+    // The example's three axes: one after the other, and in lockstep
+    // (`process_blocks`, the same numbers), in the same run.
+    let filters: Vec<AxisFilter> = image.axes.iter().map(|a| a.unwrap().filter).collect();
+    let inputs: Vec<Vec<f32>> = rec.channels.iter().map(|(_, c)| c.iter().map(|&v| v as f32).collect()).collect();
+    let mut outputs: Vec<Vec<f32>> = inputs.iter().map(|u| vec![0.0f32; u.len()]).collect();
+    g.throughput(Throughput::Elements(3 * input.len() as u64));
+    g.bench_function("block x, y, z in turn", |b| {
+        b.iter(|| {
+            for ((f, u), y) in filters.iter().zip(&inputs).zip(outputs.iter_mut()) {
+                f.process_block(&mut AxisState::default(), black_box(u), y);
+            }
+            black_box(&outputs);
+        })
+    });
+    g.bench_function("lockstep x+y+z", |b| {
+        b.iter(|| {
+            let mut states = [AxisState::default(); 3];
+            let mut jobs: Vec<BlockJob<'_>> = filters
+                .iter()
+                .zip(states.iter_mut())
+                .zip(inputs.iter().zip(outputs.iter_mut()))
+                .map(|((filter, state), (input, output))| BlockJob { filter, state, input: black_box(input), output })
+                .collect();
+            process_blocks(&mut jobs);
+            black_box(&outputs);
+        })
+    });
     g.finish();
 }
 
