@@ -31,9 +31,12 @@
 //! directly would round twice there and, for a slow mode driven by a steady
 //! force, bias it: the 24-section step response of `tests/kernel_reference.rs`
 //! then deviates 1.1·10⁻⁵ of its peak from the f64 reference instead of
-//! 2.1·10⁻⁶. That is 9 float operations (`vmla` is an unfused
-//! multiply-add, so the M4 and x86-64 round alike), 6 loads and 2 stores per
-//! pair on the Cortex-M4F. BENCHMARKS.md has the instruction counts.
+//! 2.1·10⁻⁶. That is 9 float operations per pair (`vmla` is an
+//! unfused multiply-add, so the M4 and x86-64 round alike); on the Cortex-M4F
+//! `step` runs the pairs in assembly (`kernel_m4.rs`: one `vldm` for two
+//! pairs' coefficients, one for their states, one `vstm`, 11.5 instructions
+//! per pair), everywhere else in Rust. BENCHMARKS.md has the instruction
+//! counts.
 //!
 //! The short FIR part `h_1..h_m` (m ≤ [`MAX_FIR`]) carries the compensator's
 //! fast poles (|z| ≲ 0.5, including the exact poles at z = 0 of a fixed-lag
@@ -55,6 +58,14 @@
 //! Configuration ([`AxisFilter`]) is kept apart from state ([`AxisState`]), as in
 //! QUARTIQ's `idsp`: coefficients can be swapped without touching the state
 //! layout, and the state can be reset alone.
+
+// The pair loop of `AxisFilter::step` in assembly for the Cortex-M4F (one
+// `vldm` for two pairs' coefficients, one for their states, one `vstm`);
+// every other target runs `pair_update` in Rust.
+#[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
+#[allow(unsafe_code)]
+#[path = "kernel_m4.rs"]
+mod m4;
 
 /// Maximum number of 2x2 sections per axis (filter order ≤ 48).
 pub const MAX_SECTIONS: usize = 24;
@@ -153,7 +164,11 @@ pub enum FilterError {
 
 /// A conjugate pole pair as the kernel computes it: a normal-form section
 /// with `β` folded into the output row.
+///
+/// `#[repr(C)]`: the Cortex-M4F pair loop (`kernel_m4.rs`) loads the four
+/// fields of two consecutive pairs with one `vldmia`, in this order.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[repr(C)]
 struct PairCoeffs {
     /// `σ = Δ11 = Δ22` (dimensionless).
     sigma: f32,
@@ -326,6 +341,11 @@ impl AxisFilter {
     #[inline]
     pub fn step(&self, state: &mut AxisState, u: f32) -> f32 {
         let mut y = self.d * u;
+        // Cortex-M4F: the same `pair_update`s, in hand-scheduled assembly
+        // (bit-identical, kernel_m4.rs).
+        #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
+        m4::pairs_step(self.form.pairs(), &mut state.x, u, &mut y);
+        #[cfg(not(all(target_arch = "arm", target_os = "none", target_abi = "eabihf")))]
         for (p, x) in self.form.pairs().iter().zip(state.x.iter_mut()) {
             *x = pair_update(p, *x, u, &mut y);
         }
