@@ -163,71 +163,61 @@ pub enum FilterError {
 }
 
 /// A conjugate pole pair as the kernel computes it: a normal-form section
-/// with `β` folded into the output row.
-///
-/// `#[repr(C)]`: the Cortex-M4F pair loop (`kernel_m4.rs`) loads the four
-/// fields of two consecutive pairs with one `vldmia`, in this order.
-#[derive(Clone, Copy, Debug, PartialEq, Default)]
-#[repr(C)]
-struct PairCoeffs {
-    /// `σ = Δ11 = Δ22` (dimensionless).
-    sigma: f32,
-    /// `ω = Δ12 = −Δ21` (dimensionless).
-    omega: f32,
-    /// `β·c1` (N per state unit, the state scaled to unit input gain).
-    c1: f32,
-    /// `β·c2`.
-    c2: f32,
-}
+/// with `β` folded into the output row, `[σ, ω, β·c₁, β·c₂]`: `σ = Δ11 =
+/// Δ22`, `ω = Δ12 = −Δ21` (dimensionless), `β·c` (N per state unit, the
+/// state scaled to unit input gain). The Cortex-M4F pair loop
+/// (`kernel_m4.rs`) loads two consecutive pairs with one `vldmia`, in this
+/// order.
+type PairCoeffs = [f32; 4];
 
-/// A real pole as the kernel computes it: one state of a diagonal section
-/// with its `b` folded into `c`.
-#[derive(Clone, Copy, Debug, PartialEq, Default)]
-struct RealCoeffs {
-    /// `σ = p − 1` (dimensionless).
-    sigma: f32,
-    /// `b·c` (N/N per state unit).
-    c: f32,
-}
+/// A real pole as the kernel computes it, `[σ, b·c]`: one state of a
+/// diagonal section with its `b` folded into `c`; `σ = p − 1`
+/// (dimensionless), `b·c` (N/N per state unit).
+type RealCoeffs = [f32; 2];
 
 /// Most real poles per axis (two per diagonal section).
 pub const MAX_REAL_POLES: usize = 2 * MAX_SECTIONS;
 
-/// The sections in the form the kernel computes them: the pairs and the
-/// live real poles, each in section order.
+/// The sections in the form the kernel computes them, packed into one
+/// array (a section is a pair, 4 floats, or ≤ 2 real poles, 2 floats each,
+/// so 4 · [`MAX_SECTIONS`] floats always suffice): the pairs' coefficients
+/// first, then the live real poles', each in section order. Half the RAM of
+/// separate arrays sized for the worst case of each (the firmware holds 15
+/// filters).
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct KernelForm {
-    pairs: [PairCoeffs; MAX_SECTIONS],
+    coeffs: [f32; 4 * MAX_SECTIONS],
     n_pairs: usize,
-    reals: [RealCoeffs; MAX_REAL_POLES],
     n_reals: usize,
 }
 
 impl KernelForm {
-    const EMPTY: Self = KernelForm {
-        pairs: [PairCoeffs { sigma: 0.0, omega: 0.0, c1: 0.0, c2: 0.0 }; MAX_SECTIONS],
-        n_pairs: 0,
-        reals: [RealCoeffs { sigma: 0.0, c: 0.0 }; MAX_REAL_POLES],
-        n_reals: 0,
-    };
+    const EMPTY: Self = KernelForm { coeffs: [0.0; 4 * MAX_SECTIONS], n_pairs: 0, n_reals: 0 };
 
     /// Append section `s`: a normal-form pair, or the states of a diagonal
     /// section with `b·c ≠ 0`. `Err` for any other shape (or, unreachable
     /// with ≤ [`MAX_SECTIONS`] sections, no room left).
     fn push(&mut self, s: &Section) -> Result<(), ()> {
         let [d11, d12, d21, d22] = s.delta;
+        let (pairs_end, used) = (4 * self.n_pairs, 4 * self.n_pairs + 2 * self.n_reals);
         if d12 == 0.0 && d21 == 0.0 {
             for (sigma, (b, c)) in [d11, d22].into_iter().zip(s.b.into_iter().zip(s.c)) {
                 let c = b * c;
                 if c != 0.0 {
-                    *self.reals.get_mut(self.n_reals).ok_or(())? = RealCoeffs { sigma, c };
+                    let at = 4 * self.n_pairs + 2 * self.n_reals;
+                    self.coeffs.get_mut(at..at + 2).ok_or(())?.copy_from_slice(&[sigma, c]);
                     self.n_reals += 1;
                 }
             }
             Ok(())
         } else if d11 == d22 && d21 == -d12 && s.b[1] == 0.0 {
             let beta = s.b[0];
-            *self.pairs.get_mut(self.n_pairs).ok_or(())? = PairCoeffs { sigma: d11, omega: d12, c1: beta * s.c[0], c2: beta * s.c[1] };
+            // The real poles move up by one pair to make room.
+            if used + 4 > self.coeffs.len() {
+                return Err(());
+            }
+            self.coeffs.copy_within(pairs_end..used, pairs_end + 4);
+            self.coeffs[pairs_end..pairs_end + 4].copy_from_slice(&[d11, d12, beta * s.c[0], beta * s.c[1]]);
             self.n_pairs += 1;
             Ok(())
         } else {
@@ -237,12 +227,14 @@ impl KernelForm {
 
     /// The pairs, in section order.
     fn pairs(&self) -> &[PairCoeffs] {
-        &self.pairs[..self.n_pairs.min(MAX_SECTIONS)]
+        let end = 4 * self.n_pairs;
+        self.coeffs.get(..end).unwrap_or(&[]).as_chunks::<4>().0
     }
 
     /// The live real poles, in section order.
     fn reals(&self) -> &[RealCoeffs] {
-        &self.reals[..self.n_reals.min(MAX_REAL_POLES)]
+        let start = 4 * self.n_pairs;
+        self.coeffs.get(start..start + 2 * self.n_reals).unwrap_or(&[]).as_chunks::<2>().0
     }
 }
 
@@ -596,7 +588,7 @@ fn masked(u: f32, live: u32) -> f32 {
 fn pair_update_lanes(p: &PairLanes, [x1, x2]: [Lane; 2], u: Lane, y: &mut Lane) -> [Lane; 2] {
     let mut next = [[0.0; LOCKSTEP_AXES]; 2];
     for l in 0..LOCKSTEP_AXES {
-        let c = PairCoeffs { sigma: p.sigma[l], omega: p.omega[l], c1: p.c1[l], c2: p.c2[l] };
+        let c = [p.sigma[l], p.omega[l], p.c1[l], p.c2[l]];
         [next[0][l], next[1][l]] = pair_update(&c, [x1[l], x2[l]], masked(u[l], p.live[l]), &mut y[l]);
     }
     next
@@ -606,7 +598,7 @@ fn pair_update_lanes(p: &PairLanes, [x1, x2]: [Lane; 2], u: Lane, y: &mut Lane) 
 #[inline(always)]
 fn real_update_lanes(r: &RealLanes, x: Lane, u: Lane, y: &mut Lane) -> Lane {
     core::array::from_fn(|l| {
-        let c = RealCoeffs { sigma: r.sigma[l], c: r.c[l] };
+        let c = [r.sigma[l], r.c[l]];
         real_update(&c, x[l], masked(u[l], r.live[l]), &mut y[l])
     })
 }
@@ -653,11 +645,13 @@ fn lockstep(jobs: &mut [BlockJob<'_>]) {
         n_pairs = n_pairs.max(jp.len());
         n_reals = n_reals.max(jr.len());
         for ((lanes, xi), (p, [x1, x2])) in pairs.iter_mut().zip(x.iter_mut()).zip(jp.iter().zip(job.state.x)) {
-            (lanes.sigma[l], lanes.omega[l], lanes.c1[l], lanes.c2[l], lanes.live[l]) = (p.sigma, p.omega, p.c1, p.c2, u32::MAX);
+            [lanes.sigma[l], lanes.omega[l], lanes.c1[l], lanes.c2[l]] = *p;
+            lanes.live[l] = u32::MAX;
             (xi[0][l], xi[1][l]) = (x1, x2);
         }
         for ((lanes, xj), (r, xr)) in reals.iter_mut().zip(x_real.iter_mut()).zip(jr.iter().zip(job.state.x_real)) {
-            (lanes.sigma[l], lanes.c[l], lanes.live[l]) = (r.sigma, r.c, u32::MAX);
+            [lanes.sigma[l], lanes.c[l]] = *r;
+            lanes.live[l] = u32::MAX;
             xj[l] = xr;
         }
     }
@@ -707,20 +701,20 @@ pub const BLOCK_CHUNK: usize = 512;
 /// `c₂·x₂` to `y` and returns the next state. The grouping is the kernel's
 /// definition at the bit level; `+` and `*` are never fused by rustc.
 #[inline(always)]
-fn pair_update(p: &PairCoeffs, [x1, x2]: [f32; 2], u: f32, y: &mut f32) -> [f32; 2] {
-    *y += p.c1 * x1;
-    *y += p.c2 * x2;
-    let d1 = (p.sigma * x1 + p.omega * x2) + u;
-    let d2 = p.sigma * x2 - p.omega * x1;
+fn pair_update(&[sigma, omega, c1, c2]: &PairCoeffs, [x1, x2]: [f32; 2], u: f32, y: &mut f32) -> [f32; 2] {
+    *y += c1 * x1;
+    *y += c2 * x2;
+    let d1 = (sigma * x1 + omega * x2) + u;
+    let d2 = sigma * x2 - omega * x1;
     [x1 + d1, x2 + d2]
 }
 
 /// One sample of a real pole (module equation): adds `c·x` to `y` and
 /// returns the next state.
 #[inline(always)]
-fn real_update(r: &RealCoeffs, x: f32, u: f32, y: &mut f32) -> f32 {
-    *y += r.c * x;
-    x + (r.sigma * x + u)
+fn real_update(&[sigma, c]: &RealCoeffs, x: f32, u: f32, y: &mut f32) -> f32 {
+    *y += c * x;
+    x + (sigma * x + u)
 }
 
 /// Pairs or real poles (`coeffs`, with their `states`) and the chunk they

@@ -9,7 +9,7 @@
 //! ascending, which the register allocator does not aim for (no reordering
 //! or layout of the Rust source made it do so). Here two pairs per
 //! iteration take one `vldmia` for their 8 coefficients ([`PairCoeffs`] is
-//! `#[repr(C)]`: σ, ω, c1, c2, and the pairs are contiguous), one `vldmia`
+//! `[σ, ω, c1, c2]`, and the pairs are contiguous), one `vldmia`
 //! for their 4 states (`[[f32; 2]]` is contiguous) and one `vstmia` for the
 //! 4 new states; `y` stays in `s0` and `u` in `s1` throughout:
 //!
@@ -99,8 +99,8 @@ pub(super) fn pairs_step(pairs: &[PairCoeffs], x: &mut [[f32; 2]], u: f32, y: &m
     // SAFETY: the asm reads `4 * n` f32 starting at `pairs.as_ptr()` and
     // reads and writes `2 * n` f32 starting at `x.as_mut_ptr()`, ascending,
     // and no other memory. `n` is at most the length of either slice, and
-    // the elements are contiguous: `PairCoeffs` is `#[repr(C)]` with four
-    // f32 fields (16 bytes, no padding), `[f32; 2]` is 8 bytes; so every
+    // the elements are contiguous: `PairCoeffs` is `[f32; 4]` (16 bytes,
+    // no padding), `[f32; 2]` is 8 bytes; so every
     // access is in bounds and 4-byte aligned (VLDM/VSTM need word
     // alignment). `x` is a unique borrow (writable) and `pairs` a shared
     // one, so the two ranges do not overlap. The pointers and `n` are
