@@ -520,7 +520,7 @@ pub fn led_on(state: LedState, tick: u32) -> bool {
         LedState::Running => t == 0,
         LedState::Bypass => t != 0,
         LedState::Saturated => t == 0 || t == 2,
-        LedState::Fault => t % 2 == 0,
+        LedState::Fault => t.is_multiple_of(2),
     }
 }
 

@@ -296,16 +296,16 @@ impl<F: NorFlash> Store<F> {
     /// Check the layout against the flash's geometry and scan both slots.
     pub fn open(flash: F, layout: Layout) -> Result<Self, LayoutError> {
         let (w, r, e) = (F::WRITE_SIZE, F::READ_SIZE, F::ERASE_SIZE as u32);
-        if w == 0 || w > MAX_WRITE_SIZE || MAX_WRITE_SIZE % w != 0 {
+        if w == 0 || w > MAX_WRITE_SIZE || !MAX_WRITE_SIZE.is_multiple_of(w) {
             return Err(LayoutError::WriteSize);
         }
-        if r == 0 || MAX_WRITE_SIZE % r != 0 {
+        if r == 0 || !MAX_WRITE_SIZE.is_multiple_of(r) {
             return Err(LayoutError::ReadSize);
         }
         let cap = flash.capacity() as u64;
-        let ok_slot = |o: u32| e != 0 && o % e == 0 && u64::from(o) + u64::from(layout.len) <= cap;
+        let ok_slot = |o: u32| e != 0 && o.is_multiple_of(e) && u64::from(o) + u64::from(layout.len) <= cap;
         let disjoint = layout.a.abs_diff(layout.b) >= layout.len;
-        if layout.len == 0 || e == 0 || layout.len % e != 0 || !ok_slot(layout.a) || !ok_slot(layout.b) || !disjoint {
+        if layout.len == 0 || e == 0 || !layout.len.is_multiple_of(e) || !ok_slot(layout.a) || !ok_slot(layout.b) || !disjoint {
             return Err(LayoutError::Slots);
         }
         let mut s = Store { flash, layout, active: None, upload: None, buf: [0; BUF_LEN] };

@@ -230,7 +230,7 @@ impl NorFlash for SimFlash {
     const ERASE_SIZE: usize = PAGE;
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), SimError> {
-        if from > to || (from as usize) % PAGE != 0 || (to as usize) % PAGE != 0 {
+        if from > to || !(from as usize).is_multiple_of(PAGE) || !(to as usize).is_multiple_of(PAGE) {
             return Err(SimError::NotAligned);
         }
         self.range(from, (to - from) as usize)?;
@@ -256,7 +256,7 @@ impl NorFlash for SimFlash {
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), SimError> {
-        if (offset as usize) % DWORD != 0 || bytes.len() % DWORD != 0 {
+        if !(offset as usize).is_multiple_of(DWORD) || !bytes.len().is_multiple_of(DWORD) {
             return Err(SimError::NotAligned);
         }
         self.range(offset, bytes.len())?;

@@ -224,7 +224,7 @@ impl VirtualBox {
             self.state = state;
             self.sample_index = self.sample_index.wrapping_add(1);
             if let Some(dec) = self.link.streaming() {
-                if index % u32::from(dec) == 0 {
+                if index.is_multiple_of(u32::from(dec)) {
                     let s = StreamSample { raw, out: dac, flags: flags.0 };
                     if let Some(f) = self.batcher.push(index, dec, s) {
                         self.send_stream(&mut out, f);
