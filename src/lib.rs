@@ -10,6 +10,8 @@
 //! * [`link`]: the box's request handler (pure state machine over the store).
 //! * [`store`]: the power-fail-safe A/B coefficient store on NOR flash.
 //! * [`handoff`]: lock-free switch of the running image at a sample boundary.
+//! * [`cycles`]: cost of the sample interrupt in CPU cycles (DWT CYCCNT
+//!   readings → last, max, mean).
 //!
 //! The crate is `no_std` and allocation-free, so the same code runs on the
 //! STM32G474 and under `std` in the host tests. It is free of `unsafe`
@@ -21,6 +23,7 @@
 #![cfg_attr(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"), deny(unsafe_code))]
 #![deny(missing_docs)]
 
+pub mod cycles;
 pub mod handoff;
 pub mod image;
 pub mod kernel;

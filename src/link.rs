@@ -38,6 +38,8 @@ pub struct Telemetry<'a> {
     pub firmware: [u8; 3],
     /// Sample rate the sample path runs at, Hz.
     pub fs_hz: u32,
+    /// CPU core clock, Hz (unit of the `isr_cycles_*` counters; 0 = unknown).
+    pub core_clock_hz: u32,
     /// `None` when compensating, else why the box is in bypass.
     pub bypass: Option<BypassReason>,
     /// The image the sample path runs (None if there is none).
@@ -142,6 +144,7 @@ impl BoxLink {
                 protocol: PROTOCOL_VERSION,
                 firmware: tel.firmware,
                 fs_hz: tel.fs_hz,
+                core_clock_hz: tel.core_clock_hz,
                 bypass: tel.bypass,
                 active: store.active(),
                 image: tel.image.map(image_summary),

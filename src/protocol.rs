@@ -44,7 +44,12 @@ use crate::AXES;
 
 /// Protocol version carried in [`Status::protocol`]; bumped on any
 /// incompatible change of the message types.
-pub const PROTOCOL_VERSION: u16 = 1;
+///
+/// * 1: first version.
+/// * 2: [`Status::core_clock_hz`] and the sample interrupt's cycle counts
+///   in [`StatusCounters`] (`isr_cycles_last`, `isr_cycles_max`,
+///   `isr_cycles_mean`).
+pub const PROTOCOL_VERSION: u16 = 2;
 /// Largest decoded frame body: postcard message + 4-byte CRC.
 pub const MAX_PAYLOAD: usize = 320;
 /// Largest encoded frame: COBS overhead + the 0x00 delimiter.
@@ -228,6 +233,10 @@ pub struct Status {
     pub firmware: [u8; 3],
     /// Sample rate the sample path runs at, Hz.
     pub fs_hz: u32,
+    /// CPU core clock, Hz: the unit of the `isr_cycles_*` counters
+    /// (a sample period is `core_clock_hz / fs_hz` cycles). 0 = unknown
+    /// (the virtual box).
+    pub core_clock_hz: u32,
     /// `None` when compensating, else why the box is in bypass.
     pub bypass: Option<BypassReason>,
     /// The store's active slot and its sequence number (None: no valid slot).
@@ -307,6 +316,17 @@ pub struct StatusCounters {
     pub nonfinite_resets: [u32; AXES],
     /// Streamed samples dropped because the USB queue was full.
     pub stream_dropped: u32,
+    /// Core clock cycles of the most recent sample interrupt's body
+    /// ([`crate::cycles::IsrCycles::last`]); 0 = not measured.
+    pub isr_cycles_last: u32,
+    /// Most cycles of any sample interrupt's body since boot, including
+    /// the first samples after boot and after image switches
+    /// ([`crate::cycles::IsrCycles::max`]); 0 = not measured.
+    pub isr_cycles_max: u32,
+    /// Mean cycles of the sample interrupt's body over the last complete
+    /// window of [`crate::cycles::MEAN_WINDOW`] samples
+    /// ([`crate::cycles::IsrCycles::mean`]); 0 = not measured (yet).
+    pub isr_cycles_mean: u32,
 }
 
 /// One streamed sample: ADC codes in, DAC codes out, flags.
@@ -460,6 +480,20 @@ pub fn decode_frame(buf: &mut [u8]) -> Result<&[u8], FrameError> {
 pub fn decode_message<'a, T: Deserialize<'a>>(bytes: &'a [u8]) -> Option<T> {
     match postcard::take_from_bytes::<T>(bytes) {
         Ok((v, [])) => Some(v),
+        _ => None,
+    }
+}
+
+/// The protocol version of a status reply in message bytes (from
+/// [`decode_frame`]) that may be of another protocol version, e.g. bytes
+/// that do not decode as this version's [`BoxMessage`]: the start of a
+/// status reply, `BoxMessage::Reply { id, reply: Reply::Status(Status {
+/// protocol, .. }) }` (variant 0, varint id, variant 1, varint version), is
+/// the same in every version. `None` if the bytes do not start like a
+/// status reply.
+pub fn status_protocol_version(bytes: &[u8]) -> Option<u16> {
+    match postcard::take_from_bytes::<(u32, u16, u32, u16)>(bytes) {
+        Ok(((0, _id, 1, version), _rest)) => Some(version),
         _ => None,
     }
 }

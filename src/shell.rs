@@ -26,9 +26,14 @@ use crate::sample::{
     process_sample, select_stored_mode, BypassReason, Mode, SampleFlags, SampleState,
 };
 
+/// The box's CPU core clock (SYSCLK = HCLK, 170 MHz from the PLL): the
+/// unit of the sample interrupt's cycle counts (DWT CYCCNT,
+/// `protocol::Status::core_clock_hz`).
+pub const BOX_CORE_CLOCK_HZ: u32 = 170_000_000;
+
 /// Clock of the sample timer (TIM2 on APB1, prescaler 1) with the box's
 /// 170 MHz system clock.
-pub const BOX_TIMER_CLOCK_HZ: u32 = 170_000_000;
+pub const BOX_TIMER_CLOCK_HZ: u32 = BOX_CORE_CLOCK_HZ;
 
 /// Sample rate of the box when no image can run (bypass), Hz.
 pub const DEFAULT_FS_HZ: u32 = 51_200;

@@ -64,6 +64,7 @@ fn max_status() -> Status {
         protocol: u16::MAX,
         firmware: [255; 3],
         fs_hz: u32::MAX,
+        core_clock_hz: u32::MAX,
         bypass: Some(BypassReason::InvalidImage(ImageError::BadCrc { stored: u32::MAX, computed: u32::MAX })),
         active: Some(SlotInfo { slot: Slot::B, seq: u32::MAX, image_id: u32::MAX }),
         image: Some(ImageSummary {
@@ -79,6 +80,9 @@ fn max_status() -> Status {
             saturated: [u32::MAX; 3],
             nonfinite_resets: [u32::MAX; 3],
             stream_dropped: u32::MAX,
+            isr_cycles_last: u32::MAX,
+            isr_cycles_max: u32::MAX,
+            isr_cycles_mean: u32::MAX,
         },
         stream_decimation: Some(u16::MAX),
         stream_next_seq: u32::MAX,
@@ -136,6 +140,77 @@ fn status_and_stream_round_trip() {
         let bytes = got[0].clone().unwrap();
         assert_eq!(decode_message::<BoxMessage>(&bytes), Some(msg));
     }
+}
+
+/// `Status` as protocol version 1 sent it (no core clock, no interrupt
+/// cycle counts): the wire form of an older firmware.
+#[derive(serde::Serialize)]
+struct StatusV1 {
+    protocol: u16,
+    firmware: [u8; 3],
+    fs_hz: u32,
+    bypass: Option<BypassReason>,
+    active: Option<SlotInfo>,
+    image: Option<ImageSummary>,
+    counters: (u32, u32, [u32; 3], [u32; 3], u32),
+    stream_decimation: Option<u16>,
+    stream_next_seq: u32,
+}
+
+#[derive(serde::Serialize)]
+enum ReplyV1 {
+    #[allow(dead_code)]
+    Ack,
+    Status(StatusV1),
+}
+
+#[derive(serde::Serialize)]
+enum BoxMessageV1 {
+    Reply { id: u16, reply: ReplyV1 },
+}
+
+#[test]
+fn the_status_reply_of_any_protocol_version_reveals_its_version() {
+    // This version's status reply.
+    let now = BoxMessage::Reply { id: 7, reply: Reply::Status(Status { protocol: PROTOCOL_VERSION, ..max_status() }) };
+    let bytes = feed_all(&frame(&now), &[]).remove(0).unwrap();
+    assert_eq!(status_protocol_version(&bytes), Some(PROTOCOL_VERSION));
+    assert_eq!(PROTOCOL_VERSION, 2, "core clock and interrupt cycle counts are version 2");
+
+    // A version-1 box's status reply: it does not decode as this version's
+    // message (it would be dropped as unreadable), but its version shows.
+    let m = max_status();
+    let c = m.counters;
+    let old = BoxMessageV1::Reply {
+        id: 9,
+        reply: ReplyV1::Status(StatusV1 {
+            protocol: 1,
+            firmware: [0, 1, 0],
+            fs_hz: 51_200,
+            bypass: None,
+            active: m.active,
+            image: m.image,
+            counters: (c.samples, c.overruns, c.saturated, c.nonfinite_resets, c.stream_dropped),
+            stream_decimation: None,
+            stream_next_seq: 12,
+        }),
+    };
+    let bytes = feed_all(&frame(&old), &[]).remove(0).unwrap();
+    assert_eq!(decode_message::<BoxMessage>(&bytes), None);
+    assert_eq!(status_protocol_version(&bytes), Some(1));
+
+    // Other messages are not status replies.
+    for other in [
+        BoxMessage::Reply { id: 1, reply: Reply::Ack },
+        BoxMessage::Reply { id: 1, reply: Reply::Error(LinkError::Malformed) },
+        BoxMessage::Stream(max_stream()),
+    ] {
+        let bytes = feed_all(&frame(&other), &[]).remove(0).unwrap();
+        assert_eq!(status_protocol_version(&bytes), None, "{other:?}");
+    }
+    let req = feed_all(&frame(&RequestFrame { id: 0, request: Request::GetStatus }), &[]).remove(0).unwrap();
+    assert_eq!(status_protocol_version(&req), None);
+    assert_eq!(status_protocol_version(&[]), None);
 }
 
 #[test]
@@ -216,7 +291,12 @@ proptest! {
     fn every_reply_round_trips(id in any::<u16>(), kind in 0u8..6, v in any::<u32>(), w in any::<u32>()) {
         let reply = match kind {
             0 => Reply::Ack,
-            1 => Reply::Status(Status { fs_hz: v, counters: StatusCounters { overruns: w, ..Default::default() }, ..max_status() }),
+            1 => Reply::Status(Status {
+                fs_hz: v,
+                core_clock_hz: w,
+                counters: StatusCounters { overruns: w, isr_cycles_last: v, isr_cycles_max: w, isr_cycles_mean: v / 2, ..Default::default() },
+                ..max_status()
+            }),
             2 => Reply::Error(LinkError::OutOfOrder { expected: v, got: w }),
             3 => Reply::Error(LinkError::CrcMismatch { declared: v, computed: w }),
             4 => Reply::Error(LinkError::NotRunnable(BypassReason::UnsupportedSampleRate(v))),

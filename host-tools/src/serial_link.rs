@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
 use dynocomp_core::protocol::{
-    decode_message, encode_frame, BoxMessage, FrameDecoder, LinkError, Reply, Request, RequestFrame, Status,
-    StreamFrame, MAX_FRAME,
+    decode_message, encode_frame, status_protocol_version, BoxMessage, FrameDecoder, LinkError, Reply, Request,
+    RequestFrame, Status, StreamFrame, MAX_FRAME, PROTOCOL_VERSION,
 };
 
 /// How long the host waits for a reply by default. An upload commit reads
@@ -34,6 +34,9 @@ pub struct Link {
     pub unreadable_replies: Vec<LinkError>,
     /// Reply timeout.
     pub timeout: Duration,
+    /// Protocol version of a status reply that did not decode (a box with
+    /// other firmware), until a request reports it.
+    foreign_protocol: Option<u16>,
 }
 
 /// Open a serial port in raw mode (8N1, no flow control; the baud rate is
@@ -62,6 +65,7 @@ impl Link {
             stream: VecDeque::new(),
             unreadable_replies: Vec::new(),
             timeout: REPLY_TIMEOUT,
+            foreign_protocol: None,
         }
     }
 
@@ -98,11 +102,19 @@ impl Link {
             Err(e) => return Err(anyhow!("{}: read failed: {e} (box unplugged or stopped?)", self.name)),
         };
         let mut out = Vec::new();
+        let mut foreign = None;
         self.decoder.push(&buf[..n], |r| {
-            if let Some(m) = r.ok().and_then(decode_message::<BoxMessage>) {
-                out.push(m);
+            let Ok(bytes) = r else { return };
+            match decode_message::<BoxMessage>(bytes) {
+                Some(m) => out.push(m),
+                // A status reply of another protocol version does not
+                // decode; its version number still can.
+                None => foreign = status_protocol_version(bytes).filter(|&v| v != PROTOCOL_VERSION).or(foreign),
             }
         });
+        if foreign.is_some() {
+            self.foreign_protocol = foreign;
+        }
         Ok(out)
     }
 
@@ -128,6 +140,9 @@ impl Link {
             if let Some(reply) = answer {
                 return Ok(reply);
             }
+            if let Some(v) = self.foreign_protocol.take() {
+                bail!("{}: {}", self.name, version_mismatch(v));
+            }
             if Instant::now() > deadline {
                 bail!("{}: no reply from the box within {:.1} s (is it running this firmware?)", self.name, self.timeout.as_secs_f64());
             }
@@ -146,11 +161,20 @@ impl Link {
     /// The box's status.
     pub fn status(&mut self) -> Result<Status> {
         match self.request(Request::GetStatus)? {
+            Reply::Status(s) if s.protocol != PROTOCOL_VERSION => bail!("{}: {}", self.name, version_mismatch(s.protocol)),
             Reply::Status(s) => Ok(s),
             Reply::Error(e) => bail!("{}: status request refused: {}", self.name, describe_error(&e)),
             other => bail!("{}: unexpected reply to GetStatus: {other:?}", self.name),
         }
     }
+}
+
+/// The error for a box that speaks protocol version `box_version`.
+fn version_mismatch(box_version: u16) -> String {
+    format!(
+        "the box speaks protocol version {box_version}, this dynocomp speaks version {PROTOCOL_VERSION}: \
+         flash the firmware built with this dynocomp (`cargo firmware-run`), or use the dynocomp that matches the box"
+    )
 }
 
 /// Name of a request for messages.
@@ -185,5 +209,63 @@ pub fn describe_error(e: &LinkError) -> String {
         LinkError::NotRunnable(r) => format!("the box cannot run this image: {r:?}"),
         LinkError::Flash(f) => format!("flash write failed: {f:?}"),
         LinkError::UploadAborted => "the upload was aborted; start again".into(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A transport that answers every read with canned bytes once.
+    struct Canned(std::io::Cursor<Vec<u8>>);
+    impl Read for Canned {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            self.0.read(buf)
+        }
+    }
+    impl Write for Canned {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    fn frame<T: serde::Serialize>(msg: &T) -> Vec<u8> {
+        let mut buf = [0u8; MAX_FRAME];
+        let n = encode_frame(msg, &mut buf).unwrap();
+        buf[..n].to_vec()
+    }
+
+    #[test]
+    fn a_box_with_another_protocol_version_is_named_not_timed_out() {
+        // The start of a version-1 status reply to request id 1 (Reply,
+        // id, Status, protocol 1, firmware, fs): not this version's message.
+        let old = frame(&(0u32, 1u16, 1u32, 1u16, [0u8, 1, 0], 51_200u32));
+        let mut link = Link::new(Box::new(Canned(std::io::Cursor::new(old))), "box");
+        link.timeout = Duration::from_millis(500);
+        let err = link.status().unwrap_err().to_string();
+        assert!(err.contains("the box speaks protocol version 1, this dynocomp speaks version 2"), "{err}");
+    }
+
+    #[test]
+    fn a_decodable_status_of_another_version_is_refused() {
+        let status = Status {
+            protocol: PROTOCOL_VERSION + 1,
+            firmware: [9, 9, 9],
+            fs_hz: 51_200,
+            core_clock_hz: 170_000_000,
+            bypass: None,
+            active: None,
+            image: None,
+            counters: Default::default(),
+            stream_decimation: None,
+            stream_next_seq: 0,
+        };
+        let reply = frame(&BoxMessage::Reply { id: 1, reply: Reply::Status(status) });
+        let mut link = Link::new(Box::new(Canned(std::io::Cursor::new(reply))), "box");
+        let err = link.status().unwrap_err().to_string();
+        assert!(err.contains("protocol version 3"), "{err}");
     }
 }

@@ -9,13 +9,19 @@
 //! frame cannot be told from "not yet started" and are not counted.
 //! Samples the box itself dropped (its queue full) show as gaps in the
 //! sample index and are counted separately.
+//!
+//! The box's health comes from the status before and after the recording:
+//! missed sample deadlines (overruns) during the recording, with a warning
+//! if there were any, and the sample interrupt's cost in CPU cycles (mean,
+//! max; DWT cycle counter on the box) as a share of the sample period
+//! ([`BoxLoad::summary`]).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
-use dynocomp_core::protocol::{AxisSummaryWire, Request, StreamFrame};
+use dynocomp_core::protocol::{AxisSummaryWire, Request, Status, StreamFrame};
 use dynocomp_core::sample::SampleFlags;
 use dynocomp_core::AXES;
 
@@ -61,6 +67,88 @@ pub struct StreamReport {
     /// Samples missing inside received frames' index range that the box
     /// did not send (its queue overflowed), excluding lost frames' samples.
     pub index_gaps: u64,
+    /// The box's overruns and interrupt cost (status before and after).
+    pub box_load: BoxLoad,
+}
+
+/// The sample path's health over a recording, from the box's status before
+/// and after it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BoxLoad {
+    /// Sample rate of the box, Hz.
+    pub fs_hz: u32,
+    /// The box's core clock, Hz (0 = unknown: virtual box).
+    pub core_clock_hz: u32,
+    /// Missed sample deadlines during the recording.
+    pub overruns: u32,
+    /// Missed sample deadlines since the box booted.
+    pub overruns_since_boot: u32,
+    /// Mean cycles of the sample interrupt (last complete window; 0 = not
+    /// measured).
+    pub isr_cycles_mean: u32,
+    /// Most cycles of any sample interrupt since boot (0 = not measured).
+    pub isr_cycles_max: u32,
+}
+
+impl BoxLoad {
+    /// From the status before (`start`) and after (`end`) a recording.
+    pub fn from_statuses(start: &Status, end: &Status) -> BoxLoad {
+        BoxLoad {
+            fs_hz: end.fs_hz,
+            core_clock_hz: end.core_clock_hz,
+            overruns: end.counters.overruns.wrapping_sub(start.counters.overruns),
+            overruns_since_boot: end.counters.overruns,
+            isr_cycles_mean: end.counters.isr_cycles_mean,
+            isr_cycles_max: end.counters.isr_cycles_max,
+        }
+    }
+
+    /// Lines for the user: overruns and the sample interrupt's cost, e.g.
+    /// `sample interrupt: mean 1234, max 2345 cycles = 37.2 % (max 70.6 %)
+    /// of the sample period at 51200 Hz and 170 MHz`, then a `WARNING:`
+    /// line for overruns during the recording and for an interrupt that
+    /// took longer than a sample period.
+    pub fn summary(&self) -> Vec<String> {
+        let mut lines = Vec::new();
+        let before = self.overruns_since_boot.wrapping_sub(self.overruns);
+        lines.push(format!(
+            "box: overruns (missed sample deadlines): {} during this recording, {} since boot",
+            self.overruns, self.overruns_since_boot
+        ));
+        let measured = self.core_clock_hz > 0 && self.fs_hz > 0 && self.isr_cycles_max > 0;
+        let period = if measured { f64::from(self.core_clock_hz) / f64::from(self.fs_hz) } else { 0.0 };
+        if measured {
+            let pct = |c: u32| 100.0 * f64::from(c) / period;
+            let mean = if self.isr_cycles_mean > 0 {
+                format!("mean {}, max {} cycles = {:.1} % (max {:.1} %)", self.isr_cycles_mean, self.isr_cycles_max, pct(self.isr_cycles_mean), pct(self.isr_cycles_max))
+            } else {
+                format!("mean not yet available, max {} cycles = {:.1} %", self.isr_cycles_max, pct(self.isr_cycles_max))
+            };
+            lines.push(format!(
+                "sample interrupt: {mean} of the sample period at {} Hz and {} MHz ({:.0} cycles per sample)",
+                self.fs_hz,
+                f64::from(self.core_clock_hz) / 1e6,
+                period
+            ));
+        } else {
+            lines.push("sample interrupt: cycle count not measured (the box reports none: virtual box, or no DWT cycle counter)".to_string());
+        }
+        if self.overruns > 0 {
+            lines.push(format!(
+                "WARNING: the box missed {} sample deadline(s) during this recording: samples were lost or output late (lower the sample rate or the filter order)",
+                self.overruns
+            ));
+        } else if before > 0 {
+            lines.push(format!("note: {before} overrun(s) happened before this recording (since boot), none during it"));
+        }
+        if measured && f64::from(self.isr_cycles_max) >= period {
+            lines.push(format!(
+                "WARNING: the slowest sample interrupt ({} cycles) took longer than a sample period ({:.0} cycles)",
+                self.isr_cycles_max, period
+            ));
+        }
+        lines
+    }
 }
 
 impl StreamReport {
@@ -204,6 +292,7 @@ pub fn record(
         take(f, &mut loss, &mut rows);
     }
     loss.finish(end.stream_next_seq);
+    loss.report.box_load = BoxLoad::from_statuses(&status, &end);
     // Sample-index gaps not explained by lost frames: with index steps of
     // `dec`, count the missing positions between consecutive rows.
     let mut gaps = 0u64;
@@ -256,5 +345,95 @@ pub fn run(args: &StreamArgs) -> Result<StreamReport> {
         n.is_some_and(|n| got >= n) || dur.is_some_and(|d| t.as_secs_f64() >= d)
     })?;
     eprintln!("{} -> {}", report.summary(), args.output.display());
+    for line in report.box_load.summary() {
+        eprintln!("{line}");
+    }
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn load(overruns: u32, since_boot: u32, mean: u32, max: u32) -> BoxLoad {
+        BoxLoad {
+            fs_hz: 51_200,
+            core_clock_hz: 170_000_000,
+            overruns,
+            overruns_since_boot: since_boot,
+            isr_cycles_mean: mean,
+            isr_cycles_max: max,
+        }
+    }
+
+    #[test]
+    fn interrupt_cost_is_shown_as_a_share_of_the_sample_period() {
+        // 170 MHz / 51.2 kHz = 3 320.3 cycles per sample.
+        let lines = load(0, 0, 1_234, 2_345).summary();
+        assert_eq!(
+            lines,
+            vec![
+                "box: overruns (missed sample deadlines): 0 during this recording, 0 since boot".to_string(),
+                "sample interrupt: mean 1234, max 2345 cycles = 37.2 % (max 70.6 %) of the sample period at 51200 Hz and 170 MHz (3320 cycles per sample)".to_string(),
+            ]
+        );
+        // Another clock and rate: 100 kHz at 168.5 MHz = 1 685 cycles.
+        let l = BoxLoad { fs_hz: 100_000, core_clock_hz: 168_500_000, ..load(0, 0, 337, 1_685) }.summary();
+        assert!(l[1].contains("= 20.0 % (max 100.0 %) of the sample period at 100000 Hz and 168.5 MHz (1685 cycles"), "{l:?}");
+        // The interrupt took a whole period: warned.
+        assert!(l.iter().any(|s| s.starts_with("WARNING: the slowest sample interrupt (1685 cycles) took longer than a sample period (1685 cycles)")), "{l:?}");
+    }
+
+    #[test]
+    fn overruns_during_the_recording_are_a_warning() {
+        let l = load(3, 5, 1_000, 1_500).summary();
+        assert!(l[0].contains("3 during this recording, 5 since boot"), "{l:?}");
+        assert!(l.iter().any(|s| s.starts_with("WARNING: the box missed 3 sample deadline(s) during this recording")), "{l:?}");
+        // Only before the recording: a note, no warning.
+        let l = load(0, 5, 1_000, 1_500).summary();
+        assert!(l.iter().all(|s| !s.contains("WARNING")), "{l:?}");
+        assert!(l.iter().any(|s| s.starts_with("note: 5 overrun(s) happened before this recording")), "{l:?}");
+        // None at all: neither.
+        let l = load(0, 0, 1_000, 1_500).summary();
+        assert!(l.iter().all(|s| !s.contains("WARNING") && !s.starts_with("note")), "{l:?}");
+    }
+
+    #[test]
+    fn overruns_are_counted_across_the_box_counter_wrapping() {
+        let mut a = Status {
+            protocol: dynocomp_core::protocol::PROTOCOL_VERSION,
+            firmware: [0, 1, 0],
+            fs_hz: 51_200,
+            core_clock_hz: 170_000_000,
+            bypass: None,
+            active: None,
+            image: None,
+            counters: Default::default(),
+            stream_decimation: None,
+            stream_next_seq: 0,
+        };
+        a.counters.overruns = u32::MAX;
+        let mut b = a;
+        b.counters.overruns = 1;
+        b.counters.isr_cycles_mean = 1_100;
+        b.counters.isr_cycles_max = 2_000;
+        b.counters.isr_cycles_last = 1_050;
+        assert_eq!(BoxLoad::from_statuses(&a, &b), BoxLoad { overruns: 2, overruns_since_boot: 1, ..load(0, 0, 1_100, 2_000) });
+    }
+
+    #[test]
+    fn a_box_without_cycle_counts_says_not_measured() {
+        for l in [
+            BoxLoad { core_clock_hz: 0, ..load(0, 0, 0, 0) },
+            BoxLoad { core_clock_hz: 0, ..load(0, 0, 1_000, 2_000) },
+            load(0, 0, 0, 0),
+        ] {
+            let lines = l.summary();
+            assert!(lines[1].contains("not measured"), "{lines:?}");
+            assert!(!lines[1].contains('%'), "{lines:?}");
+        }
+        // Max known but no complete mean window yet.
+        let l = load(0, 0, 0, 1_660).summary();
+        assert!(l[1].starts_with("sample interrupt: mean not yet available, max 1660 cycles = 50.0 % of the sample period"), "{l:?}");
+    }
 }

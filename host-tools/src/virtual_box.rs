@@ -9,7 +9,9 @@
 //!
 //! What it does not model: USB timing and packetisation, the sample path's
 //! real-time behaviour (samples are synthesised as fast as the link takes
-//! them), and real flash timing. Those need the board.
+//! them), and real flash timing. Those need the board. Its status therefore
+//! reports no core clock and no interrupt cycle counts
+//! (`core_clock_hz` and `isr_cycles_*` = 0: not measured) and no overruns.
 
 use std::collections::BTreeSet;
 use std::io::Write;
@@ -125,6 +127,8 @@ impl VirtualBox {
         Telemetry {
             firmware: VIRTUAL_FIRMWARE,
             fs_hz: self.fs_hz(),
+            // No CPU to count cycles of: 0 = unknown / not measured.
+            core_clock_hz: 0,
             bypass: match self.mode() {
                 Mode::Compensate(_) => None,
                 Mode::Bypass(r) => Some(r),
@@ -136,6 +140,9 @@ impl VirtualBox {
                 saturated: c.saturated,
                 nonfinite_resets: self.state.axes.map(|a| a.nonfinite_resets),
                 stream_dropped: 0,
+                isr_cycles_last: 0,
+                isr_cycles_max: 0,
+                isr_cycles_mean: 0,
             },
             stream_next_seq: self.batcher.next_seq(),
         }

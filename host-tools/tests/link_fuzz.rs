@@ -118,7 +118,8 @@ fn requests_map_to_actions() {
     use dynocomp_core::link::{Actions, BoxLink, Telemetry};
     let mut store = Store::open(SimFlash::g474_slots(), Layout::STM32G474RE).unwrap();
     let mut link = BoxLink::new();
-    let tel = Telemetry { firmware: [1, 2, 3], fs_hz: 51_200, bypass: None, image: None, counters: Default::default(), stream_next_seq: 7 };
+    let counters = StatusCounters { overruns: 2, isr_cycles_last: 1_100, isr_cycles_max: 3_000, isr_cycles_mean: 1_234, ..Default::default() };
+    let tel = Telemetry { firmware: [1, 2, 3], fs_hz: 51_200, core_clock_hz: 170_000_000, bypass: None, image: None, counters, stream_next_seq: 7 };
     let run = |req: Request<'_>, link: &mut BoxLink, store: &mut Store<SimFlash>| {
         let mut act = Actions::default();
         let reply = link.handle(req, store, &tel, &mut act);
@@ -138,6 +139,7 @@ fn requests_map_to_actions() {
         (Reply::Status(s), act) => {
             assert_eq!(act, Actions::default());
             assert_eq!((s.firmware, s.fs_hz, s.stream_decimation, s.stream_next_seq, s.active), ([1, 2, 3], 51_200, Some(4), 7, None));
+            assert_eq!((s.protocol, s.core_clock_hz, s.counters), (PROTOCOL_VERSION, 170_000_000, counters));
         }
         other => panic!("{other:?}"),
     }

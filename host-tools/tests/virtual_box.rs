@@ -220,6 +220,11 @@ fn stream_reports_exactly_the_injected_frame_losses() {
     assert_eq!(report.lost_ranges, vec![(3, 3), (10, 11)]);
     assert_eq!(report.index_gaps, 0);
     assert_eq!(report.samples, 400);
+    // The virtual box has no CPU cycles to count and misses no deadlines.
+    assert_eq!(
+        report.box_load,
+        dynocomp::stream::BoxLoad { fs_hz: 51_200, core_clock_hz: 0, overruns: 0, overruns_since_boot: 0, isr_cycles_mean: 0, isr_cycles_max: 0 }
+    );
 
     // The CSV: header, 400 rows, raw forces equal the virtual box's
     // synthetic input (2048 + 900 sin(2π·50·k/fs) codes on x, scaled by
@@ -259,6 +264,10 @@ fn stream_reports_exactly_the_injected_frame_losses() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(err.contains("200 samples") && err.contains("lost frames: 1 (seq 2)"), "{err}");
+    // ... then the box's overruns and interrupt cost (not measured here).
+    assert!(err.contains("box: overruns (missed sample deadlines): 0 during this recording, 0 since boot"), "{err}");
+    assert!(err.contains("sample interrupt: cycle count not measured"), "{err}");
+    assert!(!err.contains("WARNING"), "{err}");
     // The recording is a valid signal CSV for `dynocomp compensate`.
     let rec = dynocomp::io::signal_csv::read_signal_csv(&csv).unwrap();
     let text = std::fs::read_to_string(&csv).unwrap();

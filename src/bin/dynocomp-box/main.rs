@@ -26,7 +26,8 @@ mod usb;
 use defmt::{error, info, warn};
 use dynocomp_core::sample::{select_stored_mode, BypassReason, Mode};
 use dynocomp_core::shell::{
-    box_sample_rate, led_on, led_state, LedState, Slot, DEFAULT_FS_HZ, LED_PATTERN_TICKS,
+    box_sample_rate, led_on, led_state, LedState, Slot, BOX_CORE_CLOCK_HZ, DEFAULT_FS_HZ,
+    LED_PATTERN_TICKS,
 };
 use dynocomp_core::store::{Layout, Store};
 use embassy_executor::Spawner;
@@ -198,6 +199,21 @@ async fn main(spawner: Spawner) {
         fy_out: p.PA5,
         fz_out: p.PA6,
     };
+    // DWT cycle counter: the sample interrupt measures its own cost with it
+    // (status `isr_cycles_*`, docs/firmware.md). Nothing else in the
+    // firmware or embassy takes the cortex-m core peripherals.
+    let cycle_counter = match cortex_m::Peripherals::take() {
+        Some(mut cp) => sampler::enable_cycle_counter(&mut cp.DCB, &mut cp.DWT),
+        None => false,
+    };
+    if cycle_counter {
+        info!(
+            "DWT cycle counter on: sample interrupt cost in cycles of {} Hz",
+            BOX_CORE_CLOCK_HZ
+        );
+    } else {
+        warn!("DWT cycle counter not available: the sample interrupt's cost is not measured (0)");
+    }
     let queue: &'static mut Queue<StreamItem, STREAM_QUEUE_LEN> =
         defmt::unwrap!(cortex_m::singleton!(: Queue<StreamItem, STREAM_QUEUE_LEN> = Queue::new()));
     let (producer, consumer) = queue.split();
@@ -296,7 +312,7 @@ async fn status_task(
             };
             match mode_reason {
                 None => info!(
-                    "compensating (slot {}) | {} samples/s @ {} Hz | overruns {} late {} dma {} | sat {} | resets {} | adc ovr {}",
+                    "compensating (slot {}) | {} samples/s @ {} Hz | overruns {} late {} dma {} | sat {} | resets {} | adc ovr {} | isr cycles mean {} max {}",
                     boot.slot,
                     now.samples.wrapping_sub(last.samples),
                     boot.fs_hz,
@@ -305,10 +321,12 @@ async fn status_task(
                     now.dma_faults,
                     now.saturated,
                     now.resets,
-                    adc_ovr
+                    adc_ovr,
+                    now.isr_cycles_mean,
+                    now.isr_cycles_max
                 ),
                 Some(r) => info!(
-                    "bypass ({}) | {} samples/s @ {} Hz | overruns {} late {} dma {} | sat {} | adc ovr {}",
+                    "bypass ({}) | {} samples/s @ {} Hz | overruns {} late {} dma {} | sat {} | adc ovr {} | isr cycles mean {} max {}",
                     r,
                     now.samples.wrapping_sub(last.samples),
                     boot.fs_hz,
@@ -316,7 +334,9 @@ async fn status_task(
                     now.late,
                     now.dma_faults,
                     now.saturated,
-                    adc_ovr
+                    adc_ovr,
+                    now.isr_cycles_mean,
+                    now.isr_cycles_max
                 ),
             }
             if matches!(shown, LedState::Fault | LedState::Saturated) {

@@ -30,6 +30,10 @@
 //!   sources: samples the rings show were skipped, and a compare event that
 //!   arrived while the handler was still running (`TIMx_SR.CC1IF` set again
 //!   at exit).
+//! * The handler's cost: the DWT cycle counter (`DWT_CYCCNT`, enabled at
+//!   boot by [`enable_cycle_counter`]) is read as the handler's first step
+//!   and after the sample is output; `dynocomp_core::cycles::IsrCycles`
+//!   keeps last/max/mean, published in [`TELEMETRY`] for the USB status.
 //!
 //! Why not the embassy-stm32 ADC/DAC drivers: they are async and wake a task
 //! from the DMA interrupt; this path has to run to completion in an interrupt
@@ -51,10 +55,12 @@
 use core::cell::UnsafeCell;
 use core::mem::MaybeUninit;
 use core::sync::atomic::{
-    AtomicBool, AtomicU32,
-    Ordering::{Acquire, Relaxed, Release},
+    compiler_fence, AtomicBool, AtomicU32,
+    Ordering::{Acquire, Relaxed, Release, SeqCst},
 };
 
+use cortex_m::peripheral::{DCB, DWT};
+use dynocomp_core::cycles::IsrCycles;
 use dynocomp_core::handoff::ImageHandoff;
 use dynocomp_core::image::CoeffImage;
 use dynocomp_core::protocol::{StatusCounters, StreamSample};
@@ -226,6 +232,14 @@ pub struct Telemetry {
     pub auto_zero_failed: AtomicU32,
     /// ADC offsets (code of 0 N, f32 bits) of the latest auto-zero.
     pub auto_zero_offsets: [AtomicU32; AXES],
+    /// Core clock cycles of the last sample interrupt's body (DWT CYCCNT;
+    /// 0 = counter not running).
+    pub isr_cycles_last: AtomicU32,
+    /// Most cycles of any sample interrupt's body since boot.
+    pub isr_cycles_max: AtomicU32,
+    /// Mean cycles over the last complete window of
+    /// `dynocomp_core::cycles::MEAN_WINDOW` samples.
+    pub isr_cycles_mean: AtomicU32,
 }
 
 /// The published counters.
@@ -241,6 +255,9 @@ pub static TELEMETRY: Telemetry = Telemetry {
     auto_zero_done: AtomicU32::new(0),
     auto_zero_failed: AtomicU32::new(0),
     auto_zero_offsets: [AtomicU32::new(0), AtomicU32::new(0), AtomicU32::new(0)],
+    isr_cycles_last: AtomicU32::new(0),
+    isr_cycles_max: AtomicU32::new(0),
+    isr_cycles_mean: AtomicU32::new(0),
 };
 
 /// A copy of [`TELEMETRY`] at one instant (fields read one by one).
@@ -256,6 +273,9 @@ pub struct Snapshot {
     pub compensating: bool,
     pub auto_zero_done: u32,
     pub auto_zero_failed: u32,
+    pub isr_cycles_last: u32,
+    pub isr_cycles_max: u32,
+    pub isr_cycles_mean: u32,
 }
 
 fn load3(a: &[AtomicU32; AXES]) -> [u32; AXES] {
@@ -277,6 +297,9 @@ impl Telemetry {
             compensating: self.compensating.load(Relaxed),
             auto_zero_done: self.auto_zero_done.load(Relaxed),
             auto_zero_failed: self.auto_zero_failed.load(Relaxed),
+            isr_cycles_last: self.isr_cycles_last.load(Relaxed),
+            isr_cycles_max: self.isr_cycles_max.load(Relaxed),
+            isr_cycles_mean: self.isr_cycles_mean.load(Relaxed),
         }
     }
 
@@ -297,6 +320,13 @@ impl Telemetry {
         }
         self.compensating.store(compensating, Relaxed);
     }
+
+    #[inline(always)]
+    fn publish_cycles(&self, c: &IsrCycles) {
+        self.isr_cycles_last.store(c.last(), Relaxed);
+        self.isr_cycles_max.store(c.max(), Relaxed);
+        self.isr_cycles_mean.store(c.mean(), Relaxed);
+    }
 }
 
 impl Snapshot {
@@ -308,6 +338,9 @@ impl Snapshot {
             saturated: self.saturated,
             nonfinite_resets: self.resets,
             stream_dropped: self.stream_dropped,
+            isr_cycles_last: self.isr_cycles_last,
+            isr_cycles_max: self.isr_cycles_max,
+            isr_cycles_mean: self.isr_cycles_mean,
         }
     }
 }
@@ -372,6 +405,7 @@ pub struct Sampler {
     path: SamplePath,
     cursor: RingCursor,
     stream: Producer<'static, StreamItem>,
+    cycles: IsrCycles,
 }
 
 impl Sampler {
@@ -381,20 +415,22 @@ impl Sampler {
             path: SamplePath::new(),
             cursor: RingCursor::new(RING_LEN),
             stream,
+            cycles: IsrCycles::new(),
         }
     }
 
-    /// One sample interrupt, given the three DMA counters. Never panics.
+    /// One sample interrupt, given the three DMA counters; returns whether
+    /// a sample was output. Never panics.
     /// The decisions are `dynocomp_core::shell::SamplePath`'s (host-tested);
     /// this only moves data between it, the registers and the atomics.
     #[inline(always)]
-    fn on_tick(&mut self, ndtr: [u16; AXES]) {
+    fn on_tick(&mut self, ndtr: [u16; AXES]) -> bool {
         // A new image: switch between two samples.
         if HANDOFF.take().is_some() {
             self.path.on_image_switch();
         }
         let Some(buf) = IMAGES.0.get(HANDOFF.active()) else {
-            return;
+            return false;
         };
         // SAFETY: the active buffer was initialised (by `start` or by
         // `hand_over` before its publish), and only this handler, which
@@ -403,13 +439,13 @@ impl Sampler {
 
         let Some(step) = self.cursor.advance(&ndtr) else {
             TELEMETRY.dma_faults.fetch_add(1, Relaxed);
-            return;
+            return false;
         };
         if step.available == 0 {
             // Conversion not complete yet: nothing to output; the sample is
             // picked up (and the skip counted) at the next interrupt.
             TELEMETRY.late.fetch_add(1, Relaxed);
-            return;
+            return false;
         }
         self.path.state.note_overruns(step.missed());
         let codes = read_codes(step.newest);
@@ -437,7 +473,7 @@ impl Sampler {
         // Stream every `decimation`-th sample; a full queue is counted.
         let decimation = STREAM_DECIMATION.load(Relaxed);
         let index = self.path.state.counters.samples;
-        if decimation != 0 && index % decimation == 0 {
+        if decimation != 0 && index.is_multiple_of(decimation) {
             let item = StreamItem {
                 index,
                 step: decimation,
@@ -451,6 +487,7 @@ impl Sampler {
                 TELEMETRY.stream_dropped.fetch_add(1, Relaxed);
             }
         }
+        true
     }
 }
 
@@ -502,6 +539,12 @@ fn write_dacs(dac: [u16; AXES]) {
 
 #[interrupt]
 fn TIM2() {
+    // Cycle counter at the start of the body (exception entry and the
+    // prologue's register saves come before it; docs/firmware.md, "Reading
+    // the sample interrupt's cost"). The fences keep the compiler from
+    // moving the handler's memory accesses across the two readings.
+    let start = DWT::cycle_count();
+    compiler_fence(SeqCst);
     let tim = pac::TIM2;
     // Acknowledge CC1 (TIMx_SR flags are rc_w0: writing 1 leaves a flag alone).
     let mut ack = pac::timer::regs::SrGp16(0xFFFF_FFFF);
@@ -517,7 +560,14 @@ fn TIM2() {
     // and from then on this handler (which cannot preempt itself) is its
     // only accessor, so this is the one live reference.
     let sampler = unsafe { (*SAMPLER.0.get()).assume_init_mut() };
-    sampler.on_tick(ndtr);
+    if sampler.on_tick(ndtr) {
+        // Cost of this sample: start of the handler to the sample output
+        // and published (interrupts that output no sample are not counted).
+        compiler_fence(SeqCst);
+        let end = DWT::cycle_count();
+        sampler.cycles.record(start, end);
+        TELEMETRY.publish_cycles(&sampler.cycles);
+    }
 
     // The next compare event came while this one was being handled: that
     // sample's deadline is missed (it is processed late, or skipped and then
@@ -531,6 +581,19 @@ fn TIM2() {
 }
 
 // ------------------------------------------------------------- start-up --
+
+/// Start the DWT cycle counter (`DEMCR.TRCENA`, then `DWT_CTRL.CYCCNTENA`),
+/// which the sample interrupt reads (`DWT::cycle_count`, a read-only
+/// register access) to measure its own cost. Returns whether it runs; if
+/// not, every `isr_cycles_*` figure stays 0 ("not measured").
+pub fn enable_cycle_counter(dcb: &mut DCB, dwt: &mut DWT) -> bool {
+    if !DWT::has_cycle_counter() {
+        return false;
+    }
+    dcb.enable_trace();
+    dwt.enable_cycle_counter();
+    DWT::cycle_counter_enabled()
+}
 
 fn spin_until(mut done: impl FnMut() -> bool) -> bool {
     for _ in 0..SPIN_LIMIT {

@@ -23,7 +23,9 @@ use dynocomp_core::image::CoeffImage;
 use dynocomp_core::link::{Actions, BoxLink, Telemetry};
 use dynocomp_core::protocol::{encode_frame, BoxMessage, FrameDecoder, StreamBatcher, MAX_FRAME};
 use dynocomp_core::sample::{select_stored_mode, Mode};
-use dynocomp_core::shell::{apply_adc_offsets, image_switch, parse_version, ImageSwitch};
+use dynocomp_core::shell::{
+    apply_adc_offsets, image_switch, parse_version, ImageSwitch, BOX_CORE_CLOCK_HZ,
+};
 use dynocomp_core::store::Store;
 use embassy_futures::join::join;
 use embassy_futures::select::{select, Either};
@@ -108,7 +110,7 @@ async fn send(class: &mut Class, frame: &[u8]) -> Result<(), EndpointError> {
     for chunk in frame.chunks(PACKET) {
         class.write_packet(chunk).await?;
     }
-    if frame.len() % PACKET == 0 {
+    if frame.len().is_multiple_of(PACKET) {
         class.write_packet(&[]).await?;
     }
     Ok(())
@@ -138,6 +140,7 @@ fn telemetry(image: &Stored, fs_hz: u32, stream_next_seq: u32) -> Telemetry<'_> 
     Telemetry {
         firmware: FIRMWARE,
         fs_hz,
+        core_clock_hz: BOX_CORE_CLOCK_HZ,
         bypass,
         image: image.as_ref().ok(),
         counters: TELEMETRY.snapshot().status_counters(),
@@ -265,8 +268,12 @@ async fn serve(class: &mut Class, link: &mut Link) -> ! {
                                 continue;
                             };
                             let mut act = Actions::default();
-                            let tel = telemetry(&link.image, link.fs_hz, batcher.next_seq());
-                            let msg = handler.on_frame(frame, &mut link.store, &tel, &mut act);
+                            // `tel` in its own scope: not kept in the task's
+                            // future across the awaits below (static RAM).
+                            let msg = {
+                                let tel = telemetry(&link.image, link.fs_hz, batcher.next_seq());
+                                handler.on_frame(frame, &mut link.store, &tel, &mut act)
+                            };
                             if act.stream == Some(None) {
                                 // Stop: the last frames go out before the Ack.
                                 STREAM_DECIMATION.store(0, Relaxed);
