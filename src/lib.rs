@@ -12,6 +12,8 @@
 //! * [`handoff`]: lock-free switch of the running image at a sample boundary.
 //! * [`cycles`]: cost of the sample interrupt in CPU cycles (DWT CYCCNT
 //!   readings → last, max, mean).
+//! * [`stream_queue`]: the lock-free queue of streamed samples from the
+//!   sample interrupt to the USB task (no panic path).
 //!
 //! The crate is `no_std` and allocation-free, so the same code runs on the
 //! STM32G474 and under `std` in the host tests. It is free of `unsafe`
@@ -32,6 +34,7 @@ pub mod protocol;
 pub mod sample;
 pub mod shell;
 pub mod store;
+pub mod stream_queue;
 
 /// Number of force axes the box handles (Fx, Fy, Fz).
 pub const AXES: usize = 3;

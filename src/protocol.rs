@@ -28,8 +28,8 @@
 //!   it to the CDC class (in 64-byte packets). Stream frames are built by
 //!   [`StreamBatcher`] in the same task from samples the interrupt queued.
 //! * **Sample interrupt:** nothing in this module. The interrupt only pushes
-//!   [`StreamSample`]s into a lock-free single-producer queue (e.g.
-//!   `heapless::spsc`) when streaming is on, and never blocks on USB; a full
+//!   [`StreamSample`]s into a lock-free single-producer queue
+//!   ([`crate::stream_queue`]) when streaming is on, and never blocks on USB; a full
 //!   queue drops the sample (the host sees the gap in
 //!   [`StreamFrame::first_sample`]).
 //!

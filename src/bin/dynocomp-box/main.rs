@@ -39,8 +39,7 @@ use embassy_stm32::time::Hertz;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, peripherals, Config, Peri};
 use embassy_time::{Duration, Ticker, Timer};
-use heapless::spsc::Queue;
-use sampler::{Hardware, Sampler, Snapshot, StreamItem, STREAM_QUEUE_LEN, TELEMETRY, USER_BYPASS};
+use sampler::{Hardware, Sampler, Snapshot, STREAM_QUEUE, TELEMETRY, USER_BYPASS};
 use {defmt_rtt as _, panic_probe as _};
 
 bind_interrupts!(struct Irqs {
@@ -214,9 +213,7 @@ async fn main(spawner: Spawner) {
     } else {
         warn!("DWT cycle counter not available: the sample interrupt's cost is not measured (0)");
     }
-    let queue: &'static mut Queue<StreamItem, STREAM_QUEUE_LEN> =
-        defmt::unwrap!(cortex_m::singleton!(: Queue<StreamItem, STREAM_QUEUE_LEN> = Queue::new()));
-    let (producer, consumer) = queue.split();
+    let (producer, consumer) = defmt::unwrap!(STREAM_QUEUE.split());
     let usb_image = image;
     let started = match sampler::start(hw, &timing, image, Sampler::new(producer)) {
         Ok(()) => {

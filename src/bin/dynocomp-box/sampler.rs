@@ -82,7 +82,7 @@ use embassy_stm32::pac::dac::vals::Mode as DacMode;
 use embassy_stm32::pac::gpio::vals::{Moder, Pupdr};
 use embassy_stm32::pac::timer::vals::Mms;
 use embassy_stm32::{peripherals, rcc, Peri};
-use heapless::spsc::Producer;
+use dynocomp_core::stream_queue::{Producer, StreamItem, StreamQueue};
 
 /// Entries per DMA ring. The interrupt may be held off (critical sections of
 /// the lower-priority code, debugger) for up to `RING_LEN - 1` samples
@@ -97,8 +97,13 @@ const RING: usize = RING_LEN as usize;
 const SAMPLE_TIME: SampleTime = SampleTime::CYCLES24_5;
 const _: () = assert!(BOX_SAMPLE_HALF_CYCLES == 49);
 
-/// Streamed samples the interrupt can queue for the USB task.
+/// Streamed samples the interrupt can queue for the USB task (a power of
+/// two).
 pub const STREAM_QUEUE_LEN: usize = 128;
+
+/// The queue of streamed samples from the interrupt to the USB task
+/// (`dynocomp_core::stream_queue`: no panic path in `push`).
+pub static STREAM_QUEUE: StreamQueue<STREAM_QUEUE_LEN> = StreamQueue::new();
 /// `ADC_CFGR.EXTSEL` of `tim2_trgo` (adc_ext_trg11) for ADC1..ADC5 (RM0440
 /// "ADC1/ADC2/ADC3/ADC4/ADC5 - External triggers for regular channels").
 const EXTSEL_TIM2_TRGO: u8 = 11;
@@ -389,28 +394,18 @@ pub fn hand_over(image: CoeffImage) -> bool {
 
 // ---------------------------------------------------- interrupt context --
 
-/// One streamed sample, as queued by the interrupt.
-#[derive(Clone, Copy, Debug)]
-pub struct StreamItem {
-    /// Sample index (the sample counter after this sample).
-    pub index: u32,
-    /// The decimation it was taken with (index step to the next one).
-    pub step: u32,
-    /// Codes in/out and flags.
-    pub sample: StreamSample,
-}
 
 /// Everything the sample interrupt owns.
 pub struct Sampler {
     path: SamplePath,
     cursor: RingCursor,
-    stream: Producer<'static, StreamItem>,
+    stream: Producer<'static, STREAM_QUEUE_LEN>,
     cycles: IsrCycles,
 }
 
 impl Sampler {
     /// The sample path; streamed samples go to `stream`.
-    pub fn new(stream: Producer<'static, StreamItem>) -> Self {
+    pub fn new(stream: Producer<'static, STREAM_QUEUE_LEN>) -> Self {
         Sampler {
             path: SamplePath::new(),
             cursor: RingCursor::new(RING_LEN),
@@ -483,7 +478,7 @@ impl Sampler {
                     flags: out.flags.0,
                 },
             };
-            if self.stream.enqueue(item).is_err() {
+            if self.stream.push(&item).is_err() {
                 TELEMETRY.stream_dropped.fetch_add(1, Relaxed);
             }
         }

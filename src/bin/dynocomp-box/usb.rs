@@ -35,10 +35,10 @@ use embassy_stm32::usb::Driver;
 use embassy_time::{Duration, Timer};
 use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use embassy_usb::driver::EndpointError;
-use heapless::spsc::Consumer;
+use dynocomp_core::stream_queue::Consumer;
 
 use crate::sampler::{
-    hand_over, Stored, StreamItem, AUTO_ZERO_REQUEST, STREAM_DECIMATION, TELEMETRY, USER_BYPASS,
+    hand_over, Stored, AUTO_ZERO_REQUEST, STREAM_QUEUE_LEN, STREAM_DECIMATION, TELEMETRY, USER_BYPASS,
 };
 
 /// USB IDs: pid.codes test VID/PID (0x1209/0x0001), for development only;
@@ -70,7 +70,7 @@ pub struct Link {
     /// Sample rate the sample path runs at (Hz).
     pub fs_hz: u32,
     /// Streamed samples from the interrupt.
-    pub stream: Consumer<'static, StreamItem>,
+    pub stream: Consumer<'static, STREAM_QUEUE_LEN>,
 }
 
 /// The USB device and the protocol loop.
@@ -180,7 +180,7 @@ async fn pump_stream(
 ) -> Result<usize, EndpointError> {
     let mut packed = 0;
     while packed < max {
-        let Some(item) = link.stream.dequeue() else {
+        let Some(item) = link.stream.pop() else {
             break;
         };
         packed += 1;
@@ -291,7 +291,7 @@ async fn serve(class: &mut Class, link: &mut Link) -> ! {
 
                 if STREAM_DECIMATION.load(Relaxed) == 0 {
                     // Not streaming: drop what the interrupt queued before.
-                    while link.stream.dequeue().is_some() {}
+                    while link.stream.pop().is_some() {}
                     continue;
                 }
                 let packed = pump_stream(link, &mut batcher, class, STREAM_ITEMS_PER_POLL).await?;
