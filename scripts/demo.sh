@@ -6,11 +6,12 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release -q -p dynocomp --bin dynocomp --example score
-bin=target/release/dynocomp
+tgt="${CARGO_TARGET_DIR:-target}"
+bin="$tgt/release/dynocomp"
 mkdir -p out
 "$bin" design --frf data/example/frf.uff --fs 51200 --idle data/example/idle.csv \
     --out out/example.dcimg --report out/report
 "$bin" inspect out/example.dcimg
 "$bin" compensate --coeffs out/example.dcimg --input data/example/measured.csv --output out/compensated.csv
-target/release/examples/score data/example/true_force.csv out/compensated.csv data/example/measured.csv 51200 4000
+"$tgt/release/examples/score" data/example/true_force.csv out/compensated.csv data/example/measured.csv 51200 4000
 echo "report: out/report/index.html"
