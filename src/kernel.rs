@@ -415,8 +415,8 @@ impl AxisFilter {
     fn process_chunk(&self, state: &mut AxisState, input: &[f32], output: &mut [f32]) {
         self.start_chunk(input, output);
         let (pairs, reals) = (self.form.pairs(), self.form.reals());
-        over_chunks(Lanes::new(pairs, &mut state.x, input, output), pair_update);
-        over_chunks(Lanes::new(reals, &mut state.x_real, input, output), real_update);
+        over_chunks(pairs, &mut state.x, input, output, pair_update);
+        over_chunks(reals, &mut state.x_real, input, output, real_update);
         self.fir_chunk(state, input, output);
     }
 
@@ -669,8 +669,8 @@ fn lockstep(jobs: &mut [BlockJob<'_>]) {
         for (y, u) in y.iter_mut().zip(u.iter()) {
             *y = core::array::from_fn(|l| d[l] * u[l]);
         }
-        over_chunks(Lanes::new(&pairs[..n_pairs], &mut x, u, y), pair_update_lanes);
-        over_chunks(Lanes::new(&reals[..n_reals], &mut x_real, u, y), real_update_lanes);
+        over_chunks(&pairs[..n_pairs], &mut x, u, y, pair_update_lanes);
+        over_chunks(&reals[..n_reals], &mut x_real, u, y, real_update_lanes);
         for (l, job) in jobs.iter_mut().enumerate() {
             let out = &mut job.output[start..start + len];
             for (dst, lane) in out.iter_mut().zip(y.iter()) {
@@ -717,76 +717,49 @@ fn real_update(&[sigma, c]: &RealCoeffs, x: f32, u: f32, y: &mut f32) -> f32 {
     x + (sigma * x + u)
 }
 
-/// Pairs or real poles (`coeffs`, with their `states`) and the chunk they
-/// run over: `output[k]` receives their updates for `input[k]`. A sample
-/// `S` is one axis's f32, or [`Lane`] for the lockstep path.
-struct Lanes<'a, C, X, S> {
-    coeffs: &'a [C],
-    states: &'a mut [X],
-    input: &'a [S],
-    output: &'a mut [S],
-}
-
-impl<'a, C, X, S> Lanes<'a, C, X, S> {
-    /// `states` is cut to the length of `coeffs`; `input` and `output` to
-    /// their common length.
-    fn new(coeffs: &'a [C], states: &'a mut [X], input: &'a [S], output: &'a mut [S]) -> Self {
-        let len = coeffs.len().min(states.len());
-        let n = input.len().min(output.len());
-        Lanes { coeffs: &coeffs[..len], states: &mut states[..len], input: &input[..n], output: &mut output[..n] }
-    }
-
-    /// Up to four of the pairs (or real poles), in order, with the next
-    /// ones left in `self`; `None` when none are left.
-    fn split_four(&mut self) -> Option<Lanes<'_, C, X, S>> {
-        if self.coeffs.is_empty() {
-            return None;
-        }
-        let k = self.coeffs.len().min(4);
-        let (c, rest) = self.coeffs.split_at(k);
-        self.coeffs = rest;
-        let (x, rest) = core::mem::take(&mut self.states).split_at_mut(k);
-        self.states = rest;
-        Some(Lanes { coeffs: c, states: x, input: self.input, output: &mut *self.output })
-    }
-}
-
 /// [`over_block`] four at a time, then the remaining 1-3 together (never
-/// padded: an added zero term would turn a −0.0 output into +0.0).
+/// padded: an added zero term would turn a −0.0 output into +0.0). A sample
+/// `S` is one axis's f32, or a [`Lane`] of the lockstep path.
 #[inline(always)]
 fn over_chunks<C: Copy + Default, X: Copy + Default, S: Copy>(
-    mut lanes: Lanes<'_, C, X, S>,
+    coeffs: &[C],
+    states: &mut [X],
+    input: &[S],
+    output: &mut [S],
     update: impl Fn(&C, X, S, &mut S) -> X + Copy,
 ) {
-    while let Some(four) = lanes.split_four() {
-        match four.coeffs.len() {
-            4 => over_block::<4, _, _, _>(four, update),
-            3 => over_block::<3, _, _, _>(four, update),
-            2 => over_block::<2, _, _, _>(four, update),
-            _ => over_block::<1, _, _, _>(four, update),
+    for (c, x) in coeffs.chunks(4).zip(states.chunks_mut(4)) {
+        match c.len() {
+            4 => over_block::<4, _, _, _>(c, x, input, output, update),
+            3 => over_block::<3, _, _, _>(c, x, input, output, update),
+            2 => over_block::<2, _, _, _>(c, x, input, output, update),
+            _ => over_block::<1, _, _, _>(c, x, input, output, update),
         }
     }
 }
 
-/// `N` pairs or real poles (`lanes.coeffs.len() == N`) over a whole chunk:
+/// `N` pairs or real poles (`coeffs.len() == N`) over a whole chunk:
 /// `output[k]` receives each one's `update` in order, exactly as in
 /// [`AxisFilter::step`] (same function, so the same roundings). Running N
 /// independent recurrences per sample keeps N of them in flight.
 #[inline(always)]
 fn over_block<const N: usize, C: Copy + Default, X: Copy + Default, S: Copy>(
-    lanes: Lanes<'_, C, X, S>,
+    coeffs: &[C],
+    states: &mut [X],
+    input: &[S],
+    output: &mut [S],
     update: impl Fn(&C, X, S, &mut S) -> X,
 ) {
-    let c: [C; N] = core::array::from_fn(|i| lanes.coeffs.get(i).copied().unwrap_or_default());
-    let mut x: [X; N] = core::array::from_fn(|i| lanes.states.get(i).copied().unwrap_or_default());
-    for (y, &u) in lanes.output.iter_mut().zip(lanes.input) {
+    let c: [C; N] = core::array::from_fn(|i| coeffs.get(i).copied().unwrap_or_default());
+    let mut x: [X; N] = core::array::from_fn(|i| states.get(i).copied().unwrap_or_default());
+    for (y, &u) in output.iter_mut().zip(input) {
         let mut acc = *y;
         for (c, x) in c.iter().zip(x.iter_mut()) {
             *x = update(c, *x, u, &mut acc);
         }
         *y = acc;
     }
-    for (dst, x) in lanes.states.iter_mut().zip(x) {
+    for (dst, x) in states.iter_mut().zip(x) {
         *dst = x;
     }
 }
