@@ -36,24 +36,22 @@ pub fn check_sample_rate(image: &CoeffImage, rec: &SignalRecord, source: &str) -
 /// last L output samples are estimates made with that held input.
 pub fn compensate_record(image: &CoeffImage, rec: &SignalRecord, raw_timing: bool, source: &str) -> Result<SignalRecord> {
     let latency = if raw_timing { 0 } else { usize::from(image.latency_samples) };
-    let mut jobs = Vec::with_capacity(rec.channels.len());
+    let mut axes = Vec::with_capacity(rec.channels.len());
     for (axis, samples) in &rec.channels {
-        let Some(axis_img) = image.axes.get(*axis).copied().flatten() else {
+        let Some(axis_img) = image.axes.get(*axis).and_then(Option::as_ref) else {
             bail!(
                 "{source}: column f{} has no compensator in the image (it covers {}); drop the column or design for that axis",
                 axis_name(*axis),
                 image.axes.iter().flatten().map(|a| axis_name(a.axis as usize)).collect::<Vec<_>>().join(", ")
             );
         };
-        jobs.push((*axis, axis_img.filter, samples));
+        axes.push((&axis_img.filter, samples.as_slice()));
     }
-    let outputs = run_axes(&jobs.iter().map(|(_, f, s)| (f, s.as_slice())).collect::<Vec<_>>(), latency);
-    let results: Vec<(usize, Result<Vec<f64>, usize>)> = jobs.iter().map(|(axis, _, _)| *axis).zip(outputs).collect();
-    let mut channels = Vec::with_capacity(results.len());
-    for (axis, out) in results {
+    let mut channels = Vec::with_capacity(axes.len());
+    for ((axis, _), out) in rec.channels.iter().zip(run_axes(&axes, latency)) {
         match out {
-            Ok(out) => channels.push((axis, out)),
-            Err(k) => bail!("{source}: compensated f{} became non-finite at sample {k}; the image is unusable for this record", axis_name(axis)),
+            Ok(out) => channels.push((*axis, out)),
+            Err(k) => bail!("{source}: compensated f{} became non-finite at sample {k}; the image is unusable for this record", axis_name(*axis)),
         }
     }
     Ok(SignalRecord { t_s: rec.t_s.clone(), channels })
@@ -66,26 +64,14 @@ pub fn compensate_record(image: &CoeffImage, rec: &SignalRecord, raw_timing: boo
 /// fed samples) whose output is non-finite.
 ///
 /// The axes are independent. Up to [`LOCKSTEP_AXES`] of them run in
-/// lockstep on one core, one per vector lane ([`process_blocks`], the same
-/// numbers): a pair's recurrence is serial in time, so one axis alone
+/// lockstep on this thread, one per vector lane ([`process_blocks`], the
+/// same numbers): a pair's recurrence is serial in time, so one axis alone
 /// leaves most of a core idle, and three axes in lockstep take 0.58 of the
 /// time of three in turn (BENCHMARKS.md). That beats giving axes threads of
 /// their own: on two cores, x and y in lockstep on one and z on the other
-/// took 1.24x as long as all three in lockstep on one. More axes than one
-/// lockstep group holds run as further groups on threads of their own, the
-/// last group on this thread (one group spawns nothing).
+/// took 1.24x as long as all three in lockstep on one.
 fn run_axes(axes: &[(&AxisFilter, &[f64])], latency: usize) -> Vec<Result<Vec<f64>, usize>> {
-    let mut groups: Vec<&[(&AxisFilter, &[f64])]> = axes.chunks(LOCKSTEP_AXES).collect();
-    let last = groups.pop();
-    std::thread::scope(|scope| {
-        let handles: Vec<_> = groups.into_iter().map(|group| scope.spawn(move || run_group(group, latency))).collect();
-        let last = last.map(|group| run_group(group, latency));
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-            .chain(last.into_iter().flatten())
-            .collect()
-    })
+    axes.chunks(LOCKSTEP_AXES).flat_map(|group| run_group(group, latency)).collect()
 }
 
 /// The axes of one group of [`run_axes`], in lockstep.
@@ -191,8 +177,8 @@ mod tests {
         AxisFilter::with_fir(&secs, 0.5, &taps).unwrap()
     }
 
-    /// 1-5 axes (one lockstep group, or a group and a rest on a thread of
-    /// its own) give each axis, in its own place, exactly the box's per-sample `step` outputs (bit for bit,
+    /// 1-5 axes (one lockstep group, or a group and a rest) give each axis,
+    /// in its own place, exactly the box's per-sample `step` outputs (bit for bit,
     /// latency dropped), and names the first non-finite sample of the axis
     /// that has one.
     #[test]
