@@ -15,9 +15,15 @@ use num_complex::Complex64;
 use std::f64::consts::PI;
 
 
-/// G(s) with a machine mode at 450 Hz and a sensor mode at 2.6 kHz, |G(0)| = 1.
+/// A dynamometer with a machine mode at 450 Hz and a sensor mode at
+/// 2.6 kHz, |G(0)| = 1.
+fn two_mode_dyno() -> Dynamometer {
+    Dynamometer::from_modes(vec![Mode { fn_hz: 450.0, zeta: 0.04, residue: 0.3 }, Mode { fn_hz: 2600.0, zeta: 0.02, residue: 0.7 }]).unwrap()
+}
+
+/// G(s) of [`two_mode_dyno`].
 fn two_mode_model() -> PoleResidueModel {
-    model_of(&Dynamometer::from_modes(vec![Mode { fn_hz: 450.0, zeta: 0.04, residue: 0.3 }, Mode { fn_hz: 2600.0, zeta: 0.02, residue: 0.7 }]).unwrap())
+    model_of(&two_mode_dyno())
 }
 
 #[test]
@@ -26,11 +32,7 @@ fn noise_free_piecewise_linear_force_is_recovered_essentially_exactly() {
     // discretization, `simulate::dynamometer`) measures a force that is
     // linear between samples, so the smoother's FOH model is exact. No
     // noise; R tiny. Force: a few sines sampled, plus a step and a ramp.
-    let dyno = Dynamometer::from_modes(vec![
-        Mode { fn_hz: 450.0, zeta: 0.04, residue: 0.3 },
-        Mode { fn_hz: 2600.0, zeta: 0.02, residue: 0.7 },
-    ])
-    .unwrap();
+    let dyno = two_mode_dyno();
     let model = model_of(&dyno);
     for f in [0.0, 300.0, 2600.0, 5000.0] {
         let (g, m) = (dyno.frf(f), model.frf(f));
@@ -89,11 +91,7 @@ fn smoother_beats_the_causal_fixed_lag_filters_when_its_model_holds() {
     // `kalman::design`, run in f64 with its lag removed).
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
-    let dyno = Dynamometer::from_modes(vec![
-        Mode { fn_hz: 450.0, zeta: 0.04, residue: 0.3 },
-        Mode { fn_hz: 2600.0, zeta: 0.02, residue: 0.7 },
-    ])
-    .unwrap();
+    let dyno = two_mode_dyno();
     let model = model_of(&dyno);
     let (q, r) = (4.0f64, 0.5f64);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(99);
