@@ -15,18 +15,21 @@ fn main() -> Result<()> {
     let raw = read_signal_csv(Path::new(&a[3]))?;
     let fs: f64 = a[4].parse().context("FS_HZ")?;
     let fmax: f64 = a.get(5).map_or(Ok(4000.0), |s| s.parse()).context("F_MAX_HZ")?;
-    println!("accuracy against the true force below {fmax} Hz (NRMSE = RMS error / peak-to-peak of the truth):");
-    println!("{:<5} {:>12} {:>12} {:>16}", "axis", "raw", "compensated", "improvement");
+    println!("accuracy against the true force below {fmax} Hz (NRMSE = RMS error / std of the band-limited truth;");
+    println!("p2p: RMS error / peak-to-peak of the truth, a second figure for comparison only):");
+    println!("{:<5} {:>12} {:>12} {:>12} {:>16} {:>16}", "axis", "raw", "compensated", "improvement", "raw (p2p)", "comp. (p2p)");
     for (axis, t) in &truth.channels {
         let (Some(c), Some(r)) = (comp.channel(*axis), raw.channel(*axis)) else { continue };
         let ac = accuracy(c, t, fs, fmax);
         let ar = accuracy(r, t, fs, fmax);
         println!(
-            "f{:<4} {:>11.2}% {:>11.3}% {:>15.0}x",
+            "f{:<4} {:>11.2}% {:>11.3}% {:>11.0}x {:>15.2}% {:>15.3}%",
             dynocomp::frf::axis_name(*axis),
             ar.nrmse * 100.0,
             ac.nrmse * 100.0,
-            ar.nrmse / ac.nrmse
+            ar.nrmse / ac.nrmse,
+            ar.nrmse_p2p * 100.0,
+            ac.nrmse_p2p * 100.0
         );
     }
     Ok(())

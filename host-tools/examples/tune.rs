@@ -32,10 +32,10 @@ fn main() -> anyhow::Result<()> {
             let a = accuracy(&out, truth, fs, 4000.0);
             let raw = accuracy(meas, &sim.truth[ax], fs, 4000.0);
             println!(
-                "seed {seed} ax {ax} fn {:.0} order {} secs {} fir {} q {:.2e} R {:.3} ng {:.1} flat {:.0}-{:.0} pred {:.3}% | nrmse {:.3}% (std {:.2}%) raw {:.2}% | {:?} fit {:.2}%",
+                "seed {seed} ax {ax} fn {:.0} order {} secs {} fir {} q {:.2e} R {:.3} ng {:.1} flat {:.0}-{:.0} pred {:.3}% | nrmse {:.3}% (p2p {:.3}%) raw {:.2}% | {:?} fit {:.2}%",
                 sim.dyno.axis(ax).main_mode().fn_hz, d.model.order(), d.filter.sections().len(), d.filter.fir().len(),
                 d.kalman.q, r, d.noise_gain, d.flat_band_hz.0, d.flat_band_hz.1, d.predicted_error*100.0,
-                a.nrmse*100.0, a.rel_to_std*100.0, raw.nrmse*100.0, dt, d.fit_nrmse*100.0
+                a.nrmse*100.0, a.nrmse_p2p*100.0, raw.nrmse*100.0, dt, d.fit_nrmse*100.0
             );
         }
     }

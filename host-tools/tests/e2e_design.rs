@@ -23,7 +23,7 @@ fn score(s: &SimOutput, designs: &[AxisDesign], lag: usize) -> Vec<(f64, f64)> {
         .map(|a| {
             let comp = accuracy(out.channel(a).unwrap(), &s.truth[a], FS, F_MAX);
             let raw = accuracy(&s.measured[a], &s.truth[a], FS, F_MAX);
-            (comp.nrmse, raw.nrmse)
+            (comp.nrmse_p2p, raw.nrmse_p2p)
         })
         .collect()
 }
