@@ -18,6 +18,7 @@ use num_complex::Complex64;
 use std::f64::consts::PI;
 
 use crate::bands::{band_mask, Band};
+use crate::discretize::{discretize, DiscreteModel, Discretization, FitDiagnostics, MATCH_BAND_FRACTION};
 use crate::fit::rfp::{paper_weights, rfp_fit, RationalTf, RfpOptions};
 use crate::fit::vf::{coherence_weights, vector_fit, VfOptions};
 use crate::fit::{relative_rms_error, PoleResidueModel};
@@ -49,6 +50,8 @@ pub struct DesignOptions {
     /// Fitting bands (paper §3.2); empty = the whole coherent band. With
     /// bands, the fit, the q criterion and the flat band use the band lines.
     pub bands: Vec<Band>,
+    /// Discrete model of the Kalman design (default method only).
+    pub discretization: Discretization,
 }
 
 /// Weight of an out-of-band line relative to its coherence weight when the
@@ -82,6 +85,7 @@ impl Default for DesignOptions {
             vf: VfOptions::default(),
             method: FitMethod::Vf,
             bands: Vec::new(),
+            discretization: Discretization::Fit,
         }
     }
 }
@@ -123,6 +127,19 @@ pub struct AxisDesign {
     pub fit_nrmse_out_of_band: f64,
     /// The paper's fitted transfer function and diagnostics (`--method paper`).
     pub paper: Option<(RationalTf, PaperDiagnostics)>,
+    /// The discrete model of the Kalman design and its fit diagnostics
+    /// (default method; the paper's method discretizes by Tustin).
+    pub discrete: Option<(DiscreteModel, FitDiagnostics)>,
+    /// Model match max |Ĝ_d(e^{j2πf/fs})/Ĝ(j2πf) − 1| over the compensated
+    /// band (NaN for the paper's method).
+    pub model_match: f64,
+    /// Predicted in-band relative RMS error of the uncompensated force
+    /// (distortion |Ĝ − 1| plus noise), the figure `predicted_error` must beat.
+    pub raw_predicted_error: f64,
+    /// Compensated band (Hz): the coherent band, capped at 0.45 fs.
+    pub compensated_band_hz: (f64, f64),
+    /// Notes for the user (e.g. FRF lines beyond the box's band).
+    pub notes: Vec<String>,
 }
 
 impl AxisDesign {
@@ -222,6 +239,14 @@ struct Objective<'a> {
 }
 
 impl Objective<'_> {
+    /// J of no compensation (H = 1, no lag): distortion |Ĝ − 1|² plus the
+    /// measurement noise itself, in the same units as [`Objective::eval`].
+    fn raw(&self) -> f64 {
+        let n = self.grid.len() as f64;
+        let dist: f64 = self.grid.iter().map(|(_, g)| (g - 1.0).norm_sqr()).sum::<f64>() / n;
+        dist + 2.0 * self.r / self.opts.fs_hz * self.band_width / (self.opts.force_rms * self.opts.force_rms)
+    }
+
     /// (J, noise gain, design) for one q; J = ∞ when the design fails or the
     /// noise-gain limit is exceeded.
     fn eval(&self, q: f64) -> (f64, f64, Option<KalmanDesign>) {
@@ -345,10 +370,23 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
     if band.1 <= band.0 {
         bail!("axis {name}: no coherent band (coherence ≥ {} nowhere); repeat the impact test", opts.coherence_threshold);
     }
-    if band.1 > opts.fs_hz / 2.0 {
-        bail!("axis {name}: the FRF band reaches {} Hz, beyond the Nyquist frequency of fs = {} Hz", band.1, opts.fs_hz);
+    // The box's band ends at 0.45 fs (the pass band of the DAQ's and the
+    // box's anti-aliasing filters): lines above it still inform the fit (a
+    // sensor mode above Nyquist shapes the band below it) but are not
+    // compensated.
+    let f_cap = MATCH_BAND_FRACTION * opts.fs_hz;
+    let mut notes = Vec::new();
+    if band.0 >= f_cap {
+        bail!("axis {name}: the coherent band {:.0}–{:.0} Hz lies above 0.45 fs = {f_cap:.0} Hz; raise --fs or repeat the impact test at lower frequencies", band.0, band.1);
     }
-    let in_band: Vec<bool> = freq_hz.iter().map(|f| *f >= band.0 && *f <= band.1).collect();
+    let comp_band = (band.0, band.1.min(f_cap));
+    if band.1 > f_cap {
+        notes.push(format!(
+            "axis {name}: FRF lines above 0.45 fs = {f_cap:.0} Hz (coherent to {:.0} Hz) inform the fit but are not compensated",
+            band.1
+        ));
+    }
+    let in_band: Vec<bool> = freq_hz.iter().map(|f| *f >= comp_band.0 && *f <= comp_band.1).collect();
     let coherent: Vec<bool> = match coh {
         Some(c) => in_band.iter().zip(c).map(|(b, c)| *b && *c >= opts.coherence_threshold).collect(),
         None => in_band.clone(),
@@ -401,7 +439,7 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         bail!("axis {name}: fitted static gain |G(0)| = {dc:.3} N/N; the FRF must be force/force (N/N), check units and calibration (with fitting bands: include the static band)");
     }
 
-    let ranges: Vec<(f64, f64)> = if opts.bands.is_empty() { vec![band] } else { opts.bands.iter().map(|b| (b.lo_hz, b.hi_hz)).collect() };
+    let ranges: Vec<(f64, f64)> = if opts.bands.is_empty() { vec![comp_band] } else { opts.bands.iter().map(|b| (b.lo_hz, b.hi_hz)).collect() };
     let f_top = ranges.iter().map(|b| b.1).fold(0.0, f64::max);
     let grid: Vec<(f64, Complex64)> = band_grid(&ranges, 200).into_iter().map(|f| (f, fitted.frf(f))).collect();
     let lag = if fitted.paper.is_some() { 0 } else { opts.lag };
@@ -409,10 +447,24 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         FitMethod::Paper { prewarp_hz: Some(p), .. } => *p,
         _ => 0.5 * (ranges[0].0 + f_top),
     };
+    // The discrete model of the Kalman design (default method), matched to
+    // the sampled-data relation over the compensated band, once per axis.
+    let discrete = match &fitted.paper {
+        Some(_) => None,
+        None => Some(
+            discretize(&fitted.model, opts.fs_hz, opts.discretization, (ranges[0].0, f_top))
+                .with_context(|| format!("axis {name}: discrete model"))?,
+        ),
+    };
+    let model_match = match &discrete {
+        Some((dm, _)) => dm.match_error(&grid.iter().map(|g| g.0).collect::<Vec<_>>(), |f| fitted.frf(f)),
+        None => f64::NAN,
+    };
     let design_fn = |q: f64| -> Result<KalmanDesign> {
-        match &fitted.paper {
-            Some((tf, _)) => paper::design(tf, opts.fs_hz, q, r, prewarp_hz, &mut PaperDiagnostics::default()),
-            None => kalman::design(&fitted.model, opts.fs_hz, q, r, opts.lag),
+        match (&fitted.paper, &discrete) {
+            (Some((tf, _)), _) => paper::design(tf, opts.fs_hz, q, r, prewarp_hz, &mut PaperDiagnostics::default()),
+            (None, Some((dm, _))) => kalman::design(dm, q, r, opts.lag),
+            (None, None) => unreachable!("the default method always has a discrete model"),
         }
     };
     let obj = Objective {
@@ -446,6 +498,24 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         }
         (Err(e), None) => return Err(e).with_context(|| format!("axis {name}")),
     };
+    // Never silently worse than raw (README, "Never worse than no
+    // compensation"): refuse the design when its predicted in-band error
+    // does not beat the uncompensated force's.
+    let raw_j = obj.raw();
+    if !(j < raw_j) {
+        let next = match &fitted.paper {
+            Some(_) => "try other --paper-orders, other or narrower bands (--band, --spindle-rpm/--teeth), or the default method (--method vf)",
+            None => "check the FRF (coherence, units N/N, resolution), narrow the compensated band with --band, or raise --max-noise-gain if the noise gain limits it",
+        };
+        bail!(
+            "axis {name}: the compensator would be worse than no compensation in its band ({:.0}–{:.0} Hz): predicted in-band error {:.2} % against {:.2} % uncompensated (fit error {:.2} %); no image written; {next}",
+            ranges[0].0,
+            f_top,
+            100.0 * j.sqrt(),
+            100.0 * raw_j.sqrt(),
+            100.0 * fit_nrmse
+        );
+    }
     // The paper's diagnostics of the chosen design (the fit's conditions stay).
     let paper = match &fitted.paper {
         Some((tf, diag)) => {
@@ -479,6 +549,11 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         bands: opts.bands.clone(),
         fit_nrmse_out_of_band,
         paper,
+        discrete,
+        model_match,
+        raw_predicted_error: raw_j.sqrt(),
+        compensated_band_hz: comp_band,
+        notes,
     })
 }
 

@@ -12,6 +12,7 @@ use std::time::Instant;
 
 use crate::bands::{self, Band};
 use crate::design::{design_axis, AxisDesign, DesignOptions, FitMethod};
+use crate::discretize::{Discretization, MATCH_BAND_FRACTION};
 use crate::fit::rfp::RfpOptions;
 use crate::frf::{axis_name, Frf};
 use crate::io;
@@ -53,7 +54,7 @@ impl BandArgs {
     /// of the lowest band is added: the mean cutting force needs it, and the
     /// Kalman filter's force state is only observable through G(0).
     pub fn resolve(&self, frf: &Frf, fs_hz: f64) -> Result<Vec<Band>> {
-        let max_hz = frf.freq_hz[frf.freq_hz.len() - 1].min(fs_hz / 2.0);
+        let max_hz = frf.freq_hz[frf.freq_hz.len() - 1].min(MATCH_BAND_FRACTION * fs_hz);
         let mut out = Vec::new();
         if let (Some(rpm), Some(z)) = (self.spindle_rpm, self.teeth) {
             out.extend(bands::from_tooth_passing(rpm, z, self.harmonics, self.band_width, max_hz)?);
@@ -145,6 +146,11 @@ pub struct DesignInputArgs {
     /// Upper limit of the compensator's white-noise gain.
     #[arg(long, default_value_t = 30.0)]
     pub max_noise_gain: f64,
+    /// Discrete model of the Kalman design: `fit` (default: matched on the
+    /// unit circle to the sampled-data relation of a band-limited chain up
+    /// to 0.45 fs), or the hold equivalents `foh`/`zoh` for comparison.
+    #[arg(long, value_enum, default_value_t = Discretization::Fit)]
+    pub discretization: Discretization,
 }
 
 impl DesignInputArgs {
@@ -229,6 +235,24 @@ pub struct AxisJson {
     pub noise_gain: f64,
     /// Predicted in-band relative error √J.
     pub predicted_error: f64,
+    /// Predicted in-band relative error of the uncompensated force; the
+    /// design is refused unless `predicted_error` is below it.
+    pub raw_predicted_error: f64,
+    /// Compensated band (Hz): the coherent band capped at 0.45 fs.
+    pub compensated_band_hz: (f64, f64),
+    /// Discrete model: `fit`, `foh`, `zoh` (null for the paper's Tustin).
+    pub discretization: Option<&'static str>,
+    /// Model match max |Ĝ_d/Ĝ − 1| over the compensated band (null for the paper's method).
+    pub model_match: Option<f64>,
+    /// Advance D (samples) and FIR taps of the discrete model, and the
+    /// condition number of its least-squares fit.
+    pub discrete_advance: Option<usize>,
+    /// FIR taps of the discrete model.
+    pub discrete_taps: Option<usize>,
+    /// Condition number of the discrete model's least-squares fit.
+    pub discrete_condition: Option<f64>,
+    /// Notes (e.g. FRF lines beyond 0.45 fs).
+    pub notes: Vec<String>,
     /// Sections / FIR taps in the image.
     pub sections: usize,
     /// FIR taps.
@@ -362,13 +386,13 @@ pub fn render_summary(designs: &[AxisDesign], fs: f64, latency: usize, image: &s
     }
     let _ = writeln!(
         s,
-        "{:<4} {:>5} {:>7} {:>13} {:>10} {:>9} {:>15} {:>6} {:>7} {:>7}",
-        "axis", "order", "fit err", "coherent (Hz)", "Q (N²)", "R (N²)", "flat band (Hz)", "noise", "pred.", "sec+fir"
+        "{:<4} {:>5} {:>7} {:>13} {:>10} {:>9} {:>15} {:>6} {:>7} {:>7} {:>8} {:>7}",
+        "axis", "order", "fit err", "coherent (Hz)", "Q (N²)", "R (N²)", "flat band (Hz)", "noise", "pred.", "raw", "match", "sec+fir"
     );
     for d in designs {
         let _ = writeln!(
             s,
-            "{:<4} {:>5} {:>6.2}% {:>6.0}-{:<6.0} {:>10.3e} {:>9.4} {:>7.0}-{:<7.0} {:>6.2} {:>6.2}% {:>4}+{}",
+            "{:<4} {:>5} {:>6.2}% {:>6.0}-{:<6.0} {:>10.3e} {:>9.4} {:>7.0}-{:<7.0} {:>6.2} {:>6.2}% {:>6.2}% {:>8} {:>4}+{}",
             axis_name(d.axis),
             d.model.order(),
             d.fit_nrmse * 100.0,
@@ -380,9 +404,31 @@ pub fn render_summary(designs: &[AxisDesign], fs: f64, latency: usize, image: &s
             d.flat_band_hz.1,
             d.noise_gain,
             d.predicted_error * 100.0,
+            d.raw_predicted_error * 100.0,
+            if d.model_match.is_finite() { format!("{:.3}%", d.model_match * 100.0) } else { "tustin".to_string() },
             d.filter.sections().len(),
             d.filter.fir().len()
         );
+    }
+    for d in designs {
+        if let Some((dm, fd)) = &d.discrete {
+            let _ = writeln!(
+                s,
+                "{} discrete model: {} (advance {} samples, {} FIR taps, LS condition {:.1e}{}); match {:.3} % over {:.0}-{:.0} Hz",
+                axis_name(d.axis),
+                dm.method.name(),
+                dm.advance,
+                dm.fir.len(),
+                fd.condition,
+                if fd.modes_above_nyquist > 0 { format!(", {} mode(s) above fs/2 fitted by their tail", fd.modes_above_nyquist) } else { String::new() },
+                d.model_match * 100.0,
+                d.compensated_band_hz.0,
+                d.compensated_band_hz.1
+            );
+        }
+        for n in &d.notes {
+            let _ = writeln!(s, "note: {n}");
+        }
     }
     for d in designs {
         if let Some((tf, p)) = &d.paper {
@@ -391,7 +437,7 @@ pub fn render_summary(designs: &[AxisDesign], fs: f64, latency: usize, image: &s
     }
     let _ = writeln!(
         s,
-        "flat band: |H·Ĝ| within ±5 % and ±5° of the pure {latency}-sample delay (fitted model Ĝ); noise: white-noise gain; pred.: predicted in-band RMS error for a flat force spectrum"
+        "flat band: |H·Ĝ| within ±5 % and ±5° of the pure {latency}-sample delay (fitted model Ĝ); noise: white-noise gain; pred.: predicted in-band RMS error for a flat force spectrum; raw: the same for no compensation; match: max |Ĝ_d/Ĝ − 1| of the discrete model over the compensated band"
     );
     s
 }
@@ -440,6 +486,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
         vf: crate::fit::vf::VfOptions { max_order: args.max_order, ..Default::default() },
         method,
         bands: bands.clone(),
+        discretization: args.input.discretization,
         ..Default::default()
     };
     let method_name = if paper { "paper" } else { "vf" };
@@ -462,7 +509,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     io::image_file::write_image(&args.out, &image)?;
     if !paper {
         // The model sidecar of `compensate --offline` (crate::smoother).
-        let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model)).collect();
+        let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
         crate::smoother::write_sidecar(&args.out, &crate::smoother::ModelSidecar::new(&image, &models))?;
     }
     let id = image.id();
@@ -494,6 +541,14 @@ pub fn run(args: &DesignArgs) -> Result<()> {
                     flat_band_hz: d.flat_band_hz,
                     noise_gain: d.noise_gain,
                     predicted_error: d.predicted_error,
+                    raw_predicted_error: d.raw_predicted_error,
+                    compensated_band_hz: d.compensated_band_hz,
+                    discretization: d.discrete.as_ref().map(|x| x.0.method.name()),
+                    model_match: d.model_match.is_finite().then_some(d.model_match),
+                    discrete_advance: d.discrete.as_ref().map(|x| x.0.advance),
+                    discrete_taps: d.discrete.as_ref().map(|x| x.0.fir.len()),
+                    discrete_condition: d.discrete.as_ref().map(|x| x.1.condition),
+                    notes: d.notes.clone(),
                     sections: d.filter.sections().len(),
                     fir_taps: d.filter.fir().len(),
                     dare_residual: d.kalman.dare_residual,

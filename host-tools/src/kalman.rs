@@ -1,27 +1,30 @@
 //! Kalman compensator design (DESIGN.md, signal chain steps 2-3 and 5).
 //!
-//! 1. The fitted model G(s) = d + Σ r/(s − p) is discretized exactly per pole
-//!    (the matrix exponential of a modal model is e^{pT} per pole) with the
-//!    applied force Fa piecewise *linear* between samples (first-order hold):
-//!    a real cutting force is continuous, and a zero-order hold would assume a
-//!    half-sample lag that is not there.
-//! 2. Augmentation: x_e = [x_s; F_k; F_{k−1}; …; F_{k−L}] with the force a
-//!    random walk, F_{k+1} = F_k + w_k, E[w²] = q (N²/sample). With the FOH
-//!    the increment w_k also drives the plant, so the process noise enters
-//!    through g = [s·γ1; 1; 0…] (correlated, exact).
+//! 1. The fitted model Ĝ(s) becomes a discrete model Ĝ_d(z) = z^D·M(z)
+//!    ([`crate::discretize`]): by default fitted on the unit circle to the
+//!    sampled-data relation Ĝ(j2πf) of a band-limited chain, with an advance
+//!    of D samples (the band-limited relation is two-sided) and M causal:
+//!    M(z) = d + Σ ρ/(z − ζ) + Σ_m h_m z^{−m}. Hold equivalents (FOH, ZOH)
+//!    have the same form with D = 0 and no taps.
+//! 2. Augmentation: x_e = [x_s; F_k; F_{k−1}; …; F_{k−N}] with the force a
+//!    random walk, F_{k+1} = F_k + w_k, E[w²] = q (N²/sample), and
+//!    N = max(L + D, M) so that both the taps and the output lag are states.
+//!    The measurement is ỹ_k = y_{k−D} = M(z)F_k + v_k (causal in F).
 //! 3. The filter DARE P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + q g gᵀ is
 //!    solved by the structured doubling algorithm (Chu, Fan & Lin 2005), and
 //!    its residual and the closed-loop spectral radius are checked.
-//! 4. Compensator from y to the estimate of F_{k−L} (a fixed-lag smoother for
-//!    L > 0, still a fixed-size LTI filter):
-//!    x̂⁻[k+1] = A(I − K C) x̂⁻[k] + A K y[k],
-//!    F̂[k−L] = e_Lᵀ (I − K C) x̂⁻[k] + e_Lᵀ K y[k],  K = P Cᵀ (C P Cᵀ + R)⁻¹.
+//! 4. Compensator from ỹ to the estimate of F_{k−L−D} (a fixed-lag smoother
+//!    of lag L + D, still a fixed-size LTI filter):
+//!    x̂⁻[k+1] = A(I − K C) x̂⁻[k] + A K ỹ[k],
+//!    F̂[k−L−D] = e_{L+D}ᵀ (I − K C) x̂⁻[k] + e_{L+D}ᵀ K ỹ[k],  K = P Cᵀ (C P Cᵀ + R)⁻¹.
+//!    Fed with y instead of ỹ (D samples earlier), the same filter outputs
+//!    F̂[k−L]: the declared latency stays L.
 
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
 
-use crate::fit::{PoleResidueModel, Term};
+use crate::discretize::{DTerm, DiscreteModel};
 
 /// c (pI − A)⁻¹ b + d at the complex point p (z for a discrete system, jω
 /// for a continuous one), by an LU solve; NaN if pI − A is singular.
@@ -92,81 +95,65 @@ pub struct AugmentedPlant {
     pub c: DVector<f64>,
     /// Number of plant (sensor) states.
     pub n_plant: usize,
-    /// Fixed lag L (samples).
+    /// Lag of the estimate in the model's time frame: L + D (samples).
     pub lag: usize,
 }
 
 impl AugmentedPlant {
-    /// Index of the state F_{k−L} that the compensator outputs.
+    /// Index of the state F_{k−L−D} that the compensator outputs.
     pub fn output_index(&self) -> usize {
         self.n_plant + self.lag
     }
 }
 
-/// FOH input weights of one pole over one sample: x[k+1] = e^{pT} x[k] +
-/// γ0·F_k + γ1·F_{k+1} for ẋ = p x + F(t), F linear between samples.
-/// γ0 = I1/T, γ1 = I0 − I1/T with I0 = ∫₀ᵀ e^{pu} du, I1 = ∫₀ᵀ u e^{pu} du.
-fn foh_weights(p: Complex64, t: f64) -> (Complex64, Complex64, Complex64) {
-    let x = p * t;
-    let e = x.exp();
-    let (i0, i1) = if x.norm() < 1e-4 {
-        // series: I0 = T(1 + x/2 + x²/6), I1 = T²(1/2 + x/3 + x²/8)
-        (t * (1.0 + x / 2.0 + x * x / 6.0), t * t * (0.5 + x / 3.0 + x * x / 8.0))
-    } else {
-        ((e - 1.0) / p, (e * (x - 1.0) + 1.0) / (p * p))
-    };
-    (e, i1 / t, i0 - i1 / t)
-}
-
-/// Build the augmented plant of a fitted model at sample rate `fs_hz` with
-/// fixed lag `lag` (module doc, steps 1-2). Plant states are scaled by |p|
-/// so that every state has the magnitude of a force.
-pub fn augmented_plant(model: &PoleResidueModel, fs_hz: f64, lag: usize) -> AugmentedPlant {
-    let t = 1.0 / fs_hz;
-    let n_plant = model.order();
-    let n = n_plant + 1 + lag;
+/// Build the augmented plant of the discrete model `dm` for a declared
+/// output latency of `lag` samples (module doc, steps 1-2). Plant states are
+/// scaled by 1/|1 − ζ| so that every state has about the magnitude of a force.
+pub fn augmented_plant(dm: &DiscreteModel, lag: usize) -> AugmentedPlant {
+    let n_plant = dm.order();
+    let model_lag = lag + dm.advance;
+    let n_delay = model_lag.max(dm.fir.len());
+    let n = n_plant + 1 + n_delay;
     let f = n_plant; // index of F_k
     let mut a = DMatrix::<f64>::zeros(n, n);
     let mut g = DVector::<f64>::zeros(n);
     let mut c = DVector::<f64>::zeros(n);
     let mut i = 0;
-    for term in &model.terms {
+    for term in &dm.terms {
         match *term {
-            Term::Real { pole, residue } => {
-                let s = pole.abs();
-                let (e, g0, g1) = foh_weights(Complex64::new(pole, 0.0), t);
-                a[(i, i)] = e.re;
-                a[(i, f)] = s * (g0 + g1).re;
-                g[i] = s * g1.re;
+            DTerm::Real { pole, residue } => {
+                let s = (1.0 - pole).abs().max(1e-12);
+                a[(i, i)] = pole;
+                a[(i, f)] = s;
                 c[i] = residue / s;
                 i += 1;
             }
-            Term::Pair { pole, residue } => {
-                let s = pole.norm();
-                let (e, g0, g1) = foh_weights(pole, t);
-                a[(i, i)] = e.re;
-                a[(i, i + 1)] = -e.im;
-                a[(i + 1, i)] = e.im;
-                a[(i + 1, i + 1)] = e.re;
-                let gin = (g0 + g1) * s;
-                a[(i, f)] = gin.re;
-                a[(i + 1, f)] = gin.im;
-                g[i] = (g1 * s).re;
-                g[i + 1] = (g1 * s).im;
-                // 2·Re(r·x) with x = (ξ1 + jξ2)/s
-                c[i] = 2.0 * residue.re / s;
-                c[i + 1] = -2.0 * residue.im / s;
+            DTerm::Pair { pole, residue } => {
+                // Complex state x (x[k+1] = ζ x[k] + F_k) as ξ = s·(Re x, Im x);
+                // its output 2·Re(ρ x).
+                let z = Complex64::new(pole.0, pole.1);
+                let s = (Complex64::new(1.0, 0.0) - z).norm().max(1e-12);
+                a[(i, i)] = z.re;
+                a[(i, i + 1)] = -z.im;
+                a[(i + 1, i)] = z.im;
+                a[(i + 1, i + 1)] = z.re;
+                a[(i, f)] = s;
+                c[i] = 2.0 * residue.0 / s;
+                c[i + 1] = -2.0 * residue.1 / s;
                 i += 2;
             }
         }
     }
     a[(f, f)] = 1.0;
     g[f] = 1.0;
-    c[f] = model.d;
-    for j in 1..=lag {
+    c[f] = dm.d;
+    for j in 1..=n_delay {
         a[(f + j, f + j - 1)] = 1.0;
     }
-    AugmentedPlant { a, g, c, n_plant, lag }
+    for (m, h) in dm.fir.iter().enumerate() {
+        c[f + m + 1] = *h;
+    }
+    AugmentedPlant { a, g, c, n_plant, lag: model_lag }
 }
 
 /// Solution of the filter DARE with its checks.
@@ -239,15 +226,16 @@ pub struct KalmanDesign {
     pub r: f64,
 }
 
-/// Design the compensator for model, rate, q, R and lag (module doc).
-pub fn design(model: &PoleResidueModel, fs_hz: f64, q: f64, r: f64, lag: usize) -> Result<KalmanDesign> {
+/// Design the compensator for the discrete model, q, R and declared
+/// latency `lag` (module doc).
+pub fn design(dm: &DiscreteModel, q: f64, r: f64, lag: usize) -> Result<KalmanDesign> {
     if !(r > 0.0) || !r.is_finite() {
         bail!("measurement noise variance R must be positive and finite, got {r}");
     }
     if !(q > 0.0) || !q.is_finite() {
         bail!("process noise intensity q must be positive and finite, got {q}");
     }
-    let plant = augmented_plant(model, fs_hz, lag);
+    let plant = augmented_plant(dm, lag);
     let qm = &plant.g * plant.g.transpose() * q;
     let sol = solve_filter_dare(&plant.a, &plant.c, &qm, r)?;
     let s = (plant.c.transpose() * &sol.p * &plant.c)[(0, 0)] + r;

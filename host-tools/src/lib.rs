@@ -8,6 +8,7 @@ pub mod compare;
 pub mod compensate;
 pub mod design;
 pub mod design_cmd;
+pub mod discretize;
 pub mod flash_serial;
 pub mod flash_probe;
 pub mod fit;

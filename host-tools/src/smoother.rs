@@ -4,12 +4,17 @@
 //! the box.
 //!
 //! **Model.** The same augmented plant as the box's compensator
-//! ([`crate::kalman`], DESIGN.md steps 2-3): the fitted G(s) discretized with
-//! a first-order hold, the applied force a random walk F_{k+1} = F_k + w_k,
-//! E[w²] = q, measurement y_k = c·x_k + v_k, E[v²] = R, with q and R the
-//! values the design chose and stored in the image (`inspect` shows them).
-//! The image does not hold G(s) itself, so `dynocomp design` writes it next
-//! to the image as a sidecar `<image>.model.json` ([`ModelSidecar`]), tied to
+//! ([`crate::kalman`], DESIGN.md steps 2-3): the discrete model Ĝ_d(z) =
+//! z^D·M(z) of the design ([`crate::discretize`]), the applied force a random
+//! walk F_{k+1} = F_k + w_k, E[w²] = q, measurement ỹ_k = y_{k−D} = c·x_k + v_k,
+//! E[v²] = R, with q and R the values the design chose and stored in the
+//! image (`inspect` shows them). The record is run as ỹ (D samples of y_0
+//! in front), so the estimate of F_k uses every sample of y.
+//! The image does not hold the model itself, so `dynocomp design` writes it
+//! next to the image as a sidecar `<image>.model.json` ([`ModelSidecar`]):
+//! the fitted Ĝ(s) and the discrete model of the design (a sidecar without
+//! the discrete model, from an older version, gets the first-order hold of
+//! Ĝ(s), which that version used), tied to
 //! the image by its id (CRC-32) and the source FRF's SHA-256;
 //! `compensate --offline` refuses a missing or foreign sidecar. Only the
 //! default method (vf) writes a sidecar; `--method paper` images (continuous
@@ -41,6 +46,7 @@ use num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+use crate::discretize::{discretize, DiscreteModel, Discretization};
 use crate::fit::{PoleResidueModel, Term};
 use crate::frf::axis_name;
 use crate::io::signal_csv::SignalRecord;
@@ -79,6 +85,9 @@ pub struct AxisModelJson {
     pub d: f64,
     /// Pole-residue terms.
     pub terms: Vec<TermJson>,
+    /// The discrete model of the design (absent in older sidecars: FOH).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub discrete: Option<DiscreteModel>,
 }
 
 /// The sidecar `<image>.model.json` written by `dynocomp design`: the fitted
@@ -110,10 +119,11 @@ fn hex(bytes: &[u8]) -> String {
 
 impl ModelSidecar {
     /// Sidecar for `image` with the given per-axis models `(axis, model)`.
-    pub fn new(image: &CoeffImage, models: &[(usize, &PoleResidueModel)]) -> Self {
+    pub fn new(image: &CoeffImage, models: &[(usize, &PoleResidueModel, Option<&DiscreteModel>)]) -> Self {
         let axes = models
             .iter()
-            .map(|(axis, m)| AxisModelJson {
+            .map(|(axis, m, dm)| AxisModelJson {
+                discrete: dm.cloned(),
                 axis: axis_name(*axis).to_string(),
                 d: m.d,
                 terms: m
@@ -163,6 +173,28 @@ impl ModelSidecar {
         }
         Ok(model)
     }
+
+    /// The discrete model of `axis` for the smoother: the stored one,
+    /// validated (finite, poles inside the unit circle, a short advance), or
+    /// the first-order hold of Ĝ(s) for a sidecar that has none.
+    pub fn discrete_model(&self, axis: usize, source: &str) -> Result<DiscreteModel> {
+        let model = self.model(axis, source)?;
+        let name = axis_name(axis);
+        let stored = self.axes.iter().find(|a| a.axis == name).and_then(|a| a.discrete.clone());
+        let Some(dm) = stored else {
+            return Ok(discretize(&model, self.fs_hz, Discretization::Foh, (0.0, 0.0))?.0);
+        };
+        let finite = dm.d.is_finite()
+            && dm.fir.iter().all(|v| v.is_finite())
+            && dm.terms.iter().all(|t| match *t {
+                crate::discretize::DTerm::Real { pole, residue } => pole.is_finite() && residue.is_finite(),
+                crate::discretize::DTerm::Pair { pole, residue } => [pole.0, pole.1, residue.0, residue.1].iter().all(|v| v.is_finite()),
+            });
+        if !finite || !(dm.pole_radius() < 1.0) || dm.fs_hz != self.fs_hz || dm.advance > 64 || dm.fir.len() > 64 {
+            bail!("{source}: axis {name}: the discrete model is not valid (non-finite, unstable, another rate, or too long); re-run `dynocomp design`");
+        }
+        Ok(dm)
+    }
 }
 
 /// Write the sidecar of `image` (at `image_path`) atomically.
@@ -211,6 +243,8 @@ pub struct Smoother {
     k: DVector<f64>,
     s: f64,
     force_index: usize,
+    /// Advance D of the discrete model (samples).
+    advance: usize,
     /// Relative residual of the DARE solution.
     pub dare_residual: f64,
     /// Spectral radius of A(I − K cᵀ), the backward recursion's matrix (transposed).
@@ -218,13 +252,13 @@ pub struct Smoother {
 }
 
 impl Smoother {
-    /// Build the smoother for model G(s), sample rate `fs_hz` (Hz), process
-    /// noise q (N²/sample) and measurement noise R (N²).
-    pub fn new(model: &PoleResidueModel, fs_hz: f64, q: f64, r: f64) -> Result<Self> {
+    /// Build the smoother for the discrete model `dm`, process noise q
+    /// (N²/sample) and measurement noise R (N²).
+    pub fn new(dm: &DiscreteModel, q: f64, r: f64) -> Result<Self> {
         if !(q > 0.0 && q.is_finite() && r > 0.0 && r.is_finite()) {
             bail!("smoother needs q > 0 and R > 0 (got q = {q}, R = {r}); the image's design summary holds them");
         }
-        let plant = kalman::augmented_plant(model, fs_hz, 0);
+        let plant = kalman::augmented_plant(dm, 0);
         let qm = &plant.g * plant.g.transpose() * q;
         let sol = kalman::solve_filter_dare(&plant.a, &plant.c, &qm, r)?;
         let s = (plant.c.transpose() * &sol.p * &plant.c)[(0, 0)] + r;
@@ -242,6 +276,7 @@ impl Smoother {
             k,
             s,
             force_index: plant.n_plant,
+            advance: dm.advance,
             dare_residual: sol.residual,
             closed_loop_radius: radius,
         })
@@ -249,6 +284,14 @@ impl Smoother {
 
     /// Smoothed force estimate F̂_k|N (N) for every sample of `y` (N).
     pub fn smooth(&self, y: &[f64]) -> Vec<f64> {
+        // ỹ_k = y_{k−D}: D copies of y_0 in front; F̂_k for k < len(y).
+        let padded: Vec<f64>;
+        let y = if self.advance > 0 && !y.is_empty() {
+            padded = std::iter::repeat_n(y[0], self.advance).chain(y.iter().copied()).collect();
+            &padded[..]
+        } else {
+            y
+        };
         let n = self.a.nrows();
         let mut prior = DVector::<f64>::zeros(n);
         let mut priors: Vec<DVector<f64>> = Vec::with_capacity(y.len());
@@ -269,6 +312,7 @@ impl Smoother {
             out[k] = priors[k][self.force_index] - p_row.dot(&lambda_tilde);
             lambda_hat = self.a.tr_mul(&lambda_tilde);
         }
+        out.truncate(y.len() - self.advance.min(y.len()));
         out
     }
 }
@@ -281,8 +325,8 @@ pub fn smooth_record(image: &CoeffImage, sidecar: &ModelSidecar, rec: &SignalRec
         let Some(a) = image.axes.get(*axis).copied().flatten() else {
             bail!("{source}: column f{} has no compensator (and no q, R) in the image; drop the column or design for that axis", axis_name(*axis));
         };
-        let model = sidecar.model(*axis, source)?;
-        let sm = Smoother::new(&model, f64::from(image.fs_hz), a.summary.q, a.summary.r)
+        let dm = sidecar.discrete_model(*axis, source)?;
+        let sm = Smoother::new(&dm, a.summary.q, a.summary.r)
             .with_context(|| format!("{source}: axis {}", axis_name(*axis)))?;
         let out = sm.smooth(y);
         if let Some(k) = out.iter().position(|v| !v.is_finite()) {

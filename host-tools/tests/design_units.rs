@@ -1,25 +1,16 @@
 //! Each numerical stage of the design against an independent truth.
 
 use dynocomp::fit::vf::{coherence_weights, vector_fit, VfOptions};
-use dynocomp::fit::{PoleResidueModel, Term};
+use dynocomp::discretize::{discretize, DiscreteModel, Discretization};
+use dynocomp::fit::PoleResidueModel;
 use dynocomp::kalman::{self, solve_filter_dare, StateSpace};
 use dynocomp::realize::realize;
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
-use std::f64::consts::PI;
 
 /// A modal model with unit DC gain from (f_n Hz, ζ, weight) triples.
 fn modal(modes: &[(f64, f64, f64)]) -> PoleResidueModel {
-    let terms = modes
-        .iter()
-        .map(|&(f, z, w)| {
-            let wn = 2.0 * PI * f;
-            let wd = wn * (1.0 - z * z).sqrt();
-            // w·wn²/(s² + 2ζwn s + wn²) = r/(s−p) + r̄/(s−p̄), r = w·wn²/(2j·wd)
-            Term::Pair { pole: Complex64::new(-z * wn, wd), residue: Complex64::new(0.0, -w * wn * wn / (2.0 * wd)) }
-        })
-        .collect();
-    PoleResidueModel { terms, d: 0.0 }
+    PoleResidueModel::from_modes(modes)
 }
 
 #[test]
@@ -64,9 +55,9 @@ fn random_walk_kalman_gain_matches_the_steady_state_formula() {
     // A pure gain sensor (G = 1, no modes) with a random-walk force: the
     // Kalman filter is the scalar one above with a = 1, and the compensator
     // is F̂[k] = F̂[k−1] + K (y[k] − F̂[k−1]) with K = P/(P + r).
-    let model = PoleResidueModel { terms: vec![], d: 1.0 };
+    let model = DiscreteModel { fs_hz: 51_200.0, method: Discretization::Foh, terms: vec![], d: 1.0, fir: vec![], advance: 0 };
     let (q, r): (f64, f64) = (0.3, 0.05);
-    let d = kalman::design(&model, 51_200.0, q, r, 0).unwrap();
+    let d = kalman::design(&model, q, r, 0).unwrap();
     let b = -q;
     let p = (-b + (b * b + 4.0 * q * r).sqrt()) / 2.0;
     let k = p / (p + r);
@@ -78,9 +69,12 @@ fn random_walk_kalman_gain_matches_the_steady_state_formula() {
 #[test]
 fn realization_reproduces_the_dense_transfer_function() {
     // A compensator from a realistic model, with a fixed lag (nilpotent chain)
+    // (the unit-circle fit: an advance and FIR taps make a longer delay chain)
     let model = modal(&[(250.0, 0.03, 0.1), (2300.0, 0.04, 0.9)]);
+    let (dm, _) = discretize(&model, 51_200.0, Discretization::Fit, (0.0, 4000.0)).unwrap();
+    assert!(dm.advance > 0 && !dm.fir.is_empty(), "the fit should use its advance and taps here");
     for lag in [0usize, 3, 6] {
-        let d = kalman::design(&model, 51_200.0, 200.0, 0.05, lag).unwrap();
+        let d = kalman::design(&dm, 200.0, 0.05, lag).unwrap();
         let ss: &StateSpace = &d.compensator;
         let real = realize(ss).unwrap();
         let mut worst: f64 = 0.0;

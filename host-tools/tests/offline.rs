@@ -6,12 +6,12 @@ mod sim_common;
 use sim_common::{design_all, sim, FS, F_MAX};
 use dynocomp::compensate::compensate_record;
 use dynocomp::design_cmd::build_image;
-use dynocomp::fit::{PoleResidueModel, Term};
+use dynocomp::discretize::{discretize, DiscreteModel, Discretization};
+use dynocomp::fit::PoleResidueModel;
 use dynocomp::io::signal_csv::SignalRecord;
 use dynocomp::metrics::accuracy;
 use dynocomp::simulate::dynamometer::{Dynamometer, Hold, Mode};
 use dynocomp::smoother::{read_sidecar, sidecar_path, smooth_record, write_sidecar, ModelSidecar, Smoother};
-use num_complex::Complex64;
 use std::f64::consts::PI;
 
 
@@ -50,7 +50,7 @@ fn noise_free_piecewise_linear_force_is_recovered_essentially_exactly() {
         })
         .collect();
     let y = dyno.measure_with(&truth, FS, Hold::Foh);
-    let sm = Smoother::new(&model, FS, 1.0, 1e-10).unwrap();
+    let sm = Smoother::new(&foh_of(&model), 1.0, 1e-10).unwrap();
     assert!(sm.dare_residual < 1e-8 && sm.closed_loop_radius < 1.0);
     let est = sm.smooth(&y);
     // skip the start-up (the record starts at rest with a non-zero force)
@@ -66,19 +66,15 @@ fn noise_free_piecewise_linear_force_is_recovered_essentially_exactly() {
     assert!(worst < 1e-6 * peak, "worst error {worst:e} N");
 }
 
-/// The exact pole-residue model of a simulated dynamometer axis:
-/// r·ω²/(s² + 2ζωs + ω²) = ρ/(s − p) + c.c. with ρ = r·ω²/(2j·ω_d).
+/// The exact pole-residue model of a simulated dynamometer axis.
 fn model_of(dyno: &Dynamometer) -> PoleResidueModel {
-    let terms = dyno
-        .modes
-        .iter()
-        .map(|m| {
-            let w = m.omega();
-            let wd = w * (1.0 - m.zeta * m.zeta).sqrt();
-            Term::Pair { pole: Complex64::new(-m.zeta * w, wd), residue: Complex64::new(0.0, -m.residue * w * w / (2.0 * wd)) }
-        })
-        .collect();
-    PoleResidueModel { terms, d: 0.0 }
+    PoleResidueModel::from_modes(&dyno.modes.iter().map(|m| (m.fn_hz, m.zeta, m.residue)).collect::<Vec<_>>())
+}
+
+/// Its first-order-hold discrete model: exact for the simulator's FOH
+/// measurement of a force linear between samples.
+fn foh_of(model: &PoleResidueModel) -> DiscreteModel {
+    discretize(model, FS, Discretization::Foh, (0.0, 0.0)).unwrap().0
 }
 
 #[test]
@@ -108,10 +104,11 @@ fn smoother_beats_the_causal_fixed_lag_filters_when_its_model_holds() {
     let rms = |e: &[f64]| (e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt();
     let (lo, hi) = (n / 10, 9 * n / 10);
     let err = |est: &[f64]| rms(&(lo..hi).map(|k| est[k] - truth[k]).collect::<Vec<_>>());
-    let smoothed = Smoother::new(&model, FS, q, r).unwrap().smooth(&y);
+    let dm = foh_of(&model);
+    let smoothed = Smoother::new(&dm, q, r).unwrap().smooth(&y);
     let e_s = err(&smoothed);
     for lag in [0usize, 4, 16] {
-        let k = dynocomp::kalman::design(&model, FS, q, r, lag).unwrap();
+        let k = dynocomp::kalman::design(&dm, q, r, lag).unwrap();
         let mut padded = y.clone();
         padded.extend(std::iter::repeat_n(0.0, lag));
         let est = &k.compensator.simulate(&padded)[lag..];
@@ -137,7 +134,7 @@ fn offline_smoother_on_simulated_milling_records() {
         let designs0 = design_all(&s, 0);
         let image = build_image(&designs, FS as u32, 4, 5000.0, [3; 32]).unwrap();
         let image0 = build_image(&designs0, FS as u32, 0, 5000.0, [3; 32]).unwrap();
-        let models: Vec<(usize, &PoleResidueModel)> = designs.iter().map(|d| (d.axis, &d.model)).collect();
+        let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
         let sidecar = ModelSidecar::new(&image, &models);
         let rec = SignalRecord { t_s: None, channels: (0..3).map(|a| (a, s.measured[a].clone())).collect() };
         let causal = compensate_record(&image, &rec, false, "sim").unwrap();
@@ -163,7 +160,7 @@ fn a_smoother_with_the_wrong_model_is_worse() {
     let other = sim(54, 19_500.0, 4);
     let designs = design_all(&other, 4);
     let image = build_image(&designs, FS as u32, 4, 5000.0, [3; 32]).unwrap();
-    let models: Vec<(usize, &PoleResidueModel)> = designs.iter().map(|d| (d.axis, &d.model)).collect();
+    let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
     let sidecar = ModelSidecar::new(&image, &models);
     let rec = SignalRecord { t_s: None, channels: (0..3).map(|a| (a, s.measured[a].clone())).collect() };
     let out = smooth_record(&image, &sidecar, &rec, "sim").unwrap();
@@ -198,7 +195,7 @@ fn the_sidecar_is_tied_to_its_image() {
     // missing
     let e = read_sidecar(&path, &img).unwrap_err().to_string();
     assert!(e.contains("box.dcimg.model.json") && e.contains("cannot read"), "{e}");
-    write_sidecar(&path, &ModelSidecar::new(&img, &[(0, &model)])).unwrap();
+    write_sidecar(&path, &ModelSidecar::new(&img, &[(0, &model, None)])).unwrap();
     assert_eq!(sidecar_path(&path), dir.path().join("box.dcimg.model.json"));
     let sc = read_sidecar(&path, &img).unwrap();
     assert_eq!(sc.model(0, "t").unwrap(), model);

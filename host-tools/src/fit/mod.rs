@@ -39,6 +39,21 @@ pub struct PoleResidueModel {
 }
 
 impl PoleResidueModel {
+    /// The exact model of lightly damped modes given as (f_n Hz, ζ, share)
+    /// triples, each share·ω²/(s² + 2ζωs + ω²) = ρ/(s − p) + c.c. with
+    /// p = −ζω + jω_d, ρ = share·ω²/(2j·ω_d), ω_d = ω√(1 − ζ²).
+    pub fn from_modes(modes: &[(f64, f64, f64)]) -> Self {
+        let terms = modes
+            .iter()
+            .map(|&(f, z, share)| {
+                let wn = 2.0 * PI * f;
+                let wd = wn * (1.0 - z * z).sqrt();
+                Term::Pair { pole: Complex64::new(-z * wn, wd), residue: Complex64::new(0.0, -share * wn * wn / (2.0 * wd)) }
+            })
+            .collect();
+        PoleResidueModel { terms, d: 0.0 }
+    }
+
     /// Model order (number of poles, counting a pair as two).
     pub fn order(&self) -> usize {
         self.terms.iter().map(|t| if matches!(t, Term::Real { .. }) { 1 } else { 2 }).sum()
