@@ -664,3 +664,51 @@ fn anti_alias_option_parses_and_rejects_bad_values() {
         assert!(e.contains("--anti-alias") || e.contains("anti-alias"), "{bad:?}: {e}");
     }
 }
+
+// ---------------------------------------------------------------- multi-rate harness
+
+#[test]
+fn harness_noise_floor_matches_the_analytic_integral() {
+    use dynocomp::simulate::rates::noise_floor;
+    // G = 1: sqrt(R·2·band/fs)/std.
+    let (r, fs, band, std) = (0.05, 25_600.0, 4000.0, 7.0);
+    let flat = noise_floor(|_| Complex64::new(1.0, 0.0), r, fs, band, std);
+    let expect = (r * 2.0 * band / fs).sqrt() / std;
+    assert!((flat / expect - 1.0).abs() < 1e-9, "{flat} vs {expect}");
+    // G = 1/(1 + jf/fc)... inverse |1/G|² = 1 + (f/fc)²: ∫ = band + band³/(3fc²).
+    let fc = 1000.0;
+    let lp = noise_floor(|f| 1.0 / Complex64::new(1.0, f / fc), r, fs, band, std);
+    let expect = (r * 2.0 / fs * (band + band.powi(3) / (3.0 * fc * fc))).sqrt() / std;
+    assert!((lp / expect - 1.0).abs() < 1e-6, "{lp} vs {expect}");
+    // Negative control: a flat G is not mistaken for the low-pass one.
+    assert!(lp / flat > 2.0);
+}
+
+#[test]
+fn harness_records_a_failed_design_in_its_row_and_summarizes() {
+    use dynocomp::simulate::rates::{cases, score_sim, summarize, RunOptions};
+    let case = cases().into_iter().find(|c| c.name == "default").unwrap();
+    let mut p = case.sim_params(25_600.0);
+    p.duration_s = 0.2;
+    let s = dynocomp::simulate::simulate_with(case.seed, &p, case.dynamometer(&p).unwrap()).unwrap();
+    let mut broken = s.clone();
+    for v in broken.frf.axes[1].frf.iter_mut() {
+        *v = Complex64::new(0.0, 0.0);
+    }
+    let r = score_sim(case.name, &broken, &RunOptions::default());
+    assert!(r.axes[1].comp_nrmse.is_err(), "a zero FRF was designed: {:?}", r.axes[1]);
+    for a in [0, 2] {
+        let c = *r.axes[a].comp_nrmse.as_ref().unwrap();
+        assert!(c < r.axes[a].raw_nrmse, "axis {a}: compensated {c} vs raw {}", r.axes[a].raw_nrmse);
+        assert!(r.axes[a].noise_floor > 0.0 && r.axes[a].noise_floor < c * 1.5, "axis {a}: floor {}", r.axes[a].noise_floor);
+    }
+    let sum = summarize(std::slice::from_ref(&r));
+    assert_eq!(sum.len(), 1);
+    assert_eq!(sum[0].failed, vec!["default/y".to_string()]);
+    let (c0, c2) = (*r.axes[0].comp_nrmse.as_ref().unwrap(), *r.axes[2].comp_nrmse.as_ref().unwrap());
+    assert!((sum[0].median - 0.5 * (c0 + c2)).abs() < 1e-15 && sum[0].worst == c0.max(c2));
+    // An axis worse than raw is listed: pretend raw was perfect.
+    let mut worse = r;
+    worse.axes[0].raw_nrmse = 0.0;
+    assert_eq!(summarize(&[worse])[0].worse_than_raw, vec!["default/x".to_string()]);
+}

@@ -30,6 +30,7 @@ pub mod dynamometer;
 pub mod impact;
 pub mod measurement;
 pub mod milling;
+pub mod rates;
 
 pub use chain::{AntiAlias, Butterworth, BRICK_WALL_FRACTION};
 pub use cli::{run, SimulateArgs};
