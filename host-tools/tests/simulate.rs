@@ -5,8 +5,8 @@
 #![allow(clippy::needless_range_loop)] // axis/line indices index several arrays at once
 
 use dynocomp::simulate::{
-    h1_random_error, impact_test, milling_force, simulate, Chatter, Dynamometer, Hold, ImpactParams, MeasurementParams, MillingMode,
-    MillingParams, Mode, MultiAxisDynamometer, SimParams,
+    h1_random_error, impact_test, measure_decimated, milling_force, simulate, AntiAlias, Butterworth, Chatter, Dynamometer, Hold,
+    ImpactParams, MeasurementParams, MillingMode, MillingParams, Mode, MultiAxisDynamometer, SimParams,
 };
 use num_complex::Complex64;
 use std::f64::consts::PI;
@@ -515,4 +515,200 @@ fn run_writes_all_files_readable_by_the_io_layer() {
     let back: SimParams = serde_json::from_value(j["params"].clone()).unwrap();
     assert_eq!(back, params);
     assert!((j["params"]["milling"]["chatter"]["freq_hz"].as_f64().unwrap() - 1710.0).abs() < 1e-12);
+    // The acquisition chain is recorded (default: the ideal brick wall at 0.45 fs).
+    assert_eq!(j["anti_alias"], "ideal");
+    assert!((j["brick_wall_hz"].as_f64().unwrap() - 0.45 * 51_200.0).abs() < 1e-9);
+    assert_eq!(j["params"]["anti_alias"]["kind"], "ideal");
+}
+
+// ---------------------------------------------------------------- acquisition chain
+
+const CHAIN_FS: f64 = 10_240.0;
+const CHAIN_OS: usize = 8;
+const CHAIN_N: usize = 10_240; // 1 s: the middle half holds whole periods of any even f0
+
+/// A mode near Nyquist at the lowest DAQ rate, and a machine mode.
+fn chain_dyno() -> Dynamometer {
+    Dynamometer::from_modes(vec![mode(300.0, 0.04, 0.1), mode(3000.0, 0.03, 0.9)]).unwrap()
+}
+
+/// 4th-order Butterworth written from its normalized polynomial (independent of
+/// the simulator's pole formula): B(s) = 1/(p⁴ + a p³ + b p² + a p + 1), p = s/ωc.
+fn butterworth4(f_hz: f64, fc_hz: f64) -> Complex64 {
+    let (a, b) = (2.613_125_929_752_753, 3.414_213_562_373_095); // 2cos(π/8)+2cos(3π/8), 2+√2
+    let p = Complex64::new(0.0, f_hz / fc_hz);
+    1.0 / (p.powi(4) + a * p.powi(3) + b * p * p + a * p + 1.0)
+}
+
+/// A unit sine at `f0` Hz, faded in over 0.1 s (no onset splatter), at
+/// fs·os, through `chain`: (truth, clean) at fs.
+fn sine_through(chain: AntiAlias, f0: f64) -> (Vec<f64>, Vec<f64>) {
+    let ff = CHAIN_FS * CHAIN_OS as f64;
+    let fine: Vec<f64> = (0..chain.fine_len(CHAIN_N, CHAIN_OS))
+        .map(|k| {
+            let t = k as f64 / ff;
+            let env = if t < 0.1 { 0.5 * (1.0 - (PI * t / 0.1).cos()) } else { 1.0 };
+            env * (2.0 * PI * f0 * t).sin()
+        })
+        .collect();
+    measure_decimated(&chain_dyno(), &chain, &fine, CHAIN_FS, CHAIN_OS, CHAIN_N)
+}
+
+/// A·e^{jφ} of the component A·sin(2πf0·t + φ) of the middle half of `x`.
+fn phasor(x: &[f64], f0: f64) -> Complex64 {
+    let k0 = CHAIN_N / 4;
+    let t0 = k0 as f64 / CHAIN_FS;
+    dft_amp(&x[k0..k0 + CHAIN_N / 2], CHAIN_FS, f0) * Complex64::from_polar(1.0, 2.0 * PI * f0 * t0) * Complex64::new(0.0, 1.0)
+}
+
+fn rms_mid(x: &[f64]) -> f64 {
+    let m = &x[CHAIN_N / 4..3 * CHAIN_N / 4];
+    (m.iter().map(|v| v * v).sum::<f64>() / m.len() as f64).sqrt()
+}
+
+#[test]
+fn a_sine_below_the_brick_wall_passes_with_its_analytic_response() {
+    let d = chain_dyno();
+    let bw = Butterworth { order: 4, fc_hz: 4000.0 };
+    let ff = CHAIN_FS * CHAIN_OS as f64;
+    // The continuous force is the linear interpolant of its fine samples: its
+    // fundamental is the sine's × sinc²(πf0/f_fine).
+    let sinc2 = |f: f64| ((PI * f / ff).sin() / (PI * f / ff)).powi(2);
+    for f0 in [1000.0, 3000.0, 4400.0] {
+        for (chain, b) in [(AntiAlias::Ideal, Complex64::new(1.0, 0.0)), (AntiAlias::Butterworth(bw), butterworth4(f0, bw.fc_hz))] {
+            let (truth, clean) = sine_through(chain, f0);
+            let t = phasor(&truth, f0);
+            assert!((t - sinc2(f0)).norm() < 1e-6, "{chain} f0 {f0}: truth phasor {t}, expected {}", sinc2(f0));
+            let expected = d.frf(f0) * b;
+            let got = phasor(&clean, f0) / t;
+            let rel = (got - expected).norm() / expected.norm();
+            assert!(rel < 1e-4, "{chain} f0 {f0}: measured/true {got}, analytic G·B {expected} (rel err {rel})");
+        }
+        // The front end is really there: G alone misses it by far near fc.
+        let (truth, clean) = sine_through(AntiAlias::Butterworth(bw), f0);
+        let off = (phasor(&clean, f0) / phasor(&truth, f0) / d.frf(f0) - 1.0).norm();
+        assert!(off > 0.02, "f0 {f0}: Butterworth chain indistinguishable from G ({off})");
+        // Negative control: plain decimation relates truth samples and
+        // measurement by G·sinc², not G, so the 1e-4 check would fail.
+        let (truth, clean) = sine_through(AntiAlias::None, f0);
+        let rel = (phasor(&clean, f0) / phasor(&truth, f0) / d.frf(f0) - 1.0).norm();
+        if f0 > 2000.0 {
+            assert!(rel > 1e-3, "f0 {f0}: undecimated chain matched G to {rel}");
+        }
+    }
+    // The magnitude of the independent Butterworth is the textbook one.
+    for f in [500.0, 4000.0, 9000.0] {
+        let m2 = butterworth4(f, 4000.0).norm_sqr();
+        assert!((m2 - 1.0 / (1.0 + (f / 4000.0f64).powi(8))).abs() < 1e-12);
+        assert!((bw.frf(f) - butterworth4(f, 4000.0)).norm() < 1e-12, "simulator's B at {f} Hz");
+    }
+}
+
+#[test]
+fn a_sine_above_the_brick_wall_leaves_no_trace_but_aliases_without_it() {
+    // 0.45 fs = 4608 Hz; 5000 Hz is 8.5 % above it (below Nyquist), 7000 and
+    // 9000 Hz fold to 3240 and 1240 Hz without a filter.
+    for f0 in [5000.0, 7000.0, 9000.0] {
+        for chain in [AntiAlias::Ideal, AntiAlias::Butterworth(Butterworth { order: 4, fc_hz: 12_000.0 })] {
+            let (truth, clean) = sine_through(chain, f0);
+            assert!(rms_mid(&truth) < 1e-5, "{chain} f0 {f0}: truth keeps {:.2e} RMS", rms_mid(&truth));
+            assert!(rms_mid(&clean) < 1e-5, "{chain} f0 {f0}: measurement keeps {:.2e} RMS", rms_mid(&clean));
+        }
+        // Negative control: without the filter the sine (or its alias) stays
+        // in both records at full size.
+        let (truth, clean) = sine_through(AntiAlias::None, f0);
+        let alias = if f0 < CHAIN_FS / 2.0 { f0 } else { CHAIN_FS - f0 };
+        assert!((phasor(&truth, alias).norm() - 1.0).abs() < 0.05, "f0 {f0}: alias at {alias} Hz {}", phasor(&truth, alias).norm());
+        assert!(rms_mid(&clean) > 0.05, "f0 {f0}: measurement alias {}", rms_mid(&clean));
+    }
+}
+
+#[test]
+fn the_impact_test_runs_through_the_analog_front_end() {
+    let d = chain_dyno();
+    let bw = Butterworth { order: 4, fc_hz: 2500.0 };
+    let dyno = MultiAxisDynamometer { axes: [d.clone(), d.clone(), d.clone()] };
+    // An FRF to 8 kHz at fs = 10.24 kHz, as impact analyzers measure.
+    let mut p = SimParams { fs_hz: CHAIN_FS, duration_s: 0.05, idle_duration_s: 0.0, anti_alias: AntiAlias::Butterworth(bw), ..Default::default() };
+    p.impact.n_lines = 4001;
+    p.impact.df_hz = 2.0;
+    p.impact.hammer_cutoff_hz = 9000.0;
+    let s = dynocomp::simulate::simulate_with(3, &p, dyno).unwrap();
+    let ax = s.frf.axis(0).unwrap();
+    let coh = ax.coherence.as_ref().unwrap();
+    let (mut with_b, mut without_b, mut n) = (0.0, 0.0, 0usize);
+    for k in 50..4001 {
+        let f = s.frf.freq_hz[k];
+        if coh[k] > 0.99 && (1500.0..6000.0).contains(&f) {
+            let g = d.frf(f);
+            let gb = g * butterworth4(f, bw.fc_hz);
+            with_b += ((ax.frf[k] - gb).norm() / gb.norm()).powi(2);
+            without_b += ((ax.frf[k] - g).norm() / gb.norm()).powi(2);
+            n += 1;
+        }
+    }
+    assert!(n > 500, "only {n} coherent lines in 1.5-6 kHz");
+    let (with_b, without_b) = ((with_b / n as f64).sqrt(), (without_b / n as f64).sqrt());
+    assert!(with_b < 0.03, "H1 vs G·B: rms relative error {with_b}");
+    // Negative control: the bare G does not fit the measured FRF.
+    assert!(without_b > 0.3, "H1 vs bare G: {without_b}");
+}
+
+#[test]
+fn anti_alias_option_parses_and_rejects_bad_values() {
+    assert_eq!("ideal".parse::<AntiAlias>().unwrap(), AntiAlias::Ideal);
+    assert_eq!("none".parse::<AntiAlias>().unwrap(), AntiAlias::None);
+    assert_eq!("butterworth:4:12000".parse::<AntiAlias>().unwrap(), AntiAlias::Butterworth(Butterworth { order: 4, fc_hz: 12_000.0 }));
+    for bad in ["", "brick", "butterworth:4", "butterworth:x:12000", "butterworth:0:12000", "butterworth:4:-1", "butterworth:4:nan"] {
+        let e = bad.parse::<AntiAlias>().unwrap_err().to_string();
+        assert!(e.contains("--anti-alias") || e.contains("anti-alias"), "{bad:?}: {e}");
+    }
+}
+
+// ---------------------------------------------------------------- multi-rate harness
+
+#[test]
+fn harness_noise_floor_matches_the_analytic_integral() {
+    use dynocomp::simulate::rates::noise_floor;
+    // G = 1: sqrt(R·2·band/fs)/std.
+    let (r, fs, band, std) = (0.05, 25_600.0, 4000.0, 7.0);
+    let flat = noise_floor(|_| Complex64::new(1.0, 0.0), r, fs, band, std);
+    let expect = (r * 2.0 * band / fs).sqrt() / std;
+    assert!((flat / expect - 1.0).abs() < 1e-9, "{flat} vs {expect}");
+    // G = 1/(1 + jf/fc)... inverse |1/G|² = 1 + (f/fc)²: ∫ = band + band³/(3fc²).
+    let fc = 1000.0;
+    let lp = noise_floor(|f| 1.0 / Complex64::new(1.0, f / fc), r, fs, band, std);
+    let expect = (r * 2.0 / fs * (band + band.powi(3) / (3.0 * fc * fc))).sqrt() / std;
+    assert!((lp / expect - 1.0).abs() < 1e-6, "{lp} vs {expect}");
+    // Negative control: a flat G is not mistaken for the low-pass one.
+    assert!(lp / flat > 2.0);
+}
+
+#[test]
+fn harness_records_a_failed_design_in_its_row_and_summarizes() {
+    use dynocomp::simulate::rates::{cases, score_sim, summarize, RunOptions};
+    let case = cases().into_iter().find(|c| c.name == "default").unwrap();
+    let mut p = case.sim_params(25_600.0);
+    p.duration_s = 0.2;
+    let s = dynocomp::simulate::simulate_with(case.seed, &p, case.dynamometer(&p).unwrap()).unwrap();
+    let mut broken = s.clone();
+    for v in broken.frf.axes[1].frf.iter_mut() {
+        *v = Complex64::new(0.0, 0.0);
+    }
+    let r = score_sim(case.name, &broken, &RunOptions::default());
+    assert!(r.axes[1].comp_nrmse.is_err(), "a zero FRF was designed: {:?}", r.axes[1]);
+    for a in [0, 2] {
+        let c = *r.axes[a].comp_nrmse.as_ref().unwrap();
+        assert!(c < r.axes[a].raw_nrmse, "axis {a}: compensated {c} vs raw {}", r.axes[a].raw_nrmse);
+        assert!(r.axes[a].noise_floor > 0.0 && r.axes[a].noise_floor < c * 1.5, "axis {a}: floor {}", r.axes[a].noise_floor);
+    }
+    let sum = summarize(std::slice::from_ref(&r));
+    assert_eq!(sum.len(), 1);
+    assert_eq!(sum[0].failed, vec!["default/y".to_string()]);
+    let (c0, c2) = (*r.axes[0].comp_nrmse.as_ref().unwrap(), *r.axes[2].comp_nrmse.as_ref().unwrap());
+    assert!((sum[0].median - 0.5 * (c0 + c2)).abs() < 1e-15 && sum[0].worst == c0.max(c2));
+    // An axis worse than raw is listed: pretend raw was perfect.
+    let mut worse = r;
+    worse.axes[0].raw_nrmse = 0.0;
+    assert_eq!(summarize(&[worse])[0].worse_than_raw, vec!["default/x".to_string()]);
 }

@@ -4,7 +4,7 @@ use anyhow::{Context, Result};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
-use super::{simulate, Chatter, MillingMode, Mode, SimOutput, SimParams};
+use super::{simulate, AntiAlias, Chatter, MillingMode, Mode, SimOutput, SimParams};
 use crate::frf::axis_name;
 use crate::io::frf_csv::write_frf_csv;
 use crate::io::signal_csv::{write_signal_csv, SignalRecord};
@@ -33,6 +33,13 @@ pub struct SimulateArgs {
     /// Internal oversampling of force and model [default: 8].
     #[arg(long)]
     pub oversample: Option<usize>,
+    /// Anti-aliasing chain before sampling: `ideal` (the DAQ's zero-phase
+    /// brick wall at 0.45 fs), `none` (plain decimation, aliases kept) or
+    /// `butterworth:ORDER:FC_HZ` (an analog Butterworth front end, e.g. the
+    /// box's butterworth:4:12000, in front of the brick wall; the impact test
+    /// sees it too).
+    #[arg(long, default_value = "ideal", value_parser = clap::value_parser!(AntiAlias))]
+    pub anti_alias: AntiAlias,
     /// Spindle speed (rpm) [default: 4125].
     #[arg(long)]
     pub spindle_rpm: Option<f64>,
@@ -110,6 +117,7 @@ impl SimulateArgs {
         if let Some(v) = self.oversample {
             p.oversample = v;
         }
+        p.anti_alias = self.anti_alias;
         let m = &mut p.milling;
         set(&mut m.spindle_rpm, self.spindle_rpm);
         if let Some(v) = self.teeth {
@@ -175,6 +183,10 @@ struct Truth<'a> {
     spindle_hz: f64,
     /// How the model sees the force between fine samples.
     hold: &'static str,
+    /// Acquisition chain: `ideal`, `none` or `butterworth:ORDER:FC_HZ`.
+    anti_alias: String,
+    /// Cutoff of the brick wall that band-limits truth and measurement (Hz).
+    brick_wall_hz: Option<f64>,
     noise_variance_n2: f64,
     adc_lsb_n: f64,
     expected_idle_variance_n2: f64,
@@ -195,6 +207,8 @@ fn truth_json(out: &SimOutput) -> Result<String> {
         tooth_passing_hz: p.milling.tooth_passing_hz(),
         spindle_hz: p.milling.spindle_hz(),
         hold: "foh",
+        anti_alias: p.anti_alias.to_string(),
+        brick_wall_hz: p.anti_alias.brick_wall_hz(p.fs_hz),
         noise_variance_n2: p.measurement.noise_variance_n2,
         adc_lsb_n: p.measurement.lsb_n(),
         expected_idle_variance_n2: p.measurement.expected_idle_variance(),
@@ -236,12 +250,13 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     write_outputs(&args.out, &out)?;
     let p = &out.params;
     eprintln!(
-        "simulate: seed {}, fs {} Hz, {} samples ({} s), oversample {}",
+        "simulate: seed {}, fs {} Hz, {} samples ({} s), oversample {}, anti-alias {}",
         out.seed,
         p.fs_hz,
         out.t_s.len(),
         p.duration_s,
-        p.oversample
+        p.oversample,
+        p.anti_alias
     );
     let m = &p.milling;
     eprintln!(

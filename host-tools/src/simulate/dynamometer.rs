@@ -294,7 +294,7 @@ fn mat_fn(m: &[[f64; 2]; 2], mu: Complex64, f_mu: Complex64) -> [[f64; 2]; 2] {
 
 /// φ_k(z) = Σ_{n≥0} zⁿ/(n+k)! for k = 0, 1, 2 (φ0 = e^z, φ1 = (e^z-1)/z,
 /// φ2 = (e^z-1-z)/z²): series for |z| < 1, closed form otherwise.
-fn phi_k(k: u32, z: Complex64) -> Complex64 {
+pub(crate) fn phi_k(k: u32, z: Complex64) -> Complex64 {
     if z.norm() < 1.0 {
         // Σ zⁿ/(n+k)!: 30 terms are far below f64 resolution for |z| < 1.
         let mut fact = 1.0;

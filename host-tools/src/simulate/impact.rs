@@ -96,6 +96,12 @@ pub fn impact_test(dyn_: &Dynamometer, n_lines: usize, df_hz: f64, seed: u64, pa
 
 /// As [`impact_test`], labelled with `axis`.
 pub fn impact_test_axis(dyn_: &Dynamometer, axis: usize, n_lines: usize, df_hz: f64, seed: u64, params: &ImpactParams) -> AxisFrf {
+    impact_test_fn(&|f| dyn_.frf(f), axis, n_lines, df_hz, seed, params)
+}
+
+/// As [`impact_test_axis`], for any true response `g(f_hz)` (e.g. the
+/// dynamometer through an analog front end).
+pub fn impact_test_fn(g: &dyn Fn(f64) -> Complex64, axis: usize, n_lines: usize, df_hz: f64, seed: u64, params: &ImpactParams) -> AxisFrf {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let n_imp = params.n_impacts.max(1);
     // Per-impact strength and cutoff.
@@ -119,7 +125,7 @@ pub fn impact_test_axis(dyn_: &Dynamometer, axis: usize, n_lines: usize, df_hz: 
     let mut coh = Vec::with_capacity(n_lines);
     for k in 0..n_lines {
         let f = k as f64 * df_hz;
-        let g = dyn_.frf(f);
+        let g = g(f);
         let real_only = f == 0.0;
         let out_rms = params.output_noise_rel
             * (1.0 + (params.dc_noise_factor - 1.0).max(0.0) * (-f / params.low_freq_noise_hz.max(1e-12)).exp());
@@ -143,10 +149,16 @@ pub fn impact_test_axis(dyn_: &Dynamometer, axis: usize, n_lines: usize, df_hz: 
 /// Impact tests of all three axes (independent noise per axis) on
 /// `n_lines` lines at `df_hz`.
 pub fn impact_test_all(dyno: &MultiAxisDynamometer, n_lines: usize, df_hz: f64, seed: u64, params: &ImpactParams) -> Frf {
+    impact_test_all_with(&|a, f| dyno.axis(a).frf(f), n_lines, df_hz, seed, params)
+}
+
+/// As [`impact_test_all`], for the true responses `g(axis, f_hz)` of the
+/// three axes (e.g. through the acquisition chain's analog front end).
+pub fn impact_test_all_with(g: &dyn Fn(usize, f64) -> Complex64, n_lines: usize, df_hz: f64, seed: u64, params: &ImpactParams) -> Frf {
     let axes = (0..3)
         .map(|a| {
             let s = seed.wrapping_mul(0xA076_1D64_78BD_642F).wrapping_add(0xE703_7ED1_A0B4_28DB ^ (a as u64 + 1));
-            impact_test_axis(dyno.axis(a), a, n_lines, df_hz, s, params)
+            impact_test_fn(&|f| g(a, f), a, n_lines, df_hz, s, params)
         })
         .collect();
     Frf { freq_hz: impact_freqs(n_lines, df_hz), axes }

@@ -13,21 +13,29 @@
 //! - [`simulate`]: all of it from one seed; [`run`] writes the files of
 //!   `dynocomp simulate`.
 //!
+//! - [`chain`]: the acquisition chain (analog front end, the DAQ's brick wall).
+//!
 //! Time records: the true force is generated at `fs·oversample`, passed through
 //! each axis's model at that rate (exact for a force linear between the fine
-//! samples), and both truth and dynamometer output are then taken every
-//! `oversample`-th sample, so `measured[k]` is the continuous model's response
-//! at `t_k = k/fs` and `true[k]` the force at the same instant.
+//! samples) and the analog front end if any, then both the force and the
+//! dynamometer output go through the DAQ's zero-phase brick wall at 0.45 fs and
+//! are taken every `oversample`-th sample: `measured[k]` is the band-limited
+//! response at `t_k = k/fs` and `true[k]` the applied force through the same
+//! band limit at the same instant (DESIGN.md, "Accuracy, stated one way
+//! everywhere"). Noise and quantization are added after the filter.
 
+pub mod chain;
 pub mod cli;
 pub mod dynamometer;
 pub mod impact;
 pub mod measurement;
 pub mod milling;
+pub mod rates;
 
+pub use chain::{AntiAlias, Butterworth, BRICK_WALL_FRACTION};
 pub use cli::{run, SimulateArgs};
 pub use dynamometer::{Dynamometer, Hold, Mode, ModeRanges, ModeStep, MultiAxisDynamometer};
-pub use impact::{h1_random_error, impact_freqs, impact_test, impact_test_all, impact_test_axis, ImpactParams};
+pub use impact::{h1_random_error, impact_freqs, impact_test, impact_test_all, impact_test_all_with, impact_test_axis, ImpactParams};
 pub use measurement::MeasurementParams;
 pub use milling::{milling_force, Chatter, MillingMode, MillingParams};
 
@@ -47,7 +55,11 @@ pub struct SimParams {
     pub idle_duration_s: f64,
     /// Internal oversampling of the true force and the model (≥ 1).
     pub oversample: usize,
-    /// Measurement noise and ADC.
+    /// Anti-aliasing chain in front of the sampler (default: the DAQ's ideal
+    /// brick wall at 0.45 fs).
+    #[serde(default)]
+    pub anti_alias: AntiAlias,
+    /// Measurement noise and ADC (after the anti-aliasing filter).
     pub measurement: MeasurementParams,
     /// Ranges of the random dynamometer modes.
     pub modes: ModeRanges,
@@ -64,6 +76,7 @@ impl Default for SimParams {
             duration_s: 1.0,
             idle_duration_s: 1.0,
             oversample: 8,
+            anti_alias: AntiAlias::default(),
             measurement: MeasurementParams::default(),
             modes: ModeRanges::default(),
             impact: ImpactParams::default(),
@@ -87,6 +100,7 @@ impl SimParams {
         if self.oversample == 0 || self.oversample > 64 {
             bail!("simulate: oversample = {} must be in 1..=64", self.oversample);
         }
+        self.anti_alias.validate()?;
         let m = &self.measurement;
         if !(m.noise_variance_n2.is_finite() && m.noise_variance_n2 >= 0.0) {
             bail!("simulate: noise variance = {} N² must be ≥ 0", m.noise_variance_n2);
@@ -158,14 +172,20 @@ const TAG_IMPACT: u64 = 2;
 const TAG_NOISE: u64 = 10; // + axis
 const TAG_IDLE: u64 = 20; // + axis
 
-/// Measure `force` (defined at `fs·oversample`) with `dyn_` at that rate and
-/// keep every `oversample`-th sample: returns (truth, clean output) at fs.
-pub fn measure_decimated(dyn_: &Dynamometer, force_fine: &[f64], fs_hz: f64, oversample: usize) -> (Vec<f64>, Vec<f64>) {
-    let os = oversample.max(1);
-    let y = dyn_.measure(force_fine, fs_hz * os as f64);
-    let truth = force_fine.iter().step_by(os).copied().collect();
-    let clean = y.iter().step_by(os).copied().collect();
-    (truth, clean)
+/// Measure `force_fine` (defined at `fs·oversample`, at least
+/// `chain.fine_len(n, oversample)` samples) with `dyn_` through the
+/// acquisition `chain`: returns (band-limited truth, clean output), `n`
+/// samples at fs. With [`AntiAlias::None`] this keeps every `oversample`-th
+/// sample of the force and of the model's response.
+pub fn measure_decimated(
+    dyn_: &Dynamometer,
+    chain: &AntiAlias,
+    force_fine: &[f64],
+    fs_hz: f64,
+    oversample: usize,
+    n: usize,
+) -> (Vec<f64>, Vec<f64>) {
+    chain.acquire(dyn_, force_fine, fs_hz, oversample, n)
 }
 
 /// Run the whole simulation for `seed`: a random three-axis dynamometer, its
@@ -180,17 +200,18 @@ pub fn simulate(seed: u64, params: &SimParams) -> Result<SimOutput> {
 pub fn simulate_with(seed: u64, params: &SimParams, dyno: MultiAxisDynamometer) -> Result<SimOutput> {
     params.validate()?;
     let ip = &params.impact;
-    let frf = impact_test_all(&dyno, ip.n_lines, ip.df_hz, sub_seed(seed, TAG_IMPACT), ip);
+    // The impact test runs through the same analog front end.
+    let chain = &params.anti_alias;
+    let frf = impact_test_all_with(&|a, f| dyno.axis(a).frf(f) * chain.analog_frf(f), ip.n_lines, ip.df_hz, sub_seed(seed, TAG_IMPACT), ip);
     let n = params.n_samples();
     let os = params.oversample;
-    let n_fine = (n - 1) * os + 1;
-    let fine = milling_force(&params.milling, params.fs_hz * os as f64, n_fine);
+    let fine = milling_force(&params.milling, params.fs_hz * os as f64, chain.fine_len(n, os));
     let mut truth: [Vec<f64>; 3] = Default::default();
     let mut clean: [Vec<f64>; 3] = Default::default();
     let mut measured: [Vec<f64>; 3] = Default::default();
     let mut idle: [Vec<f64>; 3] = Default::default();
     for a in 0..3 {
-        let (t, c) = measure_decimated(dyno.axis(a), &fine[a], params.fs_hz, os);
+        let (t, c) = measure_decimated(dyno.axis(a), chain, &fine[a], params.fs_hz, os, n);
         measured[a] = params.measurement.apply(&c, sub_seed(seed, TAG_NOISE + a as u64));
         idle[a] = params.measurement.idle(params.n_idle_samples(), sub_seed(seed, TAG_IDLE + a as u64));
         truth[a] = t;
