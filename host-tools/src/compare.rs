@@ -488,7 +488,14 @@ pub fn compare(args: &CompareArgs, frf: &Frf) -> Result<Comparison> {
     let bands = args.bands.resolve(frf, args.input.fs).with_context(|| format!("{}", args.input.frf.display()))?;
     let setup = CompareSetup {
         freq_hz: &frf.freq_hz,
-        base: DesignOptions { fs_hz: args.input.fs, lag: args.latency, force_rms: args.input.force_rms, max_noise_gain: args.input.max_noise_gain, ..Default::default() },
+        base: DesignOptions {
+            fs_hz: args.input.fs,
+            lag: args.latency,
+            force_rms: args.input.force_rms,
+            max_noise_gain: args.input.max_noise_gain,
+            discretization: args.input.discretization,
+            ..Default::default()
+        },
         paper: args.paper.method(args.bands.tooth_passing_hz(), args.input.fs)?,
         bands: bands.clone(),
     };
