@@ -321,6 +321,12 @@ impl AxisFilter {
         self.d
     }
 
+    /// How the kernel runs the sections: (pole pairs, live real poles).
+    /// A diagonal section counts its poles with `b·c ≠ 0` only.
+    pub fn kernel_counts(&self) -> (usize, usize) {
+        (self.form.n_pairs, self.form.n_reals)
+    }
+
     /// Filter order (number of states in use, counting padded first-order
     /// sections as two, plus the FIR delay line).
     pub fn order(&self) -> usize {

@@ -10,6 +10,8 @@
 //! * [`link`]: the box's request handler (pure state machine over the store).
 //! * [`store`]: the power-fail-safe A/B coefficient store on NOR flash.
 //! * [`handoff`]: lock-free switch of the running image at a sample boundary.
+//! * [`budget`]: cost model of the sample interrupt (cycles per sample from
+//!   the image) and the load check that keeps over-budget images off the box.
 //! * [`cycles`]: cost of the sample interrupt in CPU cycles (DWT CYCCNT
 //!   readings → last, max, mean).
 //! * [`stream_queue`]: the lock-free queue of streamed samples from the
@@ -25,6 +27,7 @@
 #![cfg_attr(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"), deny(unsafe_code))]
 #![deny(missing_docs)]
 
+pub mod budget;
 pub mod cycles;
 pub mod handoff;
 pub mod image;

@@ -33,6 +33,11 @@ pub enum BypassReason {
     UnsupportedSampleRate(u32),
     /// Bypass requested by the user (button or USB command).
     User,
+    /// The image's predicted interrupt load at its sample rate exceeds
+    /// [`budget::BOX_LOAD_LIMIT_PERMILLE`](crate::budget::BOX_LOAD_LIMIT_PERMILLE)
+    /// (`budget::check_load`): predicted cycles per sample and per mille of
+    /// the period.
+    OverBudget(crate::budget::Load),
 }
 
 /// What the sample path does.
@@ -67,13 +72,15 @@ pub fn select_stored_mode(stored: &Result<CoeffImage, BypassReason>, user_bypass
     }
 }
 
-/// The mode of a parsed image: offline-only and out-of-range rates are never
-/// run; otherwise the user's bypass decides.
+/// The mode of a parsed image: offline-only images, out-of-range rates and
+/// images over the box's CPU budget are never run; otherwise the user's bypass decides.
 fn image_mode(img: &CoeffImage, user_bypass: bool) -> Mode<'_> {
     if img.is_offline_only() {
         Mode::Bypass(BypassReason::OfflineOnly)
     } else if !BOX_FS_RANGE_HZ.contains(&img.fs_hz) {
         Mode::Bypass(BypassReason::UnsupportedSampleRate(img.fs_hz))
+    } else if let Err(load) = crate::budget::check_load(img, crate::budget::BOX_LOAD_LIMIT_PERMILLE) {
+        Mode::Bypass(BypassReason::OverBudget(load))
     } else if user_bypass {
         Mode::Bypass(BypassReason::User)
     } else {

@@ -190,7 +190,8 @@ pub fn encode_record(image: &[u8], seq: u32, out: &mut [u8]) -> Result<usize, Im
 
 /// Verify image bytes for the box: CRC against `crc`, full parse (version,
 /// ranges, finiteness, section stability), and runnable on the box (not
-/// offline-only, sample rate in [`crate::sample::BOX_FS_RANGE_HZ`]).
+/// offline-only, sample rate in [`crate::sample::BOX_FS_RANGE_HZ`], predicted
+/// interrupt load within [`crate::budget::BOX_LOAD_LIMIT_PERMILLE`]).
 pub fn verify_image(bytes: &[u8], crc: u32) -> Result<CoeffImage, LinkError> {
     let computed = CRC32.checksum(bytes);
     if computed != crc {

@@ -121,7 +121,9 @@ fn saturation_is_flagged_and_counted_in_both_modes() {
 #[test]
 fn runaway_state_is_reset_flagged_counted_and_raw_force_output() {
     let (blocks, d) = filter_24(51_200.0);
-    let img = image_with(kernel_filter(&blocks, d), &[0, 1, 2], 51_200);
+    // 3 × 24 pairs exceed the box's CPU budget at 51.2 kHz (see
+    // `images_over_the_cpu_budget_are_never_run`); at 20 kHz they fit.
+    let img = image_with(kernel_filter(&blocks, d), &[0, 1, 2], 20_000);
     let loaded = Ok(img);
     let mode = select_mode(Some(&loaded), false);
     let mut st = SampleState::default();
@@ -149,7 +151,7 @@ fn dac_rounding_is_total() {
 #[test]
 fn the_box_rate_range_is_10_to_200_khz_inclusive() {
     let f = AxisFilter::gain(1.0).unwrap();
-    for (fs, runs) in [
+    for (fs, in_range) in [
         (9_999u32, false),
         (10_000, true),
         (51_200, true),
@@ -158,11 +160,15 @@ fn the_box_rate_range_is_10_to_200_khz_inclusive() {
     ] {
         let img = Ok(image_with(f, &[0], fs));
         let mode = select_mode(Some(&img), false);
-        assert_eq!(matches!(mode, Mode::Compensate(_)), runs, "fs {fs}");
-        if !runs {
-            assert!(
-                matches!(mode, Mode::Bypass(BypassReason::UnsupportedSampleRate(r)) if r == fs)
-            );
+        let rate_refused = matches!(mode, Mode::Bypass(BypassReason::UnsupportedSampleRate(r)) if r == fs);
+        assert_eq!(rate_refused, !in_range, "fs {fs}: {mode:?}");
+        // In range, only the CPU budget can refuse it: at 200 kHz (850
+        // cycles per sample) the interrupt shell and one axis call alone are
+        // predicted above 60 % of the period (dynocomp_core::budget).
+        let runs = matches!(mode, Mode::Compensate(_));
+        let over_budget = matches!(mode, Mode::Bypass(BypassReason::OverBudget(_)));
+        if in_range {
+            assert_eq!((runs, over_budget), (fs < 200_000, fs == 200_000), "fs {fs}: {mode:?}");
         }
     }
 }
@@ -202,4 +208,30 @@ fn stored_results_select_the_same_modes() {
         Mode::Compensate(img) => assert_eq!(Ok(*img), good),
         m => panic!("expected compensate, got {m:?}"),
     }
+}
+
+#[test]
+fn images_over_the_cpu_budget_are_never_run() {
+    use dynocomp_core::budget::{image_load, period_cycles, BOX_LOAD_LIMIT_PERMILLE};
+    // 3 × 24 pole pairs: ≈ 3 100 cycles per sample (high estimate), 93 %
+    // of the 3 320-cycle period at 51.2 kHz; 36 % at 20 kHz.
+    let (blocks, d) = filter_24(51_200.0);
+    let f = kernel_filter(&blocks, d);
+    let fast = image_with(f, &[0, 1, 2], 51_200);
+    let load = image_load(&fast);
+    assert!(load.permille > BOX_LOAD_LIMIT_PERMILLE, "{load:?}");
+    assert!(load.cycles > period_cycles(51_200) / 2, "{load:?}");
+    for mode in [select_mode(Some(&Ok(fast)), false), select_stored_mode(&Ok(fast), false)] {
+        assert!(matches!(mode, Mode::Bypass(BypassReason::OverBudget(l)) if l == load), "{mode:?}");
+        let mut st = SampleState::default();
+        let (dac, flags) = process_sample([100, 2048, 4000], mode, &mut st);
+        assert_eq!(dac, [100, 2048, 4000]);
+        assert!(flags.has(SampleFlags::BYPASS));
+    }
+    // Negative control: the same filter at 20 kHz, and one axis of it at
+    // 51.2 kHz, fit and run.
+    let slow = image_with(f, &[0, 1, 2], 20_000);
+    assert!(matches!(select_mode(Some(&Ok(slow)), false), Mode::Compensate(_)));
+    let one = image_with(f, &[1], 51_200);
+    assert!(matches!(select_mode(Some(&Ok(one)), false), Mode::Compensate(_)), "{:?}", image_load(&one));
 }

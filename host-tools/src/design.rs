@@ -52,6 +52,10 @@ pub struct DesignOptions {
     pub bands: Vec<Band>,
     /// Discrete model of the Kalman design (default method only).
     pub discretization: Discretization,
+    /// CPU budget of this axis on the box: cycles per sample it may cost
+    /// (`dynocomp_core::budget::axis_budget`); `None` = no limit. The
+    /// realization within it is preferred ([`choose_realization_within`]).
+    pub axis_cycle_budget: Option<u32>,
 }
 
 /// Weight of an out-of-band line relative to its coherence weight when the
@@ -86,6 +90,7 @@ impl Default for DesignOptions {
             method: FitMethod::Vf,
             bands: Vec::new(),
             discretization: Discretization::Fit,
+            axis_cycle_budget: None,
         }
     }
 }
@@ -526,7 +531,7 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         None => None,
     };
     let (realization, filter, verification) =
-        choose_realization(&kal.compensator, opts.fs_hz, f_top).with_context(|| format!("axis {name}"))?;
+        choose_realization_within(&kal.compensator, opts.fs_hz, f_top, opts.axis_cycle_budget).with_context(|| format!("axis {name}"))?;
     let fs = opts.fs_hz;
     // Against the fitted model, not the raw lines: an H1 line with γ² = 0.97
     // from 7 averages has ~5 % random error, as large as the tolerance.
@@ -557,24 +562,98 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
     })
 }
 
-/// Realize the compensator `ss` and round it to f32: of the valid
-/// realizations (one per fast/slow pole split, `realize::realize_candidates`),
-/// each fully verified by `quantize` over 0..`f_band_hz`, keep the one whose
-/// f32 kernel deviates least from the f64 design, coefficients and kernel
-/// arithmetic (`Verification::score`).
+/// Realize the compensator `ss` and round it to f32, with no CPU budget:
+/// [`choose_realization_within`] with `axis_budget = None`.
 pub fn choose_realization(ss: &StateSpace, fs_hz: f64, f_band_hz: f64) -> Result<(ModalRealization, AxisFilter, Verification)> {
+    choose_realization_within(ss, fs_hz, f_band_hz, None)
+}
+
+/// Largest verification score ([`Verification::score`]) a shortened FIR may
+/// reach: a tenth of the verification limits, or 10x the full FIR's score
+/// when that is larger.
+const TRIM_SCORE_FLOOR: f64 = 1e-5;
+
+/// A cheaper candidate may not be scaled worse than this or than the most
+/// accurate candidate (`Verification::term_growth`: no part of the kernel's
+/// sum beyond 2x the output).
+const MAX_CHOICE_TERM_GROWTH: f64 = 2.0;
+
+/// Realize the compensator `ss` and round it to f32.
+///
+/// Candidates: the valid realizations (one per fast/slow pole split,
+/// `realize::realize_candidates`), each fully verified by `quantize` over
+/// 0..`f_band_hz`, and for each one with FIR taps its shortest FIR that
+/// still verifies with a score ≤ max(10x its own, [`TRIM_SCORE_FLOOR`])
+/// (taps bought for nothing: the kernel's cost falls, the verification
+/// limits hold). Only candidates scaled no worse than the most accurate one
+/// or [`MAX_CHOICE_TERM_GROWTH`] are considered. Choice, the cheapest (ties:
+/// the most accurate) of the first non-empty of: within `axis_budget`
+/// (cycles per sample this axis may cost, high estimate of
+/// `dynocomp_core::budget::CostModel::CORTEX_M4`) and within the score
+/// bound max(10x the best score, [`TRIM_SCORE_FLOOR`]); within the budget;
+/// within the score bound (so the box's cost is never paid for rounding).
+pub fn choose_realization_within(
+    ss: &StateSpace,
+    fs_hz: f64,
+    f_band_hz: f64,
+    axis_budget: Option<u32>,
+) -> Result<(ModalRealization, AxisFilter, Verification)> {
+    use dynocomp_core::budget::{AxisShape, CostModel};
     let candidates = realize::realize_candidates(ss).context("realization")?;
-    let mut best: Option<(ModalRealization, AxisFilter, Verification)> = None;
+    let mut verified: Vec<(ModalRealization, AxisFilter, Verification)> = Vec::new();
     let mut last_err = None;
     for r in candidates {
         match quantize::quantize(&r, ss, fs_hz, f_band_hz) {
             Ok((f, v)) => {
-                if best.as_ref().is_none_or(|b| v.score() < b.2.score()) {
-                    best = Some((r, f, v));
+                if let Some(t) = shortest_fir(&r, &v, ss, fs_hz, f_band_hz) {
+                    verified.push(t);
                 }
+                verified.push((r, f, v));
             }
             Err(e) => last_err = Some(e),
         }
     }
-    best.ok_or_else(|| last_err.unwrap_or_else(|| anyhow::anyhow!("no realization")).context("quantization"))
+    let cost = |f: &AxisFilter| CostModel::CORTEX_M4.axis_cost(AxisShape::of(f)).high;
+    let Some(best) = verified.iter().min_by(|a, b| a.2.score().total_cmp(&b.2.score())) else {
+        return Err(last_err.unwrap_or_else(|| anyhow::anyhow!("no realization")).context("quantization"));
+    };
+    let bound = (10.0 * best.2.score()).max(TRIM_SCORE_FLOOR);
+    let growth = best.2.term_growth.max(MAX_CHOICE_TERM_GROWTH);
+    type Cand = (ModalRealization, AxisFilter, Verification);
+    let fits = |c: &Cand| axis_budget.is_some_and(|b| cost(&c.1) <= b);
+    let accurate = |c: &Cand| c.2.score() <= bound && c.2.term_growth <= growth;
+    let well_scaled = |c: &Cand| c.2.term_growth <= growth;
+    // Most preferred first: within budget and as accurate as the best; within
+    // budget; as accurate as the best (the best itself always is).
+    let pools: [&dyn Fn(&Cand) -> bool; 3] = [&|c| fits(c) && accurate(c), &|c| fits(c) && well_scaled(c), &accurate];
+    let chosen = pools.iter().find_map(|keep| {
+        verified
+            .iter()
+            .filter(|c| keep(c))
+            .min_by(|a, b| cost(&a.1).cmp(&cost(&b.1)).then(a.2.score().total_cmp(&b.2.score())))
+            .cloned()
+    });
+    chosen.ok_or_else(|| last_err.unwrap_or_else(|| anyhow::anyhow!("no realization")).context("quantization"))
+}
+
+/// The realization `r` (verified as `v`) with the fewest FIR taps that still
+/// passes `quantize` with a score ≤ max(10·v.score(), [`TRIM_SCORE_FLOOR`]);
+/// `None` if no shorter FIR does.
+fn shortest_fir(
+    r: &ModalRealization,
+    v: &Verification,
+    ss: &StateSpace,
+    fs_hz: f64,
+    f_band_hz: f64,
+) -> Option<(ModalRealization, AxisFilter, Verification)> {
+    let bound = (10.0 * v.score()).max(TRIM_SCORE_FLOOR);
+    let total: f64 = r.fir.iter().map(|h| h.abs()).sum::<f64>();
+    (0..r.fir.len()).find_map(|len| {
+        let mut t = r.clone();
+        t.fir.truncate(len);
+        let dropped: f64 = r.fir[len..].iter().map(|h| h.abs()).sum();
+        t.fir_truncation = r.fir_truncation + dropped / total.max(f64::MIN_POSITIVE);
+        let (f, tv) = quantize::quantize(&t, ss, fs_hz, f_band_hz).ok()?;
+        (tv.score() <= bound).then_some((t, f, tv))
+    })
 }

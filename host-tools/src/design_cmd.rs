@@ -210,6 +210,12 @@ pub struct DesignArgs {
     /// Print the summary as JSON on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Largest predicted CPU load of the box's sample interrupt (% of the
+    /// sample period at 170 MHz, pessimistic estimate), at most the box's
+    /// own 60 %. The realizations within it are preferred; an image above
+    /// it is still written, marked offline-only.
+    #[arg(long, default_value_t = 60.0, value_name = "PCT")]
+    pub max_load: f64,
 }
 
 /// Machine-readable summary of one axis.
@@ -296,6 +302,10 @@ pub struct DesignJson {
     pub axes: Vec<AxisJson>,
     /// Total design time (s).
     pub design_time_s: f64,
+    /// Predicted CPU load of the box at `fs_hz` (`dynocomp_core::budget`).
+    pub box_load: crate::load::LoadReport,
+    /// Offline-only: over the load limit, the box never runs it.
+    pub offline_only: bool,
 }
 
 /// Measurement-noise variance R (N²) per axis of `frf`: the variance of
@@ -471,6 +481,11 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     if latency > 16 {
         bail!("--latency {}: at most 16 samples", latency);
     }
+    let box_limit = f64::from(dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE) / 10.0;
+    if !(args.max_load > 0.0 && args.max_load <= box_limit) {
+        bail!("--max-load {}: the load limit must be above 0 and at most the box's {box_limit} %", args.max_load);
+    }
+    let limit_permille = (args.max_load * 10.0).floor() as u32;
     let t0 = Instant::now();
     let bytes = std::fs::read(&args.input.frf).with_context(|| format!("{}: cannot read", args.input.frf.display()))?;
     let sha: [u8; 32] = Sha256::digest(&bytes).into();
@@ -487,6 +502,11 @@ pub fn run(args: &DesignArgs) -> Result<()> {
         method,
         bands: bands.clone(),
         discretization: args.input.discretization,
+        axis_cycle_budget: Some(dynocomp_core::budget::axis_budget(
+            args.input.fs as u32,
+            limit_permille,
+            frf.axes.len().max(1) as u32,
+        )),
         ..Default::default()
     };
     let method_name = if paper { "paper" } else { "vf" };
@@ -505,7 +525,20 @@ pub fn run(args: &DesignArgs) -> Result<()> {
         times.push(dt);
         designs.push(d);
     }
-    let image = build_image(&designs, args.input.fs as u32, latency, args.full_scale, sha)?;
+    let mut image = build_image(&designs, args.input.fs as u32, latency, args.full_scale, sha)?;
+    let box_load = crate::load::report(&image, limit_permille);
+    if !box_load.fits {
+        image.flags |= dynocomp_core::image::FLAG_OFFLINE_ONLY;
+        eprintln!(
+            "WARNING: OFFLINE-ONLY IMAGE: predicted box CPU load {:.1} % ({} cycles per sample) at {} Hz exceeds the limit of {:.0} %; \
+             the box could run it up to {} Hz. Written for `dynocomp compensate` only: `flash` refuses it and the box would stay in bypass.",
+            box_load.load_pct[1],
+            box_load.cycles[1],
+            image.fs_hz,
+            box_load.limit_pct,
+            box_load.max_fs_hz
+        );
+    }
     io::image_file::write_image(&args.out, &image)?;
     if !paper {
         // The model sidecar of `compensate --offline` (crate::smoother).
@@ -513,7 +546,9 @@ pub fn run(args: &DesignArgs) -> Result<()> {
         crate::smoother::write_sidecar(&args.out, &crate::smoother::ModelSidecar::new(&image, &models))?;
     }
     let id = image.id();
-    let summary = render_summary(&designs, args.input.fs, latency, &args.out.display().to_string(), id, method_name);
+    let mut summary = render_summary(&designs, args.input.fs, latency, &args.out.display().to_string(), id, method_name);
+    summary.push_str(&crate::load::describe(&box_load, image.fs_hz));
+    summary.push_str(if box_load.fits { "\n" } else { "  OVER THE LIMIT: offline-only image\n" });
     if let Some(dir) = &args.report {
         let files = crate::report::write_report(dir, &frf, &designs, args.input.fs, &summary)?;
         eprintln!("report: {} files in {} (open index.html)", files.len(), dir.display());
@@ -527,6 +562,8 @@ pub fn run(args: &DesignArgs) -> Result<()> {
             method: method_name,
             bands,
             design_time_s: t0.elapsed().as_secs_f64(),
+            offline_only: image.is_offline_only(),
+            box_load,
             axes: designs
                 .iter()
                 .zip(&times)

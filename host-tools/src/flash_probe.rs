@@ -92,11 +92,24 @@ pub fn slot_address(slot: Slot) -> u64 {
 /// Read and verify an image file for the box; the error names the file.
 pub fn read_box_image(path: &Path) -> Result<(Vec<u8>, CoeffImage)> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let img = verify_image(&bytes, CRC32.checksum(&bytes)).map_err(|e| {
-        anyhow::anyhow!(
+    use dynocomp_core::sample::BypassReason;
+    use dynocomp_core::protocol::LinkError;
+    let img = verify_image(&bytes, CRC32.checksum(&bytes)).map_err(|e| match e {
+        LinkError::NotRunnable(BypassReason::OfflineOnly) => anyhow::anyhow!(
+            "{}: offline-only image (OfflineOnly: over the box's CPU budget at its sample rate, or parallel elaboration; see `dynocomp inspect`): the box never runs it, nothing was written — use it with `dynocomp compensate`, or re-run `dynocomp design` at a lower --fs",
+            path.display()
+        ),
+        LinkError::NotRunnable(BypassReason::OverBudget(l)) => anyhow::anyhow!(
+            "{}: predicted box CPU load {:.1} % ({} cycles per sample) at its sample rate exceeds the box's limit of {} %: the box would stay in bypass, nothing was written",
+            path.display(),
+            f64::from(l.permille) / 10.0,
+            l.cycles,
+            dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE / 10
+        ),
+        e => anyhow::anyhow!(
             "{}: not a valid coefficient image for the box ({e:?}); nothing was written — re-run `dynocomp design` or check the file",
             path.display()
-        )
+        ),
     })?;
     Ok((bytes, img))
 }

@@ -68,6 +68,9 @@ pub struct InspectReport {
     pub axes: Vec<AxisReport>,
     /// Bands of a parallel-elaboration image (empty otherwise), lowest first.
     pub bands: Vec<BandReport>,
+    /// Predicted CPU load of the box's sample interrupt at `fs_hz`
+    /// (`dynocomp_core::budget`); `null` for a parallel image.
+    pub box_load: Option<crate::load::LoadReport>,
 }
 
 /// One band of a parallel-elaboration image.
@@ -140,6 +143,7 @@ pub fn report(image: &CoeffImage) -> InspectReport {
         offline_reason: image.is_offline_only().then(|| "marked offline only (flag 0x01)".to_string()),
         axes,
         bands: Vec::new(),
+        box_load: Some(crate::load::report(image, dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE)),
     }
 }
 
@@ -173,6 +177,7 @@ pub fn report_parallel(image: &ParallelImage) -> Result<InspectReport> {
         offline_reason: Some(format!("parallel elaboration, {} bands: {list}", bands.len())),
         axes: Vec::new(),
         bands,
+        box_load: None,
     })
 }
 
@@ -191,8 +196,13 @@ pub fn render(r: &InspectReport) -> String {
         let why = r.offline_reason.as_deref().unwrap_or("marked offline only");
         let _ = writeln!(s, "offline only: {why}");
         let _ = writeln!(s, "this image is for `dynocomp compensate`; the box never runs it (it stays in bypass, reason OfflineOnly)");
+    } else if r.box_load.as_ref().is_some_and(|l| !l.fits) {
+        let _ = writeln!(s, "the box cannot run this image inline: its predicted CPU load exceeds the limit (it stays in bypass, reason OverBudget)");
     } else if !r.runs_in_box {
         let _ = writeln!(s, "the box cannot run this image inline (sample rate outside its 10-200 kHz range)");
+    }
+    if let Some(l) = &r.box_load {
+        let _ = writeln!(s, "{}", crate::load::describe(l, r.fs_hz));
     }
     let _ = writeln!(s, "source sha256 {}", r.source_sha256);
     if r.bands.is_empty() {

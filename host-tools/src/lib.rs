@@ -16,6 +16,7 @@ pub mod frf;
 pub mod inspect;
 pub mod io;
 pub mod kalman;
+pub mod load;
 pub mod metrics;
 pub mod parallel;
 pub mod paper;

@@ -102,6 +102,7 @@ fn the_box_rejects_bad_images_and_keeps_running_the_old_one() {
     for (bad, want) in [
         (common::offline_only(), "cannot run this image: OfflineOnly"),
         (common::slow(), "cannot run this image: UnsupportedSampleRate(5000)"),
+        (common::over_budget(), "cannot run this image: OverBudget(Load { cycles: "),
         (common::unstable(), "pole on or outside the unit circle"),
     ] {
         let err = upload(&mut link, &bad, |_, _| {}).unwrap_err().to_string();
@@ -135,6 +136,23 @@ fn the_box_rejects_bad_images_and_keeps_running_the_old_one() {
     assert!(!out.status.success());
     assert!(err.contains("bad.dcimg") && (err.contains("BadCrc") || err.contains("CRC mismatch")), "{err}");
     assert_eq!(err.lines().count(), 1, "{err}");
+
+    // ... and an offline-only or over-budget file, with the reason.
+    for (name, bytes, want) in [
+        ("offline.dcimg", common::offline_only(), "offline-only image"),
+        ("heavy.dcimg", common::over_budget(), "exceeds the box's limit of 60 %"),
+    ] {
+        let p = write(dir.path(), name, &bytes);
+        let out = flash_cli(&p, &vbox.pty);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{name}: {err}");
+        assert!(err.contains(name) && err.contains(want), "{err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+    }
+    // Negative control: the good image of the same shape at 51.2 kHz flashes.
+    let p = write(dir.path(), "good.dcimg", &common::good(7));
+    let out = flash_cli(&p, &vbox.pty);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
 
 #[test]

@@ -65,6 +65,13 @@ pub fn slow() -> Vec<u8> {
     bytes(&image(91, 5_000, 0))
 }
 
+/// An image at 200 kHz (in the box's range): three small axes, but the
+/// interrupt's fixed part and three axis calls alone are predicted above
+/// the box's 60 % CPU limit of the 850-cycle period (`dynocomp_core::budget`).
+pub fn over_budget() -> Vec<u8> {
+    bytes(&image(93, 200_000, 0))
+}
+
 /// An image whose first section has its pole at z = 1.5 (unstable), with a
 /// correct CRC, so only the stability check can reject it.
 pub fn unstable() -> Vec<u8> {

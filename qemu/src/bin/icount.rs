@@ -36,6 +36,11 @@
 //!   axes with the runaway guard, → DAC codes, flags and counters; and the
 //!   same with 3 sections + 19 taps, the size `dynocomp design` chose for the
 //!   bundled example.
+//! * `model P R T A`: `process_sample` over A axes, each with P pole pairs,
+//!   R real poles and T FIR taps, printed as one machine-readable line
+//!   `model P R T A <instructions per call> <net>` (no `empty` subtraction
+//!   in the first figure). `tests/qemu_cost_model.rs` checks the core's
+//!   cost model (`dynocomp_core::budget`) against these lines.
 #![no_std]
 #![no_main]
 
@@ -192,8 +197,41 @@ fn measure_idsp_df2t<const S: usize>(ticks: &Ticks) -> f32 {
     measure(ticks, |u| idsp_df2t(black_box(&c), &mut st, u))
 }
 
+/// A filter with `pairs` pole pairs, `reals` real poles (two per diagonal
+/// section, the last one alone when `reals` is odd) and `taps` FIR taps.
+fn mixed_filter(pairs: usize, reals: usize, taps: usize) -> AxisFilter {
+    let mut secs = [Section::default(); 24];
+    let mut n = 0;
+    for (i, s) in secs.iter_mut().take(pairs).enumerate() {
+        *s = section(i);
+        n += 1;
+    }
+    let mut left = reals;
+    while left > 0 && n < 24 {
+        let p1 = 0.9 - 0.01 * left as f32;
+        secs[n] = if left >= 2 {
+            Section { delta: [p1 - 1.0, 0.0, 0.0, p1 - 1.02], b: [0.1, 0.2], c: [0.3, -0.1] }
+        } else {
+            Section::first_order(p1, 0.1, 0.3)
+        };
+        left = left.saturating_sub(2);
+        n += 1;
+    }
+    let mut fir = [0.0f32; 24];
+    for (j, h) in fir.iter_mut().enumerate() {
+        *h = 0.1 / (j as f32 + 1.0);
+    }
+    match AxisFilter::with_fir(&secs[..n], 0.25, &fir[..taps]) {
+        Ok(f) => f,
+        Err(_) => dynocomp_qemu::fail("icount: mixed test filter rejected"),
+    }
+}
+
 fn box_image(sections: usize, taps: usize) -> CoeffImage {
-    let filter = kernel_filter(sections, taps);
+    image_of(kernel_filter(sections, taps), AXES)
+}
+
+fn image_of(filter: AxisFilter, n_axes: usize) -> CoeffImage {
     let mut img = CoeffImage {
         fs_hz: 100_000,
         latency_samples: 4,
@@ -203,7 +241,7 @@ fn box_image(sections: usize, taps: usize) -> CoeffImage {
         created_unix_s: 0,
         axes: [None; AXES],
     };
-    for (a, slot) in img.axes.iter_mut().enumerate() {
+    for (a, slot) in img.axes.iter_mut().enumerate().take(n_axes) {
         *slot = Some(AxisImage {
             axis: a as u8,
             scaling: AxisScaling {
@@ -305,5 +343,34 @@ fn main() -> ! {
     let f = kernel_filter(3, 19);
     let mut st = AxisState::default();
     report("kernel S3+F19 (n=25)", measure(&ticks, |u| kernel_step(black_box(&f), &mut st, u)), empty, 25);
+
+    // Calibration grid of the cost model (dynocomp_core::budget):
+    // (pairs, real poles, taps, axes).
+    for (p, r, t, a) in [
+        (0usize, 0usize, 0usize, 3usize),
+        (1, 0, 0, 3),
+        (2, 0, 0, 3),
+        (3, 0, 19, 3),
+        (8, 0, 0, 3),
+        (16, 0, 0, 3),
+        (24, 0, 0, 3),
+        (24, 0, 24, 3),
+        (23, 1, 24, 3),
+        (0, 0, 24, 3),
+        (0, 4, 0, 3),
+        (0, 1, 0, 3),
+        (5, 2, 10, 3),
+        (12, 0, 12, 3),
+        (11, 3, 6, 3),
+        (7, 0, 1, 3),
+        (24, 0, 24, 1),
+        (24, 0, 24, 2),
+        (6, 1, 9, 1),
+    ] {
+        let img = image_of(mixed_filter(p, r, t), a);
+        let mut sst = SampleState::default();
+        let per_call = measure(&ticks, |u| f32::from(sample_isr_body(black_box(&img), &mut sst, (u as i32 + 2048) as u16)));
+        hprintln!("model {} {} {} {} {:.2} {:.2}", p, r, t, a, per_call, per_call - empty);
+    }
     success()
 }

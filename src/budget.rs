@@ -1,0 +1,326 @@
+//! The box's CPU budget: a cost model of the sample interrupt, and the check
+//! that keeps an image the box cannot run at its sample rate off the box
+//! (issue #16).
+//!
+//! **Model.** The sample interrupt costs, per sample,
+//!
+//! ```text
+//! cycles = FIXED + Σ_axes ( AXIS + PAIR·pairs + ODD·(pairs mod 2)
+//!                            + REAL·reals + REAL_SETUP·(reals > 0)
+//!                            + TAP·taps + FIR_SETUP·(taps > 0) )
+//! ```
+//!
+//! with each coefficient a range (low, high) of Cortex-M4 cycles
+//! ([`CostModel::CORTEX_M4`]). The same form, in instructions
+//! ([`CostModel::QEMU_INSNS`]), is calibrated against the instruction counts
+//! of `process_sample` measured under QEMU (`scripts/qemu_icount.sh`, the
+//! `model …` lines; `tests/qemu_cost_model.rs` fails if they drift apart
+//! by more than [`INSN_TOLERANCE`]). Instructions become cycles with the
+//! Cortex-M4 TRM timings of each part's instruction mix (BENCHMARKS.md,
+//! "Interrupt budget on the STM32G474 at 170 MHz" and "Cost model of the
+//! sample interrupt"); FIXED also holds the interrupt shell around
+//! `process_sample` (exception entry/exit, lazy FP stacking, the ADC ring
+//! reads, the DAC writes, the stream push and the cycle statistics).
+//!
+//! **Check.** The box refuses to run an image whose *high* estimate exceeds
+//! [`BOX_LOAD_LIMIT_PERMILLE`] of the sample period at
+//! [`BOX_CORE_CLOCK_HZ`] ([`check_load`], called by
+//! `sample::select_mode`). Everything here is integer arithmetic: no
+//! allocation, no panics, no floating point.
+
+use crate::image::CoeffImage;
+use crate::kernel::AxisFilter;
+use crate::shell::BOX_CORE_CLOCK_HZ;
+
+/// The box's hard limit on the predicted interrupt load (high estimate), in
+/// thousandths of the sample period: 600 = 60 %. The rest of the period is
+/// the USB, stream and watchdog tasks' and the margin for what the model
+/// does not see (flash stalls if the code left CCM SRAM, bus contention).
+pub const BOX_LOAD_LIMIT_PERMILLE: u32 = 600;
+
+/// Largest relative deviation (per mille) of the instruction model from a
+/// QEMU-measured count that `tests/qemu_cost_model.rs` accepts, plus the
+/// absolute [`INSN_TOLERANCE_ABS`]. The fit's largest residual over the 19
+/// calibration shapes is 14.8 instructions (1.5 %, 3 pairs + 19 taps: LLVM
+/// unrolls the tap loop, so a remainder tap costs more than the mean).
+pub const INSN_TOLERANCE: u32 = 20;
+/// Absolute part of the tolerance (instructions): LLVM's register
+/// allocation moves the shared loop code by ±2 instructions between builds.
+pub const INSN_TOLERANCE_ABS: u32 = 6;
+
+/// A cost in cycles (or instructions), as a range.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Cost {
+    /// Optimistic estimate.
+    pub low: u32,
+    /// Pessimistic estimate (the one every check uses).
+    pub high: u32,
+}
+
+impl Cost {
+    const fn new(low: u32, high: u32) -> Self {
+        Cost { low, high }
+    }
+
+    fn add_scaled(self, c: Cost, k: u32) -> Cost {
+        Cost {
+            low: self.low.saturating_add(c.low.saturating_mul(k)),
+            high: self.high.saturating_add(c.high.saturating_mul(k)),
+        }
+    }
+}
+
+/// Coefficients of the cost model, in hundredths of a cycle (or of an
+/// instruction) so that fractional costs (11.5 instructions per pair) stay
+/// exact in integers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CostModel {
+    /// Per sample, whatever the image: `process_sample`'s own work and the
+    /// interrupt shell.
+    pub fixed: Cost,
+    /// Per axis present in the image (the call, scaling, guard, DAC code).
+    pub axis: Cost,
+    /// Per pole pair.
+    pub pair: Cost,
+    /// Extra for an odd pair count (the last pair runs alone).
+    pub odd_pair: Cost,
+    /// Per live real pole.
+    pub real: Cost,
+    /// Per axis with at least one real pole (entering the real-pole loop).
+    pub real_setup: Cost,
+    /// Per FIR tap.
+    pub tap: Cost,
+    /// Per axis with at least one FIR tap (entering the tap loop).
+    pub fir_setup: Cost,
+}
+
+/// Shape of one axis's filter as the kernel runs it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct AxisShape {
+    /// Pole pairs.
+    pub pairs: u32,
+    /// Live real poles.
+    pub reals: u32,
+    /// FIR taps.
+    pub taps: u32,
+}
+
+impl AxisShape {
+    /// The shape of a built filter.
+    pub fn of(f: &AxisFilter) -> Self {
+        let (pairs, reals) = f.kernel_counts();
+        AxisShape { pairs: pairs as u32, reals: reals as u32, taps: f.fir().len() as u32 }
+    }
+}
+
+impl CostModel {
+    /// Instructions per call of `process_sample` on the Cortex-M4F (no
+    /// interrupt shell), fitted to the QEMU counts (`model …` lines of
+    /// `scripts/qemu_icount.sh`; BENCHMARKS.md, "Cost model of the sample
+    /// interrupt"). low = high: the count is exact per shape.
+    pub const QEMU_INSNS: CostModel = CostModel {
+        fixed: Cost::new(12_139, 12_139),
+        axis: Cost::new(12_173, 12_173),
+        pair: Cost::new(1_134, 1_134),
+        odd_pair: Cost::new(354, 354),
+        real: Cost::new(1_272, 1_272),
+        real_setup: Cost::new(511, 511),
+        tap: Cost::new(538, 538),
+        fir_setup: Cost::new(1_346, 1_346),
+    };
+
+    /// Cycles of the whole sample interrupt on the STM32G474 at 170 MHz,
+    /// code in CCM SRAM (0 wait states): the instruction model's parts
+    /// converted with the Cortex-M4 TRM timings of their instruction mix
+    /// (BENCHMARKS.md), plus the interrupt shell in `fixed`.
+    ///
+    /// * pair: 28-29 cycles (two pairs per loop pass: `vldmia` 8 + 4,
+    ///   `vstmia` 4, 8 `vmla`/`vmls` at 3, 10 `vmul`/`vadd` at 1, `subs` +
+    ///   `bne`); odd pair: the lone last pair's 12 instructions cost 30-32
+    ///   cycles, 3.5-7 more than a pair in the loop;
+    /// * real pole: 12.7 instructions, 3 loads, 1 store, 2 `vmla`, 1 `vadd`,
+    ///   loop overhead with a taken branch: 18-24 cycles;
+    /// * tap: 5.4 instructions (2 `vldr`, `vstr`, `vmla`, loop share): 8-10.5;
+    /// * scalar and set-up code (fixed, axis, loop set-ups): 1.0-1.35 cycles
+    ///   per instruction (loads at 2, branches at 2-4, the rest at 1);
+    /// * interrupt shell, in `fixed`: 200-350 cycles (exception entry and
+    ///   exit 24, lazy FP stacking 17, timer flag, 3 DMA NDTR reads, 3 ADC
+    ///   ring reads, 3 DAC writes, stream push, DWT statistics).
+    pub const CORTEX_M4: CostModel = CostModel {
+        fixed: Cost::new(12_139 + 20_000, 16_388 + 35_000),
+        axis: Cost::new(12_173, 16_434),
+        pair: Cost::new(2_800, 2_900),
+        odd_pair: Cost::new(350, 700),
+        real: Cost::new(1_800, 2_400),
+        real_setup: Cost::new(511, 690),
+        tap: Cost::new(800, 1_050),
+        fir_setup: Cost::new(1_346, 1_817),
+    };
+
+    /// Cost of one axis of shape `s` (whole cycles, rounded up).
+    pub fn axis_cost(&self, s: AxisShape) -> Cost {
+        let c = self.axis_cost_hundredths(s);
+        Cost { low: c.low.div_ceil(100), high: c.high.div_ceil(100) }
+    }
+
+    /// Cost of one axis of shape `s` (hundredths).
+    fn axis_cost_hundredths(&self, s: AxisShape) -> Cost {
+        Cost::default()
+            .add_scaled(self.axis, 1)
+            .add_scaled(self.pair, s.pairs)
+            .add_scaled(self.odd_pair, s.pairs & 1)
+            .add_scaled(self.real, s.reals)
+            .add_scaled(self.real_setup, u32::from(s.reals > 0))
+            .add_scaled(self.tap, s.taps)
+            .add_scaled(self.fir_setup, u32::from(s.taps > 0))
+    }
+
+    /// Cost of one sample with these axes, rounded up to whole cycles
+    /// (instructions).
+    pub fn sample_cost(&self, axes: &[AxisShape]) -> Cost {
+        let sum = axes.iter().fold(self.fixed, |acc, s| {
+            let a = self.axis_cost_hundredths(*s);
+            Cost { low: acc.low.saturating_add(a.low), high: acc.high.saturating_add(a.high) }
+        });
+        Cost { low: sum.low.div_ceil(100), high: sum.high.div_ceil(100) }
+    }
+
+    /// Cost of one sample of `image`.
+    pub fn image_cost(&self, image: &CoeffImage) -> Cost {
+        let mut shapes = [AxisShape::default(); crate::AXES];
+        let mut n = 0;
+        for a in image.axes.iter().flatten() {
+            if let Some(s) = shapes.get_mut(n) {
+                *s = AxisShape::of(&a.filter);
+                n += 1;
+            }
+        }
+        self.sample_cost(shapes.get(..n).unwrap_or(&[]))
+    }
+}
+
+/// Cycles per sample period at `fs_hz` on the box's core clock (0 for
+/// fs = 0).
+pub fn period_cycles(fs_hz: u32) -> u32 {
+    BOX_CORE_CLOCK_HZ.checked_div(fs_hz).unwrap_or(0)
+}
+
+/// Load of `cycles` per sample at `fs_hz`, in thousandths of the sample
+/// period (rounded up; `u32::MAX` when the period is 0).
+pub fn load_permille(cycles: u32, fs_hz: u32) -> u32 {
+    let num = u64::from(cycles) * u64::from(fs_hz) * 1000;
+    let den = u64::from(BOX_CORE_CLOCK_HZ);
+    u32::try_from(num.div_ceil(den)).unwrap_or(u32::MAX)
+}
+
+/// The highest sample rate (Hz) at which `cycles` per sample stay within
+/// `limit_permille` of the period (0 when `cycles` is 0: no limit).
+pub fn max_fs_hz(cycles: u32, limit_permille: u32) -> u32 {
+    let num = u64::from(BOX_CORE_CLOCK_HZ) * u64::from(limit_permille);
+    u32::try_from(num.checked_div(u64::from(cycles) * 1000).unwrap_or(0)).unwrap_or(u32::MAX)
+}
+
+/// Cycles each of `n_axes` axes may cost (high estimate of
+/// [`CostModel::CORTEX_M4`]) for the whole interrupt to stay within
+/// `limit_permille` of the period at `fs_hz` (0 if not even the fixed part
+/// fits).
+pub fn axis_budget(fs_hz: u32, limit_permille: u32, n_axes: u32) -> u32 {
+    let total = u64::from(period_cycles(fs_hz)) * u64::from(limit_permille) / 1000;
+    let fixed = u64::from(CostModel::CORTEX_M4.fixed.high.div_ceil(100));
+    let per_axis = total.saturating_sub(fixed).checked_div(u64::from(n_axes)).unwrap_or(0);
+    u32::try_from(per_axis).unwrap_or(u32::MAX)
+}
+
+/// The predicted interrupt load of an image at its own sample rate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Load {
+    /// Predicted cycles per sample, high estimate.
+    pub cycles: u32,
+    /// The same as thousandths of the sample period.
+    pub permille: u32,
+}
+
+/// Predicted load of `image` at its sample rate (high estimate of
+/// [`CostModel::CORTEX_M4`]).
+pub fn image_load(image: &CoeffImage) -> Load {
+    let cycles = CostModel::CORTEX_M4.image_cost(image).high;
+    Load { cycles, permille: load_permille(cycles, image.fs_hz) }
+}
+
+/// `Err` with the predicted load when the image's high estimate exceeds
+/// `limit_permille` of its sample period.
+pub fn check_load(image: &CoeffImage, limit_permille: u32) -> Result<Load, Load> {
+    let l = image_load(image);
+    if l.permille > limit_permille {
+        Err(l)
+    } else {
+        Ok(l)
+    }
+}
+
+/// Whether the instruction model's prediction `model` is within the stated
+/// uncertainty ([`INSN_TOLERANCE`], [`INSN_TOLERANCE_ABS`]) of a measured
+/// count `measured` (instructions per call).
+pub fn insns_agree(model: u32, measured: u32) -> bool {
+    let tol = (u64::from(measured) * u64::from(INSN_TOLERANCE)).div_ceil(1000) + u64::from(INSN_TOLERANCE_ABS);
+    u64::from(model.abs_diff(measured)) <= tol
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shape(pairs: u32, reals: u32, taps: u32) -> AxisShape {
+        AxisShape { pairs, reals, taps }
+    }
+
+    #[test]
+    fn cost_grows_with_every_part_and_low_never_exceeds_high() {
+        let m = CostModel::CORTEX_M4;
+        let base = m.sample_cost(&[shape(4, 0, 0)]);
+        for more in [shape(6, 0, 0), shape(4, 1, 0), shape(4, 0, 1)] {
+            let c = m.sample_cost(&[more]);
+            assert!(c.low > base.low && c.high > base.high, "{more:?}: {c:?} vs {base:?}");
+        }
+        for s in [shape(0, 0, 0), shape(24, 0, 24), shape(3, 1, 19)] {
+            let c = m.sample_cost(&[s, s, s]);
+            assert!(c.low < c.high, "{s:?}: {c:?}");
+        }
+    }
+
+    #[test]
+    fn axes_within_the_axis_budget_fit_the_limit_and_one_cycle_more_does_not() {
+        let m = CostModel::CORTEX_M4;
+        for (fs, n) in [(51_200u32, 3u32), (25_600, 3), (51_200, 1), (102_400, 2)] {
+            let per_axis = axis_budget(fs, 600, n);
+            let total = m.fixed.high.div_ceil(100) + n * per_axis;
+            assert!(load_permille(total, fs) <= 600, "fs {fs} n {n}");
+            assert!(load_permille(total + n + 4, fs) > 600 || load_permille(total + 2 * n + 4, fs) > 600, "fs {fs} n {n}: budget not tight");
+        }
+        assert_eq!(axis_budget(1_000_000, 100, 3), 0);
+    }
+
+    #[test]
+    fn load_and_max_fs_are_inverse() {
+        // 1 700 cycles at 51.2 kHz: 1700·51200/170e6 = 0.512 → 512 ‰.
+        assert_eq!(load_permille(1_700, 51_200), 512);
+        // and the highest rate at 60 % is 170e6·0.6/1700 = 60 kHz.
+        assert_eq!(max_fs_hz(1_700, 600), 60_000);
+        assert_eq!(period_cycles(51_200), 3_320);
+        assert_eq!(max_fs_hz(0, 600), 0);
+        assert_eq!(period_cycles(0), 0);
+    }
+
+    #[test]
+    fn tolerance_accepts_the_stated_band_and_rejects_beyond() {
+        assert!(insns_agree(1_000 + 26, 1_000));
+        assert!(!insns_agree(1_000 + 27, 1_000));
+        assert!(insns_agree(1_000 - 26, 1_000));
+        assert!(!insns_agree(0, 1_000));
+        // 523 · 2 % = 10.5 → 11, + 6: 17.
+        assert!(insns_agree(523 + 17, 523));
+        assert!(!insns_agree(523 + 18, 523));
+    }
+}

@@ -1,0 +1,87 @@
+//! The cost model of the sample interrupt (`dynocomp_core::budget`) against
+//! the instructions `process_sample` executes on the emulated Cortex-M4F
+//! (issue #16).
+//!
+//! Runs `scripts/qemu_icount.sh` (builds `qemu/`'s `icount` program, runs
+//! it under `qemu-system-arm -icount shift=0`, where the count is exact; see
+//! BENCHMARKS.md, "Instructions per sample on the Cortex-M4F"), reads its
+//! `model P R T A <per call> <net>` lines (A axes, each with P pole pairs,
+//! R real poles, T FIR taps) and requires the instruction model
+//! [`CostModel::QEMU_INSNS`] to predict every count within its stated
+//! uncertainty (`budget::insns_agree`). The cycle model
+//! [`CostModel::CORTEX_M4`] is that model part by part times the TRM's
+//! cycles per instruction, so a drift here is a drift there.
+//!
+//! Negative control: the same check with one coefficient of the model
+//! off by 10 % (pairs) or 20 % (taps, real poles) must reject at least one
+//! measured shape. If `qemu-system-arm` is missing the test FAILS (like
+//! `tests/qemu_bit_exact.rs`); `bash scripts/test.sh` installs it.
+
+use dynocomp_core::budget::{insns_agree, AxisShape, Cost, CostModel};
+use std::path::Path;
+use std::process::Command;
+
+struct Measured {
+    shape: AxisShape,
+    axes: usize,
+    insns: u32,
+}
+
+fn measure() -> Vec<Measured> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    if Command::new("qemu-system-arm").arg("--version").output().is_err() {
+        panic!("qemu-system-arm not found: install it with `apt-get install -y --no-install-recommends qemu-system-arm`, or run `bash scripts/test.sh`");
+    }
+    let out = Command::new("bash")
+        .arg(root.join("scripts/qemu_icount.sh"))
+        .output()
+        .expect("run scripts/qemu_icount.sh");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "qemu_icount.sh failed: {}\n{}", text, String::from_utf8_lossy(&out.stderr));
+    let rows: Vec<Measured> = text
+        .lines()
+        .filter_map(|l| l.strip_prefix("model "))
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|w| w.parse().expect("number in a model line")).collect();
+            Measured {
+                shape: AxisShape { pairs: v[0] as u32, reals: v[1] as u32, taps: v[2] as u32 },
+                axes: v[3] as usize,
+                insns: v[4].round() as u32,
+            }
+        })
+        .collect();
+    assert!(rows.len() >= 15, "expected the calibration grid's model lines, got {}:\n{text}", rows.len());
+    rows
+}
+
+/// The shapes the model misses beyond its uncertainty (empty = agrees).
+fn misses(model: &CostModel, rows: &[Measured]) -> Vec<String> {
+    rows.iter()
+        .filter_map(|m| {
+            let predicted = model.sample_cost(&vec![m.shape; m.axes]).high;
+            (!insns_agree(predicted, m.insns)).then(|| format!("{:?} x{}: model {predicted}, QEMU {}", m.shape, m.axes, m.insns))
+        })
+        .collect()
+}
+
+fn scaled(c: Cost, pct: u32) -> Cost {
+    Cost { low: c.low * pct / 100, high: c.high * pct / 100 }
+}
+
+#[test]
+fn cost_model_matches_the_qemu_instruction_counts() {
+    let rows = measure();
+    let bad = misses(&CostModel::QEMU_INSNS, &rows);
+    assert!(bad.is_empty(), "cost model drifted from the measured counts:\n{}", bad.join("\n"));
+
+    // Negative controls: a model off in one part must be caught.
+    let base = CostModel::QEMU_INSNS;
+    for (what, m) in [
+        ("pairs -10 %", CostModel { pair: scaled(base.pair, 90), ..base }),
+        ("taps +20 %", CostModel { tap: scaled(base.tap, 120), ..base }),
+        ("real poles -20 %", CostModel { real: scaled(base.real, 80), ..base }),
+        ("axis call -20 %", CostModel { axis: scaled(base.axis, 80), ..base }),
+    ] {
+        assert!(!misses(&m, &rows).is_empty(), "negative control '{what}' was not caught");
+    }
+}
