@@ -3,7 +3,7 @@
 //! simulated with the ideal anti-aliasing chain, designed, compensated and
 //! scored against the band-limited truth.
 //!
-//! usage: cargo run --release -p dynocomp --example rates -- [--quick] [--lag L] [--discretization fit|foh|zoh]
+//! usage: cargo run --release -p dynocomp --example rates -- [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf]
 //!
 //! Per case and axis: raw and compensated NRMSE (RMS error / std of the
 //! truth, below min(4 kHz, 0.4 fs), latency removed), the exact-inverse noise
@@ -21,18 +21,19 @@ fn main() -> Result<()> {
     while let Some(a) = args.next() {
         match a.as_str() {
             "--quick" => quick = true,
+            "--exact-frf" => run.exact_frf = true,
             "--lag" => run.lag = args.next().context("--lag needs a value")?.parse().context("--lag: not a number of samples")?,
             "--discretization" => {
                 let v = args.next().context("--discretization needs fit, foh or zoh")?;
                 run.discretization = <dynocomp::discretize::Discretization as clap::ValueEnum>::from_str(&v, true)
                     .map_err(|e| anyhow::anyhow!("--discretization {v}: {e}"))?;
             }
-            _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh])"),
+            _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf])"),
         }
     }
     let list = if quick { quick_cases() } else { cases() };
     let t_all = Instant::now();
-    println!("NRMSE = RMS error / std of the band-limited truth, band min(4 kHz, 0.4 fs), declared latency {} removed, discretization {}", run.lag, run.discretization.name());
+    println!("NRMSE = RMS error / std of the band-limited truth, band min(4 kHz, 0.4 fs), declared latency {} removed, discretization {}{}", run.lag, run.discretization.name(), if run.exact_frf { ", exact (noise-free) impact-test FRF" } else { "" });
     println!("floor = exact-inverse noise floor sqrt(R·(2/fs)·∫|1/G|² df)/std(truth) with the true G");
     println!(
         "{:>7} {:<15} {:>5} {:>4} {:>4} {:>9} {:>9} {:>8} {:>9} {:>8} {:>15} {:>8}",

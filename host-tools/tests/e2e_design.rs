@@ -1,7 +1,12 @@
 //! End to end against known truth: simulate → design → image → compensate
 //! (core kernel) → NRMSE of the compensated force against the simulator's
 //! true force, below the FRF bandwidth (4 kHz). See `metrics` for the NRMSE
-//! definition (RMS error / peak-to-peak of the band-limited truth).
+//! definition (RMS error / std of the band-limited truth, DESIGN.md).
+//!
+//! Thresholds are the issue #12 targets in that convention: every axis
+//! ≤ 2 %, median ≤ 0.5 %. (The thresholds before were 1.5 % of the truth's
+//! peak-to-peak, about 5 % of its std: these are tighter.) The same targets
+//! at the other DAQ rates: `e2e_rates.rs`.
 
 use dynocomp::compensate::compensate_record;
 use dynocomp::design::AxisDesign;
@@ -13,6 +18,11 @@ use dynocomp::simulate::SimOutput;
 mod sim_common;
 use sim_common::{design_all, sim, FS, F_MAX};
 
+/// Largest compensated NRMSE of any axis (issue #12 target).
+const WORST: f64 = 0.02;
+/// Largest median compensated NRMSE (issue #12 target).
+const MEDIAN: f64 = 0.005;
+
 /// Compensate the measured record with an image built from `designs` (the
 /// same path as `dynocomp compensate`); (compensated NRMSE, raw NRMSE) per axis.
 fn score(s: &SimOutput, designs: &[AxisDesign], lag: usize) -> Vec<(f64, f64)> {
@@ -23,7 +33,7 @@ fn score(s: &SimOutput, designs: &[AxisDesign], lag: usize) -> Vec<(f64, f64)> {
         .map(|a| {
             let comp = accuracy(out.channel(a).unwrap(), &s.truth[a], FS, F_MAX);
             let raw = accuracy(&s.measured[a], &s.truth[a], FS, F_MAX);
-            (comp.nrmse_p2p, raw.nrmse_p2p)
+            (comp.nrmse, raw.nrmse)
         })
         .collect()
 }
@@ -45,14 +55,14 @@ fn compensation_meets_target_across_dynamometers_and_tooth_passing_frequencies()
     for (seed, rpm, teeth) in cases {
         let s = sim(seed, rpm, teeth);
         for (c, r) in check(&format!("seed {seed} TPF {:.0} Hz", rpm / 60.0 * teeth as f64), &s, 4) {
-            assert!(c < 0.015, "compensated NRMSE {:.3} % ≥ 1.5 %", c * 100.0);
+            assert!(c < WORST, "compensated NRMSE {:.3} % ≥ 2 %", c * 100.0);
             assert!(c < r / 5.0, "compensated {:.3} % not far below raw {:.3} %", c * 100.0, r * 100.0);
             all.push(c);
         }
     }
     all.sort_by(f64::total_cmp);
     let median = all[all.len() / 2];
-    assert!(median < 0.015, "median NRMSE {:.3} %", median * 100.0);
+    assert!(median < MEDIAN, "median NRMSE {:.3} % ≥ 0.5 %", median * 100.0);
 }
 
 #[test]
@@ -66,7 +76,7 @@ fn harmonic_on_the_dynamometer_resonance_is_compensated() {
     let sc = check(&format!("2·TPF on fn_y = {fn_y:.0} Hz"), &s, 4);
     let (c, r) = sc[1];
     assert!(r > 0.10, "raw error {:.2} % should be large on resonance", r * 100.0);
-    assert!(c < 0.015, "compensated NRMSE {:.3} % ≥ 1.5 %", c * 100.0);
+    assert!(c < WORST, "compensated NRMSE {:.3} % ≥ 2 %", c * 100.0);
 }
 
 #[test]
@@ -77,7 +87,7 @@ fn a_design_for_the_wrong_dynamometer_fails_the_threshold() {
     let other = sim(32, 19_500.0, 4);
     let wrong = design_all(&other, 4);
     let sc = score(&s, &wrong, 4);
-    assert!(sc.iter().any(|(c, _)| *c > 0.015), "wrong designs passed: {sc:?}");
+    assert!(sc.iter().any(|(c, _)| *c > WORST), "wrong designs passed: {sc:?}");
 }
 
 #[test]

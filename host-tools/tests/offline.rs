@@ -141,13 +141,14 @@ fn offline_smoother_on_simulated_milling_records() {
         let causal0 = compensate_record(&image0, &rec, false, "sim").unwrap();
         let smoothed = smooth_record(&image, &sidecar, &rec, "sim").unwrap();
         for a in 0..3 {
-            let c4 = accuracy(causal.channel(a).unwrap(), &s.truth[a], FS, F_MAX).nrmse_p2p;
-            let c0 = accuracy(causal0.channel(a).unwrap(), &s.truth[a], FS, F_MAX).nrmse_p2p;
-            let o = accuracy(smoothed.channel(a).unwrap(), &s.truth[a], FS, F_MAX).nrmse_p2p;
+            let c4 = accuracy(causal.channel(a).unwrap(), &s.truth[a], FS, F_MAX).nrmse;
+            let c0 = accuracy(causal0.channel(a).unwrap(), &s.truth[a], FS, F_MAX).nrmse;
+            let o = accuracy(smoothed.channel(a).unwrap(), &s.truth[a], FS, F_MAX).nrmse;
             eprintln!("seed {seed} axis {a}: causal L=0 {:.4} %, L=4 {:.4} %, offline smoother {:.4} %", c0 * 100.0, c4 * 100.0, o * 100.0);
             assert!(o < c0 / 5.0, "axis {a}: offline {:.4} % not far below causal L=0 {:.4} %", o * 100.0, c0 * 100.0);
             assert!(o < 1.2 * c4, "axis {a}: offline {:.4} % not within 20 % of causal L=4 {:.4} %", o * 100.0, c4 * 100.0);
-            assert!(o < 0.01, "axis {a}: offline NRMSE {:.4} % ≥ 1 %", o * 100.0);
+            // (std convention; was 1 % of peak-to-peak, about 3.5 % of std)
+            assert!(o < 0.02, "axis {a}: offline NRMSE {:.4} % ≥ 2 %", o * 100.0);
         }
     }
 }
@@ -164,8 +165,8 @@ fn a_smoother_with_the_wrong_model_is_worse() {
     let sidecar = ModelSidecar::new(&image, &models);
     let rec = SignalRecord { t_s: None, channels: (0..3).map(|a| (a, s.measured[a].clone())).collect() };
     let out = smooth_record(&image, &sidecar, &rec, "sim").unwrap();
-    let worst = (0..3).map(|a| accuracy(out.channel(a).unwrap(), &s.truth[a], FS, F_MAX).nrmse_p2p).fold(0.0, f64::max);
-    assert!(worst > 0.01, "wrong models passed: {:.4} %", worst * 100.0);
+    let worst = (0..3).map(|a| accuracy(out.channel(a).unwrap(), &s.truth[a], FS, F_MAX).nrmse).fold(0.0, f64::max);
+    assert!(worst > 0.02, "wrong models passed: {:.4} %", worst * 100.0);
 }
 
 #[test]

@@ -15,9 +15,10 @@ use dynocomp::parallel::{build_parallel_image, design_parallel};
 use dynocomp::simulate::SimOutput;
 use dynocomp_core::image::{BandImage, CoeffImage, DesignMethod, ImageError, ParallelImage, MAX_PARALLEL_IMAGE_LEN};
 
-/// Stated bound on the in-band error of parallel elaboration (NRMSE, see
-/// `band_error`).
-const BAND_BOUND: f64 = 0.005;
+/// Stated bound on the in-band error of parallel elaboration (NRMSE in the
+/// std convention, see `band_error`; was 0.5 % of the truth's peak-to-peak,
+/// about 1.7 % of its std).
+const BAND_BOUND: f64 = 0.015;
 
 fn bands_for(s: &SimOutput, rpm: f64, teeth: u32) -> Vec<Band> {
     let args = BandArgs { spindle_rpm: Some(rpm), teeth: Some(teeth), harmonics: 3, band_width: 0.1, ..Default::default() };
@@ -50,9 +51,12 @@ fn band_error(est: &[f64], truth: &[f64], lo: f64, hi: f64) -> f64 {
     let skip = e.len() / 20;
     let rng = skip..e.len() - skip;
     let rms = (rng.clone().map(|k| (e[k] - t[k]).powi(2)).sum::<f64>() / rng.len() as f64).sqrt();
+    // normalized by the std of the band-limited truth (DESIGN.md's NRMSE)
     let tl = lowpass(truth, FS, F_MAX);
-    let (mn, mx) = tl[skip..tl.len() - skip].iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
-    rms / (mx - mn)
+    let tl = &tl[skip..tl.len() - skip];
+    let mean = tl.iter().sum::<f64>() / tl.len() as f64;
+    let std = (tl.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / tl.len() as f64).sqrt();
+    rms / std
 }
 
 #[test]
@@ -81,11 +85,17 @@ fn parallel_image_compensates_a_simulated_record_in_every_band() {
     for a in 0..3 {
         let est = out.channel(a).unwrap();
         let d_est = default_out.channel(a).unwrap();
-        eprintln!("axis {a}: default (whole band) NRMSE {:.3} %, static band {:.4} %", accuracy(d_est, &s.truth[a], FS, F_MAX).nrmse_p2p * 100.0, band_error(d_est, &s.truth[a], bands[0].lo_hz, bands[0].hi_hz) * 100.0);
-        let whole = accuracy(est, &s.truth[a], FS, F_MAX).nrmse_p2p;
-        let raw = accuracy(&s.measured[a], &s.truth[a], FS, F_MAX).nrmse_p2p;
+        eprintln!("axis {a}: default (whole band) NRMSE {:.3} %, static band {:.4} %", accuracy(d_est, &s.truth[a], FS, F_MAX).nrmse * 100.0, band_error(d_est, &s.truth[a], bands[0].lo_hz, bands[0].hi_hz) * 100.0);
+        let acc = accuracy(est, &s.truth[a], FS, F_MAX);
+        let whole = acc.nrmse;
+        let raw = accuracy(&s.measured[a], &s.truth[a], FS, F_MAX).nrmse;
         eprintln!("axis {a}: parallel NRMSE {:.3} % (raw {:.2} %)", whole * 100.0, raw * 100.0);
-        assert!(whole < 0.015, "axis {a}: parallel NRMSE {:.3} % ≥ 1.5 %", whole * 100.0);
+        // The former bound, 1.5 % of the truth's peak-to-peak, converted
+        // exactly into this record's std convention (same strictness: the
+        // whole-band error of parallel elaboration includes the uncompensated
+        // gaps between the bands; its accuracy claim is the in-band one below).
+        let bound = 0.015 * acc.nrmse / acc.nrmse_p2p;
+        assert!(whole < bound, "axis {a}: parallel NRMSE {:.3} % ≥ {:.2} % (1.5 % of peak-to-peak)", whole * 100.0, bound * 100.0);
         for b in bands.iter().filter(|b| b.hi_hz <= F_MAX) {
             let e = band_error(est, &s.truth[a], b.lo_hz, b.hi_hz);
             let e_raw = band_error(&s.measured[a], &s.truth[a], b.lo_hz, b.hi_hz);

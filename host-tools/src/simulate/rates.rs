@@ -200,11 +200,15 @@ pub struct RunOptions {
     pub lag: usize,
     /// Discrete model of the Kalman design.
     pub discretization: crate::discretize::Discretization,
+    /// A noise-free impact test: the FRF is exactly the chain's G (for the
+    /// "distortion below noise" check, where only the discrete model and
+    /// the filter can make the error exceed the exact inverse's noise floor).
+    pub exact_frf: bool,
 }
 
 impl Default for RunOptions {
     fn default() -> Self {
-        Self { lag: 4, discretization: crate::discretize::Discretization::Fit }
+        Self { lag: 4, discretization: crate::discretize::Discretization::Fit, exact_frf: false }
     }
 }
 
@@ -262,7 +266,12 @@ pub fn noise_floor(g: impl Fn(f64) -> Complex64, r: f64, fs_hz: f64, band_hz: f6
 /// coefficient image (declared latency removed) and score it. A failed
 /// design is recorded in its axis, not returned as an error.
 pub fn run_case(case: &RateCase, fs_hz: f64, run: &RunOptions) -> Result<CaseResult> {
-    let params = case.sim_params(fs_hz);
+    let mut params = case.sim_params(fs_hz);
+    if run.exact_frf {
+        params.impact.output_noise_rel = 0.0;
+        params.impact.input_noise_rel = 0.0;
+        params.impact.dc_noise_factor = 1.0;
+    }
     let dyno = case.dynamometer(&params)?;
     let s = simulate_with(case.seed, &params, dyno)?;
     Ok(score_sim(case.name, &s, run))

@@ -1,0 +1,105 @@
+//! End to end at the sample rates DAQs use (issue #12): simulate with a real
+//! acquisition chain (brick wall at 0.45 fs, band-limited truth), design,
+//! compensate through a coefficient image and score against the truth (NRMSE
+//! = RMS error / std of the band-limited truth, band min(4 kHz, 0.4 fs),
+//! latency removed). Cases: `simulate::rates::quick_cases()` (the default
+//! dynamometer, and sensor modes at 4.5-6 kHz with an FRF to 8 kHz, above
+//! Nyquist at 10.24 kHz). The full case list runs in the benchmark
+//! (`cargo run --release -p dynocomp --example rates`, BENCHMARKS.md).
+
+use dynocomp::discretize::Discretization;
+use dynocomp::simulate::rates::{quick_cases, run_case, CaseResult, RunOptions, RATES_HZ};
+
+/// Issue #12 targets, met at 25.6, 51.2 and 102.4 kHz.
+const MEDIAN: f64 = 0.005;
+const WORST: f64 = 0.02;
+/// At 10.24 kHz the targets are NOT met (BENCHMARKS.md, "Accuracy at every
+/// DAQ rate"): with the main sensor mode above Nyquist the compensated error
+/// is 3-5 % (3.2-4.6 % on its three axes, half of this subset). These are
+/// regression guards just above the measured level, not targets.
+const MEDIAN_10K: f64 = 0.04;
+const WORST_10K: f64 = 0.06;
+
+fn run(fs: f64, opts: &RunOptions) -> Vec<CaseResult> {
+    quick_cases().iter().map(|c| run_case(c, fs, opts).unwrap_or_else(|e| panic!("{} at {fs} Hz: {e:#}", c.name))).collect()
+}
+
+/// (compensated, raw) NRMSE of every axis; panics on a failed design.
+fn scores(results: &[CaseResult]) -> Vec<(f64, f64)> {
+    let mut v = Vec::new();
+    for r in results {
+        for a in &r.axes {
+            let c = a.comp_nrmse.as_ref().unwrap_or_else(|e| panic!("{} at {} Hz axis {}: design failed: {e}", r.case, r.fs_hz, a.axis));
+            eprintln!("{:>6} Hz {:<11} axis {}: comp {:.3} %, raw {:.2} %, floor {:.3} %", r.fs_hz, r.case, a.axis, c * 100.0, a.raw_nrmse * 100.0, a.noise_floor * 100.0);
+            v.push((*c, a.raw_nrmse));
+        }
+    }
+    v
+}
+
+fn median_worst(s: &[(f64, f64)]) -> (f64, f64) {
+    let mut c: Vec<f64> = s.iter().map(|x| x.0).collect();
+    c.sort_by(f64::total_cmp);
+    (c[c.len() / 2], c[c.len() - 1])
+}
+
+fn limits(fs: f64) -> (f64, f64) {
+    if fs < 20_000.0 {
+        (MEDIAN_10K, WORST_10K)
+    } else {
+        (MEDIAN, WORST)
+    }
+}
+
+#[test]
+fn accurate_at_every_daq_rate_and_never_worse_than_raw() {
+    for fs in RATES_HZ {
+        let s = scores(&run(fs, &RunOptions::default()));
+        for (c, r) in &s {
+            assert!(c < r, "{fs} Hz: an axis is worse than uncompensated ({:.3} % vs {:.3} %)", c * 100.0, r * 100.0);
+        }
+        let (median, worst) = median_worst(&s);
+        let (lm, lw) = limits(fs);
+        eprintln!("{fs} Hz: median {:.3} %, worst {:.3} %", median * 100.0, worst * 100.0);
+        assert!(median <= lm, "{fs} Hz: median {:.3} % > {:.2} %", median * 100.0, lm * 100.0);
+        assert!(worst <= lw, "{fs} Hz: worst {:.3} % > {:.2} %", worst * 100.0, lw * 100.0);
+    }
+}
+
+#[test]
+fn the_first_order_hold_fails_the_same_limits() {
+    // Negative control: the same cases designed on the first-order-hold
+    // model (the design before issue #12) miss the limits above at the two
+    // lowest rates.
+    let foh = RunOptions { discretization: Discretization::Foh, ..Default::default() };
+    for fs in [RATES_HZ[0], RATES_HZ[1]] {
+        let (median, worst) = median_worst(&scores(&run(fs, &foh)));
+        let (lm, lw) = limits(fs);
+        eprintln!("FOH {fs} Hz: median {:.3} %, worst {:.3} %", median * 100.0, worst * 100.0);
+        assert!(median > lm || worst > lw, "{fs} Hz: FOH met the limits (median {:.3} %, worst {:.3} %)", median * 100.0, worst * 100.0);
+    }
+}
+
+#[test]
+fn distortion_stays_near_the_noise_floor_when_the_frf_is_exact() {
+    // With a noise-free impact test only the discrete model and the filter
+    // can push the error above the exact inverse filter's noise floor
+    // sqrt(R·(2/fs)·∫|1/G|² df)/std(truth). Target: within 1.3x, checked at
+    // the rates where it holds (BENCHMARKS.md lists every rate).
+    let exact = RunOptions { exact_frf: true, ..Default::default() };
+    let case = &quick_cases()[0];
+    for fs in [RATES_HZ[1], RATES_HZ[2]] {
+        let r = run_case(case, fs, &exact).unwrap();
+        for a in &r.axes {
+            let c = *a.comp_nrmse.as_ref().unwrap();
+            eprintln!("exact FRF {fs} Hz axis {}: {:.3} % vs floor {:.3} % ({:.2}x)", a.axis, c * 100.0, a.noise_floor * 100.0, c / a.noise_floor);
+            assert!(c <= 1.3 * a.noise_floor, "{fs} Hz axis {}: {:.3} % > 1.3 × floor {:.3} %", a.axis, c * 100.0, a.noise_floor * 100.0);
+        }
+    }
+    // Negative control: the first-order hold at 25.6 kHz exceeds 1.3x on
+    // some axis of the same exact FRF.
+    let foh = RunOptions { discretization: Discretization::Foh, ..exact };
+    let r = run_case(case, RATES_HZ[1], &foh).unwrap();
+    let worst = r.axes.iter().map(|a| a.comp_nrmse.as_ref().unwrap() / a.noise_floor).fold(0.0, f64::max);
+    assert!(worst > 1.3, "FOH stayed within 1.3x of the floor ({worst:.2}x)");
+}
