@@ -15,7 +15,7 @@ for t in $(cargo +nightly fuzz list); do
         -max_total_time="$secs" -rss_limit_mb=2048 -timeout=10 -print_final_stats=1 >"$work.log" 2>&1
     status=$?
     set -e
-    grep -E "^(#[0-9]+ +DONE|==[0-9]+== ERROR|SUMMARY|stat::number_of_executed_units)" "$work.log" || true
+    grep -E "^(#[0-9]+[[:space:]]+DONE|==[0-9]+== ERROR|SUMMARY|stat::number_of_executed_units)" "$work.log" || true
     if [ "$status" -ne 0 ]; then
         tail -n 40 "$work.log" >&2
         echo "fuzz target $t FAILED (exit $status); the input is in fuzz/artifacts/$t/" >&2
