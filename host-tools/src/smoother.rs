@@ -218,7 +218,14 @@ pub fn read_sidecar(image_path: &Path, image: &CoeffImage) -> Result<ModelSideca
     let text = std::fs::read_to_string(&path).with_context(|| {
         format!("{shown}: cannot read the model sidecar that --offline needs (`dynocomp design` writes it next to the image)")
     })?;
-    let s: ModelSidecar = serde_json::from_str(&text).with_context(|| format!("{shown}: not a valid model sidecar"))?;
+    parse_sidecar(&text, &shown, image, image_path)
+}
+
+/// Parse the text of a model sidecar (shown as `shown` in errors) and check
+/// that it belongs to `image`, stored at `image_path`: the pure part of
+/// [`read_sidecar`].
+pub fn parse_sidecar(text: &str, shown: &str, image: &CoeffImage, image_path: &Path) -> Result<ModelSidecar> {
+    let s: ModelSidecar = serde_json::from_str(text).with_context(|| format!("{shown}: not a valid model sidecar"))?;
     if s.format != SIDECAR_FORMAT {
         bail!("{shown}: format `{}`, expected `{SIDECAR_FORMAT}`", s.format);
     }

@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Long fuzzing campaign of one target (docs/fuzzing.md): runs it until RUNS
+# executions (default 10^7), one target at a time, niced, and keeps the
+# libFuzzer log in fuzz/logs/<target>.log.
+#   bash fuzz/campaign.sh TARGET [RUNS] [EXTRA_CORPUS_DIR...]
+# MAX_TIME=S caps the wall time (seconds) when 10^7 does not fit.
+# The working corpus is fuzz/corpus/TARGET (not committed), seeded from
+# fuzz/seeds/TARGET; extra read-only corpus dirs (e.g. local vendor files)
+# may follow.
+set -euo pipefail
+cd "$(dirname "$0")"
+target="$1"
+runs="${2:-10000000}"
+shift $(( $# >= 2 ? 2 : 1 ))
+mkdir -p "corpus/$target" logs "seeds/$target"
+start=$(date +%s)
+set +e
+nice -n 10 cargo +nightly fuzz run "$target" "corpus/$target" "seeds/$target" "$@" -- \
+    -runs="$runs" ${MAX_TIME:+-max_total_time=$MAX_TIME} -rss_limit_mb=2048 -timeout=10 -print_final_stats=1 \
+    > "logs/$target.log" 2>&1
+rc=$?
+set -e
+end=$(date +%s)
+echo "target=$target rc=$rc wall_s=$((end - start)) corpus_files=$(ls "corpus/$target" | wc -l)" | tee -a "logs/$target.log"
+grep -E "^#[0-9]+.*(DONE|cov:)" "logs/$target.log" | tail -1
+grep -E "stat::number_of_executed_units|stat::peak_rss_mb" "logs/$target.log" || true
+exit $rc

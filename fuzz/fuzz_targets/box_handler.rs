@@ -1,0 +1,167 @@
+//! The box's request handler (`src/link.rs` over the store, run as the host's
+//! virtual box does, `host-tools/src/virtual_box.rs`) under a fuzzed
+//! sequence of raw wire bytes, well-formed requests and whole uploads
+//! (of the project's own images, optionally corrupted).
+//!
+//! Checks: never panics; every frame the box sends is valid; every frame it
+//! receives gets exactly one reply, in order, with the request's id, or id 0
+//! and an error if the frame is unreadable (predicted by an independent
+//! decoder fed the same bytes); `StartStream { 0 }` is refused and
+//! `GetStatus` reports this protocol version; a clean upload of a box image
+//! is acked and runs, a corrupted or offline-only one is refused at commit
+//! and the running image is unchanged; after every step the running image is
+//! the one a fresh boot of the flash would run.
+#![no_main]
+
+use dynocomp::sim_flash::SimFlash;
+use dynocomp::virtual_box::VirtualBox;
+use dynocomp_core::image::{CoeffImage, CRC32};
+use dynocomp_core::protocol::*;
+use dynocomp_core::store::{Layout, Store};
+use libfuzzer_sys::arbitrary::{self, Arbitrary};
+use dynocomp_fuzz::IMAGES;
+use libfuzzer_sys::fuzz_target;
+
+#[derive(Arbitrary, Debug)]
+enum Req {
+    GetStatus,
+    SetBypass(bool),
+    StartStream(u16),
+    StopStream,
+    AutoZero,
+    UploadBegin { len: u32, crc: u32 },
+    UploadChunk { offset: u32, bytes: Vec<u8> },
+    UploadCommit,
+}
+
+#[derive(Arbitrary, Debug)]
+enum Op {
+    /// Bytes on the wire, as they come.
+    Raw(Vec<u8>),
+    /// One well-formed request.
+    Request(Req),
+    /// A whole upload: begin, chunks of `chunk` bytes, commit.
+    Upload { image: u8, chunk: u8, corrupt: Option<(u16, u8)>, commit: bool },
+}
+
+struct Harness {
+    vbox: VirtualBox,
+    /// Decoder fed the same bytes as the box: predicts its replies.
+    shadow: FrameDecoder,
+    next_id: u16,
+}
+
+impl Harness {
+    /// Send `bytes`; returns the replies (stream frames dropped), checked
+    /// against the frames the shadow decoder sees.
+    fn send(&mut self, bytes: &[u8]) -> Vec<(u16, Reply)> {
+        let mut expected: Vec<u16> = Vec::new();
+        self.shadow.push(bytes, |r| {
+            expected.push(match r.ok().and_then(decode_message::<RequestFrame<'_>>) {
+                Some(f) => f.id,
+                None => 0,
+            })
+        });
+        let wire = self.vbox.receive(bytes);
+        let mut dec = FrameDecoder::new();
+        let mut replies = Vec::new();
+        dec.push(&wire, |r| {
+            let bytes = r.expect("the box sends valid frames");
+            match decode_message::<BoxMessage>(bytes).expect("the box's frames decode") {
+                BoxMessage::Reply { id, reply } => replies.push((id, reply)),
+                BoxMessage::Stream(_) => {}
+            }
+        });
+        assert_eq!(dec.pending(), 0, "the box sent an unterminated frame");
+        assert_eq!(replies.len(), expected.len(), "one reply per received frame");
+        for ((id, reply), want) in replies.iter().zip(&expected) {
+            assert_eq!(id, want, "reply id");
+            if *id == 0 {
+                assert!(matches!(reply, Reply::Error(_)), "an unreadable frame got {reply:?}");
+            }
+        }
+        replies
+    }
+
+    /// Send one request (after a delimiter that closes any partial frame).
+    fn request(&mut self, request: Request<'_>) -> Reply {
+        self.next_id = self.next_id.wrapping_add(1).max(1);
+        let id = self.next_id;
+        let mut buf = [0u8; MAX_FRAME + 1];
+        let n = encode_frame(&RequestFrame { id, request }, &mut buf[1..]).expect("request fits a frame");
+        let replies = self.send(&buf[..n + 1]);
+        let (rid, reply) = *replies.last().expect("a request gets a reply");
+        assert_eq!(rid, id);
+        reply
+    }
+
+    /// The running image is what a fresh boot of the flash runs.
+    fn consistent(&mut self) {
+        let mut store = Store::open(self.vbox.flash_copy(), Layout::STM32G474RE).expect("layout");
+        let boot = store.boot().image.ok();
+        assert_eq!(boot.as_ref(), self.vbox.running(), "running image differs from a fresh boot of the flash");
+    }
+}
+
+fuzz_target!(|ops: Vec<Op>| {
+    let mut h = Harness { vbox: VirtualBox::boot(SimFlash::g474_slots(), []).expect("boot"), shadow: FrameDecoder::new(), next_id: 0 };
+    for op in ops.into_iter().take(32) {
+        match op {
+            Op::Raw(bytes) => {
+                h.send(&bytes);
+            }
+            Op::Request(req) => {
+                let reply = match &req {
+                    Req::GetStatus => h.request(Request::GetStatus),
+                    Req::SetBypass(on) => h.request(Request::SetBypass(*on)),
+                    Req::StartStream(d) => h.request(Request::StartStream { decimation: *d }),
+                    Req::StopStream => h.request(Request::StopStream),
+                    Req::AutoZero => h.request(Request::AutoZero),
+                    Req::UploadBegin { len, crc } => h.request(Request::UploadBegin { len: *len, crc: *crc }),
+                    Req::UploadChunk { offset, bytes } => h.request(Request::UploadChunk { offset: *offset, bytes }),
+                    Req::UploadCommit => h.request(Request::UploadCommit),
+                };
+                match req {
+                    Req::StartStream(0) => assert_eq!(reply, Reply::Error(LinkError::BadDecimation)),
+                    Req::GetStatus => match reply {
+                        Reply::Status(s) => assert_eq!(s.protocol, PROTOCOL_VERSION),
+                        other => panic!("GetStatus answered {other:?}"),
+                    },
+                    _ => {}
+                }
+            }
+            Op::Upload { image, chunk, corrupt, commit } => {
+                let src = IMAGES[usize::from(image) % IMAGES.len()];
+                let mut bytes = src.to_vec();
+                let crc = CRC32.checksum(&bytes);
+                let mut changed = false;
+                if let Some((at, x)) = corrupt {
+                    let at = usize::from(at) % bytes.len();
+                    changed = x != 0;
+                    bytes[at] ^= x;
+                }
+                let before = h.vbox.running().copied();
+                let chunk = usize::from(chunk).clamp(1, MAX_CHUNK);
+                assert_eq!(h.request(Request::UploadBegin { len: bytes.len() as u32, crc }), Reply::Ack);
+                for (k, c) in bytes.chunks(chunk).enumerate() {
+                    let offset = (k * chunk) as u32;
+                    assert_eq!(h.request(Request::UploadChunk { offset, bytes: c }), Reply::Ack, "chunk at {offset}");
+                }
+                if commit {
+                    let reply = h.request(Request::UploadCommit);
+                    match CoeffImage::parse(src) {
+                        Ok(img) if !changed => {
+                            assert_eq!(reply, Reply::Ack, "a clean upload of a box image");
+                            assert_eq!(h.vbox.running(), Some(&img));
+                        }
+                        _ => {
+                            assert!(matches!(reply, Reply::Error(_)), "corrupted or offline-only upload committed: {reply:?}");
+                            assert_eq!(h.vbox.running().copied(), before);
+                        }
+                    }
+                }
+            }
+        }
+        h.consistent();
+    }
+});

@@ -1,0 +1,146 @@
+//! Coefficient image codec, formats 1 and 2 (`src/image.rs`).
+//!
+//! Byte 0 of the input is a mode: bit 0 set = repair the trailing CRC-32
+//! before parsing (so mutations get past the envelope to the semantic
+//! checks), bit 1 set = parse as format 2 (parallel) first. The rest is the
+//! image.
+//!
+//! Checks: never panics; an accepted image validates and re-encodes to the
+//! very same bytes (encode → parse → encode); `parse_prefix` of the image
+//! followed by junk gives the same image; a rejected image's error is true of
+//! the bytes (the field it names holds what it says, axis/section/tap/band
+//! indices are in range) and no semantic error is reported for bytes whose
+//! CRC does not match.
+#![no_main]
+
+use dynocomp_core::image::*;
+use dynocomp_core::kernel::{MAX_FIR, MAX_SECTIONS};
+use libfuzzer_sys::fuzz_target;
+
+fn le16(b: &[u8], at: usize) -> Option<u16> {
+    Some(u16::from_le_bytes(b.get(at..at + 2)?.try_into().ok()?))
+}
+fn le32(b: &[u8], at: usize) -> Option<u32> {
+    Some(u32::from_le_bytes(b.get(at..at + 4)?.try_into().ok()?))
+}
+
+/// The error `e` from parsing `bytes` as format `version` is true of them.
+fn check_error(e: ImageError, bytes: &[u8], version: u16) {
+    use ImageError::*;
+    let len = bytes.len();
+    let crc_ok = len >= CRC_LEN && le32(bytes, len - CRC_LEN) == Some(CRC32.checksum(&bytes[..len - CRC_LEN]));
+    match e {
+        Truncated { needed, have } => {
+            assert_eq!(have as usize, len);
+            assert!(needed as usize > len);
+            return;
+        }
+        BadMagic => {
+            assert_ne!(bytes.get(..4), Some(&MAGIC[..]));
+            return;
+        }
+        UnsupportedVersion(v) => {
+            assert_eq!(le16(bytes, 4), Some(v));
+            assert_ne!(v, version);
+            // The box's parser names a format-2 image as such.
+            assert!(version != FORMAT_VERSION || v != PARALLEL_FORMAT_VERSION);
+            return;
+        }
+        ParallelOfflineOnly => {
+            assert_eq!(version, FORMAT_VERSION);
+            assert_eq!(le16(bytes, 4), Some(PARALLEL_FORMAT_VERSION));
+            return;
+        }
+        BadHeaderLength(l) => {
+            assert_eq!(le16(bytes, 6), Some(l));
+            assert_ne!(usize::from(l), HEADER_LEN);
+            return;
+        }
+        BadLength(_) => return,
+        BadCrc { stored, computed } => {
+            assert_ne!(stored, computed);
+            assert_eq!(le32(bytes, len - CRC_LEN), Some(stored));
+            assert_eq!(CRC32.checksum(&bytes[..len - CRC_LEN]), computed);
+            return;
+        }
+        BufferTooSmall { .. } => panic!("parse reported an encoder error: {e}"),
+        TooManyTaps { axis, .. } | BadScaling { axis } | BadSummary { axis } => assert!(usize::from(axis) < dynocomp_core::AXES),
+        NonFiniteTap { axis, tap } => assert!(usize::from(axis) < dynocomp_core::AXES && usize::from(tap) < MAX_FIR),
+        TooManySections { axis, count } => assert!(usize::from(axis) < dynocomp_core::AXES && usize::from(count) > MAX_SECTIONS),
+        NonFiniteCoefficient { axis, section } | UnstableSection { axis, section } | NotModalSection { axis, section } => {
+            assert!(usize::from(axis) < dynocomp_core::AXES);
+            assert!(usize::from(section) < MAX_SECTIONS || section == 255, "section index {section} out of range");
+        }
+        AxisMismatch { expected, .. } => assert!(usize::from(expected) < dynocomp_core::AXES),
+        BadBandCount(n) => assert!(n == 0 || usize::from(n) > MAX_BANDS),
+        BadBand { band } | BandAxesDiffer { band } => {
+            assert_eq!(version, PARALLEL_FORMAT_VERSION);
+            assert!(usize::from(band) < MAX_BANDS && band < bytes[21]);
+        }
+        SampleRateOutOfRange(fs) => assert!(!FS_RANGE_HZ.contains(&fs)),
+        LatencyOutOfRange(l) => assert!(l > MAX_LATENCY_SAMPLES),
+        BadAxisMask(_) | UnknownFlags(_) | UnknownMethod(_) | ReservedNotZero | ParallelNotOfflineOnly => {}
+    }
+    // Everything below the envelope is only checked once the CRC matched.
+    assert!(crc_ok, "semantic error {e} reported for bytes whose CRC does not match");
+}
+
+fn check_v1(bytes: &[u8]) {
+    match CoeffImage::parse(bytes) {
+        Ok(img) => {
+            let mut buf = vec![0u8; MAX_IMAGE_LEN];
+            let n = img.encode(&mut buf).expect("an accepted image validates and encodes");
+            assert_eq!(&buf[..n], bytes, "encode(parse(bytes)) != bytes");
+            assert_eq!(encoded_len(&img), n);
+            assert_eq!(CoeffImage::parse(&buf[..n]), Ok(img));
+            let mut region = bytes.to_vec();
+            region.extend_from_slice(&[0xA5; 37]);
+            assert_eq!(CoeffImage::parse_prefix(&region), Ok(img), "parse_prefix with trailing junk");
+        }
+        Err(e) => {
+            check_error(e, bytes, FORMAT_VERSION);
+            // parse_prefix never accepts what parse of the declared prefix refuses.
+            if let Some(n) = declared_len(bytes).filter(|&n| n <= bytes.len()) {
+                if let Ok(img) = CoeffImage::parse_prefix(bytes) {
+                    assert_eq!(CoeffImage::parse(&bytes[..n]), Ok(img));
+                }
+            }
+        }
+    }
+}
+
+fn check_v2(bytes: &[u8]) {
+    match ParallelImage::parse(bytes) {
+        Ok(img) => {
+            assert!(img.flags & FLAG_OFFLINE_ONLY != 0, "an accepted parallel image is offline only");
+            let mut buf = vec![0u8; MAX_PARALLEL_IMAGE_LEN];
+            let n = img.encode(&mut buf).expect("an accepted parallel image validates and encodes");
+            assert_eq!(&buf[..n], bytes, "encode(parse(bytes)) != bytes (format 2)");
+            assert_eq!(parallel_encoded_len(&img), n);
+            for k in 0..img.bands().len() {
+                assert!(img.band_image(k).is_some());
+            }
+            assert!(img.band_image(img.bands().len()).is_none());
+            // The box's parser refuses it from the version field alone.
+            assert_eq!(CoeffImage::parse(bytes), Err(ImageError::ParallelOfflineOnly));
+        }
+        Err(e) => check_error(e, bytes, PARALLEL_FORMAT_VERSION),
+    }
+}
+
+fuzz_target!(|data: &[u8]| {
+    let Some((&mode, rest)) = data.split_first() else { return };
+    let mut bytes = rest.to_vec();
+    if mode & 1 == 1 && bytes.len() >= CRC_LEN {
+        let n = bytes.len() - CRC_LEN;
+        let crc = CRC32.checksum(&bytes[..n]);
+        bytes[n..].copy_from_slice(&crc.to_le_bytes());
+    }
+    if mode & 2 == 2 {
+        check_v2(&bytes);
+        check_v1(&bytes);
+    } else {
+        check_v1(&bytes);
+        check_v2(&bytes);
+    }
+});

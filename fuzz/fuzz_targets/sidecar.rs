@@ -1,0 +1,40 @@
+//! Model sidecar JSON (`host-tools/src/smoother.rs`, `parse_sidecar`, the
+//! pure part of `read_sidecar`) checked against the project's example image.
+//!
+//! Checks: never panics, neither the parse nor the per-axis model check nor
+//! building the smoother from an accepted model; an accepted sidecar
+//! re-serialised reads back equal (write → read); a rejected one's error
+//! names the file and the place (JSON line/column, or the field: format,
+//! image id / source / rate).
+#![no_main]
+
+use std::path::Path;
+
+use dynocomp::smoother::{parse_sidecar, Smoother};
+use dynocomp_fuzz::{assert_names_place_or, example_image};
+use libfuzzer_sys::fuzz_target;
+
+const SOURCE: &str = "fuzz.dcimg.model.json";
+
+fuzz_target!(|data: &[u8]| {
+    let Ok(text) = std::str::from_utf8(data) else { return };
+    let image = example_image();
+    let image_path = Path::new("fuzz.dcimg");
+    match parse_sidecar(text, SOURCE, &image, image_path) {
+        Ok(s) => {
+            let again = serde_json::to_string(&s).expect("an accepted sidecar serialises");
+            let back = parse_sidecar(&again, "again.json", &image, image_path).expect("a written sidecar reads back");
+            assert_eq!(back, s, "sidecar write → read changed it");
+            for axis in 0..dynocomp_core::AXES {
+                match s.model(axis, SOURCE) {
+                    Ok(model) if model.terms.len() <= 16 => {
+                        let _ = Smoother::new(&model, f64::from(image.fs_hz), 1.0, 0.05);
+                    }
+                    Ok(_) => {}
+                    Err(e) => assert_names_place_or(&format!("{e:#}"), SOURCE, &["axis "]),
+                }
+            }
+        }
+        Err(e) => assert_names_place_or(&format!("{e:#}"), SOURCE, &["format `", "belongs to image"]),
+    }
+});

@@ -1,0 +1,115 @@
+#!/usr/bin/env python3
+"""Regenerate the committed seed corpora (fuzz/seeds/<target>/) from the
+project's own data: data/example, host-tools/tests/fixtures, the images in
+fuzz/images/ (written by `dynocomp design` on the bundled example) and a few
+hand-made inputs. Run from the repository root: python3 fuzz/make_seeds.py
+
+Seeds stay small (a few KiB each): big inputs slow every execution.
+Public vendor files (e.g. the pyuff samples) are NOT committed; see
+docs/fuzzing.md for seeding the long campaigns with them locally.
+"""
+import os
+import struct
+import zlib
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SEEDS = os.path.join(ROOT, "fuzz", "seeds")
+
+
+def put(target, name, data):
+    d = os.path.join(SEEDS, target)
+    os.makedirs(d, exist_ok=True)
+    with open(os.path.join(d, name), "wb") as f:
+        f.write(data if isinstance(data, bytes) else data.encode())
+
+
+def head_lines(path, n):
+    with open(os.path.join(ROOT, path), "rb") as f:
+        return b"".join(f.readlines()[:n])
+
+
+def read(path):
+    with open(os.path.join(ROOT, path), "rb") as f:
+        return f.read()
+
+
+# FRF CSV: heads of the example and of the fixtures' expected CSVs, hand-made.
+put("frf_csv", "example_head.csv", head_lines("data/example/frf.csv", 24))
+fx = "host-tools/tests/fixtures/uff"
+for name in sorted(os.listdir(os.path.join(ROOT, fx))):
+    if name.endswith(".expected.csv"):
+        put("frf_csv", name, head_lines(f"{fx}/{name}", 16))
+put("frf_csv", "coherence.csv", "freq_hz,x_re,x_im,x_coh,z_re,z_im,z_coh\n0,1,0,1,1,0,0.5\n10.5,0.9,-0.1,0.99,1.1,0.2,1\n")
+put("frf_csv", "crlf_quoted.csv", '"freq_hz","y_re","y_im"\r\n1e1,1.0,-2.5e-3\r\n2e1,1.01,-3e-3\r\n')
+
+# UFF 58 / 58b: the project's fixtures (ASCII single/double, uneven, binary).
+for name in sorted(os.listdir(os.path.join(ROOT, fx))):
+    if name.endswith(".uff"):
+        put("uff58", name, read(f"{fx}/{name}"))
+
+# Signal CSV: heads of the example records, hand-made variants.
+put("signal_csv", "measured_head.csv", head_lines("data/example/measured.csv", 24))
+put("signal_csv", "idle_head.csv", head_lines("data/example/idle.csv", 24))
+put("signal_csv", "raw_columns.csv", "t_s,fx,fz,raw_fx,raw_fz\n0,1.5,2,3,4\n1.953125e-5,-1,0,0,0\n")
+put("signal_csv", "no_time.csv", "fy\n1\n2\n3\n")
+
+# Image codec: mode byte (bit 0: repair CRC, bit 1: format 2 first) + image.
+for name in sorted(os.listdir(os.path.join(ROOT, "fuzz", "images"))):
+    if not name.endswith(".dcimg"):
+        continue
+    img = read(f"fuzz/images/{name}")
+    for mode in (0, 1, 2, 3):
+        put("image", f"{name}.mode{mode}", bytes([mode]) + img)
+
+# Protocol: mode 1 (payload, framed by the target) and mode 0 (raw wire).
+def varint(v):
+    out = bytearray()
+    while True:
+        b = v & 0x7F
+        v >>= 7
+        if v:
+            out.append(b | 0x80)
+        else:
+            out.append(b)
+            return bytes(out)
+
+
+def cobs(data):
+    out, block = bytearray(), bytearray()
+    for b in data:
+        if b == 0:
+            out += bytes([len(block) + 1]) + block
+            block = bytearray()
+        else:
+            block.append(b)
+            if len(block) == 254:
+                out += bytes([255]) + block
+                block = bytearray()
+    out += bytes([len(block) + 1]) + block
+    return bytes(out)
+
+
+def frame(payload):
+    return cobs(payload + struct.pack("<I", zlib.crc32(payload))) + b"\x00"
+
+
+example = read("fuzz/images/example.dcimg")
+requests = {
+    "get_status": varint(1) + b"\x00",
+    "set_bypass": varint(2) + b"\x01\x01",
+    "start_stream": varint(3) + b"\x02" + varint(8),
+    "stop_stream": varint(4) + b"\x03",
+    "upload_begin": varint(5) + b"\x04" + varint(len(example)) + varint(zlib.crc32(example)),
+    "upload_chunk": varint(6) + b"\x05" + varint(0) + varint(64) + example[:64],
+    "upload_commit": varint(7) + b"\x06",
+    "auto_zero": varint(8) + b"\x07",
+}
+for name, payload in requests.items():
+    put("protocol", f"{name}.payload", b"\x01" + payload)
+    put("protocol", f"{name}.wire", b"\x00" + frame(payload))
+put("protocol", "session.wire", b"\x00" + b"".join(frame(p) for p in requests.values()))
+put("protocol", "garbage.wire", b"\x00\x01\x02\x00\xff\xff\x00")
+
+# Model sidecar: the example image's own sidecar, and a foreign one.
+put("sidecar", "example.model.json", read("fuzz/images/example.dcimg.model.json"))
+put("sidecar", "foreign.model.json", read("fuzz/images/lat0.dcimg.model.json"))

@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Short smoke run of every fuzz target (CI, .ci/run): SECONDS per target
+# (default 15) from the committed seeds, failing on any crash, timeout or
+# out-of-memory. Needs nightly and cargo-fuzz.
+set -euo pipefail
+cd "$(dirname "$0")"
+secs="${1:-15}"
+cargo +nightly fuzz build
+for t in $(cargo +nightly fuzz list); do
+    echo "-- fuzz smoke: $t (${secs} s)"
+    work="$(mktemp -d)"
+    # Seeds are read-only input; new corpus entries go to a scratch dir.
+    set +e
+    cargo +nightly fuzz run "$t" "$work" "seeds/$t" -- \
+        -max_total_time="$secs" -rss_limit_mb=2048 -timeout=10 -print_final_stats=1 >"$work.log" 2>&1
+    status=$?
+    set -e
+    grep -E "^(#[0-9]+[[:space:]]+DONE|==[0-9]+== ERROR|SUMMARY|stat::number_of_executed_units)" "$work.log" || true
+    if [ "$status" -ne 0 ]; then
+        tail -n 40 "$work.log" >&2
+        echo "fuzz target $t FAILED (exit $status); the input is in fuzz/artifacts/$t/" >&2
+        rm -rf "$work" "$work.log"
+        exit 1
+    fi
+    rm -rf "$work" "$work.log"
+done
+echo "fuzz smoke: all targets passed"
