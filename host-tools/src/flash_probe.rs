@@ -43,10 +43,15 @@ use dynocomp_core::store::{
     encode_record, other, parse_header, seq_newer, trailing_id, verify_image, Header, Layout, Store,
     RECORD_HEADER_LEN, SLOT_A_ADDR, SLOT_B_ADDR, SLOT_LEN,
 };
+#[cfg(feature = "probe")]
 use probe_rs::flashing::{DownloadOptions, FlashLoader};
+#[cfg(feature = "probe")]
 use probe_rs::probe::fake_probe::FakeProbe;
+#[cfg(feature = "probe")]
 use probe_rs::probe::list::Lister;
+#[cfg(feature = "probe")]
 use probe_rs::probe::Probe;
+#[cfg(feature = "probe")]
 use probe_rs::{MemoryInterface, Permissions, Session};
 
 use crate::sim_flash::SimFlash;
@@ -184,6 +189,7 @@ pub fn plan(image: &[u8], slot: SlotArg, slots: &[u8]) -> Result<FlashPlan> {
     })
 }
 
+#[cfg(feature = "probe")]
 /// Read both slots (A then B) through an attached session.
 pub fn read_slots(session: &mut Session) -> Result<Vec<u8>> {
     let mut core = session.core(0).context("probe: cannot access core 0")?;
@@ -195,6 +201,7 @@ pub fn read_slots(session: &mut Session) -> Result<Vec<u8>> {
     Ok(out)
 }
 
+#[cfg(feature = "probe")]
 /// The probe-rs flash loader holding `plan`'s record at its address
 /// (checked against the chip's memory map).
 pub fn loader_for(session: &Session, plan: &FlashPlan) -> Result<FlashLoader> {
@@ -211,6 +218,7 @@ pub fn loader_for(session: &Session, plan: &FlashPlan) -> Result<FlashLoader> {
     Ok(loader)
 }
 
+#[cfg(feature = "probe")]
 /// Erase, program and verify `plan` (or, with `dry_run`, only let probe-rs
 /// build its flash plan).
 pub fn execute(session: &mut Session, plan: &FlashPlan, dry_run: bool) -> Result<()> {
@@ -227,6 +235,7 @@ pub fn execute(session: &mut Session, plan: &FlashPlan, dry_run: bool) -> Result
     Ok(())
 }
 
+#[cfg(feature = "probe")]
 /// A session on probe-rs's fake probe (mocked Cortex-M core), for dry runs.
 pub fn fake_session(chip: &str) -> Result<Session> {
     FakeProbe::with_mocked_core()
@@ -237,6 +246,7 @@ pub fn fake_session(chip: &str) -> Result<Session> {
         })
 }
 
+#[cfg(feature = "probe")]
 fn real_session(chip: &str) -> Result<Session> {
     let probes = Lister::new().list_all();
     let Some(info) = probes.first() else {
@@ -265,11 +275,13 @@ pub fn describe(plan: &FlashPlan) -> String {
     )
 }
 
+#[cfg(feature = "probe")]
 /// `dynocomp flash IMAGE --probe`: see the module documentation.
 pub fn run(image: &Path, chip: &str, slot: SlotArg, dry_run: bool) -> Result<()> {
     run_with(image, chip, slot, dry_run, real_session)
 }
 
+#[cfg(feature = "probe")]
 /// [`run`] with the session opener for real (non-dry) runs given, so tests
 /// can check that a bad image never reaches it.
 pub fn run_with(

@@ -139,7 +139,10 @@ fn run(cli: Cli) -> Result<()> {
         Command::Design(args) => dynocomp::design_cmd::run(&args)?,
         Command::Flash(a) => match (&a.serial, a.probe || a.dry_run) {
             (Some(port), _) => dynocomp::flash_serial::run(&a.image, port)?,
+            #[cfg(feature = "probe")]
             (None, true) => dynocomp::flash_probe::run(&a.image, &a.chip, a.slot, a.dry_run)?,
+            #[cfg(not(feature = "probe"))]
+            (None, true) => anyhow::bail!("flash --probe: this dynocomp was built without the `probe` feature (probe-rs); rebuild with default features"),
             (None, false) => anyhow::bail!("flash: give --probe (debug probe) or --serial PORT (USB)"),
         },
         Command::Stream(args) => {

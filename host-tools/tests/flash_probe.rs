@@ -1,6 +1,7 @@
 //! `dynocomp flash --probe`: the slot/sequence plan, the record bytes at the
 //! slot address, probe-rs's flash loader and dry run on its FakeProbe, and
 //! refusal of bad images before any probe is touched.
+#![cfg(feature = "probe")]
 
 mod common;
 
