@@ -1,7 +1,9 @@
 //! File input/output: FRF (CSV, UFF58), signal CSV, atomic writes.
 
 pub mod atomic;
+pub mod signal;
 pub mod signal_csv;
+pub mod signal_file;
 pub mod image_file;
 pub mod frf_csv;
 pub mod uff;

@@ -1,0 +1,75 @@
+//! Force-record files by format: opening a reader by extension or content,
+//! and a writer for an output format (issue #14).
+
+use anyhow::{bail, Result};
+use std::io::Write;
+use std::path::Path;
+
+use crate::io::signal::{SignalReader, SignalWriter};
+use crate::io::signal_csv::{CsvReader, CsvWriter};
+
+/// File formats of force records.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SignalFormat {
+    /// Signal CSV (DESIGN.md).
+    Csv,
+}
+
+/// Channel-to-axis map given with `--channels`: `fx=NAME,fy=NAME,...`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ChannelMap {
+    /// (axis, channel name as given).
+    pub pairs: Vec<(usize, String)>,
+}
+
+impl ChannelMap {
+    /// Parse `fx=A,fy=B,fz=C` (any subset).
+    pub fn parse(s: &str) -> Result<ChannelMap> {
+        let mut pairs: Vec<(usize, String)> = Vec::new();
+        for item in s.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+            let Some((k, v)) = item.split_once('=') else {
+                bail!("`{item}`: expected AXIS=CHANNEL, e.g. fx=1 or fx=Force X");
+            };
+            let axis = match k.trim().to_ascii_lowercase().as_str() {
+                "fx" | "x" => 0,
+                "fy" | "y" => 1,
+                "fz" | "z" => 2,
+                other => bail!("`{item}`: unknown axis `{other}` (fx, fy or fz)"),
+            };
+            if pairs.iter().any(|p| p.0 == axis) {
+                bail!("`{item}`: axis given twice");
+            }
+            pairs.push((axis, v.trim().to_string()));
+        }
+        if pairs.is_empty() {
+            bail!("no channel given");
+        }
+        Ok(ChannelMap { pairs })
+    }
+}
+
+/// Open the force record `path`: its reader and its format (by extension,
+/// otherwise by content).
+pub fn open_signal(path: &Path, map: Option<&ChannelMap>) -> Result<(Box<dyn SignalReader>, SignalFormat)> {
+    if map.is_some() {
+        bail!("{}: --channels applies to UFF and TDMS records; a CSV names its columns fx, fy, fz", path.display());
+    }
+    Ok((Box::new(CsvReader::open(path)?), SignalFormat::Csv))
+}
+
+/// A writer of `fmt` into `w` for `axes` (with a time column if
+/// `has_time`); `len`: the number of samples if known (formats with a
+/// length in their header need it), `fs_hz` the sample rate.
+pub fn writer_for<'w>(
+    fmt: SignalFormat,
+    w: &'w mut dyn Write,
+    axes: &[usize],
+    has_time: bool,
+    _len: Option<u64>,
+    _fs_hz: f64,
+    _path: &Path,
+) -> Result<Box<dyn SignalWriter + 'w>> {
+    match fmt {
+        SignalFormat::Csv => Ok(Box::new(CsvWriter::new(w, axes, has_time)?)),
+    }
+}
