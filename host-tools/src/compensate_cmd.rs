@@ -216,48 +216,65 @@ fn stream_box(
 ) -> Result<u64> {
     let n_ch = reader.axes().len();
     let axes = reader.axes().to_vec();
-    let mut blk = Block::new(n_ch);
+    let has_time = reader.has_time();
     let mut pending = Block::new(n_ch);
     let mut out: Vec<Vec<f64>> = vec![Vec::with_capacity(BLOCK); n_ch];
     let mut rate = RateTracker::default();
     let mut tq = TruthQueue::default();
     let mut written = 0u64;
-    loop {
-        let n = reader.read_block(&mut blk, BLOCK)?;
-        rate.push(&blk.t_s);
-        pending.t_s.extend_from_slice(&blk.t_s);
-        for (p, b) in pending.channels.iter_mut().zip(&blk.channels) {
-            p.extend_from_slice(b);
-        }
-        for o in &mut out {
-            o.clear();
-        }
-        let m = if n == 0 { comp.finish(&mut out) } else { comp.push(&blk.channels, &mut out) }.with_context(|| source.to_string())?;
-        let t = reader.has_time().then(|| &pending.t_s[..m]);
-        let outs: Vec<&[f64]> = out.iter().map(Vec::as_slice).collect();
-        w.write_block(t, &outs)?;
-        if let Some(acc) = acc.as_deref_mut() {
-            let meas: Vec<&[f64]> = pending.channels.iter().map(|c| &c[..m]).collect();
-            match truth.as_deref_mut() {
-                Some((tsrc, tr)) => {
-                    let tv = tq.take(&mut **tr, tsrc, &axes, m)?;
-                    let tv: Vec<&[f64]> = tv.iter().map(|v| &v[..m]).collect();
-                    acc.observe(&meas, &outs, Some(&tv));
-                    tq.consume(m);
+    // Parsing runs on a thread of its own, a block ahead of the kernel and
+    // the writer (two cores: parse || compensate + format); blocks go back
+    // for reuse.
+    std::thread::scope(|s| -> Result<()> {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Block>>(2);
+        let (back_tx, back_rx) = std::sync::mpsc::channel::<Block>();
+        s.spawn(move || loop {
+            let mut blk = back_rx.try_recv().unwrap_or_else(|_| Block::new(n_ch));
+            let r = reader.read_block(&mut blk, BLOCK);
+            let end = !matches!(r, Ok(n) if n > 0);
+            if tx.send(r.map(|_| blk)).is_err() || end {
+                break;
+            }
+        });
+        loop {
+            let blk = rx.recv().map_err(|_| anyhow!("{source}: the reader stopped"))??;
+            let n = blk.len();
+            rate.push(&blk.t_s);
+            pending.t_s.extend_from_slice(&blk.t_s);
+            for (p, b) in pending.channels.iter_mut().zip(&blk.channels) {
+                p.extend_from_slice(b);
+            }
+            for o in &mut out {
+                o.clear();
+            }
+            let m = if n == 0 { comp.finish(&mut out) } else { comp.push(&blk.channels, &mut out) }.with_context(|| source.to_string())?;
+            let _ = back_tx.send(blk);
+            let t = has_time.then(|| &pending.t_s[..m]);
+            let outs: Vec<&[f64]> = out.iter().map(Vec::as_slice).collect();
+            w.write_block(t, &outs)?;
+            if let Some(acc) = acc.as_deref_mut() {
+                let meas: Vec<&[f64]> = pending.channels.iter().map(|c| &c[..m]).collect();
+                match truth.as_deref_mut() {
+                    Some((tsrc, tr)) => {
+                        let tv = tq.take(&mut **tr, tsrc, &axes, m)?;
+                        let tv: Vec<&[f64]> = tv.iter().map(|v| &v[..m]).collect();
+                        acc.observe(&meas, &outs, Some(&tv));
+                        tq.consume(m);
+                    }
+                    None => acc.observe(&meas, &outs, None),
                 }
-                None => acc.observe(&meas, &outs, None),
+            }
+            pending.t_s.drain(..m.min(pending.t_s.len()));
+            for p in &mut pending.channels {
+                p.drain(..m);
+            }
+            written += m as u64;
+            progress.inc(n as u64);
+            if n == 0 {
+                return Ok(());
             }
         }
-        pending.t_s.drain(..m.min(pending.t_s.len()));
-        for p in &mut pending.channels {
-            p.drain(..m);
-        }
-        written += m as u64;
-        progress.inc(n as u64);
-        if n == 0 {
-            break;
-        }
-    }
+    })?;
     if let Some(found) = rate.rate() {
         check_rate_value(fs, found, source, "column t_s")?;
     }

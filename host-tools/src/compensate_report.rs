@@ -389,9 +389,14 @@ impl ReportAccumulator {
                     comp.nrmse_p2p * 100.0
                 ));
             }
+            let mut zw = zoom[i].clone();
+            if let Some(t) = tpf.filter(|t| *t > 0.0) {
+                let keep = ((ZOOM_TOOTH_PERIODS * fs / t).round() as usize).max(16);
+                zw.iter_mut().for_each(|v| v.truncate(keep));
+            }
             let overview = plot_overview(a, fs, self.has_truth).with_context(|| format!("report: axis {name}: overview"))?;
             let zoom_svg =
-                plot_zoom(&zoom[i], zoom_start, fs, self.has_truth, &name).with_context(|| format!("report: axis {name}: zoom"))?;
+                plot_zoom(&zw, zoom_start, fs, self.has_truth, &name).with_context(|| format!("report: axis {name}: zoom"))?;
             let spec = plot_spectrum(&f, &am, &ac, at.as_deref(), tpf, &name).with_context(|| format!("report: axis {name}: spectrum"))?;
             let dur = a.meas.len() as f64 / fs;
             let entries = vec![
@@ -402,7 +407,8 @@ impl ReportAccumulator {
                         "{} samples ({dur:.3} s). Shaded bands: the minimum and maximum of each pixel column (min/max envelope) of the \
                          measured force (grey) and the compensated force (blue){}.{}",
                         a.meas.len(),
-                        if self.has_truth { ", the true force (green) and, below, the error compensated − true (red)" } else { "" },
+                        if self.has_truth { ", the true force (green) and, below, the error compensated − true (red), unfiltered: it includes the noise above \
+                             the compensated band that the band-limited NRMSE leaves out" } else { "" },
                         if score.is_empty() { String::new() } else { format!(" {score}") }
                     ),
                 ),
@@ -412,7 +418,7 @@ impl ReportAccumulator {
                     format!(
                         "{} samples from t = {:.4} s, every sample drawn: the window whose level agrees best with the two before it \
                          among those at least 30 % as strong as the strongest.",
-                        zoom[i][0].len(),
+                        zw[0].len(),
                         zoom_start as f64 / fs
                     ),
                 ),
@@ -528,10 +534,10 @@ fn plot_zoom(w: &[Vec<f64>; 3], start: u64, fs: f64, has_truth: bool, name: &str
         mesh(&mut ch, "time (ms)", "force (N)", &fmt_n, &fmt_n, 8)?;
         let big = (yr.1 - yr.0) * 10.0;
         draw_line(&mut ch, &pts(&w[0]), yr, big, C_MEAS, 2, false, "measured")?;
+        draw_line(&mut ch, &pts(&w[1]), yr, big, C_COMP, 2, false, "compensated")?;
         if has_truth {
             draw_line(&mut ch, &pts(&w[2]), yr, big, C_TRUE, 2, true, "true")?;
         }
-        draw_line(&mut ch, &pts(&w[1]), yr, big, C_COMP, 2, false, "compensated")?;
         legend(&mut ch, SeriesLabelPosition::UpperRight)?;
         root.present().map_err(perr)?;
     }

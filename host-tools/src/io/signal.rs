@@ -43,8 +43,9 @@ impl Block {
     }
 }
 
-/// A force record read block by block.
-pub trait SignalReader {
+/// A force record read block by block (on a thread of its own in
+/// `compensate`, hence `Send`).
+pub trait SignalReader: Send {
     /// Axis of each channel (0 = x, 1 = y, 2 = z), ascending.
     fn axes(&self) -> &[usize];
     /// Whether the blocks carry sample times.

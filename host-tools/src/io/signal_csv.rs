@@ -228,7 +228,7 @@ impl<R: BufRead> CsvReader<R> {
     }
 }
 
-impl<R: BufRead> SignalReader for CsvReader<R> {
+impl<R: BufRead + Send> SignalReader for CsvReader<R> {
     fn axes(&self) -> &[usize] {
         &self.axes
     }
@@ -261,6 +261,7 @@ impl<R: BufRead> SignalReader for CsvReader<R> {
 /// bit-identical), formatted into one reused line buffer.
 pub struct CsvWriter<'w> {
     w: &'w mut dyn Write,
+    fmt: ryu::Buffer,
     line: Vec<u8>,
     n_channels: usize,
     has_time: bool,
@@ -275,7 +276,7 @@ impl<'w> CsvWriter<'w> {
         }
         header.extend(axes.iter().map(|a| format!("f{}", axis_name(*a))));
         writeln!(w, "{}", header.join(","))?;
-        Ok(CsvWriter { w, line: Vec::with_capacity(1 << 16), n_channels: axes.len(), has_time })
+        Ok(CsvWriter { w, fmt: ryu::Buffer::new(), line: Vec::with_capacity(1 << 16), n_channels: axes.len(), has_time })
     }
 }
 
@@ -288,7 +289,7 @@ impl SignalWriter for CsvWriter<'_> {
         for k in 0..n {
             let mut first = true;
             if let Some(t) = t_s {
-                write!(self.line, "{}", t[k])?;
+                push_f64(&mut self.line, &mut self.fmt, t[k]);
                 first = false;
             }
             for c in channels {
@@ -296,7 +297,7 @@ impl SignalWriter for CsvWriter<'_> {
                     self.line.push(b',');
                 }
                 first = false;
-                write!(self.line, "{}", c[k])?;
+                push_f64(&mut self.line, &mut self.fmt, c[k]);
             }
             self.line.push(b'\n');
             if self.line.len() >= 1 << 16 {
@@ -312,6 +313,14 @@ impl SignalWriter for CsvWriter<'_> {
     fn finish(&mut self) -> Result<()> {
         Ok(())
     }
+}
+
+/// Append `v` in its shortest round-trip decimal form (ryu: the same
+/// digits as `{}` formatting, about 3x faster; large and small magnitudes
+/// in exponent form, e.g. `1.953125e-5`). Non-finite values (never written:
+/// the readers and the kernel's check refuse them) would read `NaN`/`inf`.
+fn push_f64(line: &mut Vec<u8>, buf: &mut ryu::Buffer, v: f64) {
+    line.extend_from_slice(buf.format(v).as_bytes());
 }
 
 /// Write a force record to `path` atomically (columns t_s?, fx?, fy?, fz?).

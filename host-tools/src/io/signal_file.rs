@@ -1,18 +1,23 @@
 //! Force-record files by format: opening a reader by extension or content,
 //! and a writer for an output format (issue #14).
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use std::io::Write;
 use std::path::Path;
 
 use crate::io::signal::{SignalReader, SignalWriter};
 use crate::io::signal_csv::{CsvReader, CsvWriter};
+use crate::io::uff_signal::{UffReader, UffWriter};
 
 /// File formats of force records.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum SignalFormat {
     /// Signal CSV (DESIGN.md).
     Csv,
+    /// UFF dataset 58 time histories, ASCII (values as E20.12).
+    Uff,
+    /// UFF dataset 58b time histories, binary (little-endian f64).
+    Uff58b,
 }
 
 /// Channel-to-axis map given with `--channels`: `fx=NAME,fy=NAME,...`.
@@ -51,8 +56,25 @@ impl ChannelMap {
 /// Open the force record `path`: its reader and its format (by extension,
 /// otherwise by content).
 pub fn open_signal(path: &Path, map: Option<&ChannelMap>) -> Result<(Box<dyn SignalReader>, SignalFormat)> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let is_uff = match ext.as_deref() {
+        Some("csv") => false,
+        Some("uff" | "unv" | "uf") => true,
+        _ => {
+            let mut head = vec![0u8; 4096];
+            let n = std::fs::File::open(path)
+                .and_then(|mut f| std::io::Read::read(&mut f, &mut head))
+                .with_context(|| format!("{}: cannot read", path.display()))?;
+            crate::io::uff::looks_like_uff(&head[..n])
+        }
+    };
+    if is_uff {
+        let r = UffReader::open(path, map)?;
+        let fmt = if r.is_binary() { SignalFormat::Uff58b } else { SignalFormat::Uff };
+        return Ok((Box::new(r), fmt));
+    }
     if map.is_some() {
-        bail!("{}: --channels applies to UFF and TDMS records; a CSV names its columns fx, fy, fz", path.display());
+        bail!("{}: --channels applies to UFF records; a CSV names its columns fx, fy, fz", path.display());
     }
     Ok((Box::new(CsvReader::open(path)?), SignalFormat::Csv))
 }
@@ -66,10 +88,12 @@ pub fn writer_for<'w>(
     axes: &[usize],
     has_time: bool,
     _len: Option<u64>,
-    _fs_hz: f64,
+    fs_hz: f64,
     _path: &Path,
 ) -> Result<Box<dyn SignalWriter + 'w>> {
     match fmt {
         SignalFormat::Csv => Ok(Box::new(CsvWriter::new(w, axes, has_time)?)),
+        SignalFormat::Uff => Ok(Box::new(UffWriter::new(w, axes, fs_hz, false)?)),
+        SignalFormat::Uff58b => Ok(Box::new(UffWriter::new(w, axes, fs_hz, true)?)),
     }
 }
