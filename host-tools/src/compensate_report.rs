@@ -179,7 +179,7 @@ fn hann(n: usize) -> Vec<f64> {
 /// refined by a parabola through the peak bin and its neighbours).
 pub fn strongest_line(f: &[f64], a: &[f64], f_min: f64) -> Option<f64> {
     let k = (1..a.len().saturating_sub(1)).filter(|&k| f[k] >= f_min).max_by(|&i, &j| a[i].total_cmp(&a[j]))?;
-    if !(a[k] > 0.0) {
+    if a[k].is_nan() || a[k] <= 0.0 {
         return None;
     }
     let (l, c, r) = (a[k - 1], a[k], a[k + 1]);
@@ -194,6 +194,9 @@ fn window_std(x: &[f64]) -> f64 {
     let m = x.iter().sum::<f64>() / n;
     (x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n).sqrt()
 }
+
+/// One axis's kept zoom samples: measured, compensated, true.
+type ZoomWindow = [Vec<f64>; 3];
 
 /// Per-axis signals of one observation (aligned sample for sample).
 struct AxisAcc {
@@ -216,11 +219,11 @@ pub struct ReportAccumulator {
     has_truth: bool,
     zoom_len: usize,
     /// The window being filled: per axis (measured, compensated, truth).
-    cur: Vec<[Vec<f64>; 3]>,
+    cur: Vec<ZoomWindow>,
     cur_start: u64,
     /// Std (summed over axes) of the last windows, newest last.
     recent: Vec<f64>,
-    best: Option<(u64, f64, Vec<[Vec<f64>; 3]>)>,
+    best: Option<(u64, f64, Vec<ZoomWindow>)>,
     max_std: f64,
     n: u64,
     tpf_given: Option<f64>,
@@ -396,8 +399,8 @@ impl ReportAccumulator {
             }
             let overview = plot_overview(a, fs, self.has_truth).with_context(|| format!("report: axis {name}: overview"))?;
             let zoom_svg =
-                plot_zoom(&zw, zoom_start, fs, self.has_truth, &name).with_context(|| format!("report: axis {name}: zoom"))?;
-            let spec = plot_spectrum(&f, &am, &ac, at.as_deref(), tpf, &name).with_context(|| format!("report: axis {name}: spectrum"))?;
+                plot_zoom(&zw, zoom_start, fs, self.has_truth, name).with_context(|| format!("report: axis {name}: zoom"))?;
+            let spec = plot_spectrum(&f, &am, &ac, at.as_deref(), tpf, name).with_context(|| format!("report: axis {name}: spectrum"))?;
             let dur = a.meas.len() as f64 / fs;
             let entries = vec![
                 (

@@ -93,9 +93,9 @@ fn compensate_reads_and_writes_uff() {
     assert_eq!(fmt, SignalFormat::Uff58b);
     let (_, got) = read_all(&mut *r).unwrap();
     let want = compensate_record(&img, &rec, false, "x").unwrap();
-    for a in 0..3 {
+    for (a, g) in got.iter().enumerate() {
         let w = want.channel(a).unwrap();
-        assert!(got[a].len() == w.len() && got[a].iter().zip(w).all(|(x, y)| x.to_bits() == y.to_bits()), "axis {a}");
+        assert!(g.len() == w.len() && g.iter().zip(w).all(|(x, y)| x.to_bits() == y.to_bits()), "axis {a}");
     }
     let out_csv = tmp("uffcli", "out.csv");
     let (ok, _, err) = run(&inp, &out_csv, &["--output-format", "csv"]);

@@ -129,7 +129,8 @@ pub const FS_TOLERANCE: f64 = 1e-4;
 pub fn check_rate_value(fs_hz: u32, found: (f64, f64), source: &str, what: &str) -> Result<()> {
     let (fs, jitter) = found;
     let want = f64::from(fs_hz);
-    if !(((fs - want) / want).abs() <= FS_TOLERANCE) {
+    let off = ((fs - want) / want).abs();
+    if off.is_nan() || off > FS_TOLERANCE {
         bail!(
             "{source}: {what} implies a sample rate of {fs:.3} Hz, but the image was designed for {want} Hz; \
              resample the record or design for its rate"
@@ -141,9 +142,12 @@ pub fn check_rate_value(fs_hz: u32, found: (f64, f64), source: &str, what: &str)
     Ok(())
 }
 
+/// A whole record: its times (if any) and one vector per channel.
+pub type WholeRecord = (Option<Vec<f64>>, Vec<Vec<f64>>);
+
 /// Read a whole record from `reader` (for the paths that need it whole:
 /// `--offline`, parallel elaboration): (times if any, channels).
-pub fn read_all(reader: &mut dyn SignalReader) -> Result<(Option<Vec<f64>>, Vec<Vec<f64>>)> {
+pub fn read_all(reader: &mut dyn SignalReader) -> Result<WholeRecord> {
     let n_ch = reader.axes().len();
     let mut t = Vec::new();
     let mut ch: Vec<Vec<f64>> = vec![Vec::new(); n_ch];
