@@ -60,6 +60,9 @@ pub fn open_signal(path: &Path, map: Option<&ChannelMap>) -> Result<(Box<dyn Sig
     let is_uff = match ext.as_deref() {
         Some("csv") => false,
         Some("uff" | "unv" | "uf") => true,
+        // A pipe or device (e.g. /dev/stdin) cannot be sniffed without
+        // consuming what the reader needs: read as CSV.
+        _ if !std::fs::metadata(path).is_ok_and(|m| m.is_file()) => false,
         _ => {
             let mut head = vec![0u8; 4096];
             let n = std::fs::File::open(path)
