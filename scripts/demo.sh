@@ -12,6 +12,7 @@ mkdir -p out
 "$bin" design --frf data/example/frf.uff --fs 51200 --idle data/example/idle.csv \
     --out out/example.dcimg --report out/report
 "$bin" inspect out/example.dcimg
-"$bin" compensate --coeffs out/example.dcimg --input data/example/measured.csv --output out/compensated.csv
+"$bin" compensate --coeffs out/example.dcimg --input data/example/measured.csv --output out/compensated.csv \
+    --report out/compensation --truth data/example/true_force.csv
 "$tgt/release/examples/score" data/example/true_force.csv out/compensated.csv data/example/measured.csv 51200 4000
-echo "report: out/report/index.html"
+echo "reports: out/report/index.html (design), out/compensation/index.html (compensation)"

@@ -107,6 +107,126 @@ fn drop_latency(y: &[f32], latency: usize) -> Result<Vec<f64>, usize> {
     }
 }
 
+/// The box-filter path of `compensate` over a record of any length: the
+/// image's compensators applied block by block with their states carried
+/// over, so memory does not grow with the record. The outputs are those of
+/// [`compensate_record`] bit for bit (the kernel's block path equals its
+/// per-sample `step` for any block lengths): the first `latency` outputs
+/// dropped and, at [`StreamCompensator::finish`], `latency` copies of the
+/// last input fed to produce the last `latency` outputs.
+pub struct StreamCompensator<'a> {
+    filters: Vec<&'a AxisFilter>,
+    states: Vec<AxisState>,
+    axes: Vec<usize>,
+    /// Outputs still to drop (the declared latency, at the start).
+    to_drop: usize,
+    latency: usize,
+    /// Samples fed per axis so far.
+    fed: usize,
+    last: Vec<f32>,
+    input: Vec<Vec<f32>>,
+    output: Vec<Vec<f32>>,
+}
+
+impl<'a> StreamCompensator<'a> {
+    /// Compensators for the channels `axes` of a record from `source`.
+    pub fn new(image: &'a CoeffImage, axes: &[usize], raw_timing: bool, source: &str) -> Result<Self> {
+        let mut filters = Vec::with_capacity(axes.len());
+        for &axis in axes {
+            let Some(axis_img) = image.axes.get(axis).and_then(Option::as_ref) else {
+                bail!(
+                    "{source}: column f{} has no compensator in the image (it covers {}); drop the column or design for that axis",
+                    axis_name(axis),
+                    image.axes.iter().flatten().map(|a| axis_name(a.axis as usize)).collect::<Vec<_>>().join(", ")
+                );
+            };
+            filters.push(&axis_img.filter);
+        }
+        let latency = if raw_timing { 0 } else { usize::from(image.latency_samples) };
+        let n = axes.len();
+        Ok(StreamCompensator {
+            filters,
+            states: vec![AxisState::default(); n],
+            axes: axes.to_vec(),
+            to_drop: latency,
+            latency,
+            fed: 0,
+            last: vec![0.0; n],
+            input: vec![Vec::new(); n],
+            output: vec![Vec::new(); n],
+        })
+    }
+
+    /// The latency this compensator removes (samples).
+    pub fn latency(&self) -> usize {
+        self.latency
+    }
+
+    /// Compensate the next block (one slice per channel, equal lengths) and
+    /// append the outputs it completes to `out` (one vector per channel):
+    /// as many as the block has, fewer while the latency is being dropped.
+    pub fn push(&mut self, block: &[Vec<f64>], out: &mut [Vec<f64>]) -> Result<usize> {
+        for ((inp, b), last) in self.input.iter_mut().zip(block).zip(&mut self.last) {
+            inp.clear();
+            inp.extend(b.iter().map(|&u| u as f32));
+            if let Some(&l) = inp.last() {
+                *last = l;
+            }
+        }
+        self.run(out)
+    }
+
+    /// Feed the latency's held copies of the last input and append the last
+    /// outputs to `out`.
+    pub fn finish(&mut self, out: &mut [Vec<f64>]) -> Result<usize> {
+        for (inp, &last) in self.input.iter_mut().zip(&self.last) {
+            inp.clear();
+            inp.resize(self.latency, last);
+        }
+        self.run(out)
+    }
+
+    fn run(&mut self, out: &mut [Vec<f64>]) -> Result<usize> {
+        let n = self.input.first().map_or(0, Vec::len);
+        for o in self.output.iter_mut() {
+            o.clear();
+            o.resize(n, 0.0);
+        }
+        for (((filters, states), inputs), outputs) in self
+            .filters
+            .chunks(LOCKSTEP_AXES)
+            .zip(self.states.chunks_mut(LOCKSTEP_AXES))
+            .zip(self.input.chunks(LOCKSTEP_AXES))
+            .zip(self.output.chunks_mut(LOCKSTEP_AXES))
+        {
+            let mut jobs: Vec<BlockJob<'_>> = filters
+                .iter()
+                .zip(states.iter_mut())
+                .zip(inputs)
+                .zip(outputs.iter_mut())
+                .map(|(((filter, state), input), output)| BlockJob { filter, state, input, output })
+                .collect();
+            process_blocks(&mut jobs);
+        }
+        for (axis, y) in self.axes.iter().zip(&self.output) {
+            if let Some(k) = y.iter().position(|v| !v.is_finite()) {
+                bail!(
+                    "compensated f{} became non-finite at sample {}; the image is unusable for this record",
+                    axis_name(*axis),
+                    self.fed + k
+                );
+            }
+        }
+        self.fed += n;
+        let skip = self.to_drop.min(n);
+        self.to_drop -= skip;
+        for (o, y) in out.iter_mut().zip(&self.output) {
+            o.extend(y[skip..].iter().map(|&v| f64::from(v)));
+        }
+        Ok(n - skip)
+    }
+}
+
 /// Parallel elaboration (paper §3.3), **offline only**: split every force
 /// column into the image's bands with the zero-phase crossovers of
 /// [`crate::bandsplit`], run band k through band k's compensator with

@@ -6,6 +6,8 @@ pub mod bands;
 pub mod bandsplit;
 pub mod compare;
 pub mod compensate;
+pub mod compensate_cmd;
+pub mod compensate_report;
 pub mod design;
 pub mod design_cmd;
 pub mod discretize;

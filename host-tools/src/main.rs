@@ -6,7 +6,7 @@ use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use dynocomp::{compensate, inspect, io};
+use dynocomp::{inspect, io};
 
 #[derive(Parser)]
 #[command(name = "dynocomp", version, about = "Dynamic compensation of piezoelectric cutting-force dynamometers")]
@@ -33,26 +33,7 @@ enum Command {
     /// Compensate a recorded force file offline: bit-exact with the box, or
     /// band by band for a parallel-elaboration image, or with the zero-lag
     /// fixed-interval smoother (`--offline`).
-    Compensate {
-        /// Coefficient image (.dcimg).
-        #[arg(long)]
-        coeffs: PathBuf,
-        /// Input force CSV (columns [t_s,] fx, fy, fz in N; any subset).
-        #[arg(long)]
-        input: PathBuf,
-        /// Output force CSV (same columns), written atomically.
-        #[arg(long)]
-        output: PathBuf,
-        /// Keep the box's timing: do not shift the output back by the image's
-        /// declared latency.
-        #[arg(long)]
-        raw_timing: bool,
-        /// Offline only: zero-lag fixed-interval (Rauch-Tung-Striebel
-        /// equivalent) smoother in f64 instead of the box's causal filter.
-        /// Needs the model sidecar `<image>.model.json` that `design` writes.
-        #[arg(long, conflicts_with = "raw_timing")]
-        offline: bool,
-    },
+    Compensate(dynocomp::compensate_cmd::CompensateArgs),
     /// Simulate a dynamometer, an impact test and a milling record with known
     /// true force (for demos and tests).
     Simulate(dynocomp::simulate::SimulateArgs),
@@ -103,38 +84,7 @@ fn run(cli: Cli) -> Result<()> {
                 print!("{}", inspect::render(&report));
             }
         }
-        Command::Compensate { coeffs, input, output, raw_timing, offline } => {
-            let img = io::image_file::read_any_image(&coeffs)?;
-            let source = input.display().to_string();
-            let rec = io::signal_csv::read_signal_csv(&input)?;
-            compensate::check_rate(img.fs_hz(), &rec, &source)?;
-            let (out, how) = match (&img, offline) {
-                (io::image_file::AnyImage::Inline(i), false) => {
-                    let how = format!("box filter, latency {} samples{}", i.latency_samples, if raw_timing { ", not removed" } else { ", removed" });
-                    (compensate::compensate_record(i, &rec, raw_timing, &source)?, how)
-                }
-                (io::image_file::AnyImage::Parallel(p), false) => {
-                    let how = format!("parallel elaboration, {} bands, zero-phase split (offline only)", p.bands().len());
-                    (compensate::compensate_parallel(p, &rec, raw_timing, &source)?, how)
-                }
-                (io::image_file::AnyImage::Inline(i), true) => {
-                    let sidecar = dynocomp::smoother::read_sidecar(&coeffs, i)?;
-                    (dynocomp::smoother::smooth_record(i, &sidecar, &rec, &source)?, "fixed-interval smoother, zero lag (offline only)".to_string())
-                }
-                (io::image_file::AnyImage::Parallel(_), true) => anyhow::bail!(
-                    "{}: --offline needs a box image (format 1) and its model sidecar; this is a parallel-elaboration image",
-                    coeffs.display()
-                ),
-            };
-            io::signal_csv::write_signal_csv(&output, &out)?;
-            eprintln!(
-                "compensated {} samples x {} axes at {} Hz ({how}) -> {}",
-                rec.len(),
-                rec.channels.len(),
-                img.fs_hz(),
-                output.display()
-            );
-        }
+        Command::Compensate(args) => dynocomp::compensate_cmd::run(&args)?,
         Command::Simulate(args) => dynocomp::simulate::run(&args)?,
         Command::Design(args) => dynocomp::design_cmd::run(&args)?,
         Command::Flash(a) => match (&a.serial, a.probe || a.dry_run) {

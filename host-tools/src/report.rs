@@ -53,7 +53,7 @@ const C_FLAT_BAND: RGBColor = RGBColor(44, 160, 44);
 pub(crate) const C_FIT_BAND: RGBColor = RGBColor(148, 103, 189);
 
 /// One axis in index.html: heading and its plots (file, title, caption).
-type Section = (String, Vec<(String, String, String)>);
+pub(crate) type Section = (String, Vec<(String, String, String)>);
 
 /// One report file: its name in the report directory and its content.
 pub(crate) struct Page {
@@ -146,7 +146,7 @@ pub fn write_report(dir: &Path, frf: &Frf, designs: &[AxisDesign], fs_hz: f64, s
         }
         sections.push((format!("Axis {name}"), entries));
     }
-    pages.push(Page { name: "index.html".into(), content: index_html(summary_text, &sections) });
+    pages.push(Page { name: "index.html".into(), content: index_html("dynocomp design report", summary_text, &sections) });
     write_pages(dir, &pages)
 }
 
@@ -195,24 +195,27 @@ fn html_escape(s: &str) -> String {
     o
 }
 
-fn index_html(summary: &str, sections: &[Section]) -> String {
+/// The report page: `title`, `summary` as preformatted text, then each
+/// section's plots with their titles and captions.
+pub(crate) fn index_html(title: &str, summary: &str, sections: &[Section]) -> String {
     let mut h = String::new();
-    h.push_str(
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>dynocomp design report</title>\n\
+    h.push_str(&
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{title}</title>\n\
          <style>\n\
          body { font-family: sans-serif; margin: 2em auto; max-width: 1150px; padding: 0 1em; color: #222; }\n\
          pre { background: #f4f4f4; border: 1px solid #ddd; padding: 1em; overflow-x: auto; }\n\
          img { width: 100%; max-width: 1100px; border: 1px solid #ddd; }\n\
          nav a { margin-right: 1em; }\n\
          p.caption { color: #444; }\n\
-         </style>\n</head>\n<body>\n<h1>dynocomp design report</h1>\n",
+         </style>\n</head>\n<body>\n<h1>{title}</h1>\n"
+            .replace("{title}", &html_escape(title)),
     );
     if !sections.is_empty() {
         h.push_str("<nav>");
-        for (title, entries) in sections {
+        for (sec_title, entries) in sections {
             if let Some((file, _, _)) = entries.first() {
                 let anchor = file.split('_').next().unwrap_or("");
-                h.push_str(&format!("<a href=\"#axis-{}\">{}</a>", html_escape(anchor), html_escape(title)));
+                h.push_str(&format!("<a href=\"#axis-{}\">{}</a>", html_escape(anchor), html_escape(sec_title)));
             }
         }
         h.push_str("</nav>\n");

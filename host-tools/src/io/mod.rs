@@ -1,10 +1,13 @@
 //! File input/output: FRF (CSV, UFF58), signal CSV, atomic writes.
 
 pub mod atomic;
+pub mod signal;
 pub mod signal_csv;
+pub mod signal_file;
 pub mod image_file;
 pub mod frf_csv;
 pub mod uff;
+pub mod uff_signal;
 
 /// Read an FRF file: `.csv` as FRF CSV, `.uff` / `.unv` / `.uf` as UFF 58/58b,
 /// any other extension by content (a first non-blank line `-1` means UFF).

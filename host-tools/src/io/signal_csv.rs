@@ -4,10 +4,13 @@
 //! column `t_s` (seconds). Output files use the same layout.
 
 use anyhow::{anyhow, bail, Context, Result};
+use std::fs::File;
+use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
 
 use crate::frf::axis_name;
 use crate::io::atomic::write_atomic;
+use crate::io::signal::{read_all, Block, SignalReader, SignalWriter};
 
 /// A multi-axis force record.
 #[derive(Clone, Debug, PartialEq)]
@@ -63,115 +66,277 @@ pub const IGNORED_COLUMNS: [&str; 3] = ["raw_fx", "raw_fy", "raw_fz"];
 
 /// Read a force record from `path`.
 pub fn read_signal_csv(path: &Path) -> Result<SignalRecord> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    parse_signal_csv(&text, &path.display().to_string())
+    let mut r = CsvReader::open(path)?;
+    record_from(&mut r)
 }
 
 /// Parse a force record from CSV text; `source` names the input in errors.
 pub fn parse_signal_csv(text: &str, source: &str) -> Result<SignalRecord> {
-    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
-    let (_, header) = lines.next().ok_or_else(|| anyhow!("{source}: empty file, expected a header row (t_s,fx,fy,fz)"))?;
-    let names: Vec<String> = header.split(',').map(|s| s.trim().trim_matches('"').to_ascii_lowercase()).collect();
-    let mut has_time = false;
-    let mut axes = Vec::new();
-    // Data column of each CSV column (None: time or an ignored column).
-    let mut slot_of: Vec<Option<usize>> = Vec::with_capacity(names.len());
-    for (col, name) in names.iter().enumerate() {
-        if IGNORED_COLUMNS.contains(&name.as_str()) {
-            slot_of.push(None);
-            continue;
+    let mut r = CsvReader::new(text.as_bytes(), source)?;
+    record_from(&mut r)
+}
+
+fn record_from(r: &mut dyn SignalReader) -> Result<SignalRecord> {
+    let axes = r.axes().to_vec();
+    let (t_s, data) = read_all(r)?;
+    Ok(SignalRecord { t_s, channels: axes.into_iter().zip(data).collect() })
+}
+
+/// A signal CSV read block by block: one line buffer, no allocation per
+/// value (fields are parsed in place with the standard library's
+/// Eisel-Lemire float parser).
+pub struct CsvReader<R: BufRead> {
+    r: R,
+    source: String,
+    names: Vec<String>,
+    /// Data column of each CSV column (None: time or an ignored column).
+    slot_of: Vec<Option<usize>>,
+    has_time: bool,
+    axes: Vec<usize>,
+    /// Lines read so far (1-based number of the last line).
+    lineno: usize,
+    line: Vec<u8>,
+    prev_t: Option<f64>,
+    n: u64,
+    done: bool,
+}
+
+impl CsvReader<BufReader<File>> {
+    /// Open `path` and read its header.
+    pub fn open(path: &Path) -> Result<Self> {
+        let f = File::open(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        CsvReader::new(BufReader::with_capacity(1 << 20, f), &path.display().to_string())
+    }
+}
+
+impl<R: BufRead> CsvReader<R> {
+    /// Read the header of the CSV in `r`; `source` names it in errors.
+    pub fn new(r: R, source: &str) -> Result<Self> {
+        let mut me = CsvReader {
+            r,
+            source: source.to_string(),
+            names: Vec::new(),
+            slot_of: Vec::new(),
+            has_time: false,
+            axes: Vec::new(),
+            lineno: 0,
+            line: Vec::new(),
+            prev_t: None,
+            n: 0,
+            done: false,
+        };
+        if !me.next_line()? {
+            bail!("{source}: empty file, expected a header row (t_s,fx,fy,fz)");
         }
-        slot_of.push(column_axis(name).map(|_| axes.len()));
-        if name == "t_s" {
-            if col != 0 {
-                bail!("{source}: line 1, column {}: `t_s` must be the first column", col + 1);
+        let header = me.line_str()?.to_string();
+        me.parse_header(&header)?;
+        Ok(me)
+    }
+
+    fn parse_header(&mut self, header: &str) -> Result<()> {
+        let source = &self.source;
+        self.names = header.split(',').map(|s| s.trim().trim_matches('"').to_ascii_lowercase()).collect();
+        for (col, name) in self.names.iter().enumerate() {
+            if IGNORED_COLUMNS.contains(&name.as_str()) {
+                self.slot_of.push(None);
+                continue;
             }
-            has_time = true;
-        } else if let Some(axis) = column_axis(name) {
-            if axes.contains(&axis) {
-                bail!("{source}: line 1, column {}: duplicate column `{name}`", col + 1);
+            self.slot_of.push(column_axis(name).map(|_| self.axes.len()));
+            if name == "t_s" {
+                if col != 0 {
+                    bail!("{source}: line {}, column {}: `t_s` must be the first column", self.lineno, col + 1);
+                }
+                self.has_time = true;
+            } else if let Some(axis) = column_axis(name) {
+                if self.axes.contains(&axis) {
+                    bail!("{source}: line {}, column {}: duplicate column `{name}`", self.lineno, col + 1);
+                }
+                if let Some(&last) = self.axes.last() {
+                    if axis < last {
+                        bail!("{source}: line {}, column {}: columns must be in the order fx, fy, fz", self.lineno, col + 1);
+                    }
+                }
+                self.axes.push(axis);
+            } else {
+                bail!("{source}: line {}, column {}: unknown column `{name}` (expected t_s, fx, fy, fz)", self.lineno, col + 1);
             }
-            if let Some(&last) = axes.last() {
-                if axis < last {
-                    bail!("{source}: line 1, column {}: columns must be in the order fx, fy, fz", col + 1);
+        }
+        if self.axes.is_empty() {
+            bail!("{source}: line {}: no force column (expected at least one of fx, fy, fz)", self.lineno);
+        }
+        Ok(())
+    }
+
+    /// Next non-blank line into `self.line` (without its line end); false at
+    /// the end of the file.
+    fn next_line(&mut self) -> Result<bool> {
+        loop {
+            self.line.clear();
+            let got = self
+                .r
+                .read_until(b'\n', &mut self.line)
+                .with_context(|| format!("{}: read failed after line {}", self.source, self.lineno))?;
+            if got == 0 {
+                return Ok(false);
+            }
+            self.lineno += 1;
+            if self.line.last() == Some(&b'\n') {
+                self.line.pop();
+                if self.line.last() == Some(&b'\r') {
+                    self.line.pop();
                 }
             }
-            axes.push(axis);
-        } else {
-            bail!("{source}: line 1, column {}: unknown column `{name}` (expected t_s, fx, fy, fz)", col + 1);
-        }
-    }
-    if axes.is_empty() {
-        bail!("{source}: line 1: no force column (expected at least one of fx, fy, fz)");
-    }
-    let mut t_s = Vec::new();
-    let mut data: Vec<Vec<f64>> = vec![Vec::new(); axes.len()];
-    for (idx, line) in lines {
-        let lineno = idx + 1;
-        let fields: Vec<&str> = line.split(',').collect();
-        if fields.len() != names.len() {
-            bail!("{source}: line {lineno}: {} fields, header has {}", fields.len(), names.len());
-        }
-        for (col, field) in fields.iter().enumerate() {
-            let v: f64 = field
-                .trim()
-                .parse()
-                .map_err(|_| anyhow!("{source}: line {lineno}, column {} (`{}`): `{}` is not a number", col + 1, names[col], field.trim()))?;
-            if !v.is_finite() {
-                bail!("{source}: line {lineno}, column {} (`{}`): value is not finite", col + 1, names[col]);
+            if !self.line.iter().all(u8::is_ascii_whitespace) {
+                return Ok(true);
             }
-            if has_time && col == 0 {
-                if let Some(&prev) = t_s.last() {
+        }
+    }
+
+    fn line_str(&self) -> Result<&str> {
+        std::str::from_utf8(&self.line).map_err(|_| anyhow!("{}: line {}: not valid UTF-8 text", self.source, self.lineno))
+    }
+
+    /// Parse the current line into `blk`.
+    fn parse_line(&mut self, blk: &mut Block) -> Result<()> {
+        let (source, lineno) = (&self.source, self.lineno);
+        let line = std::str::from_utf8(&self.line).map_err(|_| anyhow!("{source}: line {lineno}: not valid UTF-8 text"))?;
+        let n_fields = line.split(',').count();
+        if n_fields != self.names.len() {
+            bail!("{source}: line {lineno}: {n_fields} fields, header has {}", self.names.len());
+        }
+        for (col, field) in line.split(',').enumerate() {
+            let field = field.trim();
+            let v: f64 = field
+                .parse()
+                .map_err(|_| anyhow!("{source}: line {lineno}, column {} (`{}`): `{field}` is not a number", col + 1, self.names[col]))?;
+            if !v.is_finite() {
+                bail!("{source}: line {lineno}, column {} (`{}`): value is not finite", col + 1, self.names[col]);
+            }
+            if self.has_time && col == 0 {
+                if let Some(prev) = self.prev_t {
                     if v <= prev {
                         bail!("{source}: line {lineno}, column 1 (`t_s`): time {v} does not increase (previous {prev})");
                     }
                 }
-                t_s.push(v);
-            } else if let Some(slot) = slot_of[col] {
-                data[slot].push(v);
+                self.prev_t = Some(v);
+                blk.t_s.push(v);
+            } else if let Some(slot) = self.slot_of[col] {
+                blk.channels[slot].push(v);
             }
         }
+        Ok(())
     }
-    if data[0].is_empty() {
-        bail!("{source}: no samples after the header");
+}
+
+impl<R: BufRead + Send> SignalReader for CsvReader<R> {
+    fn axes(&self) -> &[usize] {
+        &self.axes
     }
-    Ok(SignalRecord {
-        t_s: has_time.then_some(t_s),
-        channels: axes.into_iter().zip(data).collect(),
-    })
+
+    fn has_time(&self) -> bool {
+        self.has_time
+    }
+
+    fn read_block(&mut self, blk: &mut Block, max: usize) -> Result<usize> {
+        blk.clear();
+        blk.channels.resize(self.axes.len(), Vec::new());
+        while !self.done && blk.len() < max {
+            if !self.next_line()? {
+                self.done = true;
+                break;
+            }
+            self.parse_line(blk)?;
+        }
+        self.n += blk.len() as u64;
+        if self.done && self.n == 0 {
+            bail!("{}: no samples after the header", self.source);
+        }
+        Ok(blk.len())
+    }
+}
+
+/// A signal CSV written block by block: a header row, then one row per
+/// sample, every value in the shortest decimal form that reads back as the
+/// same f64 (so f32 outputs of the kernel, held as f64, read back
+/// bit-identical), formatted into one reused line buffer.
+pub struct CsvWriter<'w> {
+    w: &'w mut dyn Write,
+    fmt: ryu::Buffer,
+    line: Vec<u8>,
+    n_channels: usize,
+    has_time: bool,
+}
+
+impl<'w> CsvWriter<'w> {
+    /// Write the header for `axes` (and `t_s` first if `has_time`).
+    pub fn new(w: &'w mut dyn Write, axes: &[usize], has_time: bool) -> Result<Self> {
+        let mut header: Vec<String> = Vec::new();
+        if has_time {
+            header.push("t_s".into());
+        }
+        header.extend(axes.iter().map(|a| format!("f{}", axis_name(*a))));
+        writeln!(w, "{}", header.join(","))?;
+        Ok(CsvWriter { w, fmt: ryu::Buffer::new(), line: Vec::with_capacity(1 << 16), n_channels: axes.len(), has_time })
+    }
+}
+
+impl SignalWriter for CsvWriter<'_> {
+    fn write_block(&mut self, t_s: Option<&[f64]>, channels: &[&[f64]]) -> Result<()> {
+        let n = channels.first().map_or(0, |c| c.len());
+        if channels.len() != self.n_channels || channels.iter().any(|c| c.len() != n) || t_s.is_some() != self.has_time || t_s.is_some_and(|t| t.len() != n) {
+            bail!("internal error: a block does not match the output's columns");
+        }
+        for k in 0..n {
+            let mut first = true;
+            if let Some(t) = t_s {
+                push_f64(&mut self.line, &mut self.fmt, t[k]);
+                first = false;
+            }
+            for c in channels {
+                if !first {
+                    self.line.push(b',');
+                }
+                first = false;
+                push_f64(&mut self.line, &mut self.fmt, c[k]);
+            }
+            self.line.push(b'\n');
+            if self.line.len() >= 1 << 16 {
+                self.w.write_all(&self.line)?;
+                self.line.clear();
+            }
+        }
+        self.w.write_all(&self.line)?;
+        self.line.clear();
+        Ok(())
+    }
+
+    fn finish(&mut self) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// Append `v` in its shortest round-trip decimal form (ryu: the same
+/// digits as `{}` formatting, about 3x faster; large and small magnitudes
+/// in exponent form, e.g. `1.953125e-5`). Non-finite values (never written:
+/// the readers and the kernel's check refuse them) would read `NaN`/`inf`.
+fn push_f64(line: &mut Vec<u8>, buf: &mut ryu::Buffer, v: f64) {
+    line.extend_from_slice(buf.format(v).as_bytes());
 }
 
 /// Write a force record to `path` atomically (columns t_s?, fx?, fy?, fz?).
 ///
-/// Values are written with enough digits to round-trip f32 exactly (so a
+/// Values are written with enough digits to round-trip f64 exactly (so a
 /// compensated output read back is bit-identical to what the kernel produced).
 pub fn write_signal_csv(path: &Path, rec: &SignalRecord) -> Result<()> {
     let n = rec.len();
     if rec.channels.iter().any(|c| c.1.len() != n) || rec.t_s.as_ref().is_some_and(|t| t.len() != n) {
         bail!("{}: internal error: channels of different lengths", path.display());
     }
+    let axes: Vec<usize> = rec.channels.iter().map(|c| c.0).collect();
     write_atomic(path, |w| {
-        let mut header: Vec<&str> = Vec::new();
-        if rec.t_s.is_some() {
-            header.push("t_s");
-        }
-        let names: Vec<String> = rec.channels.iter().map(|c| format!("f{}", axis_name(c.0))).collect();
-        header.extend(names.iter().map(String::as_str));
-        writeln!(w, "{}", header.join(","))?;
-        let mut line = String::new();
-        for k in 0..n {
-            line.clear();
-            if let Some(t) = &rec.t_s {
-                line.push_str(&format!("{}", t[k]));
-            }
-            for c in &rec.channels {
-                if !line.is_empty() {
-                    line.push(',');
-                }
-                line.push_str(&format!("{}", c.1[k]));
-            }
-            writeln!(w, "{line}")?;
-        }
-        Ok(())
+        let mut cw = CsvWriter::new(w, &axes, rec.t_s.is_some())?;
+        let chans: Vec<&[f64]> = rec.channels.iter().map(|c| c.1.as_slice()).collect();
+        cw.write_block(rec.t_s.as_deref(), &chans)?;
+        cw.finish()
     })
 }

@@ -100,7 +100,7 @@ fn is_blank(b: u8) -> bool {
     b.is_ascii_whitespace() || b == 0 || b == 0x1a
 }
 
-fn trim(mut b: &[u8]) -> &[u8] {
+pub(super) fn trim(mut b: &[u8]) -> &[u8] {
     while let [first, rest @ ..] = b {
         if is_blank(*first) {
             b = rest;
@@ -119,7 +119,7 @@ fn trim(mut b: &[u8]) -> &[u8] {
 }
 
 /// A short printable rendering of a line for error messages.
-fn show(line: &[u8]) -> String {
+pub(super) fn show(line: &[u8]) -> String {
     let s = String::from_utf8_lossy(line);
     let s = s.trim();
     let mut out: String = s
@@ -134,18 +134,18 @@ fn show(line: &[u8]) -> String {
 }
 
 /// The fixed-width field `[start, start + width)` of a record, trimmed.
-fn field(line: &[u8], start: usize, width: usize) -> Option<&str> {
+pub(super) fn field(line: &[u8], start: usize, width: usize) -> Option<&str> {
     let end = (start + width).min(line.len());
     let bytes = line.get(start..end)?;
     std::str::from_utf8(bytes).ok().map(str::trim)
 }
 
-fn parse_int(s: &str) -> Option<i64> {
+pub(super) fn parse_int(s: &str) -> Option<i64> {
     s.trim().parse().ok()
 }
 
 /// A Fortran-style real: `1.5E+03`, `1.5e3`, `1.5D+03`, `15`.
-fn parse_real(s: &str) -> Option<f64> {
+pub(super) fn parse_real(s: &str) -> Option<f64> {
     let s = s.trim();
     if s.is_empty() {
         return None;
@@ -157,18 +157,18 @@ fn parse_real(s: &str) -> Option<f64> {
     }
 }
 
-fn tokens(line: &[u8]) -> Vec<&str> {
+pub(super) fn tokens(line: &[u8]) -> Vec<&str> {
     std::str::from_utf8(line)
         .map(|s| s.split_whitespace().collect())
         .unwrap_or_default()
 }
 
 /// Where we are, for error messages.
-struct Ctx<'a> {
-    source: &'a str,
-    data: &'a [u8],
-    no: usize,
-    line: usize,
+pub(super) struct Ctx<'a> {
+    pub(super) source: &'a str,
+    pub(super) data: &'a [u8],
+    pub(super) no: usize,
+    pub(super) line: usize,
 }
 
 impl Ctx<'_> {
@@ -185,14 +185,14 @@ impl Ctx<'_> {
 }
 
 #[derive(Clone, Copy)]
-struct BinHeader {
-    big_endian: bool,
-    n_ascii_lines: usize,
-    n_bytes: Option<u64>,
+pub(super) struct BinHeader {
+    pub(super) big_endian: bool,
+    pub(super) n_ascii_lines: usize,
+    pub(super) n_bytes: Option<u64>,
 }
 
 /// Parse the fields after `58b` (format I6,I6,I12,I12,...; blanks as fallback).
-fn parse_bin_header(rest: &[u8], ctx: &Ctx, off: usize) -> Result<BinHeader> {
+pub(super) fn parse_bin_header(rest: &[u8], ctx: &Ctx, off: usize) -> Result<BinHeader> {
     let fixed = (
         field(rest, 0, 6).and_then(parse_int),
         field(rest, 6, 6).and_then(parse_int),
@@ -244,7 +244,7 @@ fn parse_bin_header(rest: &[u8], ctx: &Ctx, off: usize) -> Result<BinHeader> {
 
 /// Find a closing `-1` at `pos` (after optional blanks / line breaks); return
 /// the offset after its line.
-fn closing_at(data: &[u8], mut pos: usize) -> Option<usize> {
+pub(super) fn closing_at(data: &[u8], mut pos: usize) -> Option<usize> {
     while pos < data.len() && matches!(data[pos], b' ' | b'\r' | b'\n') {
         pos += 1;
     }
@@ -303,7 +303,7 @@ fn skip_other(
     )
 }
 
-fn spec_type_name(t: i64) -> &'static str {
+pub(super) fn spec_type_name(t: i64) -> &'static str {
     match t {
         0 => "unknown",
         1 => "general",
@@ -326,7 +326,7 @@ fn spec_type_name(t: i64) -> &'static str {
     }
 }
 
-fn function_type_name(t: i64) -> &'static str {
+pub(super) fn function_type_name(t: i64) -> &'static str {
     match t {
         0 => "general",
         1 => "time response",
@@ -358,7 +358,7 @@ fn obviously_not_force(label: &str) -> bool {
 }
 
 /// Data characteristics record (8 to 11): specific data type and units label.
-fn data_characteristics(line: &[u8]) -> (Option<i64>, String) {
+pub(super) fn data_characteristics(line: &[u8]) -> (Option<i64>, String) {
     let spec = field(line, 0, 10)
         .and_then(parse_int)
         .or_else(|| tokens(line).first().and_then(|t| parse_int(t)));
@@ -378,6 +378,51 @@ enum Found58 {
         freq: Vec<f64>,
         coh: Vec<f64>,
     },
+}
+
+/// Record 6 (DOF identification, Format(2(I5,I10),2(1X,10A1,I10,I4))):
+/// function type, response direction, reference direction.
+pub(super) fn record6(r6: &[u8]) -> Option<(i64, i64, i64)> {
+    let fixed6 = (
+        field(r6, 0, 5).and_then(parse_int),
+        field(r6, 51, 4).and_then(parse_int),
+        field(r6, 76, 4).and_then(parse_int),
+    );
+    match fixed6 {
+        (Some(f), Some(d), Some(r)) => Some((f, d, r)),
+        _ => {
+            let t = tokens(r6);
+            let get = |i: usize| t.get(i).and_then(|s| parse_int(s));
+            match (get(0), get(6), get(9)) {
+                (Some(f), Some(d), Some(r)) if t.len() == 10 => Some((f, d, r)),
+                _ => None,
+            }
+        }
+    }
+}
+
+/// Record 7 (data form, Format(3I10,3E13.5)): ordinate data type, number
+/// of points, spacing (1 = even), abscissa minimum and increment.
+pub(super) fn record7(r7: &[u8]) -> Option<(i64, i64, i64, f64, f64)> {
+    let fixed7 = (
+        field(r7, 0, 10).and_then(parse_int),
+        field(r7, 10, 10).and_then(parse_int),
+        field(r7, 20, 10).and_then(parse_int),
+        field(r7, 30, 13).and_then(parse_real),
+        field(r7, 43, 13).and_then(parse_real),
+    );
+    match fixed7 {
+        (Some(a), Some(b), Some(c), Some(d), Some(e)) => Some((a, b, c, d, e)),
+        _ => {
+            let t = tokens(r7);
+            let gi = |i: usize| t.get(i).and_then(|s| parse_int(s));
+            let gr = |i: usize| t.get(i).and_then(|s| parse_real(s));
+            match (gi(0), gi(1), gi(2), gr(3), gr(4)) {
+                (Some(a), Some(b), Some(c), Some(d), Some(e)) => Some((a, b, c, d, e)),
+                _ => None,
+            }
+        }
+    }
 }
 
 /// Parse one dataset 58 whose id line was just read.
@@ -409,52 +454,23 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
 
     // Record 6: DOF identification, Format(2(I5,I10),2(1X,10A1,I10,I4)).
     let (off6, r6) = recs[5];
-    let fixed6 = (
-        field(r6, 0, 5).and_then(parse_int),
-        field(r6, 51, 4).and_then(parse_int),
-        field(r6, 76, 4).and_then(parse_int),
-    );
-    let (func_type, rsp_dir, ref_dir) = match fixed6 {
-        (Some(f), Some(d), Some(r)) => (f, d, r),
-        _ => {
-            let t = tokens(r6);
-            let get = |i: usize| t.get(i).and_then(|s| parse_int(s));
-            match (get(0), get(6), get(9)) {
-                (Some(f), Some(d), Some(r)) if t.len() == 10 => (f, d, r),
-                _ => bail!(
-                    "{}: cannot read function type, response direction and reference direction from {}",
-                    ctx.at(off6, "record 6"),
-                    show(r6)
-                ),
-            }
-        }
+    let Some((func_type, rsp_dir, ref_dir)) = record6(r6) else {
+        bail!(
+            "{}: cannot read function type, response direction and reference direction from {}",
+            ctx.at(off6, "record 6"),
+            show(r6)
+        );
     };
 
     // Record 7: data form, Format(3I10,3E13.5).
     let (off7, r7) = recs[6];
-    let fixed7 = (
-        field(r7, 0, 10).and_then(parse_int),
-        field(r7, 10, 10).and_then(parse_int),
-        field(r7, 20, 10).and_then(parse_int),
-        field(r7, 30, 13).and_then(parse_real),
-        field(r7, 43, 13).and_then(parse_real),
-    );
-    let (ord_type, num_pts, spacing, x_min, x_inc) = match fixed7 {
-        (Some(a), Some(b), Some(c), Some(d), Some(e)) => (a, b, c, d, e),
-        _ => {
-            let t = tokens(r7);
-            let gi = |i: usize| t.get(i).and_then(|s| parse_int(s));
-            let gr = |i: usize| t.get(i).and_then(|s| parse_real(s));
-            match (gi(0), gi(1), gi(2), gr(3), gr(4)) {
-                (Some(a), Some(b), Some(c), Some(d), Some(e)) => (a, b, c, d, e),
-                _ => bail!(
-                    "{}: cannot read ordinate data type, number of points, spacing, abscissa minimum \
-                     and increment from {}",
-                    ctx.at(off7, "record 7"),
-                    show(r7)
-                ),
-            }
-        }
+    let Some((ord_type, num_pts, spacing, x_min, x_inc)) = record7(r7) else {
+        bail!(
+            "{}: cannot read ordinate data type, number of points, spacing, abscissa minimum \
+             and increment from {}",
+            ctx.at(off7, "record 7"),
+            show(r7)
+        );
     };
     let (complex, double) = match ord_type {
         2 => (false, false),
@@ -761,7 +777,7 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
 /// Numbers of one ASCII data line: split at blanks; if a token does not
 /// parse (fields touching), the line is cut at the fixed Fortran widths.
 /// On failure returns the offending token.
-fn read_numbers(
+pub(super) fn read_numbers(
     line: &[u8],
     widths: &[usize],
     out: &mut Vec<f64>,
@@ -1066,12 +1082,42 @@ pub fn uff58_to_bytes(frf: &Frf, binary: bool) -> Result<Vec<u8>> {
 }
 
 /// Fortran `Ew.d`: `d` decimals, two- (or three-) digit exponent, right-aligned in `w`.
-fn fmt_e(x: f64, decimals: usize, width: usize) -> String {
+pub(super) fn fmt_e(x: f64, decimals: usize, width: usize) -> String {
     let s = format!("{x:.decimals$e}");
     let (mant, exp) = s.split_once('e').unwrap_or((&s, "0"));
     let exp: i32 = exp.parse().unwrap_or(0);
     let body = format!("{mant}e{}{:02}", if exp < 0 { '-' } else { '+' }, exp.abs());
     format!("{body:>width$}")
+}
+
+/// The `-1` line, id line and the 11 header records of a dataset 58:
+/// (function type, function id, direction, ID line 1), (ordinate data type,
+/// points, abscissa minimum, increment), records 8-11 as (specific data
+/// type, label, units), and for 58b the number of data bytes.
+pub(super) fn dataset_header(
+    (func_type, func_id, dir, id1): (i64, i64, i64, &str),
+    (ord_type, n, x0, dx): (i64, usize, f64, f64),
+    recs: [(i64, &str, &str); 4],
+    binary_bytes: Option<usize>,
+) -> String {
+    let mut s = String::new();
+    s.push_str(&format!("{:>6}\n", -1));
+    match binary_bytes {
+        Some(nb) => s.push_str(&format!("{:>6}b{:>6}{:>6}{:>12}{:>12}{:>6}{:>6}{:>12}{:>12}\n", 58, 1, 2, 11, nb, 0, 0, 0, 0)),
+        None => s.push_str(&format!("{:>6}{:74}\n", 58, "")),
+    }
+    for id in [id1, "NONE", "NONE", "NONE", "NONE"] {
+        s.push_str(&format!("{id:<80}\n"));
+    }
+    s.push_str(&format!(
+        "{:>5}{:>10}{:>5}{:>10} {:>10}{:>10}{:>4} {:>10}{:>10}{:>4}\n",
+        func_type, func_id, 0, 0, "DYN", 1, dir, "HAMMER", 1, dir
+    ));
+    s.push_str(&format!("{:>10}{:>10}{:>10}{}{}{}\n", ord_type, n, 1, fmt_e(x0, 6, 13), fmt_e(dx, 6, 13), fmt_e(0.0, 6, 13)));
+    for (spec, label, units) in recs {
+        s.push_str(&format!("{:>10}{:>5}{:>5}{:>5} {:<20} {:<20}\n", spec, 0, 0, 0, label, units));
+    }
+    s
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -1093,47 +1139,13 @@ fn write_dataset(
     } else {
         ("coherence", (0, "Coherence", "NONE"), (0, "NONE", "NONE"))
     };
-    let mut s = String::new();
-    s.push_str(&format!("{:>6}\n", -1));
-    if binary {
-        s.push_str(&format!(
-            "{:>6}b{:>6}{:>6}{:>12}{:>12}{:>6}{:>6}{:>12}{:>12}\n",
-            58,
-            1,
-            2,
-            11,
-            vals.len() * 8,
-            0,
-            0,
-            0,
-            0
-        ));
-    } else {
-        s.push_str(&format!("{:>6}{:74}\n", 58, ""));
-    }
     let id1 = format!("dynocomp {what} {}", axis_name(axis));
-    for id in [id1.as_str(), "NONE", "NONE", "NONE", "NONE"] {
-        s.push_str(&format!("{id:<80}\n"));
-    }
-    s.push_str(&format!(
-        "{:>5}{:>10}{:>5}{:>10} {:>10}{:>10}{:>4} {:>10}{:>10}{:>4}\n",
-        func_type, func_id, 0, 0, "DYN", 1, dir, "HAMMER", 1, dir
-    ));
-    s.push_str(&format!(
-        "{:>10}{:>10}{:>10}{}{}{}\n",
-        ord_type,
-        n,
-        1,
-        fmt_e(f0, 6, 13),
-        fmt_e(df, 6, 13),
-        fmt_e(0.0, 6, 13)
-    ));
-    for (spec, label, units) in [(18, "Frequency", "Hz"), num, den, (0, "NONE", "NONE")] {
-        s.push_str(&format!(
-            "{:>10}{:>5}{:>5}{:>5} {:<20} {:<20}\n",
-            spec, 0, 0, 0, label, units
-        ));
-    }
+    let s = dataset_header(
+        (func_type, func_id, dir, &id1),
+        (ord_type, n, f0, df),
+        [(18, "Frequency", "Hz"), num, den, (0, "NONE", "NONE")],
+        binary.then_some(vals.len() * 8),
+    );
     out.extend_from_slice(s.as_bytes());
     if binary {
         for v in vals {

@@ -1,0 +1,369 @@
+//! `dynocomp compensate` (DESIGN.md CLI contract, extended by issue #14):
+//! reads a force record in any supported format, compensates it, writes it
+//! atomically in the input's format (or `--output-format`), and with
+//! `--report DIR` writes a page of plots of what the compensation did.
+//!
+//! Memory per sample of the record (f64 on the host):
+//! * box image (default): none — the record streams through in blocks of
+//!   [`BLOCK`] samples ([`StreamCompensator`]); the report's accumulators are
+//!   bounded too, except with `--truth` (24 bytes per sample and axis for the
+//!   whole-record NRMSE, see [`crate::compensate_report`]);
+//! * `--offline` (fixed-interval smoother) and parallel-elaboration images:
+//!   the record is read whole (8 bytes per sample and axis) and the methods
+//!   hold their own passes (the smoother keeps its forward states, the
+//!   parallel split every band: about 8·(bands + 2) bytes per sample and
+//!   axis); only their output is written block by block.
+
+use anyhow::{anyhow, bail, Context, Result};
+use std::path::{Path, PathBuf};
+
+use crate::compensate::{compensate_parallel, StreamCompensator};
+use crate::compensate_report::ReportAccumulator;
+use crate::io::image_file::{read_any_image, AnyImage};
+use crate::io::signal::{check_rate_value, read_all, Block, RateTracker, SignalReader, BLOCK};
+use crate::io::signal_csv::SignalRecord;
+use crate::io::signal_file::{open_signal, writer_for, ChannelMap, SignalFormat};
+
+/// `dynocomp compensate` arguments.
+#[derive(clap::Args, Debug)]
+pub struct CompensateArgs {
+    /// Coefficient image (.dcimg).
+    #[arg(long)]
+    pub coeffs: PathBuf,
+    /// Input force record: CSV (columns [t_s,] fx, fy, fz in N; any subset)
+    /// or UFF 58/58b time histories (function type 1), by extension or
+    /// content.
+    #[arg(long)]
+    pub input: PathBuf,
+    /// Output force record (same channels), written atomically; its format
+    /// follows the input unless --output-format says otherwise.
+    #[arg(long)]
+    pub output: PathBuf,
+    /// Output format: csv, uff (ASCII dataset 58) or uff58b (binary).
+    #[arg(long, value_enum)]
+    pub output_format: Option<SignalFormat>,
+    /// Channel-to-axis map for UFF records whose response directions do not
+    /// say the axis, e.g. `fx=1,fy=2,fz=3` (UFF: response node number) or by
+    /// name (`fx=Force X`, matched against the record's ID line).
+    #[arg(long)]
+    pub channels: Option<String>,
+    /// Keep the box's timing: do not shift the output back by the image's
+    /// declared latency.
+    #[arg(long)]
+    pub raw_timing: bool,
+    /// Offline only: zero-lag fixed-interval (Rauch-Tung-Striebel
+    /// equivalent) smoother in f64 instead of the box's causal filter.
+    /// Needs the model sidecar `<image>.model.json` that `design` writes.
+    #[arg(long, conflicts_with = "raw_timing")]
+    pub offline: bool,
+    /// Write a report of the compensation (index.html and SVG plots) into DIR.
+    #[arg(long, value_name = "DIR")]
+    pub report: Option<PathBuf>,
+    /// True force of the record (e.g. from `simulate`), same format rules as
+    /// --input: the report adds it, the error and the NRMSE.
+    #[arg(long, value_name = "FILE", requires = "report")]
+    pub truth: Option<PathBuf>,
+    /// Spindle speed (rpm) for the report's tooth-passing frequency marks.
+    #[arg(long, requires = "teeth")]
+    pub spindle_rpm: Option<f64>,
+    /// Number of teeth of the cutter (with --spindle-rpm).
+    #[arg(long, requires = "spindle_rpm")]
+    pub teeth: Option<u32>,
+    /// Band limit of the report's NRMSE (Hz); default: the upper edge of
+    /// each axis's flat band in the image.
+    #[arg(long)]
+    pub band_hz: Option<f64>,
+}
+
+/// Run `dynocomp compensate`.
+pub fn run(a: &CompensateArgs) -> Result<()> {
+    let img = read_any_image(&a.coeffs)?;
+    let source = a.input.display().to_string();
+    let map = a.channels.as_deref().map(ChannelMap::parse).transpose().context("--channels")?;
+    let (mut reader, in_fmt) = open_signal(&a.input, map.as_ref())?;
+    let fs = img.fs_hz();
+    if let Some(f) = reader.declared_fs_hz() {
+        check_rate_value(fs, (f, 0.0), &source, "the file's sampling interval")?;
+    }
+    let out_fmt = a.output_format.unwrap_or(in_fmt);
+    let axes = reader.axes().to_vec();
+    let has_time = reader.has_time();
+    if let Some(r) = a.spindle_rpm {
+        if !(r.is_finite() && r > 0.0) {
+            bail!("--spindle-rpm {r}: must be > 0");
+        }
+    }
+    let tpf = a.spindle_rpm.zip(a.teeth).map(|(r, z)| r / 60.0 * f64::from(z));
+    let mut truth = match &a.truth {
+        Some(p) => {
+            let (t, _) = open_signal(p, map.as_ref())?;
+            for ax in &axes {
+                if !t.axes().contains(ax) {
+                    bail!("{}: no f{} channel, but the input has one", p.display(), crate::frf::axis_name(*ax));
+                }
+            }
+            Some((p.display().to_string(), t))
+        }
+        None => None,
+    };
+    let mut acc = a.report.as_ref().map(|_| ReportAccumulator::new(&axes, f64::from(fs), tpf, truth.is_some()));
+    let progress = progress_bar(reader.len_hint());
+    let how;
+    let n_samples;
+    match (&img, a.offline) {
+        (AnyImage::Inline(i), false) => {
+            let mut comp = StreamCompensator::new(i, &axes, a.raw_timing, &source)?;
+            how = format!(
+                "box filter, latency {} samples{}, streamed in blocks of {BLOCK}",
+                i.latency_samples,
+                if a.raw_timing { ", not removed" } else { ", removed" }
+            );
+            n_samples = write_output(&a.output, out_fmt, &axes, has_time, reader.len_hint(), fs, |w| {
+                stream_box(&mut *reader, &mut comp, w, fs, &source, acc.as_mut(), truth.as_mut(), &progress)
+            })?;
+        }
+        (AnyImage::Parallel(p), false) => {
+            how = format!("parallel elaboration, {} bands, zero-phase split (offline only, whole record in memory)", p.bands().len());
+            let rec = whole_record(&mut *reader, fs, &source)?;
+            let out = compensate_parallel(p, &rec, a.raw_timing, &source)?;
+            n_samples = write_whole(a, out_fmt, &rec, &out, fs, acc.as_mut(), truth.as_mut())?;
+        }
+        (AnyImage::Inline(i), true) => {
+            how = "fixed-interval smoother, zero lag (offline only, whole record in memory)".to_string();
+            let sidecar = crate::smoother::read_sidecar(&a.coeffs, i)?;
+            let rec = whole_record(&mut *reader, fs, &source)?;
+            let out = crate::smoother::smooth_record(i, &sidecar, &rec, &source)?;
+            n_samples = write_whole(a, out_fmt, &rec, &out, fs, acc.as_mut(), truth.as_mut())?;
+        }
+        (AnyImage::Parallel(_), true) => bail!(
+            "{}: --offline needs a box image (format 1) and its model sidecar; this is a parallel-elaboration image",
+            a.coeffs.display()
+        ),
+    }
+    progress.finish_and_clear();
+    eprintln!(
+        "compensated {n_samples} samples x {} axes at {fs} Hz ({how}) -> {}",
+        axes.len(),
+        a.output.display()
+    );
+    if let (Some(acc), Some(dir)) = (acc, &a.report) {
+        let summary = format!(
+            "input:  {source}\nimage:  {}\noutput: {}\n{n_samples} samples x {} axes at {fs} Hz ({:.3} s); {how}",
+            a.coeffs.display(),
+            a.output.display(),
+            axes.len(),
+            n_samples as f64 / f64::from(fs),
+        );
+        let band = |axis: usize| -> f64 {
+            a.band_hz.unwrap_or_else(|| match &img {
+                AnyImage::Inline(i) => i.axes.get(axis).and_then(Option::as_ref).map_or(f64::from(fs) / 2.0, |x| f64::from(x.summary.flat_hi_hz)),
+                AnyImage::Parallel(_) => f64::from(fs) / 2.0,
+            })
+        };
+        let (files, scores) = acc.write(dir, &summary, &band)?;
+        for s in scores {
+            eprintln!("{s}");
+        }
+        eprintln!("report: {}", files.last().map_or_else(|| dir.display().to_string(), |p| p.display().to_string()));
+    }
+    Ok(())
+}
+
+/// A progress bar on stderr, drawn only when stderr is a terminal
+/// (indicatif hides it otherwise).
+fn progress_bar(len: Option<u64>) -> indicatif::ProgressBar {
+    let pb = indicatif::ProgressBar::with_draw_target(len, indicatif::ProgressDrawTarget::stderr());
+    let style = if len.is_some() { "{bar:40} {pos}/{len} samples, {per_sec}, eta {eta}" } else { "{spinner} {pos} samples, {per_sec}" };
+    if let Ok(s) = indicatif::ProgressStyle::with_template(style) {
+        pb.set_style(s);
+    }
+    pb
+}
+
+/// Write `path` atomically in `fmt` with a writer for `axes`; `body` writes
+/// the samples and returns how many.
+fn write_output(
+    path: &Path,
+    fmt: SignalFormat,
+    axes: &[usize],
+    has_time: bool,
+    len: Option<u64>,
+    fs: u32,
+    body: impl FnOnce(&mut dyn crate::io::signal::SignalWriter) -> Result<u64>,
+) -> Result<u64> {
+    let mut n = 0;
+    crate::io::atomic::write_atomic(path, |w| {
+        let mut writer = writer_for(fmt, w, axes, has_time, len, f64::from(fs), path)?;
+        n = body(&mut *writer)?;
+        writer.finish()
+    })?;
+    Ok(n)
+}
+
+/// The box path: read, compensate, write and observe block by block; the
+/// output lags the input by the removed latency, so the inputs (and times)
+/// wait in `pending` until their outputs exist. Returns the samples written.
+#[allow(clippy::too_many_arguments)]
+fn stream_box(
+    reader: &mut dyn SignalReader,
+    comp: &mut StreamCompensator<'_>,
+    w: &mut dyn crate::io::signal::SignalWriter,
+    fs: u32,
+    source: &str,
+    mut acc: Option<&mut ReportAccumulator>,
+    mut truth: Option<&mut (String, Box<dyn SignalReader>)>,
+    progress: &indicatif::ProgressBar,
+) -> Result<u64> {
+    let n_ch = reader.axes().len();
+    let axes = reader.axes().to_vec();
+    let has_time = reader.has_time();
+    let mut pending = Block::new(n_ch);
+    let mut out: Vec<Vec<f64>> = vec![Vec::with_capacity(BLOCK); n_ch];
+    let mut rate = RateTracker::default();
+    let mut tq = TruthQueue::default();
+    let mut written = 0u64;
+    // Parsing runs on a thread of its own, a block ahead of the kernel and
+    // the writer (two cores: parse || compensate + format); blocks go back
+    // for reuse.
+    std::thread::scope(|s| -> Result<()> {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Block>>(2);
+        let (back_tx, back_rx) = std::sync::mpsc::channel::<Block>();
+        s.spawn(move || loop {
+            let mut blk = back_rx.try_recv().unwrap_or_else(|_| Block::new(n_ch));
+            let r = reader.read_block(&mut blk, BLOCK);
+            let end = !matches!(r, Ok(n) if n > 0);
+            if tx.send(r.map(|_| blk)).is_err() || end {
+                break;
+            }
+        });
+        loop {
+            let blk = rx.recv().map_err(|_| anyhow!("{source}: the reader stopped"))??;
+            let n = blk.len();
+            rate.push(&blk.t_s);
+            pending.t_s.extend_from_slice(&blk.t_s);
+            for (p, b) in pending.channels.iter_mut().zip(&blk.channels) {
+                p.extend_from_slice(b);
+            }
+            for o in &mut out {
+                o.clear();
+            }
+            let m = if n == 0 { comp.finish(&mut out) } else { comp.push(&blk.channels, &mut out) }.with_context(|| source.to_string())?;
+            let _ = back_tx.send(blk);
+            let t = has_time.then(|| &pending.t_s[..m]);
+            let outs: Vec<&[f64]> = out.iter().map(Vec::as_slice).collect();
+            w.write_block(t, &outs)?;
+            if let Some(acc) = acc.as_deref_mut() {
+                let meas: Vec<&[f64]> = pending.channels.iter().map(|c| &c[..m]).collect();
+                match truth.as_deref_mut() {
+                    Some((tsrc, tr)) => {
+                        let tv = tq.take(&mut **tr, tsrc, &axes, m)?;
+                        let tv: Vec<&[f64]> = tv.iter().map(|v| &v[..m]).collect();
+                        acc.observe(&meas, &outs, Some(&tv));
+                        tq.consume(m);
+                    }
+                    None => acc.observe(&meas, &outs, None),
+                }
+            }
+            pending.t_s.drain(..m.min(pending.t_s.len()));
+            for p in &mut pending.channels {
+                p.drain(..m);
+            }
+            written += m as u64;
+            progress.inc(n as u64);
+            if n == 0 {
+                return Ok(());
+            }
+        }
+    })?;
+    if let Some(found) = rate.rate() {
+        check_rate_value(fs, found, source, "column t_s")?;
+    }
+    Ok(written)
+}
+
+/// Samples of the truth record read ahead of their use, per input channel.
+#[derive(Default)]
+struct TruthQueue {
+    blk: Option<Block>,
+    queue: Vec<Vec<f64>>,
+}
+
+impl TruthQueue {
+    /// The next `m` truth samples of each of `axes` (at the front of the
+    /// returned vectors); an error if the truth record ends first.
+    fn take(&mut self, r: &mut dyn SignalReader, source: &str, axes: &[usize], m: usize) -> Result<&[Vec<f64>]> {
+        let slots: Vec<usize> = axes.iter().map(|a| r.axes().iter().position(|x| x == a).unwrap_or(0)).collect();
+        if self.queue.len() != axes.len() {
+            self.queue = vec![Vec::new(); axes.len()];
+        }
+        let blk = self.blk.get_or_insert_with(|| Block::new(r.axes().len()));
+        while self.queue[0].len() < m {
+            if r.read_block(blk, BLOCK)? == 0 {
+                bail!("{source}: the true force record is shorter than the input");
+            }
+            for (q, &s) in self.queue.iter_mut().zip(&slots) {
+                q.extend_from_slice(&blk.channels[s]);
+            }
+        }
+        Ok(&self.queue)
+    }
+
+    /// Drop the first `m` samples (handed out by [`TruthQueue::take`]).
+    fn consume(&mut self, m: usize) {
+        for q in &mut self.queue {
+            q.drain(..m);
+        }
+    }
+}
+
+
+fn whole_record(reader: &mut dyn SignalReader, fs: u32, source: &str) -> Result<SignalRecord> {
+    let axes = reader.axes().to_vec();
+    let (t_s, ch) = read_all(reader)?;
+    let rec = SignalRecord { t_s, channels: axes.into_iter().zip(ch).collect() };
+    if let Some(found) = rec.sample_rate_from_time() {
+        check_rate_value(fs, found, source, "column t_s")?;
+    }
+    Ok(rec)
+}
+
+/// Write a whole compensated record (and observe it for the report).
+fn write_whole(
+    a: &CompensateArgs,
+    fmt: SignalFormat,
+    rec: &SignalRecord,
+    out: &SignalRecord,
+    fs: u32,
+    acc: Option<&mut ReportAccumulator>,
+    truth: Option<&mut (String, Box<dyn SignalReader>)>,
+) -> Result<u64> {
+    let axes: Vec<usize> = out.channels.iter().map(|c| c.0).collect();
+    let n = write_output(&a.output, fmt, &axes, rec.t_s.is_some(), Some(rec.len() as u64), fs, |w| {
+        for s in (0..out.len()).step_by(BLOCK) {
+            let e = (s + BLOCK).min(out.len());
+            let chans: Vec<&[f64]> = out.channels.iter().map(|c| &c.1[s..e]).collect();
+            w.write_block(rec.t_s.as_ref().map(|t| &t[s..e]), &chans)?;
+        }
+        Ok(out.len() as u64)
+    })?;
+    if let Some(acc) = acc {
+        let meas: Vec<&[f64]> = rec.channels.iter().map(|c| c.1.as_slice()).collect();
+        let comp: Vec<&[f64]> = out.channels.iter().map(|c| c.1.as_slice()).collect();
+        match truth {
+            Some((tsrc, tr)) => {
+                let taxes = tr.axes().to_vec();
+                let (_, t) = read_all(&mut **tr)?;
+                if t.first().map_or(0, Vec::len) < out.len() {
+                    bail!("{tsrc}: the true force record is shorter than the input");
+                }
+                let tv: Vec<&[f64]> = axes
+                    .iter()
+                    .map(|ax| taxes.iter().position(|x| x == ax).map(|s| &t[s][..out.len()]).ok_or_else(|| anyhow!("{tsrc}: axis missing")))
+                    .collect::<Result<_>>()?;
+                acc.observe(&meas, &comp, Some(&tv));
+            }
+            None => acc.observe(&meas, &comp, None),
+        }
+    }
+    Ok(n)
+}

@@ -1,0 +1,196 @@
+//! Streaming force records (issue #14): a [`SignalReader`] yields a record in
+//! blocks of samples, a [`SignalWriter`] takes them, so `compensate` holds a
+//! block, never the record. CSV ([`crate::io::signal_csv`]) and UFF 58 time
+//! histories ([`crate::io::uff_signal`]) implement both.
+
+use anyhow::{bail, Result};
+
+/// Samples per block of the streaming paths: 8192 samples x (3 axes + time)
+/// x 8 bytes = 256 KiB per buffer, small against the 64 MB memory target and
+/// large enough that per-block overheads do not show.
+pub const BLOCK: usize = 8192;
+
+/// A block of a force record: the samples of each channel (in the reader's
+/// axis order) and, if the record has them, their times.
+#[derive(Clone, Debug, Default)]
+pub struct Block {
+    /// Sample times (s); empty when the record has no time column.
+    pub t_s: Vec<f64>,
+    /// One vector per channel, all of the same length.
+    pub channels: Vec<Vec<f64>>,
+}
+
+impl Block {
+    /// An empty block for `n_channels` channels.
+    pub fn new(n_channels: usize) -> Block {
+        Block { t_s: Vec::new(), channels: vec![Vec::new(); n_channels] }
+    }
+
+    /// Samples in the block.
+    pub fn len(&self) -> usize {
+        self.channels.first().map_or(0, Vec::len)
+    }
+
+    /// Whether the block has no samples.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Remove every sample, keeping the allocations.
+    pub fn clear(&mut self) {
+        self.t_s.clear();
+        self.channels.iter_mut().for_each(Vec::clear);
+    }
+}
+
+/// A force record read block by block (on a thread of its own in
+/// `compensate`, hence `Send`).
+pub trait SignalReader: Send {
+    /// Axis of each channel (0 = x, 1 = y, 2 = z), ascending.
+    fn axes(&self) -> &[usize];
+    /// Whether the blocks carry sample times.
+    fn has_time(&self) -> bool;
+    /// Sample rate the file declares in its header (Hz), if any.
+    fn declared_fs_hz(&self) -> Option<f64> {
+        None
+    }
+    /// Total number of samples, if the header says.
+    fn len_hint(&self) -> Option<u64> {
+        None
+    }
+    /// Clear `blk` and fill it with up to `max` samples (`max` > 0); returns
+    /// the number read, 0 at the end of the record.
+    fn read_block(&mut self, blk: &mut Block, max: usize) -> Result<usize>;
+}
+
+/// A force record written block by block (in the axis order it was
+/// created with).
+pub trait SignalWriter {
+    /// Append samples: `t_s` (if the output has times) and one slice per
+    /// channel, all of the same length.
+    fn write_block(&mut self, t_s: Option<&[f64]>, channels: &[&[f64]]) -> Result<()>;
+    /// Write whatever the format puts after the last sample.
+    fn finish(&mut self) -> Result<()>;
+}
+
+/// Mean spacing and worst deviation of a time column, tracked sample by
+/// sample in constant memory: the same numbers as
+/// [`crate::io::signal_csv::SignalRecord::sample_rate_from_time`] on the
+/// whole column (mean spacing (t_last − t_0)/(n − 1), worst |step − mean| /
+/// mean, which is reached at the smallest or the largest step).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RateTracker {
+    first: Option<f64>,
+    last: f64,
+    n: u64,
+    min_step: f64,
+    max_step: f64,
+}
+
+impl RateTracker {
+    /// Take the next sample times.
+    pub fn push(&mut self, t: &[f64]) {
+        for &v in t {
+            match self.first {
+                None => {
+                    self.first = Some(v);
+                    self.min_step = f64::INFINITY;
+                    self.max_step = f64::NEG_INFINITY;
+                }
+                Some(_) => {
+                    let step = v - self.last;
+                    self.min_step = self.min_step.min(step);
+                    self.max_step = self.max_step.max(step);
+                }
+            }
+            self.last = v;
+            self.n += 1;
+        }
+    }
+
+    /// (rate in Hz, worst relative deviation of a step from the mean), once
+    /// two or more times were seen.
+    pub fn rate(&self) -> Option<(f64, f64)> {
+        let first = self.first?;
+        if self.n < 2 {
+            return None;
+        }
+        let dt = (self.last - first) / (self.n - 1) as f64;
+        let worst = ((self.max_step - dt).abs() / dt).max((self.min_step - dt).abs() / dt);
+        Some((1.0 / dt, worst))
+    }
+}
+
+/// Relative tolerance between a file's sample rate and the image's.
+pub const FS_TOLERANCE: f64 = 1e-4;
+
+/// Check a sample rate found in `source` (from `what`, e.g. "column t_s")
+/// against the image's `fs_hz`, and the spacing's uniformity.
+pub fn check_rate_value(fs_hz: u32, found: (f64, f64), source: &str, what: &str) -> Result<()> {
+    let (fs, jitter) = found;
+    let want = f64::from(fs_hz);
+    let off = ((fs - want) / want).abs();
+    if off.is_nan() || off > FS_TOLERANCE {
+        bail!(
+            "{source}: {what} implies a sample rate of {fs:.3} Hz, but the image was designed for {want} Hz; \
+             resample the record or design for its rate"
+        );
+    }
+    if jitter > 0.01 {
+        bail!("{source}: {what} is not uniformly spaced (a step deviates {:.1} % from the mean)", jitter * 100.0);
+    }
+    Ok(())
+}
+
+/// A whole record: its times (if any) and one vector per channel.
+pub type WholeRecord = (Option<Vec<f64>>, Vec<Vec<f64>>);
+
+/// Read a whole record from `reader` (for the paths that need it whole:
+/// `--offline`, parallel elaboration): (times if any, channels).
+pub fn read_all(reader: &mut dyn SignalReader) -> Result<WholeRecord> {
+    let n_ch = reader.axes().len();
+    let mut t = Vec::new();
+    let mut ch: Vec<Vec<f64>> = vec![Vec::new(); n_ch];
+    let mut blk = Block::new(n_ch);
+    while reader.read_block(&mut blk, BLOCK)? > 0 {
+        t.extend_from_slice(&blk.t_s);
+        for (c, b) in ch.iter_mut().zip(&blk.channels) {
+            c.extend_from_slice(b);
+        }
+    }
+    Ok((reader.has_time().then_some(t), ch))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::signal_csv::SignalRecord;
+
+    /// The streaming tracker gives the whole-column figures bit for bit,
+    /// however the column is cut into blocks; a column with one irregular
+    /// step reads as irregular.
+    #[test]
+    fn rate_tracker_matches_the_whole_column() {
+        let mut t: Vec<f64> = (0..1000).map(|k| k as f64 / 51200.0 + 0.25).collect();
+        for irregular in [false, true] {
+            if irregular {
+                t[500] += 0.3 / 51200.0;
+            }
+            let rec = SignalRecord { t_s: Some(t.clone()), channels: vec![(0, vec![0.0; t.len()])] };
+            let want = rec.sample_rate_from_time().unwrap();
+            for cut in [1, 7, 999, 1000] {
+                let mut tr = RateTracker::default();
+                for c in t.chunks(cut) {
+                    tr.push(c);
+                }
+                let got = tr.rate().unwrap();
+                assert_eq!(got.0.to_bits(), want.0.to_bits());
+                assert_eq!(got.1.to_bits(), want.1.to_bits());
+            }
+            assert_eq!(check_rate_value(51200, want, "f", "t").is_ok(), !irregular);
+        }
+        assert!(check_rate_value(48000, (51200.0, 0.0), "f", "t").is_err());
+        assert!(check_rate_value(48000, (f64::NAN, 0.0), "f", "t").is_err());
+        assert!(RateTracker::default().rate().is_none());
+    }
+}

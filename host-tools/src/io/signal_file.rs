@@ -1,0 +1,102 @@
+//! Force-record files by format: opening a reader by extension or content,
+//! and a writer for an output format (issue #14).
+
+use anyhow::{bail, Context, Result};
+use std::io::Write;
+use std::path::Path;
+
+use crate::io::signal::{SignalReader, SignalWriter};
+use crate::io::signal_csv::{CsvReader, CsvWriter};
+use crate::io::uff_signal::{UffReader, UffWriter};
+
+/// File formats of force records.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SignalFormat {
+    /// Signal CSV (DESIGN.md).
+    Csv,
+    /// UFF dataset 58 time histories, ASCII (values as E20.12).
+    Uff,
+    /// UFF dataset 58b time histories, binary (little-endian f64).
+    Uff58b,
+}
+
+/// Channel-to-axis map given with `--channels`: `fx=NAME,fy=NAME,...`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ChannelMap {
+    /// (axis, channel name as given).
+    pub pairs: Vec<(usize, String)>,
+}
+
+impl ChannelMap {
+    /// Parse `fx=A,fy=B,fz=C` (any subset).
+    pub fn parse(s: &str) -> Result<ChannelMap> {
+        let mut pairs: Vec<(usize, String)> = Vec::new();
+        for item in s.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+            let Some((k, v)) = item.split_once('=') else {
+                bail!("`{item}`: expected AXIS=CHANNEL, e.g. fx=1 or fx=Force X");
+            };
+            let axis = match k.trim().to_ascii_lowercase().as_str() {
+                "fx" | "x" => 0,
+                "fy" | "y" => 1,
+                "fz" | "z" => 2,
+                other => bail!("`{item}`: unknown axis `{other}` (fx, fy or fz)"),
+            };
+            if pairs.iter().any(|p| p.0 == axis) {
+                bail!("`{item}`: axis given twice");
+            }
+            pairs.push((axis, v.trim().to_string()));
+        }
+        if pairs.is_empty() {
+            bail!("no channel given");
+        }
+        Ok(ChannelMap { pairs })
+    }
+}
+
+/// Open the force record `path`: its reader and its format (by extension,
+/// otherwise by content).
+pub fn open_signal(path: &Path, map: Option<&ChannelMap>) -> Result<(Box<dyn SignalReader>, SignalFormat)> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let is_uff = match ext.as_deref() {
+        Some("csv") => false,
+        Some("uff" | "unv" | "uf") => true,
+        // A pipe or device (e.g. /dev/stdin) cannot be sniffed without
+        // consuming what the reader needs: read as CSV.
+        _ if !std::fs::metadata(path).is_ok_and(|m| m.is_file()) => false,
+        _ => {
+            let mut head = vec![0u8; 4096];
+            let n = std::fs::File::open(path)
+                .and_then(|mut f| std::io::Read::read(&mut f, &mut head))
+                .with_context(|| format!("{}: cannot read", path.display()))?;
+            crate::io::uff::looks_like_uff(&head[..n])
+        }
+    };
+    if is_uff {
+        let r = UffReader::open(path, map)?;
+        let fmt = if r.is_binary() { SignalFormat::Uff58b } else { SignalFormat::Uff };
+        return Ok((Box::new(r), fmt));
+    }
+    if map.is_some() {
+        bail!("{}: --channels applies to UFF records; a CSV names its columns fx, fy, fz", path.display());
+    }
+    Ok((Box::new(CsvReader::open(path)?), SignalFormat::Csv))
+}
+
+/// A writer of `fmt` into `w` for `axes` (with a time column if
+/// `has_time`); `len`: the number of samples if known (formats with a
+/// length in their header need it), `fs_hz` the sample rate.
+pub fn writer_for<'w>(
+    fmt: SignalFormat,
+    w: &'w mut dyn Write,
+    axes: &[usize],
+    has_time: bool,
+    _len: Option<u64>,
+    fs_hz: f64,
+    _path: &Path,
+) -> Result<Box<dyn SignalWriter + 'w>> {
+    match fmt {
+        SignalFormat::Csv => Ok(Box::new(CsvWriter::new(w, axes, has_time)?)),
+        SignalFormat::Uff => Ok(Box::new(UffWriter::new(w, axes, fs_hz, false)?)),
+        SignalFormat::Uff58b => Ok(Box::new(UffWriter::new(w, axes, fs_hz, true)?)),
+    }
+}

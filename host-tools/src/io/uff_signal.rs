@@ -1,0 +1,424 @@
+//! Force records as UFF dataset 58/58b time histories (issue #14): one
+//! dataset per channel, function type 1 (time response), real ordinate
+//! (data types 2/4), even abscissa in seconds (record 8 specific data type
+//! 17 "time", or unknown/general). The axis comes from the response
+//! direction as for FRFs (±1/±2/±3, a negative direction flips the sign), or
+//! from `--channels` (by the dataset's ID line 1 or response node number).
+//! Datasets of other function types (and other dataset numbers) are skipped.
+//!
+//! Streaming: a first pass indexes the datasets (binary data is skipped by
+//! its length, ASCII data line by line, nothing kept); then every channel is
+//! read through its own file handle from its own data offset, block by block,
+//! so memory does not grow with the record. The writer spills each channel
+//! to a temporary file and writes the datasets one after the other at the
+//! end (the header needs the number of points).
+
+use anyhow::{anyhow, bail, Context, Result};
+use std::collections::VecDeque;
+use std::fs::File;
+use std::io::{BufRead, BufReader, Read, Seek, SeekFrom, Write};
+use std::path::Path;
+
+use super::signal::{Block, SignalReader, SignalWriter};
+use super::signal_file::ChannelMap;
+use super::uff::{data_characteristics, dataset_header, fmt_e, read_numbers, record6, record7, spec_type_name, tokens, trim};
+use crate::frf::axis_name;
+
+/// One time-history dataset found by the index pass.
+#[derive(Clone, Debug)]
+struct Channel {
+    axis: usize,
+    sign: f64,
+    /// Dataset number in the file (1-based) and its first line.
+    no: usize,
+    line: usize,
+    n: u64,
+    dt: f64,
+    double: bool,
+    /// 58b: Some(big endian).
+    binary: Option<bool>,
+    data_off: u64,
+    data_line: usize,
+}
+
+/// A reader of the time histories of a UFF file.
+pub struct UffReader {
+    source: String,
+    chans: Vec<Channel>,
+    axes: Vec<usize>,
+    readers: Vec<BufReader<File>>,
+    pending: Vec<VecDeque<f64>>,
+    lines: Vec<usize>,
+    done: Vec<u64>,
+    text: String,
+    raw: Vec<u8>,
+    nums: Vec<f64>,
+}
+
+impl UffReader {
+    /// Whether the channels are binary (58b) datasets.
+    pub fn is_binary(&self) -> bool {
+        self.chans.iter().any(|c| c.binary.is_some())
+    }
+
+    /// Index the time histories of `path` and open one handle per channel.
+    pub fn open(path: &Path, map: Option<&ChannelMap>) -> Result<UffReader> {
+        let source = path.display().to_string();
+        let f = File::open(path).with_context(|| format!("{source}: cannot read"))?;
+        let mut r = BufReader::with_capacity(1 << 20, f);
+        let mut found: Vec<(Channel, String, String)> = Vec::new();
+        let mut skipped: Vec<String> = Vec::new();
+        let mut off = 0u64;
+        let mut lineno = 0usize;
+        let mut line = Vec::new();
+        let mut no = 0usize;
+        let next = |r: &mut BufReader<File>, line: &mut Vec<u8>, off: &mut u64, lineno: &mut usize| -> Result<bool> {
+            line.clear();
+            let n = r.read_until(b'\n', line).with_context(|| format!("{source}: read failed"))?;
+            *off += n as u64;
+            *lineno += 1;
+            while matches!(line.last(), Some(b'\n' | b'\r')) {
+                line.pop();
+            }
+            Ok(n > 0)
+        };
+        while next(&mut r, &mut line, &mut off, &mut lineno)? {
+            if trim(&line) != b"-1" {
+                if trim(&line).is_empty() {
+                    continue;
+                }
+                bail!("{source}: line {lineno}: expected a '    -1' line opening a dataset, found {}", super::uff::show(&line));
+            }
+            let start_line = lineno;
+            if !next(&mut r, &mut line, &mut off, &mut lineno)? {
+                break;
+            }
+            let id = String::from_utf8_lossy(trim(&line)).to_string();
+            let t: Vec<String> = tokens(&line).into_iter().map(str::to_string).collect();
+            let head = t.first().cloned().unwrap_or_default();
+            no += 1;
+            let here = |what: &str, l: usize| format!("{source}: line {l}: dataset #{no} (58, starting line {start_line}), {what}");
+            let binary = match head.as_str() {
+                "58" => None,
+                "58b" => {
+                    let g = |i: usize| t.get(i).and_then(|s| s.parse::<i64>().ok());
+                    match (g(1), g(2), g(3)) {
+                        (Some(bo @ 1..=2), Some(2), Some(11)) => Some(bo == 2),
+                        _ => bail!("{}: unsupported 58b header {:?} (need byte order 1/2, IEEE 754, 11 ASCII lines)", here("binary header", lineno), id),
+                    }
+                }
+                _ => {
+                    // another dataset: skip to its closing -1 (binary ones by their byte count)
+                    let nb = if head.ends_with('b') { t.get(4).and_then(|s| s.parse::<u64>().ok()) } else { None };
+                    if let Some(nb) = nb {
+                        let nl = t.get(3).and_then(|s| s.parse::<usize>().ok()).unwrap_or(0);
+                        for _ in 0..nl {
+                            next(&mut r, &mut line, &mut off, &mut lineno)?;
+                        }
+                        r.seek_relative(nb as i64).with_context(|| format!("{source}: seek failed"))?;
+                        off += nb;
+                    }
+                    loop {
+                        if !next(&mut r, &mut line, &mut off, &mut lineno)? {
+                            bail!("{source}: line {start_line}: dataset #{no} ({head}) is not closed by a '    -1' line");
+                        }
+                        if trim(&line) == b"-1" {
+                            break;
+                        }
+                    }
+                    continue;
+                }
+            };
+            let mut recs: Vec<(usize, Vec<u8>)> = Vec::with_capacity(11);
+            for k in 0..11 {
+                if !next(&mut r, &mut line, &mut off, &mut lineno)? {
+                    bail!("{}: the file ends inside the dataset header", here(&format!("record {}", k + 1), lineno));
+                }
+                recs.push((lineno, line.clone()));
+            }
+            let (l6, r6) = (recs[5].0, &recs[5].1);
+            let (func, rsp_dir, _) = record6(r6).ok_or_else(|| anyhow!("{}: cannot read function type and directions", here("record 6", l6)))?;
+            let node = super::uff::field(r6, 41, 10).and_then(super::uff::parse_int).or_else(|| tokens(r6).get(5).and_then(|s| s.parse().ok()));
+            let (l7, r7) = (recs[6].0, &recs[6].1);
+            let (ord, num, spacing, x0, dx) = record7(r7).ok_or_else(|| anyhow!("{}: cannot read data form", here("record 7", l7)))?;
+            let double = match ord {
+                2 | 5 => false,
+                4 | 6 => true,
+                _ if func != 1 => false,
+                _ => bail!("{}: ordinate data type {ord}: a time history must be real (2 = single, 4 = double precision)", here("record 7", l7)),
+            };
+            let complex = matches!(ord, 5 | 6);
+            let elem = if matches!(ord, 4 | 6) { 8 } else { 4 } * if complex { 2 } else { 1 } * if spacing == 0 { 2 } else { 1 };
+            let n = u64::try_from(num).map_err(|_| anyhow!("{}: {num} data points", here("record 7", l7)))?;
+            let data_off = off;
+            let data_line = lineno + 1;
+            // skip the data
+            if binary.is_some() {
+                r.seek_relative((n * elem as u64) as i64).with_context(|| format!("{source}: seek failed"))?;
+                off += n * elem as u64;
+            }
+            loop {
+                if !next(&mut r, &mut line, &mut off, &mut lineno)? {
+                    bail!("{}: the dataset is not closed by a '    -1' line before the end of the file", here("record 12", lineno));
+                }
+                if trim(&line) == b"-1" {
+                    break;
+                }
+                if binary.is_some() && !trim(&line).is_empty() {
+                    bail!("{}: no closing '    -1' after the {} bytes of binary data record 7 declares", here("record 12", lineno), n * elem as u64);
+                }
+            }
+            if func == 1 && complex {
+                bail!("{}: ordinate data type {ord}: a time history must be real (2 = single, 4 = double precision)", here("record 7", l7));
+            }
+            if func != 1 {
+                skipped.push(format!("dataset #{no}: function type {func}"));
+                continue;
+            }
+            if spacing != 1 {
+                bail!("{}: uneven abscissa: a time history needs evenly spaced samples", here("record 7", l7));
+            }
+            if n == 0 {
+                bail!("{}: no data points", here("record 7", l7));
+            }
+            if !(dx > 0.0 && dx.is_finite()) {
+                bail!("{}: abscissa increment {dx} s must be positive", here("record 7", l7));
+            }
+            let (l8, r8) = (recs[7].0, &recs[7].1);
+            let (spec, units) = data_characteristics(r8);
+            if let Some(t) = spec.filter(|t| ![0, 1, 17].contains(t)) {
+                bail!("{}: the abscissa is {} (specific data type {t}), not time", here("record 8", l8), spec_type_name(t));
+            }
+            let u = units.trim().to_ascii_lowercase();
+            if !(u.is_empty() || u == "none" || u == "s" || u.starts_with("sec")) {
+                bail!("{}: abscissa units {units:?} are not seconds", here("record 8", l8));
+            }
+            let _ = x0;
+            let name = String::from_utf8_lossy(trim(&recs[0].1)).to_string();
+            let ch = Channel { axis: 9, sign: if rsp_dir < 0 { -1.0 } else { 1.0 }, no, line: start_line, n, dt: dx, double, binary, data_off, data_line };
+            let axis = match map {
+                Some(m) => m.pairs.iter().find(|(_, v)| *v == name || node.is_some_and(|nd| v.parse::<i64>() == Ok(nd))).map(|p| p.0),
+                None => match rsp_dir.abs() {
+                    d @ 1..=3 => Some((d - 1) as usize),
+                    _ => None,
+                },
+            };
+            match axis {
+                Some(a) => {
+                    let mut ch = ch;
+                    ch.axis = a;
+                    if map.is_some() {
+                        ch.sign = 1.0;
+                    }
+                    found.push((ch, name, String::new()));
+                }
+                None => skipped.push(format!("dataset #{no} ({name:?}): response direction {rsp_dir}")),
+            }
+        }
+        if found.is_empty() {
+            bail!(
+                "{source}: no time history (dataset 58, function type 1) for fx, fy or fz{}{}",
+                if skipped.is_empty() { String::new() } else { format!("; skipped: {}", skipped.join(", ")) },
+                if map.is_none() { " (give --channels fx=NAME,... if the response directions do not say the axis)" } else { "" }
+            );
+        }
+        found.sort_by_key(|c| c.0.axis);
+        for w in found.windows(2) {
+            if w[0].0.axis == w[1].0.axis {
+                bail!(
+                    "{source}: datasets #{} and #{} are both axis {}; pick one with --channels",
+                    w[0].0.no,
+                    w[1].0.no,
+                    axis_name(w[0].0.axis)
+                );
+            }
+        }
+        let c0 = found[0].0.clone();
+        for (c, _, _) in &found[1..] {
+            if c.n != c0.n || ((c.dt - c0.dt) / c0.dt).abs() > 1e-6 {
+                bail!(
+                    "{source}: dataset #{} (f{}) has {} points every {} s, dataset #{} (f{}) {} points every {} s: channels must match",
+                    c0.no,
+                    axis_name(c0.axis),
+                    c0.n,
+                    c0.dt,
+                    c.no,
+                    axis_name(c.axis),
+                    c.n,
+                    c.dt
+                );
+            }
+        }
+        let chans: Vec<Channel> = found.into_iter().map(|c| c.0).collect();
+        let mut readers = Vec::new();
+        for c in &chans {
+            let mut f = File::open(path).with_context(|| format!("{source}: cannot read"))?;
+            f.seek(SeekFrom::Start(c.data_off)).with_context(|| format!("{source}: seek failed"))?;
+            readers.push(BufReader::with_capacity(1 << 18, f));
+        }
+        let n = chans.len();
+        Ok(UffReader {
+            source,
+            axes: chans.iter().map(|c| c.axis).collect(),
+            lines: chans.iter().map(|c| c.data_line).collect(),
+            chans,
+            readers,
+            pending: vec![VecDeque::new(); n],
+            done: vec![0; n],
+            text: String::new(),
+            raw: Vec::new(),
+            nums: Vec::new(),
+        })
+    }
+
+    /// Read up to `want` values of channel `i` into `out`.
+    fn fill(&mut self, i: usize, want: usize, out: &mut Vec<f64>) -> Result<()> {
+        let c = &self.chans[i];
+        let at = |l: usize, what: &str| format!("{}: line {l}: dataset #{} (58, starting line {}), record 12, {what}", self.source, c.no, c.line);
+        match c.binary {
+            Some(big) => {
+                let elem = if c.double { 8 } else { 4 };
+                self.raw.resize(want * elem, 0);
+                self.readers[i].read_exact(&mut self.raw).with_context(|| at(c.data_line, "binary data ends early"))?;
+                for (k, b) in self.raw.chunks_exact(elem).enumerate() {
+                    let v = match (c.double, big) {
+                        (true, false) => f64::from_le_bytes(b.try_into().unwrap_or([0; 8])),
+                        (true, true) => f64::from_be_bytes(b.try_into().unwrap_or([0; 8])),
+                        (false, false) => f64::from(f32::from_le_bytes(b.try_into().unwrap_or([0; 4]))),
+                        (false, true) => f64::from(f32::from_be_bytes(b.try_into().unwrap_or([0; 4]))),
+                    };
+                    if !v.is_finite() {
+                        bail!("{}", at(c.data_line, &format!("value {} is {v} (values must be finite)", self.done[i] + k as u64 + 1)));
+                    }
+                    out.push(c.sign * v);
+                }
+            }
+            None => {
+                let widths: &[usize] = if c.double { &[20] } else { &[13] };
+                while self.pending[i].len() < want {
+                    self.text.clear();
+                    let n = self.readers[i].read_line(&mut self.text).with_context(|| at(self.lines[i], "read failed (not text?)"))?;
+                    if n == 0 || trim(self.text.as_bytes()) == b"-1" {
+                        bail!("{}", at(self.lines[i], &format!("{} values, but record 7 declares {}", self.done[i] + self.pending[i].len() as u64, c.n)));
+                    }
+                    self.nums.clear();
+                    read_numbers(self.text.trim_end().as_bytes(), widths, &mut self.nums)
+                        .map_err(|tok| anyhow!("{}", at(self.lines[i], &format!("cannot read {tok:?} as a number"))))?;
+                    if let Some(v) = self.nums.iter().find(|v| !v.is_finite()) {
+                        bail!("{}", at(self.lines[i], &format!("value {v} (values must be finite)")));
+                    }
+                    self.pending[i].extend(self.nums.iter().map(|v| c.sign * v));
+                    self.lines[i] += 1;
+                }
+                out.extend(self.pending[i].drain(..want));
+            }
+        }
+        self.done[i] += want as u64;
+        Ok(())
+    }
+}
+
+impl SignalReader for UffReader {
+    fn axes(&self) -> &[usize] {
+        &self.axes
+    }
+
+    fn has_time(&self) -> bool {
+        false
+    }
+
+    fn declared_fs_hz(&self) -> Option<f64> {
+        Some(1.0 / self.chans[0].dt)
+    }
+
+    fn len_hint(&self) -> Option<u64> {
+        Some(self.chans[0].n)
+    }
+
+    fn read_block(&mut self, blk: &mut Block, max: usize) -> Result<usize> {
+        blk.clear();
+        blk.channels.resize(self.chans.len(), Vec::new());
+        let left = (self.chans[0].n - self.done[0]).min(max as u64) as usize;
+        for i in 0..self.chans.len() {
+            let mut v = std::mem::take(&mut blk.channels[i]);
+            self.fill(i, left, &mut v)?;
+            blk.channels[i] = v;
+        }
+        Ok(left)
+    }
+}
+
+/// A writer of UFF 58 (ASCII, double precision, 4E20.12 per line) or 58b
+/// (binary little-endian doubles) time histories: one dataset per axis,
+/// abscissa from 0 s every 1/fs s.
+pub struct UffWriter<'w> {
+    w: &'w mut dyn Write,
+    axes: Vec<usize>,
+    spill: Vec<std::io::BufWriter<File>>,
+    n: u64,
+    dt: f64,
+    binary: bool,
+}
+
+impl<'w> UffWriter<'w> {
+    /// A writer for `axes` at `fs_hz` into `w`.
+    pub fn new(w: &'w mut dyn Write, axes: &[usize], fs_hz: f64, binary: bool) -> Result<Self> {
+        let spill = axes
+            .iter()
+            .map(|_| tempfile::tempfile().map(std::io::BufWriter::new).context("cannot create a temporary spill file"))
+            .collect::<Result<_>>()?;
+        Ok(UffWriter { w, axes: axes.to_vec(), spill, n: 0, dt: 1.0 / fs_hz, binary })
+    }
+}
+
+impl SignalWriter for UffWriter<'_> {
+    fn write_block(&mut self, _t_s: Option<&[f64]>, channels: &[&[f64]]) -> Result<()> {
+        for (s, c) in self.spill.iter_mut().zip(channels) {
+            for v in *c {
+                s.write_all(&v.to_le_bytes())?;
+            }
+        }
+        self.n += channels.first().map_or(0, |c| c.len()) as u64;
+        Ok(())
+    }
+
+    fn finish(&mut self) -> Result<()> {
+        let n = usize::try_from(self.n)?;
+        for (k, (axis, s)) in self.axes.iter().zip(std::mem::take(&mut self.spill)).enumerate() {
+            let id1 = format!("dynocomp compensated f{}", axis_name(*axis));
+            let head = dataset_header(
+                (1, k as i64 + 1, *axis as i64 + 1, &id1),
+                (4, n, 0.0, self.dt),
+                [(17, "Time", "s"), (9, "Force", "N"), (0, "NONE", "NONE"), (0, "NONE", "NONE")],
+                self.binary.then_some(n * 8),
+            );
+            self.w.write_all(head.as_bytes())?;
+            let mut f = s.into_inner().map_err(|e| anyhow!("spill file: {}", e.error()))?;
+            f.seek(SeekFrom::Start(0))?;
+            let mut r = BufReader::with_capacity(1 << 18, f);
+            if self.binary {
+                std::io::copy(&mut r, &mut self.w)?;
+            } else {
+                let mut b = [0u8; 32];
+                let mut line = String::new();
+                let mut k = 0;
+                while r.read_exact(&mut b[..8]).is_ok() {
+                    let v = f64::from_le_bytes(b[..8].try_into()?);
+                    line.push_str(&fmt_e(v, 12, 20));
+                    k += 1;
+                    if k % 4 == 0 {
+                        line.push('\n');
+                        self.w.write_all(line.as_bytes())?;
+                        line.clear();
+                    }
+                }
+                if !line.is_empty() {
+                    line.push('\n');
+                    self.w.write_all(line.as_bytes())?;
+                }
+            }
+            writeln!(self.w, "{:>6}", -1)?;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,149 @@
+//! Issue #14: force records as UFF 58/58b time histories (function type 1):
+//! written and read back, through `compensate`, and refused with a message
+//! naming the file, dataset and record when they are wrong.
+
+use dynocomp::compensate::compensate_record;
+use dynocomp::io::signal::{read_all, SignalWriter};
+use dynocomp::io::signal_csv::read_signal_csv;
+use dynocomp::io::signal_file::{open_signal, ChannelMap, SignalFormat};
+use dynocomp::io::uff_signal::UffWriter;
+use std::path::{Path, PathBuf};
+
+mod cli_common;
+mod common;
+use cli_common::{dynocomp, example, tmp};
+
+/// Write `chans` (axes 0..n) as a UFF time-history file at `fs`.
+fn write_uff(path: &Path, chans: &[Vec<f64>], fs: f64, binary: bool) {
+    let mut bytes = Vec::new();
+    {
+        let axes: Vec<usize> = (0..chans.len()).collect();
+        let mut w = UffWriter::new(&mut bytes, &axes, fs, binary).unwrap();
+        let sl: Vec<&[f64]> = chans.iter().map(Vec::as_slice).collect();
+        w.write_block(None, &sl).unwrap();
+        w.finish().unwrap();
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+fn signals(n: usize) -> Vec<Vec<f64>> {
+    (0..3).map(|a| (0..n).map(|k| (((k * (a + 1)) as f64 * 0.01).sin() * 100.0) as f32 as f64).collect()).collect()
+}
+
+/// Binary 58b reads back bit for bit, ASCII 58 to the f32 value it came
+/// from; the sample rate comes from the abscissa increment. A negative
+/// response direction flips the sign (negative control: the values differ).
+#[test]
+fn time_histories_round_trip() {
+    let x = signals(10_007);
+    for binary in [true, false] {
+        let p = tmp("uffrt", if binary { "b.uff" } else { "a.uff" });
+        write_uff(&p, &x, 51200.0, binary);
+        let (mut r, fmt) = open_signal(&p, None).unwrap();
+        assert_eq!(fmt, if binary { SignalFormat::Uff58b } else { SignalFormat::Uff });
+        assert_eq!(r.axes(), &[0, 1, 2]);
+        assert_eq!(r.len_hint(), Some(10_007));
+        assert!((r.declared_fs_hz().unwrap() - 51200.0).abs() < 1e-6);
+        let (_, got) = read_all(&mut *r).unwrap();
+        for (g, w) in got.iter().zip(&x) {
+            assert_eq!(g.len(), w.len());
+            for (a, b) in g.iter().zip(w) {
+                if binary {
+                    assert_eq!(a.to_bits(), b.to_bits());
+                } else {
+                    assert_eq!((*a as f32).to_bits(), (*b as f32).to_bits());
+                }
+            }
+        }
+    }
+    // Direction -2 on the y dataset: read negated.
+    let p = tmp("uffrt", "neg.uff");
+    write_uff(&p, &x, 51200.0, false);
+    let text = std::fs::read_to_string(&p).unwrap();
+    let text = text.replace("       DYN         1   2     HAMMER         1   2", "       DYN         1  -2     HAMMER         1  -2");
+    std::fs::write(&p, text).unwrap();
+    let (mut r, _) = open_signal(&p, None).unwrap();
+    let (_, got) = read_all(&mut *r).unwrap();
+    assert!(got[1].iter().zip(&x[1]).all(|(a, b)| (*a as f32) == -(*b as f32)));
+    assert!(got[0].iter().zip(&x[0]).all(|(a, b)| (*a as f32) == (*b as f32)));
+}
+
+/// `compensate` on the example as UFF 58b: the output is UFF 58b (format
+/// follows the input) with the same values as the CSV path; `--output-format
+/// csv` switches; a record at 48 kHz is refused naming the file.
+#[test]
+fn compensate_reads_and_writes_uff() {
+    let img_path = tmp("uffcli", "img.dcimg");
+    let mut img = common::image(1, 51200, 0);
+    img.latency_samples = 2;
+    std::fs::write(&img_path, common::bytes(&img)).unwrap();
+    let rec = read_signal_csv(Path::new(&example("measured.csv"))).unwrap();
+    let chans: Vec<Vec<f64>> = rec.channels.iter().map(|c| c.1.clone()).collect();
+    let inp = tmp("uffcli", "measured.uff");
+    write_uff(&inp, &chans, 51200.0, true);
+    let out = tmp("uffcli", "out.uff");
+    let run = |inp: &PathBuf, out: &PathBuf, extra: &[&str]| {
+        let mut args = vec!["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", inp.to_str().unwrap(), "--output", out.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        dynocomp(&args)
+    };
+    let (ok, _, err) = run(&inp, &out, &[]);
+    assert!(ok, "{err}");
+    let (mut r, fmt) = open_signal(&out, None).unwrap();
+    assert_eq!(fmt, SignalFormat::Uff58b);
+    let (_, got) = read_all(&mut *r).unwrap();
+    let want = compensate_record(&img, &rec, false, "x").unwrap();
+    for (a, g) in got.iter().enumerate() {
+        let w = want.channel(a).unwrap();
+        assert!(g.len() == w.len() && g.iter().zip(w).all(|(x, y)| x.to_bits() == y.to_bits()), "axis {a}");
+    }
+    let out_csv = tmp("uffcli", "out.csv");
+    let (ok, _, err) = run(&inp, &out_csv, &["--output-format", "csv"]);
+    assert!(ok, "{err}");
+    let back = read_signal_csv(&out_csv).unwrap();
+    assert_eq!(back.channel(2).unwrap(), want.channel(2).unwrap());
+    // 48 kHz record against a 51.2 kHz image
+    let slow = tmp("uffcli", "slow.uff");
+    write_uff(&slow, &chans, 48000.0, false);
+    let out2 = tmp("uffcli", "out2.uff");
+    let (ok, _, err) = run(&slow, &out2, &[]);
+    assert!(!ok);
+    assert!(err.contains("slow.uff") && err.contains("sampling interval") && err.contains("48000"), "{err}");
+    assert!(!out2.exists());
+}
+
+/// Broken files: truncated data, a non-number, and a file without any time
+/// history name the file, dataset and record; `--channels` maps by ID line.
+#[test]
+fn bad_uff_records_are_refused_clearly() {
+    let x = signals(100);
+    let p = tmp("uffbad", "a.uff");
+    write_uff(&p, &x[..1], 51200.0, false);
+    let good = std::fs::read_to_string(&p).unwrap();
+    // truncated: drop 5 data lines of the dataset
+    let lines: Vec<&str> = good.lines().collect();
+    let cut: String = lines[..lines.len() - 6].iter().chain(&lines[lines.len() - 1..]).map(|l| format!("{l}\n")).collect();
+    std::fs::write(&p, cut).unwrap();
+    let e = read(&p, None).unwrap_err();
+    assert!(e.contains("a.uff") && e.contains("dataset #1") && e.contains("record 12"), "{e}");
+    // not a number
+    let bad = good.replacen("e+01", "e+0x", 1);
+    std::fs::write(&p, bad).unwrap();
+    let e = read(&p, None).unwrap_err();
+    assert!(e.contains("a.uff") && e.contains("record 12") && e.contains("cannot read"), "{e}");
+    // an FRF file has no time history
+    let e = read(Path::new(&example("frf.uff")), None).unwrap_err();
+    assert!(e.contains("no time history"), "{e}");
+    // by name: the writer's ID line
+    std::fs::write(&p, &good).unwrap();
+    let m = ChannelMap::parse("fz=dynocomp compensated fx").unwrap();
+    let (mut r, _) = open_signal(&p, Some(&m)).unwrap();
+    assert_eq!(r.axes(), &[2]);
+    assert_eq!(read_all(&mut *r).unwrap().1[0].len(), 100);
+    assert!(read(&p, Some(&ChannelMap::parse("fz=other").unwrap())).is_err());
+}
+
+fn read(p: &Path, m: Option<&ChannelMap>) -> Result<usize, String> {
+    let (mut r, _) = open_signal(p, m).map_err(|e| format!("{e:#}"))?;
+    read_all(&mut *r).map(|(_, c)| c[0].len()).map_err(|e| format!("{e:#}"))
+}
