@@ -614,6 +614,13 @@ pub fn choose_realization_within(
         }
     }
     let cost = |f: &AxisFilter| CostModel::CORTEX_M4.axis_cost(AxisShape::of(f)).high;
+    // Well-scaled realizations first: when any verified one keeps every term
+    // of the kernel's sum within MAX_CHOICE_TERM_GROWTH of the output, the
+    // choice is made among those only (the most accurate candidate can be a
+    // badly scaled one, e.g. a fast pair split from a long delay chain).
+    if verified.iter().any(|c| c.2.term_growth <= MAX_CHOICE_TERM_GROWTH) {
+        verified.retain(|c| c.2.term_growth <= MAX_CHOICE_TERM_GROWTH);
+    }
     let Some(best) = verified.iter().min_by(|a, b| a.2.score().total_cmp(&b.2.score())) else {
         return Err(last_err.unwrap_or_else(|| anyhow::anyhow!("no realization")).context("quantization"));
     };
