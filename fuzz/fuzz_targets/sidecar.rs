@@ -26,10 +26,17 @@ fuzz_target!(|data: &[u8]| {
             let back = parse_sidecar(&again, "again.json", &image, image_path).expect("a written sidecar reads back");
             assert_eq!(back, s, "sidecar write → read changed it");
             for axis in 0..dynocomp_core::AXES {
+                // The continuous model's check, then the discrete model the
+                // smoother runs on (stored, validated; or the FOH of the
+                // continuous one for an older sidecar) and the smoother.
                 match s.model(axis, SOURCE) {
-                    Ok(model) if model.terms.len() <= 16 => {
-                        let _ = Smoother::new(&model, f64::from(image.fs_hz), 1.0, 0.05);
-                    }
+                    Ok(model) if model.terms.len() <= 16 => match s.discrete_model(axis, SOURCE) {
+                        Ok(dm) if dm.terms.len() <= 16 && dm.fir.len() <= 16 && dm.advance <= 16 => {
+                            let _ = Smoother::new(&dm, 1.0, 0.05);
+                        }
+                        Ok(_) => {}
+                        Err(e) => assert_names_place_or(&format!("{e:#}"), SOURCE, &["axis "]),
+                    },
                     Ok(_) => {}
                     Err(e) => assert_names_place_or(&format!("{e:#}"), SOURCE, &["axis "]),
                 }
