@@ -260,7 +260,7 @@ impl Objective<'_> {
         };
         let fs = self.opts.fs_hz;
         let ss = &d.compensator;
-        let ng = noise_gain(|f| ss.freq_response(f, fs), fs);
+        let ng = ss.white_noise_gain().unwrap_or(f64::INFINITY);
         let (mut dist, mut amp) = (0.0, 0.0);
         for (f, g) in &self.grid {
             let h = ss.freq_response(*f, fs);

@@ -513,15 +513,31 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     if args.parallel {
         return crate::parallel::run(args, &frf, &r, &opts, &bands, latency, sha);
     }
+    // The axes are independent: design them on parallel threads (the box
+    // has three, the host at least two cores), report in axis order.
+    eprintln!("designing {} axes ({} lines each)…", frf.axes.len(), frf.freq_hz.len());
+    let results: Vec<(Result<AxisDesign>, f64)> = std::thread::scope(|scope| {
+        let handles: Vec<_> = frf
+            .axes
+            .iter()
+            .map(|a| {
+                let opts = &opts;
+                let freq = &frf.freq_hz;
+                let rv = r[a.axis].expect("R set for every FRF axis");
+                scope.spawn(move || {
+                    let ta = Instant::now();
+                    let d = design_axis(freq, a, rv, opts);
+                    (d, ta.elapsed().as_secs_f64())
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p))).collect()
+    });
     let mut designs = Vec::new();
     let mut times = Vec::new();
-    for a in &frf.axes {
-        let ta = Instant::now();
-        eprint!("designing axis {} ({} lines)… ", axis_name(a.axis), frf.freq_hz.len());
-        let rv = r[a.axis].expect("R set for every FRF axis");
-        let d = design_axis(&frf.freq_hz, a, rv, &opts).with_context(|| format!("{}", args.input.frf.display()))?;
-        let dt = ta.elapsed().as_secs_f64();
-        eprintln!("order {}, q {:.3e}, {:.0} ms", d.model.order(), d.kalman.q, dt * 1e3);
+    for (a, (d, dt)) in frf.axes.iter().zip(results) {
+        let d = d.with_context(|| format!("{}", args.input.frf.display()))?;
+        eprintln!("  axis {}: order {}, q {:.3e}, {:.0} ms", axis_name(a.axis), d.model.order(), d.kalman.q, dt * 1e3);
         times.push(dt);
         designs.push(d);
     }

@@ -78,6 +78,30 @@ impl StateSpace {
             .collect()
     }
 
+    /// White-noise gain sqrt(Σ_k h_k²) = sqrt(d² + cᵀ W c), with the
+    /// controllability Gramian W = A W Aᵀ + b bᵀ solved by Smith doubling
+    /// (W ← W + A_k W A_kᵀ, A_k ← A_k²): exact, where a frequency grid
+    /// undersamples the few-Hz-wide peaks of poles near z = 1. `None` when A
+    /// is not stable or the doubling does not converge in 64 steps.
+    pub fn white_noise_gain(&self) -> Option<f64> {
+        let mut ak = self.a.clone();
+        let mut w = &self.b * self.b.transpose();
+        for _ in 0..64 {
+            let step = &ak * &w * ak.transpose();
+            let done = step.norm() <= 1e-15 * w.norm();
+            w += step;
+            if !w.iter().all(|v| v.is_finite()) {
+                return None;
+            }
+            if done {
+                let h2 = self.d * self.d + self.c.dot(&(&w * &self.c));
+                return (h2 >= 0.0).then(|| h2.sqrt());
+            }
+            ak = &ak * &ak;
+        }
+        None
+    }
+
     /// Largest eigenvalue modulus of A.
     pub fn spectral_radius(&self) -> f64 {
         self.a.complex_eigenvalues().iter().map(|z| z.norm()).fold(0.0, f64::max)

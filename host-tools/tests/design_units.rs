@@ -91,3 +91,23 @@ fn realization_reproduces_the_dense_transfer_function() {
         assert!(real.fir.len() <= dynocomp_core::kernel::MAX_FIR);
     }
 }
+
+#[test]
+fn white_noise_gain_is_exact_where_a_frequency_grid_is_not() {
+    // H(z) = d + b·c/(z − a): Σ h_k² = d² + (b c)²/(1 − a²) (geometric series).
+    for (a, b, c, d) in [(0.5f64, 1.0f64, 2.0f64, 0.3f64), (0.9996, 0.02, 1.0, 1.0), (-0.7, 1.0, -1.5, 0.0)] {
+        let ss = StateSpace { a: DMatrix::from_element(1, 1, a), b: DVector::from_element(1, b), c: DVector::from_element(1, c), d };
+        let truth = (d * d + (b * c).powi(2) / (1.0 - a * a)).sqrt();
+        let got = ss.white_noise_gain().unwrap();
+        assert!((got - truth).abs() < 1e-9 * truth, "a={a}: {got} vs {truth}");
+        // Negative control: the 512-point midpoint rule misses the narrow
+        // peak of the pole at 0.9996 by more than 1 %.
+        let grid = dynocomp::design::noise_gain(|f| ss.freq_response(f, 51_200.0), 51_200.0);
+        if a > 0.999 {
+            assert!((grid - truth).abs() > 1e-2 * truth, "grid {grid} vs {truth}");
+        }
+    }
+    // An unstable A has no finite gain.
+    let ss = StateSpace { a: DMatrix::from_element(1, 1, 1.01), b: DVector::from_element(1, 1.0), c: DVector::from_element(1, 1.0), d: 0.0 };
+    assert!(ss.white_noise_gain().is_none());
+}
