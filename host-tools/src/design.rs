@@ -194,7 +194,11 @@ pub fn coherent_band(freq_hz: &[f64], coherence: Option<&[f64]>, threshold: f64)
     (freq_hz[best.0], freq_hz[best.1 - 1])
 }
 
-/// White-noise gain of H: sqrt(Σ h_k²) = RMS of |H| over 0..fs/2 (Parseval).
+/// White-noise gain of H estimated from its response: RMS of |H| over
+/// 0..fs/2 (Parseval) on a 512-point midpoint grid, for responses that are
+/// not one state space (`compare`'s parallel elaboration). It undersamples
+/// peaks narrower than fs/1024; a state space has the exact
+/// [`StateSpace::white_noise_gain`].
 pub fn noise_gain(response: impl Fn(f64) -> Complex64, fs_hz: f64) -> f64 {
     let n = 512;
     let s: f64 = (0..n)

@@ -72,13 +72,6 @@ impl RateCase {
         self.spindle_rpm / 60.0 * self.teeth as f64
     }
 
-    /// Impact test band (Hz): `frf_max_hz`, whatever the box's rate (an
-    /// impact analyzer has its own; the design compensates up to 0.45 fs and
-    /// uses lines above it for the fit).
-    pub fn frf_band_hz(&self, _fs_hz: f64) -> f64 {
-        self.frf_max_hz
-    }
-
     /// The simulation parameters of this case at `fs_hz` (default chain: the
     /// ideal brick wall at 0.45 fs).
     pub fn sim_params(&self, fs_hz: f64) -> SimParams {
@@ -87,7 +80,10 @@ impl RateCase {
         p.milling.teeth = self.teeth;
         p.milling.chatter = self.chatter_hz.map(|f| Chatter { freq_hz: f, amplitude_mm: 0.01, onset_s: 0.2, growth_s: 0.02 });
         p.impact.df_hz = self.frf_df_hz;
-        p.impact.n_lines = (self.frf_band_hz(fs_hz) / self.frf_df_hz).floor() as usize + 1;
+        // The impact test covers frf_max_hz whatever the box's rate (an impact
+        // analyzer has its own; the design compensates up to 0.45 fs and fits
+        // the lines above).
+        p.impact.n_lines = (self.frf_max_hz / self.frf_df_hz).floor() as usize + 1;
         // A metal tip: the hammer's spectrum is flat past the FRF band.
         p.impact.hammer_cutoff_hz = 5000f64.max(1.25 * self.frf_max_hz);
         let (DynoSpec::Random(r) | DynoSpec::ClosePair { ranges: r, .. }) = &self.dyno;
