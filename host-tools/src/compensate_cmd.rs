@@ -30,21 +30,23 @@ pub struct CompensateArgs {
     /// Coefficient image (.dcimg).
     #[arg(long)]
     pub coeffs: PathBuf,
-    /// Input force record: CSV (columns [t_s,] fx, fy, fz in N; any subset)
-    /// or UFF 58/58b time histories (function type 1), by extension or
-    /// content.
+    /// Input force record: CSV (columns [t_s,] fx, fy, fz in N; any subset),
+    /// UFF 58/58b time histories (function type 1) or NI TDMS, by extension
+    /// or content.
     #[arg(long)]
     pub input: PathBuf,
     /// Output force record (same channels), written atomically; its format
     /// follows the input unless --output-format says otherwise.
     #[arg(long)]
     pub output: PathBuf,
-    /// Output format: csv, uff (ASCII dataset 58) or uff58b (binary).
+    /// Output format: csv, uff (ASCII dataset 58), uff58b (binary) or tdms.
     #[arg(long, value_enum)]
     pub output_format: Option<SignalFormat>,
     /// Channel-to-axis map for UFF records whose response directions do not
     /// say the axis, e.g. `fx=1,fy=2,fz=3` (UFF: response node number) or by
-    /// name (`fx=Force X`, matched against the record's ID line).
+    /// name (`fx=Force X`, matched against the record's ID line); for TDMS
+    /// records whose channel names do not say it, by channel name or
+    /// `GROUP/NAME` (case-insensitive).
     #[arg(long)]
     pub channels: Option<String>,
     /// Keep the box's timing: do not shift the output back by the image's

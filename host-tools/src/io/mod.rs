@@ -8,6 +8,7 @@ pub mod image_file;
 pub mod frf_csv;
 pub mod uff;
 pub mod uff_signal;
+pub mod tdms;
 
 /// Read an FRF file: `.csv` as FRF CSV, `.uff` / `.unv` / `.uf` as UFF 58/58b,
 /// any other extension by content (a first non-blank line `-1` means UFF).

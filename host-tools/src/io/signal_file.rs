@@ -7,6 +7,7 @@ use std::path::Path;
 
 use crate::io::signal::{SignalReader, SignalWriter};
 use crate::io::signal_csv::{CsvReader, CsvWriter};
+use crate::io::tdms::{looks_like_tdms, TdmsReader, TdmsWriter};
 use crate::io::uff_signal::{UffReader, UffWriter};
 
 /// File formats of force records.
@@ -18,6 +19,8 @@ pub enum SignalFormat {
     Uff,
     /// UFF dataset 58b time histories, binary (little-endian f64).
     Uff58b,
+    /// NI TDMS (interleaved little-endian f64 channels Fx, Fy, Fz).
+    Tdms,
 }
 
 /// Channel-to-axis map given with `--channels`: `fx=NAME,fy=NAME,...`.
@@ -57,19 +60,30 @@ impl ChannelMap {
 /// otherwise by content).
 pub fn open_signal(path: &Path, map: Option<&ChannelMap>) -> Result<(Box<dyn SignalReader>, SignalFormat)> {
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let sniff = || -> Result<Vec<u8>> {
+        let mut head = vec![0u8; 4096];
+        let n = std::fs::File::open(path)
+            .and_then(|mut f| std::io::Read::read(&mut f, &mut head))
+            .with_context(|| format!("{}: cannot read", path.display()))?;
+        head.truncate(n);
+        Ok(head)
+    };
+    // A pipe or device (e.g. /dev/stdin) cannot be sniffed without
+    // consuming what the reader needs: read as CSV.
+    let sniffable = || std::fs::metadata(path).is_ok_and(|m| m.is_file());
+    let is_tdms = match ext.as_deref() {
+        Some("tdms") => true,
+        Some("csv" | "uff" | "unv" | "uf") => false,
+        _ => sniffable() && looks_like_tdms(&sniff()?),
+    };
+    if is_tdms {
+        return Ok((Box::new(TdmsReader::open(path, map)?), SignalFormat::Tdms));
+    }
     let is_uff = match ext.as_deref() {
         Some("csv") => false,
         Some("uff" | "unv" | "uf") => true,
-        // A pipe or device (e.g. /dev/stdin) cannot be sniffed without
-        // consuming what the reader needs: read as CSV.
-        _ if !std::fs::metadata(path).is_ok_and(|m| m.is_file()) => false,
-        _ => {
-            let mut head = vec![0u8; 4096];
-            let n = std::fs::File::open(path)
-                .and_then(|mut f| std::io::Read::read(&mut f, &mut head))
-                .with_context(|| format!("{}: cannot read", path.display()))?;
-            crate::io::uff::looks_like_uff(&head[..n])
-        }
+        _ if !sniffable() => false,
+        _ => crate::io::uff::looks_like_uff(&sniff()?),
     };
     if is_uff {
         let r = UffReader::open(path, map)?;
@@ -77,7 +91,7 @@ pub fn open_signal(path: &Path, map: Option<&ChannelMap>) -> Result<(Box<dyn Sig
         return Ok((Box::new(r), fmt));
     }
     if map.is_some() {
-        bail!("{}: --channels applies to UFF records; a CSV names its columns fx, fy, fz", path.display());
+        bail!("{}: --channels applies to UFF and TDMS records; a CSV names its columns fx, fy, fz", path.display());
     }
     Ok((Box::new(CsvReader::open(path)?), SignalFormat::Csv))
 }
@@ -98,5 +112,6 @@ pub fn writer_for<'w>(
         SignalFormat::Csv => Ok(Box::new(CsvWriter::new(w, axes, has_time)?)),
         SignalFormat::Uff => Ok(Box::new(UffWriter::new(w, axes, fs_hz, false)?)),
         SignalFormat::Uff58b => Ok(Box::new(UffWriter::new(w, axes, fs_hz, true)?)),
+        SignalFormat::Tdms => Ok(Box::new(TdmsWriter::new(w, axes, fs_hz, 0.0)?)),
     }
 }
