@@ -71,8 +71,8 @@ pub struct CompensateArgs {
     /// Number of teeth of the cutter (with --spindle-rpm).
     #[arg(long, requires = "spindle_rpm")]
     pub teeth: Option<u32>,
-    /// Band limit of the report's NRMSE (Hz); default: the upper edge of
-    /// each axis's flat band in the image.
+    /// Band limit of the report's NRMSE (Hz); default: the project's
+    /// scoring band, min(4 kHz, 0.4 fs).
     #[arg(long)]
     pub band_hz: Option<f64>,
 }
@@ -156,12 +156,9 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
             axes.len(),
             n_samples as f64 / f64::from(fs),
         );
-        let band = |axis: usize| -> f64 {
-            a.band_hz.unwrap_or_else(|| match &img {
-                AnyImage::Inline(i) => i.axes.get(axis).and_then(Option::as_ref).map_or(f64::from(fs) / 2.0, |x| f64::from(x.summary.flat_hi_hz)),
-                AnyImage::Parallel(_) => f64::from(fs) / 2.0,
-            })
-        };
+        // The project's one scoring band (the same as `examples/score.rs`
+        // and the rates harness), not the image's flat band.
+        let band = |_axis: usize| -> f64 { a.band_hz.unwrap_or_else(|| crate::metrics::scoring_band_hz(f64::from(fs))) };
         let (files, scores) = acc.write(dir, &summary, &band)?;
         for s in scores {
             eprintln!("{s}");

@@ -12,6 +12,13 @@
 
 use rustfft::{num_complex::Complex64, FftPlanner};
 
+/// Upper edge of the scoring band at `fs_hz` (DESIGN.md, README): min(4
+/// kHz, 0.4 fs), the band of every accuracy figure of the project (the
+/// rates harness, `examples/score.rs`, `compensate --report`).
+pub fn scoring_band_hz(fs_hz: f64) -> f64 {
+    4000f64.min(0.4 * fs_hz)
+}
+
 /// Zero-phase brick-wall low-pass at `f_max_hz` via FFT (circular).
 pub fn lowpass(x: &[f64], fs_hz: f64, f_max_hz: f64) -> Vec<f64> {
     let n = x.len();

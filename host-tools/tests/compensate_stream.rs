@@ -183,3 +183,44 @@ fn report_size_does_not_grow_with_the_record() {
     }
     assert!(sizes[1] < 1_000_000 && sizes[1] < 2 * sizes[0], "{sizes:?}");
 }
+
+/// The report's NRMSE against `--truth` is the project's one figure: band
+/// min(4 kHz, 0.4 fs) (4 kHz at 51.2 kHz), as `examples/score.rs` computes
+/// it from the written output and the simulator's true force. Negative
+/// control: the same figures in a wider band (the image's flat band or
+/// fs/2) read differently, so the comparison can tell the bands apart.
+#[test]
+fn report_nrmse_uses_the_scoring_band() {
+    let img_path = tmp("band", "img.dcimg");
+    std::fs::write(&img_path, common::bytes(&image(4))).unwrap();
+    let out = tmp("band", "out.csv");
+    let rep = tmp("band", "report");
+    let (ok, _, err) = dynocomp(&[
+        "compensate",
+        "--coeffs",
+        img_path.to_str().unwrap(),
+        "--input",
+        &example("measured.csv"),
+        "--output",
+        out.to_str().unwrap(),
+        "--report",
+        rep.to_str().unwrap(),
+        "--truth",
+        &example("true_force.csv"),
+    ]);
+    assert!(ok, "{err}");
+    let truth = read_signal_csv(std::path::Path::new(&example("true_force.csv"))).unwrap();
+    let meas = read_signal_csv(std::path::Path::new(&example("measured.csv"))).unwrap();
+    let comp = read_signal_csv(&out).unwrap();
+    let fig = |est: &[f64], t: &[f64], band: f64| format!("{:.3} %", 100.0 * dynocomp::metrics::accuracy(est, t, 51200.0, band).nrmse);
+    for (a, name) in ["x", "y", "z"].iter().enumerate() {
+        let line = err.lines().find(|l| l.starts_with(&format!("f{name}: NRMSE"))).unwrap_or_else(|| panic!("no NRMSE line for f{name}: {err}"));
+        let t = truth.channel(a).unwrap();
+        let (c, m) = (comp.channel(a).unwrap(), meas.channel(a).unwrap());
+        let want = format!("f{name}: NRMSE measured {}, compensated {} (band 4000 Hz;", fig(m, t, 4000.0), fig(c, t, 4000.0));
+        assert!(line.starts_with(&want), "report: {line}\nscore: {want}");
+        assert_ne!(fig(c, t, 4000.0), fig(c, t, 25600.0), "axis {name}: the band makes no difference here");
+    }
+    let html = std::fs::read_to_string(rep.join("index.html")).unwrap();
+    assert!(html.contains("both low-passed at 4000 Hz"), "the page states another band");
+}

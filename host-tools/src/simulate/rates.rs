@@ -25,7 +25,7 @@ pub const RATES_HZ: [f64; 4] = [10_240.0, 25_600.0, 51_200.0, 102_400.0];
 
 /// Upper edge of the scoring band at `fs_hz`: min(4 kHz, 0.4 fs).
 pub fn scoring_band_hz(fs_hz: f64) -> f64 {
-    4000f64.min(0.4 * fs_hz)
+    crate::metrics::scoring_band_hz(fs_hz)
 }
 
 /// How the dynamometer of a case is made.
