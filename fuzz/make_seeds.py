@@ -53,6 +53,46 @@ put("signal_csv", "idle_head.csv", head_lines("data/example/idle.csv", 24))
 put("signal_csv", "raw_columns.csv", "t_s,fx,fz,raw_fx,raw_fz\n0,1.5,2,3,4\n1.953125e-5,-1,0,0,0\n")
 put("signal_csv", "no_time.csv", "fy\n1\n2\n3\n")
 
+# TDMS: the npTDMS-written fixture, and small hand-built files after NI's
+# layout: interleaved f64 in two segments (the second without metadata),
+# contiguous big-endian i16/f32 with two chunks, and a file with incremental
+# metadata (index "same as before", a kN unit added later).
+def tdms_segment(toc, objs, raw, big=False):
+    e = ">" if big else "<"
+    m = b""
+    if objs is not None:
+        m += struct.pack(e + "I", len(objs))
+        for path, index, props in objs:
+            m += struct.pack(e + "I", len(path)) + path.encode()
+            if index is None:
+                m += struct.pack(e + "I", 0xFFFFFFFF)
+            elif index == "same":
+                m += struct.pack(e + "I", 0)
+            else:
+                ty, n = index
+                m += struct.pack(e + "IIIQ", 20, ty, 1, n)
+            m += struct.pack(e + "I", len(props))
+            for k, v in props:
+                m += struct.pack(e + "I", len(k)) + k.encode()
+                if isinstance(v, str):
+                    m += struct.pack(e + "II", 0x20, len(v)) + v.encode()
+                else:
+                    m += struct.pack(e + "Id", 10, v)
+    lead = b"TDSm" + struct.pack("<I", toc) + struct.pack(e + "IQQ", 4713, len(m) + len(raw), len(m))
+    return lead + m + raw
+
+
+put("tdms", "nptdms_two_segments.tdms", read("host-tools/tests/fixtures/tdms/nptdms_two_segments.tdms"))
+wf = [("wf_increment", 1 / 51200), ("unit_string", "N")]
+chans = [("/'g'/'Fx'", (10, 4), wf), ("/'g'/'Fy'", (10, 4), wf), ("/'g'/'Fz'", (10, 4), wf)]
+raw = b"".join(struct.pack("<d", k * 0.5 - 1) for k in range(12))
+put("tdms", "interleaved.tdms", tdms_segment(0x2E, [("/", None, [("name", "seed")]), ("/'g'", None, [])] + chans, raw) + tdms_segment(0x28, None, raw))
+be = [("/'Dyno'/'Force X'", (2, 3), [("wf_increment", 1 / 25600)]), ("/'Dyno'/'Force Z'", (9, 3), [])]
+raw = struct.pack(">hhh", -1, 2, 300) + struct.pack(">fff", 0.5, -1.5, 2.5)
+put("tdms", "contiguous_be.tdms", tdms_segment(0x4E, be, raw + raw, big=True))
+one = [("/'c'/'force_y'", (10, 2), [])]
+put("tdms", "incremental.tdms", tdms_segment(0x0E, one, struct.pack("<dd", 1, 2)) + tdms_segment(0x0A, [("/'c'/'force_y'", "same", [("unit_string", "kN")])], struct.pack("<dd", 3, 4)))
+
 # Image codec: mode byte (bit 0: repair CRC, bit 1: format 2 first) + image.
 for name in sorted(os.listdir(os.path.join(ROOT, "fuzz", "images"))):
     if not name.endswith(".dcimg"):

@@ -81,32 +81,27 @@ fn streaming_is_bit_exact_with_the_whole_record() {
     assert!(!same_bits(&aligned[0], raw.channel(0).unwrap()));
 }
 
+/// `compensate` of the example's measured force with image(4), `--report`
+/// and `--truth` (a file of the example) and `extra` flags: (success,
+/// stderr, output, report folder).
+fn compensate_example_with_report(tag: &str, truth: &str, extra: &[&str]) -> (bool, String, std::path::PathBuf, std::path::PathBuf) {
+    let img_path = tmp(tag, "img.dcimg");
+    std::fs::write(&img_path, common::bytes(&image(4))).unwrap();
+    let (out, rep) = (tmp(tag, "out.csv"), tmp(tag, "report"));
+    let (inp, tr) = (example("measured.csv"), example(truth));
+    let mut args = vec!["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", &inp, "--output", out.to_str().unwrap()];
+    args.extend(["--report", rep.to_str().unwrap(), "--truth", &tr]);
+    args.extend_from_slice(extra);
+    let (ok, _, err) = dynocomp(&args);
+    (ok, err, out, rep)
+}
+
 /// The CLI on the bundled example: output equal (as f64 read back) to the
 /// whole-record path on the same input; the report exists with three plots
 /// per axis and states an NRMSE that is below the measured force's.
 #[test]
 fn cli_streams_the_example_and_reports() {
-    let img_path = tmp("stream", "img.dcimg");
-    std::fs::write(&img_path, common::bytes(&image(4))).unwrap();
-    let out = tmp("stream", "out.csv");
-    let rep = tmp("stream", "report");
-    let (ok, _, err) = dynocomp(&[
-        "compensate",
-        "--coeffs",
-        img_path.to_str().unwrap(),
-        "--input",
-        &example("measured.csv"),
-        "--output",
-        out.to_str().unwrap(),
-        "--report",
-        rep.to_str().unwrap(),
-        "--truth",
-        &example("measured.csv"),
-        "--spindle-rpm",
-        "16500",
-        "--teeth",
-        "4",
-    ]);
+    let (ok, err, out, rep) = compensate_example_with_report("stream", "measured.csv", &["--spindle-rpm", "16500", "--teeth", "4"]);
     assert!(ok, "{err}");
     let input = read_signal_csv(std::path::Path::new(&example("measured.csv"))).unwrap();
     let want = compensate_record(&image(4), &input, false, "x").unwrap();
@@ -191,23 +186,7 @@ fn report_size_does_not_grow_with_the_record() {
 /// fs/2) read differently, so the comparison can tell the bands apart.
 #[test]
 fn report_nrmse_uses_the_scoring_band() {
-    let img_path = tmp("band", "img.dcimg");
-    std::fs::write(&img_path, common::bytes(&image(4))).unwrap();
-    let out = tmp("band", "out.csv");
-    let rep = tmp("band", "report");
-    let (ok, _, err) = dynocomp(&[
-        "compensate",
-        "--coeffs",
-        img_path.to_str().unwrap(),
-        "--input",
-        &example("measured.csv"),
-        "--output",
-        out.to_str().unwrap(),
-        "--report",
-        rep.to_str().unwrap(),
-        "--truth",
-        &example("true_force.csv"),
-    ]);
+    let (ok, err, out, rep) = compensate_example_with_report("band", "true_force.csv", &[]);
     assert!(ok, "{err}");
     let truth = read_signal_csv(std::path::Path::new(&example("true_force.csv"))).unwrap();
     let meas = read_signal_csv(std::path::Path::new(&example("measured.csv"))).unwrap();
