@@ -393,3 +393,31 @@ fn a_file_written_by_nptdms_reads_as_written() {
         assert_eq!(g.as_slice(), want.channel(a).unwrap(), "axis {a}");
     }
 }
+
+/// The output keeps the input's time base: a CSV whose t_s starts at
+/// 1.25 s gives TDMS `wf_start_offset` 1.25 and a UFF abscissa starting at
+/// 1.25 s (record 7); without times, both start at 0 (negative control).
+#[test]
+fn outputs_keep_the_time_base() {
+    let img_path = tmp("tdmst0", "img.dcimg");
+    std::fs::write(&img_path, common::bytes(&common::image(1, 51200, 0))).unwrap();
+    let inp = tmp("tdmst0", "in.csv");
+    let text: String = std::iter::once("t_s,fx\n".to_string()).chain((0..5000).map(|k| format!("{},{}\n", 1.25 + k as f64 / 51200.0, k % 7))).collect();
+    std::fs::write(&inp, text).unwrap();
+    let notime = tmp("tdmst0", "notime.csv");
+    std::fs::write(&notime, "fx\n1\n2\n3\n4\n").unwrap();
+    for (input, t0) in [(&inp, 1.25), (&notime, 0.0)] {
+        let out = tmp("tdmst0", "out.tdms");
+        let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", input.to_str().unwrap(), "--output", out.to_str().unwrap(), "--output-format", "tdms"]);
+        assert!(ok, "{err}");
+        let r = dynocomp::io::tdms::TdmsReader::open(&out, None).unwrap();
+        assert_eq!(r.start_offset_s(), Some(t0));
+        let uff = tmp("tdmst0", "out.uff");
+        let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", input.to_str().unwrap(), "--output", uff.to_str().unwrap(), "--output-format", "uff"]);
+        assert!(ok, "{err}");
+        let text = std::fs::read_to_string(&uff).unwrap();
+        let rec7 = text.lines().nth(8).unwrap();
+        let x0: f64 = rec7.split_whitespace().nth(3).unwrap().parse().unwrap();
+        assert!((x0 - t0).abs() < 1e-5, "record 7 `{rec7}`: x0 {x0}, want {t0}");
+    }
+}

@@ -652,6 +652,7 @@ pub struct TdmsReader {
     n: u64,
     done: u64,
     dt: Option<f64>,
+    start: Option<f64>,
 }
 
 impl TdmsReader {
@@ -784,7 +785,16 @@ impl TdmsReader {
             n: n.map_or(0, |x| x.0),
             done: 0,
             dt: dt.map(|x| x.0),
+            start: picked.first().and_then(|p| match w.objects[p.1].props.get("wf_start_offset") {
+                Some(Prop::Num(v)) => Some(*v),
+                _ => None,
+            }),
         })
+    }
+
+    /// The first channel's `wf_start_offset` (s), if it has one.
+    pub fn start_offset_s(&self) -> Option<f64> {
+        self.start
     }
 
     /// The channels read, as `group/name`, in axis order.
@@ -832,7 +842,8 @@ impl SignalReader for TdmsReader {
 }
 
 /// A writer of a TDMS file: group `dynocomp`, one f64 channel per axis
-/// named `Fx`/`Fy`/`Fz`, with `wf_increment` = 1/fs, `wf_start_offset`,
+/// named `Fx`/`Fy`/`Fz`, with `wf_increment` = 1/fs, `wf_start_offset`
+/// (the first sample's time if the blocks carry times, else `t0_s`),
 /// `wf_samples` and `unit_string` N; interleaved segments, one per block.
 pub struct TdmsWriter<'w> {
     w: &'w mut dyn Write,
@@ -912,7 +923,13 @@ impl<'w> TdmsWriter<'w> {
 }
 
 impl SignalWriter for TdmsWriter<'_> {
-    fn write_block(&mut self, _t_s: Option<&[f64]>, channels: &[&[f64]]) -> Result<()> {
+    fn write_block(&mut self, t_s: Option<&[f64]>, channels: &[&[f64]]) -> Result<()> {
+        if !self.any {
+            // The input's time base, if it has times (a CSV's t_s).
+            if let Some(&t) = t_s.and_then(|t| t.first()) {
+                self.t0 = t;
+            }
+        }
         let n = channels.first().map_or(0, |c| c.len());
         if channels.len() != self.axes.len() || channels.iter().any(|c| c.len() != n) {
             bail!("internal error: a block does not match the output's channels");

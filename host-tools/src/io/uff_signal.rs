@@ -350,13 +350,15 @@ impl SignalReader for UffReader {
 
 /// A writer of UFF 58 (ASCII, double precision, 4E20.12 per line) or 58b
 /// (binary little-endian doubles) time histories: one dataset per axis,
-/// abscissa from 0 s every 1/fs s.
+/// abscissa every 1/fs s from the first sample's time (0 s when the input
+/// has no times).
 pub struct UffWriter<'w> {
     w: &'w mut dyn Write,
     axes: Vec<usize>,
     spill: Vec<std::io::BufWriter<File>>,
     n: u64,
     dt: f64,
+    t0: Option<f64>,
     binary: bool,
 }
 
@@ -367,12 +369,15 @@ impl<'w> UffWriter<'w> {
             .iter()
             .map(|_| tempfile::tempfile().map(std::io::BufWriter::new).context("cannot create a temporary spill file"))
             .collect::<Result<_>>()?;
-        Ok(UffWriter { w, axes: axes.to_vec(), spill, n: 0, dt: 1.0 / fs_hz, binary })
+        Ok(UffWriter { w, axes: axes.to_vec(), spill, n: 0, dt: 1.0 / fs_hz, t0: None, binary })
     }
 }
 
 impl SignalWriter for UffWriter<'_> {
-    fn write_block(&mut self, _t_s: Option<&[f64]>, channels: &[&[f64]]) -> Result<()> {
+    fn write_block(&mut self, t_s: Option<&[f64]>, channels: &[&[f64]]) -> Result<()> {
+        if self.t0.is_none() {
+            self.t0 = t_s.and_then(|t| t.first().copied());
+        }
         for (s, c) in self.spill.iter_mut().zip(channels) {
             for v in *c {
                 s.write_all(&v.to_le_bytes())?;
@@ -388,7 +393,7 @@ impl SignalWriter for UffWriter<'_> {
             let id1 = format!("dynocomp compensated f{}", axis_name(*axis));
             let head = dataset_header(
                 (1, k as i64 + 1, *axis as i64 + 1, &id1),
-                (4, n, 0.0, self.dt),
+                (4, n, self.t0.unwrap_or(0.0), self.dt),
                 [(17, "Time", "s"), (9, "Force", "N"), (0, "NONE", "NONE"), (0, "NONE", "NONE")],
                 self.binary.then_some(n * 8),
             );
