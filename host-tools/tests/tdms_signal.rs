@@ -310,6 +310,11 @@ fn bad_tdms_records_are_refused_clearly() {
     std::fs::write(&p, file).unwrap();
     let e = read(&p, None).unwrap_err();
     assert!(e.contains("no channel named for a force axis") && e.contains("Cut 1/Torque"), "{e}");
+    // a name with a newline (found by the fuzzer): the message stays one line
+    let file = segment(META | NEW_LIST | RAW, Some(&[ch("F\nx", Index::New(10, 1), vec![])]), &1.0f64.to_le_bytes());
+    std::fs::write(&p, file).unwrap();
+    let e = read(&p, None).unwrap_err();
+    assert!(e.contains("Cut 1/F\\nx") && e.lines().count() == 1, "{e}");
     // different lengths
     let mut raw = Vec::new();
     for v in [1.0f64, 2.0, 3.0] {

@@ -376,14 +376,14 @@ impl Walker {
                         let dim = m.u32("a raw data index")?;
                         let n = m.u64("a raw data index")?;
                         if dim != 1 {
-                            bail!("{source}: segment {no}, offset {at_idx}: object {path}: array dimension {dim} (TDMS allows 1)");
+                            bail!("{source}: segment {no}, offset {at_idx}: object {}: array dimension {dim} (TDMS allows 1)", shown(&path));
                         }
                         let bytes = match type_size(ty) {
                             Some(s) if l == 20 => n.checked_mul(s),
                             None if ty == TY_STRING && l == 28 => Some(m.u64("a raw data index")?),
-                            _ => bail!("{source}: segment {no}, offset {at_idx}: object {path}: raw data index of {l} bytes for {} values", type_name(ty)),
+                            _ => bail!("{source}: segment {no}, offset {at_idx}: object {}: raw data index of {l} bytes for {} values", shown(&path), type_name(ty)),
                         }
-                        .ok_or_else(|| anyhow!("{source}: segment {no}, offset {at_idx}: object {path}: {n} values overflow"))?;
+                        .ok_or_else(|| anyhow!("{source}: segment {no}, offset {at_idx}: object {}: {n} values overflow", shown(&path)))?;
                         (Some(Some(RawIndex { ty, n, bytes })), false)
                     }
                 };
@@ -405,7 +405,7 @@ impl Walker {
                                 m.bytes(sz, "a property value")?;
                                 Prop::Other
                             }
-                            None => bail!("{source}: segment {no}, offset {at_p}: property {name:?} of {path}: unknown data type 0x{t:X}"),
+                            None => bail!("{source}: segment {no}, offset {at_p}: property {name:?} of {}: unknown data type 0x{t:X}", shown(&path)),
                         },
                     };
                     if self.keep_props {
@@ -431,7 +431,7 @@ impl Walker {
                         ri
                     }
                     Some(None) => o.index.ok_or_else(|| {
-                        anyhow!("{source}: segment {no}: object {}: raw data index \"same as before\", but it had none", o.path)
+                        anyhow!("{source}: segment {no}: object {}: raw data index \"same as before\", but it had none", shown(&o.path))
                     })?,
                 };
                 o.index = Some(ri);
@@ -479,7 +479,7 @@ impl Walker {
             if let Some(e) = seg.list.iter().find(|e| e.1.n != n0 || type_size(e.1.ty).is_none()) {
                 bail!(
                     "{source}: segment {no}, offset {at}: interleaved data, but object {} has {} {} values where the first has {n0}",
-                    self.objects[e.0].path,
+                    shown(&self.objects[e.0].path),
                     e.1.n,
                     type_name(e.1.ty)
                 );
@@ -491,6 +491,12 @@ impl Walker {
         }
         Ok(Some(seg))
     }
+}
+
+/// A name or path from the file as shown in a one-line message: control
+/// characters (a newline in a channel name) escaped.
+fn shown(s: &str) -> String {
+    s.chars().flat_map(|c| if c.is_control() { c.escape_debug().collect::<Vec<_>>() } else { vec![c] }).collect()
 }
 
 /// `/'group'/'channel'` → (group, channel); None for the root and groups.
@@ -615,31 +621,58 @@ impl Cursor {
         }
     }
 
-    /// Append `want` values (in N: times `scale`) to `out`.
-    fn fill(&mut self, want: usize, scale: f64, out: &mut Vec<f64>) -> Result<()> {
-        let mut got = 0usize;
-        while got < want {
-            if self.left == 0 && !self.next_run()? {
-                bail!("{}: a channel ends early (internal error: the index pass counted more values)", self.walker.src.source);
-            }
-            let m = (want - got).min(usize::try_from(self.left).unwrap_or(usize::MAX));
-            let size = type_size(self.ty).unwrap_or(8) as usize;
-            let stride = self.stride as usize;
-            let span = (m - 1) * stride + size;
-            self.buf.resize(span, 0);
-            self.walker.src.seek(self.off)?;
-            let no = self.seg.as_ref().map_or(0, |s| s.no);
-            let mut buf = std::mem::take(&mut self.buf);
-            self.walker.src.read(&mut buf, &|| format!("the raw data of segment {no}"))?;
-            let (ty, big) = (self.ty, self.big);
-            out.extend(buf.chunks(stride).take(m).map(|b| scale * decode(ty, big, &b[..size])));
-            self.buf = buf;
-            self.off += (m * stride) as u64;
-            self.left -= m as u64;
-            got += m;
-        }
+    /// Append the next `m` values of the current run (`m` ≤ its values
+    /// left), in N (times `scale`), to `out`.
+    fn take(&mut self, m: usize, scale: f64, out: &mut Vec<f64>) -> Result<()> {
+        let size = type_size(self.ty).unwrap_or(8) as usize;
+        let stride = self.stride as usize;
+        let span = (m - 1) * stride + size;
+        self.buf.resize(span, 0);
+        self.walker.src.seek(self.off)?;
+        let no = self.seg.as_ref().map_or(0, |s| s.no);
+        let mut buf = std::mem::take(&mut self.buf);
+        self.walker.src.read(&mut buf, &|| format!("the raw data of segment {no}"))?;
+        let (ty, big) = (self.ty, self.big);
+        out.extend(buf.chunks(stride).take(m).map(|b| scale * decode(ty, big, &b[..size])));
+        self.buf = buf;
+        self.advance(m);
         Ok(())
     }
+
+    fn advance(&mut self, m: usize) {
+        self.off += m as u64 * self.stride;
+        self.left -= m as u64;
+    }
+
+    /// The segment of the current run, if it is interleaved.
+    fn interleaved_segment(&self) -> Option<usize> {
+        self.seg.as_ref().filter(|s| s.interleaved && self.left > 0).map(|s| s.no)
+    }
+}
+
+/// Read the next `m` values of every cursor, all in the same interleaved
+/// segment, with one read of the rows through the first cursor's handle.
+fn take_rows(cursors: &mut [Cursor], m: usize, scale: &[f64], outs: &mut [Vec<f64>]) -> Result<()> {
+    let stride = cursors[0].stride;
+    let base = cursors.iter().map(|c| c.off).min().unwrap_or(0);
+    let span = cursors.iter().map(|c| c.off - base + (m as u64 - 1) * stride + type_size(c.ty).unwrap_or(8)).max().unwrap_or(0);
+    let (first, _) = cursors.split_at_mut(1);
+    let c0 = &mut first[0];
+    let mut buf = std::mem::take(&mut c0.buf);
+    buf.resize(span as usize, 0);
+    c0.walker.src.seek(base)?;
+    let no = c0.seg.as_ref().map_or(0, |s| s.no);
+    c0.walker.src.read(&mut buf, &|| format!("the raw data of segment {no}"))?;
+    let stride = stride as usize;
+    for ((c, out), k) in cursors.iter_mut().zip(outs.iter_mut()).zip(scale) {
+        let size = type_size(c.ty).unwrap_or(8) as usize;
+        let at = (c.off - base) as usize;
+        let (ty, big) = (c.ty, c.big);
+        out.extend(buf[at..].chunks(stride).take(m).map(|b| k * decode(ty, big, &b[..size])));
+        c.advance(m);
+    }
+    cursors[0].buf = buf;
+    Ok(())
 }
 
 /// A reader of the force channels of a TDMS file.
@@ -670,6 +703,7 @@ impl TdmsReader {
         // Channels: (object, group, name).
         let chans: Vec<(usize, String, String)> =
             w.objects.iter().enumerate().filter_map(|(i, o)| split_path(&o.path).map(|(g, c)| (i, g, c))).collect();
+        let list = || chans.iter().map(|c| shown(&format!("{}/{}", c.1, c.2))).collect::<Vec<_>>().join(", ");
         let mut picked: Vec<(usize, usize)> = Vec::new(); // (axis, object)
         match map {
             Some(m) => {
@@ -683,7 +717,7 @@ impl TdmsReader {
                         [] => bail!(
                             "{source}: --channels f{}={want}: no such channel (channels: {})",
                             axis_name(*axis),
-                            chans.iter().map(|c| format!("{}/{}", c.1, c.2)).collect::<Vec<_>>().join(", ")
+                            list()
                         ),
                         _ => bail!("{source}: --channels f{}={want}: several groups have it; give GROUP/NAME", axis_name(*axis)),
                     }
@@ -694,8 +728,9 @@ impl TdmsReader {
                     if let Some(axis) = axis_from_name(c) {
                         if let Some(other) = picked.iter().find(|p| p.0 == axis) {
                             bail!(
-                                "{source}: channels {} and {g}/{c} are both axis {}; pick one with --channels f{}=GROUP/NAME",
-                                w.objects[other.1].path,
+                                "{source}: channels {} and {} are both axis {}; pick one with --channels f{}=GROUP/NAME",
+                                shown(&w.objects[other.1].path),
+                                shown(&format!("{g}/{c}")),
                                 axis_name(axis),
                                 axis_name(axis)
                             );
@@ -706,7 +741,7 @@ impl TdmsReader {
                 if picked.is_empty() {
                     bail!(
                         "{source}: no channel named for a force axis (Fx, Force X, ...); channels: {}; give --channels fx=NAME,...",
-                        if chans.is_empty() { "none".to_string() } else { chans.iter().map(|c| format!("{}/{}", c.1, c.2)).collect::<Vec<_>>().join(", ") }
+                        if chans.is_empty() { "none".to_string() } else { list() }
                     );
                 }
             }
@@ -719,7 +754,8 @@ impl TdmsReader {
         for &(axis, i) in &picked {
             let o = &w.objects[i];
             let (g, c) = split_path(&o.path).unwrap_or_default();
-            let here = format!("{source}: channel {g}/{c} (f{})", axis_name(axis));
+            let name = shown(&format!("{g}/{c}"));
+            let here = format!("{source}: channel {name} (f{})", axis_name(axis));
             if o.daqmx {
                 bail!("{here}: DAQmx raw data (ADC codes with NI_Scaling properties) is not supported; log scaled data or convert the file");
             }
@@ -747,7 +783,7 @@ impl TdmsReader {
                             bail!("{here}: wf_increment {d} s, but channel {c0} has {d0} s: channels must share a rate")
                         }
                         Some(_) => {}
-                        None => dt = Some((*d, format!("{g}/{c}"))),
+                        None => dt = Some((*d, name.clone())),
                     }
                 }
                 Some(_) => bail!("{here}: property wf_increment is not a number"),
@@ -756,9 +792,9 @@ impl TdmsReader {
             match &n {
                 Some((n0, c0)) if *n0 != o.total => bail!("{here}: {} samples, but channel {c0} has {n0}: channels must have the same length", o.total),
                 Some(_) => {}
-                None => n = Some((o.total, format!("{g}/{c}"))),
+                None => n = Some((o.total, name.clone())),
             }
-            names.push(format!("{g}/{c}"));
+            names.push(name);
             scale.push(k);
         }
         let mut cursors = Vec::new();
@@ -824,8 +860,26 @@ impl SignalReader for TdmsReader {
         blk.clear();
         blk.channels.resize(self.cursors.len(), Vec::new());
         let left = usize::try_from(self.n - self.done).unwrap_or(usize::MAX).min(max);
-        for (i, c) in self.cursors.iter_mut().enumerate() {
-            c.fill(left, self.scale[i], &mut blk.channels[i])?;
+        let mut got = 0usize;
+        while got < left {
+            for c in &mut self.cursors {
+                if c.left == 0 && !c.next_run()? {
+                    bail!("{}: a channel ends early (internal error: the index pass counted more values)", self.source);
+                }
+            }
+            let m = self.cursors.iter().map(|c| c.left).min().map_or(0, |l| usize::try_from(l).unwrap_or(usize::MAX)).min(left - got);
+            let seg0 = self.cursors[0].interleaved_segment();
+            if seg0.is_some() && self.cursors.iter().all(|c| c.interleaved_segment() == seg0 && c.stride == self.cursors[0].stride) {
+                // Interleaved rows: one read for all channels.
+                take_rows(&mut self.cursors, m, &self.scale, &mut blk.channels)?;
+            } else {
+                for (i, c) in self.cursors.iter_mut().enumerate() {
+                    c.take(m, self.scale[i], &mut blk.channels[i])?;
+                }
+            }
+            got += m;
+        }
+        for i in 0..self.cursors.len() {
             if let Some(k) = blk.channels[i].iter().position(|v| !v.is_finite()) {
                 bail!(
                     "{}: channel {}: value {} (sample {}) is not finite; values must be finite",
