@@ -147,3 +147,35 @@ fn read(p: &Path, m: Option<&ChannelMap>) -> Result<usize, String> {
     let (mut r, _) = open_signal(p, m).map_err(|e| format!("{e:#}"))?;
     read_all(&mut *r).map(|(_, c)| c[0].len()).map_err(|e| format!("{e:#}"))
 }
+
+/// Units of the ordinate (record 9): a force in kN is scaled to N, one in
+/// mN too, NONE reads as N, and a unit that is not a force (lbf, V) is
+/// refused naming the file, dataset and record; N itself is unchanged
+/// (the control).
+#[test]
+fn ordinate_units_are_checked_and_scaled() {
+    let x = signals(50);
+    let p = tmp("uffunits", "u.uff");
+    write_uff(&p, &x[..1], 51200.0, false);
+    let good = std::fs::read_to_string(&p).unwrap();
+    let rec9 = good.lines().nth(10).unwrap().to_string();
+    assert!(rec9.contains("Force") && rec9.contains(" N "), "record 9 is `{rec9}`");
+    let with_unit = |u: &str| {
+        let mut r9 = rec9.replacen(" N ", &format!(" {u} "), 1);
+        while r9.len() > rec9.len() && r9.ends_with(' ') {
+            r9.pop();
+        }
+        assert_eq!(r9.len(), rec9.len());
+        std::fs::write(&p, good.replacen(&rec9, &r9, 1)).unwrap();
+        open_signal(&p, None).and_then(|(mut r, _)| read_all(&mut *r)).map(|(_, c)| c[0].clone()).map_err(|e| format!("{e:#}"))
+    };
+    let n = with_unit("N").unwrap();
+    for (u, k) in [("kN", 1000.0), ("mN", 0.001)] {
+        let got = with_unit(u).unwrap();
+        assert!(got.iter().zip(&n).all(|(a, b)| *a == k * b), "{u}");
+    }
+    for u in ["lbf", "V"] {
+        let e = with_unit(u).unwrap_err();
+        assert!(e.contains("u.uff") && e.contains("dataset #1") && e.contains("record 9") && e.contains(u), "{e}");
+    }
+}

@@ -121,6 +121,18 @@ impl RateTracker {
     }
 }
 
+/// Factor from a force channel's unit to N (TDMS `unit_string`, UFF
+/// record 9): "N" (or empty) 1, "kN" 1000, "mN" 0.001; None for anything
+/// else, which the readers refuse (a record in lbf or V is not read as N).
+pub fn newton_per_unit(unit: &str) -> Option<f64> {
+    match unit.trim() {
+        "" | "N" | "n" | "newton" | "Newton" | "NEWTON" => Some(1.0),
+        "kN" | "KN" | "kn" => Some(1000.0),
+        "mN" => Some(0.001),
+        _ => None,
+    }
+}
+
 /// Relative tolerance between a file's sample rate and the image's.
 pub const FS_TOLERANCE: f64 = 1e-4;
 

@@ -37,7 +37,7 @@ use std::fs::File;
 use std::io::{BufReader, Read, Write};
 use std::path::Path;
 
-use super::signal::{Block, SignalReader, SignalWriter};
+use super::signal::{newton_per_unit, Block, SignalReader, SignalWriter};
 use super::signal_file::ChannelMap;
 use crate::frf::axis_name;
 
@@ -550,17 +550,6 @@ pub fn axis_from_name(name: &str) -> Option<usize> {
         "x" => Some(0),
         "y" => Some(1),
         "z" => Some(2),
-        _ => None,
-    }
-}
-
-/// Factor from a channel's unit to N: "N" (or none) 1, "kN" 1000, "mN"
-/// 0.001; other units are refused.
-pub fn newton_per_unit(unit: &str) -> Option<f64> {
-    match unit.trim() {
-        "" | "N" | "n" | "newton" | "Newton" => Some(1.0),
-        "kN" | "KN" | "kn" => Some(1000.0),
-        "mN" => Some(0.001),
         _ => None,
     }
 }

@@ -19,7 +19,7 @@ use std::fs::File;
 use std::io::{BufRead, BufReader, Read, Seek, SeekFrom, Write};
 use std::path::Path;
 
-use super::signal::{Block, SignalReader, SignalWriter};
+use super::signal::{newton_per_unit, Block, SignalReader, SignalWriter};
 use super::signal_file::ChannelMap;
 use super::uff::{data_characteristics, dataset_header, fmt_e, read_numbers, record6, record7, spec_type_name, tokens, trim};
 use crate::frf::axis_name;
@@ -209,6 +209,15 @@ impl UffReader {
                     ch.axis = a;
                     if map.is_some() {
                         ch.sign = 1.0;
+                    }
+                    // Ordinate units (record 9): N, kN or mN (scaled to N); NONE/blank read as N.
+                    let (l9, r9) = (recs[8].0, &recs[8].1);
+                    let (_, ounits) = data_characteristics(r9);
+                    let ou = ounits.trim();
+                    if !ou.eq_ignore_ascii_case("none") {
+                        ch.sign *= newton_per_unit(ou).ok_or_else(|| {
+                            anyhow!("{}: ordinate units {ou:?} are not a force in N (kN and mN are scaled)", here("record 9", l9))
+                        })?;
                     }
                     found.push((ch, name, String::new()));
                 }
