@@ -281,6 +281,9 @@ pub struct AxisJson {
     /// Condition numbers, observability rank, Riccati residual and prewarp
     /// frequency of `--method paper`.
     pub paper: Option<PaperDiagnostics>,
+    /// Predicted in-band error when the sensor modes shift by −5…+5 %
+    /// (`crate::sensitivity`), with the shifts where it doubles.
+    pub sensitivity: Option<crate::sensitivity::Sensitivity>,
 }
 
 /// Machine-readable summary of the whole design.
@@ -438,6 +441,11 @@ pub fn render_summary(designs: &[AxisDesign], fs: f64, latency: usize, image: &s
         }
         for n in &d.notes {
             let _ = writeln!(s, "note: {n}");
+        }
+    }
+    for d in designs {
+        if let Some(sens) = &d.sensitivity {
+            let _ = writeln!(s, "{}", crate::sensitivity::summary_line(axis_name(d.axis), sens));
         }
     }
     for d in designs {
@@ -612,6 +620,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
                     design_time_s: *t,
                     fit_nrmse_out_of_band: (!d.bands.is_empty() && d.fit_nrmse_out_of_band.is_finite()).then_some(d.fit_nrmse_out_of_band),
                     paper: d.paper.as_ref().map(|p| p.1.clone()),
+                    sensitivity: d.sensitivity.clone(),
                 })
                 .collect(),
         };

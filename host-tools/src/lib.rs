@@ -25,6 +25,7 @@ pub mod paper;
 pub mod quantize;
 pub mod realize;
 pub mod report;
+pub mod sensitivity;
 pub mod serial_link;
 pub mod sim_flash;
 pub mod simulate;

@@ -26,6 +26,7 @@
 
 pub mod chain;
 pub mod cli;
+pub mod drift;
 pub mod dynamometer;
 pub mod impact;
 pub mod measurement;
