@@ -18,7 +18,11 @@
 //! continuous, and only the step matrices are derived again. A constant
 //! model (no drift) reproduces [`Dynamometer::measure`] bit for bit.
 
-use super::dynamometer::{Dynamometer, Hold, Mode, ModeStep};
+use anyhow::{bail, Result};
+
+use super::dynamometer::{Dynamometer, Hold, Mode, ModeStep, MultiAxisDynamometer};
+use super::{impact_test_all_with, milling_force, simulate_with, sub_seed, SimOutput, SimParams, TAG_NOISE};
+use crate::frf::Frf;
 use crate::sensitivity::SENSOR_FRACTION;
 
 /// Fine samples per block of constant modal parameters in a drifting record.
@@ -109,4 +113,106 @@ pub fn measure_drifting(dyn_: &Dynamometer, drift: &Drift, force: &[f64], fs_hz:
         }
     }
     y
+}
+
+/// Tag of the second (after-drift) impact test's random stream.
+const TAG_IMPACT_AFTER: u64 = 30;
+
+/// A simulation whose sensor modes drift during the cutting record.
+#[derive(Clone, Debug)]
+pub struct DriftOutput {
+    /// The simulation: `frf` is the impact test before the drift (the
+    /// set-up at t = 0), `measured`/`clean` come from the drifting set-up,
+    /// `truth` is the band-limited applied force (independent of the set-up),
+    /// `idle` as without drift.
+    pub sim: SimOutput,
+    /// The drift.
+    pub drift: Drift,
+    /// The set-up after the drift (sensor modes shifted by `drift.delta`).
+    pub dyno_after: MultiAxisDynamometer,
+    /// Impact test of the set-up after the drift (its own noise).
+    pub frf_after: Frf,
+}
+
+/// Simulate `seed` with `params` on `dyno` (the set-up before the drift)
+/// while its sensor modes drift by `drift` (module doc). Refused with an
+/// analog front end in the chain (only the DAQ's brick wall or none).
+pub fn simulate_drifting(seed: u64, params: &SimParams, dyno: MultiAxisDynamometer, drift: Drift) -> Result<DriftOutput> {
+    drift.validate()?;
+    let chain = params.anti_alias;
+    if chain.analog().is_some() {
+        bail!("simulate: --drift-percent with an analog front end (--anti-alias {chain}) is not supported; use ideal or none");
+    }
+    let mut sim = simulate_with(seed, params, dyno)?;
+    let n = params.n_samples();
+    let os = params.oversample.max(1);
+    let f_fine = params.fs_hz * os as f64;
+    let fine = milling_force(&params.milling, f_fine, chain.fine_len(n, os));
+    for (a, force) in fine.iter().enumerate() {
+        let y = measure_drifting(sim.dyno.axis(a), &drift, force, f_fine);
+        let (_truth, clean) = chain.acquire_response(force, &y, params.fs_hz, os, n);
+        sim.measured[a] = params.measurement.apply(&clean, sub_seed(seed, TAG_NOISE + a as u64));
+        sim.clean[a] = clean;
+    }
+    let dyno_after = MultiAxisDynamometer {
+        axes: [0, 1, 2].map(|a| shift_sensor_modes(sim.dyno.axis(a), drift.delta)),
+    };
+    let ip = &params.impact;
+    let frf_after = impact_test_all_with(&|a, f| dyno_after.axis(a).frf(f), ip.n_lines, ip.df_hz, sub_seed(seed, TAG_IMPACT_AFTER), ip);
+    Ok(DriftOutput { sim, drift, dyno_after, frf_after })
+}
+
+/// Content of `drift.json`.
+#[derive(serde::Serialize)]
+struct DriftJson<'a> {
+    format: &'static str,
+    version: u32,
+    /// Relative shift of the sensor modes at the end (e.g. 0.03).
+    delta: f64,
+    start_s: f64,
+    end_s: f64,
+    /// Fine samples per block of constant modal parameters.
+    block_fine_samples: usize,
+    /// Natural frequencies of the sensor modes before and after, per axis.
+    sensor_modes_before_hz: Vec<Vec<f64>>,
+    sensor_modes_after_hz: Vec<Vec<f64>>,
+    /// Every mode of each axis after the drift.
+    modes_after: Vec<&'a [Mode]>,
+    files: [&'static str; 3],
+}
+
+/// `dynocomp simulate --drift-percent`: simulate the drifting record for
+/// `seed` (the random set-up of [`super::simulate`]) and write the files of
+/// `dynocomp simulate` plus frf_after.uff, frf_after.csv and drift.json
+/// into `dir`.
+pub fn run(seed: u64, params: &SimParams, drift: Drift, dir: &std::path::Path) -> Result<SimOutput> {
+    drift.validate()?;
+    params.validate()?;
+    let dyno = MultiAxisDynamometer::random(sub_seed(seed, super::TAG_DYNO), params);
+    let out = simulate_drifting(seed, params, dyno, drift)?;
+    super::cli::write_outputs(dir, &out.sim)?;
+    crate::io::uff::write_uff58(&dir.join("frf_after.uff"), &out.frf_after, false)?;
+    crate::io::frf_csv::write_frf_csv(&dir.join("frf_after.csv"), &out.frf_after)?;
+    let modes_hz = |d: &Dynamometer| sensor_modes(d).iter().map(|&i| d.modes[i].fn_hz).collect::<Vec<f64>>();
+    let j = DriftJson {
+        format: "dynocomp-simulate-drift",
+        version: 1,
+        delta: drift.delta,
+        start_s: drift.start_s,
+        end_s: drift.end_s,
+        block_fine_samples: DRIFT_BLOCK,
+        sensor_modes_before_hz: (0..3).map(|a| modes_hz(out.sim.dyno.axis(a))).collect(),
+        sensor_modes_after_hz: (0..3).map(|a| modes_hz(out.dyno_after.axis(a))).collect(),
+        modes_after: (0..3).map(|a| out.dyno_after.axis(a).modes.as_slice()).collect(),
+        files: ["frf_after.uff", "frf_after.csv", "drift.json"],
+    };
+    let text = serde_json::to_string_pretty(&j)?;
+    crate::io::atomic::write_bytes_atomic(&dir.join("drift.json"), format!("{text}\n").as_bytes())?;
+    eprintln!(
+        "  drift: sensor modes {:+.2} % from {} s to {} s; frf.uff = before, frf_after.uff = after",
+        100.0 * drift.delta,
+        drift.start_s,
+        drift.end_s
+    );
+    Ok(out.sim)
 }
