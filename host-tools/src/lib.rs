@@ -31,4 +31,5 @@ pub mod sim_flash;
 pub mod simulate;
 pub mod smoother;
 pub mod stream;
+pub mod two_state;
 pub mod virtual_box;

@@ -14,32 +14,27 @@
 //! Target (issue): predicted and measured agree within a factor 1.5 at
 //! ±1 % and ±3 %.
 
+mod sim_common;
+
 use dynocomp::compensate::compensate_record;
 use dynocomp::design::{design_axis, AxisDesign, DesignOptions};
 use dynocomp::design_cmd::build_image;
 use dynocomp::io::signal_csv::SignalRecord;
 use dynocomp::metrics::{accuracy, lowpass, sample_variance};
 use dynocomp::simulate::drift::shift_sensor_modes;
-use dynocomp::simulate::{milling_force, simulate, MillingParams, SimOutput, SimParams};
+use dynocomp::simulate::{milling_force, SimOutput};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
-const FS: f64 = 51_200.0;
+use sim_common::FS;
 const FORCE_RMS: f64 = 100.0;
 /// Issue target: predicted within this factor of measured.
 const FACTOR: f64 = 1.5;
 const SHIFTS_PCT: [f64; 4] = [-3.0, -1.0, 1.0, 3.0];
 
 fn sim(seed: u64, rpm: f64) -> SimOutput {
-    let p = SimParams {
-        fs_hz: FS,
-        duration_s: 0.4,
-        idle_duration_s: 0.3,
-        milling: MillingParams { spindle_rpm: rpm, teeth: 4, ..Default::default() },
-        ..Default::default()
-    };
-    simulate(seed, &p).expect("simulate")
+    sim_common::sim(seed, rpm, 4)
 }
 
 /// White force at the fine rate, low-passed at `f_hi`, RMS `FORCE_RMS`.

@@ -101,8 +101,9 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub hammer_cutoff: Option<f64>,
     /// Let the sensor modes drift during the cutting record by this many
-    /// percent (e.g. -3: the workpiece's mass loss moves them), linearly
-    /// from --drift-start to --drift-end; frf.uff is then the set-up before
+    /// percent (e.g. +3: the workpiece's mass loss moves them up), from
+    /// --drift-start to --drift-end with the modal mass linear in time (1/f²
+    /// linear); frf.uff is then the set-up before
     /// the drift and frf_after.uff/.csv after it, drift.json describes it.
     #[arg(long, allow_hyphen_values = true, value_name = "PCT")]
     pub drift_percent: Option<f64>,

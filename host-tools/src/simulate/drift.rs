@@ -9,8 +9,10 @@
 //! multiplies their natural frequencies by (1 + δ) and keeps their damping
 //! ratio and residue (static share): a change of mass at constant stiffness.
 //!
-//! **Drifting record** ([`measure_drifting`]): the shift goes linearly in time
-//! from 0 at `start_s` to δ at `end_s` and is constant outside. Each mode is
+//! **Drifting record** ([`measure_drifting`]): the shift goes from 0 at
+//! `start_s` to δ at `end_s` with the modal mass linear in time (constant
+//! material removal rate: 1/f² linear in t, [`Drift::shift_at`]) and is
+//! constant outside. Each mode is
 //! integrated as its own 2x2 system `ẍ + 2ζωẋ + ω²x = rω²u` (the simulator's
 //! exact first-order-hold step, [`ModeStep`]), its ω and ζ updated per block
 //! of [`DRIFT_BLOCK`] fine samples (ω taken at the block's middle); across a
@@ -58,14 +60,18 @@ pub struct Drift {
 }
 
 impl Drift {
-    /// Relative shift at time `t_s`.
+    /// Relative shift of the sensor modes at time `t_s`: 0 before
+    /// `start_s`, `delta` after `end_s`, and in between the modal mass
+    /// linear in time (a constant material removal rate): 1/f² moves
+    /// linearly from 1/f₀² to 1/(f₀(1 + δ))².
     pub fn shift_at(&self, t_s: f64) -> f64 {
         if t_s <= self.start_s {
             0.0
         } else if t_s >= self.end_s {
             self.delta
         } else {
-            self.delta * (t_s - self.start_s) / (self.end_s - self.start_s)
+            let tau = (t_s - self.start_s) / (self.end_s - self.start_s);
+            1.0 / ((1.0 - tau) + tau / (1.0 + self.delta).powi(2)).sqrt() - 1.0
         }
     }
 

@@ -10,15 +10,20 @@ pub const FS: f64 = 51_200.0;
 /// Upper edge of the scored band (Hz): the FRF bandwidth.
 pub const F_MAX: f64 = 4_000.0;
 
-/// A 0.4 s milling record (0.3 s idle) of a random dynamometer.
-pub fn sim(seed: u64, rpm: f64, teeth: usize) -> SimOutput {
-    let p = SimParams {
+/// The parameters of a 0.4 s milling record (0.3 s idle) at `FS`.
+pub fn params(rpm: f64, teeth: usize) -> SimParams {
+    SimParams {
+        fs_hz: FS,
         duration_s: 0.4,
         idle_duration_s: 0.3,
         milling: MillingParams { spindle_rpm: rpm, teeth, ..Default::default() },
         ..Default::default()
-    };
-    simulate(seed, &p).expect("simulate")
+    }
+}
+
+/// A 0.4 s milling record (0.3 s idle) of a random dynamometer.
+pub fn sim(seed: u64, rpm: f64, teeth: usize) -> SimOutput {
+    simulate(seed, &params(rpm, teeth)).expect("simulate")
 }
 
 /// Default (whole-band vf) designs of the three axes with lag `lag`.
