@@ -38,8 +38,11 @@ use num_complex::Complex64;
 use std::collections::HashMap;
 use std::f64::consts::PI;
 
+use crate::design::{criterion_grid, criterion_j, criterion_ranges, design_axis, noise_term, AxisDesign, DesignOptions};
 use crate::discretize::{fit_with_structure, DiscreteModel};
+use crate::fit::vf::{coherence_weights, fit_order};
 use crate::fit::{PoleResidueModel, Term};
+use crate::frf::{axis_name, AxisFrf};
 use crate::kalman::{augmented_plant, solve_filter_dare};
 
 /// Largest relative difference of the natural frequencies of two paired modes.
@@ -272,4 +275,70 @@ pub fn smooth_drifting(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, op
     }
     out.truncate(len - advance.min(len));
     Ok(out)
+}
+
+/// States s at which a box image designed for the range is evaluated.
+pub const RANGE_STATES: [f64; 5] = [0.0, 0.25, 0.5, 0.75, 1.0];
+
+/// One candidate box design for the range between two states.
+#[derive(Clone, Debug)]
+pub struct RangeCandidate {
+    /// Model state the candidate was designed for (0 = the first FRF as
+    /// measured, 1 = the second as measured, in between the interpolated model).
+    pub s: f64,
+    /// The design.
+    pub design: AxisDesign,
+    /// Predicted in-band error of its filter at each of [`RANGE_STATES`].
+    pub errors: Vec<f64>,
+    /// The largest of `errors`.
+    pub worst: f64,
+}
+
+/// The box image for a set-up that moves between two measured states
+/// (issue #15, item 2). **Criterion (stated):** the least worst-case
+/// predicted in-band error over s ∈ [`RANGE_STATES`], chosen among
+/// candidate designs for the model states `candidate_states` (0 and 1 are
+/// designed from the two measured FRFs as a single-state design would be,
+/// states in between from the interpolated model's response on the same
+/// lines, with the first FRF's coherence). Each candidate's filter is
+/// evaluated against the interpolated model at every s with the design's own
+/// criterion ([`crate::design::criterion_j`], the first FRF's band).
+/// Returns the pairing, every candidate, and the index of the chosen one.
+pub fn design_over_range(
+    freq_hz: &[f64],
+    first: &AxisFrf,
+    second: &AxisFrf,
+    r: f64,
+    opts: &DesignOptions,
+    candidate_states: &[f64],
+) -> Result<(TwoState, Vec<RangeCandidate>, usize)> {
+    let name = axis_name(first.axis);
+    let d0 = design_axis(freq_hz, first, r, opts).context("first FRF")?;
+    let w = coherence_weights(&second.frf, second.coherence.as_deref());
+    let after = fit_order(freq_hz, &second.frf, &w, d0.model.order(), &opts.vf).with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?;
+    let ts = pair(name, &d0.model, &after)?;
+    let ranges = criterion_ranges(&d0.bands, d0.compensated_band_hz);
+    let width: f64 = ranges.iter().map(|b| b.1 - b.0).sum();
+    let freqs = criterion_grid(&ranges);
+    let plants: Vec<Vec<(f64, Complex64)>> =
+        RANGE_STATES.iter().map(|&s| { let m = ts.at(s); freqs.iter().map(|f| (*f, m.frf(*f))).collect() }).collect();
+    let mut cands = Vec::new();
+    for &s in candidate_states {
+        let design = if s == 0.0 {
+            d0.clone()
+        } else if s == 1.0 {
+            design_axis(freq_hz, second, r, opts).context("second FRF")?
+        } else {
+            let m = ts.at(s);
+            let synthetic = AxisFrf { axis: first.axis, frf: freq_hz.iter().map(|f| m.frf(*f)).collect(), coherence: first.coherence.clone() };
+            design_axis(freq_hz, &synthetic, r, opts).with_context(|| format!("model state s = {s}"))?
+        };
+        let h: Vec<Complex64> = freqs.iter().map(|f| design.kalman.compensator.freq_response(*f, opts.fs_hz)).collect();
+        let noise = noise_term(design.kalman.r, opts.fs_hz, width, opts.force_rms);
+        let errors: Vec<f64> = plants.iter().map(|g| criterion_j(g, &h, design.kalman.lag, opts.fs_hz, noise).sqrt()).collect();
+        let worst = errors.iter().copied().fold(0.0, f64::max);
+        cands.push(RangeCandidate { s, design, errors, worst });
+    }
+    let best = (0..cands.len()).min_by(|&a, &b| cands[a].worst.total_cmp(&cands[b].worst)).ok_or_else(|| anyhow::anyhow!("axis {name}: no candidate state"))?;
+    Ok((ts, cands, best))
 }

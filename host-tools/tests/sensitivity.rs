@@ -16,16 +16,9 @@
 
 mod sim_common;
 
-use dynocomp::compensate::compensate_record;
-use dynocomp::design::{design_axis, AxisDesign, DesignOptions};
-use dynocomp::design_cmd::build_image;
-use dynocomp::io::signal_csv::SignalRecord;
-use dynocomp::metrics::{accuracy, lowpass, sample_variance};
-use dynocomp::simulate::drift::shift_sensor_modes;
+use dynocomp::design::{design_axis, DesignOptions};
+use dynocomp::metrics::sample_variance;
 use dynocomp::simulate::{milling_force, SimOutput};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal};
 
 use sim_common::FS;
 const FORCE_RMS: f64 = 100.0;
@@ -35,31 +28,6 @@ const SHIFTS_PCT: [f64; 4] = [-3.0, -1.0, 1.0, 3.0];
 
 fn sim(seed: u64, rpm: f64) -> SimOutput {
     sim_common::sim(seed, rpm, 4)
-}
-
-/// White force at the fine rate, low-passed at `f_hi`, RMS `FORCE_RMS`.
-fn flat_force(len: usize, f_fine: f64, f_hi: f64, seed: u64) -> Vec<f64> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let n = Normal::new(0.0, 1.0).unwrap();
-    let w: Vec<f64> = (0..len).map(|_| n.sample(&mut rng)).collect();
-    let x = lowpass(&w, f_fine, f_hi);
-    let rms = (x.iter().map(|v| v * v).sum::<f64>() / len as f64).sqrt();
-    x.iter().map(|v| v * FORCE_RMS / rms).collect()
-}
-
-/// Measured NRMSE of design `d` (axis `a` of `s`) on `force_fine` measured
-/// by the true axis with its sensor modes shifted by `pct` %.
-fn measured(s: &SimOutput, d: &AxisDesign, force_fine: &[f64], pct: f64) -> f64 {
-    let p = &s.params;
-    let a = d.axis;
-    let n = p.n_samples();
-    let dyn_ = shift_sensor_modes(s.dyno.axis(a), pct / 100.0);
-    let (truth, clean) = p.anti_alias.acquire(&dyn_, force_fine, FS, p.oversample, n);
-    let meas = p.measurement.apply(&clean, 1000 + a as u64);
-    let img = build_image(std::slice::from_ref(d), FS as u32, d.kalman.lag, 5000.0, [0; 32]).expect("image");
-    let rec = SignalRecord { t_s: None, channels: vec![(a, meas)] };
-    let out = compensate_record(&img, &rec, false, "sensitivity").expect("compensate");
-    accuracy(out.channel(a).expect("axis"), &truth, FS, d.compensated_band_hz.1).nrmse
 }
 
 /// (seed·10 + axis, shift %, predicted, measured on the flat force, measured on the milling cut).
@@ -76,11 +44,11 @@ fn table(seed: u64, rpm: f64) -> Vec<(u64, f64, f64, f64, f64)> {
         let sens = d.sensitivity.clone().expect("sensitivity");
         // The unshifted point is the design's own predicted error (same criterion, same filter).
         assert!((sens.nominal - d.predicted_error).abs() <= 1e-9 * d.predicted_error, "axis {a}: {} vs {}", sens.nominal, d.predicted_error);
-        let flat = flat_force(fine_len, f_fine, d.compensated_band_hz.1, 77 + a as u64);
+        let flat = sim_common::flat_force(fine_len, f_fine, d.compensated_band_hz.1, FORCE_RMS, 77 + a as u64);
         for pct in std::iter::once(0.0).chain(SHIFTS_PCT) {
             let pred = sens.at(pct).expect("point");
-            let m_flat = measured(&s, &d, &flat, pct);
-            let m_mill = measured(&s, &d, cut, pct);
+            let m_flat = sim_common::measured_shifted(&s, &d, &flat, pct);
+            let m_mill = sim_common::measured_shifted(&s, &d, cut, pct);
             eprintln!(
                 "seed {seed} axis {a} shift {pct:+.0} %: predicted {:.2} %, measured flat {:.2} % (ratio {:.2}), milling {:.2} %",
                 100.0 * pred,

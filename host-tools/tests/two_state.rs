@@ -17,7 +17,7 @@ use dynocomp::metrics::{accuracy, sample_variance};
 use dynocomp::simulate::drift::{shift_sensor_modes, simulate_drifting, Drift};
 use dynocomp::simulate::MultiAxisDynamometer;
 use dynocomp::smoother::Smoother;
-use dynocomp::two_state::{pair, smooth_drifting, DriftSmoothing, TwoState};
+use dynocomp::two_state::{design_over_range, pair, smooth_drifting, DriftSmoothing, RangeCandidate, TwoState, RANGE_STATES};
 
 use sim_common::FS;
 /// Issue target: two-state within 1.5x of the exact model. Met on the
@@ -144,5 +144,39 @@ fn two_state_smoother_follows_a_drift_within_1_5x_of_the_exact_model() {
         assert!(two <= GUARD * exact, "row {i}: two-state {two:.4} vs exact {exact:.4}");
         // Negative control: today's single-FRF smoother misses the target.
         assert!(single > TARGET * exact, "row {i}: single {single:.4} vs exact {exact:.4}");
+    }
+}
+
+#[test]
+fn box_image_for_the_range_beats_either_single_state_design() {
+    // A +4 % drift (modal mass linear in time); both impact tests.
+    let p = sim_common::params(20_000.0, 4);
+    let dyno = MultiAxisDynamometer::random(dynocomp::simulate::sub_seed(3, 1), &p);
+    let drift = Drift { delta: 0.04, start_s: 0.0, end_s: 1.0 };
+    let out = simulate_drifting(3, &p, dyno, drift).unwrap();
+    let s = &out.sim;
+    let opts = DesignOptions { fs_hz: FS, lag: 4, ..Default::default() };
+    let fine_len = p.anti_alias.fine_len(p.n_samples(), p.oversample);
+    let f_fine = FS * p.oversample as f64;
+    for a in [0, 1] {
+        let r = sample_variance(&s.idle[a]);
+        let (_, cands, best) = design_over_range(&s.frf.freq_hz, s.frf.axis(a).unwrap(), out.frf_after.axis(a).unwrap(), r, &opts, &[0.0, 0.25, 0.5, 0.75, 1.0]).unwrap();
+        let single = [&cands[0], &cands[cands.len() - 1]];
+        let chosen = &cands[best];
+        // Measured worst case over the range: flat force, true set-up at each state.
+        let flat = sim_common::flat_force(fine_len, f_fine, chosen.design.compensated_band_hz.1, 100.0, 55);
+        let measured_worst = |c: &RangeCandidate| {
+            RANGE_STATES.iter().map(|&sv| sim_common::measured_shifted(s, &c.design, &flat, 100.0 * drift.shift_at(sv))).fold(0.0, f64::max)
+        };
+        let m: Vec<f64> = cands.iter().map(measured_worst).collect();
+        for (c, mw) in cands.iter().zip(&m) {
+            eprintln!("axis {a} candidate s = {:.2}: predicted worst {:.2} % ({:?}), measured worst {:.2} %", c.s, 100.0 * c.worst, c.errors.iter().map(|e| (1e4 * e).round() / 100.0).collect::<Vec<_>>(), 100.0 * mw);
+        }
+        eprintln!("axis {a}: chosen s = {:.2}", chosen.s);
+        for (i, sd) in single.iter().enumerate() {
+            assert!(chosen.worst < sd.worst, "axis {a}: predicted worst case {} not below single state {i}'s {}", chosen.worst, sd.worst);
+        }
+        let (m0, m1, mc) = (m[0], m[cands.len() - 1], m[best]);
+        assert!(mc < m0 && mc < m1, "axis {a}: measured worst case {mc:.4} vs single-state {m0:.4} / {m1:.4}");
     }
 }
