@@ -32,4 +32,5 @@ pub mod simulate;
 pub mod smoother;
 pub mod stream;
 pub mod two_state;
+pub mod two_state_cmd;
 pub mod virtual_box;

@@ -43,6 +43,9 @@ use crate::discretize::{fit_with_structure, DiscreteModel};
 use crate::fit::vf::{coherence_weights, fit_order};
 use crate::fit::{PoleResidueModel, Term};
 use crate::frf::{axis_name, AxisFrf};
+use crate::io::signal_csv::SignalRecord;
+use crate::smoother::{model_from_json, terms_to_json, ModelSidecar, TermJson};
+use dynocomp_core::image::CoeffImage;
 use crate::kalman::{augmented_plant, solve_filter_dare};
 
 /// Largest relative difference of the natural frequencies of two paired modes.
@@ -341,4 +344,79 @@ pub fn design_over_range(
     }
     let best = (0..cands.len()).min_by(|&a, &b| cands[a].worst.total_cmp(&cands[b].worst)).ok_or_else(|| anyhow::anyhow!("axis {name}: no candidate state"))?;
     Ok((ts, cands, best))
+}
+
+/// Both states of one axis in the model sidecar (`design --frf A --frf B`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TwoStateJson {
+    /// Direct term of state 0.
+    pub d_before: f64,
+    /// Terms of state 0 (paired order).
+    pub before: Vec<TermJson>,
+    /// Direct term of state 1.
+    pub d_after: f64,
+    /// Terms of state 1 (in the order of their partners in `before`).
+    pub after: Vec<TermJson>,
+    /// Compensated band of the unit-circle discretization (Hz).
+    pub band_hz: (f64, f64),
+    /// FIR taps of state 0's discrete model.
+    pub fir_taps: usize,
+    /// Advance of state 0's discrete model (samples).
+    pub advance: usize,
+}
+
+impl TwoStateJson {
+    /// The sidecar entry for the paired states `ts`, the design band and
+    /// state 0's discrete structure.
+    pub fn new(ts: &TwoState, band_hz: (f64, f64), dm0: &DiscreteModel) -> Self {
+        TwoStateJson {
+            d_before: ts.before.d,
+            before: terms_to_json(&ts.before),
+            d_after: ts.after.d,
+            after: terms_to_json(&ts.after),
+            band_hz,
+            fir_taps: dm0.fir.len(),
+            advance: dm0.advance,
+        }
+    }
+
+    /// The paired states, validated (the pairing is checked again).
+    pub fn states(&self, source: &str, name: &str) -> Result<TwoState> {
+        let b = model_from_json(self.d_before, &self.before, source, name)?;
+        let a = model_from_json(self.d_after, &self.after, source, name)?;
+        pair(name, &b, &a).with_context(|| source.to_string())
+    }
+}
+
+/// `compensate --offline --drift START:END`: smooth every force column of
+/// `rec` with its axis's two states from the sidecar, the model moving from
+/// state 0 at START to state 1 at END (s), q and R from the image.
+pub fn smooth_record_drifting(image: &CoeffImage, sidecar: &ModelSidecar, rec: &SignalRecord, source: &str, interval_s: (f64, f64)) -> Result<SignalRecord> {
+    let fs_hz = f64::from(image.fs_hz);
+    let mut channels = Vec::with_capacity(rec.channels.len());
+    for (axis, y) in &rec.channels {
+        let name = axis_name(*axis);
+        let Some(a) = image.axes.get(*axis).copied().flatten() else {
+            bail!("{source}: column f{name} has no compensator (and no q, R) in the image; drop the column or design for that axis");
+        };
+        let Some(entry) = sidecar.axes.iter().find(|m| m.axis == name).and_then(|m| m.two_state.as_ref()) else {
+            bail!("{source}: --drift needs two FRF states for axis {name} in the model sidecar: design with `--frf BEFORE --frf AFTER`");
+        };
+        let ts = entry.states(source, name)?;
+        let opts = DriftSmoothing { fs_hz, interval_s, band_hz: entry.band_hz, structure: (entry.fir_taps, entry.advance), q: a.summary.q, r: a.summary.r };
+        let out = smooth_drifting(y, &|s| ts.at(s), &opts).with_context(|| format!("{source}: axis {name}"))?;
+        channels.push((*axis, out));
+    }
+    Ok(SignalRecord { t_s: rec.t_s.clone(), channels })
+}
+
+/// Parse `--drift START:END` (seconds, 0 ≤ START < END).
+pub fn parse_interval(s: &str) -> Result<(f64, f64)> {
+    let bad = || anyhow::anyhow!("--drift {s}: expected START:END in seconds with 0 ≤ START < END, e.g. 0.5:12");
+    let (a, b) = s.split_once(':').ok_or_else(bad)?;
+    let (a, b): (f64, f64) = (a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?);
+    if !(a.is_finite() && b.is_finite() && a >= 0.0 && b > a) {
+        return Err(bad());
+    }
+    Ok((a, b))
 }
