@@ -135,8 +135,11 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
             n_samples = write_whole(a, out_fmt, &rec, &out, fs, acc.as_mut(), truth.as_mut())?;
         }
         (AnyImage::Inline(i), true) => {
-            how = "fixed-interval smoother, zero lag (offline only, whole record in memory)".to_string();
             let drift = a.drift.as_deref().map(crate::two_state::parse_interval).transpose()?;
+            how = match drift {
+                Some((s0, s1)) => format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only, whole record in memory)"),
+                None => "fixed-interval smoother, zero lag (offline only, whole record in memory)".to_string(),
+            };
             let sidecar = crate::smoother::read_sidecar(&a.coeffs, i)?;
             let rec = whole_record(&mut *reader, fs, &source)?;
             let out = match drift {
