@@ -485,7 +485,7 @@ pub fn plot_axis(freq: &[f64], ax: &AxisComparison, bands: &[Band]) -> Result<St
 pub fn compare(args: &CompareArgs, frf: &Frf) -> Result<Comparison> {
     args.input.check_fs()?;
     let r = args.input.noise_variances(frf)?;
-    let bands = args.bands.resolve(frf, args.input.fs).with_context(|| format!("{}", args.input.frf.display()))?;
+    let bands = args.bands.resolve(frf, args.input.fs).with_context(|| format!("{}", args.input.frf().display()))?;
     let setup = CompareSetup {
         freq_hz: &frf.freq_hz,
         base: DesignOptions {
@@ -504,12 +504,15 @@ pub fn compare(args: &CompareArgs, frf: &Frf) -> Result<Comparison> {
         eprintln!("comparing axis {}…", axis_name(a.axis));
         axes.push(compare_axis(&setup, a, r[a.axis].expect("R for every FRF axis")));
     }
-    Ok(Comparison { frf: args.input.frf.display().to_string(), fs_hz: args.input.fs, bands, axes })
+    Ok(Comparison { frf: args.input.frf().display().to_string(), fs_hz: args.input.fs, bands, axes })
 }
 
 /// Run `dynocomp compare`.
 pub fn run(args: &CompareArgs) -> Result<()> {
-    let frf = io::read_frf(&args.input.frf)?;
+    if args.input.frf.len() != 1 {
+        anyhow::bail!("compare: --frf given {} times; compare takes one FRF", args.input.frf.len());
+    }
+    let frf = io::read_frf(args.input.frf())?;
     let c = compare(args, &frf)?;
     let text = render(&c);
     let json = serde_json::to_string_pretty(&c)?;

@@ -58,6 +58,12 @@ pub struct CompensateArgs {
     /// Needs the model sidecar `<image>.model.json` that `design` writes.
     #[arg(long, conflicts_with = "raw_timing")]
     pub offline: bool,
+    /// With --offline: the set-up drifts from the first FRF's state at START
+    /// to the second's at END (seconds; linear in the state variable,
+    /// constant outside): a time-varying smoother with the two states of a
+    /// `design --frf BEFORE --frf AFTER` sidecar (issue #15).
+    #[arg(long, value_name = "START:END", requires = "offline")]
+    pub drift: Option<String>,
     /// Write a report of the compensation (index.html and SVG plots) into DIR.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
@@ -131,10 +137,17 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
             n_samples = write_whole(a, out_fmt, &rec, &out, fs, acc.as_mut(), truth.as_mut())?;
         }
         (AnyImage::Inline(i), true) => {
-            how = "fixed-interval smoother, zero lag (offline only, whole record in memory)".to_string();
+            let drift = a.drift.as_deref().map(crate::two_state::parse_interval).transpose()?;
+            how = match drift {
+                Some((s0, s1)) => format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only, whole record in memory)"),
+                None => "fixed-interval smoother, zero lag (offline only, whole record in memory)".to_string(),
+            };
             let sidecar = crate::smoother::read_sidecar(&a.coeffs, i)?;
             let rec = whole_record(&mut *reader, fs, &source)?;
-            let out = crate::smoother::smooth_record(i, &sidecar, &rec, &source)?;
+            let out = match drift {
+                Some(iv) => crate::two_state::smooth_record_drifting(i, &sidecar, &rec, &source, iv)?,
+                None => crate::smoother::smooth_record(i, &sidecar, &rec, &source)?,
+            };
             n_samples = write_whole(a, out_fmt, &rec, &out, fs, acc.as_mut(), truth.as_mut())?;
         }
         (AnyImage::Parallel(_), true) => bail!(

@@ -145,6 +145,9 @@ pub struct AxisDesign {
     pub compensated_band_hz: (f64, f64),
     /// Notes for the user (e.g. FRF lines beyond the box's band).
     pub notes: Vec<String>,
+    /// Predicted in-band error when the sensor modes shift by −5…+5 %
+    /// ([`crate::sensitivity`]; `None` when the model has no mode).
+    pub sensitivity: Option<crate::sensitivity::Sensitivity>,
 }
 
 impl AxisDesign {
@@ -238,6 +241,42 @@ pub fn flat_band(
     }
 }
 
+/// The noise factor of J (module doc): (2R/fs)·(f_hi − f_lo)/force_rms², the
+/// in-band noise variance relative to the force's, for `band_width_hz` = the
+/// summed width of the criterion's bands.
+pub fn noise_term(r: f64, fs_hz: f64, band_width_hz: f64, force_rms: f64) -> f64 {
+    2.0 * r / fs_hz * band_width_hz / (force_rms * force_rms)
+}
+
+/// J of the Q criterion (module doc): mean over the grid of
+/// |H·G·e^{j2πfL/fs} − 1|² plus `noise`·mean |H|², with `grid` = (f, G(j2πf))
+/// (the plant the filter meets) and `h` = H(e^{j2πf/fs}) on the same lines.
+pub fn criterion_j(grid: &[(f64, Complex64)], h: &[Complex64], lag: usize, fs_hz: f64, noise: f64) -> f64 {
+    let (mut dist, mut amp) = (0.0, 0.0);
+    for ((f, g), h) in grid.iter().zip(h) {
+        let e = h * g * Complex64::from_polar(1.0, 2.0 * PI * f * lag as f64 / fs_hz) - 1.0;
+        dist += e.norm_sqr();
+        amp += h.norm_sqr();
+    }
+    let n = grid.len() as f64;
+    dist / n + noise * amp / n
+}
+
+/// The frequency ranges of the Q criterion of a design: its fitting bands,
+/// or the compensated band without bands.
+pub fn criterion_ranges(bands: &[Band], compensated_band_hz: (f64, f64)) -> Vec<(f64, f64)> {
+    if bands.is_empty() {
+        vec![compensated_band_hz]
+    } else {
+        bands.iter().map(|b| (b.lo_hz, b.hi_hz)).collect()
+    }
+}
+
+/// The lines of the Q criterion: 200 spread over `ranges` (see [`criterion_ranges`]).
+pub fn criterion_grid(ranges: &[(f64, f64)]) -> Vec<f64> {
+    band_grid(ranges, 200)
+}
+
 struct Objective<'a> {
     design: &'a dyn Fn(f64) -> Result<KalmanDesign>,
     lag: usize,
@@ -265,16 +304,9 @@ impl Objective<'_> {
         let fs = self.opts.fs_hz;
         let ss = &d.compensator;
         let ng = ss.white_noise_gain().unwrap_or(f64::INFINITY);
-        let (mut dist, mut amp) = (0.0, 0.0);
-        for (f, g) in &self.grid {
-            let h = ss.freq_response(*f, fs);
-            let e = h * g * Complex64::from_polar(1.0, 2.0 * PI * f * self.lag as f64 / fs) - 1.0;
-            dist += e.norm_sqr();
-            amp += h.norm_sqr();
-        }
-        let n = self.grid.len() as f64;
-        let noise_term = 2.0 * self.r / fs * self.band_width / (self.opts.force_rms * self.opts.force_rms);
-        let j = dist / n + noise_term * amp / n;
+        let h: Vec<Complex64> = self.grid.iter().map(|(f, _)| ss.freq_response(*f, fs)).collect();
+        let noise = noise_term(self.r, fs, self.band_width, self.opts.force_rms);
+        let j = criterion_j(&self.grid, &h, self.lag, fs, noise);
         if ng > self.opts.max_noise_gain {
             return (f64::INFINITY, ng, Some(d));
         }
@@ -448,9 +480,9 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         bail!("axis {name}: fitted static gain |G(0)| = {dc:.3} N/N; the FRF must be force/force (N/N), check units and calibration (with fitting bands: include the static band)");
     }
 
-    let ranges: Vec<(f64, f64)> = if opts.bands.is_empty() { vec![comp_band] } else { opts.bands.iter().map(|b| (b.lo_hz, b.hi_hz)).collect() };
+    let ranges = criterion_ranges(&opts.bands, comp_band);
     let f_top = ranges.iter().map(|b| b.1).fold(0.0, f64::max);
-    let grid: Vec<(f64, Complex64)> = band_grid(&ranges, 200).into_iter().map(|f| (f, fitted.frf(f))).collect();
+    let grid: Vec<(f64, Complex64)> = criterion_grid(&ranges).into_iter().map(|f| (f, fitted.frf(f))).collect();
     let lag = if fitted.paper.is_some() { 0 } else { opts.lag };
     let prewarp_hz = match &opts.method {
         FitMethod::Paper { prewarp_hz: Some(p), .. } => *p,
@@ -541,7 +573,7 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
     // from 7 averages has ~5 % random error, as large as the tolerance.
     let model_frf: Vec<Complex64> = freq_hz.iter().map(|f| fitted.frf(*f)).collect();
     let flat = flat_band(|f| quantize::filter_response(&filter, f, fs), freq_hz, &model_frf, &eval_band, lag, fs);
-    Ok(AxisDesign {
+    let mut design = AxisDesign {
         axis: frf.axis,
         model: fitted.model.clone(),
         order_trace: fitted.order_trace.clone(),
@@ -563,7 +595,10 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         raw_predicted_error: raw_j.sqrt(),
         compensated_band_hz: comp_band,
         notes,
-    })
+        sensitivity: None,
+    };
+    design.sensitivity = crate::sensitivity::predict(&design, opts);
+    Ok(design)
 }
 
 /// Realize the compensator `ss` and round it to f32, with no CPU budget:

@@ -128,9 +128,10 @@ impl PaperArgs {
 /// sample rate, the noise model and the assumptions of the Q criterion.
 #[derive(Args, Debug, Clone)]
 pub struct DesignInputArgs {
-    /// Measured FRF: UFF58 (.uff/.unv) or CSV.
-    #[arg(long)]
-    pub frf: PathBuf,
+    /// Measured FRF: UFF58 (.uff/.unv) or CSV. `design` takes it twice for
+    /// a set-up in two states (before and after machining, issue #15).
+    #[arg(long, required = true)]
+    pub frf: Vec<PathBuf>,
     /// Sample rate of the box (Hz).
     #[arg(long)]
     pub fs: f64,
@@ -154,6 +155,11 @@ pub struct DesignInputArgs {
 }
 
 impl DesignInputArgs {
+    /// The (first) measured FRF.
+    pub fn frf(&self) -> &std::path::Path {
+        &self.frf[0]
+    }
+
     /// `--fs` must be a whole number of Hz that an image can hold.
     pub fn check_fs(&self) -> Result<()> {
         let fs = self.fs;
@@ -216,6 +222,22 @@ pub struct DesignArgs {
     /// it is still written, marked offline-only.
     #[arg(long, default_value_t = 60.0, value_name = "PCT")]
     pub max_load: f64,
+}
+
+impl DesignArgs {
+    /// The design options every `design` run shares: rate, latency, the Q
+    /// criterion's inputs, the fit's highest order and the discretization.
+    pub fn base_options(&self, latency: usize) -> DesignOptions {
+        DesignOptions {
+            fs_hz: self.input.fs,
+            lag: latency,
+            force_rms: self.input.force_rms,
+            max_noise_gain: self.input.max_noise_gain,
+            vf: crate::fit::vf::VfOptions { max_order: self.max_order, ..Default::default() },
+            discretization: self.input.discretization,
+            ..Default::default()
+        }
+    }
 }
 
 /// Machine-readable summary of one axis.
@@ -281,6 +303,9 @@ pub struct AxisJson {
     /// Condition numbers, observability rank, Riccati residual and prewarp
     /// frequency of `--method paper`.
     pub paper: Option<PaperDiagnostics>,
+    /// Predicted in-band error when the sensor modes shift by −5…+5 %
+    /// (`crate::sensitivity`), with the shifts where it doubles.
+    pub sensitivity: Option<crate::sensitivity::Sensitivity>,
 }
 
 /// Machine-readable summary of the whole design.
@@ -441,6 +466,11 @@ pub fn render_summary(designs: &[AxisDesign], fs: f64, latency: usize, image: &s
         }
     }
     for d in designs {
+        if let Some(sens) = &d.sensitivity {
+            let _ = writeln!(s, "{}", crate::sensitivity::summary_line(axis_name(d.axis), sens));
+        }
+    }
+    for d in designs {
         if let Some((tf, p)) = &d.paper {
             let _ = writeln!(s, "{}", paper_line(d.axis, tf.nb(), tf.na(), p));
         }
@@ -471,6 +501,11 @@ pub fn paper_line(axis: usize, nb: usize, na: usize, p: &PaperDiagnostics) -> St
 
 /// Run `dynocomp design`.
 pub fn run(args: &DesignArgs) -> Result<()> {
+    match args.input.frf.len() {
+        1 => {}
+        2 => return crate::two_state_cmd::run(args),
+        n => bail!("--frf given {n} times: give one FRF, or two (before and after) for a set-up in two states"),
+    }
     let paper = args.method == "paper";
     let latency = match (paper, args.latency) {
         (true, Some(l)) if l != 0 => bail!("--latency {l}: the paper's method (a Kalman filter, not a smoother) has no lag; omit --latency or give 0"),
@@ -487,27 +522,21 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     }
     let limit_permille = (args.max_load * 10.0).floor() as u32;
     let t0 = Instant::now();
-    let bytes = std::fs::read(&args.input.frf).with_context(|| format!("{}: cannot read", args.input.frf.display()))?;
+    let bytes = std::fs::read(args.input.frf()).with_context(|| format!("{}: cannot read", args.input.frf().display()))?;
     let sha: [u8; 32] = Sha256::digest(&bytes).into();
-    let frf = io::parse_frf(&args.input.frf, &bytes)?;
+    let frf = io::parse_frf(args.input.frf(), &bytes)?;
     let r = args.input.noise_variances(&frf)?;
-    let bands = args.bands.resolve(&frf, args.input.fs).with_context(|| format!("{}", args.input.frf.display()))?;
+    let bands = args.bands.resolve(&frf, args.input.fs).with_context(|| format!("{}", args.input.frf().display()))?;
     let method = if paper { args.paper.method(args.bands.tooth_passing_hz(), args.input.fs)? } else { FitMethod::Vf };
     let opts = DesignOptions {
-        fs_hz: args.input.fs,
-        lag: latency,
-        force_rms: args.input.force_rms,
-        max_noise_gain: args.input.max_noise_gain,
-        vf: crate::fit::vf::VfOptions { max_order: args.max_order, ..Default::default() },
         method,
         bands: bands.clone(),
-        discretization: args.input.discretization,
         axis_cycle_budget: Some(dynocomp_core::budget::axis_budget(
             args.input.fs as u32,
             limit_permille,
             frf.axes.len().max(1) as u32,
         )),
-        ..Default::default()
+        ..args.base_options(latency)
     };
     let method_name = if paper { "paper" } else { "vf" };
     if args.parallel {
@@ -536,7 +565,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     let mut designs = Vec::new();
     let mut times = Vec::new();
     for (a, (d, dt)) in frf.axes.iter().zip(results) {
-        let d = d.with_context(|| format!("{}", args.input.frf.display()))?;
+        let d = d.with_context(|| format!("{}", args.input.frf().display()))?;
         eprintln!("  axis {}: order {}, q {:.3e}, {:.0} ms", axis_name(a.axis), d.model.order(), d.kalman.q, dt * 1e3);
         times.push(dt);
         designs.push(d);
@@ -612,6 +641,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
                     design_time_s: *t,
                     fit_nrmse_out_of_band: (!d.bands.is_empty() && d.fit_nrmse_out_of_band.is_finite()).then_some(d.fit_nrmse_out_of_band),
                     paper: d.paper.as_ref().map(|p| p.1.clone()),
+                    sensitivity: d.sensitivity.clone(),
                 })
                 .collect(),
         };

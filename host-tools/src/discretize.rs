@@ -274,9 +274,21 @@ fn fit_grid(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64)) -> Vec<f6
     g
 }
 
-/// The unit-circle least-squares fit (module doc); the number of FIR taps
-/// is raised while each tap lowers the in-band match error enough.
-fn fit_unit_circle(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64)) -> Result<(DiscreteModel, FitDiagnostics)> {
+/// The unit-circle fit of `model` with a given structure: `taps` FIR taps
+/// and advance `advance` (e.g. those [`discretize`] chose for a neighbouring
+/// model), so that models of a set-up that changes share one state layout
+/// (the time-varying smoother of [`crate::two_state`]).
+pub fn fit_with_structure(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64), taps: usize, advance: usize) -> Result<DiscreteModel> {
+    if taps > MAX_FIR_TAPS || advance > MAX_ADVANCE {
+        bail!("discrete model: {taps} FIR taps / advance {advance} exceed the fit's limits ({MAX_FIR_TAPS} / {MAX_ADVANCE})");
+    }
+    let (ls, _, _) = unit_circle_problem(model, fs_hz, band_hz)?;
+    ls.solve(taps, advance).map(|x| x.0).ok_or_else(|| anyhow::anyhow!("discrete model: the fit with {taps} taps and advance {advance} is ill-conditioned"))
+}
+
+/// The least-squares problem of the unit-circle fit of `model`, its grid's
+/// lines in the band, and the number of modes above Nyquist.
+fn unit_circle_problem(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64)) -> Result<(LeastSquares, Vec<f64>, usize)> {
     let t = 1.0 / fs_hz;
     let nyq = PI * fs_hz; // rad/s
     let kept: Vec<(Complex64, bool)> = model
@@ -295,10 +307,17 @@ fn fit_unit_circle(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64)) ->
     if let Some(i) = truth.iter().position(|g| !(g.norm() > 0.0 && g.norm().is_finite())) {
         bail!("discrete model: the fitted model is zero or not finite at {:.1} Hz; refit the FRF", grid[i]);
     }
+    let ls = LeastSquares::new(&kept, fs_hz, t, &grid, &truth, band_hz);
+    Ok((ls, band_grid, above))
+}
+
+/// The unit-circle least-squares fit (module doc); the number of FIR taps
+/// is raised while each tap lowers the in-band match error enough.
+fn fit_unit_circle(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64)) -> Result<(DiscreteModel, FitDiagnostics)> {
+    let (ls, band_grid, above) = unit_circle_problem(model, fs_hz, band_hz)?;
     // Every (advance, taps) pair, then the least complex one whose in-band
     // match error is within reach of the best: below MATCH_TARGET, or within
     // MATCH_SLACK of the best error when that is above the target.
-    let ls = LeastSquares::new(&kept, fs_hz, t, &grid, &truth, band_hz);
     let mut tried: Vec<(DiscreteModel, FitDiagnostics, f64)> = Vec::new();
     for advance in 0..=MAX_ADVANCE {
         for taps in advance.saturating_sub(1)..=MAX_FIR_TAPS {

@@ -103,7 +103,7 @@ pub fn run(
     sha: [u8; 32],
 ) -> Result<()> {
     let t0 = std::time::Instant::now();
-    let per_band = design_parallel(frf, r, opts, bands).with_context(|| format!("{}", args.input.frf.display()))?;
+    let per_band = design_parallel(frf, r, opts, bands).with_context(|| format!("{}", args.input.frf().display()))?;
     let image = build_parallel_image(&per_band, bands, args.input.fs as u32, latency, args.full_scale, sha)?;
     crate::io::image_file::write_parallel_image(&args.out, &image)?;
     let id = image.id();

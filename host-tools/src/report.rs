@@ -139,6 +139,14 @@ pub fn write_report(dir: &Path, frf: &Frf, designs: &[AxisDesign], fs_hz: f64, s
                 plot_model_match(d, dm, fs_hz).with_context(|| format!("report: axis {name}: model match plot"))?,
             ));
         }
+        if let Some(sens) = &d.sensitivity {
+            plots.push((
+                format!("{name}_sensitivity.svg"),
+                format!("Axis {name}: sensitivity to moving sensor modes"),
+                crate::sensitivity::plot_caption(sens),
+                crate::sensitivity::plot(name, sens).with_context(|| format!("report: axis {name}: sensitivity plot"))?,
+            ));
+        }
         let mut entries = Vec::new();
         for (file, title, caption, svg) in plots {
             entries.push((file.clone(), title, caption));

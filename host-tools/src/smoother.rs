@@ -88,6 +88,48 @@ pub struct AxisModelJson {
     /// The discrete model of the design (absent in older sidecars: FOH).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub discrete: Option<DiscreteModel>,
+    /// Both states of a design from two FRFs (`design --frf A --frf B`,
+    /// issue #15; absent otherwise and in older sidecars).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub two_state: Option<crate::two_state::TwoStateJson>,
+}
+
+/// The sidecar's terms of a pole-residue model.
+pub fn terms_to_json(m: &PoleResidueModel) -> Vec<TermJson> {
+    m.terms
+        .iter()
+        .map(|t| match *t {
+            Term::Real { pole, residue } => TermJson::Real { pole, residue },
+            Term::Pair { pole, residue } => TermJson::Pair { pole: [pole.re, pole.im], residue: [residue.re, residue.im] },
+        })
+        .collect()
+}
+
+/// The pole-residue model of sidecar terms, validated (finite, stable poles
+/// with Im > 0); the error names `source` and axis `name`.
+pub fn model_from_json(d: f64, terms: &[TermJson], source: &str, name: &str) -> Result<PoleResidueModel> {
+    let model = PoleResidueModel {
+        terms: terms
+            .iter()
+            .map(|t| match t {
+                TermJson::Real { pole, residue } => Term::Real { pole: *pole, residue: *residue },
+                TermJson::Pair { pole, residue } => Term::Pair {
+                    pole: Complex64::new(pole[0], pole[1]),
+                    residue: Complex64::new(residue[0], residue[1]),
+                },
+            })
+            .collect(),
+        d,
+    };
+    let finite = d.is_finite()
+        && terms.iter().all(|t| match t {
+            TermJson::Real { pole, residue } => pole.is_finite() && residue.is_finite(),
+            TermJson::Pair { pole, residue } => pole.iter().chain(residue).all(|v| v.is_finite()) && pole[1] > 0.0,
+        });
+    if !finite || !model.is_stable() {
+        bail!("{source}: axis {name}: the model has non-finite values or unstable poles; re-run `dynocomp design`");
+    }
+    Ok(model)
 }
 
 /// The sidecar `<image>.model.json` written by `dynocomp design`: the fitted
@@ -126,14 +168,8 @@ impl ModelSidecar {
                 discrete: dm.cloned(),
                 axis: axis_name(*axis).to_string(),
                 d: m.d,
-                terms: m
-                    .terms
-                    .iter()
-                    .map(|t| match *t {
-                        Term::Real { pole, residue } => TermJson::Real { pole, residue },
-                        Term::Pair { pole, residue } => TermJson::Pair { pole: [pole.re, pole.im], residue: [residue.re, residue.im] },
-                    })
-                    .collect(),
+                terms: terms_to_json(m),
+                two_state: None,
             })
             .collect();
         ModelSidecar {
@@ -151,27 +187,7 @@ impl ModelSidecar {
         let Some(a) = self.axes.iter().find(|a| a.axis == name) else {
             bail!("{source}: no model for axis {name}; re-run `dynocomp design` for this axis");
         };
-        let terms = a
-            .terms
-            .iter()
-            .map(|t| match t {
-                TermJson::Real { pole, residue } => Term::Real { pole: *pole, residue: *residue },
-                TermJson::Pair { pole, residue } => Term::Pair {
-                    pole: Complex64::new(pole[0], pole[1]),
-                    residue: Complex64::new(residue[0], residue[1]),
-                },
-            })
-            .collect();
-        let model = PoleResidueModel { terms, d: a.d };
-        let finite = a.d.is_finite()
-            && a.terms.iter().all(|t| match t {
-                TermJson::Real { pole, residue } => pole.is_finite() && residue.is_finite(),
-                TermJson::Pair { pole, residue } => pole.iter().chain(residue).all(|v| v.is_finite()) && pole[1] > 0.0,
-            });
-        if !finite || !model.is_stable() {
-            bail!("{source}: axis {name}: the model has non-finite values or unstable poles; re-run `dynocomp design`");
-        }
-        Ok(model)
+        model_from_json(a.d, &a.terms, source, name)
     }
 
     /// The discrete model of `axis` for the smoother: the stored one,

@@ -73,6 +73,9 @@ fn report_writes_svgs_and_index() {
     let poles = check_svg(&dir.join("x_poles.svg"), &["Axis x", "Re z", "Im z", "unit circle", "compensator", "fitted model"]);
     assert!(longest_polyline(&poles) > 100, "pole map has no unit circle");
     assert!(poles.contains("<circle"), "pole map has no model poles");
+    // Issue #15: the sensitivity curve, one point per shift of −5…+5 %.
+    let sens = check_svg(&dir.join("x_sensitivity.svg"), &["Axis x", "Sensor-mode shift", "predicted error", "twice the nominal"]);
+    assert!(longest_polyline(&sens) >= dynocomp::sensitivity::SHIFTS_PCT.len(), "sensitivity plot has no curve");
 
     let html = std::fs::read_to_string(dir.join("index.html")).unwrap();
     assert!(html.starts_with("<!DOCTYPE html>"));

@@ -159,15 +159,24 @@ impl AntiAlias {
     /// [`Self::fine_len`] samples) with `dyn_` through this chain: returns
     /// (band-limited truth, noise-free measurement), `n` samples each at fs.
     pub fn acquire(&self, dyn_: &Dynamometer, force_fine: &[f64], fs_hz: f64, oversample: usize, n: usize) -> (Vec<f64>, Vec<f64>) {
-        let os = oversample.max(1);
-        let f_fine = fs_hz * os as f64;
+        let f_fine = fs_hz * oversample.max(1) as f64;
         let y = match self.analog() {
             None => dyn_.measure(force_fine, f_fine),
             Some(b) => measure_through(dyn_, b, force_fine, f_fine),
         };
+        self.acquire_response(force_fine, &y, fs_hz, oversample, n)
+    }
+
+    /// As [`Self::acquire`], with the dynamometer's response `y` to
+    /// `force_fine` (rate fs·oversample, including any analog front end)
+    /// already computed, e.g. by a drifting model
+    /// ([`super::drift::measure_drifting`]).
+    pub fn acquire_response(&self, force_fine: &[f64], y: &[f64], fs_hz: f64, oversample: usize, n: usize) -> (Vec<f64>, Vec<f64>) {
+        let os = oversample.max(1);
+        let f_fine = fs_hz * os as f64;
         let decimate = |x: &[f64]| -> Vec<f64> { x.iter().step_by(os).take(n).copied().collect() };
         let Some(fc) = self.brick_wall_hz(fs_hz) else {
-            return (decimate(force_fine), decimate(&y));
+            return (decimate(force_fine), decimate(y));
         };
         // The piecewise-linear force's spectrum: the samples' × sinc²(πf/f_fine).
         let sinc2 = |f: f64| {
@@ -179,7 +188,7 @@ impl AntiAlias {
             }
         };
         let truth = band_limit(force_fine, f_fine, os, |f| if f <= fc { sinc2(f) } else { 0.0 });
-        let clean = band_limit(&y, f_fine, os, |f| if f <= fc { 1.0 } else { 0.0 });
+        let clean = band_limit(y, f_fine, os, |f| if f <= fc { 1.0 } else { 0.0 });
         (decimate(&truth), decimate(&clean))
     }
 }

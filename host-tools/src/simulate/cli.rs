@@ -100,6 +100,19 @@ pub struct SimulateArgs {
     /// Impact test: hammer spectrum cutoff (Hz) [default: 3000].
     #[arg(long)]
     pub hammer_cutoff: Option<f64>,
+    /// Let the sensor modes drift during the cutting record by this many
+    /// percent (e.g. +3: the workpiece's mass loss moves them up), from
+    /// --drift-start to --drift-end with the modal mass linear in time (1/f²
+    /// linear); frf.uff is then the set-up before
+    /// the drift and frf_after.uff/.csv after it, drift.json describes it.
+    #[arg(long, allow_hyphen_values = true, value_name = "PCT")]
+    pub drift_percent: Option<f64>,
+    /// Start of the drift (s) [default: 0].
+    #[arg(long, requires = "drift_percent")]
+    pub drift_start: Option<f64>,
+    /// End of the drift (s) [default: the end of the record].
+    #[arg(long, requires = "drift_percent")]
+    pub drift_end: Option<f64>,
 }
 
 impl SimulateArgs {
@@ -246,8 +259,17 @@ pub fn write_outputs(dir: &Path, out: &SimOutput) -> Result<()> {
 /// summary goes to stderr.
 pub fn run(args: &SimulateArgs) -> Result<()> {
     let params = args.params();
-    let out = simulate(args.seed, &params)?;
-    write_outputs(&args.out, &out)?;
+    let out = match args.drift_percent {
+        Some(pct) => {
+            let drift = super::drift::Drift { delta: pct / 100.0, start_s: args.drift_start.unwrap_or(0.0), end_s: args.drift_end.unwrap_or(params.duration_s) };
+            super::drift::run(args.seed, &params, drift, &args.out)?
+        }
+        None => {
+            let out = simulate(args.seed, &params)?;
+            write_outputs(&args.out, &out)?;
+            out
+        }
+    };
     let p = &out.params;
     eprintln!(
         "simulate: seed {}, fs {} Hz, {} samples ({} s), oversample {}, anti-alias {}",

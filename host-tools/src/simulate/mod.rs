@@ -26,6 +26,7 @@
 
 pub mod chain;
 pub mod cli;
+pub mod drift;
 pub mod dynamometer;
 pub mod impact;
 pub mod measurement;
@@ -167,9 +168,9 @@ pub fn sub_seed(seed: u64, tag: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-const TAG_DYNO: u64 = 1;
-const TAG_IMPACT: u64 = 2;
-const TAG_NOISE: u64 = 10; // + axis
+pub(crate) const TAG_DYNO: u64 = 1;
+pub(crate) const TAG_IMPACT: u64 = 2;
+pub(crate) const TAG_NOISE: u64 = 10; // + axis
 const TAG_IDLE: u64 = 20; // + axis
 
 /// Measure `force_fine` (defined at `fs·oversample`, at least

@@ -1,0 +1,422 @@
+//! A set-up in two states (issue #15, items 2-3): the FRF measured before and
+//! after machining, a modal model interpolated between them, and the
+//! fixed-interval smoother with a model that moves from one to the other
+//! during the record.
+//!
+//! **Pairing (stated rule).** The complex pairs of the two fitted models are
+//! sorted by natural frequency and matched in that order; the two models
+//! must have as many pairs and as many real poles, and each matched pair's
+//! natural frequencies may differ by at most [`PAIR_TOLERANCE`] (relative).
+//! Otherwise pairing fails with a message naming the axis and the modes.
+//! Real poles are matched in ascending order of their value.
+//!
+//! **Interpolation** in the state variable s ∈ [0, 1] (0 = before, 1 =
+//! after): per pair, 1/ω_n² linear in s (linear in added mass at constant
+//! stiffness), the damping ratio ζ linear, and the residue linear as a
+//! modal share (ρ·2jω_d/ω_n², the r of r·ω²/(s² + 2ζωs + ω²): the static
+//! gain the mode contributes, which a change of mass keeps; interpolating ρ
+//! itself would bend the static gain by ~0.1 % in the middle of a 5 %
+//! shift); real poles and their residues linear; the direct term linear.
+//!
+//! **Time-varying smoother** ([`smooth_drifting`]): the model moves from
+//! state 0 at `start_s` to state 1 at `end_s`, linearly in s, constant
+//! outside. s is quantized to [`S_LEVELS`] levels (a 5 % drift moves in
+//! steps of 0.02 %); each level's continuous model is discretized on the
+//! unit circle with the same FIR taps and advance as state 0's
+//! ([`crate::discretize::fit_with_structure`]), so every step has the same
+//! augmented state layout ([`crate::kalman::augmented_plant`]). The forward
+//! pass is the exact time-varying Kalman filter (covariance propagated
+//! through every step's A, c; P⁻₀ = state 0's stationary DARE solution), the
+//! backward pass the modified Bryson–Frazier recursion with each step's own
+//! K, c, S and A (the same estimates as Rauch–Tung–Striebel, no covariance
+//! inversion), all in f64. With a constant model it reproduces the
+//! stationary [`crate::smoother::Smoother`].
+
+use anyhow::{bail, Context, Result};
+use nalgebra::{DMatrix, DVector};
+use num_complex::Complex64;
+use std::collections::HashMap;
+use std::f64::consts::PI;
+
+use crate::design::{criterion_grid, criterion_j, criterion_ranges, design_axis, noise_term, AxisDesign, DesignOptions};
+use crate::discretize::{fit_with_structure, DiscreteModel};
+use crate::fit::vf::{coherence_weights, fit_order};
+use crate::fit::{PoleResidueModel, Term};
+use crate::frf::{axis_name, AxisFrf};
+use crate::io::signal_csv::SignalRecord;
+use crate::smoother::{model_from_json, terms_to_json, ModelSidecar, TermJson};
+use dynocomp_core::image::CoeffImage;
+use crate::kalman::{augmented_plant, solve_filter_dare};
+
+/// Largest relative difference of the natural frequencies of two paired modes.
+pub const PAIR_TOLERANCE: f64 = 0.15;
+
+/// Quantization levels of the state variable s in the time-varying smoother.
+pub const S_LEVELS: usize = 256;
+
+/// The paired models of one axis in its two states.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TwoState {
+    /// State 0 (before).
+    pub before: PoleResidueModel,
+    /// State 1 (after), its terms in the order of their partners in `before`.
+    pub after: PoleResidueModel,
+}
+
+fn fn_hz(p: Complex64) -> f64 {
+    p.norm() / (2.0 * PI)
+}
+
+fn list(f: &[f64]) -> String {
+    f.iter().map(|v| format!("{v:.0}")).collect::<Vec<_>>().join(", ")
+}
+
+/// Pair the modes of `before` and `after` (module doc); `axis` names the
+/// axis in errors.
+pub fn pair(axis: &str, before: &PoleResidueModel, after: &PoleResidueModel) -> Result<TwoState> {
+    type Split = (Vec<(Complex64, Complex64)>, Vec<(f64, f64)>);
+    let split = |m: &PoleResidueModel| -> Split {
+        let mut pairs = Vec::new();
+        let mut reals = Vec::new();
+        for t in &m.terms {
+            match *t {
+                Term::Pair { pole, residue } => pairs.push((pole, residue)),
+                Term::Real { pole, residue } => reals.push((pole, residue)),
+            }
+        }
+        pairs.sort_by(|a, b| a.0.norm().total_cmp(&b.0.norm()));
+        reals.sort_by(|a, b| a.0.total_cmp(&b.0));
+        (pairs, reals)
+    };
+    let (p0, r0) = split(before);
+    let (p1, r1) = split(after);
+    let f0: Vec<f64> = p0.iter().map(|p| fn_hz(p.0)).collect();
+    let f1: Vec<f64> = p1.iter().map(|p| fn_hz(p.0)).collect();
+    if p0.len() != p1.len() {
+        bail!(
+            "axis {axis}: cannot pair the modes of the two FRFs: the first has {} modes ({} Hz), the second {} ({} Hz); measure both states over the same band or fix --max-order",
+            p0.len(),
+            list(&f0),
+            p1.len(),
+            list(&f1)
+        );
+    }
+    if r0.len() != r1.len() {
+        bail!("axis {axis}: cannot pair the two FRFs' models: {} real poles in the first, {} in the second", r0.len(), r1.len());
+    }
+    for (a, b) in f0.iter().zip(&f1) {
+        if ((b - a) / a).abs() > PAIR_TOLERANCE {
+            bail!(
+                "axis {axis}: cannot pair mode {a:.0} Hz (first FRF) with {b:.0} Hz (second FRF): {:+.1} % apart, more than ±{:.0} %",
+                100.0 * (b / a - 1.0),
+                100.0 * PAIR_TOLERANCE
+            );
+        }
+    }
+    let model = |pairs: &[(Complex64, Complex64)], reals: &[(f64, f64)], d: f64| PoleResidueModel {
+        terms: pairs
+            .iter()
+            .map(|&(pole, residue)| Term::Pair { pole, residue })
+            .chain(reals.iter().map(|&(pole, residue)| Term::Real { pole, residue }))
+            .collect(),
+        d,
+    };
+    Ok(TwoState { before: model(&p0, &r0, before.d), after: model(&p1, &r1, after.d) })
+}
+
+impl TwoState {
+    /// The model at state s ∈ [0, 1] (module doc).
+    pub fn at(&self, s: f64) -> PoleResidueModel {
+        let lin = |a: f64, b: f64| a + s * (b - a);
+        let terms = self
+            .before
+            .terms
+            .iter()
+            .zip(&self.after.terms)
+            .map(|(a, b)| match (*a, *b) {
+                (Term::Pair { pole: p0, residue: r0 }, Term::Pair { pole: p1, residue: r1 }) => {
+                    let (w0, w1) = (p0.norm(), p1.norm());
+                    let (z0, z1) = (-p0.re / w0, -p1.re / w1);
+                    let w = 1.0 / lin(1.0 / (w0 * w0), 1.0 / (w1 * w1)).sqrt();
+                    let z = lin(z0, z1);
+                    let (c0, c1) = (modal_share(p0, r0), modal_share(p1, r1));
+                    let pole = Complex64::new(-z * w, w * (1.0 - z * z).sqrt());
+                    Term::Pair { pole, residue: (c0 + (c1 - c0) * s) * w * w / (2.0 * Complex64::i() * pole.im) }
+                }
+                (Term::Real { pole: p0, residue: r0 }, Term::Real { pole: p1, residue: r1 }) => {
+                    Term::Real { pole: lin(p0, p1), residue: lin(r0, r1) }
+                }
+                _ => unreachable!("pair() orders both models alike"),
+            })
+            .collect();
+        PoleResidueModel { terms, d: lin(self.before.d, self.after.d) }
+    }
+}
+
+/// The modal share of the pair ρ/(s − p) + c.c.: ρ·2jω_d/ω_n², the r of
+/// r·ω²/(s² + 2ζωs + ω²) (real for a classically damped mode; the static
+/// gain the mode contributes).
+fn modal_share(pole: Complex64, residue: Complex64) -> Complex64 {
+    residue * 2.0 * Complex64::i() * pole.im / pole.norm_sqr()
+}
+
+/// The state variable at time `t_s` of a drift from `start_s` to `end_s`.
+pub fn state_at(t_s: f64, start_s: f64, end_s: f64) -> f64 {
+    if t_s <= start_s {
+        0.0
+    } else if t_s >= end_s {
+        1.0
+    } else {
+        (t_s - start_s) / (end_s - start_s)
+    }
+}
+
+/// One step's model in the smoother's augmented coordinates.
+struct Plant {
+    a: DMatrix<f64>,
+    c: DVector<f64>,
+}
+
+/// Settings of [`smooth_drifting`].
+#[derive(Clone, Copy, Debug)]
+pub struct DriftSmoothing {
+    /// Sample rate of the record (Hz).
+    pub fs_hz: f64,
+    /// The drift's start and end (s): state 0 before, 1 after.
+    pub interval_s: (f64, f64),
+    /// Compensated band of the unit-circle discretization (Hz).
+    pub band_hz: (f64, f64),
+    /// (FIR taps, advance) of state 0's discrete model.
+    pub structure: (usize, usize),
+    /// Process noise q (N²/sample).
+    pub q: f64,
+    /// Measurement noise R (N²).
+    pub r: f64,
+}
+
+/// Smoothed force estimate (N) of the record `y` (N) while the model moves
+/// from `model_at(0)` to `model_at(1)` over `opts.interval_s` (module doc);
+/// `model_at(s)` returns the continuous model at state s.
+pub fn smooth_drifting(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing) -> Result<Vec<f64>> {
+    let DriftSmoothing { fs_hz, interval_s: (start_s, end_s), band_hz, structure, q, r } = *opts;
+    if !(q > 0.0 && q.is_finite() && r > 0.0 && r.is_finite()) {
+        bail!("smoother needs q > 0 and R > 0 (got q = {q}, R = {r})");
+    }
+    if !(start_s.is_finite() && end_s.is_finite() && end_s > start_s) {
+        bail!("--drift {start_s}:{end_s}: need START < END (s)");
+    }
+    let (taps, advance) = structure;
+    let discrete = |level: usize| -> Result<DiscreteModel> {
+        let s = level as f64 / S_LEVELS as f64;
+        fit_with_structure(&model_at(s), fs_hz, band_hz, taps, advance).with_context(|| format!("model at state s = {s:.3}"))
+    };
+    let dm0 = discrete(0)?;
+    let plant0 = augmented_plant(&dm0, 0);
+    let n = plant0.a.nrows();
+    let force = plant0.n_plant;
+    let g = plant0.g.clone();
+    let qm = &g * g.transpose() * q;
+    let sol = solve_filter_dare(&plant0.a, &plant0.c, &qm, r)?;
+    let mut plants: HashMap<usize, Plant> = HashMap::new();
+    plants.insert(0, Plant { a: plant0.a, c: plant0.c });
+    // ỹ_k = y_{k−D}: D copies of y_0 in front (as the stationary smoother).
+    let yt: Vec<f64> = std::iter::repeat_n(y.first().copied().unwrap_or(0.0), advance).chain(y.iter().copied()).collect();
+    // Step k of ỹ carries the force F_k (time k/fs) and its model.
+    let level_of = |k: usize| -> usize {
+        let t = k as f64 / fs_hz;
+        (state_at(t, start_s, end_s) * S_LEVELS as f64).round() as usize
+    };
+    let len = yt.len();
+    let mut levels = Vec::with_capacity(len);
+    let mut ks: Vec<DVector<f64>> = Vec::with_capacity(len);
+    let mut ss = Vec::with_capacity(len);
+    let mut es = Vec::with_capacity(len);
+    let mut prior_f = Vec::with_capacity(len);
+    let mut p_rows: Vec<DVector<f64>> = Vec::with_capacity(len);
+    let mut x = DVector::<f64>::zeros(n);
+    let mut p = sol.p;
+    for (k, &yk) in yt.iter().enumerate() {
+        let level = level_of(k);
+        if let std::collections::hash_map::Entry::Vacant(e) = plants.entry(level) {
+            let dm = discrete(level)?;
+            let pl = augmented_plant(&dm, 0);
+            if pl.a.nrows() != n {
+                bail!("the model at state s = {:.3} has another state size ({} vs {n}); a mode crossed fs/2", level as f64 / S_LEVELS as f64, pl.a.nrows());
+            }
+            e.insert(Plant { a: pl.a, c: pl.c });
+        }
+        let pl = &plants[&level];
+        let pc = &p * &pl.c;
+        let s = pl.c.dot(&pc) + r;
+        let kg = &pc / s;
+        let e = yk - pl.c.dot(&x);
+        prior_f.push(x[force]);
+        p_rows.push(p.row(force).transpose());
+        let xp = &x + &kg * e;
+        let pp = &p - &kg * pc.transpose();
+        x = &pl.a * xp;
+        p = &pl.a * pp * pl.a.transpose() + &qm;
+        p = (&p + p.transpose()) * 0.5;
+        levels.push(level);
+        ks.push(kg);
+        ss.push(s);
+        es.push(e);
+    }
+    let mut lambda_hat = DVector::<f64>::zeros(n);
+    let mut out = vec![0.0; len];
+    for k in (0..len).rev() {
+        let pl = &plants[&levels[k]];
+        let kl = ks[k].dot(&lambda_hat);
+        let lambda_tilde = &lambda_hat - &pl.c * (es[k] / ss[k] + kl);
+        out[k] = prior_f[k] - p_rows[k].dot(&lambda_tilde);
+        if k > 0 {
+            lambda_hat = plants[&levels[k - 1]].a.tr_mul(&lambda_tilde);
+        }
+    }
+    if let Some(k) = out.iter().position(|v| !v.is_finite()) {
+        bail!("the time-varying smoother became non-finite at sample {k}");
+    }
+    out.truncate(len - advance.min(len));
+    Ok(out)
+}
+
+/// States s at which a box image designed for the range is evaluated.
+pub const RANGE_STATES: [f64; 5] = [0.0, 0.25, 0.5, 0.75, 1.0];
+
+/// One candidate box design for the range between two states.
+#[derive(Clone, Debug)]
+pub struct RangeCandidate {
+    /// Model state the candidate was designed for (0 = the first FRF as
+    /// measured, 1 = the second as measured, in between the interpolated model).
+    pub s: f64,
+    /// The design.
+    pub design: AxisDesign,
+    /// Predicted in-band error of its filter at each of [`RANGE_STATES`].
+    pub errors: Vec<f64>,
+    /// The largest of `errors`.
+    pub worst: f64,
+}
+
+/// The box image for a set-up that moves between two measured states
+/// (issue #15, item 2). **Criterion (stated):** the least worst-case
+/// predicted in-band error over s ∈ [`RANGE_STATES`], chosen among
+/// candidate designs for the model states `candidate_states` (0 and 1 are
+/// designed from the two measured FRFs as a single-state design would be,
+/// states in between from the interpolated model's response on the same
+/// lines, with the first FRF's coherence). Each candidate's filter is
+/// evaluated against the interpolated model at every s with the design's own
+/// criterion ([`crate::design::criterion_j`], the first FRF's band).
+/// Returns the pairing, every candidate, and the index of the chosen one.
+pub fn design_over_range(
+    freq_hz: &[f64],
+    first: &AxisFrf,
+    second: &AxisFrf,
+    r: f64,
+    opts: &DesignOptions,
+    candidate_states: &[f64],
+) -> Result<(TwoState, Vec<RangeCandidate>, usize)> {
+    let name = axis_name(first.axis);
+    let d0 = design_axis(freq_hz, first, r, opts).context("first FRF")?;
+    let w = coherence_weights(&second.frf, second.coherence.as_deref());
+    let after = fit_order(freq_hz, &second.frf, &w, d0.model.order(), &opts.vf).with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?;
+    let ts = pair(name, &d0.model, &after)?;
+    let ranges = criterion_ranges(&d0.bands, d0.compensated_band_hz);
+    let width: f64 = ranges.iter().map(|b| b.1 - b.0).sum();
+    let freqs = criterion_grid(&ranges);
+    let plants: Vec<Vec<(f64, Complex64)>> =
+        RANGE_STATES.iter().map(|&s| { let m = ts.at(s); freqs.iter().map(|f| (*f, m.frf(*f))).collect() }).collect();
+    let mut cands = Vec::new();
+    for &s in candidate_states {
+        let design = if s == 0.0 {
+            d0.clone()
+        } else if s == 1.0 {
+            design_axis(freq_hz, second, r, opts).context("second FRF")?
+        } else {
+            let m = ts.at(s);
+            let synthetic = AxisFrf { axis: first.axis, frf: freq_hz.iter().map(|f| m.frf(*f)).collect(), coherence: first.coherence.clone() };
+            design_axis(freq_hz, &synthetic, r, opts).with_context(|| format!("model state s = {s}"))?
+        };
+        let h: Vec<Complex64> = freqs.iter().map(|f| design.kalman.compensator.freq_response(*f, opts.fs_hz)).collect();
+        let noise = noise_term(design.kalman.r, opts.fs_hz, width, opts.force_rms);
+        let errors: Vec<f64> = plants.iter().map(|g| criterion_j(g, &h, design.kalman.lag, opts.fs_hz, noise).sqrt()).collect();
+        let worst = errors.iter().copied().fold(0.0, f64::max);
+        cands.push(RangeCandidate { s, design, errors, worst });
+    }
+    let best = (0..cands.len()).min_by(|&a, &b| cands[a].worst.total_cmp(&cands[b].worst)).ok_or_else(|| anyhow::anyhow!("axis {name}: no candidate state"))?;
+    Ok((ts, cands, best))
+}
+
+/// Both states of one axis in the model sidecar (`design --frf A --frf B`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TwoStateJson {
+    /// Direct term of state 0.
+    pub d_before: f64,
+    /// Terms of state 0 (paired order).
+    pub before: Vec<TermJson>,
+    /// Direct term of state 1.
+    pub d_after: f64,
+    /// Terms of state 1 (in the order of their partners in `before`).
+    pub after: Vec<TermJson>,
+    /// Compensated band of the unit-circle discretization (Hz).
+    pub band_hz: (f64, f64),
+    /// FIR taps of state 0's discrete model.
+    pub fir_taps: usize,
+    /// Advance of state 0's discrete model (samples).
+    pub advance: usize,
+}
+
+impl TwoStateJson {
+    /// The sidecar entry for the paired states `ts`, the design band and
+    /// state 0's discrete structure.
+    pub fn new(ts: &TwoState, band_hz: (f64, f64), dm0: &DiscreteModel) -> Self {
+        TwoStateJson {
+            d_before: ts.before.d,
+            before: terms_to_json(&ts.before),
+            d_after: ts.after.d,
+            after: terms_to_json(&ts.after),
+            band_hz,
+            fir_taps: dm0.fir.len(),
+            advance: dm0.advance,
+        }
+    }
+
+    /// The paired states, validated (the pairing is checked again).
+    pub fn states(&self, source: &str, name: &str) -> Result<TwoState> {
+        let b = model_from_json(self.d_before, &self.before, source, name)?;
+        let a = model_from_json(self.d_after, &self.after, source, name)?;
+        pair(name, &b, &a).with_context(|| source.to_string())
+    }
+}
+
+/// `compensate --offline --drift START:END`: smooth every force column of
+/// `rec` with its axis's two states from the sidecar, the model moving from
+/// state 0 at START to state 1 at END (s), q and R from the image.
+pub fn smooth_record_drifting(image: &CoeffImage, sidecar: &ModelSidecar, rec: &SignalRecord, source: &str, interval_s: (f64, f64)) -> Result<SignalRecord> {
+    let fs_hz = f64::from(image.fs_hz);
+    let mut channels = Vec::with_capacity(rec.channels.len());
+    for (axis, y) in &rec.channels {
+        let name = axis_name(*axis);
+        let Some(a) = image.axes.get(*axis).copied().flatten() else {
+            bail!("{source}: column f{name} has no compensator (and no q, R) in the image; drop the column or design for that axis");
+        };
+        let Some(entry) = sidecar.axes.iter().find(|m| m.axis == name).and_then(|m| m.two_state.as_ref()) else {
+            bail!("{source}: --drift needs two FRF states for axis {name} in the model sidecar: design with `--frf BEFORE --frf AFTER`");
+        };
+        let ts = entry.states(source, name)?;
+        let opts = DriftSmoothing { fs_hz, interval_s, band_hz: entry.band_hz, structure: (entry.fir_taps, entry.advance), q: a.summary.q, r: a.summary.r };
+        let out = smooth_drifting(y, &|s| ts.at(s), &opts).with_context(|| format!("{source}: axis {name}"))?;
+        channels.push((*axis, out));
+    }
+    Ok(SignalRecord { t_s: rec.t_s.clone(), channels })
+}
+
+/// Parse `--drift START:END` (seconds, 0 ≤ START < END).
+pub fn parse_interval(s: &str) -> Result<(f64, f64)> {
+    let bad = || anyhow::anyhow!("--drift {s}: expected START:END in seconds with 0 ≤ START < END, e.g. 0.5:12");
+    let (a, b) = s.split_once(':').ok_or_else(bad)?;
+    let (a, b): (f64, f64) = (a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?);
+    if !(a.is_finite() && b.is_finite() && a >= 0.0 && b > a) {
+        return Err(bad());
+    }
+    Ok((a, b))
+}
