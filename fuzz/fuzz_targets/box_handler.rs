@@ -155,7 +155,19 @@ fuzz_target!(|ops: Vec<Op>| {
                     Req::StopStream => h.request(Request::StopStream),
                     Req::AutoZero => h.request(Request::AutoZero),
                     Req::UploadBegin { len, crc } => h.request(Request::UploadBegin { len: *len, crc: *crc }),
-                    Req::UploadChunk { offset, bytes } => h.request(Request::UploadChunk { offset: *offset, bytes }),
+                    // A host cannot send a chunk too long for one frame (the
+                    // encoder refuses it): such a chunk is sent as long as fits.
+                    // Longer-than-MAX_CHUNK chunks that do fit still reach the box.
+                    Req::UploadChunk { offset, bytes } => {
+                        let fits = (0..=bytes.len().min(MAX_PAYLOAD))
+                            .rev()
+                            .find(|&n| {
+                                let frame = RequestFrame { id: u16::MAX, request: Request::UploadChunk { offset: *offset, bytes: &bytes[..n] } };
+                                encode_frame(&frame, &mut [0u8; MAX_FRAME]).is_ok()
+                            })
+                            .unwrap_or(0);
+                        h.request(Request::UploadChunk { offset: *offset, bytes: &bytes[..fits] })
+                    }
                     Req::UploadCommit => h.request(Request::UploadCommit),
                 };
                 match req {
