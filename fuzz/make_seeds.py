@@ -42,10 +42,31 @@ for name in sorted(os.listdir(os.path.join(ROOT, fx))):
 put("frf_csv", "coherence.csv", "freq_hz,x_re,x_im,x_coh,z_re,z_im,z_coh\n0,1,0,1,1,0,0.5\n10.5,0.9,-0.1,0.99,1.1,0.2,1\n")
 put("frf_csv", "crlf_quoted.csv", '"freq_hz","y_re","y_im"\r\n1e1,1.0,-2.5e-3\r\n2e1,1.01,-3e-3\r\n')
 
-# UFF 58 / 58b: the project's fixtures (ASCII single/double, uneven, binary).
+# UFF 58 / 58b: the project's fixtures (ASCII single/double, uneven, binary),
+# whole when they fit the campaign's -max_len (fuzz/campaign.sh, 8 KiB), and
+# each dataset on its own, so that every seed is a complete, readable file
+# within that length.
+UFF_MAX_LEN = 8192
+
+
+def uff_datasets(data):
+    """The `    -1` ... `    -1` blocks of a UFF file (ASCII framing; a
+    binary 58b block is kept whole when its bytes do not contain the
+    delimiter line)."""
+    delim = b"    -1\n"
+    parts = data.split(delim)
+    # parts: '', body1, '\n'?, body2, ... : the bodies are the odd ones.
+    return [delim + body + delim for body in parts[1::2] if body.strip()]
+
+
 for name in sorted(os.listdir(os.path.join(ROOT, fx))):
     if name.endswith(".uff"):
-        put("uff58", name, read(f"{fx}/{name}"))
+        data = read(f"{fx}/{name}")
+        if len(data) <= UFF_MAX_LEN:
+            put("uff58", name, data)
+        for k, ds in enumerate(uff_datasets(data)):
+            if len(ds) <= UFF_MAX_LEN and ds != data:
+                put("uff58", f"{name}.ds{k}", ds)
 
 # Signal CSV: heads of the example records, hand-made variants.
 put("signal_csv", "measured_head.csv", head_lines("data/example/measured.csv", 24))
@@ -153,3 +174,48 @@ put("protocol", "garbage.wire", b"\x00\x01\x02\x00\xff\xff\x00")
 # Model sidecar: the example image's own sidecar, and a foreign one.
 put("sidecar", "example.model.json", read("fuzz/images/example.dcimg.model.json"))
 put("sidecar", "foreign.model.json", read("fuzz/images/lat0.dcimg.model.json"))
+
+# UFF 58 / 58b time histories (function type 1): heads of the example's
+# measured record, written in the layout of the project's writer
+# (io/uff_signal.rs: ASCII double 4E20.12, 58b little-endian doubles) and in
+# single precision (ASCII 6E13.5, 58b floats), a negative direction, and a
+# file whose first dataset is an FRF (skipped by the reader).
+def uff_time_dataset(axis_dir, values, dt, ord_type=4, binary=False, big_endian=False):
+    double = ord_type == 4
+    n = len(values)
+    out = "%6d\n" % -1
+    if binary:
+        nbytes = n * (8 if double else 4)
+        out += "%6db%6d%6d%12d%12d%6d%6d%12d%12d\n" % (58, 2 if big_endian else 1, 2, 11, nbytes, 0, 0, 0, 0)
+    else:
+        out += "%6d%74s\n" % (58, "")
+    for ident in ["seed f%d" % abs(axis_dir), "NONE", "NONE", "NONE", "NONE"]:
+        out += "%-80s\n" % ident
+    out += "%5d%10d%5d%10d %10s%10d%4d %10s%10d%4d\n" % (1, abs(axis_dir), 0, 0, "DYN", 1, axis_dir, "HAMMER", 1, axis_dir)
+    out += "%10d%10d%10d%13.6e%13.6e%13.6e\n" % (ord_type, n, 1, 0.0, dt, 0.0)
+    for spec, label, units in [(17, "Time", "s"), (9, "Force", "N"), (0, "NONE", "NONE"), (0, "NONE", "NONE")]:
+        out += "%10d%5d%5d%5d %-20s %-20s\n" % (spec, 0, 0, 0, label, units)
+    data = out.encode()
+    if binary:
+        fmt = (">" if big_endian else "<") + ("d" if double else "f") * n
+        data += struct.pack(fmt, *values)
+    else:
+        per, f = (4, "%20.12e") if double else (6, "%13.5e")
+        lines = ["".join(f % v for v in values[i:i + per]) for i in range(0, n, per)]
+        data += ("\n".join(lines) + "\n").encode()
+    return data + ("%6d\n" % -1).encode()
+
+
+rows = head_lines("data/example/measured.csv", 25).decode().splitlines()
+cols = rows[0].split(",")
+table = [[float(v) for v in r.split(",")] for r in rows[1:]]
+chans = {c: [row[i] for row in table] for i, c in enumerate(cols) if c in ("fx", "fy", "fz")}
+dt = 1.0 / 51200.0
+xyz = [(1, chans["fx"]), (2, chans["fy"]), (3, chans["fz"])]
+put("uff_signal", "ascii_double_xyz.uff", b"".join(uff_time_dataset(d, v, dt) for d, v in xyz))
+put("uff_signal", "ascii_single_xz.uff", b"".join(uff_time_dataset(d, v, dt, ord_type=2) for d, v in xyz[::2]))
+put("uff_signal", "binary_double_xyz.uff", b"".join(uff_time_dataset(d, v, dt, binary=True) for d, v in xyz))
+put("uff_signal", "binary_single_be_y.uff", uff_time_dataset(2, chans["fy"], dt, ord_type=2, binary=True, big_endian=True))
+put("uff_signal", "ascii_negative_z.uff", uff_time_dataset(-3, chans["fz"], dt))
+frf_ds = uff_datasets(read(f"{fx}/ascii_single_xz.uff"))[0]
+put("uff_signal", "frf_then_time.uff", frf_ds + uff_time_dataset(1, chans["fx"], dt))

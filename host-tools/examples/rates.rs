@@ -63,6 +63,13 @@ fn main() -> Result<()> {
                             Err(e) => println!("{head} {:>9.3} design failed: {e}", a.raw_nrmse * 100.0),
                         }
                     }
+                    match r.box_load() {
+                        Some((c, lo, hi)) => {
+                            let shapes: Vec<String> = r.axes.iter().filter_map(|a| a.shape).map(|s| format!("{}+{}r+{}", s.pairs, s.reals, s.taps)).collect();
+                            println!("{fs:>7} {:<15} box load {:.1}-{:.1} % ({}-{} cycles; pairs+real poles+taps per axis: {})", case.name, f64::from(lo) / 10.0, f64::from(hi) / 10.0, c.low, c.high, shapes.join(", "));
+                        }
+                        None => println!("{fs:>7} {:<15} box load: a design failed", case.name),
+                    }
                     results.push(r);
                 }
             }
@@ -79,6 +86,22 @@ fn main() -> Result<()> {
             if s.worse_than_raw.is_empty() { "none".to_string() } else { s.worse_than_raw.join(", ") },
             if s.failed.is_empty() { "none".to_string() } else { s.failed.join(", ") }
         );
+    }
+    println!();
+    println!("predicted box load (budget::CostModel::CORTEX_M4, 170 MHz), median over the cases' designs");
+    println!("{:>7} {:>13} {:>13} {:>6}", "fs", "median low %", "median high %", "cases");
+    for &fs in &RATES_HZ {
+        let loads: Vec<(u32, u32)> = results.iter().filter(|r| r.fs_hz == fs).filter_map(|r| r.box_load()).map(|(_, lo, hi)| (lo, hi)).collect();
+        if loads.is_empty() {
+            continue;
+        }
+        let median = |mut v: Vec<u32>| {
+            v.sort_unstable();
+            let n = v.len();
+            if n % 2 == 1 { f64::from(v[n / 2]) } else { (f64::from(v[n / 2 - 1]) + f64::from(v[n / 2])) / 2.0 }
+        };
+        let (lo, hi) = (median(loads.iter().map(|l| l.0).collect()), median(loads.iter().map(|l| l.1).collect()));
+        println!("{fs:>7} {:>13.1} {:>13.1} {:>6}", lo / 10.0, hi / 10.0, loads.len());
     }
     println!("total run time {:.1} s", t_all.elapsed().as_secs_f64());
     Ok(())

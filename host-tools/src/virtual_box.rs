@@ -104,6 +104,12 @@ impl VirtualBox {
         self.store.flash_mut().copy()
     }
 
+    /// Erase and write operations the simulated flash has performed (tests:
+    /// the contents are unchanged while this count is).
+    pub fn flash_ops(&mut self) -> u64 {
+        self.store.flash_mut().ops()
+    }
+
     /// The image the sample path runs.
     pub fn running(&self) -> Option<&CoeffImage> {
         self.images[self.handoff.active()].as_ref()

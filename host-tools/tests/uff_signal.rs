@@ -179,3 +179,51 @@ fn ordinate_units_are_checked_and_scaled() {
         assert!(e.contains("u.uff") && e.contains("dataset #1") && e.contains("record 9") && e.contains(u), "{e}");
     }
 }
+
+/// Fuzzing (issue #16, `fuzz/fuzz_targets/uff_signal.rs`): a foreign binary
+/// dataset ("29b") whose header declares more ASCII lines than the file has,
+/// or a byte count above i64::MAX (a backwards seek), made the index pass
+/// spin forever. Both are refused naming the file, line and dataset; a
+/// well-formed foreign dataset before a time history is still skipped
+/// (control).
+#[test]
+fn foreign_binary_dataset_with_impossible_counts_is_refused() {
+    let time = |dir: i64| {
+        let mut s = format!("{:>6}\n{:>6}{:74}\n", -1, 58, "");
+        for id in ["seed", "NONE", "NONE", "NONE", "NONE"] {
+            s.push_str(&format!("{id:<80}\n"));
+        }
+        s.push_str(&format!("{:>5}{:>10}{:>5}{:>10} {:>10}{:>10}{:>4} {:>10}{:>10}{:>4}\n", 1, 1, 0, 0, "DYN", 1, dir, "HAMMER", 1, dir));
+        s.push_str(&format!("{:>10}{:>10}{:>10}{:>13.6e}{:>13.6e}{:>13.6e}\n", 4, 4, 1, 0.0, 1.0 / 51200.0, 0.0));
+        for (spec, label, units) in [(17, "Time", "s"), (9, "Force", "N"), (0, "NONE", "NONE"), (0, "NONE", "NONE")] {
+            s.push_str(&format!("{spec:>10}{:>5}{:>5}{:>5} {label:<20} {units:<20}\n", 0, 0, 0));
+        }
+        s.push_str("  1.0  2.0  3.0  4.0\n    -1\n");
+        s
+    };
+    let foreign = |lines: &str, bytes: &str| format!("    -1\n    29b     2     2 {lines:>11} {bytes:>11}     0     0\nheader\n\x01\x02\x03\x04\n    -1\n");
+    let cases = [
+        ("lines", foreign("222222222222222222", "4"), Some("header lines")),
+        ("bytes", foreign("1", "18446744073709551000"), Some("byte count")),
+        ("ok", foreign("1", "5"), None),
+    ];
+    for (name, head, want) in cases {
+        let p = tmp("uffskip", &format!("{name}.uff"));
+        std::fs::write(&p, format!("{head}{}", time(1))).unwrap();
+        // Run on a thread: before the fix the first two never returned.
+        let (tx, rx) = std::sync::mpsc::channel();
+        let q = p.clone();
+        std::thread::spawn(move || {
+            let r = open_signal(&q, None).and_then(|(mut r, _)| read_all(&mut *r)).map(|(_, c)| c[0].clone()).map_err(|e| format!("{e:#}"));
+            let _ = tx.send(r);
+        });
+        let got = rx.recv_timeout(std::time::Duration::from_secs(120)).unwrap_or_else(|_| panic!("{name}: the reader did not return"));
+        match want {
+            Some(w) => {
+                let e = got.expect_err(name);
+                assert!(e.starts_with(&format!("{}: line 1: dataset #1 (29b)", p.display())) && e.contains(w), "{name}: {e}");
+            }
+            None => assert_eq!(got.unwrap(), vec![1.0, 2.0, 3.0, 4.0], "{name}"),
+        }
+    }
+}

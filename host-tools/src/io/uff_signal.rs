@@ -112,10 +112,17 @@ impl UffReader {
                     let nb = if head.ends_with('b') { t.get(4).and_then(|s| s.parse::<u64>().ok()) } else { None };
                     if let Some(nb) = nb {
                         let nl = t.get(3).and_then(|s| s.parse::<usize>().ok()).unwrap_or(0);
+                        let here = || format!("{source}: line {start_line}: dataset #{no} ({head})");
                         for _ in 0..nl {
-                            next(&mut r, &mut line, &mut off, &mut lineno)?;
+                            // A declared line count past the end of the file ends the skip (it
+                            // used to spin through up to 2^64 reads at EOF).
+                            if !next(&mut r, &mut line, &mut off, &mut lineno)? {
+                                bail!("{}: the file ends inside its {nl} header lines", here());
+                            }
                         }
-                        r.seek_relative(nb as i64).with_context(|| format!("{source}: seek failed"))?;
+                        // A byte count above i64::MAX would seek backwards (and loop).
+                        let skip = i64::try_from(nb).map_err(|_| anyhow!("{}: binary byte count {nb} out of range", here()))?;
+                        r.seek_relative(skip).with_context(|| format!("{source}: seek failed"))?;
                         off += nb;
                     }
                     loop {

@@ -232,6 +232,8 @@ pub struct AxisScore {
     pub flat_band_hz: (f64, f64),
     /// Wall time of the axis's design (s).
     pub design_s: f64,
+    /// Shape of the axis's filter on the box (None if the design failed).
+    pub shape: Option<dynocomp_core::budget::AxisShape>,
 }
 
 /// Results of one case at one rate.
@@ -289,6 +291,7 @@ pub fn score_sim(name: &'static str, s: &SimOutput, run: &RunOptions) -> CaseRes
         let t0 = Instant::now();
         let designed = s.frf.axis(a).ok_or_else(|| anyhow::anyhow!("no FRF for axis {a}")).and_then(|frf| design_axis(&s.frf.freq_hz, frf, sample_variance(&s.idle[a]), &opts));
         let design_s = t0.elapsed().as_secs_f64();
+        let shape = designed.as_ref().ok().map(|d| dynocomp_core::budget::AxisShape::of(&d.filter));
         let (comp_nrmse, predicted_error, flat_band_hz) = match designed {
             Err(e) => (Err(format!("{e:#}")), f64::NAN, (f64::NAN, f64::NAN)),
             Ok(d) => {
@@ -302,9 +305,23 @@ pub fn score_sim(name: &'static str, s: &SimOutput, run: &RunOptions) -> CaseRes
                 (nrmse, d.predicted_error, d.flat_band_hz)
             }
         };
-        axes.push(AxisScore { axis: a, raw_nrmse: raw.nrmse, comp_nrmse, noise_floor, predicted_error, flat_band_hz, design_s });
+        axes.push(AxisScore { axis: a, raw_nrmse: raw.nrmse, comp_nrmse, noise_floor, predicted_error, flat_band_hz, design_s, shape });
     }
     CaseResult { case: name, fs_hz: fs, band_hz: band, axes }
+}
+
+impl CaseResult {
+    /// Predicted sample-interrupt cost of the three axes' designs in one box
+    /// image ([`CostModel::CORTEX_M4`](dynocomp_core::budget::CostModel)):
+    /// (cycles, load low and high in thousandths of the period at
+    /// `fs_hz`); None if a design failed.
+    pub fn box_load(&self) -> Option<(dynocomp_core::budget::Cost, u32, u32)> {
+        use dynocomp_core::budget::{load_permille, CostModel};
+        let shapes: Option<Vec<_>> = self.axes.iter().map(|a| a.shape).collect();
+        let cost = CostModel::CORTEX_M4.sample_cost(&shapes?);
+        let fs = self.fs_hz as u32;
+        Some((cost, load_permille(cost.low, fs), load_permille(cost.high, fs)))
+    }
 }
 
 /// Per-rate summary of compensated NRMSEs.

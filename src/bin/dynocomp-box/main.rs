@@ -19,6 +19,7 @@
 #![no_std]
 #![no_main]
 
+mod ccm;
 mod sampler;
 mod slots;
 mod usb;

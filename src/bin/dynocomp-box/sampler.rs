@@ -532,7 +532,13 @@ fn write_dacs(dac: [u16; AXES]) {
     pac::DAC2.dhr12r(0).write(|w| w.set_dhr(z));
 }
 
+/// The sample interrupt. Runs from CCM SRAM (`.ccmram_text`, memory.x;
+/// copied there at reset by `ccm.rs`): everything on the sample path is
+/// inlined into it (the handler, `Sampler::on_tick`, `SamplePath::tick`,
+/// `process_sample`, the kernel), and what it still calls is linked into
+/// CCM SRAM too (tests/firmware_layout.rs checks both in the ELF).
 #[interrupt]
+#[link_section = ".ccmram_text.TIM2"]
 fn TIM2() {
     // Cycle counter at the start of the body (exception entry and the
     // prologue's register saves come before it; docs/firmware.md, "Reading
