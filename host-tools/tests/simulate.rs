@@ -472,7 +472,7 @@ fn run_writes_all_files_readable_by_the_io_layer() {
     for f in ["frf.uff", "frf.csv", "measured.csv", "true_force.csv", "idle.csv", "truth.json"] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
-    let params = cli.args.params();
+    let params = cli.args.params().unwrap();
     let sim = simulate(9, &params).unwrap();
     // FRF files read back to the simulated impact test.
     for f in ["frf.uff", "frf.csv"] {

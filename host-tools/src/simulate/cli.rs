@@ -21,6 +21,12 @@ pub struct SimulateArgs {
     /// Seed of every random choice (dynamometer, impact test, noise).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// One of the seed paper's experiments on its 9257A-like set-up:
+    /// sine-1185, chirp-650, chirp-1300 (shaker, Figs. 8-9), cut-1, cut-2,
+    /// cut-3 (Table 2). The other options still override its values; the
+    /// dynamometer is the preset's, not a random one.
+    #[arg(long, value_name = "NAME")]
+    pub preset: Option<String>,
     /// Sample rate (Hz) [default: 51200].
     #[arg(long)]
     pub fs: Option<f64>,
@@ -116,9 +122,18 @@ pub struct SimulateArgs {
 }
 
 impl SimulateArgs {
-    /// The simulation parameters these arguments select.
-    pub fn params(&self) -> SimParams {
-        let mut p = SimParams::default();
+    /// The simulation parameters these arguments select (from the
+    /// preset's, or [`SimParams::default`]).
+    pub fn params(&self) -> Result<SimParams> {
+        Ok(self.params_over(match &self.preset {
+            Some(name) => super::presets::preset(name)?.params,
+            None => SimParams::default(),
+        }))
+    }
+
+    /// `base` with the options given on the command line applied.
+    fn params_over(&self, base: SimParams) -> SimParams {
+        let mut p = base;
         let set = |dst: &mut f64, v: Option<f64>| {
             if let Some(v) = v {
                 *dst = v;
@@ -189,6 +204,12 @@ struct Truth<'a> {
     format: &'static str,
     version: u32,
     seed: u64,
+    /// The paper preset (`--preset`), if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    preset: Option<&'a str>,
+    /// The band-fitting flags of `design --method paper` for the preset.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    preset_design_flags: Option<&'a [String]>,
     fs_hz: f64,
     n_samples: usize,
     n_idle_samples: usize,
@@ -208,12 +229,14 @@ struct Truth<'a> {
     files: [&'static str; 6],
 }
 
-fn truth_json(out: &SimOutput) -> Result<String> {
+fn truth_json(out: &SimOutput, preset: Option<&super::presets::Preset>) -> Result<String> {
     let p = &out.params;
     let t = Truth {
         format: "dynocomp-simulate-truth",
         version: 1,
         seed: out.seed,
+        preset: preset.map(|p| p.name),
+        preset_design_flags: preset.map(|p| p.design_flags.as_slice()),
         fs_hz: p.fs_hz,
         n_samples: out.t_s.len(),
         n_idle_samples: out.idle[0].len(),
@@ -243,6 +266,11 @@ fn record(t_s: Option<&[f64]>, ch: &[Vec<f64>; 3]) -> SignalRecord {
 
 /// Write the output files of `out` into `dir` (created if missing).
 pub fn write_outputs(dir: &Path, out: &SimOutput) -> Result<()> {
+    write_outputs_of(dir, out, None)
+}
+
+/// [`write_outputs`], recording the preset that produced `out` in truth.json.
+pub fn write_outputs_of(dir: &Path, out: &SimOutput, preset: Option<&super::presets::Preset>) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create output directory", dir.display()))?;
     let t_idle: Vec<f64> = (0..out.idle[0].len()).map(|k| k as f64 / out.params.fs_hz).collect();
     write_uff58(&dir.join("frf.uff"), &out.frf, false)?;
@@ -250,7 +278,7 @@ pub fn write_outputs(dir: &Path, out: &SimOutput) -> Result<()> {
     write_signal_csv(&dir.join("measured.csv"), &record(Some(&out.t_s), &out.measured))?;
     write_signal_csv(&dir.join("true_force.csv"), &record(Some(&out.t_s), &out.truth))?;
     write_signal_csv(&dir.join("idle.csv"), &record(Some(&t_idle), &out.idle))?;
-    let json = truth_json(out)?;
+    let json = truth_json(out, preset)?;
     crate::io::atomic::write_bytes_atomic(&dir.join("truth.json"), format!("{json}\n").as_bytes())?;
     Ok(())
 }
@@ -258,19 +286,29 @@ pub fn write_outputs(dir: &Path, out: &SimOutput) -> Result<()> {
 /// `dynocomp simulate`: simulate and write the files into `args.out`; a
 /// summary goes to stderr.
 pub fn run(args: &SimulateArgs) -> Result<()> {
-    let params = args.params();
-    let out = match args.drift_percent {
-        Some(pct) => {
+    let params = args.params()?;
+    let preset = args.preset.as_deref().map(super::presets::preset).transpose()?;
+    let out = match (args.drift_percent, &preset) {
+        (Some(_), Some(_)) => anyhow::bail!("--drift-percent with --preset: a drifting paper preset is not supported; simulate the drift without --preset"),
+        (Some(pct), None) => {
             let drift = super::drift::Drift { delta: pct / 100.0, start_s: args.drift_start.unwrap_or(0.0), end_s: args.drift_end.unwrap_or(params.duration_s) };
             super::drift::run(args.seed, &params, drift, &args.out)?
         }
-        None => {
+        (None, Some(pr)) => {
+            let out = super::simulate_with(args.seed, &params, pr.dyno.clone())?;
+            write_outputs_of(&args.out, &out, Some(pr))?;
+            out
+        }
+        (None, None) => {
             let out = simulate(args.seed, &params)?;
             write_outputs(&args.out, &out)?;
             out
         }
     };
     let p = &out.params;
+    if let Some(pr) = &preset {
+        eprintln!("simulate: preset {}: {}", pr.name, pr.description);
+    }
     eprintln!(
         "simulate: seed {}, fs {} Hz, {} samples ({} s), oversample {}, anti-alias {}",
         out.seed,
@@ -281,18 +319,22 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         p.anti_alias
     );
     let m = &p.milling;
-    eprintln!(
-        "  milling: {} rpm, {} teeth, tooth_passing_hz {:.2} Hz (spindle {:.2} Hz), ap {} mm, ae {} mm, {:?}, runout {} µm{}",
-        m.spindle_rpm,
-        m.teeth,
-        m.tooth_passing_hz(),
-        m.spindle_hz(),
-        m.axial_depth_mm,
-        m.radial_depth_mm,
-        m.mode,
-        m.runout_mm * 1e3,
-        m.chatter.as_ref().map(|c| format!(", chatter {} Hz", c.freq_hz)).unwrap_or_default()
-    );
+    if let Some(e) = &p.excitation {
+        eprintln!("  shaker: {e:?} (the same force on x, y and z)");
+    } else {
+        eprintln!(
+            "  milling: {} rpm, {} teeth, tooth_passing_hz {:.2} Hz (spindle {:.2} Hz), ap {} mm, ae {} mm, {:?}, runout {} µm{}",
+            m.spindle_rpm,
+            m.teeth,
+            m.tooth_passing_hz(),
+            m.spindle_hz(),
+            m.axial_depth_mm,
+            m.radial_depth_mm,
+            m.mode,
+            m.runout_mm * 1e3,
+            m.chatter.as_ref().map(|c| format!(", chatter {} Hz", c.freq_hz)).unwrap_or_default()
+        );
+    }
     for a in 0..3 {
         let modes: Vec<String> =
             out.dyno.axis(a).modes.iter().map(|md| format!("{:.0} Hz ζ {:.3} r {:+.3}", md.fn_hz, md.zeta, md.residue)).collect();
@@ -310,5 +352,13 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         p.impact.n_impacts
     );
     eprintln!("  wrote {}/{{frf.uff, frf.csv, measured.csv, true_force.csv, idle.csv, truth.json}}", args.out.display());
+    if let Some(pr) = &preset {
+        let d = args.out.display();
+        eprintln!(
+            "  design as the paper did: dynocomp design --frf {d}/frf.uff --idle {d}/idle.csv --fs {} --method paper {} --out {d}/paper.dcimg",
+            p.fs_hz,
+            pr.design_flags.join(" ")
+        );
+    }
     Ok(())
 }

@@ -31,7 +31,9 @@ pub mod dynamometer;
 pub mod impact;
 pub mod measurement;
 pub mod milling;
+pub mod presets;
 pub mod rates;
+pub mod shaker;
 
 pub use chain::{AntiAlias, Butterworth, BRICK_WALL_FRACTION};
 pub use cli::{run, SimulateArgs};
@@ -39,6 +41,7 @@ pub use dynamometer::{Dynamometer, Hold, Mode, ModeRanges, ModeStep, MultiAxisDy
 pub use impact::{h1_random_error, impact_freqs, impact_test, impact_test_all, impact_test_all_with, impact_test_axis, ImpactParams};
 pub use measurement::MeasurementParams;
 pub use milling::{milling_force, Chatter, MillingMode, MillingParams};
+pub use shaker::Excitation;
 
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
@@ -68,6 +71,10 @@ pub struct SimParams {
     pub impact: ImpactParams,
     /// Cutting conditions.
     pub milling: MillingParams,
+    /// A shaker force applied instead of the cutting force (the paper's
+    /// validation tests, [`shaker`]); `None` = milling.
+    #[serde(default)]
+    pub excitation: Option<Excitation>,
 }
 
 impl Default for SimParams {
@@ -82,6 +89,7 @@ impl Default for SimParams {
             modes: ModeRanges::default(),
             impact: ImpactParams::default(),
             milling: MillingParams::default(),
+            excitation: None,
         }
     }
 }
@@ -117,12 +125,25 @@ impl SimParams {
             bail!("simulate: hammer cutoff = {} Hz must be > 0", i.hammer_cutoff_hz);
         }
         self.milling.validate()?;
+        if let Some(e) = &self.excitation {
+            e.validate(self.fs_hz)?;
+        }
         if let Some(ch) = &self.milling.chatter {
             if ch.freq_hz >= self.fs_hz / 2.0 {
                 bail!("simulate: chatter frequency {} Hz is not below fs/2 = {} Hz", ch.freq_hz, self.fs_hz / 2.0);
             }
         }
         Ok(())
+    }
+
+    /// The applied force at `fs·oversample` (N), `n_fine` samples: the
+    /// shaker's if one is set, else the milling force.
+    pub fn applied_force(&self, n_fine: usize) -> [Vec<f64>; 3] {
+        let fs_fine = self.fs_hz * self.oversample as f64;
+        match &self.excitation {
+            Some(e) => e.force(fs_fine, n_fine, self.duration_s),
+            None => milling_force(&self.milling, fs_fine, n_fine),
+        }
     }
 
     /// Number of output samples of the cutting record.
@@ -206,7 +227,7 @@ pub fn simulate_with(seed: u64, params: &SimParams, dyno: MultiAxisDynamometer) 
     let frf = impact_test_all_with(&|a, f| dyno.axis(a).frf(f) * chain.analog_frf(f), ip.n_lines, ip.df_hz, sub_seed(seed, TAG_IMPACT), ip);
     let n = params.n_samples();
     let os = params.oversample;
-    let fine = milling_force(&params.milling, params.fs_hz * os as f64, chain.fine_len(n, os));
+    let fine = params.applied_force(chain.fine_len(n, os));
     let mut truth: [Vec<f64>; 3] = Default::default();
     let mut clean: [Vec<f64>; 3] = Default::default();
     let mut measured: [Vec<f64>; 3] = Default::default();
