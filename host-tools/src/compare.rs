@@ -286,12 +286,14 @@ pub fn design_parallel(setup: &CompareSetup, a: &AxisFrf, r: f64) -> Result<Para
         // with the smallest fit error on the segment's coherent lines.
         let seg_lines: Vec<bool> = setup.freq_hz.iter().zip(inside.iter().zip(&outside)).map(|(f, (i, o))| (*i || *o) && *f >= seg.0 && *f <= seg.1).collect();
         let mut best: Option<(f64, AxisDesign)> = None;
-        let mut last_err = None;
+        let mut errors = Vec::new();
         for na in (2..=rfp.na).step_by(2) {
             let nb = na.saturating_sub(rfp.na - rfp.nb);
             let opts = DesignOptions {
                 method: FitMethod::Paper { rfp: crate::fit::rfp::RfpOptions { nb, na, ..rfp.clone() }, prewarp_hz: None },
                 bands: vec![Band { lo_hz: fit.0, hi_hz: fit.1, label: format!("segment {}", k + 1) }],
+                // this loop is the segment's order search
+                paper_orders_auto: false,
                 ..setup.base.clone()
             };
             match design_axis(setup.freq_hz, a, r, &opts) {
@@ -301,12 +303,11 @@ pub fn design_parallel(setup: &CompareSetup, a: &AxisFrf, r: f64) -> Result<Para
                         best = Some((err, d));
                     }
                 }
-                Err(e) => last_err = Some(e),
+                Err(e) => errors.push(format!("{nb}:{na}: {}", format!("{e:#}").rsplit(": ").next().unwrap_or_default())),
             }
         }
         let Some((_, d)) = best else {
-            let e = last_err.unwrap_or_else(|| anyhow::anyhow!("no order tried"));
-            return Err(e.context(format!("segment {} ({:.0}–{:.0} Hz), every order 2..={} failed; last", k + 1, seg.0, seg.1, rfp.na)));
+            anyhow::bail!("segment {} ({:.0}–{:.0} Hz), every order 2..={} failed: {}", k + 1, seg.0, seg.1, rfp.na, errors.join("; "));
         };
         designs.push((*seg, d));
     }
@@ -494,6 +495,7 @@ pub fn compare(args: &CompareArgs, frf: &Frf) -> Result<Comparison> {
             force_rms: args.input.force_rms,
             max_noise_gain: args.input.max_noise_gain,
             discretization: args.input.discretization,
+            paper_orders_auto: args.paper.auto(),
             ..Default::default()
         },
         paper: args.paper.method(args.bands.tooth_passing_hz(), args.input.fs)?,

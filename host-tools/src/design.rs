@@ -56,7 +56,31 @@ pub struct DesignOptions {
     /// (`dynocomp_core::budget::axis_budget`); `None` = no limit. The
     /// realization within it is preferred ([`choose_realization_within`]).
     pub axis_cycle_budget: Option<u32>,
+    /// The paper's method chooses its orders NB:NA per axis
+    /// ([`crate::paper_orders`]); the orders in [`FitMethod::Paper`] are
+    /// then ignored.
+    pub paper_orders_auto: bool,
 }
+
+/// Largest accepted fit error: relative RMS of Ĝ against the coherent
+/// measured lines inside the fitting bands (or the compensated band). A
+/// model further from the measurement than this is not the sensor the
+/// compensator would invert, whatever its predicted error says (that one is
+/// computed on the model). The lines themselves are noisy: the random error
+/// of an H1 line at the coherence threshold γ² = 0.9 is √((1 − γ²)/(2·n·γ²))
+/// = 10.5 % from n = 5 averages (8.9 % from 7), so 15 % is 1.5x that noise
+/// floor; a good fit of a good FRF is at 1-5 %.
+pub const MAX_FIT_ERROR: f64 = 0.15;
+
+/// Largest accepted predicted in-band error √J. Beating the raw force is not
+/// enough when the raw force is far off (a 400 % raw error is beaten by a
+/// filter that outputs almost nothing): at 50 % RMS error a "compensated"
+/// force says little more than its mean, so such an axis is refused.
+pub const MAX_PREDICTED_ERROR: f64 = 0.5;
+
+/// Largest accepted relative change of the fitted Ĝ from the first coherent
+/// FRF line down to 0 Hz ([`design_axis`]): the flat-band tolerance.
+pub const MAX_STATIC_ERROR: f64 = 0.05;
 
 /// Weight of an out-of-band line relative to its coherence weight when the
 /// default method fits bands (the paper's method drops those lines).
@@ -91,6 +115,7 @@ impl Default for DesignOptions {
             bands: Vec::new(),
             discretization: Discretization::Fit,
             axis_cycle_budget: None,
+            paper_orders_auto: false,
         }
     }
 }
@@ -403,8 +428,26 @@ fn band_grid(bands: &[(f64, f64)], n: usize) -> Vec<f64> {
     out
 }
 
-/// Design one axis from its FRF and measurement noise variance R (N²).
-pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions) -> Result<AxisDesign> {
+/// The FRF lines one axis is designed on.
+struct AxisLines {
+    /// Coherent band (Hz).
+    band: (f64, f64),
+    /// Compensated band: the coherent band capped at 0.45 fs (Hz).
+    comp_band: (f64, f64),
+    /// Notes for the user.
+    notes: Vec<String>,
+    /// Lines inside the compensated band.
+    in_band: Vec<bool>,
+    /// Lines where the compensator must be accurate (the bands or the
+    /// compensated band).
+    eval_band: Vec<bool>,
+    /// Coherent lines of `eval_band`: the fit error is scored on them.
+    target: Vec<bool>,
+    /// Coherent lines outside the bands.
+    out_of_band: Vec<bool>,
+}
+
+fn axis_lines(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> Result<AxisLines> {
     let name = axis_name(frf.axis);
     let coh = frf.coherence.as_deref();
     let band = coherent_band(freq_hz, coh, opts.coherence_threshold);
@@ -445,11 +488,18 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
     if target.iter().filter(|m| **m).count() < 8 {
         bail!("axis {name}: fewer than 8 coherent FRF lines inside the fitting bands; widen the bands or check that they lie inside the coherent band {:.0}–{:.0} Hz", band.0, band.1);
     }
-    let fitted = match &opts.method {
+    Ok(AxisLines { band, comp_band, notes, in_band, eval_band, target, out_of_band })
+}
+
+/// Fit the axis's model by `opts.method` on `lines`.
+fn fit_axis(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions, lines: &AxisLines) -> Result<Fitted> {
+    let name = axis_name(frf.axis);
+    let coh = frf.coherence.as_deref();
+    Ok(match &opts.method {
         FitMethod::Vf => {
             let mut weights = coherence_weights(&frf.frf, coh);
             if !opts.bands.is_empty() {
-                for (w, b) in weights.iter_mut().zip(&eval_band) {
+                for (w, b) in weights.iter_mut().zip(&lines.eval_band) {
                     if !*b {
                         *w *= VF_OUT_OF_BAND_WEIGHT;
                     }
@@ -462,14 +512,102 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
             Fitted { model: vf.model, order_trace: vf.order_trace, paper: None }
         }
         FitMethod::Paper { rfp, .. } => {
-            let fit_mask: Vec<bool> = if opts.bands.is_empty() { in_band.clone() } else { eval_band.clone() };
-            let weights = paper_weights(coh, &fit_mask);
+            let fit_mask: &[bool] = if opts.bands.is_empty() { &lines.in_band } else { &lines.eval_band };
+            let weights = paper_weights(coh, fit_mask);
             let fit = rfp_fit(freq_hz, &frf.frf, &weights, rfp).with_context(|| format!("axis {name}: paper fit (RFP + Gauss–Newton)"))?;
             let diag = PaperDiagnostics { rfp_condition: fit.rfp_condition, jacobian_condition: fit.jacobian_condition, ..Default::default() };
             let model = fit.tf.to_pole_residue().with_context(|| format!("axis {name}: paper fit"))?;
             Fitted { model, order_trace: vec![(fit.tf.na(), fit.final_error)], paper: Some((fit.tf, diag)) }
         }
+    })
+}
+
+/// The fitted response Ĝ(j2πf) of `frf` by `opts.method` on its lines,
+/// before any of the design's checks (for studies of the fit itself).
+pub fn fitted_response(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> Result<impl Fn(f64) -> Complex64> {
+    let lines = axis_lines(freq_hz, frf, opts)?;
+    let fitted = fit_axis(freq_hz, frf, opts, &lines)?;
+    Ok(move |f: f64| fitted.frf(f))
+}
+
+/// The cheap part of a paper-method design at the orders of `opts.method`,
+/// without the Q search: the fit, its stability and static gain, and the
+/// observability of the augmented system (eq. (4)) in floating point.
+/// Returns the relative RMS fit error on the coherent lines of the bands and
+/// the diagnostics; an error says which check failed.
+/// [`crate::paper_orders`] ranks orders with it.
+pub fn probe_paper_fit(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> Result<(f64, PaperDiagnostics)> {
+    let lines = axis_lines(freq_hz, frf, opts)?;
+    let fitted = fit_axis(freq_hz, frf, opts, &lines)?;
+    let Some((tf, mut diag)) = fitted.paper.clone() else {
+        bail!("probe_paper_fit needs the paper's method");
     };
+    if !fitted.model.is_stable() {
+        bail!("the fitted transfer function is unstable");
+    }
+    if opts.bands.is_empty() || opts.bands.iter().any(|b| b.contains(lines.band.0)) {
+        let dc = fitted.frf(0.0).norm();
+        if !(0.2..5.0).contains(&dc) {
+            bail!("fitted static gain |G(0)| = {dc:.3} N/N");
+        }
+        check_static_flat(axis_name(frf.axis), freq_hz, lines.band.0, &fitted)?;
+    }
+    let ss = paper::companion_form(&tf);
+    diag.companion_condition = paper::condition_number(&ss.a);
+    let (ae, _, ce) = paper::augmented(&ss);
+    let (rank, cond) = paper::observability(&ae, &ce);
+    diag.observability_rank = rank;
+    diag.observability_dim = ae.nrows();
+    diag.observability_condition = cond;
+    if rank < ae.nrows() {
+        bail!("augmented system not observable in floating point (rank {rank} of {})", ae.nrows());
+    }
+    if !(cond < paper::MAX_OBSERVABILITY_CONDITION) {
+        bail!("augmented system ill-conditioned (observability condition {cond:.1e} ≥ {:.0e})", paper::MAX_OBSERVABILITY_CONDITION);
+    }
+    let fit_nrmse = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, &lines.target);
+    Ok((fit_nrmse, diag))
+}
+
+/// The mean cutting force sits at 0 Hz, below the impact test's first
+/// coherent line, where no line constrains the fit: a model that bends there
+/// (a pole-zero doublet near 0 Hz) is inverted exactly by the compensator,
+/// and the compensated mean force drifts for seconds. When the design covers
+/// the static band, Ĝ must stay within [`MAX_STATIC_ERROR`] of its value at
+/// that first line from an eighth of its frequency down to 0 Hz, where the
+/// mean force and its slow changes are (a feature just below the first line
+/// only shapes transients).
+fn check_static_flat(name: &str, freq_hz: &[f64], f_coherent: f64, fitted: &Fitted) -> Result<()> {
+    let f_first = freq_hz.iter().copied().find(|f| *f >= f_coherent).unwrap_or(f_coherent).max(1e-3);
+    let g_first = fitted.frf(f_first);
+    let worst = std::iter::once(0.0)
+        .chain((0..=40).map(|i| 0.01 * (f_first / 8.0 / 0.01).powf(i as f64 / 40.0)))
+        .map(|f| ((fitted.frf(f) - g_first).norm() / g_first.norm(), f))
+        .fold((0.0, 0.0), |a, b| if b.0 > a.0 || b.0.is_nan() { b } else { a });
+    if !(worst.0 <= MAX_STATIC_ERROR) {
+        let next = match &fitted.paper {
+            Some(_) => "let the orders be chosen (omit --paper-orders) or try others, or use the default method (--method vf)",
+            None => "check the FRF's first lines (coherence near 0 Hz, units N/N) or raise --max-order",
+        };
+        bail!(
+            "axis {name}: the fitted model is not flat below the FRF's first coherent line ({f_first:.1} Hz): from an eighth of that down to 0 Hz it moves {:.1} % from its value there by {:.2} Hz (limit {:.0} %); no line constrains it there, and the compensated mean force would drift; no image written; {next}",
+            100.0 * worst.0,
+            worst.1,
+            100.0 * MAX_STATIC_ERROR
+        );
+    }
+    Ok(())
+}
+
+/// Design one axis from its FRF and measurement noise variance R (N²).
+pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions) -> Result<AxisDesign> {
+    if opts.paper_orders_auto && matches!(opts.method, FitMethod::Paper { .. }) {
+        return crate::paper_orders::design_axis_auto(freq_hz, frf, r, &DesignOptions { paper_orders_auto: false, ..opts.clone() });
+    }
+    let name = axis_name(frf.axis);
+    let lines = axis_lines(freq_hz, frf, opts)?;
+    let fitted = fit_axis(freq_hz, frf, opts, &lines)?;
+    let AxisLines { band, comp_band, notes, in_band: _, eval_band, target, out_of_band } = lines;
     let fit_nrmse = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, &target);
     let fit_nrmse_out_of_band = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, &out_of_band);
     // The static gain is checked when the fit covers the start of the
@@ -478,6 +616,20 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
     let dc = fitted.frf(0.0).norm();
     if fits_static && !(0.2..5.0).contains(&dc) {
         bail!("axis {name}: fitted static gain |G(0)| = {dc:.3} N/N; the FRF must be force/force (N/N), check units and calibration (with fitting bands: include the static band)");
+    }
+    if fits_static {
+        check_static_flat(&name, freq_hz, band.0, &fitted)?;
+    }
+    if !(fit_nrmse <= MAX_FIT_ERROR) {
+        let next = match &fitted.paper {
+            Some(_) => "let the orders be chosen (omit --paper-orders) or try others, fit narrower bands, or use the default method (--method vf)",
+            None => "check the FRF (coherence, resolution, units N/N), raise --max-order, or narrow the compensated band with --band",
+        };
+        bail!(
+            "axis {name}: the fitted model is {:.1} % (relative RMS) from the measured FRF on its coherent lines in the band, above the limit of {:.0} %; no image written; {next}",
+            100.0 * fit_nrmse,
+            100.0 * MAX_FIT_ERROR
+        );
     }
 
     let ranges = criterion_ranges(&opts.bands, comp_band);
@@ -543,15 +695,19 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
     // compensation"): refuse the design when its predicted in-band error
     // does not beat the uncompensated force's.
     let raw_j = obj.raw();
-    if !(j < raw_j) {
+    let worse = !(j < raw_j);
+    if worse || !(j.sqrt() < MAX_PREDICTED_ERROR) {
         let next = match &fitted.paper {
-            Some(_) => "try other --paper-orders, other or narrower bands (--band, --spindle-rpm/--teeth), or the default method (--method vf)",
+            Some(_) => "let the orders be chosen (omit --paper-orders) or try others, other or narrower bands (--band, --spindle-rpm/--teeth), or the default method (--method vf)",
             None => "check the FRF (coherence, units N/N, resolution), narrow the compensated band with --band, or raise --max-noise-gain if the noise gain limits it",
         };
+        let why = if worse {
+            format!("would be worse than no compensation in its band ({:.0}–{:.0} Hz)", ranges[0].0, f_top)
+        } else {
+            format!("would barely compensate in its band ({:.0}–{:.0} Hz), its predicted error above the limit of {:.0} % (noise gain {ng:.2})", ranges[0].0, f_top, 100.0 * MAX_PREDICTED_ERROR)
+        };
         bail!(
-            "axis {name}: the compensator would be worse than no compensation in its band ({:.0}–{:.0} Hz): predicted in-band error {:.2} % against {:.2} % uncompensated (fit error {:.2} %); no image written; {next}",
-            ranges[0].0,
-            f_top,
+            "axis {name}: the compensator {why}: predicted in-band error {:.2} % against {:.2} % uncompensated (fit error {:.2} %); no image written; {next}",
             100.0 * j.sqrt(),
             100.0 * raw_j.sqrt(),
             100.0 * fit_nrmse

@@ -91,8 +91,11 @@ impl BandArgs {
 #[derive(Args, Debug, Clone)]
 pub struct PaperArgs {
     /// Numerator and denominator orders NB:NA of the paper's fit (eq. (1)).
-    #[arg(long, default_value = "6:8", value_name = "NB:NA")]
-    pub paper_orders: String,
+    /// Default: chosen per axis, the highest orders that keep the fit stable
+    /// and the augmented system observable and well-conditioned, with the
+    /// best in-band fit (the summary says which and why).
+    #[arg(long, value_name = "NB:NA")]
+    pub paper_orders: Option<String>,
     /// Tustin prewarp frequency (Hz); default: the tooth-passing frequency if
     /// given, else the centre of the fitted band.
     #[arg(long)]
@@ -100,10 +103,17 @@ pub struct PaperArgs {
 }
 
 impl PaperArgs {
-    /// Parse --paper-orders.
+    /// Whether the orders are chosen per axis (no --paper-orders).
+    pub fn auto(&self) -> bool {
+        self.paper_orders.is_none()
+    }
+
+    /// Parse --paper-orders (6:8, the paper's, when not given: the largest
+    /// orders of parallel elaboration's per-segment search).
     pub fn orders(&self) -> Result<(usize, usize)> {
-        let bad = || anyhow::anyhow!("--paper-orders `{}`: expected NB:NA, e.g. 6:8 (numerator ≤ denominator order)", self.paper_orders);
-        let (nb, na) = self.paper_orders.split_once(':').ok_or_else(bad)?;
+        let Some(text) = &self.paper_orders else { return Ok((6, 8)) };
+        let bad = || anyhow::anyhow!("--paper-orders `{text}`: expected NB:NA, e.g. 6:8 (numerator ≤ denominator order)");
+        let (nb, na) = text.split_once(':').ok_or_else(bad)?;
         let (nb, na): (usize, usize) = (nb.trim().parse().map_err(|_| bad())?, na.trim().parse().map_err(|_| bad())?);
         if na == 0 || nb > na || na > 40 {
             return Err(bad());
@@ -531,6 +541,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     let opts = DesignOptions {
         method,
         bands: bands.clone(),
+        paper_orders_auto: paper && args.paper.auto(),
         axis_cycle_budget: Some(dynocomp_core::budget::axis_budget(
             args.input.fs as u32,
             limit_permille,

@@ -58,6 +58,11 @@ pub struct PaperDiagnostics {
     pub frequency_scale_hz: f64,
 }
 
+/// Largest accepted condition number of the row-normalized observability
+/// matrix of the augmented system: beyond it the Kalman gain is decided by
+/// rounding, not by the model (the paper, §3.1).
+pub const MAX_OBSERVABILITY_CONDITION: f64 = 1e12;
+
 /// A continuous state-space system (rescaled time unless stated).
 #[derive(Clone, Debug)]
 pub struct ContinuousSs {

@@ -12,7 +12,7 @@
 
 use dynocomp::bands::{from_tooth_passing, validate, Band};
 use dynocomp::compare::{design_parallel, CompareSetup};
-use dynocomp::design::{coherent_band, design_axis, AxisDesign, DesignOptions, FitMethod};
+use dynocomp::design::{coherent_band, design_axis, fitted_response, probe_paper_fit, AxisDesign, DesignOptions, FitMethod, MAX_FIT_ERROR};
 use dynocomp::fit::rfp::RfpOptions;
 use dynocomp::metrics::sample_variance;
 use dynocomp::simulate::{simulate, SimOutput, SimParams};
@@ -76,18 +76,23 @@ fn whole_band_high_order_paper_fit_breaks_down_where_a_narrow_band_fit_does_not(
         let band = coherent(&s, axis);
         // whole band, high order (the paper's Fig. 4 situation): the
         // companion form loses observability rank in floating point
-        let msg = match design(&s, axis, paper(14, 16), Vec::new()) {
-            Err(e) => format!("{e:#}"),
-            Ok(d) => panic!("seed {seed}: a 16th-order whole-band paper design should break down, got {:?}", d.paper.map(|p| p.1)),
-        };
-        eprintln!("seed {seed}: whole band 14:16: {msg}");
-        // "observability rank R of 17, condition C" (or "(condition C)")
-        let tail = msg.split("observability rank ").nth(1).unwrap_or_else(|| panic!("seed {seed}: no rank in the diagnostic: {msg}"));
-        let rank: usize = tail.split(' ').next().unwrap().parse().unwrap();
-        let cond: f64 = tail.split("condition ").nth(1).unwrap().split([')', ';', ' ']).next().unwrap().parse().unwrap();
-        assert!(tail.starts_with(&format!("{rank} of 17")), "{msg}");
-        // rank lost, or so close to it that the Riccati equation fails
-        assert!(rank < 17 || (cond > 1e10 && msg.contains("Riccati")), "seed {seed}: rank {rank}, condition {cond:e}: {msg}");
+        // (the design now refuses a fit beyond MAX_FIT_ERROR before the
+        // Kalman step; the probe runs the fit and the observability check
+        // without that limit, so the breakdown itself is what is tested)
+        let opts = DesignOptions { fs_hz: FS, method: paper(14, 16), ..Default::default() };
+        match probe_paper_fit(&s.frf.freq_hz, s.frf.axis(axis).unwrap(), &opts) {
+            Ok((fit, p)) => {
+                // observable, but then the fit itself misses the FRF
+                assert!(fit > MAX_FIT_ERROR, "seed {seed}: a 16th-order whole-band fit neither lost rank ({p:?}) nor missed the FRF (fit {fit})");
+                eprintln!("seed {seed}: whole band 14:16: observable (condition {:.1e}) but fit error {:.1} %", p.observability_condition, 100.0 * fit);
+            }
+            Err(e) => {
+                let msg = format!("{e:#}");
+                eprintln!("seed {seed}: whole band 14:16: {msg}");
+                // "rank R of 17", "ill-conditioned (observability condition C", or an unstable fit
+                assert!(msg.contains("of 17") || msg.contains("ill-conditioned") || msg.contains("unstable"), "seed {seed}: {msg}");
+            }
+        }
 
         // the same code, order 4:6, on the narrow bands around the TPF harmonics
         let bands = tpf_bands(band.1);
@@ -110,8 +115,11 @@ fn band_fitting_restores_accuracy_inside_the_bands() {
         let band = coherent(&s, axis);
         let bands = tpf_bands(band.1);
         let in_bands = |f: f64| bands.iter().any(|b| b.contains(f)) && f >= band.0 && f <= band.1;
-        let whole = design(&s, axis, paper(nb, na), Vec::new()).unwrap_or_else(|e| panic!("seed {seed}: whole band: {e:#}"));
-        let whole_err = truth_error(&s, axis, |f| whole.fitted_frf(f), in_bands);
+        // the whole-band fit itself (the design would now refuse most of
+        // them on the fit-error limit, which is the point)
+        let whole_opts = DesignOptions { fs_hz: FS, method: paper(nb, na), ..Default::default() };
+        let whole = fitted_response(&s.frf.freq_hz, s.frf.axis(axis).unwrap(), &whole_opts).unwrap_or_else(|e| panic!("seed {seed}: whole band: {e:#}"));
+        let whole_err = truth_error(&s, axis, whole, in_bands);
         let d = design(&s, axis, paper(nb, na), bands.clone()).unwrap_or_else(|e| panic!("seed {seed}: band-fitted: {e:#}"));
         let band_err = truth_error(&s, axis, |f| d.fitted_frf(f), in_bands);
         eprintln!("seed {seed} axis {axis} {nb}:{na}: in-band truth error: whole band {whole_err:.4}, band-fitted {band_err:.4}");
