@@ -303,7 +303,7 @@ pub fn design_parallel(setup: &CompareSetup, a: &AxisFrf, r: f64) -> Result<Para
                         best = Some((err, d));
                     }
                 }
-                Err(e) => errors.push(format!("{nb}:{na}: {}", format!("{e:#}").rsplit(": ").next().unwrap_or_default())),
+                Err(e) => errors.push(format!("{nb}:{na}: {}", crate::paper_orders::last_clause(&e))),
             }
         }
         let Some((_, d)) = best else {

@@ -545,13 +545,7 @@ pub fn probe_paper_fit(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> 
     if !fitted.model.is_stable() {
         bail!("the fitted transfer function is unstable");
     }
-    if opts.bands.is_empty() || opts.bands.iter().any(|b| b.contains(lines.band.0)) {
-        let dc = fitted.frf(0.0).norm();
-        if !(0.2..5.0).contains(&dc) {
-            bail!("fitted static gain |G(0)| = {dc:.3} N/N");
-        }
-        check_static_flat(axis_name(frf.axis), freq_hz, lines.band.0, &fitted)?;
-    }
+    check_static(axis_name(frf.axis), freq_hz, lines.band.0, opts, &fitted)?;
     let ss = paper::companion_form(&tf);
     diag.companion_condition = paper::condition_number(&ss.a);
     let (ae, _, ce) = paper::augmented(&ss);
@@ -577,7 +571,18 @@ pub fn probe_paper_fit(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> 
 /// that first line from an eighth of its frequency down to 0 Hz, where the
 /// mean force and its slow changes are (a feature just below the first line
 /// only shapes transients).
-fn check_static_flat(name: &str, freq_hz: &[f64], f_coherent: f64, fitted: &Fitted) -> Result<()> {
+///
+/// Both checks apply when the fit covers the start of the coherent band
+/// `f_coherent` (a band-pass segment of parallel elaboration does not); the
+/// static gain |Ĝ(0)| must also be plausible for a force/force FRF.
+fn check_static(name: &str, freq_hz: &[f64], f_coherent: f64, opts: &DesignOptions, fitted: &Fitted) -> Result<()> {
+    if !(opts.bands.is_empty() || opts.bands.iter().any(|b| b.contains(f_coherent))) {
+        return Ok(());
+    }
+    let dc = fitted.frf(0.0).norm();
+    if !(0.2..5.0).contains(&dc) {
+        bail!("axis {name}: fitted static gain |G(0)| = {dc:.3} N/N; the FRF must be force/force (N/N), check units and calibration (with fitting bands: include the static band)");
+    }
     let f_first = freq_hz.iter().copied().find(|f| *f >= f_coherent).unwrap_or(f_coherent).max(1e-3);
     let g_first = fitted.frf(f_first);
     let worst = std::iter::once(0.0)
@@ -610,16 +615,7 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
     let AxisLines { band, comp_band, notes, in_band: _, eval_band, target, out_of_band } = lines;
     let fit_nrmse = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, &target);
     let fit_nrmse_out_of_band = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, &out_of_band);
-    // The static gain is checked when the fit covers the start of the
-    // coherent band (a band-pass segment of parallel elaboration does not).
-    let fits_static = opts.bands.is_empty() || opts.bands.iter().any(|b| b.contains(band.0));
-    let dc = fitted.frf(0.0).norm();
-    if fits_static && !(0.2..5.0).contains(&dc) {
-        bail!("axis {name}: fitted static gain |G(0)| = {dc:.3} N/N; the FRF must be force/force (N/N), check units and calibration (with fitting bands: include the static band)");
-    }
-    if fits_static {
-        check_static_flat(&name, freq_hz, band.0, &fitted)?;
-    }
+    check_static(&name, freq_hz, band.0, opts, &fitted)?;
     if !(fit_nrmse <= MAX_FIT_ERROR) {
         let next = match &fitted.paper {
             Some(_) => "let the orders be chosen (omit --paper-orders) or try others, fit narrower bands, or use the default method (--method vf)",

@@ -80,7 +80,7 @@ pub fn design_axis_auto(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOpt
                 );
                 return Ok(d);
             }
-            Err(e) => failures.push(format!("{nb}:{na} ({})", short(&format!("{e:#}")))),
+            Err(e) => failures.push(format!("{nb}:{na} ({})", last_clause(&e).chars().take(160).collect::<String>())),
         }
     }
     bail!(
@@ -90,8 +90,9 @@ pub fn design_axis_auto(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOpt
     )
 }
 
-/// The last clause of an error chain, without the axis prefix.
-fn short(e: &str) -> String {
-    let last = e.rsplit(": ").next().unwrap_or(e);
-    last.chars().take(160).collect()
+/// The last clause of an error chain (`{e:#}` joins the contexts with ": "),
+/// without the axis and file prefixes.
+pub fn last_clause(e: &anyhow::Error) -> String {
+    let full = format!("{e:#}");
+    full.rsplit(": ").next().unwrap_or(&full).to_string()
 }
