@@ -49,6 +49,7 @@ use std::path::{Path, PathBuf};
 use crate::discretize::{discretize, DiscreteModel, Discretization};
 use crate::fit::{PoleResidueModel, Term};
 use crate::frf::axis_name;
+use crate::io::one_line;
 use crate::io::signal_csv::SignalRecord;
 use crate::kalman;
 use dynocomp_core::image::{CoeffImage, DesignMethod};
@@ -241,16 +242,18 @@ pub fn read_sidecar(image_path: &Path, image: &CoeffImage) -> Result<ModelSideca
 /// that it belongs to `image`, stored at `image_path`: the pure part of
 /// [`read_sidecar`].
 pub fn parse_sidecar(text: &str, shown: &str, image: &CoeffImage, image_path: &Path) -> Result<ModelSidecar> {
-    let s: ModelSidecar = serde_json::from_str(text).with_context(|| format!("{shown}: not a valid model sidecar"))?;
+    // serde_json's message quotes the offending value (an unknown `kind`),
+    // which may hold newlines: escaped, so the error stays one line.
+    let s: ModelSidecar = serde_json::from_str(text).map_err(|e| anyhow::anyhow!("{shown}: not a valid model sidecar: {}", one_line(&e.to_string())))?;
     if s.format != SIDECAR_FORMAT {
-        bail!("{shown}: format `{}`, expected `{SIDECAR_FORMAT}`", s.format);
+        bail!("{shown}: format `{}`, expected `{SIDECAR_FORMAT}`", one_line(&s.format));
     }
     let id = format!("{:08x}", image.id());
     if s.image_id != id || s.source_sha256 != hex(&image.source_sha256) || s.fs_hz != f64::from(image.fs_hz) {
         bail!(
             "{shown}: belongs to image {} (source {}), not to {} (image {id}); re-run `dynocomp design` to write both together",
-            s.image_id,
-            s.source_sha256.get(..12).unwrap_or(&s.source_sha256),
+            one_line(&s.image_id),
+            one_line(s.source_sha256.get(..12).unwrap_or(&s.source_sha256)),
             image_path.display()
         );
     }

@@ -211,4 +211,23 @@ fn the_sidecar_is_tied_to_its_image() {
     // corrupted
     std::fs::write(sidecar_path(&path), "{ not json").unwrap();
     assert!(read_sidecar(&path, &img).unwrap_err().to_string().contains("not a valid model sidecar"));
+    // Values quoted by the error (an unknown term kind, a wrong format tag)
+    // holding newlines keep the error one line (fuzz `sidecar` finding).
+    // Control: the same edit without a newline is refused the same way.
+    write_sidecar(&path, &ModelSidecar::new(&img, &[(0, &model, None)])).unwrap();
+    let good = std::fs::read_to_string(sidecar_path(&path)).unwrap();
+    let kind = if good.contains("\"kind\": \"pair\"") { "\"kind\": \"pair\"" } else { "\"kind\":\"pair\"" };
+    assert!(good.contains(kind), "no pair term in the sidecar: {good}");
+    let format = good.split('"').find(|f| f.starts_with("dynocomp-model/")).unwrap().to_string();
+    for (from, to, says) in [
+        (kind, "\"kind\": \"pa\\nir\"", "unknown variant"),
+        (kind, "\"kind\": \"pa ir\"", "unknown variant"),
+        (format.as_str(), "dynocomp-model/1\\n\\r\\tx", "format `"),
+        (format.as_str(), "dynocomp-model/1 x", "format `"),
+    ] {
+        std::fs::write(sidecar_path(&path), good.replacen(from, to, 1)).unwrap();
+        let e = format!("{:#}", read_sidecar(&path, &img).unwrap_err());
+        assert!(e.contains("box.dcimg.model.json") && e.contains(says), "{to}: {e}");
+        assert!(!e.contains('\n') && !e.contains('\r') && !e.contains('\t'), "{to}: error is not one line: {e}");
+    }
 }

@@ -10,6 +10,13 @@ pub mod uff;
 pub mod uff_signal;
 pub mod tdms;
 
+/// Text taken from an input file (a channel name, a JSON value quoted by a
+/// parser's message) as shown in a one-line error: control characters (a
+/// newline, a tab) escaped as `\n`, `\t`, … so the message stays one line.
+pub fn one_line(s: &str) -> String {
+    s.chars().flat_map(|c| if c.is_control() { c.escape_debug().collect::<Vec<_>>() } else { vec![c] }).collect()
+}
+
 /// Read an FRF file: `.csv` as FRF CSV, `.uff` / `.unv` / `.uf` as UFF 58/58b,
 /// any other extension by content (a first non-blank line `-1` means UFF).
 pub fn read_frf(path: &std::path::Path) -> anyhow::Result<crate::frf::Frf> {

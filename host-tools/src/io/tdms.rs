@@ -493,11 +493,8 @@ impl Walker {
     }
 }
 
-/// A name or path from the file as shown in a one-line message: control
-/// characters (a newline in a channel name) escaped.
-fn shown(s: &str) -> String {
-    s.chars().flat_map(|c| if c.is_control() { c.escape_debug().collect::<Vec<_>>() } else { vec![c] }).collect()
-}
+/// A name or path from the file as shown in a one-line message.
+use super::one_line as shown;
 
 /// `/'group'/'channel'` → (group, channel); None for the root and groups.
 fn split_path(p: &str) -> Option<(String, String)> {
