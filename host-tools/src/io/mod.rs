@@ -1,6 +1,7 @@
 //! File input/output: FRF (CSV, UFF58), signal CSV, atomic writes.
 
 pub mod atomic;
+pub mod decimal;
 pub mod signal;
 pub mod signal_csv;
 pub mod signal_file;

@@ -10,6 +10,7 @@ use std::path::Path;
 
 use crate::frf::axis_name;
 use crate::io::atomic::write_atomic;
+use crate::io::decimal;
 use crate::io::signal::{read_all, Block, SignalReader, SignalWriter};
 
 /// A multi-axis force record.
@@ -82,9 +83,10 @@ fn record_from(r: &mut dyn SignalReader) -> Result<SignalRecord> {
     Ok(SignalRecord { t_s, channels: axes.into_iter().zip(data).collect() })
 }
 
-/// A signal CSV read block by block: one line buffer, no allocation per
-/// value (fields are parsed in place with the standard library's
-/// Eisel-Lemire float parser).
+/// A signal CSV read block by block: no allocation per value, and lines
+/// parsed in place in the reader's buffer, one pass over their bytes
+/// ([`decimal::parse_f64`]: Clinger's fast path for plain decimals, the
+/// standard library's parser for the rest).
 pub struct CsvReader<R: BufRead> {
     r: R,
     source: String,
@@ -196,36 +198,70 @@ impl<R: BufRead> CsvReader<R> {
         std::str::from_utf8(&self.line).map_err(|_| anyhow!("{}: line {}: not valid UTF-8 text", self.source, self.lineno))
     }
 
-    /// Parse the current line into `blk`.
+    /// Parse the current line (`self.line`) into `blk`.
     fn parse_line(&mut self, blk: &mut Block) -> Result<()> {
-        let (source, lineno) = (&self.source, self.lineno);
-        let line = std::str::from_utf8(&self.line).map_err(|_| anyhow!("{source}: line {lineno}: not valid UTF-8 text"))?;
-        let n_fields = line.split(',').count();
-        if n_fields != self.names.len() {
-            bail!("{source}: line {lineno}: {n_fields} fields, header has {}", self.names.len());
-        }
-        for (col, field) in line.split(',').enumerate() {
-            let field = field.trim();
-            let v: f64 = field
-                .parse()
-                .map_err(|_| anyhow!("{source}: line {lineno}, column {} (`{}`): `{field}` is not a number", col + 1, self.names[col]))?;
-            if !v.is_finite() {
-                bail!("{source}: line {lineno}, column {} (`{}`): value is not finite", col + 1, self.names[col]);
-            }
-            if self.has_time && col == 0 {
-                if let Some(prev) = self.prev_t {
-                    if v <= prev {
-                        bail!("{source}: line {lineno}, column 1 (`t_s`): time {v} does not increase (previous {prev})");
-                    }
-                }
-                self.prev_t = Some(v);
-                blk.t_s.push(v);
-            } else if let Some(slot) = self.slot_of[col] {
-                blk.channels[slot].push(v);
-            }
-        }
-        Ok(())
+        parse_row(&self.line, &self.names, &self.slot_of, self.has_time, &mut self.prev_t, blk, &self.source, self.lineno)
     }
+}
+
+/// Parse one data row (`line`, without its line end) into `blk`: one pass
+/// over its bytes, each field parsed in place ([`decimal::parse_f64`]).
+/// Any problem is diagnosed by [`row_error`], which checks the row in the
+/// order the messages promise (text, field count, then field by field).
+#[allow(clippy::too_many_arguments)]
+fn parse_row(line: &[u8], names: &[String], slot_of: &[Option<usize>], has_time: bool, prev_t: &mut Option<f64>, blk: &mut Block, source: &str, lineno: usize) -> Result<()> {
+    let t_before = *prev_t;
+    let mut col = 0;
+    let mut ok = true;
+    for field in line.split(|&b| b == b',') {
+        let Some(v) = (col < names.len()).then(|| decimal::parse_f64(field)).flatten().filter(|v| v.is_finite()) else {
+            ok = false;
+            break;
+        };
+        if has_time && col == 0 {
+            if prev_t.is_some_and(|p| v <= p) {
+                ok = false;
+                break;
+            }
+            *prev_t = Some(v);
+            blk.t_s.push(v);
+        } else if let Some(slot) = slot_of[col] {
+            blk.channels[slot].push(v);
+        }
+        col += 1;
+    }
+    if ok && col == names.len() {
+        return Ok(());
+    }
+    Err(row_error(line, names, has_time, t_before, source, lineno))
+}
+
+/// Why `line` is not a valid data row (the first problem, in the order: not
+/// UTF-8, field count, then each field: not a number, not finite, time not
+/// increasing after `prev_t`).
+fn row_error(line: &[u8], names: &[String], has_time: bool, prev_t: Option<f64>, source: &str, lineno: usize) -> anyhow::Error {
+    let Ok(line) = std::str::from_utf8(line) else {
+        return anyhow!("{source}: line {lineno}: not valid UTF-8 text");
+    };
+    let n_fields = line.split(',').count();
+    if n_fields != names.len() {
+        return anyhow!("{source}: line {lineno}: {n_fields} fields, header has {}", names.len());
+    }
+    for (col, field) in line.split(',').enumerate() {
+        let field = field.trim();
+        let Ok(v) = field.parse::<f64>() else {
+            return anyhow!("{source}: line {lineno}, column {} (`{}`): `{field}` is not a number", col + 1, names[col]);
+        };
+        if !v.is_finite() {
+            return anyhow!("{source}: line {lineno}, column {} (`{}`): value is not finite", col + 1, names[col]);
+        }
+        if has_time && col == 0 {
+            if let Some(prev) = prev_t.filter(|p| v <= *p) {
+                return anyhow!("{source}: line {lineno}, column 1 (`t_s`): time {v} does not increase (previous {prev})");
+            }
+        }
+    }
+    anyhow!("{source}: line {lineno}: internal error: the row reads back valid")
 }
 
 impl<R: BufRead + Send> SignalReader for CsvReader<R> {
@@ -241,6 +277,18 @@ impl<R: BufRead + Send> SignalReader for CsvReader<R> {
         blk.clear();
         blk.channels.resize(self.axes.len(), Vec::new());
         while !self.done && blk.len() < max {
+            // A whole line in the reader's buffer is parsed in place; one
+            // that runs past the buffer's end is copied out (`next_line`).
+            let buf = self.r.fill_buf().with_context(|| format!("{}: read failed after line {}", self.source, self.lineno))?;
+            if let Some(end) = memchr::memchr(b'\n', buf) {
+                self.lineno += 1;
+                let line = buf[..end].strip_suffix(b"\r").unwrap_or(&buf[..end]);
+                if !line.iter().all(u8::is_ascii_whitespace) {
+                    parse_row(line, &self.names, &self.slot_of, self.has_time, &mut self.prev_t, blk, &self.source, self.lineno)?;
+                }
+                self.r.consume(end + 1);
+                continue;
+            }
             if !self.next_line()? {
                 self.done = true;
                 break;
@@ -258,14 +306,19 @@ impl<R: BufRead + Send> SignalReader for CsvReader<R> {
 /// A signal CSV written block by block: a header row, then one row per
 /// sample, every value in the shortest decimal form that reads back as the
 /// same f64 (so f32 outputs of the kernel, held as f64, read back
-/// bit-identical), formatted into one reused line buffer.
+/// bit-identical). Formatting is most of the cost of a CSV output (ryu,
+/// ~35 ns a value), so a large block is formatted in two halves on two
+/// threads into two reused buffers, written in order.
 pub struct CsvWriter<'w> {
     w: &'w mut dyn Write,
-    fmt: ryu::Buffer,
-    line: Vec<u8>,
+    halves: [Vec<u8>; 2],
     n_channels: usize,
     has_time: bool,
 }
+
+/// Rows below which a block is formatted on the calling thread alone (a
+/// thread costs tens of microseconds, about 300 rows' formatting).
+const SPLIT_ROWS: usize = 2048;
 
 impl<'w> CsvWriter<'w> {
     /// Write the header for `axes` (and `t_s` first if `has_time`).
@@ -276,7 +329,28 @@ impl<'w> CsvWriter<'w> {
         }
         header.extend(axes.iter().map(|a| format!("f{}", axis_name(*a))));
         writeln!(w, "{}", header.join(","))?;
-        Ok(CsvWriter { w, fmt: ryu::Buffer::new(), line: Vec::with_capacity(1 << 16), n_channels: axes.len(), has_time })
+        Ok(CsvWriter { w, halves: [Vec::new(), Vec::new()], n_channels: axes.len(), has_time })
+    }
+}
+
+/// Append rows `rows` of the block (`t_s` first, if any) to `out`.
+fn format_rows(out: &mut Vec<u8>, t_s: Option<&[f64]>, channels: &[&[f64]], rows: std::ops::Range<usize>) {
+    let mut fmt = ryu::Buffer::new();
+    out.clear();
+    for k in rows {
+        let mut first = true;
+        if let Some(t) = t_s {
+            push_f64(out, &mut fmt, t[k]);
+            first = false;
+        }
+        for c in channels {
+            if !first {
+                out.push(b',');
+            }
+            first = false;
+            push_f64(out, &mut fmt, c[k]);
+        }
+        out.push(b'\n');
     }
 }
 
@@ -286,27 +360,19 @@ impl SignalWriter for CsvWriter<'_> {
         if channels.len() != self.n_channels || channels.iter().any(|c| c.len() != n) || t_s.is_some() != self.has_time || t_s.is_some_and(|t| t.len() != n) {
             bail!("internal error: a block does not match the output's columns");
         }
-        for k in 0..n {
-            let mut first = true;
-            if let Some(t) = t_s {
-                push_f64(&mut self.line, &mut self.fmt, t[k]);
-                first = false;
-            }
-            for c in channels {
-                if !first {
-                    self.line.push(b',');
-                }
-                first = false;
-                push_f64(&mut self.line, &mut self.fmt, c[k]);
-            }
-            self.line.push(b'\n');
-            if self.line.len() >= 1 << 16 {
-                self.w.write_all(&self.line)?;
-                self.line.clear();
-            }
+        let [first, second] = &mut self.halves;
+        if n < SPLIT_ROWS {
+            format_rows(first, t_s, channels, 0..n);
+            second.clear();
+        } else {
+            let mid = n / 2;
+            std::thread::scope(|s| {
+                s.spawn(|| format_rows(second, t_s, channels, mid..n));
+                format_rows(first, t_s, channels, 0..mid);
+            });
         }
-        self.w.write_all(&self.line)?;
-        self.line.clear();
+        self.w.write_all(first)?;
+        self.w.write_all(second)?;
         Ok(())
     }
 
