@@ -9,10 +9,16 @@
 //!   bounded too, except with `--truth` (24 bytes per sample and axis for the
 //!   whole-record NRMSE, see [`crate::compensate_report`]);
 //! * `--offline` (fixed-interval smoother) and parallel-elaboration images:
-//!   the record is read whole (8 bytes per sample and axis) and the methods
-//!   hold their own passes (the smoother keeps its forward states, the
-//!   parallel split every band: about 8·(bands + 2) bytes per sample and
-//!   axis); only their output is written block by block.
+//!   the record is read whole (8 bytes per sample and column, `t_s`
+//!   included) and the output is held whole (8 bytes per sample and axis)
+//!   before it is written block by block; besides, the smoother keeps 16
+//!   bytes per sample of the axis it is smoothing (its innovations and
+//!   prior force estimates: 72 bytes per sample for t_s + 3 axes, about
+//!   220 MB a minute at 51.2 kHz), the time-varying smoother (`--drift`)
+//!   its gains and covariance rows per sample, and the parallel split
+//!   every band (about 8·(bands + 2) bytes per sample and axis). These
+//!   are not bounded: a backward pass over blocks spilled to a temporary
+//!   file is not implemented.
 
 use anyhow::{anyhow, bail, Context, Result};
 use std::path::{Path, PathBuf};

@@ -309,36 +309,40 @@ impl Smoother {
     }
 
     /// Smoothed force estimate F̂_k|N (N) for every sample of `y` (N).
+    ///
+    /// Memory: 16 bytes per sample besides `y` and the result. The
+    /// backward pass needs, of the forward pass, only each sample's
+    /// innovation e_k and the force component of its prior x⁻_k (module
+    /// doc: F̂_k|N = x⁻_k[F] − (P λ̃_k)[F]), so only those two are kept.
     pub fn smooth(&self, y: &[f64]) -> Vec<f64> {
         // ỹ_k = y_{k−D}: D copies of y_0 in front; F̂_k for k < len(y).
-        let padded: Vec<f64>;
-        let y = if self.advance > 0 && !y.is_empty() {
-            padded = std::iter::repeat_n(y[0], self.advance).chain(y.iter().copied()).collect();
-            &padded[..]
-        } else {
-            y
-        };
+        let d = if y.is_empty() { 0 } else { self.advance };
+        let y_tilde = std::iter::repeat_n(y.first().copied().unwrap_or(0.0), d).chain(y.iter().copied());
+        let len = y.len() + d;
         let n = self.a.nrows();
         let mut prior = DVector::<f64>::zeros(n);
-        let mut priors: Vec<DVector<f64>> = Vec::with_capacity(y.len());
-        let mut innov: Vec<f64> = Vec::with_capacity(y.len());
-        for &yk in y {
+        let mut next = DVector::<f64>::zeros(n);
+        let mut prior_force: Vec<f64> = Vec::with_capacity(len);
+        let mut innov: Vec<f64> = Vec::with_capacity(len);
+        for yk in y_tilde {
             let e = yk - self.c.dot(&prior);
-            priors.push(prior.clone());
+            prior_force.push(prior[self.force_index]);
             innov.push(e);
-            prior = &self.a * (&prior + &self.k * e);
+            prior.axpy(e, &self.k, 1.0);
+            self.a.mul_to(&prior, &mut next);
+            std::mem::swap(&mut prior, &mut next);
         }
         let p_row = self.p.row(self.force_index).transpose();
         let mut lambda_hat = DVector::<f64>::zeros(n);
-        let mut out = vec![0.0; y.len()];
-        for k in (0..y.len()).rev() {
+        let mut out = prior_force;
+        for k in (0..len).rev() {
             // λ̃ = −c e/S + (I − K cᵀ)ᵀ λ̂ = −c e/S + λ̂ − c (Kᵀ λ̂)
             let kl = self.k.dot(&lambda_hat);
             let lambda_tilde = &lambda_hat - &self.c * (innov[k] / self.s + kl);
-            out[k] = priors[k][self.force_index] - p_row.dot(&lambda_tilde);
+            out[k] -= p_row.dot(&lambda_tilde);
             lambda_hat = self.a.tr_mul(&lambda_tilde);
         }
-        out.truncate(y.len() - self.advance.min(y.len()));
+        out.truncate(len - d);
         out
     }
 }
