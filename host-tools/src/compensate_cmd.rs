@@ -8,17 +8,22 @@
 //!   [`BLOCK`] samples ([`StreamCompensator`]); the report's accumulators are
 //!   bounded too, except with `--truth` (24 bytes per sample and axis for the
 //!   whole-record NRMSE, see [`crate::compensate_report`]);
-//! * `--offline` (fixed-interval smoother) and parallel-elaboration images:
-//!   the record is read whole (8 bytes per sample and column, `t_s`
-//!   included) and the output is held whole (8 bytes per sample and axis)
-//!   before it is written block by block; besides, the smoother keeps 16
-//!   bytes per sample of the axis it is smoothing (its innovations and
-//!   prior force estimates: 72 bytes per sample for t_s + 3 axes, about
-//!   220 MB a minute at 51.2 kHz), the time-varying smoother (`--drift`)
-//!   its gains and covariance rows per sample, and the parallel split
-//!   every band (about 8·(bands + 2) bytes per sample and axis). These
-//!   are not bounded: a backward pass over blocks spilled to a temporary
-//!   file is not implemented.
+//! * `--offline` (fixed-interval smoother) on a file: none — the forward
+//!   pass runs over blocks and spills 16 bytes per sample and axis to a
+//!   temporary file beside the output, the backward pass reads it back in
+//!   chunks and writes the estimates (8 bytes per sample and axis) to a
+//!   second one, and the input is read again to write the output block by
+//!   block ([`crate::smoother::SpilledForward`]); temporary disk space:
+//!   24 bytes per sample and axis (≈ 13 GB for an hour of 3 axes at
+//!   51.2 kHz), freed at the end;
+//! * `--offline` from a pipe (it cannot be read twice), `--offline
+//!   --drift` and parallel-elaboration images: the record is read whole (8
+//!   bytes per sample and column, `t_s` included) and the output is held
+//!   whole (8 bytes per sample and axis) before it is written block by
+//!   block; besides, the smoother keeps 16 bytes per sample of the axis it
+//!   is smoothing, the time-varying smoother (`--drift`) its gains and
+//!   covariance rows per sample, and the parallel split every band (about
+//!   8·(bands + 2) bytes per sample and axis). These are not bounded.
 
 use anyhow::{anyhow, bail, Context, Result};
 use std::path::{Path, PathBuf};
@@ -141,6 +146,18 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
             let rec = whole_record(&mut *reader, fs, &source)?;
             let out = compensate_parallel(p, &rec, a.raw_timing, &source)?;
             n_samples = write_whole(a, out_fmt, &rec, &out, fs, acc.as_mut(), truth.as_mut())?;
+        }
+        (AnyImage::Inline(i), true) if a.drift.is_none() && std::fs::metadata(&a.input).is_ok_and(|m| m.is_file()) => {
+            how = "fixed-interval smoother, zero lag (offline only; forward pass spilled to temporary files beside the output, memory independent of the record's length)".to_string();
+            let sidecar = crate::smoother::read_sidecar(&a.coeffs, i)?;
+            let smoothers = axes.iter().map(|&ax| crate::smoother::axis_smoother(i, &sidecar, ax, &source)).collect::<Result<Vec<_>>>()?;
+            progress.set_length(reader.len_hint().unwrap_or(0) * 2);
+            let est = smooth_spilled(&mut *reader, &smoothers, &axes, &spill_dir(&a.output), fs, &source, &progress)?;
+            // The input is read a second time, for its times and the report.
+            let (mut again, _) = open_signal(&a.input, map.as_ref())?;
+            n_samples = write_output(&a.output, out_fmt, &axes, has_time, reader.len_hint(), fs, |w| {
+                write_spilled(&mut *again, est, w, &source, acc.as_mut(), truth.as_mut(), &progress)
+            })?;
         }
         (AnyImage::Inline(i), true) => {
             let drift = a.drift.as_deref().map(crate::two_state::parse_interval).transpose()?;
@@ -272,15 +289,7 @@ fn stream_box(
             w.write_block(t, &outs)?;
             if let Some(acc) = acc.as_deref_mut() {
                 let meas: Vec<&[f64]> = pending.channels.iter().map(|c| &c[..m]).collect();
-                match truth.as_deref_mut() {
-                    Some((tsrc, tr)) => {
-                        let tv = tq.take(&mut **tr, tsrc, &axes, m)?;
-                        let tv: Vec<&[f64]> = tv.iter().map(|v| &v[..m]).collect();
-                        acc.observe(&meas, &outs, Some(&tv));
-                        tq.consume(m);
-                    }
-                    None => acc.observe(&meas, &outs, None),
-                }
+                observe(acc, truth.as_deref_mut(), &mut tq, &axes, &meas, &outs, m)?;
             }
             pending.t_s.drain(..m.min(pending.t_s.len()));
             for p in &mut pending.channels {
@@ -297,6 +306,112 @@ fn stream_box(
         check_rate_value(fs, found, source, "column t_s")?;
     }
     Ok(written)
+}
+
+/// Where `compensate --offline` puts its temporary files: beside the
+/// output (the disk the user chose for a large output).
+fn spill_dir(output: &Path) -> PathBuf {
+    match output.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// `--offline` over a record of any length: the forward pass of each
+/// axis's smoother over the blocks of `reader`, spilled, then its backward
+/// pass ([`crate::smoother::SpilledForward`]). Checks the record's rate.
+fn smooth_spilled(
+    reader: &mut dyn SignalReader,
+    smoothers: &[crate::smoother::Smoother],
+    axes: &[usize],
+    dir: &Path,
+    fs: u32,
+    source: &str,
+    progress: &indicatif::ProgressBar,
+) -> Result<Vec<crate::smoother::SpilledEstimate>> {
+    let mut fwd = smoothers.iter().map(|sm| crate::smoother::SpilledForward::new(sm, dir)).collect::<Result<Vec<_>>>()?;
+    let mut blk = Block::new(axes.len());
+    let mut rate = RateTracker::default();
+    while reader.read_block(&mut blk, BLOCK)? > 0 {
+        rate.push(&blk.t_s);
+        for (f, y) in fwd.iter_mut().zip(&blk.channels) {
+            f.push(y)?;
+        }
+        progress.inc(blk.len() as u64);
+    }
+    if let Some(found) = rate.rate() {
+        check_rate_value(fs, found, source, "column t_s")?;
+    }
+    let per_axis = |n: u64| progress.inc(n / axes.len().max(1) as u64);
+    fwd.into_iter()
+        .zip(axes)
+        .map(|(f, &ax)| f.backward(dir, &format!("f{}", crate::frf::axis_name(ax)), source, &per_axis))
+        .collect()
+}
+
+/// Write the estimates of [`smooth_spilled`] block by block, with the
+/// times of the input read again (`again`), and observe them for the report.
+fn write_spilled(
+    again: &mut dyn SignalReader,
+    mut est: Vec<crate::smoother::SpilledEstimate>,
+    w: &mut dyn crate::io::signal::SignalWriter,
+    source: &str,
+    mut acc: Option<&mut ReportAccumulator>,
+    mut truth: Option<&mut (String, Box<dyn SignalReader>)>,
+    progress: &indicatif::ProgressBar,
+) -> Result<u64> {
+    let axes = again.axes().to_vec();
+    let mut blk = Block::new(axes.len());
+    let mut out: Vec<Vec<f64>> = vec![Vec::with_capacity(BLOCK); axes.len()];
+    let mut tq = TruthQueue::default();
+    let mut written = 0u64;
+    loop {
+        let m = again.read_block(&mut blk, BLOCK)?;
+        if m == 0 {
+            break;
+        }
+        if est.iter().any(|e| e.left() < m as u64) {
+            bail!("{source}: the input changed while it was compensated (longer on the second reading)");
+        }
+        for (e, o) in est.iter_mut().zip(&mut out) {
+            e.read(m, o)?;
+        }
+        let outs: Vec<&[f64]> = out.iter().map(Vec::as_slice).collect();
+        w.write_block((!blk.t_s.is_empty()).then_some(&blk.t_s[..]), &outs)?;
+        if let Some(acc) = acc.as_deref_mut() {
+            let meas: Vec<&[f64]> = blk.channels.iter().map(Vec::as_slice).collect();
+            observe(acc, truth.as_deref_mut(), &mut tq, &axes, &meas, &outs, m)?;
+        }
+        written += m as u64;
+        progress.inc(m as u64);
+    }
+    if est.iter().any(|e| e.left() > 0) {
+        bail!("{source}: the input changed while it was compensated (shorter on the second reading)");
+    }
+    Ok(written)
+}
+
+/// Observe `m` samples of measured and compensated force for the report,
+/// with the next `m` samples of the true force when there is one.
+fn observe(
+    acc: &mut ReportAccumulator,
+    truth: Option<&mut (String, Box<dyn SignalReader>)>,
+    tq: &mut TruthQueue,
+    axes: &[usize],
+    meas: &[&[f64]],
+    outs: &[&[f64]],
+    m: usize,
+) -> Result<()> {
+    match truth {
+        Some((tsrc, tr)) => {
+            let tv = tq.take(&mut **tr, tsrc, axes, m)?;
+            let tv: Vec<&[f64]> = tv.iter().map(|v| &v[..m]).collect();
+            acc.observe(meas, outs, Some(&tv));
+            tq.consume(m);
+        }
+        None => acc.observe(meas, outs, None),
+    }
+    Ok(())
 }
 
 /// Samples of the truth record read ahead of their use, per input channel.

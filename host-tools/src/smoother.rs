@@ -308,43 +308,206 @@ impl Smoother {
         })
     }
 
+    /// One forward step (module doc) from the prior x⁻_k (in `prior`, left
+    /// holding x⁻_{k+1}; `next` is scratch): returns the prior's force
+    /// component x⁻_k[F] and the innovation e_k, all the backward pass needs.
+    fn forward_step(&self, prior: &mut DVector<f64>, next: &mut DVector<f64>, yk: f64) -> (f64, f64) {
+        let e = yk - self.c.dot(prior);
+        let prior_force = prior[self.force_index];
+        prior.axpy(e, &self.k, 1.0);
+        self.a.mul_to(prior, next);
+        std::mem::swap(prior, next);
+        (prior_force, e)
+    }
+
+    /// One backward step (module doc) from λ̂_k (in `lambda_hat`, left
+    /// holding λ̂_{k−1}): returns F̂_k|N given x⁻_k[F] and e_k.
+    fn backward_step(&self, lambda_hat: &mut DVector<f64>, p_row: &DVector<f64>, prior_force: f64, e: f64) -> f64 {
+        // λ̃ = −c e/S + (I − K cᵀ)ᵀ λ̂ = −c e/S + λ̂ − c (Kᵀ λ̂)
+        let kl = self.k.dot(lambda_hat);
+        let lambda_tilde = &*lambda_hat - &self.c * (e / self.s + kl);
+        let estimate = prior_force - p_row.dot(&lambda_tilde);
+        *lambda_hat = self.a.tr_mul(&lambda_tilde);
+        estimate
+    }
+
+    /// Row F of P (the backward pass's output map), as a column.
+    fn p_row(&self) -> DVector<f64> {
+        self.p.row(self.force_index).transpose()
+    }
+
     /// Smoothed force estimate F̂_k|N (N) for every sample of `y` (N).
     ///
     /// Memory: 16 bytes per sample besides `y` and the result. The
     /// backward pass needs, of the forward pass, only each sample's
     /// innovation e_k and the force component of its prior x⁻_k (module
     /// doc: F̂_k|N = x⁻_k[F] − (P λ̃_k)[F]), so only those two are kept.
+    /// [`SpilledForward`] is the same computation with those 16 bytes on
+    /// disk.
     pub fn smooth(&self, y: &[f64]) -> Vec<f64> {
         // ỹ_k = y_{k−D}: D copies of y_0 in front; F̂_k for k < len(y).
         let d = if y.is_empty() { 0 } else { self.advance };
         let y_tilde = std::iter::repeat_n(y.first().copied().unwrap_or(0.0), d).chain(y.iter().copied());
-        let len = y.len() + d;
         let n = self.a.nrows();
-        let mut prior = DVector::<f64>::zeros(n);
-        let mut next = DVector::<f64>::zeros(n);
-        let mut prior_force: Vec<f64> = Vec::with_capacity(len);
-        let mut innov: Vec<f64> = Vec::with_capacity(len);
-        for yk in y_tilde {
-            let e = yk - self.c.dot(&prior);
-            prior_force.push(prior[self.force_index]);
-            innov.push(e);
-            prior.axpy(e, &self.k, 1.0);
-            self.a.mul_to(&prior, &mut next);
-            std::mem::swap(&mut prior, &mut next);
-        }
-        let p_row = self.p.row(self.force_index).transpose();
+        let (mut prior, mut next) = (DVector::<f64>::zeros(n), DVector::<f64>::zeros(n));
+        let (mut prior_force, mut innov): (Vec<f64>, Vec<f64>) = y_tilde.map(|yk| self.forward_step(&mut prior, &mut next, yk)).unzip();
+        let p_row = self.p_row();
         let mut lambda_hat = DVector::<f64>::zeros(n);
-        let mut out = prior_force;
-        for k in (0..len).rev() {
-            // λ̃ = −c e/S + (I − K cᵀ)ᵀ λ̂ = −c e/S + λ̂ − c (Kᵀ λ̂)
-            let kl = self.k.dot(&lambda_hat);
-            let lambda_tilde = &lambda_hat - &self.c * (innov[k] / self.s + kl);
-            out[k] -= p_row.dot(&lambda_tilde);
-            lambda_hat = self.a.tr_mul(&lambda_tilde);
+        for k in (0..prior_force.len()).rev() {
+            prior_force[k] = self.backward_step(&mut lambda_hat, &p_row, prior_force[k], innov[k]);
         }
-        out.truncate(len - d);
-        out
+        innov.clear();
+        prior_force.truncate(y.len());
+        prior_force
     }
+}
+
+/// Pairs (x⁻_k[F], e_k) per chunk of the spilled backward pass: 1 MiB.
+const SPILL_CHUNK: usize = 1 << 16;
+
+/// The smoother of one axis over a record of any length (issue #14,
+/// "a backward pass over blocks spilled to a temporary file"): the
+/// forward pass takes the record block by block and writes each sample's
+/// x⁻_k[F] and e_k (16 bytes, f64) to an unnamed temporary file; then
+/// [`SpilledForward::backward`] reads that file from its end in chunks and
+/// writes the estimates in their places to a second one, which
+/// [`SpilledEstimate`] reads forward. Same steps, same arithmetic, same bits
+/// as [`Smoother::smooth`]; memory independent of the record's length.
+pub struct SpilledForward<'s> {
+    sm: &'s Smoother,
+    prior: DVector<f64>,
+    next: DVector<f64>,
+    spill: std::io::BufWriter<std::fs::File>,
+    /// Samples of y taken.
+    n_y: u64,
+    /// Pairs written (samples of ỹ: n_y + D once y has begun).
+    n_pairs: u64,
+}
+
+impl<'s> SpilledForward<'s> {
+    /// Start the forward pass; the temporary files go to `dir`.
+    pub fn new(sm: &'s Smoother, dir: &Path) -> Result<Self> {
+        let n = sm.a.nrows();
+        let file = tempfile::tempfile_in(dir).with_context(|| format!("{}: cannot create a temporary file for the smoother's forward pass", dir.display()))?;
+        Ok(SpilledForward { sm, prior: DVector::zeros(n), next: DVector::zeros(n), spill: std::io::BufWriter::with_capacity(1 << 20, file), n_y: 0, n_pairs: 0 })
+    }
+
+    /// Take the next samples of y (N).
+    pub fn push(&mut self, y: &[f64]) -> Result<()> {
+        use std::io::Write;
+        if self.n_y == 0 {
+            // ỹ_k = y_{k−D}: D copies of y_0 in front.
+            if let Some(&y0) = y.first() {
+                for _ in 0..self.sm.advance {
+                    self.step(y0)?;
+                }
+            }
+        }
+        for &yk in y {
+            self.step(yk)?;
+        }
+        self.n_y += y.len() as u64;
+        self.spill.flush().ok();
+        Ok(())
+    }
+
+    fn step(&mut self, yk: f64) -> Result<()> {
+        use std::io::Write;
+        let (f, e) = self.sm.forward_step(&mut self.prior, &mut self.next, yk);
+        self.spill.write_all(&f.to_le_bytes())?;
+        self.spill.write_all(&e.to_le_bytes())?;
+        self.n_pairs += 1;
+        Ok(())
+    }
+
+    /// The backward pass over the spilled forward pass: the estimates
+    /// F̂_k|N, k < samples of y, in a temporary file in `dir`. `on_chunk`
+    /// is told the samples done (for a progress bar). Refuses a
+    /// non-finite estimate, naming the sample.
+    pub fn backward(self, dir: &Path, name: &str, source: &str, on_chunk: &dyn Fn(u64)) -> Result<SpilledEstimate> {
+        use std::io::{Read, Seek, SeekFrom, Write};
+        let io_err = |e: std::io::Error| anyhow::anyhow!("{}: temporary file of the smoother: {e}", dir.display());
+        let mut spill = self.spill.into_inner().map_err(|e| io_err(e.into_error()))?;
+        let mut out = tempfile::tempfile_in(dir).map_err(io_err)?;
+        let n_pairs = usize::try_from(self.n_pairs).map_err(|_| anyhow::anyhow!("{source}: record too long"))?;
+        let n_y = self.n_y as usize;
+        let p_row = self.sm.p_row();
+        let mut lambda_hat = DVector::<f64>::zeros(self.sm.a.nrows());
+        let mut bytes = vec![0u8; 16 * SPILL_CHUNK];
+        let mut est = Vec::with_capacity(SPILL_CHUNK);
+        let mut hi = n_pairs;
+        while hi > 0 {
+            let lo = hi.saturating_sub(SPILL_CHUNK);
+            let buf = &mut bytes[..16 * (hi - lo)];
+            spill.seek(SeekFrom::Start(16 * lo as u64)).map_err(io_err)?;
+            spill.read_exact(buf).map_err(io_err)?;
+            est.clear();
+            for k in (lo..hi).rev() {
+                let pair = &buf[16 * (k - lo)..16 * (k - lo + 1)];
+                let f = f64::from_le_bytes(pair[..8].try_into().unwrap_or_default());
+                let e = f64::from_le_bytes(pair[8..].try_into().unwrap_or_default());
+                let v = self.sm.backward_step(&mut lambda_hat, &p_row, f, e);
+                if k < n_y && !v.is_finite() {
+                    bail!("{source}: smoothed {name} became non-finite at sample {k}");
+                }
+                est.push(v);
+            }
+            // est holds F̂_{hi−1} … F̂_lo; keep k < n_y, in order.
+            let keep_hi = hi.min(n_y);
+            if lo < keep_hi {
+                let mut chunk: Vec<u8> = Vec::with_capacity(8 * (keep_hi - lo));
+                for v in est[hi - keep_hi..].iter().rev() {
+                    chunk.extend_from_slice(&v.to_le_bytes());
+                }
+                out.seek(SeekFrom::Start(8 * lo as u64)).map_err(io_err)?;
+                out.write_all(&chunk).map_err(io_err)?;
+                on_chunk((keep_hi - lo) as u64);
+            }
+            hi = lo;
+        }
+        out.seek(SeekFrom::Start(0)).map_err(io_err)?;
+        Ok(SpilledEstimate { r: std::io::BufReader::with_capacity(1 << 20, out), left: self.n_y })
+    }
+}
+
+/// The estimates of a [`SpilledForward`] pass, read forward.
+pub struct SpilledEstimate {
+    r: std::io::BufReader<std::fs::File>,
+    left: u64,
+}
+
+impl SpilledEstimate {
+    /// The next `n` estimates (N) into `out` (cleared first); an error if
+    /// fewer are left.
+    pub fn read(&mut self, n: usize, out: &mut Vec<f64>) -> Result<()> {
+        use std::io::Read;
+        if (n as u64) > self.left {
+            bail!("internal error: the smoother has {} estimates left, {n} asked for", self.left);
+        }
+        out.clear();
+        let mut b = [0u8; 8];
+        for _ in 0..n {
+            self.r.read_exact(&mut b).context("temporary file of the smoother")?;
+            out.push(f64::from_le_bytes(b));
+        }
+        self.left -= n as u64;
+        Ok(())
+    }
+
+    /// Estimates not yet read.
+    pub fn left(&self) -> u64 {
+        self.left
+    }
+}
+
+/// The smoother of `axis` (0 = x): the sidecar's discrete model, q and R
+/// from the image.
+pub fn axis_smoother(image: &CoeffImage, sidecar: &ModelSidecar, axis: usize, source: &str) -> Result<Smoother> {
+    let Some(a) = image.axes.get(axis).copied().flatten() else {
+        bail!("{source}: column f{} has no compensator (and no q, R) in the image; drop the column or design for that axis", axis_name(axis));
+    };
+    let dm = sidecar.discrete_model(axis, source)?;
+    Smoother::new(&dm, a.summary.q, a.summary.r).with_context(|| format!("{source}: axis {}", axis_name(axis)))
 }
 
 /// `compensate --offline`: smooth every force column of `rec` with the
@@ -352,12 +515,7 @@ impl Smoother {
 pub fn smooth_record(image: &CoeffImage, sidecar: &ModelSidecar, rec: &SignalRecord, source: &str) -> Result<SignalRecord> {
     let mut channels = Vec::with_capacity(rec.channels.len());
     for (axis, y) in &rec.channels {
-        let Some(a) = image.axes.get(*axis).copied().flatten() else {
-            bail!("{source}: column f{} has no compensator (and no q, R) in the image; drop the column or design for that axis", axis_name(*axis));
-        };
-        let dm = sidecar.discrete_model(*axis, source)?;
-        let sm = Smoother::new(&dm, a.summary.q, a.summary.r)
-            .with_context(|| format!("{source}: axis {}", axis_name(*axis)))?;
+        let sm = axis_smoother(image, sidecar, *axis, source)?;
         let out = sm.smooth(y);
         if let Some(k) = out.iter().position(|v| !v.is_finite()) {
             bail!("{source}: smoothed f{} became non-finite at sample {k}", axis_name(*axis));

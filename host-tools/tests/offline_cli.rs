@@ -27,6 +27,33 @@ fn offline_smoother_needs_the_sidecar_of_its_image() {
     assert!(err.contains("fixed-interval smoother"), "{err}");
     let text = std::fs::read_to_string(&out).unwrap();
     assert_eq!(text.lines().count(), std::fs::read_to_string(&measured).unwrap().lines().count());
+    // A file is smoothed with its forward pass spilled to disk (memory
+    // independent of the record's length); a pipe, which cannot be read
+    // twice, whole in memory. Same output, byte for byte, and both with a
+    // report against the true force.
+    assert!(err.contains("forward pass spilled"), "{err}");
+    let (report_file, report_pipe, out_pipe) = (tmp("rep-file"), tmp("rep-pipe"), tmp("smoothed-pipe.csv"));
+    let truth = example("true_force.csv");
+    let (ok, _, err_file) = dynocomp(&["compensate", "--coeffs", img.to_str().unwrap(), "--input", &measured, "--output", out.to_str().unwrap(), "--offline", "--truth", &truth, "--report", report_file.to_str().unwrap()]);
+    assert!(ok, "{err_file}");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_dynocomp"))
+        .args(["compensate", "--coeffs", img.to_str().unwrap(), "--input", "/dev/stdin", "--output", out_pipe.to_str().unwrap(), "--offline", "--truth", &truth, "--report", report_pipe.to_str().unwrap()])
+        .stdin(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let bytes = std::fs::read(&measured).unwrap();
+    let feeder = std::thread::spawn(move || std::io::Write::write_all(&mut stdin, &bytes));
+    let piped = child.wait_with_output().unwrap();
+    feeder.join().unwrap().unwrap();
+    let err_pipe = String::from_utf8_lossy(&piped.stderr);
+    assert!(piped.status.success(), "{err_pipe}");
+    assert!(err_pipe.contains("whole record in memory"), "{err_pipe}");
+    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&out_pipe).unwrap(), "spilled and in-memory smoothing differ");
+    let nrmse = |e: &str| e.lines().filter(|l| l.contains("NRMSE")).map(str::to_string).collect::<Vec<_>>();
+    assert!(!nrmse(&err_file).is_empty(), "{err_file}");
+    assert_eq!(nrmse(&err_file), nrmse(&err_pipe), "the reports' scores differ");
 
     // without the sidecar: a one-line error naming it, and no output file
     std::fs::remove_file(&sidecar).unwrap();
