@@ -152,7 +152,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
             let sidecar = crate::smoother::read_sidecar(&a.coeffs, i)?;
             let smoothers = axes.iter().map(|&ax| crate::smoother::axis_smoother(i, &sidecar, ax, &source)).collect::<Result<Vec<_>>>()?;
             progress.set_length(reader.len_hint().unwrap_or(0) * 2);
-            let est = smooth_spilled(&mut *reader, &smoothers, &axes, &spill_dir(&a.output), fs, &source, &progress)?;
+            let est = smooth_spilled(&mut *reader, &smoothers, &axes, crate::io::atomic::output_dir(&a.output), fs, &source, &progress)?;
             // The input is read a second time, for its times and the report.
             let (mut again, _) = open_signal(&a.input, map.as_ref())?;
             n_samples = write_output(&a.output, out_fmt, &axes, has_time, reader.len_hint(), fs, |w| {
@@ -306,15 +306,6 @@ fn stream_box(
         check_rate_value(fs, found, source, "column t_s")?;
     }
     Ok(written)
-}
-
-/// Where `compensate --offline` puts its temporary files: beside the
-/// output (the disk the user chose for a large output).
-fn spill_dir(output: &Path) -> PathBuf {
-    match output.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    }
 }
 
 /// `--offline` over a record of any length: the forward pass of each

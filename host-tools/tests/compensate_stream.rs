@@ -203,3 +203,31 @@ fn report_nrmse_uses_the_scoring_band() {
     let html = std::fs::read_to_string(rep.join("index.html")).unwrap();
     assert!(html.contains("both low-passed at 4000 Hz"), "the page states another band");
 }
+
+/// Outputs too large for memory spill beside the output, not to the
+/// system's temporary folder (often a small RAM disk): with TMPDIR pointing
+/// nowhere, a UFF 58b output (spilled per channel) is still written.
+/// Control: an output folder that does not exist is refused, naming it.
+#[test]
+fn uff_output_spills_beside_the_output() {
+    let img_path = tmp("spilldir", "img.dcimg");
+    std::fs::write(&img_path, common::bytes(&image(4))).unwrap();
+    let input = tmp("spilldir", "in.csv");
+    let text: String = std::iter::once("t_s,fx\n".to_string()).chain((0..20_000).map(|k| format!("{},{}\n", k as f64 / 51200.0, k % 7))).collect();
+    std::fs::write(&input, text).unwrap();
+    let run = |out: &std::path::Path| {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_dynocomp"))
+            .args(["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", input.to_str().unwrap(), "--output", out.to_str().unwrap(), "--output-format", "uff58b"])
+            .env("TMPDIR", "/nonexistent-dynocomp-tmp")
+            .output()
+            .unwrap();
+        (o.status.success(), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let out = tmp("spilldir", "out.uff");
+    let (ok, err) = run(&out);
+    assert!(ok, "{err}");
+    assert!(std::fs::metadata(&out).unwrap().len() > 20_000 * 8, "output too short");
+    let missing = tmp("spilldir", "no-such-folder").join("out.uff");
+    let (ok, err) = run(&missing);
+    assert!(!ok && err.contains("no-such-folder") && err.trim().lines().count() == 1, "{err}");
+}

@@ -9,12 +9,19 @@ use anyhow::{Context, Result};
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
-/// Write `path` atomically with the bytes produced by `write`.
-pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
-    let dir = match path.parent() {
+/// The folder of the output `path` (`.` for a bare file name): where its
+/// temporary file goes, and the temporary files of writers and passes too
+/// large for memory (the disk the user chose for a large output).
+pub fn output_dir(path: &Path) -> &Path {
+    match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
-    };
+    }
+}
+
+/// Write `path` atomically with the bytes produced by `write`.
+pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
+    let dir = output_dir(path);
     let tmp = tempfile::Builder::new()
         .prefix(".dynocomp-")
         .suffix(".tmp")

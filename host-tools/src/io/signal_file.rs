@@ -106,12 +106,13 @@ pub fn writer_for<'w>(
     has_time: bool,
     _len: Option<u64>,
     fs_hz: f64,
-    _path: &Path,
+    path: &Path,
 ) -> Result<Box<dyn SignalWriter + 'w>> {
+    let dir = crate::io::atomic::output_dir(path);
     match fmt {
         SignalFormat::Csv => Ok(Box::new(CsvWriter::new(w, axes, has_time)?)),
-        SignalFormat::Uff => Ok(Box::new(UffWriter::new(w, axes, fs_hz, false)?)),
-        SignalFormat::Uff58b => Ok(Box::new(UffWriter::new(w, axes, fs_hz, true)?)),
+        SignalFormat::Uff => Ok(Box::new(UffWriter::new_in(w, axes, fs_hz, false, dir)?)),
+        SignalFormat::Uff58b => Ok(Box::new(UffWriter::new_in(w, axes, fs_hz, true, dir)?)),
         SignalFormat::Tdms => Ok(Box::new(TdmsWriter::new(w, axes, fs_hz, 0.0)?)),
     }
 }

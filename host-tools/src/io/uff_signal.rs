@@ -379,11 +379,25 @@ pub struct UffWriter<'w> {
 }
 
 impl<'w> UffWriter<'w> {
-    /// A writer for `axes` at `fs_hz` into `w`.
+    /// A writer for `axes` at `fs_hz` into `w`, spilling to the system's
+    /// temporary folder.
     pub fn new(w: &'w mut dyn Write, axes: &[usize], fs_hz: f64, binary: bool) -> Result<Self> {
+        Self::new_in(w, axes, fs_hz, binary, &std::env::temp_dir())
+    }
+
+    /// [`UffWriter::new`], spilling each channel (8 bytes per sample) to an
+    /// unnamed temporary file in `spill_dir` until [`SignalWriter::finish`]
+    /// writes the datasets: `compensate` passes the output's folder, the
+    /// disk chosen for a large output (the system's temporary folder is
+    /// often a small RAM disk).
+    pub fn new_in(w: &'w mut dyn Write, axes: &[usize], fs_hz: f64, binary: bool, spill_dir: &Path) -> Result<Self> {
         let spill = axes
             .iter()
-            .map(|_| tempfile::tempfile().map(std::io::BufWriter::new).context("cannot create a temporary spill file"))
+            .map(|_| {
+                tempfile::tempfile_in(spill_dir)
+                    .map(std::io::BufWriter::new)
+                    .with_context(|| format!("{}: cannot create a temporary spill file", spill_dir.display()))
+            })
             .collect::<Result<_>>()?;
         Ok(UffWriter { w, axes: axes.to_vec(), spill, n: 0, dt: 1.0 / fs_hz, t0: None, binary })
     }
