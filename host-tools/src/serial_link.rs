@@ -41,13 +41,27 @@ pub struct Link {
 
 /// Open a serial port in raw mode (8N1, no flow control; the baud rate is
 /// irrelevant for USB CDC and pseudo-terminals).
+///
+/// The port is opened exclusively (flock). A port held by another program
+/// for a moment (ModemManager probes a new USB CDC device for a few
+/// seconds; a previous `dynocomp` still closing) is retried for up to
+/// [`PORT_BUSY_WAIT`] before the error says so.
 pub fn open_port(path: &str) -> Result<Box<dyn Transport>> {
-    let port = serialport::new(path, 115_200)
-        .timeout(Duration::from_millis(20))
-        .open()
-        .with_context(|| format!("{path}: cannot open serial port"))?;
-    Ok(Box::new(port))
+    let start = std::time::Instant::now();
+    loop {
+        match serialport::new(path, 115_200).timeout(Duration::from_millis(20)).open() {
+            Ok(port) => return Ok(Box::new(port)),
+            Err(e) if e.description.contains("lock") && start.elapsed() < PORT_BUSY_WAIT => std::thread::sleep(Duration::from_millis(50)),
+            Err(e) if e.description.contains("lock") => {
+                return Err(anyhow::anyhow!("{path}: cannot open serial port: {e} (busy for {} s: another program holds it; close it and retry)", PORT_BUSY_WAIT.as_secs()))
+            }
+            Err(e) => return Err(anyhow::Error::new(e).context(format!("{path}: cannot open serial port"))),
+        }
+    }
 }
+
+/// How long [`open_port`] waits for a port another program holds.
+pub const PORT_BUSY_WAIT: Duration = Duration::from_secs(3);
 
 impl Link {
     /// Connect through a serial port path.

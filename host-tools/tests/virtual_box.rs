@@ -293,3 +293,33 @@ fn stream_reports_exactly_the_injected_frame_losses() {
     assert_eq!(rec.channel(0), Some(&fx[..]), "the reader takes fx, not raw_fx");
     assert_eq!(rec.len(), 200);
 }
+
+/// A port another program holds for a moment (ModemManager probing a new
+/// USB CDC device, a previous `dynocomp` still closing) is waited for; one
+/// held longer than `PORT_BUSY_WAIT` is refused with a message saying so.
+#[test]
+fn a_busy_port_is_waited_for_then_refused_with_a_reason() {
+    use dynocomp::serial_link::{open_port, PORT_BUSY_WAIT};
+    use serialport::SerialPort;
+    let (_master, slave) = serialport::TTYPort::pair().unwrap();
+    let path = slave.name().unwrap();
+    drop(slave);
+    let keep = std::fs::OpenOptions::new().read(true).write(true).open(&path).unwrap();
+    // held 300 ms by another opener (an exclusive flock, as serialport takes)
+    let holder = serialport::new(&path, 115_200).open().unwrap();
+    let release = std::thread::spawn(move || {
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        drop(holder);
+    });
+    let t = std::time::Instant::now();
+    let port = open_port(&path);
+    assert!(port.is_ok(), "{:#}", port.err().unwrap());
+    assert!(t.elapsed() >= std::time::Duration::from_millis(250), "opened while held");
+    release.join().unwrap();
+    drop(port);
+    // held throughout: refused after the wait, naming the port and why
+    let _holder = serialport::new(&path, 115_200).open().unwrap();
+    let e = format!("{:#}", open_port(&path).err().expect("a held port must be refused"));
+    assert!(e.contains(&path) && e.contains("busy for") && !e.contains('\n'), "{e}");
+    let _ = (keep, PORT_BUSY_WAIT);
+}
