@@ -174,6 +174,11 @@ pub fn to_dac_code(value: f32) -> u16 {
 ///
 /// ADC codes at 0 or [`ADC_MAX_CODE`] are flagged and counted as saturated
 /// in both modes.
+///
+/// Always inlined: the firmware's interrupt has it inlined (one call site),
+/// and so must every harness that counts its instructions
+/// (`qemu/src/bin/icount.rs`), or the counts depend on LLVM's choice.
+#[inline(always)]
 pub fn process_sample(codes: [u16; AXES], mode: Mode<'_>, state: &mut SampleState) -> ([u16; AXES], SampleFlags) {
     let mut flags = 0u8;
     let mut out = codes;

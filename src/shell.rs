@@ -26,6 +26,75 @@ use crate::sample::{
     process_sample, select_stored_mode, BypassReason, Mode, SampleFlags, SampleState,
 };
 
+/// The image the sample path runs, with its mode decided once, when it
+/// became active (boot, upload, image switch), not on every sample.
+///
+/// Every way to make one runs the image checks of
+/// [`select_stored_mode`] (offline-only, supported sample rate, the CPU
+/// budget of [`crate::budget::check_load`]) and keeps their verdict next to
+/// the image; the fields are private and the one way to change the image
+/// afterwards ([`apply_adc_offsets`](Self::apply_adc_offsets)) decides
+/// again. So an image the checks refuse can never be run through an
+/// `ActiveImage`, whoever built it, and the sample interrupt pays for a
+/// stored verdict and the user's bypass switch instead of the checks (the
+/// budget check alone, with its 64-bit division, was ≈ 500 instructions per
+/// sample for a three-axis image: BENCHMARKS.md, "The sample interrupt's
+/// fixed part").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ActiveImage {
+    stored: Result<CoeffImage, BypassReason>,
+    /// `Some(reason)` when the checks refuse the image (or there is none).
+    refused: Option<BypassReason>,
+}
+
+impl ActiveImage {
+    /// Check `stored` (the coefficient store's result: a verified image or
+    /// why there is none) and keep the verdict.
+    pub fn new(stored: Result<CoeffImage, BypassReason>) -> Self {
+        let refused = match select_stored_mode(&stored, false) {
+            Mode::Compensate(_) => None,
+            Mode::Bypass(r) => Some(r),
+        };
+        ActiveImage { stored, refused }
+    }
+
+    /// The image (or why there is none), as given.
+    pub fn stored(&self) -> &Result<CoeffImage, BypassReason> {
+        &self.stored
+    }
+
+    /// The image's own verdict: `None` if it may run, else why not (the
+    /// user's bypass aside).
+    pub fn refused(&self) -> Option<BypassReason> {
+        self.refused
+    }
+
+    /// The sample path's mode: the stored verdict, then the user's bypass
+    /// switch (the same result as [`select_stored_mode`], without
+    /// re-running the checks).
+    #[inline(always)]
+    pub fn mode(&self, user_bypass: bool) -> Mode<'_> {
+        match (&self.stored, self.refused) {
+            (_, Some(r)) => Mode::Bypass(r),
+            (Ok(_), None) if user_bypass => Mode::Bypass(BypassReason::User),
+            (Ok(img), None) => Mode::Compensate(img),
+            // Unreachable: `new` refuses every `Err`; kept as bypass.
+            (Err(r), None) => Mode::Bypass(*r),
+        }
+    }
+
+    /// [`apply_adc_offsets`] on the image (if any), then decide again.
+    /// Returns the mask of axes changed.
+    pub fn apply_adc_offsets(&mut self, offsets: [f32; crate::AXES]) -> u8 {
+        let mask = match self.stored.as_mut() {
+            Ok(img) => apply_adc_offsets(img, offsets),
+            Err(_) => 0,
+        };
+        *self = ActiveImage::new(self.stored);
+        mask
+    }
+}
+
 /// The box's CPU core clock (SYSCLK = HCLK, 170 MHz from the PLL): the
 /// unit of the sample interrupt's cycle counts (DWT CYCCNT,
 /// `protocol::Status::core_clock_hz`).
@@ -645,22 +714,25 @@ impl SamplePath {
         self.auto_zero.start(n)
     }
 
-    /// One sample: raw ADC `codes`, the active image buffer `stored` (its ADC
-    /// offsets change when an auto-zero completes), the user's bypass switch.
+    /// One sample: raw ADC `codes`, the active image `stored` (its ADC
+    /// offsets change when an auto-zero completes), the user's bypass
+    /// switch. The image's mode was decided when it became active
+    /// ([`ActiveImage`]); here only the user's switch is read.
+    #[inline(always)]
     pub fn tick(
         &mut self,
         codes: [u16; crate::AXES],
-        stored: &mut Result<CoeffImage, BypassReason>,
+        stored: &mut ActiveImage,
         user_bypass: bool,
     ) -> TickOutput {
         let auto_zero = self.auto_zero.feed(codes);
         if let Some(Ok(offsets)) = auto_zero {
-            if let Ok(img) = stored.as_mut() {
-                apply_adc_offsets(img, offsets);
+            if stored.stored().is_ok() {
+                stored.apply_adc_offsets(offsets);
                 self.state.reset_filters();
             }
         }
-        let mode = select_stored_mode(stored, user_bypass);
+        let mode = stored.mode(user_bypass);
         let compensating = matches!(mode, Mode::Compensate(_));
         if compensating && !self.was_compensating {
             self.state.reset_filters();

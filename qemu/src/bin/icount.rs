@@ -51,6 +51,7 @@ use dsp_process::SplitProcess;
 use dynocomp_core::image::{AxisImage, AxisScaling, AxisSummary, CoeffImage, DesignMethod};
 use dynocomp_core::kernel::{AxisFilter, AxisState, Section};
 use dynocomp_core::sample::{process_sample, Mode, SampleState};
+use dynocomp_core::shell::{ActiveImage, SamplePath};
 use dynocomp_core::AXES;
 use dynocomp_qemu::{success, Ticks};
 use idsp::iir::{Biquad, Cascade, DirectForm, DirectForm2Transposed};
@@ -263,6 +264,14 @@ fn sample_isr_body(img: &CoeffImage, st: &mut SampleState, code: u16) -> u16 {
     dac[0] ^ dac[1] ^ dac[2] ^ u16::from(flags.0)
 }
 
+/// The sample interrupt's decisions around `process_sample`
+/// (`SamplePath::tick`: auto-zero feed, mode, filter resets), compensating.
+#[inline(never)]
+fn tick_body(path: &mut SamplePath, stored: &mut ActiveImage, code: u16) -> u16 {
+    let out = path.tick([code, code ^ 0x155, code ^ 0x2AA], stored, false);
+    out.dac[0] ^ out.dac[1] ^ out.dac[2] ^ u16::from(out.flags.0)
+}
+
 fn report(name: &str, per_sample: f32, empty: f32, states: u32) {
     let net = per_sample - empty;
     if states > 0 {
@@ -371,6 +380,16 @@ fn main() -> ! {
         let mut sst = SampleState::default();
         let per_call = measure(&ticks, |u| f32::from(sample_isr_body(black_box(&img), &mut sst, (u as i32 + 2048) as u16)));
         hprintln!("model {} {} {} {} {:.2} {:.2}", p, r, t, a, per_call, per_call - empty);
+    }
+    // The same shapes through `SamplePath::tick`: `tick` minus `model` is
+    // what the interrupt's decisions cost per sample on top of
+    // `process_sample`.
+    for (p, r, t, a) in [(0usize, 0usize, 0usize, 3usize), (3, 0, 19, 3), (24, 0, 24, 3), (6, 1, 9, 1)] {
+        // 20 kHz: every shape of the grid is within the box's budget there.
+        let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..image_of(mixed_filter(p, r, t), a) }));
+        let mut path = SamplePath::new();
+        let per_call = measure(&ticks, |u| f32::from(tick_body(&mut path, black_box(&mut stored), (u as i32 + 2048) as u16)));
+        hprintln!("tick {} {} {} {} {:.2} {:.2}", p, r, t, a, per_call, per_call - empty);
     }
     success()
 }
