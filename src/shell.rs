@@ -33,8 +33,8 @@ use crate::sample::{
 /// [`select_stored_mode`] (offline-only, supported sample rate, the CPU
 /// budget of [`crate::budget::check_load`]) and keeps their verdict next to
 /// the image; the fields are private and the one way to change the image
-/// afterwards ([`apply_adc_offsets`](Self::apply_adc_offsets)) decides
-/// again. So an image the checks refuse can never be run through an
+/// afterwards ([`apply_adc_offsets`](Self::apply_adc_offsets)) changes
+/// nothing the checks read. So an image the checks refuse can never be run through an
 /// `ActiveImage`, whoever built it, and the sample interrupt pays for a
 /// stored verdict and the user's bypass switch instead of the checks (the
 /// budget check alone, with its 64-bit division, was ≈ 500 instructions per
@@ -83,15 +83,17 @@ impl ActiveImage {
         }
     }
 
-    /// [`apply_adc_offsets`] on the image (if any), then decide again.
-    /// Returns the mask of axes changed.
+    /// [`apply_adc_offsets`] on the image (if any); returns the mask of
+    /// axes changed. The verdict stays: it changes only the ADC offsets,
+    /// which none of the checks reads (offline-only flag, sample rate and
+    /// the cost model's filter shapes), and it runs in the sample
+    /// interrupt, where deciding again would cost the budget check's
+    /// ≈ 500 instructions in that one sample (and copying the image).
     pub fn apply_adc_offsets(&mut self, offsets: [f32; crate::AXES]) -> u8 {
-        let mask = match self.stored.as_mut() {
+        match self.stored.as_mut() {
             Ok(img) => apply_adc_offsets(img, offsets),
             Err(_) => 0,
-        };
-        *self = ActiveImage::new(self.stored);
-        mask
+        }
     }
 }
 

@@ -735,12 +735,13 @@ fn an_image_over_the_budget_is_refused_on_every_route_to_activation() {
     assert!(!runs_any(&mut path, &mut active, true, 5));
     assert!(!runs_any(&mut path, &mut active, false, 20));
 
-    // Auto-zero: the image changes in place (ADC offsets) and is decided
-    // again; still refused.
+    // Auto-zero: the image changes in place (ADC offsets, which no check
+    // reads); still refused, and the same verdict as a fresh check.
     path.request_auto_zero(4).unwrap();
     assert!(!runs_any(&mut path, &mut active, false, 10));
     assert_ne!(active.stored().unwrap().axes[0].unwrap().scaling.adc_offset_code, 2048.0, "the auto-zero was applied");
     assert!(refused(&active));
+    assert_eq!(active.refused(), ActiveImage::new(*active.stored()).refused());
 
     // Negative control: the same routes with the image that fits run it.
     let mut boot = ActiveImage::new(Ok(within));
@@ -757,6 +758,7 @@ fn an_image_over_the_budget_is_refused_on_every_route_to_activation() {
     path.request_auto_zero(4).unwrap();
     assert!(runs_any(&mut path, &mut active, false, 10));
     assert_ne!(active.stored().unwrap().axes[0].unwrap().scaling.adc_offset_code, 2048.0);
+    assert_eq!(active.refused(), ActiveImage::new(*active.stored()).refused());
 }
 
 #[test]

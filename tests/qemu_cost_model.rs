@@ -1,5 +1,6 @@
 //! The cost model of the sample interrupt (`dynocomp_core::budget`) against
-//! the instructions `process_sample` executes on the emulated Cortex-M4F
+//! the instructions `SamplePath::tick` (`process_sample` and the decisions around it) executes
+//! on the emulated Cortex-M4F
 //! (issue #16).
 //!
 //! Runs `scripts/qemu_icount.sh` (builds `qemu/`'s `icount` program, runs
@@ -13,7 +14,8 @@
 //! cycles per instruction, so a drift here is a drift there.
 //!
 //! Negative control: the same check with one coefficient of the model
-//! off by 10 % (pairs) or 20 % (taps, real poles) must reject at least one
+//! off by 10 % (pairs), 20 % (taps, real poles, axis call, fixed part) or
+//! 50 % (remainder taps) must reject at least one
 //! measured shape. If `qemu-system-arm` is missing the test FAILS (like
 //! `tests/qemu_bit_exact.rs`); `bash scripts/test.sh` installs it.
 
@@ -81,6 +83,8 @@ fn cost_model_matches_the_qemu_instruction_counts() {
         ("taps +20 %", CostModel { tap: scaled(base.tap, 120), ..base }),
         ("real poles -20 %", CostModel { real: scaled(base.real, 80), ..base }),
         ("axis call -20 %", CostModel { axis: scaled(base.axis, 80), ..base }),
+        ("remainder taps -50 %", CostModel { tap_rem: scaled(base.tap_rem, 50), ..base }),
+        ("fixed part -20 %", CostModel { fixed: scaled(base.fixed, 80), ..base }),
     ] {
         assert!(!misses(&m, &rows).is_empty(), "negative control '{what}' was not caught");
     }
