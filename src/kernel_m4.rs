@@ -199,17 +199,25 @@ pub(super) fn pairs_step(
 /// the old `hist[j − 1]`), with `m = fir_len` clamped to [`MAX_FIR`].
 ///
 /// Four taps per pass: one `vldmia` for their coefficients, one for their
-/// history, four `vmla` in tap order, one `vstmia` of the shifted history
+/// history, four products (`vmul`) added to `y` in tap order (`vadd`,
+/// interleaved with the next product), one `vstmia` of the shifted history
 /// (the carried-in value, then the first three loaded), a `vmov` of the
-/// fourth as the next carry: 9 instructions per four taps (the Rust loop:
+/// fourth as the next carry: 14 instructions per four taps (the Rust loop:
 /// 4.5-5.4 per tap, with one `vldr`/`vstr` per value); the remaining
-/// `m mod 4` taps one at a time (6 instructions each). `y` stays in `s0`,
+/// `m mod 4` taps one at a time (7 instructions each). `y` stays in `s0`,
 /// the carry in `s3`.
 ///
-/// **Bit-identical to the Rust loop:** the same products (`vmla` is not
-/// fused: [`pairs_step`]'s argument), added to `y` in the same order, and
-/// the same values stored (copies, no arithmetic). `tests/qemu_bit_exact.rs`
-/// runs it against the host's Rust loop.
+/// `vmul` + `vadd` rather than `vmla`: the same two roundings (`vmla` is
+/// `FPAdd(y, FPMul(h, x))`, not fused: [`pairs_step`]'s argument), so the
+/// same bits, in 2 cycles instead of 3 by the Cortex-M4 TRM (VMLA 3, VMUL 1,
+/// VADD 1); a block of four: `vldmia` 5 + 5, 4 + 4, `vstmia` 5, `vmov`,
+/// `subs`, `bne` 2-4 = 27-29 cycles, 6.75-7.25 per tap (8 per tap with
+/// `vmla`). Which is faster on the silicon is for the DWT cycle counter to
+/// confirm (the pair loop keeps `vmla`, for its instruction count).
+///
+/// **Bit-identical to the Rust loop:** the same products, added to `y` in
+/// the same order, and the same values stored (copies, no arithmetic).
+/// `tests/qemu_bit_exact.rs` runs it against the host's Rust loop.
 #[inline(always)]
 pub(super) fn fir_step(h: &[f32; MAX_FIR], fir_len: usize, hist: &mut [f32; MAX_FIR], u: f32, y: &mut f32) {
     let m = fir_len.min(MAX_FIR);
@@ -222,7 +230,7 @@ pub(super) fn fir_step(h: &[f32; MAX_FIR], fir_len: usize, hist: &mut [f32; MAX_
     // a unique borrow and `h` a shared one, so they do not overlap. The
     // pointers and `m` are `inout` and discarded; `k` is a scratch output
     // allocated apart from the inputs; every S register written (`s0`,
-    // `s3`-`s11`) is a declared clobber; `lsrs`/`ands`/`subs` change the
+    // `s3`-`s15`) is a declared clobber; `lsrs`/`ands`/`subs` change the
     // flags; no stack use. FPSCR's modes are left unchanged.
     unsafe {
         core::arch::asm!(
@@ -233,11 +241,15 @@ pub(super) fn fir_step(h: &[f32; MAX_FIR], fir_len: usize, hist: &mut [f32; MAX_
             "2:",
             "vldmia {hp}!, {{s8-s11}}",
             "vldmia {xp}, {{s4-s7}}",
-            "vmla.f32 s0, s8, s4",
-            "vmla.f32 s0, s9, s5",
-            "vmla.f32 s0, s10, s6",
-            "vmla.f32 s0, s11, s7",
+            "vmul.f32 s12, s8, s4",
+            "vmul.f32 s13, s9, s5",
+            "vadd.f32 s0, s0, s12",
+            "vmul.f32 s14, s10, s6",
+            "vadd.f32 s0, s0, s13",
+            "vmul.f32 s15, s11, s7",
+            "vadd.f32 s0, s0, s14",
             "vstmia {xp}!, {{s3-s6}}",
+            "vadd.f32 s0, s0, s15",
             "vmov.f32 s3, s7",
             "subs {k}, {k}, #1",
             "bne 2b",
@@ -247,7 +259,8 @@ pub(super) fn fir_step(h: &[f32; MAX_FIR], fir_len: usize, hist: &mut [f32; MAX_
             "4:",
             "vldmia {hp}!, {{s8}}",
             "vldmia {xp}, {{s4}}",
-            "vmla.f32 s0, s8, s4",
+            "vmul.f32 s12, s8, s4",
+            "vadd.f32 s0, s0, s12",
             "vstmia {xp}!, {{s3}}",
             "vmov.f32 s3, s4",
             "subs {m}, {m}, #1",
@@ -270,6 +283,10 @@ pub(super) fn fir_step(h: &[f32; MAX_FIR], fir_len: usize, hist: &mut [f32; MAX_
             out("s9") _,
             out("s10") _,
             out("s11") _,
+            out("s12") _,
+            out("s13") _,
+            out("s14") _,
+            out("s15") _,
             options(nostack),
         );
     }

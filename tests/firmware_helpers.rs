@@ -258,6 +258,38 @@ proptest! {
         }
         prop_assert_eq!(processed + missed, written);
     }
+
+    /// The cursor (conditional subtractions) against its definition with
+    /// `%` (as first written), for any ring length, position and three
+    /// channel counts, valid or not, lagging or not.
+    #[test]
+    fn cursor_steps_equal_the_modulo_definition(len in 1u16..=64, start in 0u16..64, n in prop::array::uniform3(0u16..=66)) {
+        let mut c = RingCursor::new(len);
+        // Move the cursor to `start % len` first.
+        let s = start % len;
+        if s > 0 {
+            let n0 = len - s;
+            c.advance(&[n0, n0, n0]).unwrap();
+        }
+        prop_assert_eq!(c.next(), s);
+        let reference = || -> Option<(u16, u16, u16)> {
+            let (len, next) = (u32::from(len), u32::from(s));
+            let mut available = u32::MAX;
+            for &k in &n {
+                if k == 0 || u32::from(k) > len {
+                    return None;
+                }
+                let w = (len - u32::from(k)) % len;
+                available = available.min((w + len - next) % len);
+            }
+            Some((available as u16, ((next + len + available - 1) % len) as u16, ((next + available) % len) as u16))
+        };
+        let got = c.advance(&n).map(|st| (st.available, st.newest, c.next()));
+        prop_assert_eq!(got, reference());
+        if got.is_none() {
+            prop_assert_eq!(c.next(), s, "a refused step does not move the cursor");
+        }
+    }
 }
 
 // ---------------------------------------------------------------- slots --
