@@ -338,32 +338,35 @@ impl AxisFilter {
     /// No allocation, no panics, O(sections) multiply-adds.
     #[inline]
     pub fn step(&self, state: &mut AxisState, u: f32) -> f32 {
-        let mut y = self.d * u;
-        // Cortex-M4F: the same `pair_update`s, in hand-scheduled assembly
-        // (bit-identical, kernel_m4.rs).
+        // Cortex-M4F: the whole step below in one block of hand-scheduled
+        // assembly, bit-identical (kernel_m4.rs).
         #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
-        m4::pairs_step(self.form.pairs(), &mut state.x, u, &mut y);
+        {
+            m4::step(self, state, u)
+        }
         #[cfg(not(all(target_arch = "arm", target_os = "none", target_abi = "eabihf")))]
-        for (p, x) in self.form.pairs().iter().zip(state.x.iter_mut()) {
-            *x = pair_update(p, *x, u, &mut y);
+        {
+            let mut y = self.d * u;
+            for (p, x) in self.form.pairs().iter().zip(state.x.iter_mut()) {
+                *x = pair_update(p, *x, u, &mut y);
+            }
+            for (r, x) in self.form.reals().iter().zip(state.x_real.iter_mut()) {
+                *x = real_update(r, *x, u, &mut y);
+            }
+            // hist[j] holds u[k−1−j]. One pass accumulates h_{j+1}·u[k−1−j]
+            // in ascending j and shifts u[k] in (each slot takes its
+            // predecessor's old value): the same sums as a dot product
+            // followed by `rotate_right(1)`.
+            let m = self.fir_len.min(MAX_FIR);
+            let mut carry = u;
+            for (h, past) in self.fir[..m].iter().zip(state.fir_hist[..m].iter_mut()) {
+                let old = *past;
+                y += h * old;
+                *past = carry;
+                carry = old;
+            }
+            y
         }
-        for (r, x) in self.form.reals().iter().zip(state.x_real.iter_mut()) {
-            *x = real_update(r, *x, u, &mut y);
-        }
-        // hist[j] holds u[k−1−j]. One pass accumulates h_{j+1}·u[k−1−j] in
-        // ascending j and shifts u[k] in (each slot takes its predecessor's
-        // old value): the same sums as a dot product followed by
-        // `rotate_right(1)`, in 40 % of the instructions on the Cortex-M4
-        // (4.7 instead of 11.6 per tap; BENCHMARKS.md, instruction counts).
-        let m = self.fir_len.min(MAX_FIR);
-        let mut carry = u;
-        for (h, past) in self.fir[..m].iter().zip(state.fir_hist[..m].iter_mut()) {
-            let old = *past;
-            y += h * old;
-            *past = carry;
-            carry = old;
-        }
-        y
     }
 
     /// [`step`](Self::step) with the runaway guard: if the output is non-finite

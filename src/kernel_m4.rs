@@ -87,32 +87,85 @@
 //! (relaxed upstream by rust-lang/rust#159988, after 1.95); the S registers
 //! are named explicitly instead.
 
-use super::PairCoeffs;
+use super::{AxisFilter, AxisState, KernelForm, MAX_FIR, MAX_SECTIONS};
+use core::mem::offset_of;
 
-/// All pairs of one sample: for each pair `i` in order, `x[i] =
-/// pair_update(&pairs[i], x[i], u, y)`, over the common length of `pairs`
-/// and `x` (module documentation).
+/// Byte offsets the assembly reads the filter and the state at.
+const OFF_D: usize = offset_of!(AxisFilter, d);
+const OFF_COEFFS: usize = offset_of!(AxisFilter, form) + offset_of!(KernelForm, coeffs);
+const OFF_COEFFS_END: usize = OFF_COEFFS + 4 * 4 * MAX_SECTIONS;
+const OFF_NPAIRS: usize = offset_of!(AxisFilter, form) + offset_of!(KernelForm, n_pairs);
+const OFF_NREALS: usize = offset_of!(AxisFilter, form) + offset_of!(KernelForm, n_reals);
+const OFF_FIR: usize = offset_of!(AxisFilter, fir);
+const OFF_FIRLEN: usize = offset_of!(AxisFilter, fir_len);
+const OFF_X: usize = offset_of!(AxisState, x);
+const OFF_XREAL: usize = offset_of!(AxisState, x_real);
+const OFF_HIST: usize = offset_of!(AxisState, fir_hist);
+// The immediates below are Thumb-2 12-bit offsets.
+const _: () = assert!(OFF_D < 4096 && OFF_COEFFS_END < 4096 && OFF_NPAIRS < 4096 && OFF_NREALS < 4096);
+const _: () = assert!(OFF_FIR < 4096 && OFF_FIRLEN < 4096 && OFF_X < 4096 && OFF_XREAL < 4096 && OFF_HIST < 4096);
+const _: () = assert!(MAX_SECTIONS == 24 && MAX_FIR == 24);
+
+/// One sample of `f` ([`AxisFilter::step`]'s module equation, in its
+/// order): `y = d·u`, every pair, every live real pole, every FIR tap, in
+/// one block, so `y` stays in `s0` and `u` in `s1` from the first
+/// operation to the last (two separate blocks moved them between core and
+/// S registers four times per axis).
+///
+/// * pairs: two per pass as documented above (`vldmia` of 8 coefficients
+///   and 4 states, 18 float operations, `vstmia`), the odd last pair alone;
+///   count clamped to [`MAX_SECTIONS`];
+/// * real poles (`x += σ·x + u`, `y += c·x`): one per pass, from where the
+///   pairs' coefficients end (the kernel form packs them there), count
+///   clamped to what is left of the coefficient array; skipped when there
+///   is none;
+/// * FIR taps: four per pass (`vldmia` of 4 coefficients and 4 history
+///   values, 4 `vmul` + 4 `vadd` in tap order, `vstmia` of the shifted
+///   history, the fourth value carried in `s3`), then the rest one by one;
+///   count clamped to [`MAX_FIR`]. `vmul` + `vadd` rounds as `vmla` does
+///   (two roundings), in 2 cycles instead of 3 by the Cortex-M4 TRM; the
+///   pair loop keeps `vmla` for its instruction count.
+///
+/// **Bit-identical to the Rust loops** (`pair_update`, `real_update`, the
+/// FIR loop of `step`): the same operations on the same operands in the
+/// same order (above, and: `y += c·x` is `vmla s0, c, x`; `σ·x + u` is
+/// `vmul` then `vadd`; `x + (…)` is `vadd x, x, t`). `tests/qemu_bit_exact.rs`
+/// compares it with the host's Rust kernel on axes with an odd pair count,
+/// one and two real poles, and 24, 23 and 5 taps.
 #[inline(always)]
-pub(super) fn pairs_step(pairs: &[PairCoeffs], x: &mut [[f32; 2]], u: f32, y: &mut f32) {
-    let n = pairs.len().min(x.len());
-    let mut acc = *y;
-    // SAFETY: the asm reads `4 * n` f32 starting at `pairs.as_ptr()` and
-    // reads and writes `2 * n` f32 starting at `x.as_mut_ptr()`, ascending,
-    // and no other memory. `n` is at most the length of either slice, and
-    // the elements are contiguous: `PairCoeffs` is `[f32; 4]` (16 bytes,
-    // no padding), `[f32; 2]` is 8 bytes; so every
-    // access is in bounds and 4-byte aligned (VLDM/VSTM need word
-    // alignment). `x` is a unique borrow (writable) and `pairs` a shared
-    // one, so the two ranges do not overlap. The pointers and `n` are
-    // `inout` and discarded (post-increment writeback, shifts); `k` is a
-    // scratch output, allocated apart from the inputs; every S register the
-    // code writes (`s0`-`s15`) is a declared clobber; `subs`/`lsrs`/`lsls`
-    // change the flags, so no `preserves_flags`; no stack use (`nostack`).
-    // FPSCR's rounding and flush-to-zero modes are left unchanged.
+pub(super) fn step(f: &AxisFilter, state: &mut AxisState, u: f32) -> f32 {
+    let y: f32;
+    // SAFETY: the asm reads `f` and reads and writes `state` only, at the
+    // field offsets above (computed by `offset_of!`), and no other memory:
+    // * `d`, `n_pairs`, `n_reals`, `fir_len`: one word each;
+    // * pairs: `n ≤ MAX_SECTIONS` (clamped in the asm), `4n` f32 of
+    //   `form.coeffs` (`4·MAX_SECTIONS` long), `2n` of `state.x`
+    //   (`MAX_SECTIONS` pairs);
+    // * real poles: `r` clamped to the pairs left of `form.coeffs` after the
+    //   pairs' `4n` (so `4n + 2r ≤ 4·MAX_SECTIONS`), `2r` f32 of it and `r`
+    //   of `state.x_real` (`2·MAX_SECTIONS ≥ r` long);
+    // * taps: `m ≤ MAX_FIR` (clamped), `m` f32 of `fir` and of
+    //   `state.fir_hist` (both `MAX_FIR` long);
+    // all ascending, 4-byte aligned (f32/usize fields; VLDM/VSTM need word
+    // alignment). `state` is a unique borrow, `f` a shared one: no overlap.
+    // The pointers and counters are scratch outputs allocated apart from
+    // the inputs (`f`, `state` and `u` are not written); every S register
+    // written (`s0`-`s15`) is a declared clobber; the flags change (no
+    // `preserves_flags`); no stack use. FPSCR's rounding and flush-to-zero
+    // modes are left unchanged.
     unsafe {
         core::arch::asm!(
-            "vmov s0, {y}",
             "vmov s1, {u}",
+            "add {k}, {f}, #{off_d}",
+            "vldr s0, [{k}]",
+            "vmul.f32 s0, s0, s1",
+            // ---- pairs
+            "ldr {n}, [{f}, #{off_np}]",
+            "cmp {n}, #24",
+            "it hi",
+            "movhi {n}, #24",
+            "add {cp}, {f}, #{off_coeffs}",
+            "add {xp}, {st}, #{off_x}",
             "lsrs {k}, {n}, #1",
             "beq 3f",
             "2:",
@@ -142,7 +195,7 @@ pub(super) fn pairs_step(pairs: &[PairCoeffs], x: &mut [[f32; 2]], u: f32, y: &m
             "3:",
             "lsls {n}, {n}, #31",
             "beq 4f",
-            "vldmia {cp}, {{s8-s11}}",
+            "vldmia {cp}!, {{s8-s11}}",
             "vldmia {xp}, {{s4-s5}}",
             "vmla.f32 s0, s10, s4",
             "vmul.f32 s2, s8, s4",
@@ -155,13 +208,87 @@ pub(super) fn pairs_step(pairs: &[PairCoeffs], x: &mut [[f32; 2]], u: f32, y: &m
             "vadd.f32 s5, s5, s3",
             "vstmia {xp}, {{s4-s5}}",
             "4:",
+            // ---- real poles: {cp} is where the pairs' coefficients end
+            "ldr {n}, [{f}, #{off_nr}]",
+            "cmp {n}, #0",
+            "beq 6f",
+            "add {k}, {f}, #{off_coeffs_end}",
+            "sub {k}, {k}, {cp}",
+            "lsrs {k}, {k}, #3",
+            "cmp {n}, {k}",
+            "it hi",
+            "movhi {n}, {k}",
+            "cmp {n}, #0",
+            "beq 6f",
+            "add {xp}, {st}, #{off_xreal}",
+            "5:",
+            "vldmia {cp}!, {{s8-s9}}",
+            "vldr s4, [{xp}]",
+            "vmla.f32 s0, s9, s4",
+            "vmul.f32 s5, s8, s4",
+            "vadd.f32 s5, s5, s1",
+            "vadd.f32 s4, s4, s5",
+            "vstmia {xp}!, {{s4}}",
+            "subs {n}, {n}, #1",
+            "bne 5b",
+            "6:",
+            // ---- FIR taps
+            "ldr {n}, [{f}, #{off_fl}]",
+            "cmp {n}, #24",
+            "it hi",
+            "movhi {n}, #24",
+            "add {cp}, {f}, #{off_fir}",
+            "add {xp}, {st}, #{off_hist}",
+            "vmov.f32 s3, s1",
+            "lsrs {k}, {n}, #2",
+            "beq 8f",
+            "7:",
+            "vldmia {cp}!, {{s8-s11}}",
+            "vldmia {xp}, {{s4-s7}}",
+            "vmul.f32 s12, s8, s4",
+            "vmul.f32 s13, s9, s5",
+            "vadd.f32 s0, s0, s12",
+            "vmul.f32 s14, s10, s6",
+            "vadd.f32 s0, s0, s13",
+            "vmul.f32 s15, s11, s7",
+            "vadd.f32 s0, s0, s14",
+            "vstmia {xp}!, {{s3-s6}}",
+            "vadd.f32 s0, s0, s15",
+            "vmov.f32 s3, s7",
+            "subs {k}, {k}, #1",
+            "bne 7b",
+            "8:",
+            "ands {n}, {n}, #3",
+            "beq 10f",
+            "9:",
+            "vldmia {cp}!, {{s8}}",
+            "vldmia {xp}, {{s4}}",
+            "vmul.f32 s12, s8, s4",
+            "vadd.f32 s0, s0, s12",
+            "vstmia {xp}!, {{s3}}",
+            "vmov.f32 s3, s4",
+            "subs {n}, {n}, #1",
+            "bne 9b",
+            "10:",
             "vmov {y}, s0",
-            cp = inout(reg) pairs.as_ptr() => _,
-            xp = inout(reg) x.as_mut_ptr() => _,
-            n = inout(reg) n => _,
-            k = out(reg) _,
-            y = inout(reg) acc,
+            f = in(reg) f as *const AxisFilter,
+            st = in(reg) state as *mut AxisState,
             u = in(reg) u,
+            y = lateout(reg) y,
+            cp = out(reg) _,
+            xp = out(reg) _,
+            n = out(reg) _,
+            k = out(reg) _,
+            off_d = const OFF_D,
+            off_np = const OFF_NPAIRS,
+            off_nr = const OFF_NREALS,
+            off_coeffs = const OFF_COEFFS,
+            off_coeffs_end = const OFF_COEFFS_END,
+            off_fir = const OFF_FIR,
+            off_fl = const OFF_FIRLEN,
+            off_x = const OFF_X,
+            off_xreal = const OFF_XREAL,
+            off_hist = const OFF_HIST,
             out("s0") _,
             out("s1") _,
             out("s2") _,
@@ -181,5 +308,5 @@ pub(super) fn pairs_step(pairs: &[PairCoeffs], x: &mut [[f32; 2]], u: f32, y: &m
             options(nostack),
         );
     }
-    *y = acc;
+    y
 }

@@ -150,16 +150,28 @@ impl SampleFlags {
 
 /// Round a DAC value to the nearest code and clamp it to `0..=DAC_MAX_CODE`
 /// (NaN maps to 0). No panics.
+///
+/// `(value + 0.5) as u32` truncates toward zero and saturates (NaN and
+/// negatives to 0), which is one `vcvt.u32.f32` on the Cortex-M4F (its
+/// conversion saturates the same way), then an integer clamp: the same codes
+/// as comparing the float against 0 and `DAC_MAX_CODE` first, in a third of
+/// the instructions (`tests/sample_path.rs` compares the two definitions).
 #[inline]
 pub fn to_dac_code(value: f32) -> u16 {
-    let v = value + 0.5;
-    if !(v >= 0.0) {
-        0
-    } else if v >= f32::from(DAC_MAX_CODE) {
-        DAC_MAX_CODE
-    } else {
-        v as u16
-    }
+    let code = (value + 0.5) as u32;
+    code.min(u32::from(DAC_MAX_CODE)) as u16
+}
+
+/// One axis of [`process_sample`] in compensate mode: the DAC code, and
+/// whether the runaway guard reset the state (the raw force is output then).
+#[inline(always)]
+fn compensate_axis(a: &crate::image::AxisImage, state: &mut AxisState, code: u16) -> (u16, bool) {
+    let force_n = a.scaling.code_to_newton(code);
+    let (y, reset) = match a.filter.step_guarded(state, force_n) {
+        Some(y) => (y, false),
+        None => (force_n, true),
+    };
+    (to_dac_code(a.scaling.dac_offset_code + y * a.scaling.dac_code_per_newton), reset)
 }
 
 /// One sample of the box: ADC codes in, DAC codes and flags out.
@@ -174,6 +186,11 @@ pub fn to_dac_code(value: f32) -> u16 {
 ///
 /// ADC codes at 0 or [`ADC_MAX_CODE`] are flagged and counted as saturated
 /// in both modes.
+///
+/// Always inlined: the firmware's interrupt has it inlined (one call site),
+/// and so must every harness that counts its instructions
+/// (`qemu/src/bin/icount.rs`), or the counts depend on LLVM's choice.
+#[inline(always)]
 pub fn process_sample(codes: [u16; AXES], mode: Mode<'_>, state: &mut SampleState) -> ([u16; AXES], SampleFlags) {
     let mut flags = 0u8;
     let mut out = codes;
@@ -187,18 +204,17 @@ pub fn process_sample(codes: [u16; AXES], mode: Mode<'_>, state: &mut SampleStat
     match mode {
         Mode::Bypass(_) => flags |= SampleFlags::BYPASS,
         Mode::Compensate(img) => {
-            let lanes = img.axes.iter().zip(state.axes.iter_mut()).zip(out.iter_mut()).zip(codes.iter());
-            for (i, (((axis_img, axis_state), dac), &code)) in lanes.enumerate() {
-                let Some(a) = axis_img else { continue };
-                let force_n = a.scaling.code_to_newton(code);
-                let y = match a.filter.step_guarded(axis_state, force_n) {
-                    Some(y) => y,
-                    None => {
+            // One straight-line copy per axis (the loop over the three
+            // lanes is unrolled): no search for the next present axis.
+            let lanes = img.axes.iter().zip(state.axes.iter_mut()).zip(out.iter_mut()).zip(codes);
+            for (i, (((axis_img, axis_state), dac), code)) in lanes.enumerate() {
+                if let Some(a) = axis_img {
+                    let (code_out, reset) = compensate_axis(a, axis_state, code);
+                    *dac = code_out;
+                    if reset {
                         flags |= SampleFlags::reset(i);
-                        force_n
                     }
-                };
-                *dac = to_dac_code(a.scaling.dac_offset_code + y * a.scaling.dac_code_per_newton);
+                }
             }
         }
     }

@@ -26,6 +26,77 @@ use crate::sample::{
     process_sample, select_stored_mode, BypassReason, Mode, SampleFlags, SampleState,
 };
 
+/// The image the sample path runs, with its mode decided once, when it
+/// became active (boot, upload, image switch), not on every sample.
+///
+/// Every way to make one runs the image checks of
+/// [`select_stored_mode`] (offline-only, supported sample rate, the CPU
+/// budget of [`crate::budget::check_load`]) and keeps their verdict next to
+/// the image; the fields are private and the one way to change the image
+/// afterwards ([`apply_adc_offsets`](Self::apply_adc_offsets)) changes
+/// nothing the checks read. So an image the checks refuse can never be run through an
+/// `ActiveImage`, whoever built it, and the sample interrupt pays for a
+/// stored verdict and the user's bypass switch instead of the checks (the
+/// budget check alone, with its 64-bit division, was ≈ 500 instructions per
+/// sample for a three-axis image: BENCHMARKS.md, "The sample interrupt's
+/// fixed part").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ActiveImage {
+    stored: Result<CoeffImage, BypassReason>,
+    /// `Some(reason)` when the checks refuse the image (or there is none).
+    refused: Option<BypassReason>,
+}
+
+impl ActiveImage {
+    /// Check `stored` (the coefficient store's result: a verified image or
+    /// why there is none) and keep the verdict.
+    pub fn new(stored: Result<CoeffImage, BypassReason>) -> Self {
+        let refused = match select_stored_mode(&stored, false) {
+            Mode::Compensate(_) => None,
+            Mode::Bypass(r) => Some(r),
+        };
+        ActiveImage { stored, refused }
+    }
+
+    /// The image (or why there is none), as given.
+    pub fn stored(&self) -> &Result<CoeffImage, BypassReason> {
+        &self.stored
+    }
+
+    /// The image's own verdict: `None` if it may run, else why not (the
+    /// user's bypass aside).
+    pub fn refused(&self) -> Option<BypassReason> {
+        self.refused
+    }
+
+    /// The sample path's mode: the stored verdict, then the user's bypass
+    /// switch (the same result as [`select_stored_mode`], without
+    /// re-running the checks).
+    #[inline(always)]
+    pub fn mode(&self, user_bypass: bool) -> Mode<'_> {
+        match (&self.stored, self.refused) {
+            (_, Some(r)) => Mode::Bypass(r),
+            (Ok(_), None) if user_bypass => Mode::Bypass(BypassReason::User),
+            (Ok(img), None) => Mode::Compensate(img),
+            // Unreachable: `new` refuses every `Err`; kept as bypass.
+            (Err(r), None) => Mode::Bypass(*r),
+        }
+    }
+
+    /// [`apply_adc_offsets`] on the image (if any); returns the mask of
+    /// axes changed. The verdict stays: it changes only the ADC offsets,
+    /// which none of the checks reads (offline-only flag, sample rate and
+    /// the cost model's filter shapes), and it runs in the sample
+    /// interrupt, where deciding again would cost the budget check's
+    /// ≈ 500 instructions in that one sample (and copying the image).
+    pub fn apply_adc_offsets(&mut self, offsets: [f32; crate::AXES]) -> u8 {
+        match self.stored.as_mut() {
+            Ok(img) => apply_adc_offsets(img, offsets),
+            Err(_) => 0,
+        }
+    }
+}
+
 /// The box's CPU core clock (SYSCLK = HCLK, 170 MHz from the PLL): the
 /// unit of the sample interrupt's cycle counts (DWT CYCCNT,
 /// `protocol::Status::core_clock_hz`).
@@ -146,7 +217,9 @@ pub fn dma_write_index(ndtr: u16, len: u16) -> Option<u16> {
     if len == 0 || ndtr == 0 || ndtr > len {
         return None;
     }
-    Some((len - ndtr) % len)
+    // 1 ≤ ndtr ≤ len, so len − ndtr < len: already the index (no division
+    // on the sample path).
+    Some(len - ndtr)
 }
 
 /// What arrived in the rings since the previous sample interrupt.
@@ -212,15 +285,21 @@ impl RingCursor {
             return None;
         }
         let len = u32::from(self.len);
+        // `next < len` always (set below), and every write index is < len,
+        // so each sum below is < 2·len and "modulo len" is one conditional
+        // subtraction: no division on the sample path (a `udiv` is 2-12
+        // cycles on the Cortex-M4, and this ran four of them per sample).
+        let wrap = |x: u32| if x >= len { x - len } else { x };
         let next = u32::from(self.next);
         let mut available = u32::MAX;
         for &n in ndtrs {
             let w = u32::from(dma_write_index(n, self.len)?);
-            available = available.min((w + len - next) % len);
+            available = available.min(wrap(w + len - next));
         }
         // All values below are < len <= u16::MAX, so the casts are lossless.
-        let newest = (next + len + available - 1) % len;
-        self.next = ((next + available) % len) as u16;
+        let next_after = wrap(next + available);
+        let newest = if next_after == 0 { len - 1 } else { next_after - 1 };
+        self.next = next_after as u16;
         Some(RingStep {
             available: available as u16,
             newest: newest as u16,
@@ -413,6 +492,7 @@ impl AutoZero {
     }
 
     /// Whether an averaging is under way.
+    #[inline(always)]
     pub fn is_running(&self) -> bool {
         self.target != 0
     }
@@ -645,22 +725,27 @@ impl SamplePath {
         self.auto_zero.start(n)
     }
 
-    /// One sample: raw ADC `codes`, the active image buffer `stored` (its ADC
-    /// offsets change when an auto-zero completes), the user's bypass switch.
+    /// One sample: raw ADC `codes`, the active image `stored` (its ADC
+    /// offsets change when an auto-zero completes), the user's bypass
+    /// switch. The image's mode was decided when it became active
+    /// ([`ActiveImage`]); here only the user's switch is read.
+    #[inline(always)]
     pub fn tick(
         &mut self,
         codes: [u16; crate::AXES],
-        stored: &mut Result<CoeffImage, BypassReason>,
+        stored: &mut ActiveImage,
         user_bypass: bool,
     ) -> TickOutput {
-        let auto_zero = self.auto_zero.feed(codes);
+        // Idle (almost always): one test, no call of `feed` and no
+        // returned `Option<Result<…>>` through memory.
+        let auto_zero = if self.auto_zero.is_running() { self.auto_zero.feed(codes) } else { None };
         if let Some(Ok(offsets)) = auto_zero {
-            if let Ok(img) = stored.as_mut() {
-                apply_adc_offsets(img, offsets);
+            if stored.stored().is_ok() {
+                stored.apply_adc_offsets(offsets);
                 self.state.reset_filters();
             }
         }
-        let mode = select_stored_mode(stored, user_bypass);
+        let mode = stored.mode(user_bypass);
         let compensating = matches!(mode, Mode::Compensate(_));
         if compensating && !self.was_compensating {
             self.state.reset_filters();

@@ -258,6 +258,38 @@ proptest! {
         }
         prop_assert_eq!(processed + missed, written);
     }
+
+    /// The cursor (conditional subtractions) against its definition with
+    /// `%` (as first written), for any ring length, position and three
+    /// channel counts, valid or not, lagging or not.
+    #[test]
+    fn cursor_steps_equal_the_modulo_definition(len in 1u16..=64, start in 0u16..64, n in prop::array::uniform3(0u16..=66)) {
+        let mut c = RingCursor::new(len);
+        // Move the cursor to `start % len` first.
+        let s = start % len;
+        if s > 0 {
+            let n0 = len - s;
+            c.advance(&[n0, n0, n0]).unwrap();
+        }
+        prop_assert_eq!(c.next(), s);
+        let reference = || -> Option<(u16, u16, u16)> {
+            let (len, next) = (u32::from(len), u32::from(s));
+            let mut available = u32::MAX;
+            for &k in &n {
+                if k == 0 || u32::from(k) > len {
+                    return None;
+                }
+                let w = (len - u32::from(k)) % len;
+                available = available.min((w + len - next) % len);
+            }
+            Some((available as u16, ((next + len + available - 1) % len) as u16, ((next + available) % len) as u16))
+        };
+        let got = c.advance(&n).map(|st| (st.available, st.newest, c.next()));
+        prop_assert_eq!(got, reference());
+        if got.is_none() {
+            prop_assert_eq!(c.next(), s, "a refused step does not move the cursor");
+        }
+    }
 }
 
 // ---------------------------------------------------------------- slots --
@@ -553,7 +585,7 @@ fn firmware_version_parts() {
 
 use common::{kernel_filter, mode_block};
 use dynocomp_core::image::CoeffImage;
-use dynocomp_core::sample::{process_sample, SampleFlags};
+use dynocomp_core::sample::{process_sample, select_stored_mode, SampleFlags};
 
 /// An image whose x axis has memory (a 2.5 kHz mode at 51.2 kHz), so a
 /// filter reset shows in the output.
@@ -569,7 +601,7 @@ fn codes(k: u16) -> [u16; 3] {
 /// DAC codes of samples `ks` through `path` (compensating).
 fn run(
     path: &mut SamplePath,
-    stored: &mut Result<CoeffImage, BypassReason>,
+    stored: &mut ActiveImage,
     ks: std::ops::Range<u16>,
 ) -> Vec<[u16; 3]> {
     ks.map(|k| path.tick(codes(k), stored, false).dac).collect()
@@ -577,7 +609,7 @@ fn run(
 
 #[test]
 fn leaving_bypass_starts_the_filters_from_rest() {
-    let mut stored = Ok(image_with_memory(2_500.0));
+    let mut stored = ActiveImage::new(Ok(image_with_memory(2_500.0)));
     let mut path = SamplePath::new();
     for k in 0..50 {
         assert!(path.tick(codes(k), &mut stored, false).compensating);
@@ -592,7 +624,7 @@ fn leaving_bypass_starts_the_filters_from_rest() {
     assert_eq!(after, run(&mut SamplePath::new(), &mut stored, 60..110));
     // And it matters: carrying the state over the bypass gives other output.
     let mut st = SampleState::default();
-    let loaded = Ok(stored.unwrap());
+    let loaded = Ok(stored.stored().unwrap());
     let mode = select_mode(Some(&loaded), false);
     let carried: Vec<_> = (0..110)
         .filter(|k| !(50..60).contains(k))
@@ -604,15 +636,15 @@ fn leaving_bypass_starts_the_filters_from_rest() {
 
 #[test]
 fn a_new_image_starts_from_rest() {
-    let mut stored = Ok(image_with_memory(2_500.0));
+    let mut stored = ActiveImage::new(Ok(image_with_memory(2_500.0)));
     let mut path = SamplePath::new();
     run(&mut path, &mut stored, 0..40);
-    stored = Ok(image_with_memory(3_100.0));
+    stored = ActiveImage::new(Ok(image_with_memory(3_100.0)));
     path.on_image_switch();
     let after = run(&mut path, &mut stored, 40..90);
     assert_eq!(after, run(&mut SamplePath::new(), &mut stored, 40..90));
     // The new image is the one running: the old one gives other output.
-    let mut old = Ok(image_with_memory(2_500.0));
+    let mut old = ActiveImage::new(Ok(image_with_memory(2_500.0)));
     assert_ne!(after, run(&mut SamplePath::new(), &mut old, 40..90));
     // The counters survive the switch.
     assert_eq!(path.state.counters.samples, 90);
@@ -621,7 +653,7 @@ fn a_new_image_starts_from_rest() {
 #[test]
 fn auto_zero_in_the_sample_path() {
     // Pass-through gain on x and z (dac = code while the offset is 2048).
-    let mut stored = Ok(image_with(AxisFilter::gain(1.0).unwrap(), &[0, 2], 51_200));
+    let mut stored = ActiveImage::new(Ok(image_with(AxisFilter::gain(1.0).unwrap(), &[0, 2], 51_200)));
     let rest = [2110u16, 1990, 2003];
     let mut path = SamplePath::new();
     path.request_auto_zero(8).unwrap();
@@ -635,7 +667,7 @@ fn auto_zero_in_the_sample_path() {
     assert_eq!(out.auto_zero, Some(Ok([2110.0, 1990.0, 2003.0])));
     // From this sample on the resting input reads 0 N on the image's axes.
     assert_eq!(out.dac, [2048, 1990, 2048]);
-    let axis_x = stored.as_ref().unwrap().axes[0].unwrap();
+    let axis_x = stored.stored().as_ref().unwrap().axes[0].unwrap();
     assert_eq!(axis_x.scaling.adc_offset_code, 2110.0);
     assert_eq!(path.tick(rest, &mut stored, false).dac, [2048, 1990, 2048]);
 
@@ -645,7 +677,7 @@ fn auto_zero_in_the_sample_path() {
     let out = path.tick(rest, &mut stored, false);
     assert_eq!(out.auto_zero, Some(Err(AutoZeroError::Saturated(0))));
     assert_eq!(
-        stored.as_ref().unwrap().axes[0]
+        stored.stored().as_ref().unwrap().axes[0]
             .unwrap()
             .scaling
             .adc_offset_code,
@@ -653,17 +685,17 @@ fn auto_zero_in_the_sample_path() {
     );
 
     // Without an image the average is still reported; nothing to apply.
-    let mut none: Result<CoeffImage, BypassReason> = Err(BypassReason::NoImage);
+    let mut none = ActiveImage::new(Err(BypassReason::NoImage));
     path.request_auto_zero(1).unwrap();
     let out = path.tick(rest, &mut none, false);
     assert_eq!(out.auto_zero, Some(Ok([2110.0, 1990.0, 2003.0])));
     assert_eq!(out.dac, rest);
-    assert_eq!(none, Err(BypassReason::NoImage));
+    assert_eq!(*none.stored(), Err(BypassReason::NoImage));
 }
 
 #[test]
 fn an_image_switch_cancels_a_running_auto_zero() {
-    let mut stored = Ok(image_with(AxisFilter::gain(1.0).unwrap(), &[0], 51_200));
+    let mut stored = ActiveImage::new(Ok(image_with(AxisFilter::gain(1.0).unwrap(), &[0], 51_200)));
     let mut path = SamplePath::new();
     path.request_auto_zero(4).unwrap();
     path.tick([2100, 2000, 2000], &mut stored, false);
@@ -675,7 +707,116 @@ fn an_image_switch_cancels_a_running_auto_zero() {
         );
     }
     assert_eq!(
-        stored.unwrap().axes[0].unwrap().scaling.adc_offset_code,
+        stored.stored().unwrap().axes[0].unwrap().scaling.adc_offset_code,
         2048.0
     );
+}
+
+/// An image over the box's CPU budget (3 × 24 pole pairs at 51.2 kHz:
+/// ≈ 93 % predicted load) and the same filter where it fits (20 kHz).
+fn over_and_within_budget() -> (CoeffImage, CoeffImage) {
+    use common::filter_24;
+    use dynocomp_core::budget::{image_load, BOX_LOAD_LIMIT_PERMILLE};
+    let (blocks, d) = filter_24(51_200.0);
+    let f = kernel_filter(&blocks, d);
+    let over = image_with(f, &[0, 1, 2], 51_200);
+    let within = image_with(f, &[0, 1, 2], 20_000);
+    assert!(image_load(&over).permille > BOX_LOAD_LIMIT_PERMILLE);
+    assert!(image_load(&within).permille <= BOX_LOAD_LIMIT_PERMILLE);
+    (over, within)
+}
+
+/// Whether any of `n` samples through `path` ran the compensator, and
+/// that every sample that did not was passed through raw.
+fn runs_any(path: &mut SamplePath, stored: &mut ActiveImage, user_bypass: bool, n: u16) -> bool {
+    let mut ran = false;
+    for k in 0..n {
+        let out = path.tick(codes(k), stored, user_bypass);
+        if out.compensating {
+            ran = true;
+        } else {
+            assert_eq!(out.dac, codes(k), "a refused image passes the raw codes");
+            assert!(out.flags.has(SampleFlags::BYPASS));
+        }
+    }
+    ran
+}
+
+#[test]
+fn an_image_over_the_budget_is_refused_on_every_route_to_activation() {
+    use dynocomp_core::budget::image_load;
+    let (over, within) = over_and_within_budget();
+    let refused = |a: &ActiveImage| matches!(a.refused(), Some(BypassReason::OverBudget(l)) if l == image_load(&over));
+
+    // Boot: the store's result becomes the active image.
+    let mut boot = ActiveImage::new(Ok(over));
+    assert!(refused(&boot));
+    let mut path = SamplePath::new();
+    assert!(!runs_any(&mut path, &mut boot, false, 20));
+
+    // Upload / image switch: a running box is handed the image.
+    let mut active = ActiveImage::new(Ok(within));
+    let mut path = SamplePath::new();
+    assert!(runs_any(&mut path, &mut active, false, 5));
+    active = ActiveImage::new(Ok(over));
+    path.on_image_switch();
+    assert!(refused(&active));
+    assert!(!runs_any(&mut path, &mut active, false, 20));
+
+    // Bypass toggle: the user leaves bypass; the image still does not run.
+    assert!(!runs_any(&mut path, &mut active, true, 5));
+    assert!(!runs_any(&mut path, &mut active, false, 20));
+
+    // Auto-zero: the image changes in place (ADC offsets, which no check
+    // reads); still refused, and the same verdict as a fresh check.
+    path.request_auto_zero(4).unwrap();
+    assert!(!runs_any(&mut path, &mut active, false, 10));
+    assert_ne!(active.stored().unwrap().axes[0].unwrap().scaling.adc_offset_code, 2048.0, "the auto-zero was applied");
+    assert!(refused(&active));
+    assert_eq!(active.refused(), ActiveImage::new(*active.stored()).refused());
+
+    // Negative control: the same routes with the image that fits run it.
+    let mut boot = ActiveImage::new(Ok(within));
+    assert_eq!(boot.refused(), None);
+    assert!(runs_any(&mut SamplePath::new(), &mut boot, false, 5));
+    let mut path = SamplePath::new();
+    let mut active = ActiveImage::new(Ok(over));
+    assert!(!runs_any(&mut path, &mut active, false, 5));
+    active = ActiveImage::new(Ok(within));
+    path.on_image_switch();
+    assert!(runs_any(&mut path, &mut active, false, 5));
+    assert!(!runs_any(&mut path, &mut active, true, 5));
+    assert!(runs_any(&mut path, &mut active, false, 5));
+    path.request_auto_zero(4).unwrap();
+    assert!(runs_any(&mut path, &mut active, false, 10));
+    assert_ne!(active.stored().unwrap().axes[0].unwrap().scaling.adc_offset_code, 2048.0);
+    assert_eq!(active.refused(), ActiveImage::new(*active.stored()).refused());
+}
+
+#[test]
+fn the_cached_mode_is_the_checked_mode() {
+    // ActiveImage::mode gives what select_stored_mode decides, for every
+    // reason and both positions of the user's switch.
+    let (over, within) = over_and_within_budget();
+    let mut offline = within;
+    offline.flags = dynocomp_core::image::FLAG_OFFLINE_ONLY;
+    let slow = image_with(AxisFilter::gain(1.0).unwrap(), &[0], 5_000);
+    for stored in [
+        Ok(over),
+        Ok(within),
+        Ok(offline),
+        Ok(slow),
+        Err(BypassReason::NoImage),
+        Err(BypassReason::InvalidImage(dynocomp_core::image::ImageError::BadMagic)),
+    ] {
+        let active = ActiveImage::new(stored);
+        for user in [false, true] {
+            let (cached, checked) = (active.mode(user), select_stored_mode(&stored, user));
+            match (cached, checked) {
+                (Mode::Compensate(a), Mode::Compensate(b)) => assert_eq!(a, b),
+                (Mode::Bypass(a), Mode::Bypass(b)) => assert_eq!(a, b),
+                (a, b) => panic!("{stored:?}, user {user}: cached {a:?}, checked {b:?}"),
+            }
+        }
+    }
 }

@@ -49,7 +49,9 @@ const INSTALL_HINT: &str = "install it with `apt-get install -y --no-install-rec
 /// through the subnormal range during the input's silent tail and a
 /// flush-to-zero FPU would give different output bits. Axis y has 23 pairs
 /// and a real pole (an odd pair count: the last-pair path of the M4's
-/// assembly pair loop, `src/kernel_m4.rs`, then the real-pole loop).
+/// assembly pair loop, `src/kernel_m4.rs`, then the real-pole loop); axis z
+/// a diagonal section (two real poles after an even pair count). The axes
+/// have 24, 23 and 5 FIR taps (every path of the assembly FIR loop).
 fn test_image() -> CoeffImage {
     let (blocks, d) = filter_24(FS_HZ);
     let mut img = image_with(kernel_filter(&blocks, d), &[0, 1, 2], FS_HZ as u32);
@@ -73,7 +75,15 @@ fn test_image() -> CoeffImage {
         if axis == 1 {
             secs[23] = Section::first_order(0.995, 1.0, 0.004);
         }
-        let fir: Vec<f32> = (0..24).map(|j| 0.3 * (-0.4 * j as f32).exp() * if j % 2 == 0 { 1.0 } else { -0.7 }).collect();
+        if axis == 2 {
+            // A diagonal section: two real poles (the M4's real-pole loop
+            // runs twice, after an even pair count).
+            secs[22] = Section { delta: [0.97 - 1.0, 0.0, 0.0, 0.6 - 1.0], b: [1.0, 1.0], c: [0.003, -0.02] };
+        }
+        // 24, 23 and 5 taps: the M4's assembly FIR loop (kernel_m4.rs)
+        // runs blocks of four, then the rest one by one (0, 3 and 1 here).
+        let taps = [24, 23, 5][axis];
+        let fir: Vec<f32> = (0..taps).map(|j| 0.3 * (-0.4 * j as f32).exp() * if j % 2 == 0 { 1.0 } else { -0.7 }).collect();
         a.filter = AxisFilter::with_fir(&secs, d as f32 - 0.1 * axis as f32, &fir).expect("valid test filter");
     }
     img

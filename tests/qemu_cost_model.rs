@@ -1,5 +1,6 @@
 //! The cost model of the sample interrupt (`dynocomp_core::budget`) against
-//! the instructions `process_sample` executes on the emulated Cortex-M4F
+//! the instructions `SamplePath::tick` (`process_sample` and the decisions around it) executes
+//! on the emulated Cortex-M4F
 //! (issue #16).
 //!
 //! Runs `scripts/qemu_icount.sh` (builds `qemu/`'s `icount` program, runs
@@ -13,11 +14,12 @@
 //! cycles per instruction, so a drift here is a drift there.
 //!
 //! Negative control: the same check with one coefficient of the model
-//! off by 10 % (pairs) or 20 % (taps, real poles) must reject at least one
+//! off by 10 % (pairs), 20 % (taps, real poles, axis call, fixed part) or
+//! 50 % (remainder taps) must reject at least one
 //! measured shape. If `qemu-system-arm` is missing the test FAILS (like
 //! `tests/qemu_bit_exact.rs`); `bash scripts/test.sh` installs it.
 
-use dynocomp_core::budget::{insns_agree, AxisShape, Cost, CostModel};
+use dynocomp_core::budget::{insns_agree, AxisShape, Cost, CostModel, SHELL_INSNS};
 use std::path::Path;
 use std::process::Command;
 
@@ -27,7 +29,16 @@ struct Measured {
     insns: u32,
 }
 
-fn measure() -> Vec<Measured> {
+/// The `shell … streaming S` figures: instructions of the interrupt's
+/// software shell around `SamplePath::tick`, streaming every sample.
+fn shell_counts(text: &str) -> Vec<u32> {
+    text.lines()
+        .filter(|l| l.starts_with("shell "))
+        .map(|l| l.rsplit("streaming ").next().and_then(|v| v.trim().parse::<f64>().ok()).expect("a shell line ends with 'streaming N'").round() as u32)
+        .collect()
+}
+
+fn measure() -> (Vec<Measured>, Vec<u32>) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     if Command::new("qemu-system-arm").arg("--version").output().is_err() {
         panic!("qemu-system-arm not found: install it with `apt-get install -y --no-install-recommends qemu-system-arm`, or run `bash scripts/test.sh`");
@@ -51,7 +62,9 @@ fn measure() -> Vec<Measured> {
         })
         .collect();
     assert!(rows.len() >= 15, "expected the calibration grid's model lines, got {}:\n{text}", rows.len());
-    rows
+    let shell = shell_counts(&text);
+    assert!(!shell.is_empty(), "expected the shell lines:\n{text}");
+    (rows, shell)
 }
 
 /// The shapes the model misses beyond its uncertainty (empty = agrees).
@@ -70,9 +83,16 @@ fn scaled(c: Cost, pct: u32) -> Cost {
 
 #[test]
 fn cost_model_matches_the_qemu_instruction_counts() {
-    let rows = measure();
+    let (rows, shell) = measure();
     let bad = misses(&CostModel::QEMU_INSNS, &rows);
     assert!(bad.is_empty(), "cost model drifted from the measured counts:\n{}", bad.join("\n"));
+    // The interrupt shell's software (budget::SHELL_INSNS, in CORTEX_M4's
+    // fixed part) is what the replica measures, for every image shape.
+    for &s in &shell {
+        assert!(insns_agree(SHELL_INSNS, s), "budget::SHELL_INSNS = {SHELL_INSNS}, QEMU measures {s}");
+        // Negative control: a fifth less is caught.
+        assert!(!insns_agree(SHELL_INSNS * 4 / 5, s));
+    }
 
     // Negative controls: a model off in one part must be caught.
     let base = CostModel::QEMU_INSNS;
@@ -81,6 +101,8 @@ fn cost_model_matches_the_qemu_instruction_counts() {
         ("taps +20 %", CostModel { tap: scaled(base.tap, 120), ..base }),
         ("real poles -20 %", CostModel { real: scaled(base.real, 80), ..base }),
         ("axis call -20 %", CostModel { axis: scaled(base.axis, 80), ..base }),
+        ("remainder taps -50 %", CostModel { tap_rem: scaled(base.tap_rem, 50), ..base }),
+        ("fixed part -20 %", CostModel { fixed: scaled(base.fixed, 80), ..base }),
     ] {
         assert!(!misses(&m, &rows).is_empty(), "negative control '{what}' was not caught");
     }

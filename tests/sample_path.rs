@@ -148,6 +148,50 @@ fn dac_rounding_is_total() {
     assert_eq!(to_dac_code(1.5), 2);
 }
 
+/// The DAC rounding as first written (float comparisons, then a cast): the
+/// specification the integer-clamp version must keep.
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(v >= 0.0)` is also true for NaN, on purpose
+fn dac_code_reference(value: f32) -> u16 {
+    let v = value + 0.5;
+    if !(v >= 0.0) {
+        0
+    } else if v >= f32::from(DAC_MAX_CODE) {
+        DAC_MAX_CODE
+    } else {
+        v as u16
+    }
+}
+
+#[test]
+fn dac_rounding_equals_its_reference_on_every_float_near_the_range() {
+    // Every f32 from -2 to 4 100 (all codes, both rails and each rounding
+    // boundary, ≈ 1.1e9 values would be too many: every 97th bit pattern,
+    // plus every pattern within 4 ulps of each half-integer), and a sweep
+    // of the whole bit space for NaNs, infinities and huge values.
+    let mut checked = 0u64;
+    let mut check = |v: f32| {
+        assert_eq!(to_dac_code(v), dac_code_reference(v), "value {v:e} ({:#010x})", v.to_bits());
+        checked += 1;
+    };
+    let (lo, hi) = ((-2.0f32).to_bits(), 4_100.0f32.to_bits());
+    for b in (0..=hi).step_by(97).chain((0x8000_0000..=lo).step_by(97)) {
+        check(f32::from_bits(b));
+    }
+    for k in -4..=8_200 {
+        let half = k as f32 * 0.5;
+        for d in -4i32..=4 {
+            check(f32::from_bits(half.to_bits().wrapping_add_signed(d)));
+        }
+    }
+    for b in (0..=u32::MAX).step_by(65_537) {
+        check(f32::from_bits(b));
+    }
+    assert!(checked > 10_000_000, "{checked}");
+    // Negative control: a version that rounds by truncation alone differs.
+    let truncating = |v: f32| (v as u32).min(u32::from(DAC_MAX_CODE)) as u16;
+    assert!((0..100).map(|k| k as f32 + 0.7).any(|v| truncating(v) != dac_code_reference(v)));
+}
+
 #[test]
 fn the_box_rate_range_is_10_to_200_khz_inclusive() {
     let f = AxisFilter::gain(1.0).unwrap();

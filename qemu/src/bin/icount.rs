@@ -36,10 +36,18 @@
 //!   axes with the runaway guard, → DAC codes, flags and counters; and the
 //!   same with 3 sections + 19 taps, the size `dynocomp design` chose for the
 //!   bundled example.
-//! * `model P R T A`: `process_sample` over A axes, each with P pole pairs,
-//!   R real poles and T FIR taps, printed as one machine-readable line
+//! * `model P R T A`: `SamplePath::tick` (the sample interrupt's decisions
+//!   around `process_sample`, compensating) over A axes, each with P pole
+//!   pairs, R real poles and T FIR taps, printed as one machine-readable line
 //!   `model P R T A <instructions per call> <net>` (no `empty` subtraction
-//!   in the first figure). `tests/qemu_cost_model.rs` checks the core's
+//!   in the first figure); `tick-minus-process_sample …` is what the
+//!   decisions add to `process_sample` alone.
+//! * `shell P R T A`: a replica of the firmware's sample interrupt
+//!   (`sampler::TIM2` → `on_tick`: handoff, ring cursor, ring reads,
+//!   auto-zero request, `SamplePath::tick`, telemetry stores, stream push,
+//!   cycle statistics) without its register accesses, not streaming and
+//!   streaming every sample; `shell` and `streaming` are its instructions
+//!   beyond `SamplePath::tick` (`budget::SHELL_INSNS`). `tests/qemu_cost_model.rs` checks the core's
 //!   cost model (`dynocomp_core::budget`) against these lines.
 #![no_std]
 #![no_main]
@@ -51,6 +59,12 @@ use dsp_process::SplitProcess;
 use dynocomp_core::image::{AxisImage, AxisScaling, AxisSummary, CoeffImage, DesignMethod};
 use dynocomp_core::kernel::{AxisFilter, AxisState, Section};
 use dynocomp_core::sample::{process_sample, Mode, SampleState};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering::Relaxed};
+use dynocomp_core::cycles::IsrCycles;
+use dynocomp_core::handoff::ImageHandoff;
+use dynocomp_core::protocol::StreamSample;
+use dynocomp_core::shell::{ActiveImage, RingCursor, SamplePath};
+use dynocomp_core::stream_queue::{Consumer, Producer, StreamItem, StreamQueue};
 use dynocomp_core::AXES;
 use dynocomp_qemu::{success, Ticks};
 use idsp::iir::{Biquad, Cascade, DirectForm, DirectForm2Transposed};
@@ -263,6 +277,154 @@ fn sample_isr_body(img: &CoeffImage, st: &mut SampleState, code: u16) -> u16 {
     dac[0] ^ dac[1] ^ dac[2] ^ u16::from(flags.0)
 }
 
+/// The sample interrupt's decisions around `process_sample`
+/// (`SamplePath::tick`: auto-zero feed, mode, filter resets), compensating.
+#[inline(never)]
+fn tick_body(path: &mut SamplePath, stored: &mut ActiveImage, code: u16) -> u16 {
+    let out = path.tick([code, code ^ 0x155, code ^ 0x2AA], stored, false);
+    out.dac[0] ^ out.dac[1] ^ out.dac[2] ^ u16::from(out.flags.0)
+}
+
+// ---- the interrupt's software shell (a replica of the firmware's
+// `sampler::Sampler::on_tick` and `TIM2` without their register accesses)
+
+/// Entries per DMA ring, as the firmware's `sampler::RING_LEN`.
+const RING_LEN: u16 = 32;
+/// Stream queue length, as the firmware's `sampler::STREAM_QUEUE_LEN`.
+const QLEN: usize = 128;
+
+/// The firmware's per-sample telemetry stores (`sampler::Telemetry`).
+struct Telemetry {
+    samples: AtomicU32,
+    overruns: AtomicU32,
+    saturated: [AtomicU32; AXES],
+    resets: [AtomicU32; AXES],
+    stream_dropped: AtomicU32,
+    compensating: AtomicBool,
+    auto_zero_done: AtomicU32,
+    auto_zero_failed: AtomicU32,
+    isr_cycles_last: AtomicU32,
+    isr_cycles_max: AtomicU32,
+    isr_cycles_mean: AtomicU32,
+}
+static TELEMETRY: Telemetry = Telemetry {
+    samples: AtomicU32::new(0),
+    overruns: AtomicU32::new(0),
+    saturated: [AtomicU32::new(0), AtomicU32::new(0), AtomicU32::new(0)],
+    resets: [AtomicU32::new(0), AtomicU32::new(0), AtomicU32::new(0)],
+    stream_dropped: AtomicU32::new(0),
+    compensating: AtomicBool::new(false),
+    auto_zero_done: AtomicU32::new(0),
+    auto_zero_failed: AtomicU32::new(0),
+    isr_cycles_last: AtomicU32::new(0),
+    isr_cycles_max: AtomicU32::new(0),
+    isr_cycles_mean: AtomicU32::new(0),
+};
+static USER_BYPASS: AtomicBool = AtomicBool::new(false);
+static AUTO_ZERO_REQUEST: AtomicU32 = AtomicU32::new(0);
+static STREAM_DECIMATION: AtomicU32 = AtomicU32::new(0);
+static HANDOFF: ImageHandoff = ImageHandoff::new(0);
+static QUEUE: StreamQueue<QLEN> = StreamQueue::new();
+
+/// What the sample interrupt owns (`sampler::Sampler`).
+struct Shell {
+    path: SamplePath,
+    cursor: RingCursor,
+    stream: Producer<'static, QLEN>,
+    cycles: IsrCycles,
+}
+
+/// One sample interrupt's software, step by step as the firmware's
+/// `TIM2` → `on_tick` (same core calls, same atomics, same order), with
+/// each register access replaced: the three `DMA_CNDTR` reads by `ndtr`,
+/// the ring reads by `ring` (volatile, as the firmware), the DAC writes by
+/// a `black_box`, the two DWT readings by `t0`/`t0 + 1 000`, the TIM2
+/// status write and read left out. What is left out is the hardware part
+/// of the shell's estimate (BENCHMARKS.md, "The sample interrupt's fixed
+/// part").
+#[inline(never)]
+fn isr_software(sh: &mut Shell, stored: &mut ActiveImage, ring: &[[u16; RING_LEN as usize]; AXES], ndtr: [u16; AXES], t0: u32) -> u16 {
+    if HANDOFF.take().is_some() {
+        sh.path.on_image_switch();
+    }
+    black_box(HANDOFF.active());
+    let Some(step) = sh.cursor.advance(&ndtr) else {
+        TELEMETRY.stream_dropped.fetch_add(1, Relaxed);
+        return 0;
+    };
+    if step.available == 0 {
+        TELEMETRY.stream_dropped.fetch_add(1, Relaxed);
+        return 0;
+    }
+    sh.path.state.note_overruns(step.missed());
+    let i = usize::from(step.newest) % RING_LEN as usize;
+    let mut codes = [0u16; AXES];
+    for (c, r) in codes.iter_mut().zip(ring) {
+        // SAFETY: `i < RING_LEN`, a read of an element of `r`.
+        *c = unsafe { core::ptr::read_volatile(r.as_ptr().add(i)) } & 0x0FFF;
+    }
+    let request = AUTO_ZERO_REQUEST.swap(0, Relaxed);
+    if request != 0 && sh.path.request_auto_zero(request).is_err() {
+        TELEMETRY.auto_zero_failed.fetch_add(1, Relaxed);
+    }
+    let out = sh.path.tick(codes, stored, USER_BYPASS.load(Relaxed));
+    black_box(out.dac);
+    let c = &sh.path.state.counters;
+    TELEMETRY.samples.store(c.samples, Relaxed);
+    TELEMETRY.overruns.store(c.overruns, Relaxed);
+    for (dst, &src) in TELEMETRY.saturated.iter().zip(c.saturated.iter()) {
+        dst.store(src, Relaxed);
+    }
+    for (dst, a) in TELEMETRY.resets.iter().zip(sh.path.state.axes.iter()) {
+        dst.store(a.nonfinite_resets, Relaxed);
+    }
+    TELEMETRY.compensating.store(out.compensating, Relaxed);
+    match out.auto_zero {
+        Some(Ok(_)) => {
+            TELEMETRY.auto_zero_done.fetch_add(1, Relaxed);
+        }
+        Some(Err(_)) => {
+            TELEMETRY.auto_zero_failed.fetch_add(1, Relaxed);
+        }
+        None => {}
+    }
+    let decimation = STREAM_DECIMATION.load(Relaxed);
+    let index = sh.path.state.counters.samples;
+    if decimation != 0 && index.is_multiple_of(decimation) {
+        let item = StreamItem { index, step: decimation, sample: StreamSample { raw: codes, out: out.dac, flags: out.flags.0 } };
+        if sh.stream.push(&item).is_err() {
+            TELEMETRY.stream_dropped.fetch_add(1, Relaxed);
+        }
+    }
+    sh.cycles.record(t0, t0.wrapping_add(1_000));
+    TELEMETRY.isr_cycles_last.store(sh.cycles.last(), Relaxed);
+    TELEMETRY.isr_cycles_max.store(sh.cycles.max(), Relaxed);
+    TELEMETRY.isr_cycles_mean.store(sh.cycles.mean(), Relaxed);
+    out.dac[0] ^ out.dac[1] ^ out.dac[2] ^ u16::from(out.flags.0)
+}
+
+/// Instructions per call of [`isr_software`] for one image, streaming
+/// every sample (`stream` = the USB task's end, emptied by the harness
+/// after each call, whose cost is measured apart and subtracted) or not.
+fn measure_shell(ticks: &Ticks, img: CoeffImage, streaming: bool, consumer: &mut Consumer<'static, QLEN>, producer: Producer<'static, QLEN>) -> (f32, Producer<'static, QLEN>) {
+    let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..img }));
+    let mut sh = Shell { path: SamplePath::new(), cursor: RingCursor::new(RING_LEN), stream: producer, cycles: IsrCycles::new() };
+    let ring = [[2048u16; RING_LEN as usize]; AXES];
+    STREAM_DECIMATION.store(u32::from(streaming), Relaxed);
+    let mut written = 0u32;
+    let per_call = measure(ticks, |u| {
+        written = written.wrapping_add(1);
+        let n = RING_LEN - (written % u32::from(RING_LEN)) as u16;
+        let out = isr_software(&mut sh, black_box(&mut stored), black_box(&ring), [n, n, n], (u as i32) as u32);
+        if streaming {
+            black_box(consumer.pop());
+        }
+        f32::from(out)
+    });
+    STREAM_DECIMATION.store(0, Relaxed);
+    (per_call, sh.stream)
+}
+
 fn report(name: &str, per_sample: f32, empty: f32, states: u32) {
     let net = per_sample - empty;
     if states > 0 {
@@ -366,11 +528,72 @@ fn main() -> ! {
         (24, 0, 24, 1),
         (24, 0, 24, 2),
         (6, 1, 9, 1),
+        (3, 0, 13, 3),
+        (2, 0, 14, 3),
+        (1, 0, 15, 3),
+        (4, 0, 5, 3),
     ] {
         let img = image_of(mixed_filter(p, r, t), a);
         let mut sst = SampleState::default();
-        let per_call = measure(&ticks, |u| f32::from(sample_isr_body(black_box(&img), &mut sst, (u as i32 + 2048) as u16)));
+        let body = measure(&ticks, |u| f32::from(sample_isr_body(black_box(&img), &mut sst, (u as i32 + 2048) as u16)));
+        // The same shape through `SamplePath::tick` (what the interrupt
+        // calls: `process_sample` and the decisions around it), at 20 kHz,
+        // where every shape of the grid is within the box's budget. The
+        // `model` line's count is the tick's; `tick` minus `process_sample`
+        // is printed on its own line.
+        let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..image_of(mixed_filter(p, r, t), a) }));
+        if stored.refused().is_some() {
+            dynocomp_qemu::fail("icount: a calibration shape is refused at 20 kHz");
+        }
+        let mut path = SamplePath::new();
+        let per_call = measure(&ticks, |u| f32::from(tick_body(&mut path, black_box(&mut stored), (u as i32 + 2048) as u16)));
         hprintln!("model {} {} {} {} {:.2} {:.2}", p, r, t, a, per_call, per_call - empty);
+        hprintln!("tick-minus-process_sample {} {} {} {} {:.2}", p, r, t, a, per_call - body);
+    }
+
+    // The interrupt's software shell around `SamplePath::tick`: the same
+    // tick inside a replica of the firmware's handler, minus the tick
+    // alone, each measured in the same loop (its ring-counter arithmetic
+    // for the replica's `ndtr` input, ≈ 6 instructions, is counted too).
+    let (mut producer, mut consumer) = match QUEUE.split() {
+        Some(ends) => ends,
+        None => dynocomp_qemu::fail("icount: queue split twice"),
+    };
+    // The harness's own `pop` per sample when streaming, measured alone.
+    let mut pop_only = {
+        let mut sh_prod = producer;
+        let pop = measure(&ticks, |u| {
+            let _ = sh_prod.push(&StreamItem { index: u as u32, step: 1, sample: StreamSample { raw: [1, 2, 3], out: [4, 5, 6], flags: 0 } });
+            black_box(consumer.pop()).map_or(0.0, |i| i.index as f32)
+        });
+        producer = sh_prod;
+        pop
+    };
+    let push_only = {
+        let mut sh_prod = producer;
+        let push = measure(&ticks, |u| {
+            let r = sh_prod.push(&StreamItem { index: u as u32, step: 1, sample: StreamSample { raw: [1, 2, 3], out: [4, 5, 6], flags: 0 } });
+            black_box(r.is_ok());
+            black_box(consumer.pop()).map_or(0.0, |i| i.index as f32) * 0.0
+        });
+        producer = sh_prod;
+        push
+    };
+    // pop_only and push_only are the same loop: report their mean as the
+    // harness's push + pop, the pop alone is not separable here.
+    pop_only = 0.5 * (pop_only + push_only);
+    for (p, r, t, a) in [(0usize, 0usize, 0usize, 3usize), (3, 0, 13, 3), (24, 0, 24, 3)] {
+        let img = image_of(mixed_filter(p, r, t), a);
+        let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..img }));
+        let mut path = SamplePath::new();
+        let tick = measure(&ticks, |u| f32::from(tick_body(&mut path, black_box(&mut stored), (u as i32 + 2048) as u16)));
+        let (quiet, prod) = measure_shell(&ticks, img, false, &mut consumer, producer);
+        let (streaming, prod) = measure_shell(&ticks, img, true, &mut consumer, prod);
+        producer = prod;
+        hprintln!(
+            "shell {} {} {} {} tick {:.2} isr {:.2} isr+stream+pop {:.2} (push+pop alone {:.2}): shell {:.2}, streaming {:.2}",
+            p, r, t, a, tick, quiet, streaming, pop_only, quiet - tick, streaming - tick
+        );
     }
     success()
 }

@@ -66,7 +66,8 @@ use dynocomp_core::image::CoeffImage;
 use dynocomp_core::protocol::{StatusCounters, StreamSample};
 use dynocomp_core::sample::{BypassReason, SampleState};
 use dynocomp_core::shell::{
-    adc_oversampling, compare_offset_ticks, timer_divider, Oversampling, RingCursor, SamplePath,
+    adc_oversampling, compare_offset_ticks, timer_divider, ActiveImage, Oversampling, RingCursor,
+    SamplePath,
     TimerDivider, ARR_MAX_32, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES, BOX_TIMER_CLOCK_HZ,
 };
 use dynocomp_core::AXES;
@@ -357,7 +358,10 @@ pub type Stored = Result<CoeffImage, BypassReason>;
 
 /// The two coefficient-image buffers of `dynocomp_core::handoff`: the
 /// interrupt uses `[HANDOFF.active()]`, the USB task fills the other one.
-struct ImageBuffers([UnsafeCell<MaybeUninit<Stored>>; 2]);
+/// Each holds an `ActiveImage`: the image checks (offline-only, rate, CPU
+/// budget) run when it is written (`start`, `hand_over`, outside the
+/// interrupt), and the interrupt reads their stored verdict.
+struct ImageBuffers([UnsafeCell<MaybeUninit<ActiveImage>>; 2]);
 // SAFETY: accesses follow the ImageHandoff protocol (see `hand_over` and
 // `Sampler::on_tick`): the USB task writes only the buffer `writable()`
 // returns, which the interrupt does not use, and the interrupt reads (and,
@@ -388,7 +392,7 @@ pub fn hand_over(image: CoeffImage) -> bool {
     // SAFETY: `i` is the spare buffer: no switch is pending, so the
     // interrupt uses the other one and will not look at this one until
     // `publish` (Release) below. Only this task calls `hand_over`.
-    unsafe { (*buf.get()).write(Ok(image)) };
+    unsafe { (*buf.get()).write(ActiveImage::new(Ok(image))) };
     HANDOFF.publish(i)
 }
 
@@ -800,7 +804,7 @@ pub fn start(
     // refuses until SAMPLER_READY); after the flag only the handler uses
     // SAMPLER and the active buffer.
     unsafe {
-        (*first.get()).write(image);
+        (*first.get()).write(ActiveImage::new(image));
         (*SAMPLER.0.get()).write(sampler);
     }
     SAMPLER_READY.store(true, Release);
