@@ -64,6 +64,10 @@ pub struct CompensateArgs {
     /// `design --frf BEFORE --frf AFTER` sidecar (issue #15).
     #[arg(long, value_name = "START:END", requires = "offline")]
     pub drift: Option<String>,
+    /// With --offline: ignore the harmonic force prior of the model sidecar
+    /// (`design --force-prior harmonics`) and use the default force model.
+    #[arg(long, requires = "offline")]
+    pub no_force_prior: bool,
     /// Write a report of the compensation (index.html and SVG plots) into DIR.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
@@ -116,7 +120,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
     };
     let mut acc = a.report.as_ref().map(|_| ReportAccumulator::new(&axes, f64::from(fs), tpf, truth.is_some()));
     let progress = progress_bar(reader.len_hint());
-    let how;
+    let mut how: String;
     let n_samples;
     match (&img, a.offline) {
         (AnyImage::Inline(i), false) => {
@@ -142,7 +146,14 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
                 Some((s0, s1)) => format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only, whole record in memory)"),
                 None => "fixed-interval smoother, zero lag (offline only, whole record in memory)".to_string(),
             };
-            let sidecar = crate::smoother::read_sidecar(&a.coeffs, i)?;
+            let mut sidecar = crate::smoother::read_sidecar(&a.coeffs, i)?;
+            if a.no_force_prior {
+                sidecar.axes.iter_mut().for_each(|m| m.force_prior = None);
+            }
+            let priors: Vec<&str> = sidecar.axes.iter().filter(|m| m.force_prior.is_some()).map(|m| m.axis.as_str()).collect();
+            if !priors.is_empty() && drift.is_none() {
+                how.push_str(&format!("; harmonic force prior on axis {}", priors.join(", ")));
+            }
             let rec = whole_record(&mut *reader, fs, &source)?;
             let out = match drift {
                 Some(iv) => crate::two_state::smooth_record_drifting(i, &sidecar, &rec, &source, iv)?,

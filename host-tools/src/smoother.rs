@@ -92,6 +92,10 @@ pub struct AxisModelJson {
     /// issue #15; absent otherwise and in older sidecars).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub two_state: Option<crate::two_state::TwoStateJson>,
+    /// The harmonic force prior of `compensate --offline` (`design
+    /// --force-prior harmonics`; absent otherwise and in older sidecars).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub force_prior: Option<crate::force_prior::HarmonicPrior>,
 }
 
 /// The sidecar's terms of a pole-residue model.
@@ -170,6 +174,7 @@ impl ModelSidecar {
                 d: m.d,
                 terms: terms_to_json(m),
                 two_state: None,
+                force_prior: None,
             })
             .collect();
         ModelSidecar {
@@ -265,7 +270,9 @@ pub struct Smoother {
     p: DMatrix<f64>,
     k: DVector<f64>,
     s: f64,
-    force_index: usize,
+    /// Row o with F_k = oᵀx_k: one state for the random walk, the sum of
+    /// the broadband state and the resonators with a force prior.
+    force_row: DVector<f64>,
     /// Advance D of the discrete model (samples).
     advance: usize,
     /// Relative residual of the DARE solution.
@@ -283,7 +290,24 @@ impl Smoother {
         }
         let plant = kalman::augmented_plant(dm, 0);
         let qm = &plant.g * plant.g.transpose() * q;
-        let sol = kalman::solve_filter_dare(&plant.a, &plant.c, &qm, r)?;
+        let mut force_row = DVector::<f64>::zeros(plant.a.nrows());
+        force_row[plant.n_plant] = 1.0;
+        Self::from_plant(plant, &qm, force_row, r, dm.advance)
+    }
+
+    /// Build the smoother for the discrete model `dm` with the harmonic
+    /// force prior `prior` (its q_bb and line intensities,
+    /// [`crate::force_prior`]) and measurement noise R (N²).
+    pub fn with_force_prior(dm: &DiscreteModel, prior: &crate::force_prior::HarmonicPrior, r: f64) -> Result<Self> {
+        if !(prior.q_broadband > 0.0 && prior.q_broadband.is_finite() && r > 0.0 && r.is_finite()) {
+            bail!("smoother needs q_bb > 0 and R > 0 (got q_bb = {}, R = {r})", prior.q_broadband);
+        }
+        let (plant, qm, force_row) = crate::force_prior::plant_with_prior(dm, prior);
+        Self::from_plant(plant, &qm, force_row, r, dm.advance)
+    }
+
+    fn from_plant(plant: kalman::AugmentedPlant, qm: &DMatrix<f64>, force_row: DVector<f64>, r: f64, advance: usize) -> Result<Self> {
+        let sol = kalman::solve_filter_dare(&plant.a, &plant.c, qm, r)?;
         let s = (plant.c.transpose() * &sol.p * &plant.c)[(0, 0)] + r;
         let k = &sol.p * &plant.c / s;
         let n = plant.a.nrows();
@@ -298,8 +322,8 @@ impl Smoother {
             p: sol.p,
             k,
             s,
-            force_index: plant.n_plant,
-            advance: dm.advance,
+            force_row,
+            advance,
             dare_residual: sol.residual,
             closed_loop_radius: radius,
         })
@@ -317,22 +341,23 @@ impl Smoother {
         };
         let n = self.a.nrows();
         let mut prior = DVector::<f64>::zeros(n);
-        let mut priors: Vec<DVector<f64>> = Vec::with_capacity(y.len());
+        // Only the force component oᵀx⁻_k of each prior state is needed.
+        let mut priors: Vec<f64> = Vec::with_capacity(y.len());
         let mut innov: Vec<f64> = Vec::with_capacity(y.len());
         for &yk in y {
             let e = yk - self.c.dot(&prior);
-            priors.push(prior.clone());
+            priors.push(self.force_row.dot(&prior));
             innov.push(e);
             prior = &self.a * (&prior + &self.k * e);
         }
-        let p_row = self.p.row(self.force_index).transpose();
+        let p_row = self.p.tr_mul(&self.force_row);
         let mut lambda_hat = DVector::<f64>::zeros(n);
         let mut out = vec![0.0; y.len()];
         for k in (0..y.len()).rev() {
             // λ̃ = −c e/S + (I − K cᵀ)ᵀ λ̂ = −c e/S + λ̂ − c (Kᵀ λ̂)
             let kl = self.k.dot(&lambda_hat);
             let lambda_tilde = &lambda_hat - &self.c * (innov[k] / self.s + kl);
-            out[k] = priors[k][self.force_index] - p_row.dot(&lambda_tilde);
+            out[k] = priors[k] - p_row.dot(&lambda_tilde);
             lambda_hat = self.a.tr_mul(&lambda_tilde);
         }
         out.truncate(y.len() - self.advance.min(y.len()));
@@ -349,8 +374,18 @@ pub fn smooth_record(image: &CoeffImage, sidecar: &ModelSidecar, rec: &SignalRec
             bail!("{source}: column f{} has no compensator (and no q, R) in the image; drop the column or design for that axis", axis_name(*axis));
         };
         let dm = sidecar.discrete_model(*axis, source)?;
-        let sm = Smoother::new(&dm, a.summary.q, a.summary.r)
-            .with_context(|| format!("{source}: axis {}", axis_name(*axis)))?;
+        let name = axis_name(*axis);
+        let prior = sidecar.axes.iter().find(|m| m.axis == name).and_then(|m| m.force_prior.as_ref());
+        let sm = match prior {
+            None => Smoother::new(&dm, a.summary.q, a.summary.r),
+            Some(p) => {
+                let model = sidecar.model(*axis, source)?;
+                crate::force_prior::check_record(p, y, &|f| model.frf(f), a.summary.r)
+                    .and_then(|_| Smoother::with_force_prior(&dm, p, a.summary.r))
+                    .context("force prior")
+            }
+        }
+        .with_context(|| format!("{source}: axis {name}"))?;
         let out = sm.smooth(y);
         if let Some(k) = out.iter().position(|v| !v.is_finite()) {
             bail!("{source}: smoothed f{} became non-finite at sample {k}", axis_name(*axis));
