@@ -16,7 +16,9 @@
 //!   at the nominal speed (default / prior), and whether `compensate
 //!   --offline` accepts that record (`force_prior::check_record`);
 //! - chatter: the same cut with regenerative chatter at 1710 Hz from mid
-//!   record (0.02 mm), same prior (default / prior), and the check's verdict.
+//!   record (0.02 mm), same prior (default / prior), and the check's verdict;
+//! - t.off: the steady cut with a prior tuned at a spindle speed 2 % off
+//!   (the design's checks skipped: `design` refuses it).
 use anyhow::{bail, Context, Result};
 use dynocomp::force_prior::{build_axis_prior, check_record, PriorOptions};
 use dynocomp::frf::axis_name;
@@ -42,8 +44,8 @@ fn main() -> Result<()> {
     let list: Vec<_> = cases().into_iter().filter(|c| names.is_empty() || names.iter().any(|n| n == c.name)).collect();
     println!("NRMSE % against the band-limited truth, band min(4 kHz, 0.4 fs); columns: see examples/prior.rs");
     println!(
-        "{:>6} {:<14} {:>2} {:>7} {:>6} {:>6} {:>6} {:>6} {:>6} {:<7} | {:>6} {:>6} | {:>6} {:>6} {:<7} | {:>6} {:>6} {:<7} | {:>5} {:>5}",
-        "fs", "case", "ax", "raw", "box", "smooth", "prior", "floor", "pred", "check", "entry", "e.pri", "rpm2%", "r.pri", "check", "chat", "c.pri", "check", "lines", "s"
+        "{:>6} {:<14} {:>2} {:>7} {:>6} {:>6} {:>6} {:>6} {:>6} {:<7} | {:>6} {:>6} | {:>6} {:>6} {:<7} | {:>6} {:>6} {:<7} | {:>6} | {:>5} {:>5}",
+        "fs", "case", "ax", "raw", "box", "smooth", "prior", "floor", "pred", "check", "entry", "e.pri", "rpm2%", "r.pri", "check", "chat", "c.pri", "check", "t.off", "lines", "s"
     );
     for &fs in &rates {
         for case in &list {
@@ -112,12 +114,18 @@ fn main() -> Result<()> {
                     let m = (entry_hi - entry_lo) as f64;
                     100.0 * (e[entry_lo..entry_hi].iter().zip(&t[entry_lo..entry_hi]).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / m).sqrt() / std_truth
                 };
+                // A prior tuned at a spindle speed 2 % off (checks skipped).
+                let off_opts = PriorOptions { spindle_rpm: case.spindle_rpm * 1.02, unchecked: true, ..popts.clone() };
+                let tuned_off = build_axis_prior(&off_opts, dm, &g, r, d.kalman.q, d.compensated_band_hz, &tune.measured[a])
+                    .and_then(|b| Smoother::with_force_prior(dm, &b.prior, r))
+                    .map(|sm| score(&sm.smooth(&s.measured[a]), &s.truth[a]))
+                    .unwrap_or(f64::NAN);
                 let verdict = |y: &[f64]| match check_record(&built.prior, y, &g, r) {
                     Ok(rs) => format!("ok {:.0e}", rs.off_line_share),
                     Err(_) => "REFUSE".to_string(),
                 };
                 println!(
-                    "{fs:>6} {:<14} {:>2} {:>7.3} {:>6.3} {:>6.3} {:>6.3} {:>6.3} {:>6.3} {:<7} | {:>6.3} {:>6.3} | {:>6.3} {:>6.3} {:<7} | {:>6.3} {:>6.3} {:<7} | {:>5} {:>5.1}",
+                    "{fs:>6} {:<14} {:>2} {:>7.3} {:>6.3} {:>6.3} {:>6.3} {:>6.3} {:>6.3} {:<7} | {:>6.3} {:>6.3} | {:>6.3} {:>6.3} {:<7} | {:>6.3} {:>6.3} {:<7} | {:>6.3} | {:>5} {:>5.1}",
                     case.name,
                     axis_name(a),
                     100.0 * raw.nrmse,
@@ -135,6 +143,7 @@ fn main() -> Result<()> {
                     score(&default.smooth(&s_chat.measured[a]), &s_chat.truth[a]),
                     score(&with_prior.smooth(&s_chat.measured[a]), &s_chat.truth[a]),
                     verdict(&s_chat.measured[a]),
+                    tuned_off,
                     built.prior.lines.len(),
                     secs,
                 );

@@ -789,7 +789,7 @@ fn build_priors(args: &DesignArgs, designs: &[AxisDesign], r: &[Option<f64>; 3])
             .with_context(|| format!("{shown}: axis {name}: --force-prior harmonics"))?;
         crate::smoother::Smoother::with_force_prior(dm, &built.prior, rv).with_context(|| format!("axis {name}: the smoother with the force prior"))?;
         let p = built.prediction;
-        if !(p.with_prior < p.raw) {
+        if p.with_prior.partial_cmp(&p.raw) != Some(std::cmp::Ordering::Less) {
             bail!(
                 "axis {name}: the offline estimate with the force prior would be worse than no compensation on the record's spectrum ({:.2} % against {:.2} %); no image written; drop --force-prior",
                 100.0 * p.with_prior,

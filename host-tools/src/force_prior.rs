@@ -358,7 +358,7 @@ fn best_spindle(power: &[f64], noise: &[f64], df: f64, given_hz: f64, band_hz: f
         while k * f_sp <= band_hz {
             let x = k * f_sp / df;
             let b = x.floor() as usize;
-            if b + 1 <= top && b >= 1 {
+            if b < top && b >= 1 {
                 let t = x - b as f64;
                 s += (1.0 - t) * power[b] / noise[b] + t * power[b + 1] / noise[b + 1];
             }
