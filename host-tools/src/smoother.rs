@@ -378,6 +378,7 @@ pub fn smooth_record(image: &CoeffImage, sidecar: &ModelSidecar, rec: &SignalRec
         let prior = sidecar.axes.iter().find(|m| m.axis == name).and_then(|m| m.force_prior.as_ref());
         let sm = match prior {
             None => Smoother::new(&dm, a.summary.q, a.summary.r),
+            Some(p) if p.fs_hz != sidecar.fs_hz => bail!("{source}: axis {name}: the force prior is for {} Hz, the image for {} Hz; re-run `dynocomp design`", p.fs_hz, sidecar.fs_hz),
             Some(p) => {
                 let model = sidecar.model(*axis, source)?;
                 crate::force_prior::check_record(p, y, &|f| model.frf(f), a.summary.r)
