@@ -75,6 +75,10 @@ pub struct CompensateArgs {
     /// `design --frf BEFORE --frf AFTER` sidecar (issue #15).
     #[arg(long, value_name = "START:END", requires = "offline")]
     pub drift: Option<String>,
+    /// With --offline: ignore the harmonic force prior of the model sidecar
+    /// (`design --force-prior harmonics`) and use the default force model.
+    #[arg(long, requires = "offline")]
+    pub no_force_prior: bool,
     /// Write a report of the compensation (index.html and SVG plots) into DIR.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
@@ -127,7 +131,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
     };
     let mut acc = a.report.as_ref().map(|_| ReportAccumulator::new(&axes, f64::from(fs), tpf, truth.is_some()));
     let progress = progress_bar(reader.len_hint());
-    let how;
+    let mut how: String;
     let n_samples;
     match (&img, a.offline) {
         (AnyImage::Inline(i), false) => {
@@ -147,31 +151,41 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
             let out = compensate_parallel(p, &rec, a.raw_timing, &source)?;
             n_samples = write_whole(a, out_fmt, &rec, &out, fs, acc.as_mut(), truth.as_mut())?;
         }
-        (AnyImage::Inline(i), true) if a.drift.is_none() && std::fs::metadata(&a.input).is_ok_and(|m| m.is_file()) => {
-            how = "fixed-interval smoother, zero lag (offline only; forward pass spilled to temporary files beside the output, memory independent of the record's length)".to_string();
-            let sidecar = crate::smoother::read_sidecar(&a.coeffs, i)?;
-            let smoothers = axes.iter().map(|&ax| crate::smoother::axis_smoother(i, &sidecar, ax, &source)).collect::<Result<Vec<_>>>()?;
-            progress.set_length(reader.len_hint().unwrap_or(0) * 2);
-            let est = smooth_spilled(&mut *reader, &smoothers, &axes, crate::io::atomic::output_dir(&a.output), fs, &source, &progress)?;
-            // The input is read a second time, for its times and the report.
-            let (mut again, _) = open_signal(&a.input, map.as_ref())?;
-            n_samples = write_output(&a.output, out_fmt, &axes, has_time, reader.len_hint(), fs, |w| {
-                write_spilled(&mut *again, est, w, &source, acc.as_mut(), truth.as_mut(), &progress)
-            })?;
-        }
         (AnyImage::Inline(i), true) => {
             let drift = a.drift.as_deref().map(crate::two_state::parse_interval).transpose()?;
-            how = match drift {
-                Some((s0, s1)) => format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only, whole record in memory)"),
-                None => "fixed-interval smoother, zero lag (offline only, whole record in memory)".to_string(),
-            };
-            let sidecar = crate::smoother::read_sidecar(&a.coeffs, i)?;
-            let rec = whole_record(&mut *reader, fs, &source)?;
-            let out = match drift {
-                Some(iv) => crate::two_state::smooth_record_drifting(i, &sidecar, &rec, &source, iv)?,
-                None => crate::smoother::smooth_record(i, &sidecar, &rec, &source)?,
-            };
-            n_samples = write_whole(a, out_fmt, &rec, &out, fs, acc.as_mut(), truth.as_mut())?;
+            let mut sidecar = crate::smoother::read_sidecar(&a.coeffs, i)?;
+            if a.no_force_prior {
+                sidecar.axes.iter_mut().for_each(|m| m.force_prior = None);
+            }
+            let priors: Vec<&str> = sidecar.axes.iter().filter(|m| m.force_prior.is_some()).map(|m| m.axis.as_str()).collect();
+            // The stationary smoother on a file runs in bounded memory; the
+            // drift smoother, the force prior (checked against the whole
+            // record) and a pipe (read once) keep the record whole.
+            if drift.is_none() && priors.is_empty() && std::fs::metadata(&a.input).is_ok_and(|m| m.is_file()) {
+                how = "fixed-interval smoother, zero lag (offline only; forward pass spilled to temporary files beside the output, memory independent of the record's length)".to_string();
+                let smoothers = axes.iter().map(|&ax| crate::smoother::axis_smoother(i, &sidecar, ax, &source)).collect::<Result<Vec<_>>>()?;
+                progress.set_length(reader.len_hint().unwrap_or(0) * 2);
+                let est = smooth_spilled(&mut *reader, &smoothers, &axes, crate::io::atomic::output_dir(&a.output), fs, &source, &progress)?;
+                // The input is read a second time, for its times and the report.
+                let (mut again, _) = open_signal(&a.input, map.as_ref())?;
+                n_samples = write_output(&a.output, out_fmt, &axes, has_time, reader.len_hint(), fs, |w| {
+                    write_spilled(&mut *again, est, w, &source, acc.as_mut(), truth.as_mut(), &progress)
+                })?;
+            } else {
+                how = match drift {
+                    Some((s0, s1)) => format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only, whole record in memory)"),
+                    None => "fixed-interval smoother, zero lag (offline only, whole record in memory)".to_string(),
+                };
+                if !priors.is_empty() && drift.is_none() {
+                    how.push_str(&format!("; harmonic force prior on axis {}", priors.join(", ")));
+                }
+                let rec = whole_record(&mut *reader, fs, &source)?;
+                let out = match drift {
+                    Some(iv) => crate::two_state::smooth_record_drifting(i, &sidecar, &rec, &source, iv)?,
+                    None => crate::smoother::smooth_record(i, &sidecar, &rec, &source)?,
+                };
+                n_samples = write_whole(a, out_fmt, &rec, &out, fs, acc.as_mut(), truth.as_mut())?;
+            }
         }
         (AnyImage::Parallel(_), true) => bail!(
             "{}: --offline needs a box image (format 1) and its model sidecar; this is a parallel-elaboration image",

@@ -362,31 +362,16 @@ fn choose_q(obj: &Objective, trace: &mut Vec<(f64, f64)>) -> Result<(f64, Kalman
             obj.opts.max_noise_gain
         );
     };
-    let (mut a, mut b) = (lq0 - 1.0, lq0 + 1.0);
-    let gr = (5f64.sqrt() - 1.0) / 2.0;
-    let mut x1 = b - gr * (b - a);
-    let mut x2 = a + gr * (b - a);
-    let mut f1 = obj.eval(10f64.powf(x1)).0;
-    let mut f2 = obj.eval(10f64.powf(x2)).0;
-    trace.push((10f64.powf(x1), f1));
-    trace.push((10f64.powf(x2), f2));
-    for _ in 0..12 {
-        if f1 < f2 {
-            b = x2;
-            x2 = x1;
-            f2 = f1;
-            x1 = b - gr * (b - a);
-            f1 = obj.eval(10f64.powf(x1)).0;
-            trace.push((10f64.powf(x1), f1));
-        } else {
-            a = x1;
-            x1 = x2;
-            f1 = f2;
-            x2 = a + gr * (b - a);
-            f2 = obj.eval(10f64.powf(x2)).0;
-            trace.push((10f64.powf(x2), f2));
-        }
-    }
+    let [(x1, f1), (x2, f2)] = golden_section(
+        &mut |lq| {
+            let j = obj.eval(10f64.powf(lq)).0;
+            trace.push((10f64.powf(lq), j));
+            j
+        },
+        lq0 - 1.0,
+        lq0 + 1.0,
+        12,
+    );
     // The best of the coarse optimum and the final bracket (first wins a
     // tie); its J is known, only its design is computed again.
     let mut pick = (lq0, j0);
@@ -399,6 +384,33 @@ fn choose_q(obj: &Objective, trace: &mut Vec<(f64, f64)>) -> Result<(f64, Kalman
     let (j, ng, d) = obj.eval(q);
     let d = d.ok_or_else(|| anyhow::anyhow!("q search failed"))?;
     Ok((q, d, j, ng))
+}
+
+/// Golden-section search for the minimum of `f` on [a, b] with `iters`
+/// reductions after the first two evaluations; returns the final two
+/// interior points (x, f(x)).
+pub fn golden_section(f: &mut dyn FnMut(f64) -> f64, mut a: f64, mut b: f64, iters: usize) -> [(f64, f64); 2] {
+    let gr = (5f64.sqrt() - 1.0) / 2.0;
+    let mut x1 = b - gr * (b - a);
+    let mut x2 = a + gr * (b - a);
+    let mut f1 = f(x1);
+    let mut f2 = f(x2);
+    for _ in 0..iters {
+        if f1 < f2 {
+            b = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = b - gr * (b - a);
+            f1 = f(x1);
+        } else {
+            a = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = a + gr * (b - a);
+            f2 = f(x2);
+        }
+    }
+    [(x1, f1), (x2, f2)]
 }
 
 /// The fitted model of one axis, by either method.

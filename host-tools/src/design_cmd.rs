@@ -87,6 +87,37 @@ impl BandArgs {
     }
 }
 
+/// The force model of the offline estimate (`--force-prior`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum ForcePrior {
+    /// The random walk of the default design: safe for chatter and transients.
+    #[default]
+    Default,
+    /// Tooth-passing and runout harmonics of --spindle-rpm in the Kalman
+    /// state of `compensate --offline`, tuned from --force-record
+    /// (`crate::force_prior`); the box image stays the default design.
+    Harmonics,
+}
+
+/// The opt-in harmonic force prior (issue #12, optional part).
+#[derive(Args, Debug, Clone, Default)]
+pub struct PriorArgs {
+    /// Force model of `compensate --offline`: `default` (random walk) or
+    /// `harmonics` (the spindle harmonics of --spindle-rpm/--teeth in the
+    /// Kalman state, tuned from --force-record; offline only, the box image
+    /// is unchanged; --spindle-rpm then makes no fitting bands).
+    #[arg(long, value_enum, default_value_t = ForcePrior::Default)]
+    pub force_prior: ForcePrior,
+    /// A representative record of the cut (signal CSV, same rate, raw
+    /// measured forces): the harmonics' amplitudes are measured in it.
+    #[arg(long, value_name = "FILE")]
+    pub force_record: Option<PathBuf>,
+    /// Bandwidth of each harmonic line of the prior (Hz; default a quarter
+    /// of the spindle frequency).
+    #[arg(long, value_name = "HZ")]
+    pub line_width: Option<f64>,
+}
+
 /// The paper's method (`--method paper`).
 #[derive(Args, Debug, Clone)]
 pub struct PaperArgs {
@@ -215,6 +246,9 @@ pub struct DesignArgs {
     /// Fitting bands.
     #[command(flatten)]
     pub bands: BandArgs,
+    /// The opt-in force prior of the offline estimate.
+    #[command(flatten)]
+    pub prior: PriorArgs,
     /// Parallel elaboration (paper §3.3, offline only): one compensator per
     /// band in one image (format 2) that `compensate` runs band by band
     /// after a zero-phase split; the box never runs it. Needs bands.
@@ -316,6 +350,25 @@ pub struct AxisJson {
     /// Predicted in-band error when the sensor modes shift by −5…+5 %
     /// (`crate::sensitivity`), with the shifts where it doubles.
     pub sensitivity: Option<crate::sensitivity::Sensitivity>,
+    /// The harmonic force prior of `compensate --offline` (null without
+    /// `--force-prior harmonics`).
+    pub force_prior: Option<ForcePriorJson>,
+}
+
+/// The force prior of one axis in the `--json` summary.
+#[derive(Debug, Serialize)]
+pub struct ForcePriorJson {
+    /// Where it applies: always `compensate --offline`.
+    pub applies_to: &'static str,
+    /// The prior (lines, intensities, q_bb) as stored in the sidecar.
+    pub prior: crate::force_prior::HarmonicPrior,
+    /// Predicted errors: steady cut (the record's spectrum) and flat spectrum,
+    /// with the prior, the default smoother and no compensation.
+    pub prediction: crate::force_prior::PriorPrediction,
+    /// Share of the record's in-band force away from the harmonics.
+    pub off_line_share: f64,
+    /// Spindle speed whose harmonics best fit the record (rpm).
+    pub record_spindle_rpm: f64,
 }
 
 /// Machine-readable summary of the whole design.
@@ -511,6 +564,12 @@ pub fn paper_line(axis: usize, nb: usize, na: usize, p: &PaperDiagnostics) -> St
 
 /// Run `dynocomp design`.
 pub fn run(args: &DesignArgs) -> Result<()> {
+    let harmonics = args.prior.force_prior == ForcePrior::Harmonics;
+    if harmonics {
+        check_prior_args(args)?;
+    } else if args.prior.force_record.is_some() || args.prior.line_width.is_some() {
+        bail!("--force-record and --line-width belong to --force-prior harmonics");
+    }
     match args.input.frf.len() {
         1 => {}
         2 => return crate::two_state_cmd::run(args),
@@ -536,7 +595,10 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     let sha: [u8; 32] = Sha256::digest(&bytes).into();
     let frf = io::parse_frf(args.input.frf(), &bytes)?;
     let r = args.input.noise_variances(&frf)?;
-    let bands = args.bands.resolve(&frf, args.input.fs).with_context(|| format!("{}", args.input.frf().display()))?;
+    // With the harmonic prior, --spindle-rpm/--teeth place the prior's
+    // lines, not fitting bands: the design covers the whole band.
+    let band_args = if harmonics { BandArgs { spindle_rpm: None, teeth: None, ..args.bands.clone() } } else { args.bands.clone() };
+    let bands = band_args.resolve(&frf, args.input.fs).with_context(|| format!("{}", args.input.frf().display()))?;
     let method = if paper { args.paper.method(args.bands.tooth_passing_hz(), args.input.fs)? } else { FitMethod::Vf };
     let opts = DesignOptions {
         method,
@@ -581,6 +643,8 @@ pub fn run(args: &DesignArgs) -> Result<()> {
         times.push(dt);
         designs.push(d);
     }
+    // The prior is built and checked before anything is written.
+    let priors = if harmonics { build_priors(args, &designs, &r)? } else { designs.iter().map(|_| None).collect() };
     let mut image = build_image(&designs, args.input.fs as u32, latency, args.full_scale, sha)?;
     let box_load = crate::load::report(&image, limit_permille);
     if !box_load.fits {
@@ -599,10 +663,19 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     if !paper {
         // The model sidecar of `compensate --offline` (crate::smoother).
         let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
-        crate::smoother::write_sidecar(&args.out, &crate::smoother::ModelSidecar::new(&image, &models))?;
+        let mut sidecar = crate::smoother::ModelSidecar::new(&image, &models);
+        for (m, p) in sidecar.axes.iter_mut().zip(&priors) {
+            m.force_prior = p.as_ref().map(|p| p.prior.clone());
+        }
+        crate::smoother::write_sidecar(&args.out, &sidecar)?;
     }
     let id = image.id();
     let mut summary = render_summary(&designs, args.input.fs, latency, &args.out.display().to_string(), id, method_name);
+    for (d, p) in designs.iter().zip(&priors) {
+        if let Some(p) = p {
+            summary.push_str(&prior_line(d.axis, p));
+        }
+    }
     summary.push_str(&crate::load::describe(&box_load, image.fs_hz));
     summary.push_str(if box_load.fits { "\n" } else { "  OVER THE LIMIT: offline-only image\n" });
     if let Some(dir) = &args.report {
@@ -623,7 +696,8 @@ pub fn run(args: &DesignArgs) -> Result<()> {
             axes: designs
                 .iter()
                 .zip(&times)
-                .map(|(d, t)| AxisJson {
+                .zip(&priors)
+                .map(|((d, t), p)| AxisJson {
                     axis: axis_name(d.axis),
                     model_order: d.model.order(),
                     order_trace: d.order_trace.clone(),
@@ -653,6 +727,13 @@ pub fn run(args: &DesignArgs) -> Result<()> {
                     fit_nrmse_out_of_band: (!d.bands.is_empty() && d.fit_nrmse_out_of_band.is_finite()).then_some(d.fit_nrmse_out_of_band),
                     paper: d.paper.as_ref().map(|p| p.1.clone()),
                     sensitivity: d.sensitivity.clone(),
+                    force_prior: p.as_ref().map(|p| ForcePriorJson {
+                        applies_to: "compensate --offline",
+                        prior: p.prior.clone(),
+                        prediction: p.prediction,
+                        off_line_share: p.record.off_line_share,
+                        record_spindle_rpm: 60.0 * p.record.best_spindle_hz,
+                    }),
                 })
                 .collect(),
         };
@@ -662,4 +743,81 @@ pub fn run(args: &DesignArgs) -> Result<()> {
         eprintln!("designed in {:.0} ms", t0.elapsed().as_secs_f64() * 1e3);
     }
     Ok(())
+}
+
+/// The conditions of `--force-prior harmonics`: one FRF, the default
+/// method, no parallel elaboration, a spindle speed, teeth and a record.
+fn check_prior_args(args: &DesignArgs) -> Result<()> {
+    if args.input.frf.len() != 1 || args.method != "vf" || args.parallel {
+        bail!("--force-prior harmonics works with one --frf and the default method (vf), without --parallel: it shapes the offline smoother of a box design");
+    }
+    if args.bands.spindle_rpm.is_none() || args.bands.teeth.is_none() {
+        bail!("--force-prior harmonics needs --spindle-rpm RPM and --teeth Z (where the harmonics are)");
+    }
+    if args.prior.force_record.is_none() {
+        bail!("--force-prior harmonics needs --force-record FILE: a representative measured record of the cut, to tune the harmonics' intensities");
+    }
+    Ok(())
+}
+
+/// The harmonic force prior of each designed axis (`crate::force_prior`),
+/// tuned from `--force-record`, with the smoother's checks (Riccati
+/// residual, closed-loop stability) and the refusal of a prior predicted
+/// worse than no compensation.
+fn build_priors(args: &DesignArgs, designs: &[AxisDesign], r: &[Option<f64>; 3]) -> Result<Vec<Option<crate::force_prior::AxisPrior>>> {
+    let path = args.prior.force_record.as_ref().expect("checked by check_prior_args");
+    let shown = path.display();
+    let rec = io::signal_csv::read_signal_csv(path)?;
+    if let Some((rate, _)) = rec.sample_rate_from_time() {
+        if (rate - args.input.fs).abs() > 1e-6 * args.input.fs {
+            bail!("{shown}: sampled at {rate:.1} Hz (column t_s), not at --fs {}; record the cut at the box's rate", args.input.fs);
+        }
+    }
+    let opts = crate::force_prior::PriorOptions {
+        spindle_rpm: args.bands.spindle_rpm.expect("checked"),
+        teeth: args.bands.teeth.expect("checked"),
+        line_width_hz: args.prior.line_width,
+        unchecked: false,
+    };
+    let mut out = Vec::new();
+    for d in designs {
+        let name = axis_name(d.axis);
+        let y = rec.channel(d.axis).ok_or_else(|| anyhow::anyhow!("{shown}: no column f{name} for axis {name}; the force record needs every designed axis"))?;
+        let dm = &d.discrete.as_ref().ok_or_else(|| anyhow::anyhow!("axis {name}: no discrete model"))?.0;
+        let rv = r[d.axis].expect("R set for every designed axis");
+        let built = crate::force_prior::build_axis_prior(&opts, dm, &|f| d.model.frf(f), rv, d.kalman.q, d.compensated_band_hz, y)
+            .with_context(|| format!("{shown}: axis {name}: --force-prior harmonics"))?;
+        crate::smoother::Smoother::with_force_prior(dm, &built.prior, rv).with_context(|| format!("axis {name}: the smoother with the force prior"))?;
+        let p = built.prediction;
+        if p.with_prior.partial_cmp(&p.raw) != Some(std::cmp::Ordering::Less) {
+            bail!(
+                "axis {name}: the offline estimate with the force prior would be worse than no compensation on the record's spectrum ({:.2} % against {:.2} %); no image written; drop --force-prior",
+                100.0 * p.with_prior,
+                100.0 * p.raw
+            );
+        }
+        out.push(Some(built));
+    }
+    Ok(out)
+}
+
+/// One summary line of an axis's force prior.
+fn prior_line(axis: usize, p: &crate::force_prior::AxisPrior) -> String {
+    let pr = &p.prior;
+    let e = &p.prediction;
+    format!(
+        "{} force prior (compensate --offline only; the box runs the default design): {} harmonics of {:.2} Hz (TPF {:.2} Hz), line width {:.2} Hz, q_bb {:.3e}; predicted {:.3} % on the record's steady cut against {:.3} % for the default smoother (raw {:.2} %); for a flat force spectrum {:.2} % against {:.3} %; {:.2} % of the record's force off the harmonics\n",
+        axis_name(axis),
+        pr.lines.len(),
+        pr.spindle_hz,
+        pr.spindle_hz * f64::from(pr.teeth),
+        pr.line_width_hz,
+        pr.q_broadband,
+        100.0 * e.with_prior,
+        100.0 * e.default_smoother,
+        100.0 * e.raw,
+        100.0 * e.with_prior_flat,
+        100.0 * e.default_flat,
+        100.0 * p.record.off_line_share
+    )
 }

@@ -93,6 +93,10 @@ pub struct AxisModelJson {
     /// issue #15; absent otherwise and in older sidecars).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub two_state: Option<crate::two_state::TwoStateJson>,
+    /// The harmonic force prior of `compensate --offline` (`design
+    /// --force-prior harmonics`; absent otherwise and in older sidecars).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub force_prior: Option<crate::force_prior::HarmonicPrior>,
 }
 
 /// The sidecar's terms of a pole-residue model.
@@ -171,6 +175,7 @@ impl ModelSidecar {
                 d: m.d,
                 terms: terms_to_json(m),
                 two_state: None,
+                force_prior: None,
             })
             .collect();
         ModelSidecar {
@@ -268,7 +273,9 @@ pub struct Smoother {
     p: DMatrix<f64>,
     k: DVector<f64>,
     s: f64,
-    force_index: usize,
+    /// Row o with F_k = oᵀx_k: one state for the random walk, the sum of
+    /// the broadband state and the resonators with a force prior.
+    force_row: DVector<f64>,
     /// Advance D of the discrete model (samples).
     advance: usize,
     /// Relative residual of the DARE solution.
@@ -286,7 +293,24 @@ impl Smoother {
         }
         let plant = kalman::augmented_plant(dm, 0);
         let qm = &plant.g * plant.g.transpose() * q;
-        let sol = kalman::solve_filter_dare(&plant.a, &plant.c, &qm, r)?;
+        let mut force_row = DVector::<f64>::zeros(plant.a.nrows());
+        force_row[plant.n_plant] = 1.0;
+        Self::from_plant(plant, &qm, force_row, r, dm.advance)
+    }
+
+    /// Build the smoother for the discrete model `dm` with the harmonic
+    /// force prior `prior` (its q_bb and line intensities,
+    /// [`crate::force_prior`]) and measurement noise R (N²).
+    pub fn with_force_prior(dm: &DiscreteModel, prior: &crate::force_prior::HarmonicPrior, r: f64) -> Result<Self> {
+        if !(prior.q_broadband > 0.0 && prior.q_broadband.is_finite() && r > 0.0 && r.is_finite()) {
+            bail!("smoother needs q_bb > 0 and R > 0 (got q_bb = {}, R = {r})", prior.q_broadband);
+        }
+        let (plant, qm, force_row) = crate::force_prior::plant_with_prior(dm, prior);
+        Self::from_plant(plant, &qm, force_row, r, dm.advance)
+    }
+
+    fn from_plant(plant: kalman::AugmentedPlant, qm: &DMatrix<f64>, force_row: DVector<f64>, r: f64, advance: usize) -> Result<Self> {
+        let sol = kalman::solve_filter_dare(&plant.a, &plant.c, qm, r)?;
         let s = (plant.c.transpose() * &sol.p * &plant.c)[(0, 0)] + r;
         let k = &sol.p * &plant.c / s;
         let n = plant.a.nrows();
@@ -301,8 +325,8 @@ impl Smoother {
             p: sol.p,
             k,
             s,
-            force_index: plant.n_plant,
-            advance: dm.advance,
+            force_row,
+            advance,
             dare_residual: sol.residual,
             closed_loop_radius: radius,
         })
@@ -313,7 +337,7 @@ impl Smoother {
     /// component x⁻_k[F] and the innovation e_k, all the backward pass needs.
     fn forward_step(&self, prior: &mut DVector<f64>, next: &mut DVector<f64>, yk: f64) -> (f64, f64) {
         let e = yk - self.c.dot(prior);
-        let prior_force = prior[self.force_index];
+        let prior_force = self.force_row.dot(prior);
         prior.axpy(e, &self.k, 1.0);
         self.a.mul_to(prior, next);
         std::mem::swap(prior, next);
@@ -331,9 +355,10 @@ impl Smoother {
         estimate
     }
 
-    /// Row F of P (the backward pass's output map), as a column.
+    /// Pᵀo, the backward pass's output map (row F of P without a force
+    /// prior), as a column.
     fn p_row(&self) -> DVector<f64> {
-        self.p.row(self.force_index).transpose()
+        self.p.tr_mul(&self.force_row)
     }
 
     /// Smoothed force estimate F̂_k|N (N) for every sample of `y` (N).
@@ -515,7 +540,23 @@ pub fn axis_smoother(image: &CoeffImage, sidecar: &ModelSidecar, axis: usize, so
 pub fn smooth_record(image: &CoeffImage, sidecar: &ModelSidecar, rec: &SignalRecord, source: &str) -> Result<SignalRecord> {
     let mut channels = Vec::with_capacity(rec.channels.len());
     for (axis, y) in &rec.channels {
-        let sm = axis_smoother(image, sidecar, *axis, source)?;
+        let Some(a) = image.axes.get(*axis).copied().flatten() else {
+            bail!("{source}: column f{} has no compensator (and no q, R) in the image; drop the column or design for that axis", axis_name(*axis));
+        };
+        let dm = sidecar.discrete_model(*axis, source)?;
+        let name = axis_name(*axis);
+        let prior = sidecar.axes.iter().find(|m| m.axis == name).and_then(|m| m.force_prior.as_ref());
+        let sm = match prior {
+            None => Smoother::new(&dm, a.summary.q, a.summary.r),
+            Some(p) if p.fs_hz != sidecar.fs_hz => bail!("{source}: axis {name}: the force prior is for {} Hz, the image for {} Hz; re-run `dynocomp design`", p.fs_hz, sidecar.fs_hz),
+            Some(p) => {
+                let model = sidecar.model(*axis, source)?;
+                crate::force_prior::check_record(p, y, &|f| model.frf(f), a.summary.r)
+                    .and_then(|_| Smoother::with_force_prior(&dm, p, a.summary.r))
+                    .context("force prior")
+            }
+        }
+        .with_context(|| format!("{source}: axis {name}"))?;
         let out = sm.smooth(y);
         if let Some(k) = out.iter().position(|v| !v.is_finite()) {
             bail!("{source}: smoothed f{} became non-finite at sample {k}", axis_name(*axis));
