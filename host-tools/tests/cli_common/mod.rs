@@ -1,4 +1,5 @@
 //! Helpers for tests that run the `dynocomp` binary on the bundled example.
+#![allow(dead_code)]
 
 use std::path::PathBuf;
 use std::process::Command;
