@@ -27,6 +27,11 @@ const MEDIAN: f64 = 0.005;
 /// same path as `dynocomp compensate`); (compensated NRMSE, raw NRMSE) per axis.
 fn score(s: &SimOutput, designs: &[AxisDesign], lag: usize) -> Vec<(f64, f64)> {
     let image = build_image(designs, FS as u32, lag, 5000.0, [0; 32]).unwrap();
+    // The box's predicted interrupt load of this design (issue #16: every
+    // end-to-end design's load recorded, BENCHMARKS.md).
+    let load = dynocomp_core::budget::image_load(&image);
+    let shape: Vec<String> = image.axes.iter().flatten().map(|a| format!("{}+{}", a.filter.kernel_counts().0, a.filter.fir().len())).collect();
+    eprintln!("box load at {} Hz: {:.1} % ({} cycles, high estimate; pairs+taps {})", image.fs_hz, load.permille as f64 / 10.0, load.cycles, shape.join(", "));
     let rec = SignalRecord { t_s: None, channels: (0..3).map(|a| (a, s.measured[a].clone())).collect() };
     let out = compensate_record(&image, &rec, false, "sim").unwrap();
     (0..3)
