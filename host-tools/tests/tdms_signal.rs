@@ -300,6 +300,14 @@ fn bad_tdms_records_are_refused_clearly() {
     std::fs::write(&p, file).unwrap();
     let e = read(&p, None).unwrap_err();
     assert!(e.contains("Cut 1/Fx") && e.contains("lbf"), "{e}");
+    // a start time that is not finite; control: a finite one reads
+    let file = segment(META | NEW_LIST | RAW, Some(&[ch("Fx", Index::New(10, 1), vec![("wf_start_offset", P::F64(f64::INFINITY))])]), &1.0f64.to_le_bytes());
+    std::fs::write(&p, file).unwrap();
+    let e = read(&p, None).unwrap_err();
+    assert!(e.contains("Cut 1/Fx") && e.contains("wf_start_offset") && e.contains("not finite"), "{e}");
+    let file = segment(META | NEW_LIST | RAW, Some(&[ch("Fx", Index::New(10, 1), vec![("wf_start_offset", P::F64(2.5))])]), &1.0f64.to_le_bytes());
+    std::fs::write(&p, file).unwrap();
+    assert!(read(&p, None).is_ok());
     // DAQmx raw data
     let file = segment(META | NEW_LIST | RAW | DAQMX, Some(&[ch("Fx", Index::Daqmx, vec![])]), &[0u8; 8]);
     std::fs::write(&p, file).unwrap();
@@ -424,5 +432,27 @@ fn outputs_keep_the_time_base() {
         let rec7 = text.lines().nth(8).unwrap();
         let x0: f64 = rec7.split_whitespace().nth(3).unwrap().parse().unwrap();
         assert!((x0 - t0).abs() < 1e-5, "record 7 `{rec7}`: x0 {x0}, want {t0}");
+    }
+    // A TDMS or UFF input's time base goes on too: to a CSV output as its
+    // t_s column (from the start and the increment), to TDMS as its start.
+    let run = |input: &std::path::Path, out: &std::path::Path, fmt: &str| {
+        let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", input.to_str().unwrap(), "--output", out.to_str().unwrap(), "--output-format", fmt]);
+        assert!(ok, "{err}");
+    };
+    let (tdms_in, uff_in) = (tmp("tdmst0", "timed.tdms"), tmp("tdmst0", "timed.uff"));
+    run(&inp, &tdms_in, "tdms");
+    run(&inp, &uff_in, "uff58b");
+    for from in [&tdms_in, &uff_in] {
+        let csv = tmp("tdmst0", "back.csv");
+        run(from, &csv, "csv");
+        let rec = dynocomp::io::signal_csv::read_signal_csv(&csv).unwrap();
+        let t = rec.t_s.as_ref().unwrap_or_else(|| panic!("{}: no t_s column in the CSV output", from.display()));
+        assert_eq!(t.len(), 5000);
+        for (k, tk) in t.iter().enumerate() {
+            assert!((tk - (1.25 + k as f64 / 51200.0)).abs() < 1e-9, "{}: t_s[{k}] = {tk}", from.display());
+        }
+        let again = tmp("tdmst0", "again.tdms");
+        run(from, &again, "tdms");
+        assert_eq!(dynocomp::io::tdms::TdmsReader::open(&again, None).unwrap().start_offset_s(), Some(1.25), "{}", from.display());
     }
 }

@@ -775,6 +775,11 @@ impl TdmsReader {
                 Some(_) => bail!("{here}: property wf_increment is not a number"),
                 None => {}
             }
+            match o.props.get("wf_start_offset") {
+                Some(Prop::Num(t)) if !t.is_finite() => bail!("{here}: property wf_start_offset = {t} s is not finite"),
+                // Another type (none in NI's writers) is ignored, as before: times start at 0.
+                _ => {}
+            }
             match &n {
                 Some((n0, c0)) if *n0 != o.total => bail!("{here}: {} samples, but channel {c0} has {n0}: channels must have the same length", o.total),
                 Some(_) => {}
@@ -830,8 +835,10 @@ impl SignalReader for TdmsReader {
         &self.axes
     }
 
+    /// Times from the channels' waveform properties (`wf_start_offset`, 0
+    /// if absent, and `wf_increment`), when they have them.
     fn has_time(&self) -> bool {
-        false
+        self.dt.is_some()
     }
 
     fn declared_fs_hz(&self) -> Option<f64> {
@@ -875,6 +882,10 @@ impl SignalReader for TdmsReader {
                     self.done + k as u64
                 );
             }
+        }
+        if let Some(dt) = self.dt {
+            let (t0, k0) = (self.start.unwrap_or(0.0), self.done);
+            blk.t_s.extend((0..left as u64).map(|k| t0 + (k0 + k) as f64 * dt));
         }
         self.done += left as u64;
         Ok(left)

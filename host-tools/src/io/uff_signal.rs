@@ -34,6 +34,8 @@ struct Channel {
     line: usize,
     n: u64,
     dt: f64,
+    /// Abscissa of the first sample (s, record 7).
+    t0: f64,
     double: bool,
     /// 58b: Some(big endian).
     binary: Option<bool>,
@@ -191,6 +193,9 @@ impl UffReader {
             if !(dx > 0.0 && dx.is_finite()) {
                 bail!("{}: abscissa increment {dx} s must be positive", here("record 7", l7));
             }
+            if !x0.is_finite() {
+                bail!("{}: abscissa start {x0} s is not finite", here("record 7", l7));
+            }
             let (l8, r8) = (recs[7].0, &recs[7].1);
             let (spec, units) = data_characteristics(r8);
             if let Some(t) = spec.filter(|t| ![0, 1, 17].contains(t)) {
@@ -200,9 +205,8 @@ impl UffReader {
             if !(u.is_empty() || u == "none" || u == "s" || u.starts_with("sec")) {
                 bail!("{}: abscissa units {units:?} are not seconds", here("record 8", l8));
             }
-            let _ = x0;
             let name = String::from_utf8_lossy(trim(&recs[0].1)).to_string();
-            let ch = Channel { axis: 9, sign: if rsp_dir < 0 { -1.0 } else { 1.0 }, no, line: start_line, n, dt: dx, double, binary, data_off, data_line };
+            let ch = Channel { axis: 9, sign: if rsp_dir < 0 { -1.0 } else { 1.0 }, no, line: start_line, n, dt: dx, t0: x0, double, binary, data_off, data_line };
             let axis = match map {
                 Some(m) => m.pairs.iter().find(|(_, v)| *v == name || node.is_some_and(|nd| v.parse::<i64>() == Ok(nd))).map(|p| p.0),
                 None => match rsp_dir.abs() {
@@ -339,8 +343,11 @@ impl SignalReader for UffReader {
         &self.axes
     }
 
+    /// Times from the first dataset's abscissa (record 7: start and
+    /// increment), so a CSV output gets its `t_s` column and a UFF or TDMS
+    /// output its start time.
     fn has_time(&self) -> bool {
-        false
+        true
     }
 
     fn declared_fs_hz(&self) -> Option<f64> {
@@ -355,6 +362,8 @@ impl SignalReader for UffReader {
         blk.clear();
         blk.channels.resize(self.chans.len(), Vec::new());
         let left = (self.chans[0].n - self.done[0]).min(max as u64) as usize;
+        let (t0, dt, k0) = (self.chans[0].t0, self.chans[0].dt, self.done[0]);
+        blk.t_s.extend((0..left as u64).map(|k| t0 + (k0 + k) as f64 * dt));
         for i in 0..self.chans.len() {
             let mut v = std::mem::take(&mut blk.channels[i]);
             self.fill(i, left, &mut v)?;
