@@ -419,7 +419,6 @@ impl<'s> SpilledForward<'s> {
 
     /// Take the next samples of y (N).
     pub fn push(&mut self, y: &[f64]) -> Result<()> {
-        use std::io::Write;
         if self.n_y == 0 {
             // ỹ_k = y_{k−D}: D copies of y_0 in front.
             if let Some(&y0) = y.first() {
@@ -432,7 +431,6 @@ impl<'s> SpilledForward<'s> {
             self.step(yk)?;
         }
         self.n_y += y.len() as u64;
-        self.spill.flush().ok();
         Ok(())
     }
 
@@ -525,12 +523,18 @@ impl SpilledEstimate {
     }
 }
 
+/// The image's compensator of `axis` (its q and R), or why the column
+/// cannot be smoothed.
+fn image_axis(image: &CoeffImage, axis: usize, source: &str) -> Result<dynocomp_core::image::AxisImage> {
+    image.axes.get(axis).copied().flatten().ok_or_else(|| {
+        anyhow::anyhow!("{source}: column f{} has no compensator (and no q, R) in the image; drop the column or design for that axis", axis_name(axis))
+    })
+}
+
 /// The smoother of `axis` (0 = x): the sidecar's discrete model, q and R
 /// from the image.
 pub fn axis_smoother(image: &CoeffImage, sidecar: &ModelSidecar, axis: usize, source: &str) -> Result<Smoother> {
-    let Some(a) = image.axes.get(axis).copied().flatten() else {
-        bail!("{source}: column f{} has no compensator (and no q, R) in the image; drop the column or design for that axis", axis_name(axis));
-    };
+    let a = image_axis(image, axis, source)?;
     let dm = sidecar.discrete_model(axis, source)?;
     Smoother::new(&dm, a.summary.q, a.summary.r).with_context(|| format!("{source}: axis {}", axis_name(axis)))
 }
@@ -540,23 +544,22 @@ pub fn axis_smoother(image: &CoeffImage, sidecar: &ModelSidecar, axis: usize, so
 pub fn smooth_record(image: &CoeffImage, sidecar: &ModelSidecar, rec: &SignalRecord, source: &str) -> Result<SignalRecord> {
     let mut channels = Vec::with_capacity(rec.channels.len());
     for (axis, y) in &rec.channels {
-        let Some(a) = image.axes.get(*axis).copied().flatten() else {
-            bail!("{source}: column f{} has no compensator (and no q, R) in the image; drop the column or design for that axis", axis_name(*axis));
-        };
-        let dm = sidecar.discrete_model(*axis, source)?;
         let name = axis_name(*axis);
-        let prior = sidecar.axes.iter().find(|m| m.axis == name).and_then(|m| m.force_prior.as_ref());
-        let sm = match prior {
-            None => Smoother::new(&dm, a.summary.q, a.summary.r),
-            Some(p) if p.fs_hz != sidecar.fs_hz => bail!("{source}: axis {name}: the force prior is for {} Hz, the image for {} Hz; re-run `dynocomp design`", p.fs_hz, sidecar.fs_hz),
+        let sm = match sidecar.axes.iter().find(|m| m.axis == name).and_then(|m| m.force_prior.as_ref()) {
+            None => axis_smoother(image, sidecar, *axis, source)?,
             Some(p) => {
+                let a = image_axis(image, *axis, source)?;
+                let dm = sidecar.discrete_model(*axis, source)?;
+                if p.fs_hz != sidecar.fs_hz {
+                    bail!("{source}: axis {name}: the force prior is for {} Hz, the image for {} Hz; re-run `dynocomp design`", p.fs_hz, sidecar.fs_hz);
+                }
                 let model = sidecar.model(*axis, source)?;
                 crate::force_prior::check_record(p, y, &|f| model.frf(f), a.summary.r)
                     .and_then(|_| Smoother::with_force_prior(&dm, p, a.summary.r))
                     .context("force prior")
+                    .with_context(|| format!("{source}: axis {name}"))?
             }
-        }
-        .with_context(|| format!("{source}: axis {name}"))?;
+        };
         let out = sm.smooth(y);
         if let Some(k) = out.iter().position(|v| !v.is_finite()) {
             bail!("{source}: smoothed f{} became non-finite at sample {k}", axis_name(*axis));
