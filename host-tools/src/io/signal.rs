@@ -21,6 +21,14 @@ pub struct Block {
 }
 
 impl Block {
+    /// Append the times of samples `first..first + n` of an evenly sampled
+    /// record (s): t0 + k·dt, each from its own index (no accumulated
+    /// rounding), for readers of formats that store a start and an
+    /// increment instead of times (TDMS, UFF 58).
+    pub fn push_even_times(&mut self, t0: f64, dt: f64, first: u64, n: usize) {
+        self.t_s.extend((0..n as u64).map(|k| t0 + (first + k) as f64 * dt));
+    }
+
     /// An empty block for `n_channels` channels.
     pub fn new(n_channels: usize) -> Block {
         Block { t_s: Vec::new(), channels: vec![Vec::new(); n_channels] }

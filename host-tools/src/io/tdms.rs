@@ -884,8 +884,7 @@ impl SignalReader for TdmsReader {
             }
         }
         if let Some(dt) = self.dt {
-            let (t0, k0) = (self.start.unwrap_or(0.0), self.done);
-            blk.t_s.extend((0..left as u64).map(|k| t0 + (k0 + k) as f64 * dt));
+            blk.push_even_times(self.start.unwrap_or(0.0), dt, self.done, left);
         }
         self.done += left as u64;
         Ok(left)

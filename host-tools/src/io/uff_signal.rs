@@ -362,8 +362,7 @@ impl SignalReader for UffReader {
         blk.clear();
         blk.channels.resize(self.chans.len(), Vec::new());
         let left = (self.chans[0].n - self.done[0]).min(max as u64) as usize;
-        let (t0, dt, k0) = (self.chans[0].t0, self.chans[0].dt, self.done[0]);
-        blk.t_s.extend((0..left as u64).map(|k| t0 + (k0 + k) as f64 * dt));
+        blk.push_even_times(self.chans[0].t0, self.chans[0].dt, self.done[0], left);
         for i in 0..self.chans.len() {
             let mut v = std::mem::take(&mut blk.channels[i]);
             self.fill(i, left, &mut v)?;
