@@ -83,6 +83,17 @@ fn record_from(r: &mut dyn SignalReader) -> Result<SignalRecord> {
     Ok(SignalRecord { t_s, channels: axes.into_iter().zip(data).collect() })
 }
 
+/// The columns of a signal CSV, from its header.
+#[derive(Default)]
+struct Columns {
+    /// Column names, lower case.
+    names: Vec<String>,
+    /// Data column of each CSV column (None: time or an ignored column).
+    slot_of: Vec<Option<usize>>,
+    /// Whether the first column is `t_s`.
+    has_time: bool,
+}
+
 /// A signal CSV read block by block: no allocation per value, and lines
 /// parsed in place in the reader's buffer, one pass over their bytes
 /// ([`decimal::parse_f64`]: Clinger's fast path for plain decimals, the
@@ -90,10 +101,7 @@ fn record_from(r: &mut dyn SignalReader) -> Result<SignalRecord> {
 pub struct CsvReader<R: BufRead> {
     r: R,
     source: String,
-    names: Vec<String>,
-    /// Data column of each CSV column (None: time or an ignored column).
-    slot_of: Vec<Option<usize>>,
-    has_time: bool,
+    cols: Columns,
     axes: Vec<usize>,
     /// Lines read so far (1-based number of the last line).
     lineno: usize,
@@ -117,9 +125,7 @@ impl<R: BufRead> CsvReader<R> {
         let mut me = CsvReader {
             r,
             source: source.to_string(),
-            names: Vec::new(),
-            slot_of: Vec::new(),
-            has_time: false,
+            cols: Columns::default(),
             axes: Vec::new(),
             lineno: 0,
             line: Vec::new(),
@@ -137,18 +143,18 @@ impl<R: BufRead> CsvReader<R> {
 
     fn parse_header(&mut self, header: &str) -> Result<()> {
         let source = &self.source;
-        self.names = header.split(',').map(|s| s.trim().trim_matches('"').to_ascii_lowercase()).collect();
-        for (col, name) in self.names.iter().enumerate() {
+        self.cols.names = header.split(',').map(|s| s.trim().trim_matches('"').to_ascii_lowercase()).collect();
+        for (col, name) in self.cols.names.iter().enumerate() {
             if IGNORED_COLUMNS.contains(&name.as_str()) {
-                self.slot_of.push(None);
+                self.cols.slot_of.push(None);
                 continue;
             }
-            self.slot_of.push(column_axis(name).map(|_| self.axes.len()));
+            self.cols.slot_of.push(column_axis(name).map(|_| self.axes.len()));
             if name == "t_s" {
                 if col != 0 {
                     bail!("{source}: line {}, column {}: `t_s` must be the first column", self.lineno, col + 1);
                 }
-                self.has_time = true;
+                self.cols.has_time = true;
             } else if let Some(axis) = column_axis(name) {
                 if self.axes.contains(&axis) {
                     bail!("{source}: line {}, column {}: duplicate column `{name}`", self.lineno, col + 1);
@@ -188,7 +194,7 @@ impl<R: BufRead> CsvReader<R> {
                     self.line.pop();
                 }
             }
-            if !self.line.iter().all(u8::is_ascii_whitespace) {
+            if !is_blank(&self.line) {
                 return Ok(true);
             }
         }
@@ -200,16 +206,21 @@ impl<R: BufRead> CsvReader<R> {
 
     /// Parse the current line (`self.line`) into `blk`.
     fn parse_line(&mut self, blk: &mut Block) -> Result<()> {
-        parse_row(&self.line, &self.names, &self.slot_of, self.has_time, &mut self.prev_t, blk, &self.source, self.lineno)
+        parse_row(&self.line, &self.cols, &mut self.prev_t, blk, &self.source, self.lineno)
     }
+}
+
+/// A line of only blanks (skipped wherever it is, by both line paths).
+fn is_blank(line: &[u8]) -> bool {
+    line.iter().all(u8::is_ascii_whitespace)
 }
 
 /// Parse one data row (`line`, without its line end) into `blk`: one pass
 /// over its bytes, each field parsed in place ([`decimal::parse_f64`]).
 /// Any problem is diagnosed by [`row_error`], which checks the row in the
 /// order the messages promise (text, field count, then field by field).
-#[allow(clippy::too_many_arguments)]
-fn parse_row(line: &[u8], names: &[String], slot_of: &[Option<usize>], has_time: bool, prev_t: &mut Option<f64>, blk: &mut Block, source: &str, lineno: usize) -> Result<()> {
+fn parse_row(line: &[u8], cols: &Columns, prev_t: &mut Option<f64>, blk: &mut Block, source: &str, lineno: usize) -> Result<()> {
+    let Columns { names, slot_of, has_time } = cols;
     let t_before = *prev_t;
     let mut col = 0;
     let mut ok = true;
@@ -218,7 +229,7 @@ fn parse_row(line: &[u8], names: &[String], slot_of: &[Option<usize>], has_time:
             ok = false;
             break;
         };
-        if has_time && col == 0 {
+        if *has_time && col == 0 {
             if prev_t.is_some_and(|p| v <= p) {
                 ok = false;
                 break;
@@ -233,13 +244,14 @@ fn parse_row(line: &[u8], names: &[String], slot_of: &[Option<usize>], has_time:
     if ok && col == names.len() {
         return Ok(());
     }
-    Err(row_error(line, names, has_time, t_before, source, lineno))
+    Err(row_error(line, cols, t_before, source, lineno))
 }
 
 /// Why `line` is not a valid data row (the first problem, in the order: not
 /// UTF-8, field count, then each field: not a number, not finite, time not
 /// increasing after `prev_t`).
-fn row_error(line: &[u8], names: &[String], has_time: bool, prev_t: Option<f64>, source: &str, lineno: usize) -> anyhow::Error {
+fn row_error(line: &[u8], cols: &Columns, prev_t: Option<f64>, source: &str, lineno: usize) -> anyhow::Error {
+    let Columns { names, has_time, .. } = cols;
     let Ok(line) = std::str::from_utf8(line) else {
         return anyhow!("{source}: line {lineno}: not valid UTF-8 text");
     };
@@ -255,7 +267,7 @@ fn row_error(line: &[u8], names: &[String], has_time: bool, prev_t: Option<f64>,
         if !v.is_finite() {
             return anyhow!("{source}: line {lineno}, column {} (`{}`): value is not finite", col + 1, names[col]);
         }
-        if has_time && col == 0 {
+        if *has_time && col == 0 {
             if let Some(prev) = prev_t.filter(|p| v <= *p) {
                 return anyhow!("{source}: line {lineno}, column 1 (`t_s`): time {v} does not increase (previous {prev})");
             }
@@ -270,7 +282,7 @@ impl<R: BufRead + Send> SignalReader for CsvReader<R> {
     }
 
     fn has_time(&self) -> bool {
-        self.has_time
+        self.cols.has_time
     }
 
     fn read_block(&mut self, blk: &mut Block, max: usize) -> Result<usize> {
@@ -283,8 +295,8 @@ impl<R: BufRead + Send> SignalReader for CsvReader<R> {
             if let Some(end) = memchr::memchr(b'\n', buf) {
                 self.lineno += 1;
                 let line = buf[..end].strip_suffix(b"\r").unwrap_or(&buf[..end]);
-                if !line.iter().all(u8::is_ascii_whitespace) {
-                    parse_row(line, &self.names, &self.slot_of, self.has_time, &mut self.prev_t, blk, &self.source, self.lineno)?;
+                if !is_blank(line) {
+                    parse_row(line, &self.cols, &mut self.prev_t, blk, &self.source, self.lineno)?;
                 }
                 self.r.consume(end + 1);
                 continue;
