@@ -161,7 +161,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
             // The stationary smoother on a file runs in bounded memory; the
             // drift smoother, the force prior (checked against the whole
             // record) and a pipe (read once) keep the record whole.
-            if drift.is_none() && priors.is_empty() && std::fs::metadata(&a.input).is_ok_and(|m| m.is_file()) {
+            if drift.is_none() && priors.is_empty() && crate::io::signal_file::can_read_twice(&a.input) {
                 how = "fixed-interval smoother, zero lag (offline only; forward pass spilled to temporary files beside the output, memory independent of the record's length)".to_string();
                 let smoothers = axes.iter().map(|&ax| crate::smoother::axis_smoother(i, &sidecar, ax, &source)).collect::<Result<Vec<_>>>()?;
                 progress.set_length(reader.len_hint().unwrap_or(0) * 2);

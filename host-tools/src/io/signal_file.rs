@@ -56,6 +56,13 @@ impl ChannelMap {
     }
 }
 
+/// Whether `path` is a regular file, which can be opened and read again
+/// from its start (a pipe or a device such as /dev/stdin cannot: its bytes
+/// are gone once read).
+pub fn can_read_twice(path: &Path) -> bool {
+    std::fs::metadata(path).is_ok_and(|m| m.is_file())
+}
+
 /// Open the force record `path`: its reader and its format (by extension,
 /// otherwise by content).
 pub fn open_signal(path: &Path, map: Option<&ChannelMap>) -> Result<(Box<dyn SignalReader>, SignalFormat)> {
@@ -70,7 +77,7 @@ pub fn open_signal(path: &Path, map: Option<&ChannelMap>) -> Result<(Box<dyn Sig
     };
     // A pipe or device (e.g. /dev/stdin) cannot be sniffed without
     // consuming what the reader needs: read as CSV.
-    let sniffable = || std::fs::metadata(path).is_ok_and(|m| m.is_file());
+    let sniffable = || can_read_twice(path);
     let is_tdms = match ext.as_deref() {
         Some("tdms") => true,
         Some("csv" | "uff" | "unv" | "uf") => false,
