@@ -1,6 +1,10 @@
 //! The `dynocomp` host tool as a library: one module per stage of the signal
 //! chain, data flowing one way (io → fit → kalman → realize → quantize →
 //! image → report), plus the simulator and the offline compensator.
+//!
+//! No `unsafe` anywhere in it (what the long fuzz campaigns without
+//! AddressSanitizer rely on, `fuzz/campaign.sh`).
+#![forbid(unsafe_code)]
 
 pub mod bands;
 pub mod bandsplit;
