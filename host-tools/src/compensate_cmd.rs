@@ -241,8 +241,8 @@ fn write_output(
     body: impl FnOnce(&mut dyn crate::io::signal::SignalWriter) -> Result<u64>,
 ) -> Result<u64> {
     let mut n = 0;
-    crate::io::atomic::write_atomic(path, |w| {
-        let mut writer = writer_for(fmt, w, axes, has_time, len, f64::from(fs), path)?;
+    crate::io::atomic::write_atomic_file(path, |w, file| {
+        let mut writer = writer_for(fmt, w, Some(file), axes, has_time, len, f64::from(fs), path)?;
         n = body(&mut *writer)?;
         writer.finish()
     })?;

@@ -34,6 +34,14 @@ pub fn output_dir(path: &Path) -> &Path {
 
 /// Write `path` atomically with the bytes produced by `write`.
 pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
+    write_atomic_file(path, |w, _| write(w))
+}
+
+/// [`write_atomic`], with the temporary file itself beside the buffered
+/// writer over it, for writers that place data at offsets (positioned
+/// writes, which do not move the file's cursor). A writer that uses both
+/// must flush the buffered one before placing anything after its end.
+pub fn write_atomic_file(path: &Path, write: impl FnOnce(&mut dyn Write, &File) -> Result<()>) -> Result<()> {
     let dir = output_dir(path);
     let tmp = tempfile::Builder::new()
         .prefix(".dynocomp-")
@@ -52,7 +60,7 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()
         };
         let written = (|| -> Result<()> {
             let mut w = BufWriter::new(file);
-            write(&mut w).with_context(|| format!("{}: not written", path.display()))?;
+            write(&mut w, file).with_context(|| format!("{}: not written", path.display()))?;
             w.flush().with_context(|| format!("{}: write failed", path.display()))
         })();
         drop(done);

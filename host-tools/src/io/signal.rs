@@ -62,7 +62,9 @@ pub trait SignalReader: Send {
     fn declared_fs_hz(&self) -> Option<f64> {
         None
     }
-    /// Total number of samples, if the header says.
+    /// Total number of samples the reader will deliver, when it is known
+    /// before reading (the UFF and TDMS readers count them in their index
+    /// pass): a UFF output of that length is written in place.
     fn len_hint(&self) -> Option<u64> {
         None
     }

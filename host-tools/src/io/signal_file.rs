@@ -104,22 +104,26 @@ pub fn open_signal(path: &Path, map: Option<&ChannelMap>) -> Result<(Box<dyn Sig
 }
 
 /// A writer of `fmt` into `w` for `axes` (with a time column if
-/// `has_time`); `len`: the number of samples if known (formats with a
-/// length in their header need it), `fs_hz` the sample rate.
+/// `has_time`); `len`: the number of samples if known, `fs_hz` the sample
+/// rate. `file`: the file under `w`, if it is one; a UFF record of known
+/// length is then written in place ([`UffWriter::placed`]), otherwise
+/// through spill files in the output's folder.
+#[allow(clippy::too_many_arguments)]
 pub fn writer_for<'w>(
     fmt: SignalFormat,
     w: &'w mut dyn Write,
+    file: Option<&'w std::fs::File>,
     axes: &[usize],
     has_time: bool,
-    _len: Option<u64>,
+    len: Option<u64>,
     fs_hz: f64,
     path: &Path,
 ) -> Result<Box<dyn SignalWriter + 'w>> {
     let dir = crate::io::atomic::output_dir(path);
-    match fmt {
-        SignalFormat::Csv => Ok(Box::new(CsvWriter::new(w, axes, has_time)?)),
-        SignalFormat::Uff => Ok(Box::new(UffWriter::new_in(w, axes, fs_hz, false, dir)?)),
-        SignalFormat::Uff58b => Ok(Box::new(UffWriter::new_in(w, axes, fs_hz, true, dir)?)),
-        SignalFormat::Tdms => Ok(Box::new(TdmsWriter::new(w, axes, fs_hz, 0.0)?)),
+    match (fmt, file, len) {
+        (SignalFormat::Csv, ..) => Ok(Box::new(CsvWriter::new(w, axes, has_time)?)),
+        (SignalFormat::Uff | SignalFormat::Uff58b, Some(f), Some(n)) => Ok(Box::new(UffWriter::placed(f, n, axes, fs_hz, fmt == SignalFormat::Uff58b)?)),
+        (SignalFormat::Uff | SignalFormat::Uff58b, ..) => Ok(Box::new(UffWriter::new_in(w, axes, fs_hz, fmt == SignalFormat::Uff58b, dir)?)),
+        (SignalFormat::Tdms, ..) => Ok(Box::new(TdmsWriter::new(w, axes, fs_hz, 0.0)?)),
     }
 }

@@ -1083,11 +1083,27 @@ pub fn uff58_to_bytes(frf: &Frf, binary: bool) -> Result<Vec<u8>> {
 
 /// Fortran `Ew.d`: `d` decimals, two- (or three-) digit exponent, right-aligned in `w`.
 pub(super) fn fmt_e(x: f64, decimals: usize, width: usize) -> String {
-    let s = format!("{x:.decimals$e}");
-    let (mant, exp) = s.split_once('e').unwrap_or((&s, "0"));
+    let mut out = String::with_capacity(width);
+    push_e(&mut out, &mut String::new(), x, decimals, width);
+    out
+}
+
+/// [`fmt_e`], appended to `out` (`scratch`: a reusable buffer), without
+/// allocating once the buffers have grown: the time-history writer formats
+/// millions of values.
+pub(super) fn push_e(out: &mut String, scratch: &mut String, x: f64, decimals: usize, width: usize) {
+    use std::fmt::Write as _;
+    scratch.clear();
+    let _ = write!(scratch, "{x:.decimals$e}");
+    let (mant, exp) = scratch.split_once('e').unwrap_or((scratch.as_str(), "0"));
     let exp: i32 = exp.parse().unwrap_or(0);
-    let body = format!("{mant}e{}{:02}", if exp < 0 { '-' } else { '+' }, exp.abs());
-    format!("{body:>width$}")
+    // Exponent: sign and at least two digits (Fortran E format).
+    let digits = if exp.abs() >= 100 { 3 } else { 2 };
+    let len = mant.len() + 2 + digits;
+    for _ in len..width {
+        out.push(' ');
+    }
+    let _ = write!(out, "{mant}e{}{:02}", if exp < 0 { '-' } else { '+' }, exp.abs());
 }
 
 /// The `-1` line, id line and the 11 header records of a dataset 58:

@@ -21,7 +21,7 @@ use std::path::Path;
 
 use super::signal::{newton_per_unit, Block, SignalReader, SignalWriter};
 use super::signal_file::ChannelMap;
-use super::uff::{data_characteristics, dataset_header, fmt_e, read_numbers, record6, record7, spec_type_name, tokens, trim};
+use super::uff::{data_characteristics, dataset_header, read_numbers, record6, record7, spec_type_name, tokens, trim};
 use crate::frf::axis_name;
 
 /// One time-history dataset found by the index pass.
@@ -372,18 +372,47 @@ impl SignalReader for UffReader {
     }
 }
 
+/// Characters of one ASCII value (E20.12) and of a full data line (four
+/// values and the newline): every value has the same width, so the place of
+/// sample `i` in a dataset is known before it is written.
+const ASCII_VALUE: u64 = 20;
+const ASCII_LINE: u64 = 4 * ASCII_VALUE + 1;
+/// The line that ends a dataset (`{:>6}` of -1 and a newline).
+const END_LINE: u64 = 7;
+
 /// A writer of UFF 58 (ASCII, double precision, 4E20.12 per line) or 58b
 /// (binary little-endian doubles) time histories: one dataset per axis,
 /// abscissa every 1/fs s from the first sample's time (0 s when the input
 /// has no times).
+///
+/// The datasets follow one another and each header gives its number of
+/// points, while the samples of all axes arrive together. When the output
+/// is a file and the number of samples is known ([`UffWriter::placed`]),
+/// every dataset's place in the file is fixed from the start and each block
+/// is written at its offset; otherwise each channel is spilled to a
+/// temporary file and the datasets are written one after the other at the
+/// end (the data then goes through the disk twice).
 pub struct UffWriter<'w> {
-    w: &'w mut dyn Write,
+    sink: Sink<'w>,
     axes: Vec<usize>,
-    spill: Vec<std::io::BufWriter<File>>,
     n: u64,
     dt: f64,
     t0: Option<f64>,
     binary: bool,
+    /// Formatting buffers (ASCII) and the bytes of one block of a channel.
+    text: String,
+    scratch: String,
+    bytes: Vec<u8>,
+}
+
+enum Sink<'w> {
+    Spilled { w: &'w mut dyn Write, spill: Vec<std::io::BufWriter<File>> },
+    /// `len` samples per dataset; `data_at[k]`: the offset of dataset k's
+    /// first data byte, set when the first block fixes the headers' length
+    /// (the first sample's time is in the header).
+    Placed { file: &'w File, len: u64, data_at: Vec<u64> },
+    /// After [`SignalWriter::finish`].
+    Done,
 }
 
 impl<'w> UffWriter<'w> {
@@ -407,7 +436,84 @@ impl<'w> UffWriter<'w> {
                     .with_context(|| format!("{}: cannot create a temporary spill file", spill_dir.display()))
             })
             .collect::<Result<_>>()?;
-        Ok(UffWriter { w, axes: axes.to_vec(), spill, n: 0, dt: 1.0 / fs_hz, t0: None, binary })
+        Ok(Self::with_sink(Sink::Spilled { w, spill }, axes, fs_hz, binary))
+    }
+
+    /// A writer of a record of exactly `len` samples per axis into the empty
+    /// `file`, each block written at its place (positioned writes; the
+    /// file's cursor is not used): no spill. Writing more than `len`
+    /// samples, or finishing with fewer, is an error.
+    pub fn placed(file: &'w File, len: u64, axes: &[usize], fs_hz: f64, binary: bool) -> Result<Self> {
+        Ok(Self::with_sink(Sink::Placed { file, len, data_at: Vec::new() }, axes, fs_hz, binary))
+    }
+
+    fn with_sink(sink: Sink<'w>, axes: &[usize], fs_hz: f64, binary: bool) -> Self {
+        UffWriter { sink, axes: axes.to_vec(), n: 0, dt: 1.0 / fs_hz, t0: None, binary, text: String::new(), scratch: String::new(), bytes: Vec::new() }
+    }
+
+    /// Header of dataset `k` (of `n` points).
+    fn header(&self, k: usize, n: usize) -> String {
+        let axis = self.axes[k];
+        let id1 = format!("dynocomp compensated f{}", axis_name(axis));
+        dataset_header(
+            (1, k as i64 + 1, axis as i64 + 1, &id1),
+            (4, n, self.t0.unwrap_or(0.0), self.dt),
+            [(17, "Time", "s"), (9, "Force", "N"), (0, "NONE", "NONE"), (0, "NONE", "NONE")],
+            self.binary.then_some(n * 8),
+        )
+    }
+
+    /// Offset of each dataset's first data byte in a file of `len` samples
+    /// per dataset.
+    fn layout(&self, len: u64) -> Result<Vec<u64>> {
+        let n = usize::try_from(len)?;
+        let mut at = 0;
+        let mut data_at = Vec::with_capacity(self.axes.len());
+        for k in 0..self.axes.len() {
+            at += self.header(k, n).len() as u64;
+            data_at.push(at);
+            at += self.data_bytes(len) + END_LINE;
+        }
+        Ok(data_at)
+    }
+
+    /// Bytes of `n` samples of data (58b: doubles; 58: lines of four values,
+    /// the last one shorter).
+    fn data_bytes(&self, n: u64) -> u64 {
+        if self.binary {
+            8 * n
+        } else {
+            n / 4 * ASCII_LINE + if n % 4 > 0 { n % 4 * ASCII_VALUE + 1 } else { 0 }
+        }
+    }
+
+    /// Offset of sample `i` from the start of a dataset's data.
+    fn sample_at(&self, i: u64) -> u64 {
+        if self.binary {
+            8 * i
+        } else {
+            i / 4 * ASCII_LINE + i % 4 * ASCII_VALUE
+        }
+    }
+
+    /// Encode `values` (samples `first`, `first + 1`, … of a channel) into
+    /// `self.bytes` as they appear in the data section.
+    fn encode(&mut self, first: u64, values: &[f64]) {
+        self.bytes.clear();
+        if self.binary {
+            for v in values {
+                self.bytes.extend_from_slice(&v.to_le_bytes());
+            }
+        } else {
+            self.text.clear();
+            for (i, v) in (first..).zip(values) {
+                super::uff::push_e(&mut self.text, &mut self.scratch, *v, 12, 20);
+                if i % 4 == 3 {
+                    self.text.push('\n');
+                }
+            }
+            self.bytes.extend_from_slice(self.text.as_bytes());
+        }
     }
 }
 
@@ -416,52 +522,119 @@ impl SignalWriter for UffWriter<'_> {
         if self.t0.is_none() {
             self.t0 = t_s.and_then(|t| t.first().copied());
         }
-        for (s, c) in self.spill.iter_mut().zip(channels) {
-            for v in *c {
-                s.write_all(&v.to_le_bytes())?;
+        let m = channels.first().map_or(0, |c| c.len()) as u64;
+        let first = self.n;
+        match &mut self.sink {
+            Sink::Spilled { spill, .. } => {
+                for (s, c) in spill.iter_mut().zip(channels) {
+                    for v in *c {
+                        s.write_all(&v.to_le_bytes())?;
+                    }
+                }
+            }
+            Sink::Placed { len, data_at, .. } => {
+                let len = *len;
+                if first + m > len {
+                    bail!("the record has more than the {len} samples announced for the UFF datasets' headers");
+                }
+                // The headers' length is fixed once t0 (the first block) is known.
+                if data_at.is_empty() {
+                    let layout = self.layout(len)?;
+                    // The file's final size, set now: the writes below then
+                    // never extend it, so the write-back's syncs need not
+                    // commit a size change each time (on ext4 this halved
+                    // the time to disk).
+                    let end = layout.last().map_or(0, |at| at + self.data_bytes(len) + END_LINE);
+                    if let Sink::Placed { file, data_at, .. } = &mut self.sink {
+                        file.set_len(end)?;
+                        *data_at = layout;
+                    }
+                }
+            }
+            Sink::Done => bail!("UFF writer: a block after the end"),
+        }
+        if let Sink::Placed { file, data_at, .. } = &self.sink {
+            let (file, data_at) = (*file, data_at.clone());
+            let off = self.sample_at(first);
+            for (at, c) in data_at.iter().zip(channels) {
+                self.encode(first, c);
+                write_at(file, &self.bytes, at + off)?;
             }
         }
-        self.n += channels.first().map_or(0, |c| c.len()) as u64;
+        self.n += m;
         Ok(())
     }
 
     fn finish(&mut self) -> Result<()> {
         let n = usize::try_from(self.n)?;
-        for (k, (axis, s)) in self.axes.iter().zip(std::mem::take(&mut self.spill)).enumerate() {
-            let id1 = format!("dynocomp compensated f{}", axis_name(*axis));
-            let head = dataset_header(
-                (1, k as i64 + 1, *axis as i64 + 1, &id1),
-                (4, n, self.t0.unwrap_or(0.0), self.dt),
-                [(17, "Time", "s"), (9, "Force", "N"), (0, "NONE", "NONE"), (0, "NONE", "NONE")],
-                self.binary.then_some(n * 8),
-            );
-            self.w.write_all(head.as_bytes())?;
-            let mut f = s.into_inner().map_err(|e| anyhow!("spill file: {}", e.error()))?;
-            f.seek(SeekFrom::Start(0))?;
-            let mut r = BufReader::with_capacity(1 << 18, f);
-            if self.binary {
-                std::io::copy(&mut r, &mut self.w)?;
-            } else {
-                let mut b = [0u8; 32];
-                let mut line = String::new();
-                let mut k = 0;
-                while r.read_exact(&mut b[..8]).is_ok() {
-                    let v = f64::from_le_bytes(b[..8].try_into()?);
-                    line.push_str(&fmt_e(v, 12, 20));
-                    k += 1;
-                    if k % 4 == 0 {
-                        line.push('\n');
-                        self.w.write_all(line.as_bytes())?;
-                        line.clear();
-                    }
+        match std::mem::replace(&mut self.sink, Sink::Done) {
+            Sink::Done => bail!("UFF writer: finished twice"),
+            Sink::Placed { file, len, data_at } => {
+                if self.n != len {
+                    bail!("the record ended after {} of the {len} samples announced for the UFF datasets' headers", self.n);
                 }
-                if !line.is_empty() {
-                    line.push('\n');
-                    self.w.write_all(line.as_bytes())?;
+                // An empty record: no block fixed the layout.
+                let data_at = if data_at.is_empty() { self.layout(len)? } else { data_at };
+                for (k, at) in data_at.iter().enumerate() {
+                    let head = self.header(k, n);
+                    write_at(file, head.as_bytes(), at - head.len() as u64)?;
+                    let mut end = String::new();
+                    if !self.binary && len % 4 > 0 {
+                        end.push('\n');
+                    }
+                    end.push_str(&format!("{:>6}\n", -1));
+                    write_at(file, end.as_bytes(), at + self.sample_at(len))?;
                 }
             }
-            writeln!(self.w, "{:>6}", -1)?;
+            Sink::Spilled { w, spill } => {
+                for (k, s) in spill.into_iter().enumerate() {
+                    w.write_all(self.header(k, n).as_bytes())?;
+                    let mut f = s.into_inner().map_err(|e| anyhow!("spill file: {}", e.error()))?;
+                    f.seek(SeekFrom::Start(0))?;
+                    let mut r = BufReader::with_capacity(1 << 18, f);
+                    if self.binary {
+                        std::io::copy(&mut r, w)?;
+                    } else {
+                        let mut b = [0u8; 8];
+                        let mut i = 0u64;
+                        let mut chunk = Vec::with_capacity(4096);
+                        loop {
+                            chunk.clear();
+                            while chunk.len() < 4096 && r.read_exact(&mut b).is_ok() {
+                                chunk.push(f64::from_le_bytes(b));
+                            }
+                            if chunk.is_empty() {
+                                break;
+                            }
+                            self.encode(i, &chunk);
+                            w.write_all(&self.bytes)?;
+                            i += chunk.len() as u64;
+                        }
+                        if i % 4 > 0 {
+                            w.write_all(b"\n")?;
+                        }
+                    }
+                    writeln!(w, "{:>6}", -1)?;
+                }
+            }
         }
         Ok(())
     }
+}
+
+/// Write all of `bytes` at `offset` of `file` (positioned: the file's
+/// cursor does not move, nothing else is shared).
+fn write_at(file: &File, bytes: &[u8], offset: u64) -> Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileExt;
+        file.write_all_at(bytes, offset)?;
+    }
+    #[cfg(not(unix))]
+    {
+        let mut f = file;
+        f.seek(SeekFrom::Start(offset))?;
+        f.write_all(bytes)?;
+    }
+    Ok(())
 }
