@@ -540,10 +540,11 @@ impl SignalWriter for UffWriter<'_> {
                 // The headers' length is fixed once t0 (the first block) is known.
                 if data_at.is_empty() {
                     let layout = self.layout(len)?;
-                    // The file's final size, set now: the writes below then
-                    // never extend it, so the write-back's syncs need not
-                    // commit a size change each time (on ext4 this halved
-                    // the time to disk).
+                    // The file's final size, set now, so no write below
+                    // extends it: 74 MB of 58b to ext4 took 0.32-0.36 s
+                    // without, 0.21-0.23 s with (the writes go to three
+                    // regions, the later ones past the end; an appended
+                    // TDMS output did not gain from the same).
                     let end = layout.last().map_or(0, |at| at + self.data_bytes(len) + END_LINE);
                     if let Sink::Placed { file, data_at, .. } = &mut self.sink {
                         file.set_len(end)?;
