@@ -11,6 +11,8 @@
 # default target-nosan, so the ASan build stays cached): the code under test
 # has no `unsafe` (the core forbids it off the MCU; host-tools has none), so
 # ASan only guards the standard library there, and costs 1.5-2x in speed.
+# FORK=N runs N libFuzzer worker processes (-fork=N) on the one corpus; the
+# executions counted (and stopped at RUNS) are the workers' total.
 # The working corpus is fuzz/corpus/TARGET (not committed), seeded from
 # fuzz/seeds/TARGET; extra read-only corpus dirs (e.g. local vendor files)
 # may follow.
@@ -31,7 +33,7 @@ fi
 start=$(date +%s)
 set +e
 nice -n "${NICE:-19}" cargo +nightly fuzz run "${san[@]}" "$target" "corpus/$target" "seeds/$target" "$@" -- \
-    -runs="$runs" ${MAX_TIME:+-max_total_time=$MAX_TIME} ${max_len:+-max_len=$max_len} -rss_limit_mb=2048 -timeout=10 -print_final_stats=1 \
+    -runs="$runs" ${FORK:+-fork=$FORK} ${MAX_TIME:+-max_total_time=$MAX_TIME} ${max_len:+-max_len=$max_len} -rss_limit_mb=2048 -timeout=10 -print_final_stats=1 \
     > "logs/$target.log" 2>&1
 rc=$?
 set -e
