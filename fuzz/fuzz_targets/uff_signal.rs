@@ -3,7 +3,8 @@
 //! accepted record is written back with the project's writer (`UffWriter`,
 //! binary 58b and ASCII 58) and reads back with the same axes, length and
 //! sample rate (the header's 7 significant digits of Δt) and the same values
-//! (58b: bit for bit; ASCII: the writer's 13 significant digits); a rejected
+//! (58b: bit for bit; ASCII: the writer's 13 significant digits), and the
+//! in-place writer (`UffWriter::placed`) gives the same bytes; a rejected
 //! input's error names the file and a place in it.
 //!
 //! The reader takes a path: the bytes go to a scratch file in /dev/shm.
@@ -35,6 +36,20 @@ fn check_roundtrip(axes: &[usize], fs: f64, channels: &[Vec<f64>], binary: bool)
         w.write_block(None, &slices).expect("an accepted record is writable");
         w.finish().expect("an accepted record is writable");
     }
+    // The in-place writer (record length known, positioned writes) gives
+    // the same bytes.
+    let placed_path = scratch_path("placed.uff");
+    {
+        let file = std::fs::OpenOptions::new().read(true).write(true).create(true).truncate(true).open(&placed_path).expect("scratch file");
+        let n = channels.first().map_or(0, Vec::len) as u64;
+        let mut w = UffWriter::placed(&file, n, axes, fs, binary).expect("writer");
+        let slices: Vec<&[f64]> = channels.iter().map(Vec::as_slice).collect();
+        w.write_block(None, &slices).expect("an accepted record is writable in place");
+        w.finish().expect("an accepted record is writable in place");
+    }
+    let placed = std::fs::read(&placed_path).expect("scratch file");
+    let _ = std::fs::remove_file(&placed_path);
+    assert!(placed == bytes, "the in-place UFF writer differs from the streamed one (binary {binary})");
     let path = scratch_path("roundtrip.uff");
     std::fs::write(&path, &bytes).expect("scratch file");
     let back = read(&path).unwrap_or_else(|e| panic!("written UFF time history (binary {binary}) does not read back: {e}"));
