@@ -198,6 +198,23 @@ pub struct DriftSmoothing {
 /// from `model_at(0)` to `model_at(1)` over `opts.interval_s` (module doc);
 /// `model_at(s)` returns the continuous model at state s.
 pub fn smooth_drifting(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing) -> Result<Vec<f64>> {
+    Ok(drift_passes(y, model_at, opts, true)?.0)
+}
+
+/// Log-likelihood (nats) of the record `y` (N) under the drifting model of
+/// [`smooth_drifting`]: the forward pass's innovations e_k and their
+/// variances S_k, ℓ = −½ Σ_k (ln 2πS_k + e_k²/S_k) (the prediction-error
+/// decomposition), over the record's own samples (not the D copies of y₀ in
+/// front). Differences of ℓ between models say how much better one
+/// explains the record; used to ask whether a record can tell the drift's
+/// end state (issue #15, item 4; `examples/drift_from_record.rs`).
+pub fn drift_log_likelihood(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing) -> Result<f64> {
+    Ok(drift_passes(y, model_at, opts, false)?.1)
+}
+
+/// The forward pass, and with `smooth` the backward pass: (smoothed force
+/// estimate, or nothing; log-likelihood of the record).
+fn drift_passes(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing, smooth: bool) -> Result<(Vec<f64>, f64)> {
     let DriftSmoothing { fs_hz, interval_s: (start_s, end_s), band_hz, structure, q, r } = *opts;
     if !(q > 0.0 && q.is_finite() && r > 0.0 && r.is_finite()) {
         bail!("smoother needs q > 0 and R > 0 (got q = {q}, R = {r})");
@@ -227,14 +244,16 @@ pub fn smooth_drifting(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, op
         (state_at(t, start_s, end_s) * S_LEVELS as f64).round() as usize
     };
     let len = yt.len();
-    let mut levels = Vec::with_capacity(len);
-    let mut ks: Vec<DVector<f64>> = Vec::with_capacity(len);
-    let mut ss = Vec::with_capacity(len);
-    let mut es = Vec::with_capacity(len);
-    let mut prior_f = Vec::with_capacity(len);
-    let mut p_rows: Vec<DVector<f64>> = Vec::with_capacity(len);
+    let kept = if smooth { len } else { 0 };
+    let mut levels = Vec::with_capacity(kept);
+    let mut ks: Vec<DVector<f64>> = Vec::with_capacity(kept);
+    let mut ss = Vec::with_capacity(kept);
+    let mut es = Vec::with_capacity(kept);
+    let mut prior_f = Vec::with_capacity(kept);
+    let mut p_rows: Vec<DVector<f64>> = Vec::with_capacity(kept);
     let mut x = DVector::<f64>::zeros(n);
     let mut p = sol.p;
+    let mut log_lik = 0.0;
     for (k, &yk) in yt.iter().enumerate() {
         let level = level_of(k);
         if let std::collections::hash_map::Entry::Vacant(e) = plants.entry(level) {
@@ -250,17 +269,30 @@ pub fn smooth_drifting(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, op
         let s = pl.c.dot(&pc) + r;
         let kg = &pc / s;
         let e = yk - pl.c.dot(&x);
-        prior_f.push(x[force]);
-        p_rows.push(p.row(force).transpose());
+        if k >= advance {
+            log_lik -= 0.5 * ((2.0 * PI * s).ln() + e * e / s);
+        }
+        if smooth {
+            prior_f.push(x[force]);
+            p_rows.push(p.row(force).transpose());
+        }
         let xp = &x + &kg * e;
         let pp = &p - &kg * pc.transpose();
         x = &pl.a * xp;
         p = &pl.a * pp * pl.a.transpose() + &qm;
         p = (&p + p.transpose()) * 0.5;
-        levels.push(level);
-        ks.push(kg);
-        ss.push(s);
-        es.push(e);
+        if smooth {
+            levels.push(level);
+            ks.push(kg);
+            ss.push(s);
+            es.push(e);
+        }
+    }
+    if !log_lik.is_finite() {
+        bail!("the time-varying filter's likelihood became non-finite");
+    }
+    if !smooth {
+        return Ok((Vec::new(), log_lik));
     }
     let mut lambda_hat = DVector::<f64>::zeros(n);
     let mut out = vec![0.0; len];
@@ -277,7 +309,7 @@ pub fn smooth_drifting(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, op
         bail!("the time-varying smoother became non-finite at sample {k}");
     }
     out.truncate(len - advance.min(len));
-    Ok(out)
+    Ok((out, log_lik))
 }
 
 /// States s at which a box image designed for the range is evaluated.
