@@ -1,5 +1,6 @@
 //! `dynocomp`: design, inspect, flash and apply dynamometer compensators.
 //! The command-line contract is in DESIGN.md ("CLI contract").
+#![forbid(unsafe_code)]
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
