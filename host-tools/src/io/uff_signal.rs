@@ -594,18 +594,21 @@ impl SignalWriter for UffWriter<'_> {
                     f.seek(SeekFrom::Start(0))?;
                     let mut r = BufReader::with_capacity(1 << 18, f);
                     if self.binary {
-                        std::io::copy(&mut r, w)?;
+                        let copied = std::io::copy(&mut r, w)?;
+                        if copied != 8 * self.n {
+                            bail!("spill file: {copied} bytes read back for {} samples", self.n);
+                        }
                     } else {
                         let mut b = [0u8; 8];
                         let mut i = 0u64;
                         let mut chunk = Vec::with_capacity(4096);
-                        loop {
+                        // Exactly n values back from the spill file: a
+                        // short read is an error, not a shorter dataset.
+                        while i < self.n {
                             chunk.clear();
-                            while chunk.len() < 4096 && r.read_exact(&mut b).is_ok() {
+                            while chunk.len() < 4096 && i + (chunk.len() as u64) < self.n {
+                                r.read_exact(&mut b).context("spill file: read back")?;
                                 chunk.push(f64::from_le_bytes(b));
-                            }
-                            if chunk.is_empty() {
-                                break;
                             }
                             self.encode(i, &chunk);
                             w.write_all(&self.bytes)?;
