@@ -399,6 +399,10 @@ pub struct UffWriter<'w> {
     dt: f64,
     t0: Option<f64>,
     binary: bool,
+    /// [`Sink::Placed`]: the offset of dataset k's first data byte, fixed
+    /// when the first block fixes the headers' length (the first sample's
+    /// time is in the header); empty until then.
+    data_at: Vec<u64>,
     /// Formatting buffers (ASCII) and the bytes of one block of a channel.
     text: String,
     scratch: String,
@@ -407,10 +411,8 @@ pub struct UffWriter<'w> {
 
 enum Sink<'w> {
     Spilled { w: &'w mut dyn Write, spill: Vec<std::io::BufWriter<File>> },
-    /// `len` samples per dataset; `data_at[k]`: the offset of dataset k's
-    /// first data byte, set when the first block fixes the headers' length
-    /// (the first sample's time is in the header).
-    Placed { file: &'w File, len: u64, data_at: Vec<u64> },
+    /// `len` samples per dataset, each at its place in `file`.
+    Placed { file: &'w File, len: u64 },
     /// After [`SignalWriter::finish`].
     Done,
 }
@@ -444,11 +446,11 @@ impl<'w> UffWriter<'w> {
     /// file's cursor is not used): no spill. Writing more than `len`
     /// samples, or finishing with fewer, is an error.
     pub fn placed(file: &'w File, len: u64, axes: &[usize], fs_hz: f64, binary: bool) -> Result<Self> {
-        Ok(Self::with_sink(Sink::Placed { file, len, data_at: Vec::new() }, axes, fs_hz, binary))
+        Ok(Self::with_sink(Sink::Placed { file, len }, axes, fs_hz, binary))
     }
 
     fn with_sink(sink: Sink<'w>, axes: &[usize], fs_hz: f64, binary: bool) -> Self {
-        UffWriter { sink, axes: axes.to_vec(), n: 0, dt: 1.0 / fs_hz, t0: None, binary, text: String::new(), scratch: String::new(), bytes: Vec::new() }
+        UffWriter { sink, axes: axes.to_vec(), n: 0, dt: 1.0 / fs_hz, t0: None, binary, data_at: Vec::new(), text: String::new(), scratch: String::new(), bytes: Vec::new() }
     }
 
     /// Header of dataset `k` (of `n` points).
@@ -464,8 +466,8 @@ impl<'w> UffWriter<'w> {
     }
 
     /// Offset of each dataset's first data byte in a file of `len` samples
-    /// per dataset.
-    fn layout(&self, len: u64) -> Result<Vec<u64>> {
+    /// per dataset, and the file's length.
+    fn layout(&self, len: u64) -> Result<(Vec<u64>, u64)> {
         let n = usize::try_from(len)?;
         let mut at = 0;
         let mut data_at = Vec::with_capacity(self.axes.len());
@@ -474,7 +476,17 @@ impl<'w> UffWriter<'w> {
             data_at.push(at);
             at += self.data_bytes(len) + END_LINE;
         }
-        Ok(data_at)
+        Ok((data_at, at))
+    }
+
+    /// What follows a dataset's `n` values: the newline of a short last
+    /// ASCII line, and the line that ends the dataset.
+    fn data_end(&self, n: u64) -> &'static [u8] {
+        if !self.binary && n % 4 > 0 {
+            b"\n    -1\n"
+        } else {
+            b"    -1\n"
+        }
     }
 
     /// Bytes of `n` samples of data (58b: doubles; 58: lines of four values,
@@ -532,35 +544,28 @@ impl SignalWriter for UffWriter<'_> {
                     }
                 }
             }
-            Sink::Placed { len, data_at, .. } => {
-                let len = *len;
+            Sink::Placed { file, len } => {
+                let (file, len) = (*file, *len);
                 if first + m > len {
                     bail!("the record has more than the {len} samples announced for the UFF datasets' headers");
                 }
-                // The headers' length is fixed once t0 (the first block) is known.
-                if data_at.is_empty() {
-                    let layout = self.layout(len)?;
+                if self.data_at.is_empty() {
+                    let (data_at, end) = self.layout(len)?;
                     // The file's final size, set now, so no write below
                     // extends it: 74 MB of 58b to ext4 took 0.32-0.36 s
                     // without, 0.21-0.23 s with (the writes go to three
                     // regions, the later ones past the end; an appended
                     // TDMS output did not gain from the same).
-                    let end = layout.last().map_or(0, |at| at + self.data_bytes(len) + END_LINE);
-                    if let Sink::Placed { file, data_at, .. } = &mut self.sink {
-                        file.set_len(end)?;
-                        *data_at = layout;
-                    }
+                    file.set_len(end)?;
+                    self.data_at = data_at;
+                }
+                let off = self.sample_at(first);
+                for (k, c) in channels.iter().enumerate() {
+                    self.encode(first, c);
+                    write_at(file, &self.bytes, self.data_at[k] + off)?;
                 }
             }
             Sink::Done => bail!("UFF writer: a block after the end"),
-        }
-        if let Sink::Placed { file, data_at, .. } = &self.sink {
-            let (file, data_at) = (*file, data_at.clone());
-            let off = self.sample_at(first);
-            for (at, c) in data_at.iter().zip(channels) {
-                self.encode(first, c);
-                write_at(file, &self.bytes, at + off)?;
-            }
         }
         self.n += m;
         Ok(())
@@ -570,21 +575,16 @@ impl SignalWriter for UffWriter<'_> {
         let n = usize::try_from(self.n)?;
         match std::mem::replace(&mut self.sink, Sink::Done) {
             Sink::Done => bail!("UFF writer: finished twice"),
-            Sink::Placed { file, len, data_at } => {
+            Sink::Placed { file, len } => {
                 if self.n != len {
                     bail!("the record ended after {} of the {len} samples announced for the UFF datasets' headers", self.n);
                 }
                 // An empty record: no block fixed the layout.
-                let data_at = if data_at.is_empty() { self.layout(len)? } else { data_at };
+                let data_at = if self.data_at.is_empty() { self.layout(len)?.0 } else { std::mem::take(&mut self.data_at) };
                 for (k, at) in data_at.iter().enumerate() {
                     let head = self.header(k, n);
                     write_at(file, head.as_bytes(), at - head.len() as u64)?;
-                    let mut end = String::new();
-                    if !self.binary && len % 4 > 0 {
-                        end.push('\n');
-                    }
-                    end.push_str(&format!("{:>6}\n", -1));
-                    write_at(file, end.as_bytes(), at + self.sample_at(len))?;
+                    write_at(file, self.data_end(len), at + self.sample_at(len))?;
                 }
             }
             Sink::Spilled { w, spill } => {
@@ -614,11 +614,8 @@ impl SignalWriter for UffWriter<'_> {
                             w.write_all(&self.bytes)?;
                             i += chunk.len() as u64;
                         }
-                        if i % 4 > 0 {
-                            w.write_all(b"\n")?;
-                        }
                     }
-                    writeln!(w, "{:>6}", -1)?;
+                    w.write_all(self.data_end(self.n))?;
                 }
             }
         }
