@@ -25,11 +25,10 @@
 //! prefers the full drift over none), and whether it tells.
 use anyhow::Result;
 use dynocomp::design::{design_axis, DesignOptions};
-use dynocomp::fit::vf::{coherence_weights, fit_order, VfOptions};
 use dynocomp::metrics::sample_variance;
 use dynocomp::simulate::drift::{measure_drifting, simulate_drifting, Drift};
 use dynocomp::simulate::{milling_force, sub_seed, MillingParams, MultiAxisDynamometer, SimParams};
-use dynocomp::two_state::{drift_log_likelihood, pair, DriftSmoothing};
+use dynocomp::two_state::{drift_log_likelihood, pair_second_state, DriftSmoothing};
 use std::f64::consts::PI;
 
 const FS: f64 = 51_200.0;
@@ -119,9 +118,7 @@ fn main() -> Result<()> {
             let d = design_axis(&s.frf.freq_hz, s.frf.axis(a).ok_or_else(|| anyhow::anyhow!("no FRF of axis {a}"))?, sample_variance(&s.idle[a]), &opts)?;
             let (dm, _) = d.discrete.clone().ok_or_else(|| anyhow::anyhow!("no discrete model"))?;
             let after_frf = out.frf_after.axis(a).ok_or_else(|| anyhow::anyhow!("no after FRF of axis {a}"))?;
-            let w = coherence_weights(&after_frf.frf, after_frf.coherence.as_deref());
-            let after = fit_order(&out.frf_after.freq_hz, &after_frf.frf, &w, d.model.order(), &VfOptions::default())?;
-            let ts = pair(&a.to_string(), &d.model, &after)?;
+            let ts = pair_second_state(&out.frf_after.freq_hz, &d, after_frf, &opts.vf)?;
             let smoothing = DriftSmoothing {
                 fs_hz: FS,
                 interval_s: (0.0, p.duration_s),

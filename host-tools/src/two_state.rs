@@ -40,7 +40,7 @@ use std::f64::consts::PI;
 
 use crate::design::{criterion_grid, criterion_j, criterion_ranges, design_axis, noise_term, AxisDesign, DesignOptions};
 use crate::discretize::{fit_with_structure, DiscreteModel};
-use crate::fit::vf::{coherence_weights, fit_order};
+use crate::fit::vf::{coherence_weights, fit_order, VfOptions};
 use crate::fit::{PoleResidueModel, Term};
 use crate::frf::{axis_name, AxisFrf};
 use crate::io::signal_csv::SignalRecord;
@@ -288,10 +288,10 @@ fn drift_passes(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &Dr
             es.push(e);
         }
     }
-    if !log_lik.is_finite() {
-        bail!("the time-varying filter's likelihood became non-finite");
-    }
     if !smooth {
+        if !log_lik.is_finite() {
+            bail!("the time-varying filter's likelihood became non-finite");
+        }
         return Ok((Vec::new(), log_lik));
     }
     let mut lambda_hat = DVector::<f64>::zeros(n);
@@ -329,6 +329,16 @@ pub struct RangeCandidate {
     pub worst: f64,
 }
 
+/// The two states of an axis: the first is `d0`'s fitted model, the second
+/// FRF is fitted at the same order (its coherence as weights) and paired
+/// with it ([`pair`]).
+pub fn pair_second_state(freq_hz: &[f64], d0: &AxisDesign, second: &AxisFrf, vf: &VfOptions) -> Result<TwoState> {
+    let name = axis_name(second.axis);
+    let w = coherence_weights(&second.frf, second.coherence.as_deref());
+    let after = fit_order(freq_hz, &second.frf, &w, d0.model.order(), vf).with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?;
+    pair(name, &d0.model, &after)
+}
+
 /// The box image for a set-up that moves between two measured states
 /// (issue #15, item 2). **Criterion (stated):** the least worst-case
 /// predicted in-band error over s ∈ [`RANGE_STATES`], chosen among
@@ -349,9 +359,7 @@ pub fn design_over_range(
 ) -> Result<(TwoState, Vec<RangeCandidate>, usize)> {
     let name = axis_name(first.axis);
     let d0 = design_axis(freq_hz, first, r, opts).context("first FRF")?;
-    let w = coherence_weights(&second.frf, second.coherence.as_deref());
-    let after = fit_order(freq_hz, &second.frf, &w, d0.model.order(), &opts.vf).with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?;
-    let ts = pair(name, &d0.model, &after)?;
+    let ts = pair_second_state(freq_hz, &d0, second, &opts.vf)?;
     let ranges = criterion_ranges(&d0.bands, d0.compensated_band_hz);
     let width: f64 = ranges.iter().map(|b| b.1 - b.0).sum();
     let freqs = criterion_grid(&ranges);
