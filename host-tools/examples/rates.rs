@@ -23,7 +23,7 @@ fn main() -> Result<()> {
         match a.as_str() {
             "--quick" => quick = true,
             "--exact-frf" => run.exact_frf = true,
-            "--lag" => run.lag = args.next().context("--lag needs a value")?.parse().context("--lag: not a number of samples")?,
+            "--lag" => run.lag = Some(args.next().context("--lag needs a value")?.parse().context("--lag: not a number of samples")?),
             "--discretization" => {
                 let v = args.next().context("--discretization needs fit, foh or zoh")?;
                 run.discretization = <dynocomp::discretize::Discretization as clap::ValueEnum>::from_str(&v, true)
@@ -34,7 +34,7 @@ fn main() -> Result<()> {
     }
     let list = if quick { quick_cases() } else { cases() };
     let t_all = Instant::now();
-    println!("NRMSE = RMS error / std of the band-limited truth, band min(4 kHz, 0.4 fs), declared latency {} removed, discretization {}{}", run.lag, run.discretization.name(), if run.exact_frf { ", exact (noise-free) impact-test FRF" } else { "" });
+    println!("NRMSE = RMS error / std of the band-limited truth, band min(4 kHz, 0.4 fs), declared latency {} removed, discretization {}{}", run.lag.map_or("chosen as `design` does (4, or 6/8 where the flat band falls short)".to_string(), |l| l.to_string()), run.discretization.name(), if run.exact_frf { ", exact (noise-free) impact-test FRF" } else { "" });
     println!("floor = exact-inverse noise floor sqrt(R·(2/fs)·∫|1/G|² df)/std(truth) with the true G");
     println!(
         "{:>7} {:<15} {:>5} {:>4} {:>4} {:>9} {:>9} {:>8} {:>9} {:>8} {:>15} {:>8}",
@@ -74,7 +74,7 @@ fn main() -> Result<()> {
                             } else {
                                 String::new()
                             };
-                            println!("{fs:>7} {:<15} box load {:.1}-{:.1} % ({}-{} cycles; pairs+real poles+taps per axis: {}){offline}", case.name, f64::from(lo) / 10.0, f64::from(hi) / 10.0, c.low, c.high, shapes.join(", "));
+                            println!("{fs:>7} {:<15} latency {}, box load {:.1}-{:.1} % ({}-{} cycles; pairs+real poles+taps per axis: {}){offline}", case.name, r.latency, f64::from(lo) / 10.0, f64::from(hi) / 10.0, c.low, c.high, shapes.join(", "));
                         }
                         None => println!("{fs:>7} {:<15} box load: a design failed", case.name),
                     }

@@ -11,7 +11,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use crate::bands::{self, Band};
-use crate::design::{design_axis, AxisDesign, DesignOptions, FitMethod};
+use crate::design::{AxisDesign, DesignOptions, FitMethod};
 use crate::discretize::{Discretization, MATCH_BAND_FRACTION};
 use crate::fit::rfp::RfpOptions;
 use crate::frf::{axis_name, Frf};
@@ -394,6 +394,9 @@ pub struct DesignJson {
     pub box_load: crate::load::LoadReport,
     /// Offline-only: over the load limit, the box never runs it.
     pub offline_only: bool,
+    /// How the latency was chosen (absent when `--latency` was given).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub latency_choice: Option<crate::latency::LatencyChoice>,
 }
 
 /// Measurement-noise variance R (N²) per axis of `frf`: the variance of
@@ -579,8 +582,10 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     let latency = match (paper, args.latency) {
         (true, Some(l)) if l != 0 => bail!("--latency {l}: the paper's method (a Kalman filter, not a smoother) has no lag; omit --latency or give 0"),
         (true, _) => 0,
-        (false, l) => l.unwrap_or(4),
+        (false, l) => l.unwrap_or(crate::latency::DEFAULT_LATENCY),
     };
+    // Without --latency, the default method's latency is chosen (crate::latency).
+    let auto_latency = !paper && args.latency.is_none() && !args.parallel;
     args.input.check_fs()?;
     if latency > 16 {
         bail!("--latency {}: at most 16 samples", latency);
@@ -618,23 +623,16 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     // The axes are independent: design them on parallel threads (the box
     // has three, the host at least two cores), report in axis order.
     eprintln!("designing {} axes ({} lines each)…", frf.axes.len(), frf.freq_hz.len());
-    let results: Vec<(Result<AxisDesign>, f64)> = std::thread::scope(|scope| {
-        let handles: Vec<_> = frf
-            .axes
-            .iter()
-            .map(|a| {
-                let opts = &opts;
-                let freq = &frf.freq_hz;
-                let rv = r[a.axis].expect("R set for every FRF axis");
-                scope.spawn(move || {
-                    let ta = Instant::now();
-                    let d = design_axis(freq, a, rv, opts);
-                    (d, ta.elapsed().as_secs_f64())
-                })
-            })
-            .collect();
-        handles.into_iter().map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p))).collect()
-    });
+    let rv: Vec<f64> = frf.axes.iter().map(|a| r[a.axis].expect("R set for every FRF axis")).collect();
+    let (results, latency_choice) = if auto_latency {
+        let (d, c) = crate::latency::design_axes_choosing_latency(&frf.freq_hz, &frf.axes, &rv, &opts, Some(limit_permille), |l, why| {
+            eprintln!("  {why} at latency {}: designing again at {l} samples…", crate::latency::DEFAULT_LATENCY)
+        });
+        (d, Some(c))
+    } else {
+        (crate::latency::design_axes(&frf.freq_hz, &frf.axes, &rv, &opts), None)
+    };
+    let latency = latency_choice.as_ref().map_or(latency, |c| c.chosen);
     let mut designs = Vec::new();
     let mut times = Vec::new();
     for (a, (d, dt)) in frf.axes.iter().zip(results) {
@@ -671,6 +669,11 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     }
     let id = image.id();
     let mut summary = render_summary(&designs, args.input.fs, latency, &args.out.display().to_string(), id, method_name);
+    if let Some(c) = &latency_choice {
+        let names: Vec<&str> = designs.iter().map(|d| axis_name(d.axis)).collect();
+        summary.push_str(&crate::latency::describe(c, &names));
+        summary.push('\n');
+    }
     for (d, p) in designs.iter().zip(&priors) {
         if let Some(p) = p {
             summary.push_str(&prior_line(d.axis, p));
@@ -692,6 +695,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
             bands,
             design_time_s: t0.elapsed().as_secs_f64(),
             offline_only: image.is_offline_only(),
+            latency_choice: latency_choice.clone(),
             box_load,
             axes: designs
                 .iter()

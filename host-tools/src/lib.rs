@@ -23,6 +23,7 @@ pub mod frf;
 pub mod inspect;
 pub mod io;
 pub mod kalman;
+pub mod latency;
 pub mod load;
 pub mod metrics;
 pub mod parallel;

@@ -20,7 +20,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     if args.method != "vf" || args.parallel || args.bands.spindle_rpm.is_some() || !args.bands.band.is_empty() || args.bands.bands_from.is_some() {
         bail!("--frf given twice (a set-up in two states): only the default method, without fitting bands or --parallel");
     }
-    let latency = args.latency.unwrap_or(4);
+    let latency = args.latency.unwrap_or(crate::latency::DEFAULT_LATENCY);
     if latency > 16 {
         bail!("--latency {latency}: at most 16 samples");
     }

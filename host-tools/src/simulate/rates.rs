@@ -15,7 +15,8 @@ use std::time::Instant;
 
 use super::{simulate_with, Chatter, Dynamometer, Mode, ModeRanges, MultiAxisDynamometer, SimOutput, SimParams};
 use crate::compensate::compensate_record;
-use crate::design::{design_axis, DesignOptions};
+use crate::design::DesignOptions;
+use dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE;
 use crate::design_cmd::build_image;
 use crate::io::signal_csv::SignalRecord;
 use crate::metrics::{accuracy, sample_variance};
@@ -192,8 +193,9 @@ pub fn quick_cases() -> Vec<RateCase> {
 /// Options of a harness run that reach the design.
 #[derive(Clone, Debug)]
 pub struct RunOptions {
-    /// Declared latency L (samples).
-    pub lag: usize,
+    /// Declared latency L (samples); `None`: chosen as `design` does
+    /// without `--latency` ([`crate::latency`]).
+    pub lag: Option<usize>,
     /// Discrete model of the Kalman design.
     pub discretization: crate::discretize::Discretization,
     /// A noise-free impact test: the FRF is exactly the chain's G (for the
@@ -204,13 +206,13 @@ pub struct RunOptions {
 
 impl Default for RunOptions {
     fn default() -> Self {
-        Self { lag: 4, discretization: crate::discretize::Discretization::Fit, exact_frf: false }
+        Self { lag: None, discretization: crate::discretize::Discretization::Fit, exact_frf: false }
     }
 }
 
 /// The one place where the harness builds its [`DesignOptions`].
 pub fn design_options(fs_hz: f64, run: &RunOptions) -> DesignOptions {
-    DesignOptions { fs_hz, lag: run.lag, discretization: run.discretization, ..Default::default() }
+    DesignOptions { fs_hz, lag: run.lag.unwrap_or(crate::latency::DEFAULT_LATENCY), discretization: run.discretization, ..Default::default() }
 }
 
 /// Figures of one axis of one case at one rate.
@@ -247,6 +249,8 @@ pub struct CaseResult {
     pub band_hz: f64,
     /// The three axes.
     pub axes: Vec<AxisScore>,
+    /// Declared latency of the designs (samples).
+    pub latency: usize,
 }
 
 /// sqrt(R·(2/fs)·∫_0^band |1/G(j2πf)|² df) / std_truth: the in-band RMS of
@@ -281,6 +285,20 @@ pub fn score_sim(name: &'static str, s: &SimOutput, run: &RunOptions) -> CaseRes
     let band = scoring_band_hz(fs);
     let opts = design_options(fs, run);
     let r_true = s.params.measurement.expected_idle_variance();
+    // All three axes designed together, as `design` does: one latency per image.
+    let t0 = Instant::now();
+    let frfs: Vec<_> = (0..3).filter_map(|a| s.frf.axis(a).cloned()).collect();
+    let r: Vec<f64> = frfs.iter().map(|f| sample_variance(&s.idle[f.axis])).collect();
+    let (designs, latency) = match run.lag {
+        Some(l) => (crate::latency::design_axes(&s.frf.freq_hz, &frfs, &r, &opts), l),
+        None => {
+            let (d, c) = crate::latency::design_axes_choosing_latency(&s.frf.freq_hz, &frfs, &r, &opts, Some(BOX_LOAD_LIMIT_PERMILLE), |_, _| {});
+            (d, c.chosen)
+        }
+    };
+    // Per axis: its share of the wall time (the axes run on parallel threads).
+    let design_s = t0.elapsed().as_secs_f64() / frfs.len().max(1) as f64;
+    let mut designs = designs.into_iter();
     let mut axes = Vec::new();
     for a in 0..3 {
         let raw = accuracy(&s.measured[a], &s.truth[a], fs, band);
@@ -288,14 +306,15 @@ pub fn score_sim(name: &'static str, s: &SimOutput, run: &RunOptions) -> CaseRes
         let chain = s.params.anti_alias;
         let g = |f: f64| s.dyno.axis(a).frf(f) * chain.analog_frf(f);
         let noise_floor = noise_floor(g, r_true, fs, band, std_truth);
-        let t0 = Instant::now();
-        let designed = s.frf.axis(a).ok_or_else(|| anyhow::anyhow!("no FRF for axis {a}")).and_then(|frf| design_axis(&s.frf.freq_hz, frf, sample_variance(&s.idle[a]), &opts));
-        let design_s = t0.elapsed().as_secs_f64();
+        let designed = match s.frf.axis(a) {
+            Some(_) => designs.next().map(|d| d.0).unwrap_or_else(|| Err(anyhow::anyhow!("no design for axis {a}"))),
+            None => Err(anyhow::anyhow!("no FRF for axis {a}")),
+        };
         let shape = designed.as_ref().ok().map(|d| dynocomp_core::budget::AxisShape::of(&d.filter));
         let (comp_nrmse, predicted_error, flat_band_hz) = match designed {
             Err(e) => (Err(format!("{e:#}")), f64::NAN, (f64::NAN, f64::NAN)),
             Ok(d) => {
-                let comp = build_image(std::slice::from_ref(&d), fs as u32, run.lag, 5000.0, [0; 32]).and_then(|img| {
+                let comp = build_image(std::slice::from_ref(&d), fs as u32, latency, 5000.0, [0; 32]).and_then(|img| {
                     let rec = SignalRecord { t_s: None, channels: vec![(a, s.measured[a].clone())] };
                     compensate_record(&img, &rec, false, "rates")
                 });
@@ -307,7 +326,7 @@ pub fn score_sim(name: &'static str, s: &SimOutput, run: &RunOptions) -> CaseRes
         };
         axes.push(AxisScore { axis: a, raw_nrmse: raw.nrmse, comp_nrmse, noise_floor, predicted_error, flat_band_hz, design_s, shape });
     }
-    CaseResult { case: name, fs_hz: fs, band_hz: band, axes }
+    CaseResult { case: name, fs_hz: fs, band_hz: band, axes, latency }
 }
 
 impl CaseResult {

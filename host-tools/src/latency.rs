@@ -1,0 +1,234 @@
+//! The declared output latency L of an image, chosen when the user does not
+//! give one (`design` without `--latency`).
+//!
+//! The fixed-lag smoother sees L samples past the force it estimates (plus
+//! the discrete model's advance D, `crate::discretize`). Usually 4 is plenty:
+//! the flat band reaches the top of the compensated band. Where a sensor mode
+//! sits near or above the Nyquist frequency (a DAQ at 10.24 kHz), inverting
+//! it over the whole band needs a longer look ahead: on the simulated
+//! high-mode dynamometer at 10.24 kHz, 4 samples leave the flat band at
+//! 2-3.3 kHz of 4.1 kHz and 3.2-4.6 % NRMSE, 8 samples give 1.0-2.7 %
+//! (BENCHMARKS.md, "The declared latency, chosen").
+//!
+//! Rule: design every axis at [`DEFAULT_LATENCY`]. Only if an axis failed or
+//! its flat band stops short of its compensated band
+//! ([`FLAT_BAND_SHORT`]), design again at each of [`LONGER_LATENCIES`] and
+//! keep the shortest latency at which every axis's predicted in-band error
+//! (`AxisDesign::predicted_error`, DESIGN.md's criterion) is within
+//! [`GAIN_NOT_WORTH`] of the best that axis reached at any latency tried,
+//! among the latencies whose image the box can still run (when a load limit
+//! is given and any candidate meets it). One latency serves all axes: the
+//! image declares one.
+
+use anyhow::Result;
+use dynocomp_core::budget::{load_permille, AxisShape, CostModel};
+use serde::Serialize;
+use std::time::Instant;
+
+use crate::design::{design_axis, AxisDesign, DesignOptions};
+use crate::frf::AxisFrf;
+
+/// Latency designed first, and kept unless a longer one buys accuracy (samples).
+pub const DEFAULT_LATENCY: usize = 4;
+/// Latencies tried when the default falls short (samples; the issue's bound is 8).
+pub const LONGER_LATENCIES: [usize; 2] = [6, 8];
+/// A flat band whose top is below this fraction of the compensated band's top
+/// falls short.
+pub const FLAT_BAND_SHORT: f64 = 0.95;
+/// The shortest latency whose every axis's predicted error is within this
+/// factor of that axis's best is kept: a longer latency must buy more than 10 %.
+pub const GAIN_NOT_WORTH: f64 = 1.1;
+
+/// How the latency was chosen, for the summary, `--json` and the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct LatencyChoice {
+    /// The latency kept (samples).
+    pub chosen: usize,
+    /// Every latency designed, with each axis's predicted in-band error
+    /// (fraction; `None` where that axis's design failed) and the predicted
+    /// box load of the three designs (‰ of the period, pessimistic).
+    pub tried: Vec<LatencyTrial>,
+    /// Why the default was not enough (empty when it was).
+    pub reason: String,
+}
+
+/// One latency designed.
+#[derive(Clone, Debug, Serialize)]
+pub struct LatencyTrial {
+    /// Latency (samples).
+    pub latency: usize,
+    /// Predicted in-band error per axis (fraction), `None` if it failed.
+    pub predicted_error: Vec<Option<f64>>,
+    /// Predicted box load (‰, pessimistic), `None` if a design failed.
+    pub load_permille: Option<u32>,
+}
+
+/// One axis's design and its wall time (s).
+pub type TimedDesign = (Result<AxisDesign>, f64);
+
+/// Design every axis of `axes` (one thread each) with `opts`, at `opts.lag`.
+/// `r[i]` is axis i's noise variance (N²).
+pub fn design_axes(freq_hz: &[f64], axes: &[AxisFrf], r: &[f64], opts: &DesignOptions) -> Vec<TimedDesign> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = axes
+            .iter()
+            .zip(r)
+            .map(|(a, rv)| {
+                scope.spawn(move || {
+                    let t = Instant::now();
+                    let d = design_axis(freq_hz, a, *rv, opts);
+                    (d, t.elapsed().as_secs_f64())
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p))).collect()
+    })
+}
+
+/// Why the designs at the default latency fall short ("" if they do not).
+fn shortfall(designs: &[TimedDesign], axis_names: &[String]) -> String {
+    let why: Vec<String> = designs
+        .iter()
+        .zip(axis_names)
+        .filter_map(|((d, _), name)| match d {
+            Err(_) => Some(format!("axis {name} failed")),
+            Ok(d) => {
+                let (flat, comp) = (d.flat_band_hz.1, d.compensated_band_hz.1);
+                (flat < FLAT_BAND_SHORT * comp).then(|| format!("axis {name} flat to {flat:.0} of {comp:.0} Hz"))
+            }
+        })
+        .collect();
+    why.join(", ")
+}
+
+/// Predicted box load (‰ of the period, pessimistic) of `designs`, if all succeeded.
+fn box_load(designs: &[TimedDesign], fs_hz: f64) -> Option<u32> {
+    let shapes: Option<Vec<AxisShape>> = designs.iter().map(|(d, _)| d.as_ref().ok().map(|d| AxisShape::of(&d.filter))).collect();
+    Some(load_permille(CostModel::CORTEX_M4.sample_cost(&shapes?).high, fs_hz as u32))
+}
+
+/// The trial record of one latency's designs.
+fn trial(latency: usize, designs: &[TimedDesign], fs_hz: f64) -> LatencyTrial {
+    LatencyTrial {
+        latency,
+        predicted_error: designs.iter().map(|(d, _)| d.as_ref().ok().map(|d| d.predicted_error)).collect(),
+        load_permille: box_load(designs, fs_hz),
+    }
+}
+
+/// The index in `trials` of the latency kept (module doc).
+pub fn pick(trials: &[LatencyTrial], limit_permille: Option<u32>) -> usize {
+    let runnable = |t: &LatencyTrial| match (limit_permille, t.load_permille) {
+        (Some(l), Some(p)) => p <= l,
+        (None, Some(_)) => true,
+        (_, None) => false,
+    };
+    // The box's limit first: among the runnable latencies when there are any.
+    let any_runnable = trials.iter().any(runnable);
+    let candidates: Vec<usize> = (0..trials.len()).filter(|i| !any_runnable || runnable(&trials[*i])).collect();
+    let n_axes = trials.first().map_or(0, |t| t.predicted_error.len());
+    let best: Vec<f64> = (0..n_axes)
+        .map(|a| candidates.iter().filter_map(|i| trials[*i].predicted_error[a]).fold(f64::INFINITY, f64::min))
+        .collect();
+    let good = |t: &LatencyTrial| {
+        t.predicted_error.iter().zip(&best).all(|(e, b)| match e {
+            Some(e) => *e <= GAIN_NOT_WORTH * b,
+            None => !b.is_finite(),
+        })
+    };
+    // Axes whose bests lie at different latencies: the least worst ratio to them.
+    let worst_ratio = |t: &LatencyTrial| {
+        t.predicted_error.iter().zip(&best).map(|(e, b)| e.map_or(f64::INFINITY, |e| e / b)).fold(0.0, f64::max)
+    };
+    candidates
+        .iter()
+        .copied()
+        .find(|i| good(&trials[*i]))
+        .or_else(|| candidates.iter().copied().min_by(|a, b| worst_ratio(&trials[*a]).total_cmp(&worst_ratio(&trials[*b]))))
+        .unwrap_or(0)
+}
+
+/// Design every axis at the chosen latency (module doc). `opts.lag` is
+/// ignored; `limit_permille` is the box's load limit the image should meet.
+/// `progress` hears each latency as it is tried.
+pub fn design_axes_choosing_latency(
+    freq_hz: &[f64],
+    axes: &[AxisFrf],
+    r: &[f64],
+    opts: &DesignOptions,
+    limit_permille: Option<u32>,
+    mut progress: impl FnMut(usize, &str),
+) -> (Vec<TimedDesign>, LatencyChoice) {
+    let names: Vec<String> = axes.iter().map(|a| crate::frf::axis_name(a.axis).to_string()).collect();
+    let first = design_axes(freq_hz, axes, r, &DesignOptions { lag: DEFAULT_LATENCY, ..opts.clone() });
+    let reason = shortfall(&first, &names);
+    let mut trials = vec![trial(DEFAULT_LATENCY, &first, opts.fs_hz)];
+    let mut rounds = vec![first];
+    if !reason.is_empty() {
+        for l in LONGER_LATENCIES {
+            progress(l, &reason);
+            let d = design_axes(freq_hz, axes, r, &DesignOptions { lag: l, ..opts.clone() });
+            trials.push(trial(l, &d, opts.fs_hz));
+            rounds.push(d);
+        }
+    }
+    let i = pick(&trials, limit_permille);
+    let designs = rounds.swap_remove(i);
+    (designs, LatencyChoice { chosen: trials[i].latency, tried: trials, reason })
+}
+
+/// One summary line: "latency 8 samples, chosen: at 4 axis x flat to 2088 of
+/// 4096 Hz; predicted error x/y/z 8.82/8.01/10.51 % at 4, … at 8".
+pub fn describe(c: &LatencyChoice, axis_names: &[&str]) -> String {
+    if c.reason.is_empty() {
+        return format!("latency {} samples (default: the flat band reaches the compensated band's top on every axis)", c.chosen);
+    }
+    let per: Vec<String> = c
+        .tried
+        .iter()
+        .map(|t| {
+            let e: Vec<String> = t.predicted_error.iter().map(|e| e.map_or("failed".into(), |e| format!("{:.2}", 100.0 * e))).collect();
+            let load = t.load_permille.map_or(String::new(), |p| format!(", load {:.1} %", f64::from(p) / 10.0));
+            format!("{} at {}{}", e.join("/"), t.latency, load)
+        })
+        .collect();
+    format!(
+        "latency {} samples, chosen because at {}: {}; predicted error {} %: {}",
+        c.chosen,
+        DEFAULT_LATENCY,
+        c.reason,
+        axis_names.join("/"),
+        per.join("; ")
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn t(latency: usize, e: &[Option<f64>], load: Option<u32>) -> LatencyTrial {
+        LatencyTrial { latency, predicted_error: e.to_vec(), load_permille: load }
+    }
+
+    #[test]
+    fn keeps_the_shortest_latency_within_reach_of_every_axis_best() {
+        // x gains 3x from 4 to 6, nothing more at 8: 6 is kept.
+        let tr = [t(4, &[Some(0.09), Some(0.01)], Some(80)), t(6, &[Some(0.03), Some(0.01)], Some(85)), t(8, &[Some(0.029), Some(0.01)], Some(90))];
+        assert_eq!(pick(&tr, Some(600)), 1);
+        // Negative control: with no gain anywhere, the default stays.
+        let flat = [t(4, &[Some(0.03), Some(0.01)], Some(80)), t(6, &[Some(0.029), Some(0.01)], Some(85)), t(8, &[Some(0.028), Some(0.01)], Some(90))];
+        assert_eq!(pick(&flat, Some(600)), 0);
+    }
+
+    #[test]
+    fn an_axis_that_fails_at_the_default_is_rescued_and_the_load_limit_is_respected() {
+        let tr = [t(4, &[None, Some(0.01)], None), t(6, &[Some(0.05), Some(0.01)], Some(90)), t(8, &[Some(0.02), Some(0.01)], Some(700))];
+        // 8 is best but over the box's limit: 6, the best the box can run.
+        assert_eq!(pick(&tr, Some(600)), 1);
+        // Without a limit, 8.
+        assert_eq!(pick(&tr, None), 2);
+        // Axes whose bests lie apart: the least worst ratio (6: 1.2x, 8: 2x).
+        let apart = [t(4, &[Some(0.09), Some(0.09)], Some(80)), t(6, &[Some(0.03), Some(0.024)], Some(85)), t(8, &[Some(0.06), Some(0.02)], Some(90))];
+        assert_eq!(pick(&apart, Some(600)), 1);
+    }
+}
