@@ -18,7 +18,7 @@ use num_complex::Complex64;
 use std::f64::consts::PI;
 
 use crate::bands::{band_mask, Band};
-use crate::discretize::{discretize, DiscreteModel, Discretization, FitDiagnostics, MATCH_BAND_FRACTION};
+use crate::discretize::{discretize_to, DiscreteModel, Discretization, FitDiagnostics, MATCH_BAND_FRACTION};
 use crate::fit::rfp::{paper_weights, rfp_fit, RationalTf, RfpOptions};
 use crate::fit::vf::{coherence_weights, vector_fit, VfOptions};
 use crate::fit::{relative_rms_error, PoleResidueModel};
@@ -60,6 +60,10 @@ pub struct DesignOptions {
     /// ([`crate::paper_orders`]); the orders in [`FitMethod::Paper`] are
     /// then ignored.
     pub paper_orders_auto: bool,
+    /// Upper edge of the discrete model's fit grid as a fraction of fs
+    /// ([`MATCH_BAND_FRACTION`] by default; [`crate::discretize::NYQUIST_FIT_FRACTION`]
+    /// is tried by [`crate::latency`] where the default falls short).
+    pub discrete_fit_top: f64,
 }
 
 /// Largest accepted fit error: relative RMS of Ĝ against the coherent
@@ -116,6 +120,7 @@ impl Default for DesignOptions {
             discretization: Discretization::Fit,
             axis_cycle_budget: None,
             paper_orders_auto: false,
+            discrete_fit_top: MATCH_BAND_FRACTION,
         }
     }
 }
@@ -653,7 +658,7 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
     let discrete = match &fitted.paper {
         Some(_) => None,
         None => Some(
-            discretize(&fitted.model, opts.fs_hz, opts.discretization, (ranges[0].0, f_top))
+            discretize_to(&fitted.model, opts.fs_hz, opts.discretization, (ranges[0].0, f_top), opts.discrete_fit_top)
                 .with_context(|| format!("axis {name}: discrete model"))?,
         ),
     };

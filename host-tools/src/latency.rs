@@ -18,7 +18,10 @@
 //! [`GAIN_NOT_WORTH`] of the best that axis reached at any latency tried,
 //! among the latencies whose image the box can still run (when a load limit
 //! is given and any candidate meets it). One latency serves all axes: the
-//! image declares one.
+//! image declares one. Where the default fell short, each axis's discrete
+//! model is also fitted up to Nyquist at the chosen latency
+//! ([`NYQUIST_FIT_FRACTION`]), and the one with the smaller predicted error
+//! is kept per axis.
 
 use anyhow::Result;
 use dynocomp_core::budget::{load_permille, AxisShape, CostModel};
@@ -26,6 +29,7 @@ use serde::Serialize;
 use std::time::Instant;
 
 use crate::design::{design_axis, AxisDesign, DesignOptions};
+use crate::discretize::{Discretization, NYQUIST_FIT_FRACTION};
 use crate::frf::AxisFrf;
 
 /// Latency designed first, and kept unless a longer one buys accuracy (samples).
@@ -50,6 +54,10 @@ pub struct LatencyChoice {
     pub tried: Vec<LatencyTrial>,
     /// Why the default was not enough (empty when it was).
     pub reason: String,
+    /// Per axis: its discrete model was fitted up to Nyquist
+    /// ([`crate::discretize::NYQUIST_FIT_FRACTION`]) instead of 0.45 fs,
+    /// because that predicted a smaller error at the chosen latency.
+    pub fit_to_nyquist: Vec<bool>,
 }
 
 /// One latency designed.
@@ -103,7 +111,11 @@ fn shortfall(designs: &[TimedDesign], axis_names: &[String]) -> String {
 
 /// Predicted box load (‰ of the period, pessimistic) of `designs`, if all succeeded.
 fn box_load(designs: &[TimedDesign], fs_hz: f64) -> Option<u32> {
-    let shapes: Option<Vec<AxisShape>> = designs.iter().map(|(d, _)| d.as_ref().ok().map(|d| AxisShape::of(&d.filter))).collect();
+    box_load_of(designs.iter(), fs_hz)
+}
+
+fn box_load_of<'a>(designs: impl Iterator<Item = &'a TimedDesign>, fs_hz: f64) -> Option<u32> {
+    let shapes: Option<Vec<AxisShape>> = designs.map(|(d, _)| d.as_ref().ok().map(|d| AxisShape::of(&d.filter))).collect();
     Some(load_permille(CostModel::CORTEX_M4.sample_cost(&shapes?).high, fs_hz as u32))
 }
 
@@ -173,8 +185,38 @@ pub fn design_axes_choosing_latency(
         }
     }
     let i = pick(&trials, limit_permille);
-    let designs = rounds.swap_remove(i);
-    (designs, LatencyChoice { chosen: trials[i].latency, tried: trials, reason })
+    let mut designs = rounds.swap_remove(i);
+    let mut fit_to_nyquist = vec![false; designs.len()];
+    if !reason.is_empty() && opts.discretization == Discretization::Fit {
+        // At the chosen latency, the discrete model fitted up to Nyquist
+        // instead (crate::discretize::NYQUIST_FIT_FRACTION); per axis, the one
+        // that predicts the smaller error, if the box can still run the image.
+        let l = trials[i].latency;
+        progress(l, "fitting the discrete models up to Nyquist");
+        let alt = design_axes(freq_hz, axes, r, &DesignOptions { lag: l, discrete_fit_top: NYQUIST_FIT_FRACTION, ..opts.clone() });
+        let before = box_load(&designs, opts.fs_hz);
+        let taken: Vec<bool> = designs
+            .iter()
+            .zip(&alt)
+            .map(|(d, a)| match (&d.0, &a.0) {
+                (Ok(d), Ok(a)) => a.predicted_error < d.predicted_error,
+                (Err(_), Ok(_)) => true,
+                _ => false,
+            })
+            .collect();
+        let pairs: Vec<(TimedDesign, TimedDesign)> = designs.into_iter().zip(alt).collect();
+        let load_with = box_load_of(pairs.iter().zip(&taken).map(|((d, a), t)| if *t { a } else { d }), opts.fs_hz);
+        let runs = |p: Option<u32>| match (limit_permille, p) {
+            (Some(lim), Some(p)) => p <= lim,
+            _ => true,
+        };
+        // Never over the box's limit where the first choice was not.
+        if runs(load_with) || !runs(before) {
+            fit_to_nyquist = taken;
+        }
+        designs = pairs.into_iter().zip(&fit_to_nyquist).map(|((d, a), t)| if *t { a } else { d }).collect();
+    }
+    (designs, LatencyChoice { chosen: trials[i].latency, tried: trials, reason, fit_to_nyquist })
 }
 
 /// One summary line: "latency 8 samples, chosen: at 4 axis x flat to 2088 of
@@ -192,8 +234,10 @@ pub fn describe(c: &LatencyChoice, axis_names: &[&str]) -> String {
             format!("{} at {}{}", e.join("/"), t.latency, load)
         })
         .collect();
+    let nyq: Vec<&str> = axis_names.iter().zip(&c.fit_to_nyquist).filter(|(_, t)| **t).map(|(n, _)| *n).collect();
+    let nyq = if nyq.is_empty() { String::new() } else { format!("; discrete model of {} fitted up to Nyquist (smaller predicted error)", nyq.join(", ")) };
     format!(
-        "latency {} samples, chosen because at {}: {}; predicted error {} %: {}",
+        "latency {} samples, chosen because at {}: {}; predicted error {} %: {}{nyq}",
         c.chosen,
         DEFAULT_LATENCY,
         c.reason,

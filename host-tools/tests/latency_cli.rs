@@ -23,6 +23,8 @@ fn design_states_how_the_latency_was_chosen() {
     assert_eq!(c["chosen"], 4, "{c}");
     assert_eq!(c["tried"].as_array().unwrap().len(), 1, "{c}");
     assert_eq!(c["reason"], "", "{c}");
+    // Nothing fell short, so no discrete model was refitted up to Nyquist.
+    assert_eq!(c["fit_to_nyquist"], serde_json::json!([false, false, false]), "{c}");
     let pred = c["tried"][0]["predicted_error"].as_array().unwrap();
     for (p, ax) in pred.iter().zip(j["axes"].as_array().unwrap()) {
         assert_eq!(p, &ax["predicted_error"], "{c}");
