@@ -16,8 +16,9 @@ const MEDIAN: f64 = 0.005;
 const WORST: f64 = 0.02;
 /// At 10.24 kHz the targets are NOT met (BENCHMARKS.md, "The declared
 /// latency, chosen"): with the main sensor mode at and above Nyquist the
-/// design chooses latency 8 and the compensated error is 1.1-2.7 % on that
-/// case's three axes (3.2-4.6 % at the old fixed latency 4), half of this
+/// design chooses latency 8 (and z's discrete model fitted up to Nyquist)
+/// and the compensated error is 1.1-2.0 % on that case's three axes
+/// (3.2-4.6 % at the old fixed latency 4), half of this
 /// subset. These are regression guards just above the measured level, not
 /// targets.
 const MEDIAN_10K: f64 = 0.015;
