@@ -21,8 +21,9 @@
 //!   bytes per sample and column, `t_s` included) and the output is held
 //!   whole (8 bytes per sample and axis) before it is written block by
 //!   block; besides, the smoother keeps 16 bytes per sample of the axis it
-//!   is smoothing, the time-varying smoother (`--drift`) its gains and
-//!   covariance rows per sample, and the parallel split every band (about
+//!   is smoothing (the time-varying smoother of `--drift` as well: it keeps
+//!   its covariance only at checkpoints, every √N samples, and recomputes
+//!   each segment's gains in the backward pass), and the parallel split every band (about
 //!   8·(bands + 2) bytes per sample and axis). These are not bounded.
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -173,7 +174,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
                 })?;
             } else {
                 how = match drift {
-                    Some((s0, s1)) => format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only, whole record in memory)"),
+                    Some((s0, s1)) => format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only, whole record in memory; covariance checkpointed)"),
                     None => "fixed-interval smoother, zero lag (offline only, whole record in memory)".to_string(),
                 };
                 if !priors.is_empty() && drift.is_none() {
@@ -181,7 +182,12 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
                 }
                 let rec = whole_record(&mut *reader, fs, &source)?;
                 let out = match drift {
-                    Some(iv) => crate::two_state::smooth_record_drifting(i, &sidecar, &rec, &source, iv)?,
+                    Some(iv) => {
+                        // Both passes of every axis (and the D samples of the model's advance).
+                        progress.set_position(0);
+                        restyle(&progress, Some(rec.channels.iter().map(|c| 2 * c.1.len() as u64).sum()), "smoother steps");
+                        crate::two_state::smooth_record_drifting(i, &sidecar, &rec, &source, iv, &|m| progress.inc(m))?
+                    }
                     None => crate::smoother::smooth_record(i, &sidecar, &rec, &source)?,
                 };
                 n_samples = write_whole(a, out_fmt, &rec, &out, fs, acc.as_mut(), truth.as_mut())?;
@@ -222,11 +228,21 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
 /// (indicatif hides it otherwise).
 fn progress_bar(len: Option<u64>) -> indicatif::ProgressBar {
     let pb = indicatif::ProgressBar::with_draw_target(len, indicatif::ProgressDrawTarget::stderr());
-    let style = if len.is_some() { "{bar:40} {pos}/{len} samples, {per_sec}, eta {eta}" } else { "{spinner} {pos} samples, {per_sec}" };
+    restyle(&pb, len, "samples");
+    pb
+}
+
+/// Give `pb` the length `len` (a bar with an ETA; a spinner if unknown),
+/// counting `unit`.
+fn restyle(pb: &indicatif::ProgressBar, len: Option<u64>, unit: &'static str) {
+    let style = if len.is_some() { "{wide_bar} {human_pos}/{human_len} {msg}, eta {eta}" } else { "{spinner} {human_pos} {msg}, {per_sec}" };
     if let Ok(s) = indicatif::ProgressStyle::with_template(style) {
         pb.set_style(s);
     }
-    pb
+    if let Some(n) = len {
+        pb.set_length(n);
+    }
+    pb.set_message(unit);
 }
 
 /// Write `path` atomically in `fmt` with a writer for `axes`; `body` writes

@@ -31,11 +31,20 @@
 //! K, c, S and A (the same estimates as Rauch–Tung–Striebel, no covariance
 //! inversion), all in f64. With a constant model it reproduces the
 //! stationary [`crate::smoother::Smoother`].
+//!
+//! **Memory.** The covariance recursion does not depend on the record, so
+//! the forward pass keeps P only at checkpoints (every √N samples,
+//! [`segment_len`]) besides 16 bytes per sample (the innovation and the
+//! prior's force estimate), and the backward pass recomputes each segment's
+//! gains from its checkpoint: about 80 bytes per sample and axis with the
+//! record and the output, instead of ~440 with every step's gain and
+//! covariance row kept (BENCHMARKS.md). A is applied as its nonzero entries
+//! (≤ 3 per row), and P is held where it has converged and the model does
+//! not change (before and after the drift).
 
 use anyhow::{bail, Context, Result};
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
-use std::collections::HashMap;
 use std::f64::consts::PI;
 
 use crate::design::{criterion_grid, criterion_j, criterion_ranges, design_axis, noise_term, AxisDesign, DesignOptions};
@@ -171,10 +180,151 @@ pub fn state_at(t_s: f64, start_s: f64, end_s: f64) -> f64 {
     }
 }
 
-/// One step's model in the smoother's augmented coordinates.
+/// One step's model in the smoother's augmented coordinates: A as its
+/// nonzero entries row by row (at most 3 per row: a mode's 2x2 block and
+/// its force input, a delay-line shift, the force's random walk;
+/// [`crate::kalman::augmented_plant`]), so that A·x and A·M cost O(n) and
+/// O(n²) instead of O(n²) and O(n³).
 struct Plant {
-    a: DMatrix<f64>,
+    /// Row i's entries (column, value): `entries[row_start[i]..row_start[i + 1]]`.
+    entries: Vec<(usize, f64)>,
+    row_start: Vec<usize>,
     c: DVector<f64>,
+}
+
+impl Plant {
+    fn new(a: &DMatrix<f64>, c: DVector<f64>) -> Plant {
+        let mut entries = Vec::new();
+        let mut row_start = vec![0];
+        for i in 0..a.nrows() {
+            entries.extend((0..a.ncols()).filter(|&j| a[(i, j)] != 0.0).map(|j| (j, a[(i, j)])));
+            row_start.push(entries.len());
+        }
+        Plant { entries, row_start, c }
+    }
+
+    fn row(&self, i: usize) -> &[(usize, f64)] {
+        &self.entries[self.row_start[i]..self.row_start[i + 1]]
+    }
+
+    /// out = A·x.
+    fn mul_vec(&self, x: &DVector<f64>, out: &mut DVector<f64>) {
+        for i in 0..out.len() {
+            out[i] = self.row(i).iter().map(|&(j, v)| v * x[j]).sum();
+        }
+    }
+
+    /// out = Aᵀ·x.
+    fn tr_mul_vec(&self, x: &DVector<f64>, out: &mut DVector<f64>) {
+        out.fill(0.0);
+        for i in 0..x.len() {
+            for &(j, v) in self.row(i) {
+                out[j] += v * x[i];
+            }
+        }
+    }
+
+    /// out = A·Mᵀ (column by column: out[:, l] = A·M[l, :]ᵀ).
+    fn mul_tr(&self, m: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+        let n = m.nrows();
+        for l in 0..n {
+            for i in 0..n {
+                out[(i, l)] = self.row(i).iter().map(|&(j, v)| v * m[(l, j)]).sum();
+            }
+        }
+    }
+}
+
+/// The covariance half of the time-varying Kalman filter: the prior error
+/// covariance P_k and the step's gain, innovation variance and the row of
+/// P_k that carries the force. It does not depend on the record, so the
+/// backward pass recomputes it segment by segment from checkpoints of the
+/// forward pass ([`drift_passes`]) instead of keeping it per sample.
+///
+/// **Frozen covariance.** Where the model does not change from one step to
+/// the next and P_{k+1} equals P_k to [`FROZEN_TOLERANCE`] (relative, the
+/// largest entry), P is held until the model changes again: the stationary
+/// stretches before and after the drift then cost O(n) per sample, not
+/// O(n²). Recomputation from a checkpoint takes the same decisions, so the
+/// backward pass sees the forward pass's numbers exactly.
+#[derive(Clone)]
+struct Covariance {
+    p: DMatrix<f64>,
+    frozen: bool,
+}
+
+/// Relative change of P below which it is held ([`Covariance`]): a few
+/// hundred f64 roundings of its largest entry.
+const FROZEN_TOLERANCE: f64 = 1e-13;
+
+/// One step's measurement quantities from P_k and c_k.
+#[derive(Clone)]
+struct Gain {
+    /// K_k = P_k c_k / S_k.
+    k: DVector<f64>,
+    /// S_k = c_kᵀ P_k c_k + R.
+    s: f64,
+    /// Row `force` of P_k.
+    p_row: DVector<f64>,
+}
+
+/// Work buffers of [`Covariance::advance`].
+struct Scratch {
+    pp: DMatrix<f64>,
+    t: DMatrix<f64>,
+    next: DMatrix<f64>,
+}
+
+impl Covariance {
+    fn gain(&self, pl: &Plant, r: f64, force: usize) -> Gain {
+        let pc = &self.p * &pl.c;
+        let s = pl.c.dot(&pc) + r;
+        Gain { k: &pc / s, s, p_row: self.p.row(force).transpose() }
+    }
+
+    /// Step k: its gain (the one held in `held` while P is frozen), and P
+    /// advanced to P_{k+1}. The forward pass and the backward pass's
+    /// recomputation both step through here, so they agree exactly.
+    #[allow(clippy::too_many_arguments)]
+    fn step(&mut self, held: &mut Option<Gain>, pl: &Plant, same_model_next: bool, r: f64, q: f64, force: usize, w: &mut Scratch) -> Gain {
+        let g = match held.take() {
+            Some(g) if self.frozen => g,
+            _ => self.gain(pl, r, force),
+        };
+        let was_frozen = self.frozen;
+        self.advance(pl, &g, same_model_next, q, force, w);
+        if was_frozen && self.frozen {
+            *held = Some(g.clone());
+        }
+        g
+    }
+
+    /// P_{k+1} = A_k (P_k − K_k S_k K_kᵀ) A_kᵀ + q·g gᵀ (g the force's
+    /// unit vector), or P held if frozen and the next step keeps the model.
+    fn advance(&mut self, pl: &Plant, gain: &Gain, same_model_next: bool, q: f64, force: usize, w: &mut Scratch) {
+        if self.frozen && same_model_next {
+            return;
+        }
+        let pc = &gain.k * gain.s;
+        w.pp.copy_from(&self.p);
+        w.pp.ger(-1.0, &gain.k, &pc, 1.0);
+        // T = A·Pp (Pp symmetric: A·Ppᵀ), then P' = A·Tᵀ = A Pp Aᵀ.
+        pl.mul_tr(&w.pp, &mut w.t);
+        pl.mul_tr(&w.t, &mut w.next);
+        w.next[(force, force)] += q;
+        let n = w.next.nrows();
+        for i in 0..n {
+            for j in 0..i {
+                let v = 0.5 * (w.next[(i, j)] + w.next[(j, i)]);
+                w.next[(i, j)] = v;
+                w.next[(j, i)] = v;
+            }
+        }
+        let scale = w.next.amax();
+        let change = w.next.iter().zip(self.p.iter()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        self.frozen = same_model_next && change <= FROZEN_TOLERANCE * scale;
+        std::mem::swap(&mut self.p, &mut w.next);
+    }
 }
 
 /// Settings of [`smooth_drifting`].
@@ -198,7 +348,33 @@ pub struct DriftSmoothing {
 /// from `model_at(0)` to `model_at(1)` over `opts.interval_s` (module doc);
 /// `model_at(s)` returns the continuous model at state s.
 pub fn smooth_drifting(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing) -> Result<Vec<f64>> {
-    Ok(drift_passes(y, model_at, opts, true)?.0)
+    smooth_drifting_in_segments(y, model_at, opts, segment_len(y.len()), &|_| {})
+}
+
+/// Samples per checkpoint of the covariance for a record of `len` samples:
+/// about √len (at least 4096), so that the checkpoints (n² values each)
+/// and one segment's gains (2n + 1 values per sample) stay a few MB for
+/// records of an hour.
+pub fn segment_len(len: usize) -> usize {
+    ((len as f64).sqrt().ceil() as usize).max(4096)
+}
+
+/// [`smooth_drifting`] with the covariance checkpointed every `segment`
+/// samples (≥ 1); `progress(m)` is called as the passes advance by m
+/// samples (2·(len + advance) in all).
+///
+/// **Memory:** 16 bytes per sample (the innovation and the prior's force
+/// estimate), one covariance (n² values) per `segment` samples, and one
+/// segment's gains; the output. **Cost:** the covariance is propagated
+/// twice where it is not frozen ([`Covariance`]).
+pub fn smooth_drifting_in_segments(
+    y: &[f64],
+    model_at: &dyn Fn(f64) -> PoleResidueModel,
+    opts: &DriftSmoothing,
+    segment: usize,
+    progress: &dyn Fn(u64),
+) -> Result<Vec<f64>> {
+    Ok(drift_passes(y, model_at, opts, Some(segment.max(1)), progress)?.0)
 }
 
 /// Log-likelihood (nats) of the record `y` (N) under the drifting model of
@@ -209,12 +385,19 @@ pub fn smooth_drifting(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, op
 /// explains the record; used to ask whether a record can tell the drift's
 /// end state (issue #15, item 4; `examples/drift_from_record.rs`).
 pub fn drift_log_likelihood(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing) -> Result<f64> {
-    Ok(drift_passes(y, model_at, opts, false)?.1)
+    Ok(drift_passes(y, model_at, opts, None, &|_| {})?.1)
 }
 
-/// The forward pass, and with `smooth` the backward pass: (smoothed force
+/// The forward pass, and with `segment` the backward pass with the
+/// covariance checkpointed every `segment` samples: (smoothed force
 /// estimate, or nothing; log-likelihood of the record).
-fn drift_passes(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing, smooth: bool) -> Result<(Vec<f64>, f64)> {
+fn drift_passes(
+    y: &[f64],
+    model_at: &dyn Fn(f64) -> PoleResidueModel,
+    opts: &DriftSmoothing,
+    segment: Option<usize>,
+    progress: &dyn Fn(u64),
+) -> Result<(Vec<f64>, f64)> {
     let DriftSmoothing { fs_hz, interval_s: (start_s, end_s), band_hz, structure, q, r } = *opts;
     if !(q > 0.0 && q.is_finite() && r > 0.0 && r.is_finite()) {
         bail!("smoother needs q > 0 and R > 0 (got q = {q}, R = {r})");
@@ -231,11 +414,11 @@ fn drift_passes(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &Dr
     let plant0 = augmented_plant(&dm0, 0);
     let n = plant0.a.nrows();
     let force = plant0.n_plant;
-    let g = plant0.g.clone();
-    let qm = &g * g.transpose() * q;
+    let qm = &plant0.g * plant0.g.transpose() * q;
     let sol = solve_filter_dare(&plant0.a, &plant0.c, &qm, r)?;
-    let mut plants: HashMap<usize, Plant> = HashMap::new();
-    plants.insert(0, Plant { a: plant0.a, c: plant0.c });
+    // Each level's plant, built when the forward pass first reaches it.
+    let mut plants: Vec<Option<Plant>> = (0..=S_LEVELS).map(|_| None).collect();
+    plants[0] = Some(Plant::new(&plant0.a, plant0.c));
     // ỹ_k = y_{k−D}: D copies of y_0 in front (as the stationary smoother).
     let yt: Vec<f64> = std::iter::repeat_n(y.first().copied().unwrap_or(0.0), advance).chain(y.iter().copied()).collect();
     // Step k of ỹ carries the force F_k (time k/fs) and its model.
@@ -244,66 +427,85 @@ fn drift_passes(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &Dr
         (state_at(t, start_s, end_s) * S_LEVELS as f64).round() as usize
     };
     let len = yt.len();
-    let kept = if smooth { len } else { 0 };
-    let mut levels = Vec::with_capacity(kept);
-    let mut ks: Vec<DVector<f64>> = Vec::with_capacity(kept);
-    let mut ss = Vec::with_capacity(kept);
+    let kept = if segment.is_some() { len } else { 0 };
     let mut es = Vec::with_capacity(kept);
     let mut prior_f = Vec::with_capacity(kept);
-    let mut p_rows: Vec<DVector<f64>> = Vec::with_capacity(kept);
+    let mut checkpoints: Vec<Covariance> = Vec::new();
+    let mut w = Scratch { pp: DMatrix::zeros(n, n), t: DMatrix::zeros(n, n), next: DMatrix::zeros(n, n) };
     let mut x = DVector::<f64>::zeros(n);
-    let mut p = sol.p;
+    let mut xp = DVector::<f64>::zeros(n);
+    let mut cov = Covariance { p: sol.p, frozen: false };
+    let mut held: Option<Gain> = None;
     let mut log_lik = 0.0;
     for (k, &yk) in yt.iter().enumerate() {
         let level = level_of(k);
-        if let std::collections::hash_map::Entry::Vacant(e) = plants.entry(level) {
+        if plants[level].is_none() {
             let dm = discrete(level)?;
             let pl = augmented_plant(&dm, 0);
             if pl.a.nrows() != n {
                 bail!("the model at state s = {:.3} has another state size ({} vs {n}); a mode crossed fs/2", level as f64 / S_LEVELS as f64, pl.a.nrows());
             }
-            e.insert(Plant { a: pl.a, c: pl.c });
+            plants[level] = Some(Plant::new(&pl.a, pl.c));
         }
-        let pl = &plants[&level];
-        let pc = &p * &pl.c;
-        let s = pl.c.dot(&pc) + r;
-        let kg = &pc / s;
+        let pl = plants[level].as_ref().expect("built above");
+        if let Some(seg) = segment {
+            if k % seg == 0 {
+                checkpoints.push(cov.clone());
+            }
+        }
+        let same_next = k + 1 < len && level_of(k + 1) == level;
+        let g = cov.step(&mut held, pl, same_next, r, q, force, &mut w);
         let e = yk - pl.c.dot(&x);
         if k >= advance {
-            log_lik -= 0.5 * ((2.0 * PI * s).ln() + e * e / s);
+            log_lik -= 0.5 * ((2.0 * PI * g.s).ln() + e * e / g.s);
         }
-        if smooth {
+        if segment.is_some() {
             prior_f.push(x[force]);
-            p_rows.push(p.row(force).transpose());
-        }
-        let xp = &x + &kg * e;
-        let pp = &p - &kg * pc.transpose();
-        x = &pl.a * xp;
-        p = &pl.a * pp * pl.a.transpose() + &qm;
-        p = (&p + p.transpose()) * 0.5;
-        if smooth {
-            levels.push(level);
-            ks.push(kg);
-            ss.push(s);
             es.push(e);
         }
+        xp.copy_from(&x);
+        xp.axpy(e, &g.k, 1.0);
+        pl.mul_vec(&xp, &mut x);
+        if k % 4096 == 4095 {
+            progress(4096);
+        }
     }
-    if !smooth {
+    progress((len % 4096) as u64);
+    let Some(seg) = segment else {
         if !log_lik.is_finite() {
             bail!("the time-varying filter's likelihood became non-finite");
         }
         return Ok((Vec::new(), log_lik));
-    }
+    };
+    let plant = |k: usize| plants[level_of(k)].as_ref().expect("reached by the forward pass");
     let mut lambda_hat = DVector::<f64>::zeros(n);
+    let mut lambda_tilde = DVector::<f64>::zeros(n);
     let mut out = vec![0.0; len];
-    for k in (0..len).rev() {
-        let pl = &plants[&levels[k]];
-        let kl = ks[k].dot(&lambda_hat);
-        let lambda_tilde = &lambda_hat - &pl.c * (es[k] / ss[k] + kl);
-        out[k] = prior_f[k] - p_rows[k].dot(&lambda_tilde);
-        if k > 0 {
-            lambda_hat = plants[&levels[k - 1]].a.tr_mul(&lambda_tilde);
+    let mut gains: Vec<Gain> = Vec::with_capacity(seg);
+    for (j, start) in checkpoints.iter().enumerate().rev() {
+        // Recompute this segment's gains from its checkpoint, exactly as the
+        // forward pass did.
+        let k0 = j * seg;
+        let k1 = (k0 + seg).min(len);
+        gains.clear();
+        let mut cov = start.clone();
+        let mut held = None;
+        for k in k0..k1 {
+            let same_next = k + 1 < len && level_of(k + 1) == level_of(k);
+            gains.push(cov.step(&mut held, plant(k), same_next, r, q, force, &mut w));
         }
+        for k in (k0..k1).rev() {
+            let g = &gains[k - k0];
+            let pl = plant(k);
+            let kl = g.k.dot(&lambda_hat);
+            lambda_tilde.copy_from(&lambda_hat);
+            lambda_tilde.axpy(-(es[k] / g.s + kl), &pl.c, 1.0);
+            out[k] = prior_f[k] - g.p_row.dot(&lambda_tilde);
+            if k > 0 {
+                plant(k - 1).tr_mul_vec(&lambda_tilde, &mut lambda_hat);
+            }
+        }
+        progress((k1 - k0) as u64);
     }
     if let Some(k) = out.iter().position(|v| !v.is_finite()) {
         bail!("the time-varying smoother became non-finite at sample {k}");
@@ -430,8 +632,16 @@ impl TwoStateJson {
 
 /// `compensate --offline --drift START:END`: smooth every force column of
 /// `rec` with its axis's two states from the sidecar, the model moving from
-/// state 0 at START to state 1 at END (s), q and R from the image.
-pub fn smooth_record_drifting(image: &CoeffImage, sidecar: &ModelSidecar, rec: &SignalRecord, source: &str, interval_s: (f64, f64)) -> Result<SignalRecord> {
+/// state 0 at START to state 1 at END (s), q and R from the image;
+/// `progress(m)` as in [`smooth_drifting_in_segments`], axis after axis.
+pub fn smooth_record_drifting(
+    image: &CoeffImage,
+    sidecar: &ModelSidecar,
+    rec: &SignalRecord,
+    source: &str,
+    interval_s: (f64, f64),
+    progress: &dyn Fn(u64),
+) -> Result<SignalRecord> {
     let fs_hz = f64::from(image.fs_hz);
     let mut channels = Vec::with_capacity(rec.channels.len());
     for (axis, y) in &rec.channels {
@@ -444,7 +654,7 @@ pub fn smooth_record_drifting(image: &CoeffImage, sidecar: &ModelSidecar, rec: &
         };
         let ts = entry.states(source, name)?;
         let opts = DriftSmoothing { fs_hz, interval_s, band_hz: entry.band_hz, structure: (entry.fir_taps, entry.advance), q: a.summary.q, r: a.summary.r };
-        let out = smooth_drifting(y, &|s| ts.at(s), &opts).with_context(|| format!("{source}: axis {name}"))?;
+        let out = smooth_drifting_in_segments(y, &|s| ts.at(s), &opts, segment_len(y.len()), progress).with_context(|| format!("{source}: axis {name}"))?;
         channels.push((*axis, out));
     }
     Ok(SignalRecord { t_s: rec.t_s.clone(), channels })
