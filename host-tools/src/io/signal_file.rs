@@ -120,10 +120,62 @@ pub fn writer_for<'w>(
     path: &Path,
 ) -> Result<Box<dyn SignalWriter + 'w>> {
     let dir = crate::io::atomic::output_dir(path);
-    match (fmt, file, len) {
-        (SignalFormat::Csv, ..) => Ok(Box::new(CsvWriter::new(w, axes, has_time)?)),
-        (SignalFormat::Uff | SignalFormat::Uff58b, Some(f), Some(n)) => Ok(Box::new(UffWriter::placed(f, n, axes, fs_hz, fmt == SignalFormat::Uff58b)?)),
-        (SignalFormat::Uff | SignalFormat::Uff58b, ..) => Ok(Box::new(UffWriter::new_in(w, axes, fs_hz, fmt == SignalFormat::Uff58b, dir)?)),
-        (SignalFormat::Tdms, ..) => Ok(Box::new(TdmsWriter::new(w, axes, fs_hz, 0.0)?)),
+    let inner: Box<dyn SignalWriter + 'w> = match (fmt, file, len) {
+        (SignalFormat::Csv, ..) => Box::new(CsvWriter::new(w, axes, has_time)?),
+        (SignalFormat::Uff | SignalFormat::Uff58b, Some(f), Some(n)) => Box::new(UffWriter::placed(f, n, axes, fs_hz, fmt == SignalFormat::Uff58b)?),
+        (SignalFormat::Uff | SignalFormat::Uff58b, ..) => Box::new(UffWriter::new_in(w, axes, fs_hz, fmt == SignalFormat::Uff58b, dir)?),
+        (SignalFormat::Tdms, ..) => Box::new(TdmsWriter::new(w, axes, fs_hz, 0.0)?),
+    };
+    Ok(Box::new(FiniteOnly { inner, axes: axes.to_vec(), written: 0 }))
+}
+
+/// Refuses a non-finite sample before the format sees it: none of the
+/// formats' readers takes one back (the UFF writer would print `NaNe+00`,
+/// the CSV writer `NaN`), so a NaN or ∞ is an error naming the sample and
+/// the channel, and the caller's atomic write leaves no file.
+struct FiniteOnly<'w> {
+    inner: Box<dyn SignalWriter + 'w>,
+    axes: Vec<usize>,
+    /// Samples written so far.
+    written: u64,
+}
+
+impl SignalWriter for FiniteOnly<'_> {
+    fn write_block(&mut self, t_s: Option<&[f64]>, channels: &[&[f64]]) -> Result<()> {
+        let named = channels.iter().zip(&self.axes).map(|(c, &a)| (*c, format!("f{}", crate::frf::axis_name(a))));
+        for (c, name) in t_s.map(|t| (t, "t_s".to_string())).into_iter().chain(named) {
+            if let Some(i) = c.iter().position(|v| !v.is_finite()) {
+                bail!("sample {} of {name} is {}: the output formats cannot carry a non-finite value; nothing is written", self.written + i as u64, c[i]);
+            }
+        }
+        self.written += channels.first().map_or(0, |c| c.len()) as u64;
+        self.inner.write_block(t_s, channels)
+    }
+
+    fn finish(&mut self) -> Result<()> {
+        self.inner.finish()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every format refuses a non-finite sample, naming it; finite blocks
+    /// before it are accepted (negative control).
+    #[test]
+    fn a_non_finite_sample_is_refused_in_every_format() {
+        for fmt in [SignalFormat::Csv, SignalFormat::Uff, SignalFormat::Uff58b, SignalFormat::Tdms] {
+            let dir = tempfile::tempdir().unwrap();
+            let path = dir.path().join("out");
+            let mut buf: Vec<u8> = Vec::new();
+            let mut w = writer_for(fmt, &mut buf, None, &[0, 2], true, None, 1000.0, &path).unwrap();
+            let t = [0.0, 0.001, 0.002];
+            w.write_block(Some(&t), &[&[1.0, 2.0, 3.0], &[4.0, 5.0, 6.0]]).unwrap();
+            let e = w.write_block(Some(&[0.003, 0.004, 0.005]), &[&[1.0, 2.0, 3.0], &[4.0, f64::NAN, 6.0]]).unwrap_err().to_string();
+            assert!(e.contains("sample 4 of fz is NaN"), "{fmt:?}: {e}");
+            let e = w.write_block(Some(&[0.003, f64::INFINITY]), &[&[1.0, 2.0], &[4.0, 5.0]]).unwrap_err().to_string();
+            assert!(e.contains("sample 4 of t_s is inf"), "{fmt:?}: {e}");
+        }
     }
 }
