@@ -183,7 +183,8 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
                 let rec = whole_record(&mut *reader, fs, &source)?;
                 let out = match drift {
                     Some(iv) => {
-                        // Both passes of every axis (and the D samples of the model's advance).
+                        // Both passes of every axis (each also steps through the
+                        // model's advance of D samples, not counted in the length).
                         progress.set_position(0);
                         restyle(&progress, Some(rec.channels.iter().map(|c| 2 * c.1.len() as u64).sum()), "smoother steps");
                         crate::two_state::smooth_record_drifting(i, &sidecar, &rec, &source, iv, &|m| progress.inc(m))?

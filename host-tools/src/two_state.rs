@@ -36,9 +36,10 @@
 //! the forward pass keeps P only at checkpoints (every √N samples,
 //! [`segment_len`]) besides 16 bytes per sample (the innovation and the
 //! prior's force estimate), and the backward pass recomputes each segment's
-//! gains from its checkpoint: about 80 bytes per sample and axis with the
-//! record and the output, instead of ~440 with every step's gain and
-//! covariance row kept (BENCHMARKS.md). A is applied as its nonzero entries
+//! gains from its checkpoint: what grows with the record is then the record
+//! and the output held whole and those 16 bytes, 44 bytes per sample for
+//! 3 axes against 421 with every step's gain and covariance row kept
+//! (measured, BENCHMARKS.md). A is applied as its nonzero entries
 //! (≤ 3 per row), and P is held where it has converged and the model does
 //! not change (before and after the drift).
 
@@ -251,6 +252,10 @@ impl Plant {
 struct Covariance {
     p: DMatrix<f64>,
     frozen: bool,
+    /// The last step's gain; the next step reuses it unless `stale` (P
+    /// changed since, or none yet).
+    gain: Option<Gain>,
+    stale: bool,
 }
 
 /// Relative change of P below which it is held ([`Covariance`]): a few
@@ -282,32 +287,27 @@ impl Covariance {
         Gain { k: &pc / s, s, p_row: self.p.row(force).transpose() }
     }
 
-    /// Step k: its gain (the one held in `held` while P is frozen), and P
-    /// advanced to P_{k+1}. The forward pass and the backward pass's
-    /// recomputation both step through here, so they agree exactly.
-    #[allow(clippy::too_many_arguments)]
-    fn step(&mut self, held: &mut Option<Gain>, pl: &Plant, same_model_next: bool, r: f64, q: f64, force: usize, w: &mut Scratch) -> Gain {
-        let g = match held.take() {
-            Some(g) if self.frozen => g,
+    /// Step k: its gain (the cached one while P is frozen), and P advanced
+    /// to P_{k+1}. The forward pass and the backward pass's recomputation
+    /// both step through here, so they agree exactly.
+    fn step(&mut self, pl: &Plant, same_model_next: bool, r: f64, q: f64, force: usize, w: &mut Scratch) -> &Gain {
+        let g = match self.gain.take() {
+            Some(g) if !self.stale => g,
             _ => self.gain(pl, r, force),
         };
-        let was_frozen = self.frozen;
-        self.advance(pl, &g, same_model_next, q, force, w);
-        if was_frozen && self.frozen {
-            *held = Some(g.clone());
-        }
-        g
+        self.stale = !self.advance(pl, &g, same_model_next, q, force, w);
+        self.gain.insert(g)
     }
 
     /// P_{k+1} = A_k (P_k − K_k S_k K_kᵀ) A_kᵀ + q·g gᵀ (g the force's
-    /// unit vector), or P held if frozen and the next step keeps the model.
-    fn advance(&mut self, pl: &Plant, gain: &Gain, same_model_next: bool, q: f64, force: usize, w: &mut Scratch) {
+    /// unit vector), or P held if frozen and the next step keeps the model;
+    /// true if held.
+    fn advance(&mut self, pl: &Plant, gain: &Gain, same_model_next: bool, q: f64, force: usize, w: &mut Scratch) -> bool {
         if self.frozen && same_model_next {
-            return;
+            return true;
         }
-        let pc = &gain.k * gain.s;
         w.pp.copy_from(&self.p);
-        w.pp.ger(-1.0, &gain.k, &pc, 1.0);
+        w.pp.ger(-gain.s, &gain.k, &gain.k, 1.0);
         // T = A·Pp (Pp symmetric: A·Ppᵀ), then P' = A·Tᵀ = A Pp Aᵀ.
         pl.mul_tr(&w.pp, &mut w.t);
         pl.mul_tr(&w.t, &mut w.next);
@@ -324,6 +324,7 @@ impl Covariance {
         let change = w.next.iter().zip(self.p.iter()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         self.frozen = same_model_next && change <= FROZEN_TOLERANCE * scale;
         std::mem::swap(&mut self.p, &mut w.next);
+        false
     }
 }
 
@@ -353,8 +354,8 @@ pub fn smooth_drifting(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, op
 
 /// Samples per checkpoint of the covariance for a record of `len` samples:
 /// about √len (at least 4096), so that the checkpoints (n² values each)
-/// and one segment's gains (2n + 1 values per sample) stay a few MB for
-/// records of an hour.
+/// and one segment's gains (2n + 1 values per sample) stay tens of MB for
+/// a record of an hour at 51.2 kHz (n ≈ 25).
 pub fn segment_len(len: usize) -> usize {
     ((len as f64).sqrt().ceil() as usize).max(4096)
 }
@@ -434,8 +435,7 @@ fn drift_passes(
     let mut w = Scratch { pp: DMatrix::zeros(n, n), t: DMatrix::zeros(n, n), next: DMatrix::zeros(n, n) };
     let mut x = DVector::<f64>::zeros(n);
     let mut xp = DVector::<f64>::zeros(n);
-    let mut cov = Covariance { p: sol.p, frozen: false };
-    let mut held: Option<Gain> = None;
+    let mut cov = Covariance { p: sol.p, frozen: false, gain: None, stale: true };
     let mut log_lik = 0.0;
     for (k, &yk) in yt.iter().enumerate() {
         let level = level_of(k);
@@ -454,7 +454,7 @@ fn drift_passes(
             }
         }
         let same_next = k + 1 < len && level_of(k + 1) == level;
-        let g = cov.step(&mut held, pl, same_next, r, q, force, &mut w);
+        let g = cov.step(pl, same_next, r, q, force, &mut w);
         let e = yk - pl.c.dot(&x);
         if k >= advance {
             log_lik -= 0.5 * ((2.0 * PI * g.s).ln() + e * e / g.s);
@@ -489,10 +489,9 @@ fn drift_passes(
         let k1 = (k0 + seg).min(len);
         gains.clear();
         let mut cov = start.clone();
-        let mut held = None;
         for k in k0..k1 {
             let same_next = k + 1 < len && level_of(k + 1) == level_of(k);
-            gains.push(cov.step(&mut held, plant(k), same_next, r, q, force, &mut w));
+            gains.push(cov.step(plant(k), same_next, r, q, force, &mut w).clone());
         }
         for k in (k0..k1).rev() {
             let g = &gains[k - k0];

@@ -142,9 +142,11 @@ struct FiniteOnly<'w> {
 
 impl SignalWriter for FiniteOnly<'_> {
     fn write_block(&mut self, t_s: Option<&[f64]>, channels: &[&[f64]]) -> Result<()> {
-        let named = channels.iter().zip(&self.axes).map(|(c, &a)| (*c, format!("f{}", crate::frf::axis_name(a))));
-        for (c, name) in t_s.map(|t| (t, "t_s".to_string())).into_iter().chain(named) {
+        // (column, axis; None for the time column)
+        let columns = t_s.map(|t| (t, None)).into_iter().chain(channels.iter().zip(&self.axes).map(|(c, &a)| (*c, Some(a))));
+        for (c, axis) in columns {
             if let Some(i) = c.iter().position(|v| !v.is_finite()) {
+                let name = axis.map_or_else(|| "t_s".to_string(), |a| format!("f{}", crate::frf::axis_name(a)));
                 bail!("sample {} of {name} is {}: the output formats cannot carry a non-finite value; nothing is written", self.written + i as u64, c[i]);
             }
         }
