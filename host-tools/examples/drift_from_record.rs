@@ -115,10 +115,11 @@ fn main() -> Result<()> {
             }).collect()
         };
         for a in 0..3 {
-            let d = design_axis(&s.frf.freq_hz, s.frf.axis(a).ok_or_else(|| anyhow::anyhow!("no FRF of axis {a}"))?, sample_variance(&s.idle[a]), &opts)?;
+            let before_frf = s.frf.axis(a).ok_or_else(|| anyhow::anyhow!("no FRF of axis {a}"))?;
+            let d = design_axis(&s.frf.freq_hz, before_frf, sample_variance(&s.idle[a]), &opts)?;
             let (dm, _) = d.discrete.clone().ok_or_else(|| anyhow::anyhow!("no discrete model"))?;
             let after_frf = out.frf_after.axis(a).ok_or_else(|| anyhow::anyhow!("no after FRF of axis {a}"))?;
-            let ts = pair_second_state(&out.frf_after.freq_hz, &d, after_frf, &opts.vf)?;
+            let (ts, _) = pair_second_state(&out.frf_after.freq_hz, before_frf, &d, after_frf, &opts.vf)?;
             let smoothing = DriftSmoothing {
                 fs_hz: FS,
                 interval_s: (0.0, p.duration_s),

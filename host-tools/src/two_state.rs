@@ -8,7 +8,9 @@
 //! must have as many pairs and as many real poles, and each matched pair's
 //! natural frequencies may differ by at most [`PAIR_TOLERANCE`] (relative).
 //! Otherwise pairing fails with a message naming the axis and the modes.
-//! Real poles are matched in ascending order of their value.
+//! Real poles are matched in ascending order of their value. Machine-structure
+//! modes that both FRFs measured alike are then shared: both states carry
+//! the average of the two fits ([`share_machine_modes`]).
 //!
 //! **Interpolation** in the state variable s ∈ [0, 1] (0 = before, 1 =
 //! after): per pair, 1/ω_n² linear in s (linear in added mass at constant
@@ -530,14 +532,105 @@ pub struct RangeCandidate {
     pub worst: f64,
 }
 
-/// The two states of an axis: the first is `d0`'s fitted model, the second
-/// FRF is fitted at the same order (its coherence as weights) and paired
-/// with it ([`pair`]).
-pub fn pair_second_state(freq_hz: &[f64], d0: &AxisDesign, second: &AxisFrf, vf: &VfOptions) -> Result<TwoState> {
+/// The two states of an axis: the first is `d0`'s fitted model (of the
+/// FRF `first`), the second FRF is fitted at the same order (its coherence
+/// as weights) and paired with it ([`pair`]); then the machine-structure
+/// modes the two FRFs measured alike are shared ([`share_machine_modes`]).
+pub fn pair_second_state(freq_hz: &[f64], first: &AxisFrf, d0: &AxisDesign, second: &AxisFrf, vf: &VfOptions) -> Result<(TwoState, Vec<MachineMode>)> {
     let name = axis_name(second.axis);
     let w = coherence_weights(&second.frf, second.coherence.as_deref());
     let after = fit_order(freq_hz, &second.frf, &w, d0.model.order(), vf).with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?;
-    pair(name, &d0.model, &after)
+    let ts = pair(name, &d0.model, &after)?;
+    let w0 = coherence_weights(&first.frf, first.coherence.as_deref());
+    Ok(share_machine_modes(&ts, freq_hz, [(&first.frf, &w0), (&second.frf, &w)]))
+}
+
+/// Largest growth of a machine mode's weighted misfit (either FRF, over
+/// the mode's lines) at which the two states' fits of it are taken as two
+/// measurements of one mode ([`share_machine_modes`]).
+pub const SHARE_TOLERANCE: f64 = 1.5;
+
+/// Half-width of the lines a machine mode is judged on, in half-power
+/// bandwidths ζ·f_n (at least [`SHARE_MIN_LINES`] lines).
+pub const SHARE_WINDOW: f64 = 3.0;
+
+/// Fewest FRF lines a machine mode must span to be judged.
+pub const SHARE_MIN_LINES: usize = 5;
+
+/// What [`share_machine_modes`] did with one machine-structure mode.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct MachineMode {
+    /// Natural frequency in the first / second state's fit (Hz).
+    pub fn_hz: (f64, f64),
+    /// Weighted misfit of the shared mode over its own one's, on the first /
+    /// second FRF (√ of the ratio of Σ w|Ĝ − H|² over the mode's lines).
+    pub misfit_growth: (f64, f64),
+    /// Shared (both states carry the average), or kept apart.
+    pub shared: bool,
+}
+
+/// Machine-structure modes measured twice (issue #15). The workpiece's
+/// loss of mass moves the sensor modes; the modes below
+/// [`crate::sensitivity::SENSOR_FRACTION`] × the main mode's (the
+/// sensitivity's and the simulator's rule) belong to the machine and may
+/// stay put, and then the two impact tests are two independent measurements
+/// of them: their average has half the variance of either fit. Near a
+/// lightly damped machine mode and its anti-resonance that variance is what
+/// limits the smoother (BENCHMARKS.md, the seed-4 gap).
+///
+/// **Rule (stated).** Per machine mode (a pair of the first state's model
+/// below the sensor modes), the shared mode is the average of the two
+/// fits' poles and modal shares. Each FRF `(H, w)` (`w` the coherence
+/// weights of the fit) is judged over its lines within ±[`SHARE_WINDOW`]
+/// half-power bandwidths of the mode: the shared mode is kept if, on both
+/// FRFs, √(Σ w|Ĝ_shared − H|² / Σ w|Ĝ − H|²) ≤ [`SHARE_TOLERANCE`], i.e. the
+/// data cannot tell the two fits apart; otherwise (the mode moved, or is
+/// not resolved by [`SHARE_MIN_LINES`] lines) both states keep their own.
+pub fn share_machine_modes(ts: &TwoState, freq_hz: &[f64], frfs: [(&[Complex64], &[f64]); 2]) -> (TwoState, Vec<MachineMode>) {
+    let sensors = crate::sensitivity::sensor_mode_indices(&ts.before);
+    let mut out = ts.clone();
+    let mut report = Vec::new();
+    for (i, (t0, t1)) in ts.before.terms.iter().zip(&ts.after.terms).enumerate() {
+        let (Term::Pair { pole: p0, residue: r0 }, Term::Pair { pole: p1, residue: r1 }) = (*t0, *t1) else { continue };
+        if sensors.contains(&i) {
+            continue;
+        }
+        let pole = (p0 + p1) * 0.5;
+        let c = (modal_share(p0, r0) + modal_share(p1, r1)) * 0.5;
+        let mean = Term::Pair { pole, residue: c * pole.norm_sqr() / (2.0 * Complex64::i() * pole.im) };
+        let (f0, f1) = (fn_hz(p0), fn_hz(p1));
+        let (zeta, f) = (-pole.re / pole.norm(), fn_hz(pole));
+        let half = SHARE_WINDOW * zeta * f;
+        let lines: Vec<usize> = (0..freq_hz.len()).filter(|&k| (freq_hz[k] - f).abs() <= half).collect();
+        let growth = |m: &PoleResidueModel, (h, w): (&[Complex64], &[f64])| {
+            let mut shared = m.clone();
+            shared.terms[i] = mean;
+            let chi = |g: &PoleResidueModel| lines.iter().map(|&k| w[k] * (g.frf(freq_hz[k]) - h[k]).norm_sqr()).sum::<f64>();
+            (chi(&shared) / chi(m)).sqrt()
+        };
+        let g = (growth(&ts.before, frfs[0]), growth(&ts.after, frfs[1]));
+        // NaN (no misfit at all: noise-free data) keeps the fits apart.
+        let shared = lines.len() >= SHARE_MIN_LINES && g.0 <= SHARE_TOLERANCE && g.1 <= SHARE_TOLERANCE;
+        if shared {
+            out.before.terms[i] = mean;
+            out.after.terms[i] = mean;
+        }
+        report.push(MachineMode { fn_hz: (f0, f1), misfit_growth: g, shared });
+    }
+    (out, report)
+}
+
+/// The result of [`design_over_range`] for one axis.
+#[derive(Clone, Debug)]
+pub struct RangeDesign {
+    /// The paired states, machine modes shared where measured alike.
+    pub states: TwoState,
+    /// What became of each machine-structure mode ([`share_machine_modes`]).
+    pub machine: Vec<MachineMode>,
+    /// Every candidate design.
+    pub candidates: Vec<RangeCandidate>,
+    /// Index of the chosen one in `candidates`.
+    pub best: usize,
 }
 
 /// The box image for a set-up that moves between two measured states
@@ -549,7 +642,6 @@ pub fn pair_second_state(freq_hz: &[f64], d0: &AxisDesign, second: &AxisFrf, vf:
 /// lines, with the first FRF's coherence). Each candidate's filter is
 /// evaluated against the interpolated model at every s with the design's own
 /// criterion ([`crate::design::criterion_j`], the first FRF's band).
-/// Returns the pairing, every candidate, and the index of the chosen one.
 pub fn design_over_range(
     freq_hz: &[f64],
     first: &AxisFrf,
@@ -557,10 +649,10 @@ pub fn design_over_range(
     r: f64,
     opts: &DesignOptions,
     candidate_states: &[f64],
-) -> Result<(TwoState, Vec<RangeCandidate>, usize)> {
+) -> Result<RangeDesign> {
     let name = axis_name(first.axis);
     let d0 = design_axis(freq_hz, first, r, opts).context("first FRF")?;
-    let ts = pair_second_state(freq_hz, &d0, second, &opts.vf)?;
+    let (ts, machine) = pair_second_state(freq_hz, first, &d0, second, &opts.vf)?;
     let ranges = criterion_ranges(&d0.bands, d0.compensated_band_hz);
     let width: f64 = ranges.iter().map(|b| b.1 - b.0).sum();
     let freqs = criterion_grid(&ranges);
@@ -584,7 +676,7 @@ pub fn design_over_range(
         cands.push(RangeCandidate { s, design, errors, worst });
     }
     let best = (0..cands.len()).min_by(|&a, &b| cands[a].worst.total_cmp(&cands[b].worst)).ok_or_else(|| anyhow::anyhow!("axis {name}: no candidate state"))?;
-    Ok((ts, cands, best))
+    Ok(RangeDesign { states: ts, machine, candidates: cands, best })
 }
 
 /// Both states of one axis in the model sidecar (`design --frf A --frf B`).

@@ -1,6 +1,8 @@
 //! `dynocomp design --frf BEFORE --frf AFTER` (issue #15, item 2): a set-up
 //! measured in two states. Per axis the two fitted models are paired and
-//! interpolated ([`crate::two_state`]); the box image is the candidate with
+//! interpolated ([`crate::two_state`]), the machine-structure modes both
+//! FRFs measured alike shared ([`crate::two_state::share_machine_modes`]);
+//! the box image is the candidate with
 //! the least worst-case predicted error over the range
 //! ([`crate::two_state::design_over_range`], candidates at s = 0, ¼, ½, ¾, 1);
 //! the model sidecar keeps both states for `compensate --offline --drift`.
@@ -56,7 +58,8 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     let mut lines = String::new();
     for (a, res) in f0.axes.iter().zip(results) {
         let name = axis_name(a.axis);
-        let (ts, cands, best) = res.with_context(|| format!("{} / {}: axis {name}", p0.display(), p1.display()))?;
+        let rd = res.with_context(|| format!("{} / {}: axis {name}", p0.display(), p1.display()))?;
+        let (ts, cands, best) = (&rd.states, &rd.candidates, rd.best);
         let c = &cands[best];
         let (first, last) = (&cands[0], &cands[cands.len() - 1]);
         let moved: Vec<String> =
@@ -70,12 +73,28 @@ pub fn run(args: &DesignArgs) -> Result<()> {
             100.0 * first.worst,
             100.0 * last.worst
         );
+        let shared: Vec<String> = rd.machine.iter().filter(|m| m.shared).map(|m| format!("{:.0}", 0.5 * (m.fn_hz.0 + m.fn_hz.1))).collect();
+        let apart: Vec<String> = rd
+            .machine
+            .iter()
+            .filter(|m| !m.shared)
+            .map(|m| format!("{:.0}→{:.0} (misfit ×{:.1} / ×{:.1})", m.fn_hz.0, m.fn_hz.1, m.misfit_growth.0, m.misfit_growth.1))
+            .collect();
+        if !rd.machine.is_empty() {
+            let _ = writeln!(
+                lines,
+                "{name} machine modes measured alike in both FRFs, averaged: {} Hz; kept apart: {}",
+                if shared.is_empty() { "none".to_string() } else { shared.join(", ") },
+                if apart.is_empty() { "none".to_string() } else { apart.join(", ") + " Hz" }
+            );
+        }
         let dm0 = first.design.discrete.as_ref().map(|x| x.0.clone()).ok_or_else(|| anyhow::anyhow!("axis {name}: no discrete model"))?;
-        entries.push((a.axis, TwoStateJson::new(&ts, first.design.compensated_band_hz, &dm0)));
+        entries.push((a.axis, TwoStateJson::new(ts, first.design.compensated_band_hz, &dm0)));
         axes_json.push(RangeAxisJson {
             axis: name,
             modes_before: ts.before.modes(),
             modes_after: ts.after.modes(),
+            machine_modes: rd.machine.clone(),
             chosen_state: c.s,
             worst_case_error: c.worst,
             single_state_worst_case: (first.worst, last.worst),
@@ -140,6 +159,8 @@ struct RangeAxisJson {
     /// (Hz, ζ) of the paired modes in each state.
     modes_before: Vec<(f64, f64)>,
     modes_after: Vec<(f64, f64)>,
+    /// Machine-structure modes: shared between the states or kept apart.
+    machine_modes: Vec<crate::two_state::MachineMode>,
     /// Model state the image was designed for.
     chosen_state: f64,
     /// Its worst-case predicted in-band error over the range.

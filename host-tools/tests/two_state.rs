@@ -11,7 +11,7 @@ mod sim_common;
 
 use dynocomp::design::{design_axis, DesignOptions};
 use dynocomp::discretize::{discretize, Discretization};
-use dynocomp::fit::vf::{coherence_weights, fit_order, VfOptions};
+use dynocomp::fit::vf::VfOptions;
 use dynocomp::fit::PoleResidueModel;
 use dynocomp::metrics::{accuracy, sample_variance};
 use dynocomp::simulate::drift::{measure_drifting, shift_sensor_modes, simulate_drifting, Drift};
@@ -20,17 +20,17 @@ use dynocomp::smoother::Smoother;
 use dynocomp::discretize::fit_with_structure;
 use dynocomp::kalman::{augmented_plant, solve_filter_dare};
 use dynocomp::two_state::{
-    design_over_range, drift_log_likelihood, pair, smooth_drifting, smooth_drifting_in_segments, state_at, DriftSmoothing, RangeCandidate, TwoState, RANGE_STATES,
+    design_over_range, drift_log_likelihood, pair, pair_second_state, smooth_drifting, smooth_drifting_in_segments, state_at, DriftSmoothing, RangeCandidate, RangeDesign, TwoState, RANGE_STATES,
     S_LEVELS,
 };
 use nalgebra::DVector;
 
 use sim_common::FS;
 /// Issue target: two-state within 1.5x of the exact model. Met on the
-/// median and on 7 of the 9 axes below; NOT met on seed 4 x and y (1.66x,
-/// 1.65x): there the fitted FRF models alone, without drift, are 1.63x /
-/// 1.13x off the true model (`no_drift_reference`, BENCHMARKS.md). Each
-/// axis is guarded at the measured level, not at the target.
+/// median and on 8 of the 9 axes below; NOT met on seed 4 y (1.64x; seed 4
+/// x was 1.66x before the machine modes were shared, now 1.08x): see
+/// BENCHMARKS.md. Each axis is guarded at the measured level, not at the
+/// target.
 const TARGET: f64 = 1.5;
 const GUARD: f64 = 1.75;
 
@@ -174,11 +174,11 @@ fn drift_case(seed: u64, rpm: f64, delta: f64) -> Vec<(f64, f64, f64)> {
         let y = &s.measured[a];
         // Today: one FRF (before), stationary smoother.
         let single = Smoother::new(&dm, q, rr).unwrap().smooth(y);
-        // Two states: the after FRF fitted at the before model's order, paired.
-        let after_frf = out.frf_after.axis(a).unwrap();
-        let w = coherence_weights(&after_frf.frf, after_frf.coherence.as_deref());
-        let after = fit_order(&out.frf_after.freq_hz, &after_frf.frf, &w, d.model.order(), &VfOptions::default()).unwrap();
-        let ts = pair(&a.to_string(), &d.model, &after).unwrap();
+        // Two states: the after FRF fitted at the before model's order,
+        // paired, machine modes measured alike shared (what `design` does).
+        let (ts, machine) = pair_second_state(&s.frf.freq_hz, s.frf.axis(a).unwrap(), &d, out.frf_after.axis(a).unwrap(), &VfOptions::default()).unwrap();
+        let shared: Vec<String> = machine.iter().filter(|m| m.shared).map(|m| format!("{:.0}", m.fn_hz.0)).collect();
+        eprintln!("seed {seed} axis {a}: machine modes shared {} Hz, {} kept apart", shared.join(", "), machine.len() - shared.len());
         let two = smooth_drifting(y, &|s| ts.at(s), &DriftSmoothing { fs_hz: FS, interval_s: (0.0, p.duration_s), band_hz: band, structure, q, r: rr }).unwrap();
         // Exact: the true set-up at every instant (the simulator's modes).
         let true_axis = s.dyno.axis(a).clone();
@@ -229,6 +229,8 @@ fn two_state_smoother_follows_a_drift_within_1_5x_of_the_exact_model() {
     let median = ratios[ratios.len() / 2];
     eprintln!("two-state / exact: median {median:.2}, worst {:.2}", ratios[ratios.len() - 1]);
     assert!(median <= TARGET, "median ratio {median:.2}");
+    // 8 of 9 within the target; 7 with the machine modes kept apart.
+    assert!(ratios.iter().filter(|&&r| r <= TARGET).count() >= 8, "{ratios:?}");
     for (i, &(single, two, exact)) in rows.iter().enumerate() {
         assert!(two <= GUARD * exact, "row {i}: two-state {two:.4} vs exact {exact:.4}");
         // Negative control: today's single-FRF smoother misses the target.
@@ -249,7 +251,7 @@ fn box_image_for_the_range_beats_either_single_state_design() {
     let f_fine = FS * p.oversample as f64;
     for a in [0, 1] {
         let r = sample_variance(&s.idle[a]);
-        let (_, cands, best) = design_over_range(&s.frf.freq_hz, s.frf.axis(a).unwrap(), out.frf_after.axis(a).unwrap(), r, &opts, &[0.0, 0.25, 0.5, 0.75, 1.0]).unwrap();
+        let RangeDesign { candidates: cands, best, .. } = design_over_range(&s.frf.freq_hz, s.frf.axis(a).unwrap(), out.frf_after.axis(a).unwrap(), r, &opts, &[0.0, 0.25, 0.5, 0.75, 1.0]).unwrap();
         let single = [&cands[0], &cands[cands.len() - 1]];
         let chosen = &cands[best];
         // Measured worst case over the range: flat force, true set-up at each state.
@@ -316,4 +318,48 @@ fn drift_likelihood_tells_drift_from_none_with_the_exact_model() {
     assert!(c_full >= 0.5 && gain_full >= 100.0, "full drift: best c {c_full}, {gain_full:.0} nats above c = 0");
     let (c_none, _) = best_c(0.0);
     assert_eq!(c_none, 0.0, "no drift (negative control)");
+}
+
+/// Machine-structure modes are shared between the states only where both
+/// impact tests measured them alike (`share_machine_modes`): with the
+/// sensor modes alone moved every machine mode is shared; a machine mode
+/// that moved too is kept apart in each state (negative control).
+#[test]
+fn machine_modes_are_shared_only_where_both_frfs_measured_them_alike() {
+    use dynocomp::simulate::impact::impact_test_axis;
+    use dynocomp::simulate::sub_seed;
+    let p = sim_common::params(6_000.0, 4);
+    let dyno = MultiAxisDynamometer::random(sub_seed(4, 1), &p);
+    let before = dyno.axis(0).clone();
+    let ip = &p.impact;
+    let freq = dynocomp::simulate::impact::impact_freqs(ip.n_lines, ip.df_hz);
+    let frf0 = impact_test_axis(&before, 0, ip.n_lines, ip.df_hz, 41, ip);
+    let opts = DesignOptions { fs_hz: FS, lag: 4, ..Default::default() };
+    let d0 = design_axis(&freq, &frf0, 0.05, &opts).unwrap();
+    let sensors_moved = shift_sensor_modes(&before, 0.05);
+    // The machine mode nearest 413 Hz (ζ ≈ 0.017) moved as well.
+    let m = sensors_moved.modes.iter().enumerate().filter(|(_, m)| m.fn_hz < 1000.0).min_by(|a, b| (a.1.fn_hz - 413.0).abs().total_cmp(&(b.1.fn_hz - 413.0).abs())).unwrap().0;
+    let f_m = sensors_moved.modes[m].fn_hz;
+    let run = |after: &dynocomp::simulate::Dynamometer| {
+        let frf1 = impact_test_axis(after, 0, ip.n_lines, ip.df_hz, 42, ip);
+        pair_second_state(&freq, &frf0, &d0, &frf1, &VfOptions::default()).unwrap()
+    };
+    let (ts, machine) = run(&sensors_moved);
+    eprintln!("sensor modes moved: {machine:?}");
+    assert!(machine.len() >= 2 && machine.iter().all(|x| x.shared), "{machine:?}");
+    let sensors = dynocomp::sensitivity::sensor_mode_indices(&ts.before);
+    for (i, (a, b)) in ts.before.terms.iter().zip(&ts.after.terms).enumerate() {
+        // Shared modes are one mode in both states; sensor modes keep their shift.
+        assert_eq!(a == b, !sensors.contains(&i) && matches!(a, dynocomp::fit::Term::Pair { .. }), "term {i}: {a:?} / {b:?}");
+    }
+    for shift in [0.002, 0.005, 0.01] {
+        let mut moved = sensors_moved.clone();
+        moved.modes[m].fn_hz *= 1.0 + shift;
+        let (_, machine) = run(&moved);
+        let near = machine.iter().find(|x| (x.fn_hz.0 - f_m).abs() < 5.0).unwrap();
+        eprintln!("machine mode {f_m:.1} Hz also moved {:+.1} %: {near:?}", 100.0 * shift);
+        // Even 0.2 % (an eighth of the mode's half-power bandwidth) is seen.
+        assert!(!near.shared && near.misfit_growth.0.min(near.misfit_growth.1) > 1.5, "{near:?}");
+        assert!(machine.iter().filter(|x| x.shared).count() == machine.len() - 1, "{machine:?}");
+    }
 }
