@@ -159,14 +159,40 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
                 sidecar.axes.iter_mut().for_each(|m| m.force_prior = None);
             }
             let priors: Vec<&str> = sidecar.axes.iter().filter(|m| m.force_prior.is_some()).map(|m| m.axis.as_str()).collect();
-            // The stationary smoother on a file runs in bounded memory; the
-            // drift smoother, the force prior (checked against the whole
-            // record) and a pipe (read once) keep the record whole.
-            if drift.is_none() && priors.is_empty() && crate::io::signal_file::can_read_twice(&a.input) {
-                how = "fixed-interval smoother, zero lag (offline only; forward pass spilled to temporary files beside the output, memory independent of the record's length)".to_string();
-                let smoothers = axes.iter().map(|&ax| crate::smoother::axis_smoother(i, &sidecar, ax, &source)).collect::<Result<Vec<_>>>()?;
+            // The smoothers on a file run in bounded memory; the force prior
+            // (checked against the whole record) and a pipe (read once) keep
+            // the record whole.
+            if priors.is_empty() && crate::io::signal_file::can_read_twice(&a.input) {
+                let spilled = "spilled to temporary files beside the output, memory independent of the record's length";
+                let smoothers;
+                let drifting;
+                let models: Vec<Box<dyn Fn(f64) -> crate::fit::PoleResidueModel + '_>>;
+                let passes: Vec<Box<dyn crate::smoother::SpilledPass + '_>> = match drift {
+                    Some((s0, s1)) => {
+                        how = format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only; forward pass and covariance checkpoints {spilled})");
+                        drifting = axes.iter().map(|&ax| crate::two_state::axis_drift(i, &sidecar, ax, &source, (s0, s1))).collect::<Result<Vec<_>>>()?;
+                        models = drifting.iter().map(|(ts, _)| Box::new(move |s: f64| ts.at(s)) as Box<dyn Fn(f64) -> _>).collect();
+                        let dir = crate::io::atomic::output_dir(&a.output);
+                        models
+                            .iter()
+                            .zip(&drifting)
+                            .zip(&axes)
+                            .map(|((m, (_, opts)), &ax)| {
+                                crate::two_state::SpilledDriftForward::new(&**m, opts, dir)
+                                    .map(|p| Box::new(p) as Box<dyn crate::smoother::SpilledPass>)
+                                    .with_context(|| format!("{source}: axis {}", crate::frf::axis_name(ax)))
+                            })
+                            .collect::<Result<_>>()?
+                    }
+                    None => {
+                        how = format!("fixed-interval smoother, zero lag (offline only; forward pass {spilled})");
+                        smoothers = axes.iter().map(|&ax| crate::smoother::axis_smoother(i, &sidecar, ax, &source)).collect::<Result<Vec<_>>>()?;
+                        let dir = crate::io::atomic::output_dir(&a.output);
+                        smoothers.iter().map(|sm| crate::smoother::SpilledForward::new(sm, dir).map(|p| Box::new(p) as Box<dyn crate::smoother::SpilledPass>)).collect::<Result<_>>()?
+                    }
+                };
                 progress.set_length(reader.len_hint().unwrap_or(0) * 2);
-                let est = smooth_spilled(&mut *reader, &smoothers, &axes, crate::io::atomic::output_dir(&a.output), fs, &source, &progress)?;
+                let est = smooth_spilled(&mut *reader, passes, &axes, crate::io::atomic::output_dir(&a.output), fs, &source, &progress)?;
                 // The input is read a second time, for its times and the report.
                 let (mut again, _) = open_signal(&a.input, map.as_ref())?;
                 n_samples = write_output(&a.output, out_fmt, &axes, has_time, reader.len_hint(), fs, |w| {
@@ -174,7 +200,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
                 })?;
             } else {
                 how = match drift {
-                    Some((s0, s1)) => format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only, whole record in memory; covariance checkpointed)"),
+                    Some((s0, s1)) => format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only, whole record in memory: the input is a pipe; covariance checkpointed)"),
                     None => "fixed-interval smoother, zero lag (offline only, whole record in memory)".to_string(),
                 };
                 if !priors.is_empty() && drift.is_none() {
@@ -344,14 +370,13 @@ fn stream_box(
 /// pass ([`crate::smoother::SpilledForward`]). Checks the record's rate.
 fn smooth_spilled(
     reader: &mut dyn SignalReader,
-    smoothers: &[crate::smoother::Smoother],
+    mut fwd: Vec<Box<dyn crate::smoother::SpilledPass + '_>>,
     axes: &[usize],
     dir: &Path,
     fs: u32,
     source: &str,
     progress: &indicatif::ProgressBar,
 ) -> Result<Vec<crate::smoother::SpilledEstimate>> {
-    let mut fwd = smoothers.iter().map(|sm| crate::smoother::SpilledForward::new(sm, dir)).collect::<Result<Vec<_>>>()?;
     let mut blk = Block::new(axes.len());
     let mut rate = RateTracker::default();
     while reader.read_block(&mut blk, BLOCK)? > 0 {

@@ -409,6 +409,29 @@ pub struct SpilledForward<'s> {
     n_pairs: u64,
 }
 
+/// A smoother's forward pass over a record taken block by block, spilled
+/// to temporary files, and its backward pass ([`SpilledForward`], and the
+/// drift smoother's [`crate::two_state::SpilledDriftForward`]).
+pub trait SpilledPass {
+    /// Take the next samples of y (N).
+    fn push(&mut self, y: &[f64]) -> Result<()>;
+    /// The backward pass: the estimates F̂_k|N of every sample taken, in a
+    /// temporary file in `dir`. `on_chunk` is told the samples done (for a
+    /// progress bar). Refuses a non-finite estimate, naming `name` and the
+    /// sample.
+    fn backward(self: Box<Self>, dir: &Path, name: &str, source: &str, on_chunk: &dyn Fn(u64)) -> Result<SpilledEstimate>;
+}
+
+impl SpilledPass for SpilledForward<'_> {
+    fn push(&mut self, y: &[f64]) -> Result<()> {
+        SpilledForward::push(self, y)
+    }
+
+    fn backward(self: Box<Self>, dir: &Path, name: &str, source: &str, on_chunk: &dyn Fn(u64)) -> Result<SpilledEstimate> {
+        SpilledForward::backward(*self, dir, name, source, on_chunk)
+    }
+}
+
 impl<'s> SpilledForward<'s> {
     /// Start the forward pass; the temporary files go to `dir`.
     pub fn new(sm: &'s Smoother, dir: &Path) -> Result<Self> {
@@ -488,8 +511,7 @@ impl<'s> SpilledForward<'s> {
             }
             hi = lo;
         }
-        out.seek(SeekFrom::Start(0)).map_err(io_err)?;
-        Ok(SpilledEstimate { r: std::io::BufReader::with_capacity(1 << 20, out), left: self.n_y })
+        SpilledEstimate::new(out, self.n_y).map_err(io_err)
     }
 }
 
@@ -500,6 +522,14 @@ pub struct SpilledEstimate {
 }
 
 impl SpilledEstimate {
+    /// The `n` estimates (f64, little-endian) written to `file`, read from
+    /// its start.
+    pub fn new(mut file: std::fs::File, n: u64) -> std::io::Result<Self> {
+        use std::io::Seek;
+        file.seek(std::io::SeekFrom::Start(0))?;
+        Ok(SpilledEstimate { r: std::io::BufReader::with_capacity(1 << 20, file), left: n })
+    }
+
     /// The next `n` estimates (N) into `out` (cleared first); an error if
     /// fewer are left.
     pub fn read(&mut self, n: usize, out: &mut Vec<f64>) -> Result<()> {

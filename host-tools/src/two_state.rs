@@ -43,7 +43,9 @@
 //! 3 axes against 421 with every step's gain and covariance row kept
 //! (measured, BENCHMARKS.md). A is applied as its nonzero entries
 //! (≤ 3 per row), and P is held where it has converged and the model does
-//! not change (before and after the drift).
+//! not change (before and after the drift). On a file,
+//! [`SpilledDriftForward`] keeps those 16 bytes and the checkpoints on disk
+//! instead, so memory no longer grows with the record.
 
 use anyhow::{bail, Context, Result};
 use nalgebra::{DMatrix, DVector};
@@ -56,7 +58,8 @@ use crate::fit::vf::{coherence_weights, fit_order, VfOptions};
 use crate::fit::{PoleResidueModel, Term};
 use crate::frf::{axis_name, AxisFrf};
 use crate::io::signal_csv::SignalRecord;
-use crate::smoother::{model_from_json, terms_to_json, ModelSidecar, TermJson};
+use crate::smoother::{model_from_json, terms_to_json, ModelSidecar, SpilledEstimate, SpilledPass, TermJson};
+use std::path::Path;
 use dynocomp_core::image::CoeffImage;
 use crate::kalman::{augmented_plant, solve_filter_dare};
 
@@ -391,6 +394,159 @@ pub fn drift_log_likelihood(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueMode
     Ok(drift_passes(y, model_at, opts, None, &|_| {})?.1)
 }
 
+/// The forward pass's state (module doc): each level's plant, built when
+/// the pass first reaches it, P⁻_k and x⁻_k. Step k takes ỹ_k.
+struct DriftForward<'m> {
+    model_at: &'m dyn Fn(f64) -> PoleResidueModel,
+    opts: DriftSmoothing,
+    plants: Vec<Option<Plant>>,
+    n: usize,
+    force: usize,
+    cov: Covariance,
+    x: DVector<f64>,
+    xp: DVector<f64>,
+    w: Scratch,
+    /// Steps taken.
+    k: usize,
+    /// Log-likelihood of the steps after the D copies of y₀ (nats).
+    log_lik: f64,
+}
+
+/// Model level (0 ..= [`S_LEVELS`]) of step k: the state at time k/fs.
+fn level_of(opts: &DriftSmoothing, k: usize) -> usize {
+    (state_at(k as f64 / opts.fs_hz, opts.interval_s.0, opts.interval_s.1) * S_LEVELS as f64).round() as usize
+}
+
+impl<'m> DriftForward<'m> {
+    fn new(model_at: &'m dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing) -> Result<Self> {
+        let DriftSmoothing { interval_s: (start_s, end_s), q, r, .. } = *opts;
+        if !(q > 0.0 && q.is_finite() && r > 0.0 && r.is_finite()) {
+            bail!("smoother needs q > 0 and R > 0 (got q = {q}, R = {r})");
+        }
+        if !(start_s.is_finite() && end_s.is_finite() && end_s > start_s) {
+            bail!("--drift {start_s}:{end_s}: need START < END (s)");
+        }
+        let plant0 = augmented_plant(&Self::discrete(model_at, opts, 0)?, 0);
+        let n = plant0.a.nrows();
+        let qm = &plant0.g * plant0.g.transpose() * q;
+        let sol = solve_filter_dare(&plant0.a, &plant0.c, &qm, r)?;
+        let mut plants: Vec<Option<Plant>> = (0..=S_LEVELS).map(|_| None).collect();
+        let force = plant0.n_plant;
+        plants[0] = Some(Plant::new(&plant0.a, plant0.c));
+        Ok(DriftForward {
+            model_at,
+            opts: *opts,
+            plants,
+            n,
+            force,
+            cov: Covariance { p: sol.p, frozen: false, gain: None, stale: true },
+            x: DVector::zeros(n),
+            xp: DVector::zeros(n),
+            w: Scratch { pp: DMatrix::zeros(n, n), t: DMatrix::zeros(n, n), next: DMatrix::zeros(n, n) },
+            k: 0,
+            log_lik: 0.0,
+        })
+    }
+
+    fn discrete(model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing, level: usize) -> Result<DiscreteModel> {
+        let s = level as f64 / S_LEVELS as f64;
+        let (taps, advance) = opts.structure;
+        fit_with_structure(&model_at(s), opts.fs_hz, opts.band_hz, taps, advance).with_context(|| format!("model at state s = {s:.3}"))
+    }
+
+    /// P⁻ of the next step, for a checkpoint (its gain is recomputed: the
+    /// same bits, as P and the model are the same).
+    fn checkpoint(&self) -> Covariance {
+        Covariance { p: self.cov.p.clone(), frozen: self.cov.frozen, gain: None, stale: true }
+    }
+
+    /// Step k with ỹ_k: (x⁻_k[F], e_k), the prior's force estimate and the
+    /// innovation, for the backward pass.
+    fn step(&mut self, yk: f64) -> Result<(f64, f64)> {
+        let (k, n, force) = (self.k, self.n, self.force);
+        let level = level_of(&self.opts, k);
+        if self.plants[level].is_none() {
+            let pl = augmented_plant(&Self::discrete(self.model_at, &self.opts, level)?, 0);
+            if pl.a.nrows() != n {
+                bail!("the model at state s = {:.3} has another state size ({} vs {n}); a mode crossed fs/2", level as f64 / S_LEVELS as f64, pl.a.nrows());
+            }
+            self.plants[level] = Some(Plant::new(&pl.a, pl.c));
+        }
+        let pl = self.plants[level].as_ref().expect("built above");
+        // Whether step k + 1 keeps the model (P may be held); after the
+        // last step P is not used.
+        let same_next = level_of(&self.opts, k + 1) == level;
+        let g = self.cov.step(pl, same_next, self.opts.r, self.opts.q, force, &mut self.w);
+        let prior_f = self.x[force];
+        let e = yk - pl.c.dot(&self.x);
+        if k >= self.opts.structure.1 {
+            self.log_lik -= 0.5 * ((2.0 * PI * g.s).ln() + e * e / g.s);
+        }
+        self.xp.copy_from(&self.x);
+        self.xp.axpy(e, &g.k, 1.0);
+        pl.mul_vec(&self.xp, &mut self.x);
+        self.k += 1;
+        Ok((prior_f, e))
+    }
+
+    /// The backward pass over the `len` steps taken.
+    fn into_backward(self) -> DriftBackward {
+        let n = self.n;
+        DriftBackward {
+            opts: self.opts,
+            plants: self.plants,
+            force: self.force,
+            len: self.k,
+            lambda_hat: DVector::zeros(n),
+            lambda_tilde: DVector::zeros(n),
+            gains: Vec::new(),
+            w: self.w,
+        }
+    }
+}
+
+/// The modified Bryson–Frazier pass, one checkpointed segment at a time
+/// from the record's end.
+struct DriftBackward {
+    opts: DriftSmoothing,
+    plants: Vec<Option<Plant>>,
+    force: usize,
+    len: usize,
+    lambda_hat: DVector<f64>,
+    lambda_tilde: DVector<f64>,
+    gains: Vec<Gain>,
+    w: Scratch,
+}
+
+impl DriftBackward {
+    /// F̂_k|N for k = k0 … k0 + out.len() − 1 (the segment before the ones
+    /// already done) into `out`, from the checkpoint `start` (P⁻ of step
+    /// k0) and the forward pass's x⁻_k[F] and e_k of the same steps.
+    fn segment(&mut self, start: Covariance, k0: usize, prior_f: &[f64], es: &[f64], out: &mut [f64]) {
+        let DriftBackward { opts, plants, force, lambda_hat, lambda_tilde, gains, w, .. } = self;
+        let plant = |k: usize| plants[level_of(opts, k)].as_ref().expect("reached by the forward pass");
+        let k1 = k0 + out.len();
+        // Recompute the segment's gains from its checkpoint, exactly as the
+        // forward pass did.
+        let mut cov = start;
+        gains.clear();
+        for k in k0..k1 {
+            let same_next = level_of(opts, k + 1) == level_of(opts, k);
+            gains.push(cov.step(plant(k), same_next, opts.r, opts.q, *force, w).clone());
+        }
+        for k in (k0..k1).rev() {
+            let g = &gains[k - k0];
+            let kl = g.k.dot(lambda_hat);
+            lambda_tilde.copy_from(lambda_hat);
+            lambda_tilde.axpy(-(es[k - k0] / g.s + kl), &plant(k).c, 1.0);
+            out[k - k0] = prior_f[k - k0] - g.p_row.dot(lambda_tilde);
+            if k > 0 {
+                plant(k - 1).tr_mul_vec(lambda_tilde, lambda_hat);
+            }
+        }
+    }
+}
+
 /// The forward pass, and with `segment` the backward pass with the
 /// covariance checkpointed every `segment` samples: (smoothed force
 /// estimate, or nothing; log-likelihood of the record).
@@ -401,111 +557,41 @@ fn drift_passes(
     segment: Option<usize>,
     progress: &dyn Fn(u64),
 ) -> Result<(Vec<f64>, f64)> {
-    let DriftSmoothing { fs_hz, interval_s: (start_s, end_s), band_hz, structure, q, r } = *opts;
-    if !(q > 0.0 && q.is_finite() && r > 0.0 && r.is_finite()) {
-        bail!("smoother needs q > 0 and R > 0 (got q = {q}, R = {r})");
-    }
-    if !(start_s.is_finite() && end_s.is_finite() && end_s > start_s) {
-        bail!("--drift {start_s}:{end_s}: need START < END (s)");
-    }
-    let (taps, advance) = structure;
-    let discrete = |level: usize| -> Result<DiscreteModel> {
-        let s = level as f64 / S_LEVELS as f64;
-        fit_with_structure(&model_at(s), fs_hz, band_hz, taps, advance).with_context(|| format!("model at state s = {s:.3}"))
-    };
-    let dm0 = discrete(0)?;
-    let plant0 = augmented_plant(&dm0, 0);
-    let n = plant0.a.nrows();
-    let force = plant0.n_plant;
-    let qm = &plant0.g * plant0.g.transpose() * q;
-    let sol = solve_filter_dare(&plant0.a, &plant0.c, &qm, r)?;
-    // Each level's plant, built when the forward pass first reaches it.
-    let mut plants: Vec<Option<Plant>> = (0..=S_LEVELS).map(|_| None).collect();
-    plants[0] = Some(Plant::new(&plant0.a, plant0.c));
+    let mut fwd = DriftForward::new(model_at, opts)?;
+    let advance = opts.structure.1;
     // ỹ_k = y_{k−D}: D copies of y_0 in front (as the stationary smoother).
     let yt: Vec<f64> = std::iter::repeat_n(y.first().copied().unwrap_or(0.0), advance).chain(y.iter().copied()).collect();
-    // Step k of ỹ carries the force F_k (time k/fs) and its model.
-    let level_of = |k: usize| -> usize {
-        let t = k as f64 / fs_hz;
-        (state_at(t, start_s, end_s) * S_LEVELS as f64).round() as usize
-    };
     let len = yt.len();
     let kept = if segment.is_some() { len } else { 0 };
     let mut es = Vec::with_capacity(kept);
     let mut prior_f = Vec::with_capacity(kept);
     let mut checkpoints: Vec<Covariance> = Vec::new();
-    let mut w = Scratch { pp: DMatrix::zeros(n, n), t: DMatrix::zeros(n, n), next: DMatrix::zeros(n, n) };
-    let mut x = DVector::<f64>::zeros(n);
-    let mut xp = DVector::<f64>::zeros(n);
-    let mut cov = Covariance { p: sol.p, frozen: false, gain: None, stale: true };
-    let mut log_lik = 0.0;
     for (k, &yk) in yt.iter().enumerate() {
-        let level = level_of(k);
-        if plants[level].is_none() {
-            let dm = discrete(level)?;
-            let pl = augmented_plant(&dm, 0);
-            if pl.a.nrows() != n {
-                bail!("the model at state s = {:.3} has another state size ({} vs {n}); a mode crossed fs/2", level as f64 / S_LEVELS as f64, pl.a.nrows());
-            }
-            plants[level] = Some(Plant::new(&pl.a, pl.c));
+        if segment.is_some_and(|seg| k % seg == 0) {
+            checkpoints.push(fwd.checkpoint());
         }
-        let pl = plants[level].as_ref().expect("built above");
-        if let Some(seg) = segment {
-            if k % seg == 0 {
-                checkpoints.push(cov.clone());
-            }
-        }
-        let same_next = k + 1 < len && level_of(k + 1) == level;
-        let g = cov.step(pl, same_next, r, q, force, &mut w);
-        let e = yk - pl.c.dot(&x);
-        if k >= advance {
-            log_lik -= 0.5 * ((2.0 * PI * g.s).ln() + e * e / g.s);
-        }
+        let (f, e) = fwd.step(yk)?;
         if segment.is_some() {
-            prior_f.push(x[force]);
+            prior_f.push(f);
             es.push(e);
         }
-        xp.copy_from(&x);
-        xp.axpy(e, &g.k, 1.0);
-        pl.mul_vec(&xp, &mut x);
         if k % 4096 == 4095 {
             progress(4096);
         }
     }
     progress((len % 4096) as u64);
+    let log_lik = fwd.log_lik;
     let Some(seg) = segment else {
         if !log_lik.is_finite() {
             bail!("the time-varying filter's likelihood became non-finite");
         }
         return Ok((Vec::new(), log_lik));
     };
-    let plant = |k: usize| plants[level_of(k)].as_ref().expect("reached by the forward pass");
-    let mut lambda_hat = DVector::<f64>::zeros(n);
-    let mut lambda_tilde = DVector::<f64>::zeros(n);
+    let mut bw = fwd.into_backward();
     let mut out = vec![0.0; len];
-    let mut gains: Vec<Gain> = Vec::with_capacity(seg);
-    for (j, start) in checkpoints.iter().enumerate().rev() {
-        // Recompute this segment's gains from its checkpoint, exactly as the
-        // forward pass did.
-        let k0 = j * seg;
-        let k1 = (k0 + seg).min(len);
-        gains.clear();
-        let mut cov = start.clone();
-        for k in k0..k1 {
-            let same_next = k + 1 < len && level_of(k + 1) == level_of(k);
-            gains.push(cov.step(plant(k), same_next, r, q, force, &mut w).clone());
-        }
-        for k in (k0..k1).rev() {
-            let g = &gains[k - k0];
-            let pl = plant(k);
-            let kl = g.k.dot(&lambda_hat);
-            lambda_tilde.copy_from(&lambda_hat);
-            lambda_tilde.axpy(-(es[k] / g.s + kl), &pl.c, 1.0);
-            out[k] = prior_f[k] - g.p_row.dot(&lambda_tilde);
-            if k > 0 {
-                plant(k - 1).tr_mul_vec(&lambda_tilde, &mut lambda_hat);
-            }
-        }
+    for (j, start) in checkpoints.into_iter().enumerate().rev() {
+        let (k0, k1) = (j * seg, ((j + 1) * seg).min(len));
+        bw.segment(start, k0, &prior_f[k0..k1], &es[k0..k1], &mut out[k0..k1]);
         progress((k1 - k0) as u64);
     }
     if let Some(k) = out.iter().position(|v| !v.is_finite()) {
@@ -513,6 +599,119 @@ fn drift_passes(
     }
     out.truncate(len - advance.min(len));
     Ok((out, log_lik))
+}
+
+/// Samples per checkpoint of [`SpilledDriftForward`] (the checkpoints go to
+/// a temporary file: n² values per segment, about 1.2 bytes per sample at
+/// n ≈ 25; one segment's gains and spilled pairs in memory, ~2 MB).
+pub const SPILLED_SEGMENT: usize = 4096;
+
+/// The drift smoother ([`smooth_drifting`]) over a record taken block by
+/// block, in memory independent of the record's length: the forward pass
+/// writes x⁻_k[F] and e_k (16 bytes per sample) and every
+/// [`SPILLED_SEGMENT`]-th P⁻ to temporary files; [`SpilledPass::backward`]
+/// reads them back one segment at a time from the end, recomputes the
+/// segment's gains from its checkpoint, and writes the estimates to a third.
+/// Same steps and arithmetic as [`smooth_drifting_in_segments`] with that
+/// segment length.
+pub struct SpilledDriftForward<'m> {
+    fwd: DriftForward<'m>,
+    pairs: std::io::BufWriter<std::fs::File>,
+    checkpoints: std::io::BufWriter<std::fs::File>,
+    /// Samples of y taken.
+    n_y: u64,
+}
+
+impl<'m> SpilledDriftForward<'m> {
+    /// Start the forward pass; the temporary files go to `dir`.
+    pub fn new(model_at: &'m dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing, dir: &Path) -> Result<Self> {
+        let fwd = DriftForward::new(model_at, opts)?;
+        let temp = || {
+            tempfile::tempfile_in(dir)
+                .map(|f| std::io::BufWriter::with_capacity(1 << 20, f))
+                .with_context(|| format!("{}: cannot create a temporary file for the drift smoother's forward pass", dir.display()))
+        };
+        Ok(SpilledDriftForward { fwd, pairs: temp()?, checkpoints: temp()?, n_y: 0 })
+    }
+
+    fn step(&mut self, yk: f64) -> Result<()> {
+        use std::io::Write;
+        if self.fwd.k.is_multiple_of(SPILLED_SEGMENT) {
+            let c = self.fwd.checkpoint();
+            for v in c.p.iter().chain(std::iter::once(&f64::from(u8::from(c.frozen)))) {
+                self.checkpoints.write_all(&v.to_le_bytes())?;
+            }
+        }
+        let (f, e) = self.fwd.step(yk)?;
+        self.pairs.write_all(&f.to_le_bytes())?;
+        self.pairs.write_all(&e.to_le_bytes())?;
+        Ok(())
+    }
+}
+
+impl SpilledPass for SpilledDriftForward<'_> {
+    fn push(&mut self, y: &[f64]) -> Result<()> {
+        if self.n_y == 0 {
+            // ỹ_k = y_{k−D}: D copies of y_0 in front.
+            if let Some(&y0) = y.first() {
+                for _ in 0..self.fwd.opts.structure.1 {
+                    self.step(y0)?;
+                }
+            }
+        }
+        for &yk in y {
+            self.step(yk)?;
+        }
+        self.n_y += y.len() as u64;
+        Ok(())
+    }
+
+    fn backward(self: Box<Self>, dir: &Path, name: &str, source: &str, on_chunk: &dyn Fn(u64)) -> Result<SpilledEstimate> {
+        use std::io::{Read, Seek, SeekFrom, Write};
+        let io_err = |e: std::io::Error| anyhow::anyhow!("{}: temporary file of the drift smoother: {e}", dir.display());
+        let SpilledDriftForward { fwd, pairs, checkpoints, n_y } = *self;
+        let mut pairs = pairs.into_inner().map_err(|e| io_err(e.into_error()))?;
+        let mut checkpoints = checkpoints.into_inner().map_err(|e| io_err(e.into_error()))?;
+        let mut out = tempfile::tempfile_in(dir).map_err(io_err)?;
+        let n_y = usize::try_from(n_y).map_err(|_| anyhow::anyhow!("{source}: record too long"))?;
+        let n = fwd.n;
+        let mut bw = fwd.into_backward();
+        let len = bw.len;
+        let mut bytes = vec![0u8; 16 * SPILLED_SEGMENT];
+        let mut p_bytes = vec![0u8; 8 * (n * n + 1)];
+        let (mut prior_f, mut es, mut est) = (Vec::new(), Vec::new(), vec![0.0; SPILLED_SEGMENT]);
+        let f64_at = |b: &[u8], i: usize| f64::from_le_bytes(b[8 * i..8 * i + 8].try_into().unwrap_or_default());
+        for j in (0..len.div_ceil(SPILLED_SEGMENT)).rev() {
+            let (k0, k1) = (j * SPILLED_SEGMENT, ((j + 1) * SPILLED_SEGMENT).min(len));
+            let buf = &mut bytes[..16 * (k1 - k0)];
+            pairs.seek(SeekFrom::Start(16 * k0 as u64)).map_err(io_err)?;
+            pairs.read_exact(buf).map_err(io_err)?;
+            prior_f.clear();
+            es.clear();
+            for i in 0..k1 - k0 {
+                prior_f.push(f64_at(buf, 2 * i));
+                es.push(f64_at(buf, 2 * i + 1));
+            }
+            checkpoints.seek(SeekFrom::Start((j * p_bytes.len()) as u64)).map_err(io_err)?;
+            checkpoints.read_exact(&mut p_bytes).map_err(io_err)?;
+            let p = DMatrix::from_iterator(n, n, (0..n * n).map(|i| f64_at(&p_bytes, i)));
+            let start = Covariance { p, frozen: f64_at(&p_bytes, n * n) != 0.0, gain: None, stale: true };
+            let seg = &mut est[..k1 - k0];
+            bw.segment(start, k0, &prior_f, &es, seg);
+            // Keep F̂_k for the record's own samples, k < n_y.
+            let keep = k1.min(n_y).saturating_sub(k0);
+            if let Some(i) = seg[..keep].iter().position(|v| !v.is_finite()) {
+                bail!("{source}: smoothed {name} became non-finite at sample {}", k0 + i);
+            }
+            if keep > 0 {
+                let chunk: Vec<u8> = seg[..keep].iter().flat_map(|v| v.to_le_bytes()).collect();
+                out.seek(SeekFrom::Start(8 * k0 as u64)).map_err(io_err)?;
+                out.write_all(&chunk).map_err(io_err)?;
+                on_chunk(keep as u64);
+            }
+        }
+        SpilledEstimate::new(out, n_y as u64).map_err(io_err)
+    }
 }
 
 /// States s at which a box image designed for the range is evaluated.
@@ -733,22 +932,35 @@ pub fn smooth_record_drifting(
     interval_s: (f64, f64),
     progress: &dyn Fn(u64),
 ) -> Result<SignalRecord> {
-    let fs_hz = f64::from(image.fs_hz);
     let mut channels = Vec::with_capacity(rec.channels.len());
     for (axis, y) in &rec.channels {
-        let name = axis_name(*axis);
-        let Some(a) = image.axes.get(*axis).copied().flatten() else {
-            bail!("{source}: column f{name} has no compensator (and no q, R) in the image; drop the column or design for that axis");
-        };
-        let Some(entry) = sidecar.axes.iter().find(|m| m.axis == name).and_then(|m| m.two_state.as_ref()) else {
-            bail!("{source}: --drift needs two FRF states for axis {name} in the model sidecar: design with `--frf BEFORE --frf AFTER`");
-        };
-        let ts = entry.states(source, name)?;
-        let opts = DriftSmoothing { fs_hz, interval_s, band_hz: entry.band_hz, structure: (entry.fir_taps, entry.advance), q: a.summary.q, r: a.summary.r };
-        let out = smooth_drifting_in_segments(y, &|s| ts.at(s), &opts, segment_len(y.len()), progress).with_context(|| format!("{source}: axis {name}"))?;
+        let (ts, opts) = axis_drift(image, sidecar, *axis, source, interval_s)?;
+        let out = smooth_drifting_in_segments(y, &|s| ts.at(s), &opts, segment_len(y.len()), progress).with_context(|| format!("{source}: axis {}", axis_name(*axis)))?;
         channels.push((*axis, out));
     }
     Ok(SignalRecord { t_s: rec.t_s.clone(), channels })
+}
+
+/// The two states of `axis` from the sidecar and the drift smoother's
+/// settings (q and R from the image), or why the column cannot follow a drift.
+pub fn axis_drift(image: &CoeffImage, sidecar: &ModelSidecar, axis: usize, source: &str, interval_s: (f64, f64)) -> Result<(TwoState, DriftSmoothing)> {
+    let name = axis_name(axis);
+    let Some(a) = image.axes.get(axis).copied().flatten() else {
+        bail!("{source}: column f{name} has no compensator (and no q, R) in the image; drop the column or design for that axis");
+    };
+    let Some(entry) = sidecar.axes.iter().find(|m| m.axis == name).and_then(|m| m.two_state.as_ref()) else {
+        bail!("{source}: --drift needs two FRF states for axis {name} in the model sidecar: design with `--frf BEFORE --frf AFTER`");
+    };
+    let ts = entry.states(source, name)?;
+    let opts = DriftSmoothing {
+        fs_hz: f64::from(image.fs_hz),
+        interval_s,
+        band_hz: entry.band_hz,
+        structure: (entry.fir_taps, entry.advance),
+        q: a.summary.q,
+        r: a.summary.r,
+    };
+    Ok((ts, opts))
 }
 
 /// Parse `--drift START:END` (seconds, 0 ≤ START < END).

@@ -121,6 +121,20 @@ fn dense_reference(y: &[f64], ts: &TwoState, o: &DriftSmoothing) -> Vec<f64> {
     out
 }
 
+/// A sensor mode moving 2300 → 2420 Hz over `interval_s`, a record of
+/// `len` samples (two tones and a little deterministic noise), and the
+/// smoother's settings for it.
+fn drift_fixture(len: usize, interval_s: (f64, f64)) -> (TwoState, Vec<f64>, DriftSmoothing) {
+    let before = PoleResidueModel::from_modes(&[(400.0, 0.03, 0.1), (2300.0, 0.02, 0.9)]);
+    let after = PoleResidueModel::from_modes(&[(400.0, 0.03, 0.1), (2420.0, 0.02, 0.9)]);
+    let ts = TwoState { before, after };
+    let band = (0.0, 4000.0);
+    let (dm, _) = discretize(&ts.before, FS, Discretization::Fit, band).unwrap();
+    let y: Vec<f64> = (0..len).map(|k| (k as f64 * 0.013).sin() * 50.0 + (k as f64 * 0.71).sin() * 9.0 + ((k * 7919) % 13) as f64).collect();
+    let opts = DriftSmoothing { fs_hz: FS, interval_s, band_hz: band, structure: (dm.fir.len(), dm.advance), q: 10.0, r: 0.05 };
+    (ts, y, opts)
+}
+
 /// The smoother keeps only checkpoints of the covariance and holds it where
 /// it has converged and the model stays; neither may change the estimate.
 /// Any segment length gives the dense reference's estimate to 1e-10 of the
@@ -128,13 +142,8 @@ fn dense_reference(y: &[f64], ts: &TwoState, o: &DriftSmoothing) -> Vec<f64> {
 /// and after it.
 #[test]
 fn checkpointed_smoother_equals_the_dense_reference_for_any_segment_length() {
-    let before = PoleResidueModel::from_modes(&[(400.0, 0.03, 0.1), (2300.0, 0.02, 0.9)]);
-    let after = PoleResidueModel::from_modes(&[(400.0, 0.03, 0.1), (2420.0, 0.02, 0.9)]);
-    let ts = TwoState { before, after };
-    let band = (0.0, 4000.0);
-    let (dm, _) = discretize(&ts.before, FS, Discretization::Fit, band).unwrap();
-    let y: Vec<f64> = (0..3000).map(|k| (k as f64 * 0.013).sin() * 50.0 + (k as f64 * 0.71).sin() * 9.0 + ((k * 7919) % 13) as f64).collect();
-    let opts = DriftSmoothing { fs_hz: FS, interval_s: (0.012, 0.041), band_hz: band, structure: (dm.fir.len(), dm.advance), q: 10.0, r: 0.05 };
+    let (ts, y, opts) = drift_fixture(3000, (0.012, 0.041));
+    let advance = opts.structure.1;
     let reference = dense_reference(&y, &ts, &opts);
     let scale = reference.iter().fold(0.0f64, |a, v| a.max(v.abs()));
     let dev = |e: &[f64]| e.iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
@@ -143,13 +152,59 @@ fn checkpointed_smoother_equals_the_dense_reference_for_any_segment_length() {
         let est = smooth_drifting_in_segments(&y, &|s| ts.at(s), &opts, seg, &|m| done.set(done.get() + m)).unwrap();
         eprintln!("segment {seg}: {:e} of {scale}", dev(&est));
         assert!(dev(&est) < 1e-10 * scale, "segment {seg}: {:e} of {scale}", dev(&est));
-        assert_eq!(done.get(), 2 * (y.len() + dm.advance) as u64, "progress counts both passes");
+        assert_eq!(done.get(), 2 * (y.len() + advance) as u64, "progress counts both passes");
     }
     // Negative control: the drift's timing moved by one sample (one level
     // switch earlier) is resolved by the tolerance.
     let shifted = DriftSmoothing { interval_s: (0.012 - 1.0 / FS, 0.041 - 1.0 / FS), ..opts };
     let moved = dense_reference(&y, &ts, &shifted);
     eprintln!("one sample earlier: {:e}", dev(&moved));
+    assert!(dev(&moved) > 1e3 * 1e-10 * scale, "{:e}", dev(&moved));
+}
+
+/// `compensate --offline --drift` on a file: the forward pass and the
+/// covariance checkpoints spilled to temporary files, the record pushed in
+/// blocks of any size. Against the dense reference on a record of several
+/// spill segments, with the drift crossing a segment boundary.
+#[test]
+fn spilled_drift_smoother_equals_the_dense_reference() {
+    use dynocomp::smoother::SpilledPass;
+    use dynocomp::two_state::{SpilledDriftForward, SPILLED_SEGMENT};
+    let len = 2 * SPILLED_SEGMENT + 777;
+    // The drift runs from 0.05 s to 0.12 s, across the boundary at 4096 samples (0.08 s).
+    let (ts, y, opts) = drift_fixture(len, (0.05, 0.12));
+    let reference = dense_reference(&y, &ts, &opts);
+    let scale = reference.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let model_at = |s: f64| ts.at(s);
+    let dir = std::env::temp_dir();
+    let run = |blocks: &[usize], opts: &DriftSmoothing| {
+        let mut pass = Box::new(SpilledDriftForward::new(&model_at, opts, &dir).unwrap());
+        let mut at = 0;
+        for &b in blocks.iter().chain(std::iter::once(&usize::MAX)) {
+            let hi = at + b.min(len - at);
+            pass.push(&y[at..hi]).unwrap();
+            at = hi;
+        }
+        let done = std::cell::Cell::new(0u64);
+        let mut est = pass.backward(&dir, "fx", "test", &|m| done.set(done.get() + m)).unwrap();
+        assert_eq!(done.get(), len as u64, "the backward pass reports every sample");
+        let mut out = Vec::new();
+        est.read(len, &mut out).unwrap();
+        assert_eq!(est.left(), 0);
+        out
+    };
+    let dev = |e: &[f64]| e.iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    let whole = run(&[len], &opts);
+    let pieces = run(&[1, 1000, 333, 4096, 7], &opts);
+    eprintln!("spilled: {:e} of {scale}", dev(&whole));
+    assert!(dev(&whole) < 1e-10 * scale, "{:e} of {scale}", dev(&whole));
+    assert_eq!(whole, pieces, "the block sizes must not matter");
+    // The in-memory smoother with the same segment length: the same bits.
+    let in_memory = smooth_drifting_in_segments(&y, &model_at, &opts, SPILLED_SEGMENT, &|_| {}).unwrap();
+    assert_eq!(whole, in_memory);
+    // Negative control: the drift one sample earlier is resolved.
+    let shifted = DriftSmoothing { interval_s: (0.05 - 1.0 / FS, 0.12 - 1.0 / FS), ..opts };
+    let moved = run(&[len], &shifted);
     assert!(dev(&moved) > 1e3 * 1e-10 * scale, "{:e}", dev(&moved));
 }
 

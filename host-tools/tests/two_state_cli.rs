@@ -58,10 +58,30 @@ fn two_state_design_and_drifting_smoother_follow_the_change() {
         }
         let (ok, _, err) = dynocomp(&a);
         assert!(ok, "{err}");
+        err
     };
     let (two, one, c_two, c_one) = (d("two.dcimg"), d("one.dcimg"), d("c_two.csv"), d("c_one.csv"));
-    comp(&two, &c_two, Some("0:0.3"));
+    let err = comp(&two, &c_two, Some("0:0.3"));
     comp(&one, &c_one, None);
+    // A file is smoothed with the forward pass and the covariance
+    // checkpoints spilled to disk; a pipe (read once) whole in memory.
+    // Same segments, same arithmetic: the same bytes.
+    assert!(err.contains("checkpoints spilled"), "{err}");
+    let c_pipe = d("c_two_pipe.csv");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_dynocomp"))
+        .args(["compensate", "--coeffs", &two, "--input", "/dev/stdin", "--output", &c_pipe, "--offline", "--drift", "0:0.3"])
+        .stdin(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let bytes = std::fs::read(d("measured.csv")).unwrap();
+    let feeder = std::thread::spawn(move || std::io::Write::write_all(&mut stdin, &bytes));
+    let piped = child.wait_with_output().unwrap();
+    feeder.join().unwrap().unwrap();
+    let err_pipe = String::from_utf8_lossy(&piped.stderr);
+    assert!(piped.status.success() && err_pipe.contains("whole record in memory"), "{err_pipe}");
+    assert_eq!(std::fs::read(&c_two).unwrap(), std::fs::read(&c_pipe).unwrap(), "spilled and in-memory drift smoothing differ");
     let truth = read_signal_csv(&dir.join("true_force.csv")).unwrap();
     let (rt, ro) = (read_signal_csv(&dir.join("c_two.csv")).unwrap(), read_signal_csv(&dir.join("c_one.csv")).unwrap());
     let (mut worst_two, mut worst_one) = (0.0f64, 0.0f64);
