@@ -65,6 +65,22 @@ pub(crate) struct Page {
 /// plots per axis and `index.html` showing `summary_text` and the plots.
 /// Returns the paths written, `index.html` last.
 pub fn write_report(dir: &Path, frf: &Frf, designs: &[AxisDesign], fs_hz: f64, summary_text: &str) -> Result<Vec<PathBuf>> {
+    write_report_with(dir, frf, designs, fs_hz, summary_text, &|_| Ok(Vec::new()))
+}
+
+/// A plot of a report: (file name, title, caption, SVG).
+pub type Plot = (String, String, String, String);
+
+/// [`write_report`] with `extra(axis)`'s plots appended to each axis's
+/// section (e.g. the two-state design's range, `two_state_cmd`).
+pub fn write_report_with(
+    dir: &Path,
+    frf: &Frf,
+    designs: &[AxisDesign],
+    fs_hz: f64,
+    summary_text: &str,
+    extra: &dyn Fn(usize) -> Result<Vec<Plot>>,
+) -> Result<Vec<PathBuf>> {
     if !(fs_hz.is_finite() && fs_hz > 0.0) {
         bail!("report: sample rate fs = {fs_hz} Hz must be > 0");
     }
@@ -147,6 +163,7 @@ pub fn write_report(dir: &Path, frf: &Frf, designs: &[AxisDesign], fs_hz: f64, s
                 crate::sensitivity::plot(name, sens).with_context(|| format!("report: axis {name}: sensitivity plot"))?,
             ));
         }
+        plots.extend(extra(d.axis)?);
         let mut entries = Vec::new();
         for (file, title, caption, svg) in plots {
             entries.push((file.clone(), title, caption));

@@ -15,7 +15,7 @@ use std::fmt::Write as _;
 use crate::design_cmd::{build_image, render_summary, DesignArgs};
 use crate::frf::axis_name;
 use crate::io;
-use crate::two_state::{design_over_range, TwoStateJson, RANGE_STATES};
+use crate::two_state::{design_over_range, RangeDesign, TwoStateJson, RANGE_STATES};
 
 /// Run `design` with two FRFs.
 pub fn run(args: &DesignArgs) -> Result<()> {
@@ -56,6 +56,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     let mut entries = Vec::new();
     let mut axes_json = Vec::new();
     let mut lines = String::new();
+    let mut ranges = Vec::new();
     for (a, res) in f0.axes.iter().zip(results) {
         let name = axis_name(a.axis);
         let rd = res.with_context(|| format!("{} / {}: axis {name}", p0.display(), p1.display()))?;
@@ -103,6 +104,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
             sensitivity: c.design.sensitivity.clone(),
         });
         designs.push(c.design.clone());
+        ranges.push((a.axis, rd));
     }
     let image = build_image(&designs, args.input.fs as u32, latency, args.full_scale, sha)?;
     io::image_file::write_image(&args.out, &image)?;
@@ -121,7 +123,17 @@ pub fn run(args: &DesignArgs) -> Result<()> {
         "criterion: least worst-case predicted in-band error over s ∈ {{0, 0.25, 0.5, 0.75, 1}} (1/f² interpolated between the two FRFs' models) among designs for those states; `compensate --offline --drift START:END` follows the change with both states"
     );
     if let Some(dir) = &args.report {
-        crate::report::write_report(dir, &f0, &designs, args.input.fs, &summary)?;
+        let extra = |axis: usize| -> Result<Vec<crate::report::Plot>> {
+            let Some(rd) = ranges.iter().find(|(a, _)| *a == axis).map(|(_, rd)| rd) else { return Ok(Vec::new()) };
+            let name = axis_name(axis);
+            Ok(vec![(
+                format!("{name}_range.svg"),
+                format!("Axis {name}: the box image over the range between the two states"),
+                range_caption(rd),
+                plot_range(name, rd).with_context(|| format!("report: axis {name}: range plot"))?,
+            )])
+        };
+        crate::report::write_report_with(dir, &f0, &designs, args.input.fs, &summary, &extra)?;
     }
     if args.json {
         let j = RangeJson {
@@ -173,4 +185,53 @@ struct RangeAxisJson {
     predicted_error: f64,
     /// Its sensitivity to shifted sensor modes.
     sensitivity: Option<crate::sensitivity::Sensitivity>,
+}
+
+/// Caption of the report's range plot.
+fn range_caption(rd: &RangeDesign) -> String {
+    let shared: Vec<String> = rd.machine.iter().filter(|m| m.shared).map(|m| format!("{:.0}", 0.5 * (m.fn_hz.0 + m.fn_hz.1))).collect();
+    format!(
+        "Predicted in-band error (the design's criterion, flat force spectrum) of each candidate image at the states s = 0, ¼, ½, ¾, 1 \
+         of the range (joined by straight lines; 0 = the first FRF, 1 = the second, in between the model interpolated with 1/f² \
+         linear). The image is the candidate \
+         with the least worst case (thick); the first and second FRF's own designs are the candidates at s = 0 and 1. \
+         Machine modes shared by both states: {} Hz. A fixed image cannot follow a drift of a few %: \
+         `compensate --offline --drift START:END` follows it with both states.",
+        if shared.is_empty() { "none".to_string() } else { shared.join(", ") }
+    )
+}
+
+/// The report's SVG: each candidate's predicted error (%) against the state s.
+fn plot_range(axis: &str, rd: &RangeDesign) -> Result<String> {
+    use crate::report::{build_chart, draw_line, legend, mesh, perr, FONT};
+    use plotters::prelude::*;
+    let top = rd.candidates.iter().flat_map(|c| c.errors.iter()).fold(0.0f64, |a, e| a.max(100.0 * e));
+    let yr = (0.0, if top.is_finite() && top > 0.0 { 1.1 * top } else { 1.0 });
+    let chosen = &rd.candidates[rd.best];
+    let (first, last) = (&rd.candidates[0], &rd.candidates[rd.candidates.len() - 1]);
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (1100, 420)).into_drawing_area();
+        root.fill(&WHITE).map_err(perr)?;
+        let title = format!(
+            "Axis {axis} — image designed at s = {:.2}: worst case {:.2} % over the range (first / second FRF's design alone: {:.2} / {:.2} %)",
+            chosen.s,
+            100.0 * chosen.worst,
+            100.0 * first.worst,
+            100.0 * last.worst
+        );
+        let root = root.titled(&title, (FONT, 16)).map_err(perr)?;
+        let mut c = build_chart(&root, "Predicted in-band RMS error (% of the force's std)", (0.0, 1.0), yr)?;
+        mesh(&mut c, "State s (0 = first FRF, 1 = second FRF)", "Predicted error (%)", &|v| format!("{v:.2}"), &|v| format!("{v:.1}"), 8)?;
+        const PALETTE: [RGBColor; 5] = [RGBColor(31, 119, 180), RGBColor(44, 160, 44), RGBColor(148, 103, 189), RGBColor(140, 86, 75), RGBColor(255, 127, 14)];
+        for (i, cand) in rd.candidates.iter().enumerate() {
+            let pts: Vec<(f64, f64)> = RANGE_STATES.iter().zip(&cand.errors).map(|(s, e)| (*s, 100.0 * e)).collect();
+            let (color, width) = if i == rd.best { (RGBColor(214, 39, 40), 3) } else { (PALETTE[i % PALETTE.len()], 1) };
+            let label = format!("designed at s = {:.2}{}", cand.s, if i == rd.best { " (the image)" } else { "" });
+            draw_line(&mut c, &pts, yr, f64::INFINITY, color, width, i != rd.best, &label)?;
+        }
+        legend(&mut c, SeriesLabelPosition::UpperMiddle)?;
+        root.present().map_err(perr)?;
+    }
+    Ok(buf)
 }

@@ -36,8 +36,19 @@ fn two_state_design_and_drifting_smoother_follow_the_change() {
         let line = out.lines().find(|l| l.starts_with(&format!("{axis} two states: modes paired"))).unwrap_or_else(|| panic!("{out}"));
         assert!(line.contains("worst-case predicted error") && line.contains("designs for the first / second FRF alone"), "{line}");
     }
+    assert!(out.lines().any(|l| l.starts_with("x machine modes measured alike in both FRFs, averaged: ")), "{out}");
     let side = std::fs::read_to_string(d("two.dcimg.model.json")).unwrap();
     assert!(side.contains("\"two_state\"") && side.contains("\"d_after\""), "sidecar keeps both states");
+    // The report shows each axis's candidates over the range.
+    let (frf, after, idle, img, rep) = (d("frf.uff"), d("frf_after.uff"), d("idle.csv"), d("two_rep.dcimg"), d("rep"));
+    let (ok, _, err) = dynocomp(&["design", "--fs", "51200", "--idle", &idle, "--frf", &frf, "--frf", &after, "--out", &img, "--report", &rep]);
+    assert!(ok, "{err}");
+    for axis in ["x", "y", "z"] {
+        let svg = std::fs::read_to_string(dir.join("rep").join(format!("{axis}_range.svg"))).unwrap();
+        assert!(svg.contains("worst case") && svg.contains("(the image)"), "{axis}");
+    }
+    let index = std::fs::read_to_string(dir.join("rep/index.html")).unwrap();
+    assert!(index.contains("x_range.svg") && index.contains("Machine modes shared by both states"), "index links the range plots");
     let (ok, out, err) = design("two_json.dcimg", &["frf.uff", "frf_after.uff", "--json"]);
     assert!(ok, "{err}");
     let j: serde_json::Value = serde_json::from_str(&out).unwrap();
@@ -46,6 +57,9 @@ fn two_state_design_and_drifting_smoother_follow_the_change() {
         let (s0, s1) = (ax["single_state_worst_case"][0].as_f64().unwrap(), ax["single_state_worst_case"][1].as_f64().unwrap());
         assert!(w < s0 && w < s1, "issue target: the range image beats either single-state design: {ax}");
         assert_eq!(ax["candidates"].as_array().unwrap().len(), 5);
+        // This set-up moves only its sensor modes: every machine mode is shared.
+        let machine = ax["machine_modes"].as_array().unwrap();
+        assert!(!machine.is_empty() && machine.iter().all(|m| m["shared"] == true), "{ax}");
     }
     let (ok, _, err) = design("one.dcimg", &["frf.uff"]);
     assert!(ok, "{err}");
