@@ -79,14 +79,14 @@ pub fn run(args: &DesignArgs) -> Result<()> {
             .machine
             .iter()
             .filter(|m| !m.shared)
-            .map(|m| format!("{:.0}→{:.0} (misfit ×{:.1} / ×{:.1})", m.fn_hz.0, m.fn_hz.1, m.misfit_growth.0, m.misfit_growth.1))
+            .map(|m| format!("{:.0}→{:.0} Hz (misfit ×{:.1} / ×{:.1} if shared)", m.fn_hz.0, m.fn_hz.1, m.misfit_growth.0, m.misfit_growth.1))
             .collect();
         if !rd.machine.is_empty() {
             let _ = writeln!(
                 lines,
                 "{name} machine modes measured alike in both FRFs, averaged: {} Hz; kept apart: {}",
                 if shared.is_empty() { "none".to_string() } else { shared.join(", ") },
-                if apart.is_empty() { "none".to_string() } else { apart.join(", ") + " Hz" }
+                if apart.is_empty() { "none".to_string() } else { apart.join(", ") }
             );
         }
         let dm0 = first.design.discrete.as_ref().map(|x| x.0.clone()).ok_or_else(|| anyhow::anyhow!("axis {name}: no discrete model"))?;
