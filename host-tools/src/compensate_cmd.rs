@@ -164,6 +164,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
             // the record whole.
             if priors.is_empty() && crate::io::signal_file::can_read_twice(&a.input) {
                 let spilled = "spilled to temporary files beside the output, memory independent of the record's length";
+                let dir = crate::io::atomic::output_dir(&a.output);
                 let smoothers;
                 let drifting;
                 let models: Vec<Box<dyn Fn(f64) -> crate::fit::PoleResidueModel + '_>>;
@@ -172,7 +173,6 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
                         how = format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only; forward pass and covariance checkpoints {spilled})");
                         drifting = axes.iter().map(|&ax| crate::two_state::axis_drift(i, &sidecar, ax, &source, (s0, s1))).collect::<Result<Vec<_>>>()?;
                         models = drifting.iter().map(|(ts, _)| Box::new(move |s: f64| ts.at(s)) as Box<dyn Fn(f64) -> _>).collect();
-                        let dir = crate::io::atomic::output_dir(&a.output);
                         models
                             .iter()
                             .zip(&drifting)
@@ -187,12 +187,11 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
                     None => {
                         how = format!("fixed-interval smoother, zero lag (offline only; forward pass {spilled})");
                         smoothers = axes.iter().map(|&ax| crate::smoother::axis_smoother(i, &sidecar, ax, &source)).collect::<Result<Vec<_>>>()?;
-                        let dir = crate::io::atomic::output_dir(&a.output);
                         smoothers.iter().map(|sm| crate::smoother::SpilledForward::new(sm, dir).map(|p| Box::new(p) as Box<dyn crate::smoother::SpilledPass>)).collect::<Result<_>>()?
                     }
                 };
                 progress.set_length(reader.len_hint().unwrap_or(0) * 2);
-                let est = smooth_spilled(&mut *reader, passes, &axes, crate::io::atomic::output_dir(&a.output), fs, &source, &progress)?;
+                let est = smooth_spilled(&mut *reader, passes, &axes, dir, fs, &source, &progress)?;
                 // The input is read a second time, for its times and the report.
                 let (mut again, _) = open_signal(&a.input, map.as_ref())?;
                 n_samples = write_output(&a.output, out_fmt, &axes, has_time, reader.len_hint(), fs, |w| {

@@ -422,6 +422,18 @@ pub trait SpilledPass {
     fn backward(self: Box<Self>, dir: &Path, name: &str, source: &str, on_chunk: &dyn Fn(u64)) -> Result<SpilledEstimate>;
 }
 
+/// Feed the block `y` to `step` as ỹ_k = y_{k−D} (the smoothers' delayed
+/// measurement): in front of the record's first samples (`first`: nothing
+/// taken yet), D = `advance` copies of y_0.
+pub(crate) fn feed_delayed(y: &[f64], advance: usize, first: bool, mut step: impl FnMut(f64) -> Result<()>) -> Result<()> {
+    if let (true, Some(&y0)) = (first, y.first()) {
+        for _ in 0..advance {
+            step(y0)?;
+        }
+    }
+    y.iter().try_for_each(|&v| step(v))
+}
+
 impl SpilledPass for SpilledForward<'_> {
     fn push(&mut self, y: &[f64]) -> Result<()> {
         SpilledForward::push(self, y)
@@ -442,17 +454,8 @@ impl<'s> SpilledForward<'s> {
 
     /// Take the next samples of y (N).
     pub fn push(&mut self, y: &[f64]) -> Result<()> {
-        if self.n_y == 0 {
-            // ỹ_k = y_{k−D}: D copies of y_0 in front.
-            if let Some(&y0) = y.first() {
-                for _ in 0..self.sm.advance {
-                    self.step(y0)?;
-                }
-            }
-        }
-        for &yk in y {
-            self.step(yk)?;
-        }
+        let (first, advance) = (self.n_y == 0, self.sm.advance);
+        feed_delayed(y, advance, first, |v| self.step(v))?;
         self.n_y += y.len() as u64;
         Ok(())
     }

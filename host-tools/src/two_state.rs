@@ -489,14 +489,13 @@ impl<'m> DriftForward<'m> {
         Ok((prior_f, e))
     }
 
-    /// The backward pass over the `len` steps taken.
+    /// The backward pass over the steps taken.
     fn into_backward(self) -> DriftBackward {
         let n = self.n;
         DriftBackward {
             opts: self.opts,
             plants: self.plants,
             force: self.force,
-            len: self.k,
             lambda_hat: DVector::zeros(n),
             lambda_tilde: DVector::zeros(n),
             gains: Vec::new(),
@@ -511,7 +510,6 @@ struct DriftBackward {
     opts: DriftSmoothing,
     plants: Vec<Option<Plant>>,
     force: usize,
-    len: usize,
     lambda_hat: DVector<f64>,
     lambda_tilde: DVector<f64>,
     gains: Vec<Gain>,
@@ -651,17 +649,8 @@ impl<'m> SpilledDriftForward<'m> {
 
 impl SpilledPass for SpilledDriftForward<'_> {
     fn push(&mut self, y: &[f64]) -> Result<()> {
-        if self.n_y == 0 {
-            // ỹ_k = y_{k−D}: D copies of y_0 in front.
-            if let Some(&y0) = y.first() {
-                for _ in 0..self.fwd.opts.structure.1 {
-                    self.step(y0)?;
-                }
-            }
-        }
-        for &yk in y {
-            self.step(yk)?;
-        }
+        let (first, advance) = (self.n_y == 0, self.fwd.opts.structure.1);
+        crate::smoother::feed_delayed(y, advance, first, |v| self.step(v))?;
         self.n_y += y.len() as u64;
         Ok(())
     }
@@ -674,9 +663,8 @@ impl SpilledPass for SpilledDriftForward<'_> {
         let mut checkpoints = checkpoints.into_inner().map_err(|e| io_err(e.into_error()))?;
         let mut out = tempfile::tempfile_in(dir).map_err(io_err)?;
         let n_y = usize::try_from(n_y).map_err(|_| anyhow::anyhow!("{source}: record too long"))?;
-        let n = fwd.n;
+        let (n, len) = (fwd.n, fwd.k);
         let mut bw = fwd.into_backward();
-        let len = bw.len;
         let mut bytes = vec![0u8; 16 * SPILLED_SEGMENT];
         let mut p_bytes = vec![0u8; 8 * (n * n + 1)];
         let (mut prior_f, mut es, mut est) = (Vec::new(), Vec::new(), vec![0.0; SPILLED_SEGMENT]);

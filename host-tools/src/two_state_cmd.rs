@@ -74,7 +74,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
             100.0 * first.worst,
             100.0 * last.worst
         );
-        let shared: Vec<String> = rd.machine.iter().filter(|m| m.shared).map(|m| format!("{:.0}", 0.5 * (m.fn_hz.0 + m.fn_hz.1))).collect();
+        let shared = shared_modes_hz(&rd);
         let apart: Vec<String> = rd
             .machine
             .iter()
@@ -187,9 +187,14 @@ struct RangeAxisJson {
     sensitivity: Option<crate::sensitivity::Sensitivity>,
 }
 
+/// The shared machine modes' frequencies (Hz, mean of the two states).
+fn shared_modes_hz(rd: &RangeDesign) -> Vec<String> {
+    rd.machine.iter().filter(|m| m.shared).map(|m| format!("{:.0}", 0.5 * (m.fn_hz.0 + m.fn_hz.1))).collect()
+}
+
 /// Caption of the report's range plot.
 fn range_caption(rd: &RangeDesign) -> String {
-    let shared: Vec<String> = rd.machine.iter().filter(|m| m.shared).map(|m| format!("{:.0}", 0.5 * (m.fn_hz.0 + m.fn_hz.1))).collect();
+    let shared = shared_modes_hz(rd);
     format!(
         "Predicted in-band error (the design's criterion, flat force spectrum) of each candidate image at the states s = 0, ¼, ½, ¾, 1 \
          of the range (joined by straight lines; 0 = the first FRF, 1 = the second, in between the model interpolated with 1/f² \
