@@ -8,23 +8,26 @@
 //!   [`BLOCK`] samples ([`StreamCompensator`]); the report's accumulators are
 //!   bounded too, except with `--truth` (24 bytes per sample and axis for the
 //!   whole-record NRMSE, see [`crate::compensate_report`]);
-//! * `--offline` (fixed-interval smoother) on a file: none — the forward
-//!   pass runs over blocks and spills 16 bytes per sample and axis to a
-//!   temporary file beside the output, the backward pass reads it back in
-//!   chunks and writes the estimates (8 bytes per sample and axis) to a
-//!   second one, and the input is read again to write the output block by
-//!   block ([`crate::smoother::SpilledForward`]); temporary disk space:
-//!   24 bytes per sample and axis (≈ 13 GB for an hour of 3 axes at
-//!   51.2 kHz), freed at the end;
-//! * `--offline` from a pipe (it cannot be read twice), `--offline
-//!   --drift` and parallel-elaboration images: the record is read whole (8
+//! * `--offline` (fixed-interval smoother, stationary or with `--drift`):
+//!   none — the forward pass runs over blocks and spills 16 bytes per sample
+//!   and axis to a temporary file beside the output (the time-varying
+//!   smoother of `--drift` adds its covariance every 4096 samples, about 1.2
+//!   bytes per sample), the backward pass reads it back in chunks and writes
+//!   the estimates (8 bytes per sample and axis) to a second one, and the
+//!   input is read again to write the output block by block
+//!   ([`crate::smoother::SpilledForward`],
+//!   [`crate::two_state::SpilledDriftForward`]). A pipe, which cannot be
+//!   read twice, is kept in a temporary file during the first reading (8
+//!   bytes per sample and column, [`crate::io::spool`]). Temporary disk
+//!   space: 24-26 bytes per sample and axis, plus the spooled pipe (≈ 13 GB
+//!   for an hour of 3 axes at 51.2 kHz from a file), freed at the end;
+//! * `--offline` with a harmonic force prior (checked against the whole
+//!   record) and parallel-elaboration images: the record is read whole (8
 //!   bytes per sample and column, `t_s` included) and the output is held
 //!   whole (8 bytes per sample and axis) before it is written block by
 //!   block; besides, the smoother keeps 16 bytes per sample of the axis it
-//!   is smoothing (the time-varying smoother of `--drift` as well: it keeps
-//!   its covariance only at checkpoints, every √N samples, and recomputes
-//!   each segment's gains in the backward pass), and the parallel split every band (about
-//!   8·(bands + 2) bytes per sample and axis). These are not bounded.
+//!   is smoothing, and the parallel split every band (about 8·(bands + 2)
+//!   bytes per sample and axis). These are not bounded.
 
 use anyhow::{anyhow, bail, Context, Result};
 use std::path::{Path, PathBuf};
@@ -132,7 +135,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
     };
     let mut acc = a.report.as_ref().map(|_| ReportAccumulator::new(&axes, f64::from(fs), tpf, truth.is_some()));
     let progress = progress_bar(reader.len_hint());
-    let mut how: String;
+    let how: String;
     let n_samples;
     match (&img, a.offline) {
         (AnyImage::Inline(i), false) => {
@@ -159,18 +162,27 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
                 sidecar.axes.iter_mut().for_each(|m| m.force_prior = None);
             }
             let priors: Vec<&str> = sidecar.axes.iter().filter(|m| m.force_prior.is_some()).map(|m| m.axis.as_str()).collect();
-            // The smoothers on a file run in bounded memory; the force prior
-            // (checked against the whole record) and a pipe (read once) keep
-            // the record whole.
-            if priors.is_empty() && crate::io::signal_file::can_read_twice(&a.input) {
-                let spilled = "spilled to temporary files beside the output, memory independent of the record's length";
+            // The smoothers run in bounded memory (a pipe, read once, is
+            // spooled for its second reading); the force prior (checked
+            // against the whole record) keeps the record whole. The
+            // time-varying smoother has no force model (and a two-state
+            // design makes no prior).
+            if priors.is_empty() || drift.is_some() {
                 let dir = crate::io::atomic::output_dir(&a.output);
+                let mut input = crate::io::spool::TwoReadings::new(reader, &a.input, dir)?;
+                let spilled = format!(
+                    "spilled to temporary files beside the output{}, memory independent of the record's length",
+                    if input.spooled() { ", with the input (a pipe) for its second reading" } else { "" }
+                );
                 let smoothers;
                 let drifting;
                 let models: Vec<Box<dyn Fn(f64) -> crate::fit::PoleResidueModel + '_>>;
                 let passes: Vec<Box<dyn crate::smoother::SpilledPass + '_>> = match drift {
                     Some((s0, s1)) => {
                         how = format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only; forward pass and covariance checkpoints {spilled})");
+                        if !priors.is_empty() {
+                            eprintln!("warning: the harmonic force prior of axis {} is not used: the time-varying smoother of --drift has no force model", priors.join(", "));
+                        }
                         drifting = axes.iter().map(|&ax| crate::two_state::axis_drift(i, &sidecar, ax, &source, (s0, s1))).collect::<Result<Vec<_>>>()?;
                         models = drifting.iter().map(|(ts, _)| Box::new(move |s: f64| ts.at(s)) as Box<dyn Fn(f64) -> _>).collect();
                         models
@@ -190,32 +202,18 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
                         smoothers.iter().map(|sm| crate::smoother::SpilledForward::new(sm, dir).map(|p| Box::new(p) as Box<dyn crate::smoother::SpilledPass>)).collect::<Result<_>>()?
                     }
                 };
-                progress.set_length(reader.len_hint().unwrap_or(0) * 2);
-                let est = smooth_spilled(&mut *reader, passes, &axes, dir, fs, &source, &progress)?;
+                let len_hint = input.first().len_hint();
+                progress.set_length(len_hint.unwrap_or(0) * 2);
+                let est = smooth_spilled(input.first(), passes, &axes, dir, fs, &source, &progress)?;
                 // The input is read a second time, for its times and the report.
-                let (mut again, _) = open_signal(&a.input, map.as_ref())?;
-                n_samples = write_output(&a.output, out_fmt, &axes, has_time, reader.len_hint(), fs, |w| {
+                let mut again = input.second(|| Ok(open_signal(&a.input, map.as_ref())?.0))?;
+                n_samples = write_output(&a.output, out_fmt, &axes, has_time, len_hint.or(again.len_hint()), fs, |w| {
                     write_spilled(&mut *again, est, w, &source, acc.as_mut(), truth.as_mut(), &progress)
                 })?;
             } else {
-                how = match drift {
-                    Some((s0, s1)) => format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only, whole record in memory: the input is a pipe; covariance checkpointed)"),
-                    None => "fixed-interval smoother, zero lag (offline only, whole record in memory)".to_string(),
-                };
-                if !priors.is_empty() && drift.is_none() {
-                    how.push_str(&format!("; harmonic force prior on axis {}", priors.join(", ")));
-                }
+                how = format!("fixed-interval smoother, zero lag, harmonic force prior on axis {} (offline only, whole record in memory for the force prior)", priors.join(", "));
                 let rec = whole_record(&mut *reader, fs, &source)?;
-                let out = match drift {
-                    Some(iv) => {
-                        // Both passes of every axis (each also steps through the
-                        // model's advance of D samples, not counted in the length).
-                        progress.set_position(0);
-                        restyle(&progress, Some(rec.channels.iter().map(|c| 2 * c.1.len() as u64).sum()), "smoother steps");
-                        crate::two_state::smooth_record_drifting(i, &sidecar, &rec, &source, iv, &|m| progress.inc(m))?
-                    }
-                    None => crate::smoother::smooth_record(i, &sidecar, &rec, &source)?,
-                };
+                let out = crate::smoother::smooth_record(i, &sidecar, &rec, &source)?;
                 n_samples = write_whole(a, out_fmt, &rec, &out, fs, acc.as_mut(), truth.as_mut())?;
             }
         }

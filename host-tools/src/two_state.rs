@@ -57,7 +57,6 @@ use crate::discretize::{fit_with_structure, DiscreteModel};
 use crate::fit::vf::{coherence_weights, fit_order, VfOptions};
 use crate::fit::{PoleResidueModel, Term};
 use crate::frf::{axis_name, AxisFrf};
-use crate::io::signal_csv::SignalRecord;
 use crate::smoother::{model_from_json, terms_to_json, ModelSidecar, SpilledEstimate, SpilledPass, TermJson};
 use std::path::Path;
 use dynocomp_core::image::CoeffImage;
@@ -906,27 +905,6 @@ impl TwoStateJson {
         let a = model_from_json(self.d_after, &self.after, source, name)?;
         pair(name, &b, &a).with_context(|| source.to_string())
     }
-}
-
-/// `compensate --offline --drift START:END`: smooth every force column of
-/// `rec` with its axis's two states from the sidecar, the model moving from
-/// state 0 at START to state 1 at END (s), q and R from the image;
-/// `progress(m)` as in [`smooth_drifting_in_segments`], axis after axis.
-pub fn smooth_record_drifting(
-    image: &CoeffImage,
-    sidecar: &ModelSidecar,
-    rec: &SignalRecord,
-    source: &str,
-    interval_s: (f64, f64),
-    progress: &dyn Fn(u64),
-) -> Result<SignalRecord> {
-    let mut channels = Vec::with_capacity(rec.channels.len());
-    for (axis, y) in &rec.channels {
-        let (ts, opts) = axis_drift(image, sidecar, *axis, source, interval_s)?;
-        let out = smooth_drifting_in_segments(y, &|s| ts.at(s), &opts, segment_len(y.len()), progress).with_context(|| format!("{source}: axis {}", axis_name(*axis)))?;
-        channels.push((*axis, out));
-    }
-    Ok(SignalRecord { t_s: rec.t_s.clone(), channels })
 }
 
 /// The two states of `axis` from the sidecar and the drift smoother's

@@ -13,6 +13,24 @@ fn tmp(name: &str) -> PathBuf {
     cli_common::tmp("offline-cli", name)
 }
 
+/// Run the binary with `args` and `bytes` on its stdin: success and stderr.
+fn through_pipe(args: &[&str], bytes: Vec<u8>) -> (bool, String) {
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_dynocomp"))
+        .args(args)
+        .stdin(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    // The binary may stop reading at an error: a broken pipe is not the test's.
+    let feeder = std::thread::spawn(move || {
+        let _ = std::io::Write::write_all(&mut stdin, &bytes);
+    });
+    let out = child.wait_with_output().unwrap();
+    feeder.join().unwrap();
+    (out.status.success(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
 #[test]
 fn offline_smoother_needs_the_sidecar_of_its_image() {
     let img = tmp("box.dcimg");
@@ -28,32 +46,40 @@ fn offline_smoother_needs_the_sidecar_of_its_image() {
     let text = std::fs::read_to_string(&out).unwrap();
     assert_eq!(text.lines().count(), std::fs::read_to_string(&measured).unwrap().lines().count());
     // A file is smoothed with its forward pass spilled to disk (memory
-    // independent of the record's length); a pipe, which cannot be read
-    // twice, whole in memory. Same output, byte for byte, and both with a
-    // report against the true force.
+    // independent of the record's length) and read twice; a pipe, which
+    // cannot be read twice, is kept in a temporary file during its first
+    // reading. Same output, byte for byte, and both with a report against
+    // the true force.
     assert!(err.contains("forward pass spilled"), "{err}");
     let (report_file, report_pipe, out_pipe) = (tmp("rep-file"), tmp("rep-pipe"), tmp("smoothed-pipe.csv"));
     let truth = example("true_force.csv");
     let (ok, _, err_file) = dynocomp(&["compensate", "--coeffs", img.to_str().unwrap(), "--input", &measured, "--output", out.to_str().unwrap(), "--offline", "--truth", &truth, "--report", report_file.to_str().unwrap()]);
     assert!(ok, "{err_file}");
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_dynocomp"))
-        .args(["compensate", "--coeffs", img.to_str().unwrap(), "--input", "/dev/stdin", "--output", out_pipe.to_str().unwrap(), "--offline", "--truth", &truth, "--report", report_pipe.to_str().unwrap()])
-        .stdin(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
     let bytes = std::fs::read(&measured).unwrap();
-    let feeder = std::thread::spawn(move || std::io::Write::write_all(&mut stdin, &bytes));
-    let piped = child.wait_with_output().unwrap();
-    feeder.join().unwrap().unwrap();
-    let err_pipe = String::from_utf8_lossy(&piped.stderr);
-    assert!(piped.status.success(), "{err_pipe}");
-    assert!(err_pipe.contains("whole record in memory"), "{err_pipe}");
-    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&out_pipe).unwrap(), "spilled and in-memory smoothing differ");
+    let (ok, err_pipe) = through_pipe(&["compensate", "--coeffs", img.to_str().unwrap(), "--input", "/dev/stdin", "--output", out_pipe.to_str().unwrap(), "--offline", "--truth", &truth, "--report", report_pipe.to_str().unwrap()], bytes.clone());
+    assert!(ok, "{err_pipe}");
+    assert!(err_pipe.contains("with the input (a pipe) for its second reading"), "{err_pipe}");
+    assert!(!err_file.contains("(a pipe)"), "{err_file}");
+    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&out_pipe).unwrap(), "a file and a pipe smoothed differently");
     let nrmse = |e: &str| e.lines().filter(|l| l.contains("NRMSE")).map(str::to_string).collect::<Vec<_>>();
     assert!(!nrmse(&err_file).is_empty(), "{err_file}");
     assert_eq!(nrmse(&err_file), nrmse(&err_pipe), "the reports' scores differ");
+
+    // A malformed row deep in a piped record (beyond the first blocks
+    // spooled): a one-line error naming the input and its line, and
+    // nothing left in the output's folder, neither the output nor the
+    // temporary copy of the input.
+    let text = String::from_utf8(bytes).unwrap();
+    let bad_line = 20_000;
+    let spoil = |l: &str| l.split(',').enumerate().map(|(j, v)| if j == 2 { "oops" } else { v }).collect::<Vec<_>>().join(",");
+    let broken: String = text.lines().enumerate().map(|(k, l)| if k + 1 == bad_line { format!("{}\n", spoil(l)) } else { format!("{l}\n") }).collect();
+    let folder = tmp("bad-pipe");
+    std::fs::create_dir_all(&folder).unwrap();
+    let out_bad = folder.join("smoothed.csv");
+    let (ok, err) = through_pipe(&["compensate", "--coeffs", img.to_str().unwrap(), "--input", "/dev/stdin", "--output", out_bad.to_str().unwrap(), "--offline"], broken.into_bytes());
+    assert!(!ok, "{err}");
+    assert!(err.contains("/dev/stdin") && err.contains(&format!("line {bad_line}")) && err.contains("oops") && err.trim().lines().count() == 1, "{err}");
+    assert_eq!(std::fs::read_dir(&folder).unwrap().count(), 0, "no output and no temporary file may be left behind");
 
     // without the sidecar: a one-line error naming it, and no output file
     std::fs::remove_file(&sidecar).unwrap();

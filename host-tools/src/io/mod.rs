@@ -5,6 +5,7 @@ pub mod decimal;
 pub mod signal;
 pub mod signal_csv;
 pub mod signal_file;
+pub mod spool;
 pub mod image_file;
 pub mod frf_csv;
 pub mod uff;
