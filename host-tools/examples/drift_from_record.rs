@@ -119,7 +119,7 @@ fn main() -> Result<()> {
             let d = design_axis(&s.frf.freq_hz, before_frf, sample_variance(&s.idle[a]), &opts)?;
             let (dm, _) = d.discrete.clone().ok_or_else(|| anyhow::anyhow!("no discrete model"))?;
             let after_frf = out.frf_after.axis(a).ok_or_else(|| anyhow::anyhow!("no after FRF of axis {a}"))?;
-            let (ts, _) = pair_second_state(&out.frf_after.freq_hz, before_frf, &d, after_frf, &opts.vf)?;
+            let ts = pair_second_state(&out.frf_after.freq_hz, before_frf, &d, after_frf, &opts.vf)?.states;
             let smoothing = DriftSmoothing {
                 fs_hz: FS,
                 interval_s: (0.0, p.duration_s),

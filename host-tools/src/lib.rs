@@ -41,4 +41,5 @@ pub mod smoother;
 pub mod stream;
 pub mod two_state;
 pub mod two_state_cmd;
+pub mod two_state_joint;
 pub mod virtual_box;

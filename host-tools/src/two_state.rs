@@ -10,7 +10,9 @@
 //! Otherwise pairing fails with a message naming the axis and the modes.
 //! Real poles are matched in ascending order of their value. Machine-structure
 //! modes that both FRFs measured alike are then shared: both states carry
-//! the average of the two fits ([`share_machine_modes`]).
+//! the average of the two fits ([`share_machine_modes`]). Sensor modes above
+//! the compensated band are fitted to both FRFs at once, their modal shares
+//! and the direct term common ([`crate::two_state_joint`]).
 //!
 //! **Interpolation** in the state variable s ∈ [0, 1] (0 = before, 1 =
 //! after): per pair, 1/ω_n² linear in s (linear in added mass at constant
@@ -57,6 +59,7 @@ use crate::discretize::{fit_with_structure, DiscreteModel};
 use crate::fit::vf::{coherence_weights, fit_order, VfOptions};
 use crate::fit::{PoleResidueModel, Term};
 use crate::frf::{axis_name, AxisFrf};
+use crate::two_state_joint::{fit_above_band_jointly, AboveBandMode, Lines};
 use crate::smoother::{model_from_json, terms_to_json, ModelSidecar, SpilledEstimate, SpilledPass, TermJson};
 use std::path::Path;
 use dynocomp_core::image::CoeffImage;
@@ -718,17 +721,34 @@ pub struct RangeCandidate {
     pub worst: f64,
 }
 
+/// The two states of an axis, as [`pair_second_state`] makes them.
+#[derive(Clone, Debug)]
+pub struct Paired {
+    /// The paired states.
+    pub states: TwoState,
+    /// What became of each machine-structure mode ([`share_machine_modes`]).
+    pub machine: Vec<MachineMode>,
+    /// What became of each sensor mode above the compensated band
+    /// ([`crate::two_state_joint`]).
+    pub above_band: Vec<AboveBandMode>,
+}
+
 /// The two states of an axis: the first is `d0`'s fitted model (of the
 /// FRF `first`), the second FRF is fitted at the same order (its coherence
 /// as weights) and paired with it ([`pair`]); then the machine-structure
-/// modes the two FRFs measured alike are shared ([`share_machine_modes`]).
-pub fn pair_second_state(freq_hz: &[f64], first: &AxisFrf, d0: &AxisDesign, second: &AxisFrf, vf: &VfOptions) -> Result<(TwoState, Vec<MachineMode>)> {
+/// modes the two FRFs measured alike are shared ([`share_machine_modes`])
+/// and the sensor modes above `d0`'s compensated band are fitted to both
+/// FRFs at once ([`crate::two_state_joint`]).
+pub fn pair_second_state(freq_hz: &[f64], first: &AxisFrf, d0: &AxisDesign, second: &AxisFrf, vf: &VfOptions) -> Result<Paired> {
     let name = axis_name(second.axis);
     let w = coherence_weights(&second.frf, second.coherence.as_deref());
     let after = fit_order(freq_hz, &second.frf, &w, d0.model.order(), vf).with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?;
     let ts = pair(name, &d0.model, &after)?;
     let w0 = coherence_weights(&first.frf, first.coherence.as_deref());
-    Ok(share_machine_modes(&ts, freq_hz, [(&first.frf, &w0), (&second.frf, &w)]))
+    let frfs = [(&first.frf[..], &w0[..]), (&second.frf[..], &w[..])];
+    let (ts, machine) = share_machine_modes(&ts, freq_hz, frfs);
+    let (states, above_band) = fit_above_band_jointly(&ts, &Lines::new(freq_hz, frfs), d0.compensated_band_hz);
+    Ok(Paired { states, machine, above_band })
 }
 
 /// Largest growth of a machine mode's weighted misfit (either FRF, over
@@ -813,6 +833,9 @@ pub struct RangeDesign {
     pub states: TwoState,
     /// What became of each machine-structure mode ([`share_machine_modes`]).
     pub machine: Vec<MachineMode>,
+    /// What became of each sensor mode above the compensated band
+    /// ([`crate::two_state_joint`]).
+    pub above_band: Vec<AboveBandMode>,
     /// Every candidate design.
     pub candidates: Vec<RangeCandidate>,
     /// Index of the chosen one in `candidates`.
@@ -838,7 +861,7 @@ pub fn design_over_range(
 ) -> Result<RangeDesign> {
     let name = axis_name(first.axis);
     let d0 = design_axis(freq_hz, first, r, opts).context("first FRF")?;
-    let (ts, machine) = pair_second_state(freq_hz, first, &d0, second, &opts.vf)?;
+    let Paired { states: ts, machine, above_band } = pair_second_state(freq_hz, first, &d0, second, &opts.vf)?;
     let ranges = criterion_ranges(&d0.bands, d0.compensated_band_hz);
     let width: f64 = ranges.iter().map(|b| b.1 - b.0).sum();
     let freqs = criterion_grid(&ranges);
@@ -862,7 +885,7 @@ pub fn design_over_range(
         cands.push(RangeCandidate { s, design, errors, worst });
     }
     let best = (0..cands.len()).min_by(|&a, &b| cands[a].worst.total_cmp(&cands[b].worst)).ok_or_else(|| anyhow::anyhow!("axis {name}: no candidate state"))?;
-    Ok(RangeDesign { states: ts, machine, candidates: cands, best })
+    Ok(RangeDesign { states: ts, machine, above_band, candidates: cands, best })
 }
 
 /// Both states of one axis in the model sidecar (`design --frf A --frf B`).

@@ -1,7 +1,9 @@
 //! `dynocomp design --frf BEFORE --frf AFTER` (issue #15, item 2): a set-up
 //! measured in two states. Per axis the two fitted models are paired and
 //! interpolated ([`crate::two_state`]), the machine-structure modes both
-//! FRFs measured alike shared ([`crate::two_state::share_machine_modes`]);
+//! FRFs measured alike shared ([`crate::two_state::share_machine_modes`]),
+//! the sensor modes above the compensated band fitted to both FRFs at once
+//! ([`crate::two_state_joint`]);
 //! the box image is the candidate with
 //! the least worst-case predicted error over the range
 //! ([`crate::two_state::design_over_range`], candidates at s = 0, ¼, ½, ¾, 1);
@@ -89,6 +91,24 @@ pub fn run(args: &DesignArgs) -> Result<()> {
                 if apart.is_empty() { "none".to_string() } else { apart.join(", ") }
             );
         }
+        if let Some(m0) = rd.above_band.first() {
+            let modes: Vec<String> = rd
+                .above_band
+                .iter()
+                .map(|m| if m.joint {
+                    format!("{:.0}→{:.0} Hz (separately {:.0}→{:.0} Hz)", m.joint_fn_hz.0, m.joint_fn_hz.1, m.fn_hz.0, m.fn_hz.1)
+                } else {
+                    format!("{:.0}→{:.0} Hz", m.fn_hz.0, m.fn_hz.1)
+                })
+                .collect();
+            let growth = 100.0 * (m0.misfit_growth - 1.0);
+            let how = if m0.joint {
+                format!("fitted to both FRFs at once, modal shares and direct term common (misfit {growth:+.2} %)")
+            } else {
+                format!("each FRF's own fit kept: fitted at once with a common static gain the misfit grows {growth:+.1} %, more than {:.0} %", 100.0 * crate::two_state_joint::JOINT_TOLERANCE)
+            };
+            let _ = writeln!(lines, "{name} sensor modes above the compensated band {how}: {}", modes.join(", "));
+        }
         let dm0 = first.design.discrete.as_ref().map(|x| x.0.clone()).ok_or_else(|| anyhow::anyhow!("axis {name}: no discrete model"))?;
         entries.push((a.axis, TwoStateJson::new(ts, first.design.compensated_band_hz, &dm0)));
         axes_json.push(RangeAxisJson {
@@ -96,6 +116,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
             modes_before: ts.before.modes(),
             modes_after: ts.after.modes(),
             machine_modes: rd.machine.clone(),
+            above_band_modes: rd.above_band.clone(),
             chosen_state: c.s,
             worst_case_error: c.worst,
             single_state_worst_case: (first.worst, last.worst),
@@ -173,6 +194,9 @@ struct RangeAxisJson {
     modes_after: Vec<(f64, f64)>,
     /// Machine-structure modes: shared between the states or kept apart.
     machine_modes: Vec<crate::two_state::MachineMode>,
+    /// Sensor modes above the compensated band: fitted to both FRFs at once
+    /// or each FRF's own fit kept.
+    above_band_modes: Vec<crate::two_state_joint::AboveBandMode>,
     /// Model state the image was designed for.
     chosen_state: f64,
     /// Its worst-case predicted in-band error over the range.
@@ -200,9 +224,17 @@ fn range_caption(rd: &RangeDesign) -> String {
          of the range (joined by straight lines; 0 = the first FRF, 1 = the second, in between the model interpolated with 1/f² \
          linear). The image is the candidate \
          with the least worst case (thick); the first and second FRF's own designs are the candidates at s = 0 and 1. \
-         Machine modes shared by both states: {} Hz. A fixed image cannot follow a drift of a few %: \
+         Machine modes shared by both states: {} Hz.{} A fixed image cannot follow a drift of a few %: \
          `compensate --offline --drift START:END` follows it with both states.",
-        if shared.is_empty() { "none".to_string() } else { shared.join(", ") }
+        if shared.is_empty() { "none".to_string() } else { shared.join(", ") },
+        match rd.above_band.first() {
+            Some(m) if m.joint => format!(
+                " Sensor modes above the compensated band, fitted to both FRFs at once: {} Hz.",
+                rd.above_band.iter().map(|m| format!("{:.0}→{:.0}", m.joint_fn_hz.0, m.joint_fn_hz.1)).collect::<Vec<_>>().join(", ")
+            ),
+            Some(_) => " Sensor modes above the compensated band: each FRF's own fit (the FRFs disagree on their static gain).".to_string(),
+            None => String::new(),
+        }
     )
 }
 

@@ -25,14 +25,14 @@ use dynocomp::two_state::{
 };
 use nalgebra::DVector;
 
+use dynocomp::simulate::impact::impact_test_axis;
+use dynocomp::two_state_joint::JOINT_TOLERANCE;
 use sim_common::FS;
-/// Issue target: two-state within 1.5x of the exact model. Met on the
-/// median and on 8 of the 9 axes below; NOT met on seed 4 y (1.64x; seed 4
-/// x was 1.66x before the machine modes were shared, now 1.08x): see
-/// BENCHMARKS.md. Each axis is guarded at the measured level, not at the
-/// target.
+/// Issue target: two-state within 1.5x of the exact model. Met on all 9
+/// axes below (worst 1.28x): seed 4 x was 1.66x before the machine modes
+/// were shared (now 1.08x), seed 4 y 1.64x before its above-band sensor
+/// mode was fitted to both FRFs at once (now 0.96x); see BENCHMARKS.md.
 const TARGET: f64 = 1.5;
-const GUARD: f64 = 1.75;
 
 #[test]
 fn pairing_fails_clearly_and_interpolation_follows_the_stated_rule() {
@@ -231,7 +231,8 @@ fn drift_case(seed: u64, rpm: f64, delta: f64) -> Vec<(f64, f64, f64)> {
         let single = Smoother::new(&dm, q, rr).unwrap().smooth(y);
         // Two states: the after FRF fitted at the before model's order,
         // paired, machine modes measured alike shared (what `design` does).
-        let (ts, machine) = pair_second_state(&s.frf.freq_hz, s.frf.axis(a).unwrap(), &d, out.frf_after.axis(a).unwrap(), &VfOptions::default()).unwrap();
+        let paired = pair_second_state(&s.frf.freq_hz, s.frf.axis(a).unwrap(), &d, out.frf_after.axis(a).unwrap(), &VfOptions::default()).unwrap();
+        let (ts, machine) = (paired.states, paired.machine);
         let shared: Vec<String> = machine.iter().filter(|m| m.shared).map(|m| format!("{:.0}", m.fn_hz.0)).collect();
         eprintln!("seed {seed} axis {a}: machine modes shared {} Hz, {} kept apart", shared.join(", "), machine.len() - shared.len());
         let two = smooth_drifting(y, &|s| ts.at(s), &DriftSmoothing { fs_hz: FS, interval_s: (0.0, p.duration_s), band_hz: band, structure, q, r: rr }).unwrap();
@@ -284,10 +285,10 @@ fn two_state_smoother_follows_a_drift_within_1_5x_of_the_exact_model() {
     let median = ratios[ratios.len() / 2];
     eprintln!("two-state / exact: median {median:.2}, worst {:.2}", ratios[ratios.len() - 1]);
     assert!(median <= TARGET, "median ratio {median:.2}");
-    // 8 of 9 within the target; 7 with the machine modes kept apart.
-    assert!(ratios.iter().filter(|&&r| r <= TARGET).count() >= 8, "{ratios:?}");
+    // All 9 within the target; 7 with the machine modes kept apart and the
+    // above-band modes fitted separately.
     for (i, &(single, two, exact)) in rows.iter().enumerate() {
-        assert!(two <= GUARD * exact, "row {i}: two-state {two:.4} vs exact {exact:.4}");
+        assert!(two <= TARGET * exact, "row {i}: two-state {two:.4} vs exact {exact:.4}");
         // Negative control: today's single-FRF smoother misses the target.
         assert!(single > TARGET * exact, "row {i}: single {single:.4} vs exact {exact:.4}");
     }
@@ -375,29 +376,44 @@ fn drift_likelihood_tells_drift_from_none_with_the_exact_model() {
     assert_eq!(c_none, 0.0, "no drift (negative control)");
 }
 
+/// Seed 4's set-up (TPF 400 Hz), axis `axis` before any change: its true
+/// model, an impact test of it (seed 41) and the default design from that.
+struct ImpactFixture {
+    before: dynocomp::simulate::Dynamometer,
+    p: dynocomp::simulate::SimParams,
+    freq: Vec<f64>,
+    d0: (dynocomp::design::AxisDesign, dynocomp::frf::AxisFrf),
+}
+
+fn impact_fixture(axis: usize) -> ImpactFixture {
+    let p = sim_common::params(6_000.0, 4);
+    let dyno = MultiAxisDynamometer::random(dynocomp::simulate::sub_seed(4, 1), &p);
+    let before = dyno.axis(axis).clone();
+    let ip = &p.impact;
+    let freq = dynocomp::simulate::impact::impact_freqs(ip.n_lines, ip.df_hz);
+    let frf0 = impact_test_axis(&before, axis, ip.n_lines, ip.df_hz, 41, ip);
+    let opts = DesignOptions { fs_hz: FS, lag: 4, ..Default::default() };
+    let d0 = design_axis(&freq, &frf0, 0.05, &opts).unwrap();
+    ImpactFixture { before, p, freq, d0: (d0, frf0) }
+}
+
 /// Machine-structure modes are shared between the states only where both
 /// impact tests measured them alike (`share_machine_modes`): with the
 /// sensor modes alone moved every machine mode is shared; a machine mode
 /// that moved too is kept apart in each state (negative control).
 #[test]
 fn machine_modes_are_shared_only_where_both_frfs_measured_them_alike() {
-    use dynocomp::simulate::impact::impact_test_axis;
-    use dynocomp::simulate::sub_seed;
-    let p = sim_common::params(6_000.0, 4);
-    let dyno = MultiAxisDynamometer::random(sub_seed(4, 1), &p);
-    let before = dyno.axis(0).clone();
-    let ip = &p.impact;
-    let freq = dynocomp::simulate::impact::impact_freqs(ip.n_lines, ip.df_hz);
-    let frf0 = impact_test_axis(&before, 0, ip.n_lines, ip.df_hz, 41, ip);
-    let opts = DesignOptions { fs_hz: FS, lag: 4, ..Default::default() };
-    let d0 = design_axis(&freq, &frf0, 0.05, &opts).unwrap();
+    let ImpactFixture { before, p, freq, d0 } = impact_fixture(0);
+    let frf0 = &d0.1;
+    let (d0, ip) = (&d0.0, &p.impact);
     let sensors_moved = shift_sensor_modes(&before, 0.05);
     // The machine mode nearest 413 Hz (ζ ≈ 0.017) moved as well.
     let m = sensors_moved.modes.iter().enumerate().filter(|(_, m)| m.fn_hz < 1000.0).min_by(|a, b| (a.1.fn_hz - 413.0).abs().total_cmp(&(b.1.fn_hz - 413.0).abs())).unwrap().0;
     let f_m = sensors_moved.modes[m].fn_hz;
     let run = |after: &dynocomp::simulate::Dynamometer| {
         let frf1 = impact_test_axis(after, 0, ip.n_lines, ip.df_hz, 42, ip);
-        pair_second_state(&freq, &frf0, &d0, &frf1, &VfOptions::default()).unwrap()
+        let p = pair_second_state(&freq, frf0, d0, &frf1, &VfOptions::default()).unwrap();
+        (p.states, p.machine)
     };
     let (ts, machine) = run(&sensors_moved);
     eprintln!("sensor modes moved: {machine:?}");
@@ -416,5 +432,55 @@ fn machine_modes_are_shared_only_where_both_frfs_measured_them_alike() {
         // Even 0.2 % (an eighth of the mode's half-power bandwidth) is seen.
         assert!(!near.shared && near.misfit_growth.0.min(near.misfit_growth.1) > 1.5, "{near:?}");
         assert!(machine.iter().filter(|x| x.shared).count() == machine.len() - 1, "{machine:?}");
+    }
+}
+
+/// Sensor modes above the compensated band are fitted to both FRFs at once
+/// (`two_state_joint`): on seed 4 y (true 4396 → 4616 Hz, +5 %, the band
+/// ending near 3.7 kHz) the joint fit lands closer to the true frequencies
+/// than the two separate fits. Negative control: when the second state's
+/// mode also changed its static gain (stiffness, not mass), the two FRFs
+/// disagree and each keeps its own fit.
+#[test]
+fn above_band_modes_are_fitted_jointly_only_where_the_frfs_agree_on_their_static_gain() {
+    let ImpactFixture { before, p, freq, d0 } = impact_fixture(1);
+    let frf0 = &d0.1;
+    let (d0, ip) = (&d0.0, &p.impact);
+    let after = shift_sensor_modes(&before, 0.05);
+    let top = |d: &dynocomp::simulate::Dynamometer| d.modes.last().unwrap().fn_hz;
+    assert!(top(&before) > d0.compensated_band_hz.1, "the fixture needs a sensor mode above the band");
+    let run_seeded = |after: &dynocomp::simulate::Dynamometer, seed: u64| {
+        let frf1 = impact_test_axis(after, 1, ip.n_lines, ip.df_hz, seed, ip);
+        pair_second_state(&freq, frf0, d0, &frf1, &VfOptions::default()).unwrap()
+    };
+    let run = |after: &dynocomp::simulate::Dynamometer| run_seeded(after, 42);
+    let p = run(&after);
+    eprintln!("sensor modes moved: {:?}", p.above_band);
+    let [m] = &p.above_band[..] else { panic!("one above-band mode expected: {:?}", p.above_band) };
+    assert!(m.joint, "{m:?}");
+    let miss = |f: (f64, f64)| ((f.0 / top(&before) - 1.0).abs()).max((f.1 / top(&after) - 1.0).abs());
+    eprintln!("largest frequency error: separate {:.2} %, joint {:.2} %", 100.0 * miss(m.fn_hz), 100.0 * miss(m.joint_fn_hz));
+    assert!(miss(m.joint_fn_hz) < 0.5 * miss(m.fn_hz), "{m:?}");
+    // The states carry the joint fit: one modal share and one d.
+    assert_eq!(p.states.before.d, p.states.after.d);
+    // Null: other impact tests of the after-state (noise draws).
+    let mut null = vec![m.misfit_growth];
+    for seed in [43, 44, 45] {
+        let q = run_seeded(&after, seed);
+        let [m] = &q.above_band[..] else { panic!("{:?}", q.above_band) };
+        assert!(m.joint, "null seed {seed}: {m:?}");
+        null.push(m.misfit_growth);
+    }
+    eprintln!("misfit growth, mass change only: {null:?}");
+    // Negative control: the second state's mode also changed its static
+    // gain (stiffness, not mass) by −10 %, +10 %, +30 %.
+    for g in [0.9, 1.1, 1.3] {
+        let mut changed = after.clone();
+        changed.modes.last_mut().unwrap().residue *= g;
+        let q = run(&changed);
+        eprintln!("static gain ×{g} too: {:?}", q.above_band);
+        let [m] = &q.above_band[..] else { panic!("{:?}", q.above_band) };
+        assert!(!m.joint && m.misfit_growth > 1.0 + JOINT_TOLERANCE, "×{g}: {m:?}");
+        assert_ne!(q.states.before.d, q.states.after.d, "each state keeps its own fit");
     }
 }
