@@ -108,9 +108,8 @@ pub fn fit_above_band_jointly(ts: &TwoState, lines: &Lines, band_hz: (f64, f64))
         return (ts.clone(), Vec::new());
     }
     let n = ts.before.terms.len();
-    // Common to both states: the shared machine modes, and for the joint
-    // fit the above-band modes' shares (d is always common in `solve` with
-    // `common_d`).
+    // Common to both states: the shared machine modes' shares in both
+    // refinements; the above-band modes' shares and d in the joint one only.
     let machine: Vec<bool> = (0..n).map(|i| ts.before.terms[i] == ts.after.terms[i]).collect();
     let common: Vec<bool> = (0..n).map(|i| machine[i] || above.contains(&i)).collect();
     let separate = refine(ts, lines, &machine, false, &above);
@@ -209,8 +208,9 @@ fn golden(mut lo: f64, mut hi: f64, cost: impl Fn(f64) -> f64) -> f64 {
 /// Step 1 of the rule: the modal shares and d of both states for the
 /// poles of `ts`, by weighted least squares over both FRFs (the shares of
 /// the terms `common` marks, and d if `common_d`, one unknown for both
-/// states); with the residual Σ w|Ĝ − H|² over both. `None` if the column-scaled matrix's
-/// condition number exceeds [`MAX_COND`] or the solution is not finite.
+/// states); with the residual Σ w|Ĝ − H|² over both. `None` if the
+/// column-scaled matrix's condition number exceeds [`MAX_COND`] or the
+/// solution is not finite.
 fn solve(ts: &TwoState, lines: &Lines, common: &[bool], common_d: bool) -> Option<(TwoState, f64)> {
     let models = [&ts.before, &ts.after];
     let n = ts.before.terms.len();
