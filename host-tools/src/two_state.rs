@@ -80,8 +80,15 @@ pub struct TwoState {
     pub after: PoleResidueModel,
 }
 
-fn fn_hz(p: Complex64) -> f64 {
+/// Natural frequency (Hz) of the pole `p`.
+pub(crate) fn fn_hz(p: Complex64) -> f64 {
     p.norm() / (2.0 * PI)
+}
+
+/// The upper pole −ζω + jω√(1 − ζ²) of natural frequency `w` (rad/s) and
+/// damping ratio `zeta`.
+pub(crate) fn pole_at(w: f64, zeta: f64) -> Complex64 {
+    Complex64::new(-zeta * w, w * (1.0 - zeta * zeta).sqrt())
 }
 
 fn list(f: &[f64]) -> String {
@@ -157,7 +164,7 @@ impl TwoState {
                     let w = 1.0 / lin(1.0 / (w0 * w0), 1.0 / (w1 * w1)).sqrt();
                     let z = lin(z0, z1);
                     let (c0, c1) = (modal_share(p0, r0), modal_share(p1, r1));
-                    let pole = Complex64::new(-z * w, w * (1.0 - z * z).sqrt());
+                    let pole = pole_at(w, z);
                     Term::Pair { pole, residue: (c0 + (c1 - c0) * s) * w * w / (2.0 * Complex64::i() * pole.im) }
                 }
                 (Term::Real { pole: p0, residue: r0 }, Term::Real { pole: p1, residue: r1 }) => {
@@ -175,6 +182,12 @@ impl TwoState {
 /// gain the mode contributes).
 fn modal_share(pole: Complex64, residue: Complex64) -> Complex64 {
     residue * 2.0 * Complex64::i() * pole.im / pole.norm_sqr()
+}
+
+/// The residue ρ of the pair at `pole` whose modal share is `share` (the
+/// inverse of [`modal_share`]).
+pub(crate) fn residue_of_share(pole: Complex64, share: Complex64) -> Complex64 {
+    share * pole.norm_sqr() / (2.0 * Complex64::i() * pole.im)
 }
 
 /// The state variable at time `t_s` of a drift from `start_s` to `end_s`.
@@ -803,7 +816,7 @@ pub fn share_machine_modes(ts: &TwoState, freq_hz: &[f64], frfs: [(&[Complex64],
         }
         let pole = (p0 + p1) * 0.5;
         let c = (modal_share(p0, r0) + modal_share(p1, r1)) * 0.5;
-        let mean = Term::Pair { pole, residue: c * pole.norm_sqr() / (2.0 * Complex64::i() * pole.im) };
+        let mean = Term::Pair { pole, residue: residue_of_share(pole, c) };
         let (f0, f1) = (fn_hz(p0), fn_hz(p1));
         let (zeta, f) = (-pole.re / pole.norm(), fn_hz(pole));
         let half = SHARE_WINDOW * zeta * f;

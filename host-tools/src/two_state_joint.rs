@@ -52,7 +52,7 @@ use num_complex::Complex64;
 use std::f64::consts::PI;
 
 use crate::fit::{PoleResidueModel, Term};
-use crate::two_state::TwoState;
+use crate::two_state::{fn_hz, pole_at, residue_of_share, TwoState};
 
 /// Largest relative growth of the weighted misfit over both FRFs at which
 /// the joint fit is kept (rule step 3).
@@ -135,10 +135,6 @@ pub fn fit_above_band_jointly(ts: &TwoState, lines: &Lines, band_hz: (f64, f64))
     }
 }
 
-fn fn_hz(p: Complex64) -> f64 {
-    p.norm() / (2.0 * PI)
-}
-
 fn pair_fn_hz(m: &PoleResidueModel, i: usize) -> f64 {
     match m.terms[i] {
         Term::Pair { pole, .. } => fn_hz(pole),
@@ -148,8 +144,16 @@ fn pair_fn_hz(m: &PoleResidueModel, i: usize) -> f64 {
 
 /// The pole of natural frequency `f_hz` and damping ratio `zeta`.
 fn pole_of(f_hz: f64, zeta: f64) -> Complex64 {
-    let w = 2.0 * PI * f_hz;
-    Complex64::new(-zeta * w, w * (1.0 - zeta * zeta).sqrt())
+    pole_at(2.0 * PI * f_hz, zeta)
+}
+
+/// State `st` (0 before, 1 after) of `t`.
+fn state(t: &TwoState, st: usize) -> &PoleResidueModel {
+    if st == 0 { &t.before } else { &t.after }
+}
+
+fn state_mut(t: &mut TwoState, st: usize) -> &mut PoleResidueModel {
+    if st == 0 { &mut t.before } else { &mut t.after }
 }
 
 /// Step 2 of the rule: the above-band poles refined, one parameter at a
@@ -161,14 +165,12 @@ fn refine(ts: &TwoState, lines: &Lines, common: &[bool], common_d: bool, above: 
         for &i in above {
             for st in 0..2 {
                 for which in 0..2 {
-                    let model = |t: &TwoState| if st == 0 { t.before.clone() } else { t.after.clone() };
-                    let Term::Pair { pole, .. } = model(&cur).terms[i] else { return None };
+                    let Term::Pair { pole, .. } = state(&cur, st).terms[i] else { return None };
                     let (f, z) = (fn_hz(pole), -pole.re / pole.norm());
                     let with = |v: f64| {
                         let mut t = cur.clone();
-                        let m = if st == 0 { &mut t.before } else { &mut t.after };
                         let p = if which == 0 { pole_of(v, z) } else { pole_of(f, v) };
-                        m.terms[i] = Term::Pair { pole: p, residue: Complex64::new(0.0, 0.0) };
+                        state_mut(&mut t, st).terms[i] = Term::Pair { pole: p, residue: Complex64::new(0.0, 0.0) };
                         t
                     };
                     let cost = |v: f64| solve(&with(v), lines, common, common_d).map_or(f64::INFINITY, |s| s.1);
@@ -245,8 +247,8 @@ fn solve(ts: &TwoState, lines: &Lines, common: &[bool], common_d: bool) -> Optio
             for (i, t) in model.terms.iter().enumerate() {
                 match *t {
                     Term::Pair { pole, .. } => {
-                        // Share c = 1 and c = j as residues ρ = c·ω_n²/(2jω_d).
-                        let rho = Complex64::new(pole.norm_sqr(), 0.0) / (2.0 * Complex64::i() * pole.im);
+                        // Shares c = 1 and c = j as residues ρ = c·ω_n²/(2jω_d).
+                        let rho = residue_of_share(pole, Complex64::new(1.0, 0.0));
                         let basis = |q: Complex64| q / (s - pole) + q.conj() / (s - pole.conj());
                         put(col[i][st], basis(rho));
                         put(col[i][st] + 1, basis(rho * Complex64::i()));
@@ -289,7 +291,7 @@ fn solve(ts: &TwoState, lines: &Lines, common: &[bool], common_d: bool) -> Optio
             .map(|(i, t)| match *t {
                 Term::Pair { pole, .. } => {
                     let c = Complex64::new(x[col[i][st]], x[col[i][st] + 1]);
-                    Term::Pair { pole, residue: c * pole.norm_sqr() / (2.0 * Complex64::i() * pole.im) }
+                    Term::Pair { pole, residue: residue_of_share(pole, c) }
                 }
                 Term::Real { pole, .. } => Term::Real { pole, residue: x[col[i][st]] },
             })

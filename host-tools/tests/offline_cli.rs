@@ -7,28 +7,10 @@
 use std::path::PathBuf;
 
 mod cli_common;
-use cli_common::{dynocomp, example};
+use cli_common::{dynocomp, dynocomp_piped, example};
 
 fn tmp(name: &str) -> PathBuf {
     cli_common::tmp("offline-cli", name)
-}
-
-/// Run the binary with `args` and `bytes` on its stdin: success and stderr.
-fn through_pipe(args: &[&str], bytes: Vec<u8>) -> (bool, String) {
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_dynocomp"))
-        .args(args)
-        .stdin(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    // The binary may stop reading at an error: a broken pipe is not the test's.
-    let feeder = std::thread::spawn(move || {
-        let _ = std::io::Write::write_all(&mut stdin, &bytes);
-    });
-    let out = child.wait_with_output().unwrap();
-    feeder.join().unwrap();
-    (out.status.success(), String::from_utf8_lossy(&out.stderr).into_owned())
 }
 
 #[test]
@@ -56,8 +38,8 @@ fn offline_smoother_needs_the_sidecar_of_its_image() {
     let (ok, _, err_file) = dynocomp(&["compensate", "--coeffs", img.to_str().unwrap(), "--input", &measured, "--output", out.to_str().unwrap(), "--offline", "--truth", &truth, "--report", report_file.to_str().unwrap()]);
     assert!(ok, "{err_file}");
     let bytes = std::fs::read(&measured).unwrap();
-    let (ok, err_pipe) = through_pipe(&["compensate", "--coeffs", img.to_str().unwrap(), "--input", "/dev/stdin", "--output", out_pipe.to_str().unwrap(), "--offline", "--truth", &truth, "--report", report_pipe.to_str().unwrap()], bytes.clone());
-    assert!(ok, "{err_pipe}");
+    let (ok, err_pipe, fed) = dynocomp_piped(&["compensate", "--coeffs", img.to_str().unwrap(), "--input", "/dev/stdin", "--output", out_pipe.to_str().unwrap(), "--offline", "--truth", &truth, "--report", report_pipe.to_str().unwrap()], bytes.clone());
+    assert!(ok && fed, "{err_pipe}");
     assert!(err_pipe.contains("with the input (a pipe) for its second reading"), "{err_pipe}");
     assert!(!err_file.contains("(a pipe)"), "{err_file}");
     assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&out_pipe).unwrap(), "a file and a pipe smoothed differently");
@@ -76,7 +58,7 @@ fn offline_smoother_needs_the_sidecar_of_its_image() {
     let folder = tmp("bad-pipe");
     std::fs::create_dir_all(&folder).unwrap();
     let out_bad = folder.join("smoothed.csv");
-    let (ok, err) = through_pipe(&["compensate", "--coeffs", img.to_str().unwrap(), "--input", "/dev/stdin", "--output", out_bad.to_str().unwrap(), "--offline"], broken.into_bytes());
+    let (ok, err, _) = dynocomp_piped(&["compensate", "--coeffs", img.to_str().unwrap(), "--input", "/dev/stdin", "--output", out_bad.to_str().unwrap(), "--offline"], broken.into_bytes());
     assert!(!ok, "{err}");
     assert!(err.contains("/dev/stdin") && err.contains(&format!("line {bad_line}")) && err.contains("oops") && err.trim().lines().count() == 1, "{err}");
     assert_eq!(std::fs::read_dir(&folder).unwrap().count(), 0, "no output and no temporary file may be left behind");

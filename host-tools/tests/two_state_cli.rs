@@ -6,7 +6,7 @@
 
 #[allow(dead_code)]
 mod cli_common;
-use cli_common::dynocomp;
+use cli_common::{dynocomp, dynocomp_piped};
 use dynocomp::io::signal_csv::read_signal_csv;
 use dynocomp::metrics::accuracy;
 
@@ -82,19 +82,8 @@ fn two_state_design_and_drifting_smoother_follow_the_change() {
     // kept in a temporary file for its second reading. The same bytes.
     assert!(err.contains("checkpoints spilled"), "{err}");
     let c_pipe = d("c_two_pipe.csv");
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_dynocomp"))
-        .args(["compensate", "--coeffs", &two, "--input", "/dev/stdin", "--output", &c_pipe, "--offline", "--drift", "0:0.3"])
-        .stdin(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    let bytes = std::fs::read(d("measured.csv")).unwrap();
-    let feeder = std::thread::spawn(move || std::io::Write::write_all(&mut stdin, &bytes));
-    let piped = child.wait_with_output().unwrap();
-    feeder.join().unwrap().unwrap();
-    let err_pipe = String::from_utf8_lossy(&piped.stderr);
-    assert!(piped.status.success() && err_pipe.contains("checkpoints spilled") && err_pipe.contains("with the input (a pipe)"), "{err_pipe}");
+    let (ok, err_pipe, fed) = dynocomp_piped(&["compensate", "--coeffs", &two, "--input", "/dev/stdin", "--output", &c_pipe, "--offline", "--drift", "0:0.3"], std::fs::read(d("measured.csv")).unwrap());
+    assert!(ok && fed && err_pipe.contains("checkpoints spilled") && err_pipe.contains("with the input (a pipe)"), "{err_pipe}");
     assert_eq!(std::fs::read(&c_two).unwrap(), std::fs::read(&c_pipe).unwrap(), "a file and a pipe smoothed differently");
     let truth = read_signal_csv(&dir.join("true_force.csv")).unwrap();
     let (rt, ro) = (read_signal_csv(&dir.join("c_two.csv")).unwrap(), read_signal_csv(&dir.join("c_one.csv")).unwrap());

@@ -15,6 +15,24 @@ pub fn dynocomp(args: &[&str]) -> (bool, String, String) {
     (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
 }
 
+/// Run `dynocomp` with `args` and `input` on its stdin (fed from a thread,
+/// so a large input cannot deadlock against the output): (success, stderr,
+/// whether all of `input` was taken; the binary may stop reading at an
+/// error).
+pub fn dynocomp_piped(args: &[&str], input: Vec<u8>) -> (bool, String, bool) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_dynocomp"))
+        .args(args)
+        .stdin(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run dynocomp");
+    let mut stdin = child.stdin.take().expect("stdin");
+    let feeder = std::thread::spawn(move || std::io::Write::write_all(&mut stdin, &input).is_ok());
+    let out = child.wait_with_output().expect("wait for dynocomp");
+    let fed = feeder.join().expect("feeder thread");
+    (out.status.success(), String::from_utf8_lossy(&out.stderr).into_owned(), fed)
+}
+
 /// A path `name` in a per-test-binary, per-process temporary folder `tag`.
 pub fn tmp(tag: &str, name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("dynocomp-{tag}-{}", std::process::id()));
