@@ -3,7 +3,13 @@
 //! simulated with the ideal anti-aliasing chain, designed, compensated and
 //! scored against the band-limited truth.
 //!
-//! usage: cargo run --release -p dynocomp --example rates -- [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf]
+//! usage: cargo run --release -p dynocomp --example rates -- [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum] [--chatter HZ]
+//!
+//! `--force-spectrum`: q chosen for the force spectrum of a representative
+//! record (the same steady cut, other noise), as `design --force-prior
+//! spectrum` does. `--chatter HZ`: the scored cut chatters at HZ (0.02 mm
+//! from 0.2 s) while a representative record stays the steady cut (the
+//! negative control of `--force-spectrum`).
 //!
 //! Per case and axis: raw and compensated NRMSE (RMS error / std of the
 //! truth, below min(4 kHz, 0.4 fs), latency removed), the exact-inverse noise
@@ -11,30 +17,40 @@
 //! fs the median and worst compensated NRMSE and the axes worse than raw.
 use anyhow::{bail, Context, Result};
 use dynocomp::frf::axis_name;
-use dynocomp::simulate::rates::{cases, quick_cases, run_case, summarize, RunOptions, RATES_HZ};
+use dynocomp::simulate::rates::{cases, quick_cases, run_case_on, summarize, RunOptions, RATES_HZ};
+use dynocomp::simulate::Chatter;
 use std::time::Instant;
 use dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE;
 
 fn main() -> Result<()> {
     let mut quick = false;
+    let mut chatter_hz: Option<f64> = None;
     let mut run = RunOptions::default();
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--quick" => quick = true,
             "--exact-frf" => run.exact_frf = true,
+            "--force-spectrum" => run.force_spectrum = true,
+            "--chatter" => chatter_hz = Some(args.next().context("--chatter needs Hz")?.parse().context("--chatter: not a number")?),
             "--lag" => run.lag = Some(args.next().context("--lag needs a value")?.parse().context("--lag: not a number of samples")?),
             "--discretization" => {
                 let v = args.next().context("--discretization needs fit, foh or zoh")?;
                 run.discretization = <dynocomp::discretize::Discretization as clap::ValueEnum>::from_str(&v, true)
                     .map_err(|e| anyhow::anyhow!("--discretization {v}: {e}"))?;
             }
-            _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf])"),
+            _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum] [--chatter HZ])"),
         }
     }
     let list = if quick { quick_cases() } else { cases() };
     let t_all = Instant::now();
     println!("NRMSE = RMS error / std of the band-limited truth, band min(4 kHz, 0.4 fs), declared latency {} removed, discretization {}{}", run.lag.map_or("chosen as `design` does (4, or 6/8 where the flat band falls short)".to_string(), |l| l.to_string()), run.discretization.name(), if run.exact_frf { ", exact (noise-free) impact-test FRF" } else { "" });
+    if run.force_spectrum {
+        println!("q chosen for the force spectrum of a representative record (the steady cut, seed + 1000), as design --force-prior spectrum");
+    }
+    if let Some(f) = chatter_hz {
+        println!("scored cut chatters at {f} Hz (0.02 mm from 0.2 s); any representative record is the steady cut");
+    }
     println!("floor = exact-inverse noise floor sqrt(R·(2/fs)·∫|1/G|² df)/std(truth) with the true G");
     println!(
         "{:>7} {:<15} {:>5} {:>4} {:>4} {:>9} {:>9} {:>8} {:>9} {:>8} {:>15} {:>8}",
@@ -43,7 +59,11 @@ fn main() -> Result<()> {
     let mut results = Vec::new();
     for &fs in &RATES_HZ {
         for case in &list {
-            match run_case(case, fs, &run) {
+            let mut params = case.sim_params(fs);
+            if let Some(f) = chatter_hz {
+                params.milling.chatter = Some(Chatter { freq_hz: f, amplitude_mm: 0.02, onset_s: 0.2, growth_s: 0.02 });
+            }
+            match run_case_on(case, &params, &run) {
                 Err(e) => println!("{fs:>7} {:<15} simulation failed: {e:#}", case.name),
                 Ok(r) => {
                     for a in &r.axes {

@@ -137,6 +137,20 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
     let progress = progress_bar(reader.len_hint());
     let how: String;
     let n_samples;
+    // An image whose q was chosen for a record's force spectrum says so
+    // every time it is used (its sidecar keeps that; the box path does not
+    // need the sidecar otherwise, so an unreadable one is left to --offline).
+    if let AnyImage::Inline(i) = &img {
+        if crate::smoother::sidecar_path(&a.coeffs).exists() {
+            if let Ok(sc) = crate::smoother::read_sidecar(&a.coeffs, i) {
+                for m in &sc.axes {
+                    if let Some(p) = &m.force_spectrum {
+                        eprintln!("{}", p.note(&m.axis));
+                    }
+                }
+            }
+        }
+    }
     match (&img, a.offline) {
         (AnyImage::Inline(i), false) => {
             let mut comp = StreamCompensator::new(i, &axes, a.raw_timing, &source)?;

@@ -11,6 +11,12 @@
 //! (distortion of the force + amplified noise inside the band, both relative
 //! to the force variance), subject to the white-noise gain of H staying below
 //! `max_noise_gain`. √J is reported as the predicted in-band error.
+//!
+//! With a representative record of the cut ([`DesignOptions::force_record`],
+//! `--force-prior spectrum`) the mean over the lines in the distortion term
+//! becomes a mean weighted by the record's force power in each line's cell,
+//! and `force_rms`² the record's in-band force power
+//! ([`crate::force_spectrum`], [`criterion_j_weighted`]).
 
 use anyhow::{bail, Context, Result};
 use dynocomp_core::kernel::AxisFilter;
@@ -64,6 +70,10 @@ pub struct DesignOptions {
     /// ([`MATCH_BAND_FRACTION`] by default; [`crate::discretize::NYQUIST_FIT_FRACTION`]
     /// is tried by [`crate::latency`] where the default falls short).
     pub discrete_fit_top: f64,
+    /// A representative record of the cut: q is chosen for its force
+    /// spectrum instead of a flat one of `force_rms`
+    /// ([`crate::force_spectrum`], `--force-prior spectrum`).
+    pub force_record: Option<std::sync::Arc<crate::force_spectrum::ForceRecord>>,
 }
 
 /// Largest accepted fit error: relative RMS of Ĝ against the coherent
@@ -121,6 +131,7 @@ impl Default for DesignOptions {
             axis_cycle_budget: None,
             paper_orders_auto: false,
             discrete_fit_top: MATCH_BAND_FRACTION,
+            force_record: None,
         }
     }
 }
@@ -178,6 +189,9 @@ pub struct AxisDesign {
     /// Predicted in-band error when the sensor modes shift by −5…+5 %
     /// ([`crate::sensitivity`]; `None` when the model has no mode).
     pub sensitivity: Option<crate::sensitivity::Sensitivity>,
+    /// The record's force spectrum q was chosen for (`None`: the flat
+    /// spectrum of `force_rms`, the default).
+    pub force_spectrum: Option<crate::force_spectrum::AxisForceSpectrum>,
 }
 
 impl AxisDesign {
@@ -292,6 +306,19 @@ pub fn criterion_j(grid: &[(f64, Complex64)], h: &[Complex64], lag: usize, fs_hz
     dist / n + noise * amp / n
 }
 
+/// [`criterion_j`] with the distortion of line i weighted by `weights[i]`
+/// (Σ = 1: the force's share there, [`crate::force_spectrum`]); the noise
+/// term stays the mean over the lines (white noise).
+pub fn criterion_j_weighted(grid: &[(f64, Complex64)], h: &[Complex64], weights: &[f64], lag: usize, fs_hz: f64, noise: f64) -> f64 {
+    let (mut dist, mut amp) = (0.0, 0.0);
+    for (((f, g), h), w) in grid.iter().zip(h).zip(weights) {
+        let e = h * g * Complex64::from_polar(1.0, 2.0 * PI * f * lag as f64 / fs_hz) - 1.0;
+        dist += w * e.norm_sqr();
+        amp += h.norm_sqr();
+    }
+    dist + noise * amp / grid.len() as f64
+}
+
 /// The frequency ranges of the Q criterion of a design: its fitting bands,
 /// or the compensated band without bands.
 pub fn criterion_ranges(bands: &[Band], compensated_band_hz: (f64, f64)) -> Vec<(f64, f64)> {
@@ -302,9 +329,16 @@ pub fn criterion_ranges(bands: &[Band], compensated_band_hz: (f64, f64)) -> Vec<
     }
 }
 
-/// The lines of the Q criterion: 200 spread over `ranges` (see [`criterion_ranges`]).
+/// The lines of the Q criterion: 200 spread over `ranges` (see
+/// [`criterion_ranges`]), the centres of [`criterion_cells`].
 pub fn criterion_grid(ranges: &[(f64, f64)]) -> Vec<f64> {
     band_grid(ranges, 200)
+}
+
+/// The cells (lo, hi) (Hz) whose centres are [`criterion_grid`]: each line
+/// stands for the force in its cell ([`crate::force_spectrum`]).
+pub fn criterion_cells(ranges: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    band_cells(ranges, 200)
 }
 
 struct Objective<'a> {
@@ -314,6 +348,9 @@ struct Objective<'a> {
     opts: &'a DesignOptions,
     r: f64,
     band_width: f64,
+    /// The record's force spectrum on the grid (weights, power P_F in N²);
+    /// `None`: flat, of power `force_rms`² (module doc).
+    force: Option<(Vec<f64>, f64)>,
 }
 
 impl Objective<'_> {
@@ -321,8 +358,28 @@ impl Objective<'_> {
     /// measurement noise itself, in the same units as [`Objective::eval`].
     fn raw(&self) -> f64 {
         let n = self.grid.len() as f64;
-        let dist: f64 = self.grid.iter().map(|(_, g)| (g - 1.0).norm_sqr()).sum::<f64>() / n;
-        dist + 2.0 * self.r / self.opts.fs_hz * self.band_width / (self.opts.force_rms * self.opts.force_rms)
+        let dist: f64 = match &self.force {
+            None => self.grid.iter().map(|(_, g)| (g - 1.0).norm_sqr()).sum::<f64>() / n,
+            Some((w, _)) => self.grid.iter().zip(w).map(|((_, g), w)| w * (g - 1.0).norm_sqr()).sum::<f64>(),
+        };
+        dist + 2.0 * self.r / self.opts.fs_hz * self.band_width / self.force_power()
+    }
+
+    /// The force power the criterion is relative to (N²).
+    fn force_power(&self) -> f64 {
+        self.force.as_ref().map_or(self.opts.force_rms * self.opts.force_rms, |f| f.1)
+    }
+
+    /// J of the response `h` on the grid: for the record's spectrum when
+    /// there is one, else flat (`flat` forces the flat spectrum at the same
+    /// power).
+    fn j_of(&self, h: &[Complex64], flat: bool) -> f64 {
+        let fs = self.opts.fs_hz;
+        let noise = 2.0 * self.r / fs * self.band_width / self.force_power();
+        match &self.force {
+            Some((w, _)) if !flat => criterion_j_weighted(&self.grid, h, w, self.lag, fs, noise),
+            _ => criterion_j(&self.grid, h, self.lag, fs, noise),
+        }
     }
 
     /// (J, noise gain, design) for one q; J = ∞ when the design fails or the
@@ -335,8 +392,10 @@ impl Objective<'_> {
         let ss = &d.compensator;
         let ng = ss.white_noise_gain().unwrap_or(f64::INFINITY);
         let h: Vec<Complex64> = self.grid.iter().map(|(f, _)| ss.freq_response(*f, fs)).collect();
-        let noise = noise_term(self.r, fs, self.band_width, self.opts.force_rms);
-        let j = criterion_j(&self.grid, &h, self.lag, fs, noise);
+        let j = match self.force {
+            None => criterion_j(&self.grid, &h, self.lag, fs, noise_term(self.r, fs, self.band_width, self.opts.force_rms)),
+            Some(_) => self.j_of(&h, false),
+        };
         if ng > self.opts.max_noise_gain {
             return (f64::INFINITY, ng, Some(d));
         }
@@ -441,6 +500,18 @@ fn band_grid(bands: &[(f64, f64)], n: usize) -> Vec<f64> {
     for b in bands {
         let k = ((n as f64 * (b.1 - b.0) / total).round() as usize).max(4);
         out.extend((0..k).map(|i| b.0 + (b.1 - b.0) * (i as f64 + 0.5) / k as f64));
+    }
+    out
+}
+
+/// The cells of [`band_grid`]: each of its frequencies is the centre of one.
+fn band_cells(bands: &[(f64, f64)], n: usize) -> Vec<(f64, f64)> {
+    let total: f64 = bands.iter().map(|b| b.1 - b.0).sum();
+    let mut out = Vec::with_capacity(n + bands.len());
+    for b in bands {
+        let k = ((n as f64 * (b.1 - b.0) / total).round() as usize).max(4);
+        let w = (b.1 - b.0) / k as f64;
+        out.extend((0..k).map(|i| (b.0 + w * i as f64, b.0 + w * (i + 1) as f64)));
     }
     out
 }
@@ -673,6 +744,19 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
             (None, None) => unreachable!("the default method always has a discrete model"),
         }
     };
+    // The record's force spectrum on the grid's cells (--force-prior spectrum).
+    let spectrum = match &opts.force_record {
+        None => None,
+        Some(rec) => {
+            let y = rec.channels.get(frf.axis).and_then(|c| c.as_deref()).ok_or_else(|| {
+                anyhow::anyhow!("{}: no column f{name} for axis {name}; the force record needs every designed axis", rec.source)
+            })?;
+            let cells = criterion_cells(&ranges);
+            let s = crate::force_spectrum::estimate(y, opts.fs_hz, &|f| fitted.frf(f), r, &cells)
+                .with_context(|| format!("{}: axis {name}: --force-prior spectrum", rec.source))?;
+            Some(s)
+        }
+    };
     let obj = Objective {
         design: &design_fn,
         lag,
@@ -680,6 +764,7 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         opts,
         r,
         band_width: ranges.iter().map(|b| b.1 - b.0).sum(),
+        force: spectrum.as_ref().map(|s| (s.weights(), s.total_n2())),
     };
     let mut q_trace = Vec::new();
     let chosen = match opts.q_override {
@@ -742,6 +827,19 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
     // from 7 averages has ~5 % random error, as large as the tolerance.
     let model_frf: Vec<Complex64> = freq_hz.iter().map(|f| fitted.frf(*f)).collect();
     let flat = flat_band(|f| quantize::filter_response(&filter, f, fs), freq_hz, &model_frf, &eval_band, lag, fs);
+    let force_spectrum = match (&spectrum, &obj.force) {
+        (Some(s), Some((w, p))) => {
+            let h: Vec<Complex64> = obj.grid.iter().map(|(f, _)| kal.compensator.freq_response(*f, fs)).collect();
+            Some(crate::force_spectrum::AxisForceSpectrum {
+                force_rms_n: p.sqrt(),
+                weights: w.clone(),
+                predicted_error: j.sqrt(),
+                flat_predicted_error: obj.j_of(&h, true).sqrt(),
+                resolution_hz: s.resolution_hz,
+            })
+        }
+        _ => None,
+    };
     let mut design = AxisDesign {
         axis: frf.axis,
         model: fitted.model.clone(),
@@ -765,7 +863,9 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         compensated_band_hz: comp_band,
         notes,
         sensitivity: None,
+        force_spectrum,
     };
+
     design.sensitivity = crate::sensitivity::predict(&design, opts);
     Ok(design)
 }

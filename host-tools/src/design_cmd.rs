@@ -97,19 +97,26 @@ pub enum ForcePrior {
     /// state of `compensate --offline`, tuned from --force-record
     /// (`crate::force_prior`); the box image stays the default design.
     Harmonics,
+    /// q of the box design chosen for the force spectrum of --force-record
+    /// instead of a flat spectrum of --force-rms (`crate::force_spectrum`):
+    /// the same filter structure and cost, tuned for the cut.
+    Spectrum,
 }
 
 /// The opt-in harmonic force prior (issue #12, optional part).
 #[derive(Args, Debug, Clone, Default)]
 pub struct PriorArgs {
-    /// Force model of `compensate --offline`: `default` (random walk) or
-    /// `harmonics` (the spindle harmonics of --spindle-rpm/--teeth in the
-    /// Kalman state, tuned from --force-record; offline only, the box image
-    /// is unchanged; --spindle-rpm then makes no fitting bands).
+    /// Force model: `default` (random walk, q for a flat force spectrum of
+    /// --force-rms), `harmonics` (the spindle harmonics of
+    /// --spindle-rpm/--teeth in the Kalman state of `compensate --offline`,
+    /// tuned from --force-record; the box image is unchanged; --spindle-rpm
+    /// then makes no fitting bands) or `spectrum` (q of the box image and of
+    /// the offline smoother chosen for the force spectrum of --force-record).
     #[arg(long, value_enum, default_value_t = ForcePrior::Default)]
     pub force_prior: ForcePrior,
     /// A representative record of the cut (signal CSV, same rate, raw
-    /// measured forces): the harmonics' amplitudes are measured in it.
+    /// measured forces, a column per designed axis): the harmonics'
+    /// amplitudes or the force spectrum are measured in it.
     #[arg(long, value_name = "FILE")]
     pub force_record: Option<PathBuf>,
     /// Bandwidth of each harmonic line of the prior (Hz; default a quarter
@@ -353,6 +360,9 @@ pub struct AxisJson {
     /// The harmonic force prior of `compensate --offline` (null without
     /// `--force-prior harmonics`).
     pub force_prior: Option<ForcePriorJson>,
+    /// The record's force spectrum q was chosen for (null without
+    /// `--force-prior spectrum`).
+    pub force_spectrum: Option<crate::force_spectrum::AxisForceSpectrum>,
 }
 
 /// The force prior of one axis in the `--json` summary.
@@ -541,9 +551,10 @@ pub fn render_summary(designs: &[AxisDesign], fs: f64, latency: usize, image: &s
             let _ = writeln!(s, "{}", paper_line(d.axis, tf.nb(), tf.na(), p));
         }
     }
+    let spectrum = if designs.iter().any(|d| d.force_spectrum.is_some()) { "the force spectrum of --force-record" } else { "a flat force spectrum" };
     let _ = writeln!(
         s,
-        "flat band: |H·Ĝ| within ±5 % and ±5° of the pure {latency}-sample delay (fitted model Ĝ); noise: white-noise gain; pred.: predicted in-band RMS error for a flat force spectrum; raw: the same for no compensation; match: max |Ĝ_d/Ĝ − 1| of the discrete model over the compensated band"
+        "flat band: |H·Ĝ| within ±5 % and ±5° of the pure {latency}-sample delay (fitted model Ĝ); noise: white-noise gain; pred.: predicted in-band RMS error for {spectrum}; raw: the same for no compensation; match: max |Ĝ_d/Ĝ − 1| of the discrete model over the compensated band"
     );
     s
 }
@@ -568,10 +579,13 @@ pub fn paper_line(axis: usize, nb: usize, na: usize, p: &PaperDiagnostics) -> St
 /// Run `dynocomp design`.
 pub fn run(args: &DesignArgs) -> Result<()> {
     let harmonics = args.prior.force_prior == ForcePrior::Harmonics;
+    let spectrum = args.prior.force_prior == ForcePrior::Spectrum;
     if harmonics {
         check_prior_args(args)?;
+    } else if spectrum {
+        check_spectrum_args(args)?;
     } else if args.prior.force_record.is_some() || args.prior.line_width.is_some() {
-        bail!("--force-record and --line-width belong to --force-prior harmonics");
+        bail!("--force-record belongs to --force-prior harmonics or spectrum, --line-width to --force-prior harmonics");
     }
     match args.input.frf.len() {
         1 => {}
@@ -615,6 +629,16 @@ pub fn run(args: &DesignArgs) -> Result<()> {
             frf.axes.len().max(1) as u32,
         )),
         ..args.base_options(latency)
+    };
+    // The representative record is read before anything is designed.
+    let opts = match spectrum {
+        false => opts,
+        true => {
+            let path = args.prior.force_record.as_ref().expect("checked by check_spectrum_args");
+            let rec = read_force_record(path, args.input.fs)?;
+            let channels = [0, 1, 2].map(|a| rec.channel(a).map(|c| c.to_vec()));
+            DesignOptions { force_record: Some(std::sync::Arc::new(crate::force_spectrum::ForceRecord { source: path.display().to_string(), channels })), ..opts }
+        }
     };
     let method_name = if paper { "paper" } else { "vf" };
     if args.parallel {
@@ -662,8 +686,14 @@ pub fn run(args: &DesignArgs) -> Result<()> {
         // The model sidecar of `compensate --offline` (crate::smoother).
         let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
         let mut sidecar = crate::smoother::ModelSidecar::new(&image, &models);
-        for (m, p) in sidecar.axes.iter_mut().zip(&priors) {
+        for ((m, p), d) in sidecar.axes.iter_mut().zip(&priors).zip(&designs) {
             m.force_prior = p.as_ref().map(|p| p.prior.clone());
+            m.force_spectrum = d.force_spectrum.as_ref().map(|s| crate::force_spectrum::SpectrumProvenance {
+                record: args.prior.force_record.as_ref().map(|p| p.display().to_string()).unwrap_or_default(),
+                force_rms_n: s.force_rms_n,
+                predicted_error: s.predicted_error,
+                flat_predicted_error: s.flat_predicted_error,
+            });
         }
         crate::smoother::write_sidecar(&args.out, &sidecar)?;
     }
@@ -677,6 +707,9 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     for (d, p) in designs.iter().zip(&priors) {
         if let Some(p) = p {
             summary.push_str(&prior_line(d.axis, p));
+        }
+        if let Some(s) = &d.force_spectrum {
+            summary.push_str(&spectrum_line(d.axis, s, args.input.force_rms));
         }
     }
     summary.push_str(&crate::load::describe(&box_load, image.fs_hz));
@@ -738,6 +771,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
                         off_line_share: p.record.off_line_share,
                         record_spindle_rpm: 60.0 * p.record.best_spindle_hz,
                     }),
+                    force_spectrum: d.force_spectrum.clone(),
                 })
                 .collect(),
         };
@@ -764,6 +798,32 @@ fn check_prior_args(args: &DesignArgs) -> Result<()> {
     Ok(())
 }
 
+/// The conditions of `--force-prior spectrum`: one FRF, the default
+/// method, no parallel elaboration, a record, no line width.
+fn check_spectrum_args(args: &DesignArgs) -> Result<()> {
+    if args.input.frf.len() != 1 || args.method != "vf" || args.parallel {
+        bail!("--force-prior spectrum works with one --frf and the default method (vf), without --parallel");
+    }
+    if args.prior.force_record.is_none() {
+        bail!("--force-prior spectrum needs --force-record FILE: a representative measured record of the cut, whose force spectrum q is chosen for");
+    }
+    if args.prior.line_width.is_some() {
+        bail!("--line-width belongs to --force-prior harmonics");
+    }
+    Ok(())
+}
+
+/// Read a representative record (`--force-record`) sampled at `fs_hz`.
+fn read_force_record(path: &std::path::Path, fs_hz: f64) -> Result<io::signal_csv::SignalRecord> {
+    let rec = io::signal_csv::read_signal_csv(path)?;
+    if let Some((rate, _)) = rec.sample_rate_from_time() {
+        if (rate - fs_hz).abs() > 1e-6 * fs_hz {
+            bail!("{}: sampled at {rate:.1} Hz (column t_s), not at --fs {fs_hz}; record the cut at the box's rate", path.display());
+        }
+    }
+    Ok(rec)
+}
+
 /// The harmonic force prior of each designed axis (`crate::force_prior`),
 /// tuned from `--force-record`, with the smoother's checks (Riccati
 /// residual, closed-loop stability) and the refusal of a prior predicted
@@ -771,12 +831,7 @@ fn check_prior_args(args: &DesignArgs) -> Result<()> {
 fn build_priors(args: &DesignArgs, designs: &[AxisDesign], r: &[Option<f64>; 3]) -> Result<Vec<Option<crate::force_prior::AxisPrior>>> {
     let path = args.prior.force_record.as_ref().expect("checked by check_prior_args");
     let shown = path.display();
-    let rec = io::signal_csv::read_signal_csv(path)?;
-    if let Some((rate, _)) = rec.sample_rate_from_time() {
-        if (rate - args.input.fs).abs() > 1e-6 * args.input.fs {
-            bail!("{shown}: sampled at {rate:.1} Hz (column t_s), not at --fs {}; record the cut at the box's rate", args.input.fs);
-        }
-    }
+    let rec = read_force_record(path, args.input.fs)?;
     let opts = crate::force_prior::PriorOptions {
         spindle_rpm: args.bands.spindle_rpm.expect("checked"),
         teeth: args.bands.teeth.expect("checked"),
@@ -803,6 +858,17 @@ fn build_priors(args: &DesignArgs, designs: &[AxisDesign], r: &[Option<f64>; 3])
         out.push(Some(built));
     }
     Ok(out)
+}
+
+/// One summary line of an axis designed on a record's force spectrum.
+fn spectrum_line(axis: usize, s: &crate::force_spectrum::AxisForceSpectrum, force_rms: f64) -> String {
+    format!(
+        "{} q chosen for the force spectrum of --force-record ({:.2} N RMS in the band, in place of a flat --force-rms {force_rms} N): predicted {:.3} % for that spectrum, {:.3} % for a flat spectrum of the same power (a broadband force: chatter, transients)\n",
+        axis_name(axis),
+        s.force_rms_n,
+        100.0 * s.predicted_error,
+        100.0 * s.flat_predicted_error
+    )
 }
 
 /// One summary line of an axis's force prior.

@@ -17,6 +17,7 @@ pub mod design_cmd;
 pub mod discretize;
 pub mod flash_serial;
 pub mod force_prior;
+pub mod force_spectrum;
 pub mod flash_probe;
 pub mod fit;
 pub mod frf;

@@ -97,6 +97,10 @@ pub struct AxisModelJson {
     /// --force-prior harmonics`; absent otherwise and in older sidecars).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub force_prior: Option<crate::force_prior::HarmonicPrior>,
+    /// The record's force spectrum q was chosen for (`design --force-prior
+    /// spectrum`; absent otherwise and in older sidecars).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub force_spectrum: Option<crate::force_spectrum::SpectrumProvenance>,
 }
 
 /// The sidecar's terms of a pole-residue model.
@@ -176,6 +180,7 @@ impl ModelSidecar {
                 terms: terms_to_json(m),
                 two_state: None,
                 force_prior: None,
+                force_spectrum: None,
             })
             .collect();
         ModelSidecar {

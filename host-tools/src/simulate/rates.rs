@@ -202,13 +202,20 @@ pub struct RunOptions {
     /// "distortion below noise" check, where only the discrete model and
     /// the filter can make the error exceed the exact inverse's noise floor).
     pub exact_frf: bool,
+    /// Choose q for the force spectrum of a representative record
+    /// (`design --force-prior spectrum`): the case's steady cut simulated
+    /// again with other noise (seed + [`REPRESENTATIVE_SEED_OFFSET`]).
+    pub force_spectrum: bool,
 }
 
 impl Default for RunOptions {
     fn default() -> Self {
-        Self { lag: None, discretization: crate::discretize::Discretization::Fit, exact_frf: false }
+        Self { lag: None, discretization: crate::discretize::Discretization::Fit, exact_frf: false, force_spectrum: false }
     }
 }
+
+/// Seed offset of the representative record ([`RunOptions::force_spectrum`]).
+pub const REPRESENTATIVE_SEED_OFFSET: u64 = 1000;
 
 /// The one place where the harness builds its [`DesignOptions`].
 pub fn design_options(fs_hz: f64, run: &RunOptions) -> DesignOptions {
@@ -268,22 +275,46 @@ pub fn noise_floor(g: impl Fn(f64) -> Complex64, r: f64, fs_hz: f64, band_hz: f6
 /// coefficient image (declared latency removed) and score it. A failed
 /// design is recorded in its axis, not returned as an error.
 pub fn run_case(case: &RateCase, fs_hz: f64, run: &RunOptions) -> Result<CaseResult> {
-    let mut params = case.sim_params(fs_hz);
+    run_case_on(case, &case.sim_params(fs_hz), run)
+}
+
+/// [`run_case`] with the scored record simulated from `params` (for
+/// example the case's cut with chatter); a representative record
+/// ([`RunOptions::force_spectrum`]) is always the case's own steady cut.
+pub fn run_case_on(case: &RateCase, params: &SimParams, run: &RunOptions) -> Result<CaseResult> {
+    let fs_hz = params.fs_hz;
+    let mut params = params.clone();
+    let mut steady = case.sim_params(fs_hz);
     if run.exact_frf {
-        params.impact.output_noise_rel = 0.0;
-        params.impact.input_noise_rel = 0.0;
-        params.impact.dc_noise_factor = 1.0;
+        for p in [&mut params, &mut steady] {
+            p.impact.output_noise_rel = 0.0;
+            p.impact.input_noise_rel = 0.0;
+            p.impact.dc_noise_factor = 1.0;
+        }
     }
     let dyno = case.dynamometer(&params)?;
+    let record = match run.force_spectrum {
+        false => None,
+        true => {
+            let rep = simulate_with(case.seed + REPRESENTATIVE_SEED_OFFSET, &steady, dyno.clone())?;
+            let channels = [0, 1, 2].map(|a| Some(rep.measured[a].clone()));
+            Some(std::sync::Arc::new(crate::force_spectrum::ForceRecord { source: format!("{} representative record", case.name), channels }))
+        }
+    };
     let s = simulate_with(case.seed, &params, dyno)?;
-    Ok(score_sim(case.name, &s, run))
+    Ok(score_sim_with(case.name, &s, run, record))
 }
 
 /// Design, compensate and score an existing simulation (see [`run_case`]).
 pub fn score_sim(name: &'static str, s: &SimOutput, run: &RunOptions) -> CaseResult {
+    score_sim_with(name, s, run, None)
+}
+
+/// [`score_sim`] designed on the force spectrum of `record` when given.
+fn score_sim_with(name: &'static str, s: &SimOutput, run: &RunOptions, record: Option<std::sync::Arc<crate::force_spectrum::ForceRecord>>) -> CaseResult {
     let fs = s.params.fs_hz;
     let band = scoring_band_hz(fs);
-    let opts = design_options(fs, run);
+    let opts = DesignOptions { force_record: record, ..design_options(fs, run) };
     let r_true = s.params.measurement.expected_idle_variance();
     // All three axes designed together, as `design` does: one latency per image.
     let t0 = Instant::now();
