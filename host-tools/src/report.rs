@@ -163,6 +163,15 @@ pub fn write_report_with(
                 crate::sensitivity::plot(name, sens).with_context(|| format!("report: axis {name}: sensitivity plot"))?,
             ));
         }
+        if let Some(svg) = crate::force_spectrum::plot(d, fs_hz).with_context(|| format!("report: axis {name}: force spectrum plot"))? {
+            let s = d.force_spectrum.as_ref().expect("plotted only with a force spectrum");
+            plots.push((
+                format!("{name}_force_spectrum.svg"),
+                format!("Axis {name}: q for the record's force spectrum"),
+                crate::force_spectrum::plot_caption(s),
+                svg,
+            ));
+        }
         plots.extend(extra(d.axis)?);
         let mut entries = Vec::new();
         for (file, title, caption, svg) in plots {

@@ -12,7 +12,8 @@
 //!   under 2 %; negative control: the flat criterion leaves it above. The
 //!   other two axes stay within 5 % of the flat criterion. Its cost: on a
 //!   chattering cut the record's q is worse than the flat one.
-//! - Through the binary: the summary line, the `--json` field, the note
+//! - Through the binary: the summary line, the `--json` field, the
+//!   report's plot (control: none in a default design's report), the note
 //!   `compensate` prints from the sidecar (control: none for a default
 //!   image), and the refusals (no record, a record without an axis, an
 //!   idle record) with no image written.
@@ -185,11 +186,23 @@ fn design_chooses_q_for_the_records_spectrum_through_the_binary() {
         assert!(fsp["flat_predicted_error"].as_f64().unwrap() > 0.0);
         assert!(fl["force_spectrum"].is_null());
     }
-    let (ok, summary, err) = dynocomp(&[&base[..], &["--force-prior", "spectrum", "--force-record", measured.as_str()]].concat());
+    let report = tmp("report");
+    let (ok, summary, err) = dynocomp(&[&base[..], &["--force-prior", "spectrum", "--force-record", measured.as_str(), "--report", report.to_str().unwrap()]].concat());
     assert!(ok, "{err}");
+    let index = std::fs::read_to_string(report.join("index.html")).unwrap();
     for a in ["x", "y", "z"] {
         assert!(summary.contains(&format!("{a} q chosen for the force spectrum of --force-record")), "{summary}");
+        // The report plots where the force is against where the filter is accurate.
+        let svg = std::fs::read_to_string(report.join(format!("{a}_force_spectrum.svg"))).unwrap();
+        assert!(svg.contains("record&apos;s force power per line") || svg.contains("record's force power per line"), "{a}");
+        assert!(index.contains(&format!("{a}_force_spectrum.svg")));
     }
+    // Control: a default design's report has no such plot.
+    let plain_report = tmp("plain-report");
+    let plain_img = tmp("plain-report.dcimg");
+    let (ok, _, err) = dynocomp(&["design", "--frf", frf.as_str(), "--fs", "51200", "--idle", idle.as_str(), "--out", plain_img.to_str().unwrap(), "--report", plain_report.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    assert!(!plain_report.join("x_force_spectrum.svg").exists());
     // The image says so whenever it is used, from its sidecar: on the box
     // path and offline; the default image (control) does not.
     let out = tmp("comp.csv");
