@@ -102,6 +102,16 @@ pub struct CompensateArgs {
     pub band_hz: Option<f64>,
 }
 
+/// An image whose q was chosen for a record's force spectrum says so every
+/// time it is used (its sidecar keeps that).
+fn print_spectrum_notes(sidecar: &crate::smoother::ModelSidecar) {
+    for m in &sidecar.axes {
+        if let Some(p) = &m.force_spectrum {
+            eprintln!("{}", p.note(&m.axis));
+        }
+    }
+}
+
 /// Run `dynocomp compensate`.
 pub fn run(a: &CompensateArgs) -> Result<()> {
     let img = read_any_image(&a.coeffs)?;
@@ -137,22 +147,15 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
     let progress = progress_bar(reader.len_hint());
     let how: String;
     let n_samples;
-    // An image whose q was chosen for a record's force spectrum says so
-    // every time it is used (its sidecar keeps that; the box path does not
-    // need the sidecar otherwise, so an unreadable one is left to --offline).
-    if let AnyImage::Inline(i) = &img {
-        if crate::smoother::sidecar_path(&a.coeffs).exists() {
-            if let Ok(sc) = crate::smoother::read_sidecar(&a.coeffs, i) {
-                for m in &sc.axes {
-                    if let Some(p) = &m.force_spectrum {
-                        eprintln!("{}", p.note(&m.axis));
-                    }
-                }
-            }
-        }
-    }
     match (&img, a.offline) {
         (AnyImage::Inline(i), false) => {
+            // The box path does not need the sidecar; one that is there
+            // may still say the image was tuned for a record's spectrum.
+            if crate::smoother::sidecar_path(&a.coeffs).exists() {
+                if let Ok(sc) = crate::smoother::read_sidecar(&a.coeffs, i) {
+                    print_spectrum_notes(&sc);
+                }
+            }
             let mut comp = StreamCompensator::new(i, &axes, a.raw_timing, &source)?;
             how = format!(
                 "box filter, latency {} samples{}, streamed in blocks of {BLOCK}",
@@ -172,6 +175,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
         (AnyImage::Inline(i), true) => {
             let drift = a.drift.as_deref().map(crate::two_state::parse_interval).transpose()?;
             let mut sidecar = crate::smoother::read_sidecar(&a.coeffs, i)?;
+            print_spectrum_notes(&sidecar);
             if a.no_force_prior {
                 sidecar.axes.iter_mut().for_each(|m| m.force_prior = None);
             }

@@ -298,22 +298,30 @@ pub fn noise_term(r: f64, fs_hz: f64, band_width_hz: f64, force_rms: f64) -> f64
 pub fn criterion_j(grid: &[(f64, Complex64)], h: &[Complex64], lag: usize, fs_hz: f64, noise: f64) -> f64 {
     let (mut dist, mut amp) = (0.0, 0.0);
     for ((f, g), h) in grid.iter().zip(h) {
-        let e = h * g * Complex64::from_polar(1.0, 2.0 * PI * f * lag as f64 / fs_hz) - 1.0;
-        dist += e.norm_sqr();
+        dist += distortion(*f, *g, *h, lag, fs_hz).norm_sqr();
         amp += h.norm_sqr();
     }
     let n = grid.len() as f64;
     dist / n + noise * amp / n
 }
 
-/// [`criterion_j`] with the distortion of line i weighted by `weights[i]`
-/// (Σ = 1: the force's share there, [`crate::force_spectrum`]); the noise
-/// term stays the mean over the lines (white noise).
-pub fn criterion_j_weighted(grid: &[(f64, Complex64)], h: &[Complex64], weights: &[f64], lag: usize, fs_hz: f64, noise: f64) -> f64 {
+/// The distortion H·G·e^{j2πfL/fs} − 1 of one line of the Q criterion
+/// (module doc), with G = G(j2πf) and H = H(e^{j2πf/fs}).
+pub fn distortion(f_hz: f64, g: Complex64, h: Complex64, lag: usize, fs_hz: f64) -> Complex64 {
+    h * g * Complex64::from_polar(1.0, 2.0 * PI * f_hz * lag as f64 / fs_hz) - 1.0
+}
+
+/// J for the criterion's force spectrum: [`criterion_j`] when `weights` is
+/// `None` (flat), else with the distortion of line i weighted by
+/// `weights[i]` (Σ = 1: the force's share there, [`crate::force_spectrum`]);
+/// the noise term stays the mean over the lines (white noise).
+pub fn criterion_j_weighted(grid: &[(f64, Complex64)], h: &[Complex64], weights: Option<&[f64]>, lag: usize, fs_hz: f64, noise: f64) -> f64 {
+    let Some(weights) = weights else {
+        return criterion_j(grid, h, lag, fs_hz, noise);
+    };
     let (mut dist, mut amp) = (0.0, 0.0);
     for (((f, g), h), w) in grid.iter().zip(h).zip(weights) {
-        let e = h * g * Complex64::from_polar(1.0, 2.0 * PI * f * lag as f64 / fs_hz) - 1.0;
-        dist += w * e.norm_sqr();
+        dist += w * distortion(*f, *g, *h, lag, fs_hz).norm_sqr();
         amp += h.norm_sqr();
     }
     dist + noise * amp / grid.len() as f64
@@ -362,24 +370,22 @@ impl Objective<'_> {
             None => self.grid.iter().map(|(_, g)| (g - 1.0).norm_sqr()).sum::<f64>() / n,
             Some((w, _)) => self.grid.iter().zip(w).map(|((_, g), w)| w * (g - 1.0).norm_sqr()).sum::<f64>(),
         };
-        dist + 2.0 * self.r / self.opts.fs_hz * self.band_width / self.force_power()
+        dist + self.noise()
     }
 
-    /// The force power the criterion is relative to (N²).
-    fn force_power(&self) -> f64 {
-        self.force.as_ref().map_or(self.opts.force_rms * self.opts.force_rms, |f| f.1)
+    /// The noise factor of J: (2R/fs)·W relative to the force power, flat
+    /// `force_rms`² or the record's P_F (N²).
+    fn noise(&self) -> f64 {
+        let power = self.force.as_ref().map_or(self.opts.force_rms * self.opts.force_rms, |f| f.1);
+        2.0 * self.r / self.opts.fs_hz * self.band_width / power
     }
 
     /// J of the response `h` on the grid: for the record's spectrum when
     /// there is one, else flat (`flat` forces the flat spectrum at the same
     /// power).
     fn j_of(&self, h: &[Complex64], flat: bool) -> f64 {
-        let fs = self.opts.fs_hz;
-        let noise = 2.0 * self.r / fs * self.band_width / self.force_power();
-        match &self.force {
-            Some((w, _)) if !flat => criterion_j_weighted(&self.grid, h, w, self.lag, fs, noise),
-            _ => criterion_j(&self.grid, h, self.lag, fs, noise),
-        }
+        let weights = self.force.as_ref().filter(|_| !flat).map(|f| f.0.as_slice());
+        criterion_j_weighted(&self.grid, h, weights, self.lag, self.opts.fs_hz, self.noise())
     }
 
     /// (J, noise gain, design) for one q; J = ∞ when the design fails or the
@@ -392,10 +398,7 @@ impl Objective<'_> {
         let ss = &d.compensator;
         let ng = ss.white_noise_gain().unwrap_or(f64::INFINITY);
         let h: Vec<Complex64> = self.grid.iter().map(|(f, _)| ss.freq_response(*f, fs)).collect();
-        let j = match self.force {
-            None => criterion_j(&self.grid, &h, self.lag, fs, noise_term(self.r, fs, self.band_width, self.opts.force_rms)),
-            Some(_) => self.j_of(&h, false),
-        };
+        let j = self.j_of(&h, false);
         if ng > self.opts.max_noise_gain {
             return (f64::INFINITY, ng, Some(d));
         }
@@ -865,7 +868,6 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         sensitivity: None,
         force_spectrum,
     };
-
     design.sensitivity = crate::sensitivity::predict(&design, opts);
     Ok(design)
 }

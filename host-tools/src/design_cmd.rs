@@ -688,12 +688,10 @@ pub fn run(args: &DesignArgs) -> Result<()> {
         let mut sidecar = crate::smoother::ModelSidecar::new(&image, &models);
         for ((m, p), d) in sidecar.axes.iter_mut().zip(&priors).zip(&designs) {
             m.force_prior = p.as_ref().map(|p| p.prior.clone());
-            m.force_spectrum = d.force_spectrum.as_ref().map(|s| crate::force_spectrum::SpectrumProvenance {
-                record: args.prior.force_record.as_ref().map(|p| p.display().to_string()).unwrap_or_default(),
-                force_rms_n: s.force_rms_n,
-                predicted_error: s.predicted_error,
-                flat_predicted_error: s.flat_predicted_error,
-            });
+            m.force_spectrum = d
+                .force_spectrum
+                .as_ref()
+                .map(|s| s.provenance(args.prior.force_record.as_ref().map(|p| p.display().to_string()).unwrap_or_default()));
         }
         crate::smoother::write_sidecar(&args.out, &sidecar)?;
     }

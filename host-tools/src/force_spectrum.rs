@@ -104,17 +104,16 @@ pub fn estimate(y: &[f64], fs_hz: f64, g: &dyn Fn(f64) -> Complex64, r: f64, cel
     let Some(narrowest) = cells.iter().map(|c| c.1 - c.0).reduce(f64::min) else {
         bail!("no frequency cells to estimate the force spectrum on");
     };
-    let df = fs_hz / n.min(WELCH_SEGMENT).max(1) as f64;
+    // Welch: Hann segments of at most WELCH_SEGMENT samples, half
+    // overlapping, their powers averaged (one segment: the whole record).
+    let seg = n.min(WELCH_SEGMENT);
+    let df = fs_hz / seg.max(1) as f64;
     if n < 64 || df > 0.5 * narrowest {
         bail!(
             "{n} samples resolve {df:.2} Hz, coarser than half the criterion's {narrowest:.1} Hz cells; give a record of at least {:.3} s",
             2.0 / narrowest
         );
     }
-    // Welch: Hann segments of at most WELCH_SEGMENT samples, half
-    // overlapping, their powers averaged (one segment: the whole record).
-    let seg = n.min(WELCH_SEGMENT);
-    let df = fs_hz / seg as f64;
     let starts: Vec<usize> = (0..).map(|i| i * (seg / 2)).take_while(|s| s + seg <= n).collect();
     let w: Vec<f64> = (0..seg).map(|i| 0.5 - 0.5 * (2.0 * PI * i as f64 / seg as f64).cos()).collect();
     let sw2: f64 = w.iter().map(|v| v * v).sum();
@@ -199,6 +198,18 @@ pub struct SpectrumProvenance {
     pub flat_predicted_error: f64,
 }
 
+impl AxisForceSpectrum {
+    /// What the model sidecar keeps of it, with the record's name.
+    pub fn provenance(&self, record: String) -> SpectrumProvenance {
+        SpectrumProvenance {
+            record,
+            force_rms_n: self.force_rms_n,
+            predicted_error: self.predicted_error,
+            flat_predicted_error: self.flat_predicted_error,
+        }
+    }
+}
+
 impl SpectrumProvenance {
     /// The note `compensate` prints for axis `axis`.
     pub fn note(&self, axis: &str) -> String {
@@ -230,7 +241,7 @@ pub fn plot(d: &crate::design::AxisDesign, fs_hz: f64) -> Result<Option<String>>
     let dist: Vec<(f64, f64)> = freqs
         .iter()
         .map(|f| {
-            let e = d.kalman.compensator.freq_response(*f, fs_hz) * d.fitted_frf(*f) * Complex64::from_polar(1.0, 2.0 * PI * f * lag as f64 / fs_hz) - 1.0;
+            let e = crate::design::distortion(*f, d.fitted_frf(*f), d.kalman.compensator.freq_response(*f, fs_hz), lag, fs_hz);
             (*f, 20.0 * e.norm().max(1e-12).log10())
         })
         .collect();

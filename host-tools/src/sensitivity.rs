@@ -29,7 +29,7 @@
 use num_complex::Complex64;
 use serde::Serialize;
 
-use crate::design::{criterion_grid, criterion_j, criterion_j_weighted, criterion_ranges, noise_term, AxisDesign, DesignOptions};
+use crate::design::{criterion_grid, criterion_j_weighted, criterion_ranges, noise_term, AxisDesign, DesignOptions};
 use crate::fit::{PoleResidueModel, Term};
 
 /// Sensor modes: fitted pairs at or above this fraction of the main mode's
@@ -283,10 +283,7 @@ pub fn predict(d: &AxisDesign, opts: &DesignOptions) -> Option<Sensitivity> {
         let m = shifted_model(&d.model, &idx, pct / 100.0);
         let grid: Vec<(f64, Complex64)> =
             freqs.iter().zip(&base).map(|(f, (g, part))| (*f, g + terms_frf(&m, &idx, *f) - part)).collect();
-        match force {
-            None => criterion_j(&grid, &h, d.kalman.lag, fs, noise).sqrt(),
-            Some(s) => criterion_j_weighted(&grid, &h, &s.weights, d.kalman.lag, fs, noise).sqrt(),
-        }
+        criterion_j_weighted(&grid, &h, force.map(|s| s.weights.as_slice()), d.kalman.lag, fs, noise).sqrt()
     };
     let points: Vec<(f64, f64)> = SHIFTS_PCT.iter().map(|&pct| (pct, err(pct))).collect();
     let nominal = points.iter().find(|p| p.0 == 0.0).map(|p| p.1).unwrap_or(f64::NAN);
