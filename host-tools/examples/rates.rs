@@ -3,7 +3,10 @@
 //! simulated with the ideal anti-aliasing chain, designed, compensated and
 //! scored against the band-limited truth.
 //!
-//! usage: cargo run --release -p dynocomp --example rates -- [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum] [--chatter HZ]
+//! usage: cargo run --release -p dynocomp --example rates -- [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum] [--chatter HZ] [--fitted-static-gain]
+//!
+//! `--fitted-static-gain`: the discrete model's static gain fitted like any
+//! other line (the fit before), not held exact (`discretize::StaticGain`).
 //!
 //! `--force-spectrum`: q chosen for the force spectrum of a representative
 //! record (the same steady cut, other noise), as `design --force-prior
@@ -33,18 +36,19 @@ fn main() -> Result<()> {
             "--exact-frf" => run.exact_frf = true,
             "--force-spectrum" => run.force_spectrum = true,
             "--chatter" => chatter_hz = Some(args.next().context("--chatter needs Hz")?.parse().context("--chatter: not a number")?),
+            "--fitted-static-gain" => run.static_gain = dynocomp::discretize::StaticGain::Fitted,
             "--lag" => run.lag = Some(args.next().context("--lag needs a value")?.parse().context("--lag: not a number of samples")?),
             "--discretization" => {
                 let v = args.next().context("--discretization needs fit, foh or zoh")?;
                 run.discretization = <dynocomp::discretize::Discretization as clap::ValueEnum>::from_str(&v, true)
                     .map_err(|e| anyhow::anyhow!("--discretization {v}: {e}"))?;
             }
-            _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum] [--chatter HZ])"),
+            _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum] [--chatter HZ] [--fitted-static-gain])"),
         }
     }
     let list = if quick { quick_cases() } else { cases() };
     let t_all = Instant::now();
-    println!("NRMSE = RMS error / std of the band-limited truth, band min(4 kHz, 0.4 fs), declared latency {} removed, discretization {}{}", run.lag.map_or("chosen as `design` does (4, or 6/8 where the flat band falls short)".to_string(), |l| l.to_string()), run.discretization.name(), if run.exact_frf { ", exact (noise-free) impact-test FRF" } else { "" });
+    println!("NRMSE = RMS error / std of the band-limited truth, band min(4 kHz, 0.4 fs), declared latency {} removed, discretization {} (static gain {:?}){}", run.lag.map_or("chosen as `design` does (4, or 6/8 where the flat band falls short)".to_string(), |l| l.to_string()), run.discretization.name(), run.static_gain, if run.exact_frf { ", exact (noise-free) impact-test FRF" } else { "" });
     if run.force_spectrum {
         println!("q chosen for the force spectrum of a representative record (the steady cut, seed + 1000), as design --force-prior spectrum");
     }

@@ -70,6 +70,9 @@ pub struct DesignOptions {
     /// ([`MATCH_BAND_FRACTION`] by default; [`crate::discretize::NYQUIST_FIT_FRACTION`]
     /// is tried by [`crate::latency`] where the default falls short).
     pub discrete_fit_top: f64,
+    /// The discrete model's static gain: exact (the default) or fitted like
+    /// any other line ([`crate::discretize::StaticGain`]).
+    pub discrete_static_gain: crate::discretize::StaticGain,
     /// A representative record of the cut: q is chosen for its force
     /// spectrum instead of a flat one of `force_rms`
     /// ([`crate::force_spectrum`], `--force-prior spectrum`).
@@ -131,6 +134,7 @@ impl Default for DesignOptions {
             axis_cycle_budget: None,
             paper_orders_auto: false,
             discrete_fit_top: MATCH_BAND_FRACTION,
+            discrete_static_gain: crate::discretize::StaticGain::Exact,
             force_record: None,
         }
     }
@@ -732,7 +736,7 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
     let discrete = match &fitted.paper {
         Some(_) => None,
         None => Some(
-            discretize_to(&fitted.model, opts.fs_hz, opts.discretization, (ranges[0].0, f_top), opts.discrete_fit_top)
+            discretize_to(&fitted.model, opts.fs_hz, opts.discretization, (ranges[0].0, f_top), opts.discrete_fit_top, opts.discrete_static_gain)
                 .with_context(|| format!("axis {name}: discrete model"))?,
         ),
     };

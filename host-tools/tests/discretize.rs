@@ -161,3 +161,35 @@ fn the_fit_reports_its_conditioning_and_refuses_nothing_it_cannot_solve() {
         }
     }
 }
+
+#[test]
+fn the_static_gain_is_matched_where_a_cutting_force_has_its_mean() {
+    // A cutting force's mean is 1-1.5x its standard deviation, so a static
+    // gain error of the discrete model is an error of that size on its own.
+    // Analytic truth: the modes' shares of every case sum to 1, so
+    // G(0) = 1 exactly. Negative control: the static gain fitted like any
+    // other line (the fit before) is 3e-4 to 2e-3 off.
+    use dynocomp::discretize::{discretize_to, StaticGain, MATCH_BAND_FRACTION};
+    for (fs, modes, band_hi) in cases() {
+        assert!((modes.iter().map(|m| m.2).sum::<f64>() - 1.0).abs() < 1e-12);
+        let model = PoleResidueModel::from_modes(&modes);
+        for band_lo in [0.0, 7.0] {
+            let fit = |s: StaticGain| discretize_to(&model, fs, Discretization::Fit, (band_lo, band_hi), MATCH_BAND_FRACTION, s).unwrap().0;
+            let (exact, fitted) = (fit(StaticGain::Exact), fit(StaticGain::Fitted));
+            let err = |dm: &DiscreteModel| (dm.frf(0.0) - 1.0).norm();
+            let band: Vec<f64> = (0..=400).map(|i| band_lo + (band_hi - band_lo) * i as f64 / 400.0).collect();
+            let in_band = |dm: &DiscreteModel| dm.match_error(&band, |f| model.frf(f));
+            eprintln!(
+                "fs {fs} band from {band_lo} Hz: static gain error {:.2e} exact, {:.2e} fitted; in-band match {:.2e} / {:.2e}",
+                err(&exact),
+                err(&fitted),
+                in_band(&exact),
+                in_band(&fitted)
+            );
+            assert!(err(&exact) < 1e-9, "fs {fs}: static gain {:.3e} off with the exact constraint", err(&exact));
+            assert!(err(&fitted) > 1e-4, "fs {fs}: the fitted static gain was already exact ({:.3e})", err(&fitted));
+            // The constraint costs little elsewhere in the band.
+            assert!(in_band(&exact) < 2.0 * in_band(&fitted).max(MATCH_TARGET), "fs {fs}: in-band match {:.3e} with the constraint, {:.3e} without", in_band(&exact), in_band(&fitted));
+        }
+    }
+}

@@ -206,11 +206,14 @@ pub struct RunOptions {
     /// (`design --force-prior spectrum`): the case's steady cut simulated
     /// again with other noise (seed + [`REPRESENTATIVE_SEED_OFFSET`]).
     pub force_spectrum: bool,
+    /// The discrete model's static gain
+    /// ([`DesignOptions::discrete_static_gain`]).
+    pub static_gain: crate::discretize::StaticGain,
 }
 
 impl Default for RunOptions {
     fn default() -> Self {
-        Self { lag: None, discretization: crate::discretize::Discretization::Fit, exact_frf: false, force_spectrum: false }
+        Self { lag: None, discretization: crate::discretize::Discretization::Fit, exact_frf: false, force_spectrum: false, static_gain: crate::discretize::StaticGain::Exact }
     }
 }
 
@@ -219,7 +222,7 @@ pub const REPRESENTATIVE_SEED_OFFSET: u64 = 1000;
 
 /// The one place where the harness builds its [`DesignOptions`].
 pub fn design_options(fs_hz: f64, run: &RunOptions) -> DesignOptions {
-    DesignOptions { fs_hz, lag: run.lag.unwrap_or(crate::latency::DEFAULT_LATENCY), discretization: run.discretization, ..Default::default() }
+    DesignOptions { fs_hz, lag: run.lag.unwrap_or(crate::latency::DEFAULT_LATENCY), discretization: run.discretization, discrete_static_gain: run.static_gain, ..Default::default() }
 }
 
 /// Figures of one axis of one case at one rate.
