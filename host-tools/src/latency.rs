@@ -10,9 +10,9 @@
 //! 2-3.3 kHz of 4.1 kHz and 3.2-4.6 % NRMSE, 8 samples give 1.0-2.7 %
 //! (BENCHMARKS.md, "The declared latency, chosen").
 //!
-//! Rule: design every axis at [`DEFAULT_LATENCY`]. Only if an axis failed or
-//! its flat band stops short of its compensated band
-//! ([`FLAT_BAND_SHORT`]), design again at each of [`LONGER_LATENCIES`] and
+//! Rule: design every axis at [`DEFAULT_LATENCY`]. Only if an axis failed,
+//! its flat band stops short of its compensated band ([`FLAT_BAND_SHORT`]),
+//! or it predicts an in-band error above [`PREDICTED_SHORT`], design again at each of [`LONGER_LATENCIES`] and
 //! keep the shortest latency at which every axis's predicted in-band error
 //! (`AxisDesign::predicted_error`, DESIGN.md's criterion) is within
 //! [`GAIN_NOT_WORTH`] of the best that axis reached at any latency tried,
@@ -39,6 +39,15 @@ pub const LONGER_LATENCIES: [usize; 2] = [6, 8];
 /// A flat band whose top is below this fraction of the compensated band's top
 /// falls short.
 pub const FLAT_BAND_SHORT: f64 = 0.95;
+/// A predicted in-band error above this (fraction) falls short too: the
+/// accuracy target of issue #12 (median ≤ 0.5 %). At 10.24 kHz the designs
+/// at latency 4 predict 0.8-2 % on a flat force even where their flat band
+/// reaches the top of the band: the smoother's distortion near the band's
+/// top. Latency 8 brings stiff axes from 2.2-3.0x to 1.05-1.09x their noise
+/// floor there (BENCHMARKS.md, "Looking further ahead where the design
+/// predicts missing the target"). Designs that predict less, like the
+/// bundled example's 0.07-0.12 % at 51.2 kHz, are designed once.
+pub const PREDICTED_SHORT: f64 = 0.005;
 /// The shortest latency whose every axis's predicted error is within this
 /// factor of that axis's best is kept: a longer latency must buy more than 10 %.
 pub const GAIN_NOT_WORTH: f64 = 1.1;
@@ -102,7 +111,11 @@ fn shortfall(designs: &[TimedDesign], axis_names: &[String]) -> String {
             Err(_) => Some(format!("axis {name} failed")),
             Ok(d) => {
                 let (flat, comp) = (d.flat_band_hz.1, d.compensated_band_hz.1);
-                (flat < FLAT_BAND_SHORT * comp).then(|| format!("axis {name} flat to {flat:.0} of {comp:.0} Hz"))
+                if flat < FLAT_BAND_SHORT * comp {
+                    Some(format!("axis {name} flat to {flat:.0} of {comp:.0} Hz"))
+                } else {
+                    (d.predicted_error > PREDICTED_SHORT).then(|| format!("axis {name} predicts {:.2} % (> {:.1} %)", 100.0 * d.predicted_error, 100.0 * PREDICTED_SHORT))
+                }
             }
         })
         .collect();
@@ -223,7 +236,7 @@ pub fn design_axes_choosing_latency(
 /// 4096 Hz; predicted error x/y/z 8.82/8.01/10.51 % at 4, … at 8".
 pub fn describe(c: &LatencyChoice, axis_names: &[&str]) -> String {
     if c.reason.is_empty() {
-        return format!("latency {} samples (default: the flat band reaches the compensated band's top on every axis)", c.chosen);
+        return format!("latency {} samples (default: on every axis the flat band reaches the compensated band's top and the predicted error is within {:.1} %)", c.chosen, 100.0 * PREDICTED_SHORT);
     }
     let per: Vec<String> = c
         .tried
