@@ -649,9 +649,7 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     eprintln!("designing {} axes ({} lines each)…", frf.axes.len(), frf.freq_hz.len());
     let rv: Vec<f64> = frf.axes.iter().map(|a| r[a.axis].expect("R set for every FRF axis")).collect();
     let (results, latency_choice) = if auto_latency {
-        let (d, c) = crate::latency::design_axes_choosing_latency(&frf.freq_hz, &frf.axes, &rv, &opts, Some(limit_permille), |l, why| {
-            eprintln!("  {why} at latency {}: designing again at {l} samples…", crate::latency::DEFAULT_LATENCY)
-        });
+        let (d, c) = crate::latency::design_axes_choosing_latency(&frf.freq_hz, &frf.axes, &rv, &opts, Some(limit_permille), |_, what| eprintln!("  {what}…"));
         (d, Some(c))
     } else {
         (crate::latency::design_axes(&frf.freq_hz, &frf.axes, &rv, &opts), None)
