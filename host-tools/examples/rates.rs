@@ -3,14 +3,15 @@
 //! simulated with the ideal anti-aliasing chain, designed, compensated and
 //! scored against the band-limited truth.
 //!
-//! usage: cargo run --release -p dynocomp --example rates -- [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum] [--chatter HZ] [--fitted-static-gain]
+//! usage: cargo run --release -p dynocomp --example rates -- [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum | --force-level] [--chatter HZ] [--fitted-static-gain]
 //!
 //! `--fitted-static-gain`: the discrete model's static gain fitted like any
 //! other line (the fit before), not held exact (`discretize::StaticGain`).
 //!
 //! `--force-spectrum`: q chosen for the force spectrum of a representative
 //! record (the same steady cut, other noise), as `design --force-prior
-//! spectrum` does. `--chatter HZ`: the scored cut chatters at HZ (0.02 mm
+//! spectrum` does; `--force-level`: q for a flat spectrum at that
+//! record's level, as `design --force-prior level` does. `--chatter HZ`: the scored cut chatters at HZ (0.02 mm
 //! from 0.2 s) while a representative record stays the steady cut (the
 //! negative control of `--force-spectrum`).
 //!
@@ -35,6 +36,7 @@ fn main() -> Result<()> {
             "--quick" => quick = true,
             "--exact-frf" => run.exact_frf = true,
             "--force-spectrum" => run.force_spectrum = true,
+            "--force-level" => (run.force_spectrum, run.force_level_only) = (true, true),
             "--chatter" => chatter_hz = Some(args.next().context("--chatter needs Hz")?.parse().context("--chatter: not a number")?),
             "--fitted-static-gain" => run.static_gain = dynocomp::discretize::StaticGain::Fitted,
             "--lag" => run.lag = Some(args.next().context("--lag needs a value")?.parse().context("--lag: not a number of samples")?),
@@ -43,14 +45,17 @@ fn main() -> Result<()> {
                 run.discretization = <dynocomp::discretize::Discretization as clap::ValueEnum>::from_str(&v, true)
                     .map_err(|e| anyhow::anyhow!("--discretization {v}: {e}"))?;
             }
-            _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum] [--chatter HZ] [--fitted-static-gain])"),
+            _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum | --force-level] [--chatter HZ] [--fitted-static-gain])"),
         }
     }
     let list = if quick { quick_cases() } else { cases() };
     let t_all = Instant::now();
     println!("NRMSE = RMS error / std of the band-limited truth, band min(4 kHz, 0.4 fs), declared latency {} removed, discretization {} (static gain {:?}){}", run.lag.map_or("chosen as `design` does (4, or 6/8 where the flat band falls short)".to_string(), |l| l.to_string()), run.discretization.name(), run.static_gain, if run.exact_frf { ", exact (noise-free) impact-test FRF" } else { "" });
     if run.force_spectrum {
-        println!("q chosen for the force spectrum of a representative record (the steady cut, seed + 1000), as design --force-prior spectrum");
+        match run.force_level_only {
+            true => println!("q chosen for a flat force spectrum at the level of a representative record (the steady cut, seed + 1000), as design --force-prior level"),
+            false => println!("q chosen for the force spectrum of a representative record (the steady cut, seed + 1000), as design --force-prior spectrum"),
+        }
     }
     if let Some(f) = chatter_hz {
         println!("scored cut chatters at {f} Hz (0.02 mm from 0.2 s); any representative record is the steady cut");

@@ -77,6 +77,11 @@ pub struct DesignOptions {
     /// spectrum instead of a flat one of `force_rms`
     /// ([`crate::force_spectrum`], `--force-prior spectrum`).
     pub force_record: Option<std::sync::Arc<crate::force_spectrum::ForceRecord>>,
+    /// Use only the record's in-band force level: the criterion's spectrum
+    /// stays flat, of the record's power instead of `force_rms`
+    /// (`--force-prior level`): honest predicted errors, the default's
+    /// robustness to chatter.
+    pub force_record_level_only: bool,
 }
 
 /// Largest accepted fit error: relative RMS of Ĝ against the coherent
@@ -136,6 +141,7 @@ impl Default for DesignOptions {
             discrete_fit_top: MATCH_BAND_FRACTION,
             discrete_static_gain: crate::discretize::StaticGain::Exact,
             force_record: None,
+            force_record_level_only: false,
         }
     }
 }
@@ -771,7 +777,14 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         opts,
         r,
         band_width: ranges.iter().map(|b| b.1 - b.0).sum(),
-        force: spectrum.as_ref().map(|s| (s.weights(), s.total_n2())),
+        force: spectrum.as_ref().map(|s| {
+            let w = s.weights();
+            match opts.force_record_level_only {
+                // Flat, of the record's power: J as criterion_j's mean.
+                true => (vec![1.0 / w.len() as f64; w.len()], s.total_n2()),
+                false => (w, s.total_n2()),
+            }
+        }),
     };
     let mut q_trace = Vec::new();
     let chosen = match opts.q_override {
@@ -843,6 +856,7 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
                 predicted_error: j.sqrt(),
                 flat_predicted_error: obj.j_of(&h, true).sqrt(),
                 resolution_hz: s.resolution_hz,
+                level_only: opts.force_record_level_only,
             })
         }
         _ => None,

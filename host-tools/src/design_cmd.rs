@@ -101,6 +101,10 @@ pub enum ForcePrior {
     /// instead of a flat spectrum of --force-rms (`crate::force_spectrum`):
     /// the same filter structure and cost, tuned for the cut.
     Spectrum,
+    /// q of the box design chosen for a flat force spectrum at the in-band
+    /// force level of --force-record instead of --force-rms: predicted
+    /// errors for the cut's force, as robust to chatter as the default.
+    Level,
 }
 
 /// The opt-in harmonic force prior (issue #12, optional part).
@@ -110,8 +114,11 @@ pub struct PriorArgs {
     /// --force-rms), `harmonics` (the spindle harmonics of
     /// --spindle-rpm/--teeth in the Kalman state of `compensate --offline`,
     /// tuned from --force-record; the box image is unchanged; --spindle-rpm
-    /// then makes no fitting bands) or `spectrum` (q of the box image and of
-    /// the offline smoother chosen for the force spectrum of --force-record).
+    /// then makes no fitting bands), `spectrum` (q of the box image and of
+    /// the offline smoother chosen for the force spectrum of --force-record)
+    /// or `level` (q for a flat spectrum at the record's in-band force level
+    /// instead of --force-rms: honest predicted errors, as safe for chatter
+    /// as the default).
     #[arg(long, value_enum, default_value_t = ForcePrior::Default)]
     pub force_prior: ForcePrior,
     /// A representative record of the cut (signal CSV, same rate, raw
@@ -551,7 +558,11 @@ pub fn render_summary(designs: &[AxisDesign], fs: f64, latency: usize, image: &s
             let _ = writeln!(s, "{}", paper_line(d.axis, tf.nb(), tf.na(), p));
         }
     }
-    let spectrum = if designs.iter().any(|d| d.force_spectrum.is_some()) { "the force spectrum of --force-record" } else { "a flat force spectrum" };
+    let spectrum = match designs.iter().find_map(|d| d.force_spectrum.as_ref()) {
+        Some(s) if !s.level_only => "the force spectrum of --force-record",
+        Some(_) => "a flat force spectrum at the level of --force-record",
+        None => "a flat force spectrum",
+    };
     let _ = writeln!(
         s,
         "flat band: |H·Ĝ| within ±5 % and ±5° of the pure {latency}-sample delay (fitted model Ĝ); noise: white-noise gain; pred.: predicted in-band RMS error for {spectrum}; raw: the same for no compensation; match: max |Ĝ_d/Ĝ − 1| of the discrete model over the compensated band"
@@ -579,13 +590,14 @@ pub fn paper_line(axis: usize, nb: usize, na: usize, p: &PaperDiagnostics) -> St
 /// Run `dynocomp design`.
 pub fn run(args: &DesignArgs) -> Result<()> {
     let harmonics = args.prior.force_prior == ForcePrior::Harmonics;
-    let spectrum = args.prior.force_prior == ForcePrior::Spectrum;
+    // Both read the record's force spectrum; `level` keeps only its power.
+    let spectrum = matches!(args.prior.force_prior, ForcePrior::Spectrum | ForcePrior::Level);
     if harmonics {
         check_prior_args(args)?;
     } else if spectrum {
         check_spectrum_args(args)?;
     } else if args.prior.force_record.is_some() || args.prior.line_width.is_some() {
-        bail!("--force-record belongs to --force-prior harmonics or spectrum, --line-width to --force-prior harmonics");
+        bail!("--force-record belongs to --force-prior harmonics, spectrum or level, --line-width to --force-prior harmonics");
     }
     match args.input.frf.len() {
         1 => {}
@@ -637,7 +649,11 @@ pub fn run(args: &DesignArgs) -> Result<()> {
             let path = args.prior.force_record.as_ref().expect("checked by check_spectrum_args");
             let rec = read_force_record(path, args.input.fs)?;
             let channels = [0, 1, 2].map(|a| rec.channel(a).map(|c| c.to_vec()));
-            DesignOptions { force_record: Some(std::sync::Arc::new(crate::force_spectrum::ForceRecord { source: path.display().to_string(), channels })), ..opts }
+            DesignOptions {
+                force_record: Some(std::sync::Arc::new(crate::force_spectrum::ForceRecord { source: path.display().to_string(), channels })),
+                force_record_level_only: args.prior.force_prior == ForcePrior::Level,
+                ..opts
+            }
         }
     };
     let method_name = if paper { "paper" } else { "vf" };
@@ -686,9 +702,12 @@ pub fn run(args: &DesignArgs) -> Result<()> {
         let mut sidecar = crate::smoother::ModelSidecar::new(&image, &models);
         for ((m, p), d) in sidecar.axes.iter_mut().zip(&priors).zip(&designs) {
             m.force_prior = p.as_ref().map(|p| p.prior.clone());
+            // A flat spectrum at the record's level is as safe as the
+            // default: no note for `compensate`.
             m.force_spectrum = d
                 .force_spectrum
                 .as_ref()
+                .filter(|s| !s.level_only)
                 .map(|s| s.provenance(args.prior.force_record.as_ref().map(|p| p.display().to_string()).unwrap_or_default()));
         }
         crate::smoother::write_sidecar(&args.out, &sidecar)?;
@@ -794,14 +813,15 @@ fn check_prior_args(args: &DesignArgs) -> Result<()> {
     Ok(())
 }
 
-/// The conditions of `--force-prior spectrum`: one FRF, the default
-/// method, no parallel elaboration, a record, no line width.
+/// The conditions of `--force-prior spectrum` and `level`: one FRF, the
+/// default method, no parallel elaboration, a record, no line width.
 fn check_spectrum_args(args: &DesignArgs) -> Result<()> {
+    let name = if args.prior.force_prior == ForcePrior::Level { "level" } else { "spectrum" };
     if args.input.frf.len() != 1 || args.method != "vf" || args.parallel {
-        bail!("--force-prior spectrum works with one --frf and the default method (vf), without --parallel");
+        bail!("--force-prior {name} works with one --frf and the default method (vf), without --parallel");
     }
     if args.prior.force_record.is_none() {
-        bail!("--force-prior spectrum needs --force-record FILE: a representative measured record of the cut, whose force spectrum q is chosen for");
+        bail!("--force-prior {name} needs --force-record FILE: a representative measured record of the cut, whose in-band force {} q is chosen for", if name == "level" { "level" } else { "spectrum" });
     }
     if args.prior.line_width.is_some() {
         bail!("--line-width belongs to --force-prior harmonics");
@@ -856,8 +876,17 @@ fn build_priors(args: &DesignArgs, designs: &[AxisDesign], r: &[Option<f64>; 3])
     Ok(out)
 }
 
-/// One summary line of an axis designed on a record's force spectrum.
+/// One summary line of an axis designed on a record's force spectrum (or
+/// its level).
 fn spectrum_line(axis: usize, s: &crate::force_spectrum::AxisForceSpectrum, force_rms: f64) -> String {
+    if s.level_only {
+        return format!(
+            "{} q chosen for a flat force spectrum at the level of --force-record ({:.2} N RMS in the band, in place of --force-rms {force_rms} N): predicted {:.3} %\n",
+            axis_name(axis),
+            s.force_rms_n,
+            100.0 * s.predicted_error
+        );
+    }
     format!(
         "{} q chosen for the force spectrum of --force-record ({:.2} N RMS in the band, in place of a flat --force-rms {force_rms} N): predicted {:.3} % for that spectrum, {:.3} % for a flat spectrum of the same power (a broadband force: chatter, transients)\n",
         axis_name(axis),

@@ -182,6 +182,10 @@ pub struct AxisForceSpectrum {
     pub flat_predicted_error: f64,
     /// Resolution of the record's spectrum (Hz).
     pub resolution_hz: f64,
+    /// Only the record's level was used (`--force-prior level`): q is chosen
+    /// for a flat spectrum of the record's power, so `predicted_error` is
+    /// `flat_predicted_error`.
+    pub level_only: bool,
 }
 
 /// What the model sidecar keeps of an axis designed on a record's force
@@ -228,11 +232,12 @@ impl SpectrumProvenance {
 /// relative to a flat spectrum (dB; the flat share β shows as its floor,
 /// −30 dB) and this filter's distortion |H·Ĝ·e^{j2πfL/fs} − 1| (dB), so that
 /// one sees where the filter gives accuracy up and that the force is weak
-/// there. `None` for an axis designed on the flat spectrum.
+/// there. `None` for an axis designed on a flat spectrum (also at a
+/// record's level, `--force-prior level`).
 pub fn plot(d: &crate::design::AxisDesign, fs_hz: f64) -> Result<Option<String>> {
     use crate::report::{build_chart, draw_line, legend, mesh, perr, FONT};
     use plotters::prelude::*;
-    let Some(s) = &d.force_spectrum else { return Ok(None) };
+    let Some(s) = d.force_spectrum.as_ref().filter(|s| !s.level_only) else { return Ok(None) };
     let ranges = crate::design::criterion_ranges(&d.bands, d.compensated_band_hz);
     let freqs = crate::design::criterion_grid(&ranges);
     let n = freqs.len() as f64;

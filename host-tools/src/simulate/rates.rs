@@ -206,6 +206,9 @@ pub struct RunOptions {
     /// (`design --force-prior spectrum`): the case's steady cut simulated
     /// again with other noise (seed + [`REPRESENTATIVE_SEED_OFFSET`]).
     pub force_spectrum: bool,
+    /// With `force_spectrum`: use only the record's force level, the
+    /// spectrum stays flat (`design --force-prior level`).
+    pub force_level_only: bool,
     /// The discrete model's static gain
     /// ([`DesignOptions::discrete_static_gain`]).
     pub static_gain: crate::discretize::StaticGain,
@@ -213,7 +216,7 @@ pub struct RunOptions {
 
 impl Default for RunOptions {
     fn default() -> Self {
-        Self { lag: None, discretization: crate::discretize::Discretization::Fit, exact_frf: false, force_spectrum: false, static_gain: crate::discretize::StaticGain::Exact }
+        Self { lag: None, discretization: crate::discretize::Discretization::Fit, exact_frf: false, force_spectrum: false, force_level_only: false, static_gain: crate::discretize::StaticGain::Exact }
     }
 }
 
@@ -317,7 +320,7 @@ pub fn score_sim(name: &'static str, s: &SimOutput, run: &RunOptions) -> CaseRes
 fn score_sim_with(name: &'static str, s: &SimOutput, run: &RunOptions, record: Option<std::sync::Arc<crate::force_spectrum::ForceRecord>>) -> CaseResult {
     let fs = s.params.fs_hz;
     let band = scoring_band_hz(fs);
-    let opts = DesignOptions { force_record: record, ..design_options(fs, run) };
+    let opts = DesignOptions { force_record: record, force_record_level_only: run.force_level_only, ..design_options(fs, run) };
     let r_true = s.params.measurement.expected_idle_variance();
     // All three axes designed together, as `design` does: one latency per image.
     let t0 = Instant::now();
