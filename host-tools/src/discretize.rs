@@ -21,10 +21,12 @@
 //! lies below fs/2; a mode above Nyquist has no discrete counterpart inside
 //! the band, and its in-band tail is carried by the other terms. The residues
 //! ρ, the direct term d and M FIR taps h_m are the least-squares solution of
-//! the relative error (Ĝ_d − Ĝ)/Ĝ on a dense grid: a linear problem, solved
-//! by SVD with column scaling, its condition number and residual checked.
-//! Zero- and first-order holds are special cases of the same form (same
-//! poles, fixed residues), so the fit is never worse than either on its grid.
+//! the relative error (Ĝ_d − Ĝ)/Ĝ on a dense grid, under the one linear
+//! constraint Ĝ_d(1) = Ĝ(0) (the static gain exact, [`StaticGain`]): a linear
+//! problem, solved with column scaling, its condition number and residual
+//! checked. Zero- and first-order holds are special cases of the same form
+//! (same poles, fixed residues) that keep the static gain too, so the fit is
+//! never worse than either on its grid.
 //! FOH and ZOH stay selectable (`--discretization foh|zoh`) to show the
 //! difference.
 
