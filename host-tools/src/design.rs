@@ -174,6 +174,9 @@ pub struct AxisDesign {
     pub noise_gain: f64,
     /// Predicted in-band relative RMS error √J (fraction).
     pub predicted_error: f64,
+    /// Its distortion part alone, √J with the noise term left out
+    /// (fraction): what a longer look-ahead can lower ([`crate::latency`]).
+    pub predicted_distortion: f64,
     /// Evaluations of J during the q search: (q, J).
     pub q_trace: Vec<(f64, f64)>,
     /// Fitting bands used (empty = whole coherent band).
@@ -388,6 +391,12 @@ impl Objective<'_> {
     fn noise(&self) -> f64 {
         let power = self.force.as_ref().map_or(self.opts.force_rms * self.opts.force_rms, |f| f.1);
         2.0 * self.r / self.opts.fs_hz * self.band_width / power
+    }
+
+    /// The distortion part of J for the response `h` on the grid (the
+    /// noise term left out), for the record's spectrum when there is one.
+    fn distortion_of(&self, h: &[Complex64]) -> f64 {
+        criterion_j_weighted(&self.grid, h, self.force.as_ref().map(|f| f.0.as_slice()), self.lag, self.opts.fs_hz, 0.0)
     }
 
     /// J of the response `h` on the grid: for the record's spectrum when
@@ -847,9 +856,10 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
     // from 7 averages has ~5 % random error, as large as the tolerance.
     let model_frf: Vec<Complex64> = freq_hz.iter().map(|f| fitted.frf(*f)).collect();
     let flat = flat_band(|f| quantize::filter_response(&filter, f, fs), freq_hz, &model_frf, &eval_band, lag, fs);
+    let h: Vec<Complex64> = obj.grid.iter().map(|(f, _)| kal.compensator.freq_response(*f, fs)).collect();
+    let predicted_distortion = obj.distortion_of(&h).sqrt();
     let force_spectrum = match (&spectrum, &obj.force) {
         (Some(s), Some((w, p))) => {
-            let h: Vec<Complex64> = obj.grid.iter().map(|(f, _)| kal.compensator.freq_response(*f, fs)).collect();
             Some(crate::force_spectrum::AxisForceSpectrum {
                 force_rms_n: p.sqrt(),
                 weights: w.clone(),
@@ -874,6 +884,7 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         flat_band_hz: flat,
         noise_gain: ng,
         predicted_error: j.sqrt(),
+        predicted_distortion,
         q_trace,
         bands: opts.bands.clone(),
         fit_nrmse_out_of_band,

@@ -165,12 +165,13 @@ fn a_longer_latency_is_chosen_only_where_the_flat_band_falls_short() {
 #[test]
 fn a_longer_latency_is_chosen_where_a_design_predicts_missing_the_target() {
     // The close-pair dynamometer at 10.24 kHz: latency 4 is flat to the
-    // band's top on every axis but predicts 0.8-1.2 % (> 0.5 %); its stiff y
+    // band's top on every axis but predicts 0.8-1.2 % of distortion
+    // (> 0.5 %, `latency::PREDICTED_SHORT`); its stiff y
     // axis, with an exact FRF, was 2.2x its noise floor there. Without
     // --latency the design now looks further ahead and y comes within 1.3x
     // of its floor; the same case at the fixed latency 4 stays above
-    // (negative control). The default case at 51.2 kHz, which predicts
-    // under 0.5 %, keeps 4 (the previous test).
+    // (negative control). The default case at 51.2 kHz, whose predicted
+    // distortion is under 0.5 %, keeps 4 (the previous test).
     use dynocomp::simulate::rates::cases;
     let case = cases().into_iter().find(|c| c.name == "close-pair").unwrap();
     let exact = RunOptions { exact_frf: true, ..Default::default() };
