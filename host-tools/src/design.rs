@@ -378,12 +378,13 @@ impl Objective<'_> {
     /// J of no compensation (H = 1, no lag): distortion |Ĝ − 1|² plus the
     /// measurement noise itself, in the same units as [`Objective::eval`].
     fn raw(&self) -> f64 {
-        let n = self.grid.len() as f64;
-        let dist: f64 = match &self.force {
-            None => self.grid.iter().map(|(_, g)| (g - 1.0).norm_sqr()).sum::<f64>() / n,
-            Some((w, _)) => self.grid.iter().zip(w).map(|((_, g), w)| w * (g - 1.0).norm_sqr()).sum::<f64>(),
-        };
-        dist + self.noise()
+        let ones = vec![Complex64::new(1.0, 0.0); self.grid.len()];
+        criterion_j_weighted(&self.grid, &ones, self.weights(), 0, self.opts.fs_hz, self.noise())
+    }
+
+    /// The record's weights on the grid, `None` for the flat spectrum.
+    fn weights(&self) -> Option<&[f64]> {
+        self.force.as_ref().map(|f| f.0.as_slice())
     }
 
     /// The noise factor of J: (2R/fs)·W relative to the force power, flat
@@ -396,14 +397,14 @@ impl Objective<'_> {
     /// The distortion part of J for the response `h` on the grid (the
     /// noise term left out), for the record's spectrum when there is one.
     fn distortion_of(&self, h: &[Complex64]) -> f64 {
-        criterion_j_weighted(&self.grid, h, self.force.as_ref().map(|f| f.0.as_slice()), self.lag, self.opts.fs_hz, 0.0)
+        criterion_j_weighted(&self.grid, h, self.weights(), self.lag, self.opts.fs_hz, 0.0)
     }
 
     /// J of the response `h` on the grid: for the record's spectrum when
     /// there is one, else flat (`flat` forces the flat spectrum at the same
     /// power).
     fn j_of(&self, h: &[Complex64], flat: bool) -> f64 {
-        let weights = self.force.as_ref().filter(|_| !flat).map(|f| f.0.as_slice());
+        let weights = if flat { None } else { self.weights() };
         criterion_j_weighted(&self.grid, h, weights, self.lag, self.opts.fs_hz, self.noise())
     }
 

@@ -821,7 +821,7 @@ fn check_spectrum_args(args: &DesignArgs) -> Result<()> {
         bail!("--force-prior {name} works with one --frf and the default method (vf), without --parallel");
     }
     if args.prior.force_record.is_none() {
-        bail!("--force-prior {name} needs --force-record FILE: a representative measured record of the cut, whose in-band force {} q is chosen for", if name == "level" { "level" } else { "spectrum" });
+        bail!("--force-prior {name} needs --force-record FILE: a representative measured record of the cut, whose in-band force {name} q is chosen for");
     }
     if args.prior.line_width.is_some() {
         bail!("--line-width belongs to --force-prior harmonics");

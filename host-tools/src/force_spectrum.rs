@@ -30,6 +30,10 @@
 //! `design` therefore also states the chosen filter's error for a flat
 //! spectrum of the same power ([`AxisForceSpectrum::flat_predicted_error`]).
 //! The default stays the flat criterion.
+//!
+//! `design --force-prior level` uses only P_F from the same estimate: the
+//! weights stay flat (w_i = 1/n), so q and the predicted error are for a
+//! flat force of the record's level instead of `--force-rms`.
 
 use anyhow::{bail, Result};
 use num_complex::Complex64;

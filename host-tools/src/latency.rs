@@ -13,8 +13,9 @@
 //! Rule: design every axis at [`DEFAULT_LATENCY`]. Only if an axis failed,
 //! its flat band stops short of its compensated band ([`FLAT_BAND_SHORT`]),
 //! or its predicted in-band distortion (the error without the noise, what
-//! looking further ahead can lower) is above [`PREDICTED_SHORT`], design again at each of [`LONGER_LATENCIES`] and
-//! keep the shortest latency at which every axis's predicted in-band error
+//! looking further ahead can lower) is above [`PREDICTED_SHORT`], design
+//! again at each of [`LONGER_LATENCIES`] and keep the shortest latency at
+//! which every axis's predicted in-band error
 //! (`AxisDesign::predicted_error`, DESIGN.md's criterion) is within
 //! [`GAIN_NOT_WORTH`] of the best that axis reached at any latency tried,
 //! among the latencies whose image the box can still run (when a load limit
