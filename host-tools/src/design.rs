@@ -940,12 +940,13 @@ pub fn choose_realization_within(
 ) -> Result<(ModalRealization, AxisFilter, Verification)> {
     use dynocomp_core::budget::{AxisShape, CostModel};
     let candidates = realize::realize_candidates(ss).context("realization")?;
+    let reference = quantize::Reference::of(ss, fs_hz, f_band_hz);
     let mut verified: Vec<(ModalRealization, AxisFilter, Verification)> = Vec::new();
     let mut last_err = None;
     for r in candidates {
-        match quantize::quantize(&r, ss, fs_hz, f_band_hz) {
+        match quantize::quantize_against(&r, &reference) {
             Ok((f, v)) => {
-                if let Some(t) = shortest_fir(&r, &v, ss, fs_hz, f_band_hz) {
+                if let Some(t) = shortest_fir(&r, &v, &reference) {
                     verified.push(t);
                 }
                 verified.push((r, f, v));
@@ -986,13 +987,7 @@ pub fn choose_realization_within(
 /// The realization `r` (verified as `v`) with the fewest FIR taps that still
 /// passes `quantize` with a score ≤ max(10·v.score(), [`TRIM_SCORE_FLOOR`]);
 /// `None` if no shorter FIR does.
-fn shortest_fir(
-    r: &ModalRealization,
-    v: &Verification,
-    ss: &StateSpace,
-    fs_hz: f64,
-    f_band_hz: f64,
-) -> Option<(ModalRealization, AxisFilter, Verification)> {
+fn shortest_fir(r: &ModalRealization, v: &Verification, reference: &quantize::Reference) -> Option<(ModalRealization, AxisFilter, Verification)> {
     let bound = (10.0 * v.score()).max(TRIM_SCORE_FLOOR);
     let total: f64 = r.fir.iter().map(|h| h.abs()).sum::<f64>();
     (0..r.fir.len()).find_map(|len| {
@@ -1000,7 +995,7 @@ fn shortest_fir(
         t.fir.truncate(len);
         let dropped: f64 = r.fir[len..].iter().map(|h| h.abs()).sum();
         t.fir_truncation = r.fir_truncation + dropped / total.max(f64::MIN_POSITIVE);
-        let (f, tv) = quantize::quantize(&t, ss, fs_hz, f_band_hz).ok()?;
+        let (f, tv) = quantize::quantize_against(&t, reference).ok()?;
         (tv.score() <= bound).then_some((t, f, tv))
     })
 }

@@ -139,8 +139,55 @@ pub fn test_signal(n: usize, fs_hz: f64, f_hi: f64) -> Vec<f64> {
         .collect()
 }
 
+/// What a quantized filter is checked against: the f64 design's frequency
+/// response on the check grid and its output for the time-domain test
+/// signal. It depends on the design `ss` only, so [`quantize_against`]
+/// shares it between every realization and FIR length of one compensator
+/// (the f64 simulation was most of a check's cost).
+pub struct Reference {
+    fs_hz: f64,
+    /// (f (Hz), H64(f)) on `VERIFY_GRID` + 1 points over 0..f_band.
+    grid: Vec<(f64, Complex64)>,
+    /// max |H64| on the grid.
+    peak: f64,
+    /// The test signal ([`test_signal`]) and the design's output for it.
+    u: Vec<f64>,
+    y64: Vec<f64>,
+    /// RMS of `y64`.
+    rms: f64,
+}
+
+/// Points of the frequency check over the band (plus one).
+const VERIFY_GRID: usize = 400;
+/// Samples of the time-domain check.
+const VERIFY_SAMPLES: usize = 20_000;
+
+impl Reference {
+    /// The f64 design `ss`'s responses over 0..`f_band_hz` at `fs_hz`.
+    pub fn of(ss: &StateSpace, fs_hz: f64, f_band_hz: f64) -> Self {
+        let grid: Vec<(f64, Complex64)> = (0..=VERIFY_GRID)
+            .map(|i| {
+                let f = f_band_hz * i as f64 / VERIFY_GRID as f64;
+                (f, ss.freq_response(f, fs_hz))
+            })
+            .collect();
+        let peak = grid.iter().map(|g| g.1.norm()).fold(0.0, f64::max);
+        let u = test_signal(VERIFY_SAMPLES, fs_hz, f_band_hz);
+        let y64 = ss.simulate(&u);
+        let rms = (y64.iter().map(|v| v * v).sum::<f64>() / y64.len() as f64).sqrt();
+        Reference { fs_hz, grid, peak, u, y64, rms }
+    }
+}
+
 /// Round to f32 and verify against the f64 design `ss` over 0..`f_band_hz`.
 pub fn quantize(real: &ModalRealization, ss: &StateSpace, fs_hz: f64, f_band_hz: f64) -> Result<(AxisFilter, Verification)> {
+    quantize_against(real, &Reference::of(ss, fs_hz, f_band_hz))
+}
+
+/// [`quantize`] against a precomputed [`Reference`] of the design.
+pub fn quantize_against(real: &ModalRealization, reference: &Reference) -> Result<(AxisFilter, Verification)> {
+    let Reference { fs_hz, grid, peak, u, y64, rms } = reference;
+    let (fs_hz, peak, rms) = (*fs_hz, *peak, *rms);
     let sections: Vec<Section> = real.sections.iter().map(round_section).collect();
     let fir: Vec<f32> = real.fir.iter().map(|v| *v as f32).collect();
     let filter = AxisFilter::with_fir(&sections, real.d as f32, &fir)
@@ -166,28 +213,16 @@ pub fn quantize(real: &ModalRealization, ss: &StateSpace, fs_hz: f64, f_band_hz:
         bail!("rounding to f32 moves a compensator pole by {max_shift:.1e} of its distance from z = 1 (limit {MAX_POLE_SHIFT:e})");
     }
     // frequency response over the band (and a little beyond)
-    let n_grid = 400;
-    let mut peak = 0.0f64;
-    let mut worst = 0.0f64;
-    for i in 0..=n_grid {
-        let f = f_band_hz * i as f64 / n_grid as f64;
-        let h64 = ss.freq_response(f, fs_hz);
-        let h32 = filter_response(&filter, f, fs_hz);
-        peak = peak.max(h64.norm());
-        worst = worst.max((h32 - h64).norm());
-    }
+    let worst = grid.iter().map(|(f, h64)| (filter_response(&filter, *f, fs_hz) - h64).norm()).fold(0.0, f64::max);
     let freq_error = worst / peak;
     if !(freq_error <= MAX_FREQ_ERROR) {
         bail!("f32 compensator deviates from the f64 design by {freq_error:.1e} of its peak response (limit {MAX_FREQ_ERROR:e})");
     }
     // time domain through the real kernel
-    let u = test_signal(20_000, fs_hz, f_band_hz);
-    let y64 = ss.simulate(&u);
     let mut st = AxisState::default();
-    let rms = (y64.iter().map(|v| v * v).sum::<f64>() / y64.len() as f64).sqrt();
     let time_error = u
         .iter()
-        .zip(&y64)
+        .zip(y64)
         .map(|(u, y)| (f64::from(filter.step(&mut st, *u as f32)) - y).abs())
         .fold(0.0, f64::max)
         / rms;
