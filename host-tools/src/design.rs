@@ -720,12 +720,44 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
     if opts.paper_orders_auto && matches!(opts.method, FitMethod::Paper { .. }) {
         return crate::paper_orders::design_axis_auto(freq_hz, frf, r, &DesignOptions { paper_orders_auto: false, ..opts.clone() });
     }
+    design_prepared(&prepare_axis(freq_hz, frf, r, opts)?, opts)
+}
+
+/// The part of one axis's design that does not depend on the declared
+/// latency (`DesignOptions::lag`) nor on how far up the discrete model is
+/// fitted (`DesignOptions::discrete_fit_top`): the fitted model Ĝ and its
+/// checks, the criterion's grid, the record's force spectrum, and the
+/// discrete model for `discrete_fit_top`. The latency rule
+/// (`crate::latency`) designs one axis at up to four latencies and fit tops
+/// from one of these instead of fitting its FRF four times.
+pub struct PreparedAxis {
+    name: &'static str,
+    axis: usize,
+    r: f64,
+    freq_hz: Vec<f64>,
+    lines: AxisLines,
+    fitted: Fitted,
+    fit_nrmse: f64,
+    fit_nrmse_out_of_band: f64,
+    ranges: Vec<(f64, f64)>,
+    f_top: f64,
+    grid: Vec<(f64, Complex64)>,
+    spectrum: Option<crate::force_spectrum::CellSpectrum>,
+    /// The discrete model at `discrete_fit_top` (`None` for the paper's
+    /// method, or if it failed: `design_prepared` then says why).
+    discrete: Option<(f64, (DiscreteModel, FitDiagnostics))>,
+}
+
+/// The latency-independent part of [`design_axis`] (not for
+/// `paper_orders_auto`, which chooses its orders by whole designs).
+pub fn prepare_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions) -> Result<PreparedAxis> {
     let name = axis_name(frf.axis);
     let lines = axis_lines(freq_hz, frf, opts)?;
     let fitted = fit_axis(freq_hz, frf, opts, &lines)?;
-    let AxisLines { band, comp_band, notes, in_band: _, eval_band, target, out_of_band } = lines;
-    let fit_nrmse = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, &target);
-    let fit_nrmse_out_of_band = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, &out_of_band);
+    let AxisLines { band, comp_band, target, out_of_band, .. } = &lines;
+    let (band, comp_band) = (*band, *comp_band);
+    let fit_nrmse = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, target);
+    let fit_nrmse_out_of_band = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, out_of_band);
     check_static(&name, freq_hz, band.0, opts, &fitted)?;
     if !(fit_nrmse <= MAX_FIT_ERROR) {
         let next = match &fitted.paper {
@@ -742,31 +774,6 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
     let ranges = criterion_ranges(&opts.bands, comp_band);
     let f_top = ranges.iter().map(|b| b.1).fold(0.0, f64::max);
     let grid: Vec<(f64, Complex64)> = criterion_grid(&ranges).into_iter().map(|f| (f, fitted.frf(f))).collect();
-    let lag = if fitted.paper.is_some() { 0 } else { opts.lag };
-    let prewarp_hz = match &opts.method {
-        FitMethod::Paper { prewarp_hz: Some(p), .. } => *p,
-        _ => 0.5 * (ranges[0].0 + f_top),
-    };
-    // The discrete model of the Kalman design (default method), matched to
-    // the sampled-data relation over the compensated band, once per axis.
-    let discrete = match &fitted.paper {
-        Some(_) => None,
-        None => Some(
-            discretize_to(&fitted.model, opts.fs_hz, opts.discretization, (ranges[0].0, f_top), opts.discrete_fit_top, opts.discrete_static_gain)
-                .with_context(|| format!("axis {name}: discrete model"))?,
-        ),
-    };
-    let model_match = match &discrete {
-        Some((dm, _)) => dm.match_error(&grid.iter().map(|g| g.0).collect::<Vec<_>>(), |f| fitted.frf(f)),
-        None => f64::NAN,
-    };
-    let design_fn = |q: f64| -> Result<KalmanDesign> {
-        match (&fitted.paper, &discrete) {
-            (Some((tf, _)), _) => paper::design(tf, opts.fs_hz, q, r, prewarp_hz, &mut PaperDiagnostics::default()),
-            (None, Some((dm, _))) => kalman::design(dm, q, r, opts.lag),
-            (None, None) => unreachable!("the default method always has a discrete model"),
-        }
-    };
     // The record's force spectrum on the grid's cells (--force-prior spectrum).
     let spectrum = match &opts.force_record {
         None => None,
@@ -778,6 +785,66 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
             let s = crate::force_spectrum::estimate(y, opts.fs_hz, &|f| fitted.frf(f), r, &cells)
                 .with_context(|| format!("{}: axis {name}: --force-prior spectrum", rec.source))?;
             Some(s)
+        }
+    };
+    let discrete = match &fitted.paper {
+        Some(_) => None,
+        None => discrete_model(&fitted, (ranges[0].0, f_top), opts).ok().map(|d| (opts.discrete_fit_top, d)),
+    };
+    Ok(PreparedAxis {
+        name,
+        axis: frf.axis,
+        r,
+        freq_hz: freq_hz.to_vec(),
+        lines,
+        fitted,
+        fit_nrmse,
+        fit_nrmse_out_of_band,
+        ranges,
+        f_top,
+        grid,
+        spectrum,
+        discrete,
+    })
+}
+
+/// The discrete model of the Kalman design (default method), matched to the
+/// sampled-data relation over the compensated band `band_hz`.
+fn discrete_model(fitted: &Fitted, band_hz: (f64, f64), opts: &DesignOptions) -> Result<(DiscreteModel, FitDiagnostics)> {
+    discretize_to(&fitted.model, opts.fs_hz, opts.discretization, band_hz, opts.discrete_fit_top, opts.discrete_static_gain)
+}
+
+/// The latency-dependent part of [`design_axis`]: `opts` must be the
+/// options `p` was prepared with, apart from `lag`, `discrete_fit_top`,
+/// `q_override` and `axis_cycle_budget`.
+pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDesign> {
+    let PreparedAxis { name, axis, r, freq_hz, lines, fitted, fit_nrmse, fit_nrmse_out_of_band, ranges, f_top, grid, spectrum, discrete: prepared } = p;
+    let (name, r, fit_nrmse, fit_nrmse_out_of_band, f_top) = (*name, *r, *fit_nrmse, *fit_nrmse_out_of_band, *f_top);
+    let AxisLines { band, comp_band, notes, eval_band, .. } = lines;
+    let (band, comp_band) = (*band, *comp_band);
+    let grid = grid.clone();
+    let lag = if fitted.paper.is_some() { 0 } else { opts.lag };
+    let prewarp_hz = match &opts.method {
+        FitMethod::Paper { prewarp_hz: Some(p), .. } => *p,
+        _ => 0.5 * (ranges[0].0 + f_top),
+    };
+    // The discrete model of the Kalman design (default method), matched to
+    // the sampled-data relation over the compensated band, once per axis
+    // and fit top.
+    let discrete = match (&fitted.paper, prepared) {
+        (Some(_), _) => None,
+        (None, Some((top, d))) if *top == opts.discrete_fit_top => Some(d.clone()),
+        (None, _) => Some(discrete_model(fitted, (ranges[0].0, f_top), opts).with_context(|| format!("axis {name}: discrete model"))?),
+    };
+    let model_match = match &discrete {
+        Some((dm, _)) => dm.match_error(&grid.iter().map(|g| g.0).collect::<Vec<_>>(), |f| fitted.frf(f)),
+        None => f64::NAN,
+    };
+    let design_fn = |q: f64| -> Result<KalmanDesign> {
+        match (&fitted.paper, &discrete) {
+            (Some((tf, _)), _) => paper::design(tf, opts.fs_hz, q, r, prewarp_hz, &mut PaperDiagnostics::default()),
+            (None, Some((dm, _))) => kalman::design(dm, q, r, opts.lag),
+            (None, None) => unreachable!("the default method always has a discrete model"),
         }
     };
     let obj = Objective {
@@ -873,7 +940,7 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         _ => None,
     };
     let mut design = AxisDesign {
-        axis: frf.axis,
+        axis: *axis,
         model: fitted.model.clone(),
         order_trace: fitted.order_trace.clone(),
         fit_nrmse,
@@ -894,7 +961,7 @@ pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions)
         model_match,
         raw_predicted_error: raw_j.sqrt(),
         compensated_band_hz: comp_band,
-        notes,
+        notes: notes.clone(),
         sensitivity: None,
         force_spectrum,
     };

@@ -25,12 +25,12 @@
 //! ([`NYQUIST_FIT_FRACTION`]), and the one with the smaller predicted error
 //! is kept per axis.
 
-use anyhow::Result;
+use anyhow::{anyhow, Result};
 use dynocomp_core::budget::{load_permille, AxisShape, CostModel};
 use serde::Serialize;
 use std::time::Instant;
 
-use crate::design::{design_axis, AxisDesign, DesignOptions};
+use crate::design::{design_axis, design_prepared, prepare_axis, AxisDesign, DesignOptions, PreparedAxis};
 use crate::discretize::{Discretization, NYQUIST_FIT_FRACTION};
 use crate::frf::AxisFrf;
 
@@ -91,20 +91,42 @@ pub type TimedDesign = (Result<AxisDesign>, f64);
 /// Design every axis of `axes` (one thread each) with `opts`, at `opts.lag`.
 /// `r[i]` is axis i's noise variance (N²).
 pub fn design_axes(freq_hz: &[f64], axes: &[AxisFrf], r: &[f64], opts: &DesignOptions) -> Vec<TimedDesign> {
+    on_threads(axes.iter().zip(r), |(a, rv)| design_axis(freq_hz, a, *rv, opts))
+}
+
+/// `f` of every item, one thread each, with each one's wall time (s).
+fn on_threads<I: Send, T: Send>(items: impl Iterator<Item = I>, f: impl Fn(I) -> T + Sync) -> Vec<(T, f64)> {
+    let f = &f;
     std::thread::scope(|scope| {
-        let handles: Vec<_> = axes
-            .iter()
-            .zip(r)
-            .map(|(a, rv)| {
+        let handles: Vec<_> = items
+            .map(|i| {
                 scope.spawn(move || {
                     let t = Instant::now();
-                    let d = design_axis(freq_hz, a, *rv, opts);
+                    let d = f(i);
                     (d, t.elapsed().as_secs_f64())
                 })
             })
             .collect();
         handles.into_iter().map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p))).collect()
     })
+}
+
+/// One axis prepared for every design round (`design::prepare_axis`: the
+/// fit, done once), and its wall time (s).
+type TimedPrepared = (Result<PreparedAxis>, f64);
+
+/// Design every prepared axis at `opts.lag` and `opts.discrete_fit_top`;
+/// each axis's time includes its preparation. An axis that could not be
+/// prepared fails in every round with the same message.
+fn design_round(prepared: &[TimedPrepared], opts: &DesignOptions) -> Vec<TimedDesign> {
+    on_threads(prepared.iter(), |(p, _)| match p {
+        Ok(p) => design_prepared(p, opts),
+        Err(e) => Err(anyhow!("{e:#}")),
+    })
+    .into_iter()
+    .zip(prepared)
+    .map(|((d, t), (_, tp))| (d, t + tp))
+    .collect()
 }
 
 /// Why the designs at the default latency fall short ("" if they do not).
@@ -193,14 +215,18 @@ pub fn design_axes_choosing_latency(
     mut progress: impl FnMut(usize, &str),
 ) -> (Vec<TimedDesign>, LatencyChoice) {
     let names: Vec<String> = axes.iter().map(|a| crate::frf::axis_name(a.axis).to_string()).collect();
-    let first = design_axes(freq_hz, axes, r, &DesignOptions { lag: DEFAULT_LATENCY, ..opts.clone() });
+    // Each axis fitted once for all rounds: only the discrete model's fit
+    // top, the latency and what follows from them change between rounds.
+    let prepared = if opts.paper_orders_auto { Vec::new() } else { on_threads(axes.iter().zip(r), |(a, rv)| prepare_axis(freq_hz, a, *rv, opts)) };
+    let round = |o: &DesignOptions| if opts.paper_orders_auto { design_axes(freq_hz, axes, r, o) } else { design_round(&prepared, o) };
+    let first = round(&DesignOptions { lag: DEFAULT_LATENCY, ..opts.clone() });
     let reason = shortfall(&first, &names);
     let mut trials = vec![trial(DEFAULT_LATENCY, &first, opts.fs_hz)];
     let mut rounds = vec![first];
     if !reason.is_empty() {
         for l in LONGER_LATENCIES {
             progress(l, &format!("{reason} at latency {DEFAULT_LATENCY}: designing again at {l} samples"));
-            let d = design_axes(freq_hz, axes, r, &DesignOptions { lag: l, ..opts.clone() });
+            let d = round(&DesignOptions { lag: l, ..opts.clone() });
             trials.push(trial(l, &d, opts.fs_hz));
             rounds.push(d);
         }
@@ -214,7 +240,7 @@ pub fn design_axes_choosing_latency(
         // that predicts the smaller error, if the box can still run the image.
         let l = trials[i].latency;
         progress(l, &format!("fitting the discrete models up to Nyquist at latency {l}"));
-        let alt = design_axes(freq_hz, axes, r, &DesignOptions { lag: l, discrete_fit_top: NYQUIST_FIT_FRACTION, ..opts.clone() });
+        let alt = round(&DesignOptions { lag: l, discrete_fit_top: NYQUIST_FIT_FRACTION, ..opts.clone() });
         let before = box_load(&designs, opts.fs_hz);
         let taken: Vec<bool> = designs
             .iter()
