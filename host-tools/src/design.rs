@@ -417,7 +417,7 @@ impl Objective<'_> {
         let fs = self.opts.fs_hz;
         let ss = &d.compensator;
         let ng = ss.white_noise_gain().unwrap_or(f64::INFINITY);
-        let h: Vec<Complex64> = self.grid.iter().map(|(f, _)| ss.freq_response(*f, fs)).collect();
+        let h = ss.freq_responses(&self.grid.iter().map(|g| g.0).collect::<Vec<_>>(), fs);
         let j = self.j_of(&h, false);
         if ng > self.opts.max_noise_gain {
             return (f64::INFINITY, ng, Some(d));
@@ -924,7 +924,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
     // from 7 averages has ~5 % random error, as large as the tolerance.
     let model_frf: Vec<Complex64> = freq_hz.iter().map(|f| fitted.frf(*f)).collect();
     let flat = flat_band(|f| quantize::filter_response(&filter, f, fs), freq_hz, &model_frf, &eval_band, lag, fs);
-    let h: Vec<Complex64> = obj.grid.iter().map(|(f, _)| kal.compensator.freq_response(*f, fs)).collect();
+    let h = kal.compensator.freq_responses(&obj.grid.iter().map(|g| g.0).collect::<Vec<_>>(), fs);
     let predicted_distortion = obj.distortion_of(&h).sqrt();
     let force_spectrum = match (&spectrum, &obj.force) {
         (Some(s), Some((w, p))) => {

@@ -247,10 +247,12 @@ pub fn plot(d: &crate::design::AxisDesign, fs_hz: f64) -> Result<Option<String>>
     let n = freqs.len() as f64;
     let force: Vec<(f64, f64)> = freqs.iter().zip(&s.weights).map(|(f, w)| (*f, 10.0 * (w * n).max(1e-12).log10())).collect();
     let lag = d.kalman.lag;
+    let h = d.kalman.compensator.freq_responses(&freqs, fs_hz);
     let dist: Vec<(f64, f64)> = freqs
         .iter()
-        .map(|f| {
-            let e = crate::design::distortion(*f, d.fitted_frf(*f), d.kalman.compensator.freq_response(*f, fs_hz), lag, fs_hz);
+        .zip(h)
+        .map(|(f, h)| {
+            let e = crate::design::distortion(*f, d.fitted_frf(*f), h, lag, fs_hz);
             (*f, 20.0 * e.norm().max(1e-12).log10())
         })
         .collect();

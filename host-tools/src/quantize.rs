@@ -165,12 +165,8 @@ const VERIFY_SAMPLES: usize = 20_000;
 impl Reference {
     /// The f64 design `ss`'s responses over 0..`f_band_hz` at `fs_hz`.
     pub fn of(ss: &StateSpace, fs_hz: f64, f_band_hz: f64) -> Self {
-        let grid: Vec<(f64, Complex64)> = (0..=VERIFY_GRID)
-            .map(|i| {
-                let f = f_band_hz * i as f64 / VERIFY_GRID as f64;
-                (f, ss.freq_response(f, fs_hz))
-            })
-            .collect();
+        let freqs: Vec<f64> = (0..=VERIFY_GRID).map(|i| f_band_hz * i as f64 / VERIFY_GRID as f64).collect();
+        let grid: Vec<(f64, Complex64)> = freqs.iter().copied().zip(ss.freq_responses(&freqs, fs_hz)).collect();
         let peak = grid.iter().map(|g| g.1.norm()).fold(0.0, f64::max);
         let u = test_signal(VERIFY_SAMPLES, fs_hz, f_band_hz);
         let y64 = ss.simulate(&u);

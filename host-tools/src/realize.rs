@@ -182,16 +182,13 @@ pub fn realize_candidates(ss: &StateSpace) -> Result<Vec<ModalRealization>> {
     // Rank by measured accuracy: the largest deviation of the realization's
     // response from the dense transfer function over 0..fs/2 (relative to
     // its peak), on a grid in normalized frequency.
+    let freqs: Vec<f64> = (0..=256).map(|i| 0.5 * i as f64 / 256.0).collect();
+    let h = ss.freq_responses(&freqs, 1.0);
+    let peak = h.iter().map(|h| h.norm()).fold(0.0, f64::max);
     let mut scored: Vec<(f64, ModalRealization)> = out
         .into_iter()
         .map(|r| {
-            let (mut worst, mut peak) = (0.0f64, 0.0f64);
-            for i in 0..=256 {
-                let f = 0.5 * i as f64 / 256.0;
-                let h = ss.freq_response(f, 1.0);
-                peak = peak.max(h.norm());
-                worst = worst.max((r.freq_response(f, 1.0) - h).norm());
-            }
+            let worst = freqs.iter().zip(&h).map(|(f, h)| (r.freq_response(*f, 1.0) - h).norm()).fold(0.0, f64::max);
             (worst / peak, r)
         })
         .collect();

@@ -274,7 +274,7 @@ pub fn predict(d: &AxisDesign, opts: &DesignOptions) -> Option<Sensitivity> {
     let ranges = criterion_ranges(&d.bands, d.compensated_band_hz);
     let width: f64 = ranges.iter().map(|b| b.1 - b.0).sum();
     let freqs = criterion_grid(&ranges);
-    let h: Vec<Complex64> = freqs.iter().map(|f| d.kalman.compensator.freq_response(*f, fs)).collect();
+    let h = d.kalman.compensator.freq_responses(&freqs, fs);
     let base: Vec<(Complex64, Complex64)> = freqs.iter().map(|f| (d.fitted_frf(*f), terms_frf(&d.model, &idx, *f))).collect();
     // The design's own force spectrum: flat of `force_rms`, or the record's.
     let force = d.force_spectrum.as_ref();

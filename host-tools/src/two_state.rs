@@ -891,7 +891,7 @@ pub fn design_over_range(
             let synthetic = AxisFrf { axis: first.axis, frf: freq_hz.iter().map(|f| m.frf(*f)).collect(), coherence: first.coherence.clone() };
             design_axis(freq_hz, &synthetic, r, opts).with_context(|| format!("model state s = {s}"))?
         };
-        let h: Vec<Complex64> = freqs.iter().map(|f| design.kalman.compensator.freq_response(*f, opts.fs_hz)).collect();
+        let h = design.kalman.compensator.freq_responses(&freqs, opts.fs_hz);
         let noise = noise_term(design.kalman.r, opts.fs_hz, width, opts.force_rms);
         let errors: Vec<f64> = plants.iter().map(|g| criterion_j(g, &h, design.kalman.lag, opts.fs_hz, noise).sqrt()).collect();
         let worst = errors.iter().copied().fold(0.0, f64::max);
