@@ -52,14 +52,15 @@ pub fn resolvent_response(a: &DMatrix<f64>, b: &DVector<f64>, c: &DVector<f64>, 
 fn solve_hessenberg(m: &mut [Complex64], x: &mut [Complex64], n: usize) -> bool {
     for k in 0..n.saturating_sub(1) {
         let (top, below) = (k * n, (k + 1) * n);
-        if m[below + k].norm() > m[top + k].norm() {
+        // |re| + |im|: no hypot per comparison, and no underflow to 0.
+        if m[below + k].l1_norm() > m[top + k].l1_norm() {
             for j in k..n {
                 m.swap(top + j, below + j);
             }
             x.swap(k, k + 1);
         }
         let pivot = m[top + k];
-        if !(pivot.norm() > 0.0) {
+        if !(pivot.l1_norm() > 0.0) {
             return false;
         }
         let l = m[below + k] / pivot;
@@ -78,7 +79,7 @@ fn solve_hessenberg(m: &mut [Complex64], x: &mut [Complex64], n: usize) -> bool 
             s -= m[i * n + j] * x[j];
         }
         let p = m[i * n + i];
-        if !(p.norm() > 0.0 && p.is_finite()) {
+        if !(p.l1_norm() > 0.0 && p.is_finite()) {
             return false;
         }
         x[i] = s / p;
