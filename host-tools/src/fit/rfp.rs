@@ -184,7 +184,11 @@ pub struct RfpFit {
 
 /// Condition number σ_max/σ_min of a matrix (∞ when singular).
 pub fn condition_number(m: &DMatrix<f64>) -> f64 {
-    let sv = m.singular_values();
+    condition_of(&m.singular_values())
+}
+
+/// max σ / min σ of the singular values `sv` (∞ if one is zero).
+fn condition_of(sv: &DVector<f64>) -> f64 {
     let max = sv.iter().copied().fold(0.0, f64::max);
     let min = sv.iter().copied().fold(f64::INFINITY, f64::min);
     if min > 0.0 {
@@ -203,8 +207,9 @@ fn lstsq(m: DMatrix<f64>, rhs: &DVector<f64>) -> Result<(DVector<f64>, f64)> {
     for (j, s) in scale.iter().enumerate() {
         ms.column_mut(j).scale_mut(1.0 / s);
     }
-    let cond = condition_number(&ms);
+    // One SVD for both: the condition from its singular values.
     let svd = ms.svd(true, true);
+    let cond = condition_of(&svd.singular_values);
     let x = svd.solve(rhs, 0.0).map_err(|e| anyhow::anyhow!("least squares: {e}"))?;
     Ok((DVector::from_iterator(x.len(), x.iter().zip(&scale).map(|(v, s)| v / s)), cond))
 }
