@@ -365,7 +365,9 @@ pub fn criterion_cells(ranges: &[(f64, f64)]) -> Vec<(f64, f64)> {
 struct Objective<'a> {
     design: &'a dyn Fn(f64) -> Result<KalmanDesign>,
     lag: usize,
-    grid: Vec<(f64, Complex64)>,
+    /// The criterion's lines: (f (Hz), Ĝ(j2πf)), and their frequencies alone.
+    grid: &'a [(f64, Complex64)],
+    grid_hz: &'a [f64],
     opts: &'a DesignOptions,
     r: f64,
     band_width: f64,
@@ -379,7 +381,7 @@ impl Objective<'_> {
     /// measurement noise itself, in the same units as [`Objective::eval`].
     fn raw(&self) -> f64 {
         let ones = vec![Complex64::new(1.0, 0.0); self.grid.len()];
-        criterion_j_weighted(&self.grid, &ones, self.weights(), 0, self.opts.fs_hz, self.noise())
+        criterion_j_weighted(self.grid, &ones, self.weights(), 0, self.opts.fs_hz, self.noise())
     }
 
     /// The record's weights on the grid, `None` for the flat spectrum.
@@ -397,7 +399,7 @@ impl Objective<'_> {
     /// The distortion part of J for the response `h` on the grid (the
     /// noise term left out), for the record's spectrum when there is one.
     fn distortion_of(&self, h: &[Complex64]) -> f64 {
-        criterion_j_weighted(&self.grid, h, self.weights(), self.lag, self.opts.fs_hz, 0.0)
+        criterion_j_weighted(self.grid, h, self.weights(), self.lag, self.opts.fs_hz, 0.0)
     }
 
     /// J of the response `h` on the grid: for the record's spectrum when
@@ -405,7 +407,7 @@ impl Objective<'_> {
     /// power).
     fn j_of(&self, h: &[Complex64], flat: bool) -> f64 {
         let weights = if flat { None } else { self.weights() };
-        criterion_j_weighted(&self.grid, h, weights, self.lag, self.opts.fs_hz, self.noise())
+        criterion_j_weighted(self.grid, h, weights, self.lag, self.opts.fs_hz, self.noise())
     }
 
     /// (J, noise gain, design) for one q; J = ∞ when the design fails or the
@@ -417,7 +419,7 @@ impl Objective<'_> {
         let fs = self.opts.fs_hz;
         let ss = &d.compensator;
         let ng = ss.white_noise_gain().unwrap_or(f64::INFINITY);
-        let h = ss.freq_responses(&self.grid.iter().map(|g| g.0).collect::<Vec<_>>(), fs);
+        let h = ss.freq_responses(self.grid_hz, fs);
         let j = self.j_of(&h, false);
         if ng > self.opts.max_noise_gain {
             return (f64::INFINITY, ng, Some(d));
@@ -822,7 +824,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
     let (name, r, fit_nrmse, fit_nrmse_out_of_band, f_top) = (*name, *r, *fit_nrmse, *fit_nrmse_out_of_band, *f_top);
     let AxisLines { band, comp_band, notes, eval_band, .. } = lines;
     let (band, comp_band) = (*band, *comp_band);
-    let grid = grid.clone();
+    let grid_hz: Vec<f64> = grid.iter().map(|g| g.0).collect();
     let lag = if fitted.paper.is_some() { 0 } else { opts.lag };
     let prewarp_hz = match &opts.method {
         FitMethod::Paper { prewarp_hz: Some(p), .. } => *p,
@@ -837,7 +839,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
         (None, _) => Some(discrete_model(fitted, (ranges[0].0, f_top), opts).with_context(|| format!("axis {name}: discrete model"))?),
     };
     let model_match = match &discrete {
-        Some((dm, _)) => dm.match_error(&grid.iter().map(|g| g.0).collect::<Vec<_>>(), |f| fitted.frf(f)),
+        Some((dm, _)) => dm.match_error(&grid_hz, |f| fitted.frf(f)),
         None => f64::NAN,
     };
     let design_fn = |q: f64| -> Result<KalmanDesign> {
@@ -851,6 +853,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
         design: &design_fn,
         lag,
         grid,
+        grid_hz: &grid_hz,
         opts,
         r,
         band_width: ranges.iter().map(|b| b.1 - b.0).sum(),
@@ -924,7 +927,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
     // from 7 averages has ~5 % random error, as large as the tolerance.
     let model_frf: Vec<Complex64> = freq_hz.iter().map(|f| fitted.frf(*f)).collect();
     let flat = flat_band(|f| quantize::filter_response(&filter, f, fs), freq_hz, &model_frf, &eval_band, lag, fs);
-    let h = kal.compensator.freq_responses(&obj.grid.iter().map(|g| g.0).collect::<Vec<_>>(), fs);
+    let h = kal.compensator.freq_responses(&grid_hz, fs);
     let predicted_distortion = obj.distortion_of(&h).sqrt();
     let force_spectrum = match (&spectrum, &obj.force) {
         (Some(s), Some((w, p))) => {
@@ -1011,7 +1014,7 @@ pub fn choose_realization_within(
     let mut verified: Vec<(ModalRealization, AxisFilter, Verification)> = Vec::new();
     let mut last_err = None;
     for r in candidates {
-        match quantize::quantize_against(&r, &reference) {
+        match quantize::quantize(&r, &reference) {
             Ok((f, v)) => {
                 if let Some(t) = shortest_fir(&r, &v, &reference) {
                     verified.push(t);
@@ -1062,7 +1065,7 @@ fn shortest_fir(r: &ModalRealization, v: &Verification, reference: &quantize::Re
         t.fir.truncate(len);
         let dropped: f64 = r.fir[len..].iter().map(|h| h.abs()).sum();
         t.fir_truncation = r.fir_truncation + dropped / total.max(f64::MIN_POSITIVE);
-        let (f, tv) = quantize::quantize_against(&t, reference).ok()?;
+        let (f, tv) = quantize::quantize(&t, reference).ok()?;
         (tv.score() <= bound).then_some((t, f, tv))
     })
 }

@@ -141,7 +141,7 @@ pub fn test_signal(n: usize, fs_hz: f64, f_hi: f64) -> Vec<f64> {
 
 /// What a quantized filter is checked against: the f64 design's frequency
 /// response on the check grid and its output for the time-domain test
-/// signal. It depends on the design `ss` only, so [`quantize_against`]
+/// signal. It depends on the design `ss` only, so [`quantize`]
 /// shares it between every realization and FIR length of one compensator
 /// (the f64 simulation was most of a check's cost).
 pub struct Reference {
@@ -175,13 +175,9 @@ impl Reference {
     }
 }
 
-/// Round to f32 and verify against the f64 design `ss` over 0..`f_band_hz`.
-pub fn quantize(real: &ModalRealization, ss: &StateSpace, fs_hz: f64, f_band_hz: f64) -> Result<(AxisFilter, Verification)> {
-    quantize_against(real, &Reference::of(ss, fs_hz, f_band_hz))
-}
-
-/// [`quantize`] against a precomputed [`Reference`] of the design.
-pub fn quantize_against(real: &ModalRealization, reference: &Reference) -> Result<(AxisFilter, Verification)> {
+/// Round to f32 and verify against the f64 design, whose responses
+/// `reference` holds ([`Reference::of`] the design `ss` over 0..`f_band_hz`).
+pub fn quantize(real: &ModalRealization, reference: &Reference) -> Result<(AxisFilter, Verification)> {
     let Reference { fs_hz, grid, peak, u, y64, rms } = reference;
     let (fs_hz, peak, rms) = (*fs_hz, *peak, *rms);
     let sections: Vec<Section> = real.sections.iter().map(round_section).collect();
