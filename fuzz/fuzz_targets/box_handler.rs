@@ -13,8 +13,8 @@
 //! the one a fresh boot of the flash would run.
 #![no_main]
 
-use dynocomp::sim_flash::SimFlash;
-use dynocomp::virtual_box::VirtualBox;
+use dynocomp::link::sim_flash::SimFlash;
+use dynocomp::link::virtual_box::VirtualBox;
 use dynocomp_core::image::{CoeffImage, CRC32};
 use dynocomp_core::protocol::*;
 use dynocomp_core::store::{Layout, Store};

@@ -15,7 +15,7 @@
 //! committed; `load_active` agrees with boot.
 #![no_main]
 
-use dynocomp::sim_flash::SimFlash;
+use dynocomp::link::sim_flash::SimFlash;
 use dynocomp_core::image::{CoeffImage, CRC32, FLAG_OFFLINE_ONLY, MAX_IMAGE_LEN};
 use dynocomp_core::sample::{BypassReason, BOX_FS_RANGE_HZ};
 use dynocomp_core::shell::Slot;

@@ -4,7 +4,7 @@
 //! models of 9257-class dynamometers (no fit error involved).
 //!
 //! usage: cargo run --release -p dynocomp --example discretize_match
-use dynocomp::discretize::{discretize, Discretization};
+use dynocomp::design::discretize::{discretize, Discretization};
 use dynocomp::fit::PoleResidueModel;
 
 fn main() -> anyhow::Result<()> {

@@ -24,11 +24,12 @@
 //! Printed per case and axis: ĉ ± σ, ℓ(1) − ℓ(0) (how strongly the record
 //! prefers the full drift over none), and whether it tells.
 use anyhow::Result;
-use dynocomp::design::{design_axis, DesignOptions};
+use dynocomp::design::axis::{design_axis, DesignOptions};
 use dynocomp::metrics::sample_variance;
 use dynocomp::simulate::drift::{measure_drifting, simulate_drifting, Drift};
 use dynocomp::simulate::{milling_force, sub_seed, MillingParams, MultiAxisDynamometer, SimParams};
-use dynocomp::two_state::{drift_log_likelihood, pair_second_state, DriftSmoothing};
+use dynocomp::offline::drift::{drift_log_likelihood, DriftSmoothing};
+use dynocomp::design::two_state::range::pair_second_state;
 use std::f64::consts::PI;
 
 const FS: f64 = 51_200.0;

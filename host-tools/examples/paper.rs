@@ -8,7 +8,7 @@
 //! restricted to the preset's fitting bands ("bands"). `--quick` simulates
 //! shorter records (the designs are the same).
 
-use dynocomp::reproduce::{evaluate, local_error_single_vs_parallel, preset_bands, simulate_preset, AxisOutcome, Method};
+use dynocomp::eval::reproduce::{evaluate, local_error_single_vs_parallel, preset_bands, simulate_preset, AxisOutcome, Method};
 use dynocomp::simulate::presets::{dynamometer_9257a, preset, NAMES};
 use std::time::Instant;
 

@@ -1,5 +1,5 @@
 //! The harmonic force prior (issue #12, optional part) against the default,
-//! on the cases of `dynocomp::simulate::rates`, scored against the
+//! on the cases of `dynocomp::eval::rates`, scored against the
 //! simulator's band-limited truth, with its negative controls.
 //!
 //! usage: cargo run --release -p dynocomp --example prior -- [--case NAME]... [--fs HZ]... [--width HZ]
@@ -20,12 +20,12 @@
 //! - t.off: the steady cut with a prior tuned at a spindle speed 2 % off
 //!   (the design's checks skipped: `design` refuses it).
 use anyhow::{bail, Context, Result};
-use dynocomp::force_prior::{build_axis_prior, check_record, PriorOptions};
+use dynocomp::offline::force_prior::{build_axis_prior, check_record, PriorOptions};
 use dynocomp::frf::axis_name;
 use dynocomp::metrics::{accuracy, lowpass, sample_variance, scoring_band_hz};
-use dynocomp::simulate::rates::{cases, design_options, noise_floor, RunOptions, RATES_HZ};
+use dynocomp::eval::rates::{cases, design_options, noise_floor, RunOptions, RATES_HZ};
 use dynocomp::simulate::{simulate_with, Chatter};
-use dynocomp::smoother::Smoother;
+use dynocomp::offline::smoother::Smoother;
 
 fn main() -> Result<()> {
     let (mut names, mut rates, mut width) = (Vec::new(), Vec::new(), None);
@@ -72,16 +72,16 @@ fn main() -> Result<()> {
                 let floor = noise_floor(|f| s.dyno.axis(a).frf(f) * chain.analog_frf(f), s.params.measurement.expected_idle_variance(), fs, band, std_truth);
                 let r = sample_variance(&s.idle[a]);
                 let frf = s.frf.axis(a).context("axis")?;
-                let d = match dynocomp::design::design_axis(&s.frf.freq_hz, frf, r, &opts) {
+                let d = match dynocomp::design::axis::design_axis(&s.frf.freq_hz, frf, r, &opts) {
                     Ok(d) => d,
                     Err(e) => {
                         println!("{fs:>6} {:<14} {:>2} design failed: {e:#}", case.name, axis_name(a));
                         continue;
                     }
                 };
-                let img = dynocomp::design_cmd::build_image(std::slice::from_ref(&d), fs as u32, 4, 5000.0, [0; 32])?;
+                let img = dynocomp::design::image::build_image(std::slice::from_ref(&d), fs as u32, 4, 5000.0, [0; 32])?;
                 let rec = dynocomp::io::signal_csv::SignalRecord { t_s: None, channels: vec![(a, s.measured[a].clone())] };
-                let boxed = dynocomp::compensate::compensate_record(&img, &rec, false, "prior")?;
+                let boxed = dynocomp::offline::compensate::compensate_record(&img, &rec, false, "prior")?;
                 let box_nrmse = accuracy(boxed.channel(a).context("channel")?, &s.truth[a], fs, band).nrmse;
                 let dm = &d.discrete.as_ref().context("discrete model")?.0;
                 let default = Smoother::new(dm, d.kalman.q, r)?;

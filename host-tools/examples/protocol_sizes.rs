@@ -3,7 +3,7 @@
 //! (Sizes of these types are the same on thumbv7em: they are byte arrays,
 //! u16/u32 and f32 fields.)
 
-use dynocomp::sim_flash::SimFlash;
+use dynocomp::link::sim_flash::SimFlash;
 use dynocomp_core::image::CoeffImage;
 use dynocomp_core::link::BoxLink;
 use dynocomp_core::protocol::*;

@@ -1,5 +1,5 @@
 //! Multi-rate accuracy benchmark (issue #12): every case of
-//! `dynocomp::simulate::rates` at fs ∈ {10.24, 25.6, 51.2, 102.4} kHz,
+//! `dynocomp::eval::rates` at fs ∈ {10.24, 25.6, 51.2, 102.4} kHz,
 //! simulated with the ideal anti-aliasing chain, designed, compensated and
 //! scored against the band-limited truth.
 //!
@@ -21,7 +21,7 @@
 //! fs the median and worst compensated NRMSE and the axes worse than raw.
 use anyhow::{bail, Context, Result};
 use dynocomp::frf::axis_name;
-use dynocomp::simulate::rates::{cases, quick_cases, run_case_on, summarize, RunOptions, RATES_HZ};
+use dynocomp::eval::rates::{cases, quick_cases, run_case_on, summarize, RunOptions, RATES_HZ};
 use dynocomp::simulate::Chatter;
 use std::time::Instant;
 use dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE;
@@ -38,12 +38,12 @@ fn main() -> Result<()> {
             "--force-spectrum" => run.force_spectrum = true,
             "--force-level" => (run.force_spectrum, run.force_level_only) = (true, true),
             "--chatter" => chatter_hz = Some(args.next().context("--chatter needs Hz")?.parse().context("--chatter: not a number")?),
-            "--fitted-static-gain" => run.static_gain = dynocomp::discretize::StaticGain::Fitted,
+            "--fitted-static-gain" => run.static_gain = dynocomp::design::discretize::StaticGain::Fitted,
             "--lag" => run.lag = Some(args.next().context("--lag needs a value")?.parse().context("--lag: not a number of samples")?),
             "--discretization" => {
                 let v = args.next().context("--discretization needs fit, foh or zoh")?;
-                run.discretization = <dynocomp::discretize::Discretization as clap::ValueEnum>::from_str(&v, true)
-                    .map_err(|e| anyhow::anyhow!("--discretization {v}: {e}"))?;
+                run.discretization = dynocomp::design::discretize::Discretization::from_name(&v)
+                    .ok_or_else(|| anyhow::anyhow!("--discretization {v}: expected fit, foh or zoh"))?;
             }
             _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum | --force-level] [--chatter HZ] [--fitted-static-gain])"),
         }

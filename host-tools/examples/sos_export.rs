@@ -12,7 +12,7 @@
 //! space. The kernel's filter is d + Σ sections + FIR (parallel form).
 //! Prints `compensate_samples_per_s <axes> <value>` (best of REPEATS, default 200: the first runs after start-up are up to 1.4x slower).
 use anyhow::{ensure, Context, Result};
-use dynocomp::compensate::compensate_record;
+use dynocomp::offline::compensate::compensate_record;
 use dynocomp::io::image_file::read_image;
 use dynocomp::io::signal_csv::{read_signal_csv, SignalRecord};
 use serde_json::json;

@@ -1,5 +1,5 @@
 //! Design-tuning experiment on simulated dynamometers (not part of the CLI).
-use dynocomp::design::{design_axis, DesignOptions};
+use dynocomp::design::axis::{design_axis, DesignOptions};
 use dynocomp::metrics::accuracy;
 use dynocomp::simulate::{simulate, SimParams};
 use dynocomp_core::kernel::AxisState;

@@ -2,7 +2,7 @@
 //! the whole-record path; `--report` draws what it did; bad input leaves no
 //! output behind.
 
-use dynocomp::compensate::{compensate_record, StreamCompensator};
+use dynocomp::offline::compensate::{compensate_record, StreamCompensator};
 use dynocomp::io::signal_csv::{read_signal_csv, SignalRecord};
 use dynocomp_core::image::CoeffImage;
 use dynocomp_core::kernel::{AxisFilter, Section};

@@ -1,10 +1,11 @@
 //! Each numerical stage of the design against an independent truth.
 
 use dynocomp::fit::vf::{coherence_weights, vector_fit, VfOptions};
-use dynocomp::discretize::{discretize, DiscreteModel, Discretization};
+use dynocomp::design::discretize::{discretize, DiscreteModel, Discretization};
 use dynocomp::fit::PoleResidueModel;
-use dynocomp::kalman::{self, solve_filter_dare, StateSpace};
-use dynocomp::realize::realize;
+use dynocomp::design::kalman::{self, solve_filter_dare};
+use dynocomp::numeric::lti::StateSpace;
+use dynocomp::realize::modal::realize;
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
 
@@ -102,7 +103,7 @@ fn white_noise_gain_is_exact_where_a_frequency_grid_is_not() {
         assert!((got - truth).abs() < 1e-9 * truth, "a={a}: {got} vs {truth}");
         // Negative control: the 512-point midpoint rule misses the narrow
         // peak of the pole at 0.9996 by more than 1 %.
-        let grid = dynocomp::design::noise_gain(|f| ss.freq_response(f, 51_200.0), 51_200.0);
+        let grid = dynocomp::design::criterion::noise_gain(|f| ss.freq_response(f, 51_200.0), 51_200.0);
         if a > 0.999 {
             assert!((grid - truth).abs() > 1e-2 * truth, "grid {grid} vs {truth}");
         }

@@ -6,9 +6,9 @@
 //! augmented plant (`kalman::augmented_plant`), so the test covers the model
 //! the filter is designed on, its advance and its FIR taps.
 
-use dynocomp::discretize::{discretize, DiscreteModel, Discretization, MATCH_TARGET};
+use dynocomp::design::discretize::{discretize, DiscreteModel, Discretization, MATCH_TARGET};
 use dynocomp::fit::PoleResidueModel;
-use dynocomp::kalman::augmented_plant;
+use dynocomp::design::kalman::augmented_plant;
 use nalgebra::DVector;
 use num_complex::Complex64;
 use rand::SeedableRng;
@@ -169,7 +169,7 @@ fn the_static_gain_is_matched_where_a_cutting_force_has_its_mean() {
     // Analytic truth: the modes' shares of every case sum to 1, so
     // G(0) = 1 exactly. Negative control: the static gain fitted like any
     // other line (the fit before) is 3e-4 to 2e-3 off.
-    use dynocomp::discretize::{discretize_to, StaticGain, MATCH_BAND_FRACTION};
+    use dynocomp::design::discretize::{discretize_to, StaticGain, MATCH_BAND_FRACTION};
     for (fs, modes, band_hi) in cases() {
         assert!((modes.iter().map(|m| m.2).sum::<f64>() - 1.0).abs() < 1e-12);
         let model = PoleResidueModel::from_modes(&modes);

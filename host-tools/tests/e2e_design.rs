@@ -8,9 +8,9 @@
 //! peak-to-peak, about 5 % of its std: these are tighter.) The same targets
 //! at the other DAQ rates: `e2e_rates.rs`.
 
-use dynocomp::compensate::compensate_record;
-use dynocomp::design::AxisDesign;
-use dynocomp::design_cmd::build_image;
+use dynocomp::offline::compensate::compensate_record;
+use dynocomp::design::axis::AxisDesign;
+use dynocomp::design::image::build_image;
 use dynocomp::io::signal_csv::SignalRecord;
 use dynocomp::metrics::accuracy;
 use dynocomp::simulate::SimOutput;

@@ -7,9 +7,9 @@
 //! Nyquist at 10.24 kHz). The full case list runs in the benchmark
 //! (`cargo run --release -p dynocomp --example rates`, BENCHMARKS.md).
 
-use dynocomp::discretize::{Discretization, StaticGain};
-use dynocomp::latency::DEFAULT_LATENCY;
-use dynocomp::simulate::rates::{quick_cases, run_case, CaseResult, RunOptions, RATES_HZ};
+use dynocomp::design::discretize::{Discretization, StaticGain};
+use dynocomp::design::latency::DEFAULT_LATENCY;
+use dynocomp::eval::rates::{quick_cases, run_case, CaseResult, RunOptions, RATES_HZ};
 
 /// Issue #12 targets, met at 25.6, 51.2 and 102.4 kHz.
 const MEDIAN: f64 = 0.005;
@@ -172,7 +172,7 @@ fn a_longer_latency_is_chosen_where_a_design_predicts_missing_the_target() {
     // of its floor; the same case at the fixed latency 4 stays above
     // (negative control). The default case at 51.2 kHz, whose predicted
     // distortion is under 0.5 %, keeps 4 (the previous test).
-    use dynocomp::simulate::rates::cases;
+    use dynocomp::eval::rates::cases;
     let case = cases().into_iter().find(|c| c.name == "close-pair").unwrap();
     let exact = RunOptions { exact_frf: true, ..Default::default() };
     let fs = RATES_HZ[0];

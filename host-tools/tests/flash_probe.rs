@@ -8,11 +8,11 @@ mod common;
 use std::cell::Cell;
 use std::path::PathBuf;
 
-use dynocomp::flash_probe::{
+use dynocomp::link::flash_probe::{
     execute, fake_session, loader_for, plan, read_slots, run_with, FlashPlan, SlotArg,
     DEFAULT_CHIP, SLOTS_LEN,
 };
-use dynocomp::sim_flash::SimFlash;
+use dynocomp::link::sim_flash::SimFlash;
 use dynocomp_core::image::{CoeffImage, CRC32};
 use dynocomp_core::shell::Slot;
 use dynocomp_core::store::{encode_record, Layout, Store, FLASH_BASE};

@@ -19,12 +19,12 @@
 //!   `compensate --offline` uses it and refuses, with one line and no
 //!   output, a record at another spindle speed.
 
-use dynocomp::discretize::{DTerm, DiscreteModel, Discretization};
-use dynocomp::force_prior::{build_axis_prior, check_record, wiener_response, HarmonicLine, HarmonicPrior, PriorOptions};
+use dynocomp::design::discretize::{DTerm, DiscreteModel, Discretization};
+use dynocomp::offline::force_prior::{build_axis_prior, check_record, wiener_response, HarmonicLine, HarmonicPrior, PriorOptions};
 use dynocomp::metrics::{accuracy, sample_variance, scoring_band_hz};
-use dynocomp::simulate::rates::{cases, design_options, noise_floor, RateCase, RunOptions};
+use dynocomp::eval::rates::{cases, design_options, noise_floor, RateCase, RunOptions};
 use dynocomp::simulate::{simulate_with, Chatter, SimOutput};
-use dynocomp::smoother::Smoother;
+use dynocomp::offline::smoother::Smoother;
 use rustfft::{num_complex::Complex64, FftPlanner};
 
 mod cli_common;
@@ -94,7 +94,7 @@ fn smoother_is_the_wiener_filter_of_the_prior() {
 /// put in; the checks accept the steady record and refuse the other.
 #[test]
 fn record_analysis_measures_known_lines() {
-    use dynocomp::force_prior::analyze_record;
+    use dynocomp::offline::force_prior::analyze_record;
     let (fs, f_sp, n, r): (f64, f64, usize, f64) = (10_240.0, 40.0, 20_480, 0.01);
     let amps = [(1u32, 30.0), (2, 80.0), (4, 12.0), (7, 3.0), (20, 1.0)];
     let mut rng_state = 12345u64;
@@ -150,7 +150,7 @@ fn harmonic_prior_beats_the_noise_floor_on_a_steady_cut() {
     let s = simulate_with(case.seed, &params, dyno.clone()).unwrap();
     let tune = simulate_with(case.seed + 1000, &params, dyno.clone()).unwrap();
     let r = sample_variance(&s.idle[a]);
-    let d = dynocomp::design::design_axis(&s.frf.freq_hz, s.frf.axis(a).unwrap(), r, &design_options(fs, &RunOptions::default())).unwrap();
+    let d = dynocomp::design::axis::design_axis(&s.frf.freq_hz, s.frf.axis(a).unwrap(), r, &design_options(fs, &RunOptions::default())).unwrap();
     let dm = &d.discrete.as_ref().unwrap().0;
     let g = |f: f64| d.model.frf(f);
     let popts = PriorOptions { spindle_rpm: case.spindle_rpm, teeth: case.teeth as u32, line_width_hz: None, unchecked: false };

@@ -18,8 +18,8 @@
 //!   image), and the refusals (no record, a record without an axis, an
 //!   idle record) with no image written.
 
-use dynocomp::force_spectrum::{estimate, WELCH_SEGMENT};
-use dynocomp::simulate::rates::{cases, run_case, run_case_on, RunOptions};
+use dynocomp::design::force_spectrum::{estimate, WELCH_SEGMENT};
+use dynocomp::eval::rates::{cases, run_case, run_case_on, RunOptions};
 use dynocomp::simulate::Chatter;
 use rustfft::num_complex::Complex64;
 use std::f64::consts::PI;
@@ -112,7 +112,7 @@ fn records_that_cannot_tell_the_spectrum_are_refused() {
     estimate(&ok, fs, &sensor, r, &cells()).unwrap();
 }
 
-fn z_error(r: &dynocomp::simulate::rates::CaseResult) -> f64 {
+fn z_error(r: &dynocomp::eval::rates::CaseResult) -> f64 {
     *r.axes[2].comp_nrmse.as_ref().unwrap()
 }
 
@@ -250,7 +250,7 @@ fn the_records_level_makes_the_predicted_error_honest() {
     let fs = 25_600.0;
     let flat = run_case(&case, fs, &RunOptions::default()).unwrap();
     let level = run_case(&case, fs, &RunOptions { force_spectrum: true, force_level_only: true, ..Default::default() }).unwrap();
-    let ratio = |a: &dynocomp::simulate::rates::AxisScore| a.predicted_error / a.comp_nrmse.as_ref().unwrap();
+    let ratio = |a: &dynocomp::eval::rates::AxisScore| a.predicted_error / a.comp_nrmse.as_ref().unwrap();
     for (f, l) in flat.axes.iter().zip(&level.axes) {
         eprintln!(
             "axis {}: measured {:.3} %, predicted {:.3} % at the record's level, {:.3} % at 100 N",

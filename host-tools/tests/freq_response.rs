@@ -4,7 +4,7 @@
 //! exactly, independent of either solver. The per-point LU
 //! (`freq_response`) is held to the same truth.
 
-use dynocomp::kalman::StateSpace;
+use dynocomp::numeric::lti::StateSpace;
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
 

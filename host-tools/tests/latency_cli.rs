@@ -1,4 +1,4 @@
-//! The declared latency through the binary (`crate::latency`): without
+//! The declared latency through the binary (`crate::design::latency`): without
 //! `--latency` the summary and `--json` say how it was chosen; with it, the
 //! given latency is kept and nothing is chosen. The choice itself (a longer
 //! latency where the flat band falls short, with its negative control) is

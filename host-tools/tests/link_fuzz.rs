@@ -6,8 +6,8 @@
 
 mod common;
 
-use dynocomp::sim_flash::SimFlash;
-use dynocomp::virtual_box::VirtualBox;
+use dynocomp::link::sim_flash::SimFlash;
+use dynocomp::link::virtual_box::VirtualBox;
 use dynocomp_core::image::CRC32;
 use dynocomp_core::protocol::*;
 use dynocomp_core::store::{Layout, Store};

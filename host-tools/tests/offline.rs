@@ -4,14 +4,15 @@
 
 mod sim_common;
 use sim_common::{design_all, sim, FS, F_MAX};
-use dynocomp::compensate::compensate_record;
-use dynocomp::design_cmd::build_image;
-use dynocomp::discretize::{discretize, DiscreteModel, Discretization};
+use dynocomp::offline::compensate::compensate_record;
+use dynocomp::design::image::build_image;
+use dynocomp::design::discretize::{discretize, DiscreteModel, Discretization};
 use dynocomp::fit::PoleResidueModel;
 use dynocomp::io::signal_csv::SignalRecord;
 use dynocomp::metrics::accuracy;
 use dynocomp::simulate::dynamometer::{Dynamometer, Hold, Mode};
-use dynocomp::smoother::{read_sidecar, sidecar_path, smooth_record, write_sidecar, ModelSidecar, Smoother};
+use dynocomp::offline::smoother::{smooth_record, Smoother};
+use dynocomp::offline::sidecar::{read_sidecar, sidecar_path, write_sidecar, ModelSidecar};
 use std::f64::consts::PI;
 
 
@@ -108,7 +109,7 @@ fn smoother_beats_the_causal_fixed_lag_filters_when_its_model_holds() {
     let smoothed = Smoother::new(&dm, q, r).unwrap().smooth(&y);
     let e_s = err(&smoothed);
     for lag in [0usize, 4, 16] {
-        let k = dynocomp::kalman::design(&dm, q, r, lag).unwrap();
+        let k = dynocomp::design::kalman::design(&dm, q, r, lag).unwrap();
         let mut padded = y.clone();
         padded.extend(std::iter::repeat_n(0.0, lag));
         let est = &k.compensator.simulate(&padded)[lag..];
@@ -240,7 +241,7 @@ fn the_sidecar_is_tied_to_its_image() {
 /// (D > 0, so the D copies of y_0 in front are exercised).
 #[test]
 fn spilled_smoother_equals_the_in_memory_one_bit_for_bit() {
-    use dynocomp::smoother::SpilledForward;
+    use dynocomp::offline::smoother::SpilledForward;
     let model = two_mode_model();
     let fit = discretize(&model, FS, Discretization::Fit, (0.0, 0.4 * FS)).unwrap().0;
     assert!(fit.advance > 0, "the fitted model has no advance: the padding goes untested");

@@ -10,9 +10,9 @@
 //! - parallel elaboration is accurate across the bands;
 //! - the default method matches or beats them over the whole band.
 
-use dynocomp::bands::{from_tooth_passing, validate, Band};
-use dynocomp::compare::{design_parallel, CompareSetup};
-use dynocomp::design::{coherent_band, design_axis, fitted_response, probe_paper_fit, AxisDesign, DesignOptions, FitMethod, MAX_FIT_ERROR};
+use dynocomp::design::bands::{from_tooth_passing, validate, Band};
+use dynocomp::eval::compare::{design_parallel, CompareSetup};
+use dynocomp::design::axis::{coherent_band, design_axis, fitted_response, probe_paper_fit, AxisDesign, DesignOptions, FitMethod, MAX_FIT_ERROR};
 use dynocomp::fit::rfp::RfpOptions;
 use dynocomp::metrics::sample_variance;
 use dynocomp::simulate::{simulate, SimOutput, SimParams};
@@ -153,9 +153,9 @@ fn parallel_elaboration_is_accurate_across_bands_and_the_default_method_matches_
         };
         let vf = design(&s, axis, FitMethod::Vf, Vec::new()).unwrap();
         let vf_fit = truth_error(&s, axis, |f| vf.fitted_frf(f), whole);
-        let vf_comp = compensated_error(&s, axis, |f| dynocomp::quantize::filter_response(&vf.filter, f, FS), vf.kalman.lag, whole);
+        let vf_comp = compensated_error(&s, axis, |f| dynocomp::realize::quantize::filter_response(&vf.filter, f, FS), vf.kalman.lag, whole);
         let pb = design(&s, axis, paper(6, 8), bands.clone()).ok();
-        let pb_comp = pb.as_ref().map_or(f64::INFINITY, |d| compensated_error(&s, axis, |f| dynocomp::quantize::filter_response(&d.filter, f, FS), 0, whole));
+        let pb_comp = pb.as_ref().map_or(f64::INFINITY, |d| compensated_error(&s, axis, |f| dynocomp::realize::quantize::filter_response(&d.filter, f, FS), 0, whole));
         eprintln!(
             "seed {seed}: truth fit error: parallel {par_bands:.4} in the TPF bands, {par_fit:.4} whole band ({} segments, order {}); single paper 6:8 {single:.4} in the TPF bands; vf {vf_fit:.4} whole band; compensated error (whole band): parallel {par_comp:.4}, paper band-fitted {pb_comp:.4}, vf {vf_comp:.4}",
             par.segments.len(),

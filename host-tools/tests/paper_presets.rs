@@ -9,7 +9,7 @@
 //! bands is below the raw error there.
 
 use dynocomp::metrics::accuracy_in_bands;
-use dynocomp::reproduce::{evaluate, preset_bands, simulate_preset, Method};
+use dynocomp::eval::reproduce::{evaluate, preset_bands, simulate_preset, Method};
 use dynocomp::simulate::presets::{preset, NAMES};
 
 /// Records long enough for ≥ 20 tooth periods at TPF 83 Hz and the whole

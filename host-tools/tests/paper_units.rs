@@ -4,7 +4,7 @@
 //! construction.
 
 use dynocomp::fit::rfp::{poly_eval, poly_from_roots, rfp_fit, RationalTf, RfpOptions};
-use dynocomp::paper::{self, companion_form, continuous_response, observability, solve_filter_care, tustin_prewarped, ContinuousSs, PaperDiagnostics};
+use dynocomp::design::paper::{self, companion_form, continuous_response, observability, solve_filter_care, tustin_prewarped, ContinuousSs, PaperDiagnostics};
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
 use std::f64::consts::PI;

@@ -5,13 +5,15 @@
 
 mod sim_common;
 use sim_common::{design_all, sim, FS, F_MAX};
-use dynocomp::bands::Band;
-use dynocomp::compensate::{compensate_parallel, compensate_record};
-use dynocomp::design::{design_axis, DesignOptions};
-use dynocomp::design_cmd::{build_image, BandArgs};
+use dynocomp::design::bands::Band;
+use dynocomp::offline::compensate::{compensate_parallel, compensate_record};
+use dynocomp::design::axis::{design_axis, DesignOptions};
+use dynocomp::cli::design_args::BandArgs;
+use dynocomp::design::image::build_image;
 use dynocomp::io::signal_csv::SignalRecord;
 use dynocomp::metrics::{accuracy, lowpass, sample_variance};
-use dynocomp::parallel::{build_parallel_image, design_parallel};
+use dynocomp::design::parallel::design_parallel;
+use dynocomp::design::image::build_parallel_image;
 use dynocomp::simulate::SimOutput;
 use dynocomp_core::image::{BandImage, CoeffImage, DesignMethod, ImageError, ParallelImage, MAX_PARALLEL_IMAGE_LEN};
 
@@ -68,11 +70,11 @@ fn parallel_image_compensates_a_simulated_record_in_every_band() {
     assert_eq!(bands.len(), 4, "{bands:?}");
     let img = parallel_image(&s, &bands);
     // `inspect` says it plainly, in text and JSON
-    let rep = dynocomp::inspect::report_parallel(&img).unwrap();
+    let rep = dynocomp::report::inspect::report_parallel(&img).unwrap();
     assert!(rep.offline_only && !rep.runs_in_box);
     assert_eq!(rep.bands.len(), 4);
     assert_eq!(rep.bands[1].split_hz, [(292.5 + 1170.0) / 2.0, (1430.0 + 2340.0) / 2.0]);
-    let text = dynocomp::inspect::render(&rep);
+    let text = dynocomp::report::inspect::render(&rep);
     assert!(text.contains("offline only: parallel elaboration, 4 bands: 0-292 Hz, 1170-1430 Hz, 2340-2860 Hz, 3510-4096 Hz"), "{text}");
     let json = serde_json::to_value(&rep).unwrap();
     assert_eq!(json["offline_only"], true);

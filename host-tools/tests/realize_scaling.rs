@@ -4,11 +4,12 @@
 //! Truth: the f64 design (dense state space, `StateSpace::simulate`); the
 //! f32 kernel runs the image's coefficients. Bound: f32 rounding, ~1e-6 of
 //! peak-to-peak (the kernel's floor on the example's axes x and z).
-use dynocomp::design::{choose_realization, design_axis, DesignOptions};
+use dynocomp::design::axis::{design_axis, DesignOptions};
+use dynocomp::realize::choose::choose_realization;
 use dynocomp::io;
-use dynocomp::kalman::StateSpace;
-use dynocomp::quantize::term_growth;
-use dynocomp::realize::ModalRealization;
+use dynocomp::numeric::lti::StateSpace;
+use dynocomp::realize::quantize::term_growth;
+use dynocomp::realize::modal::ModalRealization;
 use dynocomp_core::kernel::{AxisFilter, AxisState};
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
@@ -135,7 +136,7 @@ fn fast_pair_next_to_the_delay_cluster_goes_to_the_fir() {
     let ss = companion(&num, &den);
     let (real, filter, v) = choose_realization(&ss, 51200.0, 4096.0).unwrap();
     let g = term_growth(&filter);
-    let u = dynocomp::quantize::test_signal(40_000, 51200.0, 4096.0);
+    let u = dynocomp::realize::quantize::test_signal(40_000, 51200.0, 4096.0);
     let e = rel_error(&filter, &ss, &u);
     let lim = allowed(&real, &ss, &u);
     println!(

@@ -1,8 +1,9 @@
 //! The `design --report DIR` output: one SVG per axis and plot, and an
 //! index.html that shows the summary and references every plot.
 
-use dynocomp::design::{design_axis, DesignOptions};
-use dynocomp::report::write_report;
+use dynocomp::design::axis::{design_axis, DesignOptions};
+use dynocomp::design::sensitivity::predict;
+use dynocomp::report::design::write_report;
 use dynocomp::simulate::{simulate, SimParams};
 use std::path::PathBuf;
 
@@ -48,7 +49,7 @@ fn report_writes_svgs_and_index() {
     // a directory that does not exist yet: write_report creates it
     let dir = tmp.path().join("out").join("report");
     let summary = "axis x: summary <with> & special \"chars\"\nsecond line";
-    let files = write_report(&dir, &sim.frf, std::slice::from_ref(&d), opts.fs_hz, summary).unwrap();
+    let files = write_report(&dir, &sim.frf, std::slice::from_ref(&d), &[predict(&d, &opts)], opts.fs_hz, summary).unwrap();
 
     let names: Vec<String> = files.iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
     for n in ["x_frf_fit.svg", "x_compensated.svg", "x_poles.svg", "index.html"] {
@@ -75,7 +76,7 @@ fn report_writes_svgs_and_index() {
     assert!(poles.contains("<circle"), "pole map has no model poles");
     // Issue #15: the sensitivity curve, one point per shift of −5…+5 %.
     let sens = check_svg(&dir.join("x_sensitivity.svg"), &["Axis x", "Sensor-mode shift", "predicted error", "twice the nominal"]);
-    assert!(longest_polyline(&sens) >= dynocomp::sensitivity::SHIFTS_PCT.len(), "sensitivity plot has no curve");
+    assert!(longest_polyline(&sens) >= dynocomp::design::sensitivity::SHIFTS_PCT.len(), "sensitivity plot has no curve");
 
     let html = std::fs::read_to_string(dir.join("index.html")).unwrap();
     assert!(html.starts_with("<!DOCTYPE html>"));
@@ -92,7 +93,7 @@ fn report_writes_svgs_and_index() {
     }
 
     // writing again over an existing report succeeds and leaves the same files
-    let again = write_report(&dir, &sim.frf, std::slice::from_ref(&d), opts.fs_hz, summary).unwrap();
+    let again = write_report(&dir, &sim.frf, std::slice::from_ref(&d), &[predict(&d, &opts)], opts.fs_hz, summary).unwrap();
     assert_eq!(again, files);
 
     // a write that fails midway removes the files this run created: make the
@@ -100,7 +101,7 @@ fn report_writes_svgs_and_index() {
     let dir2 = tmp.path().join("failing");
     std::fs::create_dir_all(dir2.join("x_poles.svg")).unwrap();
     std::fs::write(dir2.join("x_frf_fit.svg"), "old").unwrap();
-    let err = write_report(&dir2, &sim.frf, std::slice::from_ref(&d), opts.fs_hz, summary).unwrap_err();
+    let err = write_report(&dir2, &sim.frf, std::slice::from_ref(&d), &[predict(&d, &opts)], opts.fs_hz, summary).unwrap_err();
     assert!(format!("{err:#}").contains("x_poles.svg"), "{err:#}");
     let mut left: Vec<String> =
         std::fs::read_dir(&dir2).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
@@ -125,7 +126,7 @@ fn report_error_names_missing_axis_and_writes_nothing() {
     frf.axes.retain(|a| a.axis != 0);
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("r");
-    let err = write_report(&dir, &frf, std::slice::from_ref(&d), opts.fs_hz, "s").unwrap_err();
+    let err = write_report(&dir, &frf, std::slice::from_ref(&d), &[predict(&d, &opts)], opts.fs_hz, "s").unwrap_err();
     assert!(format!("{err:#}").contains("axis x"), "{err:#}");
     assert!(!dir.exists(), "report dir created although nothing was written");
 }

@@ -1,5 +1,5 @@
 //! Issue #15, item 1: the design's predicted error for shifted sensor modes
-//! (`dynocomp::sensitivity`) against the MEASURED error of the same filter on
+//! (`dynocomp::design::sensitivity`) against the MEASURED error of the same filter on
 //! a simulated set-up whose true sensor modes are shifted: the record is
 //! measured with the shifted dynamometer (`simulate::drift::shift_sensor_modes`),
 //! compensated through the unshifted design's coefficient image (latency
@@ -16,7 +16,7 @@
 
 mod sim_common;
 
-use dynocomp::design::{design_axis, DesignOptions};
+use dynocomp::design::axis::{design_axis, DesignOptions};
 use dynocomp::metrics::sample_variance;
 use dynocomp::simulate::{milling_force, SimOutput};
 
@@ -41,7 +41,7 @@ fn table(seed: u64, rpm: f64) -> Vec<(u64, f64, f64, f64, f64)> {
     let mut rows = Vec::new();
     for (a, cut) in milling.iter().enumerate() {
         let d = design_axis(&s.frf.freq_hz, s.frf.axis(a).unwrap(), sample_variance(&s.idle[a]), &opts).unwrap_or_else(|e| panic!("axis {a}: {e:#}"));
-        let sens = d.sensitivity.clone().expect("sensitivity");
+        let sens = dynocomp::design::sensitivity::predict(&d, &opts).expect("sensitivity");
         // The unshifted point is the design's own predicted error (same criterion, same filter).
         assert!((sens.nominal - d.predicted_error).abs() <= 1e-9 * d.predicted_error, "axis {a}: {} vs {}", sens.nominal, d.predicted_error);
         let flat = sim_common::flat_force(fine_len, f_fine, d.compensated_band_hz.1, FORCE_RMS, 77 + a as u64);

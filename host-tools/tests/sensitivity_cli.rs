@@ -25,7 +25,7 @@ fn design_states_sensitivity_in_text_and_json() {
     for ax in j["axes"].as_array().unwrap() {
         let s = &ax["sensitivity"];
         let pts = s["points"].as_array().unwrap();
-        assert_eq!(pts.len(), dynocomp::sensitivity::SHIFTS_PCT.len(), "{s}");
+        assert_eq!(pts.len(), dynocomp::design::sensitivity::SHIFTS_PCT.len(), "{s}");
         let at = |p: f64| pts.iter().find(|v| (v[0].as_f64().unwrap() - p).abs() < 1e-9).unwrap()[1].as_f64().unwrap();
         // The unshifted point is the design's predicted error; shifts only make it worse.
         assert!((at(0.0) - ax["predicted_error"].as_f64().unwrap()).abs() < 1e-12, "{ax}");

@@ -669,7 +669,7 @@ fn anti_alias_option_parses_and_rejects_bad_values() {
 
 #[test]
 fn harness_noise_floor_matches_the_analytic_integral() {
-    use dynocomp::simulate::rates::noise_floor;
+    use dynocomp::eval::rates::noise_floor;
     // G = 1: sqrt(R·2·band/fs)/std.
     let (r, fs, band, std) = (0.05, 25_600.0, 4000.0, 7.0);
     let flat = noise_floor(|_| Complex64::new(1.0, 0.0), r, fs, band, std);
@@ -686,7 +686,7 @@ fn harness_noise_floor_matches_the_analytic_integral() {
 
 #[test]
 fn harness_records_a_failed_design_in_its_row_and_summarizes() {
-    use dynocomp::simulate::rates::{cases, score_sim, summarize, RunOptions};
+    use dynocomp::eval::rates::{cases, score_sim, summarize, RunOptions};
     let case = cases().into_iter().find(|c| c.name == "default").unwrap();
     let mut p = case.sim_params(25_600.0);
     p.duration_s = 0.2;

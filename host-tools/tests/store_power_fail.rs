@@ -7,7 +7,7 @@
 
 mod common;
 
-use dynocomp::sim_flash::{CutMode, SimFlash};
+use dynocomp::link::sim_flash::{CutMode, SimFlash};
 use dynocomp_core::image::{CoeffImage, CRC32};
 use dynocomp_core::protocol::{LinkError, MAX_CHUNK};
 use dynocomp_core::sample::BypassReason;

@@ -5,7 +5,7 @@
 //! `compensate`, and refused with a message naming the file, segment or
 //! channel when they are wrong.
 
-use dynocomp::compensate::compensate_record;
+use dynocomp::offline::compensate::compensate_record;
 use dynocomp::io::signal::{read_all, SignalWriter};
 use dynocomp::io::signal_csv::read_signal_csv;
 use dynocomp::io::signal_file::{open_signal, ChannelMap, SignalFormat};

@@ -9,24 +9,23 @@
 
 mod sim_common;
 
-use dynocomp::design::{design_axis, DesignOptions};
-use dynocomp::discretize::{discretize, Discretization};
+use dynocomp::design::axis::{design_axis, DesignOptions};
+use dynocomp::design::discretize::{discretize, Discretization};
 use dynocomp::fit::vf::VfOptions;
 use dynocomp::fit::PoleResidueModel;
 use dynocomp::metrics::{accuracy, sample_variance};
 use dynocomp::simulate::drift::{measure_drifting, shift_sensor_modes, simulate_drifting, Drift};
 use dynocomp::simulate::MultiAxisDynamometer;
-use dynocomp::smoother::Smoother;
-use dynocomp::discretize::fit_with_structure;
-use dynocomp::kalman::{augmented_plant, solve_filter_dare};
-use dynocomp::two_state::{
-    design_over_range, drift_log_likelihood, pair, pair_second_state, smooth_drifting, smooth_drifting_in_segments, state_at, DriftSmoothing, RangeCandidate, RangeDesign, TwoState, RANGE_STATES,
-    S_LEVELS,
-};
+use dynocomp::offline::smoother::Smoother;
+use dynocomp::design::discretize::fit_with_structure;
+use dynocomp::design::kalman::{augmented_plant, solve_filter_dare};
+use dynocomp::offline::drift::{drift_log_likelihood, smooth_drifting, smooth_drifting_in_segments, state_at, DriftSmoothing, S_LEVELS};
+use dynocomp::design::two_state::range::{design_over_range, pair_second_state, RangeCandidate, RangeDesign, RANGE_STATES};
+use dynocomp::design::two_state::model::{pair, TwoState};
 use nalgebra::DVector;
 
 use dynocomp::simulate::impact::impact_test_axis;
-use dynocomp::two_state_joint::JOINT_TOLERANCE;
+use dynocomp::design::two_state::joint::JOINT_TOLERANCE;
 use sim_common::FS;
 /// Issue target: two-state within 1.5x of the exact model. Met on all 9
 /// axes below (worst 1.28x): seed 4 x was 1.66x before the machine modes
@@ -168,8 +167,8 @@ fn checkpointed_smoother_equals_the_dense_reference_for_any_segment_length() {
 /// spill segments, with the drift crossing a segment boundary.
 #[test]
 fn spilled_drift_smoother_equals_the_dense_reference() {
-    use dynocomp::smoother::SpilledPass;
-    use dynocomp::two_state::{SpilledDriftForward, SPILLED_SEGMENT};
+    use dynocomp::offline::smoother::SpilledPass;
+    use dynocomp::offline::drift::{SpilledDriftForward, SPILLED_SEGMENT};
     let len = 2 * SPILLED_SEGMENT + 777;
     // The drift runs from 0.05 s to 0.12 s, across the boundary at 4096 samples (0.08 s).
     let (ts, y, opts) = drift_fixture(len, (0.05, 0.12));
@@ -382,7 +381,7 @@ struct ImpactFixture {
     before: dynocomp::simulate::Dynamometer,
     p: dynocomp::simulate::SimParams,
     freq: Vec<f64>,
-    d0: (dynocomp::design::AxisDesign, dynocomp::frf::AxisFrf),
+    d0: (dynocomp::design::axis::AxisDesign, dynocomp::frf::AxisFrf),
 }
 
 fn impact_fixture(axis: usize) -> ImpactFixture {
@@ -418,7 +417,7 @@ fn machine_modes_are_shared_only_where_both_frfs_measured_them_alike() {
     let (ts, machine) = run(&sensors_moved);
     eprintln!("sensor modes moved: {machine:?}");
     assert!(machine.len() >= 2 && machine.iter().all(|x| x.shared), "{machine:?}");
-    let sensors = dynocomp::sensitivity::sensor_mode_indices(&ts.before);
+    let sensors = dynocomp::fit::modes::sensor_mode_indices(&ts.before);
     for (i, (a, b)) in ts.before.terms.iter().zip(&ts.after.terms).enumerate() {
         // Shared modes are one mode in both states; sensor modes keep their shift.
         assert_eq!(a == b, !sensors.contains(&i) && matches!(a, dynocomp::fit::Term::Pair { .. }), "term {i}: {a:?} / {b:?}");

@@ -2,7 +2,7 @@
 //! written and read back, through `compensate`, and refused with a message
 //! naming the file, dataset and record when they are wrong.
 
-use dynocomp::compensate::compensate_record;
+use dynocomp::offline::compensate::compensate_record;
 use dynocomp::io::signal::{read_all, SignalWriter};
 use dynocomp::io::signal_csv::read_signal_csv;
 use dynocomp::io::signal_file::{open_signal, ChannelMap, SignalFormat};

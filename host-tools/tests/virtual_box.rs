@@ -9,10 +9,10 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 
-use dynocomp::flash_serial::upload;
-use dynocomp::serial_link::Link;
-use dynocomp::stream::record;
-use dynocomp::virtual_box::{spawn, POWER_CUT_EXIT};
+use dynocomp::link::flash_serial::upload;
+use dynocomp::link::serial::Link;
+use dynocomp::link::stream::record;
+use dynocomp::link::virtual_box::{spawn, POWER_CUT_EXIT};
 use dynocomp_core::image::CRC32;
 use dynocomp_core::protocol::{encode_frame, FrameError, LinkError, Reply, Request, RequestFrame, MAX_FRAME};
 use dynocomp_core::sample::BypassReason;
@@ -241,7 +241,7 @@ fn stream_reports_exactly_the_injected_frame_losses() {
     // The virtual box has no CPU cycles to count and misses no deadlines.
     assert_eq!(
         report.box_load,
-        dynocomp::stream::BoxLoad { fs_hz: 51_200, core_clock_hz: 0, overruns: 0, overruns_since_boot: 0, isr_cycles_mean: 0, isr_cycles_max: 0 }
+        dynocomp::link::stream::BoxLoad { fs_hz: 51_200, core_clock_hz: 0, overruns: 0, overruns_since_boot: 0, isr_cycles_mean: 0, isr_cycles_max: 0 }
     );
 
     // The CSV: header, 400 rows, raw forces equal the virtual box's
@@ -299,7 +299,7 @@ fn stream_reports_exactly_the_injected_frame_losses() {
 /// held longer than `PORT_BUSY_WAIT` is refused with a message saying so.
 #[test]
 fn a_busy_port_is_waited_for_then_refused_with_a_reason() {
-    use dynocomp::serial_link::{open_port, PORT_BUSY_WAIT};
+    use dynocomp::link::serial::{open_port, PORT_BUSY_WAIT};
     use serialport::SerialPort;
     let (_master, slave) = serialport::TTYPort::pair().unwrap();
     let path = slave.name().unwrap();

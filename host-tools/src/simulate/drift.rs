@@ -2,9 +2,9 @@
 //! while it is machined, so the dynamometer's modes drift during the cut.
 //!
 //! **Sensor modes of a simulated axis** (the same rule as the design's,
-//! [`crate::sensitivity`], applied to the true modes): the main mode is the
+//! [`crate::design::sensitivity`], applied to the true modes): the main mode is the
 //! one with the largest residue, the sensor modes are those whose natural
-//! frequency is at least [`crate::sensitivity::SENSOR_FRACTION`] × the main
+//! frequency is at least [`crate::fit::modes::SENSOR_FRACTION`] × the main
 //! mode's; machine-structure modes stay put. A shift by the relative δ
 //! multiplies their natural frequencies by (1 + δ) and keeps their damping
 //! ratio and residue (static share): a change of mass at constant stiffness.
@@ -25,7 +25,7 @@ use anyhow::{bail, Result};
 use super::dynamometer::{Dynamometer, Hold, Mode, ModeStep, MultiAxisDynamometer};
 use super::{impact_test_all_with, milling_force, simulate_with, sub_seed, SimOutput, SimParams, TAG_NOISE};
 use crate::frf::Frf;
-use crate::sensitivity::SENSOR_FRACTION;
+use crate::fit::modes::SENSOR_FRACTION;
 
 /// Fine samples per block of constant modal parameters in a drifting record.
 pub const DRIFT_BLOCK: usize = 64;

@@ -32,7 +32,7 @@ pub mod impact;
 pub mod measurement;
 pub mod milling;
 pub mod presets;
-pub mod rates;
+
 pub mod shaker;
 
 pub use chain::{AntiAlias, Butterworth, BRICK_WALL_FRACTION};

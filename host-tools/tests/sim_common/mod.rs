@@ -1,7 +1,7 @@
 //! Shared fixtures of the host tests against simulated truth.
 #![allow(dead_code)]
 
-use dynocomp::design::{design_axis, AxisDesign, DesignOptions};
+use dynocomp::design::axis::{design_axis, AxisDesign, DesignOptions};
 use dynocomp::metrics::sample_variance;
 use dynocomp::simulate::{simulate, MillingParams, SimOutput, SimParams};
 
@@ -58,8 +58,8 @@ pub fn measured_shifted(s: &SimOutput, d: &AxisDesign, force_fine: &[f64], pct: 
     let dyn_ = dynocomp::simulate::drift::shift_sensor_modes(s.dyno.axis(a), pct / 100.0);
     let (truth, clean) = p.anti_alias.acquire(&dyn_, force_fine, p.fs_hz, p.oversample, p.n_samples());
     let meas = p.measurement.apply(&clean, 1000 + a as u64);
-    let img = dynocomp::design_cmd::build_image(std::slice::from_ref(d), p.fs_hz as u32, d.kalman.lag, 5000.0, [0; 32]).expect("image");
+    let img = dynocomp::design::image::build_image(std::slice::from_ref(d), p.fs_hz as u32, d.kalman.lag, 5000.0, [0; 32]).expect("image");
     let rec = SignalRecord { t_s: None, channels: vec![(a, meas)] };
-    let out = dynocomp::compensate::compensate_record(&img, &rec, false, "measured_shifted").expect("compensate");
+    let out = dynocomp::offline::compensate::compensate_record(&img, &rec, false, "measured_shifted").expect("compensate");
     dynocomp::metrics::accuracy(out.channel(a).expect("axis"), &truth, p.fs_hz, d.compensated_band_hz.1).nrmse
 }

@@ -1,0 +1,189 @@
+//! `dynocomp design`: FRF → per-axis design (with progress) → image and
+//! model sidecar → summary (text or JSON) and optional report.
+//! Two FRFs go to [`crate::cli::design_two_state`], `--parallel` to
+//! [`crate::cli::design_parallel`].
+
+use anyhow::{bail, Context, Result};
+use std::time::Instant;
+
+use dynocomp_core::image::CoeffImage;
+
+use crate::cli::design_args::{check_prior_flags, read_force_record, DesignArgs, DesignSetup, ForcePrior, Method};
+use crate::design::axis::AxisDesign;
+use crate::design::image::build_image;
+use crate::design::latency::LatencyChoice;
+use crate::frf::axis_name;
+use crate::io;
+use crate::offline::force_prior::{AxisPrior, PriorOptions};
+use crate::offline::smoother::build_priors;
+use crate::realize::load::LoadReport;
+use crate::report::summary::{prior_line, render_summary, spectrum_line, AxisJson, DesignJson};
+
+/// Run `dynocomp design`.
+pub fn run(args: &DesignArgs) -> Result<()> {
+    check_prior_flags(args)?;
+    match args.input.frf.len() {
+        1 => {}
+        2 => return crate::cli::design_two_state::run(args),
+        n => bail!("--frf given {n} times: give one FRF, or two (before and after) for a set-up in two states"),
+    }
+    let t0 = Instant::now();
+    let setup = DesignSetup::new(args)?;
+    if args.parallel {
+        return crate::cli::design_parallel::run(args, &setup);
+    }
+    let designed = design_axes(args, &setup)?;
+    // The prior is built and checked before anything is written.
+    let priors = harmonic_priors(args, &designed.designs, &setup.r)?;
+    let (image, box_load) = image_within_load(args, &setup, &designed)?;
+    write_image_and_sidecar(args, &image, &designed.designs, &priors)?;
+    render(args, &setup, &designed, &priors, &image, box_load, t0)
+}
+
+/// Every axis designed, in axis order.
+struct Designed {
+    designs: Vec<AxisDesign>,
+    /// Design time of each axis (s).
+    times: Vec<f64>,
+    /// How the latency was chosen (`None`: given).
+    latency_choice: Option<LatencyChoice>,
+    /// The declared latency (samples).
+    latency: usize,
+}
+
+/// Design the axes on parallel threads (the box has three, the host at
+/// least two cores), choosing the latency where it is not given.
+fn design_axes(args: &DesignArgs, s: &DesignSetup) -> Result<Designed> {
+    let frf = &s.frf;
+    eprintln!("designing {} axes ({} lines each)…", frf.axes.len(), frf.freq_hz.len());
+    let rv: Vec<f64> = frf.axes.iter().map(|a| s.r[a.axis].expect("R set for every FRF axis")).collect();
+    let (results, latency_choice) = if s.auto_latency {
+        let progress = |_: usize, what: &str| eprintln!("  {what}…");
+        let (d, c) =
+            crate::design::latency::design_axes_choosing_latency(&frf.freq_hz, &frf.axes, &rv, &s.opts, Some(s.limit_permille), progress);
+        (d, Some(c))
+    } else {
+        (crate::design::latency::design_axes(&frf.freq_hz, &frf.axes, &rv, &s.opts), None)
+    };
+    let latency = latency_choice.as_ref().map_or(s.latency, |c| c.chosen);
+    let mut designs = Vec::new();
+    let mut times = Vec::new();
+    for (a, (d, dt)) in frf.axes.iter().zip(results) {
+        let d = d.with_context(|| format!("{}", args.input.frf().display()))?;
+        eprintln!("  axis {}: order {}, q {:.3e}, {:.0} ms", axis_name(a.axis), d.model.order(), d.kalman.q, dt * 1e3);
+        times.push(dt);
+        designs.push(d);
+    }
+    Ok(Designed { designs, times, latency_choice, latency })
+}
+
+/// The harmonic force prior of each axis (`--force-prior harmonics`), or none.
+fn harmonic_priors(args: &DesignArgs, designs: &[AxisDesign], r: &[Option<f64>; 3]) -> Result<Vec<Option<AxisPrior>>> {
+    if args.prior.force_prior != ForcePrior::Harmonics {
+        return Ok(designs.iter().map(|_| None).collect());
+    }
+    let path = args.prior.force_record.as_ref().expect("checked by check_prior_flags");
+    let rec = read_force_record(path, args.input.fs)?;
+    let opts = PriorOptions {
+        spindle_rpm: args.bands.spindle_rpm.expect("checked"),
+        teeth: args.bands.teeth.expect("checked"),
+        line_width_hz: args.prior.line_width,
+        unchecked: false,
+    };
+    build_priors(&opts, &rec, &path.display().to_string(), designs, r)
+}
+
+/// The image of the designs, marked offline-only (loudly) when the box could
+/// not run it within its load limit.
+fn image_within_load(args: &DesignArgs, s: &DesignSetup, d: &Designed) -> Result<(CoeffImage, LoadReport)> {
+    let mut image = build_image(&d.designs, args.input.fs as u32, d.latency, args.full_scale, s.sha)?;
+    let box_load = crate::realize::load::report(&image, s.limit_permille);
+    if !box_load.fits {
+        image.flags |= dynocomp_core::image::FLAG_OFFLINE_ONLY;
+        eprintln!(
+            "WARNING: OFFLINE-ONLY IMAGE: predicted box CPU load {:.1} % ({} cycles per sample) at {} Hz exceeds the limit of {:.0} %; \
+             the box could run it up to {} Hz. Written for `dynocomp compensate` only: `flash` refuses it and the box would stay in bypass.",
+            box_load.load_pct[1],
+            box_load.cycles[1],
+            image.fs_hz,
+            box_load.limit_pct,
+            box_load.max_fs_hz
+        );
+    }
+    Ok((image, box_load))
+}
+
+/// Write the image and, for the default method, the model sidecar of
+/// `compensate --offline` ([`crate::offline::sidecar`]).
+fn write_image_and_sidecar(args: &DesignArgs, image: &CoeffImage, designs: &[AxisDesign], priors: &[Option<AxisPrior>]) -> Result<()> {
+    io::image_file::write_image(&args.out, image)?;
+    if args.method == Method::Paper {
+        return Ok(());
+    }
+    let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
+    let mut sidecar = crate::offline::sidecar::ModelSidecar::new(image, &models);
+    let record = args.prior.force_record.as_ref().map(|p| p.display().to_string()).unwrap_or_default();
+    for ((m, p), d) in sidecar.axes.iter_mut().zip(priors).zip(designs) {
+        m.force_prior = p.as_ref().map(|p| p.prior.clone());
+        // A flat spectrum at the record's level is as safe as the default:
+        // no note for `compensate`.
+        m.force_spectrum = d.force_spectrum.as_ref().filter(|s| !s.level_only).map(|s| s.provenance(record.clone()));
+    }
+    crate::offline::sidecar::write_sidecar(&args.out, &sidecar)
+}
+
+/// The summary (text or JSON) and the report.
+fn render(
+    args: &DesignArgs,
+    s: &DesignSetup,
+    d: &Designed,
+    priors: &[Option<AxisPrior>],
+    image: &CoeffImage,
+    box_load: LoadReport,
+    t0: Instant,
+) -> Result<()> {
+    let (designs, latency) = (&d.designs, d.latency);
+    let id = image.id();
+    let sensitivities = crate::design::sensitivity::predict_all(designs, &s.opts);
+    let mut summary = render_summary(designs, &sensitivities, args.input.fs, latency, &args.out.display().to_string(), id, args.method.name());
+    if let Some(c) = &d.latency_choice {
+        let names: Vec<&str> = designs.iter().map(|d| axis_name(d.axis)).collect();
+        summary.push_str(&crate::design::latency::describe(c, &names));
+        summary.push('\n');
+    }
+    for (d, p) in designs.iter().zip(priors) {
+        if let Some(p) = p {
+            summary.push_str(&prior_line(d.axis, p));
+        }
+        if let Some(s) = &d.force_spectrum {
+            summary.push_str(&spectrum_line(d.axis, s, args.input.force_rms));
+        }
+    }
+    summary.push_str(&crate::realize::load::describe(&box_load, image.fs_hz));
+    summary.push_str(if box_load.fits { "\n" } else { "  OVER THE LIMIT: offline-only image\n" });
+    if let Some(dir) = &args.report {
+        let files = crate::report::design::write_report(dir, &s.frf, designs, &sensitivities, args.input.fs, &summary)?;
+        eprintln!("report: {} files in {} (open index.html)", files.len(), dir.display());
+    }
+    if !args.json {
+        print!("{summary}");
+        eprintln!("designed in {:.0} ms", t0.elapsed().as_secs_f64() * 1e3);
+        return Ok(());
+    }
+    let axes = (0..designs.len()).map(|i| AxisJson::new(&designs[i], d.times[i], priors[i].as_ref(), &sensitivities[i])).collect();
+    let j = DesignJson {
+        image: args.out.display().to_string(),
+        image_id: format!("{id:08x}"),
+        fs_hz: args.input.fs,
+        latency_samples: latency,
+        method: args.method.name(),
+        bands: s.bands.clone(),
+        design_time_s: t0.elapsed().as_secs_f64(),
+        offline_only: image.is_offline_only(),
+        latency_choice: d.latency_choice.clone(),
+        box_load,
+        axes,
+    };
+    println!("{}", serde_json::to_string_pretty(&j)?);
+    Ok(())
+}

@@ -1,0 +1,83 @@
+//! `dynocomp design --parallel`: one compensator per fitting band, in one
+//! offline-only image.
+
+use anyhow::{Context, Result};
+
+use crate::cli::design_args::{DesignArgs, DesignSetup};
+use crate::design::image::build_parallel_image;
+use crate::design::parallel::{design_parallel, design_regions};
+use crate::design::bands::Band;
+use crate::frf::axis_name;
+
+/// `dynocomp design --parallel`: design per band, write the parallel image
+/// atomically, print a summary per band.
+pub fn run(args: &DesignArgs, setup: &DesignSetup) -> Result<()> {
+    let DesignSetup { frf, r, opts, bands, latency, sha, .. } = setup;
+    let (latency, sha) = (*latency, *sha);
+    let t0 = std::time::Instant::now();
+    let per_band = design_parallel(frf, r, opts, bands).with_context(|| format!("{}", args.input.frf().display()))?;
+    let image = build_parallel_image(&per_band, bands, args.input.fs as u32, latency, args.full_scale, sha)?;
+    crate::io::image_file::write_parallel_image(&args.out, &image)?;
+    let id = image.id();
+    let method = args.method.name();
+    let shown = args.out.display().to_string();
+    if args.json {
+        #[derive(serde::Serialize)]
+        struct AxisJson {
+            axis: &'static str,
+            model_order: usize,
+            fit_nrmse: f64,
+            q: f64,
+            flat_band_hz: (f64, f64),
+            noise_gain: f64,
+        }
+        #[derive(serde::Serialize)]
+        struct BandJson<'a> {
+            band: &'a Band,
+            design_region_hz: (f64, f64),
+            axes: Vec<AxisJson>,
+        }
+        let n = frf.freq_hz.len();
+        let regions = design_regions(bands, frf.freq_hz[0], frf.freq_hz[n - 1])?;
+        let j: Vec<BandJson> = bands
+            .iter()
+            .zip(&regions)
+            .zip(&per_band)
+            .map(|((b, reg), ds)| BandJson {
+                band: b,
+                design_region_hz: (reg.lo_hz, reg.hi_hz),
+                axes: ds
+                    .iter()
+                    .map(|d| AxisJson {
+                        axis: axis_name(d.axis),
+                        model_order: d.model.order(),
+                        fit_nrmse: d.fit_nrmse,
+                        q: d.kalman.q,
+                        flat_band_hz: d.flat_band_hz,
+                        noise_gain: d.noise_gain,
+                    })
+                    .collect(),
+            })
+            .collect();
+        let doc = serde_json::json!({
+            "image": shown,
+            "image_id": format!("{id:08x}"),
+            "offline_only": true,
+            "parallel_bands": j,
+            "fs_hz": args.input.fs,
+            "latency_samples": latency,
+            "method": method,
+            "design_time_s": t0.elapsed().as_secs_f64(),
+        });
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+    } else {
+        println!("parallel-elaboration image {shown} (id {id:08x}), OFFLINE ONLY (the box never runs it), {} bands:", bands.len());
+        for (k, (b, ds)) in bands.iter().zip(&per_band).enumerate() {
+            println!("band {k}: {:.0}-{:.0} Hz ({})", b.lo_hz, b.hi_hz, b.label);
+            let sensitivities = crate::design::sensitivity::predict_all(ds, opts);
+            print!("{}", crate::report::summary::render_summary(ds, &sensitivities, args.input.fs, latency, &shown, id, method));
+        }
+        eprintln!("designed in {:.0} ms", t0.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(())
+}

@@ -1,0 +1,804 @@
+//! One axis's design: FRF lines → fit Ĝ → discrete model → Kalman filter
+//! with q chosen by the criterion ([`crate::design::criterion`]) → the
+//! realization the box runs, verified in f32 (`crate::realize`).
+//!
+//! With a representative record of the cut ([`DesignOptions::force_record`],
+//! `--force-prior spectrum`) q is chosen for the record's force spectrum
+//! ([`crate::design::force_spectrum`]).
+
+use anyhow::{bail, Context, Result};
+use dynocomp_core::kernel::AxisFilter;
+use num_complex::Complex64;
+
+use crate::design::bands::{band_mask, Band};
+use crate::design::criterion::{criterion_cells, criterion_grid, criterion_j_weighted, criterion_ranges, flat_band};
+use crate::design::discretize::{discretize_to, DiscreteModel, Discretization, FitDiagnostics, MATCH_BAND_FRACTION};
+use crate::fit::rfp::{paper_weights, rfp_fit, RationalTf, RfpOptions};
+use crate::fit::vf::{coherence_weights, vector_fit, VfOptions};
+use crate::fit::{relative_rms_error, PoleResidueModel};
+use crate::frf::{axis_name, AxisFrf};
+use crate::design::kalman::{self, KalmanDesign};
+use crate::numeric::search::golden_section;
+use crate::realize::choose::choose_realization_within;
+use crate::design::paper::{self, PaperDiagnostics};
+use crate::realize::quantize::{self, Verification};
+use crate::realize::modal::ModalRealization;
+
+/// Design options shared by all axes.
+#[derive(Clone, Debug)]
+pub struct DesignOptions {
+    /// Sample rate of the box (Hz).
+    pub fs_hz: f64,
+    /// Fixed lag L of the smoother = declared output latency (samples).
+    pub lag: usize,
+    /// Assumed RMS of the cutting force inside the band (N), for the Q criterion.
+    pub force_rms: f64,
+    /// Upper limit of the white-noise gain of the compensator (ratio).
+    pub max_noise_gain: f64,
+    /// Coherence γ² at or above which a line counts as coherent.
+    pub coherence_threshold: f64,
+    /// Fix q instead of searching (N²/sample).
+    pub q_override: Option<f64>,
+    /// Vector fitting options.
+    pub vf: VfOptions,
+    /// Fitting method.
+    pub method: FitMethod,
+    /// Fitting bands (paper §3.2); empty = the whole coherent band. With
+    /// bands, the fit, the q criterion and the flat band use the band lines.
+    pub bands: Vec<Band>,
+    /// Discrete model of the Kalman design (default method only).
+    pub discretization: Discretization,
+    /// CPU budget of this axis on the box: cycles per sample it may cost
+    /// (`dynocomp_core::budget::axis_budget`); `None` = no limit. The
+    /// realization within it is preferred ([`choose_realization_within`]).
+    pub axis_cycle_budget: Option<u32>,
+    /// The paper's method chooses its orders NB:NA per axis
+    /// ([`crate::design::paper_orders`]); the orders in [`FitMethod::Paper`] are
+    /// then ignored.
+    pub paper_orders_auto: bool,
+    /// Upper edge of the discrete model's fit grid as a fraction of fs
+    /// ([`MATCH_BAND_FRACTION`] by default; [`crate::design::discretize::NYQUIST_FIT_FRACTION`]
+    /// is tried by [`crate::design::latency`] where the default falls short).
+    pub discrete_fit_top: f64,
+    /// The discrete model's static gain: exact (the default) or fitted like
+    /// any other line ([`crate::design::discretize::StaticGain`]).
+    pub discrete_static_gain: crate::design::discretize::StaticGain,
+    /// A representative record of the cut: q is chosen for its force
+    /// spectrum instead of a flat one of `force_rms`
+    /// ([`crate::design::force_spectrum`], `--force-prior spectrum`).
+    pub force_record: Option<std::sync::Arc<crate::design::force_spectrum::ForceRecord>>,
+    /// Use only the record's in-band force level: the criterion's spectrum
+    /// stays flat, of the record's power instead of `force_rms`
+    /// (`--force-prior level`): honest predicted errors, the default's
+    /// robustness to chatter.
+    pub force_record_level_only: bool,
+}
+
+/// Largest accepted fit error: relative RMS of Ĝ against the coherent
+/// measured lines inside the fitting bands (or the compensated band). A
+/// model further from the measurement than this is not the sensor the
+/// compensator would invert, whatever its predicted error says (that one is
+/// computed on the model). The lines themselves are noisy: the random error
+/// of an H1 line at the coherence threshold γ² = 0.9 is √((1 − γ²)/(2·n·γ²))
+/// = 10.5 % from n = 5 averages (8.9 % from 7), so 15 % is 1.5x that noise
+/// floor; a good fit of a good FRF is at 1-5 %.
+pub const MAX_FIT_ERROR: f64 = 0.15;
+
+/// Largest accepted predicted in-band error √J. Beating the raw force is not
+/// enough when the raw force is far off (a 400 % raw error is beaten by a
+/// filter that outputs almost nothing): at 50 % RMS error a "compensated"
+/// force says little more than its mean, so such an axis is refused.
+pub const MAX_PREDICTED_ERROR: f64 = 0.5;
+
+/// Largest accepted relative change of the fitted Ĝ from the first coherent
+/// FRF line down to 0 Hz ([`design_axis`]): the flat-band tolerance.
+pub const MAX_STATIC_ERROR: f64 = 0.05;
+
+/// Weight of an out-of-band line relative to its coherence weight when the
+/// default method fits bands (the paper's method drops those lines).
+pub const VF_OUT_OF_BAND_WEIGHT: f64 = 1e-2;
+
+/// Which fit and Kalman formulation designs the compensator.
+#[derive(Clone, Debug)]
+pub enum FitMethod {
+    /// Default: vector fitting, discrete FOH Kalman fixed-lag smoother.
+    Vf,
+    /// The seed paper: RFP + damped Gauss–Newton, companion form, continuous
+    /// Riccati, Tustin with prewarping (latency 0).
+    Paper {
+        /// Numerator and denominator orders of eq. (1).
+        rfp: RfpOptions,
+        /// Tustin prewarp frequency (Hz); `None` = centre of the fitted band.
+        prewarp_hz: Option<f64>,
+    },
+}
+
+impl Default for DesignOptions {
+    fn default() -> Self {
+        DesignOptions {
+            fs_hz: 51_200.0,
+            lag: 4,
+            force_rms: 100.0,
+            max_noise_gain: 30.0,
+            coherence_threshold: 0.9,
+            q_override: None,
+            vf: VfOptions::default(),
+            method: FitMethod::Vf,
+            bands: Vec::new(),
+            discretization: Discretization::Fit,
+            axis_cycle_budget: None,
+            paper_orders_auto: false,
+            discrete_fit_top: MATCH_BAND_FRACTION,
+            discrete_static_gain: crate::design::discretize::StaticGain::Exact,
+            force_record: None,
+            force_record_level_only: false,
+        }
+    }
+}
+
+/// Everything designed for one axis.
+#[derive(Clone, Debug)]
+pub struct AxisDesign {
+    /// Axis index.
+    pub axis: usize,
+    /// Fitted sensor model.
+    pub model: PoleResidueModel,
+    /// Order search trace of the fit: (order, weighted RMS error).
+    pub order_trace: Vec<(usize, f64)>,
+    /// Relative RMS fit error over the coherent band.
+    pub fit_nrmse: f64,
+    /// Coherent band (Hz).
+    pub coherent_band_hz: (f64, f64),
+    /// Kalman design (f64).
+    pub kalman: KalmanDesign,
+    /// Realization (f64).
+    pub realization: ModalRealization,
+    /// The f32 filter that goes into the image.
+    pub filter: AxisFilter,
+    /// Verification of the f32 filter.
+    pub verification: Verification,
+    /// Flat band: |H·Ĝ| within ±5 % and ±5° of the pure delay (Hz), with the
+    /// fitted model Ĝ over the coherent band (the fit error is reported apart).
+    pub flat_band_hz: (f64, f64),
+    /// White-noise gain of the compensator (ratio of RMS).
+    pub noise_gain: f64,
+    /// Predicted in-band relative RMS error √J (fraction).
+    pub predicted_error: f64,
+    /// Its distortion part alone, √J with the noise term left out
+    /// (fraction): what a longer look-ahead can lower ([`crate::design::latency`]).
+    pub predicted_distortion: f64,
+    /// Evaluations of J during the q search: (q, J).
+    pub q_trace: Vec<(f64, f64)>,
+    /// Fitting bands used (empty = whole coherent band).
+    pub bands: Vec<Band>,
+    /// Relative RMS fit error on coherent lines outside the bands (NaN
+    /// without bands or without such lines).
+    pub fit_nrmse_out_of_band: f64,
+    /// The paper's fitted transfer function and diagnostics (`--method paper`).
+    pub paper: Option<(RationalTf, PaperDiagnostics)>,
+    /// The discrete model of the Kalman design and its fit diagnostics
+    /// (default method; the paper's method discretizes by Tustin).
+    pub discrete: Option<(DiscreteModel, FitDiagnostics)>,
+    /// Model match max |Ĝ_d(e^{j2πf/fs})/Ĝ(j2πf) − 1| over the compensated
+    /// band (NaN for the paper's method).
+    pub model_match: f64,
+    /// Predicted in-band relative RMS error of the uncompensated force
+    /// (distortion |Ĝ − 1| plus noise), the figure `predicted_error` must beat.
+    pub raw_predicted_error: f64,
+    /// Compensated band (Hz): the coherent band, capped at 0.45 fs.
+    pub compensated_band_hz: (f64, f64),
+    /// Notes for the user (e.g. FRF lines beyond the box's band).
+    pub notes: Vec<String>,
+    /// The record's force spectrum q was chosen for (`None`: the flat
+    /// spectrum of `force_rms`, the default).
+    pub force_spectrum: Option<crate::design::force_spectrum::AxisForceSpectrum>,
+}
+
+impl AxisDesign {
+    /// Fitted response Ĝ(j2πf): the paper's B/A itself, else the pole-residue model.
+    pub fn fitted_frf(&self, f_hz: f64) -> Complex64 {
+        match &self.paper {
+            Some((tf, _)) => tf.frf(f_hz),
+            None => self.model.frf(f_hz),
+        }
+    }
+}
+
+/// The coherent band: from the first to the last line of the longest run of
+/// lines whose coherence (median over ±5 lines) is at least `threshold`.
+/// Without coherence, the whole measured band.
+pub fn coherent_band(freq_hz: &[f64], coherence: Option<&[f64]>, threshold: f64) -> (f64, f64) {
+    let n = freq_hz.len();
+    let Some(c) = coherence else {
+        return (freq_hz[0], freq_hz[n - 1]);
+    };
+    let ok: Vec<bool> = (0..n)
+        .map(|i| {
+            let lo = i.saturating_sub(5);
+            let hi = (i + 6).min(n);
+            let mut w: Vec<f64> = c[lo..hi].to_vec();
+            w.sort_by(f64::total_cmp);
+            w[w.len() / 2] >= threshold
+        })
+        .collect();
+    let (mut best, mut start) = ((0, 0), None);
+    for i in 0..=n {
+        let good = i < n && ok[i];
+        match (good, start) {
+            (true, None) => start = Some(i),
+            (false, Some(s)) => {
+                if i - s > best.1 - best.0 {
+                    best = (s, i);
+                }
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if best.1 == best.0 {
+        return (freq_hz[0], freq_hz[0]);
+    }
+    (freq_hz[best.0], freq_hz[best.1 - 1])
+}
+
+struct Objective<'a> {
+    design: &'a dyn Fn(f64) -> Result<KalmanDesign>,
+    lag: usize,
+    /// The criterion's lines: (f (Hz), Ĝ(j2πf)), and their frequencies alone.
+    grid: &'a [(f64, Complex64)],
+    grid_hz: &'a [f64],
+    opts: &'a DesignOptions,
+    r: f64,
+    band_width: f64,
+    /// The record's force spectrum on the grid (weights, power P_F in N²);
+    /// `None`: flat, of power `force_rms`² (module doc).
+    force: Option<(Vec<f64>, f64)>,
+}
+
+impl Objective<'_> {
+    /// J of no compensation (H = 1, no lag): distortion |Ĝ − 1|² plus the
+    /// measurement noise itself, in the same units as [`Objective::eval`].
+    fn raw(&self) -> f64 {
+        let ones = vec![Complex64::new(1.0, 0.0); self.grid.len()];
+        criterion_j_weighted(self.grid, &ones, self.weights(), 0, self.opts.fs_hz, self.noise())
+    }
+
+    /// The record's weights on the grid, `None` for the flat spectrum.
+    fn weights(&self) -> Option<&[f64]> {
+        self.force.as_ref().map(|f| f.0.as_slice())
+    }
+
+    /// The noise factor of J: (2R/fs)·W relative to the force power, flat
+    /// `force_rms`² or the record's P_F (N²).
+    fn noise(&self) -> f64 {
+        let power = self.force.as_ref().map_or(self.opts.force_rms * self.opts.force_rms, |f| f.1);
+        2.0 * self.r / self.opts.fs_hz * self.band_width / power
+    }
+
+    /// The distortion part of J for the response `h` on the grid (the
+    /// noise term left out), for the record's spectrum when there is one.
+    fn distortion_of(&self, h: &[Complex64]) -> f64 {
+        criterion_j_weighted(self.grid, h, self.weights(), self.lag, self.opts.fs_hz, 0.0)
+    }
+
+    /// J of the response `h` on the grid: for the record's spectrum when
+    /// there is one, else flat (`flat` forces the flat spectrum at the same
+    /// power).
+    fn j_of(&self, h: &[Complex64], flat: bool) -> f64 {
+        let weights = if flat { None } else { self.weights() };
+        criterion_j_weighted(self.grid, h, weights, self.lag, self.opts.fs_hz, self.noise())
+    }
+
+    /// (J, noise gain, design) for one q; J = ∞ when the design fails or the
+    /// noise-gain limit is exceeded.
+    fn eval(&self, q: f64) -> (f64, f64, Option<KalmanDesign>) {
+        let Ok(d) = (self.design)(q) else {
+            return (f64::INFINITY, f64::NAN, None);
+        };
+        let fs = self.opts.fs_hz;
+        let ss = &d.compensator;
+        let ng = ss.white_noise_gain().unwrap_or(f64::INFINITY);
+        let h = ss.freq_responses(self.grid_hz, fs);
+        let j = self.j_of(&h, false);
+        if ng > self.opts.max_noise_gain {
+            return (f64::INFINITY, ng, Some(d));
+        }
+        (j, ng, Some(d))
+    }
+}
+
+/// Choose q by the declared criterion: a coarse scan over decades, then a
+/// golden-section refinement on log10 q around the best decade.
+fn choose_q(obj: &Objective, trace: &mut Vec<(f64, f64)>) -> Result<(f64, KalmanDesign, f64, f64)> {
+    let base = obj.r.log10();
+    let mut best: Option<(f64, f64)> = None; // (log10 q, J)
+    let mut lowest_gain = f64::INFINITY;
+    let mut designed = 0;
+    for i in -2..=14 {
+        let lq = base + i as f64;
+        let (j, ng, d) = obj.eval(10f64.powf(lq));
+        designed += usize::from(d.is_some());
+        lowest_gain = lowest_gain.min(ng);
+        trace.push((10f64.powf(lq), j));
+        if j.is_finite() && best.is_none_or(|b| j < b.1) {
+            best = Some((lq, j));
+        }
+    }
+    let Some((lq0, j0)) = best else {
+        bail!(
+            "no q gives a valid compensator within the noise-gain limit {} ({designed} of 17 trial q designed, lowest noise gain {lowest_gain:.1}); raise --max-noise-gain or check R",
+            obj.opts.max_noise_gain
+        );
+    };
+    let [(x1, f1), (x2, f2)] = golden_section(
+        &mut |lq| {
+            let j = obj.eval(10f64.powf(lq)).0;
+            trace.push((10f64.powf(lq), j));
+            j
+        },
+        lq0 - 1.0,
+        lq0 + 1.0,
+        12,
+    );
+    // The best of the coarse optimum and the final bracket (first wins a
+    // tie); its J is known, only its design is computed again.
+    let mut pick = (lq0, j0);
+    for (lq, j) in [(x1, f1), (x2, f2)] {
+        if j.is_finite() && j < pick.1 {
+            pick = (lq, j);
+        }
+    }
+    let q = 10f64.powf(pick.0);
+    let (j, ng, d) = obj.eval(q);
+    let d = d.ok_or_else(|| anyhow::anyhow!("q search failed"))?;
+    Ok((q, d, j, ng))
+}
+
+/// The fitted model of one axis, by either method.
+struct Fitted {
+    model: PoleResidueModel,
+    order_trace: Vec<(usize, f64)>,
+    paper: Option<(RationalTf, PaperDiagnostics)>,
+}
+
+impl Fitted {
+    fn frf(&self, f_hz: f64) -> Complex64 {
+        match &self.paper {
+            Some((tf, _)) => tf.frf(f_hz),
+            None => self.model.frf(f_hz),
+        }
+    }
+}
+
+/// The FRF lines one axis is designed on.
+struct AxisLines {
+    /// Coherent band (Hz).
+    band: (f64, f64),
+    /// Compensated band: the coherent band capped at 0.45 fs (Hz).
+    comp_band: (f64, f64),
+    /// Notes for the user.
+    notes: Vec<String>,
+    /// Lines inside the compensated band.
+    in_band: Vec<bool>,
+    /// Lines where the compensator must be accurate (the bands or the
+    /// compensated band).
+    eval_band: Vec<bool>,
+    /// Coherent lines of `eval_band`: the fit error is scored on them.
+    target: Vec<bool>,
+    /// Coherent lines outside the bands.
+    out_of_band: Vec<bool>,
+}
+
+fn axis_lines(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> Result<AxisLines> {
+    let name = axis_name(frf.axis);
+    let coh = frf.coherence.as_deref();
+    let band = coherent_band(freq_hz, coh, opts.coherence_threshold);
+    if band.1 <= band.0 {
+        bail!("axis {name}: no coherent band (coherence ≥ {} nowhere); repeat the impact test", opts.coherence_threshold);
+    }
+    // The box's band ends at 0.45 fs (the pass band of the DAQ's and the
+    // box's anti-aliasing filters): lines above it still inform the fit (a
+    // sensor mode above Nyquist shapes the band below it) but are not
+    // compensated.
+    let f_cap = MATCH_BAND_FRACTION * opts.fs_hz;
+    let mut notes = Vec::new();
+    if band.0 >= f_cap {
+        bail!("axis {name}: the coherent band {:.0}–{:.0} Hz lies above 0.45 fs = {f_cap:.0} Hz; raise --fs or repeat the impact test at lower frequencies", band.0, band.1);
+    }
+    let comp_band = (band.0, band.1.min(f_cap));
+    if band.1 > f_cap {
+        notes.push(format!(
+            "axis {name}: FRF lines above 0.45 fs = {f_cap:.0} Hz (coherent to {:.0} Hz) inform the fit but are not compensated",
+            band.1
+        ));
+    }
+    let in_band: Vec<bool> = freq_hz.iter().map(|f| *f >= comp_band.0 && *f <= comp_band.1).collect();
+    let coherent: Vec<bool> = match coh {
+        Some(c) => in_band.iter().zip(c).map(|(b, c)| *b && *c >= opts.coherence_threshold).collect(),
+        None => in_band.clone(),
+    };
+    // Lines where the compensator must be accurate: the fitting bands, or
+    // the whole coherent band.
+    let (eval_band, target, out_of_band): (Vec<bool>, Vec<bool>, Vec<bool>) = if opts.bands.is_empty() {
+        (in_band.clone(), coherent.clone(), vec![false; freq_hz.len()])
+    } else {
+        let bm = band_mask(freq_hz, &opts.bands);
+        let target = bm.iter().zip(&coherent).map(|(b, c)| *b && *c).collect();
+        let out = bm.iter().zip(&coherent).map(|(b, c)| !*b && *c).collect();
+        (bm, target, out)
+    };
+    if target.iter().filter(|m| **m).count() < 8 {
+        bail!("axis {name}: fewer than 8 coherent FRF lines inside the fitting bands; widen the bands or check that they lie inside the coherent band {:.0}–{:.0} Hz", band.0, band.1);
+    }
+    Ok(AxisLines { band, comp_band, notes, in_band, eval_band, target, out_of_band })
+}
+
+/// Fit the axis's model by `opts.method` on `lines`.
+fn fit_axis(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions, lines: &AxisLines) -> Result<Fitted> {
+    let name = axis_name(frf.axis);
+    let coh = frf.coherence.as_deref();
+    Ok(match &opts.method {
+        FitMethod::Vf => {
+            let mut weights = coherence_weights(&frf.frf, coh);
+            if !opts.bands.is_empty() {
+                for (w, b) in weights.iter_mut().zip(&lines.eval_band) {
+                    if !*b {
+                        *w *= VF_OUT_OF_BAND_WEIGHT;
+                    }
+                }
+            }
+            let vf = vector_fit(freq_hz, &frf.frf, &weights, &opts.vf).with_context(|| format!("axis {name}: fit"))?;
+            if !vf.model.is_stable() {
+                bail!("axis {name}: fitted model is unstable");
+            }
+            Fitted { model: vf.model, order_trace: vf.order_trace, paper: None }
+        }
+        FitMethod::Paper { rfp, .. } => {
+            let fit_mask: &[bool] = if opts.bands.is_empty() { &lines.in_band } else { &lines.eval_band };
+            let weights = paper_weights(coh, fit_mask);
+            let fit = rfp_fit(freq_hz, &frf.frf, &weights, rfp).with_context(|| format!("axis {name}: paper fit (RFP + Gauss–Newton)"))?;
+            let diag = PaperDiagnostics { rfp_condition: fit.rfp_condition, jacobian_condition: fit.jacobian_condition, ..Default::default() };
+            let model = fit.tf.to_pole_residue().with_context(|| format!("axis {name}: paper fit"))?;
+            Fitted { model, order_trace: vec![(fit.tf.na(), fit.final_error)], paper: Some((fit.tf, diag)) }
+        }
+    })
+}
+
+/// The fitted response Ĝ(j2πf) of `frf` by `opts.method` on its lines,
+/// before any of the design's checks (for studies of the fit itself).
+pub fn fitted_response(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> Result<impl Fn(f64) -> Complex64> {
+    let lines = axis_lines(freq_hz, frf, opts)?;
+    let fitted = fit_axis(freq_hz, frf, opts, &lines)?;
+    Ok(move |f: f64| fitted.frf(f))
+}
+
+/// The cheap part of a paper-method design at the orders of `opts.method`,
+/// without the Q search: the fit, its stability and static gain, and the
+/// observability of the augmented system (eq. (4)) in floating point.
+/// Returns the relative RMS fit error on the coherent lines of the bands and
+/// the diagnostics; an error says which check failed.
+/// [`crate::design::paper_orders`] ranks orders with it.
+pub fn probe_paper_fit(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> Result<(f64, PaperDiagnostics)> {
+    let lines = axis_lines(freq_hz, frf, opts)?;
+    let fitted = fit_axis(freq_hz, frf, opts, &lines)?;
+    let Some((tf, mut diag)) = fitted.paper.clone() else {
+        bail!("probe_paper_fit needs the paper's method");
+    };
+    if !fitted.model.is_stable() {
+        bail!("the fitted transfer function is unstable");
+    }
+    check_static(axis_name(frf.axis), freq_hz, lines.band.0, opts, &fitted)?;
+    let ss = paper::companion_form(&tf);
+    diag.companion_condition = paper::condition_number(&ss.a);
+    let (ae, _, ce) = paper::augmented(&ss);
+    let (rank, cond) = paper::observability(&ae, &ce);
+    diag.observability_rank = rank;
+    diag.observability_dim = ae.nrows();
+    diag.observability_condition = cond;
+    if rank < ae.nrows() {
+        bail!("augmented system not observable in floating point (rank {rank} of {})", ae.nrows());
+    }
+    if !(cond < paper::MAX_OBSERVABILITY_CONDITION) {
+        bail!("augmented system ill-conditioned (observability condition {cond:.1e} ≥ {:.0e})", paper::MAX_OBSERVABILITY_CONDITION);
+    }
+    let fit_nrmse = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, &lines.target);
+    Ok((fit_nrmse, diag))
+}
+
+/// The mean cutting force sits at 0 Hz, below the impact test's first
+/// coherent line, where no line constrains the fit: a model that bends there
+/// (a pole-zero doublet near 0 Hz) is inverted exactly by the compensator,
+/// and the compensated mean force drifts for seconds. When the design covers
+/// the static band, Ĝ must stay within [`MAX_STATIC_ERROR`] of its value at
+/// that first line from an eighth of its frequency down to 0 Hz, where the
+/// mean force and its slow changes are (a feature just below the first line
+/// only shapes transients).
+///
+/// Both checks apply when the fit covers the start of the coherent band
+/// `f_coherent` (a band-pass segment of parallel elaboration does not); the
+/// static gain |Ĝ(0)| must also be plausible for a force/force FRF.
+fn check_static(name: &str, freq_hz: &[f64], f_coherent: f64, opts: &DesignOptions, fitted: &Fitted) -> Result<()> {
+    if !(opts.bands.is_empty() || opts.bands.iter().any(|b| b.contains(f_coherent))) {
+        return Ok(());
+    }
+    let dc = fitted.frf(0.0).norm();
+    if !(0.2..5.0).contains(&dc) {
+        bail!("axis {name}: fitted static gain |G(0)| = {dc:.3} N/N; the FRF must be force/force (N/N), check units and calibration (with fitting bands: include the static band)");
+    }
+    let f_first = freq_hz.iter().copied().find(|f| *f >= f_coherent).unwrap_or(f_coherent).max(1e-3);
+    let g_first = fitted.frf(f_first);
+    let worst = std::iter::once(0.0)
+        .chain((0..=40).map(|i| 0.01 * (f_first / 8.0 / 0.01).powf(i as f64 / 40.0)))
+        .map(|f| ((fitted.frf(f) - g_first).norm() / g_first.norm(), f))
+        .fold((0.0, 0.0), |a, b| if b.0 > a.0 || b.0.is_nan() { b } else { a });
+    if !(worst.0 <= MAX_STATIC_ERROR) {
+        let next = match &fitted.paper {
+            Some(_) => "let the orders be chosen (omit --paper-orders) or try others, or use the default method (--method vf)",
+            None => "check the FRF's first lines (coherence near 0 Hz, units N/N) or raise --max-order",
+        };
+        bail!(
+            "axis {name}: the fitted model is not flat below the FRF's first coherent line ({f_first:.1} Hz): from an eighth of that down to 0 Hz it moves {:.1} % from its value there by {:.2} Hz (limit {:.0} %); no line constrains it there, and the compensated mean force would drift; no image written; {next}",
+            100.0 * worst.0,
+            worst.1,
+            100.0 * MAX_STATIC_ERROR
+        );
+    }
+    Ok(())
+}
+
+/// Design one axis from its FRF and measurement noise variance R (N²).
+/// The paper's method is designed at the orders of `opts.method`: where they
+/// are to be chosen (`paper_orders_auto`), call
+/// [`crate::design::paper_orders::design_axis`] instead.
+pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions) -> Result<AxisDesign> {
+    debug_assert!(
+        !(opts.paper_orders_auto && matches!(opts.method, FitMethod::Paper { .. })),
+        "orders to be chosen: design through design::paper_orders::design_axis"
+    );
+    design_prepared(&prepare_axis(freq_hz, frf, r, opts)?, opts)
+}
+
+/// The part of one axis's design that does not depend on the declared
+/// latency (`DesignOptions::lag`) nor on how far up the discrete model is
+/// fitted (`DesignOptions::discrete_fit_top`): the fitted model Ĝ and its
+/// checks, the criterion's grid, the record's force spectrum, and the
+/// discrete model for `discrete_fit_top`. The latency rule
+/// (`crate::design::latency`) designs one axis at up to four latencies and fit tops
+/// from one of these instead of fitting its FRF four times.
+pub struct PreparedAxis {
+    name: &'static str,
+    axis: usize,
+    r: f64,
+    freq_hz: Vec<f64>,
+    lines: AxisLines,
+    fitted: Fitted,
+    fit_nrmse: f64,
+    fit_nrmse_out_of_band: f64,
+    ranges: Vec<(f64, f64)>,
+    f_top: f64,
+    grid: Vec<(f64, Complex64)>,
+    spectrum: Option<crate::design::force_spectrum::CellSpectrum>,
+    /// The discrete model at `discrete_fit_top` (`None` for the paper's
+    /// method, or if it failed: `design_prepared` then says why).
+    discrete: Option<(f64, (DiscreteModel, FitDiagnostics))>,
+}
+
+/// The latency-independent part of [`design_axis`] (not for
+/// `paper_orders_auto`, which chooses its orders by whole designs).
+pub fn prepare_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions) -> Result<PreparedAxis> {
+    let name = axis_name(frf.axis);
+    let lines = axis_lines(freq_hz, frf, opts)?;
+    let fitted = fit_axis(freq_hz, frf, opts, &lines)?;
+    let AxisLines { band, comp_band, target, out_of_band, .. } = &lines;
+    let (band, comp_band) = (*band, *comp_band);
+    let fit_nrmse = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, target);
+    let fit_nrmse_out_of_band = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, out_of_band);
+    check_static(&name, freq_hz, band.0, opts, &fitted)?;
+    if !(fit_nrmse <= MAX_FIT_ERROR) {
+        let next = match &fitted.paper {
+            Some(_) => "let the orders be chosen (omit --paper-orders) or try others, fit narrower bands, or use the default method (--method vf)",
+            None => "check the FRF (coherence, resolution, units N/N), raise --max-order, or narrow the compensated band with --band",
+        };
+        bail!(
+            "axis {name}: the fitted model is {:.1} % (relative RMS) from the measured FRF on its coherent lines in the band, above the limit of {:.0} %; no image written; {next}",
+            100.0 * fit_nrmse,
+            100.0 * MAX_FIT_ERROR
+        );
+    }
+
+    let ranges = criterion_ranges(&opts.bands, comp_band);
+    let f_top = ranges.iter().map(|b| b.1).fold(0.0, f64::max);
+    let grid: Vec<(f64, Complex64)> = criterion_grid(&ranges).into_iter().map(|f| (f, fitted.frf(f))).collect();
+    // The record's force spectrum on the grid's cells (--force-prior spectrum).
+    let spectrum = match &opts.force_record {
+        None => None,
+        Some(rec) => {
+            let y = rec.channels.get(frf.axis).and_then(|c| c.as_deref()).ok_or_else(|| {
+                anyhow::anyhow!("{}: no column f{name} for axis {name}; the force record needs every designed axis", rec.source)
+            })?;
+            let cells = criterion_cells(&ranges);
+            let s = crate::design::force_spectrum::estimate(y, opts.fs_hz, &|f| fitted.frf(f), r, &cells)
+                .with_context(|| format!("{}: axis {name}: --force-prior spectrum", rec.source))?;
+            Some(s)
+        }
+    };
+    let discrete = match &fitted.paper {
+        Some(_) => None,
+        None => discrete_model(&fitted, (ranges[0].0, f_top), opts).ok().map(|d| (opts.discrete_fit_top, d)),
+    };
+    Ok(PreparedAxis {
+        name,
+        axis: frf.axis,
+        r,
+        freq_hz: freq_hz.to_vec(),
+        lines,
+        fitted,
+        fit_nrmse,
+        fit_nrmse_out_of_band,
+        ranges,
+        f_top,
+        grid,
+        spectrum,
+        discrete,
+    })
+}
+
+/// The discrete model of the Kalman design (default method), matched to the
+/// sampled-data relation over the compensated band `band_hz`.
+fn discrete_model(fitted: &Fitted, band_hz: (f64, f64), opts: &DesignOptions) -> Result<(DiscreteModel, FitDiagnostics)> {
+    discretize_to(&fitted.model, opts.fs_hz, opts.discretization, band_hz, opts.discrete_fit_top, opts.discrete_static_gain)
+}
+
+/// The latency-dependent part of [`design_axis`]: `opts` must be the
+/// options `p` was prepared with, apart from `lag`, `discrete_fit_top`,
+/// `q_override` and `axis_cycle_budget`.
+pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDesign> {
+    let PreparedAxis { name, axis, r, freq_hz, lines, fitted, fit_nrmse, fit_nrmse_out_of_band, ranges, f_top, grid, spectrum, discrete: prepared } = p;
+    let (name, r, fit_nrmse, fit_nrmse_out_of_band, f_top) = (*name, *r, *fit_nrmse, *fit_nrmse_out_of_band, *f_top);
+    let AxisLines { band, comp_band, notes, eval_band, .. } = lines;
+    let (band, comp_band) = (*band, *comp_band);
+    let grid_hz: Vec<f64> = grid.iter().map(|g| g.0).collect();
+    let lag = if fitted.paper.is_some() { 0 } else { opts.lag };
+    let prewarp_hz = match &opts.method {
+        FitMethod::Paper { prewarp_hz: Some(p), .. } => *p,
+        _ => 0.5 * (ranges[0].0 + f_top),
+    };
+    // The discrete model of the Kalman design (default method), matched to
+    // the sampled-data relation over the compensated band, once per axis
+    // and fit top.
+    let discrete = match (&fitted.paper, prepared) {
+        (Some(_), _) => None,
+        (None, Some((top, d))) if *top == opts.discrete_fit_top => Some(d.clone()),
+        (None, _) => Some(discrete_model(fitted, (ranges[0].0, f_top), opts).with_context(|| format!("axis {name}: discrete model"))?),
+    };
+    let model_match = match &discrete {
+        Some((dm, _)) => dm.match_error(&grid_hz, |f| fitted.frf(f)),
+        None => f64::NAN,
+    };
+    let design_fn = |q: f64| -> Result<KalmanDesign> {
+        match (&fitted.paper, &discrete) {
+            (Some((tf, _)), _) => paper::design(tf, opts.fs_hz, q, r, prewarp_hz, &mut PaperDiagnostics::default()),
+            (None, Some((dm, _))) => kalman::design(dm, q, r, opts.lag),
+            (None, None) => unreachable!("the default method always has a discrete model"),
+        }
+    };
+    let obj = Objective {
+        design: &design_fn,
+        lag,
+        grid,
+        grid_hz: &grid_hz,
+        opts,
+        r,
+        band_width: ranges.iter().map(|b| b.1 - b.0).sum(),
+        force: spectrum.as_ref().map(|s| {
+            let w = s.weights();
+            match opts.force_record_level_only {
+                // Flat, of the record's power: J as criterion_j's mean.
+                true => (vec![1.0 / w.len() as f64; w.len()], s.total_n2()),
+                false => (w, s.total_n2()),
+            }
+        }),
+    };
+    let mut q_trace = Vec::new();
+    let chosen = match opts.q_override {
+        Some(q) => {
+            let (j, ng, d) = obj.eval(q);
+            match d {
+                Some(d) => Ok((q, d, j, ng)),
+                None => design_fn(q).map(|d| (q, d, j, ng)).with_context(|| format!("axis {name}: no valid compensator for q = {q}")),
+            }
+        }
+        None => choose_q(&obj, &mut q_trace),
+    };
+    let (_q, kal, j, ng) = match (chosen, &fitted.paper) {
+        (Ok(c), _) => c,
+        // The paper's path: say why the design failed (rank, conditions),
+        // from a design at a mid-range q.
+        (Err(e), Some(_)) => {
+            return Err(match design_fn(10f64.powf(r.log10() + 6.0)) {
+                Err(why) => e.context(format!("axis {name}: at q = 1e6·R: {why:#}")),
+                Ok(_) => e.context(format!("axis {name}")),
+            });
+        }
+        (Err(e), None) => return Err(e).with_context(|| format!("axis {name}")),
+    };
+    // Never silently worse than raw (README, "Never worse than no
+    // compensation"): refuse the design when its predicted in-band error
+    // does not beat the uncompensated force's.
+    let raw_j = obj.raw();
+    let worse = !(j < raw_j);
+    if worse || !(j.sqrt() < MAX_PREDICTED_ERROR) {
+        let next = match &fitted.paper {
+            Some(_) => "let the orders be chosen (omit --paper-orders) or try others, other or narrower bands (--band, --spindle-rpm/--teeth), or the default method (--method vf)",
+            None => "check the FRF (coherence, units N/N, resolution), narrow the compensated band with --band, or raise --max-noise-gain if the noise gain limits it",
+        };
+        let why = if worse {
+            format!("would be worse than no compensation in its band ({:.0}–{:.0} Hz)", ranges[0].0, f_top)
+        } else {
+            format!("would barely compensate in its band ({:.0}–{:.0} Hz), its predicted error above the limit of {:.0} % (noise gain {ng:.2})", ranges[0].0, f_top, 100.0 * MAX_PREDICTED_ERROR)
+        };
+        bail!(
+            "axis {name}: the compensator {why}: predicted in-band error {:.2} % against {:.2} % uncompensated (fit error {:.2} %); no image written; {next}",
+            100.0 * j.sqrt(),
+            100.0 * raw_j.sqrt(),
+            100.0 * fit_nrmse
+        );
+    }
+    // The paper's diagnostics of the chosen design (the fit's conditions stay).
+    let paper = match &fitted.paper {
+        Some((tf, diag)) => {
+            let mut diag = diag.clone();
+            paper::design(tf, opts.fs_hz, kal.q, r, prewarp_hz, &mut diag)?;
+            Some((tf.clone(), diag))
+        }
+        None => None,
+    };
+    let (realization, filter, verification) =
+        choose_realization_within(&kal.compensator, opts.fs_hz, f_top, opts.axis_cycle_budget).with_context(|| format!("axis {name}"))?;
+    let fs = opts.fs_hz;
+    // Against the fitted model, not the raw lines: an H1 line with γ² = 0.97
+    // from 7 averages has ~5 % random error, as large as the tolerance.
+    let model_frf: Vec<Complex64> = freq_hz.iter().map(|f| fitted.frf(*f)).collect();
+    let flat = flat_band(|f| quantize::filter_response(&filter, f, fs), freq_hz, &model_frf, &eval_band, lag, fs);
+    let h = kal.compensator.freq_responses(&grid_hz, fs);
+    let predicted_distortion = obj.distortion_of(&h).sqrt();
+    let force_spectrum = match (&spectrum, &obj.force) {
+        (Some(s), Some((w, p))) => {
+            Some(crate::design::force_spectrum::AxisForceSpectrum {
+                force_rms_n: p.sqrt(),
+                weights: w.clone(),
+                predicted_error: j.sqrt(),
+                flat_predicted_error: obj.j_of(&h, true).sqrt(),
+                resolution_hz: s.resolution_hz,
+                level_only: opts.force_record_level_only,
+            })
+        }
+        _ => None,
+    };
+    let design = AxisDesign {
+        axis: *axis,
+        model: fitted.model.clone(),
+        order_trace: fitted.order_trace.clone(),
+        fit_nrmse,
+        coherent_band_hz: band,
+        kalman: kal,
+        realization,
+        filter,
+        verification,
+        flat_band_hz: flat,
+        noise_gain: ng,
+        predicted_error: j.sqrt(),
+        predicted_distortion,
+        q_trace,
+        bands: opts.bands.clone(),
+        fit_nrmse_out_of_band,
+        paper,
+        discrete,
+        model_match,
+        raw_predicted_error: raw_j.sqrt(),
+        compensated_band_hz: comp_band,
+        notes: notes.clone(),
+        force_spectrum,
+    };
+    Ok(design)
+}

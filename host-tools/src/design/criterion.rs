@@ -1,0 +1,151 @@
+//! The Q criterion: what a compensator H predicts to achieve on a plant Ĝ.
+//!
+//! q is chosen to minimize the predicted relative error variance of the
+//! compensated force inside the band [f_lo, f_hi], for a force with a flat
+//! spectrum of RMS `force_rms` (N) in that band and white measurement noise
+//! of variance R:
+//!
+//! J(q) = mean_f |H(f)·Ĝ(f)·e^{j2πfL/fs} − 1|²  +  (2R/fs)·(f_hi − f_lo)/force_rms² · mean_f |H(f)|²
+//!
+//! (distortion of the force + amplified noise inside the band, both relative
+//! to the force variance), subject to the white-noise gain of H staying below
+//! `max_noise_gain`. √J is reported as the predicted in-band error. With a
+//! record's force spectrum the mean over the lines in the distortion term
+//! becomes a mean weighted by the force's power in each line's cell
+//! ([`criterion_j_weighted`]).
+
+use num_complex::Complex64;
+use std::f64::consts::PI;
+
+use crate::design::bands::Band;
+
+/// White-noise gain of H estimated from its response: RMS of |H| over
+/// 0..fs/2 (Parseval) on a 512-point midpoint grid, for responses that are
+/// not one state space (`compare`'s parallel elaboration). It undersamples
+/// peaks narrower than fs/1024; a state space has the exact
+/// [`StateSpace::white_noise_gain`].
+pub fn noise_gain(response: impl Fn(f64) -> Complex64, fs_hz: f64) -> f64 {
+    let n = 512;
+    let s: f64 = (0..n)
+        .map(|i| response((i as f64 + 0.5) / n as f64 * fs_hz / 2.0).norm_sqr())
+        .sum();
+    (s / n as f64).sqrt()
+}
+
+/// The flat band of H·G: from the first line of `mask` up to the last line
+/// before the first masked line where |H·G·e^{jωL/fs}| leaves 1 ± 5 % or its
+/// phase leaves ±5°.
+pub fn flat_band(
+    response: impl Fn(f64) -> Complex64,
+    freq_hz: &[f64],
+    frf: &[Complex64],
+    mask: &[bool],
+    lag: usize,
+    fs_hz: f64,
+) -> (f64, f64) {
+    let mut lo = None;
+    let mut hi = 0.0;
+    for ((f, g), m) in freq_hz.iter().zip(frf).zip(mask) {
+        if !*m {
+            continue;
+        }
+        let e = response(*f) * g * Complex64::from_polar(1.0, 2.0 * PI * f * lag as f64 / fs_hz);
+        let ok = (e.norm() - 1.0).abs() <= 0.05 && e.arg().abs() <= 5f64.to_radians();
+        if !ok {
+            break;
+        }
+        lo.get_or_insert(*f);
+        hi = *f;
+    }
+    match lo {
+        Some(l) => (l, hi),
+        None => (0.0, 0.0),
+    }
+}
+
+/// The noise factor of J (module doc): (2R/fs)·(f_hi − f_lo)/force_rms², the
+/// in-band noise variance relative to the force's, for `band_width_hz` = the
+/// summed width of the criterion's bands.
+pub fn noise_term(r: f64, fs_hz: f64, band_width_hz: f64, force_rms: f64) -> f64 {
+    2.0 * r / fs_hz * band_width_hz / (force_rms * force_rms)
+}
+
+/// J of the Q criterion (module doc): mean over the grid of
+/// |H·G·e^{j2πfL/fs} − 1|² plus `noise`·mean |H|², with `grid` = (f, G(j2πf))
+/// (the plant the filter meets) and `h` = H(e^{j2πf/fs}) on the same lines.
+pub fn criterion_j(grid: &[(f64, Complex64)], h: &[Complex64], lag: usize, fs_hz: f64, noise: f64) -> f64 {
+    let (mut dist, mut amp) = (0.0, 0.0);
+    for ((f, g), h) in grid.iter().zip(h) {
+        dist += distortion(*f, *g, *h, lag, fs_hz).norm_sqr();
+        amp += h.norm_sqr();
+    }
+    let n = grid.len() as f64;
+    dist / n + noise * amp / n
+}
+
+/// The distortion H·G·e^{j2πfL/fs} − 1 of one line of the Q criterion
+/// (module doc), with G = G(j2πf) and H = H(e^{j2πf/fs}).
+pub fn distortion(f_hz: f64, g: Complex64, h: Complex64, lag: usize, fs_hz: f64) -> Complex64 {
+    h * g * Complex64::from_polar(1.0, 2.0 * PI * f_hz * lag as f64 / fs_hz) - 1.0
+}
+
+/// J for the criterion's force spectrum: [`criterion_j`] when `weights` is
+/// `None` (flat), else with the distortion of line i weighted by
+/// `weights[i]` (Σ = 1: the force's share there, [`crate::design::force_spectrum`]);
+/// the noise term stays the mean over the lines (white noise).
+pub fn criterion_j_weighted(grid: &[(f64, Complex64)], h: &[Complex64], weights: Option<&[f64]>, lag: usize, fs_hz: f64, noise: f64) -> f64 {
+    let Some(weights) = weights else {
+        return criterion_j(grid, h, lag, fs_hz, noise);
+    };
+    let (mut dist, mut amp) = (0.0, 0.0);
+    for (((f, g), h), w) in grid.iter().zip(h).zip(weights) {
+        dist += w * distortion(*f, *g, *h, lag, fs_hz).norm_sqr();
+        amp += h.norm_sqr();
+    }
+    dist + noise * amp / grid.len() as f64
+}
+
+/// The frequency ranges of the Q criterion of a design: its fitting bands,
+/// or the compensated band without bands.
+pub fn criterion_ranges(bands: &[Band], compensated_band_hz: (f64, f64)) -> Vec<(f64, f64)> {
+    if bands.is_empty() {
+        vec![compensated_band_hz]
+    } else {
+        bands.iter().map(|b| (b.lo_hz, b.hi_hz)).collect()
+    }
+}
+
+/// The lines of the Q criterion: 200 spread over `ranges` (see
+/// [`criterion_ranges`]), the centres of [`criterion_cells`].
+pub fn criterion_grid(ranges: &[(f64, f64)]) -> Vec<f64> {
+    band_grid(ranges, 200)
+}
+
+/// The cells (lo, hi) (Hz) whose centres are [`criterion_grid`]: each line
+/// stands for the force in its cell ([`crate::design::force_spectrum`]).
+pub fn criterion_cells(ranges: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    band_cells(ranges, 200)
+}
+
+/// `n` frequencies spread over `bands` in proportion to their widths (Hz).
+fn band_grid(bands: &[(f64, f64)], n: usize) -> Vec<f64> {
+    let total: f64 = bands.iter().map(|b| b.1 - b.0).sum();
+    let mut out = Vec::with_capacity(n + bands.len());
+    for b in bands {
+        let k = ((n as f64 * (b.1 - b.0) / total).round() as usize).max(4);
+        out.extend((0..k).map(|i| b.0 + (b.1 - b.0) * (i as f64 + 0.5) / k as f64));
+    }
+    out
+}
+
+/// The cells of [`band_grid`]: each of its frequencies is the centre of one.
+fn band_cells(bands: &[(f64, f64)], n: usize) -> Vec<(f64, f64)> {
+    let total: f64 = bands.iter().map(|b| b.1 - b.0).sum();
+    let mut out = Vec::with_capacity(n + bands.len());
+    for b in bands {
+        let k = ((n as f64 * (b.1 - b.0) / total).round() as usize).max(4);
+        let w = (b.1 - b.0) / k as f64;
+        out.extend((0..k).map(|i| (b.0 + w * i as f64, b.0 + w * (i + 1) as f64)));
+    }
+    out
+}

@@ -1,0 +1,209 @@
+//! Kalman compensator design (DESIGN.md, signal chain steps 2-3 and 5).
+//!
+//! 1. The fitted model Ĝ(s) becomes a discrete model Ĝ_d(z) = z^D·M(z)
+//!    ([`crate::design::discretize`]): by default fitted on the unit circle to the
+//!    sampled-data relation Ĝ(j2πf) of a band-limited chain, with an advance
+//!    of D samples (the band-limited relation is two-sided) and M causal:
+//!    M(z) = d + Σ ρ/(z − ζ) + Σ_m h_m z^{−m}. Hold equivalents (FOH, ZOH)
+//!    have the same form with D = 0 and no taps.
+//! 2. Augmentation: x_e = [x_s; F_k; F_{k−1}; …; F_{k−N}] with the force a
+//!    random walk, F_{k+1} = F_k + w_k, E[w²] = q (N²/sample), and
+//!    N = max(L + D, M) so that both the taps and the output lag are states.
+//!    The measurement is ỹ_k = y_{k−D} = M(z)F_k + v_k (causal in F).
+//! 3. The filter DARE P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + q g gᵀ is
+//!    solved by the structured doubling algorithm (Chu, Fan & Lin 2005), and
+//!    its residual and the closed-loop spectral radius are checked.
+//! 4. Compensator from ỹ to the estimate of F_{k−L−D} (a fixed-lag smoother
+//!    of lag L + D, still a fixed-size LTI filter):
+//!    x̂⁻[k+1] = A(I − K C) x̂⁻[k] + A K ỹ[k],
+//!    F̂[k−L−D] = e_{L+D}ᵀ (I − K C) x̂⁻[k] + e_{L+D}ᵀ K ỹ[k],  K = P Cᵀ (C P Cᵀ + R)⁻¹.
+//!    Fed with y instead of ỹ (D samples earlier), the same filter outputs
+//!    F̂[k−L]: the declared latency stays L.
+
+use anyhow::{bail, Result};
+use nalgebra::{DMatrix, DVector};
+
+use crate::numeric::lti::StateSpace;
+use num_complex::Complex64;
+
+use crate::design::discretize::{DTerm, DiscreteModel};
+
+/// The augmented discrete plant of the estimator.
+#[derive(Clone, Debug)]
+pub struct AugmentedPlant {
+    /// State transition.
+    pub a: DMatrix<f64>,
+    /// Process-noise input (force increment w).
+    pub g: DVector<f64>,
+    /// Measurement row.
+    pub c: DVector<f64>,
+    /// Number of plant (sensor) states.
+    pub n_plant: usize,
+    /// Lag of the estimate in the model's time frame: L + D (samples).
+    pub lag: usize,
+}
+
+impl AugmentedPlant {
+    /// Index of the state F_{k−L−D} that the compensator outputs.
+    pub fn output_index(&self) -> usize {
+        self.n_plant + self.lag
+    }
+}
+
+/// Build the augmented plant of the discrete model `dm` for a declared
+/// output latency of `lag` samples (module doc, steps 1-2). Plant states are
+/// scaled by 1/|1 − ζ| so that every state has about the magnitude of a force.
+pub fn augmented_plant(dm: &DiscreteModel, lag: usize) -> AugmentedPlant {
+    let n_plant = dm.order();
+    let model_lag = lag + dm.advance;
+    let n_delay = model_lag.max(dm.fir.len());
+    let n = n_plant + 1 + n_delay;
+    let f = n_plant; // index of F_k
+    let mut a = DMatrix::<f64>::zeros(n, n);
+    let mut g = DVector::<f64>::zeros(n);
+    let mut c = DVector::<f64>::zeros(n);
+    let mut i = 0;
+    for term in &dm.terms {
+        match *term {
+            DTerm::Real { pole, residue } => {
+                let s = (1.0 - pole).abs().max(1e-12);
+                a[(i, i)] = pole;
+                a[(i, f)] = s;
+                c[i] = residue / s;
+                i += 1;
+            }
+            DTerm::Pair { pole, residue } => {
+                // Complex state x (x[k+1] = ζ x[k] + F_k) as ξ = s·(Re x, Im x);
+                // its output 2·Re(ρ x).
+                let z = Complex64::new(pole.0, pole.1);
+                let s = (Complex64::new(1.0, 0.0) - z).norm().max(1e-12);
+                a[(i, i)] = z.re;
+                a[(i, i + 1)] = -z.im;
+                a[(i + 1, i)] = z.im;
+                a[(i + 1, i + 1)] = z.re;
+                a[(i, f)] = s;
+                c[i] = 2.0 * residue.0 / s;
+                c[i + 1] = -2.0 * residue.1 / s;
+                i += 2;
+            }
+        }
+    }
+    a[(f, f)] = 1.0;
+    g[f] = 1.0;
+    c[f] = dm.d;
+    for j in 1..=n_delay {
+        a[(f + j, f + j - 1)] = 1.0;
+    }
+    for (m, h) in dm.fir.iter().enumerate() {
+        c[f + m + 1] = *h;
+    }
+    AugmentedPlant { a, g, c, n_plant, lag: model_lag }
+}
+
+/// Solution of the filter DARE with its checks.
+#[derive(Clone, Debug)]
+pub struct DareSolution {
+    /// Prior error covariance P (N² in the scaled coordinates).
+    pub p: DMatrix<f64>,
+    /// Relative residual ‖P − Ric(P)‖_F / ‖P‖_F.
+    pub residual: f64,
+    /// Doubling iterations used.
+    pub iterations: usize,
+}
+
+/// Solve P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + Q by structured doubling
+/// (dual form: Â = Aᵀ, G = Cᵀ C / R, H = Q).
+pub fn solve_filter_dare(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r: f64) -> Result<DareSolution> {
+    let n = a.nrows();
+    let id = DMatrix::<f64>::identity(n, n);
+    let mut ak = a.transpose();
+    let mut gk = c * c.transpose() / r;
+    let mut hk = q.clone();
+    let mut iterations = 0;
+    for it in 1..=200 {
+        iterations = it;
+        let w = &id + &gk * &hk;
+        let lu = w.lu();
+        let w_inv_a = lu.solve(&ak).ok_or_else(|| anyhow::anyhow!("Riccati doubling: I + G·H is singular"))?;
+        let w_inv_g = lu.solve(&gk).ok_or_else(|| anyhow::anyhow!("Riccati doubling: I + G·H is singular"))?;
+        let a_next = &ak * &w_inv_a;
+        let g_next = &gk + &ak * &w_inv_g * ak.transpose();
+        let h_next = &hk + ak.transpose() * &hk * &w_inv_a;
+        let change = (&h_next - &hk).norm() / h_next.norm().max(f64::MIN_POSITIVE);
+        ak = a_next;
+        gk = (&g_next + g_next.transpose()) * 0.5;
+        hk = (&h_next + h_next.transpose()) * 0.5;
+        if !hk.iter().all(|v| v.is_finite()) {
+            bail!("Riccati doubling diverged (non-finite iterate); the model may be unobservable");
+        }
+        if change < 1e-14 {
+            break;
+        }
+    }
+    let p = hk;
+    let s = (c.transpose() * &p * c)[(0, 0)] + r;
+    let apc = a * &p * c;
+    let ric = a * &p * a.transpose() - &apc * apc.transpose() / s + q;
+    let residual = (&p - ric).norm() / p.norm().max(f64::MIN_POSITIVE);
+    if !(residual < 1e-8) {
+        bail!("Riccati solution rejected: relative residual {residual:.2e} after {iterations} doubling steps (needs < 1e-8)");
+    }
+    Ok(DareSolution { p, residual, iterations })
+}
+
+/// The designed compensator with its diagnostics.
+#[derive(Clone, Debug)]
+pub struct KalmanDesign {
+    /// Compensator y → F̂[k−L] (f64).
+    pub compensator: StateSpace,
+    /// Kalman gain K (measurement update), in the scaled coordinates.
+    pub kalman_gain: DVector<f64>,
+    /// Riccati solution diagnostics.
+    pub dare_residual: f64,
+    /// Spectral radius of the compensator matrix A(I − K C).
+    pub closed_loop_radius: f64,
+    /// Fixed lag L (samples).
+    pub lag: usize,
+    /// Process-noise intensity q (N²/sample).
+    pub q: f64,
+    /// Measurement-noise variance R (N²).
+    pub r: f64,
+}
+
+/// Design the compensator for the discrete model, q, R and declared
+/// latency `lag` (module doc).
+pub fn design(dm: &DiscreteModel, q: f64, r: f64, lag: usize) -> Result<KalmanDesign> {
+    if !(r > 0.0) || !r.is_finite() {
+        bail!("measurement noise variance R must be positive and finite, got {r}");
+    }
+    if !(q > 0.0) || !q.is_finite() {
+        bail!("process noise intensity q must be positive and finite, got {q}");
+    }
+    let plant = augmented_plant(dm, lag);
+    let qm = &plant.g * plant.g.transpose() * q;
+    let sol = solve_filter_dare(&plant.a, &plant.c, &qm, r)?;
+    let s = (plant.c.transpose() * &sol.p * &plant.c)[(0, 0)] + r;
+    let k = &sol.p * &plant.c / s;
+    let n = plant.a.nrows();
+    let i_kc = DMatrix::<f64>::identity(n, n) - &k * plant.c.transpose();
+    let out = plant.output_index();
+    let comp = StateSpace {
+        a: &plant.a * &i_kc,
+        b: &plant.a * &k,
+        c: i_kc.row(out).transpose(),
+        d: k[out],
+    };
+    let radius = comp.spectral_radius();
+    if !(radius < 1.0) {
+        bail!("Kalman compensator is not stable (spectral radius {radius:.9}); the fitted model may be unobservable");
+    }
+    Ok(KalmanDesign {
+        compensator: comp,
+        kalman_gain: k,
+        dare_residual: sol.residual,
+        closed_loop_radius: radius,
+        lag,
+        q,
+        r,
+    })
+}

@@ -1,0 +1,24 @@
+//! Design: from a measured FRF to a verified compensator per axis.
+//!
+//! The paper's steps: fit Ĝ ([`axis`] calls `fit`), a discrete model of the
+//! sampled-data relation ([`discretize`]), the disturbance Kalman filter and
+//! fixed-lag smoother ([`kalman`], or the paper's own method in [`paper`]),
+//! q chosen by the declared criterion ([`criterion`]), the latency rule
+//! ([`latency`]), band-fitting ([`bands`], [`parallel`]), and analyses of a
+//! design ([`sensitivity`], [`force_spectrum`], [`two_state`]).
+//! May import the leaves and `realize`; nothing above.
+
+pub mod axis;
+pub mod bands;
+pub mod criterion;
+pub mod discretize;
+pub mod force_spectrum;
+pub mod image;
+pub mod kalman;
+pub mod latency;
+pub mod noise;
+pub mod paper;
+pub mod paper_orders;
+pub mod parallel;
+pub mod sensitivity;
+pub mod two_state;

@@ -1,0 +1,200 @@
+//! The box image for a set-up that moves between two measured states: the
+//! second FRF fitted and paired with the first, machine modes shared where
+//! both measured them alike, and the design whose worst predicted error over
+//! the range is least.
+
+use anyhow::{Context, Result};
+use num_complex::Complex64;
+
+use crate::design::axis::{design_axis, AxisDesign, DesignOptions};
+use crate::design::criterion::{criterion_grid, criterion_j, criterion_ranges, noise_term};
+use crate::design::two_state::joint::{fit_above_band_jointly, AboveBandMode, Lines};
+use crate::design::two_state::model::{pair, TwoState};
+use crate::fit::modes::{fn_hz, modal_share, residue_of_share, sensor_mode_indices};
+use crate::fit::vf::{coherence_weights, fit_order, VfOptions};
+use crate::fit::{PoleResidueModel, Term};
+use crate::frf::{axis_name, AxisFrf};
+
+/// States s at which a box image designed for the range is evaluated.
+pub const RANGE_STATES: [f64; 5] = [0.0, 0.25, 0.5, 0.75, 1.0];
+
+/// One candidate box design for the range between two states.
+#[derive(Clone, Debug)]
+pub struct RangeCandidate {
+    /// Model state the candidate was designed for (0 = the first FRF as
+    /// measured, 1 = the second as measured, in between the interpolated model).
+    pub s: f64,
+    /// The design.
+    pub design: AxisDesign,
+    /// Predicted in-band error of its filter at each of [`RANGE_STATES`].
+    pub errors: Vec<f64>,
+    /// The largest of `errors`.
+    pub worst: f64,
+}
+
+/// The two states of an axis, as [`pair_second_state`] makes them.
+#[derive(Clone, Debug)]
+pub struct Paired {
+    /// The paired states.
+    pub states: TwoState,
+    /// What became of each machine-structure mode ([`share_machine_modes`]).
+    pub machine: Vec<MachineMode>,
+    /// What became of each sensor mode above the compensated band
+    /// ([`crate::design::two_state::joint`]).
+    pub above_band: Vec<AboveBandMode>,
+}
+
+/// The two states of an axis: the first is `d0`'s fitted model (of the
+/// FRF `first`), the second FRF is fitted at the same order (its coherence
+/// as weights) and paired with it ([`pair`]); then the machine-structure
+/// modes the two FRFs measured alike are shared ([`share_machine_modes`])
+/// and the sensor modes above `d0`'s compensated band are fitted to both
+/// FRFs at once ([`crate::design::two_state::joint`]).
+pub fn pair_second_state(freq_hz: &[f64], first: &AxisFrf, d0: &AxisDesign, second: &AxisFrf, vf: &VfOptions) -> Result<Paired> {
+    let name = axis_name(second.axis);
+    let w = coherence_weights(&second.frf, second.coherence.as_deref());
+    let after = fit_order(freq_hz, &second.frf, &w, d0.model.order(), vf).with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?;
+    let ts = pair(name, &d0.model, &after)?;
+    let w0 = coherence_weights(&first.frf, first.coherence.as_deref());
+    let frfs = [(&first.frf[..], &w0[..]), (&second.frf[..], &w[..])];
+    let (ts, machine) = share_machine_modes(&ts, freq_hz, frfs);
+    let (states, above_band) = fit_above_band_jointly(&ts, &Lines::new(freq_hz, frfs), d0.compensated_band_hz);
+    Ok(Paired { states, machine, above_band })
+}
+
+/// Largest growth of a machine mode's weighted misfit (either FRF, over
+/// the mode's lines) at which the two states' fits of it are taken as two
+/// measurements of one mode ([`share_machine_modes`]).
+pub const SHARE_TOLERANCE: f64 = 1.5;
+
+/// Half-width of the lines a machine mode is judged on, in half-power
+/// bandwidths ζ·f_n (at least [`SHARE_MIN_LINES`] lines).
+pub const SHARE_WINDOW: f64 = 3.0;
+
+/// Fewest FRF lines a machine mode must span to be judged.
+pub const SHARE_MIN_LINES: usize = 5;
+
+/// What [`share_machine_modes`] did with one machine-structure mode.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct MachineMode {
+    /// Natural frequency in the first / second state's fit (Hz).
+    pub fn_hz: (f64, f64),
+    /// Weighted misfit of the shared mode over its own one's, on the first /
+    /// second FRF (√ of the ratio of Σ w|Ĝ − H|² over the mode's lines).
+    pub misfit_growth: (f64, f64),
+    /// Shared (both states carry the average), or kept apart.
+    pub shared: bool,
+}
+
+/// Machine-structure modes measured twice (issue #15). The workpiece's
+/// loss of mass moves the sensor modes; the modes below
+/// [`crate::fit::modes::SENSOR_FRACTION`] × the main mode's (the
+/// sensitivity's and the simulator's rule) belong to the machine and may
+/// stay put, and then the two impact tests are two independent measurements
+/// of them: their average has half the variance of either fit. Near a
+/// lightly damped machine mode and its anti-resonance that variance is what
+/// limits the smoother (BENCHMARKS.md, the seed-4 gap).
+///
+/// **Rule (stated).** Per machine mode (a pair of the first state's model
+/// below the sensor modes), the shared mode is the average of the two
+/// fits' poles and modal shares. Each FRF `(H, w)` (`w` the coherence
+/// weights of the fit) is judged over its lines within ±[`SHARE_WINDOW`]
+/// half-power bandwidths of the mode: the shared mode is kept if, on both
+/// FRFs, √(Σ w|Ĝ_shared − H|² / Σ w|Ĝ − H|²) ≤ [`SHARE_TOLERANCE`], i.e. the
+/// data cannot tell the two fits apart; otherwise (the mode moved, or is
+/// not resolved by [`SHARE_MIN_LINES`] lines) both states keep their own.
+pub fn share_machine_modes(ts: &TwoState, freq_hz: &[f64], frfs: [(&[Complex64], &[f64]); 2]) -> (TwoState, Vec<MachineMode>) {
+    let sensors = sensor_mode_indices(&ts.before);
+    let mut out = ts.clone();
+    let mut report = Vec::new();
+    for (i, (t0, t1)) in ts.before.terms.iter().zip(&ts.after.terms).enumerate() {
+        let (Term::Pair { pole: p0, residue: r0 }, Term::Pair { pole: p1, residue: r1 }) = (*t0, *t1) else { continue };
+        if sensors.contains(&i) {
+            continue;
+        }
+        let pole = (p0 + p1) * 0.5;
+        let c = (modal_share(p0, r0) + modal_share(p1, r1)) * 0.5;
+        let mean = Term::Pair { pole, residue: residue_of_share(pole, c) };
+        let (f0, f1) = (fn_hz(p0), fn_hz(p1));
+        let (zeta, f) = (-pole.re / pole.norm(), fn_hz(pole));
+        let half = SHARE_WINDOW * zeta * f;
+        let lines: Vec<usize> = (0..freq_hz.len()).filter(|&k| (freq_hz[k] - f).abs() <= half).collect();
+        let growth = |m: &PoleResidueModel, (h, w): (&[Complex64], &[f64])| {
+            let mut shared = m.clone();
+            shared.terms[i] = mean;
+            let chi = |g: &PoleResidueModel| lines.iter().map(|&k| w[k] * (g.frf(freq_hz[k]) - h[k]).norm_sqr()).sum::<f64>();
+            (chi(&shared) / chi(m)).sqrt()
+        };
+        let g = (growth(&ts.before, frfs[0]), growth(&ts.after, frfs[1]));
+        // NaN (no misfit at all: noise-free data) keeps the fits apart.
+        let shared = lines.len() >= SHARE_MIN_LINES && g.0 <= SHARE_TOLERANCE && g.1 <= SHARE_TOLERANCE;
+        if shared {
+            out.before.terms[i] = mean;
+            out.after.terms[i] = mean;
+        }
+        report.push(MachineMode { fn_hz: (f0, f1), misfit_growth: g, shared });
+    }
+    (out, report)
+}
+
+/// The result of [`design_over_range`] for one axis.
+#[derive(Clone, Debug)]
+pub struct RangeDesign {
+    /// The paired states, machine modes shared where measured alike.
+    pub states: TwoState,
+    /// What became of each machine-structure mode ([`share_machine_modes`]).
+    pub machine: Vec<MachineMode>,
+    /// What became of each sensor mode above the compensated band
+    /// ([`crate::design::two_state::joint`]).
+    pub above_band: Vec<AboveBandMode>,
+    /// Every candidate design.
+    pub candidates: Vec<RangeCandidate>,
+    /// Index of the chosen one in `candidates`.
+    pub best: usize,
+}
+
+/// The box image for a set-up that moves between two measured states
+/// (issue #15, item 2). **Criterion (stated):** the least worst-case
+/// predicted in-band error over s ∈ [`RANGE_STATES`], chosen among
+/// candidate designs for the model states `candidate_states` (0 and 1 are
+/// designed from the two measured FRFs as a single-state design would be,
+/// states in between from the interpolated model's response on the same
+/// lines, with the first FRF's coherence). Each candidate's filter is
+/// evaluated against the interpolated model at every s with the design's own
+/// criterion ([`crate::design::criterion::criterion_j`], the first FRF's band).
+pub fn design_over_range(
+    freq_hz: &[f64],
+    first: &AxisFrf,
+    second: &AxisFrf,
+    r: f64,
+    opts: &DesignOptions,
+    candidate_states: &[f64],
+) -> Result<RangeDesign> {
+    let name = axis_name(first.axis);
+    let d0 = design_axis(freq_hz, first, r, opts).context("first FRF")?;
+    let Paired { states: ts, machine, above_band } = pair_second_state(freq_hz, first, &d0, second, &opts.vf)?;
+    let ranges = criterion_ranges(&d0.bands, d0.compensated_band_hz);
+    let width: f64 = ranges.iter().map(|b| b.1 - b.0).sum();
+    let freqs = criterion_grid(&ranges);
+    let plants: Vec<Vec<(f64, Complex64)>> =
+        RANGE_STATES.iter().map(|&s| { let m = ts.at(s); freqs.iter().map(|f| (*f, m.frf(*f))).collect() }).collect();
+    let mut cands = Vec::new();
+    for &s in candidate_states {
+        let design = if s == 0.0 {
+            d0.clone()
+        } else if s == 1.0 {
+            design_axis(freq_hz, second, r, opts).context("second FRF")?
+        } else {
+            let m = ts.at(s);
+            let synthetic = AxisFrf { axis: first.axis, frf: freq_hz.iter().map(|f| m.frf(*f)).collect(), coherence: first.coherence.clone() };
+            design_axis(freq_hz, &synthetic, r, opts).with_context(|| format!("model state s = {s}"))?
+        };
+        let h = design.kalman.compensator.freq_responses(&freqs, opts.fs_hz);
+        let noise = noise_term(design.kalman.r, opts.fs_hz, width, opts.force_rms);
+        let errors: Vec<f64> = plants.iter().map(|g| criterion_j(g, &h, design.kalman.lag, opts.fs_hz, noise).sqrt()).collect();
+        let worst = errors.iter().copied().fold(0.0, f64::max);
+        cands.push(RangeCandidate { s, design, errors, worst });
+    }
+    let best = (0..cands.len()).min_by(|&a, &b| cands[a].worst.total_cmp(&cands[b].worst)).ok_or_else(|| anyhow::anyhow!("axis {name}: no candidate state"))?;
+    Ok(RangeDesign { states: ts, machine, above_band, candidates: cands, best })
+}

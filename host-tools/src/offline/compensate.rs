@@ -1,0 +1,340 @@
+//! Offline compensation of recorded forces (`dynocomp compensate`):
+//!
+//! * a box image (format 1) runs through the core kernel, bit-exact with the
+//!   box: the same f32 kernel code (its block path, bit-identical to the box's
+//!   per-sample `step`), the same coefficients, the axes in lockstep
+//!   ([`compensate_record`]);
+//! * a parallel-elaboration image (format 2, offline only) splits the record
+//!   into its bands with zero-phase filters, runs each band through its own
+//!   compensator (the same kernel) and sums ([`compensate_parallel`]);
+//! * `--offline` runs the fixed-interval smoother of [`crate::offline::smoother`]
+//!   instead (f64, zero lag, offline only).
+
+use anyhow::{bail, Context, Result};
+use dynocomp_core::image::{CoeffImage, ParallelImage};
+use dynocomp_core::kernel::{process_blocks, AxisFilter, AxisState, BlockJob, LOCKSTEP_AXES};
+
+use crate::frf::axis_name;
+use crate::io::signal_csv::SignalRecord;
+
+/// Relative tolerance between the rate implied by `t_s` and the image's rate.
+pub const FS_TOLERANCE: f64 = 1e-4;
+
+/// Check a record's `t_s` column (if any) against the image's sample rate.
+pub fn check_sample_rate(image: &CoeffImage, rec: &SignalRecord, source: &str) -> Result<()> {
+    check_rate(image.fs_hz, rec, source)
+}
+
+/// Compensate every force column of `rec` with the image's compensator for
+/// that axis.
+///
+/// Each column is converted to f32 and run through the core kernel, exactly as
+/// the box does after its ADC scaling. With `raw_timing == false` the output is
+/// aligned to the input: the image's declared latency L (samples) is removed by
+/// shifting the output back by L samples; to keep the record's length the
+/// kernel is fed L extra samples that hold the record's last value, so the
+/// last L output samples are estimates made with that held input.
+pub fn compensate_record(image: &CoeffImage, rec: &SignalRecord, raw_timing: bool, source: &str) -> Result<SignalRecord> {
+    let latency = if raw_timing { 0 } else { usize::from(image.latency_samples) };
+    let mut axes = Vec::with_capacity(rec.channels.len());
+    for (axis, samples) in &rec.channels {
+        let Some(axis_img) = image.axes.get(*axis).and_then(Option::as_ref) else {
+            bail!(
+                "{source}: column f{} has no compensator in the image (it covers {}); drop the column or design for that axis",
+                axis_name(*axis),
+                image.axes.iter().flatten().map(|a| axis_name(a.axis as usize)).collect::<Vec<_>>().join(", ")
+            );
+        };
+        axes.push((&axis_img.filter, samples.as_slice()));
+    }
+    let mut channels = Vec::with_capacity(axes.len());
+    for ((axis, _), out) in rec.channels.iter().zip(run_axes(&axes, latency)) {
+        match out {
+            Ok(out) => channels.push((*axis, out)),
+            Err(k) => bail!("{source}: compensated f{} became non-finite at sample {k}; the image is unusable for this record", axis_name(*axis)),
+        }
+    }
+    Ok(SignalRecord { t_s: rec.t_s.clone(), channels })
+}
+
+/// Every axis through the core kernel's block path (bit-identical to stepping
+/// it sample by sample, as the box does), each input followed by `latency`
+/// copies of its last value and the first `latency` outputs dropped; the
+/// results in the order of `axes`. Err(k): the first sample k (counting the
+/// fed samples) whose output is non-finite.
+///
+/// The axes are independent. Up to [`LOCKSTEP_AXES`] of them run in
+/// lockstep on this thread, one per vector lane ([`process_blocks`], the
+/// same numbers): a pair's recurrence is serial in time, so one axis alone
+/// leaves most of a core idle, and three axes in lockstep take 0.58 of the
+/// time of three in turn (BENCHMARKS.md). That beats giving axes threads of
+/// their own: on two cores, x and y in lockstep on one and z on the other
+/// took 1.24x as long as all three in lockstep on one.
+fn run_axes(axes: &[(&AxisFilter, &[f64])], latency: usize) -> Vec<Result<Vec<f64>, usize>> {
+    axes.chunks(LOCKSTEP_AXES).flat_map(|group| run_group(group, latency)).collect()
+}
+
+/// The axes of one group of [`run_axes`], in lockstep.
+fn run_group(group: &[(&AxisFilter, &[f64])], latency: usize) -> Vec<Result<Vec<f64>, usize>> {
+    let inputs: Vec<Vec<f32>> = group
+        .iter()
+        .map(|(_, samples)| {
+            let last = samples.last().copied().unwrap_or(0.0) as f32;
+            let mut input = Vec::with_capacity(samples.len() + latency);
+            input.extend(samples.iter().map(|&u| u as f32));
+            input.resize(samples.len() + latency, last);
+            input
+        })
+        .collect();
+    let mut outputs: Vec<Vec<f32>> = inputs.iter().map(|u| vec![0.0f32; u.len()]).collect();
+    let mut states = vec![AxisState::default(); group.len()];
+    let mut jobs: Vec<BlockJob<'_>> = group
+        .iter()
+        .zip(&inputs)
+        .zip(outputs.iter_mut().zip(states.iter_mut()))
+        .map(|(((filter, _), input), (output, state))| BlockJob { filter, state, input, output })
+        .collect();
+    process_blocks(&mut jobs);
+    outputs.iter().map(|y| drop_latency(y, latency)).collect()
+}
+
+/// The kernel's outputs as f64 without the first `latency`; Err(k): the
+/// first non-finite output k.
+fn drop_latency(y: &[f32], latency: usize) -> Result<Vec<f64>, usize> {
+    match y.iter().position(|v| !v.is_finite()) {
+        Some(k) => Err(k),
+        None => Ok(y.iter().skip(latency).map(|&v| f64::from(v)).collect()),
+    }
+}
+
+/// The box-filter path of `compensate` over a record of any length: the
+/// image's compensators applied block by block with their states carried
+/// over, so memory does not grow with the record. The outputs are those of
+/// [`compensate_record`] bit for bit (the kernel's block path equals its
+/// per-sample `step` for any block lengths): the first `latency` outputs
+/// dropped and, at [`StreamCompensator::finish`], `latency` copies of the
+/// last input fed to produce the last `latency` outputs.
+pub struct StreamCompensator<'a> {
+    filters: Vec<&'a AxisFilter>,
+    states: Vec<AxisState>,
+    axes: Vec<usize>,
+    /// Outputs still to drop (the declared latency, at the start).
+    to_drop: usize,
+    latency: usize,
+    /// Samples fed per axis so far.
+    fed: usize,
+    last: Vec<f32>,
+    input: Vec<Vec<f32>>,
+    output: Vec<Vec<f32>>,
+}
+
+impl<'a> StreamCompensator<'a> {
+    /// Compensators for the channels `axes` of a record from `source`.
+    pub fn new(image: &'a CoeffImage, axes: &[usize], raw_timing: bool, source: &str) -> Result<Self> {
+        let mut filters = Vec::with_capacity(axes.len());
+        for &axis in axes {
+            let Some(axis_img) = image.axes.get(axis).and_then(Option::as_ref) else {
+                bail!(
+                    "{source}: column f{} has no compensator in the image (it covers {}); drop the column or design for that axis",
+                    axis_name(axis),
+                    image.axes.iter().flatten().map(|a| axis_name(a.axis as usize)).collect::<Vec<_>>().join(", ")
+                );
+            };
+            filters.push(&axis_img.filter);
+        }
+        let latency = if raw_timing { 0 } else { usize::from(image.latency_samples) };
+        let n = axes.len();
+        Ok(StreamCompensator {
+            filters,
+            states: vec![AxisState::default(); n],
+            axes: axes.to_vec(),
+            to_drop: latency,
+            latency,
+            fed: 0,
+            last: vec![0.0; n],
+            input: vec![Vec::new(); n],
+            output: vec![Vec::new(); n],
+        })
+    }
+
+    /// The latency this compensator removes (samples).
+    pub fn latency(&self) -> usize {
+        self.latency
+    }
+
+    /// Compensate the next block (one slice per channel, equal lengths) and
+    /// append the outputs it completes to `out` (one vector per channel):
+    /// as many as the block has, fewer while the latency is being dropped.
+    pub fn push(&mut self, block: &[Vec<f64>], out: &mut [Vec<f64>]) -> Result<usize> {
+        for ((inp, b), last) in self.input.iter_mut().zip(block).zip(&mut self.last) {
+            inp.clear();
+            inp.extend(b.iter().map(|&u| u as f32));
+            if let Some(&l) = inp.last() {
+                *last = l;
+            }
+        }
+        self.run(out)
+    }
+
+    /// Feed the latency's held copies of the last input and append the last
+    /// outputs to `out`.
+    pub fn finish(&mut self, out: &mut [Vec<f64>]) -> Result<usize> {
+        for (inp, &last) in self.input.iter_mut().zip(&self.last) {
+            inp.clear();
+            inp.resize(self.latency, last);
+        }
+        self.run(out)
+    }
+
+    fn run(&mut self, out: &mut [Vec<f64>]) -> Result<usize> {
+        let n = self.input.first().map_or(0, Vec::len);
+        for o in self.output.iter_mut() {
+            o.clear();
+            o.resize(n, 0.0);
+        }
+        for (((filters, states), inputs), outputs) in self
+            .filters
+            .chunks(LOCKSTEP_AXES)
+            .zip(self.states.chunks_mut(LOCKSTEP_AXES))
+            .zip(self.input.chunks(LOCKSTEP_AXES))
+            .zip(self.output.chunks_mut(LOCKSTEP_AXES))
+        {
+            let mut jobs: Vec<BlockJob<'_>> = filters
+                .iter()
+                .zip(states.iter_mut())
+                .zip(inputs)
+                .zip(outputs.iter_mut())
+                .map(|(((filter, state), input), output)| BlockJob { filter, state, input, output })
+                .collect();
+            process_blocks(&mut jobs);
+        }
+        for (axis, y) in self.axes.iter().zip(&self.output) {
+            if let Some(k) = y.iter().position(|v| !v.is_finite()) {
+                bail!(
+                    "compensated f{} became non-finite at sample {}; the image is unusable for this record",
+                    axis_name(*axis),
+                    self.fed + k
+                );
+            }
+        }
+        self.fed += n;
+        let skip = self.to_drop.min(n);
+        self.to_drop -= skip;
+        for (o, y) in out.iter_mut().zip(&self.output) {
+            o.extend(y[skip..].iter().map(|&v| f64::from(v)));
+        }
+        Ok(n - skip)
+    }
+}
+
+/// Parallel elaboration (paper §3.3), **offline only**: split every force
+/// column into the image's bands with the zero-phase crossovers of
+/// [`crate::offline::bandsplit`], run band k through band k's compensator with
+/// [`compensate_record`] (the core kernel, as for any image), and sum the
+/// bands. The split adds no phase and its bands sum to the input, so the
+/// result differs from the input only by what the band compensators do.
+pub fn compensate_parallel(image: &ParallelImage, rec: &SignalRecord, raw_timing: bool, source: &str) -> Result<SignalRecord> {
+    let edges: Vec<(f64, f64)> = image.bands().iter().map(|b| (f64::from(b.lo_hz), f64::from(b.hi_hz))).collect();
+    let crossovers = crate::design::bands::crossovers(&edges)?;
+    let fs = f64::from(image.fs_hz);
+    // split[c][k]: column c, band k
+    let split: Vec<Vec<Vec<f64>>> = rec
+        .channels
+        .iter()
+        .map(|(_, x)| crate::offline::bandsplit::split(x, fs, &crossovers))
+        .collect::<Result<_>>()?;
+    let mut sum: Vec<(usize, Vec<f64>)> = rec.channels.iter().map(|(a, x)| (*a, vec![0.0; x.len()])).collect();
+    for k in 0..image.bands().len() {
+        let band_img = image.band_image(k).ok_or_else(|| anyhow::anyhow!("band {k} missing"))?;
+        let band_rec = SignalRecord {
+            t_s: None,
+            channels: rec.channels.iter().zip(&split).map(|((a, _), s)| (*a, s[k].clone())).collect(),
+        };
+        let out = compensate_record(&band_img, &band_rec, raw_timing, source)
+            .with_context(|| format!("band {k} ({:.0}-{:.0} Hz)", edges[k].0, edges[k].1))?;
+        for ((_, acc), (_, y)) in sum.iter_mut().zip(&out.channels) {
+            for (a, v) in acc.iter_mut().zip(y) {
+                *a += v;
+            }
+        }
+    }
+    Ok(SignalRecord { t_s: rec.t_s.clone(), channels: sum })
+}
+
+/// Check a record's `t_s` column (if any) against a sample rate (Hz).
+pub fn check_rate(fs_hz: u32, rec: &SignalRecord, source: &str) -> Result<()> {
+    if let Some((fs, jitter)) = rec.sample_rate_from_time() {
+        let want = f64::from(fs_hz);
+        if ((fs - want) / want).abs() > FS_TOLERANCE {
+            bail!(
+                "{source}: column t_s implies a sample rate of {fs:.3} Hz, but the image was designed for {want} Hz; \
+                 resample the record or design for its rate"
+            );
+        }
+        if jitter > 0.01 {
+            bail!("{source}: column t_s is not uniformly spaced (a step deviates {:.1} % from the mean)", jitter * 100.0);
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dynocomp_core::kernel::Section;
+
+    /// A different filter per axis: `a + 1` pairs (so groups of unequal
+    /// sizes meet), a real pole and `a` taps.
+    fn filter(a: usize) -> AxisFilter {
+        let mut secs: Vec<Section> = (0..=a)
+            .map(|i| {
+                let (re, im) = (0.97 - 0.01 * i as f32, 0.05 + 0.03 * (i + a) as f32);
+                Section { delta: [re - 1.0, im, -im, re - 1.0], b: [1.0, 0.0], c: [0.3 + 0.1 * a as f32, -0.2] }
+            })
+            .collect();
+        secs.push(Section::first_order(0.5, 1.0, 0.7));
+        let taps: Vec<f32> = (0..a).map(|j| 0.1 * (j as f32 + 1.0)).collect();
+        AxisFilter::with_fir(&secs, 0.5, &taps).unwrap()
+    }
+
+    /// 1-5 axes (one lockstep group, or a group and a rest) give each axis,
+    /// in its own place, exactly the box's per-sample `step` outputs (bit for bit,
+    /// latency dropped), and names the first non-finite sample of the axis
+    /// that has one.
+    #[test]
+    fn every_axis_gets_the_box_outputs_in_its_place() {
+        let latency = 3;
+        for n_axes in 1..=5 {
+            let filters: Vec<AxisFilter> = (0..n_axes).map(filter).collect();
+            let inputs: Vec<Vec<f64>> = (0..n_axes)
+                .map(|a| (0..1500).map(|k| ((k * (a + 3)) as f64 * 0.37).sin() * 100.0 + a as f64).collect())
+                .collect();
+            let want: Vec<Vec<f64>> = filters
+                .iter()
+                .zip(&inputs)
+                .map(|(f, u)| {
+                    let mut st = AxisState::default();
+                    let fed = u.iter().chain(std::iter::repeat_n(u.last().unwrap(), latency));
+                    fed.map(|&v| f64::from(f.step(&mut st, v as f32))).skip(latency).collect()
+                })
+                .collect();
+            let axes: Vec<(&AxisFilter, &[f64])> = filters.iter().zip(&inputs).map(|(f, u)| (f, u.as_slice())).collect();
+            let got = run_axes(&axes, latency);
+            assert_eq!(got.len(), n_axes);
+            for (a, (g, w)) in got.iter().zip(&want).enumerate() {
+                let g = g.as_ref().unwrap();
+                assert_eq!(g.len(), w.len());
+                for (k, (x, y)) in g.iter().zip(w).enumerate() {
+                    assert_eq!(x.to_bits(), y.to_bits(), "{n_axes} axes: axis {a}, sample {k}");
+                }
+            }
+        }
+        let mut bad = vec![1.0; 100];
+        bad[40] = f64::NAN;
+        let (f0, f1) = (filter(0), filter(1));
+        let ok = vec![1.0; 100];
+        let got = run_axes(&[(&f0, ok.as_slice()), (&f1, bad.as_slice())], 0);
+        assert!(got[0].is_ok());
+        assert_eq!(got[1], Err(40));
+    }
+}

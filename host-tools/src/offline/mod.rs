@@ -1,0 +1,14 @@
+//! Offline: compensate recorded data on the host.
+//!
+//! [`compensate`] runs the box's own kernel over a record (bit-exact with
+//! the box), [`smoother`] the zero-lag fixed-interval smoother, with its
+//! model sidecar, [`force_prior`] the harmonic force prior, and
+//! [`bandsplit`] the zero-phase band split of parallel elaboration.
+//! May import the leaves, `realize` and `design`.
+
+pub mod bandsplit;
+pub mod compensate;
+pub mod drift;
+pub mod force_prior;
+pub mod sidecar;
+pub mod smoother;

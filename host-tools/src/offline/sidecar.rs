@@ -1,0 +1,280 @@
+//! The model sidecar `<image>.model.json` that `dynocomp design` writes
+//! next to the image: the fitted Ĝ(s) and the discrete model of the design
+//! (a sidecar without the discrete model, from an older version, gets the
+//! first-order hold of Ĝ(s), which that version used), the two states of a
+//! two-state design and the force priors, tied to the image by its id
+//! (CRC-32) and the source FRF's SHA-256; `compensate --offline` refuses a
+//! missing or foreign sidecar. Only the default method (vf) writes one;
+//! `--method paper` images (continuous Q, Tustin) are refused by `--offline`
+//! with a message saying so.
+
+use anyhow::{bail, Context, Result};
+use num_complex::Complex64;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+use dynocomp_core::image::{CoeffImage, DesignMethod};
+
+use crate::design::discretize::{discretize, DiscreteModel, Discretization};
+use crate::design::two_state::model::{pair, TwoState};
+use crate::fit::{PoleResidueModel, Term};
+use crate::frf::axis_name;
+use crate::io::one_line;
+
+/// Format tag of the model sidecar.
+pub const SIDECAR_FORMAT: &str = "dynocomp-model/1";
+
+/// One pole-residue term of a sidecar model (rad/s).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum TermJson {
+    /// Real pole p (rad/s) with real residue r (rad/s).
+    Real {
+        /// Pole (rad/s).
+        pole: f64,
+        /// Residue (rad/s).
+        residue: f64,
+    },
+    /// Complex pair: the pole with Im > 0 and its residue, as [re, im] (rad/s).
+    Pair {
+        /// Pole [re, im] (rad/s).
+        pole: [f64; 2],
+        /// Residue [re, im] (rad/s).
+        residue: [f64; 2],
+    },
+}
+
+/// The fitted sensor model G(s) of one axis.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AxisModelJson {
+    /// Axis letter (x, y, z).
+    pub axis: String,
+    /// Direct term d (N/N).
+    pub d: f64,
+    /// Pole-residue terms.
+    pub terms: Vec<TermJson>,
+    /// The discrete model of the design (absent in older sidecars: FOH).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub discrete: Option<DiscreteModel>,
+    /// Both states of a design from two FRFs (`design --frf A --frf B`,
+    /// issue #15; absent otherwise and in older sidecars).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub two_state: Option<crate::offline::sidecar::TwoStateJson>,
+    /// The harmonic force prior of `compensate --offline` (`design
+    /// --force-prior harmonics`; absent otherwise and in older sidecars).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub force_prior: Option<crate::offline::force_prior::HarmonicPrior>,
+    /// The record's force spectrum q was chosen for (`design --force-prior
+    /// spectrum`; absent otherwise and in older sidecars).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub force_spectrum: Option<crate::design::force_spectrum::SpectrumProvenance>,
+}
+
+/// The sidecar's terms of a pole-residue model.
+pub fn terms_to_json(m: &PoleResidueModel) -> Vec<TermJson> {
+    m.terms
+        .iter()
+        .map(|t| match *t {
+            Term::Real { pole, residue } => TermJson::Real { pole, residue },
+            Term::Pair { pole, residue } => TermJson::Pair { pole: [pole.re, pole.im], residue: [residue.re, residue.im] },
+        })
+        .collect()
+}
+
+/// The pole-residue model of sidecar terms, validated (finite, stable poles
+/// with Im > 0); the error names `source` and axis `name`.
+pub fn model_from_json(d: f64, terms: &[TermJson], source: &str, name: &str) -> Result<PoleResidueModel> {
+    let model = PoleResidueModel {
+        terms: terms
+            .iter()
+            .map(|t| match t {
+                TermJson::Real { pole, residue } => Term::Real { pole: *pole, residue: *residue },
+                TermJson::Pair { pole, residue } => Term::Pair {
+                    pole: Complex64::new(pole[0], pole[1]),
+                    residue: Complex64::new(residue[0], residue[1]),
+                },
+            })
+            .collect(),
+        d,
+    };
+    let finite = d.is_finite()
+        && terms.iter().all(|t| match t {
+            TermJson::Real { pole, residue } => pole.is_finite() && residue.is_finite(),
+            TermJson::Pair { pole, residue } => pole.iter().chain(residue).all(|v| v.is_finite()) && pole[1] > 0.0,
+        });
+    if !finite || !model.is_stable() {
+        bail!("{source}: axis {name}: the model has non-finite values or unstable poles; re-run `dynocomp design`");
+    }
+    Ok(model)
+}
+
+/// The sidecar `<image>.model.json` written by `dynocomp design`: the fitted
+/// model per axis, tied to one image.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelSidecar {
+    /// Always [`SIDECAR_FORMAT`].
+    pub format: String,
+    /// Id (CRC-32, 8 hex digits) of the image this model belongs to.
+    pub image_id: String,
+    /// SHA-256 of the source FRF file (hex), as in the image.
+    pub source_sha256: String,
+    /// Sample rate of the image (Hz).
+    pub fs_hz: f64,
+    /// Models per axis.
+    pub axes: Vec<AxisModelJson>,
+}
+
+/// Path of the model sidecar of an image: `<image>.model.json`.
+pub fn sidecar_path(image: &Path) -> PathBuf {
+    let mut s = image.as_os_str().to_owned();
+    s.push(".model.json");
+    PathBuf::from(s)
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+impl ModelSidecar {
+    /// Sidecar for `image` with the given per-axis models `(axis, model)`.
+    pub fn new(image: &CoeffImage, models: &[(usize, &PoleResidueModel, Option<&DiscreteModel>)]) -> Self {
+        let axes = models
+            .iter()
+            .map(|(axis, m, dm)| AxisModelJson {
+                discrete: dm.cloned(),
+                axis: axis_name(*axis).to_string(),
+                d: m.d,
+                terms: terms_to_json(m),
+                two_state: None,
+                force_prior: None,
+                force_spectrum: None,
+            })
+            .collect();
+        ModelSidecar {
+            format: SIDECAR_FORMAT.into(),
+            image_id: format!("{:08x}", image.id()),
+            source_sha256: hex(&image.source_sha256),
+            fs_hz: f64::from(image.fs_hz),
+            axes,
+        }
+    }
+
+    /// The model of `axis`, validated (finite, stable poles with Im ≥ 0).
+    pub fn model(&self, axis: usize, source: &str) -> Result<PoleResidueModel> {
+        let name = axis_name(axis);
+        let Some(a) = self.axes.iter().find(|a| a.axis == name) else {
+            bail!("{source}: no model for axis {name}; re-run `dynocomp design` for this axis");
+        };
+        model_from_json(a.d, &a.terms, source, name)
+    }
+
+    /// The discrete model of `axis` for the smoother: the stored one,
+    /// validated (finite, poles inside the unit circle, a short advance), or
+    /// the first-order hold of Ĝ(s) for a sidecar that has none.
+    pub fn discrete_model(&self, axis: usize, source: &str) -> Result<DiscreteModel> {
+        let model = self.model(axis, source)?;
+        let name = axis_name(axis);
+        let stored = self.axes.iter().find(|a| a.axis == name).and_then(|a| a.discrete.clone());
+        let Some(dm) = stored else {
+            return Ok(discretize(&model, self.fs_hz, Discretization::Foh, (0.0, 0.0))?.0);
+        };
+        let finite = dm.d.is_finite()
+            && dm.fir.iter().all(|v| v.is_finite())
+            && dm.terms.iter().all(|t| match *t {
+                crate::design::discretize::DTerm::Real { pole, residue } => pole.is_finite() && residue.is_finite(),
+                crate::design::discretize::DTerm::Pair { pole, residue } => [pole.0, pole.1, residue.0, residue.1].iter().all(|v| v.is_finite()),
+            });
+        if !finite || !(dm.pole_radius() < 1.0) || dm.fs_hz != self.fs_hz || dm.advance > 64 || dm.fir.len() > 64 {
+            bail!("{source}: axis {name}: the discrete model is not valid (non-finite, unstable, another rate, or too long); re-run `dynocomp design`");
+        }
+        Ok(dm)
+    }
+}
+
+/// Write the sidecar of `image` (at `image_path`) atomically.
+pub fn write_sidecar(image_path: &Path, sidecar: &ModelSidecar) -> Result<()> {
+    let path = sidecar_path(image_path);
+    let text = serde_json::to_string_pretty(sidecar)?;
+    crate::io::atomic::write_bytes_atomic(&path, text.as_bytes())
+}
+
+/// Read the sidecar of the image at `image_path` and check that it belongs
+/// to `image` (id, source hash, rate).
+pub fn read_sidecar(image_path: &Path, image: &CoeffImage) -> Result<ModelSidecar> {
+    if image.method != DesignMethod::VectorFitting {
+        bail!(
+            "{}: --offline needs an image designed with the default method (vf): the smoother uses its discrete-time q and R and fitted model",
+            image_path.display()
+        );
+    }
+    let path = sidecar_path(image_path);
+    let shown = path.display().to_string();
+    let text = std::fs::read_to_string(&path).with_context(|| {
+        format!("{shown}: cannot read the model sidecar that --offline needs (`dynocomp design` writes it next to the image)")
+    })?;
+    parse_sidecar(&text, &shown, image, image_path)
+}
+
+/// Parse the text of a model sidecar (shown as `shown` in errors) and check
+/// that it belongs to `image`, stored at `image_path`: the pure part of
+/// [`read_sidecar`].
+pub fn parse_sidecar(text: &str, shown: &str, image: &CoeffImage, image_path: &Path) -> Result<ModelSidecar> {
+    // serde_json's message quotes the offending value (an unknown `kind`),
+    // which may hold newlines: escaped, so the error stays one line.
+    let s: ModelSidecar = serde_json::from_str(text).map_err(|e| anyhow::anyhow!("{shown}: not a valid model sidecar: {}", one_line(&e.to_string())))?;
+    if s.format != SIDECAR_FORMAT {
+        bail!("{shown}: format `{}`, expected `{SIDECAR_FORMAT}`", one_line(&s.format));
+    }
+    let id = format!("{:08x}", image.id());
+    if s.image_id != id || s.source_sha256 != hex(&image.source_sha256) || s.fs_hz != f64::from(image.fs_hz) {
+        bail!(
+            "{shown}: belongs to image {} (source {}), not to {} (image {id}); re-run `dynocomp design` to write both together",
+            one_line(&s.image_id),
+            one_line(s.source_sha256.get(..12).unwrap_or(&s.source_sha256)),
+            image_path.display()
+        );
+    }
+    Ok(s)
+}
+
+/// Both states of one axis in the model sidecar (`design --frf A --frf B`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TwoStateJson {
+    /// Direct term of state 0.
+    pub d_before: f64,
+    /// Terms of state 0 (paired order).
+    pub before: Vec<TermJson>,
+    /// Direct term of state 1.
+    pub d_after: f64,
+    /// Terms of state 1 (in the order of their partners in `before`).
+    pub after: Vec<TermJson>,
+    /// Compensated band of the unit-circle discretization (Hz).
+    pub band_hz: (f64, f64),
+    /// FIR taps of state 0's discrete model.
+    pub fir_taps: usize,
+    /// Advance of state 0's discrete model (samples).
+    pub advance: usize,
+}
+
+impl TwoStateJson {
+    /// The sidecar entry for the paired states `ts`, the design band and
+    /// state 0's discrete structure.
+    pub fn new(ts: &TwoState, band_hz: (f64, f64), dm0: &DiscreteModel) -> Self {
+        TwoStateJson {
+            d_before: ts.before.d,
+            before: terms_to_json(&ts.before),
+            d_after: ts.after.d,
+            after: terms_to_json(&ts.after),
+            band_hz,
+            fir_taps: dm0.fir.len(),
+            advance: dm0.advance,
+        }
+    }
+
+    /// The paired states, validated (the pairing is checked again).
+    pub fn states(&self, source: &str, name: &str) -> Result<TwoState> {
+        let b = model_from_json(self.d_before, &self.before, source, name)?;
+        let a = model_from_json(self.d_after, &self.after, source, name)?;
+        pair(name, &b, &a).with_context(|| source.to_string())
+    }
+}

@@ -1,0 +1,12 @@
+//! Realize: turn a linear filter into the box's f32 modal form and prove it.
+//!
+//! [`modal`] realizes a state-space compensator as 2x2 "delta" blocks plus
+//! an FIR tail, [`quantize`] rounds it to f32 and verifies it against the
+//! f64 filter, [`load`] predicts the box's CPU load of an image.
+//! May import only the leaves (frf, metrics, numeric, io, fit) and the core.
+
+pub mod choose;
+pub mod image;
+pub mod load;
+pub mod modal;
+pub mod quantize;

@@ -1,0 +1,410 @@
+//! Realization of a compensator in the kernel's form (DESIGN.md step 6):
+//! modal 2x2 sections in delta form for the slow poles, plus a short FIR for
+//! the fast pole cluster.
+//!
+//! Method (all f64):
+//! 1. Complex Schur form A = Q T Qᴴ (nalgebra).
+//! 2. Reorder T by Givens swaps of adjacent eigenvalues so the slow poles
+//!    (|λ| ≥ ρ₀) come first, the fast ones (|λ| < ρ₀) last. ρ₀ is chosen
+//!    among the gaps of the pole moduli for the best-conditioned split.
+//! 3. Decouple the two clusters with the triangular Sylvester equation
+//!    T11 X − X T22 = −T12 (well conditioned: the clusters are separated).
+//! 4. Fast cluster → FIR taps h_j = C2 T22^{j−1} B2, exact up to the
+//!    truncation |λ|^m (checked).
+//! 5. Slow cluster → eigenvectors of the triangular T11 by back substitution
+//!    (the modal transform; its condition number is checked), residues
+//!    ρ_i = ĉ_i·b̂_i, and one real 2x2 section per conjugate pair
+//!    (Δ = A − I = [[σ, ω], [−ω, σ]], b = [1, 0], c = [2 Re ρ, 2 Im ρ]),
+//!    real poles two to a diagonal section (b = 1, c = ρ): the two shapes the
+//!    kernel runs (`dynocomp_core::kernel`). Unit input gain makes the
+//!    kernel's folding of b into c exact; f32 rounding is relative, so the
+//!    state's scale does not matter for accuracy.
+
+use anyhow::{bail, Result};
+use dynocomp_core::kernel::{MAX_FIR, MAX_SECTIONS};
+use nalgebra::{DMatrix, DVector, Schur};
+use num_complex::Complex64;
+
+use crate::numeric::lti::StateSpace;
+
+/// One 2x2 section in f64 (A − I stored directly, as the kernel does).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Section64 {
+    /// A − I, row-major.
+    pub delta: [f64; 4],
+    /// Input column.
+    pub b: [f64; 2],
+    /// Output row.
+    pub c: [f64; 2],
+}
+
+/// The compensator in kernel form, f64.
+#[derive(Clone, Debug)]
+pub struct ModalRealization {
+    /// Sections (slow poles).
+    pub sections: Vec<Section64>,
+    /// Direct term.
+    pub d: f64,
+    /// FIR taps h_1..h_m (fast poles).
+    pub fir: Vec<f64>,
+    /// Poles carried by the sections (z-plane).
+    pub poles: Vec<Complex64>,
+    /// Condition number estimate of the modal transform of the slow cluster.
+    pub modal_condition: f64,
+    /// Norm of the cluster decoupling solution X (1 = trivial).
+    pub decoupling_norm: f64,
+    /// Relative size of the truncated FIR tail.
+    pub fir_truncation: f64,
+}
+
+impl ModalRealization {
+    /// H(z) at z = e^{j2πf/fs}, evaluated from the realization (f64).
+    pub fn freq_response(&self, f_hz: f64, fs_hz: f64) -> Complex64 {
+        let z = Complex64::from_polar(1.0, 2.0 * std::f64::consts::PI * f_hz / fs_hz);
+        let mut h = Complex64::new(self.d, 0.0);
+        for s in &self.sections {
+            h += section_response(s.delta, s.b, s.c, z);
+        }
+        let zi = 1.0 / z;
+        let mut zp = zi;
+        for tap in &self.fir {
+            h += zp * tap;
+            zp *= zi;
+        }
+        h
+    }
+}
+
+/// c (zI − I − Δ)⁻¹ b for one 2x2 section.
+pub fn section_response(delta: [f64; 4], b: [f64; 2], c: [f64; 2], z: Complex64) -> Complex64 {
+    let zm1 = z - 1.0;
+    let (m11, m12, m21, m22) = (zm1 - delta[0], -delta[1], -delta[2], zm1 - delta[3]);
+    let det = m11 * m22 - m12 * m21;
+    let x1 = (m22 * b[0] - m12 * b[1]) / det;
+    let x2 = (-m21 * b[0] + m11 * b[1]) / det;
+    x1 * c[0] + x2 * c[1]
+}
+
+/// Poles of one 2x2 section: eigenvalues of I + Δ (z-plane), with the
+/// discriminant formed as ((a − d)/2)² + b·c to avoid cancellation.
+pub fn section_poles(delta: [f64; 4]) -> [Complex64; 2] {
+    let (a, b, c, d) = (1.0 + delta[0], delta[1], delta[2], 1.0 + delta[3]);
+    let tr = a + d;
+    let disc = Complex64::new((a - d) * (a - d) / 4.0 + b * c, 0.0).sqrt();
+    [tr / 2.0 + disc, tr / 2.0 - disc]
+}
+
+/// Poles at or beyond this modulus always go to the modal sections (an FIR of
+/// 24 taps cannot carry them: 0.6^24 ≈ 5e-6).
+const RHO_FAST_MAX: f64 = 0.6;
+/// Required relative size of the FIR truncation tail (of Σ|h_j|).
+const FIR_TAIL_TOL: f64 = 1e-7;
+/// Largest relative truncation tail accepted at the full length
+/// [`MAX_FIR`], when [`FIR_TAIL_TOL`] would need more taps. The tail adds at
+/// most tail·max|u| to the output, ≤ 1e-6 of Σ|h_j|·max|u| here: the size
+/// of f32 rounding of a well-scaled filter (16 ε_f32). It lets a fast pole
+/// pair up to |z| ≈ 0.5 join the FIR instead of a section; split from a
+/// cluster of poles near z = 0 (the smoother's delay chain), such a pair has
+/// a residue ∝ 1/|z|^(cluster size) that the FIR taps must cancel, so its
+/// section and the taps sum terms 10³ times the output (issue #6: axis y of
+/// the bundled example, 1.6e-4 of peak-to-peak lost to f32 rounding).
+const FIR_TAIL_TOL_FULL: f64 = 1e-6;
+/// Largest acceptable modal-transform condition number.
+const MAX_MODAL_CONDITION: f64 = 1e8;
+
+/// Swap adjacent diagonal entries i, i+1 of the upper triangular T,
+/// updating Q so that A = Q T Qᴴ still holds.
+fn swap_adjacent(t: &mut DMatrix<Complex64>, q: &mut DMatrix<Complex64>, i: usize) {
+    let n = t.nrows();
+    let (a, b, x) = (t[(i, i)], t[(i + 1, i + 1)], t[(i, i + 1)]);
+    // eigenvector of [[a, x], [0, b]] for b: v = [x, b − a]
+    let v = [x, b - a];
+    let nv = (v[0].norm_sqr() + v[1].norm_sqr()).sqrt();
+    if nv == 0.0 {
+        return;
+    }
+    let q1 = [v[0] / nv, v[1] / nv];
+    let q2 = [-v[1].conj() / nv, v[0].conj() / nv];
+    // rows i, i+1 ← Uᴴ·rows
+    for j in 0..n {
+        let (r0, r1) = (t[(i, j)], t[(i + 1, j)]);
+        t[(i, j)] = q1[0].conj() * r0 + q1[1].conj() * r1;
+        t[(i + 1, j)] = q2[0].conj() * r0 + q2[1].conj() * r1;
+    }
+    // cols i, i+1 ← cols·U
+    for m in [&mut *t, &mut *q] {
+        for r in 0..n {
+            let (c0, c1) = (m[(r, i)], m[(r, i + 1)]);
+            m[(r, i)] = c0 * q1[0] + c1 * q1[1];
+            m[(r, i + 1)] = c0 * q2[0] + c1 * q2[1];
+        }
+    }
+    t[(i + 1, i)] = Complex64::new(0.0, 0.0);
+    t[(i, i)] = b;
+    t[(i + 1, i + 1)] = a;
+}
+
+/// Candidate fast/slow thresholds: the midpoints of the gaps between the
+/// distinct eigenvalue moduli below [`RHO_FAST_MAX`] (and 0: no fast cluster).
+fn thresholds(moduli: &[f64]) -> Vec<f64> {
+    let mut m: Vec<f64> = moduli.iter().copied().filter(|v| *v < RHO_FAST_MAX).collect();
+    m.sort_by(f64::total_cmp);
+    let mut out = vec![0.0];
+    for w in m.windows(2) {
+        if w[1] - w[0] > 1e-3 {
+            out.push(0.5 * (w[0] + w[1]));
+        }
+    }
+    if let Some(last) = m.last() {
+        let above = moduli.iter().copied().filter(|v| *v > *last).fold(RHO_FAST_MAX, f64::min);
+        out.push(0.5 * (last + above));
+    }
+    out
+}
+
+/// Every valid realization of a compensator, one per candidate split of the
+/// poles into a fast (FIR) and a slow (modal) cluster, most accurate (f64,
+/// against the dense transfer function) first. The caller picks the one that survives f32 rounding best. Fails
+/// with the reason of the last attempt when no split works.
+pub fn realize_candidates(ss: &StateSpace) -> Result<Vec<ModalRealization>> {
+    let moduli: Vec<f64> = ss.a.complex_eigenvalues().iter().map(|z| z.norm()).collect();
+    let mut out: Vec<ModalRealization> = Vec::new();
+    let mut last_err = None;
+    for rho in thresholds(&moduli) {
+        match realize_split(ss, rho) {
+            Ok(r) => out.push(r),
+            Err(e) => last_err = Some(e),
+        }
+    }
+    if out.is_empty() {
+        return Err(last_err.unwrap_or_else(|| anyhow::anyhow!("realization: no eigenvalues")));
+    }
+    // Rank by measured accuracy: the largest deviation of the realization's
+    // response from the dense transfer function over 0..fs/2 (relative to
+    // its peak), on a grid in normalized frequency.
+    let freqs: Vec<f64> = (0..=256).map(|i| 0.5 * i as f64 / 256.0).collect();
+    let h = ss.freq_responses(&freqs, 1.0);
+    let peak = h.iter().map(|h| h.norm()).fold(0.0, f64::max);
+    let mut scored: Vec<(f64, ModalRealization)> = out
+        .into_iter()
+        .map(|r| {
+            let worst = freqs.iter().zip(&h).map(|(f, h)| (r.freq_response(*f, 1.0) - h).norm()).fold(0.0, f64::max);
+            (worst / peak, r)
+        })
+        .collect();
+    scored.sort_by(|a, b| a.0.total_cmp(&b.0));
+    Ok(scored.into_iter().map(|x| x.1).collect())
+}
+
+/// The most accurate realization (see [`realize_candidates`]).
+pub fn realize(ss: &StateSpace) -> Result<ModalRealization> {
+    Ok(realize_candidates(ss)?.swap_remove(0))
+}
+
+/// Realize with a given fast/slow threshold `rho` on the pole modulus.
+fn realize_split(ss: &StateSpace, rho: f64) -> Result<ModalRealization> {
+    let n = ss.a.nrows();
+    let ac = ss.a.map(|v| Complex64::new(v, 0.0));
+    let schur = Schur::try_new(ac, 1e-15, 10_000)
+        .ok_or_else(|| anyhow::anyhow!("realization: Schur decomposition did not converge"))?;
+    let (mut q, mut t) = schur.unpack();
+    for i in 0..n {
+        for j in 0..i {
+            t[(i, j)] = Complex64::new(0.0, 0.0);
+        }
+    }
+    // bubble slow eigenvalues to the front (stable order otherwise)
+    for _ in 0..n {
+        let mut swapped = false;
+        for i in 0..n.saturating_sub(1) {
+            if t[(i, i)].norm() < rho && t[(i + 1, i + 1)].norm() >= rho {
+                swap_adjacent(&mut t, &mut q, i);
+                swapped = true;
+            }
+        }
+        if !swapped {
+            break;
+        }
+    }
+    let m = (0..n).take_while(|&i| t[(i, i)].norm() >= rho).count();
+    if (m..n).any(|i| t[(i, i)].norm() >= rho) {
+        bail!("realization: eigenvalue reordering failed");
+    }
+    // Decouple: T11 X − X T22 = −T12, column by column.
+    let nf = n - m;
+    let mut x = DMatrix::<Complex64>::zeros(m, nf);
+    for j in 0..nf {
+        let lam = t[(m + j, m + j)];
+        let mut rhs: Vec<Complex64> = (0..m).map(|i| -t[(i, m + j)]).collect();
+        for l in 0..j {
+            let tl = t[(m + l, m + j)];
+            for i in 0..m {
+                rhs[i] += x[(i, l)] * tl;
+            }
+        }
+        for i in (0..m).rev() {
+            let mut s = rhs[i];
+            for k in i + 1..m {
+                s -= t[(i, k)] * x[(k, j)];
+            }
+            x[(i, j)] = s / (t[(i, i)] - lam);
+        }
+    }
+    let decoupling_norm = 1.0 + x.norm();
+    if !(decoupling_norm < 1e8) {
+        bail!("realization: fast and slow poles are not separable (decoupling norm {decoupling_norm:.1e})");
+    }
+    // Transformed input/output: B̃ = S⁻¹ Qᴴ b, C̃ = c Q S with S = [[I, X], [0, I]].
+    let bq = q.adjoint() * ss.b.map(|v| Complex64::new(v, 0.0));
+    let cq = ss.c.map(|v| Complex64::new(v, 0.0)).transpose() * &q;
+    let mut b1: Vec<Complex64> = (0..m).map(|i| bq[i]).collect();
+    let b2: Vec<Complex64> = (0..nf).map(|i| bq[m + i]).collect();
+    for i in 0..m {
+        for j in 0..nf {
+            b1[i] -= x[(i, j)] * b2[j];
+        }
+    }
+    let c1: Vec<Complex64> = (0..m).map(|i| cq[i]).collect();
+    let mut c2: Vec<Complex64> = (0..nf).map(|j| cq[m + j]).collect();
+    for j in 0..nf {
+        for i in 0..m {
+            c2[j] += c1[i] * x[(i, j)];
+        }
+    }
+
+    // Fast cluster → FIR.
+    let mut fir = Vec::new();
+    let mut fir_truncation = 0.0;
+    if nf > 0 {
+        let t22 = t.view((m, m), (nf, nf)).clone_owned();
+        let mut v = DVector::<Complex64>::from_vec(b2.clone());
+        let c2v = DVector::<Complex64>::from_vec(c2.clone());
+        let mut taps = Vec::new();
+        for _ in 0..MAX_FIR + 16 {
+            taps.push(c2v.dot(&v)); // c2ᵀ v (no conjugation)
+            v = &t22 * v;
+        }
+        let total: f64 = taps.iter().map(|h| h.norm()).sum::<f64>().max(f64::MIN_POSITIVE);
+        // shortest length whose tail is negligible
+        let mut len = 0;
+        for l in 0..=MAX_FIR {
+            let tail: f64 = taps[l..].iter().map(|h| h.norm()).sum();
+            if tail <= FIR_TAIL_TOL * total {
+                len = l;
+                break;
+            }
+            len = l + 1;
+        }
+        let full_tail: f64 = taps[MAX_FIR..].iter().map(|h| h.norm()).sum();
+        if len > MAX_FIR && full_tail <= FIR_TAIL_TOL_FULL * total {
+            len = MAX_FIR;
+        }
+        if len > MAX_FIR {
+            let tail = full_tail;
+            bail!(
+                "realization: the fast poles need more than {MAX_FIR} FIR taps (tail {:.1e} of the response); reduce the lag",
+                tail / total
+            );
+        }
+        fir_truncation = taps[len..].iter().map(|h| h.norm()).sum::<f64>() / total;
+        let imag = taps[..len].iter().map(|h| h.im.abs()).fold(0.0, f64::max);
+        if imag > 1e-9 * total {
+            bail!("realization: FIR taps are not real (imaginary part {imag:.1e}); the fast cluster is not conjugate-closed");
+        }
+        fir = taps[..len].iter().map(|h| h.re).collect();
+    }
+
+    // Slow cluster → eigenvectors of triangular T11 (unit upper triangular W).
+    let mut w = DMatrix::<Complex64>::identity(m, m);
+    for k in 0..m {
+        let lam = t[(k, k)];
+        for i in (0..k).rev() {
+            let mut s = Complex64::new(0.0, 0.0);
+            for l in i + 1..=k {
+                s += t[(i, l)] * w[(l, k)];
+            }
+            let den = t[(i, i)] - lam;
+            if den.norm() == 0.0 {
+                bail!("realization: repeated pole {lam}; nearly coincident modes cannot be split into sections");
+            }
+            w[(i, k)] = -s / den;
+        }
+    }
+    let w_inv = w
+        .clone()
+        .solve_upper_triangular(&DMatrix::identity(m, m))
+        .ok_or_else(|| anyhow::anyhow!("realization: modal transform is singular"))?;
+    let modal_condition = w.norm() * w_inv.norm() / (m.max(1) as f64);
+    if !(modal_condition < MAX_MODAL_CONDITION) {
+        bail!("realization: modal transform is ill-conditioned (condition {modal_condition:.1e}); nearly coincident compensator poles");
+    }
+    let bh = &w_inv * DVector::from_vec(b1);
+    let ch = DVector::from_vec(c1).transpose() * &w;
+    let eig: Vec<(Complex64, Complex64)> = (0..m).map(|i| (t[(i, i)], ch[i] * bh[i])).collect();
+
+    // Pair conjugates; collect real poles.
+    let scale = eig.iter().map(|e| e.0.norm()).fold(1.0, f64::max);
+    let mut used = vec![false; m];
+    let mut sections = Vec::new();
+    let mut poles = Vec::new();
+    let mut reals: Vec<(f64, f64)> = Vec::new();
+    for i in 0..m {
+        if used[i] {
+            continue;
+        }
+        let (lam, res) = eig[i];
+        used[i] = true;
+        if lam.im.abs() <= 1e-10 * scale {
+            reals.push((lam.re, res.re));
+            continue;
+        }
+        // partner: the unused eigenvalue closest to conj(lam)
+        let partner = (0..m)
+            .filter(|&j| !used[j])
+            .min_by(|&a, &b| (eig[a].0 - lam.conj()).norm().total_cmp(&(eig[b].0 - lam.conj()).norm()));
+        let Some(j) = partner else {
+            bail!("realization: pole {lam} has no conjugate partner");
+        };
+        if (eig[j].0 - lam.conj()).norm() > 1e-8 * scale {
+            bail!("realization: pole {lam} has no conjugate partner (closest {})", eig[j].0);
+        }
+        used[j] = true;
+        let (lam, res) = if lam.im > 0.0 { (lam, res) } else { (eig[j].0, eig[j].1) };
+        sections.push(Section64 {
+            delta: [lam.re - 1.0, lam.im, -lam.im, lam.re - 1.0],
+            b: [1.0, 0.0],
+            c: [2.0 * res.re, 2.0 * res.im],
+        });
+        poles.push(lam);
+        poles.push(lam.conj());
+    }
+    for pair in reals.chunks(2) {
+        let mk = |(p, r): (f64, f64)| (p - 1.0, 1.0, r);
+        let (d1, b1, c1) = mk(pair[0]);
+        poles.push(Complex64::new(pair[0].0, 0.0));
+        let sec = if let Some(&second) = pair.get(1) {
+            let (d2, b2, c2) = mk(second);
+            poles.push(Complex64::new(second.0, 0.0));
+            Section64 { delta: [d1, 0.0, 0.0, d2], b: [b1, b2], c: [c1, c2] }
+        } else {
+            // second state unused, pole at z = 0 (kernel convention)
+            Section64 { delta: [d1, 0.0, 0.0, -1.0], b: [b1, 0.0], c: [c1, 0.0] }
+        };
+        sections.push(sec);
+    }
+    if sections.len() > MAX_SECTIONS {
+        bail!(
+            "compensator needs {} sections, the box holds {MAX_SECTIONS}; reduce the model order (--max-order) or the lag",
+            sections.len()
+        );
+    }
+    Ok(ModalRealization {
+        sections,
+        d: ss.d,
+        fir,
+        poles,
+        modal_condition,
+        decoupling_norm,
+        fir_truncation,
+    })
+}

@@ -1,0 +1,540 @@
+//! `dynocomp design --report DIR`: plots of each axis's design, as SVG, and an
+//! `index.html` that shows the design summary and embeds them.
+//!
+//! Per axis `a` (x, y, z) three SVG files:
+//! * `a_frf_fit.svg`: measured FRF magnitude (dB) and phase with the fitted
+//!   model overlaid, and the coherence γ²; the coherent band is shaded.
+//! * `a_compensated.svg`: the compensated response H·G·e^{j2πfL/fs} (measured
+//!   G, the f32 filter H as it goes into the image, the declared latency L
+//!   removed) against the uncompensated G: an overview in dB and zooms of the
+//!   magnitude ratio and the phase with the ±5 % / ±5° tolerances; the flat
+//!   band is shaded.
+//! * `a_model_match.svg` (default method): the discrete model's match to the
+//!   sampled-data relation, |Ĝ_d(e^{j2πf/fs})/Ĝ(j2πf) − 1| in dB over
+//!   0..0.45 fs, for the design's discretization beside the first- and
+//!   zero-order holds; the compensated band is shaded.
+//! * `a_poles.svg`: the z-plane with the unit circle, the compensator's section
+//!   poles and the fitted model's poles mapped by z = exp(p/fs); whole plane
+//!   and a zoom near z = 1, where the slow (machine-structure) modes sit.
+//!
+//! Every file is rendered in memory first, then written atomically
+//! ([`crate::io::atomic`]); if writing fails, the files this run created are
+//! removed again, so a report directory never holds a half-written file.
+//!
+//! Plots use plotters' SVG backend without its font stack: text is emitted as
+//! SVG `<text>` in a generic `sans-serif` family and laid out by the viewer.
+
+use anyhow::{anyhow, bail, Context, Result};
+use num_complex::Complex64;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+use std::f64::consts::PI;
+use std::path::{Path, PathBuf};
+
+use crate::design::axis::AxisDesign;
+use crate::design::sensitivity::Sensitivity;
+use crate::design::bands::ranges_hz;
+use crate::report::page::{index_html, write_pages, Page, Section};
+use crate::report::plot::*;
+use crate::fit::Term;
+use crate::frf::{axis_name, AxisFrf, Frf};
+use crate::realize::quantize::filter_response;
+
+
+const C_MEASURED: RGBColor = RGBColor(31, 119, 180);
+const C_MODEL: RGBColor = RGBColor(214, 39, 40);
+const C_RAW: RGBColor = RGBColor(127, 127, 127);
+const C_COH: RGBColor = RGBColor(44, 140, 44);
+const C_TOL: RGBColor = RGBColor(230, 120, 0);
+const C_COH_BAND: RGBColor = RGBColor(150, 150, 150);
+const C_FLAT_BAND: RGBColor = RGBColor(44, 160, 44);
+/// Returns the paths written, `index.html` last.
+pub fn write_report(
+    dir: &Path,
+    frf: &Frf,
+    designs: &[AxisDesign],
+    sensitivities: &[Option<Sensitivity>],
+    fs_hz: f64,
+    summary_text: &str,
+) -> Result<Vec<PathBuf>> {
+    write_report_with(dir, frf, designs, sensitivities, fs_hz, summary_text, &|_| Ok(Vec::new()))
+}
+
+/// A plot of a report: (file name, title, caption, SVG).
+pub type Plot = (String, String, String, String);
+
+/// [`write_report`] with `extra(axis)`'s plots appended to each axis's
+/// section (e.g. the two-state design's range, `two_state_cmd`).
+pub fn write_report_with(
+    dir: &Path,
+    frf: &Frf,
+    designs: &[AxisDesign],
+    sensitivities: &[Option<Sensitivity>],
+    fs_hz: f64,
+    summary_text: &str,
+    extra: &dyn Fn(usize) -> Result<Vec<Plot>>,
+) -> Result<Vec<PathBuf>> {
+    if !(fs_hz.is_finite() && fs_hz > 0.0) {
+        bail!("report: sample rate fs = {fs_hz} Hz must be > 0");
+    }
+    if frf.freq_hz.is_empty() {
+        bail!("report: the FRF has no frequency lines");
+    }
+    // Render everything in memory first: a plotting error writes nothing.
+    let mut pages: Vec<Page> = Vec::new();
+    let mut sections: Vec<Section> = Vec::new();
+    for (i, d) in designs.iter().enumerate() {
+        let name = axis_name(d.axis);
+        let meas = frf.axis(d.axis).ok_or_else(|| anyhow!("report: the FRF has no measured data for axis {name}"))?;
+        if meas.frf.len() != frf.freq_hz.len() {
+            bail!("report: axis {name}: {} FRF values for {} frequency lines", meas.frf.len(), frf.freq_hz.len());
+        }
+        let plots = [
+            (
+                format!("{name}_frf_fit.svg"),
+                format!("Axis {name}: measured FRF and fitted model"),
+                format!(
+                    "Magnitude and phase of the measured FRF G (impact test) with the fitted model Ĝ, \
+                     and the coherence γ². Shaded: the coherent band used for the design{}.",
+                    if d.bands.is_empty() { String::new() } else { format!(" and, in violet, the fitting bands ({})", crate::design::bands::describe(&d.bands)) }
+                ),
+                plot_frf_fit(&frf.freq_hz, meas, d).with_context(|| format!("report: axis {name}: FRF plot"))?,
+            ),
+            (
+                format!("{name}_compensated.svg"),
+                format!("Axis {name}: compensated response H·G"),
+                format!(
+                    "The f32 compensator H times the measured G, with the declared latency of {} samples removed, \
+                     against the uncompensated G. Dashed: the ±5 % and ±5° tolerances. Shaded: the flat band \
+                     (green) inside the coherent band (grey).",
+                    d.kalman.lag
+                ),
+                plot_compensated(&frf.freq_hz, meas, d, fs_hz)
+                    .with_context(|| format!("report: axis {name}: compensated plot"))?,
+            ),
+            (
+                format!("{name}_poles.svg"),
+                format!("Axis {name}: pole map (z-plane)"),
+                format!(
+                    "Poles of the compensator's modal sections (×) and of the fitted sensor model (○, z = exp(p/fs)), \
+                     whole z-plane and zoom near z = 1.{}",
+                    if d.realization.fir.is_empty() {
+                        String::new()
+                    } else {
+                        format!(
+                            " The compensator's fast poles are realized as {} FIR taps and are not shown.",
+                            d.realization.fir.len()
+                        )
+                    }
+                ),
+                plot_poles(d, fs_hz).with_context(|| format!("report: axis {name}: pole map"))?,
+            ),
+        ];
+        let mut plots = plots.to_vec();
+        if let Some((dm, _)) = &d.discrete {
+            plots.push((
+                format!("{name}_model_match.svg"),
+                format!("Axis {name}: discrete model against the sampled-data relation"),
+                format!(
+                    "The Kalman design's discrete model Ĝ_d ({}, advance {} samples, {} FIR taps) against the fitted Ĝ(j2πf), \
+                     which relates the sampled force and measurement exactly for band-limited signals: |Ĝ_d/Ĝ − 1| in dB, \
+                     beside the first- and zero-order holds. Shaded: the compensated band; the maximum there is the \
+                     reported model match ({:.3} %).",
+                    dm.method.name(),
+                    dm.advance,
+                    dm.fir.len(),
+                    100.0 * d.model_match
+                ),
+                plot_model_match(d, dm, fs_hz).with_context(|| format!("report: axis {name}: model match plot"))?,
+            ));
+        }
+        if let Some(sens) = sensitivities.get(i).and_then(Option::as_ref) {
+            plots.push((
+                format!("{name}_sensitivity.svg"),
+                format!("Axis {name}: sensitivity to moving sensor modes"),
+                crate::report::sensitivity::plot_caption(sens),
+                crate::report::sensitivity::plot(name, sens).with_context(|| format!("report: axis {name}: sensitivity plot"))?,
+            ));
+        }
+        if let Some(svg) = crate::report::force_spectrum::plot(d, fs_hz).with_context(|| format!("report: axis {name}: force spectrum plot"))? {
+            let s = d.force_spectrum.as_ref().expect("plotted only with a force spectrum");
+            plots.push((
+                format!("{name}_force_spectrum.svg"),
+                format!("Axis {name}: q for the record's force spectrum"),
+                crate::report::force_spectrum::plot_caption(s),
+                svg,
+            ));
+        }
+        plots.extend(extra(d.axis)?);
+        let mut entries = Vec::new();
+        for (file, title, caption, svg) in plots {
+            entries.push((file.clone(), title, caption));
+            pages.push(Page { name: file, content: svg });
+        }
+        sections.push((format!("Axis {name}"), entries));
+    }
+    pages.push(Page { name: "index.html".into(), content: index_html("dynocomp design report", summary_text, &sections) });
+    write_pages(dir, &pages)
+}
+
+// ------------------------------------------------------------ plot 1: FRF fit
+
+fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> {
+    let name = axis_name(d.axis);
+    let xr = (freq[0], *freq.last().unwrap_or(&freq[0]));
+    let xr = if xr.1 > xr.0 { xr } else { (xr.0, xr.0 + 1.0) };
+    let model: Vec<Complex64> = freq.iter().map(|f| d.fitted_frf(*f)).collect();
+    let mag_m: Vec<(f64, f64)> = freq.iter().zip(&meas.frf).map(|(f, g)| (*f, db(*g))).collect();
+    let mag_f: Vec<(f64, f64)> = freq.iter().zip(&model).map(|(f, g)| (*f, db(*g))).collect();
+    let ph_m: Vec<(f64, f64)> = freq.iter().zip(&meas.frf).map(|(f, g)| (*f, wrap_deg(*g))).collect();
+    let ph_f: Vec<(f64, f64)> = freq.iter().zip(&model).map(|(f, g)| (*f, wrap_deg(*g))).collect();
+    let (lo, hi) = finite_range(mag_m.iter().chain(&mag_f).map(|p| p.1)).unwrap_or((-20.0, 20.0));
+    // keep the plot readable when a line has (almost) zero magnitude
+    let yr_mag = pad_range((lo.max(hi - 80.0), hi), 0.06, 6.0);
+    let band = d.coherent_band_hz;
+
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (1100, 980)).into_drawing_area();
+        root.fill(&WHITE).map_err(perr)?;
+        let title = format!(
+            "Axis {name} — measured FRF and fitted model (order {}, fit error {:.2} % in the {})",
+            d.model.order(),
+            100.0 * d.fit_nrmse,
+            if d.bands.is_empty() { "coherent band" } else { "fitting bands" }
+        );
+        let root = root.titled(&title, (FONT, 20)).map_err(perr)?;
+        let (top, rest) = root.split_vertically(380);
+        let (midp, bot) = rest.split_vertically(320);
+
+        let band_txt = format!("coherent band {:.0}–{:.0} Hz", band.0, band.1);
+        let mut c = build_chart(&top, &format!("Magnitude |G| ({band_txt})"), xr, yr_mag)?;
+        mesh(&mut c, "Frequency (Hz)", "|G| (dB re 1 N/N)", &hz, &|v| format!("{v:.0}"), 7)?;
+        shade(&mut c, band, xr, yr_mag, C_COH_BAND, 0.15, "coherent band")?;
+        shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_mag, true)?;
+        draw_line(&mut c, &mag_m, yr_mag, f64::INFINITY, C_MEASURED, 1, false, "measured G")?;
+        draw_line(&mut c, &mag_f, yr_mag, f64::INFINITY, C_MODEL, 2, false, "fitted model Ĝ")?;
+        legend(&mut c, SeriesLabelPosition::UpperLeft)?;
+
+        let yr_ph = (-190.0, 190.0);
+        let mut c = build_chart(&midp, "Phase ∠G (wrapped)", xr, yr_ph)?;
+        mesh(&mut c, "Frequency (Hz)", "Phase (°)", &hz, &|v| format!("{v:.0}"), 9)?;
+        shade(&mut c, band, xr, yr_ph, C_COH_BAND, 0.15, "")?;
+        shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_ph, false)?;
+        draw_line(&mut c, &ph_m, yr_ph, 180.0, C_MEASURED, 1, false, "measured G")?;
+        draw_line(&mut c, &ph_f, yr_ph, 180.0, C_MODEL, 2, false, "fitted model Ĝ")?;
+        legend(&mut c, SeriesLabelPosition::LowerLeft)?;
+
+        let yr_c = (0.0, 1.05);
+        let mut c = build_chart(&bot, &format!("Coherence γ² ({band_txt})"), xr, yr_c)?;
+        mesh(&mut c, "Frequency (Hz)", "γ²", &hz, &|v| format!("{v:.1}"), 6)?;
+        shade(&mut c, band, xr, yr_c, C_COH_BAND, 0.15, "coherent band")?;
+        shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_c, true)?;
+        match &meas.coherence {
+            Some(coh) => {
+                let pts: Vec<(f64, f64)> = freq.iter().zip(coh).map(|(f, c)| (*f, *c)).collect();
+                draw_line(&mut c, &pts, yr_c, f64::INFINITY, C_COH, 2, false, "coherence γ²")?;
+            }
+            None => {
+                c.draw_series(std::iter::once(Text::new(
+                    "no coherence in the FRF file: the whole band counts as coherent",
+                    (xr.0 + 0.05 * (xr.1 - xr.0), 0.5),
+                    (FONT, 16),
+                )))
+                .map_err(perr)?;
+            }
+        }
+        legend(&mut c, SeriesLabelPosition::LowerLeft)?;
+        root.present().map_err(perr)?;
+    }
+    Ok(buf)
+}
+
+// ------------------------------------------------------------ plot 2: compensated
+
+fn plot_compensated(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Result<String> {
+    let name = axis_name(d.axis);
+    let xr = (freq[0], *freq.last().unwrap_or(&freq[0]));
+    let xr = if xr.1 > xr.0 { xr } else { (xr.0, xr.0 + 1.0) };
+    let lag = d.kalman.lag as f64;
+    let h: Vec<Complex64> =
+        freq.iter().map(|f| filter_response(&d.filter, *f, fs) * Complex64::from_polar(1.0, 2.0 * PI * f * lag / fs)).collect();
+    let hg: Vec<Complex64> = h.iter().zip(&meas.frf).map(|(h, g)| h * g).collect();
+    let hg_model: Vec<Complex64> = h.iter().zip(freq).map(|(h, f)| h * d.fitted_frf(*f)).collect();
+    let g = &meas.frf;
+
+    let mag_g_db: Vec<(f64, f64)> = freq.iter().zip(g).map(|(f, z)| (*f, db(*z))).collect();
+    let mag_hg_db: Vec<(f64, f64)> = freq.iter().zip(&hg).map(|(f, z)| (*f, db(*z))).collect();
+    let mag_g: Vec<(f64, f64)> = freq.iter().zip(g).map(|(f, z)| (*f, z.norm())).collect();
+    let mag_hg: Vec<(f64, f64)> = freq.iter().zip(&hg).map(|(f, z)| (*f, z.norm())).collect();
+    let mag_hgm: Vec<(f64, f64)> = freq.iter().zip(&hg_model).map(|(f, z)| (*f, z.norm())).collect();
+    let ph_g: Vec<(f64, f64)> = freq.iter().zip(g).map(|(f, z)| (*f, wrap_deg(*z))).collect();
+    let ph_hg: Vec<(f64, f64)> = freq.iter().zip(&hg).map(|(f, z)| (*f, wrap_deg(*z))).collect();
+    let ph_hgm: Vec<(f64, f64)> = freq.iter().zip(&hg_model).map(|(f, z)| (*f, wrap_deg(*z))).collect();
+
+    let (lo, hi) = finite_range(mag_g_db.iter().chain(&mag_hg_db).map(|p| p.1)).unwrap_or((-20.0, 20.0));
+    let yr_db = pad_range((lo.clamp(-60.0, -3.0), hi.clamp(3.0, 60.0)), 0.06, 6.0);
+    let flat = d.flat_band_hz;
+    let band = d.coherent_band_hz;
+    let tol = |y: f64| vec![(xr.0, y), (xr.1, y)];
+
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (1100, 1000)).into_drawing_area();
+        root.fill(&WHITE).map_err(perr)?;
+        let flat_txt =
+            if flat.1 > flat.0 { format!("flat band {:.0}–{:.0} Hz", flat.0, flat.1) } else { "no flat band".to_string() };
+        let title = format!("Axis {name} — compensated response H·G (latency {} samples removed), {flat_txt}", d.kalman.lag);
+        let root = root.titled(&title, (FONT, 20)).map_err(perr)?;
+        let (top, rest) = root.split_vertically(340);
+        let (midp, bot) = rest.split_vertically(320);
+
+        let mut c = build_chart(&top, "Magnitude, overview", xr, yr_db)?;
+        mesh(&mut c, "Frequency (Hz)", "Magnitude (dB)", &hz, &|v| format!("{v:.0}"), 7)?;
+        shade(&mut c, band, xr, yr_db, C_COH_BAND, 0.12, "coherent band")?;
+        shade(&mut c, flat, xr, yr_db, C_FLAT_BAND, 0.13, "flat band (±5 %, ±5°)")?;
+        shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_db, true)?;
+        draw_line(&mut c, &mag_g_db, yr_db, f64::INFINITY, C_RAW, 2, false, "uncompensated |G|")?;
+        draw_line(&mut c, &mag_hg_db, yr_db, f64::INFINITY, C_MEASURED, 1, false, "compensated |H·G|")?;
+        legend(&mut c, SeriesLabelPosition::UpperLeft)?;
+
+        let yr_m = (0.8, 1.2);
+        let mut c = build_chart(&midp, "Magnitude ratio, zoom (tolerance ±5 %)", xr, yr_m)?;
+        mesh(&mut c, "Frequency (Hz)", "|H·G| (N/N)", &hz, &|v| format!("{v:.2}"), 9)?;
+        shade(&mut c, band, xr, yr_m, C_COH_BAND, 0.12, "")?;
+        shade(&mut c, flat, xr, yr_m, C_FLAT_BAND, 0.13, "")?;
+        shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_m, false)?;
+        draw_line(&mut c, &tol(1.05), yr_m, f64::INFINITY, C_TOL, 2, true, "±5 % tolerance")?;
+        draw_line(&mut c, &tol(0.95), yr_m, f64::INFINITY, C_TOL, 2, true, "")?;
+        draw_line(&mut c, &mag_g, yr_m, f64::INFINITY, C_RAW, 2, false, "uncompensated |G|")?;
+        draw_line(&mut c, &mag_hg, yr_m, f64::INFINITY, C_MEASURED, 1, false, "compensated |H·G| (measured G)")?;
+        draw_line(&mut c, &mag_hgm, yr_m, f64::INFINITY, C_MODEL, 2, false, "|H·Ĝ| (fitted model)")?;
+        legend(&mut c, SeriesLabelPosition::LowerMiddle)?;
+
+        let yr_p = (-20.0, 20.0);
+        let mut c = build_chart(&bot, "Phase, zoom (tolerance ±5°)", xr, yr_p)?;
+        mesh(&mut c, "Frequency (Hz)", "Phase (°)", &hz, &|v| format!("{v:.0}"), 9)?;
+        shade(&mut c, band, xr, yr_p, C_COH_BAND, 0.12, "")?;
+        shade(&mut c, flat, xr, yr_p, C_FLAT_BAND, 0.13, "")?;
+        shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_p, false)?;
+        draw_line(&mut c, &tol(5.0), yr_p, f64::INFINITY, C_TOL, 2, true, "±5° tolerance")?;
+        draw_line(&mut c, &tol(-5.0), yr_p, f64::INFINITY, C_TOL, 2, true, "")?;
+        draw_line(&mut c, &ph_g, yr_p, 180.0, C_RAW, 2, false, "uncompensated ∠G")?;
+        draw_line(&mut c, &ph_hg, yr_p, 180.0, C_MEASURED, 1, false, "compensated ∠H·G (measured G)")?;
+        draw_line(&mut c, &ph_hgm, yr_p, 180.0, C_MODEL, 2, false, "∠H·Ĝ (fitted model)")?;
+        legend(&mut c, SeriesLabelPosition::UpperMiddle)?;
+        root.present().map_err(perr)?;
+    }
+    Ok(buf)
+}
+
+// ------------------------------------------------------------ plot 3: poles
+
+/// The fitted model's poles in the z-plane, z = exp(p/fs), conjugates included.
+fn model_z_poles(d: &AxisDesign, fs: f64) -> Vec<Complex64> {
+    let mut z = Vec::new();
+    for t in &d.model.terms {
+        match *t {
+            Term::Real { pole, .. } => z.push(Complex64::new((pole / fs).exp(), 0.0)),
+            Term::Pair { pole, .. } => {
+                let p = (pole / fs).exp();
+                z.push(p);
+                z.push(p.conj());
+            }
+        }
+    }
+    z
+}
+
+/// Radius around z = 1 of the zoom: it holds the cluster of poles nearest to
+/// z = 1 (the slow, machine-structure modes), cut at the largest ratio gap
+/// between consecutive distances |1 − z| (below 0.9), if that gap is at
+/// least 2×; otherwise all poles within 0.9.
+fn zoom_radius(poles: &[Complex64]) -> f64 {
+    let mut dist: Vec<f64> = poles.iter().map(|z| (1.0 - z).norm()).filter(|r| r.is_finite() && *r > 1e-9 && *r < 0.9).collect();
+    dist.sort_by(f64::total_cmp);
+    dist.dedup_by(|a, b| (*a / *b) < 1.02);
+    let Some(&last) = dist.last() else {
+        return 0.1;
+    };
+    let mut cut = last;
+    let mut best = 2.0;
+    for w in dist.windows(2) {
+        let ratio = w[1] / w[0];
+        if ratio >= best {
+            best = ratio;
+            cut = w[0];
+        }
+    }
+    cut * 1.3
+}
+
+/// Pixel size of the plotting area a [`build_chart`] would get on an area of
+/// `dim` pixels (measured on a scratch backend: the layout depends on the
+/// caption's text size).
+fn plot_area_px(dim: (u32, u32), caption: &str) -> Result<(u32, u32)> {
+    let mut scratch = String::new();
+    let area = SVGBackend::with_string(&mut scratch, dim).into_drawing_area();
+    let c = build_chart(&area, caption, (0.0, 1.0), (0.0, 1.0))?;
+    Ok(c.plotting_area().dim_in_pixel())
+}
+
+/// Ranges with equal scale on both axes around the given centre and minimum
+/// half-spans, for a plotting area of `px` pixels.
+fn equal_aspect(cx: f64, cy: f64, half_x: f64, half_y: f64, px: (u32, u32)) -> ((f64, f64), (f64, f64)) {
+    let (w, h) = (px.0.max(1) as f64, px.1.max(1) as f64);
+    let scale = (2.0 * half_x / w).max(2.0 * half_y / h); // data units per pixel
+    let (hx, hy) = (0.5 * w * scale, 0.5 * h * scale);
+    ((cx - hx, cx + hx), (cy - hy, cy + hy))
+}
+
+fn plot_poles(d: &AxisDesign, fs: f64) -> Result<String> {
+    let name = axis_name(d.axis);
+    let comp = &d.realization.poles;
+    let modelz = model_z_poles(d, fs);
+    let all: Vec<Complex64> = comp.iter().chain(&modelz).copied().filter(|z| z.re.is_finite() && z.im.is_finite()).collect();
+
+    let r_zoom = zoom_radius(&all);
+
+    let dim = (1100u32, 600u32);
+    let panel = (dim.0 / 2, dim.1 - 40);
+    let cap_full = "Whole z-plane";
+    let cap_zoom = "Zoom near z = 1 (upper half plane)";
+    let px_full = plot_area_px(panel, cap_full)?;
+    let px_zoom = plot_area_px(panel, cap_zoom)?;
+    let (xf, yf) = equal_aspect(0.0, 0.0, 1.15, 1.15, px_full);
+    let (xz, yz) = equal_aspect(1.0 - 0.5 * r_zoom, 0.45 * r_zoom, 0.6 * r_zoom, 0.55 * r_zoom, px_zoom);
+
+    // the unit circle, sampled finely enough to look smooth in the window
+    let circle = |(x0, x1): (f64, f64), (y0, y1): (f64, f64)| -> Vec<(f64, f64)> {
+        let n = ((2.0 * PI / ((y1 - y0) / 400.0)).ceil() as usize).clamp(720, 400_000);
+        (0..=n)
+            .map(|i| {
+                let t = 2.0 * PI * i as f64 / n as f64;
+                (t.cos(), t.sin())
+            })
+            .filter(|(x, y)| *x >= x0 && *x <= x1 && *y >= y0 && *y <= y1)
+            .collect()
+    };
+    let max_r = comp.iter().map(|z| z.norm()).fold(0.0f64, f64::max);
+
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, dim).into_drawing_area();
+        root.fill(&WHITE).map_err(perr)?;
+        let title = format!(
+            "Axis {name} — poles: {} compensator section poles (max |z| = {:.6}), {} model poles",
+            comp.len(),
+            max_r,
+            modelz.len()
+        );
+        let root = root.titled(&title, (FONT, 20)).map_err(perr)?;
+        let (left, right) = root.split_horizontally(panel.0);
+        for (area, cap, xr, yr, full) in [(&left, cap_full, xf, yf, true), (&right, cap_zoom, xz, yz, false)] {
+            let mut c = build_chart(area, cap, xr, yr)?;
+            mesh(&mut c, "Re z", "Im z", &fmt_num, &fmt_num, 9)?;
+            let circ = circle(xr, yr);
+            // the circle filter above may join the two ends across the gap of a
+            // zoom; split where consecutive points are far apart
+            let mut segs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+            for w in circ.windows(2) {
+                if segs.last().is_some_and(|s| s.is_empty()) {
+                    segs.last_mut().unwrap().push(w[0]);
+                }
+                let far = ((w[1].0 - w[0].0).powi(2) + (w[1].1 - w[0].1).powi(2)).sqrt() > 0.05;
+                if far {
+                    segs.push(Vec::new());
+                } else {
+                    segs.last_mut().unwrap().push(w[1]);
+                }
+            }
+            let st = ShapeStyle::from(&C_RAW).stroke_width(1);
+            c.draw_series(segs.into_iter().filter(|s| s.len() >= 2).map(|s| PathElement::new(s, st)))
+                .map_err(perr)?
+                .label("unit circle")
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], st));
+            let inr = |z: &&Complex64| z.re >= xr.0 && z.re <= xr.1 && z.im >= yr.0 && z.im <= yr.1;
+            let ms = ShapeStyle::from(&C_MEASURED).stroke_width(2);
+            c.draw_series(modelz.iter().filter(inr).map(|z| Circle::new((z.re, z.im), 6, ms)))
+                .map_err(perr)?
+                .label("fitted model, exp(p/fs)")
+                .legend(move |(x, y)| Circle::new((x + 10, y), 6, ms));
+            let cs = ShapeStyle::from(&C_MODEL).stroke_width(2);
+            c.draw_series(comp.iter().filter(inr).map(|z| Cross::new((z.re, z.im), 5, cs)))
+                .map_err(perr)?
+                .label("compensator sections")
+                .legend(move |(x, y)| Cross::new((x + 10, y), 5, cs));
+            {
+                // name the model's modes (upper half plane) by frequency and
+                // damping: in the zoom those inside it, in the whole plane
+                // those outside the zoom
+                let labels: Vec<(Complex64, String)> = d
+                    .model
+                    .terms
+                    .iter()
+                    .filter_map(|t| match *t {
+                        Term::Pair { pole, .. } => {
+                            let wn = pole.norm();
+                            let z = (pole / fs).exp();
+                            Some((z, {
+                                let zeta = 100.0 * -pole.re / wn;
+                                let prec = if zeta < 1.0 { 2 } else { 1 };
+                                format!("{:.0} Hz, ζ {zeta:.prec$} %", wn / (2.0 * PI))
+                            }))
+                        }
+                        _ => None,
+                    })
+                    .filter(|(z, _)| inr(&z) && (!full || (1.0 - z).norm() > r_zoom))
+                    .collect();
+                c.draw_series(labels.into_iter().map(|(z, s)| {
+                    EmptyElement::at((z.re, z.im))
+                        + Text::new(s, (-14, -6), (FONT, 12).into_font().color(&BLACK).pos(Pos::new(HPos::Right, VPos::Center)))
+                }))
+                .map_err(perr)?;
+            }
+            legend(&mut c, if full { SeriesLabelPosition::LowerLeft } else { SeriesLabelPosition::UpperLeft })?;
+        }
+        root.present().map_err(perr)?;
+    }
+    Ok(buf)
+}
+
+// ------------------------------------------------------------ plot 4: model match
+
+/// |Ĝ_d/Ĝ − 1| (dB) over 0..0.45 fs for the design's discrete model and the
+/// two hold equivalents of the same fitted Ĝ.
+fn plot_model_match(d: &AxisDesign, dm: &crate::design::discretize::DiscreteModel, fs: f64) -> Result<String> {
+    use crate::design::discretize::{discretize, Discretization, MATCH_BAND_FRACTION};
+    let name = axis_name(d.axis);
+    let f_hi = MATCH_BAND_FRACTION * fs;
+    let xr = (0.0, f_hi);
+    let grid: Vec<f64> = (1..=900).map(|i| f_hi * i as f64 / 900.0).collect();
+    let curve = |m: &crate::design::discretize::DiscreteModel| -> Vec<(f64, f64)> {
+        grid.iter().map(|f| (*f, 20.0 * ((m.frf(*f) / d.model.frf(*f) - 1.0).norm().max(1e-9)).log10())).collect()
+    };
+    let band = d.compensated_band_hz;
+    let mut lines = vec![(curve(dm), C_MODEL, 2, format!("{} (this design)", dm.method.name()))];
+    for m in [Discretization::Foh, Discretization::Zoh] {
+        if m != dm.method {
+            let (h, _) = discretize(&d.model, fs, m, band)?;
+            lines.push((curve(&h), if m == Discretization::Foh { C_MEASURED } else { C_RAW }, 1, format!("{} (hold)", m.name())));
+        }
+    }
+    let yr = (-100.0, 20.0);
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (1100, 420)).into_drawing_area();
+        root.fill(&WHITE).map_err(perr)?;
+        let title = format!("Axis {name} — discrete model match |Ĝ_d/Ĝ − 1|: max {:.3} % in the compensated band", 100.0 * d.model_match);
+        let root = root.titled(&title, (FONT, 20)).map_err(perr)?;
+        let mut c = build_chart(&root, "Relative model error (dB; −40 dB = 1 %, −60 dB = 0.1 %)", xr, yr)?;
+        mesh(&mut c, "Frequency (Hz)", "|Ĝ_d/Ĝ − 1| (dB)", &hz, &|v| format!("{v:.0}"), 7)?;
+        shade(&mut c, band, xr, yr, C_COH_BAND, 0.15, "compensated band")?;
+        for (pts, col, w, label) in &lines {
+            draw_line(&mut c, pts, yr, f64::INFINITY, *col, *w, false, label)?;
+        }
+        legend(&mut c, SeriesLabelPosition::UpperLeft)?;
+        root.present().map_err(perr)?;
+    }
+    Ok(buf)
+}

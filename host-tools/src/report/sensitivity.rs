@@ -1,0 +1,50 @@
+//! The design report's sensitivity figure: predicted in-band error of a
+//! design against the shift of its sensor modes.
+
+use crate::design::sensitivity::{Sensitivity, SHIFTS_PCT};
+use crate::fit::modes::SENSOR_FRACTION;
+use crate::report::plot::{build_chart, draw_line, legend, mesh, perr, FONT};
+
+/// Caption of the report's sensitivity plot.
+pub fn plot_caption(s: &Sensitivity) -> String {
+    let modes: Vec<String> = s.sensor_modes_hz.iter().map(|f| format!("{f:.0}")).collect();
+    format!(
+        "Predicted in-band error (the design's criterion: model error of this filter against the shifted plant plus noise, \
+         flat force spectrum) when the sensor modes ({} Hz; fitted pairs at or above {:.0} % of the main mode's frequency) \
+         move by δ, ω scaled by 1 + δ, damping and static share kept. Dashed: twice the nominal error. {}.",
+        modes.join(", "),
+        100.0 * SENSOR_FRACTION,
+        s.advice()
+    )
+}
+
+/// The report's SVG: predicted error (%) against the shift δ (%).
+pub fn plot(axis: &str, s: &Sensitivity) -> anyhow::Result<String> {
+    use plotters::prelude::*;
+    let pts: Vec<(f64, f64)> = s.points.iter().map(|p| (p.0, 100.0 * p.1)).collect();
+    let top = pts.iter().map(|p| p.1).fold(2.0 * 100.0 * s.nominal, f64::max);
+    let yr = (0.0, if top.is_finite() && top > 0.0 { 1.08 * top } else { 1.0 });
+    let xr = (SHIFTS_PCT[0], SHIFTS_PCT[SHIFTS_PCT.len() - 1]);
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (1100, 420)).into_drawing_area();
+        root.fill(&WHITE).map_err(perr)?;
+        let title = format!(
+            "Axis {axis} — predicted in-band error vs sensor-mode shift: {:.2} % nominal, {:.2} / {:.2} % at ±1 %, {:.2} / {:.2} % at ±3 %",
+            100.0 * s.nominal,
+            100.0 * s.at(-1.0).unwrap_or(f64::NAN),
+            100.0 * s.at(1.0).unwrap_or(f64::NAN),
+            100.0 * s.at(-3.0).unwrap_or(f64::NAN),
+            100.0 * s.at(3.0).unwrap_or(f64::NAN)
+        );
+        let root = root.titled(&title, (FONT, 16)).map_err(perr)?;
+        let mut c = build_chart(&root, "Predicted in-band RMS error (% of the force's std)", xr, yr)?;
+        mesh(&mut c, "Sensor-mode shift δ (%)", "Predicted error (%)", &|v| format!("{v:+.1}"), &|v| format!("{v:.1}"), 8)?;
+        draw_line(&mut c, &pts, yr, f64::INFINITY, RGBColor(214, 39, 40), 2, false, "predicted error, this filter")?;
+        let twice = [(xr.0, 200.0 * s.nominal), (xr.1, 200.0 * s.nominal)];
+        draw_line(&mut c, &twice, yr, f64::INFINITY, RGBColor(127, 127, 127), 1, true, "twice the nominal error")?;
+        legend(&mut c, SeriesLabelPosition::UpperMiddle)?;
+        root.present().map_err(perr)?;
+    }
+    Ok(buf)
+}

@@ -1,0 +1,313 @@
+//! The text and JSON summaries of a design: what `design` prints and the
+//! report shows.
+
+use serde::Serialize;
+use std::fmt::Write as _;
+
+use crate::design::axis::AxisDesign;
+use crate::design::bands::{self, Band};
+use crate::design::paper::PaperDiagnostics;
+use crate::design::sensitivity::Sensitivity;
+use crate::frf::axis_name;
+use crate::offline::force_prior::AxisPrior;
+
+/// Machine-readable summary of one axis.
+#[derive(Debug, Serialize)]
+pub struct AxisJson {
+    /// Axis letter.
+    pub axis: &'static str,
+    /// Fitted model order.
+    pub model_order: usize,
+    /// Order search trace (order, weighted RMS error).
+    pub order_trace: Vec<(usize, f64)>,
+    /// Relative RMS fit error over the coherent band.
+    pub fit_nrmse: f64,
+    /// Coherent band (Hz).
+    pub coherent_band_hz: (f64, f64),
+    /// Chosen q (N²/sample).
+    pub q: f64,
+    /// R (N²).
+    pub r: f64,
+    /// Flat band (Hz).
+    pub flat_band_hz: (f64, f64),
+    /// White-noise gain.
+    pub noise_gain: f64,
+    /// Predicted in-band relative error √J.
+    pub predicted_error: f64,
+    /// Predicted in-band relative error of the uncompensated force; the
+    /// design is refused unless `predicted_error` is below it.
+    pub raw_predicted_error: f64,
+    /// Compensated band (Hz): the coherent band capped at 0.45 fs.
+    pub compensated_band_hz: (f64, f64),
+    /// Discrete model: `fit`, `foh`, `zoh` (null for the paper's Tustin).
+    pub discretization: Option<&'static str>,
+    /// Model match max |Ĝ_d/Ĝ − 1| over the compensated band (null for the paper's method).
+    pub model_match: Option<f64>,
+    /// Advance D (samples) and FIR taps of the discrete model, and the
+    /// condition number of its least-squares fit.
+    pub discrete_advance: Option<usize>,
+    /// FIR taps of the discrete model.
+    pub discrete_taps: Option<usize>,
+    /// Condition number of the discrete model's least-squares fit.
+    pub discrete_condition: Option<f64>,
+    /// Notes (e.g. FRF lines beyond 0.45 fs).
+    pub notes: Vec<String>,
+    /// Sections / FIR taps in the image.
+    pub sections: usize,
+    /// FIR taps.
+    pub fir_taps: usize,
+    /// Riccati residual.
+    pub dare_residual: f64,
+    /// f32 verification: frequency-response error, time-domain error, max pole radius.
+    pub verify_freq_error: f64,
+    /// Time-domain error of the f32 kernel.
+    pub verify_time_error: f64,
+    /// Largest pole radius.
+    pub max_pole_radius: f64,
+    /// Natural frequency (Hz) and damping of each fitted mode.
+    pub modes: Vec<(f64, f64)>,
+    /// Design time of this axis (s).
+    pub design_time_s: f64,
+    /// Relative RMS fit error on coherent lines outside the bands (null
+    /// without bands).
+    pub fit_nrmse_out_of_band: Option<f64>,
+    /// Condition numbers, observability rank, Riccati residual and prewarp
+    /// frequency of `--method paper`.
+    pub paper: Option<PaperDiagnostics>,
+    /// Predicted in-band error when the sensor modes shift by −5…+5 %
+    /// (`crate::design::sensitivity`), with the shifts where it doubles.
+    pub sensitivity: Option<crate::design::sensitivity::Sensitivity>,
+    /// The harmonic force prior of `compensate --offline` (null without
+    /// `--force-prior harmonics`).
+    pub force_prior: Option<ForcePriorJson>,
+    /// The record's force spectrum q was chosen for (null without
+    /// `--force-prior spectrum`).
+    pub force_spectrum: Option<crate::design::force_spectrum::AxisForceSpectrum>,
+}
+
+impl AxisJson {
+    /// The JSON summary of design `d`, designed in `design_time_s` (s), with
+    /// its force prior and the sensitivity analysis of it.
+    pub fn new(d: &AxisDesign, design_time_s: f64, prior: Option<&AxisPrior>, sensitivity: &Option<Sensitivity>) -> Self {
+        AxisJson {
+            axis: axis_name(d.axis),
+            model_order: d.model.order(),
+            order_trace: d.order_trace.clone(),
+            fit_nrmse: d.fit_nrmse,
+            coherent_band_hz: d.coherent_band_hz,
+            q: d.kalman.q,
+            r: d.kalman.r,
+            flat_band_hz: d.flat_band_hz,
+            noise_gain: d.noise_gain,
+            predicted_error: d.predicted_error,
+            raw_predicted_error: d.raw_predicted_error,
+            compensated_band_hz: d.compensated_band_hz,
+            discretization: d.discrete.as_ref().map(|x| x.0.method.name()),
+            model_match: d.model_match.is_finite().then_some(d.model_match),
+            discrete_advance: d.discrete.as_ref().map(|x| x.0.advance),
+            discrete_taps: d.discrete.as_ref().map(|x| x.0.fir.len()),
+            discrete_condition: d.discrete.as_ref().map(|x| x.1.condition),
+            notes: d.notes.clone(),
+            sections: d.filter.sections().len(),
+            fir_taps: d.filter.fir().len(),
+            dare_residual: d.kalman.dare_residual,
+            verify_freq_error: d.verification.freq_error,
+            verify_time_error: d.verification.time_error,
+            max_pole_radius: d.verification.max_pole_radius,
+            modes: d.model.modes(),
+            design_time_s,
+            fit_nrmse_out_of_band: (!d.bands.is_empty() && d.fit_nrmse_out_of_band.is_finite()).then_some(d.fit_nrmse_out_of_band),
+            paper: d.paper.as_ref().map(|p| p.1.clone()),
+            sensitivity: sensitivity.clone(),
+            force_prior: prior.map(|p| ForcePriorJson {
+                applies_to: "compensate --offline",
+                prior: p.prior.clone(),
+                prediction: p.prediction,
+                off_line_share: p.record.off_line_share,
+                record_spindle_rpm: 60.0 * p.record.best_spindle_hz,
+            }),
+            force_spectrum: d.force_spectrum.clone(),
+        }
+    }
+}
+
+/// The force prior of one axis in the `--json` summary.
+#[derive(Debug, Serialize)]
+pub struct ForcePriorJson {
+    /// Where it applies: always `compensate --offline`.
+    pub applies_to: &'static str,
+    /// The prior (lines, intensities, q_bb) as stored in the sidecar.
+    pub prior: crate::offline::force_prior::HarmonicPrior,
+    /// Predicted errors: steady cut (the record's spectrum) and flat spectrum,
+    /// with the prior, the default smoother and no compensation.
+    pub prediction: crate::offline::force_prior::PriorPrediction,
+    /// Share of the record's in-band force away from the harmonics.
+    pub off_line_share: f64,
+    /// Spindle speed whose harmonics best fit the record (rpm).
+    pub record_spindle_rpm: f64,
+}
+
+/// Machine-readable summary of the whole design.
+#[derive(Debug, Serialize)]
+pub struct DesignJson {
+    /// Image path.
+    pub image: String,
+    /// Image id.
+    pub image_id: String,
+    /// Sample rate (Hz).
+    pub fs_hz: f64,
+    /// Declared latency (samples).
+    pub latency_samples: usize,
+    /// Method.
+    pub method: &'static str,
+    /// Fitting bands (empty = whole coherent band).
+    pub bands: Vec<Band>,
+    /// Axes.
+    pub axes: Vec<AxisJson>,
+    /// Total design time (s).
+    pub design_time_s: f64,
+    /// Predicted CPU load of the box at `fs_hz` (`dynocomp_core::budget`).
+    pub box_load: crate::realize::load::LoadReport,
+    /// Offline-only: over the load limit, the box never runs it.
+    pub offline_only: bool,
+    /// How the latency was chosen (absent when `--latency` was given).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub latency_choice: Option<crate::design::latency::LatencyChoice>,
+}
+
+/// One-screen text summary.
+pub fn render_summary(designs: &[AxisDesign], sensitivities: &[Option<Sensitivity>], fs: f64, latency: usize, image: &str, id: u32, method: &str) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "image {image} (id {id:08x}): fs {fs} Hz, latency {latency} samples ({:.1} µs), method {method}",
+        latency as f64 * 1e6 / fs
+    );
+    if let Some(d) = designs.first().filter(|d| !d.bands.is_empty()) {
+        let _ = writeln!(s, "fitting bands: {}", bands::describe(&d.bands));
+    }
+    let _ = writeln!(
+        s,
+        "{:<4} {:>5} {:>7} {:>13} {:>10} {:>9} {:>15} {:>6} {:>7} {:>7} {:>8} {:>7}",
+        "axis", "order", "fit err", "coherent (Hz)", "Q (N²)", "R (N²)", "flat band (Hz)", "noise", "pred.", "raw", "match", "sec+fir"
+    );
+    for d in designs {
+        let _ = writeln!(
+            s,
+            "{:<4} {:>5} {:>6.2}% {:>6.0}-{:<6.0} {:>10.3e} {:>9.4} {:>7.0}-{:<7.0} {:>6.2} {:>6.2}% {:>6.2}% {:>8} {:>4}+{}",
+            axis_name(d.axis),
+            d.model.order(),
+            d.fit_nrmse * 100.0,
+            d.coherent_band_hz.0,
+            d.coherent_band_hz.1,
+            d.kalman.q,
+            d.kalman.r,
+            d.flat_band_hz.0,
+            d.flat_band_hz.1,
+            d.noise_gain,
+            d.predicted_error * 100.0,
+            d.raw_predicted_error * 100.0,
+            if d.model_match.is_finite() { format!("{:.3}%", d.model_match * 100.0) } else { "tustin".to_string() },
+            d.filter.sections().len(),
+            d.filter.fir().len()
+        );
+    }
+    for d in designs {
+        if let Some((dm, fd)) = &d.discrete {
+            let _ = writeln!(
+                s,
+                "{} discrete model: {} (advance {} samples, {} FIR taps, LS condition {:.1e}{}); match {:.3} % over {:.0}-{:.0} Hz",
+                axis_name(d.axis),
+                dm.method.name(),
+                dm.advance,
+                dm.fir.len(),
+                fd.condition,
+                if fd.modes_above_nyquist > 0 { format!(", {} mode(s) above fs/2 fitted by their tail", fd.modes_above_nyquist) } else { String::new() },
+                d.model_match * 100.0,
+                d.compensated_band_hz.0,
+                d.compensated_band_hz.1
+            );
+        }
+        for n in &d.notes {
+            let _ = writeln!(s, "note: {n}");
+        }
+    }
+    for (d, sens) in designs.iter().zip(sensitivities) {
+        if let Some(sens) = sens {
+            let _ = writeln!(s, "{}", crate::design::sensitivity::summary_line(axis_name(d.axis), sens));
+        }
+    }
+    for d in designs {
+        if let Some((tf, p)) = &d.paper {
+            let _ = writeln!(s, "{}", paper_line(d.axis, tf.nb(), tf.na(), p));
+        }
+    }
+    let spectrum = match designs.iter().find_map(|d| d.force_spectrum.as_ref()) {
+        Some(s) if !s.level_only => "the force spectrum of --force-record",
+        Some(_) => "a flat force spectrum at the level of --force-record",
+        None => "a flat force spectrum",
+    };
+    let _ = writeln!(
+        s,
+        "flat band: |H·Ĝ| within ±5 % and ±5° of the pure {latency}-sample delay (fitted model Ĝ); noise: white-noise gain; pred.: predicted in-band RMS error for {spectrum}; raw: the same for no compensation; match: max |Ĝ_d/Ĝ − 1| of the discrete model over the compensated band"
+    );
+    s
+}
+
+/// One line of the paper's diagnostics for an axis.
+pub fn paper_line(axis: usize, nb: usize, na: usize, p: &PaperDiagnostics) -> String {
+    format!(
+        "{} paper {nb}:{na}: cond RFP {:.1e}, GN {:.1e}, companion {:.1e}; observability rank {}/{} (cond {:.1e}); CARE residual {:.1e}; Tustin prewarp {:.1} Hz; frequency scale {:.1} Hz",
+        axis_name(axis),
+        p.rfp_condition,
+        p.jacobian_condition,
+        p.companion_condition,
+        p.observability_rank,
+        p.observability_dim,
+        p.observability_condition,
+        p.care_residual,
+        p.prewarp_hz,
+        p.frequency_scale_hz
+    )
+}
+
+/// One summary line of an axis designed on a record's force spectrum (or
+/// its level).
+pub fn spectrum_line(axis: usize, s: &crate::design::force_spectrum::AxisForceSpectrum, force_rms: f64) -> String {
+    if s.level_only {
+        return format!(
+            "{} q chosen for a flat force spectrum at the level of --force-record ({:.2} N RMS in the band, in place of --force-rms {force_rms} N): predicted {:.3} %\n",
+            axis_name(axis),
+            s.force_rms_n,
+            100.0 * s.predicted_error
+        );
+    }
+    format!(
+        "{} q chosen for the force spectrum of --force-record ({:.2} N RMS in the band, in place of a flat --force-rms {force_rms} N): predicted {:.3} % for that spectrum, {:.3} % for a flat spectrum of the same power (a broadband force: chatter, transients)\n",
+        axis_name(axis),
+        s.force_rms_n,
+        100.0 * s.predicted_error,
+        100.0 * s.flat_predicted_error
+    )
+}
+
+/// One summary line of an axis's force prior.
+pub fn prior_line(axis: usize, p: &crate::offline::force_prior::AxisPrior) -> String {
+    let pr = &p.prior;
+    let e = &p.prediction;
+    format!(
+        "{} force prior (compensate --offline only; the box runs the default design): {} harmonics of {:.2} Hz (TPF {:.2} Hz), line width {:.2} Hz, q_bb {:.3e}; predicted {:.3} % on the record's steady cut against {:.3} % for the default smoother (raw {:.2} %); for a flat force spectrum {:.2} % against {:.3} %; {:.2} % of the record's force off the harmonics\n",
+        axis_name(axis),
+        pr.lines.len(),
+        pr.spindle_hz,
+        pr.spindle_hz * f64::from(pr.teeth),
+        pr.line_width_hz,
+        pr.q_broadband,
+        100.0 * e.with_prior,
+        100.0 * e.default_smoother,
+        100.0 * e.raw,
+        100.0 * e.with_prior_flat,
+        100.0 * e.default_flat,
+        100.0 * p.record.off_line_share
+    )
+}
