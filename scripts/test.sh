@@ -4,20 +4,17 @@
 #   (rust-toolchain.toml names both; rustup does not install them by itself
 #   when the stable toolchain is already there; tests/firmware_layout.rs
 #   reads the firmware's symbols with llvm-nm),
-# - qemu-system-arm (Debian's package) for tests/qemu_bit_exact.rs, which
-#   runs the kernel on an emulated Cortex-M4F and fails if QEMU is missing.
+# - qemu-system-arm for tests/qemu_bit_exact.rs, which runs the kernel on an
+#   emulated Cortex-M4F and fails if QEMU is missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 rustup target add thumbv7em-none-eabihf
 rustup component add llvm-tools
 
-if ! command -v qemu-system-arm >/dev/null 2>&1; then
-    echo "test.sh: installing qemu-system-arm (Debian package)"
-    sudo=""
-    if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
-    $sudo apt-get update -qq
-    $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends qemu-system-arm
-fi
+# qemu-system-arm on PATH, or Debian's package unpacked under target/qemu
+# (scripts/install_qemu.sh: it never installs or removes a system package).
+qemu_dir="$(bash scripts/install_qemu.sh)"
+if [ -n "$qemu_dir" ]; then export PATH="$qemu_dir:$PATH"; fi
 
 cargo test --workspace "$@"
