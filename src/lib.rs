@@ -33,6 +33,7 @@ pub mod handoff;
 pub mod image;
 pub mod kernel;
 pub mod link;
+pub mod mimo;
 pub mod protocol;
 pub mod sample;
 pub mod shell;
