@@ -144,7 +144,13 @@ impl StateSpace {
         let mut w = &self.b * self.b.transpose();
         for _ in 0..64 {
             let step = &ak * &w * ak.transpose();
-            let done = step.norm() <= 1e-15 * w.norm();
+            // The Frobenius norm of a diverging Gramian overflows before its
+            // entries do, and `x <= ∞` would end the doubling.
+            let scale = w.norm();
+            if !scale.is_finite() {
+                return None;
+            }
+            let done = step.norm() <= 1e-15 * scale;
             w += step;
             if !w.iter().all(|v| v.is_finite()) {
                 return None;
@@ -161,5 +167,98 @@ impl StateSpace {
     /// Largest eigenvalue modulus of A.
     pub fn spectral_radius(&self) -> f64 {
         self.a.complex_eigenvalues().iter().map(|z| z.norm()).fold(0.0, f64::max)
+    }
+}
+
+/// A discrete state-space system with several inputs and outputs (f64): the
+/// 3x3 compensator of the matrix design.
+#[derive(Clone, Debug)]
+pub struct MimoStateSpace {
+    /// State matrix (n × n).
+    pub a: DMatrix<f64>,
+    /// Input matrix (n × inputs).
+    pub b: DMatrix<f64>,
+    /// Output matrix (outputs × n).
+    pub c: DMatrix<f64>,
+    /// Direct term (outputs × inputs).
+    pub d: DMatrix<f64>,
+}
+
+impl MimoStateSpace {
+    /// H(z) = C (zI − A)⁻¹ B + D (outputs × inputs) at z = e^{j·2π·f/fs}
+    /// for every frequency of `f_hz` (Hz): A reduced once to Hessenberg
+    /// form, as [`StateSpace::freq_responses`], one solve per input column.
+    /// NaN where zI − A is singular.
+    pub fn freq_responses(&self, f_hz: &[f64], fs_hz: f64) -> Vec<DMatrix<Complex64>> {
+        let (n, p, m) = (self.a.nrows(), self.c.nrows(), self.b.ncols());
+        let dc = self.d.map(|v| Complex64::new(v, 0.0));
+        if n == 0 {
+            return vec![dc; f_hz.len()];
+        }
+        let (q, h) = self.a.clone().hessenberg().unpack();
+        let bt = q.transpose() * &self.b;
+        let ct = &self.c * &q;
+        let mut mat = vec![Complex64::new(0.0, 0.0); n * n];
+        let mut x = vec![Complex64::new(0.0, 0.0); n];
+        f_hz.iter()
+            .map(|f| {
+                let z = Complex64::from_polar(1.0, 2.0 * std::f64::consts::PI * f / fs_hz);
+                let mut out = dc.clone();
+                for j in 0..m {
+                    for r in 0..n {
+                        for col in 0..n {
+                            mat[r * n + col] = Complex64::new(-h[(r, col)], 0.0);
+                        }
+                        mat[r * n + r] += z;
+                        x[r] = Complex64::new(bt[(r, j)], 0.0);
+                    }
+                    if !solve_hessenberg(&mut mat, &mut x, n) {
+                        return DMatrix::from_element(p, m, Complex64::new(f64::NAN, f64::NAN));
+                    }
+                    for i in 0..p {
+                        out[(i, j)] += (0..n).map(|r| x[r] * ct[(i, r)]).sum::<Complex64>();
+                    }
+                }
+                out
+            })
+            .collect()
+    }
+
+    /// Simulate in f64: y[k] = C x + D u, x ← A x + B u.
+    pub fn simulate(&self, input: &[DVector<f64>]) -> Vec<DVector<f64>> {
+        let mut x = DVector::<f64>::zeros(self.a.nrows());
+        input
+            .iter()
+            .map(|u| {
+                let y = &self.c * &x + &self.d * u;
+                x = &self.a * &x + &self.b * u;
+                y
+            })
+            .collect()
+    }
+
+    /// White-noise gain of each output for unit white noise on every input:
+    /// sqrt((D Dᵀ + C W Cᵀ)_ii), with the controllability Gramian
+    /// W = A W Aᵀ + B Bᵀ by Smith doubling. `None` when A is not stable or
+    /// the doubling does not converge in 64 steps.
+    pub fn white_noise_gains(&self) -> Option<Vec<f64>> {
+        let mut ak = self.a.clone();
+        let mut w = &self.b * self.b.transpose();
+        for _ in 0..64 {
+            let step = &ak * &w * ak.transpose();
+            // Largest entries, not the Frobenius norm: that overflows on a
+            // diverging Gramian before its entries do.
+            let done = step.amax() <= 1e-15 * w.amax().max(f64::MIN_POSITIVE);
+            w += step;
+            if !w.iter().all(|v| v.is_finite()) {
+                return None;
+            }
+            if done {
+                let g = &self.d * self.d.transpose() + &self.c * &w * self.c.transpose();
+                return (0..g.nrows()).map(|i| (g[(i, i)] >= 0.0).then(|| g[(i, i)].sqrt())).collect();
+            }
+            ak = &ak * &ak;
+        }
+        None
     }
 }
