@@ -1,4 +1,6 @@
-//! File input/output: FRF (CSV, UFF58), signal CSV, atomic writes.
+//! File input/output: FRF (CSV, UFF58, a matrix from several files), signal CSV, atomic writes.
+
+pub use frf_set::{read_frf_set, split_frf_list};
 
 pub mod atomic;
 pub mod decimal;
@@ -8,6 +10,7 @@ pub mod signal_file;
 pub mod spool;
 pub mod image_file;
 pub mod frf_csv;
+pub mod frf_set;
 pub mod uff;
 pub mod uff_signal;
 pub mod tdms;

@@ -161,7 +161,7 @@ pub fn impact_test_all_with(g: &dyn Fn(usize, f64) -> Complex64, n_lines: usize,
             impact_test_fn(&|f| g(a, f), a, n_lines, df_hz, s, params)
         })
         .collect();
-    Frf { freq_hz: impact_freqs(n_lines, df_hz), axes }
+    Frf::direct(impact_freqs(n_lines, df_hz), axes)
 }
 
 /// Normalized random error of an H1 magnitude estimate from `n_avg` averages
