@@ -113,10 +113,12 @@ pub fn merge_frf_files(files: &[FrfFile]) -> Result<Frf> {
         if let Some(u) = f.units.as_deref() {
             match units {
                 Some((o, prev)) if !prev.eq_ignore_ascii_case(u) => bail!(
-                    "{}: FRFs in units {u}, but {} has them in {prev}: the files of one matrix must use the same \
+                    "{}: FRFs in units {}, but {} has them in {}: the files of one matrix must use the same \
                      units; export every hammer direction as N/N",
                     f.source,
-                    files[o].source
+                    super::one_line(u),
+                    files[o].source,
+                    super::one_line(prev)
                 ),
                 Some(_) => {}
                 None => units = Some((k, u)),

@@ -978,9 +978,11 @@ pub fn parse_uff58_units(bytes: &[u8], source: &str) -> Result<(Frf, Option<Stri
                 if let Some(u) = u {
                     match &units {
                         Some((first, no, line)) if !first.eq_ignore_ascii_case(&u) => bail!(
-                            "{source}: line {start_line}: dataset #{set_no} ({}) is in units {u}, but dataset #{no} \
-                             (line {line}) in {first}: export every FRF of the file in the same units (N/N)",
-                            entry_label(entry)
+                            "{source}: line {start_line}: dataset #{set_no} ({}) is in units {}, but dataset #{no} \
+                             (line {line}) in {}: export every FRF of the file in the same units (N/N)",
+                            entry_label(entry),
+                            super::one_line(&u),
+                            super::one_line(first)
                         ),
                         Some(_) => {}
                         None => units = Some((u, set_no, start_line)),
