@@ -80,12 +80,7 @@ impl Frf {
     /// Entry G_ij (channel i, force direction j), direct or cross, if present.
     pub fn entry(&self, channel: Axis, direction: Axis) -> Option<FrfEntry<'_>> {
         if channel == direction {
-            self.axis(channel).map(|a| FrfEntry {
-                channel,
-                direction,
-                frf: &a.frf,
-                coherence: a.coherence.as_deref(),
-            })
+            self.axis(channel).map(|a| FrfEntry { channel, direction, frf: &a.frf, coherence: a.coherence.as_deref() })
         } else {
             self.cross.iter().find(|c| c.channel == channel && c.direction == direction).map(|c| FrfEntry {
                 channel,
@@ -192,9 +187,9 @@ impl MatrixStatus {
         };
         match self.kind() {
             MatrixKind::Complete => None,
-            MatrixKind::DirectOnly => Some(format!(
-                "only direct FRFs{direct_note}: crosstalk is not compensated, the design is per axis"
-            )),
+            MatrixKind::DirectOnly => {
+                Some(format!("only direct FRFs{direct_note}: crosstalk is not compensated, the design is per axis"))
+            }
             MatrixKind::Incomplete => Some(format!(
                 "cross FRFs missing: {}{direct_note}; crosstalk is not compensated, the design is per axis \
                  from the direct FRFs",

@@ -33,7 +33,8 @@ fn known(i: usize, j: usize, k: usize) -> Complex64 {
 fn full_matrix(n: usize, coh: &[(usize, usize)]) -> Frf {
     let freq = (0..n).map(|k| 8.0 * k as f64).collect();
     let vals = |i, j| (0..n).map(|k| known(i, j, k)).collect::<Vec<_>>();
-    let cohv = |i: usize, j: usize| coh.contains(&(i, j)).then(|| (0..n).map(|k| ((k + i + j) % 5) as f64 * 0.25).collect());
+    let cohv =
+        |i: usize, j: usize| coh.contains(&(i, j)).then(|| (0..n).map(|k| ((k + i + j) % 5) as f64 * 0.25).collect());
     let axes = (0..3).map(|a| AxisFrf { axis: a, frf: vals(a, a), coherence: cohv(a, a) }).collect();
     let mut cross = Vec::new();
     for i in 0..3 {
@@ -183,8 +184,7 @@ fn uff_reference_direction_is_the_force_direction_and_negative_directions_flip_t
         (2, 2, (1, 1), 1.0),
         (-2, 0, (1, 1), -1.0),
     ] {
-        let t = ds58(4, rsp, refd, 2, "N", "2.0 3.0 -0.5 0.25\n")
-            + &ds58(6, rsp, refd, 2, "NONE", "0.5 0.75\n");
+        let t = ds58(4, rsp, refd, 2, "N", "2.0 3.0 -0.5 0.25\n") + &ds58(6, rsp, refd, 2, "NONE", "0.5 0.75\n");
         let f = uff::parse_uff58(t.as_bytes(), "ok.uff").unwrap();
         let e = f.entry(entry.0, entry.1).unwrap_or_else(|| panic!("rsp {rsp} ref {refd}: no entry {entry:?}"));
         assert_eq!(e.frf, &[c(2.0 * sign, 3.0 * sign), c(-0.5 * sign, 0.25 * sign)][..], "rsp {rsp} ref {refd}");
@@ -210,7 +210,10 @@ fn uff_matrix_round_trip_ascii_and_binary() {
         } else {
             assert_eq!(back.freq_hz, frf.freq_hz);
             for (a, b) in back.entries().zip(frf.entries()) {
-                assert_eq!((a.channel, a.direction, a.coherence.is_some()), (b.channel, b.direction, b.coherence.is_some()));
+                assert_eq!(
+                    (a.channel, a.direction, a.coherence.is_some()),
+                    (b.channel, b.direction, b.coherence.is_some())
+                );
                 for (x, y) in a.frf.iter().zip(b.frf) {
                     assert!((x - y).norm() <= 1e-12 * y.norm(), "{x} vs {y}");
                 }
@@ -231,7 +234,12 @@ fn uff_matrix_errors_name_the_datasets() {
     let frf12 = ds58(4, 1, 2, 1, "N", "1 0\n");
     has(
         &uff_err(&(frf12.clone() + &ds58(4, -1, 2, 1, "N", "1 0\n"))),
-        &["line 16", "dataset #2 is a second FRF for entry xy (channel x, force y)", "dataset #1 at line 1", "duplicate entry"],
+        &[
+            "line 16",
+            "dataset #2 is a second FRF for entry xy (channel x, force y)",
+            "dataset #1 at line 1",
+            "duplicate entry",
+        ],
     );
     has(
         &uff_err(&(ds58(4, 1, 1, 1, "N", "1 0\n") + &ds58(6, 3, 2, 1, "NONE", "1\n"))),
@@ -371,7 +379,10 @@ fn merge_refuses_duplicates_other_lines_and_other_units_naming_both_files() {
     // One cross entry in two files.
     let mut extra = hy.clone();
     extra.cross.insert(0, hx.cross[0].clone());
-    has(&err(&[file("hx.uff", hx.clone(), None), file("hy.uff", extra, None)]), &["hy.uff: holds entry yx (cross FRF", "hx.uff"]);
+    has(
+        &err(&[file("hx.uff", hx.clone(), None), file("hy.uff", extra, None)]),
+        &["hy.uff: holds entry yx (cross FRF", "hx.uff"],
+    );
     // Other number of lines.
     let short = column(&full_matrix(5, &[]), 1);
     has(
@@ -410,9 +421,15 @@ fn parse_frf_file_keeps_the_units_label() {
 
 #[test]
 fn frf_list_splits_on_commas() {
-    assert_eq!(split_frf_list("hx.uff,hy.uff,hz.uff").unwrap(), vec![PathBuf::from("hx.uff"), "hy.uff".into(), "hz.uff".into()]);
+    assert_eq!(
+        split_frf_list("hx.uff,hy.uff,hz.uff").unwrap(),
+        vec![PathBuf::from("hx.uff"), "hy.uff".into(), "hz.uff".into()]
+    );
     assert_eq!(split_frf_list("dir with space/a.uff").unwrap(), vec![PathBuf::from("dir with space/a.uff")]);
-    has(&format!("{:#}", split_frf_list("a.uff,,b.uff").unwrap_err()), &["--frf a.uff,,b.uff", "file name 2 of 3 is empty"]);
+    has(
+        &format!("{:#}", split_frf_list("a.uff,,b.uff").unwrap_err()),
+        &["--frf a.uff,,b.uff", "file name 2 of 3 is empty"],
+    );
     has(&format!("{:#}", split_frf_list("a.uff,").unwrap_err()), &["file name 2 of 2 is empty"]);
     has(&format!("{:#}", split_frf_list("").unwrap_err()), &["file name 1 of 1 is empty"]);
     has(&format!("{:#}", split_frf_list("a.uff,b.uff,a.uff").unwrap_err()), &["a.uff is named twice"]);

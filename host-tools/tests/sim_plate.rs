@@ -145,7 +145,11 @@ fn a_centred_symmetric_plate_couples_nothing_and_its_vertical_modes_are_the_two_
     };
     let near = |f: f64| modal.modes.iter().map(|md| (md.fn_hz - f).abs() / f).fold(f64::INFINITY, f64::min);
     for f in two_mass(k1) {
-        assert!(near(f) < 1e-9, "vertical mode {f} Hz not among {:?}", modal.modes.iter().map(|m| m.fn_hz).collect::<Vec<_>>());
+        assert!(
+            near(f) < 1e-9,
+            "vertical mode {f} Hz not among {:?}",
+            modal.modes.iter().map(|m| m.fn_hz).collect::<Vec<_>>()
+        );
     }
     // ... and only they show in G_zz (a vertical force excites nothing else).
     let zz: Vec<f64> = modal.modes.iter().map(|md| md.residue()[2][2].abs()).collect();
@@ -217,7 +221,8 @@ fn the_time_response_to_a_sine_is_the_frf_in_amplitude_and_phase() {
         }
         // Negative control: half a sample of delay (what a zero-order hold
         // does) is a phase error far above the tolerance.
-        let delayed: Complex64 = (0..3).map(|j| g[(0, j)] * amp[j]).sum::<Complex64>() * sinc2 * Complex64::from_polar(1.0, -x);
+        let delayed: Complex64 =
+            (0..3).map(|j| g[(0, j)] * amp[j]).sum::<Complex64>() * sinc2 * Complex64::from_polar(1.0, -x);
         let got = phasor(&y[0], fs, f, k0, len);
         assert!((got - delayed).norm() / delayed.norm() > 1e-3);
     }
@@ -373,7 +378,9 @@ fn the_noise_floor_of_a_constant_matrix_is_its_inverse_rows() {
 fn the_noise_floor_of_first_order_axes_is_the_closed_form_integral() {
     // G_ii = 1/(1 + jf/fc_i): |1/G_ii|² = 1 + (f/fc)², ∫ = Δf + (hi³ − lo³)/(3fc²).
     let fc = [1000.0, 2000.0, 3000.0];
-    let g = |f: f64| Matrix3::from_fn(|i, j| if i == j { 1.0 / Complex64::new(1.0, f / fc[i]) } else { Complex64::new(0.0, 0.0) });
+    let g = |f: f64| {
+        Matrix3::from_fn(|i, j| if i == j { 1.0 / Complex64::new(1.0, f / fc[i]) } else { Complex64::new(0.0, 0.0) })
+    };
     let r = [0.05, 0.05, 0.1];
     let band = (0.0, 4000.0);
     let sp = spec(r, band);
@@ -474,7 +481,8 @@ fn a_plate_simulation_measures_the_cut_point_through_the_same_chain_as_the_truth
 #[test]
 fn set_up_parameters_outside_their_physical_range_are_refused_by_name() {
     let ok = preset("flat");
-    let cases: Vec<(Box<dyn Fn(&mut PlateSetup)>, &str)> = vec![
+    type Change = Box<dyn Fn(&mut PlateSetup)>;
+    let cases: Vec<(Change, &str)> = vec![
         (Box::new(|s| s.plate_mass_kg = 0.0), "plate mass = 0 kg"),
         (Box::new(|s| s.plate_mass_kg = 40.0), "plate density"),
         (Box::new(|s| s.workpiece_mass_kg = 500.0), "workpiece mass"),

@@ -81,13 +81,16 @@ fn the_per_axis_model_stays_the_default_and_plate_flags_need_it() {
     let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("truth.json")).unwrap()).unwrap();
     assert_eq!(j["version"], 1);
     assert!(j.get("dynamometer").is_none());
-    let err = |extra: &[&str]| format!("{:#}", dynocomp::simulate::run(&parse(extra, &dir.path().join("x"))).unwrap_err());
+    let err =
+        |extra: &[&str]| format!("{:#}", dynocomp::simulate::run(&parse(extra, &dir.path().join("x"))).unwrap_err());
     assert!(err(&["--dyno-preset", "tall"]).contains("add --dyno plate"));
     assert!(err(&["--cut-offset", "10:0:0"]).contains("add --dyno plate"));
     assert!(err(&["--dyno", "plate", "--preset", "cut-1"]).contains("use --dyno-preset"));
     assert!(err(&["--dyno", "plate", "--drift-percent", "3"]).contains("not simulated yet"));
     assert!(err(&["--dyno", "plate", "--dyno-preset", "cube"]).contains("flat, offcentre, tall"));
-    assert!(err(&["--dyno", "plate", "--dyno-preset", "flat", "--cut-offset", "150:0:0"]).contains("cut offset x = 0.15 m"));
+    assert!(
+        err(&["--dyno", "plate", "--dyno-preset", "flat", "--cut-offset", "150:0:0"]).contains("cut offset x = 0.15 m")
+    );
     assert!(!dir.path().join("x").exists(), "no output after an error");
     let bad = Cli::try_parse_from(["simulate", "--out", "o", "--dyno", "plate", "--cut-offset", "1:2"]);
     assert!(bad.err().unwrap().to_string().contains("DX:DY:DZ"));

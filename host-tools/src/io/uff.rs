@@ -957,7 +957,7 @@ pub fn parse_uff58_units(bytes: &[u8], source: &str) -> Result<(Frf, Option<Stri
         fn store<T>(slot: &mut Option<(Item, T)>, new: (Item, T), source: &str) -> Result<()> {
             if let Some((p, _)) = slot {
                 let n = &new.0;
-                let dup = if n.entry % 4 == 0 { "duplicate axis" } else { "duplicate entry" };
+                let dup = if n.entry / 3 == n.entry % 3 { "duplicate axis" } else { "duplicate entry" };
                 bail!(
                     "{source}: line {}: dataset #{} is a second {} for {} \
                      (the first is dataset #{} at line {}): {dup}",
@@ -1060,7 +1060,10 @@ pub fn parse_uff58_units(bytes: &[u8], source: &str) -> Result<(Frf, Option<Stri
         if let Some((it, _)) = &cohs[entry] {
             if frfs[entry].is_none() {
                 let (i, j) = (entry / 3, entry % 3);
-                let what = if i == j { format!("axis {}", axis_name(i)) } else { format!("entry {}", entry_name(i, j)) };
+                let what = match i == j {
+                    true => format!("axis {}", axis_name(i)),
+                    false => format!("entry {}", entry_name(i, j)),
+                };
                 bail!(
                     "{source}: line {}: dataset #{} is a coherence for {} but the file has no FRF for {}",
                     it.line,

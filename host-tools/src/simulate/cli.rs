@@ -466,6 +466,7 @@ fn run_plate(args: &SimulateArgs) -> Result<()> {
         p.impact.df_hz,
         p.impact.n_impacts
     );
-    eprintln!("  wrote {}/{{frf.uff, frf.csv, measured.csv, true_force.csv, idle.csv, truth.json}}", args.out.display());
+    let files = "frf.uff, frf.csv, measured.csv, true_force.csv, idle.csv, truth.json";
+    eprintln!("  wrote {}/{{{files}}}", args.out.display());
     Ok(())
 }

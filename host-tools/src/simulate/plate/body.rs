@@ -31,11 +31,11 @@ impl RigidBody {
         Self {
             mass_kg,
             com_m: centre_m,
-            inertia_kg_m2: [[k * (ly * ly + lz * lz), 0.0, 0.0], [0.0, k * (lx * lx + lz * lz), 0.0], [
-                0.0,
-                0.0,
-                k * (lx * lx + ly * ly),
-            ]],
+            inertia_kg_m2: [
+                [k * (ly * ly + lz * lz), 0.0, 0.0],
+                [0.0, k * (lx * lx + lz * lz), 0.0],
+                [0.0, 0.0, k * (lx * lx + ly * ly)],
+            ],
         }
     }
 

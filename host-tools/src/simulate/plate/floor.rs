@@ -87,7 +87,7 @@ pub fn inverse_noise_floor(g: &dyn Fn(f64) -> Matrix3<Complex64>, spec: &FloorSp
         };
         // Check the inverse: ‖G·G⁻¹ − I‖ small against the conditioning.
         let res = (m * inv - Matrix3::identity()).norm();
-        if !(res < 1e-6) {
+        if res.is_nan() || res >= 1e-6 {
             bail!("noise floor: G⁻¹ at {f} Hz is inaccurate (‖G·G⁻¹ − I‖ = {res:e})");
         }
         Ok(std::array::from_fn(|i| (0..3).map(|j| spec.r_n2[j] * inv[(i, j)].norm_sqr()).sum()))

@@ -67,6 +67,11 @@ impl PlateMode {
         std::array::from_fn(|i| std::array::from_fn(|j| self.output[i] * self.input[j] / w2))
     }
 
+    /// b_r·F at sample `k` of `force` (x, y, z).
+    fn modal_force(&self, force: [&[f64]; 3], k: usize) -> f64 {
+        self.input[0] * force[0][k] + self.input[1] * force[1][k] + self.input[2] * force[2][k]
+    }
+
     /// The scalar factor of this mode in G(s): (1 + 2ζs/ω)/(s² + 2ζωs + ω²).
     fn factor(&self, s: Complex64) -> Complex64 {
         let (w, z) = (self.omega(), self.zeta);
@@ -106,7 +111,8 @@ pub fn undamped_modes(mats: &PlateMatrices) -> Result<(Vec<f64>, DMatrix<f64>)> 
     let mut order: Vec<usize> = (0..DOF).collect();
     order.sort_by(|&i, &j| eig.eigenvalues[i].total_cmp(&eig.eigenvalues[j]));
     let lam: Vec<f64> = order.iter().map(|&i| eig.eigenvalues[i]).collect();
-    if !(lam[0] > 0.0) || !(lam[DOF - 1] / lam[0] < MAX_EIGEN_SPREAD) {
+    let spread = lam[DOF - 1] / lam[0];
+    if lam[0].is_nan() || lam[0] <= 0.0 || spread.is_nan() || spread >= MAX_EIGEN_SPREAD {
         bail!(
             "plate dynamometer: the stiffness is (nearly) singular (eigenvalues ω² from {:e} to {:e} rad²/s²): \
              every body must be held by its springs",
@@ -121,12 +127,12 @@ pub fn undamped_modes(mats: &PlateMatrices) -> Result<(Vec<f64>, DMatrix<f64>)> 
     for (c, &l2) in lam.iter().enumerate() {
         let v: DVector<f64> = phi.column(c).into();
         let res = (&mats.k * &v - &mats.m * &v * l2).norm() / (knorm * v.norm());
-        if !(res < EIGEN_TOL) {
+        if res.is_nan() || res >= EIGEN_TOL {
             bail!("plate dynamometer: mode {} fails its eigen residual ({res:e})", c + 1);
         }
     }
     let ortho = (phi.transpose() * &mats.m * &phi - DMatrix::<f64>::identity(DOF, DOF)).norm();
-    if !(ortho < EIGEN_TOL * DOF as f64) {
+    if ortho.is_nan() || ortho >= EIGEN_TOL * DOF as f64 {
         bail!("plate dynamometer: modes are not mass-orthonormal (error {ortho:e})");
     }
     Ok((lam, phi))
@@ -213,7 +219,7 @@ impl PlateModal {
             let w = m.omega();
             let unit = Mode { fn_hz: m.fn_hz, zeta: m.zeta, residue: 1.0 };
             let d = ModeStep::new(&unit, 1.0 / fs_hz, Hold::Foh);
-            let u = |k: usize| (m.input[0] * force[0][k] + m.input[1] * force[1][k] + m.input[2] * force[2][k]) / (w * w);
+            let u = |k: usize| m.modal_force(force, k) / (w * w);
             let kv = 2.0 * m.zeta / w;
             let (mut x, mut v) = (0.0f64, 0.0f64);
             for k in 1..n {
@@ -261,8 +267,7 @@ impl PlateModal {
                 let den: Complex64 = bp.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, &ql)| q - ql).product();
                 terms.push((q, wc_n / den * num(q) / ((q - p) * (q - p.conj()))));
             }
-            let u: Vec<f64> =
-                (0..n).map(|k| m.input[0] * force[0][k] + m.input[1] * force[1][k] + m.input[2] * force[2][k]).collect();
+            let u: Vec<f64> = (0..n).map(|k| m.modal_force(force, k)).collect();
             let out = pole_sum_response(&terms, &u, fs_hz);
             for (yi, ci) in y.iter_mut().zip(m.output) {
                 for (v, o) in yi.iter_mut().zip(&out) {

@@ -59,10 +59,8 @@ fn draw(rng: &mut ChaCha8Rng) -> PlateSetup {
     let (wp_mass, wp_size, wp_xy) = if with_workpiece {
         let size = [plate[0] * uni(rng, (0.3, 0.9)), plate[1] * uni(rng, (0.3, 0.9)), uni(rng, (0.01, 0.09))];
         let rho = uni(rng, AL_STEEL);
-        let xy = [
-            uni(rng, (-1.0, 1.0)) * (plate[0] - size[0]) / 2.0,
-            uni(rng, (-1.0, 1.0)) * (plate[1] - size[1]) / 2.0,
-        ];
+        let xy =
+            [uni(rng, (-1.0, 1.0)) * (plate[0] - size[0]) / 2.0, uni(rng, (-1.0, 1.0)) * (plate[1] - size[1]) / 2.0];
         (rho * size[0] * size[1] * size[2], size, xy)
     } else {
         (0.0, [0.0; 3], [0.0; 2])
@@ -86,11 +84,7 @@ fn draw(rng: &mut ChaCha8Rng) -> PlateSetup {
         (0.0, 0.0, plate[0] / 2.0, plate[1] / 2.0, plate[2])
     };
     // The tool engages somewhere on the top, or on a side near the top.
-    let point = [
-        cx + uni(rng, (-1.0, 1.0)) * hx,
-        cy + uni(rng, (-1.0, 1.0)) * hy,
-        top - uni(rng, (0.0, 0.3)) * h,
-    ];
+    let point = [cx + uni(rng, (-1.0, 1.0)) * hx, cy + uni(rng, (-1.0, 1.0)) * hy, top - uni(rng, (0.0, 0.3)) * h];
     PlateSetup {
         plate_mass_kg: plate_mass,
         plate_size_m: plate,
@@ -116,7 +110,7 @@ impl PlateSetup {
         let mut last = String::new();
         for _ in 0..1000 {
             let s = draw(&mut rng);
-            let checked = s.validate().and_then(|_| PlateModal::new(&s, s.force_point_m)).and_then(|m| check_mode_bands(&m));
+            let checked = PlateModal::new(&s, s.force_point_m).and_then(|m| check_mode_bands(&m));
             match checked {
                 Ok(()) => return Ok(s),
                 Err(e) => last = format!("{e:#}"),

@@ -90,7 +90,8 @@ pub fn simulate_plate(seed: u64, params: &SimParams, plate: &PlateSim) -> Result
     let cut_modal = PlateModal::new(&plate.setup, plate.cut_point_m())?;
     let chain = &params.anti_alias;
     let ip = &params.impact;
-    let frf = impact_test_matrix(&impact_modal, &|f| chain.analog_frf(f), ip.n_lines, ip.df_hz, sub_seed(seed, TAG_IMPACT), ip);
+    let analog = |f: f64| chain.analog_frf(f);
+    let frf = impact_test_matrix(&impact_modal, &analog, ip.n_lines, ip.df_hz, sub_seed(seed, TAG_IMPACT), ip);
     let n = params.n_samples();
     let os = params.oversample;
     let fine = params.applied_force(chain.fine_len(n, os));
@@ -112,5 +113,6 @@ pub fn simulate_plate(seed: u64, params: &SimParams, plate: &PlateSim) -> Result
         clean[a] = c;
     }
     let t_s = (0..n).map(|k| k as f64 / params.fs_hz).collect();
-    Ok(PlateSimOutput { seed, params: params.clone(), plate: plate.clone(), impact_modal, cut_modal, frf, t_s, truth, clean, measured, idle })
+    let (params, plate) = (params.clone(), plate.clone());
+    Ok(PlateSimOutput { seed, params, plate, impact_modal, cut_modal, frf, t_s, truth, clean, measured, idle })
 }

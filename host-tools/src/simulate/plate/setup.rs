@@ -137,7 +137,8 @@ impl PlateSetup {
         }
         in_range("plate thickness", self.plate_size_m[2], PLATE_THICKNESS_M, "m")?;
         let vol = |s: [f64; 3]| s[0] * s[1] * s[2];
-        in_range("plate density (mass / volume)", self.plate_mass_kg / vol(self.plate_size_m), DENSITY_KG_M3, "kg/m³")?;
+        let rho = self.plate_mass_kg / vol(self.plate_size_m);
+        in_range("plate density (mass / volume)", rho, DENSITY_KG_M3, "kg/m³")?;
         in_range("workpiece mass", self.workpiece_mass_kg, WORKPIECE_MASS_KG, "kg")?;
         if self.workpiece_mass_kg > 0.0 {
             for (k, ax) in ["x", "y", "z"].iter().enumerate() {
@@ -155,12 +156,16 @@ impl PlateSetup {
             in_range(&format!("sensor half spacing {ax}"), v, SENSOR_HALF_SPACING_M, "m")?;
             let half = self.plate_size_m[k] / 2.0;
             if v > half {
-                bail!("plate dynamometer: sensor half spacing {ax} = {v} m puts the sensors outside the plate (half edge {half} m)");
+                bail!(
+                    "plate dynamometer: sensor half spacing {ax} = {v} m puts the sensors outside the plate \
+                     (half edge {half} m)"
+                );
             }
         }
         for (k, ax) in ["x", "y", "z"].iter().enumerate() {
-            in_range(&format!("sensor stiffness {ax}"), self.sensor_stiffness_n_per_m[k], SENSOR_STIFFNESS_N_PER_M, "N/m")?;
-            in_range(&format!("table stiffness {ax}"), self.table_stiffness_n_per_m[k], TABLE_STIFFNESS_N_PER_M, "N/m")?;
+            let (ks, kt) = (self.sensor_stiffness_n_per_m[k], self.table_stiffness_n_per_m[k]);
+            in_range(&format!("sensor stiffness {ax}"), ks, SENSOR_STIFFNESS_N_PER_M, "N/m")?;
+            in_range(&format!("table stiffness {ax}"), kt, TABLE_STIFFNESS_N_PER_M, "N/m")?;
             in_range(&format!("base edge {ax}"), self.base_size_m[k], BASE_EDGE_M, "m")?;
         }
         in_range("base mass", self.base_mass_kg, BASE_MASS_KG, "kg")?;
@@ -174,7 +179,9 @@ impl PlateSetup {
             for j in 0..3 {
                 let e = self.crosstalk[i][j];
                 if i == j && e != 0.0 {
-                    bail!("plate dynamometer: static crosstalk E[{i}][{j}] = {e} must be 0 (a gain error is calibration)");
+                    bail!(
+                        "plate dynamometer: static crosstalk E[{i}][{j}] = {e} must be 0 (a gain error is calibration)"
+                    );
                 }
                 in_range(&format!("static crosstalk E[{i}][{j}]"), e, (-CROSSTALK, CROSSTALK), "")?;
             }
