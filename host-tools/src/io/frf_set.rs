@@ -38,8 +38,10 @@ pub struct FrfFile {
     pub units: Option<String>,
 }
 
-/// Parse the bytes of the FRF file `path` as [`super::parse_frf`] does,
-/// keeping the units label for [`merge_frf_files`].
+/// Parse the bytes of the FRF file `path`, keeping the units label for
+/// [`merge_frf_files`]: the format follows from the extension (`.csv`;
+/// `.uff`, `.unv`, `.uf`), otherwise from the content (a first non-blank
+/// line `-1` means UFF). [`super::parse_frf`] is this without the units.
 pub fn parse_frf_file(path: &Path, bytes: &[u8]) -> Result<FrfFile> {
     let source = path.display().to_string();
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
