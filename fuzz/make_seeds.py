@@ -219,3 +219,76 @@ put("uff_signal", "binary_single_be_y.uff", uff_time_dataset(2, chans["fy"], dt,
 put("uff_signal", "ascii_negative_z.uff", uff_time_dataset(-3, chans["fz"], dt))
 frf_ds = uff_datasets(read(f"{fx}/ascii_single_xz.uff"))[0]
 put("uff_signal", "frf_then_time.uff", frf_ds + uff_time_dataset(1, chans["fx"], dt))
+
+# The FRF matrix: FRF CSV <i><j>_ columns, UFF 58 FRFs with a reference
+# (hammer) direction of their own, and one matrix from several files
+# (frf_merge: a mode byte whose bits 0-2 mark the UFF files, then the files
+# separated by 0x1E).
+def matrix_csv(entries, n=4, coh=()):
+    head = ["freq_hz"]
+    for e in entries:
+        head += [e + "_re", e + "_im"] + ([e + "_coh"] if e in coh else [])
+    rows = [",".join(head)]
+    for k in range(n):
+        row = ["%g" % (8.0 * k)]
+        for m, e in enumerate(entries):
+            row += ["%g" % (1.0 + 0.25 * k + m), "%g" % (-0.125 * k * m)] + (["%g" % (1.0 - 0.125 * k)] if e in coh else [])
+        rows.append(",".join(row))
+    return "\n".join(rows) + "\n"
+
+
+ALL9 = [i + j for i in "xyz" for j in "xyz"]
+put("frf_csv", "matrix_full.csv", matrix_csv(ALL9, coh=("xx", "xy", "zz")))
+put("frf_csv", "matrix_short_names.csv", matrix_csv(["x", "xy", "xz", "y", "z"], coh=("x", "xz")))
+put("frf_csv", "matrix_column_y.csv", matrix_csv(["xy", "yy", "zy"], coh=("yy",)))
+
+
+def uff_frf_dataset(rsp, ref, values, coherence=False, n=4, df=8.0, units="N"):
+    """An ASCII dataset 58 in the layout of io/uff.rs's writer: complex double
+    FRF (4E20.12) or real double coherence."""
+    ft, ord_type = (6, 4) if coherence else (4, 6)
+    out = "%6d\n%6d%74s\n" % (-1, 58, "")
+    for ident in ["seed %d %d" % (rsp, ref), "NONE", "NONE", "NONE", "NONE"]:
+        out += "%-80s\n" % ident
+    out += "%5d%10d%5d%10d %10s%10d%4d %10s%10d%4d\n" % (ft, 1, 0, 0, "DYN", 1, rsp, "HAMMER", 1, ref)
+    out += "%10d%10d%10d%13.6e%13.6e%13.6e\n" % (ord_type, n, 1, 0.0, df, 0.0)
+    num, den = ((0, "NONE"), (0, "NONE")) if coherence else ((9, units), (13, units))
+    for spec, u in [(18, "Hz"), num, den, (0, "NONE")]:
+        out += "%10d%5d%5d%5d %-20s %-20s\n" % (spec, 0, 0, 0, "NONE", u)
+    lines = ["".join("%20.12e" % v for v in values[i:i + 4]) for i in range(0, len(values), 4)]
+    return (out + "\n".join(lines) + "\n" + "%6d\n" % -1).encode()
+
+
+def frf_vals(m, n=4):
+    return [v for k in range(n) for v in (1.0 + 0.25 * k + m, -0.125 * k * m)]
+
+
+def coh_vals(n=4):
+    return [1.0 - 0.125 * k for k in range(n)]
+
+
+def uff_column(j, sign=1):
+    """Hammer direction j (1..3): the three channels' FRFs, coherence on the direct one."""
+    out = b""
+    for i in (1, 2, 3):
+        out += uff_frf_dataset(i, sign * j, frf_vals(3 * i + j))
+        if i == j:
+            out += uff_frf_dataset(i, sign * j, coh_vals(), coherence=True)
+    return out
+
+
+put("uff58", "matrix_column_x.uff", uff_column(1))
+put("uff58", "matrix_column_y_negative_ref.uff", uff_column(2, sign=-1))
+put("uff58", "matrix_full.uff", uff_column(1) + uff_column(2) + uff_column(3))
+put("uff58", "matrix_rotational_ref.uff", uff_frf_dataset(1, 5, frf_vals(0)) + uff_frf_dataset(1, 1, frf_vals(1)))
+put("uff58", "matrix_mixed_units.uff", uff_frf_dataset(1, 1, frf_vals(0)) + uff_frf_dataset(2, 1, frf_vals(1), units="lbf"))
+
+SEP = b"\x1e"
+cols = [matrix_csv([i + j for i in "xyz"], coh=(j + j,)).encode() for j in "xyz"]
+put("frf_merge", "csv_columns", b"\x00" + SEP.join(cols))
+put("frf_merge", "uff_columns", b"\x07" + SEP.join(uff_column(j) for j in (1, 2, 3)))
+put("frf_merge", "mixed_columns", b"\x02" + SEP.join([cols[0], uff_column(2), cols[2]]))
+put("frf_merge", "duplicate_column", b"\x00" + SEP.join([cols[0], cols[0]]))
+put("frf_merge", "other_lines", b"\x00" + SEP.join([cols[0], matrix_csv(["xy", "yy", "zy"], n=3).encode()]))
+put("frf_merge", "other_units", b"\x02" + SEP.join([cols[0], uff_column(2).replace(b"N                   ", b"lbf                 ")]))
+put("frf_merge", "single", b"\x00" + matrix_csv(ALL9).encode())

@@ -134,6 +134,7 @@ fn sample_frf(freq: Vec<f64>, coh_axes: &[usize], axes: &[usize]) -> Frf {
             })
             .collect(),
         freq_hz: freq,
+        cross: Vec::new(),
     }
 }
 
@@ -443,14 +444,14 @@ fn uff_hand_made_reads_and_sign_rules() {
     );
     let f = uff::parse_uff58(t.as_bytes(), "ok.uff").unwrap();
     assert_eq!(f.axes[0].frf[0], Complex64::new(-1.23456e100, -2e-100));
-    // Cross-axis and other function types are skipped next to the FRF.
+    // Other function types are skipped next to the FRF; a cross-axis FRF
+    // is an off-diagonal entry, not a direct one.
     let t = ds58(4, 1, 2, 6, 3, 1, 0.0, 10.0, [18, 9, 13], "1 0 1 0 1 0\n")
         + &ds58(2, 1, 1, 4, 3, 1, 0.0, 10.0, [18, 0, 0], "1 1 1\n")
         + &frf_x();
-    assert_eq!(
-        uff::parse_uff58(t.as_bytes(), "ok.uff").unwrap().axes.len(),
-        1
-    );
+    let f = uff::parse_uff58(t.as_bytes(), "ok.uff").unwrap();
+    assert_eq!(f.axes.len(), 1);
+    assert_eq!(f.cross.len(), 1);
 }
 
 #[test]
@@ -463,14 +464,15 @@ fn uff_errors_name_file_line_record_and_problem() {
         &uff_err(b"    -1\n  abc\n    -1\n"),
         &["line 2", "expected a dataset number"],
     );
-    // Only non-58 datasets, or only cross-axis FRFs: no FRF at all.
+    // Only non-58 datasets, or only rotational reference directions: no FRF
+    // at all (a cross FRF alone is an entry of the matrix, io_frf_matrix.rs).
     let t = "    -1\n   151\nmodel\n    -1\n";
     has(
         &uff_err(t.as_bytes()),
         &["no FRF found", "dataset #1 at line 1: type 151"],
     );
-    let t = ds58(4, 1, 2, 6, 1, 1, 0.0, 1.0, [18, 9, 13], "1 0\n");
-    has(&uff_err(t.as_bytes()), &["no FRF found", "cross-axis FRF"]);
+    let t = ds58(4, 1, 5, 6, 1, 1, 0.0, 1.0, [18, 9, 13], "1 0\n");
+    has(&uff_err(t.as_bytes()), &["no FRF found", "reference direction 5 is not a translation"]);
     // Unclosed datasets.
     has(
         &uff_err(b"    -1\n   151\nmodel\n"),
@@ -802,6 +804,7 @@ proptest! {
                 frf: vals.iter().map(|v| Complex64::new(v.0, v.1)).collect(),
                 coherence: Some(vals.iter().map(|v| v.2).collect()),
             }],
+            cross: Vec::new(),
         };
         let text = frf_csv::frf_csv_to_string(&frf).unwrap();
         prop_assert_eq!(frf_csv::parse_frf_csv(&text, "rt").unwrap(), frf);

@@ -8,11 +8,18 @@
 //! ```
 //!
 //! `freq_hz` (Hz, strictly ascending, uniform or not), then for each axis
-//! present (x, y, z) `<a>_re`, `<a>_im` (the FRF, N/N) and optionally `<a>_coh`
-//! (coherence γ², 0..=1). Column names are case-insensitive and may be quoted;
-//! the delimiter is `,` (`;` or a tab are accepted when the header uses them);
-//! blank lines are ignored. Every error names the file, the line and, for a
-//! value, the column.
+//! present (x, y, z) `<a>_re`, `<a>_im` (the direct FRF G_aa, N/N) and
+//! optionally `<a>_coh` (coherence γ², 0..=1). The 3x3 matrix adds
+//! `<i><j>_re`, `<i><j>_im`, `<i><j>_coh` for channel i and force (hammer)
+//! direction j (`xy` = channel x, hammer y); `x_re` means `xx_re`, and one
+//! entry is spelled one way in a file. Column names are case-insensitive and
+//! may be quoted; the delimiter is `,` (`;` or a tab are accepted when the
+//! header uses them); blank lines are ignored. Every error names the file,
+//! the line and, for a value, the column.
+//!
+//! The writer spells direct-only sets as `x_re`, … (the files read before the
+//! matrix existed) and sets with cross entries as `xx_re`, `xy_re`, …, row by
+//! row.
 
 use std::io::Write;
 use std::path::Path;
@@ -20,7 +27,7 @@ use std::path::Path;
 use anyhow::{anyhow, bail, Context, Result};
 use num_complex::Complex64;
 
-use crate::frf::{axis_name, AxisFrf, Frf};
+use crate::frf::{axis_name, entry_name, AxisFrf, CrossFrf, Frf};
 
 /// Coherence values this far outside [0, 1] are taken as rounding of the
 /// exporting analyser and clamped; anything further out is an error.
@@ -74,11 +81,14 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
         ','
     };
 
-    // Header: map each column to freq or (axis, kind).
+    // Header: map each column to freq or (entry, kind); entry = 3·channel + direction.
     let mut freq_col: Option<usize> = None;
     let mut cols: Vec<Option<(usize, Kind)>> = Vec::new();
-    // slot[axis][kind] = column index
-    let mut slot = [[None::<usize>; 3]; 3];
+    // Column names as written (lower case), for messages.
+    let mut names: Vec<String> = Vec::new();
+    // slot[entry][kind] = column index; spelling[entry] = how the entry is named.
+    let mut slot = [[None::<usize>; 3]; 9];
+    let mut spelling: [Option<(String, usize)>; 9] = Default::default();
     for (c, raw) in header.split(delim).enumerate() {
         let name = unquote(raw).to_ascii_lowercase();
         let colno = c + 1;
@@ -91,51 +101,56 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
             }
             freq_col = Some(c);
             cols.push(None);
+            names.push(name);
             continue;
         }
-        let parsed = name.split_once('_').and_then(|(a, k)| {
-            let axis = match a {
-                "x" => 0,
-                "y" => 1,
-                "z" => 2,
-                _ => return None,
-            };
-            let kind = match k {
-                "re" => Kind::Re,
-                "im" => Kind::Im,
-                "coh" => Kind::Coh,
-                _ => return None,
-            };
-            Some((axis, kind))
-        });
-        let Some((axis, kind)) = parsed else {
+        let Some((entry, kind, spelled)) = column_entry(&name) else {
             bail!(
                 "{source}: line {hline}, column {colno}: unknown column name {:?} \
-                 (expected freq_hz, then <a>_re, <a>_im and optionally <a>_coh for a = x, y, z)",
+                 (expected freq_hz, then <a>_re, <a>_im and optionally <a>_coh for a = x, y, z, \
+                 or <i><j>_re, <i><j>_im, <i><j>_coh for channel i and force direction j)",
                 unquote(raw)
             );
         };
+        let (i, j) = (entry / 3, entry % 3);
+        match &spelling[entry] {
+            Some((s, first)) if *s != spelled => bail!(
+                "{source}: line {hline}, column {colno}: column {name} and column {} ({}) are the same entry {} \
+                 ({}_re means {}_re): give each entry once, in one spelling",
+                first + 1,
+                names[*first],
+                entry_name(i, j),
+                axis_name(i),
+                entry_name(i, j)
+            ),
+            Some(_) => {}
+            None => spelling[entry] = Some((spelled.clone(), c)),
+        }
         let k = kind as usize;
-        if let Some(prev) = slot[axis][k] {
+        if let Some(prev) = slot[entry][k] {
+            let what = if spelled.len() == 1 {
+                format!("axis {}", axis_name(i))
+            } else {
+                format!("entry {} (channel {}, force {})", entry_name(i, j), axis_name(i), axis_name(j))
+            };
             bail!(
-                "{source}: line {hline}, column {colno}: duplicate column {name} (also column {}): \
-                 axis {} given twice",
-                prev + 1,
-                axis_name(axis)
+                "{source}: line {hline}, column {colno}: duplicate column {name} (also column {}): {what} given twice",
+                prev + 1
             );
         }
-        slot[axis][k] = Some(c);
-        cols.push(Some((axis, kind)));
+        slot[entry][k] = Some(c);
+        cols.push(Some((entry, kind)));
+        names.push(name);
     }
     if freq_col.is_none() {
         bail!("{source}: line {hline}: missing column freq_hz in the header");
     }
     let mut present = Vec::new();
-    for (axis, s) in slot.iter().enumerate() {
-        let a = axis_name(axis);
+    for (entry, s) in slot.iter().enumerate() {
+        let a = spelling[entry].as_ref().map_or("?", |(s, _)| s.as_str());
         match (s[0], s[1], s[2]) {
             (None, None, None) => {}
-            (Some(_), Some(_), _) => present.push(axis),
+            (Some(_), Some(_), _) => present.push(entry),
             (Some(c), None, _) => bail!(
                 "{source}: line {hline}: column {a}_re (column {}) has no matching {a}_im column",
                 c + 1
@@ -151,14 +166,17 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
         }
     }
     if present.is_empty() {
-        bail!("{source}: line {hline}: no FRF columns in the header (expected x_re/x_im, y_re/y_im or z_re/z_im)");
+        bail!(
+            "{source}: line {hline}: no FRF columns in the header (expected x_re/x_im, y_re/y_im or z_re/z_im, \
+             or <i><j>_re/<i><j>_im)"
+        );
     }
 
     let ncols = cols.len();
     let mut freq: Vec<f64> = Vec::new();
-    let mut re = [Vec::new(), Vec::new(), Vec::new()];
-    let mut im = [Vec::new(), Vec::new(), Vec::new()];
-    let mut coh = [Vec::new(), Vec::new(), Vec::new()];
+    let mut re: [Vec<f64>; 9] = Default::default();
+    let mut im: [Vec<f64>; 9] = Default::default();
+    let mut coh: [Vec<f64>; 9] = Default::default();
     for (lineno, line) in lines {
         let fields: Vec<&str> = line.split(delim).collect();
         if fields.len() != ncols {
@@ -168,19 +186,7 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
             );
         }
         for (c, raw) in fields.iter().enumerate() {
-            let colname = match cols[c] {
-                None => "freq_hz".to_string(),
-                Some((a, k)) => format!(
-                    "{}_{}",
-                    axis_name(a),
-                    match k {
-                        Kind::Re => "re",
-                        Kind::Im => "im",
-                        Kind::Coh => "coh",
-                    }
-                ),
-            };
-            let at = || format!("{source}: line {lineno}, column {} ({colname})", c + 1);
+            let at = || format!("{source}: line {lineno}, column {} ({})", c + 1, names[c]);
             let tok = unquote(raw);
             if tok.is_empty() {
                 bail!("{}: empty value", at());
@@ -207,13 +213,13 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
                     }
                     freq.push(v);
                 }
-                Some((a, Kind::Re)) => re[a].push(v),
-                Some((a, Kind::Im)) => im[a].push(v),
-                Some((a, Kind::Coh)) => {
+                Some((e, Kind::Re)) => re[e].push(v),
+                Some((e, Kind::Im)) => im[e].push(v),
+                Some((e, Kind::Coh)) => {
                     if !(-COHERENCE_SLACK..=1.0 + COHERENCE_SLACK).contains(&v) {
                         bail!("{}: coherence {v} outside [0, 1]", at());
                     }
-                    coh[a].push(v.clamp(0.0, 1.0));
+                    coh[e].push(v.clamp(0.0, 1.0));
                 }
             }
         }
@@ -221,22 +227,39 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
     if freq.is_empty() {
         bail!("{source}: no data rows after the header (line {hline})");
     }
-    let axes = present
-        .into_iter()
-        .map(|a| AxisFrf {
-            axis: a,
-            frf: re[a]
-                .iter()
-                .zip(&im[a])
-                .map(|(&r, &i)| Complex64::new(r, i))
-                .collect(),
-            coherence: slot[a][Kind::Coh as usize].map(|_| std::mem::take(&mut coh[a])),
-        })
-        .collect();
-    Ok(Frf {
-        freq_hz: freq,
-        axes,
-    })
+    let mut axes = Vec::new();
+    let mut cross = Vec::new();
+    for e in present {
+        let frf = re[e].iter().zip(&im[e]).map(|(&r, &i)| Complex64::new(r, i)).collect();
+        let coherence = slot[e][Kind::Coh as usize].map(|_| std::mem::take(&mut coh[e]));
+        let (i, j) = (e / 3, e % 3);
+        if i == j {
+            axes.push(AxisFrf { axis: i, frf, coherence });
+        } else {
+            cross.push(CrossFrf { channel: i, direction: j, frf, coherence });
+        }
+    }
+    Ok(Frf { freq_hz: freq, axes, cross })
+}
+
+/// The entry (3·channel + direction), kind and spelling (`x` or `xy`) of an
+/// FRF column name (lower case): `x_re` is entry xx, as `xx_re` is.
+fn column_entry(name: &str) -> Option<(usize, Kind, String)> {
+    let (a, k) = name.split_once('_')?;
+    let idx = |c: char| "xyz".find(c);
+    let mut chars = a.chars();
+    let entry = match (chars.next(), chars.next(), chars.next()) {
+        (Some(i), None, None) => 4 * idx(i)?,
+        (Some(i), Some(j), None) => 3 * idx(i)? + idx(j)?,
+        _ => return None,
+    };
+    let kind = match k {
+        "re" => Kind::Re,
+        "im" => Kind::Im,
+        "coh" => Kind::Coh,
+        _ => return None,
+    };
+    Some((entry, kind, a.to_string()))
 }
 
 /// Trim blanks and one pair of surrounding double quotes.
@@ -263,20 +286,23 @@ pub fn write_frf_csv(path: &Path, frf: &Frf) -> Result<()> {
 /// The FRF CSV text of `frf` (validated as [`write_frf_csv`] does).
 pub fn frf_csv_to_string(frf: &Frf) -> Result<String> {
     validate_frf(frf)?;
+    let entries: Vec<_> = frf.entries().collect();
+    // Direct-only sets keep the one-letter names; the matrix is spelled in full.
+    let matrix = frf.has_cross();
     let mut s = String::from("freq_hz");
-    for a in &frf.axes {
-        let n = axis_name(a.axis);
+    for e in &entries {
+        let n = if matrix { entry_name(e.channel, e.direction) } else { axis_name(e.channel).to_string() };
         s.push_str(&format!(",{n}_re,{n}_im"));
-        if a.coherence.is_some() {
+        if e.coherence.is_some() {
             s.push_str(&format!(",{n}_coh"));
         }
     }
     s.push('\n');
     for (i, f) in frf.freq_hz.iter().enumerate() {
         s.push_str(&format!("{f:?}"));
-        for a in &frf.axes {
-            s.push_str(&format!(",{:?},{:?}", a.frf[i].re, a.frf[i].im));
-            if let Some(c) = &a.coherence {
+        for e in &entries {
+            s.push_str(&format!(",{:?},{:?}", e.frf[i].re, e.frf[i].im));
+            if let Some(c) = e.coherence {
                 s.push_str(&format!(",{:?}", c[i]));
             }
         }
@@ -285,15 +311,17 @@ pub fn frf_csv_to_string(frf: &Frf) -> Result<String> {
     Ok(s)
 }
 
-/// Check an [`Frf`] before writing it: at least one axis, axes x/y/z ascending
-/// and unique, lengths matching the frequency lines, finite values, strictly
-/// ascending non-negative frequencies, coherence within [0, 1].
+/// Check an [`Frf`] before writing it: at least one entry, direct axes x/y/z
+/// ascending and unique, cross entries off the diagonal, ascending by
+/// (channel, direction) and unique, lengths matching the frequency lines,
+/// finite values, strictly ascending non-negative frequencies, coherence
+/// within [0, 1].
 pub(crate) fn validate_frf(frf: &Frf) -> Result<()> {
     let n = frf.freq_hz.len();
     if n == 0 {
         bail!("FRF has no frequency lines");
     }
-    if frf.axes.is_empty() {
+    if frf.axes.is_empty() && frf.cross.is_empty() {
         bail!("FRF has no axis");
     }
     for (i, &f) in frf.freq_hz.iter().enumerate() {
@@ -323,37 +351,48 @@ pub(crate) fn validate_frf(frf: &Frf) -> Result<()> {
             }
         }
         prev = Some(a.axis);
-        let name = axis_name(a.axis);
-        if a.frf.len() != n {
+        check_values(&frf.freq_hz, &format!("axis {}", axis_name(a.axis)), &a.frf, a.coherence.as_deref())?;
+    }
+    let mut prev: Option<(usize, usize)> = None;
+    for c in &frf.cross {
+        if c.channel > 2 || c.direction > 2 || c.channel == c.direction {
             bail!(
-                "axis {name}: {} FRF values for {n} frequency lines",
-                a.frf.len()
+                "cross FRF (channel {}, direction {}) is not an off-diagonal entry of the 3x3 matrix",
+                c.channel,
+                c.direction
             );
         }
-        if let Some(i) = a
-            .frf
-            .iter()
-            .position(|v| !v.re.is_finite() || !v.im.is_finite())
-        {
-            bail!(
-                "axis {name}: FRF value at line {i} ({} Hz) is not finite",
-                frf.freq_hz[i]
-            );
+        let key = (c.channel, c.direction);
+        if let Some(p) = prev {
+            if key <= p {
+                bail!(
+                    "cross FRFs must be unique and ascending by channel, then direction (entry {} after {})",
+                    entry_name(key.0, key.1),
+                    entry_name(p.0, p.1)
+                );
+            }
         }
-        if let Some(c) = &a.coherence {
-            if c.len() != n {
-                bail!(
-                    "axis {name}: {} coherence values for {n} frequency lines",
-                    c.len()
-                );
-            }
-            if let Some(i) = c.iter().position(|v| !(0.0..=1.0).contains(v)) {
-                bail!(
-                    "axis {name}: coherence {} at line {i} ({} Hz) outside [0, 1]",
-                    c[i],
-                    frf.freq_hz[i]
-                );
-            }
+        prev = Some(key);
+        check_values(&frf.freq_hz, &format!("entry {}", entry_name(key.0, key.1)), &c.frf, c.coherence.as_deref())?;
+    }
+    Ok(())
+}
+
+/// Lengths, finiteness and coherence range of one entry named `name`.
+fn check_values(freq_hz: &[f64], name: &str, frf: &[Complex64], coherence: Option<&[f64]>) -> Result<()> {
+    let n = freq_hz.len();
+    if frf.len() != n {
+        bail!("{name}: {} FRF values for {n} frequency lines", frf.len());
+    }
+    if let Some(i) = frf.iter().position(|v| !v.re.is_finite() || !v.im.is_finite()) {
+        bail!("{name}: FRF value at line {i} ({} Hz) is not finite", freq_hz[i]);
+    }
+    if let Some(c) = coherence {
+        if c.len() != n {
+            bail!("{name}: {} coherence values for {n} frequency lines", c.len());
+        }
+        if let Some(i) = c.iter().position(|v| !(0.0..=1.0).contains(v)) {
+            bail!("{name}: coherence {} at line {i} ({} Hz) outside [0, 1]", c[i], freq_hz[i]);
         }
     }
     Ok(())

@@ -1,4 +1,6 @@
-//! File input/output: FRF (CSV, UFF58), signal CSV, atomic writes.
+//! File input/output: FRF (CSV, UFF58, a matrix from several files), signal CSV, atomic writes.
+
+pub use frf_set::{read_frf_set, split_frf_list};
 
 pub mod atomic;
 pub mod decimal;
@@ -8,6 +10,7 @@ pub mod signal_file;
 pub mod spool;
 pub mod image_file;
 pub mod frf_csv;
+pub mod frf_set;
 pub mod uff;
 pub mod uff_signal;
 pub mod tdms;
@@ -31,12 +34,5 @@ pub fn read_frf(path: &std::path::Path) -> anyhow::Result<crate::frf::Frf> {
 /// the very bytes that are parsed): the format follows from the extension
 /// (`.csv`; `.uff`, `.unv`, `.uf`), otherwise from the content.
 pub fn parse_frf(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<crate::frf::Frf> {
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
-    let source = path.display().to_string();
-    match ext.as_deref() {
-        Some("csv") => frf_csv::parse_frf_csv_bytes(bytes, &source),
-        Some("uff" | "unv" | "uf") => uff::parse_uff58(bytes, &source),
-        _ if uff::looks_like_uff(bytes) => uff::parse_uff58(bytes, &source),
-        _ => frf_csv::parse_frf_csv_bytes(bytes, &source),
-    }
+    frf_set::parse_frf_file(path, bytes).map(|f| f.frf)
 }

@@ -8,11 +8,15 @@
 //! skipped. In a dataset 58:
 //!
 //! * function type 4 (FRF) and 6 (coherence) are used, others are skipped;
-//! * the axis comes from the response direction (record 6): 1/2/3 = +X/+Y/+Z.
-//!   A negative direction (-1/-2/-3) flips the sign of the FRF (not of the
-//!   coherence); a negative reference direction does too, so the FRF returned is
-//!   always +axis response over +axis force. Cross-axis FRFs (reference axis ≠
-//!   response axis) and rotational directions are skipped (the baseline is SISO);
+//! * entry G_ij of the FRF matrix: the channel i comes from the response
+//!   direction, the force (hammer) direction j from the reference direction
+//!   (record 6), 1/2/3 = +X/+Y/+Z; a reference direction 0 (unknown) means the
+//!   direct FRF G_ii. A negative direction (-1/-2/-3) flips the sign of the FRF
+//!   (not of the coherence), so the FRF returned is always the +i response over
+//!   the +j force. Equal directions give [`Frf::axes`], different ones
+//!   [`Frf::cross`]; rotational directions (±4/±5/±6) are skipped;
+//! * FRFs of one file labelled with different force units (records 9/10) are
+//!   refused;
 //! * ordinate data types 2/4 (real single/double) and 5/6 (complex
 //!   single/double); even abscissa (min + i·increment, record 7) or uneven
 //!   (abscissa stored with every value);
@@ -40,7 +44,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use num_complex::Complex64;
 
 use super::frf_csv::{validate_frf, COHERENCE_SLACK};
-use crate::frf::{axis_name, AxisFrf, Frf};
+use crate::frf::{axis_name, entry_name, AxisFrf, CrossFrf, Frf};
 
 /// Read an FRF (+ coherence) from a UFF file with datasets 58/58b.
 pub fn read_uff58(path: &Path) -> Result<Frf> {
@@ -357,6 +361,12 @@ fn obviously_not_force(label: &str) -> bool {
     NOT.iter().any(|p| l.contains(p)) || ["g", "m", "v", "in", "s", "rad"].contains(&l.as_str())
 }
 
+/// A units label as exported (trimmed), or `None` when it is blank or `NONE`.
+fn units_label(label: &str) -> Option<String> {
+    let t = label.trim();
+    (!t.is_empty() && !t.eq_ignore_ascii_case("none")).then(|| t.to_string())
+}
+
 /// Data characteristics record (8 to 11): specific data type and units label.
 pub(super) fn data_characteristics(line: &[u8]) -> (Option<i64>, String) {
     let spec = field(line, 0, 10)
@@ -369,12 +379,13 @@ pub(super) fn data_characteristics(line: &[u8]) -> (Option<i64>, String) {
 enum Found58 {
     Skipped(String),
     Frf {
-        axis: usize,
+        entry: usize,
         freq: Vec<f64>,
         frf: Vec<Complex64>,
+        units: Option<String>,
     },
     Coh {
-        axis: usize,
+        entry: usize,
         freq: Vec<f64>,
         coh: Vec<f64>,
     },
@@ -508,8 +519,14 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
             )
         })?;
 
-    // Which datasets we use.
+    // Which datasets we use: G_ij is response (channel) i over reference
+    // (force) j; an unknown reference direction (0) is taken as the direct FRF.
     let axis = match rsp_dir.abs() {
+        d @ 1..=3 => Some((d - 1) as usize),
+        _ => None,
+    };
+    let direction = match ref_dir.abs() {
+        0 => axis,
         d @ 1..=3 => Some((d - 1) as usize),
         _ => None,
     };
@@ -525,12 +542,10 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
             "dataset #{} at line {}: response direction {rsp_dir} is not a translation (±1/±2/±3)",
             ctx.no, ctx.line
         ))
-    } else if ref_dir != 0 && ref_dir.abs() != rsp_dir.abs() {
+    } else if direction.is_none() {
         Some(format!(
-            "dataset #{} at line {}: cross-axis {} (response direction {rsp_dir}, reference direction {ref_dir})",
-            ctx.no,
-            ctx.line,
-            function_type_name(func_type)
+            "dataset #{} at line {}: reference direction {ref_dir} is not a translation (±1/±2/±3)",
+            ctx.no, ctx.line
         ))
     } else {
         None
@@ -634,7 +649,7 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
     if let Some(note) = skip {
         return Ok(Found58::Skipped(note));
     }
-    let axis = axis.unwrap_or(0);
+    let entry = 3 * axis.unwrap_or(0) + direction.unwrap_or(0);
 
     // Units: the abscissa must be frequency, an FRF force over force.
     let (off8, r8) = recs[7];
@@ -653,6 +668,7 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
             ctx.at(off8, "record 8")
         );
     }
+    let mut labels = Vec::new();
     if func_type == 4 {
         for (r, part) in [(8usize, "numerator"), (9, "denominator")] {
             let (off, line) = recs[r];
@@ -672,8 +688,14 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
                     ctx.at(off, &format!("record {}", r + 1))
                 );
             }
+            labels.push(units_label(&units));
         }
     }
+    // The FRF's units as labelled, e.g. "N/N"; None when either is unlabelled.
+    let units = match labels.as_slice() {
+        [Some(n), Some(d)] => Some(format!("{n}/{d}")),
+        _ => None,
+    };
 
     // Every value finite.
     if let Some(i) = vals.iter().position(|v| !v.is_finite()) {
@@ -746,7 +768,7 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
                 v * s
             })
             .collect();
-        Ok(Found58::Frf { axis, freq, frf })
+        Ok(Found58::Frf { entry, freq, frf, units })
     } else {
         let mut coh = Vec::with_capacity(n);
         for k in 0..n {
@@ -770,7 +792,7 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
             }
             coh.push(c.clamp(0.0, 1.0));
         }
-        Ok(Found58::Coh { axis, freq, coh })
+        Ok(Found58::Coh { entry, freq, coh })
     }
 }
 
@@ -825,15 +847,41 @@ pub(super) fn read_numbers(
 /// Parse a UFF file (ASCII and/or binary datasets) from memory; `source`
 /// names the input in error messages.
 pub fn parse_uff58(bytes: &[u8], source: &str) -> Result<Frf> {
+    parse_uff58_units(bytes, source).map(|(frf, _)| frf)
+}
+
+/// What one FRF or coherence dataset of a file is, for error messages.
+struct Item {
+    no: usize,
+    line: usize,
+    entry: usize,
+    freq: Vec<f64>,
+    what: &'static str,
+}
+
+impl Item {
+    /// "axis x" for a direct entry, "entry xy (channel x, force y)" otherwise.
+    fn name(&self) -> String {
+        entry_label(self.entry)
+    }
+}
+
+/// "axis x" for the direct entry xx, "entry xy (channel x, force y)" for a cross one.
+fn entry_label(entry: usize) -> String {
+    let (i, j) = (entry / 3, entry % 3);
+    if i == j {
+        format!("axis {}", axis_name(i))
+    } else {
+        format!("entry {} (channel {}, force {})", entry_name(i, j), axis_name(i), axis_name(j))
+    }
+}
+
+/// [`parse_uff58`], also returning the FRFs' force units as labelled in
+/// records 9 and 10 (e.g. `"N/N"`), or `None` when no FRF labels both. FRFs
+/// of one file labelled with different units are refused.
+pub fn parse_uff58_units(bytes: &[u8], source: &str) -> Result<(Frf, Option<String>)> {
     if trim(bytes).is_empty() {
         bail!("{source}: empty file");
-    }
-    struct Item {
-        no: usize,
-        line: usize,
-        axis: usize,
-        freq: Vec<f64>,
-        what: &'static str,
     }
     let mut cur = Cursor {
         data: bytes,
@@ -841,8 +889,9 @@ pub fn parse_uff58(bytes: &[u8], source: &str) -> Result<Frf> {
     };
     let mut set_no = 0usize;
     let mut skipped: Vec<String> = Vec::new();
-    let mut frfs: [Option<(Item, Vec<Complex64>)>; 3] = [None, None, None];
-    let mut cohs: [Option<(Item, Vec<f64>)>; 3] = [None, None, None];
+    let mut frfs: [Option<(Item, Vec<Complex64>)>; 9] = Default::default();
+    let mut cohs: [Option<(Item, Vec<f64>)>; 9] = Default::default();
+    let mut units: Option<(String, usize, usize)> = None;
     while let Some((off, line)) = cur.next_line() {
         let t = trim(line);
         if t.is_empty() {
@@ -897,24 +946,25 @@ pub fn parse_uff58(bytes: &[u8], source: &str) -> Result<Frf> {
         } else {
             None
         };
-        let item = |axis: usize, freq: Vec<f64>, what: &'static str| Item {
+        let item = |entry: usize, freq: Vec<f64>, what: &'static str| Item {
             no: set_no,
             line: start_line,
-            axis,
+            entry,
             freq,
             what,
         };
-        // Store a dataset for its axis, refusing a second one of the same kind.
+        // Store a dataset for its entry, refusing a second one of the same kind.
         fn store<T>(slot: &mut Option<(Item, T)>, new: (Item, T), source: &str) -> Result<()> {
             if let Some((p, _)) = slot {
                 let n = &new.0;
+                let dup = if n.entry / 3 == n.entry % 3 { "duplicate axis" } else { "duplicate entry" };
                 bail!(
-                    "{source}: line {}: dataset #{} is a second {} for axis {} \
-                     (the first is dataset #{} at line {}): duplicate axis",
+                    "{source}: line {}: dataset #{} is a second {} for {} \
+                     (the first is dataset #{} at line {}): {dup}",
                     n.line,
                     n.no,
                     n.what,
-                    axis_name(n.axis),
+                    n.name(),
                     p.no,
                     p.line
                 );
@@ -924,8 +974,25 @@ pub fn parse_uff58(bytes: &[u8], source: &str) -> Result<Frf> {
         }
         match parse58(&mut cur, &ctx, bin)? {
             Found58::Skipped(note) => skipped.push(note),
-            Found58::Frf { axis, freq, frf } => store(&mut frfs[axis], (item(axis, freq, "FRF"), frf), source)?,
-            Found58::Coh { axis, freq, coh } => store(&mut cohs[axis], (item(axis, freq, "coherence"), coh), source)?,
+            Found58::Frf { entry, freq, frf, units: u } => {
+                if let Some(u) = u {
+                    match &units {
+                        Some((first, no, line)) if !first.eq_ignore_ascii_case(&u) => bail!(
+                            "{source}: line {start_line}: dataset #{set_no} ({}) is in units {}, but dataset #{no} \
+                             (line {line}) in {}: export every FRF of the file in the same units (N/N)",
+                            entry_label(entry),
+                            super::one_line(&u),
+                            super::one_line(first)
+                        ),
+                        Some(_) => {}
+                        None => units = Some((u, set_no, start_line)),
+                    }
+                }
+                store(&mut frfs[entry], (item(entry, freq, "FRF"), frf), source)?
+            }
+            Found58::Coh { entry, freq, coh } => {
+                store(&mut cohs[entry], (item(entry, freq, "coherence"), coh), source)?
+            }
         }
     }
     if set_no == 0 {
@@ -952,15 +1019,7 @@ pub fn parse_uff58(bytes: &[u8], source: &str) -> Result<Frf> {
     };
     let check = |it: &Item| -> Result<()> {
         let (a, b) = (&reference.freq, &it.freq);
-        let head = || {
-            format!(
-                "{source}: line {}: dataset #{} ({} {})",
-                it.line,
-                it.no,
-                it.what,
-                axis_name(it.axis)
-            )
-        };
+        let head = || format!("{source}: line {}: dataset #{} ({} {})", it.line, it.no, it.what, short(it.entry));
         if a.len() != b.len() {
             bail!(
                 "{}: {} frequency lines, but dataset #{} (FRF {}, line {}) has {}: \
@@ -968,7 +1027,7 @@ pub fn parse_uff58(bytes: &[u8], source: &str) -> Result<Frf> {
                 head(),
                 b.len(),
                 reference.no,
-                axis_name(reference.axis),
+                short(reference.entry),
                 reference.line,
                 a.len()
             );
@@ -988,24 +1047,29 @@ pub fn parse_uff58(bytes: &[u8], source: &str) -> Result<Frf> {
                 b[i],
                 a[i],
                 reference.no,
-                axis_name(reference.axis),
+                short(reference.entry),
                 reference.line
             );
         }
         Ok(())
     };
-    for axis in 0..3 {
-        if let Some((it, _)) = &frfs[axis] {
+    for entry in 0..9 {
+        if let Some((it, _)) = &frfs[entry] {
             check(it)?;
         }
-        if let Some((it, _)) = &cohs[axis] {
-            if frfs[axis].is_none() {
+        if let Some((it, _)) = &cohs[entry] {
+            if frfs[entry].is_none() {
+                let (i, j) = (entry / 3, entry % 3);
+                let what = match i == j {
+                    true => format!("axis {}", axis_name(i)),
+                    false => format!("entry {}", entry_name(i, j)),
+                };
                 bail!(
-                    "{source}: line {}: dataset #{} is a coherence for axis {} but the file has no FRF for axis {}",
+                    "{source}: line {}: dataset #{} is a coherence for {} but the file has no FRF for {}",
                     it.line,
                     it.no,
-                    axis_name(axis),
-                    axis_name(axis)
+                    it.name(),
+                    what
                 );
             }
             check(it)?;
@@ -1013,26 +1077,40 @@ pub fn parse_uff58(bytes: &[u8], source: &str) -> Result<Frf> {
     }
     let freq_hz = reference.freq.clone();
     let mut axes = Vec::new();
-    for axis in 0..3 {
-        if let Some((_, frf)) = frfs[axis].take() {
-            let coherence = cohs[axis].take().map(|(_, c)| c);
-            axes.push(AxisFrf {
-                axis,
-                frf,
-                coherence,
-            });
+    let mut cross = Vec::new();
+    for entry in 0..9 {
+        if let Some((_, frf)) = frfs[entry].take() {
+            let coherence = cohs[entry].take().map(|(_, c)| c);
+            let (i, j) = (entry / 3, entry % 3);
+            if i == j {
+                axes.push(AxisFrf { axis: i, frf, coherence });
+            } else {
+                cross.push(CrossFrf { channel: i, direction: j, frf, coherence });
+            }
         }
     }
-    Ok(Frf { freq_hz, axes })
+    Ok((Frf { freq_hz, axes, cross }, units.map(|(u, _, _)| u)))
+}
+
+/// The short name of an entry in messages: `x` for the direct entry xx (as
+/// before the matrix existed), `xy` for a cross entry.
+fn short(entry: usize) -> String {
+    let (i, j) = (entry / 3, entry % 3);
+    if i == j {
+        axis_name(i).to_string()
+    } else {
+        entry_name(i, j)
+    }
 }
 
 // ---------------------------------------------------------------------------
 // Writing
 
 /// Write `frf` as UFF datasets 58 (ASCII) or 58b (binary, little endian,
-/// IEEE 754 double), atomically: per axis an FRF (function type 4, complex
-/// double) and, if present, its coherence (function type 6, real double);
-/// response and reference direction +1/+2/+3, node 1. The frequency lines must
+/// IEEE 754 double), atomically: per entry G_ij, row by row, an FRF (function
+/// type 4, complex double) and, if present, its coherence (function type 6,
+/// real double); response direction i + 1, reference direction j + 1 (+X/+Y/+Z),
+/// node 1. The frequency lines must
 /// be evenly spaced (the abscissa is written as minimum and increment, with 7
 /// significant digits).
 pub fn write_uff58(path: &Path, frf: &Frf, binary: bool) -> Result<()> {
@@ -1066,16 +1144,14 @@ pub fn uff58_to_bytes(frf: &Frf, binary: bool) -> Result<Vec<u8>> {
     }
     let mut out = Vec::new();
     let mut func_id = 0;
-    for a in &frf.axes {
-        let dir = a.axis as i64 + 1;
+    for e in frf.entries() {
+        let entry = (e.channel, e.direction);
         func_id += 1;
-        let vals: Vec<f64> = a.frf.iter().flat_map(|v| [v.re, v.im]).collect();
-        write_dataset(
-            &mut out, 4, func_id, dir, a.axis, 6, n, f0, df, &vals, binary,
-        );
-        if let Some(c) = &a.coherence {
+        let vals: Vec<f64> = e.frf.iter().flat_map(|v| [v.re, v.im]).collect();
+        write_dataset(&mut out, 4, func_id, entry, 6, n, f0, df, &vals, binary);
+        if let Some(c) = e.coherence {
             func_id += 1;
-            write_dataset(&mut out, 6, func_id, dir, a.axis, 4, n, f0, df, c, binary);
+            write_dataset(&mut out, 6, func_id, entry, 4, n, f0, df, c, binary);
         }
     }
     Ok(out)
@@ -1116,6 +1192,17 @@ pub(super) fn dataset_header(
     recs: [(i64, &str, &str); 4],
     binary_bytes: Option<usize>,
 ) -> String {
+    dataset_header_ref((func_type, func_id, (dir, dir), id1), (ord_type, n, x0, dx), recs, binary_bytes)
+}
+
+/// [`dataset_header`] with a response and a reference direction of their own
+/// (record 6): an FRF G_ij has response direction i + 1, reference j + 1.
+pub(super) fn dataset_header_ref(
+    (func_type, func_id, (dir, ref_dir), id1): (i64, i64, (i64, i64), &str),
+    (ord_type, n, x0, dx): (i64, usize, f64, f64),
+    recs: [(i64, &str, &str); 4],
+    binary_bytes: Option<usize>,
+) -> String {
     let mut s = String::new();
     s.push_str(&format!("{:>6}\n", -1));
     match binary_bytes {
@@ -1127,7 +1214,7 @@ pub(super) fn dataset_header(
     }
     s.push_str(&format!(
         "{:>5}{:>10}{:>5}{:>10} {:>10}{:>10}{:>4} {:>10}{:>10}{:>4}\n",
-        func_type, func_id, 0, 0, "DYN", 1, dir, "HAMMER", 1, dir
+        func_type, func_id, 0, 0, "DYN", 1, dir, "HAMMER", 1, ref_dir
     ));
     s.push_str(&format!("{:>10}{:>10}{:>10}{}{}{}\n", ord_type, n, 1, fmt_e(x0, 6, 13), fmt_e(dx, 6, 13), fmt_e(0.0, 6, 13)));
     for (spec, label, units) in recs {
@@ -1141,8 +1228,7 @@ fn write_dataset(
     out: &mut Vec<u8>,
     func_type: i64,
     func_id: i64,
-    dir: i64,
-    axis: usize,
+    (channel, direction): (usize, usize),
     ord_type: i64,
     n: usize,
     f0: f64,
@@ -1155,9 +1241,13 @@ fn write_dataset(
     } else {
         ("coherence", (0, "Coherence", "NONE"), (0, "NONE", "NONE"))
     };
-    let id1 = format!("dynocomp {what} {}", axis_name(axis));
-    let s = dataset_header(
-        (func_type, func_id, dir, &id1),
+    // A direct entry keeps the one-letter name of the files written before
+    // the matrix existed.
+    let name = if channel == direction { axis_name(channel).to_string() } else { entry_name(channel, direction) };
+    let id1 = format!("dynocomp {what} {name}");
+    let dirs = (channel as i64 + 1, direction as i64 + 1);
+    let s = dataset_header_ref(
+        (func_type, func_id, dirs, &id1),
         (ord_type, n, f0, df),
         [(18, "Frequency", "Hz"), num, den, (0, "NONE", "NONE")],
         binary.then_some(vals.len() * 8),

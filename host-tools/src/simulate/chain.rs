@@ -243,9 +243,17 @@ pub fn measure_through(dyn_: &Dynamometer, b: &Butterworth, force: &[f64], fs_hz
         let den: Complex64 = bp.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, &ql)| q - ql).product();
         terms.push((q, wc_n / den * g_at(q)));
     }
+    pole_sum_response(&terms, force, fs_hz)
+}
+
+/// Response Re Σ_i x_i of Σ_i ρ_i/(s − p_i) to the piecewise-linear `input`
+/// (rate `fs_hz`) from rest, each first-order term discretized exactly for a
+/// linear input on each step. The terms must hold conjugate poles in pairs
+/// (with conjugate residues) for the sum to be the real response.
+pub(crate) fn pole_sum_response(terms: &[(Complex64, Complex64)], input: &[f64], fs_hz: f64) -> Vec<f64> {
     let h = 1.0 / fs_hz;
-    let mut y = vec![0.0; force.len()];
-    for (p, rho) in terms {
+    let mut y = vec![0.0; input.len()];
+    for &(p, rho) in terms {
         // x⁺ = e^{ph} x + ρh[(φ1 − φ2)(ph)·u0 + φ2(ph)·u1]
         let ph = p * h;
         let e = phi_k(0, ph);
@@ -253,8 +261,8 @@ pub fn measure_through(dyn_: &Dynamometer, b: &Butterworth, force: &[f64], fs_hz
         let c0 = rho * h * (p1 - p2);
         let c1 = rho * h * p2;
         let mut x = Complex64::new(0.0, 0.0);
-        for k in 1..force.len() {
-            x = e * x + c0 * force[k - 1] + c1 * force[k];
+        for k in 1..input.len() {
+            x = e * x + c0 * input[k - 1] + c1 * input[k];
             y[k] += x.re;
         }
     }

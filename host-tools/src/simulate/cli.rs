@@ -119,6 +119,44 @@ pub struct SimulateArgs {
     /// End of the drift (s) [default: the end of the record].
     #[arg(long, requires = "drift_percent")]
     pub drift_end: Option<f64>,
+    /// The dynamometer model: `diagonal` (one independent modal model per
+    /// axis, no crosstalk) or `plate` (a rigid plate and workpiece on four
+    /// 3-component sensors and a base on the table: every channel responds
+    /// to every force direction; the impact test measures all nine FRFs).
+    #[arg(long, value_enum, default_value_t = DynoModel::Diagonal)]
+    pub dyno: DynoModel,
+    /// With --dyno plate: a named set-up instead of a random one: `flat`
+    /// (flat centred plate), `offcentre` (block off the centre), `tall`
+    /// (tall part, force 90 mm above the sensors).
+    #[arg(long, value_name = "NAME")]
+    pub dyno_preset: Option<String>,
+    /// With --dyno plate: where the cutting force acts, from the impact point,
+    /// as DX:DY:DZ in mm (e.g. 20:0:0); the FRF is measured at the impact point.
+    #[arg(long, value_name = "DX:DY:DZ", allow_hyphen_values = true, value_parser = parse_offset_mm)]
+    pub cut_offset: Option<[f64; 3]>,
+}
+
+/// The dynamometer model of `dynocomp simulate`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DynoModel {
+    /// One independent modal model per axis (no crosstalk).
+    Diagonal,
+    /// The physical 3x3 plate dynamometer (crosstalk).
+    Plate,
+}
+
+/// `DX:DY:DZ` in mm → metres.
+fn parse_offset_mm(s: &str) -> Result<[f64; 3]> {
+    let parts: Vec<&str> = s.split(':').collect();
+    let [x, y, z] = parts.as_slice() else {
+        anyhow::bail!("--cut-offset {s}: expected DX:DY:DZ in mm, e.g. 20:0:0");
+    };
+    let mm = |v: &str| -> Result<f64> {
+        let x: f64 = v.trim().parse().with_context(|| format!("--cut-offset {s}: {v:?} is not a number of mm"))?;
+        anyhow::ensure!(x.is_finite(), "--cut-offset {s}: {v:?} is not finite");
+        Ok(x * 1e-3)
+    };
+    Ok([mm(x)?, mm(y)?, mm(z)?])
 }
 
 impl SimulateArgs {
@@ -264,6 +302,29 @@ fn record(t_s: Option<&[f64]>, ch: &[Vec<f64>; 3]) -> SignalRecord {
     SignalRecord { t_s: t_s.map(|t| t.to_vec()), channels: (0..3).map(|a| (a, ch[a].clone())).collect() }
 }
 
+/// Write the files every model writes into `dir` (created if missing): the
+/// impact test `frf` (frf.uff, frf.csv), the records `[measured, truth,
+/// idle]` at `fs_hz` (measured.csv, true_force.csv, idle.csv; the first two
+/// on `t_s`) and `truth_json` (truth.json).
+pub(crate) fn write_records(
+    dir: &Path,
+    frf: &crate::frf::Frf,
+    fs_hz: f64,
+    t_s: &[f64],
+    [measured, truth, idle]: [&[Vec<f64>; 3]; 3],
+    truth_json: &str,
+) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create output directory", dir.display()))?;
+    let t_idle: Vec<f64> = (0..idle[0].len()).map(|k| k as f64 / fs_hz).collect();
+    write_uff58(&dir.join("frf.uff"), frf, false)?;
+    write_frf_csv(&dir.join("frf.csv"), frf)?;
+    write_signal_csv(&dir.join("measured.csv"), &record(Some(t_s), measured))?;
+    write_signal_csv(&dir.join("true_force.csv"), &record(Some(t_s), truth))?;
+    write_signal_csv(&dir.join("idle.csv"), &record(Some(&t_idle), idle))?;
+    crate::io::atomic::write_bytes_atomic(&dir.join("truth.json"), format!("{truth_json}\n").as_bytes())?;
+    Ok(())
+}
+
 /// Write the output files of `out` into `dir` (created if missing).
 pub fn write_outputs(dir: &Path, out: &SimOutput) -> Result<()> {
     write_outputs_of(dir, out, None)
@@ -271,21 +332,19 @@ pub fn write_outputs(dir: &Path, out: &SimOutput) -> Result<()> {
 
 /// [`write_outputs`], recording the preset that produced `out` in truth.json.
 pub fn write_outputs_of(dir: &Path, out: &SimOutput, preset: Option<&super::presets::Preset>) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create output directory", dir.display()))?;
-    let t_idle: Vec<f64> = (0..out.idle[0].len()).map(|k| k as f64 / out.params.fs_hz).collect();
-    write_uff58(&dir.join("frf.uff"), &out.frf, false)?;
-    write_frf_csv(&dir.join("frf.csv"), &out.frf)?;
-    write_signal_csv(&dir.join("measured.csv"), &record(Some(&out.t_s), &out.measured))?;
-    write_signal_csv(&dir.join("true_force.csv"), &record(Some(&out.t_s), &out.truth))?;
-    write_signal_csv(&dir.join("idle.csv"), &record(Some(&t_idle), &out.idle))?;
     let json = truth_json(out, preset)?;
-    crate::io::atomic::write_bytes_atomic(&dir.join("truth.json"), format!("{json}\n").as_bytes())?;
-    Ok(())
+    write_records(dir, &out.frf, out.params.fs_hz, &out.t_s, [&out.measured, &out.truth, &out.idle], &json)
 }
 
 /// `dynocomp simulate`: simulate and write the files into `args.out`; a
 /// summary goes to stderr.
 pub fn run(args: &SimulateArgs) -> Result<()> {
+    if args.dyno == DynoModel::Plate {
+        return run_plate(args);
+    }
+    if args.dyno_preset.is_some() || args.cut_offset.is_some() {
+        anyhow::bail!("--dyno-preset and --cut-offset describe the plate dynamometer: add --dyno plate");
+    }
     let params = args.params()?;
     let preset = args.preset.as_deref().map(super::presets::preset).transpose()?;
     let out = match (args.drift_percent, &preset) {
@@ -360,5 +419,54 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             pr.design_flags.join(" ")
         );
     }
+    Ok(())
+}
+
+/// `dynocomp simulate --dyno plate`: the physical 3x3 dynamometer, random
+/// from the seed or a `--dyno-preset`, cut at `--cut-offset` from the impact point.
+fn run_plate(args: &SimulateArgs) -> Result<()> {
+    use super::plate::{output, simulate_plate, PlateSetup, PlateSim};
+    if args.preset.is_some() {
+        anyhow::bail!(
+            "--preset with --dyno plate: the paper presets bring their own per-axis dynamometer; \
+             use --dyno-preset for a plate set-up"
+        );
+    }
+    if args.drift_percent.is_some() {
+        anyhow::bail!("--drift-percent with --dyno plate: a drifting plate dynamometer is not simulated yet");
+    }
+    let params = args.params()?;
+    let setup = match &args.dyno_preset {
+        Some(name) => PlateSetup::preset(name)?,
+        None => PlateSetup::random(super::sub_seed(args.seed, super::TAG_DYNO))?,
+    };
+    let plate = PlateSim { setup, cut_offset_m: args.cut_offset.unwrap_or([0.0; 3]) };
+    let out = simulate_plate(args.seed, &params, &plate)?;
+    output::write_plate_outputs(&args.out, &out, args.dyno_preset.as_deref())?;
+    let p = &out.params;
+    eprintln!(
+        "simulate: seed {}, fs {} Hz, {} samples ({} s), oversample {}, anti-alias {}, plate dynamometer{}",
+        out.seed,
+        p.fs_hz,
+        out.t_s.len(),
+        p.duration_s,
+        p.oversample,
+        p.anti_alias,
+        args.dyno_preset.as_deref().map(|n| format!(" (preset {n})")).unwrap_or_default()
+    );
+    for line in output::summary(&out) {
+        eprintln!("{line}");
+    }
+    eprintln!(
+        "  noise R {} N², ADC {} bits ±{} N; impact tests in x, y, z: {} lines × {} Hz, {} impacts, all nine FRFs",
+        p.measurement.noise_variance_n2,
+        p.measurement.adc_bits,
+        p.measurement.adc_range_n,
+        p.impact.n_lines,
+        p.impact.df_hz,
+        p.impact.n_impacts
+    );
+    let files = "frf.uff, frf.csv, measured.csv, true_force.csv, idle.csv, truth.json";
+    eprintln!("  wrote {}/{{{files}}}", args.out.display());
     Ok(())
 }

@@ -102,6 +102,25 @@ pub fn impact_test_axis(dyn_: &Dynamometer, axis: usize, n_lines: usize, df_hz: 
 /// As [`impact_test_axis`], for any true response `g(f_hz)` (e.g. the
 /// dynamometer through an analog front end).
 pub fn impact_test_fn(g: &dyn Fn(f64) -> Complex64, axis: usize, n_lines: usize, df_hz: f64, seed: u64, params: &ImpactParams) -> AxisFrf {
+    let mut out = impact_test_channels(&|f, y: &mut [Complex64]| y[0] = g(f), 1, n_lines, df_hz, seed, params);
+    let (frf, coh) = out.remove(0);
+    AxisFrf { axis, frf, coherence: Some(coh) }
+}
+
+/// One impact test recording `n_channels` channels at once (a hammer
+/// direction of a multi-component dynamometer): every channel sees the same
+/// impacts and the same hammer load-cell signal, each with its own output
+/// noise; `g(f_hz, out)` writes the channels' true responses at `f_hz` into
+/// `out`. Returns (H1, coherence) per channel. With one channel this is
+/// [`impact_test_fn`], draw for draw.
+pub fn impact_test_channels(
+    g: &dyn Fn(f64, &mut [Complex64]),
+    n_channels: usize,
+    n_lines: usize,
+    df_hz: f64,
+    seed: u64,
+    params: &ImpactParams,
+) -> Vec<(Vec<Complex64>, Vec<f64>)> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let n_imp = params.n_impacts.max(1);
     // Per-impact strength and cutoff.
@@ -121,29 +140,38 @@ pub fn impact_test_fn(g: &dyn Fn(f64) -> Complex64, axis: usize, n_lines: usize,
             Complex64::new(a, b) * (rms / std::f64::consts::SQRT_2)
         }
     };
-    let mut frf = Vec::with_capacity(n_lines);
-    let mut coh = Vec::with_capacity(n_lines);
+    let mut out: Vec<(Vec<Complex64>, Vec<f64>)> =
+        (0..n_channels).map(|_| (Vec::with_capacity(n_lines), Vec::with_capacity(n_lines))).collect();
+    let mut gk = vec![Complex64::new(0.0, 0.0); n_channels];
+    let mut gyy = vec![0.0f64; n_channels];
+    let mut gxy = vec![Complex64::new(0.0, 0.0); n_channels];
     for k in 0..n_lines {
         let f = k as f64 * df_hz;
-        let g = g(f);
+        g(f, &mut gk);
         let real_only = f == 0.0;
         let out_rms = params.output_noise_rel
             * (1.0 + (params.dc_noise_factor - 1.0).max(0.0) * (-f / params.low_freq_noise_hz.max(1e-12)).exp());
-        let (mut gxx, mut gyy, mut gxy) = (0.0f64, 0.0f64, Complex64::new(0.0, 0.0));
+        let mut gxx = 0.0f64;
+        gyy.iter_mut().for_each(|v| *v = 0.0);
+        gxy.iter_mut().for_each(|v| *v = Complex64::new(0.0, 0.0));
         for &(a, fc) in &impacts {
             let x_true = a * hammer(f, fc, params.hammer_order);
             let x = Complex64::new(x_true, 0.0) + cgauss(&mut rng, params.input_noise_rel, real_only);
-            let y = g * x_true + cgauss(&mut rng, out_rms, real_only);
             gxx += x.norm_sqr();
-            gyy += y.norm_sqr();
-            gxy += x.conj() * y;
+            for c in 0..n_channels {
+                let y = gk[c] * x_true + cgauss(&mut rng, out_rms, real_only);
+                gyy[c] += y.norm_sqr();
+                gxy[c] += x.conj() * y;
+            }
         }
-        let h1 = if gxx > 0.0 { gxy / gxx } else { Complex64::new(0.0, 0.0) };
-        let c = if gxx > 0.0 && gyy > 0.0 { (gxy.norm_sqr() / (gxx * gyy)).clamp(0.0, 1.0) } else { 0.0 };
-        frf.push(h1);
-        coh.push(c);
+        for (c, (frf, coh)) in out.iter_mut().enumerate() {
+            let h1 = if gxx > 0.0 { gxy[c] / gxx } else { Complex64::new(0.0, 0.0) };
+            let v = if gxx > 0.0 && gyy[c] > 0.0 { (gxy[c].norm_sqr() / (gxx * gyy[c])).clamp(0.0, 1.0) } else { 0.0 };
+            frf.push(h1);
+            coh.push(v);
+        }
     }
-    AxisFrf { axis, frf, coherence: Some(coh) }
+    out
 }
 
 /// Impact tests of all three axes (independent noise per axis) on
@@ -161,7 +189,7 @@ pub fn impact_test_all_with(g: &dyn Fn(usize, f64) -> Complex64, n_lines: usize,
             impact_test_fn(&|f| g(a, f), a, n_lines, df_hz, s, params)
         })
         .collect();
-    Frf { freq_hz: impact_freqs(n_lines, df_hz), axes }
+    Frf::direct(impact_freqs(n_lines, df_hz), axes)
 }
 
 /// Normalized random error of an H1 magnitude estimate from `n_avg` averages

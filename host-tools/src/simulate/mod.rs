@@ -5,6 +5,9 @@
 //!
 //! - [`dynamometer`]: modal models G(s) with unit DC gain per axis, random or
 //!   explicit, their FRF and exact (first-order-hold) time response;
+//! - [`plate`]: the physical 3x3 dynamometer (a rigid plate and workpiece on
+//!   four 3-component sensors, a base on the table) with crosstalk, the
+//!   impact tests of all nine FRFs, and the exact 3x3 inverse's noise floor;
 //! - [`impact`]: simulated impact-hammer tests (H1 and coherence from averaged
 //!   spectra);
 //! - [`milling`]: mechanistic milling forces (Altintas) with helix, runout,
@@ -31,6 +34,7 @@ pub mod dynamometer;
 pub mod impact;
 pub mod measurement;
 pub mod milling;
+pub mod plate;
 pub mod presets;
 
 pub mod shaker;
@@ -192,7 +196,7 @@ pub fn sub_seed(seed: u64, tag: u64) -> u64 {
 pub(crate) const TAG_DYNO: u64 = 1;
 pub(crate) const TAG_IMPACT: u64 = 2;
 pub(crate) const TAG_NOISE: u64 = 10; // + axis
-const TAG_IDLE: u64 = 20; // + axis
+pub(crate) const TAG_IDLE: u64 = 20; // + axis
 
 /// Measure `force_fine` (defined at `fs·oversample`, at least
 /// `chain.fine_len(n, oversample)` samples) with `dyn_` through the
