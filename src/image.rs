@@ -72,7 +72,7 @@ pub const MAX_COEFFICIENT: f32 = 1.0e6;
 pub const MIN_POLE_MARGIN: f64 = 1.0e-7;
 /// Largest accepted bound on the ℓ1 gain of an axis's filter
 /// ([`AxisFilter::gain_bound`], N/N): for |u| ≤ U the output stays within
-/// this times U. Designed compensators are at 40…300 (their lightly damped
+/// this times U. Designed compensators are at 3…1 300 (their lightly damped
 /// slow modes dominate); a compensator that may amplify some bounded force
 /// ten thousand times is not a force measurement, it is a wrong image.
 pub const MAX_GAIN_BOUND: f64 = 1.0e4;
