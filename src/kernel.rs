@@ -229,6 +229,20 @@ pub enum FilterError {
     NotModal(usize),
 }
 
+impl core::fmt::Display for FilterError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            FilterError::TooManySections => write!(f, "more than {MAX_SECTIONS} sections"),
+            FilterError::NonFinite(s) if s >= MAX_SECTIONS => f.write_str("the direct term d is not finite"),
+            FilterError::NonFinite(s) => write!(f, "section {s} has a non-finite coefficient"),
+            FilterError::Unstable(s) => write!(f, "section {s} has a pole on or outside the unit circle"),
+            FilterError::TooManyTaps => write!(f, "more than {MAX_FIR} FIR taps"),
+            FilterError::NonFiniteTap(t) => write!(f, "FIR tap {t} is not finite"),
+            FilterError::NotModal(s) => write!(f, "section {s} is neither a normal-form pole pair nor diagonal"),
+        }
+    }
+}
+
 /// A conjugate pole pair as the kernel computes it: a normal-form section
 /// with `β` folded into the output row, `[σ, ω, β·c₁, β·c₂]`: `σ = Δ11 =
 /// Δ22`, `ω = Δ12 = −Δ21` (dimensionless), `β·c` (N per state unit, the
