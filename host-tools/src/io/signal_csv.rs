@@ -76,9 +76,15 @@ fn column_axis(name: &str) -> Option<usize> {
 /// forces that `dynocomp stream` records next to the compensated ones.
 pub const IGNORED_COLUMNS: [&str; 3] = ["raw_fx", "raw_fy", "raw_fz"];
 
-/// Read a force record from `path`.
+/// Read a force record from `path` (forces within the default full scale).
 pub fn read_signal_csv(path: &Path) -> Result<SignalRecord> {
-    let mut r = CsvReader::open(path)?;
+    read_signal_csv_checked(path, DEFAULT_FULL_SCALE_N)
+}
+
+/// Read a force record from `path`, refusing forces beyond ±`full_scale_n`
+/// (N; `f64::INFINITY` checks only that they are finite).
+pub fn read_signal_csv_checked(path: &Path, full_scale_n: f64) -> Result<SignalRecord> {
+    let mut r = CsvReader::open(path)?.with_full_scale(full_scale_n);
     record_from(&mut r)
 }
 
@@ -164,7 +170,8 @@ impl<R: BufRead> CsvReader<R> {
     }
 
     /// Refuse force values beyond ±`full_scale_n` (N) instead of
-    /// [`DEFAULT_FULL_SCALE_N`].
+    /// [`DEFAULT_FULL_SCALE_N`]; `f64::INFINITY` checks only that they are
+    /// finite.
     pub fn with_full_scale(mut self, full_scale_n: f64) -> Self {
         self.cols.full_scale_n = full_scale_n;
         self
