@@ -5,7 +5,7 @@
 //! The truth for eigenvalues is Vieta's: the roots of a monic polynomial sum
 //! to −a_{n−1}; the truth for a fit is the model it was given.
 
-use dynocomp::fit::linalg::{eigenvalues, poly_roots, singular_values, svd, sweeps};
+use dynocomp::fit::linalg::{eigenvalues, poly_roots, singular_values, svd, sweeps, symmetric_eigenvalues};
 use dynocomp::fit::rfp::{rfp_fit, RfpOptions};
 use dynocomp::fit::vf::{coherence_weights, max_order_for, min_lines, vector_fit, VfOptions};
 use dynocomp::fit::PoleResidueModel;
@@ -158,6 +158,13 @@ proptest! {
             prop_assert_eq!(e.len(), m.nrows());
         }
         let _ = singular_values(&m, "m");
+        let sym = &m + m.transpose();
+        if let Ok(e) = symmetric_eigenvalues(&sym, "s") {
+            // Σ eigenvalues = trace (where the entries are not so spread
+            // that the trace itself is rounding).
+            let scale = sym.iter().map(|v| v.abs()).fold(0.0, f64::max) * sym.nrows() as f64;
+            prop_assert!((e.sum() - sym.trace()).abs() <= 1e-9 * scale.max(1e-300) || !scale.is_finite());
+        }
         let _ = svd(m.clone(), "m");
         let mut tall = m.clone().resize(m.nrows() + 3, m.ncols(), 0.0);
         tall[(m.nrows(), 0)] = f64::NAN;

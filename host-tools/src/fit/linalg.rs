@@ -11,7 +11,7 @@
 //! non-convergence as an error that names what did not converge.
 
 use anyhow::{bail, Result};
-use nalgebra::{DMatrix, DVector, Schur, SVD};
+use nalgebra::{DMatrix, DVector, Schur, SymmetricEigen, SVD};
 use num_complex::Complex64;
 
 /// Iteration limit of one decomposition of an n×n (or n-column) matrix:
@@ -118,5 +118,22 @@ pub fn singular_values(m: &DMatrix<f64>, what: &str) -> Result<DVector<f64>> {
     match SVD::try_new(m.clone(), false, false, SVD_EPS, limit) {
         Some(s) => Ok(s.singular_values),
         None => bail!("{what}: the singular value iteration (SVD) of the {rows}×{cols} matrix did not converge within {limit} sweeps"),
+    }
+}
+
+/// Eigenvalues of the symmetric matrix `m` (only its lower triangle is
+/// read), at most [`sweeps`] iterations; `what` names it in errors (for
+/// nalgebra's `symmetric_eigenvalues`, which has no limit).
+pub fn symmetric_eigenvalues(m: &DMatrix<f64>, what: &str) -> Result<DVector<f64>> {
+    let n = m.nrows();
+    if n != m.ncols() {
+        bail!("{what}: eigenvalues of a {n}×{} matrix, which is not square", m.ncols());
+    }
+    if let Some((i, j)) = non_finite(m) {
+        bail!("{what}: entry ({i}, {j}) is {}, eigenvalues undefined", m[(i, j)]);
+    }
+    match SymmetricEigen::try_new(m.clone(), f64::EPSILON, sweeps(n)) {
+        Some(e) => Ok(e.eigenvalues),
+        None => bail!("{what}: the symmetric eigenvalue iteration of the {n}×{n} matrix did not converge within {} sweeps", sweeps(n)),
     }
 }
