@@ -78,6 +78,17 @@ const MAX_SYMLINKS: usize = 40;
 /// through). An error for a symlink loop, and for an existing target that
 /// is not a regular file (device, FIFO, socket, directory).
 pub fn resolve_output(path: &Path) -> Result<PathBuf> {
+    // What the path finally opens, magic links included: /dev/stdout is
+    // /proc/self/fd/1, whose link text (`pipe:[…]`) names no file.
+    if let Ok(meta) = std::fs::metadata(path) {
+        if !meta.is_file() {
+            bail!(
+                "{}: is {}, not a regular file; outputs are regular files, or `-` for standard output",
+                path.display(),
+                kind_of(&meta.file_type())
+            );
+        }
+    }
     let mut p = path.to_path_buf();
     for _ in 0..MAX_SYMLINKS {
         let meta = match std::fs::symlink_metadata(&p) {
@@ -782,6 +793,12 @@ mod tests {
         std::fs::create_dir(&sub).unwrap();
         assert!(write_bytes_atomic(&sub, b"x").unwrap_err().to_string().contains("directory"));
         assert!(std::fs::metadata(&sub).unwrap().is_dir());
+        // A pipe behind a /proc magic link, as /dev/stdout is in a pipeline.
+        let (reader, _writer) = std::io::pipe().unwrap();
+        use std::os::fd::AsRawFd;
+        let proc_fd = PathBuf::from(format!("/proc/self/fd/{}", reader.as_raw_fd()));
+        let e = write_bytes_atomic(&proc_fd, b"x").unwrap_err().to_string();
+        assert!(e.contains("FIFO"), "{e}");
         let e = write_atomic_file(Path::new("-"), |_, _| Ok(())).unwrap_err().to_string();
         assert!(e.contains("standard output"), "{e}");
         assert!(leftovers(dir.path()).is_empty());
