@@ -59,6 +59,30 @@ pub const FS_RANGE_HZ: core::ops::RangeInclusive<u32> = 1_000..=1_000_000;
 /// Largest declared output latency (samples).
 pub const MAX_LATENCY_SAMPLES: u16 = 1024;
 
+/// Largest magnitude of any filter coefficient (Δ, b, c, d, FIR taps), N/N
+/// or dimensionless. The host scales every section state to unit input gain
+/// (b = 1), so c, d and the taps are gains of a force/force filter, and
+/// stable Δ entries are below 2: designs use magnitudes of 10⁻⁶…10². The
+/// bound is four orders of magnitude above that and far below what a flipped
+/// high exponent bit makes of a coefficient (a factor of 2⁶⁴ or more).
+pub const MAX_COEFFICIENT: f32 = 1.0e6;
+/// Smallest distance of every section pole from the unit circle: pole
+/// radius ≤ 1 − `MIN_POLE_MARGIN`, the margin the host's design verifies
+/// after rounding to f32 (`quantize::POLE_MARGIN`).
+pub const MIN_POLE_MARGIN: f64 = 1.0e-7;
+/// Largest accepted bound on the ℓ1 gain of an axis's filter
+/// ([`AxisFilter::gain_bound`], N/N): for |u| ≤ U the output stays within
+/// this times U. Designed compensators are at 3…1 300 (their lightly damped
+/// slow modes dominate); a compensator that may amplify some bounded force
+/// ten thousand times is not a force measurement, it is a wrong image.
+pub const MAX_GAIN_BOUND: f64 = 1.0e4;
+/// Largest magnitude of an axis's DC gain ([`AxisFilter::dc_gain`], N/N).
+/// A compensator's static gain is the inverse of the dynamometer's static
+/// sensitivity after calibration, ≈ 1 (band-pass compensators of a
+/// parallel image: ≈ 0); beyond 100 the image does not belong to a
+/// calibrated force channel.
+pub const MAX_DC_GAIN: f64 = 100.0;
+
 /// Image flag: the image holds an offline-only design (e.g. parallel
 /// elaboration); the box must never run it.
 pub const FLAG_OFFLINE_ONLY: u8 = 0x01;
@@ -290,6 +314,42 @@ pub enum ImageError {
         /// Section index.
         section: u8,
     },
+    /// A coefficient's magnitude exceeds [`MAX_COEFFICIENT`] (section index;
+    /// 255 for `d`).
+    CoefficientOutOfRange {
+        /// Axis index.
+        axis: u8,
+        /// Section index (255: `d`).
+        section: u8,
+    },
+    /// An FIR tap's magnitude exceeds [`MAX_COEFFICIENT`].
+    TapOutOfRange {
+        /// Axis index.
+        axis: u8,
+        /// Tap index (0 = delay 1).
+        tap: u8,
+    },
+    /// A section has a pole within [`MIN_POLE_MARGIN`] of the unit circle.
+    PoleMarginTooSmall {
+        /// Axis index.
+        axis: u8,
+        /// Section index.
+        section: u8,
+    },
+    /// The bound on the axis filter's ℓ1 gain exceeds [`MAX_GAIN_BOUND`] or
+    /// is not finite.
+    GainBoundTooLarge {
+        /// Axis index.
+        axis: u8,
+        /// The bound, rounded to an integer (N/N; `u32::MAX` if larger or
+        /// not finite).
+        bound: u32,
+    },
+    /// The axis filter's DC gain is not finite or exceeds [`MAX_DC_GAIN`].
+    DcGainOutOfRange {
+        /// Axis index.
+        axis: u8,
+    },
 }
 
 impl core::fmt::Display for ImageError {
@@ -326,6 +386,24 @@ impl core::fmt::Display for ImageError {
                 "parallel-elaboration image (format {PARALLEL_FORMAT_VERSION}): offline only, run it with `dynocomp compensate`; the box never runs it"
             ),
             ParallelNotOfflineOnly => write!(f, "parallel-elaboration image without the offline-only flag"),
+            CoefficientOutOfRange { axis, section: 255 } => {
+                write!(f, "axis {axis}: direct term d is beyond ±{MAX_COEFFICIENT:e} (image corrupted or not a force compensator)")
+            }
+            CoefficientOutOfRange { axis, section } => {
+                write!(f, "axis {axis}: section {section} has a coefficient beyond ±{MAX_COEFFICIENT:e} (image corrupted)")
+            }
+            TapOutOfRange { axis, tap } => write!(f, "axis {axis}: FIR tap {tap} is beyond ±{MAX_COEFFICIENT:e} (image corrupted)"),
+            PoleMarginTooSmall { axis, section } => {
+                write!(f, "axis {axis}: section {section} has a pole within {MIN_POLE_MARGIN:e} of the unit circle")
+            }
+            GainBoundTooLarge { axis, bound } => write!(
+                f,
+                "axis {axis}: the filter may amplify a bounded force up to {bound} times (limit {MAX_GAIN_BOUND:e}): image corrupted or unstable"
+            ),
+            DcGainOutOfRange { axis } => write!(
+                f,
+                "axis {axis}: DC gain is not finite or beyond ±{MAX_DC_GAIN} (not a calibrated force/force compensator)"
+            ),
             BadBandCount(n) => write!(f, "parallel image with {n} bands (allowed 1..={MAX_BANDS})"),
             BadBand { band } => write!(f, "band {band}: edges non-finite, empty, above Nyquist or overlapping the previous band"),
             BandAxesDiffer { band } => write!(f, "band {band} covers other axes than band 0"),
@@ -679,6 +757,45 @@ fn validate_axes(axes: &[Option<AxisImage>; AXES]) -> Result<(), ImageError> {
                 return Err(ImageError::UnstableSection { axis, section });
             }
         }
+        validate_filter(axis, &a.filter)?;
+    }
+    Ok(())
+}
+
+/// Whether `v` lies within ±[`MAX_COEFFICIENT`] (false for NaN).
+fn in_range(v: f32) -> bool {
+    v.abs() <= MAX_COEFFICIENT
+}
+
+/// What the design verified, checked again on what will run (steps 19-22
+/// of `docs/image-format.md` §8): coefficients bounded, pole margin, ℓ1
+/// gain bound and DC gain. The filter's structure (finite, stable, modal)
+/// has been checked.
+// `!(x <= limit)` on purpose: a NaN bound or gain must fail the check.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+fn validate_filter(axis: u8, filter: &AxisFilter) -> Result<(), ImageError> {
+    if !in_range(filter.d()) {
+        return Err(ImageError::CoefficientOutOfRange { axis, section: 255 });
+    }
+    if let Some(tap) = filter.fir().iter().position(|h| !in_range(*h)) {
+        return Err(ImageError::TapOutOfRange { axis, tap: tap as u8 });
+    }
+    for (j, sec) in filter.sections().iter().enumerate() {
+        let section = j as u8;
+        if !sec.delta.iter().chain(&sec.b).chain(&sec.c).all(|v| in_range(*v)) {
+            return Err(ImageError::CoefficientOutOfRange { axis, section });
+        }
+        if !sec.poles_within(1.0 - MIN_POLE_MARGIN) {
+            return Err(ImageError::PoleMarginTooSmall { axis, section });
+        }
+    }
+    let bound = filter.gain_bound();
+    if !(bound <= MAX_GAIN_BOUND) {
+        let rounded = if bound < u32::MAX as f64 { bound as u32 } else { u32::MAX };
+        return Err(ImageError::GainBoundTooLarge { axis, bound: rounded });
+    }
+    if !(filter.dc_gain().abs() <= MAX_DC_GAIN) {
+        return Err(ImageError::DcGainOutOfRange { axis });
     }
     Ok(())
 }

@@ -140,6 +140,73 @@ impl Section {
         let det_a = 1.0 + t + d;
         p_plus > 0.0 && p_minus > 0.0 && det_a.abs() < r * r
     }
+
+    /// Bound on the ℓ1 norm of the section's impulse response from `u` to
+    /// its output term `c·x` (N/N): no |c·x| exceeds it for |u| ≤ 1, in
+    /// exact arithmetic. `∞` for a section with a pole on or outside the
+    /// unit circle.
+    ///
+    /// A normal-form pair is a scaled rotation, `A = ρ·R(θ)` with
+    /// `ρ = |1 + σ + jω|`, so `|c·Aᵏ·b| ≤ ‖c‖₂·‖b‖₂·ρᵏ`, and the sum over k is
+    /// `‖c‖₂·‖b‖₂ / (1 − ρ)`. Without a square root (no_std): `‖·‖₂ ≤ ‖·‖₁`
+    /// and `1 − ρ = (1 − ρ²)/(1 + ρ) ≥ (1 − ρ²)/2`, so the bound used is
+    /// `2·‖c‖₁·‖b‖₁ / (1 − ρ²)`, at most 2√2 times the former (√2 near
+    /// z = 1, where slow modes are). A diagonal section's states are separate
+    /// first-order filters: `Σ_j |b_j·c_j| / (1 − |1 + Δ_jj|)` over the states
+    /// with `b_j·c_j ≠ 0`. Computed in f64 from the stored f32 values, with
+    /// `1 − ρ²` and `1 − |p|` formed without cancellation.
+    pub fn gain_bound(&self) -> f64 {
+        let [d11, d12, d21, d22] = self.delta.map(f64::from);
+        let [b1, b2] = self.b.map(f64::from);
+        let [c1, c2] = self.c.map(f64::from);
+        if d12 == 0.0 && d21 == 0.0 {
+            return real_gain_bound(d11, b1 * c1) + real_gain_bound(d22, b2 * c2);
+        }
+        // 1 − ρ² = −(2σ + σ² + ω²) for A = [[1 + σ, ω], [−ω, 1 + σ]].
+        let one_minus_rho2 = -(2.0 * d11 + d11 * d11 + d12 * d12);
+        let gain = (b1.abs() + b2.abs()) * (c1.abs() + c2.abs());
+        if one_minus_rho2 > 0.0 {
+            2.0 * gain / one_minus_rho2
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// The section's steady-state gain from `u` to `c·x` (N/N): the value
+    /// of its transfer function at z = 1, `c·(−Δ)⁻¹·b`. Non-finite when Δ
+    /// is singular (a pole at z = 1). For a diagonal section, states with
+    /// `b_j·c_j = 0` add nothing (the kernel drops them).
+    pub fn dc_gain(&self) -> f64 {
+        let [d11, d12, d21, d22] = self.delta.map(f64::from);
+        let [b1, b2] = self.b.map(f64::from);
+        let [c1, c2] = self.c.map(f64::from);
+        if d12 == 0.0 && d21 == 0.0 {
+            let real = |d: f64, bc: f64| if bc == 0.0 { 0.0 } else { -bc / d };
+            return real(d11, b1 * c1) + real(d22, b2 * c2);
+        }
+        // x = −Δ⁻¹·b, with Δ⁻¹ = [[Δ22, −Δ12], [−Δ21, Δ11]] / det Δ.
+        let det = d11 * d22 - d12 * d21;
+        let x1 = -(d22 * b1 - d12 * b2) / det;
+        let x2 = -(-d21 * b1 + d11 * b2) / det;
+        c1 * x1 + c2 * x2
+    }
+}
+
+/// ℓ1 gain of one first-order state `x ← x + Δ·x + b·u`, output `c·x`:
+/// `|bc| / (1 − |1 + Δ|)`, 0 when `bc = 0` (the kernel drops the state), ∞
+/// when the pole is on or outside the unit circle.
+fn real_gain_bound(delta: f64, bc: f64) -> f64 {
+    if bc == 0.0 {
+        return 0.0;
+    }
+    let p = 1.0 + delta;
+    // 1 − |p| without cancellation: −Δ for p ≥ 0, 2 + Δ for p < 0.
+    let margin = if p >= 0.0 { -delta } else { 2.0 + delta };
+    if margin > 0.0 {
+        bc.abs() / margin
+    } else {
+        f64::INFINITY
+    }
 }
 
 /// Error building an [`AxisFilter`].
@@ -160,6 +227,20 @@ pub enum FilterError {
     /// (`Δ11 = Δ22`, `Δ21 = −Δ12 ≠ 0`, `b2 = 0`) nor diagonal
     /// (`Δ12 = Δ21 = 0`) (section index).
     NotModal(usize),
+}
+
+impl core::fmt::Display for FilterError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            FilterError::TooManySections => write!(f, "more than {MAX_SECTIONS} sections"),
+            FilterError::NonFinite(s) if s >= MAX_SECTIONS => f.write_str("the direct term d is not finite"),
+            FilterError::NonFinite(s) => write!(f, "section {s} has a non-finite coefficient"),
+            FilterError::Unstable(s) => write!(f, "section {s} has a pole on or outside the unit circle"),
+            FilterError::TooManyTaps => write!(f, "more than {MAX_FIR} FIR taps"),
+            FilterError::NonFiniteTap(t) => write!(f, "FIR tap {t} is not finite"),
+            FilterError::NotModal(s) => write!(f, "section {s} is neither a normal-form pole pair nor diagonal"),
+        }
+    }
 }
 
 /// A conjugate pole pair as the kernel computes it: a normal-form section
@@ -298,6 +379,23 @@ impl AxisFilter {
             fir: taps,
             fir_len: fir.len(),
         })
+    }
+
+    /// Bound on the ℓ1 norm of the filter's impulse response (N/N):
+    /// `|d| + Σ|h_j| + Σ_sections` [`Section::gain_bound`]. For any input
+    /// with |u| ≤ U the exact output stays within this bound times U.
+    pub fn gain_bound(&self) -> f64 {
+        let taps: f64 = self.fir().iter().map(|h| f64::from(*h).abs()).sum();
+        let secs: f64 = self.sections().iter().map(Section::gain_bound).sum();
+        f64::from(self.d).abs() + taps + secs
+    }
+
+    /// Steady-state (DC) gain of the filter, its transfer function at z = 1
+    /// (N/N): `d + Σ h_j + Σ_sections` [`Section::dc_gain`].
+    pub fn dc_gain(&self) -> f64 {
+        let taps: f64 = self.fir().iter().map(|h| f64::from(*h)).sum();
+        let secs: f64 = self.sections().iter().map(Section::dc_gain).sum();
+        f64::from(self.d) + taps + secs
     }
 
     /// A pure gain `y = d·u` (no sections).

@@ -224,6 +224,51 @@ pub enum FrameError {
     TooLarge,
 }
 
+impl core::fmt::Display for FrameError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            FrameError::Cobs => "frame is not valid COBS",
+            FrameError::Oversized => "frame longer than the largest frame, discarded",
+            FrameError::Truncated => "frame too short to hold its CRC",
+            FrameError::BadCrc => "frame CRC mismatch (corrupted on the link)",
+            FrameError::TooLarge => "message too large for one frame",
+        })
+    }
+}
+
+impl core::fmt::Display for FlashFault {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            FlashFault::NotAligned => "flash access not aligned to the flash's granularity",
+            FlashFault::OutOfBounds => "flash access outside the flash",
+            FlashFault::Other => "flash driver error",
+            FlashFault::Verify => "flash read-back differs from what was written",
+        })
+    }
+}
+
+impl core::fmt::Display for LinkError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            LinkError::Frame(e) => write!(f, "the box could not read the frame: {e}"),
+            LinkError::Malformed => f.write_str("the box could not decode the message (protocol version mismatch?)"),
+            LinkError::NoUpload => f.write_str("no upload in progress"),
+            LinkError::BadDecimation => f.write_str("stream decimation must be at least 1"),
+            LinkError::UploadTooLarge { len, max } => write!(f, "image of {len} bytes does not fit a slot (at most {max})"),
+            LinkError::OutOfOrder { expected, got } => write!(f, "upload chunk at offset {got}, the box expected {expected}"),
+            LinkError::ChunkTooLong { len } => write!(f, "upload chunk reaches past the declared length {len} or is too long"),
+            LinkError::Incomplete { received, len } => write!(f, "commit after {received} of {len} bytes"),
+            LinkError::CrcMismatch { declared, computed } => {
+                write!(f, "image corrupted in transfer: CRC {computed:#010x} read back, {declared:#010x} declared")
+            }
+            LinkError::Image(e) => write!(f, "invalid image: {e}"),
+            LinkError::NotRunnable(r) => write!(f, "the box cannot run this image: {r}"),
+            LinkError::Flash(e) => write!(f, "flash write failed: {e}"),
+            LinkError::UploadAborted => f.write_str("the upload was aborted; start again"),
+        }
+    }
+}
+
 /// Box state for the host (`GetStatus`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Status {

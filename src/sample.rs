@@ -40,6 +40,31 @@ pub enum BypassReason {
     OverBudget(crate::budget::Load),
 }
 
+impl core::fmt::Display for BypassReason {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            BypassReason::NoImage => f.write_str("no image in either flash slot"),
+            BypassReason::InvalidImage(e) => write!(f, "the stored image is invalid: {e}"),
+            BypassReason::OfflineOnly => f.write_str("the image is offline-only (run it with `dynocomp compensate`)"),
+            BypassReason::UnsupportedSampleRate(fs) => write!(
+                f,
+                "sample rate {fs} Hz outside the box's {}..={} Hz",
+                BOX_FS_RANGE_HZ.start(),
+                BOX_FS_RANGE_HZ.end()
+            ),
+            BypassReason::User => f.write_str("bypass requested by the user"),
+            BypassReason::OverBudget(l) => write!(
+                f,
+                "predicted CPU load {}.{} % ({} cycles per sample) exceeds the box's limit of {} %",
+                l.permille / 10,
+                l.permille % 10,
+                l.cycles,
+                crate::budget::BOX_LOAD_LIMIT_PERMILLE / 10
+            ),
+        }
+    }
+}
+
 /// What the sample path does.
 #[derive(Clone, Copy, Debug)]
 pub enum Mode<'a> {

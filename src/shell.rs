@@ -317,6 +317,15 @@ pub enum Slot {
     B,
 }
 
+impl core::fmt::Display for Slot {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Slot::A => "A",
+            Slot::B => "B",
+        })
+    }
+}
+
 /// The sample rate the box runs at in `mode`: the image's rate when
 /// compensating, [`DEFAULT_FS_HZ`] in bypass.
 pub fn box_sample_rate(mode: &Mode<'_>) -> u32 {
@@ -464,6 +473,20 @@ pub enum AutoZeroError {
     /// mean of a clipped signal is not its offset. Unload the dynamometer
     /// and check the charge amplifier range, then retry.
     Saturated(u8),
+}
+
+impl core::fmt::Display for AutoZeroError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            AutoZeroError::BadCount(n) => write!(f, "auto-zero over {n} samples: need 1..={AUTO_ZERO_MAX_SAMPLES}"),
+            AutoZeroError::Busy => f.write_str("an auto-zero is already running"),
+            AutoZeroError::Saturated(a) => write!(
+                f,
+                "axis {}: the ADC hit a rail during the auto-zero; unload the dynamometer, check the amplifier range, retry",
+                crate::AXIS_NAMES.get(usize::from(a)).copied().unwrap_or("?")
+            ),
+        }
+    }
 }
 
 /// Offset auto-zero of the ADC inputs (the charge amplifiers' drift): on

@@ -237,6 +237,20 @@ pub enum VerifyFailure {
     Flash,
 }
 
+impl core::fmt::Display for VerifyFailure {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            VerifyFailure::BadLength(l) => write!(f, "slot record length {l} out of range"),
+            VerifyFailure::Crc { stored, computed } => {
+                write!(f, "slot image CRC mismatch: stored {stored:#010x}, computed {computed:#010x}")
+            }
+            VerifyFailure::Image(e) => write!(f, "slot image invalid: {e}"),
+            VerifyFailure::NotRunnable(r) => write!(f, "slot image not runnable: {r}"),
+            VerifyFailure::Flash => f.write_str("flash read failed"),
+        }
+    }
+}
+
 /// What boot found: the image to run or why not, and the slot it is in.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Boot {
@@ -283,6 +297,16 @@ pub enum LayoutError {
     /// A slot is not aligned to / a multiple of the erase size, the slots
     /// overlap, or a slot lies outside the flash.
     Slots,
+}
+
+impl core::fmt::Display for LayoutError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            LayoutError::WriteSize => "the flash's write size does not divide the store's write unit",
+            LayoutError::ReadSize => "the flash's read size does not divide the store's write unit",
+            LayoutError::Slots => "slots misaligned to the erase size, overlapping, or outside the flash",
+        })
+    }
 }
 
 fn fault<E: NorFlashError>(e: E) -> LinkError {

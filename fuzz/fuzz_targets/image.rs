@@ -10,7 +10,8 @@
 //! followed by junk gives the same image; a rejected image's error is true of
 //! the bytes (the field it names holds what it says, axis/section/tap/band
 //! indices are in range) and no semantic error is reported for bytes whose
-//! CRC does not match.
+//! CRC does not match; an accepted image's filters keep their output within
+//! their gain bound for inputs within ±1.
 #![no_main]
 
 use dynocomp_core::image::*;
@@ -71,6 +72,16 @@ fn check_error(e: ImageError, bytes: &[u8], version: u16) {
             assert!(usize::from(axis) < dynocomp_core::AXES);
             assert!(usize::from(section) < MAX_SECTIONS || section == 255, "section index {section} out of range");
         }
+        CoefficientOutOfRange { axis, section } | PoleMarginTooSmall { axis, section } => {
+            assert!(usize::from(axis) < dynocomp_core::AXES);
+            assert!(usize::from(section) < MAX_SECTIONS || section == 255, "section index {section} out of range");
+        }
+        TapOutOfRange { axis, tap } => assert!(usize::from(axis) < dynocomp_core::AXES && usize::from(tap) < MAX_FIR),
+        GainBoundTooLarge { axis, bound } => {
+            assert!(usize::from(axis) < dynocomp_core::AXES);
+            assert!(f64::from(bound) >= MAX_GAIN_BOUND.floor(), "gain bound {bound} reported within the limit");
+        }
+        DcGainOutOfRange { axis } => assert!(usize::from(axis) < dynocomp_core::AXES),
         AxisMismatch { expected, .. } => assert!(usize::from(expected) < dynocomp_core::AXES),
         BadBandCount(n) => assert!(n == 0 || usize::from(n) > MAX_BANDS),
         BadBand { band } | BandAxesDiffer { band } => {
@@ -85,9 +96,35 @@ fn check_error(e: ImageError, bytes: &[u8], version: u16) {
     assert!(crc_ok, "semantic error {e} reported for bytes whose CRC does not match");
 }
 
+/// Samples of the bounded-output check of an accepted image.
+const RUN: usize = 512;
+
+/// An accepted axis filter keeps its promise: for inputs with |u| ≤ 1 (a
+/// pattern of ±1 and 0 taken from the fuzz input) the f32 kernel's output
+/// stays within the filter's gain bound, itself within MAX_GAIN_BOUND, and
+/// the DC gain within MAX_DC_GAIN.
+fn check_bounded(img: &CoeffImage, pattern: &[u8]) {
+    for a in img.axes.iter().flatten() {
+        let bound = a.filter.gain_bound();
+        assert!(bound <= MAX_GAIN_BOUND, "accepted axis {} with gain bound {bound}", a.axis);
+        assert!(a.filter.dc_gain().abs() <= MAX_DC_GAIN);
+        let mut st = dynocomp_core::kernel::AxisState::default();
+        for k in 0..RUN {
+            let u = match pattern.get(k % pattern.len().max(1)).map_or(1, |b| b % 3) {
+                0 => -1.0,
+                1 => 1.0,
+                _ => 0.0,
+            };
+            let y = f64::from(a.filter.step(&mut st, u));
+            assert!(y.abs() <= bound * (1.0 + 1e-4) + 1e-6, "axis {}: |y| = {y} beyond the gain bound {bound}", a.axis);
+        }
+    }
+}
+
 fn check_v1(bytes: &[u8]) {
     match CoeffImage::parse(bytes) {
         Ok(img) => {
+            check_bounded(&img, bytes);
             let mut buf = vec![0u8; MAX_IMAGE_LEN];
             let n = img.encode(&mut buf).expect("an accepted image validates and encodes");
             assert_eq!(&buf[..n], bytes, "encode(parse(bytes)) != bytes");

@@ -4,6 +4,7 @@
 //! `G(s) = d + Σ_real r/(s − p) + Σ_pairs [r/(s − p) + r̄/(s − p̄)]`,
 //! s in rad/s, G in N/N.
 
+pub mod linalg;
 pub mod modes;
 pub mod rfp;
 pub mod vf;

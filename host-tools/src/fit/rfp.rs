@@ -52,15 +52,10 @@ pub fn poly_eval(c: &[f64], x: Complex64) -> Complex64 {
 }
 
 /// Roots of a monic polynomial (ascending coefficients), as the eigenvalues
-/// of its companion matrix (nalgebra).
-pub fn poly_roots(a: &[f64]) -> Vec<Complex64> {
-    let n = a.len() - 1;
-    if n == 0 {
-        return Vec::new();
-    }
-    let lead = a[n];
-    let m = DMatrix::<f64>::from_fn(n, n, |i, j| if i == 0 { -a[n - 1 - j] / lead } else if i == j + 1 { 1.0 } else { 0.0 });
-    m.complex_eigenvalues().iter().copied().collect()
+/// of its companion matrix, with an iteration limit
+/// ([`super::linalg::poly_roots`]); `what` names the polynomial in errors.
+pub fn poly_roots(a: &[f64], what: &str) -> Result<Vec<Complex64>> {
+    super::linalg::poly_roots(a, what)
 }
 
 /// Monic real polynomial (ascending) with the given roots (conjugates paired).
@@ -99,21 +94,27 @@ impl RationalTf {
         self.eval_s(Complex64::new(0.0, 2.0 * PI * f_hz))
     }
 
-    /// Poles (rad/s).
-    pub fn poles(&self) -> Vec<Complex64> {
-        poly_roots(&self.a).into_iter().map(|p| p * self.omega_scale).collect()
+    /// The denominator's name in errors.
+    fn denominator(&self) -> String {
+        format!("the denominator of the {}:{} rational fraction fit", self.nb(), self.na())
     }
 
-    /// Whether every pole has a negative real part.
-    pub fn is_stable(&self) -> bool {
-        poly_roots(&self.a).iter().all(|p| p.re < 0.0)
+    /// Poles (rad/s); an error if their eigenvalue iteration does not converge.
+    pub fn poles(&self) -> Result<Vec<Complex64>> {
+        Ok(poly_roots(&self.a, &self.denominator())?.into_iter().map(|p| p * self.omega_scale).collect())
+    }
+
+    /// Whether every pole has a negative real part; an error if their
+    /// eigenvalue iteration does not converge.
+    pub fn is_stable(&self) -> Result<bool> {
+        Ok(poly_roots(&self.a, &self.denominator())?.iter().all(|p| p.re < 0.0))
     }
 
     /// The same G(s) in pole-residue form (for reports and evaluation):
     /// residue of pole p = ω_0·B(p')/A'(p'). Fails on (numerically) repeated
     /// poles, where partial fractions do not exist.
     pub fn to_pole_residue(&self) -> Result<PoleResidueModel> {
-        let roots = poly_roots(&self.a);
+        let roots = poly_roots(&self.a, &self.denominator())?;
         let da: Vec<f64> = self.a.iter().enumerate().skip(1).map(|(i, v)| i as f64 * v).collect();
         let (mut b, d) = (self.b.clone(), if self.nb() == self.na() { self.b[self.nb()] } else { 0.0 });
         if self.nb() == self.na() {
@@ -182,9 +183,18 @@ pub struct RfpFit {
     pub reflected_poles: usize,
 }
 
-/// Condition number σ_max/σ_min of a matrix (∞ when singular).
+/// Condition number σ_max/σ_min of a matrix (∞ when singular, and when its
+/// singular values do not converge within [`super::linalg::sweeps`]: a
+/// matrix whose SVD does not converge counts as singular). See
+/// [`try_condition_number`] for the error instead.
 pub fn condition_number(m: &DMatrix<f64>) -> f64 {
-    condition_of(&m.singular_values())
+    try_condition_number(m, "matrix").unwrap_or(f64::INFINITY)
+}
+
+/// Condition number σ_max/σ_min of a matrix (∞ when singular); an error
+/// naming `what` if its singular values do not converge.
+pub fn try_condition_number(m: &DMatrix<f64>, what: &str) -> Result<f64> {
+    Ok(condition_of(&super::linalg::singular_values(m, what)?))
 }
 
 /// max σ / min σ of the singular values `sv` (∞ if one is zero).
@@ -208,7 +218,7 @@ fn condition_of(sv: &DVector<f64>) -> f64 {
 /// same least-squares solution (Golub & Van Loan, "Matrix Computations",
 /// §5.4.5, R-bidiagonalization); the SVD of M itself spent most of its time
 /// forming and rotating its tall U.
-fn lstsq(m: DMatrix<f64>, rhs: &DVector<f64>) -> Result<(DVector<f64>, f64)> {
+fn lstsq(m: DMatrix<f64>, rhs: &DVector<f64>, what: &str) -> Result<(DVector<f64>, f64)> {
     let scale: Vec<f64> = m.column_iter().map(|c| c.norm().max(f64::MIN_POSITIVE)).collect();
     let mut ms = m;
     for (j, s) in scale.iter().enumerate() {
@@ -216,15 +226,15 @@ fn lstsq(m: DMatrix<f64>, rhs: &DVector<f64>) -> Result<(DVector<f64>, f64)> {
     }
     let n = ms.ncols();
     if ms.nrows() < n {
-        bail!("least squares: {} equations for {n} unknowns", ms.nrows());
+        bail!("{what}: {} equations for {n} unknowns", ms.nrows());
     }
     let qr = ms.qr();
     let mut qt_rhs = rhs.clone();
     qr.q_tr_mul(&mut qt_rhs);
     // One SVD for both: the condition from its singular values.
-    let svd = qr.r().svd(true, true);
+    let svd = super::linalg::svd(qr.r(), what)?;
     let cond = condition_of(&svd.singular_values);
-    let x = svd.solve(&qt_rhs.rows(0, n).into_owned(), 0.0).map_err(|e| anyhow::anyhow!("least squares: {e}"))?;
+    let x = svd.solve(&qt_rhs.rows(0, n).into_owned(), 0.0).map_err(|e| anyhow::anyhow!("{what}: {e}"))?;
     Ok((DVector::from_iterator(x.len(), x.iter().zip(&scale).map(|(v, s)| v / s)), cond))
 }
 
@@ -279,7 +289,7 @@ pub fn rfp_fit(freq_hz: &[f64], h: &[Complex64], w: &[f64], opts: &RfpOptions) -
             xp *= x;
         }
     }
-    let (theta, rfp_condition) = lstsq(mat, &rhs)?;
+    let (theta, rfp_condition) = lstsq(mat, &rhs, &format!("the {nb}:{na} rational fraction polynomial least squares"))?;
     if !(rfp_condition < MAX_CONDITION) || theta.iter().any(|v| !v.is_finite()) {
         bail!(
             "rational fraction polynomial fit {nb}:{na} over {:.0}–{f_max:.0} Hz is ill-conditioned: condition number {rfp_condition:.2e} (limit {MAX_CONDITION:.0e}); lower the orders or fit narrower bands (--band, --spindle-rpm)",
@@ -290,7 +300,7 @@ pub fn rfp_fit(freq_hz: &[f64], h: &[Complex64], w: &[f64], opts: &RfpOptions) -
     let mut a0: Vec<f64> = theta.iter().skip(nb + 1).copied().collect();
     a0.push(1.0);
     // Reflect unstable roots (invfreqs does the same to its initial estimate).
-    let roots = poly_roots(&a0);
+    let roots = poly_roots(&a0, &format!("the denominator of the {nb}:{na} initial estimate"))?;
     let reflected_poles = roots.iter().filter(|r| r.re >= 0.0).count();
     let a0 = if reflected_poles > 0 {
         poly_from_roots(&roots.iter().map(|r| if r.re >= 0.0 { Complex64::new(-r.re.abs().max(1e-6 * r.norm()), r.im) } else { *r }).collect::<Vec<_>>())
@@ -332,7 +342,7 @@ pub fn rfp_fit(freq_hz: &[f64], h: &[Complex64], w: &[f64], opts: &RfpOptions) -
                 jac[(2 * k + 1, nb)] = d.im;
             }
         }
-        let (step, cond) = lstsq(jac, &res)?;
+        let (step, cond) = lstsq(jac, &res, &format!("the {nb}:{na} Gauss–Newton step {it}"))?;
         jacobian_condition = cond;
         let mut lambda = 1.0;
         let mut accepted = false;
@@ -341,7 +351,10 @@ pub fn rfp_fit(freq_hz: &[f64], h: &[Complex64], w: &[f64], opts: &RfpOptions) -
             let mut at: Vec<f64> = (0..na).map(|i| a[i] + lambda * step[nb + 1 + i]).collect();
             at.push(1.0);
             let et = output_error(&bt, &at, &xs, &hs, &ws);
-            if et.is_finite() && et < err && poly_roots(&at).iter().all(|r| r.re < 0.0) {
+            // A trial whose roots do not converge is a rejected step, like
+            // one that is unstable or does not lower the error.
+            let stable = || poly_roots(&at, "trial denominator").is_ok_and(|r| r.iter().all(|r| r.re < 0.0));
+            if et.is_finite() && et < err && stable() {
                 let improvement = (err - et) / err;
                 b = bt;
                 a = at;
@@ -360,7 +373,7 @@ pub fn rfp_fit(freq_hz: &[f64], h: &[Complex64], w: &[f64], opts: &RfpOptions) -
     // minimum-norm one, and what breaks downstream (observability, Riccati)
     // is checked there.
     let tf = RationalTf { b, a, omega_scale };
-    if !tf.is_stable() {
+    if !tf.is_stable()? {
         bail!("the {nb}:{na} fit has unstable poles after Gauss–Newton; lower the orders or fit narrower bands");
     }
     Ok(RfpFit { tf, rfp_condition, jacobian_condition, initial_error, final_error: err, iterations, reflected_poles })
@@ -392,7 +405,7 @@ mod tests {
         };
         let m = DMatrix::<f64>::from_fn(rows, cols, |_, j| next() * 10f64.powi(j as i32 - 4));
         let b = DVector::<f64>::from_fn(rows, |_, _| next());
-        let (x, cond) = lstsq(m.clone(), &b).unwrap();
+        let (x, cond) = lstsq(m.clone(), &b, "test").unwrap();
         let reference = (m.transpose() * &m).cholesky().unwrap().solve(&(m.transpose() * &b));
         let err = (&x - &reference).norm() / reference.norm();
         assert!(err < 1e-10, "QR-SVD solution {err:.1e} from the normal equations");
@@ -406,10 +419,10 @@ mod tests {
         assert!((cond / full - 1.0).abs() < 1e-10, "condition {cond} against {full} from the full SVD");
         // Negative control: the solution of a slightly different right-hand
         // side is seen at this tolerance.
-        let (x2, _) = lstsq(m.clone(), &(b.clone() + DVector::from_element(rows, 1e-6))).unwrap();
+        let (x2, _) = lstsq(m.clone(), &(b.clone() + DVector::from_element(rows, 1e-6)), "test").unwrap();
         assert!((&x2 - &reference).norm() / reference.norm() > 1e-8);
         // Fewer equations than unknowns: refused, not a made-up solution.
-        assert!(lstsq(DMatrix::from_element(3, 5, 1.0), &DVector::from_element(3, 1.0)).is_err());
+        assert!(lstsq(DMatrix::from_element(3, 5, 1.0), &DVector::from_element(3, 1.0), "test").is_err());
     }
 
     #[test]
@@ -417,7 +430,7 @@ mod tests {
         let roots = [Complex64::new(-0.1, 0.9), Complex64::new(-0.1, -0.9), Complex64::new(-0.5, 0.0)];
         let a = poly_from_roots(&roots);
         assert_eq!(a.len(), 4);
-        let mut back = poly_roots(&a);
+        let mut back = poly_roots(&a, "test").unwrap();
         back.sort_by(|x, y| x.im.total_cmp(&y.im));
         for (r, t) in back.iter().zip([roots[1], roots[2], roots[0]]) {
             assert!((r - t).norm() < 1e-12, "{r} vs {t}");

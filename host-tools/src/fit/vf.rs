@@ -98,9 +98,17 @@ fn basis_row(s: Complex64, poles: &[Pole], out: &mut Vec<Complex64>) {
     }
 }
 
-/// Solve min ‖A x − b‖ by QR after column equilibration.
+/// Solve min ‖A x − b‖ by QR after column equilibration; an error (never a
+/// panic) when A has fewer rows than columns, a non-finite entry, or is
+/// numerically rank deficient.
 fn lstsq(mut a: DMatrix<f64>, b: DVector<f64>) -> Result<DVector<f64>> {
     let ncols = a.ncols();
+    if a.nrows() < ncols {
+        bail!("vector fitting: {} equations for {ncols} unknowns; lower the model order or give more frequency lines", a.nrows());
+    }
+    if a.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+        bail!("vector fitting: the least-squares system has a non-finite entry (a pole on a measured line?)");
+    }
     let mut scale = vec![1.0; ncols];
     for (j, sc) in scale.iter_mut().enumerate() {
         let n = a.column(j).norm();
@@ -185,8 +193,8 @@ fn relocate(s: &[Complex64], h: &[Complex64], sw: &[f64], poles: &[Pole]) -> Res
             m[(r, c)] -= b[r] * c_t[c] / d_t;
         }
     }
-    let eig = m.complex_eigenvalues();
-    Ok(classify(eig.iter().copied()))
+    let eig = super::linalg::eigenvalues(&m, &format!("vector fitting, pole relocation at order {n}"))?;
+    Ok(classify(eig.into_iter()))
 }
 
 /// Turn eigenvalues into stable poles: flip unstable ones (Re > 0 → −Re),
@@ -259,6 +267,26 @@ fn weighted_rms(model: &PoleResidueModel, freq_hz: &[f64], h: &[Complex64], w: &
     (num / den).sqrt()
 }
 
+/// Fewest lines a fit of `order` poles can use: the relocation's least
+/// squares has 2·lines + 1 equations (real and imaginary parts, and the
+/// relaxation row) for 2·order + 2 unknowns.
+pub fn min_lines(order: usize) -> usize {
+    order + 1
+}
+
+/// Highest even order that `lines` frequency lines can carry ([`min_lines`]).
+pub fn max_order_for(lines: usize) -> usize {
+    (lines.saturating_sub(1) / 2) * 2
+}
+
+/// Every how many lines the relocation uses for `order` poles: `decimate`,
+/// lowered where fewer lines would be kept than [`min_lines`] (the largest
+/// step s with ⌈lines/s⌉ ≥ min_lines, i.e. s ≤ (lines − 1)/(min_lines − 1)).
+fn relocation_step(lines: usize, order: usize, decimate: usize) -> usize {
+    let need = min_lines(order).max(2);
+    decimate.min(lines.saturating_sub(1) / (need - 1)).max(1)
+}
+
 /// Fit a model of a fixed (even) order.
 pub fn fit_order(freq_hz: &[f64], h: &[Complex64], weights: &[f64], order: usize, opts: &VfOptions) -> Result<PoleResidueModel> {
     let f_max = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
@@ -268,7 +296,14 @@ pub fn fit_order(freq_hz: &[f64], h: &[Complex64], weights: &[f64], order: usize
     let w_scale = 2.0 * PI * f_max;
     let s_all: Vec<Complex64> = freq_hz.iter().map(|f| Complex64::new(0.0, 2.0 * PI * f / w_scale)).collect();
     let sw_all: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
-    let step = opts.decimate.max(1);
+    if freq_hz.len() < min_lines(order) {
+        bail!(
+            "vector fitting at order {order} needs at least {} frequency lines, got {}; lower --max-order or measure more lines",
+            min_lines(order),
+            freq_hz.len()
+        );
+    }
+    let step = relocation_step(freq_hz.len(), order, opts.decimate);
     let idx: Vec<usize> = (0..freq_hz.len()).step_by(step).collect();
     let s: Vec<Complex64> = idx.iter().map(|&i| s_all[i]).collect();
     let hs: Vec<Complex64> = idx.iter().map(|&i| h[i]).collect();
@@ -309,7 +344,9 @@ pub fn vector_fit(freq_hz: &[f64], h: &[Complex64], weights: &[f64], opts: &VfOp
     let mut models: Vec<(usize, PoleResidueModel, f64)> = Vec::new();
     let mut stall = 0;
     let mut order = 2;
-    while order <= opts.max_order {
+    // Orders beyond what the lines carry are not tried (fewer poles than
+    // asked for, never an underdetermined fit).
+    while order <= opts.max_order.min(max_order_for(freq_hz.len())) {
         // An order above what the data support makes the relocation
         // least-squares rank deficient (clean data): that ends the search.
         let m = match fit_order(freq_hz, h, weights, order, opts) {

@@ -15,11 +15,28 @@ pub mod uff;
 pub mod uff_signal;
 pub mod tdms;
 
+/// Most characters of input text that one error message shows.
+pub const ECHO_CHARS: usize = 120;
+
 /// Text taken from an input file (a channel name, a JSON value quoted by a
 /// parser's message) as shown in a one-line error: control characters (a
-/// newline, a tab) escaped as `\n`, `\t`, … so the message stays one line.
+/// newline, a tab) escaped as `\n`, `\t`, … so the message stays one line,
+/// and cut after [`ECHO_CHARS`] characters with the text's length in bytes
+/// (a whole file on one line is not echoed whole).
 pub fn one_line(s: &str) -> String {
-    s.chars().flat_map(|c| if c.is_control() { c.escape_debug().collect::<Vec<_>>() } else { vec![c] }).collect()
+    let mut out = String::new();
+    for (n, c) in s.chars().enumerate() {
+        if n == ECHO_CHARS {
+            out.push_str(&format!("… ({} bytes in all)", s.len()));
+            break;
+        }
+        if c.is_control() {
+            out.extend(c.escape_debug());
+        } else {
+            out.push(c);
+        }
+    }
+    out
 }
 
 /// Read an FRF file: `.csv` as FRF CSV, `.uff` / `.unv` / `.uf` as UFF 58/58b,

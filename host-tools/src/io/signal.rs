@@ -143,6 +143,80 @@ pub fn newton_per_unit(unit: &str) -> Option<f64> {
     }
 }
 
+/// Default bound on the magnitude of a force record's values (N): the
+/// full scale of the charge amplifiers. 100 kN is above the range of every
+/// table dynamometer of the Kistler 9257/9255/9129 class (5-60 kN) and far
+/// below what a corrupted value makes of a force (a flipped exponent bit,
+/// a wrong data type: 10⁹ N and more). A value beyond it is an input error.
+pub const DEFAULT_FULL_SCALE_N: f64 = 1.0e5;
+
+/// Whether `v` is a plausible force for the bound `full_scale_n` (N): finite
+/// and |v| ≤ full scale (false for NaN).
+#[inline]
+pub fn plausible(v: f64, full_scale_n: f64) -> bool {
+    v.abs() <= full_scale_n
+}
+
+/// The error for an implausible force value `v` (N) at `place` (e.g.
+/// "line 7, column 2 (`fx`)" or "sample 12 of channel `Fx`") of `source`.
+pub fn implausible(source: &str, place: &str, v: f64, full_scale_n: f64) -> anyhow::Error {
+    if v.is_finite() {
+        anyhow::anyhow!(
+            "{source}: {place}: {v:e} N is beyond the full scale of ±{full_scale_n:e} N: no charge amplifier outputs it \
+             (a corrupted value, or set the full scale)"
+        )
+    } else {
+        anyhow::anyhow!("{source}: {place}: value is {v}; values must be finite")
+    }
+}
+
+/// A reader whose force values are checked against a full scale
+/// ([`plausible`]): an implausible value is an error naming the source,
+/// the sample (1-based) and the channel. For readers that do not check
+/// themselves (the CSV reader checks each row as it parses it, with its
+/// line number).
+pub struct Bounded {
+    inner: Box<dyn SignalReader>,
+    source: String,
+    full_scale_n: f64,
+    /// Samples delivered so far.
+    n: u64,
+}
+
+impl Bounded {
+    /// Check the forces of `inner` (named `source` in errors) against
+    /// `full_scale_n` (N).
+    pub fn new(inner: Box<dyn SignalReader>, source: &str, full_scale_n: f64) -> Bounded {
+        Bounded { inner, source: source.to_string(), full_scale_n, n: 0 }
+    }
+}
+
+impl SignalReader for Bounded {
+    fn axes(&self) -> &[usize] {
+        self.inner.axes()
+    }
+    fn has_time(&self) -> bool {
+        self.inner.has_time()
+    }
+    fn declared_fs_hz(&self) -> Option<f64> {
+        self.inner.declared_fs_hz()
+    }
+    fn len_hint(&self) -> Option<u64> {
+        self.inner.len_hint()
+    }
+    fn read_block(&mut self, blk: &mut Block, max: usize) -> Result<usize> {
+        let m = self.inner.read_block(blk, max)?;
+        for (c, axis) in blk.channels.iter().zip(self.inner.axes()) {
+            if let Some(k) = c.iter().position(|v| !plausible(*v, self.full_scale_n)) {
+                let place = format!("sample {} of f{}", self.n + k as u64 + 1, crate::frf::axis_name(*axis));
+                return Err(implausible(&self.source, &place, c[k], self.full_scale_n));
+            }
+        }
+        self.n += m as u64;
+        Ok(m)
+    }
+}
+
 /// Relative tolerance between a file's sample rate and the image's.
 pub const FS_TOLERANCE: f64 = 1e-4;
 

@@ -2,16 +2,27 @@
 //!
 //! Header row; columns `fx`, `fy`, `fz` (any subset, in N); an optional first
 //! column `t_s` (seconds). Output files use the same layout.
+//!
+//! Every force value must be finite and within the full scale (N; default
+//! [`DEFAULT_FULL_SCALE_N`], [`CsvReader::with_full_scale`]); a line longer
+//! than [`MAX_LINE_BYTES`] is refused before it is held in memory whole.
+//! `-` reads standard input ([`CsvReader::stdin`]).
 
 use anyhow::{anyhow, bail, Context, Result};
 use std::fs::File;
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufRead, BufReader, Read, Write};
 use std::path::Path;
 
 use crate::frf::axis_name;
 use crate::io::atomic::write_atomic;
 use crate::io::decimal;
-use crate::io::signal::{read_all, Block, SignalReader, SignalWriter};
+use crate::io::one_line;
+use crate::io::signal::{implausible, plausible, read_all, Block, SignalReader, SignalWriter, DEFAULT_FULL_SCALE_N};
+
+/// Longest line a signal CSV may have (bytes): a row of a few numbers is
+/// tens of bytes; a file with a longer line is not a signal CSV, and is not
+/// read into memory whole to say so.
+pub const MAX_LINE_BYTES: usize = 1 << 20;
 
 /// A multi-axis force record.
 #[derive(Clone, Debug, PartialEq)]
@@ -65,9 +76,15 @@ fn column_axis(name: &str) -> Option<usize> {
 /// forces that `dynocomp stream` records next to the compensated ones.
 pub const IGNORED_COLUMNS: [&str; 3] = ["raw_fx", "raw_fy", "raw_fz"];
 
-/// Read a force record from `path`.
+/// Read a force record from `path` (forces within the default full scale).
 pub fn read_signal_csv(path: &Path) -> Result<SignalRecord> {
-    let mut r = CsvReader::open(path)?;
+    read_signal_csv_checked(path, DEFAULT_FULL_SCALE_N)
+}
+
+/// Read a force record from `path`, refusing forces beyond ±`full_scale_n`
+/// (N; `f64::INFINITY` checks only that they are finite).
+pub fn read_signal_csv_checked(path: &Path, full_scale_n: f64) -> Result<SignalRecord> {
+    let mut r = CsvReader::open(path)?.with_full_scale(full_scale_n);
     record_from(&mut r)
 }
 
@@ -92,6 +109,8 @@ struct Columns {
     slot_of: Vec<Option<usize>>,
     /// Whether the first column is `t_s`.
     has_time: bool,
+    /// Bound on the force values (N).
+    full_scale_n: f64,
 }
 
 /// A signal CSV read block by block: no allocation per value, and lines
@@ -119,6 +138,14 @@ impl CsvReader<BufReader<File>> {
     }
 }
 
+impl CsvReader<BufReader<std::io::Stdin>> {
+    /// Read the record from standard input (named "standard input" in
+    /// errors), header first.
+    pub fn stdin() -> Result<Self> {
+        CsvReader::new(BufReader::with_capacity(1 << 20, std::io::stdin()), "standard input")
+    }
+}
+
 impl<R: BufRead> CsvReader<R> {
     /// Read the header of the CSV in `r`; `source` names it in errors.
     pub fn new(r: R, source: &str) -> Result<Self> {
@@ -138,7 +165,16 @@ impl<R: BufRead> CsvReader<R> {
         }
         let header = me.line_str()?.to_string();
         me.parse_header(&header)?;
+        me.cols.full_scale_n = DEFAULT_FULL_SCALE_N;
         Ok(me)
+    }
+
+    /// Refuse force values beyond ±`full_scale_n` (N) instead of
+    /// [`DEFAULT_FULL_SCALE_N`]; `f64::INFINITY` checks only that they are
+    /// finite.
+    pub fn with_full_scale(mut self, full_scale_n: f64) -> Self {
+        self.cols.full_scale_n = full_scale_n;
+        self
     }
 
     fn parse_header(&mut self, header: &str) -> Result<()> {
@@ -166,7 +202,7 @@ impl<R: BufRead> CsvReader<R> {
                 }
                 self.axes.push(axis);
             } else {
-                bail!("{source}: line {}, column {}: unknown column `{name}` (expected t_s, fx, fy, fz)", self.lineno, col + 1);
+                bail!("{source}: line {}, column {}: unknown column `{}` (expected t_s, fx, fy, fz)", self.lineno, col + 1, one_line(name));
             }
         }
         if self.axes.is_empty() {
@@ -176,18 +212,21 @@ impl<R: BufRead> CsvReader<R> {
     }
 
     /// Next non-blank line into `self.line` (without its line end); false at
-    /// the end of the file.
+    /// the end of the file. A line longer than [`MAX_LINE_BYTES`] is an error.
     fn next_line(&mut self) -> Result<bool> {
         loop {
             self.line.clear();
-            let got = self
-                .r
+            let got = (&mut self.r)
+                .take(MAX_LINE_BYTES as u64 + 1)
                 .read_until(b'\n', &mut self.line)
                 .with_context(|| format!("{}: read failed after line {}", self.source, self.lineno))?;
             if got == 0 {
                 return Ok(false);
             }
             self.lineno += 1;
+            if got > MAX_LINE_BYTES && self.line.last() != Some(&b'\n') {
+                bail!("{}: line {} is longer than {MAX_LINE_BYTES} bytes: not a signal CSV", self.source, self.lineno);
+            }
             if self.line.last() == Some(&b'\n') {
                 self.line.pop();
                 if self.line.last() == Some(&b'\r') {
@@ -220,7 +259,7 @@ fn is_blank(line: &[u8]) -> bool {
 /// Any problem is diagnosed by [`row_error`], which checks the row in the
 /// order the messages promise (text, field count, then field by field).
 fn parse_row(line: &[u8], cols: &Columns, prev_t: &mut Option<f64>, blk: &mut Block, source: &str, lineno: usize) -> Result<()> {
-    let Columns { names, slot_of, has_time } = cols;
+    let Columns { names, slot_of, has_time, full_scale_n } = cols;
     let t_before = *prev_t;
     let mut col = 0;
     let mut ok = true;
@@ -237,6 +276,10 @@ fn parse_row(line: &[u8], cols: &Columns, prev_t: &mut Option<f64>, blk: &mut Bl
             *prev_t = Some(v);
             blk.t_s.push(v);
         } else if let Some(slot) = slot_of[col] {
+            if !plausible(v, *full_scale_n) {
+                ok = false;
+                break;
+            }
             blk.channels[slot].push(v);
         }
         col += 1;
@@ -249,9 +292,9 @@ fn parse_row(line: &[u8], cols: &Columns, prev_t: &mut Option<f64>, blk: &mut Bl
 
 /// Why `line` is not a valid data row (the first problem, in the order: not
 /// UTF-8, field count, then each field: not a number, not finite, time not
-/// increasing after `prev_t`).
+/// increasing after `prev_t`, force beyond the full scale).
 fn row_error(line: &[u8], cols: &Columns, prev_t: Option<f64>, source: &str, lineno: usize) -> anyhow::Error {
-    let Columns { names, has_time, .. } = cols;
+    let Columns { names, has_time, slot_of, full_scale_n } = cols;
     let Ok(line) = std::str::from_utf8(line) else {
         return anyhow!("{source}: line {lineno}: not valid UTF-8 text");
     };
@@ -262,7 +305,7 @@ fn row_error(line: &[u8], cols: &Columns, prev_t: Option<f64>, source: &str, lin
     for (col, field) in line.split(',').enumerate() {
         let field = field.trim();
         let Ok(v) = field.parse::<f64>() else {
-            return anyhow!("{source}: line {lineno}, column {} (`{}`): `{field}` is not a number", col + 1, names[col]);
+            return anyhow!("{source}: line {lineno}, column {} (`{}`): `{}` is not a number", col + 1, names[col], one_line(field));
         };
         if !v.is_finite() {
             return anyhow!("{source}: line {lineno}, column {} (`{}`): value is not finite", col + 1, names[col]);
@@ -271,6 +314,8 @@ fn row_error(line: &[u8], cols: &Columns, prev_t: Option<f64>, source: &str, lin
             if let Some(prev) = prev_t.filter(|p| v <= *p) {
                 return anyhow!("{source}: line {lineno}, column 1 (`t_s`): time {v} does not increase (previous {prev})");
             }
+        } else if slot_of[col].is_some() && !plausible(v, *full_scale_n) {
+            return implausible(source, &format!("line {lineno}, column {} (`{}`)", col + 1, names[col]), v, *full_scale_n);
         }
     }
     anyhow!("{source}: line {lineno}: internal error: the row reads back valid")

@@ -5,7 +5,7 @@ use anyhow::{bail, Context, Result};
 use std::io::Write;
 use std::path::Path;
 
-use crate::io::signal::{SignalReader, SignalWriter};
+use crate::io::signal::{Bounded, SignalReader, SignalWriter, DEFAULT_FULL_SCALE_N};
 use crate::io::signal_csv::{CsvReader, CsvWriter};
 use crate::io::tdms::{looks_like_tdms, TdmsReader, TdmsWriter};
 use crate::io::uff_signal::{UffReader, UffWriter};
@@ -64,8 +64,37 @@ pub fn can_read_twice(path: &Path) -> bool {
 }
 
 /// Open the force record `path`: its reader and its format (by extension,
-/// otherwise by content).
+/// otherwise by content), with force values checked against the default
+/// full scale ([`open_signal_checked`]).
 pub fn open_signal(path: &Path, map: Option<&ChannelMap>) -> Result<(Box<dyn SignalReader>, SignalFormat)> {
+    open_signal_checked(path, map, DEFAULT_FULL_SCALE_N)
+}
+
+/// Open the force record `path` as [`open_signal`]; every force value must
+/// be finite and within ±`full_scale_n` (N), otherwise reading fails with
+/// the file, the line or sample, and the column named.
+///
+/// `-` is standard input, read as CSV: the other formats cannot come from a
+/// pipe (a TDMS file is read through its segment index and at offsets, a
+/// UFF record is indexed in a first pass and read in a second).
+pub fn open_signal_checked(path: &Path, map: Option<&ChannelMap>, full_scale_n: f64) -> Result<(Box<dyn SignalReader>, SignalFormat)> {
+    if crate::io::atomic::is_stdio(path) {
+        if map.is_some() {
+            bail!("standard input (`-`) is read as CSV, whose columns are named fx, fy, fz; --channels applies to UFF and TDMS files");
+        }
+        return Ok((Box::new(CsvReader::stdin()?.with_full_scale(full_scale_n)), SignalFormat::Csv));
+    }
+    let (reader, fmt) = open_by_format(path, map, full_scale_n)?;
+    let reader: Box<dyn SignalReader> = match fmt {
+        SignalFormat::Csv => reader,
+        _ => Box::new(Bounded::new(reader, &path.display().to_string(), full_scale_n)),
+    };
+    Ok((reader, fmt))
+}
+
+/// The reader of `path` by its format; the CSV reader checks its values
+/// against `full_scale_n` itself (with line numbers), the others do not.
+fn open_by_format(path: &Path, map: Option<&ChannelMap>, full_scale_n: f64) -> Result<(Box<dyn SignalReader>, SignalFormat)> {
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     let sniff = || -> Result<Vec<u8>> {
         let mut head = vec![0u8; 4096];
@@ -100,7 +129,7 @@ pub fn open_signal(path: &Path, map: Option<&ChannelMap>) -> Result<(Box<dyn Sig
     if map.is_some() {
         bail!("{}: --channels applies to UFF and TDMS records; a CSV names its columns fx, fy, fz", path.display());
     }
-    Ok((Box::new(CsvReader::open(path)?), SignalFormat::Csv))
+    Ok((Box::new(CsvReader::open(path)?.with_full_scale(full_scale_n)), SignalFormat::Csv))
 }
 
 /// A writer of `fmt` into `w` for `axes` (with a time column if

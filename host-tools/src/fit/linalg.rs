@@ -1,0 +1,139 @@
+//! Iterative decompositions of the fits with an iteration limit.
+//!
+//! nalgebra's `complex_eigenvalues`, `svd`, `singular_values` and
+//! `Schur::new` iterate until convergence with no limit (`max_niter = 0`):
+//! its real Schur iteration has no exceptional shift, and a companion
+//! matrix can make it cycle for ever. Every eigenvalue and singular-value
+//! computation of the fits goes through this module instead: each has a
+//! limit of [`sweeps`] iterations (LAPACK's `dlahqr` allows 30·max(10, n)),
+//! falls back once to an equivalent problem that converges differently
+//! (a balanced matrix, then the complex Schur form), and reports
+//! non-convergence as an error that names what did not converge.
+
+use anyhow::{bail, Result};
+use nalgebra::{DMatrix, DVector, Schur, SymmetricEigen, SVD};
+use num_complex::Complex64;
+
+/// Iteration limit of one decomposition of an n×n (or n-column) matrix:
+/// 30·max(10, n) sweeps in total, as LAPACK's `dlahqr`.
+pub fn sweeps(n: usize) -> usize {
+    30 * n.max(10)
+}
+
+/// Convergence tolerance of the SVD: nalgebra's own for `svd` and
+/// `singular_values` (5·ε), so a converged result is the same to the bit.
+const SVD_EPS: f64 = 5.0 * f64::EPSILON;
+
+/// The first non-finite entry of `m`, as (row, column), if any.
+fn non_finite(m: &DMatrix<f64>) -> Option<(usize, usize)> {
+    let k = m.iter().position(|v| !v.is_finite())?;
+    Some((k % m.nrows(), k / m.nrows()))
+}
+
+/// Eigenvalues of the real square matrix `m`; `what` names the matrix in
+/// errors (e.g. "the companion matrix of the 8:10 RFP denominator").
+///
+/// The real Schur form first (the same numbers as nalgebra's
+/// `complex_eigenvalues` where that converges), then, if it does not
+/// converge within [`sweeps`], the real Schur form of the Parlett–Reinsch
+/// balanced matrix (a diagonal similarity by powers of 2: same
+/// eigenvalues), then the complex Schur form, whose complex shifts break
+/// the cycles of the real iteration. An error if all three fail, or if `m`
+/// has a non-finite entry.
+pub fn eigenvalues(m: &DMatrix<f64>, what: &str) -> Result<Vec<Complex64>> {
+    let n = m.nrows();
+    if n != m.ncols() {
+        bail!("{what}: eigenvalues of a {n}×{} matrix, which is not square", m.ncols());
+    }
+    if let Some((i, j)) = non_finite(m) {
+        bail!("{what}: entry ({i}, {j}) is {}, eigenvalues undefined", m[(i, j)]);
+    }
+    let eps = f64::EPSILON;
+    if let Some(s) = Schur::try_new(m.clone(), eps, sweeps(n)) {
+        return Ok(s.complex_eigenvalues().iter().copied().collect());
+    }
+    let mut balanced = m.clone();
+    nalgebra::linalg::balancing::balance_parlett_reinsch(&mut balanced);
+    if let Some(s) = Schur::try_new(balanced, eps, sweeps(n)) {
+        return Ok(s.complex_eigenvalues().iter().copied().collect());
+    }
+    let complex = m.map(|v| Complex64::new(v, 0.0));
+    if let Some(s) = Schur::try_new(complex, eps, sweeps(n)) {
+        let (_, t) = s.unpack();
+        return Ok(t.diagonal().iter().copied().collect());
+    }
+    bail!(
+        "{what}: the eigenvalue iteration (Schur) of the {n}×{n} matrix did not converge within {} sweeps, \
+         balanced or in complex arithmetic",
+        sweeps(n)
+    )
+}
+
+/// Roots of the polynomial with ascending real coefficients `a` (a_n ≠ 0),
+/// as the eigenvalues of its companion matrix ([`eigenvalues`]); `what`
+/// names the polynomial in errors.
+pub fn poly_roots(a: &[f64], what: &str) -> Result<Vec<Complex64>> {
+    let Some(n) = a.len().checked_sub(1) else {
+        return Ok(Vec::new());
+    };
+    if n == 0 {
+        return Ok(Vec::new());
+    }
+    let lead = a[n];
+    if !(lead != 0.0 && lead.is_finite()) {
+        bail!("{what}: leading coefficient {lead}, roots undefined");
+    }
+    let m = DMatrix::<f64>::from_fn(n, n, |i, j| if i == 0 { -a[n - 1 - j] / lead } else if i == j + 1 { 1.0 } else { 0.0 });
+    eigenvalues(&m, &format!("{what} (companion matrix)"))
+}
+
+/// Singular value decomposition of `m` with U and V, at most [`sweeps`]
+/// of its column count; `what` names the matrix in errors. The same
+/// decomposition as nalgebra's `svd(true, true)` where that converges.
+pub fn svd(m: DMatrix<f64>, what: &str) -> Result<SVD<f64, nalgebra::Dyn, nalgebra::Dyn>> {
+    let (rows, cols) = m.shape();
+    if rows == 0 || cols == 0 {
+        bail!("{what}: singular values of an empty {rows}×{cols} matrix");
+    }
+    if let Some((i, j)) = non_finite(&m) {
+        bail!("{what}: entry ({i}, {j}) is {}, singular values undefined", m[(i, j)]);
+    }
+    let limit = sweeps(rows.min(cols));
+    match SVD::try_new(m, true, true, SVD_EPS, limit) {
+        Some(s) => Ok(s),
+        None => bail!("{what}: the singular value iteration (SVD) of the {rows}×{cols} matrix did not converge within {limit} sweeps"),
+    }
+}
+
+/// Singular values of `m` (descending), as [`svd`] without U and V.
+pub fn singular_values(m: &DMatrix<f64>, what: &str) -> Result<DVector<f64>> {
+    let (rows, cols) = m.shape();
+    if rows == 0 || cols == 0 {
+        bail!("{what}: singular values of an empty {rows}×{cols} matrix");
+    }
+    if let Some((i, j)) = non_finite(m) {
+        bail!("{what}: entry ({i}, {j}) is {}, singular values undefined", m[(i, j)]);
+    }
+    let limit = sweeps(rows.min(cols));
+    match SVD::try_new(m.clone(), false, false, SVD_EPS, limit) {
+        Some(s) => Ok(s.singular_values),
+        None => bail!("{what}: the singular value iteration (SVD) of the {rows}×{cols} matrix did not converge within {limit} sweeps"),
+    }
+}
+
+/// Eigenvalues of the symmetric matrix `m` (only its lower triangle is
+/// read), at most [`sweeps`] iterations; `what` names it in errors (for
+/// nalgebra's `symmetric_eigenvalues`, which has no limit).
+pub fn symmetric_eigenvalues(m: &DMatrix<f64>, what: &str) -> Result<DVector<f64>> {
+    let n = m.nrows();
+    if n != m.ncols() {
+        bail!("{what}: eigenvalues of a {n}×{} matrix, which is not square", m.ncols());
+    }
+    if let Some((i, j)) = non_finite(m) {
+        bail!("{what}: entry ({i}, {j}) is {}, eigenvalues undefined", m[(i, j)]);
+    }
+    match SymmetricEigen::try_new(m.clone(), f64::EPSILON, sweeps(n)) {
+        Some(e) => Ok(e.eigenvalues),
+        None => bail!("{what}: the symmetric eigenvalue iteration of the {n}×{n} matrix did not converge within {} sweeps", sweeps(n)),
+    }
+}
