@@ -37,7 +37,8 @@ use crate::report::compensation::ReportAccumulator;
 use crate::io::image_file::{read_any_image, AnyImage};
 use crate::io::signal::{check_rate_value, read_all, Block, RateTracker, SignalReader, BLOCK};
 use crate::io::signal_csv::SignalRecord;
-use crate::io::signal_file::{open_signal, writer_for, ChannelMap, SignalFormat};
+use crate::io::signal_file::{open_signal, writer_for, SignalFormat};
+use crate::io::signal::ChannelMap;
 
 /// `dynocomp compensate` arguments.
 #[derive(clap::Args, Debug)]
