@@ -17,9 +17,12 @@
 //! Ĝ_d(z) = d + Σ_real ρ/(z − ζ) + Σ_pairs [ρ/(z − ζ) + ρ̄/(z − ζ̄)] + Σ_{m=1..M} h_m z^{−m}
 //!
 //! with the poles mapped exactly, ζ = e^{pT} (the free response of a mode is
-//! sampled exactly by any chain), for every pole whose frequency |Im p|/2π
-//! lies below fs/2; a mode above Nyquist has no discrete counterpart inside
-//! the band, and its in-band tail is carried by the other terms. The residues
+//! sampled exactly by any chain), for every pair whose frequency |Im p|/2π
+//! and every real pole whose corner frequency |p|/2π lies below fs/2; a mode
+//! above Nyquist has no discrete counterpart inside the band, and its in-band
+//! tail is carried by the other terms. (A real pole beyond Nyquist maps to
+//! ζ < e^{−π} ≈ 0.04: its column 1/(z − ζ) is z^{−1} to within a few percent,
+//! and beside the FIR taps the least squares would be ill-conditioned.) The residues
 //! ρ, the direct term d and M FIR taps h_m are the least-squares solution of
 //! the relative error (Ĝ_d − Ĝ)/Ĝ on a dense grid, under the one linear
 //! constraint Ĝ_d(1) = Ĝ(0) (the static gain exact, [`StaticGain`]): a linear
@@ -339,7 +342,8 @@ fn unit_circle_problem(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64)
         .terms
         .iter()
         .filter_map(|term| match *term {
-            Term::Real { pole, .. } => Some((Complex64::new(pole, 0.0), false)),
+            Term::Real { pole, .. } if pole.abs() < nyq => Some((Complex64::new(pole, 0.0), false)),
+            Term::Real { .. } => None,
             Term::Pair { pole, .. } if pole.im < nyq => Some((pole, true)),
             Term::Pair { .. } => None,
         })
