@@ -456,6 +456,12 @@ impl ReportAccumulator {
     }
 }
 
+impl crate::offline::record::Observer for ReportAccumulator {
+    fn observe(&mut self, measured: &[&[f64]], compensated: &[&[f64]], truth: Option<&[&[f64]]>) {
+        ReportAccumulator::observe(self, measured, compensated, truth);
+    }
+}
+
 /// Draw an envelope as a filled band (one polygon, max edge then min edge
 /// backwards), or as a line when every bucket is a single sample.
 fn draw_envelope(chart: &mut crate::report::plot::Chart<'_>, env: &[(u64, u64, f64, f64)], fs: f64, color: RGBColor, alpha: f64, label: &str) -> Result<()> {
