@@ -671,8 +671,9 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
     let raw_j = obj.raw();
     p.refuse_unless_better(j, raw_j, ng)?;
     let paper = p.paper_design(kal.q, prewarp_hz, opts)?;
-    let (realization, filter, verification) = choose_realization_within(&kal.compensator, fs, p.f_top, opts.axis_cycle_budget)
-        .with_context(|| format!("axis {}", p.name))?;
+    let (realization, filter, verification) =
+        choose_realization_within(&kal.compensator, fs, p.f_top, opts.axis_cycle_budget)
+            .with_context(|| format!("axis {}", p.name))?;
     let flat = p.flat_band(&filter, lag, fs);
     let h = kal.compensator.freq_responses(&grid_hz, fs);
     let predicted_distortion = obj.distortion_of(&h).sqrt();
@@ -739,7 +740,9 @@ impl PreparedAxis {
         opts: &DesignOptions,
     ) -> Result<KalmanDesign> {
         match (&self.fitted.paper, discrete) {
-            (Some((tf, _)), _) => paper::design(tf, opts.fs_hz, q, self.r, prewarp_hz, &mut PaperDiagnostics::default()),
+            (Some((tf, _)), _) => {
+                paper::design(tf, opts.fs_hz, q, self.r, prewarp_hz, &mut PaperDiagnostics::default())
+            }
             (None, Some((dm, _))) => kalman::design(dm, q, self.r, opts.lag),
             (None, None) => unreachable!("the default method always has a discrete model"),
         }
@@ -839,7 +842,12 @@ impl PreparedAxis {
 
     /// The paper's fitted B/A with the diagnostics of its design at q (the
     /// fit's conditions stay); `None` for the default method.
-    fn paper_design(&self, q: f64, prewarp_hz: f64, opts: &DesignOptions) -> Result<Option<(RationalTf, PaperDiagnostics)>> {
+    fn paper_design(
+        &self,
+        q: f64,
+        prewarp_hz: f64,
+        opts: &DesignOptions,
+    ) -> Result<Option<(RationalTf, PaperDiagnostics)>> {
         match &self.fitted.paper {
             Some((tf, diag)) => {
                 let mut diag = diag.clone();
@@ -855,7 +863,8 @@ impl PreparedAxis {
     /// ~5 % random error, as large as the tolerance.
     fn flat_band(&self, filter: &AxisFilter, lag: usize, fs: f64) -> (f64, f64) {
         let model_frf: Vec<Complex64> = self.freq_hz.iter().map(|f| self.fitted.frf(*f)).collect();
-        flat_band(|f| quantize::filter_response(filter, f, fs), &self.freq_hz, &model_frf, &self.lines.eval_band, lag, fs)
+        let response = |f| quantize::filter_response(filter, f, fs);
+        flat_band(response, &self.freq_hz, &model_frf, &self.lines.eval_band, lag, fs)
     }
 
     /// What q for the record's force spectrum predicts, beside the flat

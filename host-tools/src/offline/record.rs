@@ -134,8 +134,17 @@ pub fn compensate_file(
     observer: Option<&mut dyn Observer>,
     monitor: &dyn Monitor,
 ) -> Result<Compensated> {
-    let RecordJob { compensation, image_path, mut input, input_path, channels, output, output_format, raw_timing, truth } =
-        job;
+    let RecordJob {
+        compensation,
+        image_path,
+        mut input,
+        input_path,
+        channels,
+        output,
+        output_format,
+        raw_timing,
+        truth,
+    } = job;
     let axes = input.axes().to_vec();
     let target = Target {
         output: &output,
