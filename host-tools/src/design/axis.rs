@@ -251,7 +251,7 @@ struct Objective<'a> {
     r: f64,
     band_width: f64,
     /// The record's force spectrum on the grid (weights, power P_F in N²);
-    /// `None`: flat, of power `force_rms`² (module doc).
+    /// `None`: flat, of power `force_rms`² ([`crate::design::force_spectrum`]).
     force: Option<(Vec<f64>, f64)>,
 }
 

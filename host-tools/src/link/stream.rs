@@ -1,20 +1,8 @@
 //! `dynocomp stream --serial PORT --output FILE.csv [--duration S | --samples N]`:
 //! record the box's stream of raw and compensated samples, converted to
-//! newtons with the running image's scaling, and report lost frames.
-//!
-//! Loss accounting: every stream frame carries a sequence number (+1 per
-//! frame sent). A gap between two received frames is a run of lost frames;
-//! after `StopStream` the box's `stream_next_seq` (status) reveals frames
-//! lost after the last one received. Frames lost before the first received
-//! frame cannot be told from "not yet started" and are not counted.
-//! Samples the box itself dropped (its queue full) show as gaps in the
-//! sample index and are counted separately.
-//!
-//! The box's health comes from the status before and after the recording:
-//! missed sample deadlines (overruns) during the recording, with a warning
-//! if there were any, and the sample interrupt's cost in CPU cycles (mean,
-//! max; DWT cycle counter on the box) as a share of the sample period
-//! ([`BoxLoad::summary`]).
+//! newtons with the running image's scaling ([`record`]), and report lost
+//! frames ([`LossCounter`]) and the box's health over the recording
+//! ([`BoxLoad`]).
 
 use std::io::Write;
 use std::path::Path;
@@ -50,7 +38,10 @@ pub struct StreamReport {
 }
 
 /// The sample path's health over a recording, from the box's status before
-/// and after it.
+/// and after it: missed sample deadlines (overruns) during the recording,
+/// with a warning if there were any, and the sample interrupt's cost in CPU
+/// cycles (mean, max; DWT cycle counter on the box) as a share of the
+/// sample period ([`BoxLoad::summary`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct BoxLoad {
     /// Sample rate of the box, Hz.
@@ -148,6 +139,15 @@ impl StreamReport {
 }
 
 /// Tracks frame sequence numbers and records losses.
+///
+/// Every stream frame carries a sequence number (+1 per frame sent). A gap
+/// between two received frames is a run of lost frames; after `StopStream`
+/// the box's `stream_next_seq` (status) reveals frames lost after the last
+/// one received ([`LossCounter::finish`]). Frames lost before the first
+/// received frame cannot be told from "not yet started" and are not
+/// counted. Samples the box itself dropped (its queue full) show as gaps in
+/// the sample index and are counted separately
+/// ([`StreamReport::index_gaps`]).
 #[derive(Clone, Debug, Default)]
 pub struct LossCounter {
     last: Option<u32>,

@@ -1,14 +1,10 @@
-//! Offline compensation of recorded forces (`dynocomp compensate`):
-//!
-//! * a box image (format 1) runs through the core kernel, bit-exact with the
-//!   box: the same f32 kernel code (its block path, bit-identical to the box's
-//!   per-sample `step`), the same coefficients, the axes in lockstep
-//!   ([`compensate_record`]);
-//! * a parallel-elaboration image (format 2, offline only) splits the record
-//!   into its bands with zero-phase filters, runs each band through its own
-//!   compensator (the same kernel) and sums ([`compensate_parallel`]);
-//! * `--offline` runs the fixed-interval smoother of [`crate::offline::smoother`]
-//!   instead (f64, zero lag, offline only).
+//! Offline compensation of recorded forces through the core kernel, bit-exact
+//! with the box: the same f32 kernel code (its block path, bit-identical to
+//! the box's per-sample `step`), the same coefficients, the axes in lockstep
+//! ([`compensate_record`], [`StreamCompensator`]). A parallel-elaboration image
+//! (offline only) splits the record into its bands with zero-phase filters,
+//! runs each band through its own compensator and sums
+//! ([`compensate_parallel`]).
 
 use anyhow::{bail, Context, Result};
 use dynocomp_core::image::{CoeffImage, ParallelImage};

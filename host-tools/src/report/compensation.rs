@@ -1,26 +1,9 @@
-//! `dynocomp compensate --report DIR` (issue #14): what the compensation did
-//! to a record, after the paper's Figs. 10-12, per axis:
-//!
-//! * `a_overview.svg`: the whole record, measured and compensated (and the
-//!   true force and the error with `--truth`), drawn as min/max envelopes
-//!   over at most [`ENVELOPE_COLUMNS`]-2x that many buckets, never every
-//!   sample;
-//! * `a_zoom.svg`: a few tooth periods where the cut is steady, every
-//!   sample, measured and compensated overlaid;
-//! * `a_spectrum.svg`: Welch amplitude spectra of measured and compensated
-//!   (and true) forces with the tooth-passing frequency and its harmonics
-//!   marked (given by `--spindle-rpm`/`--teeth`, else the strongest line of
-//!   the compensated spectrum).
-//!
-//! Everything is accumulated while the record streams through
-//! ([`ReportAccumulator::observe`]): envelopes that halve their resolution
-//! when full, a Welch spectrum summed segment by segment, and a short kept
-//! window for the zoom, so the report's memory does not grow with the record.
-//! The one exception is the NRMSE against `--truth`, which follows the
-//! project's single convention ([`crate::metrics::accuracy`]: zero-phase
-//! FFT band limit over the whole record) and therefore keeps the
-//! compensated, measured and true forces of each axis (24 bytes per sample
-//! and axis) when `--truth` is given.
+//! `dynocomp compensate --report DIR`: what the compensation did to a
+//! record, after the paper's Figs. 10-12, per axis: the whole record, a zoom
+//! on a steady stretch of the cut and the amplitude spectra
+//! ([`ReportAccumulator::write`]). Everything is accumulated while the record
+//! streams through ([`ReportAccumulator::observe`]), so the report's memory
+//! does not grow with the record, except for the NRMSE against `--truth`.
 
 use anyhow::{Context, Result};
 use plotters::prelude::*;
@@ -213,7 +196,14 @@ struct AxisAcc {
     keep: Option<[Vec<f64>; 3]>,
 }
 
-/// Everything the compensation report needs, accumulated block by block.
+/// Everything the compensation report needs, accumulated block by block:
+/// envelopes that halve their resolution when full, a Welch spectrum summed
+/// segment by segment, and a short kept window for the zoom. The one
+/// exception is the NRMSE against `--truth`, which follows the project's
+/// single convention ([`crate::metrics::accuracy`]: zero-phase FFT band limit
+/// over the whole record) and therefore keeps the compensated, measured and
+/// true forces of each axis (24 bytes per sample and axis) when `--truth` is
+/// given.
 pub struct ReportAccumulator {
     fs_hz: f64,
     axes: Vec<AxisAcc>,
@@ -554,6 +544,10 @@ fn range_of<'a>(envs: impl Iterator<Item = &'a [(u64, u64, f64, f64)]>) -> (f64,
     }
 }
 
+/// `a_overview.svg`: the whole record, measured and compensated (and the
+/// true force and the error with `--truth`), drawn as min/max envelopes
+/// over at most [`ENVELOPE_COLUMNS`]-2x that many buckets, never every
+/// sample.
 fn plot_overview(a: &AxisAcc, fs: f64, has_truth: bool) -> Result<String> {
     let name = axis_name(a.axis);
     let (m, c, t, e) = (a.meas.buckets(), a.comp.buckets(), a.truth.buckets(), a.err.buckets());
@@ -585,6 +579,8 @@ fn plot_overview(a: &AxisAcc, fs: f64, has_truth: bool) -> Result<String> {
     Ok(svg)
 }
 
+/// `a_zoom.svg`: a few tooth periods where the cut is steady, every
+/// sample, measured and compensated overlaid.
 fn plot_zoom(w: &[Vec<f64>; 3], start: u64, fs: f64, has_truth: bool, name: &str) -> Result<String> {
     let t0 = start as f64 / fs;
     let pts = |x: &[f64]| -> Vec<(f64, f64)> { x.iter().enumerate().map(|(k, v)| ((t0 + k as f64 / fs) * 1e3, *v)).collect() };
@@ -610,6 +606,10 @@ fn plot_zoom(w: &[Vec<f64>; 3], start: u64, fs: f64, has_truth: bool, name: &str
     Ok(svg)
 }
 
+/// `a_spectrum.svg`: Welch amplitude spectra of measured and compensated
+/// (and true) forces with the tooth-passing frequency and its harmonics
+/// marked (given by `--spindle-rpm`/`--teeth`, else the strongest line of
+/// the compensated spectrum).
 fn plot_spectrum(f: &[f64], am: &[f64], ac: &[f64], at: Option<&[f64]>, tpf: Option<f64>, name: &str) -> Result<String> {
     let db = |v: &f64| 20.0 * v.max(1e-12).log10();
     let fmax = f.last().copied().unwrap_or(1.0);

@@ -1,26 +1,10 @@
-//! `dynocomp design --report DIR`: plots of each axis's design, as SVG, and an
-//! `index.html` that shows the design summary and embeds them.
-//!
-//! Per axis `a` (x, y, z) three SVG files:
-//! * `a_frf_fit.svg`: measured FRF magnitude (dB) and phase with the fitted
-//!   model overlaid, and the coherence γ²; the coherent band is shaded.
-//! * `a_compensated.svg`: the compensated response H·G·e^{j2πfL/fs} (measured
-//!   G, the f32 filter H as it goes into the image, the declared latency L
-//!   removed) against the uncompensated G: an overview in dB and zooms of the
-//!   magnitude ratio and the phase with the ±5 % / ±5° tolerances; the flat
-//!   band is shaded.
-//! * `a_model_match.svg` (default method): the discrete model's match to the
-//!   sampled-data relation, |Ĝ_d(e^{j2πf/fs})/Ĝ(j2πf) − 1| in dB over
-//!   0..0.45 fs, for the design's discretization beside the first- and
-//!   zero-order holds; the compensated band is shaded.
-//! * `a_poles.svg`: the z-plane with the unit circle, the compensator's section
-//!   poles and the fitted model's poles mapped by z = exp(p/fs); whole plane
-//!   and a zoom near z = 1, where the slow (machine-structure) modes sit.
+//! `dynocomp design --report DIR`: plots of each axis's design, as SVG, and
+//! an `index.html` that shows the design summary and embeds them
+//! ([`write_report`]).
 //!
 //! Every file is rendered in memory first, then written atomically
 //! ([`crate::io::atomic`]); if writing fails, the files this run created are
 //! removed again, so a report directory never holds a half-written file.
-//!
 //! Plots use plotters' SVG backend without its font stack: text is emitted as
 //! SVG `<text>` in a generic `sans-serif` family and laid out by the viewer.
 
@@ -104,8 +88,7 @@ pub fn write_report_with(
 }
 
 /// The plots of one design `d` against its measured FRF `meas`: the fit,
-/// the compensated response and the pole map, then the discrete model's
-/// match, the sensitivity `sens` and the force spectrum where it has them.
+/// the compensated response and the pole map, then [`further_plots`].
 fn axis_plots(
     freq: &[f64],
     meas: &AxisFrf,
@@ -158,6 +141,16 @@ fn axis_plots(
             plot_poles(d, fs_hz).with_context(|| format!("report: axis {name}: pole map"))?,
         ),
     ];
+    plots.extend(further_plots(d, sens, fs_hz)?);
+    Ok(plots)
+}
+
+/// The plots of `d` that only some designs have: the discrete model's
+/// match (default method), the sensitivity `sens` to moving sensor modes and
+/// q for a record's force spectrum.
+fn further_plots(d: &AxisDesign, sens: Option<&Sensitivity>, fs_hz: f64) -> Result<Vec<Plot>> {
+    let name = axis_name(d.axis);
+    let mut plots = Vec::new();
     if let Some((dm, _)) = &d.discrete {
         plots.push((
             format!("{name}_model_match.svg"),
@@ -200,6 +193,8 @@ fn axis_plots(
 
 // ------------------------------------------------------------ plot 1: FRF fit
 
+/// `a_frf_fit.svg`: measured FRF magnitude (dB) and phase with the fitted
+/// model overlaid, and the coherence γ²; the coherent band is shaded.
 fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> {
     let name = axis_name(d.axis);
     let xr = (freq[0], *freq.last().unwrap_or(&freq[0]));
@@ -273,6 +268,11 @@ fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> 
 
 // ------------------------------------------------------------ plot 2: compensated
 
+/// `a_compensated.svg`: the compensated response H·G·e^{j2πfL/fs} (measured
+/// G, the f32 filter H as it goes into the image, the declared latency L
+/// removed) against the uncompensated G: an overview in dB and zooms of the
+/// magnitude ratio and the phase with the ±5 % / ±5° tolerances; the flat
+/// band is shaded.
 fn plot_compensated(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Result<String> {
     let name = axis_name(d.axis);
     let xr = (freq[0], *freq.last().unwrap_or(&freq[0]));
@@ -409,7 +409,8 @@ fn equal_aspect(cx: f64, cy: f64, half_x: f64, half_y: f64, px: (u32, u32)) -> (
     ((cx - hx, cx + hx), (cy - hy, cy + hy))
 }
 
-/// The pole map: the whole z-plane and a zoom near z = 1 ([`zoom_radius`]),
+/// `a_poles.svg`, the pole map: the whole z-plane and a zoom near z = 1,
+/// where the slow (machine-structure) modes sit ([`zoom_radius`]),
 /// with equal scales on both axes, the unit circle, the fitted model's
 /// poles (○), the compensator's section poles (×) and the model's modes
 /// named.
@@ -529,8 +530,10 @@ fn draw_mode_labels(c: &mut Chart<'_>, d: &AxisDesign, fs: f64, show: &dyn Fn(&C
 
 // ------------------------------------------------------------ plot 4: model match
 
-/// |Ĝ_d/Ĝ − 1| (dB) over 0..0.45 fs for the design's discrete model and the
-/// two hold equivalents of the same fitted Ĝ.
+/// `a_model_match.svg` (default method): the discrete model's match to the
+/// sampled-data relation, |Ĝ_d(e^{j2πf/fs})/Ĝ(j2πf) − 1| in dB over
+/// 0..0.45 fs, for the design's discretization beside the first- and
+/// zero-order holds of the same fitted Ĝ; the compensated band is shaded.
 fn plot_model_match(d: &AxisDesign, dm: &crate::design::discretize::DiscreteModel, fs: f64) -> Result<String> {
     use crate::design::discretize::{discretize, Discretization, MATCH_BAND_FRACTION};
     let name = axis_name(d.axis);
