@@ -223,7 +223,7 @@ pub fn coherent_band(freq_hz: &[f64], coherence: Option<&[f64]>, threshold: f64)
         .collect();
     let (mut best, mut start) = ((0, 0), None);
     for i in 0..=n {
-        let good = i < n && ok[i];
+        let good = ok.get(i).copied().unwrap_or(false);
         match (good, start) {
             (true, None) => start = Some(i),
             (false, Some(s)) => {
@@ -593,7 +593,7 @@ pub fn prepare_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions
     let (band, comp_band) = (*band, *comp_band);
     let fit_nrmse = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, target);
     let fit_nrmse_out_of_band = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, out_of_band);
-    check_static(&name, freq_hz, band.0, opts, &fitted)?;
+    check_static(name, freq_hz, band.0, opts, &fitted)?;
     if !(fit_nrmse <= MAX_FIT_ERROR) {
         let next = match &fitted.paper {
             Some(_) => "let the orders be chosen (omit --paper-orders) or try others, fit narrower bands, or use the default method (--method vf)",
@@ -816,7 +816,7 @@ impl PreparedAxis {
     /// above [`MAX_PREDICTED_ERROR`].
     fn refuse_unless_better(&self, j: f64, raw_j: f64, ng: f64) -> Result<()> {
         let worse = !(j < raw_j);
-        if !(worse || !(j.sqrt() < MAX_PREDICTED_ERROR)) {
+        if !worse && j.sqrt() < MAX_PREDICTED_ERROR {
             return Ok(());
         }
         let (name, lo, f_top) = (self.name, self.ranges[0].0, self.f_top);

@@ -5,10 +5,6 @@
 //! paper, §3.1: "the observability matrix is not full rank due to round-off
 //! errors").
 
-// `!(x < limit)` on purpose: a NaN residual or condition number must fail
-// the check, as in kalman.rs and quantize.rs.
-#![allow(clippy::neg_cmp_op_on_partial_ord)]
-
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;

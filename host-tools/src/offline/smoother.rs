@@ -393,7 +393,7 @@ pub fn build_priors(opts: &PriorOptions, rec: &SignalRecord, shown: &str, design
         let y = rec.channel(d.axis).ok_or_else(|| anyhow::anyhow!("{shown}: no column f{name} for axis {name}; the force record needs every designed axis"))?;
         let dm = &d.discrete.as_ref().ok_or_else(|| anyhow::anyhow!("axis {name}: no discrete model"))?.0;
         let rv = r[d.axis].expect("R set for every designed axis");
-        let built = build_axis_prior(&opts, dm, &|f| d.model.frf(f), rv, d.kalman.q, d.compensated_band_hz, y)
+        let built = build_axis_prior(opts, dm, &|f| d.model.frf(f), rv, d.kalman.q, d.compensated_band_hz, y)
             .with_context(|| format!("{shown}: axis {name}: --force-prior harmonics"))?;
         Smoother::with_force_prior(dm, &built.prior, rv).with_context(|| format!("axis {name}: the smoother with the force prior"))?;
         let p = built.prediction;
