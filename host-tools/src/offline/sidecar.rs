@@ -56,8 +56,8 @@ pub struct AxisModelJson {
     /// The discrete model of the design (absent in older sidecars: FOH).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub discrete: Option<DiscreteModel>,
-    /// Both states of a design from two FRFs (`design --frf A --frf B`,
-    /// issue #15; absent otherwise and in older sidecars).
+    /// Both states of a design from two FRFs (`design --frf A --frf B`;
+    /// absent otherwise and in older sidecars).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub two_state: Option<crate::offline::sidecar::TwoStateJson>,
     /// The harmonic force prior of `compensate --offline` (`design
