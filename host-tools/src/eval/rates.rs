@@ -18,7 +18,7 @@ use crate::design::axis::DesignOptions;
 use dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE;
 use crate::design::image::build_image;
 use crate::io::signal_csv::SignalRecord;
-use crate::metrics::{accuracy, sample_variance};
+use crate::metrics::{accuracy, accuracy_as_written, sample_variance, AsWritten};
 
 /// The DAQ sample rates of the harness (Hz).
 pub const RATES_HZ: [f64; 4] = [10_240.0, 25_600.0, 51_200.0, 102_400.0];
@@ -246,6 +246,9 @@ pub struct AxisScore {
     pub flat_band_hz: (f64, f64),
     /// Wall time of the axis's design (s).
     pub design_s: f64,
+    /// The compensated force as written against the anti-aliased truth,
+    /// beside a perfect band-limited estimate (None if the design failed).
+    pub as_written: Option<AsWritten>,
     /// Shape of the axis's filter on the box (None if the design failed).
     pub shape: Option<dynocomp_core::budget::AxisShape>,
 }
@@ -347,6 +350,7 @@ fn score_sim_with(name: &'static str, s: &SimOutput, run: &RunOptions, record: O
             None => Err(anyhow::anyhow!("no FRF for axis {a}")),
         };
         let shape = designed.as_ref().ok().map(|d| dynocomp_core::budget::AxisShape::of(&d.filter));
+        let mut as_written = None;
         let (comp_nrmse, predicted_error, flat_band_hz) = match designed {
             Err(e) => (Err(format!("{e:#}")), f64::NAN, (f64::NAN, f64::NAN)),
             Ok(d) => {
@@ -355,12 +359,16 @@ fn score_sim_with(name: &'static str, s: &SimOutput, run: &RunOptions, record: O
                     compensate_record(&img, &rec, false, "rates")
                 });
                 let nrmse = comp
-                    .and_then(|out| out.channel(a).map(|c| accuracy(c, &s.truth[a], fs, band).nrmse).ok_or_else(|| anyhow::anyhow!("axis {a} missing")))
+                    .and_then(|out| {
+                        let c = out.channel(a).ok_or_else(|| anyhow::anyhow!("axis {a} missing"))?;
+                        as_written = Some(accuracy_as_written(c, &s.truth[a], fs, band));
+                        Ok(accuracy(c, &s.truth[a], fs, band).nrmse)
+                    })
                     .map_err(|e| format!("{e:#}"));
                 (nrmse, d.predicted_error, d.flat_band_hz)
             }
         };
-        axes.push(AxisScore { axis: a, raw_nrmse: raw.nrmse, comp_nrmse, noise_floor, predicted_error, flat_band_hz, design_s, shape });
+        axes.push(AxisScore { axis: a, raw_nrmse: raw.nrmse, comp_nrmse, noise_floor, predicted_error, flat_band_hz, design_s, shape, as_written });
     }
     CaseResult { case: name, fs_hz: fs, band_hz: band, axes, latency }
 }
