@@ -19,8 +19,7 @@
 //! `model …` lines; `tests/qemu_cost_model.rs` fails if they drift apart
 //! by more than [`INSN_TOLERANCE`]). Instructions become cycles with the
 //! Cortex-M4 TRM timings of each part's instruction mix (BENCHMARKS.md,
-//! "Interrupt budget on the STM32G474 at 170 MHz" and "Cost model of the
-//! sample interrupt"); FIXED also holds the interrupt shell around
+//! "Interrupt budget and box load"); FIXED also holds the interrupt shell around
 //! `SamplePath::tick` (exception entry/exit, lazy FP stacking, the ADC ring
 //! reads, the DAC writes, the stream push and the cycle statistics).
 //!
@@ -147,8 +146,8 @@ impl CostModel {
     /// Instructions per call of `SamplePath::tick` (`process_sample` and
     /// the decisions around it) on the Cortex-M4F (no interrupt shell),
     /// fitted to the QEMU counts (`model …` lines of
-    /// `scripts/qemu_icount.sh`; BENCHMARKS.md, "The sample interrupt's
-    /// fixed part"). low = high: the count is exact per shape.
+    /// `scripts/qemu_icount.sh`; BENCHMARKS.md, "Cost model of
+    /// the sample interrupt"). low = high: the count is exact per shape.
     pub const QEMU_INSNS: CostModel = CostModel {
         fixed: Cost::new(8_737, 8_737),
         axis: Cost::new(6_428, 6_428),

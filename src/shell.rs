@@ -38,8 +38,8 @@ use crate::sample::{
 /// `ActiveImage`, whoever built it, and the sample interrupt pays for a
 /// stored verdict and the user's bypass switch instead of the checks (the
 /// budget check alone, with its 64-bit division, was ≈ 500 instructions per
-/// sample for a three-axis image: BENCHMARKS.md, "The sample interrupt's
-/// fixed part").
+/// sample for a three-axis image: BENCHMARKS.md, "Cost model of the
+/// sample interrupt").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ActiveImage {
     stored: Result<CoeffImage, BypassReason>,

@@ -51,7 +51,7 @@ pub struct CompensateArgs {
     /// With --offline: the set-up drifts from the first FRF's state at START
     /// to the second's at END (seconds; linear in the state variable,
     /// constant outside): a time-varying smoother with the two states of a
-    /// `design --frf BEFORE --frf AFTER` sidecar (issue #15).
+    /// `design --frf BEFORE --frf AFTER` sidecar.
     #[arg(long, value_name = "START:END", requires = "offline")]
     pub drift: Option<String>,
     /// With --offline: ignore the harmonic force prior of the model sidecar
@@ -62,8 +62,10 @@ pub struct CompensateArgs {
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
     /// True force of the record (e.g. from `simulate`), same format rules as
-    /// --input: the report adds it, the error and the NRMSE.
-    #[arg(long, value_name = "FILE", requires = "report")]
+    /// --input: prints, per axis, the NRMSE of the measured and the
+    /// compensated force against it (band-limited, and the output as
+    /// written; README "Accuracy"); with --report the pages show it too.
+    #[arg(long, value_name = "FILE")]
     pub truth: Option<PathBuf>,
     /// Spindle speed (rpm) for the report's tooth-passing frequency marks.
     #[arg(long, requires = "teeth")]
@@ -71,8 +73,8 @@ pub struct CompensateArgs {
     /// Number of teeth of the cutter (with --spindle-rpm).
     #[arg(long, requires = "spindle_rpm")]
     pub teeth: Option<u32>,
-    /// Band limit of the report's NRMSE (Hz); default: the project's
-    /// scoring band, min(4 kHz, 0.4 fs).
+    /// Band limit of the NRMSE against --truth (Hz); default: the
+    /// project's scoring band, min(4 kHz, 0.4 fs).
     #[arg(long)]
     pub band_hz: Option<f64>,
 }
@@ -81,7 +83,8 @@ pub struct CompensateArgs {
 pub fn run(a: &CompensateArgs) -> Result<()> {
     let Options { job, axes, fs, tpf } = Options::new(a)?;
     let has_truth = job.truth.is_some();
-    let mut acc = a.report.as_ref().map(|_| ReportAccumulator::new(&axes, f64::from(fs), tpf, has_truth));
+    let keep = a.report.is_some() || has_truth;
+    let mut acc = keep.then(|| ReportAccumulator::new(&axes, f64::from(fs), tpf, has_truth));
     let progress = progress_bar(job.input.len_hint());
     let done = compensate_file(job, acc.as_mut().map(|r| r as &mut dyn Observer), &Terminal(&progress))?;
     progress.finish_and_clear();
@@ -91,6 +94,14 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
         axes.len(),
         a.output.display()
     );
+    // The project's one scoring band (the same as `examples/score.rs` and
+    // the rates harness), not the image's flat band.
+    let band = |_axis: usize| -> f64 { a.band_hz.unwrap_or_else(|| crate::metrics::scoring_band_hz(f64::from(fs))) };
+    if let (Some(acc), None) = (&acc, &a.report) {
+        for s in acc.score_lines(&band) {
+            eprintln!("{s}");
+        }
+    }
     if let (Some(acc), Some(dir)) = (acc, &a.report) {
         let summary = format!(
             "input:  {}\nimage:  {}\noutput: {}\n{n_samples} samples x {} axes at {fs} Hz ({:.3} s); {how}",
@@ -100,7 +111,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
             axes.len(),
             n_samples as f64 / f64::from(fs),
         );
-        write_report(a, acc, dir, &summary, fs)?;
+        write_report(acc, dir, &summary, &band)?;
     }
     Ok(())
 }
@@ -178,11 +189,8 @@ impl Options {
 
 /// Write the report into `dir` with `summary` on top and print its NRMSE
 /// lines and where it is.
-fn write_report(a: &CompensateArgs, acc: ReportAccumulator, dir: &Path, summary: &str, fs: u32) -> Result<()> {
-    // The project's one scoring band (the same as `examples/score.rs`
-    // and the rates harness), not the image's flat band.
-    let band = |_axis: usize| -> f64 { a.band_hz.unwrap_or_else(|| crate::metrics::scoring_band_hz(f64::from(fs))) };
-    let (files, scores) = acc.write(dir, summary, &band)?;
+fn write_report(acc: ReportAccumulator, dir: &Path, summary: &str, band: &dyn Fn(usize) -> f64) -> Result<()> {
+    let (files, scores) = acc.write(dir, summary, band)?;
     for s in scores {
         eprintln!("{s}");
     }

@@ -36,7 +36,7 @@ impl Method {
 /// Discrete model of the Kalman design (`--discretization`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum DiscretizationArg {
-    /// Fit on the unit circle to the sampled-data relation (module doc)
+    /// Fit on the unit circle to the sampled-data relation (README "Discrete model")
     #[default]
     Fit,
     /// First-order hold: force linear between samples
@@ -111,10 +111,10 @@ pub enum ForcePrior {
     Default,
     /// Tooth-passing and runout harmonics of --spindle-rpm in the Kalman
     /// state of `compensate --offline`, tuned from --force-record
-    /// (`crate::offline::force_prior`); the box image stays the default design.
+    /// (README "Force priors"); the box image stays the default design.
     Harmonics,
     /// q of the box design chosen for the force spectrum of --force-record
-    /// instead of a flat spectrum of --force-rms (`crate::design::force_spectrum`):
+    /// instead of a flat spectrum of --force-rms (README "Force priors"):
     /// the same filter structure and cost, tuned for the cut.
     Spectrum,
     /// q of the box design chosen for a flat force spectrum at the in-band
@@ -199,8 +199,9 @@ impl PaperArgs {
 /// sample rate, the noise model and the assumptions of the Q criterion.
 #[derive(Args, Debug, Clone)]
 pub struct DesignInputArgs {
-    /// Measured FRF: UFF58 (.uff/.unv) or CSV. `design` takes it twice for
-    /// a set-up in two states (before and after machining, issue #15).
+    /// Measured FRF: UFF58 (.uff/.unv) or CSV (docs/frf-matrix.md). `design`
+    /// takes it twice for a set-up in two states (before and after
+    /// machining; README "Two states").
     #[arg(long, required = true)]
     pub frf: Vec<PathBuf>,
     /// Sample rate of the box (Hz).
@@ -255,8 +256,10 @@ pub struct DesignArgs {
     /// Output coefficient image (.dcimg), written atomically.
     #[arg(long)]
     pub out: PathBuf,
-    /// Declared output latency L (samples): the fixed lag of the smoother
-    /// (default 4; the paper's method has no lag and accepts only 0).
+    /// Declared output latency L (samples): the fixed lag of the smoother.
+    /// Without it the design starts at 4 and takes up to 8 where that
+    /// predicts a clearly smaller error (README "Latency"); the paper's
+    /// method has no lag and accepts only 0.
     #[arg(long)]
     pub latency: Option<usize>,
     /// Highest model order the fit may use.

@@ -336,6 +336,14 @@ impl ReportAccumulator {
         self.cur.iter_mut().for_each(|c| c.iter_mut().for_each(Vec::clear));
     }
 
+    /// The NRMSE line of each axis against the true force (empty without
+    /// one), as [`ReportAccumulator::write`] prints them, without a report.
+    pub fn score_lines(&self, band_hz: &dyn Fn(usize) -> f64) -> Vec<String> {
+        let fs = self.fs_hz;
+        let scored = self.axes.iter().filter_map(|a| a.keep.as_ref().map(|k| (a.axis, k)));
+        scored.map(|(axis, k)| Score::of(k, fs, band_hz(axis)).line(axis_name(axis))).collect()
+    }
+
     /// Render the report into `dir`: three SVGs per axis and `index.html`
     /// with `summary` on top. `band_hz`: the NRMSE's band limit per axis.
     /// Returns the files written, `index.html` last, and the NRMSE lines.

@@ -340,8 +340,8 @@ struct Shell {
 /// the ring reads by `ring` (volatile, as the firmware), the DAC writes by
 /// a `black_box`, the two DWT readings by `t0`/`t0 + 1 000`, the TIM2
 /// status write and read left out. What is left out is the hardware part
-/// of the shell's estimate (BENCHMARKS.md, "The sample interrupt's fixed
-/// part").
+/// of the shell's estimate (BENCHMARKS.md, "Cost model of the
+/// sample interrupt").
 #[inline(never)]
 fn isr_software(sh: &mut Shell, stored: &mut ActiveImage, ring: &[[u16; RING_LEN as usize]; AXES], ndtr: [u16; AXES], t0: u32) -> u16 {
     if HANDOFF.take().is_some() {
