@@ -402,36 +402,32 @@ impl Score {
         Score { band_hz, raw, comp, written }
     }
 
+    /// The figures in %: raw, compensated, both peak-to-peak normalized,
+    /// the output as written and the perfect band-limited estimate.
+    fn percents(&self) -> [f64; 6] {
+        let (r, c, w) = (&self.raw, &self.comp, &self.written);
+        [r.nrmse, c.nrmse, r.nrmse_p2p, c.nrmse_p2p, w.output.nrmse, w.perfect.nrmse].map(|v| v * 100.0)
+    }
+
     /// The sentence of the overview's caption.
     fn caption(&self) -> String {
-        let (b, raw, comp) = (self.band_hz, &self.raw, &self.comp);
+        let (b, [raw, comp, raw_p2p, comp_p2p, written, perfect]) = (self.band_hz, self.percents());
         format!(
             "NRMSE against the true force (RMS error / std of the true force, both low-passed at {b:.0} Hz, \
-             5 % of the record excluded at each end): measured {:.3} %, compensated {:.3} % \
-             (peak-to-peak normalization: {:.3} % and {:.3} %). As written, unfiltered, against the true force \
-             through the anti-aliasing filter alone: {:.3} %, where a perfect estimate band-limited to {b:.0} Hz \
-             reaches {:.3} %.",
-            raw.nrmse * 100.0,
-            comp.nrmse * 100.0,
-            raw.nrmse_p2p * 100.0,
-            comp.nrmse_p2p * 100.0,
-            self.written.output.nrmse * 100.0,
-            self.written.perfect.nrmse * 100.0
+             5 % of the record excluded at each end): measured {raw:.3} %, compensated {comp:.3} % \
+             (peak-to-peak normalization: {raw_p2p:.3} % and {comp_p2p:.3} %). As written, unfiltered, against the \
+             true force through the anti-aliasing filter alone: {written:.3} %, where a perfect estimate \
+             band-limited to {b:.0} Hz reaches {perfect:.3} %.",
         )
     }
 
     /// The line of the summary and of stderr for axis `name`.
     fn line(&self, name: &str) -> String {
-        let (b, raw, comp) = (self.band_hz, &self.raw, &self.comp);
+        let (b, [raw, comp, raw_p2p, comp_p2p, written, perfect]) = (self.band_hz, self.percents());
         format!(
-            "f{name}: NRMSE measured {:.3} %, compensated {:.3} % (band {b:.0} Hz; p2p-normalized {:.3} % / {:.3} %); \
-             as written {:.3} % vs {:.3} % for a perfect band-limited estimate",
-            raw.nrmse * 100.0,
-            comp.nrmse * 100.0,
-            raw.nrmse_p2p * 100.0,
-            comp.nrmse_p2p * 100.0,
-            self.written.output.nrmse * 100.0,
-            self.written.perfect.nrmse * 100.0
+            "f{name}: NRMSE measured {raw:.3} %, compensated {comp:.3} % (band {b:.0} Hz; p2p-normalized \
+             {raw_p2p:.3} % / {comp_p2p:.3} %); as written {written:.3} % vs {perfect:.3} % for a perfect \
+             band-limited estimate",
         )
     }
 }
