@@ -247,10 +247,20 @@ fn truth_alone_prints_the_scores() {
     let lines: Vec<&str> = err.lines().filter(|l| l.contains("NRMSE measured")).collect();
     assert_eq!(lines.len(), 3, "{err}");
     assert!(lines.iter().all(|l| l.contains("as written")), "{err}");
-    let (_, with_report, _, _) = compensate_example_with_report("truthrep", "true_force.csv", &[]);
+    let (_, with_report, _, rep) = compensate_example_with_report("truthrep", "true_force.csv", &[]);
     for l in &lines {
         assert!(with_report.contains(l), "`{l}` differs from the report's lines: {with_report}");
     }
-    let (ok, _, err) = dynocomp(&base);
+    // The report's plots: the error split at the band edge, the spectra in
+    // the band and up to Nyquist with the band marked.
+    let read = |d: &std::path::Path, f: &str| std::fs::read_to_string(d.join(f)).unwrap();
+    let overview = read(&rep, "x_overview.svg");
+    assert!(overview.contains("error in the band") && overview.contains("error above"), "error panels missing");
+    let spectrum = read(&rep, "x_spectrum.svg");
+    assert!(spectrum.contains("compensated band") && spectrum.contains("up to Nyquist"), "band not marked");
+    // Control: without a truth, no NRMSE line and no error panels.
+    let rep2 = tmp("truthonly", "report");
+    let (ok, _, err) = dynocomp(&[&base[..], &["--report", rep2.to_str().unwrap()]].concat());
     assert!(ok && !err.contains("NRMSE"), "{err}");
+    assert!(!read(&rep2, "x_overview.svg").contains("error in the band"));
 }
