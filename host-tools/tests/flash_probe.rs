@@ -261,3 +261,26 @@ fn cli_dry_run_needs_no_hardware() {
     let e = run_with(&path, "NOT_A_CHIP", SlotArg::Auto, true, |_| unreachable!()).unwrap_err();
     assert!(format!("{e:#}").contains("NOT_A_CHIP"), "{e:#}");
 }
+
+/// `flash --probe --dry-run` prints what it does in one line; the simulated
+/// probe's register traces (about 56 lines on stdout) only with `-v`.
+#[test]
+fn dry_run_is_quiet_unless_verbose() {
+    let image = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/images/example.dcimg");
+    let run = |extra: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_dynocomp"))
+            .args(["flash", image.to_str().unwrap(), "--probe", "--dry-run"])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let quiet = run(&[]);
+    assert_eq!(quiet.lines().count(), 1, "{quiet}");
+    assert!(quiet.starts_with("dry run (fake probe, nothing written): would write slot"), "{quiet}");
+    // Control: the traces are there with -v, and the summary still last.
+    let verbose = run(&["-v"]);
+    assert!(verbose.lines().count() > 10, "{verbose}");
+    assert_eq!(verbose.lines().last(), quiet.lines().last());
+}

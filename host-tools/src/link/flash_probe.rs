@@ -276,8 +276,53 @@ pub fn describe(plan: &FlashPlan) -> String {
 /// A, sequence 1. A power cut or a pulled cable during step 4 leaves a record
 /// whose CRC or commit word does not check out; the box then boots the other
 /// slot (or bypass).
-pub fn run(image: &Path, chip: &str, slot: SlotArg, dry_run: bool) -> Result<()> {
-    run_with(image, chip, slot, dry_run, real_session)
+pub fn run(image: &Path, chip: &str, slot: SlotArg, dry_run: bool, verbose: bool) -> Result<()> {
+    // probe-rs's fake probe prints every register access on stdout (about 56
+    // lines): shown only with --verbose.
+    let quiet = (dry_run && !verbose).then(StdoutSilenced::new);
+    let result = run_with(image, chip, slot, dry_run, real_session);
+    drop(quiet);
+    let summary = result?;
+    println!("{summary}");
+    Ok(())
+}
+
+/// Stdout sent to /dev/null while it lives (the process's file descriptor
+/// 1, which a library's `println!` writes to), restored on drop. Does
+/// nothing where that is not possible.
+struct StdoutSilenced {
+    #[cfg(unix)]
+    saved: Option<std::os::fd::OwnedFd>,
+}
+
+impl StdoutSilenced {
+    fn new() -> Self {
+        use std::io::Write;
+        let _ = std::io::stdout().flush();
+        #[cfg(unix)]
+        {
+            use std::os::fd::AsFd;
+            let null = std::fs::OpenOptions::new().write(true).open("/dev/null").ok();
+            let saved = null.and_then(|null| {
+                let saved = nix::unistd::dup(std::io::stdout().as_fd()).ok()?;
+                nix::unistd::dup2_stdout(&null).ok().map(|()| saved)
+            });
+            StdoutSilenced { saved }
+        }
+        #[cfg(not(unix))]
+        StdoutSilenced {}
+    }
+}
+
+impl Drop for StdoutSilenced {
+    fn drop(&mut self) {
+        use std::io::Write;
+        let _ = std::io::stdout().flush();
+        #[cfg(unix)]
+        if let Some(saved) = &self.saved {
+            let _ = nix::unistd::dup2_stdout(saved);
+        }
+    }
 }
 
 #[cfg(feature = "probe")]
@@ -289,7 +334,7 @@ pub fn run_with(
     slot: SlotArg,
     dry_run: bool,
     open: impl FnOnce(&str) -> Result<Session>,
-) -> Result<()> {
+) -> Result<String> {
     let (bytes, img) = read_box_image(image)?;
     let mut session = if dry_run {
         fake_session(chip)?
@@ -307,22 +352,18 @@ pub fn run_with(
     execute(&mut session, &plan, dry_run)?;
     if dry_run {
         // probe-rs's fake probe logs its register accesses on stdout, also
-        // when the session closes: close it first so the plan is the last line.
+        // when the session closes: close it first so the plan comes last.
         drop(session);
-        println!(
+        Ok(format!(
             "dry run (fake probe, nothing written): would write {} to {chip}, fs = {} Hz; the slots were not read (erased assumed)",
             describe(&plan),
             img.fs_hz
-        );
+        ))
     } else {
         session
             .core(0)
             .and_then(|mut core| core.reset())
             .context("written and verified, but the reset failed: reset the box by hand")?;
-        println!(
-            "wrote and verified {} on {chip}; box reset, it boots the newest valid slot",
-            describe(&plan)
-        );
+        Ok(format!("wrote and verified {} on {chip}; box reset, it boots the newest valid slot", describe(&plan)))
     }
-    Ok(())
 }
