@@ -615,7 +615,7 @@ fn plot_overview(a: &AxisAcc, fs: f64, band_hz: f64) -> Result<String> {
             // The NRMSE leaves out 5 % at each end (filter edges, start-up):
             // the scale follows the scored part, the ends are shaded.
             let n = a.meas.len();
-            let (s0, s1) = ((n / 20) as u64, (n - n / 20) as u64);
+            let (s0, s1) = (n / 20, n - n / 20);
             let edges = [(xr.0, s0 as f64 / fs), (s1 as f64 / fs, xr.1)];
             for (area, env, color, title) in panels {
                 let scored: Vec<_> = env.iter().copied().filter(|b| b.0 >= s0 && b.1 < s1).collect();
