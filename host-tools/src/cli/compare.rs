@@ -26,7 +26,8 @@ pub struct CompareArgs {
     /// Fitting bands.
     #[command(flatten)]
     pub bands: BandArgs,
-    /// Write the plots (one SVG per axis) and compare.json into this directory.
+    /// Write the plots (one SVG per axis), compare.txt (the printed table)
+    /// and compare.json into this directory.
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
     /// Print the comparison as JSON on stdout.

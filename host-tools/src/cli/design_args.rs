@@ -199,9 +199,9 @@ impl PaperArgs {
 /// sample rate, the noise model and the assumptions of the Q criterion.
 #[derive(Args, Debug, Clone)]
 pub struct DesignInputArgs {
-    /// Measured FRF: UFF58 (.uff/.unv) or CSV (docs/frf-matrix.md). `design`
-    /// takes it twice for a set-up in two states (before and after
-    /// machining; README "Two states").
+    /// Measured FRF: UFF58 (.uff/.unv) or CSV (README "File formats",
+    /// docs/frf-matrix.md). With `design` only, give it twice for a set-up
+    /// in two states (before and after machining; README "Two states").
     #[arg(long, required = true)]
     pub frf: Vec<PathBuf>,
     /// Sample rate of the box (Hz).
