@@ -12,6 +12,7 @@ use crate::cli::design_args::{check_prior_flags, read_force_record, DesignArgs, 
 use crate::design::axis::AxisDesign;
 use crate::design::image::build_image;
 use crate::design::latency::LatencyChoice;
+use crate::design::versus_default::VersusDefault;
 use crate::frf::axis_name;
 use crate::io;
 use crate::offline::force_prior::{AxisPrior, PriorOptions};
@@ -49,6 +50,9 @@ struct Designed {
     latency_choice: Option<LatencyChoice>,
     /// The declared latency (samples).
     latency: usize,
+    /// Band-fitted or paper-method axes beside the default design, and
+    /// whether the default replaced them.
+    versus: Vec<(VersusDefault, bool)>,
 }
 
 /// Design the axes on parallel threads (the box has three, the host at
@@ -74,7 +78,48 @@ fn design_axes(args: &DesignArgs, s: &DesignSetup) -> Result<Designed> {
         times.push(dt);
         designs.push(d);
     }
-    Ok(Designed { designs, times, latency_choice, latency })
+    let versus = against_default(args, s, &mut designs, latency, &rv);
+    Ok(Designed { designs, times, latency_choice, latency, versus })
+}
+
+/// A band-fitted or paper-method design beside the default design of the
+/// same FRF ([`crate::design::versus_default`]), at the image's latency
+/// (band-fitted) or the default latency (paper method, latency 0).
+/// Where the default predicts less error, a band-fitted axis is replaced by
+/// it (the image then says so); a paper-method axis is kept (the method
+/// exists to reproduce the paper) with a warning naming the better command.
+/// Returns each axis's comparison and whether it was replaced; empty for
+/// the default design.
+fn against_default(args: &DesignArgs, s: &DesignSetup, designs: &mut [AxisDesign], latency: usize, rv: &[f64]) -> Vec<(VersusDefault, bool)> {
+    let paper = args.method == Method::Paper;
+    if s.bands.is_empty() && !paper {
+        return Vec::new();
+    }
+    let opts = crate::design::axis::DesignOptions {
+        method: crate::design::axis::FitMethod::Vf,
+        bands: Vec::new(),
+        paper_orders_auto: false,
+        // The paper's filter has no lag; the default command it is judged
+        // against has the default latency (a paper axis is only warned about).
+        lag: if paper { crate::design::latency::DEFAULT_LATENCY } else { latency },
+        ..s.opts.clone()
+    };
+    let frf = &s.frf;
+    let defaults = crate::design::latency::design_axes(&frf.freq_hz, &frf.axes, rv, &opts);
+    let mut out = Vec::new();
+    for (d, (def, _)) in designs.iter_mut().zip(defaults) {
+        let Ok(def) = def else {
+            // No default design to prefer: the asked-for one stands.
+            continue;
+        };
+        let v = crate::design::versus_default::compare(d, &def, s.opts.force_rms, args.input.fs);
+        let replace = v.default_better && !paper;
+        if replace {
+            *d = def;
+        }
+        out.push((v, replace));
+    }
+    out
 }
 
 /// The harmonic force prior of each axis (`--force-prior harmonics`), or none.
@@ -144,7 +189,8 @@ fn render(
 ) -> Result<()> {
     let (designs, latency) = (&d.designs, d.latency);
     let id = image.id();
-    let sensitivities = crate::design::sensitivity::predict_all(designs, &s.opts);
+    let mut sensitivities = crate::design::sensitivity::predict_all(designs, &s.opts);
+    crate::design::sensitivity::set_line_spacing(&mut sensitivities, &s.frf.freq_hz);
     let mut summary = render_summary(designs, &sensitivities, args.input.fs, latency, &args.out.display().to_string(), id, args.method.name());
     if let Some(c) = &d.latency_choice {
         let names: Vec<&str> = designs.iter().map(|d| axis_name(d.axis)).collect();
@@ -158,6 +204,18 @@ fn render(
         if let Some(s) = &d.force_spectrum {
             summary.push_str(&spectrum_line(d.axis, s, args.input.force_rms));
         }
+    }
+    let better = if args.method == Method::Paper {
+        "the default method is better: drop --method paper"
+    } else {
+        "the design without fitting bands: drop --spindle-rpm/--teeth, --band and --bands-from"
+    };
+    for (v, replaced) in &d.versus {
+        let line = crate::design::versus_default::describe(v, *replaced, better);
+        if v.default_better {
+            eprint!("{line}");
+        }
+        summary.push_str(&line);
     }
     summary.push_str(&crate::realize::load::describe(&box_load, image.fs_hz));
     summary.push_str(if box_load.fits { "\n" } else { "  OVER THE LIMIT: offline-only image\n" });
@@ -181,6 +239,11 @@ fn render(
         design_time_s: t0.elapsed().as_secs_f64(),
         offline_only: image.is_offline_only(),
         latency_choice: d.latency_choice.clone(),
+        versus_default: d
+            .versus
+            .iter()
+            .map(|(v, replaced)| crate::report::summary::VersusDefaultJson { comparison: v.clone(), replaced_by_default: *replaced })
+            .collect(),
         box_load,
         axes,
     };

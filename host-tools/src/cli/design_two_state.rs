@@ -31,7 +31,8 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     let designs: Vec<AxisDesign> = axes.iter().map(|a| a.range.candidates[a.range.best].design.clone()).collect();
     let image = build_image(&designs, args.input.fs as u32, latency, args.full_scale, frfs.sha)?;
     write_image_and_sidecar(args, &image, &designs, &axes)?;
-    let sensitivities = crate::design::sensitivity::predict_all(&designs, &opts);
+    let mut sensitivities = crate::design::sensitivity::predict_all(&designs, &opts);
+    crate::design::sensitivity::set_line_spacing(&mut sensitivities, &frfs.before.freq_hz);
     render(args, &frfs.before, &axes, &designs, &sensitivities, &image, latency)
 }
 

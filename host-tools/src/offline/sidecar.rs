@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use dynocomp_core::image::{CoeffImage, DesignMethod};
 
 use crate::design::discretize::{discretize, DiscreteModel, Discretization};
-use crate::design::two_state::model::{pair, TwoState};
+use crate::design::two_state::model::TwoState;
 use crate::fit::{PoleResidueModel, Term};
 use crate::frf::axis_name;
 use crate::io::one_line;
@@ -277,10 +277,11 @@ impl TwoStateJson {
         }
     }
 
-    /// The paired states, validated (the pairing is checked again).
+    /// The paired states, validated (the pairing is checked again,
+    /// [`TwoState::checked`]).
     pub fn states(&self, source: &str, name: &str) -> Result<TwoState> {
         let b = model_from_json(self.d_before, &self.before, source, name)?;
         let a = model_from_json(self.d_after, &self.after, source, name)?;
-        pair(name, &b, &a).with_context(|| source.to_string())
+        TwoState::checked(name, b, a).with_context(|| source.to_string())
     }
 }

@@ -71,7 +71,8 @@ impl<'a> Lines<'a> {
 /// stiffness); it does not assume that all sensor modes move alike.
 ///
 /// **Rule (stated).** Only if the first-state model has sensor modes
-/// ([`crate::fit::modes::sensor_mode_indices`]) above the compensated band:
+/// ([`crate::fit::modes::sensor_mode_indices`], not background terms of the
+/// fit, [`TwoState::is_background`]) above the compensated band:
 /// 1. One weighted least-squares problem over both FRFs' lines (each with
 ///    the coherence weights of its fit): the above-band modes' modal shares
 ///    and d are common unknowns, as are the modal shares of terms both
@@ -97,7 +98,7 @@ impl<'a> Lines<'a> {
 /// joint fit is kept: the data then cannot say it is wrong.
 pub fn fit_above_band_jointly(ts: &TwoState, lines: &Lines, band_hz: (f64, f64)) -> (TwoState, Vec<AboveBandMode>) {
     let sensors = crate::fit::modes::sensor_mode_indices(&ts.before);
-    let above: Vec<usize> = sensors.into_iter().filter(|&i| matches!(ts.before.terms[i], Term::Pair { pole, .. } if fn_hz(pole) > band_hz.1)).collect();
+    let above: Vec<usize> = sensors.into_iter().filter(|&i| !ts.is_background(i) && matches!(ts.before.terms[i], Term::Pair { pole, .. } if fn_hz(pole) > band_hz.1)).collect();
     if above.is_empty() {
         return (ts.clone(), Vec::new());
     }
