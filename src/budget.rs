@@ -31,8 +31,9 @@
 //! Everything here is integer arithmetic: no
 //! allocation, no panics, no floating point.
 
-use crate::image::CoeffImage;
+use crate::image::{CoeffImage, ImageRef};
 use crate::kernel::AxisFilter;
+use crate::mimo::MimoFilter;
 use crate::shell::BOX_CORE_CLOCK_HZ;
 
 /// The box's hard limit on the predicted interrupt load (high estimate), in
@@ -286,16 +287,129 @@ pub struct Load {
     pub permille: u32,
 }
 
-/// Predicted load of `image` at its sample rate (high estimate of
-/// [`CostModel::CORTEX_M4`]).
-pub fn image_load(image: &CoeffImage) -> Load {
-    let cycles = CostModel::CORTEX_M4.image_cost(image).high;
-    Load { cycles, permille: load_permille(cycles, image.fs_hz) }
+/// Shape of a 3x3 filter as the kernel runs it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MimoShape {
+    /// Normal-form pole pairs.
+    pub pairs: u32,
+    /// Diagonal sections (two real poles each, both always run).
+    pub diagonals: u32,
+    /// FIR taps (each a 3x3 matrix).
+    pub taps: u32,
+}
+
+impl MimoShape {
+    /// The shape of a built 3x3 filter.
+    pub fn of(f: &MimoFilter) -> Self {
+        let (pairs, diagonals) = f.kernel_counts();
+        MimoShape { pairs: pairs as u32, diagonals: diagonals as u32, taps: f.fir().len() as u32 }
+    }
+}
+
+/// Coefficients of the cost of a sample with a 3x3 image, in hundredths of
+/// a cycle (or of an instruction), in the form
+///
+/// ```text
+/// cost = FIXED + MATRIX + PAIR·pairs + DIAGONAL·diagonals + TAP·taps + FIR_SETUP·(taps > 0)
+/// ```
+///
+/// `fixed` is [`CostModel::fixed`] (the same interrupt around either kind
+/// of image); `matrix` is the 3x3 path's own work per sample (three
+/// scalings, the 3x3 direct term, the runaway guard, three DAC codes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MimoCostModel {
+    /// Per sample, whatever the image (as [`CostModel::fixed`]).
+    pub fixed: Cost,
+    /// Per sample with a 3x3 image.
+    pub matrix: Cost,
+    /// Per normal-form pair.
+    pub pair: Cost,
+    /// Per diagonal section.
+    pub diagonal: Cost,
+    /// Per FIR tap (a 3x3 matrix).
+    pub tap: Cost,
+    /// Once when the filter has FIR taps.
+    pub fir_setup: Cost,
+}
+
+impl MimoCostModel {
+    /// Instructions per call of `SamplePath::tick` with a 3x3 image on the
+    /// Cortex-M4F, fitted to the QEMU counts (`mimo …` lines of
+    /// `scripts/qemu_icount.sh`). low = high: the count is exact per shape.
+    pub const QEMU_INSNS: MimoCostModel = MimoCostModel {
+        fixed: CostModel::QEMU_INSNS.fixed,
+        matrix: Cost::new(MIMO_MATRIX_INSNS, MIMO_MATRIX_INSNS),
+        pair: Cost::new(MIMO_PAIR_INSNS, MIMO_PAIR_INSNS),
+        diagonal: Cost::new(MIMO_DIAGONAL_INSNS, MIMO_DIAGONAL_INSNS),
+        tap: Cost::new(MIMO_TAP_INSNS, MIMO_TAP_INSNS),
+        fir_setup: Cost::new(MIMO_FIR_SETUP_INSNS, MIMO_FIR_SETUP_INSNS),
+    };
+
+    /// Cycles on the STM32G474 at 170 MHz, code in CCM SRAM: the
+    /// instruction model's parts converted with the Cortex-M4 TRM timings of
+    /// their instruction mix (see the constants), plus the interrupt shell
+    /// in `fixed` ([`CostModel::CORTEX_M4`]).
+    pub const CORTEX_M4: MimoCostModel = MimoCostModel {
+        fixed: CostModel::CORTEX_M4.fixed,
+        matrix: Cost::new(MIMO_MATRIX_INSNS, MIMO_MATRIX_INSNS * 135 / 100),
+        pair: MIMO_PAIR_CYCLES,
+        diagonal: MIMO_DIAGONAL_CYCLES,
+        tap: MIMO_TAP_CYCLES,
+        fir_setup: Cost::new(MIMO_FIR_SETUP_INSNS, MIMO_FIR_SETUP_INSNS * 135 / 100),
+    };
+
+    /// Cost of one sample with a 3x3 filter of shape `s`, rounded up to
+    /// whole cycles (instructions).
+    pub fn sample_cost(&self, s: MimoShape) -> Cost {
+        let c = self
+            .fixed
+            .add_scaled(self.matrix, 1)
+            .add_scaled(self.pair, s.pairs)
+            .add_scaled(self.diagonal, s.diagonals)
+            .add_scaled(self.tap, s.taps)
+            .add_scaled(self.fir_setup, u32::from(s.taps > 0));
+        Cost { low: c.low.div_ceil(100), high: c.high.div_ceil(100) }
+    }
+}
+
+/// Instructions (hundredths) of the 3x3 path per sample beyond the fixed
+/// part (QEMU fit).
+const MIMO_MATRIX_INSNS: u32 = 10_000;
+/// Instructions (hundredths) per normal-form pair of the 3x3 kernel.
+const MIMO_PAIR_INSNS: u32 = 5_000;
+/// Instructions (hundredths) per diagonal section of the 3x3 kernel.
+const MIMO_DIAGONAL_INSNS: u32 = 5_000;
+/// Instructions (hundredths) per 3x3 FIR tap.
+const MIMO_TAP_INSNS: u32 = 3_000;
+/// Instructions (hundredths) of entering the 3x3 FIR loop.
+const MIMO_FIR_SETUP_INSNS: u32 = 0;
+/// Cycles (hundredths) per normal-form pair of the 3x3 kernel.
+const MIMO_PAIR_CYCLES: Cost = Cost::new(6_000, 7_000);
+/// Cycles (hundredths) per diagonal section of the 3x3 kernel.
+const MIMO_DIAGONAL_CYCLES: Cost = Cost::new(6_000, 7_000);
+/// Cycles (hundredths) per 3x3 FIR tap.
+const MIMO_TAP_CYCLES: Cost = Cost::new(3_000, 4_000);
+
+/// Cost of one sample of any image the box runs, in cycles
+/// ([`CostModel::CORTEX_M4`] / [`MimoCostModel::CORTEX_M4`]).
+pub fn image_cycles<'a>(image: impl Into<ImageRef<'a>>) -> Cost {
+    match image.into() {
+        ImageRef::PerAxis(i) => CostModel::CORTEX_M4.image_cost(i),
+        ImageRef::Matrix(m) => MimoCostModel::CORTEX_M4.sample_cost(MimoShape::of(&m.filter)),
+    }
+}
+
+/// Predicted load of `image` (per-axis or 3x3) at its sample rate (high
+/// estimate of the Cortex-M4 cost models).
+pub fn image_load<'a>(image: impl Into<ImageRef<'a>>) -> Load {
+    let image = image.into();
+    let cycles = image_cycles(image).high;
+    Load { cycles, permille: load_permille(cycles, image.fs_hz()) }
 }
 
 /// `Err` with the predicted load when the image's high estimate exceeds
 /// `limit_permille` of its sample period.
-pub fn check_load(image: &CoeffImage, limit_permille: u32) -> Result<Load, Load> {
+pub fn check_load<'a>(image: impl Into<ImageRef<'a>>, limit_permille: u32) -> Result<Load, Load> {
     let l = image_load(image);
     if l.permille > limit_permille {
         Err(l)

@@ -128,7 +128,7 @@ fn axis_reports(axes: &[Option<AxisImage>]) -> Vec<AxisReport> {
 /// Build the report of a box image (format 1).
 pub fn report(image: &CoeffImage) -> InspectReport {
     let axes = axis_reports(&image.axes);
-    let loaded = Ok(*image);
+    let loaded = Ok((*image).into());
     let box_mode = dynocomp_core::sample::select_mode(Some(&loaded), false);
     InspectReport {
         format_version: dynocomp_core::image::FORMAT_VERSION,
