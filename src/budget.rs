@@ -310,12 +310,16 @@ impl MimoShape {
 /// a cycle (or of an instruction), in the form
 ///
 /// ```text
-/// cost = FIXED + MATRIX + PAIR·pairs + DIAGONAL·diagonals + TAP·taps + FIR_SETUP·(taps > 0)
+/// cost = FIXED + MATRIX + PAIR·pairs + DIAGONAL·diagonals
+///        + SECTION_SETUP·(sections > 0) + EVEN_SECTIONS·(sections > 0 and even)
+///        + TAP·taps + FIR_SETUP·(taps > 0) + EVEN_TAPS·(taps > 0 and even)
 /// ```
 ///
 /// `fixed` is [`CostModel::fixed`] (the same interrupt around either kind
 /// of image); `matrix` is the 3x3 path's own work per sample (three
-/// scalings, the 3x3 direct term, the runaway guard, three DAC codes).
+/// scalings, the 3x3 direct term, the runaway guard, three DAC codes). The
+/// compiled section and tap loops run two sections (taps) per pass, hence
+/// the even/odd terms.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MimoCostModel {
     /// Per sample, whatever the image (as [`CostModel::fixed`]).
@@ -326,69 +330,79 @@ pub struct MimoCostModel {
     pub pair: Cost,
     /// Per diagonal section.
     pub diagonal: Cost,
+    /// Once when the filter has sections.
+    pub section_setup: Cost,
+    /// Once more when the section count is even (and not 0).
+    pub even_sections: Cost,
     /// Per FIR tap (a 3x3 matrix).
     pub tap: Cost,
     /// Once when the filter has FIR taps.
     pub fir_setup: Cost,
+    /// Once more when the tap count is even (and not 0).
+    pub even_taps: Cost,
 }
 
 impl MimoCostModel {
     /// Instructions per call of `SamplePath::tick` with a 3x3 image on the
-    /// Cortex-M4F, fitted to the QEMU counts (`mimo …` lines of
-    /// `scripts/qemu_icount.sh`). low = high: the count is exact per shape.
+    /// Cortex-M4F, fitted to the QEMU counts (`mimo P D T …` lines of
+    /// `scripts/qemu_icount.sh`; `tests/qemu_cost_model.rs`): 49.5 per pair
+    /// (16 coefficient and 2 state `vldr`, 12 `vmla`, 4 `vmul`, 4 `vadd`, 2
+    /// `vstr`, the pair/diagonal test), 46.5 per diagonal section, 29.5 per
+    /// tap. low = high: the count is exact per shape.
     pub const QEMU_INSNS: MimoCostModel = MimoCostModel {
         fixed: CostModel::QEMU_INSNS.fixed,
-        matrix: Cost::new(MIMO_MATRIX_INSNS, MIMO_MATRIX_INSNS),
-        pair: Cost::new(MIMO_PAIR_INSNS, MIMO_PAIR_INSNS),
-        diagonal: Cost::new(MIMO_DIAGONAL_INSNS, MIMO_DIAGONAL_INSNS),
-        tap: Cost::new(MIMO_TAP_INSNS, MIMO_TAP_INSNS),
-        fir_setup: Cost::new(MIMO_FIR_SETUP_INSNS, MIMO_FIR_SETUP_INSNS),
+        matrix: Cost::new(12_985, 12_985),
+        pair: Cost::new(4_950, 4_950),
+        diagonal: Cost::new(4_650, 4_650),
+        section_setup: Cost::new(350, 350),
+        even_sections: Cost::new(550, 550),
+        tap: Cost::new(2_950, 2_950),
+        fir_setup: Cost::new(550, 550),
+        even_taps: Cost::new(150, 150),
     };
 
-    /// Cycles on the STM32G474 at 170 MHz, code in CCM SRAM: the
-    /// instruction model's parts converted with the Cortex-M4 TRM timings of
-    /// their instruction mix (see the constants), plus the interrupt shell
-    /// in `fixed` ([`CostModel::CORTEX_M4`]).
+    /// Cycles on the STM32G474 at 170 MHz, code in CCM SRAM: each part's
+    /// instruction mix at the Cortex-M4 TRM timings (`vldr`/`vstr` 2, `vmla`
+    /// 3, `vmul`/`vadd`/`vcmp`/`vmrs` 1, branches 2-4), plus the interrupt
+    /// shell in `fixed` ([`CostModel::CORTEX_M4`]).
+    ///
+    /// * pair: 18 `vldr` (36), 12 `vmla` (36), 8 `vmul`/`vadd` (8), 2
+    ///   `vstr` (4), test and loop (8-13): 95-100 by the table, 102 with a
+    ///   `vmrs` stall; low 78 if back-to-back `vldr`s pipeline to one cycle;
+    /// * diagonal section: two `vmla` fewer: 70-92;
+    /// * tap: 12 `vldr` (24), 9 `vmla` (27), 3 `vstr` (6), history shift and
+    ///   loop (6-9): 50-66 (low again with pipelined loads);
+    /// * the 3x3 path's scalar part and set-ups: 1.0-1.5 cycles per
+    ///   instruction (its direct term is 9 multiply-adds).
     pub const CORTEX_M4: MimoCostModel = MimoCostModel {
         fixed: CostModel::CORTEX_M4.fixed,
-        matrix: Cost::new(MIMO_MATRIX_INSNS, MIMO_MATRIX_INSNS * 135 / 100),
-        pair: MIMO_PAIR_CYCLES,
-        diagonal: MIMO_DIAGONAL_CYCLES,
-        tap: MIMO_TAP_CYCLES,
-        fir_setup: Cost::new(MIMO_FIR_SETUP_INSNS, MIMO_FIR_SETUP_INSNS * 135 / 100),
+        matrix: Cost::new(12_985, 19_478),
+        pair: Cost::new(7_800, 10_200),
+        diagonal: Cost::new(7_000, 9_200),
+        section_setup: Cost::new(350, 473),
+        even_sections: Cost::new(550, 743),
+        tap: Cost::new(5_000, 6_600),
+        fir_setup: Cost::new(550, 743),
+        even_taps: Cost::new(150, 203),
     };
 
     /// Cost of one sample with a 3x3 filter of shape `s`, rounded up to
     /// whole cycles (instructions).
     pub fn sample_cost(&self, s: MimoShape) -> Cost {
+        let sections = s.pairs + s.diagonals;
         let c = self
             .fixed
             .add_scaled(self.matrix, 1)
             .add_scaled(self.pair, s.pairs)
             .add_scaled(self.diagonal, s.diagonals)
+            .add_scaled(self.section_setup, u32::from(sections > 0))
+            .add_scaled(self.even_sections, u32::from(sections > 0 && sections % 2 == 0))
             .add_scaled(self.tap, s.taps)
-            .add_scaled(self.fir_setup, u32::from(s.taps > 0));
+            .add_scaled(self.fir_setup, u32::from(s.taps > 0))
+            .add_scaled(self.even_taps, u32::from(s.taps > 0 && s.taps % 2 == 0));
         Cost { low: c.low.div_ceil(100), high: c.high.div_ceil(100) }
     }
 }
-
-/// Instructions (hundredths) of the 3x3 path per sample beyond the fixed
-/// part (QEMU fit).
-const MIMO_MATRIX_INSNS: u32 = 10_000;
-/// Instructions (hundredths) per normal-form pair of the 3x3 kernel.
-const MIMO_PAIR_INSNS: u32 = 5_000;
-/// Instructions (hundredths) per diagonal section of the 3x3 kernel.
-const MIMO_DIAGONAL_INSNS: u32 = 5_000;
-/// Instructions (hundredths) per 3x3 FIR tap.
-const MIMO_TAP_INSNS: u32 = 3_000;
-/// Instructions (hundredths) of entering the 3x3 FIR loop.
-const MIMO_FIR_SETUP_INSNS: u32 = 0;
-/// Cycles (hundredths) per normal-form pair of the 3x3 kernel.
-const MIMO_PAIR_CYCLES: Cost = Cost::new(6_000, 7_000);
-/// Cycles (hundredths) per diagonal section of the 3x3 kernel.
-const MIMO_DIAGONAL_CYCLES: Cost = Cost::new(6_000, 7_000);
-/// Cycles (hundredths) per 3x3 FIR tap.
-const MIMO_TAP_CYCLES: Cost = Cost::new(3_000, 4_000);
 
 /// Cost of one sample of any image the box runs, in cycles
 /// ([`CostModel::CORTEX_M4`] / [`MimoCostModel::CORTEX_M4`]).
@@ -469,6 +483,25 @@ mod tests {
         assert_eq!(period_cycles(51_200), 3_320);
         assert_eq!(max_fs_hz(0, 600), 0);
         assert_eq!(period_cycles(0), 0);
+    }
+
+    #[test]
+    fn mimo_cost_grows_with_every_part_and_low_never_exceeds_high() {
+        let m = MimoCostModel::CORTEX_M4;
+        let s = |pairs, diagonals, taps| MimoShape { pairs, diagonals, taps };
+        let base = m.sample_cost(s(10, 0, 8));
+        for more in [s(11, 0, 8), s(10, 1, 8), s(10, 0, 9)] {
+            let c = m.sample_cost(more);
+            assert!(c.low > base.low && c.high > base.high, "{more:?}: {c:?} vs {base:?}");
+        }
+        for shape in [s(0, 0, 0), s(40, 8, 24), s(13, 3, 5)] {
+            let c = m.sample_cost(shape);
+            assert!(c.low < c.high, "{shape:?}: {c:?}");
+        }
+        // A 3x3 filter costs more than the per-axis filters of the same
+        // section count on one axis (dense B and C).
+        let per_axis = CostModel::CORTEX_M4.sample_cost(&[AxisShape { pairs: 10, reals: 0, taps: 8 }]);
+        assert!(base.low > per_axis.high);
     }
 
     #[test]

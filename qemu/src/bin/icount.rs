@@ -273,13 +273,13 @@ fn mimo_filter(pairs: usize, diagonals: usize, taps: usize) -> MimoFilter {
     }
 }
 
-/// A 3x3 image of `filter` at 20 kHz (every shape of the grid fits the
+/// A 3x3 image of `filter` at 10 kHz (every shape of the grid fits the
 /// box's budget there), scaling as [`image_of`].
 fn matrix_image(filter: MimoFilter) -> BoxImage {
     let scaling = AxisScaling { adc_offset_code: 2048.0, newton_per_code: 2.5, dac_code_per_newton: 0.4, dac_offset_code: 2048.0 };
     let ch = |axis: u8| AxisChannel { axis, scaling, summary: AxisSummary::default() };
     BoxImage::Matrix(MatrixImage {
-        fs_hz: 20_000,
+        fs_hz: 10_000,
         latency_samples: 4,
         flags: 0,
         method: DesignMethod::Manual,
@@ -633,7 +633,7 @@ fn main() -> ! {
     ] {
         let mut stored = ActiveImage::new(Ok(matrix_image(mimo_filter(p, dg, t))));
         if stored.refused().is_some() {
-            dynocomp_qemu::fail("icount: a 3x3 calibration shape is refused at 20 kHz");
+            dynocomp_qemu::fail("icount: a 3x3 calibration shape is refused at 10 kHz");
         }
         let mut path = SamplePath::new();
         let per_call = measure(&ticks, |u| f32::from(tick_body(&mut path, black_box(&mut stored), (u as i32 + 2048) as u16)));
