@@ -6,7 +6,9 @@
 //! parse as format 3 (3x3) first. The rest is the image; every parser sees
 //! it, and `BoxImage::parse` must agree with the one its version selects.
 //!
-//! Checks: never panics; an accepted image validates and re-encodes to the
+//! Checks: never panics; the host's reader (`io::image_file::parse_any_image`)
+//! agrees with the version's parser and its error names the file and a
+//! place (`assert_names_place_or`); an accepted image validates and re-encodes to the
 //! very same bytes (encode → parse → encode); `parse_prefix` of the image
 //! followed by junk gives the same image; a rejected image's error is true of
 //! the bytes (the field it names holds what it says, axis/section/tap/band
@@ -18,7 +20,46 @@
 use dynocomp_core::image::*;
 use dynocomp_core::kernel::{MAX_FIR, MAX_SECTIONS};
 use dynocomp_core::mimo::{MimoState, MAX_MIMO_FIR, MAX_MIMO_SECTIONS};
+use dynocomp::io::image_file::{parse_any_image, AnyImage};
+use dynocomp_fuzz::assert_names_place_or;
 use libfuzzer_sys::fuzz_target;
+
+/// The name the host's reader is given for the input.
+const SOURCE: &str = "fuzz.dcimg";
+
+/// What an image error names instead of a line or column: the header field
+/// (magic, format version, length, CRC, sample rate, latency, axis mask,
+/// flags, method), the axis, band, row, section or tap, or the whole image
+/// (truncated).
+const IMAGE_PLACES: &[&str] = &[
+    "truncated", "magic", "format version", "length", "crc", "sample rate", "latency", "axis mask", "flag", "method",
+    "axis ", "band", "row ", "section", "tap", "direct term",
+];
+
+/// The host's reader (`inspect`, `compensate`) takes what the version's own
+/// parser takes, and its one-line error names the file and a place.
+fn check_host(bytes: &[u8]) {
+    let own = match peek_version(bytes) {
+        Some(PARALLEL_FORMAT_VERSION) => ParallelImage::parse(bytes).map(|p| p.id()),
+        Some(MATRIX_FORMAT_VERSION) => MatrixImage::parse(bytes).map(|m| m.id()),
+        _ => CoeffImage::parse(bytes).map(|i| i.id()),
+    };
+    match parse_any_image(bytes, SOURCE) {
+        Ok(img) => {
+            assert_eq!(own, Ok(img.id()), "the host's reader and the version's parser disagree");
+            let expected = match img {
+                AnyImage::Inline(_) => FORMAT_VERSION,
+                AnyImage::Parallel(_) => PARALLEL_FORMAT_VERSION,
+                AnyImage::Matrix(_) => MATRIX_FORMAT_VERSION,
+            };
+            assert_eq!(peek_version(bytes), Some(expected));
+        }
+        Err(e) => {
+            assert!(own.is_err(), "the host's reader refused an image its version's parser takes: {e:#}");
+            assert_names_place_or(&format!("{e:#}"), SOURCE, IMAGE_PLACES);
+        }
+    }
+}
 
 fn le16(b: &[u8], at: usize) -> Option<u16> {
     Some(u16::from_le_bytes(b.get(at..at + 2)?.try_into().ok()?))
@@ -285,4 +326,5 @@ fuzz_target!(|data: &[u8]| {
     if mode & 4 == 0 {
         check_v3(&bytes);
     }
+    check_host(&bytes);
 });
