@@ -37,7 +37,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::image::{DesignMethod, ImageError, CRC32};
+use crate::image::{DesignMethod, ImageError, RowDesign, CRC32};
 use crate::sample::BypassReason;
 use crate::shell::Slot;
 use crate::AXES;
@@ -49,7 +49,10 @@ use crate::AXES;
 /// * 2: [`Status::core_clock_hz`] and the sample interrupt's cycle counts
 ///   in [`StatusCounters`] (`isr_cycles_last`, `isr_cycles_max`,
 ///   `isr_cycles_mean`).
-pub const PROTOCOL_VERSION: u16 = 2;
+/// * 3: [`ImageSummary::rows`] (a 3x3 image, format version 3, and how each
+///   of its output rows was designed); new [`ImageError`] variants of the
+///   3x3 image at the end of the enum.
+pub const PROTOCOL_VERSION: u16 = 3;
 /// Largest decoded frame body: postcard message + 4-byte CRC.
 pub const MAX_PAYLOAD: usize = 320;
 /// Largest encoded frame: COBS overhead + the 0x00 delimiter.
@@ -306,7 +309,7 @@ pub struct SlotInfo {
     pub slot: Slot,
     /// Its sequence number (newest wins, wrapping comparison).
     pub seq: u32,
-    /// Id of the image in the slot ([`crate::image::CoeffImage::id`]: the
+    /// Id of the image in the slot ([`crate::image::BoxImage::id`]: the
     /// image's own trailing CRC-32, as `dynocomp inspect` shows it).
     pub image_id: u32,
 }
@@ -314,7 +317,7 @@ pub struct SlotInfo {
 /// Design summary of the running image (what `dynocomp inspect` shows).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ImageSummary {
-    /// Image id: its CRC-32 ([`crate::image::CoeffImage::id`]).
+    /// Image id: its CRC-32 ([`crate::image::BoxImage::id`]).
     pub id: u32,
     /// Design sample rate, Hz.
     pub fs_hz: u32,
@@ -324,6 +327,9 @@ pub struct ImageSummary {
     pub method: DesignMethod,
     /// Per axis (x, y, z): scaling and design figures, None if absent.
     pub axes: [Option<AxisSummaryWire>; AXES],
+    /// `None` for a per-axis image (format version 1); for a 3x3 image
+    /// (version 3), how each output row was designed.
+    pub rows: Option<[RowDesign; AXES]>,
 }
 
 /// One axis of [`ImageSummary`]: what the host needs to convert streamed

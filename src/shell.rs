@@ -21,7 +21,7 @@
 //!
 //! Nothing here touches hardware, allocates or panics.
 
-use crate::image::CoeffImage;
+use crate::image::BoxImage;
 use crate::sample::{
     process_sample, select_stored_mode, BypassReason, Mode, SampleFlags, SampleState,
 };
@@ -42,7 +42,7 @@ use crate::sample::{
 /// sample interrupt").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ActiveImage {
-    stored: Result<CoeffImage, BypassReason>,
+    stored: Result<BoxImage, BypassReason>,
     /// `Some(reason)` when the checks refuse the image (or there is none).
     refused: Option<BypassReason>,
 }
@@ -50,7 +50,7 @@ pub struct ActiveImage {
 impl ActiveImage {
     /// Check `stored` (the coefficient store's result: a verified image or
     /// why there is none) and keep the verdict.
-    pub fn new(stored: Result<CoeffImage, BypassReason>) -> Self {
+    pub fn new(stored: Result<BoxImage, BypassReason>) -> Self {
         let refused = match select_stored_mode(&stored, false) {
             Mode::Compensate(_) => None,
             Mode::Bypass(r) => Some(r),
@@ -59,7 +59,7 @@ impl ActiveImage {
     }
 
     /// The image (or why there is none), as given.
-    pub fn stored(&self) -> &Result<CoeffImage, BypassReason> {
+    pub fn stored(&self) -> &Result<BoxImage, BypassReason> {
         &self.stored
     }
 
@@ -89,6 +89,7 @@ impl ActiveImage {
     /// the cost model's filter shapes), and it runs in the sample
     /// interrupt, where deciding again would cost the budget check's
     /// ≈ 500 instructions in that one sample (and copying the image).
+    #[inline(always)]
     pub fn apply_adc_offsets(&mut self, offsets: [f32; crate::AXES]) -> u8 {
         match self.stored.as_mut() {
             Ok(img) => apply_adc_offsets(img, offsets),
@@ -330,7 +331,7 @@ impl core::fmt::Display for Slot {
 /// compensating, [`DEFAULT_FS_HZ`] in bypass.
 pub fn box_sample_rate(mode: &Mode<'_>) -> u32 {
     match mode {
-        Mode::Compensate(img) => img.fs_hz,
+        Mode::Compensate(img) => img.fs_hz(),
         Mode::Bypass(_) => DEFAULT_FS_HZ,
     }
 }
@@ -574,15 +575,9 @@ impl AutoZero {
 /// `offsets` (from [`AutoZero`]); returns the mask of axes changed (bit i =
 /// axis i). Call between two samples and reset the filter state after it:
 /// the offset step would otherwise ring through the compensator.
-pub fn apply_adc_offsets(img: &mut CoeffImage, offsets: [f32; crate::AXES]) -> u8 {
-    let mut mask = 0u8;
-    for (i, (axis, &off)) in img.axes.iter_mut().zip(offsets.iter()).enumerate() {
-        if let Some(a) = axis {
-            a.scaling.adc_offset_code = off;
-            mask |= 1 << i;
-        }
-    }
-    mask
+#[inline(always)]
+pub fn apply_adc_offsets(img: &mut BoxImage, offsets: [f32; crate::AXES]) -> u8 {
+    img.set_adc_offsets(offsets)
 }
 
 // ------------------------------------------------------------- status LED --
@@ -653,13 +648,13 @@ pub enum ImageSwitch {
 }
 
 /// How to switch from the sample path running at `running_fs_hz` to `new`.
-pub fn image_switch(running_fs_hz: u32, new: &CoeffImage) -> ImageSwitch {
-    if new.fs_hz == running_fs_hz {
+pub fn image_switch(running_fs_hz: u32, new: &BoxImage) -> ImageSwitch {
+    if new.fs_hz() == running_fs_hz {
         ImageSwitch::AtSampleBoundary
     } else {
         ImageSwitch::Reboot {
             from_hz: running_fs_hz,
-            to_hz: new.fs_hz,
+            to_hz: new.fs_hz(),
         }
     }
 }

@@ -11,14 +11,29 @@ use dynocomp_core::image::CoeffImage;
 /// sidecar targets start from.
 pub const EXAMPLE_IMAGE: &[u8] = include_bytes!("../images/example.dcimg");
 
-/// The project's images (`images/`, written by `dynocomp design` on the
-/// bundled example): two box images (latency 4 and 0) and one parallel,
-/// offline-only image (format 2), for the targets that upload or store them.
-pub const IMAGES: [&[u8]; 3] = [
+/// The project's images (`images/`): two per-axis box images written by
+/// `dynocomp design` on the bundled example (latency 4 and 0), one
+/// parallel, offline-only image (format 2), and two 3x3 images (format 3):
+/// the worked example of docs/image-format.md §13.7 (runs in the box) and
+/// the realistic filter of tests/image_matrix.rs (see [`box_runnable`]),
+/// for the targets that upload or store them.
+pub const IMAGES: [&[u8]; 5] = [
     EXAMPLE_IMAGE,
     include_bytes!("../images/lat0.dcimg"),
     include_bytes!("../images/parallel.dcimg"),
+    include_bytes!("../images/matrix_doc.dcimg"),
+    include_bytes!("../images/matrix.dcimg"),
 ];
+
+/// Whether the box runs a valid image: not offline-only, its sample rate
+/// in the box's range, its predicted load within the box's limit
+/// (docs/image-format.md §13.6, docs/store.md).
+pub fn box_runnable(img: &dynocomp_core::image::BoxImage) -> bool {
+    use dynocomp_core::budget::{check_load, BOX_LOAD_LIMIT_PERMILLE};
+    !img.is_offline_only()
+        && dynocomp_core::sample::BOX_FS_RANGE_HZ.contains(&img.fs_hz())
+        && check_load(img, BOX_LOAD_LIMIT_PERMILLE).is_ok()
+}
 
 /// The parsed [`EXAMPLE_IMAGE`].
 pub fn example_image() -> CoeffImage {

@@ -13,7 +13,7 @@ use dynocomp::link::flash_probe::{
     DEFAULT_CHIP, SLOTS_LEN,
 };
 use dynocomp::link::sim_flash::SimFlash;
-use dynocomp_core::image::{CoeffImage, CRC32};
+use dynocomp_core::image::{BoxImage, CRC32};
 use dynocomp_core::shell::Slot;
 use dynocomp_core::store::{encode_record, Layout, Store, FLASH_BASE};
 use embedded_storage::nor_flash::NorFlash;
@@ -57,7 +57,7 @@ fn empty_box_gets_slot_a_with_sequence_1() {
     let img = common::good(1);
     let p = plan(&img, SlotArg::Auto, &erased()).unwrap();
     assert_eq!((p.slot, p.address, p.seq), (Slot::A, 0x0807_C000, 1));
-    assert_eq!(p.image_id, CoeffImage::parse(&img).unwrap().id(), "the id inspect and the box show");
+    assert_eq!(p.image_id, BoxImage::parse(&img).unwrap().id(), "the id inspect and the box show");
     assert_record_layout(&p.record, &img, 1);
 }
 
@@ -124,7 +124,7 @@ fn the_running_slot_is_never_overwritten() {
 fn box_boots(
     flash: SimFlash,
 ) -> (
-    Result<CoeffImage, dynocomp_core::sample::BypassReason>,
+    Result<BoxImage, dynocomp_core::sample::BypassReason>,
     Option<Slot>,
 ) {
     let mut store = Store::open(flash, Layout::STM32G474RE).unwrap();
@@ -147,7 +147,7 @@ fn the_box_boots_what_the_probe_wrote() {
     let p1 = plan(&old, SlotArg::Auto, flash.bytes()).unwrap();
     probe_write(&mut flash, &p1);
     let (img, slot) = box_boots(flash.copy());
-    assert_eq!(img.unwrap(), CoeffImage::parse(&old).unwrap());
+    assert_eq!(img.unwrap(), BoxImage::parse(&old).unwrap());
     assert_eq!(slot, Some(Slot::A));
 
     // Second flash, planned from the slots as the probe reads them.
@@ -155,7 +155,7 @@ fn the_box_boots_what_the_probe_wrote() {
     assert_eq!((p2.slot, p2.seq), (Slot::B, 2));
     probe_write(&mut flash, &p2);
     let (img, slot) = box_boots(flash.copy());
-    assert_eq!(img.unwrap(), CoeffImage::parse(&new).unwrap());
+    assert_eq!(img.unwrap(), BoxImage::parse(&new).unwrap());
     assert_eq!(slot, Some(Slot::B));
 
     // A write cut short (last double word of the image missing) is not
@@ -164,7 +164,7 @@ fn the_box_boots_what_the_probe_wrote() {
     let off = 8 * 1024 + p2.record.len() - 16;
     torn.bytes_mut()[off..off + 16].fill(0xFF);
     let (img, slot) = box_boots(torn);
-    assert_eq!(img.unwrap(), CoeffImage::parse(&old).unwrap());
+    assert_eq!(img.unwrap(), BoxImage::parse(&old).unwrap());
     assert_eq!(slot, Some(Slot::A));
 }
 

@@ -167,6 +167,10 @@ impl Options {
                 force_prior: !a.no_force_prior,
                 image,
             },
+            (AnyImage::Matrix(_), _) => bail!(
+                "{}: a 3x3 image (format 3): `compensate` cannot run it yet; the box and `dynocomp virtual-box` do",
+                a.coeffs.display()
+            ),
             (AnyImage::Parallel(_), true) => bail!(
                 "{}: --offline needs a box image (format 1) and its model sidecar; this is a parallel-elaboration image",
                 a.coeffs.display()

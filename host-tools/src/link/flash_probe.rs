@@ -12,7 +12,7 @@
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
-use dynocomp_core::image::{CoeffImage, CRC32};
+use dynocomp_core::image::{BoxImage, CRC32};
 use dynocomp_core::protocol::SlotInfo;
 use dynocomp_core::shell::Slot;
 use dynocomp_core::store::{
@@ -57,7 +57,7 @@ pub struct FlashPlan {
     pub seq: u32,
     /// The record bytes (header + image + 0xFF padding).
     pub record: Vec<u8>,
-    /// The image id as `inspect` and the box's status show it (`CoeffImage::id`,
+    /// The image id as `inspect` and the box's status show it (`BoxImage::id`,
     /// the image's trailing CRC).
     pub image_id: u32,
 }
@@ -71,7 +71,7 @@ pub fn slot_address(slot: Slot) -> u64 {
 }
 
 /// Read and verify an image file for the box; the error names the file.
-pub fn read_box_image(path: &Path) -> Result<(Vec<u8>, CoeffImage)> {
+pub fn read_box_image(path: &Path) -> Result<(Vec<u8>, BoxImage)> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
     use dynocomp_core::sample::BypassReason;
     use dynocomp_core::protocol::LinkError;
@@ -357,7 +357,7 @@ pub fn run_with(
         Ok(format!(
             "dry run (fake probe, nothing written): would write {} to {chip}, fs = {} Hz; the slots were not read (erased assumed)",
             describe(&plan),
-            img.fs_hz
+            img.fs_hz()
         ))
     } else {
         session

@@ -76,7 +76,7 @@ pub fn run(image: &Path, port: &str) -> Result<()> {
         fmt_id(before.image.map(|i| i.id)),
         before.bypass.map_or("compensating".to_string(), |r| format!("bypass: {r:?}"))
     );
-    eprintln!("uploading {} ({} bytes, {} Hz, id {:#010x})", image.display(), bytes.len(), img.fs_hz, img.id());
+    eprintln!("uploading {} ({} bytes, {} Hz, id {:#010x})", image.display(), bytes.len(), img.fs_hz(), img.id());
     let mut last_pct = usize::MAX;
     let up = upload(&mut link, &bytes, |sent, total| {
         let pct = sent * 100 / total.max(1);

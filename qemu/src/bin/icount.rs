@@ -56,7 +56,8 @@ use core::hint::black_box;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::hprintln;
 use dsp_process::SplitProcess;
-use dynocomp_core::image::{AxisImage, AxisScaling, AxisSummary, CoeffImage, DesignMethod};
+use dynocomp_core::image::{AxisChannel, AxisImage, AxisScaling, AxisSummary, BoxImage, CoeffImage, DesignMethod, MatrixImage, RowDesign};
+use dynocomp_core::mimo::{MimoFilter, MimoSection, MimoState};
 use dynocomp_core::kernel::{AxisFilter, AxisState, Section};
 use dynocomp_core::sample::{process_sample, Mode, SampleState};
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering::Relaxed};
@@ -241,8 +242,59 @@ fn mixed_filter(pairs: usize, reals: usize, taps: usize) -> AxisFilter {
     }
 }
 
-fn box_image(sections: usize, taps: usize) -> CoeffImage {
-    image_of(kernel_filter(sections, taps), AXES)
+fn box_image(sections: usize, taps: usize) -> BoxImage {
+    image_of(kernel_filter(sections, taps), AXES).into()
+}
+
+/// A 3x3 filter with `pairs` normal-form pairs, `diagonals` diagonal
+/// sections and `taps` FIR taps, every B and C entry non-zero (dense).
+fn mimo_filter(pairs: usize, diagonals: usize, taps: usize) -> MimoFilter {
+    let mut secs = [MimoSection::default(); 48];
+    let n = (pairs + diagonals).min(48);
+    for (i, s) in secs.iter_mut().take(n).enumerate() {
+        let k = i as f32;
+        let b = [[0.1, -0.02 * k, 0.03], [0.01, 0.05, -0.04]];
+        let c = [[0.5, -0.2], [0.03, 0.1 + 0.001 * k], [-0.02, 0.04]];
+        *s = if i < pairs {
+            let w = 0.001 + 0.0015 * k;
+            MimoSection { delta: [-0.002, w, -w, -0.002], b, c }
+        } else {
+            MimoSection { delta: [-0.1 - 0.01 * k, 0.0, 0.0, -0.3], b, c }
+        };
+    }
+    let mut fir = [[[0.0f32; 3]; 3]; 24];
+    for (m, h) in fir.iter_mut().enumerate() {
+        *h = [[0.01, 0.002, -0.003], [0.001, 0.01, 0.002], [-0.002, 0.001, 0.01]].map(|r| r.map(|v| v / (m as f32 + 1.0)));
+    }
+    let d = [[1.0, 0.01, -0.02], [0.015, 1.0, 0.01], [-0.01, 0.02, 1.0]];
+    match MimoFilter::new(&secs[..n], d, &fir[..taps]) {
+        Ok(f) => f,
+        Err(_) => dynocomp_qemu::fail("icount: 3x3 test filter rejected"),
+    }
+}
+
+/// A 3x3 image of `filter` at 10 kHz (every shape of the grid fits the
+/// box's budget there), scaling as [`image_of`].
+fn matrix_image(filter: MimoFilter) -> BoxImage {
+    let scaling = AxisScaling { adc_offset_code: 2048.0, newton_per_code: 2.5, dac_code_per_newton: 0.4, dac_offset_code: 2048.0 };
+    let ch = |axis: u8| AxisChannel { axis, scaling, summary: AxisSummary::default() };
+    BoxImage::Matrix(MatrixImage {
+        fs_hz: 10_000,
+        latency_samples: 4,
+        flags: 0,
+        method: DesignMethod::Manual,
+        source_sha256: [0; 32],
+        created_unix_s: 0,
+        axes: [ch(0), ch(1), ch(2)],
+        filter,
+        rows: [RowDesign::Matrix; 3],
+    })
+}
+
+#[inline(never)]
+fn mimo_step(f: &MimoFilter, st: &mut MimoState, u: f32) -> f32 {
+    let y = f.step(st, [u, 0.5 * u, -0.25 * u]);
+    y[0] + y[1] + y[2]
 }
 
 fn image_of(filter: AxisFilter, n_axes: usize) -> CoeffImage {
@@ -272,7 +324,7 @@ fn image_of(filter: AxisFilter, n_axes: usize) -> CoeffImage {
 }
 
 #[inline(never)]
-fn sample_isr_body(img: &CoeffImage, st: &mut SampleState, code: u16) -> u16 {
+fn sample_isr_body(img: &BoxImage, st: &mut SampleState, code: u16) -> u16 {
     let (dac, flags) = process_sample([code, code ^ 0x155, code ^ 0x2AA], Mode::Compensate(img), st);
     dac[0] ^ dac[1] ^ dac[2] ^ u16::from(flags.0)
 }
@@ -375,8 +427,8 @@ fn isr_software(sh: &mut Shell, stored: &mut ActiveImage, ring: &[[u16; RING_LEN
     for (dst, &src) in TELEMETRY.saturated.iter().zip(c.saturated.iter()) {
         dst.store(src, Relaxed);
     }
-    for (dst, a) in TELEMETRY.resets.iter().zip(sh.path.state.axes.iter()) {
-        dst.store(a.nonfinite_resets, Relaxed);
+    for (dst, n) in TELEMETRY.resets.iter().zip(sh.path.state.nonfinite_resets()) {
+        dst.store(n, Relaxed);
     }
     TELEMETRY.compensating.store(out.compensating, Relaxed);
     match out.auto_zero {
@@ -407,7 +459,7 @@ fn isr_software(sh: &mut Shell, stored: &mut ActiveImage, ring: &[[u16; RING_LEN
 /// every sample (`stream` = the USB task's end, emptied by the harness
 /// after each call, whose cost is measured apart and subtracted) or not.
 fn measure_shell(ticks: &Ticks, img: CoeffImage, streaming: bool, consumer: &mut Consumer<'static, QLEN>, producer: Producer<'static, QLEN>) -> (f32, Producer<'static, QLEN>) {
-    let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..img }));
+    let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..img }.into()));
     let mut sh = Shell { path: SamplePath::new(), cursor: RingCursor::new(RING_LEN), stream: producer, cycles: IsrCycles::new() };
     let ring = [[2048u16; RING_LEN as usize]; AXES];
     STREAM_DECIMATION.store(u32::from(streaming), Relaxed);
@@ -533,7 +585,7 @@ fn main() -> ! {
         (1, 0, 15, 3),
         (4, 0, 5, 3),
     ] {
-        let img = image_of(mixed_filter(p, r, t), a);
+        let img = image_of(mixed_filter(p, r, t), a).into();
         let mut sst = SampleState::default();
         let body = measure(&ticks, |u| f32::from(sample_isr_body(black_box(&img), &mut sst, (u as i32 + 2048) as u16)));
         // The same shape through `SamplePath::tick` (what the interrupt
@@ -541,7 +593,7 @@ fn main() -> ! {
         // where every shape of the grid is within the box's budget. The
         // `model` line's count is the tick's; `tick` minus `process_sample`
         // is printed on its own line.
-        let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..image_of(mixed_filter(p, r, t), a) }));
+        let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..image_of(mixed_filter(p, r, t), a) }.into()));
         if stored.refused().is_some() {
             dynocomp_qemu::fail("icount: a calibration shape is refused at 20 kHz");
         }
@@ -549,6 +601,43 @@ fn main() -> ! {
         let per_call = measure(&ticks, |u| f32::from(tick_body(&mut path, black_box(&mut stored), (u as i32 + 2048) as u16)));
         hprintln!("model {} {} {} {} {:.2} {:.2}", p, r, t, a, per_call, per_call - empty);
         hprintln!("tick-minus-process_sample {} {} {} {} {:.2}", p, r, t, a, per_call - body);
+    }
+
+    // The 3x3 kernel alone (`MimoFilter::step`), and its calibration grid
+    // through `SamplePath::tick` with a 3x3 image: (pairs, diagonal
+    // sections, taps). `mimo P D T <per call> <net>` lines.
+    for (p, dg, t) in [(20usize, 2usize, 8usize), (40, 0, 24), (10, 0, 8)] {
+        let f = mimo_filter(p, dg, t);
+        let mut st = MimoState::default();
+        let k = measure(&ticks, |u| mimo_step(black_box(&f), &mut st, u));
+        hprintln!("kernel3x3 {} {} {} {:.2} {:.2}", p, dg, t, k, k - empty);
+    }
+    for (p, dg, t) in [
+        (0usize, 0usize, 0usize),
+        (1, 0, 0),
+        (2, 0, 0),
+        (10, 0, 0),
+        (20, 0, 0),
+        (40, 0, 0),
+        (0, 1, 0),
+        (0, 4, 0),
+        (0, 0, 1),
+        (0, 0, 8),
+        (0, 0, 24),
+        (10, 0, 8),
+        (20, 2, 8),
+        (30, 0, 24),
+        (40, 0, 8),
+        (40, 8, 24),
+        (13, 3, 5),
+    ] {
+        let mut stored = ActiveImage::new(Ok(matrix_image(mimo_filter(p, dg, t))));
+        if stored.refused().is_some() {
+            dynocomp_qemu::fail("icount: a 3x3 calibration shape is refused at 10 kHz");
+        }
+        let mut path = SamplePath::new();
+        let per_call = measure(&ticks, |u| f32::from(tick_body(&mut path, black_box(&mut stored), (u as i32 + 2048) as u16)));
+        hprintln!("mimo {} {} {} {:.2} {:.2}", p, dg, t, per_call, per_call - empty);
     }
 
     // The interrupt's software shell around `SamplePath::tick`: the same
@@ -584,7 +673,7 @@ fn main() -> ! {
     pop_only = 0.5 * (pop_only + push_only);
     for (p, r, t, a) in [(0usize, 0usize, 0usize, 3usize), (3, 0, 13, 3), (24, 0, 24, 3)] {
         let img = image_of(mixed_filter(p, r, t), a);
-        let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..img }));
+        let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..img }.into()));
         let mut path = SamplePath::new();
         let tick = measure(&ticks, |u| f32::from(tick_body(&mut path, black_box(&mut stored), (u as i32 + 2048) as u16)));
         let (quiet, prod) = measure_shell(&ticks, img, false, &mut consumer, producer);
