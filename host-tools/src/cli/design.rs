@@ -13,7 +13,6 @@ use crate::design::axis::AxisDesign;
 use crate::design::image::build_image;
 use crate::design::latency::LatencyChoice;
 use crate::frf::axis_name;
-use crate::io;
 use crate::offline::force_prior::{AxisPrior, PriorOptions};
 use crate::offline::smoother::build_priors;
 use crate::realize::load::LoadReport;
@@ -116,9 +115,8 @@ fn image_within_load(args: &DesignArgs, s: &DesignSetup, d: &Designed) -> Result
 /// Write the image and, for the default method, the model sidecar of
 /// `compensate --offline` ([`crate::offline::sidecar`]).
 fn write_image_and_sidecar(args: &DesignArgs, image: &CoeffImage, designs: &[AxisDesign], priors: &[Option<AxisPrior>]) -> Result<()> {
-    io::image_file::write_image(&args.out, image)?;
     if args.method == Method::Paper {
-        return Ok(());
+        return crate::offline::sidecar::write_image_and_sidecar(&args.out, image, None);
     }
     let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
     let mut sidecar = crate::offline::sidecar::ModelSidecar::new(image, &models);
@@ -129,7 +127,7 @@ fn write_image_and_sidecar(args: &DesignArgs, image: &CoeffImage, designs: &[Axi
         // no note for `compensate`.
         m.force_spectrum = d.force_spectrum.as_ref().filter(|s| !s.level_only).map(|s| s.provenance(record.clone()));
     }
-    crate::offline::sidecar::write_sidecar(&args.out, &sidecar)
+    crate::offline::sidecar::write_image_and_sidecar(&args.out, image, Some(&sidecar))
 }
 
 /// The summary (text or JSON) and the report.

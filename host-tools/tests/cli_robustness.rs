@@ -1,0 +1,118 @@
+//! The command line as a careless or hostile user meets it: interrupted
+//! runs, outputs that are inputs, image and sidecar written as a pair,
+//! implausible values, bad parameters. Each test runs the built binary.
+
+mod cli_common;
+
+use cli_common::{dynocomp, example, tmp};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Temporary files of the tool's naming left in `dir`.
+fn temporaries(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".dynocomp-"))
+        .collect()
+}
+
+/// A fresh folder `name` for one test.
+fn fresh_dir(name: &str) -> PathBuf {
+    let d = tmp("robust", name);
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A default-method image of the bundled example designed into `dir`.
+fn example_image(dir: &Path) -> PathBuf {
+    let img = dir.join("ex.dcimg");
+    let (ok, _, err) = dynocomp(&["design", "--frf", &example("frf.csv"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", s(&img)]);
+    assert!(ok, "design failed: {err}");
+    img
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// SIGTERM in the middle of a compensation removes its temporary output
+/// file (a record read from a pipe that is still open keeps the run busy).
+/// Negative control: SIGKILL, which no process can handle, leaves it.
+#[test]
+fn sigterm_removes_the_temporary_output() {
+    let img = example_image(&fresh_dir("sig-image"));
+    for (sig, cleaned) in [("-TERM", true), ("-INT", true), ("-KILL", false)] {
+        let dir = fresh_dir(&format!("sig{sig}"));
+        let out = dir.join("out.csv");
+        let mut child = Command::new(env!("CARGO_BIN_EXE_dynocomp"))
+            .args(["compensate", "--coeffs", s(&img), "--input", "-", "--output", s(&out)])
+            .stdin(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut stdin = child.stdin.take().unwrap();
+        let mut text = String::from("t_s,fx\n");
+        for k in 0..20_000 {
+            text.push_str(&format!("{},{}\n", k as f64 / 51200.0, (k as f64 * 0.01).sin()));
+        }
+        std::io::Write::write_all(&mut stdin, text.as_bytes()).unwrap();
+        let t0 = Instant::now();
+        while temporaries(&dir).is_empty() && t0.elapsed() < Duration::from_secs(20) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        assert!(!temporaries(&dir).is_empty(), "no temporary output appeared");
+        std::thread::sleep(Duration::from_millis(200));
+        let killed = Command::new("kill").args([sig, &child.id().to_string()]).status().unwrap();
+        assert!(killed.success());
+        let status = child.wait().unwrap();
+        drop(stdin);
+        assert!(!status.success());
+        assert_eq!(temporaries(&dir).is_empty(), cleaned, "{sig}: temporaries {:?}", temporaries(&dir));
+        assert!(!out.exists(), "{sig}: an output was written");
+    }
+}
+
+/// `design` writes the image and its sidecar together: when the sidecar
+/// cannot be written (a directory in its place) the old image is left as
+/// it was. Control: without the obstacle the same run replaces both.
+#[test]
+fn design_keeps_the_old_image_when_the_sidecar_cannot_be_written() {
+    let dir = fresh_dir("pair");
+    let img = dir.join("ex.dcimg");
+    std::fs::write(&img, b"old image").unwrap();
+    let side = dir.join("ex.dcimg.model.json");
+    std::fs::create_dir(&side).unwrap();
+    let args = ["design", "--frf", &example("frf.csv"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", s(&img)];
+    let (ok, _, err) = dynocomp(&args);
+    assert!(!ok, "design succeeded with a directory in the sidecar's place");
+    assert!(err.contains("model.json"), "{err}");
+    assert_eq!(std::fs::read(&img).unwrap(), b"old image", "the old image was replaced");
+    assert!(temporaries(&dir).is_empty());
+    std::fs::remove_dir(&side).unwrap();
+    let (ok, _, err) = dynocomp(&args);
+    assert!(ok, "{err}");
+    assert_ne!(std::fs::read(&img).unwrap(), b"old image");
+    assert!(side.is_file());
+}
+
+/// An image without a sidecar (parallel elaboration) removes the sidecar
+/// of the image it replaces. Control: a file that is not its sidecar stays.
+#[test]
+fn design_without_sidecar_removes_the_stale_one() {
+    let dir = fresh_dir("stale");
+    let img = dir.join("par.dcimg");
+    let side = dir.join("par.dcimg.model.json");
+    let other = dir.join("par.model.json");
+    std::fs::write(&side, b"{}").unwrap();
+    std::fs::write(&other, b"{}").unwrap();
+    let (ok, _, err) = dynocomp(&[
+        "design", "--frf", &example("frf.csv"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", s(&img), "--parallel", "--spindle-rpm", "16500", "--teeth", "4",
+    ]);
+    assert!(ok, "{err}");
+    assert!(img.is_file());
+    assert!(!side.exists(), "the old sidecar is still there");
+    assert!(other.exists());
+}
