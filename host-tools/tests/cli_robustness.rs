@@ -116,3 +116,79 @@ fn design_without_sidecar_removes_the_stale_one() {
     assert!(!side.exists(), "the old sidecar is still there");
     assert!(other.exists());
 }
+
+/// Runs `args` and expects a refusal that names `flags` and leaves `kept`
+/// with the bytes it had.
+fn refused_keeping(args: &[&str], flags: &[&str], kept: &Path) {
+    let before = std::fs::read(kept).unwrap();
+    let (ok, _, err) = dynocomp(args);
+    assert!(!ok, "{args:?} succeeded");
+    for f in flags {
+        assert!(err.contains(f), "{args:?}: the message does not name {f}: {err}");
+    }
+    assert!(err.contains("same file"), "{err}");
+    assert_eq!(std::fs::read(kept).unwrap(), before, "{args:?}: {} was changed", kept.display());
+}
+
+/// An output that is one of the inputs is refused, naming both flags, and
+/// the input is left as it was: compensate, design (its image and its
+/// sidecar), compare's folder and stream. Controls: the same runs with
+/// another output succeed (compensate, design) or fail for another reason.
+#[test]
+fn an_output_that_is_an_input_is_refused() {
+    let dir = fresh_dir("same");
+    let img = example_image(&dir);
+    let rec = dir.join("rec.csv");
+    std::fs::copy(example("measured.csv"), &rec).unwrap();
+    let truth = dir.join("truth.csv");
+    std::fs::copy(example("true_force.csv"), &truth).unwrap();
+    let (i, r, t) = (s(&img), s(&rec), s(&truth));
+    refused_keeping(&["compensate", "--coeffs", i, "--input", r, "--output", r], &["--output", "--input"], &rec);
+    let dot = format!("{}/./rec.csv", dir.display());
+    refused_keeping(&["compensate", "--coeffs", i, "--input", r, "--output", &dot], &["--output", "--input"], &rec);
+    refused_keeping(&["compensate", "--coeffs", i, "--input", r, "--output", i], &["--output", "--coeffs"], &img);
+    let side = format!("{i}.model.json");
+    refused_keeping(&["compensate", "--coeffs", i, "--input", r, "--output", &side, "--offline"], &["--output", "sidecar"], Path::new(&side));
+    let rep = dir.join("rep");
+    let rp = s(&rep);
+    refused_keeping(&["compensate", "--coeffs", i, "--input", r, "--output", t, "--report", rp, "--truth", t], &["--output", "--truth"], &truth);
+    // A hard link is the same file under another name.
+    let link = dir.join("link.csv");
+    std::fs::hard_link(&rec, &link).unwrap();
+    refused_keeping(&["compensate", "--coeffs", i, "--input", r, "--output", s(&link)], &["--output", "--input"], &rec);
+    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", i, "--input", r, "--output", s(&dir.join("out.csv"))]);
+    assert!(ok, "control: {err}");
+
+    let frf = dir.join("frf.csv");
+    std::fs::copy(example("frf.csv"), &frf).unwrap();
+    let idle = dir.join("idle.csv");
+    std::fs::copy(example("idle.csv"), &idle).unwrap();
+    let (f, id) = (s(&frf), s(&idle));
+    refused_keeping(&["design", "--frf", f, "--fs", "51200", "--idle", id, "--out", f], &["--out", "--frf"], &frf);
+    refused_keeping(&["design", "--frf", f, "--fs", "51200", "--idle", id, "--out", id], &["--out", "--idle"], &idle);
+    let idle_side = dir.join("i.dcimg.model.json");
+    std::fs::copy(example("idle.csv"), &idle_side).unwrap();
+    let i2 = dir.join("i.dcimg");
+    refused_keeping(&["design", "--frf", f, "--fs", "51200", "--idle", s(&idle_side), "--out", s(&i2)], &["sidecar", "--idle"], &idle_side);
+    assert!(!i2.exists());
+    refused_keeping(
+        &["design", "--frf", f, "--fs", "51200", "--idle", id, "--out", r, "--force-prior", "spectrum", "--force-record", r],
+        &["--out", "--force-record"],
+        &rec,
+    );
+    refused_keeping(
+        &["design", "--frf", f, "--fs", "51200", "--idle", id, "--out", r, "--spindle-rpm", "16500", "--teeth", "4", "--bands-from", r],
+        &["--out", "--bands-from"],
+        &rec,
+    );
+
+    let cmp = dir.join("cmp");
+    std::fs::create_dir_all(&cmp).unwrap();
+    let cidle = cmp.join("compare.txt");
+    std::fs::copy(example("idle.csv"), &cidle).unwrap();
+    refused_keeping(&["compare", "--frf", f, "--fs", "51200", "--idle", s(&cidle), "--out-dir", s(&cmp)], &["--out-dir", "--idle"], &cidle);
+
+    let port = dir.join("port");
+    std::fs::write(&port, b"not a port").unwrap();
+    refused_keeping(&["stream", "--serial", s(&port), "--output", s(&port), "--samples", "10"], &["--output", "--serial"], &port);
+}

@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use dynocomp_core::image::CoeffImage;
 
-use crate::cli::design_args::{check_prior_flags, read_force_record, DesignArgs, DesignSetup, ForcePrior, Method};
+use crate::cli::design_args::{check_outputs_are_not_inputs, check_prior_flags, read_force_record, DesignArgs, DesignSetup, ForcePrior, Method};
 use crate::design::axis::AxisDesign;
 use crate::design::image::build_image;
 use crate::design::latency::LatencyChoice;
@@ -21,6 +21,7 @@ use crate::report::summary::{prior_line, render_summary, spectrum_line, AxisJson
 /// Run `dynocomp design`.
 pub fn run(args: &DesignArgs) -> Result<()> {
     check_prior_flags(args)?;
+    check_outputs_are_not_inputs(args)?;
     match args.input.frf.len() {
         1 => {}
         2 => return crate::cli::design_two_state::run(args),

@@ -381,6 +381,18 @@ impl DesignSetup {
     }
 }
 
+/// Refuse an `--out` (or its model sidecar) that is one of the inputs:
+/// writing it would destroy that input.
+pub fn check_outputs_are_not_inputs(args: &DesignArgs) -> Result<()> {
+    let sidecar = crate::offline::sidecar::sidecar_path(&args.out);
+    let outputs = [("--out", args.out.as_path()), ("the model sidecar of --out", sidecar.as_path())];
+    let mut inputs: Vec<(&str, &std::path::Path)> = args.input.frf.iter().map(|p| ("--frf", p.as_path())).collect();
+    inputs.extend(args.input.idle.as_deref().map(|p| ("--idle", p)));
+    inputs.extend(args.bands.bands_from.as_deref().map(|p| ("--bands-from", p)));
+    inputs.extend(args.prior.force_record.as_deref().map(|p| ("--force-record", p)));
+    crate::io::atomic::ensure_not_an_input(&outputs, &inputs)
+}
+
 /// Check the force-prior flags against the rest (before anything is read).
 pub fn check_prior_flags(args: &DesignArgs) -> Result<()> {
     match args.prior.force_prior {
