@@ -192,3 +192,101 @@ fn an_output_that_is_an_input_is_refused() {
     std::fs::write(&port, b"not a port").unwrap();
     refused_keeping(&["stream", "--serial", s(&port), "--output", s(&port), "--samples", "10"], &["--output", "--serial"], &port);
 }
+
+/// Runs `dynocomp args`: (success, stdout bytes, stderr).
+fn dynocomp_bytes(args: &[&str]) -> (bool, Vec<u8>, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_dynocomp")).args(args).output().expect("run dynocomp");
+    (out.status.success(), out.stdout, String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+/// `compensate --output -` writes the record to standard output, the same
+/// bytes as a file output, in every mode that holds the output differently
+/// (streamed box filter, whole-record smoother); no file named `-` is made.
+#[test]
+fn compensate_writes_standard_output() {
+    let dir = fresh_dir("stdout");
+    let img = example_image(&dir);
+    let measured = example("measured.csv");
+    for extra in [&[][..], &["--offline"][..], &["--output-format", "tdms"][..]] {
+        let file = dir.join("file.out");
+        let mut args = vec!["compensate", "--coeffs", s(&img), "--input", &measured];
+        args.extend_from_slice(extra);
+        let (ok, _, err) = dynocomp_bytes(&[&args[..], &["--output", s(&file)]].concat());
+        assert!(ok, "{err}");
+        let (ok, piped, err) = dynocomp_bytes(&[&args[..], &["--output", "-"]].concat());
+        assert!(ok, "{extra:?}: {err}");
+        assert_eq!(piped, std::fs::read(&file).unwrap(), "{extra:?}: standard output differs from the file");
+        assert!(piped.len() > 100_000);
+    }
+    assert!(!dir.join("-").exists());
+}
+
+/// Copy of the example's measured record with line `line` (1-based, the
+/// header is line 1) given the force `fx` (N).
+fn record_with(dir: &Path, name: &str, src: &str, line: usize, fx: &str) -> PathBuf {
+    let text = std::fs::read_to_string(example(src)).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let mut cols: Vec<String> = lines[line - 1].split(',').map(String::from).collect();
+    cols[1] = fx.to_string();
+    lines[line - 1] = cols.join(",");
+    let p = dir.join(name);
+    std::fs::write(&p, lines.join("\n") + "\n").unwrap();
+    p
+}
+
+/// A record value beyond the full scale (`--max-force`, 100 kN by default)
+/// is refused, naming the file and the line, by compensate (input and true
+/// force) and design (--idle, --force-record); a larger --max-force takes
+/// it, and a --max-force that is not a positive force is refused.
+#[test]
+fn implausible_forces_are_refused_and_max_force_sets_the_bound() {
+    let dir = fresh_dir("maxforce");
+    let img = example_image(&dir);
+    let i = s(&img);
+    let big = record_with(&dir, "big.csv", "measured.csv", 100, "2.5e5");
+    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", i, "--input", s(&big), "--output", s(&dir.join("o.csv"))]);
+    assert!(!ok);
+    assert!(err.contains("big.csv") && err.contains("line 100"), "{err}");
+    let (ok, _, err) =
+        dynocomp(&["compensate", "--coeffs", i, "--input", s(&big), "--output", s(&dir.join("o.csv")), "--max-force", "3e5"]);
+    assert!(ok, "{err}");
+    let (ok, _, err) = dynocomp(&[
+        "compensate", "--coeffs", i, "--input", &example("measured.csv"), "--output", s(&dir.join("o2.csv")),
+        "--report", s(&dir.join("rep")), "--truth", s(&big),
+    ]);
+    assert!(!ok && err.contains("big.csv"), "{err}");
+    for bad in ["0", "-5", "nan"] {
+        let (ok, _, err) = dynocomp(&["compensate", "--coeffs", i, "--input", s(&big), "--output", s(&dir.join("o.csv")), &format!("--max-force={bad}")]);
+        assert!(!ok && err.contains("--max-force"), "{bad}: {err}");
+    }
+
+    let idle = record_with(&dir, "idle.csv", "idle.csv", 50, "1e30");
+    let (frf, d) = (example("frf.csv"), dir.join("d.dcimg"));
+    let base = ["design", "--frf", &frf, "--fs", "51200", "--out", s(&d)];
+    let (ok, _, err) = dynocomp(&[&base[..], &["--idle", s(&idle)]].concat());
+    assert!(!ok && err.contains("idle.csv") && err.contains("line 50"), "{err}");
+    // A lower full scale reaches the idle record too (its noise is ~1 N);
+    // control: the default takes it.
+    let (ok, _, err) = dynocomp(&[&base[..], &["--idle", &example("idle.csv"), "--max-force", "0.3"]].concat());
+    assert!(!ok && err.contains("idle.csv") && err.contains("line"), "{err}");
+    let (ok, _, err) = dynocomp(&[&base[..], &["--idle", &example("idle.csv")]].concat());
+    assert!(ok, "{err}");
+    let (ok, _, err) = dynocomp(
+        &[&base[..], &["--idle", &example("idle.csv"), "--force-prior", "level", "--force-record", s(&big)]].concat(),
+    );
+    assert!(!ok && err.contains("big.csv") && err.contains("line 100"), "{err}");
+}
+
+/// An idle record sampled at another rate than --fs gives another R: it is
+/// refused, naming the file and both rates. Control: the right rate works.
+#[test]
+fn design_refuses_an_idle_record_at_another_rate() {
+    let dir = fresh_dir("idlerate");
+    let out = dir.join("d.dcimg");
+    let (ok, _, err) = dynocomp(&["design", "--frf", &example("frf.csv"), "--fs", "25600", "--idle", &example("idle.csv"), "--out", s(&out)]);
+    assert!(!ok);
+    assert!(err.contains("idle.csv") && err.contains("51200") && err.contains("25600"), "{err}");
+    assert!(!out.exists());
+    let (ok, _, err) = dynocomp(&["design", "--frf", &example("frf.csv"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", s(&out)]);
+    assert!(ok, "{err}");
+}

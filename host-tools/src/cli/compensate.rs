@@ -10,7 +10,8 @@ use std::path::{Path, PathBuf};
 
 use crate::io::image_file::{read_any_image, AnyImage};
 use crate::io::signal::{check_rate_value, ChannelMap};
-use crate::io::signal_file::{open_signal, SignalFormat};
+use crate::io::signal::check_max_force;
+use crate::io::signal_file::{open_signal_checked, SignalFormat};
 use crate::offline::record::{compensate_file, Compensated, Compensation, Monitor, Observer, RecordJob, Truth};
 use crate::report::compensation::ReportAccumulator;
 
@@ -26,7 +27,8 @@ pub struct CompensateArgs {
     #[arg(long)]
     pub input: PathBuf,
     /// Output force record (same channels), written atomically; its format
-    /// follows the input unless --output-format says otherwise.
+    /// follows the input unless --output-format says otherwise. `-` writes
+    /// it to standard output (the input `-` reads CSV from standard input).
     #[arg(long)]
     pub output: PathBuf,
     /// Output format: csv, uff (ASCII dataset 58), uff58b (binary) or tdms.
@@ -71,6 +73,11 @@ pub struct CompensateArgs {
     /// Number of teeth of the cutter (with --spindle-rpm).
     #[arg(long, requires = "spindle_rpm")]
     pub teeth: Option<u32>,
+    /// Largest plausible force (N): the full scale of the charge amplifier
+    /// or ADC. A value of the input or the true force beyond ± this, or not
+    /// finite, is an input error that names the sample.
+    #[arg(long, default_value_t = crate::io::signal::DEFAULT_FULL_SCALE_N, value_name = "N")]
+    pub max_force: f64,
     /// Band limit of the report's NRMSE (Hz); default: the project's
     /// scoring band, min(4 kHz, 0.4 fs).
     #[arg(long)]
@@ -128,7 +135,8 @@ impl Options {
         let img = read_any_image(&a.coeffs)?;
         let source = a.input.display().to_string();
         let map = a.channels.as_deref().map(ChannelMap::parse).transpose().context("--channels")?;
-        let (input, in_fmt) = open_signal(&a.input, map.as_ref())?;
+        let max_force = check_max_force(a.max_force)?;
+        let (input, in_fmt) = open_signal_checked(&a.input, map.as_ref(), max_force)?;
         let fs = img.fs_hz();
         if let Some(f) = input.declared_fs_hz() {
             check_rate_value(fs, (f, 0.0), &source, "the file's sampling interval")?;
@@ -142,7 +150,7 @@ impl Options {
         let tpf = a.spindle_rpm.zip(a.teeth).map(|(r, z)| r / 60.0 * f64::from(z));
         let truth = match &a.truth {
             Some(p) => {
-                let (t, _) = open_signal(p, map.as_ref())?;
+                let (t, _) = open_signal_checked(p, map.as_ref(), max_force)?;
                 for ax in &axes {
                     if !t.axes().contains(ax) {
                         bail!("{}: no f{} channel, but the input has one", p.display(), crate::frf::axis_name(*ax));
@@ -171,6 +179,7 @@ impl Options {
             input,
             input_path: a.input.clone(),
             channels: map,
+            full_scale_n: max_force,
             output: a.output.clone(),
             output_format: a.output_format.unwrap_or(in_fmt),
             raw_timing: a.raw_timing,

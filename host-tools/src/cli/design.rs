@@ -83,7 +83,7 @@ fn harmonic_priors(args: &DesignArgs, designs: &[AxisDesign], r: &[Option<f64>; 
         return Ok(designs.iter().map(|_| None).collect());
     }
     let path = args.prior.force_record.as_ref().expect("checked by check_prior_flags");
-    let rec = read_force_record(path, args.input.fs)?;
+    let rec = read_force_record(path, args.input.fs, args.input.max_force)?;
     let opts = PriorOptions {
         spindle_rpm: args.bands.spindle_rpm.expect("checked"),
         teeth: args.bands.teeth.expect("checked"),

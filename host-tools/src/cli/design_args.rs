@@ -81,9 +81,11 @@ pub struct BandArgs {
 }
 
 impl BandArgs {
-    /// The library's band specification of these flags.
+    /// The library's band specification of these flags (the record of
+    /// `--bands-from` checked against the default full scale).
     pub fn spec(&self) -> BandSpec {
         BandSpec {
+            max_force_n: None,
             tooth_passing: self.spindle_rpm.zip(self.teeth),
             harmonics: self.harmonics,
             band_width: self.band_width,
@@ -97,9 +99,10 @@ impl BandArgs {
         self.spec().tooth_passing_hz()
     }
 
-    /// The validated bands for this FRF and sample rate ([`BandSpec::resolve`]).
-    pub fn resolve(&self, frf: &Frf, fs_hz: f64) -> Result<Vec<Band>> {
-        self.spec().resolve(frf, fs_hz)
+    /// The validated bands for this FRF and sample rate ([`BandSpec::resolve`]),
+    /// the record of `--bands-from` within ±`max_force_n` (N).
+    pub fn resolve(&self, frf: &Frf, fs_hz: f64, max_force_n: f64) -> Result<Vec<Band>> {
+        BandSpec { max_force_n: Some(max_force_n), ..self.spec() }.resolve(frf, fs_hz)
     }
 }
 
@@ -223,6 +226,12 @@ pub struct DesignInputArgs {
     /// to 0.45 fs), or the hold equivalents `foh`/`zoh` for comparison.
     #[arg(long, value_enum, default_value_t = DiscretizationArg::Fit)]
     pub discretization: DiscretizationArg,
+    /// Largest plausible force (N) in the records read (--idle,
+    /// --force-record, --bands-from): the full scale of the charge
+    /// amplifier or ADC. A value beyond ± this, or not finite, is an input
+    /// error that names the sample.
+    #[arg(long, default_value_t = crate::io::signal::DEFAULT_FULL_SCALE_N, value_name = "N")]
+    pub max_force: f64,
 }
 
 impl DesignInputArgs {
@@ -240,9 +249,12 @@ impl DesignInputArgs {
         Ok(())
     }
 
-    /// R per axis (N²) from `--idle` or `--noise-variance`.
+    /// R per axis (N²) from `--idle` (sampled at `--fs`, values within
+    /// `--max-force`) or `--noise-variance`.
     pub fn noise_variances(&self, frf: &Frf) -> Result<[Option<f64>; 3]> {
-        crate::design::noise::noise_variances(self.idle.as_deref(), self.noise_variance, frf)
+        let max_force = crate::io::signal::check_max_force(self.max_force)?;
+        let checks = crate::design::noise::IdleChecks { fs_hz: Some(self.fs), full_scale_n: max_force };
+        crate::design::noise::noise_variances_checked(self.idle.as_deref(), self.noise_variance, frf, &checks)
     }
 }
 
@@ -359,7 +371,7 @@ impl DesignSetup {
         let r = args.input.noise_variances(&frf)?;
         // With the harmonic prior, --spindle-rpm/--teeth place the prior's
         // lines, not fitting bands: the design covers the whole band.
-        let mut spec = args.bands.spec();
+        let mut spec = BandSpec { max_force_n: Some(args.input.max_force), ..args.bands.spec() };
         if args.prior.force_prior == ForcePrior::Harmonics {
             spec.tooth_passing = None;
         }
@@ -412,7 +424,7 @@ fn force_record(args: &DesignArgs) -> Result<Option<std::sync::Arc<ForceRecord>>
         return Ok(None);
     }
     let path = args.prior.force_record.as_ref().expect("checked by check_spectrum_args");
-    let rec = read_force_record(path, args.input.fs)?;
+    let rec = read_force_record(path, args.input.fs, args.input.max_force)?;
     let channels = [0, 1, 2].map(|a| rec.channel(a).map(|c| c.to_vec()));
     Ok(Some(std::sync::Arc::new(ForceRecord { source: path.display().to_string(), channels })))
 }
@@ -448,13 +460,12 @@ fn check_spectrum_args(args: &DesignArgs) -> Result<()> {
     Ok(())
 }
 
-/// Read a representative record (`--force-record`) sampled at `fs_hz`.
-pub fn read_force_record(path: &std::path::Path, fs_hz: f64) -> Result<crate::io::signal_csv::SignalRecord> {
-    let rec = crate::io::signal_csv::read_signal_csv(path)?;
-    if let Some((rate, _)) = rec.sample_rate_from_time() {
-        if (rate - fs_hz).abs() > 1e-6 * fs_hz {
-            bail!("{}: sampled at {rate:.1} Hz (column t_s), not at --fs {fs_hz}; record the cut at the box's rate", path.display());
-        }
+/// Read a representative record (`--force-record`) sampled at `fs_hz`,
+/// its values within ±`full_scale_n` (N).
+pub fn read_force_record(path: &std::path::Path, fs_hz: f64, full_scale_n: f64) -> Result<crate::io::signal_csv::SignalRecord> {
+    let rec = crate::io::signal_csv::read_signal_csv_checked(path, full_scale_n)?;
+    if let Some(found) = rec.sample_rate_from_time() {
+        crate::io::signal::check_rate_against_fs(found, fs_hz, &path.display().to_string(), "record the cut at the box's rate")?;
     }
     Ok(rec)
 }
