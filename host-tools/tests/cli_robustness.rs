@@ -290,3 +290,19 @@ fn design_refuses_an_idle_record_at_another_rate() {
     let (ok, _, err) = dynocomp(&["design", "--frf", &example("frf.csv"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", s(&out)]);
     assert!(ok, "{err}");
 }
+
+/// `flash` names what is wrong with an image in words, not as Rust's
+/// debug form (`Image(BadCrc { stored: … })`).
+#[test]
+fn flash_errors_read_as_words() {
+    let dir = fresh_dir("flash");
+    let img = example_image(&dir);
+    let mut bytes = std::fs::read(&img).unwrap();
+    bytes[100] ^= 1;
+    let bad = dir.join("bad.dcimg");
+    std::fs::write(&bad, &bytes).unwrap();
+    let (ok, _, err) = dynocomp(&["flash", s(&bad), "--probe", "--dry-run"]);
+    assert!(!ok);
+    assert!(err.contains("bad.dcimg") && err.contains("CRC"), "{err}");
+    assert!(!err.contains("BadCrc") && !err.contains('{'), "{err}");
+}
