@@ -306,3 +306,101 @@ fn flash_errors_read_as_words() {
     assert!(err.contains("bad.dcimg") && err.contains("CRC"), "{err}");
     assert!(!err.contains("BadCrc") && !err.contains('{'), "{err}");
 }
+
+/// Runs `dynocomp args` and gives up after `secs` seconds (killing it):
+/// (finished in time, success, stderr).
+fn dynocomp_within(args: &[&str], secs: u64) -> (bool, bool, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_dynocomp"))
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut err = String::new();
+            std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut err).unwrap();
+            return (true, status.success(), err);
+        }
+        if t0.elapsed() > Duration::from_secs(secs) {
+            let _ = child.kill();
+            let _ = child.wait();
+            return (false, false, String::new());
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Out-of-range parameters are refused at once with a message naming the
+/// parameter and its range, instead of running for hours (`--teeth
+/// 100000`), aborting on a failed allocation (`--duration 1e9`), taking a
+/// negative number for a flag, or designing with a non-positive force.
+/// Control: the same flags with sensible values run.
+#[test]
+fn out_of_range_parameters_are_refused_at_once() {
+    let dir = fresh_dir("range");
+    let out = s(&dir.join("sim")).to_string();
+    let refused = [
+        (&["--teeth", "100000"][..], "teeth"),
+        (&["--duration", "1e9"][..], "duration"),
+        (&["--fs", "-51200"][..], "fs"),
+        (&["--spindle-rpm", "0"][..], "spindle"),
+        (&["--frf-lines", "100000000"][..], "lines"),
+    ];
+    for (extra, word) in refused {
+        let (done, ok, err) = dynocomp_within(&[&["simulate", "--out", &out][..], extra].concat(), 20);
+        assert!(done, "{extra:?} did not finish");
+        assert!(!ok && err.contains(word) && !err.contains("panicked") && err.lines().count() == 1, "{extra:?}: {err}");
+    }
+    let (done, ok, err) = dynocomp_within(&["simulate", "--out", &out, "--duration", "0.05", "--idle-duration", "0.05", "--teeth", "8"], 120);
+    assert!(done && ok, "control: {err}");
+
+    let (frf, idle, img) = (example("frf.csv"), example("idle.csv"), dir.join("d.dcimg"));
+    let base = ["design", "--frf", &frf, "--idle", &idle, "--out", s(&img)];
+    let refused = [
+        (&["--fs", "51200", "--force-rms", "0"][..], "--force-rms 0"),
+        (&["--fs", "51200", "--force-rms", "-5"][..], "--force-rms -5"),
+        (&["--fs", "51200", "--force-rms=-5"][..], "--force-rms -5"),
+        (&["--fs", "-51200"][..], "--fs -51200"),
+        (&["--fs", "51200", "--spindle-rpm", "0", "--teeth", "4"][..], "--spindle-rpm 0"),
+        (&["--fs", "51200", "--spindle-rpm", "5000", "--teeth", "0"][..], "--teeth 0"),
+        (
+            &["--fs", "51200", "--spindle-rpm", "0", "--teeth", "4", "--force-prior", "harmonics", "--force-record", &idle][..],
+            "--spindle-rpm 0",
+        ),
+    ];
+    for (extra, want) in refused {
+        let (done, ok, err) = dynocomp_within(&[&base[..], extra].concat(), 20);
+        assert!(done, "{extra:?} did not finish");
+        assert!(!ok && err.contains(want), "{extra:?}: {err}");
+        assert!(!img.exists(), "{extra:?} wrote an image");
+    }
+}
+
+/// Random `simulate` arguments from a fixed seed (values in and far out of
+/// range, negative, non-finite): every run ends within its time with
+/// success or a one-line error, never a panic, an abort or a hang.
+#[test]
+fn random_simulate_arguments_never_panic_or_hang() {
+    use rand::{RngExt, SeedableRng};
+    let dir = fresh_dir("simfuzz");
+    let out = s(&dir.join("sim")).to_string();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(31);
+    let flags = ["--fs", "--duration", "--idle-duration", "--oversample", "--spindle-rpm", "--teeth", "--diameter", "--helix",
+        "--axial-depth", "--radial-depth", "--feed-per-tooth", "--runout-um", "--noise-variance", "--adc-bits", "--adc-range",
+        "--frf-lines", "--frf-df", "--impacts", "--hammer-cutoff", "--chatter-hz", "--ramp-in-revs"];
+    let values = ["0", "-1", "1e9", "-1e300", "nan", "inf", "3", "0.5", "100000", "1e-300", "18446744073709551616"];
+    for _ in 0..40 {
+        let mut args = vec!["simulate".to_string(), "--out".into(), out.clone(), "--duration".into(), "0.02".into(),
+            "--idle-duration".into(), "0.02".into(), "--frf-lines".into(), "200".into()];
+        for _ in 0..rng.random_range(1..4) {
+            args.push(flags[rng.random_range(0..flags.len())].to_string());
+            args.push(values[rng.random_range(0..values.len())].to_string());
+        }
+        let a: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (done, ok, err) = dynocomp_within(&a, 120);
+        assert!(done, "{a:?} did not finish");
+        assert!(ok || (err.starts_with("error") && !err.contains("panicked")), "{a:?}: {err}");
+    }
+}

@@ -36,7 +36,7 @@ pub struct CompareArgs {
 
 /// The comparison's inputs from `args`, validated, for `frf`.
 fn inputs(args: &CompareArgs, frf: &Frf) -> Result<CompareInputs> {
-    args.input.check_fs()?;
+    args.input.check_values(&args.bands)?;
     let r = args.input.noise_variances(frf)?;
     let bands = args.bands.resolve(frf, args.input.fs, args.input.max_force).with_context(|| format!("{}", args.input.frf().display()))?;
     let base = DesignOptions {

@@ -142,11 +142,7 @@ impl Options {
             check_rate_value(fs, (f, 0.0), &source, "the file's sampling interval")?;
         }
         let axes = input.axes().to_vec();
-        if let Some(r) = a.spindle_rpm {
-            if !(r.is_finite() && r > 0.0) {
-                bail!("--spindle-rpm {r}: must be > 0");
-            }
-        }
+        crate::cli::design_args::check_spindle(a.spindle_rpm, a.teeth)?;
         let tpf = a.spindle_rpm.zip(a.teeth).map(|(r, z)| r / 60.0 * f64::from(z));
         let truth = match &a.truth {
             Some(p) => {

@@ -241,12 +241,20 @@ impl DesignInputArgs {
     }
 
     /// `--fs` must be a whole number of Hz that an image can hold.
-    pub fn check_fs(&self) -> Result<()> {
+    /// `--force-rms` and `--max-noise-gain` must be positive, and the
+    /// spindle of the bands a real one.
+    pub fn check_values(&self, bands: &BandArgs) -> Result<()> {
         let fs = self.fs;
         if !(fs.is_finite() && (1_000.0..=1_000_000.0).contains(&fs) && fs.fract() == 0.0) {
             bail!("--fs {fs}: the sample rate must be a whole number of Hz in 1000..=1000000");
         }
-        Ok(())
+        if !(self.force_rms.is_finite() && self.force_rms > 0.0) {
+            bail!("--force-rms {}: the assumed in-band force must be a positive number of N", self.force_rms);
+        }
+        if !(self.max_noise_gain.is_finite() && self.max_noise_gain > 0.0) {
+            bail!("--max-noise-gain {}: must be a positive number", self.max_noise_gain);
+        }
+        check_spindle(bands.spindle_rpm, bands.teeth)
     }
 
     /// R per axis (N²) from `--idle` (sampled at `--fs`, values within
@@ -356,7 +364,7 @@ impl DesignSetup {
             (true, _) => 0,
             (false, l) => l.unwrap_or(crate::design::latency::DEFAULT_LATENCY),
         };
-        args.input.check_fs()?;
+        args.input.check_values(&args.bands)?;
         if latency > 16 {
             bail!("--latency {}: at most 16 samples", latency);
         }
@@ -393,6 +401,26 @@ impl DesignSetup {
     }
 }
 
+/// Most teeth of a cutter `--teeth` takes.
+pub const MAX_TEETH: u32 = 100;
+/// Fastest spindle `--spindle-rpm` takes (rev/min).
+pub const MAX_SPINDLE_RPM: f64 = 200_000.0;
+
+/// `--spindle-rpm` in (0, 200000] and `--teeth` in 1..=100, where given.
+pub fn check_spindle(rpm: Option<f64>, teeth: Option<u32>) -> Result<()> {
+    if let Some(r) = rpm {
+        if !(r.is_finite() && r > 0.0 && r <= MAX_SPINDLE_RPM) {
+            bail!("--spindle-rpm {r}: the spindle speed must be above 0 and at most {MAX_SPINDLE_RPM} rev/min");
+        }
+    }
+    if let Some(z) = teeth {
+        if !(1..=MAX_TEETH).contains(&z) {
+            bail!("--teeth {z}: a cutter has 1 to {MAX_TEETH} teeth");
+        }
+    }
+    Ok(())
+}
+
 /// Refuse an `--out` (or its model sidecar) that is one of the inputs:
 /// writing it would destroy that input.
 pub fn check_outputs_are_not_inputs(args: &DesignArgs) -> Result<()> {
@@ -407,6 +435,7 @@ pub fn check_outputs_are_not_inputs(args: &DesignArgs) -> Result<()> {
 
 /// Check the force-prior flags against the rest (before anything is read).
 pub fn check_prior_flags(args: &DesignArgs) -> Result<()> {
+    args.input.check_values(&args.bands)?;
     match args.prior.force_prior {
         ForcePrior::Harmonics => check_prior_args(args),
         ForcePrior::Spectrum | ForcePrior::Level => check_spectrum_args(args),

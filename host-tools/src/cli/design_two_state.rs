@@ -50,7 +50,7 @@ fn check_args(args: &DesignArgs) -> Result<usize> {
     if latency > 16 {
         bail!("--latency {latency}: at most 16 samples");
     }
-    args.input.check_fs()?;
+    args.input.check_values(&args.bands)?;
     Ok(latency)
 }
 
