@@ -404,3 +404,30 @@ fn random_simulate_arguments_never_panic_or_hang() {
         assert!(ok || (err.starts_with("error") && !err.contains("panicked")), "{a:?}: {err}");
     }
 }
+
+/// The output's format follows --output-format, else its extension, else
+/// the input's: a TDMS record compensated into `x.csv` gives CSV (it gave
+/// TDMS bytes), and --output-format that contradicts the extension is an
+/// error that writes nothing. Control: a format that fits the name works.
+#[test]
+fn output_format_and_extension_agree() {
+    let dir = fresh_dir("format");
+    let img = example_image(&dir);
+    let i = s(&img);
+    let tdms = dir.join("rec.tdms");
+    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", i, "--input", &example("measured.csv"), "--output", s(&tdms), "--raw-timing"]);
+    assert!(ok, "{err}");
+    assert_eq!(&std::fs::read(&tdms).unwrap()[..4], b"TDSm");
+    let csv = dir.join("x.csv");
+    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", i, "--input", s(&tdms), "--output", s(&csv)]);
+    assert!(ok, "{err}");
+    let text = std::fs::read(&csv).unwrap();
+    assert!(text.starts_with(b"t_s,fx") || text.starts_with(b"fx"), "{:?}", String::from_utf8_lossy(&text[..20]));
+    let bad = dir.join("y.csv");
+    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", i, "--input", s(&tdms), "--output", s(&bad), "--output-format", "tdms"]);
+    assert!(!ok && err.contains("y.csv") && err.contains("tdms"), "{err}");
+    assert!(!bad.exists());
+    let good = dir.join("y.tdms");
+    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", i, "--input", &example("measured.csv"), "--output", s(&good), "--output-format", "tdms"]);
+    assert!(ok, "{err}");
+}

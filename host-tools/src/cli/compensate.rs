@@ -27,11 +27,14 @@ pub struct CompensateArgs {
     #[arg(long)]
     pub input: PathBuf,
     /// Output force record (same channels), written atomically; its format
-    /// follows the input unless --output-format says otherwise. `-` writes
+    /// is --output-format, else the output's extension (.csv, .tdms,
+    /// .uff/.unv/.uf), else the input's. An extension that contradicts
+    /// --output-format is an error. `-` writes
     /// it to standard output (the input `-` reads CSV from standard input).
     #[arg(long)]
     pub output: PathBuf,
-    /// Output format: csv, uff (ASCII dataset 58), uff58b (binary) or tdms.
+    /// Output format: csv, uff (ASCII dataset 58), uff58b (binary) or tdms
+    /// (it must agree with the output's extension, if that names a format).
     #[arg(long, value_enum)]
     pub output_format: Option<SignalFormat>,
     /// Channel-to-axis map for UFF records whose response directions do not
@@ -177,11 +180,36 @@ impl Options {
             channels: map,
             full_scale_n: max_force,
             output: a.output.clone(),
-            output_format: a.output_format.unwrap_or(in_fmt),
+            output_format: output_format(&a.output, a.output_format, in_fmt)?,
             raw_timing: a.raw_timing,
             truth,
         };
         Ok(Options { job, axes, fs, tpf })
+    }
+}
+
+/// The format of the output `path`: `given` (`--output-format`), else the
+/// one its extension names, else the input's `input`; an error when `given`
+/// contradicts the extension (TDMS bytes in `x.csv`).
+fn output_format(path: &Path, given: Option<SignalFormat>, input: SignalFormat) -> Result<SignalFormat> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let named: Option<&[SignalFormat]> = match ext.as_deref() {
+        Some("csv") => Some(&[SignalFormat::Csv]),
+        Some("tdms") => Some(&[SignalFormat::Tdms]),
+        Some("uff" | "unv" | "uf") => Some(&[SignalFormat::Uff, SignalFormat::Uff58b]),
+        _ => None,
+    };
+    match (given, named) {
+        (Some(g), Some(n)) if !n.contains(&g) => bail!(
+            "{}: the extension .{} does not fit --output-format {}; name the output after its format",
+            path.display(),
+            ext.unwrap_or_default(),
+            clap::ValueEnum::to_possible_value(&g).map_or_else(String::new, |v| v.get_name().to_string())
+        ),
+        (Some(g), _) => Ok(g),
+        (None, Some(n)) if n.contains(&input) => Ok(input),
+        (None, Some(n)) => Ok(n[0]),
+        (None, None) => Ok(input),
     }
 }
 
