@@ -431,3 +431,55 @@ fn output_format_and_extension_agree() {
     let (ok, _, err) = dynocomp(&["compensate", "--coeffs", i, "--input", &example("measured.csv"), "--output", s(&good), "--output-format", "tdms"]);
     assert!(ok, "{err}");
 }
+
+/// `design` on the first 1 to 100 lines of a valid FRF (8-64 lines made
+/// the fit panic on a non-square matrix): an image or a one-line error,
+/// never a panic or a hang.
+#[test]
+fn design_on_a_few_frf_lines_never_panics() {
+    let dir = fresh_dir("fewlines");
+    let text = std::fs::read_to_string(example("frf.csv")).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let idle = example("idle.csv");
+    for n in [1usize, 2, 3, 5, 8, 9, 12, 16, 24, 33, 48, 64, 100] {
+        let frf = dir.join(format!("f{n}.csv"));
+        std::fs::write(&frf, lines[..=n].join("\n") + "\n").unwrap();
+        let out = dir.join(format!("f{n}.dcimg"));
+        let (done, ok, err) = dynocomp_within(&["design", "--frf", s(&frf), "--fs", "51200", "--idle", &idle, "--out", s(&out)], 300);
+        assert!(done, "{n} lines: no answer");
+        let last = err.lines().last().unwrap_or("");
+        assert!(ok || (last.starts_with("error: ") && !err.contains("panicked")), "{n} lines: {err}");
+        assert_eq!(ok, out.exists(), "{n} lines");
+    }
+}
+
+/// With the latency removed, the last L outputs have no look-ahead: the
+/// summary says so. Against the simulator's true force, their error is
+/// far above the record's (which is why it must be said); control: with
+/// --raw-timing nothing is extrapolated and nothing is said.
+#[test]
+fn the_tail_without_look_ahead_is_announced() {
+    let dir = fresh_dir("tail");
+    let img = example_image(&dir);
+    let out = dir.join("c.csv");
+    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", s(&img), "--input", &example("measured.csv"), "--output", s(&out)]);
+    assert!(ok, "{err}");
+    assert!(err.contains("the last 4 samples lack their look-ahead"), "{err}");
+    let column = |p: &Path, k: usize| -> Vec<f64> {
+        std::fs::read_to_string(p).unwrap().lines().skip(1).map(|l| l.split(',').nth(k).unwrap().parse().unwrap()).collect()
+    };
+    let truth = std::path::PathBuf::from(example("true_force.csv"));
+    let worst_ratio = (1..=3)
+        .map(|k| {
+            let (y, t) = (column(&out, k), column(&truth, k));
+            let n = y.len();
+            assert_eq!(n, t.len());
+            let interior = ((100..n - 100).map(|i| (y[i] - t[i]).powi(2)).sum::<f64>() / (n - 200) as f64).sqrt();
+            let tail = (n - 4..n).map(|i| (y[i] - t[i]).abs()).fold(0.0, f64::max);
+            tail / interior
+        })
+        .fold(0.0, f64::max);
+    assert!(worst_ratio > 5.0, "the tail's error is only {worst_ratio:.1} times the interior's RMS error");
+    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", s(&img), "--input", &example("measured.csv"), "--output", s(&out), "--raw-timing"]);
+    assert!(ok && !err.contains("look-ahead"), "{err}");
+}

@@ -380,11 +380,15 @@ fn compensate_box(
         }
     }
     let mut comp = StreamCompensator::new(image, target.axes, raw_timing, target.source)?;
-    let how = format!(
-        "box filter, latency {} samples{}, streamed in blocks of {BLOCK}",
-        image.latency_samples,
-        if raw_timing { ", not removed" } else { ", removed" }
-    );
+    let l = image.latency_samples;
+    let removed = match (raw_timing, l) {
+        (true, _) => ", not removed".to_string(),
+        (false, 0) => ", removed".to_string(),
+        // The fixed-lag smoother's last L estimates have no look-ahead: the
+        // last input is held in its place, so they are not accurate.
+        (false, l) => format!(", removed; the last {l} samples lack their look-ahead (last input held) and are less accurate"),
+    };
+    let how = format!("box filter, latency {l} samples{removed}, streamed in blocks of {BLOCK}");
     let len = reader.len_hint();
     let samples = target.write(target.has_time, len, |w| stream_box(&mut *reader, &mut comp, w, target, observed))?;
     Ok(Compensated { samples, how })
