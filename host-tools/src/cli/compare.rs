@@ -38,7 +38,10 @@ pub struct CompareArgs {
 fn inputs(args: &CompareArgs, frf: &Frf) -> Result<CompareInputs> {
     args.input.check_values(&args.bands)?;
     let r = args.input.noise_variances(frf)?;
-    let bands = args.bands.resolve(frf, args.input.fs, args.input.max_force).with_context(|| format!("{}", args.input.frf().display()))?;
+    let bands = args
+        .bands
+        .resolve(frf, args.input.fs, args.input.max_force)
+        .with_context(|| format!("{}", args.input.frf().display()))?;
     let base = DesignOptions {
         fs_hz: args.input.fs,
         lag: args.latency,

@@ -132,7 +132,8 @@ struct Options {
 impl Options {
     fn new(a: &CompensateArgs) -> Result<Self> {
         let sidecar = crate::offline::sidecar::sidecar_path(&a.coeffs);
-        let mut inputs = vec![("--input", a.input.as_path()), ("--coeffs", a.coeffs.as_path()), ("the model sidecar of --coeffs", &sidecar)];
+        let mut inputs =
+            vec![("--input", a.input.as_path()), ("--coeffs", a.coeffs.as_path()), ("the model sidecar of --coeffs", &sidecar)];
         inputs.extend(a.truth.as_deref().map(|p| ("--truth", p)));
         crate::io::atomic::ensure_not_an_input(&[("--output", &a.output)], &inputs)?;
         let img = read_any_image(&a.coeffs)?;

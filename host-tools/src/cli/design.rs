@@ -8,7 +8,9 @@ use std::time::Instant;
 
 use dynocomp_core::image::CoeffImage;
 
-use crate::cli::design_args::{check_outputs_are_not_inputs, check_prior_flags, read_force_record, DesignArgs, DesignSetup, ForcePrior, Method};
+use crate::cli::design_args::{
+    check_outputs_are_not_inputs, check_prior_flags, read_force_record, DesignArgs, DesignSetup, ForcePrior, Method,
+};
 use crate::design::axis::AxisDesign;
 use crate::design::image::build_image;
 use crate::design::latency::LatencyChoice;

@@ -491,10 +491,15 @@ fn check_spectrum_args(args: &DesignArgs) -> Result<()> {
 
 /// Read a representative record (`--force-record`) sampled at `fs_hz`,
 /// its values within ±`full_scale_n` (N).
-pub fn read_force_record(path: &std::path::Path, fs_hz: f64, full_scale_n: f64) -> Result<crate::io::signal_csv::SignalRecord> {
+pub fn read_force_record(
+    path: &std::path::Path,
+    fs_hz: f64,
+    full_scale_n: f64,
+) -> Result<crate::io::signal_csv::SignalRecord> {
     let rec = crate::io::signal_csv::read_signal_csv_checked(path, full_scale_n)?;
     if let Some(found) = rec.sample_rate_from_time() {
-        crate::io::signal::check_rate_against_fs(found, fs_hz, &path.display().to_string(), "record the cut at the box's rate")?;
+        let why = "record the cut at the box's rate";
+        crate::io::signal::check_rate_against_fs(found, fs_hz, &path.display().to_string(), why)?;
     }
     Ok(rec)
 }

@@ -386,7 +386,9 @@ fn compensate_box(
         (false, 0) => ", removed".to_string(),
         // The fixed-lag smoother's last L estimates have no look-ahead: the
         // last input is held in its place, so they are not accurate.
-        (false, l) => format!(", removed; the last {l} samples lack their look-ahead (last input held) and are less accurate"),
+        (false, l) => {
+            format!(", removed; the last {l} samples lack their look-ahead (last input held) and are less accurate")
+        }
     };
     let how = format!("box filter, latency {l} samples{removed}, streamed in blocks of {BLOCK}");
     let len = reader.len_hint();
@@ -491,7 +493,8 @@ fn smooth_spilled(
         if input.spooled() { ", with the input (a pipe) for its second reading" } else { "" }
     );
     let source = target.source;
-    let spill = Spill { dir, reopen: &|| Ok(open_signal_checked(reading.path, reading.channels, reading.full_scale_n)?.0) };
+    let (path, channels, full_scale) = (reading.path, reading.channels, reading.full_scale_n);
+    let spill = Spill { dir, reopen: &|| Ok(open_signal_checked(path, channels, full_scale)?.0) };
     match drift {
         Some((s0, s1)) => {
             let how = format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only; forward pass and covariance checkpoints {spilled})");

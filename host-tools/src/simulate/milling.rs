@@ -169,7 +169,8 @@ impl MillingParams {
             anyhow::bail!("milling parameter teeth = {} must be in 1..={}", self.teeth, super::MAX_TEETH);
         }
         if self.spindle_rpm > super::MAX_SPINDLE_RPM {
-            anyhow::bail!("milling parameter spindle_rpm = {} must be at most {}", self.spindle_rpm, super::MAX_SPINDLE_RPM);
+            let max = super::MAX_SPINDLE_RPM;
+            anyhow::bail!("milling parameter spindle_rpm = {} must be at most {max}", self.spindle_rpm);
         }
         if self.axial_slices == 0 {
             anyhow::bail!("milling parameter axial_slices must be ≥ 1");
