@@ -216,11 +216,11 @@ fn bad_images_are_refused_before_any_probe_is_opened() {
     let mid = corrupt.len() / 2;
     corrupt[mid] ^= 0x01; // CRC no longer matches
     let cases: [(&str, Vec<u8>, &str); 5] = [
-        ("corrupt.dcimg", corrupt, "BadCrc"),
-        ("offline.dcimg", common::offline_only(), "OfflineOnly"),
-        ("slow.dcimg", common::slow(), "UnsupportedSampleRate"),
-        ("unstable.dcimg", common::unstable(), "Unstable"),
-        ("empty.dcimg", Vec::new(), "Truncated"),
+        ("corrupt.dcimg", corrupt, "CRC mismatch"),
+        ("offline.dcimg", common::offline_only(), "offline-only"),
+        ("slow.dcimg", common::slow(), "sample rate 5000 Hz"),
+        ("unstable.dcimg", common::unstable(), "outside the unit circle"),
+        ("empty.dcimg", Vec::new(), "truncated"),
     ];
     for (name, bytes, why) in cases {
         let (_dir, path) = temp_image(name, &bytes);

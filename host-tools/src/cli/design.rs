@@ -8,13 +8,14 @@ use std::time::Instant;
 
 use dynocomp_core::image::CoeffImage;
 
-use crate::cli::design_args::{check_prior_flags, read_force_record, DesignArgs, DesignSetup, ForcePrior, Method};
+use crate::cli::design_args::{
+    check_outputs_are_not_inputs, check_prior_flags, read_force_record, DesignArgs, DesignSetup, ForcePrior, Method,
+};
 use crate::design::axis::AxisDesign;
 use crate::design::image::build_image;
 use crate::design::latency::LatencyChoice;
 use crate::design::versus_default::VersusDefault;
 use crate::frf::axis_name;
-use crate::io;
 use crate::offline::force_prior::{AxisPrior, PriorOptions};
 use crate::offline::smoother::build_priors;
 use crate::realize::load::LoadReport;
@@ -23,6 +24,7 @@ use crate::report::summary::{prior_line, render_summary, spectrum_line, AxisJson
 /// Run `dynocomp design`.
 pub fn run(args: &DesignArgs) -> Result<()> {
     check_prior_flags(args)?;
+    check_outputs_are_not_inputs(args)?;
     match args.input.frf.len() {
         1 => {}
         2 => return crate::cli::design_two_state::run(args),
@@ -128,7 +130,7 @@ fn harmonic_priors(args: &DesignArgs, designs: &[AxisDesign], r: &[Option<f64>; 
         return Ok(designs.iter().map(|_| None).collect());
     }
     let path = args.prior.force_record.as_ref().expect("checked by check_prior_flags");
-    let rec = read_force_record(path, args.input.fs)?;
+    let rec = read_force_record(path, args.input.fs, args.input.max_force)?;
     let opts = PriorOptions {
         spindle_rpm: args.bands.spindle_rpm.expect("checked"),
         teeth: args.bands.teeth.expect("checked"),
@@ -161,9 +163,8 @@ fn image_within_load(args: &DesignArgs, s: &DesignSetup, d: &Designed) -> Result
 /// Write the image and, for the default method, the model sidecar of
 /// `compensate --offline` ([`crate::offline::sidecar`]).
 fn write_image_and_sidecar(args: &DesignArgs, image: &CoeffImage, designs: &[AxisDesign], priors: &[Option<AxisPrior>]) -> Result<()> {
-    io::image_file::write_image(&args.out, image)?;
     if args.method == Method::Paper {
-        return Ok(());
+        return crate::offline::sidecar::write_image_and_sidecar(&args.out, image, None);
     }
     let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
     let mut sidecar = crate::offline::sidecar::ModelSidecar::new(image, &models);
@@ -174,7 +175,7 @@ fn write_image_and_sidecar(args: &DesignArgs, image: &CoeffImage, designs: &[Axi
         // no note for `compensate`.
         m.force_spectrum = d.force_spectrum.as_ref().filter(|s| !s.level_only).map(|s| s.provenance(record.clone()));
     }
-    crate::offline::sidecar::write_sidecar(&args.out, &sidecar)
+    crate::offline::sidecar::write_image_and_sidecar(&args.out, image, Some(&sidecar))
 }
 
 /// The summary (text or JSON) and the report.

@@ -18,6 +18,7 @@ pub fn run(args: &DesignArgs, setup: &DesignSetup) -> Result<()> {
     let per_band = design_parallel(frf, r, opts, bands).with_context(|| format!("{}", args.input.frf().display()))?;
     let image = build_parallel_image(&per_band, bands, args.input.fs as u32, latency, args.full_scale, sha)?;
     crate::io::image_file::write_parallel_image(&args.out, &image)?;
+    crate::offline::sidecar::remove_stale_sidecar(&args.out)?;
     let id = image.id();
     let method = args.method.name();
     let shown = args.out.display().to_string();

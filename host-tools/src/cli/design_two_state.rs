@@ -51,7 +51,7 @@ fn check_args(args: &DesignArgs) -> Result<usize> {
     if latency > 16 {
         bail!("--latency {latency}: at most 16 samples");
     }
-    args.input.check_fs()?;
+    args.input.check_values(&args.bands)?;
     Ok(latency)
 }
 
@@ -127,7 +127,6 @@ fn write_image_and_sidecar(
     designs: &[AxisDesign],
     axes: &[RangeAxis],
 ) -> Result<()> {
-    io::image_file::write_image(&args.out, image)?;
     let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
     let mut sidecar = crate::offline::sidecar::ModelSidecar::new(image, &models);
     for a in axes {
@@ -135,7 +134,7 @@ fn write_image_and_sidecar(
             m.two_state = Some(a.sidecar.clone());
         }
     }
-    crate::offline::sidecar::write_sidecar(&args.out, &sidecar)
+    crate::offline::sidecar::write_image_and_sidecar(&args.out, image, Some(&sidecar))
 }
 
 /// The summary (text or JSON) and the report, with each axis's range plot.

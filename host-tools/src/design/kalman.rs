@@ -253,7 +253,7 @@ pub fn design(dm: &DiscreteModel, q: f64, r: f64, lag: usize) -> Result<KalmanDe
         c: i_kc.row(out).transpose(),
         d: k[out],
     };
-    let radius = comp.spectral_radius();
+    let radius = comp.spectral_radius()?;
     if !(radius < 1.0) {
         bail!("Kalman compensator is not stable (spectral radius {radius:.9}); the fitted model may be unobservable");
     }

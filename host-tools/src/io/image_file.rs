@@ -28,10 +28,16 @@ pub fn encode_image(image: &CoeffImage) -> Result<Vec<u8>> {
 /// Encode and write an image atomically, then read it back and check that it
 /// decodes to the same value (the file on disk is what the box will get).
 pub fn write_image(path: &Path, image: &CoeffImage) -> Result<()> {
+    write_bytes_atomic(path, &encode_image_checked(path, image)?)
+}
+
+/// The bytes of `image` (to be written at `path`), checked to decode to the
+/// same value.
+pub fn encode_image_checked(path: &Path, image: &CoeffImage) -> Result<Vec<u8>> {
     let bytes = encode_image(image)?;
     let back = CoeffImage::parse(&bytes).map_err(|e| anyhow::anyhow!("{}: encoded image does not parse: {e}", path.display()))?;
     anyhow::ensure!(back == *image, "{}: encoded image does not decode to the design", path.display());
-    write_bytes_atomic(path, &bytes)
+    Ok(bytes)
 }
 
 /// Any coefficient image file: a per-axis box image (format 1), a

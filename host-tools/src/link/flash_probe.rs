@@ -88,7 +88,7 @@ pub fn read_box_image(path: &Path) -> Result<(Vec<u8>, BoxImage)> {
             dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE / 10
         ),
         e => anyhow::anyhow!(
-            "{}: not a valid coefficient image for the box ({e:?}); nothing was written — re-run `dynocomp design` or check the file",
+            "{}: not a valid coefficient image for the box ({e}); nothing was written — re-run `dynocomp design` or check the file",
             path.display()
         ),
     })?;
@@ -108,7 +108,7 @@ pub fn running_slot(slots: &[u8]) -> Result<Option<SlotInfo>> {
     let mut flash = SimFlash::g474_slots();
     flash.bytes_mut().copy_from_slice(slots);
     let mut store = Store::open(flash, Layout::STM32G474RE)
-        .map_err(|e| anyhow::anyhow!("store layout refused: {e:?}"))?;
+        .map_err(|e| anyhow::anyhow!("store layout refused: {e}"))?;
     Ok(store.boot().active)
 }
 
@@ -154,7 +154,7 @@ pub fn plan(image: &[u8], slot: SlotArg, slots: &[u8]) -> Result<FlashPlan> {
     let seq = newest_seq.map_or(1, |s| s.wrapping_add(1));
     let mut record = vec![0xFF; SLOT_LEN as usize];
     let n = encode_record(image, seq, &mut record)
-        .map_err(|e| anyhow::anyhow!("image does not fit a slot record: {e:?}"))?;
+        .map_err(|e| anyhow::anyhow!("image does not fit a slot record: {e}"))?;
     record.truncate(n);
     Ok(FlashPlan {
         slot: target,
@@ -242,7 +242,7 @@ fn real_session(chip: &str) -> Result<Session> {
 /// One-line description of a plan.
 pub fn describe(plan: &FlashPlan) -> String {
     format!(
-        "slot {:?} at {:#010x}: record of {} bytes (image id {:#010x}, sequence {})",
+        "slot {} at {:#010x}: record of {} bytes (image id {:#010x}, sequence {})",
         plan.slot,
         plan.address,
         plan.record.len(),

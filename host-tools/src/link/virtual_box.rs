@@ -74,7 +74,7 @@ impl VirtualBox {
     /// Boot from `flash`; stream frames whose sequence numbers are in `drop`
     /// are never sent (simulated loss on the link).
     pub fn boot(flash: SimFlash, drop: impl IntoIterator<Item = u32>) -> Result<VirtualBox> {
-        let mut store = Store::open(flash, Layout::STM32G474RE).map_err(|e| anyhow::anyhow!("simulated flash: {e:?}"))?;
+        let mut store = Store::open(flash, Layout::STM32G474RE).map_err(|e| anyhow::anyhow!("simulated flash: {e}"))?;
         let boot = store.boot();
         let (image, boot_reason) = match boot.image {
             Ok(img) => (Some(img), BypassReason::NoImage),

@@ -164,9 +164,12 @@ impl StateSpace {
         None
     }
 
-    /// Largest eigenvalue modulus of A.
-    pub fn spectral_radius(&self) -> f64 {
-        self.a.complex_eigenvalues().iter().map(|z| z.norm()).fold(0.0, f64::max)
+    /// Largest eigenvalue modulus of A; an error if the eigenvalue
+    /// iteration does not converge within its limit
+    /// ([`crate::fit::linalg::eigenvalues`]).
+    pub fn spectral_radius(&self) -> anyhow::Result<f64> {
+        let eig = crate::fit::linalg::eigenvalues(&self.a, "the compensator's state matrix A")?;
+        Ok(eig.iter().map(|z| z.norm()).fold(0.0, f64::max))
     }
 }
 

@@ -301,7 +301,8 @@ fn scaled_least_squares(mut a: DMatrix<f64>, b: &DVector<f64>) -> Option<(Vec<f6
     for (c, s) in scale.iter().enumerate() {
         a.column_mut(c).scale_mut(1.0 / s);
     }
-    let svd = a.tr_mul(&a).svd(true, true);
+    // No convergence within the iteration limit: no solution.
+    let svd = crate::fit::linalg::svd(a.tr_mul(&a), "the joint two-state fit").ok()?;
     let (smax, smin) = (svd.singular_values.max(), svd.singular_values.min());
     if !(smin > 0.0 && smax / smin <= MAX_COND * MAX_COND) {
         return None;
