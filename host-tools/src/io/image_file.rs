@@ -74,11 +74,17 @@ impl AnyImage {
 /// field).
 pub fn read_any_image(path: &Path) -> Result<AnyImage> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let bad = |e: ImageError| anyhow::anyhow!("{}: invalid coefficient image: {e}", path.display());
-    if peek_version(&bytes) == Some(PARALLEL_FORMAT_VERSION) {
-        Ok(AnyImage::Parallel(Box::new(ParallelImage::parse(&bytes).map_err(bad)?)))
+    parse_any_image(&bytes, &path.display().to_string())
+}
+
+/// Validate the bytes of an image of either format; `source` names them in
+/// messages.
+pub fn parse_any_image(bytes: &[u8], source: &str) -> Result<AnyImage> {
+    let bad = |e: ImageError| anyhow::anyhow!("{source}: invalid coefficient image: {e}");
+    if peek_version(bytes) == Some(PARALLEL_FORMAT_VERSION) {
+        Ok(AnyImage::Parallel(Box::new(ParallelImage::parse(bytes).map_err(bad)?)))
     } else {
-        Ok(AnyImage::Inline(CoeffImage::parse(&bytes).map_err(bad)?))
+        Ok(AnyImage::Inline(CoeffImage::parse(bytes).map_err(bad)?))
     }
 }
 
