@@ -53,7 +53,13 @@ pub fn compensate_record(image: &CoeffImage, rec: &SignalRecord, raw_timing: boo
 /// [`compensate_record`] aligns them. For callers whose samples are not a
 /// [`SignalRecord`] (e.g. arrays of another language): the one conversion
 /// to f32 is theirs, the kernel run is this one.
-pub fn compensate_f32(image: &CoeffImage, axes: &[usize], inputs: Vec<Vec<f32>>, raw_timing: bool, source: &str) -> Result<Vec<Vec<f64>>> {
+pub fn compensate_f32(
+    image: &CoeffImage,
+    axes: &[usize],
+    inputs: Vec<Vec<f32>>,
+    raw_timing: bool,
+    source: &str,
+) -> Result<Vec<Vec<f64>>> {
     let latency = if raw_timing { 0 } else { usize::from(image.latency_samples) };
     let mut jobs = Vec::with_capacity(axes.len());
     for (axis, input) in axes.iter().zip(inputs) {
