@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::bail;
-use numpy::{Complex64, PyArray1, PyReadonlyArray1};
+use numpy::{Complex64, PyArray1, PyArrayMethods, PyReadonlyArray1};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
@@ -14,7 +14,7 @@ use pyo3::types::PyBytes;
 use dynocomp::frf::axis_name;
 use dynocomp::io::image_file::{parse_any_image, AnyImage};
 use dynocomp::io::signal_csv::SignalRecord;
-use dynocomp::offline::compensate::{compensate_f32, compensate_parallel, StreamCompensator};
+use dynocomp::offline::compensate::{compensate_f32, compensate_f32_into, compensate_parallel, StreamCompensator};
 use dynocomp::offline::sidecar::{parse_sidecar, read_sidecar, ModelSidecar};
 use dynocomp_core::image::CoeffImage;
 
@@ -245,35 +245,39 @@ impl Image {
         let (n, one_d) = (view.len(), view.shape().len() == 1);
         let axes = self.channel_axes(view.channels(), axes)?;
         let source = self.source.as_str();
+        if let (AnyImage::Inline(image), false) = (&self.any, offline) {
+            // The box's filter writes straight into the result array.
+            let out = numpy::PyArray2::<f64>::zeros(py, [n, axes.len()], true);
+            {
+                let mut rw = out.readwrite();
+                let flat = rw.as_slice_mut().expect("a new Fortran-order array is contiguous");
+                let mut sinks: Vec<&mut [f64]> = if n == 0 {
+                    std::iter::repeat_with(<&mut [f64]>::default).take(axes.len()).collect()
+                } else {
+                    flat.chunks_mut(n).collect()
+                };
+                py.detach(|| {
+                    let inputs = view.columns_f32(usize::from(image.latency_samples));
+                    guarded(|| compensate_f32_into(image, &axes, inputs, raw_timing, source, &mut sinks))
+                })?;
+            }
+            return Ok(if one_d { out.into_any().call_method1("ravel", ("F",))? } else { out.into_any() });
+        }
         let out = py.detach(|| {
             guarded(|| match (&self.any, offline) {
-                (AnyImage::Inline(image), false) => compensate_f32(
-                    image,
-                    &axes,
-                    view.columns_f32(usize::from(image.latency_samples)),
-                    raw_timing,
-                    source,
-                ),
+                (AnyImage::Inline(image), false) => {
+                    compensate_f32(image, &axes, view.columns_f32(usize::from(image.latency_samples)), raw_timing, source)
+                }
                 (AnyImage::Parallel(p), false) => {
-                    let rec = SignalRecord {
-                        t_s: None,
-                        channels: axes.iter().copied().zip(view.columns_f64()).collect(),
-                    };
-                    Ok(compensate_parallel(p, &rec, raw_timing, source)?
-                        .channels
-                        .into_iter()
-                        .map(|c| c.1)
-                        .collect())
+                    let rec = SignalRecord { t_s: None, channels: axes.iter().copied().zip(view.columns_f64()).collect() };
+                    Ok(compensate_parallel(p, &rec, raw_timing, source)?.channels.into_iter().map(|c| c.1).collect())
                 }
                 (AnyImage::Inline(image), true) => {
                     let mut sidecar = self.model_sidecar(image)?;
                     if !force_prior {
                         sidecar.axes.iter_mut().for_each(|m| m.force_prior = None);
                     }
-                    let rec = SignalRecord {
-                        t_s: None,
-                        channels: axes.iter().copied().zip(view.columns_f64()).collect(),
-                    };
+                    let rec = SignalRecord { t_s: None, channels: axes.iter().copied().zip(view.columns_f64()).collect() };
                     let out = dynocomp::offline::smoother::smooth_record(image, &sidecar, &rec, source)?;
                     Ok(out.channels.into_iter().map(|c| c.1).collect())
                 }

@@ -60,19 +60,46 @@ pub fn compensate_f32(
     raw_timing: bool,
     source: &str,
 ) -> Result<Vec<Vec<f64>>> {
+    let mut outputs: Vec<Vec<f64>> = inputs.iter().map(|u| vec![0.0; u.len()]).collect();
+    let mut sinks: Vec<&mut [f64]> = outputs.iter_mut().map(Vec::as_mut_slice).collect();
+    compensate_f32_into(image, axes, inputs, raw_timing, source, &mut sinks)?;
+    Ok(outputs)
+}
+
+/// [`compensate_f32`] writing channel c's outputs (N) into `outputs[c]`,
+/// which has its input's length: a caller's own buffer (e.g. an array of
+/// another language), written once.
+pub fn compensate_f32_into(
+    image: &CoeffImage,
+    axes: &[usize],
+    inputs: Vec<Vec<f32>>,
+    raw_timing: bool,
+    source: &str,
+    outputs: &mut [&mut [f64]],
+) -> Result<()> {
     let latency = if raw_timing { 0 } else { usize::from(image.latency_samples) };
+    anyhow::ensure!(
+        outputs.len() == axes.len()
+            && inputs.len() == axes.len()
+            && inputs.iter().zip(&*outputs).all(|(u, o)| u.len() == o.len()),
+        "{source}: one output of its input's length per channel"
+    );
     let mut jobs = Vec::with_capacity(axes.len());
     for (axis, input) in axes.iter().zip(inputs) {
         jobs.push((axis_filter(image, *axis, source)?, input));
     }
-    let mut channels = Vec::with_capacity(jobs.len());
-    for (axis, out) in axes.iter().zip(run_axes_f32(jobs, latency)) {
-        match out {
-            Ok(out) => channels.push(out),
-            Err(k) => bail!("{source}: compensated f{} became non-finite at sample {k}; the image is unusable for this record", axis_name(*axis)),
+    for ((axis, y), out) in axes.iter().zip(run_kernel(jobs, latency)).zip(outputs.iter_mut()) {
+        if let Some(k) = y.iter().position(|v| !v.is_finite()) {
+            bail!(
+                "{source}: compensated f{} became non-finite at sample {k}; the image is unusable for this record",
+                axis_name(*axis)
+            );
+        }
+        for (o, &v) in out.iter_mut().zip(&y[latency..]) {
+            *o = f64::from(v);
         }
     }
-    Ok(channels)
+    Ok(())
 }
 
 /// The image's compensator for the record's column of `axis`; an error
@@ -88,11 +115,19 @@ fn axis_filter<'a>(image: &'a CoeffImage, axis: usize, source: &str) -> Result<&
     }
 }
 
+/// Every axis through [`run_kernel`], inputs in f64, outputs without the
+/// first `latency`; Err(k): the first sample k (counting the fed samples)
+/// whose output is non-finite.
+#[cfg(test)]
+fn run_axes(axes: &[(&AxisFilter, &[f64])], latency: usize) -> Vec<Result<Vec<f64>, usize>> {
+    let inputs = axes.iter().map(|(f, x)| (*f, x.iter().map(|&u| u as f32).collect())).collect();
+    run_kernel(inputs, latency).iter().map(|y| drop_latency(y, latency)).collect()
+}
+
 /// Every axis through the core kernel's block path (bit-identical to stepping
 /// it sample by sample, as the box does), each input followed by `latency`
-/// copies of its last value and the first `latency` outputs dropped; the
-/// results in the order of `axes`. Err(k): the first sample k (counting the
-/// fed samples) whose output is non-finite.
+/// copies of its last value: the f32 outputs in the order of `axes`, each
+/// `latency` samples longer than its input (the first `latency` to drop).
 ///
 /// The axes are independent. Up to [`LOCKSTEP_AXES`] of them run in
 /// lockstep on this thread, one per vector lane ([`process_blocks`], the
@@ -101,20 +136,13 @@ fn axis_filter<'a>(image: &'a CoeffImage, axis: usize, source: &str) -> Result<&
 /// time of three in turn (BENCHMARKS.md). That beats giving axes threads of
 /// their own: on two cores, x and y in lockstep on one and z on the other
 /// took 1.24x as long as all three in lockstep on one.
-#[cfg(test)]
-fn run_axes(axes: &[(&AxisFilter, &[f64])], latency: usize) -> Vec<Result<Vec<f64>, usize>> {
-    run_axes_f32(axes.iter().map(|(f, x)| (*f, x.iter().map(|&u| u as f32).collect())).collect(), latency)
-}
-
-/// [`run_axes`] on inputs already in f32 (the record's conversion done by
-/// the caller, once).
-fn run_axes_f32(mut axes: Vec<(&AxisFilter, Vec<f32>)>, latency: usize) -> Vec<Result<Vec<f64>, usize>> {
+fn run_kernel(mut axes: Vec<(&AxisFilter, Vec<f32>)>, latency: usize) -> Vec<Vec<f32>> {
     axes.chunks_mut(LOCKSTEP_AXES).flat_map(|group| run_group(group, latency)).collect()
 }
 
-/// The axes of one group of [`run_axes`], in lockstep; each input is
+/// The axes of one group of [`run_kernel`], in lockstep; each input is
 /// extended in place by `latency` copies of its last value.
-fn run_group(group: &mut [(&AxisFilter, Vec<f32>)], latency: usize) -> Vec<Result<Vec<f64>, usize>> {
+fn run_group(group: &mut [(&AxisFilter, Vec<f32>)], latency: usize) -> Vec<Vec<f32>> {
     for (_, input) in group.iter_mut() {
         let last = input.last().copied().unwrap_or(0.0);
         input.resize(input.len() + latency, last);
@@ -127,11 +155,12 @@ fn run_group(group: &mut [(&AxisFilter, Vec<f32>)], latency: usize) -> Vec<Resul
         .map(|((filter, input), (output, state))| BlockJob { filter, state, input, output })
         .collect();
     process_blocks(&mut jobs);
-    outputs.iter().map(|y| drop_latency(y, latency)).collect()
+    outputs
 }
 
 /// The kernel's outputs as f64 without the first `latency`; Err(k): the
 /// first non-finite output k.
+#[cfg(test)]
 fn drop_latency(y: &[f32], latency: usize) -> Result<Vec<f64>, usize> {
     match y.iter().position(|v| !v.is_finite()) {
         Some(k) => Err(k),
