@@ -33,8 +33,10 @@ CARGO_TARGET_DIR="$tgt/python-ext" "$venv/bin/python" -m pip install -q --disabl
 echo "python: built and installed the extension in $(( $(date +%s) - t0 )) s"
 
 # The tests compare against the CLI's own outputs: the same release binary
-# the demo builds.
-cargo build --release -q -p dynocomp --bin dynocomp
-export DYNOCOMP_BIN="$PWD/$tgt/release/dynocomp"
+# the demo builds (or DYNOCOMP_BIN, a `dynocomp` built already).
+if [ -z "${DYNOCOMP_BIN:-}" ]; then
+    cargo build --release -q -p dynocomp --bin dynocomp
+    export DYNOCOMP_BIN="$PWD/$tgt/release/dynocomp"
+fi
 "$venv/bin/python" -m pytest -q python/tests
 "$venv/bin/python" python/examples/run_notebook.py python/examples/quickstart.ipynb
