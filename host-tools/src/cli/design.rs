@@ -21,8 +21,17 @@ use crate::offline::smoother::build_priors;
 use crate::realize::load::LoadReport;
 use crate::report::summary::{prior_line, render_summary, spectrum_line, AxisJson, DesignJson};
 
-/// Run `dynocomp design`.
+/// Run `dynocomp design`: the summary (text or JSON) on stdout.
 pub fn run(args: &DesignArgs) -> Result<()> {
+    print!("{}", design(args)?);
+    Ok(())
+}
+
+/// Everything `dynocomp design` does (image, sidecar, report; progress on
+/// stderr) except printing: returns the summary, text or with `--json` the
+/// JSON document, that it prints on stdout. Other front ends (the Python
+/// package) call this with the same arguments.
+pub fn design(args: &DesignArgs) -> Result<String> {
     check_prior_flags(args)?;
     check_outputs_are_not_inputs(args)?;
     match args.input.frf.len() {
@@ -187,7 +196,7 @@ fn render(
     image: &CoeffImage,
     box_load: LoadReport,
     t0: Instant,
-) -> Result<()> {
+) -> Result<String> {
     let (designs, latency) = (&d.designs, d.latency);
     let id = image.id();
     let mut sensitivities = crate::design::sensitivity::predict_all(designs, &s.opts);
@@ -225,9 +234,8 @@ fn render(
         eprintln!("report: {} files in {} (open index.html)", files.len(), dir.display());
     }
     if !args.json {
-        print!("{summary}");
         eprintln!("designed in {:.0} ms", t0.elapsed().as_secs_f64() * 1e3);
-        return Ok(());
+        return Ok(summary);
     }
     let axes = (0..designs.len()).map(|i| AxisJson::new(&designs[i], d.times[i], priors[i].as_ref(), &sensitivities[i])).collect();
     let j = DesignJson {
@@ -248,6 +256,5 @@ fn render(
         box_load,
         axes,
     };
-    println!("{}", serde_json::to_string_pretty(&j)?);
-    Ok(())
+    Ok(format!("{}\n", serde_json::to_string_pretty(&j)?))
 }

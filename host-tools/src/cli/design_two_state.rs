@@ -21,8 +21,8 @@ use crate::offline::sidecar::TwoStateJson;
 use crate::report::summary::render_summary;
 use crate::report::two_state::{RangeAxisJson, RangeJson};
 
-/// Run `design` with two FRFs.
-pub fn run(args: &DesignArgs) -> Result<()> {
+/// Run `design` with two FRFs; returns the summary (text or JSON) for stdout.
+pub fn run(args: &DesignArgs) -> Result<String> {
     let latency = check_args(args)?;
     let frfs = TwoFrfs::read(args)?;
     let r = args.input.noise_variances(&frfs.before)?;
@@ -146,7 +146,7 @@ fn render(
     sensitivities: &[Option<Sensitivity>],
     image: &CoeffImage,
     latency: usize,
-) -> Result<()> {
+) -> Result<String> {
     let shown = args.out.display().to_string();
     let mut summary = render_summary(designs, sensitivities, args.input.fs, latency, &shown, image.id(), "vf");
     for a in axes {
@@ -171,8 +171,7 @@ fn render(
         crate::report::design::write_report_with(dir, frf, designs, sensitivities, args.input.fs, &summary, &extra)?;
     }
     if !args.json {
-        print!("{summary}");
-        return Ok(());
+        return Ok(summary);
     }
     let j = RangeJson {
         image: shown,
@@ -187,6 +186,5 @@ fn render(
             .map(|(a, s)| RangeAxisJson::new(axis_name(a.axis), &a.range, s.clone()))
             .collect(),
     };
-    println!("{}", serde_json::to_string_pretty(&j)?);
-    Ok(())
+    Ok(format!("{}\n", serde_json::to_string_pretty(&j)?))
 }

@@ -404,7 +404,7 @@ fn compensate_box(
 /// rate. Returns the samples written.
 fn stream_box(
     reader: &mut dyn SignalReader,
-    comp: &mut StreamCompensator<'_>,
+    comp: &mut StreamCompensator,
     w: &mut dyn SignalWriter,
     target: &Target<'_>,
     observed: &mut Observed<'_>,
