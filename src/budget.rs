@@ -395,10 +395,10 @@ impl MimoCostModel {
             .add_scaled(self.pair, s.pairs)
             .add_scaled(self.diagonal, s.diagonals)
             .add_scaled(self.section_setup, u32::from(sections > 0))
-            .add_scaled(self.even_sections, u32::from(sections > 0 && sections % 2 == 0))
+            .add_scaled(self.even_sections, u32::from(sections > 0 && sections.is_multiple_of(2)))
             .add_scaled(self.tap, s.taps)
             .add_scaled(self.fir_setup, u32::from(s.taps > 0))
-            .add_scaled(self.even_taps, u32::from(s.taps > 0 && s.taps % 2 == 0));
+            .add_scaled(self.even_taps, u32::from(s.taps > 0 && s.taps.is_multiple_of(2)));
         Cost { low: c.low.div_ceil(100), high: c.high.div_ceil(100) }
     }
 }
