@@ -44,7 +44,8 @@ pub const SECTION_LEN: usize = 32;
 /// Size of the trailing CRC.
 pub const CRC_LEN: usize = 4;
 /// Largest possible image (3 axes × 24 sections × 24 FIR taps).
-pub const MAX_IMAGE_LEN: usize = HEADER_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN + MAX_FIR * TAP_LEN) + CRC_LEN;
+pub const MAX_IMAGE_LEN: usize =
+    HEADER_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN + MAX_FIR * TAP_LEN) + CRC_LEN;
 /// Smallest valid image (1 axis, 0 sections, no taps).
 pub const MIN_IMAGE_LEN: usize = HEADER_LEN + AXIS_HEADER_LEN + CRC_LEN;
 
@@ -57,8 +58,9 @@ pub const MAX_BANDS: usize = 8;
 pub const BAND_RECORD_LEN: usize = 8;
 /// Largest possible parallel image ([`MAX_BANDS`] bands × 3 full axes). It
 /// is larger than a flash slot: parallel images only live in files.
-pub const MAX_PARALLEL_IMAGE_LEN: usize =
-    HEADER_LEN + MAX_BANDS * (BAND_RECORD_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN + MAX_FIR * TAP_LEN)) + CRC_LEN;
+pub const MAX_PARALLEL_IMAGE_LEN: usize = HEADER_LEN
+    + MAX_BANDS * (BAND_RECORD_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN + MAX_FIR * TAP_LEN))
+    + CRC_LEN;
 
 /// Accepted sample-rate range of an image (Hz). The box itself narrows this
 /// to what its hardware supports.
@@ -107,11 +109,14 @@ pub const MIMO_TAP_LEN: usize = 36;
 /// reserved byte).
 pub const ROW_RECORD_LEN: usize = 4;
 /// Smallest 3x3 image (a pure 3x3 gain: no section, no tap).
-pub const MIN_MATRIX_IMAGE_LEN: usize = HEADER_LEN + MIMO_AXES * MATRIX_AXIS_LEN + MATRIX_FILTER_HEADER_LEN + ROW_RECORD_LEN + CRC_LEN;
+pub const MIN_MATRIX_IMAGE_LEN: usize =
+    HEADER_LEN + MIMO_AXES * MATRIX_AXIS_LEN + MATRIX_FILTER_HEADER_LEN + ROW_RECORD_LEN + CRC_LEN;
 /// Largest 3x3 image ([`MAX_MIMO_SECTIONS`] sections, [`MAX_MIMO_FIR`] taps).
-pub const MAX_MATRIX_IMAGE_LEN: usize = MIN_MATRIX_IMAGE_LEN + MAX_MIMO_SECTIONS * MIMO_SECTION_LEN + MAX_MIMO_FIR * MIMO_TAP_LEN;
+pub const MAX_MATRIX_IMAGE_LEN: usize =
+    MIN_MATRIX_IMAGE_LEN + MAX_MIMO_SECTIONS * MIMO_SECTION_LEN + MAX_MIMO_FIR * MIMO_TAP_LEN;
 /// Largest image the box runs (either version): what a flash slot must hold.
-pub const MAX_BOX_IMAGE_LEN: usize = if MAX_MATRIX_IMAGE_LEN > MAX_IMAGE_LEN { MAX_MATRIX_IMAGE_LEN } else { MAX_IMAGE_LEN };
+pub const MAX_BOX_IMAGE_LEN: usize =
+    if MAX_MATRIX_IMAGE_LEN > MAX_IMAGE_LEN { MAX_MATRIX_IMAGE_LEN } else { MAX_IMAGE_LEN };
 /// Largest deviation of a 3x3 filter's DC gain row from the identity row,
 /// `Σ_j |H_ij(1) − δ_ij|` (N/N). A dynamometer's static matrix is the
 /// identity within its calibration (sensitivity ≲ 1 %) and its static
@@ -721,9 +726,7 @@ fn write_header(w: &mut Writer<'_>, version: u16, len: usize, h: &Header) {
 /// The CRC stored at the end of the `n` encoded bytes in `buf` (0 if the
 /// encoding failed): the image id.
 fn stored_crc(buf: &[u8], n: Result<usize, ImageError>) -> u32 {
-    n.ok()
-        .and_then(|n| Reader { buf, pos: n.checked_sub(CRC_LEN)? }.u32())
-        .unwrap_or(0)
+    n.ok().and_then(|n| Reader { buf, pos: n.checked_sub(CRC_LEN)? }.u32()).unwrap_or(0)
 }
 
 /// Append the CRC of everything written so far; returns the total length.
@@ -803,11 +806,7 @@ fn read_axis(r: &mut Reader<'_>, expected: u8, bad_len: ImageError) -> Result<Ax
         for x in v.iter_mut() {
             *x = r.f32().ok_or(bad_len)?;
         }
-        *sec = Section {
-            delta: [v[0], v[1], v[2], v[3]],
-            b: [v[4], v[5]],
-            c: [v[6], v[7]],
-        };
+        *sec = Section { delta: [v[0], v[1], v[2], v[3]], b: [v[4], v[5]], c: [v[6], v[7]] };
     }
     let mut taps = [0f32; MAX_FIR];
     for h in taps.iter_mut().take(usize::from(n_taps)) {
@@ -817,10 +816,9 @@ fn read_axis(r: &mut Reader<'_>, expected: u8, bad_len: ImageError) -> Result<Ax
     let fir = taps.get(..usize::from(n_taps)).unwrap_or(&[]);
     let filter = AxisFilter::with_fir(secs, d, fir).map_err(|e| match e {
         FilterError::TooManySections => ImageError::TooManySections { axis, count },
-        FilterError::NonFinite(s) => ImageError::NonFiniteCoefficient {
-            axis,
-            section: if s >= MAX_SECTIONS { 255 } else { s as u8 },
-        },
+        FilterError::NonFinite(s) => {
+            ImageError::NonFiniteCoefficient { axis, section: if s >= MAX_SECTIONS { 255 } else { s as u8 } }
+        }
         FilterError::Unstable(s) => ImageError::UnstableSection { axis, section: s as u8 },
         FilterError::TooManyTaps => ImageError::TooManyTaps { axis, count: n_taps },
         FilterError::NonFiniteTap(t) => ImageError::NonFiniteTap { axis, tap: t as u8 },
@@ -842,10 +840,7 @@ fn read_axes(r: &mut Reader<'_>, mask: u8, bad_len: ImageError) -> Result<[Optio
 
 /// Axis mask of an axis array: bit i set when axis i is present.
 fn mask_of(axes: &[Option<AxisImage>; AXES]) -> u8 {
-    axes.iter()
-        .enumerate()
-        .filter(|(_, a)| a.is_some())
-        .fold(0, |m, (i, _)| m | (1 << i))
+    axes.iter().enumerate().filter(|(_, a)| a.is_some()).fold(0, |m, (i, _)| m | (1 << i))
 }
 
 /// Header checks shared by both versions (steps 14-16).
@@ -865,15 +860,12 @@ fn validate_header(fs_hz: u32, latency_samples: u16, flags: u8) -> Result<(), Im
 /// Scaling finite with non-zero gains, then summary finite and ≥ 0
 /// (steps 17-18 of version 1; the same for every axis of version 3).
 fn validate_channel(axis: u8, s: &AxisScaling, m: &AxisSummary) -> Result<(), ImageError> {
-    let finite = [s.adc_offset_code, s.newton_per_code, s.dac_code_per_newton, s.dac_offset_code]
-        .iter()
-        .all(|v| v.is_finite());
+    let finite =
+        [s.adc_offset_code, s.newton_per_code, s.dac_code_per_newton, s.dac_offset_code].iter().all(|v| v.is_finite());
     if !finite || s.newton_per_code == 0.0 || s.dac_code_per_newton == 0.0 {
         return Err(ImageError::BadScaling { axis });
     }
-    let ok = [m.fit_nrmse, m.flat_lo_hz, m.flat_hi_hz, m.noise_gain]
-        .iter()
-        .all(|v| v.is_finite() && *v >= 0.0)
+    let ok = [m.fit_nrmse, m.flat_lo_hz, m.flat_hi_hz, m.noise_gain].iter().all(|v| v.is_finite() && *v >= 0.0)
         && m.q.is_finite()
         && m.q >= 0.0
         && m.r.is_finite()
@@ -1184,7 +1176,11 @@ impl ParallelImage {
         let mut prev_hi = 0.0f32;
         for (k, b) in self.bands().iter().enumerate() {
             let band = k as u8;
-            let edges_ok = b.lo_hz.is_finite() && b.hi_hz.is_finite() && b.lo_hz >= prev_hi && b.hi_hz > b.lo_hz && b.hi_hz <= nyquist;
+            let edges_ok = b.lo_hz.is_finite()
+                && b.hi_hz.is_finite()
+                && b.lo_hz >= prev_hi
+                && b.hi_hz > b.lo_hz
+                && b.hi_hz <= nyquist;
             if !edges_ok {
                 return Err(ImageError::BadBand { band });
             }
@@ -1551,11 +1547,8 @@ impl MatrixImage {
             return Err(ImageError::BadAxisMask(h.mask));
         }
         let method = DesignMethod::from_u8(h.method_code).ok_or(ImageError::UnknownMethod(h.method_code))?;
-        let axes = [
-            read_channel(&mut r, 0, bad_len)?,
-            read_channel(&mut r, 1, bad_len)?,
-            read_channel(&mut r, 2, bad_len)?,
-        ];
+        let axes =
+            [read_channel(&mut r, 0, bad_len)?, read_channel(&mut r, 1, bad_len)?, read_channel(&mut r, 2, bad_len)?];
         let n_sections = r.u8().ok_or(bad_len)?;
         if usize::from(n_sections) > MAX_MIMO_SECTIONS {
             return Err(ImageError::MatrixTooManySections(n_sections));
@@ -1597,9 +1590,9 @@ impl MatrixImage {
         let filter = MimoFilter::new(secs, d, fir).map_err(|e| match e {
             FilterError::TooManySections => ImageError::MatrixTooManySections(n_sections),
             FilterError::TooManyTaps => ImageError::MatrixTooManyTaps(n_taps),
-            FilterError::NonFinite(s) => ImageError::MatrixNonFinite {
-                section: if s >= MAX_MIMO_SECTIONS { 255 } else { s as u8 },
-            },
+            FilterError::NonFinite(s) => {
+                ImageError::MatrixNonFinite { section: if s >= MAX_MIMO_SECTIONS { 255 } else { s as u8 } }
+            }
             FilterError::NonFiniteTap(t) => ImageError::MatrixNonFiniteTap { tap: t as u8 },
             FilterError::Unstable(s) => ImageError::MatrixUnstableSection { section: s as u8 },
             FilterError::NotModal(s) => ImageError::MatrixNotModalSection { section: s as u8 },

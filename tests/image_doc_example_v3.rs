@@ -22,7 +22,12 @@ fn example_image() -> MatrixImage {
     let d = [[0.5, 0.0, 0.0], [-0.25, 1.0, 0.0], [0.0, 0.0, 0.875]];
     let h1 = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.125]];
     let filter = MimoFilter::new(&[section], d, &[h1]).expect("valid filter");
-    let scaling = AxisScaling { adc_offset_code: 2048.0, newton_per_code: 2.5, dac_code_per_newton: 0.4, dac_offset_code: 2048.0 };
+    let scaling = AxisScaling {
+        adc_offset_code: 2048.0,
+        newton_per_code: 2.5,
+        dac_code_per_newton: 0.4,
+        dac_offset_code: 2048.0,
+    };
     let summary = AxisSummary { model_order: 2, ..AxisSummary::default() };
     let ch = |axis| AxisChannel { axis, scaling, summary };
     MatrixImage {
@@ -137,7 +142,11 @@ fn encode(img: &MatrixImage) -> Vec<u8> {
 fn doc_hex_dump_matches_the_encoder() {
     let bytes = encode(&example_image());
     let expected = annotated_dump(&bytes);
-    assert_eq!(dump_in_doc(), expected, "docs/image-format.md §13.7 is out of date; the encoder now produces:\n{expected}");
+    assert_eq!(
+        dump_in_doc(),
+        expected,
+        "docs/image-format.md §13.7 is out of date; the encoder now produces:\n{expected}"
+    );
 }
 
 #[test]

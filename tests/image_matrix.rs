@@ -104,7 +104,10 @@ fn a_3x3_image_round_trips_exactly_and_from_a_flash_slot() {
     assert_eq!(CoeffImage::parse_prefix(&slot), Err(ImageError::NotPerAxisImage));
     assert!(MAX_MATRIX_IMAGE_LEN + 32 <= 8192 && MAX_MATRIX_IMAGE_LEN == 4216);
     // A truncated image in a slot reports the missing bytes.
-    assert_eq!(BoxImage::parse_prefix(&b[..b.len() - 1]), Err(ImageError::Truncated { needed: b.len() as u32, have: b.len() as u32 - 1 }));
+    assert_eq!(
+        BoxImage::parse_prefix(&b[..b.len() - 1]),
+        Err(ImageError::Truncated { needed: b.len() as u32, have: b.len() as u32 - 1 })
+    );
     // A per-axis image through BoxImage encodes to the same bytes as before.
     let v1 = image_with(dynocomp_core::kernel::AxisFilter::gain(1.5).unwrap(), &[0, 2], 51_200);
     let mut buf = vec![0u8; MAX_BOX_IMAGE_LEN];
@@ -159,7 +162,10 @@ fn structural_errors_are_named() {
     assert_eq!(p(&with_byte(&b, rows + 1, 2)), Some(ImageError::BadRowDesign { row: 1, code: 2 }));
     assert_eq!(p(&with_byte(&b, rows + 3, 1)), Some(ImageError::ReservedNotZero));
     assert_eq!(p(&with_f32(&b, FILTER + 4 + 4 * 5, f32::NAN)), Some(ImageError::MatrixNonFinite { section: 255 }));
-    assert_eq!(p(&with_f32(&b, SECTIONS + 64 * 3 + 44, f32::INFINITY)), Some(ImageError::MatrixNonFinite { section: 3 }));
+    assert_eq!(
+        p(&with_f32(&b, SECTIONS + 64 * 3 + 44, f32::INFINITY)),
+        Some(ImageError::MatrixNonFinite { section: 3 })
+    );
     let taps = SECTIONS + 64 * 22;
     assert_eq!(p(&with_f32(&b, taps + 36 * 7 + 8, f32::NAN)), Some(ImageError::MatrixNonFiniteTap { tap: 7 }));
     // σ = 0.5 on a pair: |1 + σ ± jω| > 1.
@@ -167,7 +173,10 @@ fn structural_errors_are_named() {
     assert_eq!(p(&c), Some(ImageError::MatrixUnstableSection { section: 0 }));
     // Δ22 ≠ Δ11 on a pair: neither shape.
     assert_eq!(p(&with_f32(&b, SECTIONS + 64 + 12, -0.5)), Some(ImageError::MatrixNotModalSection { section: 1 }));
-    assert_eq!(p(&with_f32(&b, 12, 500.0)), Some(ImageError::SampleRateOutOfRange(u32::from_le_bytes(500f32.to_le_bytes()))));
+    assert_eq!(
+        p(&with_f32(&b, 12, 500.0)),
+        Some(ImageError::SampleRateOutOfRange(u32::from_le_bytes(500f32.to_le_bytes())))
+    );
     assert_eq!(p(&with_f32(&b, AXIS0 + 56 + 12, 0.0)), Some(ImageError::BadScaling { axis: 1 }));
     assert_eq!(p(&with_f32(&b, AXIS0 + 112 + 36, -1.0)), Some(ImageError::BadSummary { axis: 2 }));
     // Negative control: the unmodified bytes (CRC recomputed) parse.
@@ -210,7 +219,12 @@ fn the_dc_rows_must_be_near_the_identity() {
             y = f.step(&mut st, u);
         }
         for i in 0..3 {
-            assert!((f64::from(y[i]) - dc[i][j]).abs() < 1e-4, "H({i},{j})(1) = {} by the formula, {} by the step", dc[i][j], y[i]);
+            assert!(
+                (f64::from(y[i]) - dc[i][j]).abs() < 1e-4,
+                "H({i},{j})(1) = {} by the formula, {} by the step",
+                dc[i][j],
+                y[i]
+            );
         }
     }
 }
@@ -255,13 +269,24 @@ fn coefficient_margin_and_gain_bounds_are_enforced_at_their_limits() {
         img
     };
     // A diagonal section whose unused state is x₂: pole 1 − margin.
-    let sec = |p: f32, c: f32| MimoSection { delta: [p - 1.0, 0.0, 0.0, -1.0], b: [[1e-3, 0.0, 0.0], [0.0; 3]], c: [[c, 0.0], [0.0; 2], [0.0; 2]] };
+    let sec = |p: f32, c: f32| MimoSection {
+        delta: [p - 1.0, 0.0, 0.0, -1.0],
+        b: [[1e-3, 0.0, 0.0], [0.0; 3]],
+        c: [[c, 0.0], [0.0; 2], [0.0; 2]],
+    };
     // Pole margin: 1 − 2·10⁻⁷ accepted, 1 − 6·10⁻⁸ refused (f32 steps
     // near 1 are 6·10⁻⁸).
     assert!(enc(&with_sections(&[sec(1.0 - 2.4e-7, 1e-4)], I3)).is_ok());
-    assert_eq!(enc(&with_sections(&[sec(1.0 - 6e-8, 1e-4)], I3)).err(), Some(ImageError::MatrixPoleMarginTooSmall { section: 0 }));
+    assert_eq!(
+        enc(&with_sections(&[sec(1.0 - 6e-8, 1e-4)], I3)).err(),
+        Some(ImageError::MatrixPoleMarginTooSmall { section: 0 })
+    );
     // Coefficient bound: 10⁶ accepted, the next f32 above refused.
-    let big = MimoSection { delta: [-0.5, 0.0, 0.0, -1.0], b: [[1.0e6, 0.0, 0.0], [0.0; 3]], c: [[1e-7, 0.0], [0.0; 2], [0.0; 2]] };
+    let big = MimoSection {
+        delta: [-0.5, 0.0, 0.0, -1.0],
+        b: [[1.0e6, 0.0, 0.0], [0.0; 3]],
+        c: [[1e-7, 0.0], [0.0; 2], [0.0; 2]],
+    };
     assert!(enc(&with_sections(&[big], I3)).is_ok());
     let mut bigger = big;
     bigger.b[0][0] = f32::from_bits(1.0e6f32.to_bits() + 1);

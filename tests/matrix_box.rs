@@ -41,7 +41,9 @@ fn the_3x3_path_scales_filters_and_scales_back() {
         let c = codes(k);
         let (dac, flags) = process_sample(c, mode, &mut st);
         // Truth: the documented equations, written out here.
-        let u: [f32; 3] = core::array::from_fn(|i| (f32::from(c[i]) - img.axes[i].scaling.adc_offset_code) * img.axes[i].scaling.newton_per_code);
+        let u: [f32; 3] = core::array::from_fn(|i| {
+            (f32::from(c[i]) - img.axes[i].scaling.adc_offset_code) * img.axes[i].scaling.newton_per_code
+        });
         let y = img.filter.step(&mut truth_state, u);
         let want: [u16; 3] = core::array::from_fn(|i| {
             let v = img.axes[i].scaling.dac_offset_code + y[i] * img.axes[i].scaling.dac_code_per_newton;
@@ -116,7 +118,8 @@ fn offline_only_over_budget_and_user_bypass_3x3_images_are_not_run() {
 
 #[test]
 fn switching_between_per_axis_and_3x3_images_starts_from_rest() {
-    let per_axis: BoxImage = image_with(dynocomp_core::kernel::AxisFilter::gain(1.0).unwrap(), &[0, 1, 2], 25_600).into();
+    let per_axis: BoxImage =
+        image_with(dynocomp_core::kernel::AxisFilter::gain(1.0).unwrap(), &[0, 1, 2], 25_600).into();
     let matrix: BoxImage = small(25_600).into();
     let mut path = SamplePath::new();
     let mut active = ActiveImage::new(Ok(matrix));
@@ -174,12 +177,21 @@ impl NorFlash for RamFlash {
 }
 
 fn upload(link: &mut BoxLink, store: &mut Store<RamFlash>, bytes: &[u8]) -> (Reply, Actions) {
-    let tel = Telemetry { firmware: [0, 1, 0], fs_hz: 25_600, core_clock_hz: 0, bypass: None, image: None, counters: StatusCounters::default(), stream_next_seq: 0 };
+    let tel = Telemetry {
+        firmware: [0, 1, 0],
+        fs_hz: 25_600,
+        core_clock_hz: 0,
+        bypass: None,
+        image: None,
+        counters: StatusCounters::default(),
+        stream_next_seq: 0,
+    };
     let mut act = Actions::default();
     let crc = CRC32.checksum(bytes);
     assert_eq!(link.handle(Request::UploadBegin { len: bytes.len() as u32, crc }, store, &tel, &mut act), Reply::Ack);
     for (i, chunk) in bytes.chunks(MAX_CHUNK).enumerate() {
-        let r = link.handle(Request::UploadChunk { offset: (i * MAX_CHUNK) as u32, bytes: chunk }, store, &tel, &mut act);
+        let r =
+            link.handle(Request::UploadChunk { offset: (i * MAX_CHUNK) as u32, bytes: chunk }, store, &tel, &mut act);
         assert_eq!(r, Reply::Ack);
     }
     let r = link.handle(Request::UploadCommit, store, &tel, &mut act);
@@ -200,7 +212,15 @@ fn a_3x3_image_is_uploaded_verified_committed_and_reported() {
     assert_eq!(store.boot().image, Ok(BoxImage::Matrix(img)));
     assert_eq!(store.active().map(|a| a.image_id), Some(img.id()));
     // The status names the 3x3 image and its rows.
-    let tel = Telemetry { firmware: [0, 1, 0], fs_hz: 25_600, core_clock_hz: 0, bypass: None, image: Some(&loaded), counters: StatusCounters::default(), stream_next_seq: 0 };
+    let tel = Telemetry {
+        firmware: [0, 1, 0],
+        fs_hz: 25_600,
+        core_clock_hz: 0,
+        bypass: None,
+        image: Some(&loaded),
+        counters: StatusCounters::default(),
+        stream_next_seq: 0,
+    };
     match link.handle(Request::GetStatus, &mut store, &tel, &mut Actions::default()) {
         Reply::Status(s) => {
             let summary = s.image.expect("image summary");

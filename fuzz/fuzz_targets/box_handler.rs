@@ -18,8 +18,8 @@ use dynocomp::link::virtual_box::VirtualBox;
 use dynocomp_core::image::{BoxImage, CRC32};
 use dynocomp_core::protocol::*;
 use dynocomp_core::store::{Layout, Store};
-use libfuzzer_sys::arbitrary::{self, Arbitrary};
 use dynocomp_fuzz::{box_runnable, IMAGES};
+use libfuzzer_sys::arbitrary::{self, Arbitrary};
 use libfuzzer_sys::fuzz_target;
 
 #[derive(Arbitrary, Debug)]
@@ -140,7 +140,12 @@ fn upload_chunks(bytes: &[u8], first: u8) -> Vec<(u32, &[u8])> {
 }
 
 fuzz_target!(|ops: Vec<Op>| {
-    let mut h = Harness { vbox: VirtualBox::boot(SimFlash::g474_slots(), []).expect("boot"), shadow: FrameDecoder::new(), next_id: 0, booted: None };
+    let mut h = Harness {
+        vbox: VirtualBox::boot(SimFlash::g474_slots(), []).expect("boot"),
+        shadow: FrameDecoder::new(),
+        next_id: 0,
+        booted: None,
+    };
     let mut uploads = 0;
     for op in ops.into_iter().take(32) {
         match op {
@@ -162,7 +167,10 @@ fuzz_target!(|ops: Vec<Op>| {
                         let fits = (0..=bytes.len().min(MAX_PAYLOAD))
                             .rev()
                             .find(|&n| {
-                                let frame = RequestFrame { id: u16::MAX, request: Request::UploadChunk { offset: *offset, bytes: &bytes[..n] } };
+                                let frame = RequestFrame {
+                                    id: u16::MAX,
+                                    request: Request::UploadChunk { offset: *offset, bytes: &bytes[..n] },
+                                };
                                 encode_frame(&frame, &mut [0u8; MAX_FRAME]).is_ok()
                             })
                             .unwrap_or(0);

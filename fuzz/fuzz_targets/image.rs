@@ -17,10 +17,10 @@
 //! their gain bound for inputs within ±1.
 #![no_main]
 
+use dynocomp::io::image_file::{parse_any_image, AnyImage};
 use dynocomp_core::image::*;
 use dynocomp_core::kernel::{MAX_FIR, MAX_SECTIONS};
 use dynocomp_core::mimo::{MimoState, MAX_MIMO_FIR, MAX_MIMO_SECTIONS};
-use dynocomp::io::image_file::{parse_any_image, AnyImage};
 use dynocomp_fuzz::assert_names_place_or;
 use libfuzzer_sys::fuzz_target;
 
@@ -32,8 +32,22 @@ const SOURCE: &str = "fuzz.dcimg";
 /// flags, method), the axis, band, row, section or tap, or the whole image
 /// (truncated).
 const IMAGE_PLACES: &[&str] = &[
-    "truncated", "magic", "format version", "length", "crc", "sample rate", "latency", "axis mask", "flag", "method",
-    "axis ", "band", "row ", "section", "tap", "direct term",
+    "truncated",
+    "magic",
+    "format version",
+    "length",
+    "crc",
+    "sample rate",
+    "latency",
+    "axis mask",
+    "flag",
+    "method",
+    "axis ",
+    "band",
+    "row ",
+    "section",
+    "tap",
+    "direct term",
 ];
 
 /// The host's reader (`inspect`, `compensate`) takes what the version's own
@@ -113,10 +127,16 @@ fn check_error(e: ImageError, bytes: &[u8], version: u16) {
             return;
         }
         BufferTooSmall { .. } => panic!("parse reported an encoder error: {e}"),
-        TooManyTaps { axis, .. } | BadScaling { axis } | BadSummary { axis } => assert!(usize::from(axis) < dynocomp_core::AXES),
+        TooManyTaps { axis, .. } | BadScaling { axis } | BadSummary { axis } => {
+            assert!(usize::from(axis) < dynocomp_core::AXES)
+        }
         NonFiniteTap { axis, tap } => assert!(usize::from(axis) < dynocomp_core::AXES && usize::from(tap) < MAX_FIR),
-        TooManySections { axis, count } => assert!(usize::from(axis) < dynocomp_core::AXES && usize::from(count) > MAX_SECTIONS),
-        NonFiniteCoefficient { axis, section } | UnstableSection { axis, section } | NotModalSection { axis, section } => {
+        TooManySections { axis, count } => {
+            assert!(usize::from(axis) < dynocomp_core::AXES && usize::from(count) > MAX_SECTIONS)
+        }
+        NonFiniteCoefficient { axis, section }
+        | UnstableSection { axis, section }
+        | NotModalSection { axis, section } => {
             assert!(usize::from(axis) < dynocomp_core::AXES);
             assert!(usize::from(section) < MAX_SECTIONS || section == 255, "section index {section} out of range");
         }
@@ -145,7 +165,9 @@ fn check_error(e: ImageError, bytes: &[u8], version: u16) {
         MatrixNonFinite { section } | MatrixCoefficientOutOfRange { section } => {
             assert!(usize::from(section) < MAX_MIMO_SECTIONS || section == 255, "section index {section} out of range");
         }
-        MatrixUnstableSection { section } | MatrixNotModalSection { section } | MatrixPoleMarginTooSmall { section } => {
+        MatrixUnstableSection { section }
+        | MatrixNotModalSection { section }
+        | MatrixPoleMarginTooSmall { section } => {
             assert!(usize::from(section) < MAX_MIMO_SECTIONS, "section index {section} out of range");
         }
         MatrixNonFiniteTap { tap } | MatrixTapOutOfRange { tap } => assert!(usize::from(tap) < MAX_MIMO_FIR),
@@ -268,7 +290,11 @@ fn check_matrix_bounded(img: &MatrixImage, pattern: &[u8]) {
         let y = f.step(&mut st, u);
         for i in 0..3 {
             let v = f64::from(y[i]);
-            assert!(v.abs() <= bounds[i] * (1.0 + 1e-4) + 1e-6, "row {i}: |y| = {v} beyond the gain bound {}", bounds[i]);
+            assert!(
+                v.abs() <= bounds[i] * (1.0 + 1e-4) + 1e-6,
+                "row {i}: |y| = {v} beyond the gain bound {}",
+                bounds[i]
+            );
         }
     }
 }

@@ -20,8 +20,8 @@ use dynocomp_core::image::{BoxImage, CRC32, MAX_BOX_IMAGE_LEN};
 use dynocomp_core::sample::BypassReason;
 use dynocomp_core::shell::Slot;
 use dynocomp_core::store::*;
-use libfuzzer_sys::arbitrary::{self, Arbitrary};
 use dynocomp_fuzz::{box_runnable, IMAGES};
+use libfuzzer_sys::arbitrary::{self, Arbitrary};
 use libfuzzer_sys::fuzz_target;
 
 #[derive(Arbitrary, Debug)]

@@ -41,12 +41,11 @@ pub fn example_image() -> CoeffImage {
 }
 
 /// Words that name a place inside an input.
-const PLACE_WORDS: &[&str] = &[
-    "line ", "column ", "record ", "dataset", "offset", "byte ", "field", "header", "value",
-];
+const PLACE_WORDS: &[&str] = &["line ", "column ", "record ", "dataset", "offset", "byte ", "field", "header", "value"];
 
 /// Phrases of errors about the input as a whole (the file is the place).
-const WHOLE_INPUT: &[&str] = &["empty file", "no data rows", "no samples", "no uff dataset", "no frf", "no force column"];
+const WHOLE_INPUT: &[&str] =
+    &["empty file", "no data rows", "no samples", "no uff dataset", "no frf", "no force column"];
 
 /// The error of a rejected input names the input (`source`, first) and a
 /// place in it: a line/column/record/offset/field, or it is an error about
@@ -58,10 +57,7 @@ pub fn assert_names_place(msg: &str, source: &str) {
 /// [`assert_names_place`], with more words that name a place in this
 /// format (e.g. a JSON field).
 pub fn assert_names_place_or(msg: &str, source: &str, more: &[&str]) {
-    assert!(
-        msg.starts_with(&format!("{source}:")),
-        "error does not start with the input's name `{source}`: {msg}"
-    );
+    assert!(msg.starts_with(&format!("{source}:")), "error does not start with the input's name `{source}`: {msg}");
     let lower = msg.to_ascii_lowercase();
     assert!(
         PLACE_WORDS.iter().chain(WHOLE_INPUT).chain(more).any(|w| lower.contains(w)),

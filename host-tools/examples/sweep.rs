@@ -24,11 +24,29 @@ fn draw(seed: u64) -> (RateCase, f64, &'static str) {
     let d = ModeRanges::default();
     let (kind, dyno, frf_max_hz) = match rng.random_range(0..4) {
         0 => ("default", DynoSpec::Random(d), 4096.0),
-        1 => ("machine-cluster", DynoSpec::Random(ModeRanges { machine_count: (3, 5), machine_hz: (300.0, 900.0), machine_residue: (0.05, 0.15), ..d }), 4096.0),
-        2 => ("close-pair", DynoSpec::ClosePair { ranges: d, spacing: rng.random_range(0.03..0.08), share: rng.random_range(0.2..0.5) }, 4096.0),
+        1 => (
+            "machine-cluster",
+            DynoSpec::Random(ModeRanges {
+                machine_count: (3, 5),
+                machine_hz: (300.0, 900.0),
+                machine_residue: (0.05, 0.15),
+                ..d
+            }),
+            4096.0,
+        ),
+        2 => (
+            "close-pair",
+            DynoSpec::ClosePair { ranges: d, spacing: rng.random_range(0.03..0.08), share: rng.random_range(0.2..0.5) },
+            4096.0,
+        ),
         _ => (
             "above-band",
-            DynoSpec::Random(ModeRanges { main_xy_hz: (3800.0, 5000.0), main_z_hz: (4500.0, 6000.0), secondary_hz: (4500.0, 6000.0), ..d }),
+            DynoSpec::Random(ModeRanges {
+                main_xy_hz: (3800.0, 5000.0),
+                main_z_hz: (4500.0, 6000.0),
+                secondary_hz: (4500.0, 6000.0),
+                ..d
+            }),
             8192.0,
         ),
     };
@@ -70,14 +88,22 @@ fn main() -> Result<()> {
             let small = a.comp_nrmse.as_ref().is_ok_and(|e| *e <= 0.003);
             within_13 += usize::from(ratio <= 1.3);
             within_2 += usize::from(ratio <= 2.0 || small);
-            let row = format!("seed {seed} {} ({kind}, {fs} Hz, {} Hz lines): {what}, {ratio:.2}x", axis_name(a.axis), case.frf_df_hz);
+            let row = format!(
+                "seed {seed} {} ({kind}, {fs} Hz, {} Hz lines): {what}, {ratio:.2}x",
+                axis_name(a.axis),
+                case.frf_df_hz
+            );
             println!("{row}");
             rows.push((ratio, row));
         }
     }
     let pct = |k: usize, of: usize| 100.0 * k as f64 / of.max(1) as f64;
     println!("\n{n} set-ups: {with_image} with an image on all three axes ({:.0} %)", pct(with_image, n as usize));
-    println!("{axes} axes: {:.0} % within 1.3x of the exact inverse's noise floor, {:.0} % within 2x or at most 0.3 %", pct(within_13, axes), pct(within_2, axes));
+    println!(
+        "{axes} axes: {:.0} % within 1.3x of the exact inverse's noise floor, {:.0} % within 2x or at most 0.3 %",
+        pct(within_13, axes),
+        pct(within_2, axes)
+    );
     rows.sort_by(|a, b| b.0.total_cmp(&a.0));
     println!("worst axes:");
     for r in rows.iter().take(8) {

@@ -29,7 +29,17 @@ fn fresh_dir(name: &str) -> PathBuf {
 /// A default-method image of the bundled example designed into `dir`.
 fn example_image(dir: &Path) -> PathBuf {
     let img = dir.join("ex.dcimg");
-    let (ok, _, err) = dynocomp(&["design", "--frf", &example("frf.csv"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", s(&img)]);
+    let (ok, _, err) = dynocomp(&[
+        "design",
+        "--frf",
+        &example("frf.csv"),
+        "--fs",
+        "51200",
+        "--idle",
+        &example("idle.csv"),
+        "--out",
+        s(&img),
+    ]);
     assert!(ok, "design failed: {err}");
     img
 }
@@ -85,7 +95,8 @@ fn design_keeps_the_old_image_when_the_sidecar_cannot_be_written() {
     std::fs::write(&img, b"old image").unwrap();
     let side = dir.join("ex.dcimg.model.json");
     std::fs::create_dir(&side).unwrap();
-    let args = ["design", "--frf", &example("frf.csv"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", s(&img)];
+    let args =
+        ["design", "--frf", &example("frf.csv"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", s(&img)];
     let (ok, _, err) = dynocomp(&args);
     assert!(!ok, "design succeeded with a directory in the sidecar's place");
     assert!(err.contains("model.json"), "{err}");
@@ -109,7 +120,20 @@ fn design_without_sidecar_removes_the_stale_one() {
     std::fs::write(&side, b"{}").unwrap();
     std::fs::write(&other, b"{}").unwrap();
     let (ok, _, err) = dynocomp(&[
-        "design", "--frf", &example("frf.csv"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", s(&img), "--parallel", "--spindle-rpm", "16500", "--teeth", "4",
+        "design",
+        "--frf",
+        &example("frf.csv"),
+        "--fs",
+        "51200",
+        "--idle",
+        &example("idle.csv"),
+        "--out",
+        s(&img),
+        "--parallel",
+        "--spindle-rpm",
+        "16500",
+        "--teeth",
+        "4",
     ]);
     assert!(ok, "{err}");
     assert!(img.is_file());
@@ -148,10 +172,18 @@ fn an_output_that_is_an_input_is_refused() {
     refused_keeping(&["compensate", "--coeffs", i, "--input", r, "--output", &dot], &["--output", "--input"], &rec);
     refused_keeping(&["compensate", "--coeffs", i, "--input", r, "--output", i], &["--output", "--coeffs"], &img);
     let side = format!("{i}.model.json");
-    refused_keeping(&["compensate", "--coeffs", i, "--input", r, "--output", &side, "--offline"], &["--output", "sidecar"], Path::new(&side));
+    refused_keeping(
+        &["compensate", "--coeffs", i, "--input", r, "--output", &side, "--offline"],
+        &["--output", "sidecar"],
+        Path::new(&side),
+    );
     let rep = dir.join("rep");
     let rp = s(&rep);
-    refused_keeping(&["compensate", "--coeffs", i, "--input", r, "--output", t, "--report", rp, "--truth", t], &["--output", "--truth"], &truth);
+    refused_keeping(
+        &["compensate", "--coeffs", i, "--input", r, "--output", t, "--report", rp, "--truth", t],
+        &["--output", "--truth"],
+        &truth,
+    );
     // A hard link is the same file under another name.
     let link = dir.join("link.csv");
     std::fs::hard_link(&rec, &link).unwrap();
@@ -169,15 +201,49 @@ fn an_output_that_is_an_input_is_refused() {
     let idle_side = dir.join("i.dcimg.model.json");
     std::fs::copy(example("idle.csv"), &idle_side).unwrap();
     let i2 = dir.join("i.dcimg");
-    refused_keeping(&["design", "--frf", f, "--fs", "51200", "--idle", s(&idle_side), "--out", s(&i2)], &["sidecar", "--idle"], &idle_side);
+    refused_keeping(
+        &["design", "--frf", f, "--fs", "51200", "--idle", s(&idle_side), "--out", s(&i2)],
+        &["sidecar", "--idle"],
+        &idle_side,
+    );
     assert!(!i2.exists());
     refused_keeping(
-        &["design", "--frf", f, "--fs", "51200", "--idle", id, "--out", r, "--force-prior", "spectrum", "--force-record", r],
+        &[
+            "design",
+            "--frf",
+            f,
+            "--fs",
+            "51200",
+            "--idle",
+            id,
+            "--out",
+            r,
+            "--force-prior",
+            "spectrum",
+            "--force-record",
+            r,
+        ],
         &["--out", "--force-record"],
         &rec,
     );
     refused_keeping(
-        &["design", "--frf", f, "--fs", "51200", "--idle", id, "--out", r, "--spindle-rpm", "16500", "--teeth", "4", "--bands-from", r],
+        &[
+            "design",
+            "--frf",
+            f,
+            "--fs",
+            "51200",
+            "--idle",
+            id,
+            "--out",
+            r,
+            "--spindle-rpm",
+            "16500",
+            "--teeth",
+            "4",
+            "--bands-from",
+            r,
+        ],
         &["--out", "--bands-from"],
         &rec,
     );
@@ -186,11 +252,19 @@ fn an_output_that_is_an_input_is_refused() {
     std::fs::create_dir_all(&cmp).unwrap();
     let cidle = cmp.join("compare.txt");
     std::fs::copy(example("idle.csv"), &cidle).unwrap();
-    refused_keeping(&["compare", "--frf", f, "--fs", "51200", "--idle", s(&cidle), "--out-dir", s(&cmp)], &["--out-dir", "--idle"], &cidle);
+    refused_keeping(
+        &["compare", "--frf", f, "--fs", "51200", "--idle", s(&cidle), "--out-dir", s(&cmp)],
+        &["--out-dir", "--idle"],
+        &cidle,
+    );
 
     let port = dir.join("port");
     std::fs::write(&port, b"not a port").unwrap();
-    refused_keeping(&["stream", "--serial", s(&port), "--output", s(&port), "--samples", "10"], &["--output", "--serial"], &port);
+    refused_keeping(
+        &["stream", "--serial", s(&port), "--output", s(&port), "--samples", "10"],
+        &["--output", "--serial"],
+        &port,
+    );
 }
 
 /// Runs `dynocomp args`: (success, stdout bytes, stderr).
@@ -247,16 +321,43 @@ fn implausible_forces_are_refused_and_max_force_sets_the_bound() {
     let (ok, _, err) = dynocomp(&["compensate", "--coeffs", i, "--input", s(&big), "--output", s(&dir.join("o.csv"))]);
     assert!(!ok);
     assert!(err.contains("big.csv") && err.contains("line 100"), "{err}");
-    let (ok, _, err) =
-        dynocomp(&["compensate", "--coeffs", i, "--input", s(&big), "--output", s(&dir.join("o.csv")), "--max-force", "3e5"]);
+    let (ok, _, err) = dynocomp(&[
+        "compensate",
+        "--coeffs",
+        i,
+        "--input",
+        s(&big),
+        "--output",
+        s(&dir.join("o.csv")),
+        "--max-force",
+        "3e5",
+    ]);
     assert!(ok, "{err}");
     let (ok, _, err) = dynocomp(&[
-        "compensate", "--coeffs", i, "--input", &example("measured.csv"), "--output", s(&dir.join("o2.csv")),
-        "--report", s(&dir.join("rep")), "--truth", s(&big),
+        "compensate",
+        "--coeffs",
+        i,
+        "--input",
+        &example("measured.csv"),
+        "--output",
+        s(&dir.join("o2.csv")),
+        "--report",
+        s(&dir.join("rep")),
+        "--truth",
+        s(&big),
     ]);
     assert!(!ok && err.contains("big.csv"), "{err}");
     for bad in ["0", "-5", "nan"] {
-        let (ok, _, err) = dynocomp(&["compensate", "--coeffs", i, "--input", s(&big), "--output", s(&dir.join("o.csv")), &format!("--max-force={bad}")]);
+        let (ok, _, err) = dynocomp(&[
+            "compensate",
+            "--coeffs",
+            i,
+            "--input",
+            s(&big),
+            "--output",
+            s(&dir.join("o.csv")),
+            &format!("--max-force={bad}"),
+        ]);
         assert!(!ok && err.contains("--max-force"), "{bad}: {err}");
     }
 
@@ -283,11 +384,31 @@ fn implausible_forces_are_refused_and_max_force_sets_the_bound() {
 fn design_refuses_an_idle_record_at_another_rate() {
     let dir = fresh_dir("idlerate");
     let out = dir.join("d.dcimg");
-    let (ok, _, err) = dynocomp(&["design", "--frf", &example("frf.csv"), "--fs", "25600", "--idle", &example("idle.csv"), "--out", s(&out)]);
+    let (ok, _, err) = dynocomp(&[
+        "design",
+        "--frf",
+        &example("frf.csv"),
+        "--fs",
+        "25600",
+        "--idle",
+        &example("idle.csv"),
+        "--out",
+        s(&out),
+    ]);
     assert!(!ok);
     assert!(err.contains("idle.csv") && err.contains("51200") && err.contains("25600"), "{err}");
     assert!(!out.exists());
-    let (ok, _, err) = dynocomp(&["design", "--frf", &example("frf.csv"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", s(&out)]);
+    let (ok, _, err) = dynocomp(&[
+        "design",
+        "--frf",
+        &example("frf.csv"),
+        "--fs",
+        "51200",
+        "--idle",
+        &example("idle.csv"),
+        "--out",
+        s(&out),
+    ]);
     assert!(ok, "{err}");
 }
 
@@ -353,7 +474,10 @@ fn out_of_range_parameters_are_refused_at_once() {
         assert!(done, "{extra:?} did not finish");
         assert!(!ok && err.contains(word) && !err.contains("panicked") && err.lines().count() == 1, "{extra:?}: {err}");
     }
-    let (done, ok, err) = dynocomp_within(&["simulate", "--out", &out, "--duration", "0.05", "--idle-duration", "0.05", "--teeth", "8"], 120);
+    let (done, ok, err) = dynocomp_within(
+        &["simulate", "--out", &out, "--duration", "0.05", "--idle-duration", "0.05", "--teeth", "8"],
+        120,
+    );
     assert!(done && ok, "control: {err}");
 
     let (frf, idle, img) = (example("frf.csv"), example("idle.csv"), dir.join("d.dcimg"));
@@ -366,7 +490,18 @@ fn out_of_range_parameters_are_refused_at_once() {
         (&["--fs", "51200", "--spindle-rpm", "0", "--teeth", "4"][..], "--spindle-rpm 0"),
         (&["--fs", "51200", "--spindle-rpm", "5000", "--teeth", "0"][..], "--teeth 0"),
         (
-            &["--fs", "51200", "--spindle-rpm", "0", "--teeth", "4", "--force-prior", "harmonics", "--force-record", &idle][..],
+            &[
+                "--fs",
+                "51200",
+                "--spindle-rpm",
+                "0",
+                "--teeth",
+                "4",
+                "--force-prior",
+                "harmonics",
+                "--force-record",
+                &idle,
+            ][..],
             "--spindle-rpm 0",
         ),
     ];
@@ -387,13 +522,42 @@ fn random_simulate_arguments_never_panic_or_hang() {
     let dir = fresh_dir("simfuzz");
     let out = s(&dir.join("sim")).to_string();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(31);
-    let flags = ["--fs", "--duration", "--idle-duration", "--oversample", "--spindle-rpm", "--teeth", "--diameter", "--helix",
-        "--axial-depth", "--radial-depth", "--feed-per-tooth", "--runout-um", "--noise-variance", "--adc-bits", "--adc-range",
-        "--frf-lines", "--frf-df", "--impacts", "--hammer-cutoff", "--chatter-hz", "--ramp-in-revs"];
+    let flags = [
+        "--fs",
+        "--duration",
+        "--idle-duration",
+        "--oversample",
+        "--spindle-rpm",
+        "--teeth",
+        "--diameter",
+        "--helix",
+        "--axial-depth",
+        "--radial-depth",
+        "--feed-per-tooth",
+        "--runout-um",
+        "--noise-variance",
+        "--adc-bits",
+        "--adc-range",
+        "--frf-lines",
+        "--frf-df",
+        "--impacts",
+        "--hammer-cutoff",
+        "--chatter-hz",
+        "--ramp-in-revs",
+    ];
     let values = ["0", "-1", "1e9", "-1e300", "nan", "inf", "3", "0.5", "100000", "1e-300", "18446744073709551616"];
     for _ in 0..40 {
-        let mut args = vec!["simulate".to_string(), "--out".into(), out.clone(), "--duration".into(), "0.02".into(),
-            "--idle-duration".into(), "0.02".into(), "--frf-lines".into(), "200".into()];
+        let mut args = vec![
+            "simulate".to_string(),
+            "--out".into(),
+            out.clone(),
+            "--duration".into(),
+            "0.02".into(),
+            "--idle-duration".into(),
+            "0.02".into(),
+            "--frf-lines".into(),
+            "200".into(),
+        ];
         for _ in 0..rng.random_range(1..4) {
             args.push(flags[rng.random_range(0..flags.len())].to_string());
             args.push(values[rng.random_range(0..values.len())].to_string());
@@ -415,7 +579,16 @@ fn output_format_and_extension_agree() {
     let img = example_image(&dir);
     let i = s(&img);
     let tdms = dir.join("rec.tdms");
-    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", i, "--input", &example("measured.csv"), "--output", s(&tdms), "--raw-timing"]);
+    let (ok, _, err) = dynocomp(&[
+        "compensate",
+        "--coeffs",
+        i,
+        "--input",
+        &example("measured.csv"),
+        "--output",
+        s(&tdms),
+        "--raw-timing",
+    ]);
     assert!(ok, "{err}");
     assert_eq!(&std::fs::read(&tdms).unwrap()[..4], b"TDSm");
     let csv = dir.join("x.csv");
@@ -424,11 +597,22 @@ fn output_format_and_extension_agree() {
     let text = std::fs::read(&csv).unwrap();
     assert!(text.starts_with(b"t_s,fx") || text.starts_with(b"fx"), "{:?}", String::from_utf8_lossy(&text[..20]));
     let bad = dir.join("y.csv");
-    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", i, "--input", s(&tdms), "--output", s(&bad), "--output-format", "tdms"]);
+    let (ok, _, err) =
+        dynocomp(&["compensate", "--coeffs", i, "--input", s(&tdms), "--output", s(&bad), "--output-format", "tdms"]);
     assert!(!ok && err.contains("y.csv") && err.contains("tdms"), "{err}");
     assert!(!bad.exists());
     let good = dir.join("y.tdms");
-    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", i, "--input", &example("measured.csv"), "--output", s(&good), "--output-format", "tdms"]);
+    let (ok, _, err) = dynocomp(&[
+        "compensate",
+        "--coeffs",
+        i,
+        "--input",
+        &example("measured.csv"),
+        "--output",
+        s(&good),
+        "--output-format",
+        "tdms",
+    ]);
     assert!(ok, "{err}");
 }
 
@@ -445,7 +629,8 @@ fn design_on_a_few_frf_lines_never_panics() {
         let frf = dir.join(format!("f{n}.csv"));
         std::fs::write(&frf, lines[..=n].join("\n") + "\n").unwrap();
         let out = dir.join(format!("f{n}.dcimg"));
-        let (done, ok, err) = dynocomp_within(&["design", "--frf", s(&frf), "--fs", "51200", "--idle", &idle, "--out", s(&out)], 300);
+        let (done, ok, err) =
+            dynocomp_within(&["design", "--frf", s(&frf), "--fs", "51200", "--idle", &idle, "--out", s(&out)], 300);
         assert!(done, "{n} lines: no answer");
         let last = err.lines().last().unwrap_or("");
         assert!(ok || (last.starts_with("error: ") && !err.contains("panicked")), "{n} lines: {err}");
@@ -462,11 +647,17 @@ fn the_tail_without_look_ahead_is_announced() {
     let dir = fresh_dir("tail");
     let img = example_image(&dir);
     let out = dir.join("c.csv");
-    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", s(&img), "--input", &example("measured.csv"), "--output", s(&out)]);
+    let (ok, _, err) =
+        dynocomp(&["compensate", "--coeffs", s(&img), "--input", &example("measured.csv"), "--output", s(&out)]);
     assert!(ok, "{err}");
     assert!(err.contains("the last 4 samples lack their look-ahead"), "{err}");
     let column = |p: &Path, k: usize| -> Vec<f64> {
-        std::fs::read_to_string(p).unwrap().lines().skip(1).map(|l| l.split(',').nth(k).unwrap().parse().unwrap()).collect()
+        std::fs::read_to_string(p)
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(k).unwrap().parse().unwrap())
+            .collect()
     };
     let truth = std::path::PathBuf::from(example("true_force.csv"));
     let worst_ratio = (1..=3)
@@ -480,6 +671,15 @@ fn the_tail_without_look_ahead_is_announced() {
         })
         .fold(0.0, f64::max);
     assert!(worst_ratio > 5.0, "the tail's error is only {worst_ratio:.1} times the interior's RMS error");
-    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", s(&img), "--input", &example("measured.csv"), "--output", s(&out), "--raw-timing"]);
+    let (ok, _, err) = dynocomp(&[
+        "compensate",
+        "--coeffs",
+        s(&img),
+        "--input",
+        &example("measured.csv"),
+        "--output",
+        s(&out),
+        "--raw-timing",
+    ]);
     assert!(ok && !err.contains("look-ahead"), "{err}");
 }

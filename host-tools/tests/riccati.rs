@@ -47,7 +47,13 @@ fn check(slow_hz: f64, q: f64, r: f64) {
         &plant.a * p * plant.a.transpose() - &apc * apc.transpose() / s + &qm
     };
     let plain = (&sol.p - ric(&sol.p)).norm() / sol.p.norm();
-    eprintln!("slow {slow_hz} Hz, q {q:e}, R {r:e}: n {}, residual {:.2e} (over ‖P‖ alone {:.2e}), {} doubling steps", plant.a.nrows(), sol.residual, plain, sol.iterations);
+    eprintln!(
+        "slow {slow_hz} Hz, q {q:e}, R {r:e}: n {}, residual {:.2e} (over ‖P‖ alone {:.2e}), {} doubling steps",
+        plant.a.nrows(),
+        sol.residual,
+        plain,
+        sol.iterations
+    );
     assert!(sol.residual < DARE_TOLERANCE);
     // Independent: the Riccati recursion from P = Q to its fixed point.
     let mut p = qm.clone();

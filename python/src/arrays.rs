@@ -39,11 +39,7 @@ impl<'py> Samples<'py> {
                 "{what}: numpy array of dtype {dtype}; pass float64 or float32 (N), e.g. {what}.astype(numpy.float64)"
             )));
         }
-        let ty = x
-            .get_type()
-            .name()
-            .map(|s| s.to_string())
-            .unwrap_or_else(|_| "?".into());
+        let ty = x.get_type().name().map(|s| s.to_string()).unwrap_or_else(|_| "?".into());
         Err(PyTypeError::new_err(format!(
             "{what}: a {ty}, not a numpy array; pass a float64 or float32 numpy array (N), \
              e.g. numpy.asarray({what}, dtype=float)"
@@ -122,9 +118,7 @@ fn columns<T: Copy, U>(a: &ArrayViewD<'_, T>, extra: usize, conv: impl Fn(T) -> 
         let col = a.view().into_dimensionality::<numpy::ndarray::Ix1>().expect("1-D");
         return vec![one(col)];
     }
-    a.axis_iter(Axis(1))
-        .map(|c| one(c.into_dimensionality().expect("2-D")))
-        .collect()
+    a.axis_iter(Axis(1)).map(|c| one(c.into_dimensionality().expect("2-D"))).collect()
 }
 
 /// Channels of `n` samples as an (n, k) float64 array in Fortran order

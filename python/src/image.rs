@@ -68,10 +68,7 @@ impl Image {
         match &self.any {
             AnyImage::Inline(i) => Ok(i),
             AnyImage::Parallel(_) => {
-                bail!(
-                    "{}: {what} needs a box image (format 1); this is a parallel-elaboration image",
-                    self.source
-                )
+                bail!("{}: {what} needs a box image (format 1); this is a parallel-elaboration image", self.source)
             }
         }
     }
@@ -120,12 +117,7 @@ impl Image {
         match (&self.sidecar, &self.path) {
             (Some(text), _) => {
                 let shown = format!("{} (model sidecar)", self.source);
-                parse_sidecar(
-                    text,
-                    &shown,
-                    image,
-                    self.path.as_deref().unwrap_or(Path::new(&self.source)),
-                )
+                parse_sidecar(text, &shown, image, self.path.as_deref().unwrap_or(Path::new(&self.source)))
             }
             (None, Some(p)) => read_sidecar(p, image),
             (None, None) => bail!(
@@ -148,13 +140,7 @@ impl Image {
                 let bytes = std::fs::read(&path)
                     .map_err(|e| anyhow::Error::from(e).context(format!("{source}: cannot read")))?;
                 let any = parse_any_image(&bytes, &source)?;
-                Ok(Image {
-                    any,
-                    bytes,
-                    path: Some(path),
-                    sidecar: None,
-                    source,
-                })
+                Ok(Image { any, bytes, path: Some(path), sidecar: None, source })
             })
         })
     }
@@ -167,13 +153,7 @@ impl Image {
         let source = name.unwrap_or_else(|| "<image bytes>".into());
         guarded(|| {
             let any = parse_any_image(&data, &source)?;
-            Ok(Image {
-                any,
-                bytes: data,
-                path: None,
-                sidecar,
-                source,
-            })
+            Ok(Image { any, bytes: data, path: None, sidecar, source })
         })
     }
 
@@ -265,11 +245,16 @@ impl Image {
         }
         let out = py.detach(|| {
             guarded(|| match (&self.any, offline) {
-                (AnyImage::Inline(image), false) => {
-                    compensate_f32(image, &axes, view.columns_f32(usize::from(image.latency_samples)), raw_timing, source)
-                }
+                (AnyImage::Inline(image), false) => compensate_f32(
+                    image,
+                    &axes,
+                    view.columns_f32(usize::from(image.latency_samples)),
+                    raw_timing,
+                    source,
+                ),
                 (AnyImage::Parallel(p), false) => {
-                    let rec = SignalRecord { t_s: None, channels: axes.iter().copied().zip(view.columns_f64()).collect() };
+                    let rec =
+                        SignalRecord { t_s: None, channels: axes.iter().copied().zip(view.columns_f64()).collect() };
                     Ok(compensate_parallel(p, &rec, raw_timing, source)?.channels.into_iter().map(|c| c.1).collect())
                 }
                 (AnyImage::Inline(image), true) => {
@@ -277,7 +262,8 @@ impl Image {
                     if !force_prior {
                         sidecar.axes.iter_mut().for_each(|m| m.force_prior = None);
                     }
-                    let rec = SignalRecord { t_s: None, channels: axes.iter().copied().zip(view.columns_f64()).collect() };
+                    let rec =
+                        SignalRecord { t_s: None, channels: axes.iter().copied().zip(view.columns_f64()).collect() };
                     let out = dynocomp::offline::smoother::smooth_record(image, &sidecar, &rec, source)?;
                     Ok(out.channels.into_iter().map(|c| c.1).collect())
                 }
@@ -298,10 +284,7 @@ impl Image {
     ) -> PyResult<Bound<'py, PyArray1<Complex64>>> {
         let image = guarded(|| self.inline("frequency_response"))?;
         let Some(a) = image.axes.get(axis).and_then(Option::as_ref) else {
-            return Err(PyValueError::new_err(format!(
-                "{}: no compensator for axis {axis}",
-                self.source
-            )));
+            return Err(PyValueError::new_err(format!("{}: no compensator for axis {axis}", self.source)));
         };
         let fs = f64::from(image.fs_hz);
         let h: Vec<Complex64> = f_hz
@@ -366,9 +349,7 @@ impl Compensator {
     fn run<'py>(&mut self, py: Python<'py>, block: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyAny>> {
         let k = self.channels;
         let Some(inner) = self.inner.as_mut() else {
-            return Err(PyValueError::new_err(
-                "this Compensator is finished; make a new one with image.compensator()",
-            ));
+            return Err(PyValueError::new_err("this Compensator is finished; make a new one with image.compensator()"));
         };
         let mut out = vec![Vec::new(); k];
         let n = match block {
@@ -409,10 +390,7 @@ impl Compensator {
         };
         let img = guarded(|| image.inline("Compensator"))?;
         let inner = guarded(|| StreamCompensator::new(img, &axes, raw_timing, &image.source))?;
-        Ok(Compensator {
-            inner: Some(inner),
-            channels: axes.len(),
-        })
+        Ok(Compensator { inner: Some(inner), channels: axes.len() })
     }
 
     /// Compensate the next block (n, k) and return the outputs it completes.

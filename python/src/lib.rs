@@ -49,9 +49,7 @@ pub(crate) fn guarded<T>(f: impl FnOnce() -> anyhow::Result<T>) -> PyResult<T> {
                 .map(|s| s.to_string())
                 .or_else(|| p.downcast_ref::<String>().cloned())
                 .unwrap_or_else(|| "unknown panic".into());
-            Err(PyRuntimeError::new_err(format!(
-                "internal error in dynocomp (please report it): {what}"
-            )))
+            Err(PyRuntimeError::new_err(format!("internal error in dynocomp (please report it): {what}")))
         }
     }
 }
@@ -70,11 +68,7 @@ fn parse_args<A: clap::Args>(command: &str, argv: Vec<String>) -> PyResult<A> {
         Ok(w) => Ok(w.args),
         Err(e) => {
             let text = e.to_string();
-            let first = text
-                .lines()
-                .next()
-                .unwrap_or("invalid arguments")
-                .trim_start_matches("error: ");
+            let first = text.lines().next().unwrap_or("invalid arguments").trim_start_matches("error: ");
             Err(PyValueError::new_err(format!("dynocomp {command}: {first}")))
         }
     }
@@ -157,22 +151,12 @@ fn read_frf<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDict>>
 fn read_record<'py>(py: Python<'py>, path: PathBuf, channels: Option<String>) -> PyResult<Bound<'py, PyDict>> {
     let (rec, declared) = py.detach(|| {
         guarded(|| {
-            let map = channels
-                .as_deref()
-                .map(ChannelMap::parse)
-                .transpose()
-                .map_err(|e| e.context("channels"))?;
+            let map = channels.as_deref().map(ChannelMap::parse).transpose().map_err(|e| e.context("channels"))?;
             let (mut reader, _) = dynocomp::io::signal_file::open_signal(&path, map.as_ref())?;
             let axes = reader.axes().to_vec();
             let declared = reader.declared_fs_hz();
             let (t_s, ch) = read_all(&mut *reader)?;
-            Ok((
-                SignalRecord {
-                    t_s,
-                    channels: axes.into_iter().zip(ch).collect(),
-                },
-                declared,
-            ))
+            Ok((SignalRecord { t_s, channels: axes.into_iter().zip(ch).collect() }, declared))
         })
     })?;
     let fs = declared.or_else(|| rec.sample_rate_from_time().map(|(f, _)| f));
@@ -240,10 +224,7 @@ fn write_signal_csv(py: Python<'_>, path: PathBuf, x: &Bound<'_, PyAny>, axes: V
             view.channels()
         )));
     }
-    let rec = SignalRecord {
-        t_s: None,
-        channels: axes.into_iter().zip(view.columns_f64()).collect(),
-    };
+    let rec = SignalRecord { t_s: None, channels: axes.into_iter().zip(view.columns_f64()).collect() };
     py.detach(|| guarded(|| dynocomp::io::signal_csv::write_signal_csv(&path, &rec)))
 }
 

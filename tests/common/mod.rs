@@ -25,23 +25,14 @@ pub fn mode_block(f_hz: f64, zeta: f64, fs_hz: f64, c: [f64; 2]) -> Block64 {
     let z_re = r * co;
     let z_im = r * s;
     let gain = ((1.0 - z_re).powi(2) + z_im.powi(2)).sqrt();
-    Block64 {
-        a: [[r * co, r * s], [-r * s, r * co]],
-        b: [gain, 0.0],
-        c,
-    }
+    Block64 { a: [[r * co, r * s], [-r * s, r * co]], b: [gain, 0.0], c }
 }
 
 /// Round an f64 block to the kernel's f32 delta form. `A − I` is formed in
 /// f64 before rounding, which is the point of the delta form.
 pub fn to_section(b: &Block64) -> Section {
     Section {
-        delta: [
-            (b.a[0][0] - 1.0) as f32,
-            b.a[0][1] as f32,
-            b.a[1][0] as f32,
-            (b.a[1][1] - 1.0) as f32,
-        ],
+        delta: [(b.a[0][0] - 1.0) as f32, b.a[0][1] as f32, b.a[1][0] as f32, (b.a[1][1] - 1.0) as f32],
         b: [b.b[0] as f32, b.b[1] as f32],
         c: [b.c[0] as f32, b.c[1] as f32],
     }
@@ -137,7 +128,13 @@ impl Xorshift {
 /// compensator's residues are), and the direct term chosen so that the DC
 /// gain is the identity (to f32 rounding).
 #[allow(dead_code)]
-pub fn mimo_test_filter(fs_hz: f64, pairs: usize, diagonals: usize, taps: usize, seed: u64) -> dynocomp_core::mimo::MimoFilter {
+pub fn mimo_test_filter(
+    fs_hz: f64,
+    pairs: usize,
+    diagonals: usize,
+    taps: usize,
+    seed: u64,
+) -> dynocomp_core::mimo::MimoFilter {
     use dynocomp_core::mimo::{MimoFilter, MimoSection};
     let mut rng = Xorshift(seed);
     let mut secs = Vec::new();
@@ -150,18 +147,30 @@ pub fn mimo_test_filter(fs_hz: f64, pairs: usize, diagonals: usize, taps: usize,
         let (sigma, omega) = ((r * th.cos() - 1.0) as f32, (r * th.sin()) as f32);
         let g = 0.3 * (1.0 - r * r);
         let b = [[0; 3].map(|_| rng.next() as f32), [0; 3].map(|_| rng.next() as f32)];
-        let c = [[0; 2].map(|_| (g * rng.next()) as f32), [0; 2].map(|_| (g * rng.next()) as f32), [0; 2].map(|_| (g * rng.next()) as f32)];
+        let c = [
+            [0; 2].map(|_| (g * rng.next()) as f32),
+            [0; 2].map(|_| (g * rng.next()) as f32),
+            [0; 2].map(|_| (g * rng.next()) as f32),
+        ];
         secs.push(MimoSection { delta: [sigma, omega, -omega, sigma], b, c });
     }
     for _ in 0..diagonals {
         let b = [[0; 3].map(|_| rng.next() as f32), [0; 3].map(|_| rng.next() as f32)];
-        let c = [[0; 2].map(|_| (0.01 * rng.next()) as f32), [0; 2].map(|_| (0.01 * rng.next()) as f32), [0; 2].map(|_| (0.01 * rng.next()) as f32)];
+        let c = [
+            [0; 2].map(|_| (0.01 * rng.next()) as f32),
+            [0; 2].map(|_| (0.01 * rng.next()) as f32),
+            [0; 2].map(|_| (0.01 * rng.next()) as f32),
+        ];
         secs.push(MimoSection { delta: [0.97 - 1.0, 0.0, 0.0, 0.6 - 1.0], b, c });
     }
     let fir: Vec<[[f32; 3]; 3]> = (0..taps)
         .map(|m| {
             let s = 0.1 * (-0.4 * m as f64).exp();
-            [[0; 3].map(|_| (s * rng.next()) as f32), [0; 3].map(|_| (s * rng.next()) as f32), [0; 3].map(|_| (s * rng.next()) as f32)]
+            [
+                [0; 3].map(|_| (s * rng.next()) as f32),
+                [0; 3].map(|_| (s * rng.next()) as f32),
+                [0; 3].map(|_| (s * rng.next()) as f32),
+            ]
         })
         .collect();
     let zero = [[0.0f32; 3]; 3];

@@ -9,8 +9,8 @@ use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 
 use crate::io::image_file::{read_any_image, AnyImage};
-use crate::io::signal::{check_rate_value, ChannelMap};
 use crate::io::signal::check_max_force;
+use crate::io::signal::{check_rate_value, ChannelMap};
 use crate::io::signal_file::{open_signal_checked, SignalFormat};
 use crate::offline::record::{compensate_file, Compensated, Compensation, Monitor, Observer, RecordJob, Truth};
 use crate::report::compensation::ReportAccumulator;
@@ -99,11 +99,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
     let done = compensate_file(job, acc.as_mut().map(|r| r as &mut dyn Observer), &Terminal(&progress))?;
     progress.finish_and_clear();
     let Compensated { samples: n_samples, how } = done;
-    eprintln!(
-        "compensated {n_samples} samples x {} axes at {fs} Hz ({how}) -> {}",
-        axes.len(),
-        a.output.display()
-    );
+    eprintln!("compensated {n_samples} samples x {} axes at {fs} Hz ({how}) -> {}", axes.len(), a.output.display());
     // The project's one scoring band (the same as `examples/score.rs` and
     // the rates harness), not the image's flat band.
     let band = |_axis: usize| -> f64 { a.band_hz.unwrap_or_else(|| crate::metrics::scoring_band_hz(f64::from(fs))) };
@@ -143,8 +139,11 @@ struct Options {
 impl Options {
     fn new(a: &CompensateArgs) -> Result<Self> {
         let sidecar = crate::offline::sidecar::sidecar_path(&a.coeffs);
-        let mut inputs =
-            vec![("--input", a.input.as_path()), ("--coeffs", a.coeffs.as_path()), ("the model sidecar of --coeffs", &sidecar)];
+        let mut inputs = vec![
+            ("--input", a.input.as_path()),
+            ("--coeffs", a.coeffs.as_path()),
+            ("the model sidecar of --coeffs", &sidecar),
+        ];
         inputs.extend(a.truth.as_deref().map(|p| ("--truth", p)));
         crate::io::atomic::ensure_not_an_input(&[("--output", &a.output)], &inputs)?;
         let img = read_any_image(&a.coeffs)?;
@@ -268,7 +267,11 @@ fn progress_bar(len: Option<u64>) -> indicatif::ProgressBar {
 /// Give `pb` the length `len` (a bar with an ETA; a spinner if unknown),
 /// counting `unit`.
 fn restyle(pb: &indicatif::ProgressBar, len: Option<u64>, unit: &'static str) {
-    let style = if len.is_some() { "{wide_bar} {human_pos}/{human_len} {msg}, eta {eta}" } else { "{spinner} {human_pos} {msg}, {per_sec}" };
+    let style = if len.is_some() {
+        "{wide_bar} {human_pos}/{human_len} {msg}, eta {eta}"
+    } else {
+        "{spinner} {human_pos} {msg}, {per_sec}"
+    };
     if let Ok(s) = indicatif::ProgressStyle::with_template(style) {
         pb.set_style(s);
     }

@@ -4,9 +4,9 @@
 use anyhow::{Context, Result};
 
 use crate::cli::design_args::{DesignArgs, DesignSetup};
+use crate::design::bands::Band;
 use crate::design::image::build_parallel_image;
 use crate::design::parallel::{design_parallel, design_regions};
-use crate::design::bands::Band;
 use crate::frf::axis_name;
 
 /// `dynocomp design --parallel`: design per band, write the parallel image

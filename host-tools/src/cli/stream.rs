@@ -51,4 +51,3 @@ pub fn run(args: &StreamArgs) -> Result<StreamReport> {
     }
     Ok(report)
 }
-

@@ -113,7 +113,13 @@ const NEWTON_STEPS: usize = 4;
 
 /// Ric(P) = A P Aᵀ − A P c (cᵀ P c + R)⁻¹ cᵀ P Aᵀ + Q, and the predictor
 /// gain K̄ = A P c / (cᵀ P c + R) with s = cᵀ P c + R.
-fn riccati_map(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r: f64, p: &DMatrix<f64>) -> (DMatrix<f64>, DVector<f64>, f64) {
+fn riccati_map(
+    a: &DMatrix<f64>,
+    c: &DVector<f64>,
+    q: &DMatrix<f64>,
+    r: f64,
+    p: &DMatrix<f64>,
+) -> (DMatrix<f64>, DVector<f64>, f64) {
     let s = (c.transpose() * p * c)[(0, 0)] + r;
     let kbar = a * p * c / s;
     let apa = a * p * a.transpose();
@@ -247,12 +253,7 @@ pub fn design(dm: &DiscreteModel, q: f64, r: f64, lag: usize) -> Result<KalmanDe
     let n = plant.a.nrows();
     let i_kc = DMatrix::<f64>::identity(n, n) - &k * plant.c.transpose();
     let out = plant.output_index();
-    let comp = StateSpace {
-        a: &plant.a * &i_kc,
-        b: &plant.a * &k,
-        c: i_kc.row(out).transpose(),
-        d: k[out],
-    };
+    let comp = StateSpace { a: &plant.a * &i_kc, b: &plant.a * &k, c: i_kc.row(out).transpose(), d: k[out] };
     let radius = comp.spectral_radius()?;
     if !(radius < 1.0) {
         bail!("Kalman compensator is not stable (spectral radius {radius:.9}); the fitted model may be unobservable");

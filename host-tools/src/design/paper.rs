@@ -10,10 +10,10 @@ use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 use std::f64::consts::PI;
 
-pub use crate::fit::rfp::condition_number;
-use crate::fit::linalg;
-use crate::fit::rfp::RationalTf;
 use crate::design::kalman::KalmanDesign;
+use crate::fit::linalg;
+pub use crate::fit::rfp::condition_number;
+use crate::fit::rfp::RationalTf;
 use crate::numeric::lti::StateSpace;
 
 /// Condition numbers and ranks along the paper's path (reported by
@@ -65,7 +65,15 @@ pub struct ContinuousSs {
 pub fn companion_form(tf: &RationalTf) -> ContinuousSs {
     let n = tf.na();
     let d = if tf.nb() == n { tf.b[n] } else { 0.0 };
-    let a = DMatrix::<f64>::from_fn(n, n, |i, j| if i == 0 { -tf.a[n - 1 - j] } else if i == j + 1 { 1.0 } else { 0.0 });
+    let a = DMatrix::<f64>::from_fn(n, n, |i, j| {
+        if i == 0 {
+            -tf.a[n - 1 - j]
+        } else if i == j + 1 {
+            1.0
+        } else {
+            0.0
+        }
+    });
     let mut b = DVector::<f64>::zeros(n);
     b[0] = 1.0;
     // strictly proper numerator B − d·A, coefficient of s'^(n−1−j) in C_j
@@ -174,7 +182,8 @@ pub fn solve_filter_care(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r
     rhs.view_mut((0, 0), (n, n)).copy_from(&(-(&w11 + &id)));
     rhs.view_mut((n, 0), (n, n)).copy_from(&(-&w21));
     let p = linalg::svd(lhs, "continuous Riccati (7): the sign-function subspace")?
-        .solve(&rhs, 0.0).map_err(|e| anyhow::anyhow!("continuous Riccati: {e}"))?;
+        .solve(&rhs, 0.0)
+        .map_err(|e| anyhow::anyhow!("continuous Riccati: {e}"))?;
     let mut p = (&p + p.transpose()) * 0.5;
     let residual_of = |p: &DMatrix<f64>| {
         let pcp = p * &g * p;
@@ -276,7 +285,14 @@ pub fn tustin_prewarped(ss: &ContinuousSs, t: f64, omega_p: f64) -> Result<State
 ///    x̂̇ = (A_e − K C_e) x̂ + K F_m, F̂_a = C_0 x̂;
 /// 5. the bilinear (Tustin) transform with frequency prewarping at f_p, exact
 ///    at f_p: H_d(e^{j2πf_p/fs}) = H_c(j2πf_p) ([`tustin_prewarped`]).
-pub fn design(tf: &RationalTf, fs_hz: f64, q: f64, r: f64, prewarp_hz: f64, diag: &mut PaperDiagnostics) -> Result<KalmanDesign> {
+pub fn design(
+    tf: &RationalTf,
+    fs_hz: f64,
+    q: f64,
+    r: f64,
+    prewarp_hz: f64,
+    diag: &mut PaperDiagnostics,
+) -> Result<KalmanDesign> {
     if !(r > 0.0 && r.is_finite() && q > 0.0 && q.is_finite()) {
         bail!("Q and R must be positive and finite (q = {q}, R = {r})");
     }
@@ -319,7 +335,15 @@ pub fn design(tf: &RationalTf, fs_hz: f64, q: f64, r: f64, prewarp_hz: f64, diag
     if !(radius < 1.0) {
         bail!("discretized compensator is not stable (spectral radius {radius:.9})");
     }
-    Ok(KalmanDesign { compensator: disc, kalman_gain: k, dare_residual: care.residual, closed_loop_radius: radius, lag: 0, q, r })
+    Ok(KalmanDesign {
+        compensator: disc,
+        kalman_gain: k,
+        dare_residual: care.residual,
+        closed_loop_radius: radius,
+        lag: 0,
+        q,
+        r,
+    })
 }
 
 /// Continuous response C (jωI − A)⁻¹ B + D of `ss` at ω (rad per time unit).

@@ -29,12 +29,7 @@ pub struct VfOptions {
 
 impl Default for VfOptions {
     fn default() -> Self {
-        VfOptions {
-            max_order: 24,
-            iterations: 8,
-            improvement_tol: 0.03,
-            decimate: 4,
-        }
+        VfOptions { max_order: 24, iterations: 8, improvement_tol: 0.03, decimate: 4 }
     }
 }
 
@@ -104,7 +99,10 @@ fn basis_row(s: Complex64, poles: &[Pole], out: &mut Vec<Complex64>) {
 fn lstsq(mut a: DMatrix<f64>, b: DVector<f64>) -> Result<DVector<f64>> {
     let ncols = a.ncols();
     if a.nrows() < ncols {
-        bail!("vector fitting: {} equations for {ncols} unknowns; lower the model order or give more frequency lines", a.nrows());
+        bail!(
+            "vector fitting: {} equations for {ncols} unknowns; lower the model order or give more frequency lines",
+            a.nrows()
+        );
     }
     if a.iter().chain(b.iter()).any(|v| !v.is_finite()) {
         bail!("vector fitting: the least-squares system has a non-finite entry (a pole on a measured line?)");
@@ -245,10 +243,7 @@ fn to_model(poles: &[Pole], c: &[f64], d: f64, w_scale: f64) -> PoleResidueModel
     let mut j = 0;
     for p in poles {
         if p.pair {
-            terms.push(Term::Pair {
-                pole: p.p * w_scale,
-                residue: Complex64::new(c[j], c[j + 1]) * w_scale,
-            });
+            terms.push(Term::Pair { pole: p.p * w_scale, residue: Complex64::new(c[j], c[j + 1]) * w_scale });
             j += 2;
         } else {
             terms.push(Term::Real { pole: p.p.re * w_scale, residue: c[j] * w_scale });
@@ -288,7 +283,13 @@ fn relocation_step(lines: usize, order: usize, decimate: usize) -> usize {
 }
 
 /// Fit a model of a fixed (even) order.
-pub fn fit_order(freq_hz: &[f64], h: &[Complex64], weights: &[f64], order: usize, opts: &VfOptions) -> Result<PoleResidueModel> {
+pub fn fit_order(
+    freq_hz: &[f64],
+    h: &[Complex64],
+    weights: &[f64],
+    order: usize,
+    opts: &VfOptions,
+) -> Result<PoleResidueModel> {
     let f_max = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
     if f_max <= 0.0 {
         bail!("vector fitting needs positive frequencies");

@@ -35,7 +35,8 @@ pub fn write_image(path: &Path, image: &CoeffImage) -> Result<()> {
 /// same value.
 pub fn encode_image_checked(path: &Path, image: &CoeffImage) -> Result<Vec<u8>> {
     let bytes = encode_image(image)?;
-    let back = CoeffImage::parse(&bytes).map_err(|e| anyhow::anyhow!("{}: encoded image does not parse: {e}", path.display()))?;
+    let back = CoeffImage::parse(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: encoded image does not parse: {e}", path.display()))?;
     anyhow::ensure!(back == *image, "{}: encoded image does not decode to the design", path.display());
     Ok(bytes)
 }
@@ -109,7 +110,8 @@ pub fn write_parallel_image(path: &Path, image: &ParallelImage) -> Result<()> {
     let mut buf = vec![0u8; MAX_PARALLEL_IMAGE_LEN];
     let n = image.encode(&mut buf).map_err(|e| anyhow::anyhow!("cannot encode parallel image: {e}"))?;
     buf.truncate(n);
-    let back = ParallelImage::parse(&buf).map_err(|e| anyhow::anyhow!("{}: encoded parallel image does not parse: {e}", path.display()))?;
+    let back = ParallelImage::parse(&buf)
+        .map_err(|e| anyhow::anyhow!("{}: encoded parallel image does not parse: {e}", path.display()))?;
     anyhow::ensure!(back == *image, "{}: encoded parallel image does not decode to the design", path.display());
     write_bytes_atomic(path, &buf)
 }

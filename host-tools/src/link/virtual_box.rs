@@ -256,7 +256,14 @@ impl VirtualBox {
         loop {
             let n = match port.read(&mut buf) {
                 Ok(n) => n,
-                Err(e) if matches!(e.kind(), std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock | std::io::ErrorKind::Interrupted) => 0,
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock | std::io::ErrorKind::Interrupted
+                    ) =>
+                {
+                    0
+                }
                 Err(_) => return Exit::LinkClosed,
             };
             let mut out = self.receive(&buf[..n]);
@@ -351,6 +358,10 @@ pub fn spawn(exe: &Path, args: &[&str]) -> Result<(std::process::Child, String)>
     let stdout = child.stdout.take().context("virtual box stdout")?;
     let mut line = String::new();
     std::io::BufReader::new(stdout).read_line(&mut line).context("virtual box did not start")?;
-    let path = line.trim().strip_prefix("PTY ").map(str::to_string).with_context(|| format!("virtual box printed `{}`", line.trim()))?;
+    let path = line
+        .trim()
+        .strip_prefix("PTY ")
+        .map(str::to_string)
+        .with_context(|| format!("virtual box printed `{}`", line.trim()))?;
     Ok((child, path))
 }

@@ -2,7 +2,9 @@
 //! (`design`, `inspect`): the core's cost model (`dynocomp_core::budget`)
 //! at the image's sample rate on the 170 MHz STM32G474.
 
-use dynocomp_core::budget::{image_cycles, image_load, load_permille, max_fs_hz, period_cycles, BOX_LOAD_LIMIT_PERMILLE};
+use dynocomp_core::budget::{
+    image_cycles, image_load, load_permille, max_fs_hz, period_cycles, BOX_LOAD_LIMIT_PERMILLE,
+};
 use dynocomp_core::image::ImageRef;
 use serde::Serialize;
 

@@ -21,15 +21,35 @@ pub fn render(c: &Comparison) -> String {
         let _ = writeln!(s, "fitting bands: {}", crate::design::bands::describe(&c.bands));
     }
     for ax in &c.axes {
-        let _ = writeln!(s, "\naxis {} (coherent {:.0}–{:.0} Hz)", ax.axis, ax.coherent_band_hz.0, ax.coherent_band_hz.1);
+        let _ =
+            writeln!(s, "\naxis {} (coherent {:.0}–{:.0} Hz)", ax.axis, ax.coherent_band_hz.0, ax.coherent_band_hz.1);
         let _ = writeln!(
             s,
             "{:<28} {:>5} {:>8} {:>8} {:>8} {:>8} {:>13} {:>6} {:>3} {:>8} {:>8} {:>8} {:>5} {:>8}",
-            "method", "order", "fit in", "fit out", "comp in", "comp out", "flat (Hz)", "noise", "L", "cond RFP", "cond GN", "cond obs", "rank", "time"
+            "method",
+            "order",
+            "fit in",
+            "fit out",
+            "comp in",
+            "comp out",
+            "flat (Hz)",
+            "noise",
+            "L",
+            "cond RFP",
+            "cond GN",
+            "cond obs",
+            "rank",
+            "time"
         );
         for r in &ax.rows {
             if let Some(diag) = &r.diagnostic {
-                let _ = writeln!(s, "{:<28} FAILED after {:.0} ms: {}", r.method, r.design_time_s * 1e3, short_diagnostic(diag));
+                let _ = writeln!(
+                    s,
+                    "{:<28} FAILED after {:.0} ms: {}",
+                    r.method,
+                    r.design_time_s * 1e3,
+                    short_diagnostic(diag)
+                );
                 continue;
             }
             let (c1, c2, c3, rank) = match &r.paper {
@@ -85,7 +105,13 @@ fn short_diagnostic(diag: &str) -> String {
 /// Characters of a failure's diagnostic in the table.
 const DIAG_CHARS: usize = 110;
 
-const COLORS: [RGBColor; 5] = [RGBColor(214, 39, 40), RGBColor(255, 127, 14), RGBColor(148, 103, 189), RGBColor(31, 119, 180), RGBColor(44, 160, 44)];
+const COLORS: [RGBColor; 5] = [
+    RGBColor(214, 39, 40),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(31, 119, 180),
+    RGBColor(44, 160, 44),
+];
 
 /// SVG of one axis: |H·G·delay| and the phase of every method that produced
 /// a filter, with the fitting bands shaded. Earlier methods are drawn wider,
@@ -98,7 +124,9 @@ pub fn plot_axis(freq: &[f64], ax: &AxisComparison, bands: &[Band]) -> Result<St
     {
         let root = SVGBackend::with_string(&mut buf, (1100, 760)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
-        let root = root.titled(&format!("Axis {} — compensated response H·G of each method (measured G)", ax.axis), (FONT, 20)).map_err(perr)?;
+        let root = root
+            .titled(&format!("Axis {} — compensated response H·G of each method (measured G)", ax.axis), (FONT, 20))
+            .map_err(perr)?;
         let (plots, key) = root.split_horizontally(840);
         let (top, bot) = plots.split_vertically(370);
         let yr_m = (0.5, 1.5);
@@ -119,7 +147,8 @@ pub fn plot_axis(freq: &[f64], ax: &AxisComparison, bands: &[Band]) -> Result<St
             }
             let width = 1 + (n - 1 - i as u32).min(2);
             let mag: Vec<(f64, f64)> = freq.iter().zip(&r.compensated).map(|(f, h)| (*f, h.norm())).collect();
-            let ph: Vec<(f64, f64)> = freq.iter().zip(&r.compensated).map(|(f, h)| (*f, h.arg().to_degrees())).collect();
+            let ph: Vec<(f64, f64)> =
+                freq.iter().zip(&r.compensated).map(|(f, h)| (*f, h.arg().to_degrees())).collect();
             draw_line(&mut c, &mag, yr_m, 0.3, *color, width, false, "")?;
             draw_line(&mut cp, &ph, yr_p, 30.0, *color, width, false, "")?;
             entries.push((r.method.clone(), Some((*color, width))));
@@ -132,7 +161,11 @@ pub fn plot_axis(freq: &[f64], ax: &AxisComparison, bands: &[Band]) -> Result<St
 
 /// The legend column of [`plot_axis`]: a swatch and the name of each method
 /// (failed ones in grey, without a swatch), then the shaded bands.
-fn draw_key(area: &crate::report::plot::Area<'_>, entries: &[(String, Option<(RGBColor, u32)>)], bands: bool) -> Result<()> {
+fn draw_key(
+    area: &crate::report::plot::Area<'_>,
+    entries: &[(String, Option<(RGBColor, u32)>)],
+    bands: bool,
+) -> Result<()> {
     use crate::report::plot::{perr, FONT};
     let mut y = 40;
     let text = |area: &crate::report::plot::Area<'_>, s: &str, y: i32, color: RGBColor| {
@@ -141,7 +174,8 @@ fn draw_key(area: &crate::report::plot::Area<'_>, entries: &[(String, Option<(RG
     for (name, style) in entries {
         match style {
             Some((color, width)) => {
-                area.draw(&PathElement::new(vec![(4, y), (32, y)], ShapeStyle::from(color).stroke_width(*width))).map_err(perr)?;
+                area.draw(&PathElement::new(vec![(4, y), (32, y)], ShapeStyle::from(color).stroke_width(*width)))
+                    .map_err(perr)?;
                 text(area, name, y, BLACK)?;
             }
             None => text(area, name, y, RGBColor(120, 120, 120))?,
@@ -149,7 +183,8 @@ fn draw_key(area: &crate::report::plot::Area<'_>, entries: &[(String, Option<(RG
         y += 24;
     }
     y += 12;
-    let swatches = [(RGBColor(150, 150, 150), 0.10, "coherent band"), (crate::report::plot::C_FIT_BAND, 0.18, "fitting bands")];
+    let swatches =
+        [(RGBColor(150, 150, 150), 0.10, "coherent band"), (crate::report::plot::C_FIT_BAND, 0.18, "fitting bands")];
     for (color, alpha, name) in swatches.into_iter().filter(|s| bands || s.2 != "fitting bands") {
         area.draw(&Rectangle::new([(4, y - 6), (32, y + 6)], color.mix(alpha).filled())).map_err(perr)?;
         text(area, name, y, BLACK)?;

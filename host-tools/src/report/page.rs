@@ -22,7 +22,8 @@ pub struct Page {
 pub fn write_pages(dir: &Path, pages: &[Page]) -> Result<Vec<PathBuf>> {
     let dir_existed = dir.is_dir();
     if !dir_existed {
-        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the report directory", dir.display()))?;
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create the report directory", dir.display()))?;
     }
     let mut written: Vec<PathBuf> = Vec::new();
     let mut created: Vec<PathBuf> = Vec::new();

@@ -45,7 +45,11 @@ pub fn plot(axis: &str, s: &Sensitivity) -> anyhow::Result<String> {
         let mut c = build_chart(&root, "Predicted in-band RMS error (% of the force's std, log scale)", xr, yr)?;
         let ytick = |v: &f64| {
             let p = 10f64.powf(*v);
-            if p >= 1.0 { format!("{p:.1}") } else { format!("{p:.2}") }
+            if p >= 1.0 {
+                format!("{p:.1}")
+            } else {
+                format!("{p:.2}")
+            }
         };
         mesh(&mut c, "Sensor-mode shift δ (%)", "Predicted error (%)", &|v| format!("{v:+.1}"), &ytick, 8)?;
         draw_line(&mut c, &pts, yr, f64::INFINITY, RGBColor(214, 39, 40), 2, false, "predicted error, this filter")?;

@@ -51,10 +51,7 @@ fn main() -> ! {
         if got == 0 {
             break;
         }
-        for (fin, fout) in inb[..got]
-            .chunks_exact(FRAME_BYTES)
-            .zip(outb.chunks_exact_mut(FRAME_BYTES))
-        {
+        for (fin, fout) in inb[..got].chunks_exact(FRAME_BYTES).zip(outb.chunks_exact_mut(FRAME_BYTES)) {
             let u: [f32; AXES] = core::array::from_fn(|axis| f32_le(&fin[4 * axis..]));
             let y = match &image {
                 BoxImage::Matrix(m) => m.filter.step(&mut matrix_state, u),

@@ -84,7 +84,11 @@ pub fn pair(axis: &str, before: &PoleResidueModel, after: &PoleResidueModel) -> 
     let split = |m: &PoleResidueModel| -> (Vec<Term>, Vec<Term>) {
         let (mut modes, mut background) = (Vec::new(), Vec::new());
         for (i, t) in m.terms.iter().enumerate() {
-            if is_physical(m, i) { modes.push(*t) } else { background.push(*t) }
+            if is_physical(m, i) {
+                modes.push(*t)
+            } else {
+                background.push(*t)
+            }
         }
         modes.sort_by(|a, b| term_fn_hz(a).total_cmp(&term_fn_hz(b)));
         (modes, background)

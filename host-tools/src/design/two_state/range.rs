@@ -55,10 +55,17 @@ pub struct Paired {
 /// modes the two FRFs measured alike are shared ([`share_machine_modes`])
 /// and the sensor modes above `d0`'s compensated band are fitted to both
 /// FRFs at once ([`crate::design::two_state::joint`]).
-pub fn pair_second_state(freq_hz: &[f64], first: &AxisFrf, d0: &AxisDesign, second: &AxisFrf, vf: &VfOptions) -> Result<Paired> {
+pub fn pair_second_state(
+    freq_hz: &[f64],
+    first: &AxisFrf,
+    d0: &AxisDesign,
+    second: &AxisFrf,
+    vf: &VfOptions,
+) -> Result<Paired> {
     let name = axis_name(second.axis);
     let w = coherence_weights(&second.frf, second.coherence.as_deref());
-    let after = fit_order(freq_hz, &second.frf, &w, d0.model.order(), vf).with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?;
+    let after = fit_order(freq_hz, &second.frf, &w, d0.model.order(), vf)
+        .with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?;
     let ts = pair(name, &d0.model, &after)?;
     let w0 = coherence_weights(&first.frf, first.coherence.as_deref());
     let frfs = [(&first.frf[..], &w0[..]), (&second.frf[..], &w[..])];
@@ -109,7 +116,11 @@ pub struct MachineMode {
 /// FRFs, √(Σ w|Ĝ_shared − H|² / Σ w|Ĝ − H|²) ≤ [`SHARE_TOLERANCE`], i.e. the
 /// data cannot tell the two fits apart; otherwise (the mode moved, or is
 /// not resolved by [`SHARE_MIN_LINES`] lines) both states keep their own.
-pub fn share_machine_modes(ts: &TwoState, freq_hz: &[f64], frfs: [(&[Complex64], &[f64]); 2]) -> (TwoState, Vec<MachineMode>) {
+pub fn share_machine_modes(
+    ts: &TwoState,
+    freq_hz: &[f64],
+    frfs: [(&[Complex64], &[f64]); 2],
+) -> (TwoState, Vec<MachineMode>) {
     let sensors = sensor_mode_indices(&ts.before);
     let mut out = ts.clone();
     let mut report = Vec::new();
@@ -128,7 +139,8 @@ pub fn share_machine_modes(ts: &TwoState, freq_hz: &[f64], frfs: [(&[Complex64],
         let growth = |m: &PoleResidueModel, (h, w): (&[Complex64], &[f64])| {
             let mut shared = m.clone();
             shared.terms[i] = mean;
-            let chi = |g: &PoleResidueModel| lines.iter().map(|&k| w[k] * (g.frf(freq_hz[k]) - h[k]).norm_sqr()).sum::<f64>();
+            let chi =
+                |g: &PoleResidueModel| lines.iter().map(|&k| w[k] * (g.frf(freq_hz[k]) - h[k]).norm_sqr()).sum::<f64>();
             (chi(&shared) / chi(m)).sqrt()
         };
         let g = (growth(&ts.before, frfs[0]), growth(&ts.after, frfs[1]));
@@ -204,9 +216,15 @@ pub fn design_over_range(
     let ranges = criterion_ranges(&d0.bands, d0.compensated_band_hz);
     let width: f64 = ranges.iter().map(|b| b.1 - b.0).sum();
     let freqs = criterion_grid(&ranges);
-    let plants: Vec<Vec<(f64, Complex64)>> =
-        RANGE_STATES.iter().map(|&s| { let m = ts.at(s); freqs.iter().map(|f| (*f, m.frf(*f))).collect() }).collect();
-    let in_band: Vec<usize> = (0..freq_hz.len()).filter(|&k| ranges.iter().any(|b| freq_hz[k] >= b.0 && freq_hz[k] <= b.1)).collect();
+    let plants: Vec<Vec<(f64, Complex64)>> = RANGE_STATES
+        .iter()
+        .map(|&s| {
+            let m = ts.at(s);
+            freqs.iter().map(|f| (*f, m.frf(*f))).collect()
+        })
+        .collect();
+    let in_band: Vec<usize> =
+        (0..freq_hz.len()).filter(|&k| ranges.iter().any(|b| freq_hz[k] >= b.0 && freq_hz[k] <= b.1)).collect();
     let measured_freqs: Vec<f64> = in_band.iter().map(|&k| freq_hz[k]).collect();
     let measured_plants: [Vec<(f64, Complex64)>; 2] =
         [first, second].map(|a| in_band.iter().map(|&k| (freq_hz[k], a.frf[k])).collect());
@@ -221,7 +239,11 @@ pub fn design_over_range(
             design_axis(freq_hz, second, r, opts).context("second FRF")
         } else {
             let m = ts.at(s);
-            let synthetic = AxisFrf { axis: first.axis, frf: freq_hz.iter().map(|f| m.frf(*f)).collect(), coherence: first.coherence.clone() };
+            let synthetic = AxisFrf {
+                axis: first.axis,
+                frf: freq_hz.iter().map(|f| m.frf(*f)).collect(),
+                coherence: first.coherence.clone(),
+            };
             design_axis(freq_hz, &synthetic, r, opts).with_context(|| format!("model state s = {s}"))
         };
         // A state that cannot be designed is not a candidate; the first
@@ -235,7 +257,8 @@ pub fn design_over_range(
         };
         let h = design.kalman.compensator.freq_responses(&freqs, opts.fs_hz);
         let noise = noise_term(design.kalman.r, opts.fs_hz, width, opts.force_rms);
-        let j = |g: &[(f64, Complex64)], h: &[Complex64]| criterion_j(g, h, design.kalman.lag, opts.fs_hz, noise).sqrt();
+        let j =
+            |g: &[(f64, Complex64)], h: &[Complex64]| criterion_j(g, h, design.kalman.lag, opts.fs_hz, noise).sqrt();
         let errors: Vec<f64> = plants.iter().map(|g| j(g, &h)).collect();
         let hm = design.kalman.compensator.freq_responses(&measured_freqs, opts.fs_hz);
         let measured = (j(&measured_plants[0], &hm), j(&measured_plants[1], &hm));
@@ -244,7 +267,9 @@ pub fn design_over_range(
     }
     // Ties go to the first FRF's own design (candidate 0): a range design
     // must predict strictly less to replace it.
-    let best = (0..cands.len()).min_by(|&a, &b| cands[a].worst.total_cmp(&cands[b].worst)).ok_or_else(|| anyhow::anyhow!("axis {name}: no candidate state"))?;
+    let best = (0..cands.len())
+        .min_by(|&a, &b| cands[a].worst.total_cmp(&cands[b].worst))
+        .ok_or_else(|| anyhow::anyhow!("axis {name}: no candidate state"))?;
     Ok(RangeDesign { states: ts, machine, above_band, candidates: cands, best, skipped })
 }
 
