@@ -265,6 +265,7 @@ pub fn run(image: &Path, chip: &str, slot: SlotArg, dry_run: bool, verbose: bool
     Ok(())
 }
 
+#[cfg(feature = "probe")]
 /// Stdout sent to /dev/null while it lives (the process's file descriptor
 /// 1, which a library's `println!` writes to), restored on drop. Does
 /// nothing where that is not possible.
@@ -273,6 +274,7 @@ struct StdoutSilenced {
     saved: Option<std::os::fd::OwnedFd>,
 }
 
+#[cfg(feature = "probe")]
 impl StdoutSilenced {
     fn new() -> Self {
         use std::io::Write;
@@ -292,6 +294,7 @@ impl StdoutSilenced {
     }
 }
 
+#[cfg(feature = "probe")]
 impl Drop for StdoutSilenced {
     fn drop(&mut self) {
         use std::io::Write;
