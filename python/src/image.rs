@@ -62,6 +62,15 @@ pub struct Image {
     source: String,
 }
 
+/// `any`, or an error for a 3x3 image (format 3), which the package cannot
+/// run yet (nor can `dynocomp compensate`).
+fn runnable(any: AnyImage, source: &str) -> anyhow::Result<AnyImage> {
+    if let AnyImage::Matrix(_) = any {
+        bail!("{source}: a 3x3 image (format 3): the Python package cannot run it yet; use the per-axis image of `dynocomp design`");
+    }
+    Ok(any)
+}
+
 impl Image {
     /// The box image (format 1), or an error for a parallel image.
     fn inline(&self, what: &str) -> anyhow::Result<&CoeffImage> {
@@ -70,6 +79,7 @@ impl Image {
             AnyImage::Parallel(_) => {
                 bail!("{}: {what} needs a box image (format 1); this is a parallel-elaboration image", self.source)
             }
+            AnyImage::Matrix(_) => bail!("{}: {what} needs a box image (format 1); this is a 3x3 image", self.source),
         }
     }
 
@@ -81,6 +91,7 @@ impl Image {
                 Some(i) => i,
                 None => return Vec::new(),
             },
+            AnyImage::Matrix(_) => return vec![0, 1, 2],
         };
         img.axes.iter().flatten().map(|a| a.axis as usize).collect()
     }
@@ -139,7 +150,7 @@ impl Image {
                 let source = path.display().to_string();
                 let bytes = std::fs::read(&path)
                     .map_err(|e| anyhow::Error::from(e).context(format!("{source}: cannot read")))?;
-                let any = parse_any_image(&bytes, &source)?;
+                let any = runnable(parse_any_image(&bytes, &source)?, &source)?;
                 Ok(Image { any, bytes, path: Some(path), sidecar: None, source })
             })
         })
@@ -152,7 +163,7 @@ impl Image {
     fn from_bytes(data: Vec<u8>, sidecar: Option<String>, name: Option<String>) -> PyResult<Image> {
         let source = name.unwrap_or_else(|| "<image bytes>".into());
         guarded(|| {
-            let any = parse_any_image(&data, &source)?;
+            let any = runnable(parse_any_image(&data, &source)?, &source)?;
             Ok(Image { any, bytes: data, path: None, sidecar, source })
         })
     }
@@ -180,6 +191,7 @@ impl Image {
         match &self.any {
             AnyImage::Inline(i) => u32::from(i.latency_samples),
             AnyImage::Parallel(p) => p.band_image(0).map_or(0, |i| u32::from(i.latency_samples)),
+            AnyImage::Matrix(m) => u32::from(m.latency_samples),
         }
     }
 
@@ -201,6 +213,7 @@ impl Image {
         match &self.any {
             AnyImage::Inline(i) => i.is_offline_only(),
             AnyImage::Parallel(_) => true,
+            AnyImage::Matrix(m) => m.flags & dynocomp_core::image::FLAG_OFFLINE_ONLY != 0,
         }
     }
 
@@ -268,6 +281,7 @@ impl Image {
                     Ok(out.channels.into_iter().map(|c| c.1).collect())
                 }
                 (AnyImage::Parallel(_), true) => self.inline("offline=True").map(|_| Vec::new()),
+                (AnyImage::Matrix(_), _) => self.inline("compensate").map(|_| Vec::new()),
             })
         })?;
         Ok(channels_to_array(py, &out, n, one_d))
