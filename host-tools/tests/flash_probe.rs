@@ -3,6 +3,7 @@
 //! refusal of bad images before any probe is touched.
 #![cfg(feature = "probe")]
 
+mod cli_common;
 mod common;
 
 use std::cell::Cell;
@@ -240,13 +241,10 @@ fn cli_dry_run_needs_no_hardware() {
 fn dry_run_is_quiet_unless_verbose() {
     let image = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/images/example.dcimg");
     let run = |extra: &[&str]| {
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_dynocomp"))
-            .args(["flash", image.to_str().unwrap(), "--probe", "--dry-run"])
-            .args(extra)
-            .output()
-            .unwrap();
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-        String::from_utf8(out.stdout).unwrap()
+        let args = [&["flash", image.to_str().unwrap(), "--probe", "--dry-run"], extra].concat();
+        let (ok, out, err) = cli_common::dynocomp(&args);
+        assert!(ok, "{err}");
+        out
     };
     let quiet = run(&[]);
     assert_eq!(quiet.lines().count(), 1, "{quiet}");

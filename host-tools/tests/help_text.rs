@@ -2,13 +2,15 @@
 //! docs/, never the source (`crate::` paths, module docs), issue numbers or
 //! files outside the repository.
 
-use std::path::Path;
-use std::process::Command;
+mod cli_common;
 
-fn dynocomp(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_dynocomp")).args(args).output().unwrap();
-    assert!(out.status.success(), "dynocomp {args:?} failed");
-    String::from_utf8(out.stdout).unwrap()
+use std::path::Path;
+
+/// The stdout of a successful `dynocomp args`.
+fn help(args: &[&str]) -> String {
+    let (ok, out, err) = cli_common::dynocomp(args);
+    assert!(ok, "dynocomp {args:?} failed: {err}");
+    out
 }
 
 fn repo() -> &'static Path {
@@ -47,7 +49,7 @@ fn problems(help: &str, readme: &str) -> Vec<String> {
 #[test]
 fn every_help_text_refers_only_to_what_users_have() {
     let readme = std::fs::read_to_string(repo().join("README.md")).unwrap();
-    let top = dynocomp(&["--help"]);
+    let top = help(&["--help"]);
     let commands: Vec<&str> = top
         .lines()
         .skip_while(|l| !l.starts_with("Commands:"))
@@ -59,8 +61,8 @@ fn every_help_text_refers_only_to_what_users_have() {
     assert!(commands.len() >= 7, "commands not found in: {top}");
     let mut all = Vec::new();
     for c in &commands {
-        let help = dynocomp(&[c, "--help"]);
-        all.extend(problems(&help, &readme).into_iter().map(|p| format!("{c} --help: {p}")));
+        let text = help(&[c, "--help"]);
+        all.extend(problems(&text, &readme).into_iter().map(|p| format!("{c} --help: {p}")));
     }
     assert!(all.is_empty(), "{}", all.join("\n"));
 
