@@ -111,14 +111,17 @@ pub struct DareSolution {
     pub iterations: usize,
 }
 
-/// Solve P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + Q by structured doubling
-/// (dual form: Â = Aᵀ, G = Cᵀ C / R, H = Q).
-pub fn solve_filter_dare(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r: f64) -> Result<DareSolution> {
-    let n = a.nrows();
+/// The structured doubling iteration (Chu, Fan & Lin 2005) of the DARE in
+/// its dual form, from Â₀ = `ak`, G₀ = `gk`, H₀ = `hk`: at most 200 steps,
+/// stopping when H changes by less than 10⁻¹⁴ of its norm. Returns H (the
+/// solution P) and the steps taken; the caller checks the residual.
+pub(crate) fn structured_doubling(
+    mut ak: DMatrix<f64>,
+    mut gk: DMatrix<f64>,
+    mut hk: DMatrix<f64>,
+) -> Result<(DMatrix<f64>, usize)> {
+    let n = ak.nrows();
     let id = DMatrix::<f64>::identity(n, n);
-    let mut ak = a.transpose();
-    let mut gk = c * c.transpose() / r;
-    let mut hk = q.clone();
     let mut iterations = 0;
     for it in 1..=200 {
         iterations = it;
@@ -140,7 +143,13 @@ pub fn solve_filter_dare(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r
             break;
         }
     }
-    let p = hk;
+    Ok((hk, iterations))
+}
+
+/// Solve P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + Q by structured doubling
+/// (dual form: Â = Aᵀ, G = Cᵀ C / R, H = Q).
+pub fn solve_filter_dare(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r: f64) -> Result<DareSolution> {
+    let (p, iterations) = structured_doubling(a.transpose(), c * c.transpose() / r, q.clone())?;
     let s = (c.transpose() * &p * c)[(0, 0)] + r;
     let apc = a * &p * c;
     let ric = a * &p * a.transpose() - &apc * apc.transpose() / s + q;

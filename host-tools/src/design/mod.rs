@@ -15,6 +15,7 @@ pub mod discretize;
 pub mod force_spectrum;
 pub mod image;
 pub mod kalman;
+pub mod mimo;
 pub mod latency;
 pub mod noise;
 pub mod paper;
