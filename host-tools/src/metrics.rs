@@ -1,14 +1,6 @@
-//! Accuracy scoring of compensated forces against a known true force.
-//!
-//! **NRMSE (the one convention of DESIGN.md, "Accuracy, stated one way
-//! everywhere"):** both signals are low-passed at `f_max` with a zero-phase
-//! FFT brick-wall filter, the first and last 5 % of the record are dropped
-//! (edge effects of the circular filter and the start-up of the
-//! compensator), and `NRMSE = RMS(ŝ − s) / std(s)` over what remains, i.e.
-//! normalized by the standard deviation of the band-limited true force
-//! (MATLAB `goodnessOfFit` 'NRMSE'). The peak-to-peak normalization, which
-//! reads about 3-4x smaller for milling forces, is kept only as a second,
-//! labelled figure (`nrmse_p2p`).
+//! Accuracy scoring of compensated forces against a known true force, in
+//! the one convention of DESIGN.md, "Accuracy, stated one way everywhere"
+//! ([`accuracy`]).
 
 use rustfft::{num_complex::Complex64, FftPlanner};
 
@@ -58,7 +50,16 @@ pub fn sample_variance(x: &[f64]) -> f64 {
     x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)
 }
 
-/// Error figures of an estimate against the truth (see the module doc).
+/// Error figures of an estimate against the truth.
+///
+/// **NRMSE:** both signals are low-passed at `f_max` with a zero-phase FFT
+/// brick-wall filter, the first and last 5 % of the record are dropped (edge
+/// effects of the circular filter and the start-up of the compensator), and
+/// `NRMSE = RMS(ŝ − s) / std(s)` over what remains, i.e. normalized by the
+/// standard deviation of the band-limited true force (MATLAB `goodnessOfFit`
+/// 'NRMSE'). The peak-to-peak normalization, which reads about 3-4x smaller
+/// for milling forces, is kept only as a second, labelled figure
+/// (`nrmse_p2p`).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Accuracy {
     /// NRMSE: RMS error / standard deviation of the band-limited truth.

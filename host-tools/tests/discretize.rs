@@ -193,3 +193,31 @@ fn the_static_gain_is_matched_where_a_cutting_force_has_its_mean() {
         }
     }
 }
+
+/// A real pole whose corner lies above Nyquist has no discrete counterpart
+/// in the band: it is left to the taps and the direct term (counted as a mode
+/// above fs/2), so the least squares stays well conditioned and the match
+/// holds. Negative control: the same pole below Nyquist is mapped.
+#[test]
+fn a_real_pole_beyond_nyquist_is_fitted_by_its_tail() {
+    use dynocomp::fit::{PoleResidueModel, Term};
+    let fs = 51_200.0;
+    let with_real = |corner_hz: f64| {
+        let mut m = PoleResidueModel::from_modes(&[(300.0, 0.05, 0.2), (850.0, 0.04, 0.15), (3300.0, 0.02, 0.65)]);
+        let p = -2.0 * std::f64::consts::PI * corner_hz;
+        // A small static share, as a vector fit of a measured FRF leaves.
+        m.terms.push(Term::Real { pole: p, residue: -0.05 * p });
+        m
+    };
+    let above = with_real(31_700.0);
+    let (dm, fd) = discretize(&above, fs, Discretization::Fit, (0.0, 4096.0)).unwrap();
+    let grid: Vec<f64> = (0..=400).map(|i| 4096.0 * i as f64 / 400.0).collect();
+    let err = dm.match_error(&grid, |f| above.frf(f));
+    assert_eq!(fd.modes_above_nyquist, 1);
+    assert!(fd.condition < 1e3, "condition {:.1e}", fd.condition);
+    assert!(err < 2e-3, "match {:.2e}", err);
+    assert!(dm.fir.iter().all(|h| h.abs() < 1.0), "taps {:?}", dm.fir);
+    let below = with_real(9_000.0);
+    let (_, fd) = discretize(&below, fs, Discretization::Fit, (0.0, 4096.0)).unwrap();
+    assert_eq!(fd.modes_above_nyquist, 0, "a real pole at 9 kHz (below fs/2) must be mapped");
+}

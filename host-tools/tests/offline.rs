@@ -231,6 +231,15 @@ fn the_sidecar_is_tied_to_its_image() {
         assert!(e.contains("box.dcimg.model.json") && e.contains(says), "{to}: {e}");
         assert!(!e.contains('\n') && !e.contains('\r') && !e.contains('\t'), "{to}: error is not one line: {e}");
     }
+    // A long quoted value is capped, and the cap keeps the place (fuzz
+    // `sidecar` finding: a 700-byte string cut off "at line 1 column 819").
+    // Control: a short one names the place too.
+    for len in [10, 2000] {
+        std::fs::write(sidecar_path(&path), format!("\"{}\", 1", "x".repeat(len))).unwrap();
+        let e = format!("{:#}", read_sidecar(&path, &img).unwrap_err());
+        assert!(e.contains("line 1 column"), "{len}: place lost: {e}");
+        assert!(e.len() < 600, "{len}: error not capped: {e}");
+    }
 }
 
 /// `compensate --offline` on a file spills the forward pass to disk and runs

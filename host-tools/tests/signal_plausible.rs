@@ -103,6 +103,6 @@ fn a_dash_reads_standard_input_as_csv() {
     let out = child.wait_with_output().unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("CHILD Csv 2 Some([0.0, 0.001]) [[1.5, 2.5], [-2.0, 3.0]]"), "{text}");
-    let map = dynocomp::io::signal_file::ChannelMap::parse("fx=A").unwrap();
+    let map = dynocomp::io::signal::ChannelMap::parse("fx=A").unwrap();
     assert!(open_signal(Path::new("-"), Some(&map)).is_err());
 }

@@ -6,7 +6,7 @@
 use clap::Parser;
 use dynocomp::frf::MatrixKind;
 use dynocomp::simulate::plate::{simulate_plate, PlateModal, PlateSetup, PlateSim};
-use dynocomp::simulate::SimulateArgs;
+use dynocomp::cli::simulate::SimulateArgs;
 
 #[derive(Parser)]
 struct Cli {
@@ -26,7 +26,7 @@ fn plate_files_hold_the_nine_frfs_the_records_and_the_model() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("sim");
     let args = parse(&["--dyno", "plate", "--dyno-preset", "tall", "--cut-offset", "20:-10:0"], &out);
-    dynocomp::simulate::run(&args).unwrap();
+    dynocomp::cli::simulate::run(&args).unwrap();
     let setup = PlateSetup::preset("tall").unwrap();
     let plate = PlateSim { setup: setup.clone(), cut_offset_m: [0.02, -0.01, 0.0] };
     let sim = simulate_plate(4, &args.params().unwrap(), &plate).unwrap();
@@ -75,14 +75,14 @@ fn the_per_axis_model_stays_the_default_and_plate_flags_need_it() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("d");
     let args = parse(&[], &out);
-    dynocomp::simulate::run(&args).unwrap();
+    dynocomp::cli::simulate::run(&args).unwrap();
     let frf = dynocomp::io::read_frf(&out.join("frf.csv")).unwrap();
     assert_eq!(frf.matrix_status().kind(), MatrixKind::DirectOnly);
     let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("truth.json")).unwrap()).unwrap();
     assert_eq!(j["version"], 1);
     assert!(j.get("dynamometer").is_none());
     let err =
-        |extra: &[&str]| format!("{:#}", dynocomp::simulate::run(&parse(extra, &dir.path().join("x"))).unwrap_err());
+        |extra: &[&str]| format!("{:#}", dynocomp::cli::simulate::run(&parse(extra, &dir.path().join("x"))).unwrap_err());
     assert!(err(&["--dyno-preset", "tall"]).contains("add --dyno plate"));
     assert!(err(&["--cut-offset", "10:0:0"]).contains("add --dyno plate"));
     assert!(err(&["--dyno", "plate", "--preset", "cut-1"]).contains("use --dyno-preset"));
@@ -96,7 +96,7 @@ fn the_per_axis_model_stays_the_default_and_plate_flags_need_it() {
     assert!(bad.err().unwrap().to_string().contains("DX:DY:DZ"));
     // A random plate from the seed.
     let r = dir.path().join("r");
-    dynocomp::simulate::run(&parse(&["--dyno", "plate"], &r)).unwrap();
+    dynocomp::cli::simulate::run(&parse(&["--dyno", "plate"], &r)).unwrap();
     let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(r.join("truth.json")).unwrap()).unwrap();
     assert!(j.get("dyno_preset").is_none());
     assert_eq!(dynocomp::io::read_frf(&r.join("frf.uff")).unwrap().entries().count(), 9);

@@ -460,7 +460,7 @@ fn run_writes_all_files_readable_by_the_io_layer() {
     #[derive(Parser)]
     struct Cli {
         #[command(flatten)]
-        args: dynocomp::simulate::SimulateArgs,
+        args: dynocomp::cli::simulate::SimulateArgs,
     }
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("sim");
@@ -468,7 +468,7 @@ fn run_writes_all_files_readable_by_the_io_layer() {
         "simulate", "--out", out.to_str().unwrap(), "--seed", "9", "--duration", "0.1", "--idle-duration", "0.2",
         "--spindle-rpm", "9000", "--teeth", "3", "--chatter-hz", "1710", "--frf-lines", "1025", "--frf-df", "4",
     ]);
-    dynocomp::simulate::run(&cli.args).unwrap();
+    dynocomp::cli::simulate::run(&cli.args).unwrap();
     for f in ["frf.uff", "frf.csv", "measured.csv", "true_force.csv", "idle.csv", "truth.json"] {
         assert!(out.join(f).is_file(), "{f} missing");
     }

@@ -5,7 +5,8 @@
 use dynocomp::offline::compensate::compensate_record;
 use dynocomp::io::signal::{read_all, SignalWriter};
 use dynocomp::io::signal_csv::read_signal_csv;
-use dynocomp::io::signal_file::{open_signal, ChannelMap, SignalFormat};
+use dynocomp::io::signal_file::{open_signal, SignalFormat};
+use dynocomp::io::signal::ChannelMap;
 use dynocomp::io::uff_signal::UffWriter;
 use std::path::{Path, PathBuf};
 

@@ -123,7 +123,7 @@ pub enum ForcePrior {
     Level,
 }
 
-/// The opt-in harmonic force prior (issue #12, optional part).
+/// The opt-in harmonic force prior.
 #[derive(Args, Debug, Clone, Default)]
 pub struct PriorArgs {
     /// Force model: `default` (random walk, q for a flat force spectrum of

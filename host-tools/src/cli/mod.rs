@@ -10,6 +10,7 @@ pub mod design_parallel;
 pub mod design_two_state;
 pub mod flash;
 pub mod inspect;
+pub mod simulate;
 pub mod stream;
 pub mod virtual_box;
 
@@ -39,7 +40,7 @@ enum Command {
     Compensate(compensate::CompensateArgs),
     /// Simulate a dynamometer, an impact test and a milling record with known
     /// true force (for demos and tests).
-    Simulate(crate::simulate::SimulateArgs),
+    Simulate(simulate::SimulateArgs),
     /// Write a coefficient image into the box: through a debug probe
     /// (--probe) or over the box's USB port (--serial PORT).
     Flash(flash::FlashArgs),
@@ -56,7 +57,7 @@ pub fn run(cli: Cli) -> Result<u8> {
     match cli.command {
         Command::Inspect(args) => inspect::run(&args)?,
         Command::Compensate(args) => compensate::run(&args)?,
-        Command::Simulate(args) => crate::simulate::run(&args)?,
+        Command::Simulate(args) => simulate::run(&args)?,
         Command::Design(args) => design::run(&args)?,
         Command::Flash(args) => flash::run(&args)?,
         Command::Stream(args) => {

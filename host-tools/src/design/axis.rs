@@ -223,7 +223,7 @@ pub fn coherent_band(freq_hz: &[f64], coherence: Option<&[f64]>, threshold: f64)
         .collect();
     let (mut best, mut start) = ((0, 0), None);
     for i in 0..=n {
-        let good = i < n && ok[i];
+        let good = ok.get(i).copied().unwrap_or(false);
         match (good, start) {
             (true, None) => start = Some(i),
             (false, Some(s)) => {
@@ -251,7 +251,7 @@ struct Objective<'a> {
     r: f64,
     band_width: f64,
     /// The record's force spectrum on the grid (weights, power P_F in N²);
-    /// `None`: flat, of power `force_rms`² (module doc).
+    /// `None`: flat, of power `force_rms`² ([`crate::design::force_spectrum`]).
     force: Option<(Vec<f64>, f64)>,
 }
 
@@ -593,7 +593,7 @@ pub fn prepare_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions
     let (band, comp_band) = (*band, *comp_band);
     let fit_nrmse = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, target);
     let fit_nrmse_out_of_band = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, out_of_band);
-    check_static(&name, freq_hz, band.0, opts, &fitted)?;
+    check_static(name, freq_hz, band.0, opts, &fitted)?;
     if !(fit_nrmse <= MAX_FIT_ERROR) {
         let next = match &fitted.paper {
             Some(_) => "let the orders be chosen (omit --paper-orders) or try others, fit narrower bands, or use the default method (--method vf)",
@@ -651,136 +651,39 @@ fn discrete_model(fitted: &Fitted, band_hz: (f64, f64), opts: &DesignOptions) ->
 
 /// The latency-dependent part of [`design_axis`]: `opts` must be the
 /// options `p` was prepared with, apart from `lag`, `discrete_fit_top`,
-/// `q_override` and `axis_cycle_budget`.
+/// `q_override` and `axis_cycle_budget`. Discrete model → Kalman filter with
+/// q by the criterion → refusal unless it beats no compensation →
+/// realization within the cycle budget → its flat band.
 pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDesign> {
-    let PreparedAxis { name, axis, r, freq_hz, lines, fitted, fit_nrmse, fit_nrmse_out_of_band, ranges, f_top, grid, spectrum, discrete: prepared } = p;
-    let (name, r, fit_nrmse, fit_nrmse_out_of_band, f_top) = (*name, *r, *fit_nrmse, *fit_nrmse_out_of_band, *f_top);
-    let AxisLines { band, comp_band, notes, eval_band, .. } = lines;
-    let (band, comp_band) = (*band, *comp_band);
-    let grid_hz: Vec<f64> = grid.iter().map(|g| g.0).collect();
-    let lag = if fitted.paper.is_some() { 0 } else { opts.lag };
-    let prewarp_hz = match &opts.method {
-        FitMethod::Paper { prewarp_hz: Some(p), .. } => *p,
-        _ => 0.5 * (ranges[0].0 + f_top),
-    };
-    // The discrete model of the Kalman design (default method), matched to
-    // the sampled-data relation over the compensated band, once per axis
-    // and fit top.
-    let discrete = match (&fitted.paper, prepared) {
-        (Some(_), _) => None,
-        (None, Some((top, d))) if *top == opts.discrete_fit_top => Some(d.clone()),
-        (None, _) => Some(discrete_model(fitted, (ranges[0].0, f_top), opts).with_context(|| format!("axis {name}: discrete model"))?),
-    };
+    let fs = opts.fs_hz;
+    let grid_hz: Vec<f64> = p.grid.iter().map(|g| g.0).collect();
+    let lag = if p.fitted.paper.is_some() { 0 } else { opts.lag };
+    let discrete = p.discrete_for(opts)?;
     let model_match = match &discrete {
-        Some((dm, _)) => dm.match_error(&grid_hz, |f| fitted.frf(f)),
+        Some((dm, _)) => dm.match_error(&grid_hz, |f| p.fitted.frf(f)),
         None => f64::NAN,
     };
-    let design_fn = |q: f64| -> Result<KalmanDesign> {
-        match (&fitted.paper, &discrete) {
-            (Some((tf, _)), _) => paper::design(tf, opts.fs_hz, q, r, prewarp_hz, &mut PaperDiagnostics::default()),
-            (None, Some((dm, _))) => kalman::design(dm, q, r, opts.lag),
-            (None, None) => unreachable!("the default method always has a discrete model"),
-        }
-    };
-    let obj = Objective {
-        design: &design_fn,
-        lag,
-        grid,
-        grid_hz: &grid_hz,
-        opts,
-        r,
-        band_width: ranges.iter().map(|b| b.1 - b.0).sum(),
-        force: spectrum.as_ref().map(|s| {
-            let w = s.weights();
-            match opts.force_record_level_only {
-                // Flat, of the record's power: J as criterion_j's mean.
-                true => (vec![1.0 / w.len() as f64; w.len()], s.total_n2()),
-                false => (w, s.total_n2()),
-            }
-        }),
-    };
+    let prewarp_hz = p.prewarp_hz(opts);
+    let design_fn = |q: f64| p.kalman_design(discrete.as_ref(), q, prewarp_hz, opts);
+    let obj = p.objective(&design_fn, lag, &grid_hz, opts);
     let mut q_trace = Vec::new();
-    let chosen = match opts.q_override {
-        Some(q) => {
-            let (j, ng, d) = obj.eval(q);
-            match d {
-                Some(d) => Ok((q, d, j, ng)),
-                None => design_fn(q).map(|d| (q, d, j, ng)).with_context(|| format!("axis {name}: no valid compensator for q = {q}")),
-            }
-        }
-        None => choose_q(&obj, &mut q_trace),
-    };
-    let (_q, kal, j, ng) = match (chosen, &fitted.paper) {
-        (Ok(c), _) => c,
-        // The paper's path: say why the design failed (rank, conditions),
-        // from a design at a mid-range q.
-        (Err(e), Some(_)) => {
-            return Err(match design_fn(10f64.powf(r.log10() + 6.0)) {
-                Err(why) => e.context(format!("axis {name}: at q = 1e6·R: {why:#}")),
-                Ok(_) => e.context(format!("axis {name}")),
-            });
-        }
-        (Err(e), None) => return Err(e).with_context(|| format!("axis {name}")),
-    };
-    // Never silently worse than raw (README, "Never worse than no
-    // compensation"): refuse the design when its predicted in-band error
-    // does not beat the uncompensated force's.
+    let (kal, j, ng) = p.choose_kalman(&obj, opts, &mut q_trace)?;
     let raw_j = obj.raw();
-    let worse = !(j < raw_j);
-    if worse || !(j.sqrt() < MAX_PREDICTED_ERROR) {
-        let next = match &fitted.paper {
-            Some(_) => "let the orders be chosen (omit --paper-orders) or try others, other or narrower bands (--band, --spindle-rpm/--teeth), or the default method (--method vf)",
-            None => "check the FRF (coherence, units N/N, resolution), narrow the compensated band with --band, or raise --max-noise-gain if the noise gain limits it",
-        };
-        let why = if worse {
-            format!("would be worse than no compensation in its band ({:.0}–{:.0} Hz)", ranges[0].0, f_top)
-        } else {
-            format!("would barely compensate in its band ({:.0}–{:.0} Hz), its predicted error above the limit of {:.0} % (noise gain {ng:.2})", ranges[0].0, f_top, 100.0 * MAX_PREDICTED_ERROR)
-        };
-        bail!(
-            "axis {name}: the compensator {why}: predicted in-band error {:.2} % against {:.2} % uncompensated (fit error {:.2} %); no image written; {next}",
-            100.0 * j.sqrt(),
-            100.0 * raw_j.sqrt(),
-            100.0 * fit_nrmse
-        );
-    }
-    // The paper's diagnostics of the chosen design (the fit's conditions stay).
-    let paper = match &fitted.paper {
-        Some((tf, diag)) => {
-            let mut diag = diag.clone();
-            paper::design(tf, opts.fs_hz, kal.q, r, prewarp_hz, &mut diag)?;
-            Some((tf.clone(), diag))
-        }
-        None => None,
-    };
+    p.refuse_unless_better(j, raw_j, ng)?;
+    let paper = p.paper_design(kal.q, prewarp_hz, opts)?;
     let (realization, filter, verification) =
-        choose_realization_within(&kal.compensator, opts.fs_hz, f_top, opts.axis_cycle_budget).with_context(|| format!("axis {name}"))?;
-    let fs = opts.fs_hz;
-    // Against the fitted model, not the raw lines: an H1 line with γ² = 0.97
-    // from 7 averages has ~5 % random error, as large as the tolerance.
-    let model_frf: Vec<Complex64> = freq_hz.iter().map(|f| fitted.frf(*f)).collect();
-    let flat = flat_band(|f| quantize::filter_response(&filter, f, fs), freq_hz, &model_frf, &eval_band, lag, fs);
+        choose_realization_within(&kal.compensator, fs, p.f_top, opts.axis_cycle_budget)
+            .with_context(|| format!("axis {}", p.name))?;
+    let flat = p.flat_band(&filter, lag, fs);
     let h = kal.compensator.freq_responses(&grid_hz, fs);
     let predicted_distortion = obj.distortion_of(&h).sqrt();
-    let force_spectrum = match (&spectrum, &obj.force) {
-        (Some(s), Some((w, p))) => {
-            Some(crate::design::force_spectrum::AxisForceSpectrum {
-                force_rms_n: p.sqrt(),
-                weights: w.clone(),
-                predicted_error: j.sqrt(),
-                flat_predicted_error: obj.j_of(&h, true).sqrt(),
-                resolution_hz: s.resolution_hz,
-                level_only: opts.force_record_level_only,
-            })
-        }
-        _ => None,
-    };
-    let design = AxisDesign {
-        axis: *axis,
-        model: fitted.model.clone(),
-        order_trace: fitted.order_trace.clone(),
-        fit_nrmse,
-        coherent_band_hz: band,
+    let force_spectrum = p.force_spectrum(&obj, &h, j, opts);
+    Ok(AxisDesign {
+        axis: p.axis,
+        model: p.fitted.model.clone(),
+        order_trace: p.fitted.order_trace.clone(),
+        fit_nrmse: p.fit_nrmse,
+        coherent_band_hz: p.lines.band,
         kalman: kal,
         realization,
         filter,
@@ -791,14 +694,198 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
         predicted_distortion,
         q_trace,
         bands: opts.bands.clone(),
-        fit_nrmse_out_of_band,
+        fit_nrmse_out_of_band: p.fit_nrmse_out_of_band,
         paper,
         discrete,
         model_match,
         raw_predicted_error: raw_j.sqrt(),
-        compensated_band_hz: comp_band,
-        notes: notes.clone(),
+        compensated_band_hz: p.lines.comp_band,
+        notes: p.lines.notes.clone(),
         force_spectrum,
-    };
-    Ok(design)
+    })
+}
+
+impl PreparedAxis {
+    /// The discrete model of the Kalman design (default method), matched to
+    /// the sampled-data relation over the compensated band, once per axis
+    /// and fit top: the prepared one if it is for `opts.discrete_fit_top`.
+    fn discrete_for(&self, opts: &DesignOptions) -> Result<Option<(DiscreteModel, FitDiagnostics)>> {
+        Ok(match (&self.fitted.paper, &self.discrete) {
+            (Some(_), _) => None,
+            (None, Some((top, d))) if *top == opts.discrete_fit_top => Some(d.clone()),
+            (None, _) => Some(
+                discrete_model(&self.fitted, (self.ranges[0].0, self.f_top), opts)
+                    .with_context(|| format!("axis {}: discrete model", self.name))?,
+            ),
+        })
+    }
+
+    /// The paper's Tustin prewarp frequency (Hz): the given one, else the
+    /// centre of the compensated band.
+    fn prewarp_hz(&self, opts: &DesignOptions) -> f64 {
+        match &opts.method {
+            FitMethod::Paper { prewarp_hz: Some(p), .. } => *p,
+            _ => 0.5 * (self.ranges[0].0 + self.f_top),
+        }
+    }
+
+    /// The Kalman design for q: the paper's continuous one on its fitted
+    /// B/A, else the discrete one on `discrete` (always there for the
+    /// default method).
+    fn kalman_design(
+        &self,
+        discrete: Option<&(DiscreteModel, FitDiagnostics)>,
+        q: f64,
+        prewarp_hz: f64,
+        opts: &DesignOptions,
+    ) -> Result<KalmanDesign> {
+        match (&self.fitted.paper, discrete) {
+            (Some((tf, _)), _) => {
+                paper::design(tf, opts.fs_hz, q, self.r, prewarp_hz, &mut PaperDiagnostics::default())
+            }
+            (None, Some((dm, _))) => kalman::design(dm, q, self.r, opts.lag),
+            (None, None) => unreachable!("the default method always has a discrete model"),
+        }
+    }
+
+    /// The criterion over this axis's grid for the designs of `design`: for
+    /// the record's force spectrum where there is one (flat, of its power,
+    /// with `force_record_level_only`).
+    fn objective<'a>(
+        &'a self,
+        design: &'a dyn Fn(f64) -> Result<KalmanDesign>,
+        lag: usize,
+        grid_hz: &'a [f64],
+        opts: &'a DesignOptions,
+    ) -> Objective<'a> {
+        Objective {
+            design,
+            lag,
+            grid: &self.grid,
+            grid_hz,
+            opts,
+            r: self.r,
+            band_width: self.ranges.iter().map(|b| b.1 - b.0).sum(),
+            force: self.spectrum.as_ref().map(|s| {
+                let w = s.weights();
+                match opts.force_record_level_only {
+                    // Flat, of the record's power: J as criterion_j's mean.
+                    true => (vec![1.0 / w.len() as f64; w.len()], s.total_n2()),
+                    false => (w, s.total_n2()),
+                }
+            }),
+        }
+    }
+
+    /// The Kalman design at the given q (`opts.q_override`) or at the q the
+    /// criterion chooses, with its J and noise gain; `q_trace` gets the
+    /// search's evaluations. A failed paper design says why from a design
+    /// at a mid-range q (rank, conditions).
+    fn choose_kalman(
+        &self,
+        obj: &Objective,
+        opts: &DesignOptions,
+        q_trace: &mut Vec<(f64, f64)>,
+    ) -> Result<(KalmanDesign, f64, f64)> {
+        let name = self.name;
+        let chosen = match opts.q_override {
+            Some(q) => {
+                let (j, ng, d) = obj.eval(q);
+                match d {
+                    Some(d) => Ok((q, d, j, ng)),
+                    None => (obj.design)(q)
+                        .map(|d| (q, d, j, ng))
+                        .with_context(|| format!("axis {name}: no valid compensator for q = {q}")),
+                }
+            }
+            None => choose_q(obj, q_trace),
+        };
+        match (chosen, &self.fitted.paper) {
+            (Ok((_q, kal, j, ng)), _) => Ok((kal, j, ng)),
+            (Err(e), Some(_)) => Err(match (obj.design)(10f64.powf(self.r.log10() + 6.0)) {
+                Err(why) => e.context(format!("axis {name}: at q = 1e6·R: {why:#}")),
+                Ok(_) => e.context(format!("axis {name}")),
+            }),
+            (Err(e), None) => Err(e).with_context(|| format!("axis {name}")),
+        }
+    }
+
+    /// Never silently worse than raw (README, "Never worse than no
+    /// compensation"): refuse a design whose predicted in-band error J
+    /// does not beat the uncompensated force's `raw_j`, or whose √J is
+    /// above [`MAX_PREDICTED_ERROR`].
+    fn refuse_unless_better(&self, j: f64, raw_j: f64, ng: f64) -> Result<()> {
+        let worse = !(j < raw_j);
+        if !worse && j.sqrt() < MAX_PREDICTED_ERROR {
+            return Ok(());
+        }
+        let (name, lo, f_top) = (self.name, self.ranges[0].0, self.f_top);
+        let next = match &self.fitted.paper {
+            Some(_) => "let the orders be chosen (omit --paper-orders) or try others, other or narrower bands (--band, --spindle-rpm/--teeth), or the default method (--method vf)",
+            None => "check the FRF (coherence, units N/N, resolution), narrow the compensated band with --band, or raise --max-noise-gain if the noise gain limits it",
+        };
+        let why = if worse {
+            format!("would be worse than no compensation in its band ({lo:.0}–{f_top:.0} Hz)")
+        } else {
+            format!(
+                "would barely compensate in its band ({lo:.0}–{f_top:.0} Hz), its predicted error above the limit of {:.0} % (noise gain {ng:.2})",
+                100.0 * MAX_PREDICTED_ERROR
+            )
+        };
+        bail!(
+            "axis {name}: the compensator {why}: predicted in-band error {:.2} % against {:.2} % uncompensated (fit error {:.2} %); no image written; {next}",
+            100.0 * j.sqrt(),
+            100.0 * raw_j.sqrt(),
+            100.0 * self.fit_nrmse
+        );
+    }
+
+    /// The paper's fitted B/A with the diagnostics of its design at q (the
+    /// fit's conditions stay); `None` for the default method.
+    fn paper_design(
+        &self,
+        q: f64,
+        prewarp_hz: f64,
+        opts: &DesignOptions,
+    ) -> Result<Option<(RationalTf, PaperDiagnostics)>> {
+        match &self.fitted.paper {
+            Some((tf, diag)) => {
+                let mut diag = diag.clone();
+                paper::design(tf, opts.fs_hz, q, self.r, prewarp_hz, &mut diag)?;
+                Ok(Some((tf.clone(), diag)))
+            }
+            None => Ok(None),
+        }
+    }
+
+    /// The flat band of the f32 `filter` (Hz), against the fitted model,
+    /// not the raw lines: an H1 line with γ² = 0.97 from 7 averages has
+    /// ~5 % random error, as large as the tolerance.
+    fn flat_band(&self, filter: &AxisFilter, lag: usize, fs: f64) -> (f64, f64) {
+        let model_frf: Vec<Complex64> = self.freq_hz.iter().map(|f| self.fitted.frf(*f)).collect();
+        let response = |f| quantize::filter_response(filter, f, fs);
+        flat_band(response, &self.freq_hz, &model_frf, &self.lines.eval_band, lag, fs)
+    }
+
+    /// What q for the record's force spectrum predicts, beside the flat
+    /// spectrum's J of the same response `h` (`None` without a record).
+    fn force_spectrum(
+        &self,
+        obj: &Objective,
+        h: &[Complex64],
+        j: f64,
+        opts: &DesignOptions,
+    ) -> Option<crate::design::force_spectrum::AxisForceSpectrum> {
+        match (&self.spectrum, &obj.force) {
+            (Some(s), Some((w, p))) => Some(crate::design::force_spectrum::AxisForceSpectrum {
+                force_rms_n: p.sqrt(),
+                weights: w.clone(),
+                predicted_error: j.sqrt(),
+                flat_predicted_error: obj.j_of(h, true).sqrt(),
+                resolution_hz: s.resolution_hz,
+                level_only: opts.force_record_level_only,
+            }),
+            _ => None,
+        }
+    }
 }

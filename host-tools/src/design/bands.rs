@@ -1,15 +1,12 @@
 //! Fitting bands (paper §3.2 "band-fitting", §3.3 "parallel elaboration").
 //!
 //! A band is a frequency interval `[lo_hz, hi_hz]` (Hz) where the cutting
-//! force has content and where the fit must be accurate. Bands come from
-//! three sources, all validated by [`validate`]:
-//!
-//! - the tooth-passing frequency `TPF = rpm/60 · Z` and its harmonics
-//!   ([`from_tooth_passing`], paper §3.2, Fig. 5);
-//! - explicit `LO:HI` strings ([`parse_band`], `--band`);
-//! - the peaks of a measured force record's spectrum, found a posteriori,
-//!   including non-harmonic peaks such as chatter ([`from_record_spectrum`],
-//!   paper §3.2 last paragraph).
+//! force has content and where the fit must be accurate. Bands come from the
+//! tooth-passing frequency TPF = rpm/60 · Z and its harmonics
+//! ([`from_tooth_passing`], paper §3.2, Fig. 5), explicit `LO:HI` strings
+//! ([`parse_band`], `--band`), or the peaks of a measured force record's
+//! spectrum, chatter included ([`from_record_spectrum`], paper §3.2 last
+//! paragraph); all are validated by [`validate`].
 
 use anyhow::{bail, Context, Result};
 use rustfft::{num_complex::Complex64, FftPlanner};
@@ -336,7 +333,9 @@ mod tests {
 }
 
 /// Crossover frequencies (Hz) between consecutive bands `[lo, hi]` (Hz,
-/// ascending, not overlapping): the middle of each gap (module doc).
+/// ascending, not overlapping): the middle of each gap, f_c = (hi_k +
+/// lo_k+1)/2, so that every frequency belongs to a band of the split
+/// ([`crate::offline::bandsplit`]).
 pub fn crossovers(bands: &[(f64, f64)]) -> Result<Vec<f64>> {
     for (k, w) in bands.windows(2).enumerate() {
         if !(w[0].0 < w[0].1 && w[0].1 <= w[1].0 && w[1].0 < w[1].1) {

@@ -1,18 +1,7 @@
-//! The Q criterion: what a compensator H predicts to achieve on a plant Ĝ.
-//!
-//! q is chosen to minimize the predicted relative error variance of the
-//! compensated force inside the band [f_lo, f_hi], for a force with a flat
-//! spectrum of RMS `force_rms` (N) in that band and white measurement noise
-//! of variance R:
-//!
-//! J(q) = mean_f |H(f)·Ĝ(f)·e^{j2πfL/fs} − 1|²  +  (2R/fs)·(f_hi − f_lo)/force_rms² · mean_f |H(f)|²
-//!
-//! (distortion of the force + amplified noise inside the band, both relative
-//! to the force variance), subject to the white-noise gain of H staying below
-//! `max_noise_gain`. √J is reported as the predicted in-band error. With a
-//! record's force spectrum the mean over the lines in the distortion term
-//! becomes a mean weighted by the force's power in each line's cell
-//! ([`criterion_j_weighted`]).
+//! The Q criterion: what a compensator H predicts to achieve on a plant Ĝ
+//! ([`criterion_j`]). q is chosen to minimize it, subject to the white-noise
+//! gain of H staying below `max_noise_gain`; √J is reported as the predicted
+//! in-band error.
 
 use num_complex::Complex64;
 use std::f64::consts::PI;
@@ -23,7 +12,7 @@ use crate::design::bands::Band;
 /// 0..fs/2 (Parseval) on a 512-point midpoint grid, for responses that are
 /// not one state space (`compare`'s parallel elaboration). It undersamples
 /// peaks narrower than fs/1024; a state space has the exact
-/// [`StateSpace::white_noise_gain`].
+/// [`crate::numeric::lti::StateSpace::white_noise_gain`].
 pub fn noise_gain(response: impl Fn(f64) -> Complex64, fs_hz: f64) -> f64 {
     let n = 512;
     let s: f64 = (0..n)
@@ -63,16 +52,28 @@ pub fn flat_band(
     }
 }
 
-/// The noise factor of J (module doc): (2R/fs)·(f_hi − f_lo)/force_rms², the
+/// The noise factor of J ([`criterion_j`]): (2R/fs)·(f_hi − f_lo)/force_rms², the
 /// in-band noise variance relative to the force's, for `band_width_hz` = the
 /// summed width of the criterion's bands.
 pub fn noise_term(r: f64, fs_hz: f64, band_width_hz: f64, force_rms: f64) -> f64 {
     2.0 * r / fs_hz * band_width_hz / (force_rms * force_rms)
 }
 
-/// J of the Q criterion (module doc): mean over the grid of
-/// |H·G·e^{j2πfL/fs} − 1|² plus `noise`·mean |H|², with `grid` = (f, G(j2πf))
-/// (the plant the filter meets) and `h` = H(e^{j2πf/fs}) on the same lines.
+/// J of the Q criterion: mean over the grid of |H·G·e^{j2πfL/fs} − 1|² plus
+/// `noise`·mean |H|², with `grid` = (f, G(j2πf)) (the plant the filter meets)
+/// and `h` = H(e^{j2πf/fs}) on the same lines.
+///
+/// For a force with a flat spectrum of RMS `force_rms` (N) in the band
+/// [f_lo, f_hi] and white measurement noise of variance R it is the
+/// predicted relative error variance of the compensated force in the band:
+///
+/// J(q) = mean_f |H(f)·Ĝ(f)·e^{j2πfL/fs} − 1|²  +  (2R/fs)·(f_hi − f_lo)/force_rms² · mean_f |H(f)|²
+///
+/// (distortion of the force + amplified noise inside the band, both relative
+/// to the force variance; the noise factor is [`noise_term`]). With a
+/// record's force spectrum the mean over the lines in the distortion term
+/// becomes a mean weighted by the force's power in each line's cell
+/// ([`criterion_j_weighted`]).
 pub fn criterion_j(grid: &[(f64, Complex64)], h: &[Complex64], lag: usize, fs_hz: f64, noise: f64) -> f64 {
     let (mut dist, mut amp) = (0.0, 0.0);
     for ((f, g), h) in grid.iter().zip(h) {
@@ -84,7 +85,7 @@ pub fn criterion_j(grid: &[(f64, Complex64)], h: &[Complex64], lag: usize, fs_hz
 }
 
 /// The distortion H·G·e^{j2πfL/fs} − 1 of one line of the Q criterion
-/// (module doc), with G = G(j2πf) and H = H(e^{j2πf/fs}).
+/// ([`criterion_j`]), with G = G(j2πf) and H = H(e^{j2πf/fs}).
 pub fn distortion(f_hz: f64, g: Complex64, h: Complex64, lag: usize, fs_hz: f64) -> Complex64 {
     h * g * Complex64::from_polar(1.0, 2.0 * PI * f_hz * lag as f64 / fs_hz) - 1.0
 }

@@ -1,34 +1,13 @@
 //! The sampled-data relation (DESIGN.md, signal chain step 3): a discrete
 //! model Ĝ_d(z) of the fitted sensor model Ĝ(s) for the Kalman design.
 //!
-//! A real acquisition chain band-limits before it samples (charge amplifier,
-//! the DAQ's sigma-delta anti-aliasing filter, the box's front end), and the
-//! impact-test FRF is measured through that chain. For band-limited signals the
-//! sampled force F_k and the sampled measurement y_k are then related exactly
-//! by Ĝ(j2πf) for f below the band limit, and a Kalman filter designed on a
-//! model with Ĝ_d(e^{j2πf/fs}) = Ĝ(j2πf) there inverts the sensor exactly.
-//! No hold equivalent does that: zero- and first-order holds assume a force
-//! that is constant or linear between samples, and their error grows as
-//! (f/fs)² (a 2.5 kHz mode at 25.6 kHz: FOH 2 % off at 2 kHz).
-//!
-//! [`Discretization::Fit`] (default) therefore fits the discrete model to
-//! Ĝ(j2πf) on the unit circle, from 0 to 0.45 fs:
-//!
-//! Ĝ_d(z) = d + Σ_real ρ/(z − ζ) + Σ_pairs [ρ/(z − ζ) + ρ̄/(z − ζ̄)] + Σ_{m=1..M} h_m z^{−m}
-//!
-//! with the poles mapped exactly, ζ = e^{pT} (the free response of a mode is
-//! sampled exactly by any chain), for every pole whose frequency |Im p|/2π
-//! lies below fs/2; a mode above Nyquist has no discrete counterpart inside
-//! the band, and its in-band tail is carried by the other terms. The residues
-//! ρ, the direct term d and M FIR taps h_m are the least-squares solution of
-//! the relative error (Ĝ_d − Ĝ)/Ĝ on a dense grid, under the one linear
-//! constraint Ĝ_d(1) = Ĝ(0) (the static gain exact, [`StaticGain`]): a linear
-//! problem, solved with column scaling, its condition number and residual
-//! checked. Zero- and first-order holds are special cases of the same form
-//! (same poles, fixed residues) that keep the static gain too, so the fit is
-//! never worse than either on its grid.
-//! FOH and ZOH stay selectable (`--discretization foh|zoh`) to show the
-//! difference.
+//! A real acquisition chain band-limits before it samples, and the impact
+//! test measures the FRF through that chain: for band-limited signals the
+//! sampled force and measurement are then related exactly by Ĝ(j2πf) below
+//! the band limit. A model with Ĝ_d(e^{j2πf/fs}) = Ĝ(j2πf) there
+//! ([`Discretization::Fit`]) lets the Kalman filter invert the sensor exactly;
+//! the hold equivalents assume a force constant or linear between samples and
+//! err as (f/fs)².
 
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
@@ -56,10 +35,27 @@ pub const NYQUIST_FIT_FRACTION: f64 = 0.499;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "lowercase")]
 pub enum Discretization {
-    /// Fit on the unit circle to the sampled-data relation (module doc).
+    /// Fit on the unit circle to the sampled-data relation, from 0 to 0.45 fs:
+    ///
+    /// Ĝ_d(z) = d + Σ_real ρ/(z − ζ) + Σ_pairs [ρ/(z − ζ) + ρ̄/(z − ζ̄)] + Σ_{m=1..M} h_m z^{−m}
+    ///
+    /// with the poles mapped exactly, ζ = e^{pT} (the free response of a mode is
+    /// sampled exactly by any chain), for every pair whose frequency |Im p|/2π
+    /// and every real pole whose corner |p|/2π lies below fs/2; a pole beyond
+    /// Nyquist has no discrete counterpart inside the band, and its in-band
+    /// tail is carried by the other terms. The
+    /// residues ρ, the direct term d and M FIR taps h_m are the least-squares
+    /// solution of the relative error (Ĝ_d − Ĝ)/Ĝ on a dense grid, under the one
+    /// linear constraint Ĝ_d(1) = Ĝ(0) (the static gain exact, [`StaticGain`]): a
+    /// linear problem, solved with column scaling, its condition number and
+    /// residual checked. Zero- and first-order holds are special cases of the
+    /// same form (same poles, fixed residues) that keep the static gain too, so
+    /// the fit is never worse than either on its grid.
     #[default]
     Fit,
-    /// First-order hold: force linear between samples.
+    /// First-order hold: force linear between samples (its error grows as
+    /// (f/fs)²: a 2.5 kHz mode at 25.6 kHz is 2 % off at 2 kHz). Selectable
+    /// to show the difference, as is [`Discretization::Zoh`].
     Foh,
     /// Zero-order hold: force constant over each sample.
     Zoh,
@@ -100,7 +96,8 @@ pub enum DTerm {
     },
 }
 
-/// A discrete SISO model of the sensor (module doc), input F_k (N), output y_k (N).
+/// A discrete SISO model of the sensor ([`Discretization`]), input F_k (N),
+/// output y_k (N).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DiscreteModel {
     /// Sample rate (Hz).
@@ -114,7 +111,7 @@ pub struct DiscreteModel {
     /// FIR taps h_1..h_M (N/N) on F_{k−1}..F_{k−M}.
     pub fir: Vec<f64>,
     /// Advance D (samples): Ĝ_d(z) = z^D·M(z) with M(z) the causal part
-    /// above (module doc); 0 for the hold equivalents.
+    /// above ([`Discretization::Fit`]); 0 for the hold equivalents.
     #[serde(default)]
     pub advance: usize,
 }
@@ -189,7 +186,7 @@ pub struct FitDiagnostics {
 
 /// Discrete model by `method` for the fitted Ĝ(s) at `fs_hz`. `band_hz` is
 /// the band where the compensator must be exact (weighted fully); the rest
-/// of 0..0.45 fs is matched with a lower weight (module doc).
+/// of 0..0.45 fs is matched with a lower weight ([`Discretization::Fit`]).
 pub fn discretize(model: &PoleResidueModel, fs_hz: f64, method: Discretization, band_hz: (f64, f64)) -> Result<(DiscreteModel, FitDiagnostics)> {
     discretize_to(model, fs_hz, method, band_hz, MATCH_BAND_FRACTION, StaticGain::Exact)
 }
@@ -339,7 +336,8 @@ fn unit_circle_problem(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64)
         .terms
         .iter()
         .filter_map(|term| match *term {
-            Term::Real { pole, .. } => Some((Complex64::new(pole, 0.0), false)),
+            Term::Real { pole, .. } if pole.abs() < nyq => Some((Complex64::new(pole, 0.0), false)),
+            Term::Real { .. } => None,
             Term::Pair { pole, .. } if pole.im < nyq => Some((pole, true)),
             Term::Pair { .. } => None,
         })
@@ -356,7 +354,7 @@ fn unit_circle_problem(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64)
     Ok((ls, band_grid, above))
 }
 
-/// The unit-circle least-squares fit (module doc); the number of FIR taps
+/// The unit-circle least-squares fit ([`Discretization::Fit`]); the number of FIR taps
 /// is raised while each tap lowers the in-band match error enough.
 fn fit_unit_circle(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64), top_fraction: f64, static_gain: StaticGain) -> Result<(DiscreteModel, FitDiagnostics)> {
     let (ls, band_grid, above) = unit_circle_problem(model, fs_hz, band_hz, top_fraction, static_gain)?;
@@ -410,7 +408,7 @@ struct LeastSquares {
     static_gain: Option<(DVector<f64>, f64)>,
 }
 
-/// The columns of the fit at z (module doc): per mapped pole 1/(z − ζ)
+/// The columns of the fit at z ([`Discretization::Fit`]): per mapped pole 1/(z − ζ)
 /// (a pair: the real and imaginary part of its residue), the direct term,
 /// then z^{−1}..z^{−MAX_FIR_TAPS}.
 pub(crate) fn columns_at(poles: &[(Complex64, bool)], z: Complex64) -> Vec<Complex64> {

@@ -1,39 +1,13 @@
-//! Opt-in force spectrum for the box design's Q criterion (issue #12,
-//! item 3: "the force spectrum estimated from a representative measured
-//! record"), `design --force-prior spectrum --force-record REC`.
+//! Opt-in force spectrum for the box design's q criterion
+//! (`design --force-prior spectrum --force-record REC`, or `level`).
 //!
-//! **Why.** The default criterion ([`crate::design::axis`]) weighs the distortion
-//! |H·Ĝ·e^{j2πfL/fs} − 1|² alike at every frequency of the band, for a force
-//! of RMS `--force-rms` (100 N by default). A cutting force is neither flat
-//! nor, often, of that level: most of its power sits at the low harmonics of
-//! the tooth-passing frequency. On the rates harness the z axes carry about
-//! 11 N in the band, not 100 N, so the default criterion under-weights the
-//! noise ninefold and lets the filter follow frequencies where the force has
-//! almost no power and the inverse carries mostly noise.
-//!
-//! **What changes.** Only q. The filter keeps the default structure (random
-//! walk force, the same states, the same cost on the box); the criterion
-//! weighs each of its lines by the force power the record has there:
-//!
-//! J = Σ_i w_i |H(f_i)Ĝ(f_i)e^{j2πf_iL/fs} − 1|² + (2R/fs)·W·mean_i |H(f_i)|² / P_F,
-//! w_i = (1 − β)·P_i/P_F + β/n,
-//!
-//! with P_i the record's force power in line i's cell (Hann-windowed
-//! spectrum of the raw inverse Y/Ĝ, the expected noise R·Σw²/|Ĝ|² removed
-//! per cell), P_F = Σ P_i, W the criterion's summed band width, n the number
-//! of lines and β = [`MIN_BROADBAND_SHARE`]: a share of the weight spread
-//! flat, so that no frequency is given up entirely (entries, exits and feed
-//! changes are broadband; chatter is not in a steady record).
-//!
-//! **What it costs.** A force with more power where the record had little
-//! (chatter, a sharper entry, another cut) meets a filter tuned for less:
-//! `design` therefore also states the chosen filter's error for a flat
-//! spectrum of the same power ([`AxisForceSpectrum::flat_predicted_error`]).
-//! The default stays the flat criterion.
-//!
-//! `design --force-prior level` uses only P_F from the same estimate: the
-//! weights stay flat (w_i = 1/n), so q and the predicted error are for a
-//! flat force of the record's level instead of `--force-rms`.
+//! The default criterion ([`crate::design::axis`]) weighs the distortion alike
+//! at every frequency of the band, for a flat force of `--force-rms`. A cutting
+//! force is neither flat nor, often, of that level: most of its power sits at
+//! the low harmonics of the tooth-passing frequency. Only q changes: the filter
+//! keeps the default structure and its cost on the box, and the criterion
+//! weighs each line by the force power a representative record has there
+//! ([`estimate`], [`CellSpectrum::weights`]).
 
 use anyhow::{bail, Result};
 use num_complex::Complex64;
@@ -88,7 +62,17 @@ impl CellSpectrum {
         self.power_n2.iter().sum()
     }
 
-    /// The criterion's weights w_i (module doc), Σ = 1.
+    /// The criterion's weights w_i, Σ = 1. With them the criterion is
+    ///
+    /// J = Σ_i w_i |H(f_i)Ĝ(f_i)e^{j2πf_iL/fs} − 1|² + (2R/fs)·W·mean_i |H(f_i)|² / P_F,
+    /// w_i = (1 − β)·P_i/P_F + β/n,
+    ///
+    /// with P_i the record's force power in line i's cell, P_F = Σ P_i, W the
+    /// criterion's summed band width, n the number of lines and
+    /// β = [`MIN_BROADBAND_SHARE`]: a share of the weight spread flat, so that no
+    /// frequency is given up entirely (entries, exits and feed changes are
+    /// broadband; chatter is not in a steady record). `--force-prior level`
+    /// keeps the weights flat (w_i = 1/n) and uses only P_F.
     pub fn weights(&self) -> Vec<f64> {
         let n = self.power_n2.len() as f64;
         let total = self.total_n2();
@@ -174,6 +158,11 @@ pub fn estimate(y: &[f64], fs_hz: f64, g: &dyn Fn(f64) -> Complex64, r: f64, cel
 }
 
 /// What `design` reports of an axis designed on a record's force spectrum.
+///
+/// A force with more power where the record had little (chatter, a sharper
+/// entry, another cut) meets a filter tuned for less: hence the chosen
+/// filter's error for a flat spectrum of the same power beside the record's
+/// (`flat_predicted_error`). The default stays the flat criterion.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct AxisForceSpectrum {
     /// The record's in-band force RMS √P_F (N), noise removed.

@@ -1,24 +1,8 @@
-//! Kalman compensator design (DESIGN.md, signal chain steps 2-3 and 5).
-//!
-//! 1. The fitted model Ĝ(s) becomes a discrete model Ĝ_d(z) = z^D·M(z)
-//!    ([`crate::design::discretize`]): by default fitted on the unit circle to the
-//!    sampled-data relation Ĝ(j2πf) of a band-limited chain, with an advance
-//!    of D samples (the band-limited relation is two-sided) and M causal:
-//!    M(z) = d + Σ ρ/(z − ζ) + Σ_m h_m z^{−m}. Hold equivalents (FOH, ZOH)
-//!    have the same form with D = 0 and no taps.
-//! 2. Augmentation: x_e = [x_s; F_k; F_{k−1}; …; F_{k−N}] with the force a
-//!    random walk, F_{k+1} = F_k + w_k, E[w²] = q (N²/sample), and
-//!    N = max(L + D, M) so that both the taps and the output lag are states.
-//!    The measurement is ỹ_k = y_{k−D} = M(z)F_k + v_k (causal in F).
-//! 3. The filter DARE P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + q g gᵀ is
-//!    solved by the structured doubling algorithm (Chu, Fan & Lin 2005), and
-//!    its residual and the closed-loop spectral radius are checked.
-//! 4. Compensator from ỹ to the estimate of F_{k−L−D} (a fixed-lag smoother
-//!    of lag L + D, still a fixed-size LTI filter):
-//!    x̂⁻[k+1] = A(I − K C) x̂⁻[k] + A K ỹ[k],
-//!    F̂[k−L−D] = e_{L+D}ᵀ (I − K C) x̂⁻[k] + e_{L+D}ᵀ K ỹ[k],  K = P Cᵀ (C P Cᵀ + R)⁻¹.
-//!    Fed with y instead of ỹ (D samples earlier), the same filter outputs
-//!    F̂[k−L]: the declared latency stays L.
+//! Kalman compensator design (DESIGN.md, signal chain steps 2-3 and 5): the
+//! discrete sensor model augmented with a random-walk force
+//! ([`augmented_plant`]), the filter DARE ([`solve_filter_dare`]) and the
+//! fixed-lag smoother that estimates the force L samples late as a
+//! fixed-size LTI filter ([`design`]).
 
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
@@ -51,8 +35,18 @@ impl AugmentedPlant {
 }
 
 /// Build the augmented plant of the discrete model `dm` for a declared
-/// output latency of `lag` samples (module doc, steps 1-2). Plant states are
-/// scaled by 1/|1 − ζ| so that every state has about the magnitude of a force.
+/// output latency of `lag` samples. Plant states are scaled by 1/|1 − ζ| so
+/// that every state has about the magnitude of a force.
+///
+/// The discrete model is Ĝ_d(z) = z^D·M(z) ([`crate::design::discretize`]): by
+/// default fitted on the unit circle to the sampled-data relation Ĝ(j2πf) of
+/// a band-limited chain, with an advance of D samples (the band-limited
+/// relation is two-sided) and M causal: M(z) = d + Σ ρ/(z − ζ) + Σ_m h_m z^{−m}.
+/// Hold equivalents (FOH, ZOH) have the same form with D = 0 and no taps.
+/// Augmentation: x_e = [x_s; F_k; F_{k−1}; …; F_{k−N}] with the force a random
+/// walk, F_{k+1} = F_k + w_k, E\[w²\] = q (N²/sample), and N = max(L + D, M) so
+/// that both the taps and the output lag are states. The measurement is
+/// ỹ_k = y_{k−D} = M(z)F_k + v_k (causal in F).
 pub fn augmented_plant(dm: &DiscreteModel, lag: usize) -> AugmentedPlant {
     let n_plant = dm.order();
     let model_lag = lag + dm.advance;
@@ -180,7 +174,22 @@ pub struct KalmanDesign {
 }
 
 /// Design the compensator for the discrete model, q, R and declared
-/// latency `lag` (module doc).
+/// latency `lag`.
+///
+/// The filter DARE P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + q g gᵀ of the
+/// [`augmented_plant`] is solved by the structured doubling algorithm (Chu,
+/// Fan & Lin 2005, [`solve_filter_dare`]), and its residual and the
+/// closed-loop spectral radius are checked. The compensator runs from ỹ to
+/// the estimate of F_{k−L−D} (a fixed-lag smoother of lag L + D, still a
+/// fixed-size LTI filter):
+///
+/// ```text
+/// x̂⁻[k+1] = A(I − K C) x̂⁻[k] + A K ỹ[k],
+/// F̂[k−L−D] = e_{L+D}ᵀ (I − K C) x̂⁻[k] + e_{L+D}ᵀ K ỹ[k],  K = P Cᵀ (C P Cᵀ + R)⁻¹.
+/// ```
+///
+/// Fed with y instead of ỹ (D samples earlier), the same filter outputs
+/// F̂[k−L]: the declared latency stays L.
 pub fn design(dm: &DiscreteModel, q: f64, r: f64, lag: usize) -> Result<KalmanDesign> {
     if !(r > 0.0) || !r.is_finite() {
         bail!("measurement noise variance R must be positive and finite, got {r}");

@@ -1,29 +1,11 @@
 //! The declared output latency L of an image, chosen when the user does not
-//! give one (`design` without `--latency`).
+//! give one (`design` without `--latency`, [`design_axes_choosing_latency`]).
 //!
 //! The fixed-lag smoother sees L samples past the force it estimates (plus
-//! the discrete model's advance D, `crate::design::discretize`). Usually 4 is plenty:
-//! the flat band reaches the top of the compensated band. Where a sensor mode
-//! sits near or above the Nyquist frequency (a DAQ at 10.24 kHz), inverting
-//! it over the whole band needs a longer look ahead: on the simulated
-//! high-mode dynamometer at 10.24 kHz, 4 samples leave the flat band at
-//! 2-3.3 kHz of 4.1 kHz and 3.2-4.6 % NRMSE, 8 samples give 1.0-2.7 %
-//! (BENCHMARKS.md, "The declared latency, chosen").
-//!
-//! Rule: design every axis at [`DEFAULT_LATENCY`]. Only if an axis failed,
-//! its flat band stops short of its compensated band ([`FLAT_BAND_SHORT`]),
-//! or its predicted in-band distortion (the error without the noise, what
-//! looking further ahead can lower) is above [`PREDICTED_SHORT`], design
-//! again at each of [`LONGER_LATENCIES`] and keep the shortest latency at
-//! which every axis's predicted in-band error
-//! (`AxisDesign::predicted_error`, DESIGN.md's criterion) is within
-//! [`GAIN_NOT_WORTH`] of the best that axis reached at any latency tried,
-//! among the latencies whose image the box can still run (when a load limit
-//! is given and any candidate meets it). One latency serves all axes: the
-//! image declares one. Where the default fell short, each axis's discrete
-//! model is also fitted up to Nyquist at the chosen latency
-//! ([`NYQUIST_FIT_FRACTION`]), and the one with the smaller predicted error
-//! is kept per axis.
+//! the discrete model's advance D, `crate::design::discretize`). Usually 4 is
+//! plenty: the flat band reaches the top of the compensated band. Where a
+//! sensor mode sits near or above the Nyquist frequency (a DAQ at 10.24 kHz),
+//! inverting it over the whole band needs a longer look ahead.
 
 use anyhow::{anyhow, Result};
 use dynocomp_core::budget::{load_permille, AxisShape, CostModel};
@@ -37,14 +19,14 @@ use crate::frf::AxisFrf;
 
 /// Latency designed first, and kept unless a longer one buys accuracy (samples).
 pub const DEFAULT_LATENCY: usize = 4;
-/// Latencies tried when the default falls short (samples; the issue's bound is 8).
+/// Latencies tried when the default falls short (samples; at most 8).
 pub const LONGER_LATENCIES: [usize; 2] = [6, 8];
 /// A flat band whose top is below this fraction of the compensated band's top
 /// falls short.
 pub const FLAT_BAND_SHORT: f64 = 0.95;
 /// A predicted in-band distortion (`AxisDesign::predicted_distortion`)
-/// above this (fraction) falls short too: the accuracy target of issue #12
-/// (median ≤ 0.5 %). At 10.24 kHz the designs at latency 4 predict 0.7-1.9 %
+/// above this (fraction) falls short too: the accuracy target (median
+/// ≤ 0.5 %). At 10.24 kHz the designs at latency 4 predict 0.7-1.9 %
 /// of distortion on a flat force even where their flat band reaches the top
 /// of the band: the smoother's own distortion near the band's top. Latency 8
 /// brings stiff axes from 2.2-3.0x to 1.05-1.09x their noise floor there
@@ -170,7 +152,8 @@ fn trial(latency: usize, designs: &[TimedDesign], fs_hz: f64) -> LatencyTrial {
     }
 }
 
-/// The index in `trials` of the latency kept (module doc).
+/// The index in `trials` of the latency kept
+/// ([`design_axes_choosing_latency`]).
 pub fn pick(trials: &[LatencyTrial], limit_permille: Option<u32>) -> usize {
     let runnable = |t: &LatencyTrial| match (limit_permille, t.load_permille) {
         (Some(l), Some(p)) => p <= l,
@@ -202,11 +185,24 @@ pub fn pick(trials: &[LatencyTrial], limit_permille: Option<u32>) -> usize {
         .unwrap_or(0)
 }
 
-/// Design every axis at the chosen latency (module doc). `opts.lag` is
-/// ignored; `limit_permille` is the box's load limit the image should meet.
+/// Design every axis at the chosen latency. `opts.lag` is ignored; `limit_permille` is the box's load limit the image should meet.
 /// `progress` hears each further design round as it starts: its latency
 /// and what it is for ("axis z flat to 2088 of 4096 Hz at latency 4:
 /// designing again at 6 samples").
+///
+/// its flat band stops short of its compensated band ([`FLAT_BAND_SHORT`]),
+/// or its predicted in-band distortion (the error without the noise, what
+/// looking further ahead can lower) is above [`PREDICTED_SHORT`], design
+/// again at each of [`LONGER_LATENCIES`] and keep the shortest latency at
+/// which every axis's predicted in-band error
+/// (`AxisDesign::predicted_error`, DESIGN.md's criterion) is within
+/// [`GAIN_NOT_WORTH`] of the best that axis reached at any latency tried,
+/// among the latencies whose image the box can still run (when a load limit
+/// is given and any candidate meets it; [`pick`]). One latency serves all
+/// axes: the image declares one. Where the default fell short, each axis's
+/// discrete model is also fitted up to Nyquist at the chosen latency
+/// ([`NYQUIST_FIT_FRACTION`]), and the one with the smaller predicted error
+/// is kept per axis.
 pub fn design_axes_choosing_latency(
     freq_hz: &[f64],
     axes: &[AxisFrf],

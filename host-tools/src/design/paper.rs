@@ -1,29 +1,9 @@
-//! The seed paper's compensator (§3.1, §4; `design --method paper`).
-//!
-//! From a fitted G(s) = B(s')/A(s'), s' = s/ω_0 ([`crate::fit::rfp`]):
-//!
-//! 1. the controllable companion form of eq. (2)–(3), ẋ_s = A_s x_s + B_s F_a,
-//!    F_m = C_s x_s (+ D F_a when numerator and denominator orders are equal),
-//!    in rescaled time τ = ω_0·t (the paper's "frequency rescaling");
-//! 2. the augmented system of eq. (4)–(5), x_e = [x_s; F_a], Ḟ_a = w
-//!    (E[w w] = Q δ, N²/s), measurement noise of intensity R/fs (N²·s);
-//! 3. the continuous Riccati equation (7),
-//!    A_e P + P A_eᵀ − P C_eᵀ R⁻¹ C_e P + Γ Q Γᵀ = 0, solved by the matrix sign
-//!    function of the Hamiltonian (Roberts 1971; Byers 1987, determinant
-//!    scaling) refined by Newton (Kleinman 1968) steps, with its residual and
-//!    closed-loop stability checked;
-//! 4. the gain (8), K = P C_eᵀ R⁻¹, and the compensator (6),
-//!    x̂̇ = (A_e − K C_e) x̂ + K F_m, F̂_a = C_0 x̂;
-//! 5. the bilinear (Tustin) transform with frequency prewarping at f_p, exact
-//!    at f_p: H_d(e^{j2πf_p/fs}) = H_c(j2πf_p).
-//!
-//! Where the path breaks, it stops with the condition numbers and the
-//! observability rank (the paper, §3.1: "the observability matrix is not
-//! full rank due to round-off errors").
-
-// `!(x < limit)` on purpose: a NaN residual or condition number must fail
-// the check, as in kalman.rs and quantize.rs.
-#![allow(clippy::neg_cmp_op_on_partial_ord)]
+//! The seed paper's compensator (§3.1, §4; `design --method paper`,
+//! [`design`]): a continuous Kalman filter on the companion form of the fitted
+//! G(s) = B(s')/A(s'), discretized by Tustin with prewarping. Where the path
+//! breaks, it stops with the condition numbers and the observability rank (the
+//! paper, §3.1: "the observability matrix is not full rank due to round-off
+//! errors").
 
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
@@ -272,6 +252,25 @@ pub fn tustin_prewarped(ss: &ContinuousSs, t: f64, omega_p: f64) -> Result<State
 /// noise intensity R/fs (R in N²), discretized by Tustin with prewarping at
 /// `prewarp_hz`. `diag` receives the condition numbers as they are computed,
 /// so a failure still reports what was measured.
+///
+/// From G(s) = B(s')/A(s'), s' = s/ω_0 ([`crate::fit::rfp`]):
+///
+/// 1. the controllable companion form of eq. (2)–(3), ẋ_s = A_s x_s + B_s F_a,
+///    F_m = C_s x_s (+ D F_a when numerator and denominator orders are equal),
+///    in rescaled time τ = ω_0·t (the paper's "frequency rescaling",
+///    [`companion_form`]);
+/// 2. the augmented system of eq. (4)–(5), x_e = [x_s; F_a], Ḟ_a = w
+///    (E[w w] = Q δ, N²/s), measurement noise of intensity R/fs (N²·s)
+///    ([`augmented`]);
+/// 3. the continuous Riccati equation (7),
+///    A_e P + P A_eᵀ − P C_eᵀ R⁻¹ C_e P + Γ Q Γᵀ = 0, solved by the matrix sign
+///    function of the Hamiltonian (Roberts 1971; Byers 1987, determinant
+///    scaling) refined by Newton (Kleinman 1968) steps, with its residual and
+///    closed-loop stability checked ([`solve_filter_care`]);
+/// 4. the gain (8), K = P C_eᵀ R⁻¹, and the compensator (6),
+///    x̂̇ = (A_e − K C_e) x̂ + K F_m, F̂_a = C_0 x̂;
+/// 5. the bilinear (Tustin) transform with frequency prewarping at f_p, exact
+///    at f_p: H_d(e^{j2πf_p/fs}) = H_c(j2πf_p) ([`tustin_prewarped`]).
 pub fn design(tf: &RationalTf, fs_hz: f64, q: f64, r: f64, prewarp_hz: f64, diag: &mut PaperDiagnostics) -> Result<KalmanDesign> {
     if !(r > 0.0 && r.is_finite() && q > 0.0 && q.is_finite()) {
         bail!("Q and R must be positive and finite (q = {q}, R = {r})");

@@ -1,17 +1,8 @@
 //! The paper method's orders NB:NA chosen per axis (`design --method paper`
-//! without `--paper-orders`).
-//!
-//! The paper chose its orders by hand for its own FRF (§3.1). Here every
-//! pair with 2 ≤ NA ≤ [`MAX_AUTO_NA`] and NA − 2 ≤ NB ≤ NA is first probed
-//! cheaply ([`crate::design::axis::probe_paper_fit`]): the RFP/Gauss–Newton fit
-//! must be stable with a plausible static gain, and the augmented system of
-//! eq. (4) observable and well-conditioned in floating point
-//! ([`crate::design::paper::MAX_OBSERVABILITY_CONDITION`]). The workable pairs are
-//! ranked by their in-band fit error (relative RMS against the coherent
-//! measured lines in the bands), the higher orders first among equal fits
-//! (within [`FIT_TIE`]), and designed in that order; the first that passes
-//! every check of the full design (Q search, the fit-error limit, never worse
-//! than raw, f32 verification) is taken. The reason is reported.
+//! without `--paper-orders`, [`design_axis_auto`]). The paper chose its orders
+//! by hand for its own FRF (§3.1); here they are the highest that pass every
+//! check of the full design among the best-fitting workable pairs, and the
+//! reason is reported.
 
 use anyhow::{bail, Result};
 
@@ -26,8 +17,8 @@ pub const FIT_TIE: f64 = 0.02;
 /// Full designs tried at most, best-ranked first.
 pub const MAX_FULL_TRIALS: usize = 4;
 
-/// Design one axis: by the paper's method at orders chosen as in the module
-/// doc when `opts.paper_orders_auto` asks for it, else as
+/// Design one axis: by the paper's method at orders chosen by
+/// [`design_axis_auto`] when `opts.paper_orders_auto` asks for it, else as
 /// [`crate::design::axis::design_axis`] does.
 pub fn design_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions) -> Result<AxisDesign> {
     if opts.paper_orders_auto && matches!(opts.method, FitMethod::Paper { .. }) {
@@ -41,9 +32,20 @@ pub fn candidates() -> Vec<(usize, usize)> {
     (2..=MAX_AUTO_NA).flat_map(|na| (na.saturating_sub(2)..=na).map(move |nb| (nb, na))).collect()
 }
 
-/// Design `frf` by the paper's method at the orders chosen as in the module
-/// doc. `opts.method` must be [`FitMethod::Paper`] (its orders are ignored).
-/// The reason for the choice is the first of the design's notes.
+/// Design `frf` by the paper's method at orders it chooses. `opts.method`
+/// must be [`FitMethod::Paper`] (its orders are ignored). The reason for the
+/// choice is the first of the design's notes.
+///
+/// Every pair with 2 ≤ NA ≤ [`MAX_AUTO_NA`] and NA − 2 ≤ NB ≤ NA is first
+/// probed cheaply ([`crate::design::axis::probe_paper_fit`]): the
+/// RFP/Gauss–Newton fit must be stable with a plausible static gain, and the
+/// augmented system of eq. (4) observable and well-conditioned in floating
+/// point ([`crate::design::paper::MAX_OBSERVABILITY_CONDITION`]). The workable
+/// pairs are ranked by their in-band fit error (relative RMS against the
+/// coherent measured lines in the bands), the higher orders first among equal
+/// fits (within [`FIT_TIE`]), and designed in that order; the first that
+/// passes every check of the full design (Q search, the fit-error limit,
+/// never worse than raw, f32 verification) is taken.
 pub fn design_axis_auto(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions) -> Result<AxisDesign> {
     let name = axis_name(frf.axis);
     let FitMethod::Paper { rfp, prewarp_hz } = &opts.method else {

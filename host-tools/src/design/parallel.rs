@@ -1,16 +1,7 @@
 //! Parallel elaboration (paper §3.3): one compensator per band, in one
-//! offline-only image (`design --parallel`), run by `compensate` through the
-//! zero-phase split of [`crate::offline::bandsplit`].
-//!
-//! **Design regions.** `compensate` hands band k everything between the
-//! crossovers `f_c,k` and `f_c,k+1` (the middle of the gaps between the bands;
-//! DC for the first band, Nyquist for the last). So band k's compensator is
-//! designed with the band-fitting of [`crate::design::axis`] (fit weighted to, Q
-//! criterion and flat band evaluated on its band lines) over its **region**
-//! `[f_c,k / 1.25, 1.25·f_c,k+1]`, clipped to the FRF: where the split
-//! passes more than ≈ 5 % of the signal (`L_c(1.25·f_c) = 0.028`), the filter
-//! that receives it was designed for it. The image stores the bands
-//! themselves (they define the crossovers).
+//! offline-only image (`design --parallel`, [`design_parallel`]), run by
+//! `compensate` through the zero-phase split of [`crate::offline::bandsplit`].
+//! The image stores the bands themselves (they define the crossovers).
 
 use anyhow::{bail, Context, Result};
 use dynocomp_core::image::MAX_BANDS;
@@ -21,11 +12,21 @@ use crate::design::axis::{AxisDesign, DesignOptions};
 use crate::design::paper_orders::design_axis;
 use crate::frf::{axis_name, Frf};
 
-/// Ratio by which a design region extends past each crossover (module doc).
+/// Ratio by which a design region extends past each crossover
+/// ([`design_regions`]).
 pub const REGION_MARGIN: f64 = 1.25;
 
-/// The design region of each band (Hz; module doc): the band's share of the
-/// zero-phase split, widened by [`REGION_MARGIN`], within `[f_first, f_last]`.
+/// The design region of each band (Hz): the band's share of the zero-phase
+/// split, widened by [`REGION_MARGIN`], within `[f_first, f_last]`.
+///
+/// `compensate` hands band k everything between the crossovers `f_c,k` and
+/// `f_c,k+1` (the middle of the gaps between the bands; DC for the first
+/// band, Nyquist for the last). So band k's compensator is designed with the
+/// band-fitting of [`crate::design::axis`] (fit weighted to, Q criterion and
+/// flat band evaluated on its band lines) over its **region**
+/// `[f_c,k / 1.25, 1.25·f_c,k+1]`, clipped to the FRF: where the split passes
+/// more than ≈ 5 % of the signal (`L_c(1.25·f_c) = 0.028`), the filter that
+/// receives it was designed for it.
 pub fn design_regions(bands: &[Band], f_first: f64, f_last: f64) -> Result<Vec<Band>> {
     let edges: Vec<(f64, f64)> = bands.iter().map(|b| (b.lo_hz, b.hi_hz)).collect();
     let c = crossovers(&edges)?;
@@ -40,7 +41,8 @@ pub fn design_regions(bands: &[Band], f_first: f64, f_last: f64) -> Result<Vec<B
         .collect())
 }
 
-/// Design every axis of `frf` once per band (module doc); `r[axis]` is R
+/// Design every axis of `frf` once per band over its region
+/// ([`design_regions`]); `r[axis]` is R
 /// (N²). Returns the designs per band, then per axis.
 pub fn design_parallel(frf: &Frf, r: &[Option<f64>; 3], opts: &DesignOptions, bands: &[Band]) -> Result<Vec<Vec<AxisDesign>>> {
     if bands.is_empty() {

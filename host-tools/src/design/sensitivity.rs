@@ -1,30 +1,9 @@
 //! How sensitive a designed compensator is to its sensor modes moving
-//! (issue #15, item 1): the workpiece loses mass during the cut, the FRF was
+//! ([`predict`]): the workpiece loses mass during the cut, the FRF was
 //! measured once, and near a lightly damped resonance a 1 % shift is most of
-//! a half-power bandwidth.
-//!
-//! **Sensor modes (stated rule).** The dynamometer's main mode is the fitted
-//! pair with the largest modal share 2|ρ|/|p| (the static gain a pair
-//! r/(s − p) + c.c. contributes, for light damping); the sensor modes are
-//! the fitted pairs whose natural frequency is at least
-//! [`SENSOR_FRACTION`] × the main mode's. Machine-structure modes (a few
-//! hundred Hz on a 9257-class set-up, sensor modes 2-6 kHz) stay below that
-//! line and do not move; real poles do not move either.
-//!
-//! **Shift.** A sensor mode moved by the relative δ is the same mode on a
-//! frequency axis scaled by (1 + δ): its term r/(s − p) becomes
-//! r/(s/(1+δ) − p) = r(1+δ)/(s − p(1+δ)), so ω scales by (1 + δ), the damping
-//! ratio and the mode's static share stay (a change of mass at constant
-//! stiffness moves ω and keeps the static compliance). The plant met by the
-//! filter is G_δ = Ĝ + Σ_sensor (term_δ − term), so G_0 is the design's Ĝ.
-//!
-//! **Prediction.** The designed filter H (f64, the one the q search chose)
-//! against G_δ, by the design's own criterion J ([`crate::design::criterion::criterion_j`]:
-//! model error |H·G_δ·e^{j2πfL/fs} − 1|² plus amplified noise, flat force
-//! spectrum of `force_rms` in the criterion's bands); √J is reported at each
-//! δ of [`SHIFTS_PCT`]. The shift at which the predicted error has doubled
-//! (interpolated between the points) is what a user acts on: re-measure the
-//! FRF when the modes may have moved by more than that.
+//! a half-power bandwidth. The shift at which the predicted error has doubled
+//! is what a user acts on: re-measure the FRF when the modes may have moved
+//! by more than that.
 
 use num_complex::Complex64;
 use serde::Serialize;
@@ -145,8 +124,14 @@ fn fmt_pct(v: Option<f64>) -> String {
     }
 }
 
-/// `model` with the terms at `indices` moved by the relative shift `delta`
-/// (module doc): pole and residue times (1 + δ).
+/// `model` with the terms at `indices` moved by the relative shift `delta`:
+/// pole and residue times (1 + δ).
+///
+/// A sensor mode moved by δ is the same mode on a frequency axis scaled by
+/// (1 + δ): its term r/(s − p) becomes r/(s/(1+δ) − p) = r(1+δ)/(s − p(1+δ)),
+/// so ω scales by (1 + δ), the damping ratio and the mode's static share stay
+/// (a change of mass at constant stiffness moves ω and keeps the static
+/// compliance).
 pub fn shifted_model(model: &PoleResidueModel, indices: &[usize], delta: f64) -> PoleResidueModel {
     let mut m = model.clone();
     for &i in indices {
@@ -195,8 +180,25 @@ pub fn predict_all(designs: &[AxisDesign], opts: &DesignOptions) -> Vec<Option<S
 }
 
 /// Predict the in-band error of the designed filter of `d` when its sensor
-/// modes shift (module doc), with the design's own criterion and `opts`
-/// (sample rate, force RMS). `None` when the model has no pair.
+/// modes shift, with the design's own criterion and `opts` (sample rate,
+/// force RMS). `None` when the model has no pair.
+///
+/// **Sensor modes (stated rule).** The dynamometer's main mode is the fitted
+/// pair with the largest modal share 2|ρ|/|p| (the static gain a pair
+/// r/(s − p) + c.c. contributes, for light damping); the sensor modes are the
+/// fitted pairs whose natural frequency is at least
+/// [`crate::fit::modes::SENSOR_FRACTION`] × the main mode's
+/// ([`sensor_mode_indices`]). Machine-structure modes (a few hundred Hz on a
+/// 9257-class set-up, sensor modes 2-6 kHz) stay below that line and do not
+/// move; real poles do not move either.
+///
+/// **Prediction.** The plant met by the filter is G_δ = Ĝ + Σ_sensor
+/// (term_δ − term) ([`shifted_model`]), so G_0 is the design's Ĝ. The designed
+/// filter H (f64, the one the q search chose) is scored against G_δ by the
+/// design's own criterion J ([`crate::design::criterion::criterion_j`]: model
+/// error |H·G_δ·e^{j2πfL/fs} − 1|² plus amplified noise, flat force spectrum
+/// of `force_rms` in the criterion's bands); √J at each δ of [`SHIFTS_PCT`],
+/// and the shifts at which it has doubled (interpolated between the points).
 pub fn predict(d: &AxisDesign, opts: &DesignOptions) -> Option<Sensitivity> {
     let idx = sensor_mode_indices(&d.model);
     if idx.is_empty() {

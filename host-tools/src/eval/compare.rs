@@ -1,25 +1,7 @@
 //! `dynocomp compare`: the seed paper's method (whole band, band-fitted,
-//! parallel elaboration) against the default method on the same FRF.
-//!
-//! Per axis, each method is one row: fit error inside and outside the
-//! fitting bands (relative RMS of Ĝ against the measured lines, coherent
-//! lines only), compensated error inside and outside the bands (RMS of
-//! |H·G·e^{j2πfL/fs} − 1| with the f32 filter and the *measured* G, the
-//! same truth for every method), flat band, white-noise gain, order,
-//! latency, the paper path's condition numbers and observability rank, and
-//! design time. A method that fails is a row with its diagnostic.
-//!
-//! **Parallel elaboration** (paper §3.3) is evaluated in the frequency
-//! domain: the coherent band is cut into segments at the crossovers of
-//! [`crate::offline::bandsplit`] (the middles of the gaps between the fitting bands,
-//! or three equal segments without bands), each segment is designed by the
-//! paper's method over the design region of `design --parallel`
-//! ([`crate::design::parallel::design_regions`]; the
-//! denominator order is chosen per segment among 2, 4, …, `--paper-orders`'s
-//! by the smallest fit error on the segment's coherent lines), and the
-//! compensator is `H(f) = Σ_k B_k(f)·H_k(f)` with the zero-phase band gains
-//! `B_k` of the offline band split. Its "model" for the fit error is
-//! `Σ_k B_k(f)·Ĝ_k(f)`.
+//! parallel elaboration) against the default method on the same FRF, one row
+//! per method and axis ([`compare_axis`]), every method scored against the
+//! same truth: the *measured* G.
 
 use anyhow::Result;
 use num_complex::Complex64;
@@ -188,7 +170,7 @@ fn run_design(method: &str, setup: &CompareSetup, a: &AxisFrf, r: f64, opts: &De
 /// A segment (Hz) and the range its fit uses (Hz).
 type Segment = ((f64, f64), (f64, f64));
 
-/// Segments of parallel elaboration (module doc): with bands, each band's
+/// Segments of parallel elaboration ([`ParallelDesign`]): with bands, each band's
 /// share of the zero-phase split and the design region of
 /// `design --parallel` ([`crate::design::parallel::design_regions`]); without, three
 /// equal parts of the coherent band, widened the same way.
@@ -213,8 +195,19 @@ fn parallel_segments(bands: &[Band], coherent: (f64, f64)) -> Result<Vec<Segment
     Ok(edges.windows(2).map(|e| ((e[0], e[1]), ((e[0] / m).max(coherent.0), (e[1] * m).min(coherent.1)))).collect())
 }
 
-/// Parallel elaboration (paper §3.3, module doc): one paper-method design
-/// per segment, combined with the zero-phase band gains of the offline split.
+/// Parallel elaboration (paper §3.3): one paper-method design per segment,
+/// combined with the zero-phase band gains of the offline split, evaluated
+/// in the frequency domain.
+///
+/// The coherent band is cut into segments at the crossovers of
+/// [`crate::offline::bandsplit`] (the middles of the gaps between the fitting
+/// bands, or three equal segments without bands), each segment is designed
+/// by the paper's method over the design region of `design --parallel`
+/// ([`crate::design::parallel::design_regions`]; the denominator order is
+/// chosen per segment among 2, 4, …, `--paper-orders`'s by the smallest fit
+/// error on the segment's coherent lines), and the compensator is
+/// `H(f) = Σ_k B_k(f)·H_k(f)` with the zero-phase band gains `B_k` of the
+/// offline band split. Its "model" for the fit error is `Σ_k B_k(f)·Ĝ_k(f)`.
 pub struct ParallelDesign {
     /// Segments (Hz) and their designs.
     pub segments: Vec<((f64, f64), AxisDesign)>,
@@ -245,7 +238,7 @@ impl ParallelDesign {
     }
 }
 
-/// Design parallel elaboration for one axis (module doc).
+/// Design parallel elaboration for one axis ([`ParallelDesign`]).
 pub fn design_parallel(setup: &CompareSetup, a: &AxisFrf, r: f64) -> Result<ParallelDesign> {
     let (inside, outside, coherent) = masks(setup, a);
     let segments = parallel_segments(&setup.bands, coherent)?;
@@ -287,7 +280,7 @@ pub fn design_parallel(setup: &CompareSetup, a: &AxisFrf, r: f64) -> Result<Para
     Ok(ParallelDesign { segments: designs, crossovers_hz, fs_hz: setup.base.fs_hz })
 }
 
-/// Parallel elaboration row (module doc).
+/// The row of parallel elaboration ([`ParallelDesign`]).
 fn parallel_row(setup: &CompareSetup, a: &AxisFrf, r: f64) -> CompareRow {
     let method = "paper, parallel";
     let t0 = Instant::now();
@@ -331,7 +324,15 @@ fn parallel_row(setup: &CompareSetup, a: &AxisFrf, r: f64) -> CompareRow {
     }
 }
 
-/// Compare the methods on one axis (module doc).
+/// Compare the methods on one axis.
+///
+/// Each method is one row: fit error inside and outside the fitting bands
+/// (relative RMS of Ĝ against the measured lines, coherent lines only),
+/// compensated error inside and outside the bands (RMS of
+/// |H·G·e^{j2πfL/fs} − 1| with the f32 filter and the *measured* G, the same
+/// truth for every method), flat band, white-noise gain, order, latency, the
+/// paper path's condition numbers and observability rank, and design time. A
+/// method that fails is a row with its diagnostic.
 pub fn compare_axis(setup: &CompareSetup, a: &AxisFrf, r: f64) -> AxisComparison {
     let (_, _, coherent) = masks(setup, a);
     let mut rows = Vec::new();

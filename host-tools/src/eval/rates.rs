@@ -1,7 +1,6 @@
-//! The multi-rate accuracy harness of issue #12: simulated dynamometers and
-//! cuts at the sample rates DAQs use, designed and compensated with the public
-//! API (as `dynocomp design` + `compensate` do), scored against the
-//! band-limited truth.
+//! The multi-rate accuracy harness: simulated dynamometers and cuts at the
+//! sample rates DAQs use, designed and compensated with the public API (as
+//! `dynocomp design` + `compensate` do), scored against the band-limited truth.
 //!
 //! Used by `examples/rates.rs` (the benchmark table of BENCHMARKS.md) and
 //! meant for end-to-end threshold tests: [`cases`], [`run_case`] and
@@ -111,7 +110,7 @@ impl RateCase {
     }
 }
 
-/// The case list covering issue #12: sensor modes 1.8-6 kHz (above 0.45 fs
+/// The case list: sensor modes 1.8-6 kHz (above 0.45 fs
 /// at 10.24 kHz), a close mode pair, machine modes 80-900 Hz, FRF resolution
 /// 0.5-4 Hz, tooth-passing frequencies 60 Hz-1.6 kHz, chatter.
 pub fn cases() -> Vec<RateCase> {

@@ -1,14 +1,8 @@
-//! The seed paper reproduced on its own experiments (issue #13,
-//! `docs/paper.md`, `examples/paper.rs`, `tests/paper_presets.rs`).
-//!
-//! A preset ([`crate::simulate::presets`]) is simulated, designed by one
-//! method, its measured record compensated through the core kernel (the
-//! path of `dynocomp compensate`), and scored against the simulator's true
-//! force in the convention of DESIGN.md ([`crate::metrics`]): NRMSE = RMS
-//! error / std of the truth, below 4 kHz, and the same restricted to the
-//! fitting bands (both signals band-passed to them), which is what the
-//! paper's band-fitting claims are about. Each axis is designed and scored
-//! on its own, so one refused axis does not hide the others.
+//! The seed paper reproduced on its own experiments (`docs/paper.md`,
+//! `examples/paper.rs`, `tests/paper_presets.rs`): a preset
+//! ([`crate::simulate::presets`]) simulated, designed by one method,
+//! compensated through the core kernel and scored against the simulator's
+//! true force ([`evaluate`]).
 
 use anyhow::{Context, Result};
 
@@ -121,6 +115,13 @@ fn paper_opts(fs_hz: f64, bands: Vec<Band>, orders: Option<(usize, usize)>) -> D
 /// Design, compensate and score every axis of `s` (simulated from
 /// `preset`) by `method`; `bands` are the preset's fitting bands (the
 /// in-band score uses them for every method).
+///
+/// The measured record is compensated as `dynocomp compensate` does and
+/// scored in the convention of DESIGN.md ([`crate::metrics`]): NRMSE = RMS
+/// error / std of the truth, below 4 kHz, and the same restricted to the
+/// fitting bands (both signals band-passed to them), which is what the
+/// paper's band-fitting claims are about. Each axis is designed and scored
+/// on its own, so one refused axis does not hide the others.
 pub fn evaluate(s: &SimOutput, bands: &[Band], method: &Method) -> Vec<AxisOutcome> {
     let fs = s.params.fs_hz;
     let ranges: Vec<(f64, f64)> = bands.iter().map(|b| (b.lo_hz, b.hi_hz)).collect();

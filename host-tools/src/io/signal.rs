@@ -257,6 +257,39 @@ pub fn read_all(reader: &mut dyn SignalReader) -> Result<WholeRecord> {
     Ok((reader.has_time().then_some(t), ch))
 }
 
+/// Channel-to-axis map given with `--channels`: `fx=NAME,fy=NAME,...`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ChannelMap {
+    /// (axis, channel name as given).
+    pub pairs: Vec<(usize, String)>,
+}
+
+impl ChannelMap {
+    /// Parse `fx=A,fy=B,fz=C` (any subset).
+    pub fn parse(s: &str) -> Result<ChannelMap> {
+        let mut pairs: Vec<(usize, String)> = Vec::new();
+        for item in s.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+            let Some((k, v)) = item.split_once('=') else {
+                bail!("`{item}`: expected AXIS=CHANNEL, e.g. fx=1 or fx=Force X");
+            };
+            let axis = match k.trim().to_ascii_lowercase().as_str() {
+                "fx" | "x" => 0,
+                "fy" | "y" => 1,
+                "fz" | "z" => 2,
+                other => bail!("`{item}`: unknown axis `{other}` (fx, fy or fz)"),
+            };
+            if pairs.iter().any(|p| p.0 == axis) {
+                bail!("`{item}`: axis given twice");
+            }
+            pairs.push((axis, v.trim().to_string()));
+        }
+        if pairs.is_empty() {
+            bail!("no channel given");
+        }
+        Ok(ChannelMap { pairs })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -38,7 +38,7 @@ use std::io::{BufReader, Read, Write};
 use std::path::Path;
 
 use super::signal::{newton_per_unit, Block, SignalReader, SignalWriter};
-use super::signal_file::ChannelMap;
+use super::signal::ChannelMap;
 use crate::frf::axis_name;
 
 /// The lead-in's tag.

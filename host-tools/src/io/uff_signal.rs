@@ -20,7 +20,7 @@ use std::io::{BufRead, BufReader, Read, Seek, SeekFrom, Write};
 use std::path::Path;
 
 use super::signal::{newton_per_unit, Block, SignalReader, SignalWriter};
-use super::signal_file::ChannelMap;
+use super::signal::ChannelMap;
 use super::uff::{data_characteristics, dataset_header, read_numbers, record6, record7, spec_type_name, tokens, trim};
 use crate::frf::axis_name;
 

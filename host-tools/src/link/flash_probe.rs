@@ -1,37 +1,13 @@
 //! `dynocomp flash IMAGE --probe [--chip CHIP] [--slot a|b|auto] [--dry-run]`:
 //! write a coefficient image into one of the box's two flash slots through a
-//! debug probe, with the probe-rs library, and verify it.
+//! debug probe, with the probe-rs library, and verify it ([`run`]).
 //!
 //! What is written is a complete slot *record* of the coefficient store
 //! (`dynocomp_core::store::encode_record`: header with sequence number and
 //! CRC, commit word, the image, 0xFF padding), exactly what a USB upload
 //! leaves in a slot, so the box's boot scan (newest valid slot wins) accepts
-//! it. Steps, in this order:
-//!
-//! 1. Read and verify the image file (CRC, version, ranges, stability,
-//!    runnable on the box). A bad image is refused here, before any probe is
-//!    opened.
-//! 2. Open the probe, attach to the chip, read both slots.
-//! 3. [`plan`]: run the box's own boot scan on those bytes to see which slot
-//!    it runs; pick the other one (`auto`; an explicit slot that holds the
-//!    running image is refused) and the sequence number (newest committed +
-//!    1, so the new record wins at boot).
-//! 4. probe-rs `FlashLoader`: the record at the slot address, erase/program
-//!    with `verify` (read back), then reset the core so the box boots with
-//!    the new image.
-//!
-//! `--dry-run` needs no hardware: it runs steps 1, 3 and 4 against
-//! probe-rs's `FakeProbe` (a mock debug probe with a mocked Cortex-M core)
-//! and `DownloadOptions::dry_run` — the loader checks the data against the
-//! chip's memory map and builds its flash plan (flash algorithm, sectors) —
-//! and prints the plan (after the fake probe's own log of register
-//! accesses, which probe-rs prints on stdout). The slots are not read in a
-//! dry run (the fake probe has no flash contents): both count as erased, so
-//! `auto` = slot A, sequence 1.
-//!
-//! A power cut or a pulled cable during step 4 leaves a record whose CRC or
-//! commit word does not check out; the box then boots the other slot (or
-//! bypass), never a mix, because the written slot is never the active one.
+//! it; the written slot is never the active one, so a power cut during the
+//! write leaves the box booting the other slot (or bypass), never a mix.
 
 use std::path::Path;
 
@@ -276,7 +252,30 @@ pub fn describe(plan: &FlashPlan) -> String {
 }
 
 #[cfg(feature = "probe")]
-/// `dynocomp flash IMAGE --probe`: see the module documentation.
+/// `dynocomp flash IMAGE --probe`, in this order:
+///
+/// 1. Read and verify the image file (CRC, version, ranges, stability,
+///    runnable on the box). A bad image is refused here, before any probe is
+///    opened.
+/// 2. Open the probe, attach to the chip, read both slots.
+/// 3. [`plan`]: run the box's own boot scan on those bytes to see which slot
+///    it runs; pick the other one (`auto`; an explicit slot that holds the
+///    running image is refused) and the sequence number (newest committed +
+///    1, so the new record wins at boot).
+/// 4. probe-rs `FlashLoader`: the record at the slot address, erase/program
+///    with `verify` (read back), then reset the core so the box boots with
+///    the new image.
+///
+/// `dry_run` needs no hardware: it runs steps 1, 3 and 4 against probe-rs's
+/// `FakeProbe` (a mock debug probe with a mocked Cortex-M core) and
+/// `DownloadOptions::dry_run` — the loader checks the data against the chip's
+/// memory map and builds its flash plan (flash algorithm, sectors) — and
+/// prints the plan (after the fake probe's own log of register accesses,
+/// which probe-rs prints on stdout). The slots are not read in a dry run (the
+/// fake probe has no flash contents): both count as erased, so `auto` = slot
+/// A, sequence 1. A power cut or a pulled cable during step 4 leaves a record
+/// whose CRC or commit word does not check out; the box then boots the other
+/// slot (or bypass).
 pub fn run(image: &Path, chip: &str, slot: SlotArg, dry_run: bool) -> Result<()> {
     run_with(image, chip, slot, dry_run, real_session)
 }

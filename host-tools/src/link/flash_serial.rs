@@ -1,15 +1,5 @@
 //! `dynocomp flash IMAGE --serial PORT`: upload a coefficient image over the
-//! box's USB protocol (docs/protocol.md, "Upload").
-//!
-//! 1. Read and verify the image file locally (the same checks as the box:
-//!    CRC, version, ranges, stability, runnable), so a bad file is refused
-//!    before the box is touched.
-//! 2. `UploadBegin { len, crc }` (the box erases its inactive slot), the
-//!    bytes in [`MAX_CHUNK`]-byte chunks, each acknowledged, then
-//!    `UploadCommit`: the box reads the slot back, verifies it and switches
-//!    at a sample boundary.
-//! 3. `GetStatus`: the box must report the new image id as active and
-//!    running; anything else is an error.
+//! box's USB protocol (docs/protocol.md, "Upload", [`run`]).
 
 use std::path::Path;
 
@@ -63,7 +53,17 @@ fn fmt_id(id: Option<u32>) -> String {
     id.map_or("none".into(), |i| format!("{i:#010x}"))
 }
 
-/// `dynocomp flash IMAGE --serial PORT`.
+/// `dynocomp flash IMAGE --serial PORT`:
+///
+/// 1. Read and verify the image file locally (the same checks as the box:
+///    CRC, version, ranges, stability, runnable), so a bad file is refused
+///    before the box is touched.
+/// 2. `UploadBegin { len, crc }` (the box erases its inactive slot), the
+///    bytes in [`MAX_CHUNK`]-byte chunks, each acknowledged, then
+///    `UploadCommit`: the box reads the slot back, verifies it and switches
+///    at a sample boundary ([`upload`]).
+/// 3. `GetStatus`: the box must report the new image id as active and
+///    running; anything else is an error.
 pub fn run(image: &Path, port: &str) -> Result<()> {
     let (bytes, img) = crate::link::flash_probe::read_box_image(image)?;
     let mut link = Link::open(port)?;

@@ -1,19 +1,7 @@
-//! A simulated NOR flash with the STM32G4's geometry and semantics, for the
-//! coefficient store's tests and the virtual box.
-//!
-//! * Erase works on 2 KiB pages and sets them to 0xFF.
-//! * Writes are whole, 8-byte aligned double words, and a double word can
-//!   only be programmed while fully erased (RM0440 §3.3.7: programming a
-//!   non-erased double word sets PROGERR). Bits can only go 1 → 0.
-//! * A power cut can be scheduled at any operation boundary: operation
-//!   number `n` (each page erase and each double-word write is one
-//!   operation) is torn ([`CutMode`]) and every later operation fails with
-//!   [`SimError::PowerLost`], as if the MCU had lost power there.
-//! * Optionally the contents live in a file, written through on every
-//!   operation, so a "reboot" can be a new process.
-//!
-//! The window `base..base + len` of the device's address space is simulated;
-//! the rest is out of bounds. With `base = 0x7C000` and `len = 16 KiB` the
+//! A simulated NOR flash with the STM32G4's geometry and semantics
+//! ([`SimFlash`]), for the coefficient store's tests and the virtual box. The
+//! window `base..base + len` of the device's address space is simulated; the
+//! rest is out of bounds. With `base = 0x7C000` and `len = 16 KiB` the
 //! store's [`Layout::STM32G474RE`](dynocomp_core::store::Layout::STM32G474RE)
 //! offsets are used unchanged.
 
@@ -69,6 +57,17 @@ impl NorFlashError for SimError {
 }
 
 /// The simulated flash.
+///
+/// * Erase works on 2 KiB pages and sets them to 0xFF.
+/// * Writes are whole, 8-byte aligned double words, and a double word can
+///   only be programmed while fully erased (RM0440 §3.3.7: programming a
+///   non-erased double word sets PROGERR). Bits can only go 1 → 0.
+/// * A power cut can be scheduled at any operation boundary: operation
+///   number `n` (each page erase and each double-word write is one
+///   operation) is torn ([`CutMode`]) and every later operation fails with
+///   [`SimError::PowerLost`], as if the MCU had lost power there.
+/// * Optionally the contents live in a file, written through on every
+///   operation, so a "reboot" can be a new process.
 #[derive(Debug)]
 pub struct SimFlash {
     base: u32,

@@ -1,20 +1,8 @@
 //! `dynocomp stream --serial PORT --output FILE.csv [--duration S | --samples N]`:
 //! record the box's stream of raw and compensated samples, converted to
-//! newtons with the running image's scaling, and report lost frames.
-//!
-//! Loss accounting: every stream frame carries a sequence number (+1 per
-//! frame sent). A gap between two received frames is a run of lost frames;
-//! after `StopStream` the box's `stream_next_seq` (status) reveals frames
-//! lost after the last one received. Frames lost before the first received
-//! frame cannot be told from "not yet started" and are not counted.
-//! Samples the box itself dropped (its queue full) show as gaps in the
-//! sample index and are counted separately.
-//!
-//! The box's health comes from the status before and after the recording:
-//! missed sample deadlines (overruns) during the recording, with a warning
-//! if there were any, and the sample interrupt's cost in CPU cycles (mean,
-//! max; DWT cycle counter on the box) as a share of the sample period
-//! ([`BoxLoad::summary`]).
+//! newtons with the running image's scaling ([`record`]), and report lost
+//! frames ([`LossCounter`]) and the box's health over the recording
+//! ([`BoxLoad`]).
 
 use std::io::Write;
 use std::path::Path;
@@ -50,7 +38,10 @@ pub struct StreamReport {
 }
 
 /// The sample path's health over a recording, from the box's status before
-/// and after it.
+/// and after it: missed sample deadlines (overruns) during the recording,
+/// with a warning if there were any, and the sample interrupt's cost in CPU
+/// cycles (mean, max; DWT cycle counter on the box) as a share of the
+/// sample period ([`BoxLoad::summary`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct BoxLoad {
     /// Sample rate of the box, Hz.
@@ -148,6 +139,15 @@ impl StreamReport {
 }
 
 /// Tracks frame sequence numbers and records losses.
+///
+/// Every stream frame carries a sequence number (+1 per frame sent). A gap
+/// between two received frames is a run of lost frames; after `StopStream`
+/// the box's `stream_next_seq` (status) reveals frames lost after the last
+/// one received ([`LossCounter::finish`]). Frames lost before the first
+/// received frame cannot be told from "not yet started" and are not
+/// counted. Samples the box itself dropped (its queue full) show as gaps in
+/// the sample index and are counted separately
+/// ([`StreamReport::index_gaps`]).
 #[derive(Clone, Debug, Default)]
 pub struct LossCounter {
     last: Option<u32>,
@@ -215,45 +215,22 @@ pub fn record(
     if dec == 0 {
         bail!("--decimation must be at least 1");
     }
-    let axes: Vec<(usize, AxisSummaryWire)> = image.axes.iter().enumerate().filter_map(|(i, a)| a.map(|a| (i, a))).collect();
+    let axes: Vec<(usize, AxisSummaryWire)> =
+        image.axes.iter().enumerate().filter_map(|(i, a)| a.map(|a| (i, a))).collect();
     link.stream.clear();
     link.command(Request::StartStream { decimation: dec })?;
-    let mut loss = LossCounter::default();
-    let mut rows: Vec<Row> = Vec::new();
-    // t_s is the box's sample index / fs (time since the sample path
-    // started); the box's u32 index wraps (11.9 h at 100 kHz) and is
-    // unwrapped here.
-    let mut epoch = 0u64;
-    let mut prev_first: Option<u32> = None;
+    let mut rec = Recording { axes: &axes, epoch: 0, prev_first: None, loss: LossCounter::default(), rows: Vec::new() };
     let start = Instant::now();
-    let mut take = |f: StreamFrame, loss: &mut LossCounter, rows: &mut Vec<Row>| {
-        loss.frame(f.seq);
-        if prev_first.is_some_and(|p| f.first_sample < p) {
-            epoch += 1 << 32;
-        }
-        prev_first = Some(f.first_sample);
-        for (k, s) in f.valid().iter().enumerate() {
-            let idx = epoch + u64::from(f.first_sample) + k as u64 * u64::from(f.step);
-            let bypass = SampleFlags(s.flags).has(SampleFlags::BYPASS);
-            let mut force = [f64::NAN; AXES];
-            let mut raw = [f64::NAN; AXES];
-            for &(i, a) in &axes {
-                raw[i] = newton(s.raw[i], &a);
-                force[i] = if bypass { newton(s.out[i], &a) } else { dac_newton(s.out[i], &a) };
-            }
-            rows.push(Row { index: idx, force, raw });
-        }
-    };
-    while !stop(rows.len(), start.elapsed()) {
+    while !stop(rec.rows.len(), start.elapsed()) {
         while let Some(f) = link.stream.pop_front() {
-            take(f, &mut loss, &mut rows);
+            rec.take(f);
         }
         for m in link.poll(Duration::from_millis(5))? {
             if let dynocomp_core::protocol::BoxMessage::Stream(f) = m {
-                take(f, &mut loss, &mut rows);
+                rec.take(f);
             }
         }
-        if start.elapsed() > Duration::from_secs(2) && loss.report.frames == 0 {
+        if start.elapsed() > Duration::from_secs(2) && rec.loss.report.frames == 0 {
             // Best effort: leave the box as found.
             let _ = link.command(Request::StopStream);
             bail!("no stream frames from the box within 2 s");
@@ -263,48 +240,95 @@ pub fn record(
     // sequence counter ended.
     link.command(Request::StopStream)?;
     while let Some(f) = link.stream.pop_front() {
-        take(f, &mut loss, &mut rows);
+        rec.take(f);
     }
     let end = link.status()?;
     while let Some(f) = link.stream.pop_front() {
-        take(f, &mut loss, &mut rows);
+        rec.take(f);
     }
+    let Recording { mut loss, mut rows, .. } = rec;
     loss.finish(end.stream_next_seq);
     loss.report.box_load = BoxLoad::from_statuses(&status, &end);
-    // Sample-index gaps not explained by lost frames: with index steps of
-    // `dec`, count the missing positions between consecutive rows.
+    let lost_samples_in_frames = loss.report.lost_frames * dynocomp_core::protocol::STREAM_BATCH as u64;
+    loss.report.index_gaps = index_gaps(&rows, dec).saturating_sub(lost_samples_in_frames);
+    if let Some(m) = max_rows {
+        rows.truncate(m);
+    }
+    loss.report.samples = rows.len();
+    write_rows(output, &axes, &rows, fs).with_context(|| format!("{}: cannot write the recording", output.display()))?;
+    Ok(loss.report)
+}
+
+/// The rows of a recording so far, with its losses.
+struct Recording<'a> {
+    /// The image's axes and their scaling.
+    axes: &'a [(usize, AxisSummaryWire)],
+    /// t_s is the box's sample index / fs (time since the sample path
+    /// started); the box's u32 index wraps (11.9 h at 100 kHz) and is
+    /// unwrapped here: the wraps so far, times 2³².
+    epoch: u64,
+    /// The first sample index of the previous frame.
+    prev_first: Option<u32>,
+    loss: LossCounter,
+    rows: Vec<Row>,
+}
+
+impl Recording<'_> {
+    /// Account for frame `f` and convert its valid samples to newtons: the
+    /// raw ADC codes, and the compensated DAC codes (the ADC codes passed
+    /// through in bypass).
+    fn take(&mut self, f: StreamFrame) {
+        self.loss.frame(f.seq);
+        if self.prev_first.is_some_and(|p| f.first_sample < p) {
+            self.epoch += 1 << 32;
+        }
+        self.prev_first = Some(f.first_sample);
+        for (k, s) in f.valid().iter().enumerate() {
+            let idx = self.epoch + u64::from(f.first_sample) + k as u64 * u64::from(f.step);
+            let bypass = SampleFlags(s.flags).has(SampleFlags::BYPASS);
+            let mut force = [f64::NAN; AXES];
+            let mut raw = [f64::NAN; AXES];
+            for &(i, a) in self.axes {
+                raw[i] = newton(s.raw[i], &a);
+                force[i] = if bypass { newton(s.out[i], &a) } else { dac_newton(s.out[i], &a) };
+            }
+            self.rows.push(Row { index: idx, force, raw });
+        }
+    }
+}
+
+/// Missing sample positions between consecutive rows, with index steps of
+/// `dec` (lost frames' samples included).
+fn index_gaps(rows: &[Row], dec: u16) -> u64 {
     let mut gaps = 0u64;
     for w in rows.windows(2) {
         let d = w[1].index.saturating_sub(w[0].index);
         gaps += (d / u64::from(dec)).saturating_sub(1);
     }
-    let lost_samples_in_frames = loss.report.lost_frames * dynocomp_core::protocol::STREAM_BATCH as u64;
-    loss.report.index_gaps = gaps.saturating_sub(lost_samples_in_frames);
-    if let Some(m) = max_rows {
-        rows.truncate(m);
-    }
-    loss.report.samples = rows.len();
+    gaps
+}
 
+/// Write the recording atomically as CSV: `t_s`, the compensated force of
+/// each axis, then its raw force.
+fn write_rows(output: &Path, axes: &[(usize, AxisSummaryWire)], rows: &[Row], fs: u32) -> Result<()> {
     let names = ["fx", "fy", "fz"];
     write_atomic(output, |w: &mut dyn Write| {
         let mut header = vec!["t_s".to_string()];
         header.extend(axes.iter().map(|&(i, _)| names[i].to_string()));
         header.extend(axes.iter().map(|&(i, _)| format!("raw_{}", names[i])));
         writeln!(w, "{}", header.join(","))?;
-        for r in &rows {
+        for r in rows {
             let mut line = format!("{}", r.index as f64 / f64::from(fs));
-            for &(i, _) in &axes {
+            for &(i, _) in axes {
                 line.push_str(&format!(",{}", r.force[i]));
             }
-            for &(i, _) in &axes {
+            for &(i, _) in axes {
                 line.push_str(&format!(",{}", r.raw[i]));
             }
             writeln!(w, "{line}")?;
         }
         Ok(())
     })
-    .with_context(|| format!("{}: cannot write the recording", output.display()))?;
-    Ok(loss.report)
 }
 
 #[cfg(test)]

@@ -1,17 +1,9 @@
-//! The virtual box: a host program that runs the box's own protocol handler
-//! (`dynocomp_core::link::BoxLink`), coefficient store
-//! (`dynocomp_core::store::Store`, on a simulated NOR flash optionally
-//! persisted to a file), image handoff (`dynocomp_core::handoff`) and sample
-//! function (`dynocomp_core::sample::process_sample`) over a pseudo-terminal.
-//! `dynocomp flash --serial` and `dynocomp stream` talk to it exactly as to a
-//! real box; the tests use it for upload, switch, power-cut recovery,
-//! rejection of bad images and stream loss.
-//!
-//! What it does not model: USB timing and packetisation, the sample path's
-//! real-time behaviour (samples are synthesised as fast as the link takes
-//! them), and real flash timing. Those need the board. Its status therefore
-//! reports no core clock and no interrupt cycle counts
-//! (`core_clock_hz` and `isr_cycles_*` = 0: not measured) and no overruns.
+//! The virtual box ([`VirtualBox`]): a host program that runs the box's own
+//! protocol handler, coefficient store (on a simulated NOR flash, optionally
+//! persisted to a file), image handoff and sample function over a
+//! pseudo-terminal. `dynocomp flash --serial` and `dynocomp stream` talk to it
+//! exactly as to a real box; the tests use it for upload, switch, power-cut
+//! recovery, rejection of bad images and stream loss.
 
 use std::collections::BTreeSet;
 use std::io::Write;
@@ -50,7 +42,17 @@ pub enum Exit {
     LinkClosed,
 }
 
-/// The state of one virtual box.
+/// The state of one virtual box: the box's protocol handler
+/// (`dynocomp_core::link::BoxLink`), coefficient store
+/// (`dynocomp_core::store::Store` on a [`SimFlash`]), image handoff
+/// (`dynocomp_core::handoff`) and sample function
+/// (`dynocomp_core::sample::process_sample`).
+///
+/// What it does not model: USB timing and packetisation, the sample path's
+/// real-time behaviour (samples are synthesised as fast as the link takes
+/// them), and real flash timing. Those need the board. Its status therefore
+/// reports no core clock and no interrupt cycle counts (`core_clock_hz` and
+/// `isr_cycles_*` = 0: not measured) and no overruns.
 pub struct VirtualBox {
     store: Store<SimFlash>,
     link: BoxLink,

@@ -121,7 +121,7 @@ impl StateSpace {
             .collect()
     }
 
-    /// Simulate in f64: y[k] = c x + d u, x ← A x + b u.
+    /// Simulate in f64: y\[k\] = c x + d u, x ← A x + b u.
     pub fn simulate(&self, input: &[f64]) -> Vec<f64> {
         let mut x = DVector::<f64>::zeros(self.a.nrows());
         input

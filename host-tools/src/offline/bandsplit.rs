@@ -1,44 +1,38 @@
 //! Zero-phase band split for parallel elaboration (paper §3.3; DESIGN.md,
-//! signal chain step 4). **Offline only**: the split looks at the whole
-//! record, past and future.
-//!
-//! **Filters (documented contract).** A record is split into N bands by N − 1
-//! crossover frequencies `f_c,1 < … < f_c,N−1` (Hz). The crossover between
-//! image bands k and k+1 (edges `[lo_k, hi_k]`, `[lo_k+1, hi_k+1]`, Hz) is the
-//! middle of the gap between them, `f_c = (hi_k + lo_k+1)/2`, so band 0 takes
-//! everything down to DC and the last band everything up to Nyquist. With
-//!
-//! ```text
-//! L_c(f) = 1 / (1 + (f / f_c)^(2n))          (n = SPLIT_ORDER = 8)
-//! ```
-//!
-//! the magnitude-squared of an order-n Butterworth low-pass (analog
-//! prototype, −6 dB at f_c), the gain of band k is
-//!
-//! ```text
-//! B_0(f) = L_{c,1}(f),  B_k(f) = L_{c,k+1}(f) − L_{c,k}(f),  B_N−1(f) = 1 − L_{c,N−1}(f)
-//! ```
-//!
-//! real and non-negative at every frequency: **zero phase**, and
-//! `Σ_k B_k(f) = 1` exactly (the sum telescopes), so the bands sum back to the
-//! input to rounding. `L_c` is what forward-backward filtering with an order-n
-//! Butterworth gives (48 dB/octave per pass, 96 dB/octave in all); here it
-//! is applied exactly in the frequency domain (FFT of the record, mirrored at
-//! both ends to avoid wrap-around, times `B_k(|f|)`, inverse FFT), so there
-//! are no start-up transients of a recursive filter.
+//! signal chain step 4, [`split`]). **Offline only**: the split looks at the
+//! whole record, past and future. The bands' gains are real and non-negative
+//! at every frequency and sum to exactly 1, so the bands add no phase and sum
+//! back to the input to rounding.
 
 use anyhow::{bail, Result};
 use rustfft::{num_complex::Complex64, FftPlanner};
 
-/// Order n of the Butterworth-squared crossovers (module doc).
+/// Order n of the Butterworth-squared crossovers ([`lowpass_gain`]).
 pub const SPLIT_ORDER: i32 = 8;
 
-/// Zero-phase Butterworth-squared low-pass gain `L_c(f)` (module doc).
+/// Zero-phase Butterworth-squared low-pass gain
+///
+/// ```text
+/// L_c(f) = 1 / (1 + (f / f_c)^(2n))          (n = SPLIT_ORDER = 8)
+/// ```
+///
+/// the magnitude-squared of an order-n Butterworth low-pass (analog
+/// prototype, −6 dB at f_c): what forward-backward filtering with an order-n
+/// Butterworth gives (48 dB/octave per pass, 96 dB/octave in all).
 pub fn lowpass_gain(f_hz: f64, crossover_hz: f64) -> f64 {
     1.0 / (1.0 + (f_hz.abs() / crossover_hz).powi(2 * SPLIT_ORDER))
 }
 
-/// Gain of band `k` at `f_hz` for the given crossovers: `B_k(f)` (module doc).
+/// Gain of band `k` at `f_hz` for the crossovers `f_c,1 < … < f_c,N−1`
+/// (Hz) of N bands:
+///
+/// ```text
+/// B_0(f) = L_{c,1}(f),  B_k(f) = L_{c,k+1}(f) − L_{c,k}(f),  B_N−1(f) = 1 − L_{c,N−1}(f)
+/// ```
+///
+/// real and non-negative at every frequency: **zero phase**, and
+/// `Σ_k B_k(f) = 1` exactly (the sum telescopes). Band 0 takes everything
+/// down to DC, the last band everything up to Nyquist.
 pub fn band_gain(f_hz: f64, k: usize, crossovers_hz: &[f64]) -> f64 {
     let upper = crossovers_hz.get(k).map_or(1.0, |c| lowpass_gain(f_hz, *c));
     let lower = if k == 0 { 0.0 } else { crossovers_hz.get(k - 1).map_or(1.0, |c| lowpass_gain(f_hz, *c)) };
@@ -46,7 +40,10 @@ pub fn band_gain(f_hz: f64, k: usize, crossovers_hz: &[f64]) -> f64 {
 }
 
 /// Split `x` (sampled at `fs_hz`) into `crossovers_hz.len() + 1` bands with
-/// the zero-phase gains `B_k` (module doc). Returns one signal per band, each
+/// the zero-phase gains `B_k` ([`band_gain`]), applied exactly in the
+/// frequency domain (FFT of the record, mirrored at both ends to avoid
+/// wrap-around, times `B_k(|f|)`, inverse FFT), so there are no start-up
+/// transients of a recursive filter. Returns one signal per band, each
 /// as long as `x`; they sum to `x` to rounding.
 pub fn split(x: &[f64], fs_hz: f64, crossovers_hz: &[f64]) -> Result<Vec<Vec<f64>>> {
     let nyquist = fs_hz / 2.0;

@@ -1,14 +1,10 @@
-//! Offline compensation of recorded forces (`dynocomp compensate`):
-//!
-//! * a box image (format 1) runs through the core kernel, bit-exact with the
-//!   box: the same f32 kernel code (its block path, bit-identical to the box's
-//!   per-sample `step`), the same coefficients, the axes in lockstep
-//!   ([`compensate_record`]);
-//! * a parallel-elaboration image (format 2, offline only) splits the record
-//!   into its bands with zero-phase filters, runs each band through its own
-//!   compensator (the same kernel) and sums ([`compensate_parallel`]);
-//! * `--offline` runs the fixed-interval smoother of [`crate::offline::smoother`]
-//!   instead (f64, zero lag, offline only).
+//! Offline compensation of recorded forces through the core kernel, bit-exact
+//! with the box: the same f32 kernel code (its block path, bit-identical to
+//! the box's per-sample `step`), the same coefficients, the axes in lockstep
+//! ([`compensate_record`], [`StreamCompensator`]). A parallel-elaboration image
+//! (offline only) splits the record into its bands with zero-phase filters,
+//! runs each band through its own compensator and sums
+//! ([`compensate_parallel`]).
 
 use anyhow::{bail, Context, Result};
 use dynocomp_core::image::{CoeffImage, ParallelImage};
@@ -18,7 +14,7 @@ use crate::frf::axis_name;
 use crate::io::signal_csv::SignalRecord;
 
 /// Relative tolerance between the rate implied by `t_s` and the image's rate.
-pub const FS_TOLERANCE: f64 = 1e-4;
+pub use crate::io::signal::FS_TOLERANCE;
 
 /// Check a record's `t_s` column (if any) against the image's sample rate.
 pub fn check_sample_rate(image: &CoeffImage, rec: &SignalRecord, source: &str) -> Result<()> {
@@ -38,14 +34,7 @@ pub fn compensate_record(image: &CoeffImage, rec: &SignalRecord, raw_timing: boo
     let latency = if raw_timing { 0 } else { usize::from(image.latency_samples) };
     let mut axes = Vec::with_capacity(rec.channels.len());
     for (axis, samples) in &rec.channels {
-        let Some(axis_img) = image.axes.get(*axis).and_then(Option::as_ref) else {
-            bail!(
-                "{source}: column f{} has no compensator in the image (it covers {}); drop the column or design for that axis",
-                axis_name(*axis),
-                image.axes.iter().flatten().map(|a| axis_name(a.axis as usize)).collect::<Vec<_>>().join(", ")
-            );
-        };
-        axes.push((&axis_img.filter, samples.as_slice()));
+        axes.push((axis_filter(image, *axis, source)?, samples.as_slice()));
     }
     let mut channels = Vec::with_capacity(axes.len());
     for ((axis, _), out) in rec.channels.iter().zip(run_axes(&axes, latency)) {
@@ -55,6 +44,19 @@ pub fn compensate_record(image: &CoeffImage, rec: &SignalRecord, raw_timing: boo
         }
     }
     Ok(SignalRecord { t_s: rec.t_s.clone(), channels })
+}
+
+/// The image's compensator for the record's column of `axis`; an error
+/// naming the axes the image covers if it has none.
+fn axis_filter<'a>(image: &'a CoeffImage, axis: usize, source: &str) -> Result<&'a AxisFilter> {
+    match image.axes.get(axis).and_then(Option::as_ref) {
+        Some(axis_img) => Ok(&axis_img.filter),
+        None => bail!(
+            "{source}: column f{} has no compensator in the image (it covers {}); drop the column or design for that axis",
+            axis_name(axis),
+            image.axes.iter().flatten().map(|a| axis_name(a.axis as usize)).collect::<Vec<_>>().join(", ")
+        ),
+    }
 }
 
 /// Every axis through the core kernel's block path (bit-identical to stepping
@@ -131,17 +133,7 @@ pub struct StreamCompensator<'a> {
 impl<'a> StreamCompensator<'a> {
     /// Compensators for the channels `axes` of a record from `source`.
     pub fn new(image: &'a CoeffImage, axes: &[usize], raw_timing: bool, source: &str) -> Result<Self> {
-        let mut filters = Vec::with_capacity(axes.len());
-        for &axis in axes {
-            let Some(axis_img) = image.axes.get(axis).and_then(Option::as_ref) else {
-                bail!(
-                    "{source}: column f{} has no compensator in the image (it covers {}); drop the column or design for that axis",
-                    axis_name(axis),
-                    image.axes.iter().flatten().map(|a| axis_name(a.axis as usize)).collect::<Vec<_>>().join(", ")
-                );
-            };
-            filters.push(&axis_img.filter);
-        }
+        let filters = axes.iter().map(|&axis| axis_filter(image, axis, source)).collect::<Result<Vec<_>>>()?;
         let latency = if raw_timing { 0 } else { usize::from(image.latency_samples) };
         let n = axes.len();
         Ok(StreamCompensator {
@@ -261,21 +253,13 @@ pub fn compensate_parallel(image: &ParallelImage, rec: &SignalRecord, raw_timing
     Ok(SignalRecord { t_s: rec.t_s.clone(), channels: sum })
 }
 
-/// Check a record's `t_s` column (if any) against a sample rate (Hz).
+/// Check a record's `t_s` column (if any) against a sample rate (Hz)
+/// ([`crate::io::signal::check_rate_value`]).
 pub fn check_rate(fs_hz: u32, rec: &SignalRecord, source: &str) -> Result<()> {
-    if let Some((fs, jitter)) = rec.sample_rate_from_time() {
-        let want = f64::from(fs_hz);
-        if ((fs - want) / want).abs() > FS_TOLERANCE {
-            bail!(
-                "{source}: column t_s implies a sample rate of {fs:.3} Hz, but the image was designed for {want} Hz; \
-                 resample the record or design for its rate"
-            );
-        }
-        if jitter > 0.01 {
-            bail!("{source}: column t_s is not uniformly spaced (a step deviates {:.1} % from the mean)", jitter * 100.0);
-        }
+    match rec.sample_rate_from_time() {
+        Some(found) => crate::io::signal::check_rate_value(fs_hz, found, source, "column t_s"),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 #[cfg(test)]

@@ -1,32 +1,10 @@
 //! The fixed-interval smoother whose model moves between two measured
-//! states during the record (`compensate --offline --drift START:END`).
-//!
-//! **Time-varying smoother** ([`smooth_drifting`]): the model moves from
-//! state 0 at `start_s` to state 1 at `end_s`, linearly in s, constant
-//! outside. s is quantized to [`S_LEVELS`] levels (a 5 % drift moves in
-//! steps of 0.02 %); each level's continuous model is discretized on the
-//! unit circle with the same FIR taps and advance as state 0's
-//! ([`crate::design::discretize::fit_with_structure`]), so every step has the same
-//! augmented state layout ([`crate::design::kalman::augmented_plant`]). The forward
-//! pass is the exact time-varying Kalman filter (covariance propagated
-//! through every step's A, c; P⁻₀ = state 0's stationary DARE solution), the
-//! backward pass the modified Bryson–Frazier recursion with each step's own
-//! K, c, S and A (the same estimates as Rauch–Tung–Striebel, no covariance
-//! inversion), all in f64. With a constant model it reproduces the
-//! stationary [`crate::offline::smoother::Smoother`].
-//!
-//! **Memory.** The covariance recursion does not depend on the record, so
-//! the forward pass keeps P only at checkpoints (every √N samples,
-//! [`segment_len`]) besides 16 bytes per sample (the innovation and the
-//! prior's force estimate), and the backward pass recomputes each segment's
-//! gains from its checkpoint: what grows with the record is then the record
-//! and the output held whole and those 16 bytes, 44 bytes per sample for
-//! 3 axes against 421 with every step's gain and covariance row kept
-//! (measured, BENCHMARKS.md). A is applied as its nonzero entries
-//! (≤ 3 per row), and P is held where it has converged and the model does
-//! not change (before and after the drift). On a file,
-//! [`SpilledDriftForward`] keeps those 16 bytes and the checkpoints on disk
-//! instead, so memory no longer grows with the record.
+//! states during the record (`compensate --offline --drift START:END`,
+//! [`smooth_drifting`]): a time-varying Kalman filter forward and the modified
+//! Bryson–Frazier recursion backward, in f64. With a constant model it
+//! reproduces the stationary [`crate::offline::smoother::Smoother`]. Its memory
+//! does not grow with the record beyond 16 bytes per sample, on disk with
+//! [`SpilledDriftForward`].
 
 
 use anyhow::{bail, Context, Result};
@@ -135,7 +113,7 @@ struct Covariance {
     stale: bool,
 }
 
-/// Relative change of P below which it is held ([`Covariance`]): a few
+/// Relative change of P below which it is held (`Covariance`): a few
 /// hundred f64 roundings of its largest entry.
 const FROZEN_TOLERANCE: f64 = 1e-13;
 
@@ -223,8 +201,28 @@ pub struct DriftSmoothing {
 }
 
 /// Smoothed force estimate (N) of the record `y` (N) while the model moves
-/// from `model_at(0)` to `model_at(1)` over `opts.interval_s` (module doc);
-/// `model_at(s)` returns the continuous model at state s.
+/// from `model_at(0)` to `model_at(1)` over `opts.interval_s`; `model_at(s)`
+/// returns the continuous model at state s.
+///
+/// The model moves from state 0 at `start_s` to state 1 at `end_s`, linearly
+/// in s, constant outside. s is quantized to [`S_LEVELS`] levels (a 5 % drift
+/// moves in steps of 0.02 %); each level's continuous model is discretized on
+/// the unit circle with the same FIR taps and advance as state 0's
+/// ([`crate::design::discretize::fit_with_structure`]), so every step has the
+/// same augmented state layout ([`crate::design::kalman::augmented_plant`]).
+/// The forward pass is the exact time-varying Kalman filter (covariance
+/// propagated through every step's A, c; P⁻₀ = state 0's stationary DARE
+/// solution), the backward pass the modified Bryson–Frazier recursion with
+/// each step's own K, c, S and A (the same estimates as Rauch–Tung–Striebel,
+/// no covariance inversion).
+///
+/// **Memory.** The covariance recursion does not depend on the record, so
+/// the forward pass keeps P only at checkpoints (every √N samples,
+/// [`segment_len`]) besides 16 bytes per sample (the innovation and the
+/// prior's force estimate), and the backward pass recomputes each segment's
+/// gains from its checkpoint. A is applied as its nonzero entries (≤ 3 per
+/// row), and P is held where it has converged and the model does not change
+/// (before and after the drift).
 pub fn smooth_drifting(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing) -> Result<Vec<f64>> {
     smooth_drifting_in_segments(y, model_at, opts, segment_len(y.len()), &|_| {})
 }
@@ -244,7 +242,7 @@ pub fn segment_len(len: usize) -> usize {
 /// **Memory:** 16 bytes per sample (the innovation and the prior's force
 /// estimate), one covariance (n² values) per `segment` samples, and one
 /// segment's gains; the output. **Cost:** the covariance is propagated
-/// twice where it is not frozen ([`Covariance`]).
+/// twice where it is not frozen (`Covariance`).
 pub fn smooth_drifting_in_segments(
     y: &[f64],
     model_at: &dyn Fn(f64) -> PoleResidueModel,
@@ -261,12 +259,12 @@ pub fn smooth_drifting_in_segments(
 /// decomposition), over the record's own samples (not the D copies of y₀ in
 /// front). Differences of ℓ between models say how much better one
 /// explains the record; used to ask whether a record can tell the drift's
-/// end state (issue #15, item 4; `examples/drift_from_record.rs`).
+/// end state (`examples/drift_from_record.rs`).
 pub fn drift_log_likelihood(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing) -> Result<f64> {
     Ok(drift_passes(y, model_at, opts, None, &|_| {})?.1)
 }
 
-/// The forward pass's state (module doc): each level's plant, built when
+/// The forward pass's state ([`smooth_drifting`]): each level's plant, built when
 /// the pass first reaches it, P⁻_k and x⁻_k. Step k takes ỹ_k.
 struct DriftForward<'m> {
     model_at: &'m dyn Fn(f64) -> PoleResidueModel,
@@ -478,7 +476,7 @@ pub const SPILLED_SEGMENT: usize = 4096;
 
 /// The drift smoother ([`smooth_drifting`]) over a record taken block by
 /// block, in memory independent of the record's length: the forward pass
-/// writes x⁻_k[F] and e_k (16 bytes per sample) and every
+/// writes x⁻_k\[F\] and e_k (16 bytes per sample) and every
 /// [`SPILLED_SEGMENT`]-th P⁻ to temporary files; [`SpilledPass::backward`]
 /// reads them back one segment at a time from the end, recomputes the
 /// segment's gains from its checkpoint, and writes the estimates to a third.

@@ -1,55 +1,13 @@
-//! Opt-in force prior for offline estimation (issue #12, optional part):
-//! the tooth-passing and runout harmonics of a steady milling cut in the
-//! Kalman state, self-tuned from a representative measured record.
+//! Opt-in harmonic force prior for offline estimation: the tooth-passing
+//! and runout harmonics of a steady milling cut in the Kalman state, tuned
+//! from a representative measured record ([`HarmonicPrior`]).
 //!
-//! **Why.** The default force model is a random walk (DESIGN.md step 2): a
-//! flat-ish prior that lets every frequency of the band through, so the
-//! estimate carries the measurement noise through the exact inverse of Ĝ,
-//! sqrt(R·(2/fs)·∫|1/G|² df): no unbiased inverse gets below that noise
-//! floor. A steady cut puts its force on the spindle harmonics k·f_sp
-//! (f_sp = rpm/60; the tooth-passing frequency TPF = Z·f_sp and its multiples
-//! carry most, runout the others). A model that knows this can reject the
-//! noise between the lines, as Kalman force estimation with a sensor model
-//! and a harmonic force model does.
-//!
-//! **Model.** The applied force is F_k = F^bb_k + Σ_i r_i,1[k]: the default
-//! broadband random walk F^bb_{k+1} = F^bb_k + w_k, E[w²] = q_bb (N²/sample),
-//! plus one lightly damped resonator per line i at f_i (Hz):
-//!
-//! ```text
-//! r_i[k+1] = ρ·R(θ_i)·r_i[k] + u_i[k],  θ_i = 2π f_i/fs,  ρ = exp(−π B/fs),  E[u uᵀ] = q_i I₂
-//! ```
-//!
-//! R(θ) the 2x2 rotation. Each resonator is a narrow-band process of
-//! half-power bandwidth ≈ B (Hz, [`HarmonicPrior::line_width_hz`]): it lets
-//! the line's amplitude and phase change with a time constant 1/(πB) (tool
-//! entry, feed changes). Its stationary variance per component is
-//! q_i/(1 − ρ²), the mean square A_i²/2 of a sine of amplitude A_i, so
-//! **q_i = (1 − ρ²)·A_i²/2** ([`line_q`]): the line amplitudes A_i (N) are
-//! measured in the record ([`analyze_record`]: the raw inverse Y(f)/Ĝ(f) of
-//! its Hann-windowed spectrum around each line, less the expected noise).
-//!
-//! **Where.** Offline only (`compensate --offline`): the box's kernel holds
-//! at most 24 sections per axis (`dynocomp_core::kernel::MAX_SECTIONS`), and
-//! a useful prior needs lines up to the top of the band (tens of
-//! resonators, lightly damped poles that f32 rounding would move). The box
-//! image of a design with the prior is the default design, unchanged.
-//!
-//! **Predicted error** ([`predict`]). The steady-state fixed-interval
-//! smoother of this model is, away from the record's ends, the non-causal
-//! Wiener filter H = S_F·Ĝ_d*/(|Ĝ_d|²·S_F + R) with S_F the model's force
-//! spectrum ([`HarmonicPrior::force_psd`]). Its error is evaluated for a
-//! **steady cut**: the measured line powers P_i at f_i plus a flat broadband
-//! part P_bb (the record's in-band force power away from the lines, less
-//! the noise there, at least [`MIN_BROADBAND_SHARE`] of the total):
-//!
-//! J = [Σ_i P_i |H(f_i)Ĝ(f_i) − 1|² + P_bb·mean_band |HĜ − 1|² + (2R/fs)·W·mean_band |H|²] / (Σ_i P_i + P_bb)
-//!
-//! (W the band width), the same terms as the default q criterion
-//! ([`crate::design::axis`]) with the record's spectrum for the flat one. q_bb is
-//! the one that minimizes it. A force that is not a steady cut (chatter,
-//! transients, a wrong spindle speed) is not in J; [`analyze_record`]
-//! refuses a record whose force is not on the harmonics.
+//! The default random-walk force model lets every frequency of the band
+//! through, so its estimate carries the measurement noise through the exact
+//! inverse of Ĝ. A steady cut puts its force on the spindle harmonics k·f_sp;
+//! a model that knows this rejects the noise between the lines. Offline only
+//! (`compensate --offline`): tens of lightly damped resonators fit neither the
+//! box's sections nor its f32 arithmetic.
 
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
@@ -97,7 +55,31 @@ pub struct HarmonicLine {
     pub power_n2: f64,
 }
 
-/// The harmonic force prior of one axis (module doc).
+/// The harmonic force prior of one axis.
+///
+/// The applied force is F_k = F^bb_k + Σ_i r_i,1\[k\]: the default broadband
+/// random walk F^bb_{k+1} = F^bb_k + w_k, E\[w²\] = q_bb (N²/sample), plus one
+/// lightly damped resonator per line i at f_i (Hz):
+///
+/// ```text
+/// r_i[k+1] = ρ·R(θ_i)·r_i[k] + u_i[k],  θ_i = 2π f_i/fs,  ρ = exp(−π B/fs),  E[u uᵀ] = q_i I₂
+/// ```
+///
+/// R(θ) the 2x2 rotation. Each resonator is a narrow-band process of
+/// half-power bandwidth ≈ B (Hz, `line_width_hz`): it lets the line's
+/// amplitude and phase change with a time constant 1/(πB) (tool entry, feed
+/// changes). Its stationary variance per component is q_i/(1 − ρ²), the mean
+/// square A_i²/2 of a sine of amplitude A_i, so **q_i = (1 − ρ²)·A_i²/2**
+/// ([`line_q`]): the line amplitudes A_i (N) are measured in the record
+/// ([`analyze_record`]: the raw inverse Y(f)/Ĝ(f) of its Hann-windowed
+/// spectrum around each line, less the expected noise).
+///
+/// Why: with the default model no unbiased inverse gets below the noise
+/// floor sqrt(R·(2/fs)·∫|1/G|² df); the lines' model rejects the noise between
+/// them. Where: offline only, as the box's kernel holds at most 24 sections
+/// per axis (`dynocomp_core::kernel::MAX_SECTIONS`) and a useful prior needs
+/// lines up to the top of the band; the box image of a design with the prior
+/// is the default design, unchanged.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HarmonicPrior {
     /// Sample rate (Hz).
@@ -235,8 +217,9 @@ pub fn plant_with_prior(dm: &DiscreteModel, prior: &HarmonicPrior) -> (Augmented
     (AugmentedPlant { a, g, c, n_plant: base.n_plant, lag: base.lag }, q, o)
 }
 
-/// Frequency response of the offline smoother (the non-causal Wiener
-/// filter, module doc) for the force spectrum `s_f` and noise R at f (Hz).
+/// Frequency response H = S_F·Ĝ_d*/(|Ĝ_d|²·S_F + R) of the offline
+/// smoother away from the record's ends (the non-causal Wiener filter) for
+/// the force spectrum `s_f` = S_F and noise R at f (Hz).
 pub fn wiener_response(dm: &DiscreteModel, s_f: f64, r: f64, f_hz: f64) -> Complex64 {
     let g = dm.frf(f_hz);
     s_f * g.conj() / (g.norm_sqr() * s_f + r)
@@ -367,7 +350,7 @@ fn best_spindle(power: &[f64], noise: &[f64], df: f64, given_hz: f64, band_hz: f
         .1
 }
 
-/// The figures of [`predict`] for one set of filters.
+/// The figures of [`tune_and_predict`] for one set of filters.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct PriorPrediction {
     /// Predicted in-band error √J of the smoother with the prior (steady cut).
@@ -383,8 +366,8 @@ pub struct PriorPrediction {
     pub default_flat: f64,
 }
 
-/// The steady-cut spectrum the criterion evaluates (module doc): all
-/// measured lines and a flat broadband part.
+/// The steady-cut spectrum the criterion evaluates ([`tune_and_predict`]):
+/// all measured lines and a flat broadband part.
 #[derive(Clone, Debug)]
 pub struct CutSpectrum {
     /// Lines (f, P) (Hz, N²).
@@ -405,9 +388,15 @@ impl CutSpectrum {
     }
 }
 
-/// J of a filter response `h` (on y) against the plant `g` (Ĝ(j2πf)) for
-/// the spectrum `cut` (module doc), or for a flat spectrum of the same
-/// total power when `flat`; relative to the force power.
+/// J of a filter response `h` (on y) against the plant `g` (Ĝ(j2πf)) for a
+/// steady cut `cut`, relative to its force power: the measured line powers
+/// P_i at f_i plus a flat broadband part P_bb,
+///
+/// J = [Σ_i P_i |H(f_i)Ĝ(f_i) − 1|² + P_bb·mean_band |HĜ − 1|² + (2R/fs)·W·mean_band |H|²] / (Σ_i P_i + P_bb)
+///
+/// (W the band width): the terms of the default q criterion
+/// ([`crate::design::axis`]) with the record's spectrum for the flat one. With
+/// `flat`, for a flat spectrum of the same total power.
 fn criterion(h: &dyn Fn(f64) -> Complex64, g: &dyn Fn(f64) -> Complex64, cut: &CutSpectrum, r: f64, fs_hz: f64, flat: bool) -> f64 {
     let grid = crate::design::criterion::criterion_grid(&[cut.band_hz]);
     let width = cut.band_hz.1 - cut.band_hz.0;
@@ -432,6 +421,16 @@ fn criterion(h: &dyn Fn(f64) -> Complex64, g: &dyn Fn(f64) -> Complex64, cut: &C
 /// `cut` (decades of q_default·1e-6…10, then golden section on log10 q_bb),
 /// and predict the errors ([`PriorPrediction`]). `q_default` is the
 /// default design's q, `g` the fitted Ĝ(j2πf).
+///
+/// The steady-state fixed-interval smoother of the prior's model is, away
+/// from the record's ends, the non-causal Wiener filter
+/// H = S_F·Ĝ_d*/(|Ĝ_d|²·S_F + R), S_F the model's force spectrum
+/// ([`HarmonicPrior::force_psd`], [`wiener_response`]); J is that of a steady
+/// cut (`criterion`), its broadband part P_bb the record's in-band force power
+/// away from the lines, less the noise there, at least
+/// [`MIN_BROADBAND_SHARE`] of the total. A force that is not a steady cut
+/// (chatter, transients, a wrong spindle speed) is not in J; [`analyze_record`]
+/// refuses a record whose force is not on the harmonics.
 pub fn tune_and_predict(prior: &mut HarmonicPrior, dm: &DiscreteModel, g: &dyn Fn(f64) -> Complex64, cut: &CutSpectrum, r: f64, q_default: f64) -> PriorPrediction {
     let fs = prior.fs_hz;
     let j_of = |p: &HarmonicPrior, flat: bool| {
@@ -497,7 +496,7 @@ pub fn default_line_width_hz(spindle_rpm: f64) -> f64 {
     spindle_rpm / 60.0 / 4.0
 }
 
-/// The prior of one axis, tuned and checked (module doc).
+/// The prior of one axis ([`HarmonicPrior`]), tuned and checked.
 #[derive(Clone, Debug)]
 pub struct AxisPrior {
     /// The prior (lines, intensities, q_bb).
@@ -548,7 +547,7 @@ pub fn build_axis_prior(
     Ok(AxisPrior { prior, record: rs, prediction })
 }
 
-/// The record checks of the prior (module doc): at most `max_share` of
+/// The record checks of the prior: at most `max_share` of
 /// the record's force may lie off the lines, and its harmonics must sit
 /// where the prior puts them (the best spindle frequency moves the highest
 /// modelled line by less than half a line width, or one bin).
@@ -576,7 +575,7 @@ fn check_spectrum(rs: &RecordSpectrum, lines: &[HarmonicLine], spindle_hz: f64, 
 }
 
 /// Check that a record to be compensated with `prior` is the steady cut it
-/// was tuned for: [`check_spectrum`] on the record's own analysis, with at
+/// was tuned for: `check_spectrum` on the record's own analysis, with at
 /// most [`OFF_LINE_MARGIN`] times the off-line share of the record it was
 /// tuned on (at least [`MIN_OFF_LINE_LIMIT`]).
 /// Another spindle speed or chatter is refused, saying what to do; the

@@ -56,8 +56,8 @@ pub struct AxisModelJson {
     /// The discrete model of the design (absent in older sidecars: FOH).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub discrete: Option<DiscreteModel>,
-    /// Both states of a design from two FRFs (`design --frf A --frf B`,
-    /// issue #15; absent otherwise and in older sidecars).
+    /// Both states of a design from two FRFs (`design --frf A --frf B`;
+    /// absent otherwise and in older sidecars).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub two_state: Option<crate::offline::sidecar::TwoStateJson>,
     /// The harmonic force prior of `compensate --offline` (`design
@@ -220,8 +220,14 @@ pub fn read_sidecar(image_path: &Path, image: &CoeffImage) -> Result<ModelSideca
 /// [`read_sidecar`].
 pub fn parse_sidecar(text: &str, shown: &str, image: &CoeffImage, image_path: &Path) -> Result<ModelSidecar> {
     // serde_json's message quotes the offending value (an unknown `kind`),
-    // which may hold newlines: escaped, so the error stays one line.
-    let s: ModelSidecar = serde_json::from_str(text).map_err(|e| anyhow::anyhow!("{shown}: not a valid model sidecar: {}", one_line(&e.to_string())))?;
+    // which may hold newlines and be long: escaped and capped, so the error
+    // stays one line, with the place first so the cap cannot cut it off.
+    let s: ModelSidecar = serde_json::from_str(text).map_err(|e| {
+        let msg = e.to_string();
+        let place = format!(" at line {} column {}", e.line(), e.column());
+        let what = msg.strip_suffix(&place).unwrap_or(&msg);
+        anyhow::anyhow!("{shown}: line {} column {}: not a valid model sidecar: {}", e.line(), e.column(), one_line(what))
+    })?;
     if s.format != SIDECAR_FORMAT {
         bail!("{shown}: format `{}`, expected `{SIDECAR_FORMAT}`", one_line(&s.format));
     }

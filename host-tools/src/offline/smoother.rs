@@ -1,37 +1,9 @@
 //! Offline zero-phase estimation of recorded forces (`dynocomp compensate
-//! --offline`): a fixed-interval smoother. **Offline only**: every estimate
-//! uses the whole record, past and future, so it has no lag and no place in
-//! the box.
-//!
-//! **Model.** The same augmented plant as the box's compensator
-//! ([`crate::design::kalman`], DESIGN.md steps 2-3): the discrete model Ĝ_d(z) =
-//! z^D·M(z) of the design ([`crate::design::discretize`]), the applied force a random
-//! walk F_{k+1} = F_k + w_k, E[w²] = q, measurement ỹ_k = y_{k−D} = c·x_k + v_k,
-//! E[v²] = R, with q and R the values the design chose and stored in the
-//! image (`inspect` shows them). The record is run as ỹ (D samples of y_0
-//! in front), so the estimate of F_k uses every sample of y.
-//! The image does not hold the model itself: it comes from the image's
-//! sidecar ([`crate::offline::sidecar`]).
-//!
-//! **Smoother.** Steady-state Kalman filter forward, then the modified
-//! Bryson–Frazier backward pass (Bierman 1977), which gives the same
-//! estimates as the Rauch–Tung–Striebel smoother without inverting any
-//! covariance. With P the prior covariance of the filter DARE (solved and
-//! residual-checked by [`kalman::solve_filter_dare`]), S = cᵀPc + R,
-//! K = Pc/S, C̃ = I − K cᵀ:
-//!
-//! ```text
-//! forward:   e_k = y_k − cᵀ x⁻_k,   x⁻_{k+1} = A (x⁻_k + K e_k),   x⁻_0 = 0
-//! backward:  λ̂_{N−1} = 0
-//!            λ̃_k = −c e_k / S + C̃ᵀ λ̂_k,   x̂_k|N = x⁻_k − P λ̃_k,   λ̂_{k−1} = Aᵀ λ̃_k
-//! ```
-//!
-//! The backward recursion runs through (A C̃)ᵀ, whose spectral radius is the
-//! (checked, < 1) closed-loop radius of the filter, so it is stable. The
-//! force estimate is the F_k component of x̂_k|N (N).
-//!
-//! Computed in f64 on the host. It is an estimator, not the box's filter:
-//! the box's arithmetic stays in the core kernel only.
+//! --offline`): the fixed-interval smoother of the design's own model
+//! ([`Smoother`]), in memory or spilled to disk ([`SpilledForward`]).
+//! **Offline only**: every estimate uses the whole record, past and future,
+//! so it has no lag and no place in the box. It is an estimator in f64, not
+//! the box's filter: the box's arithmetic stays in the core kernel.
 
 use anyhow::{bail, Context, Result};
 use nalgebra::{DMatrix, DVector};
@@ -46,7 +18,34 @@ use crate::offline::force_prior::{build_axis_prior, AxisPrior, PriorOptions};
 use crate::offline::sidecar::ModelSidecar;
 use dynocomp_core::image::CoeffImage;
 
-/// The steady-state fixed-interval smoother of one axis (module doc).
+/// The steady-state fixed-interval smoother of one axis.
+///
+/// **Model.** The same augmented plant as the box's compensator
+/// ([`crate::design::kalman`], DESIGN.md steps 2-3): the discrete model
+/// Ĝ_d(z) = z^D·M(z) of the design ([`crate::design::discretize`]), the
+/// applied force a random walk F_{k+1} = F_k + w_k, E\[w²\] = q, measurement
+/// ỹ_k = y_{k−D} = c·x_k + v_k, E\[v²\] = R, with q and R the values the design
+/// chose and stored in the image (`inspect` shows them). The record is run
+/// as ỹ (D samples of y_0 in front), so the estimate of F_k uses every sample
+/// of y. The image does not hold the model itself: it comes from the image's
+/// sidecar ([`crate::offline::sidecar`]).
+///
+/// **Smoother.** Steady-state Kalman filter forward, then the modified
+/// Bryson–Frazier backward pass (Bierman 1977), which gives the same
+/// estimates as the Rauch–Tung–Striebel smoother without inverting any
+/// covariance. With P the prior covariance of the filter DARE (solved and
+/// residual-checked by [`kalman::solve_filter_dare`]), S = cᵀPc + R,
+/// K = Pc/S, C̃ = I − K cᵀ:
+///
+/// ```text
+/// forward:   e_k = y_k − cᵀ x⁻_k,   x⁻_{k+1} = A (x⁻_k + K e_k),   x⁻_0 = 0
+/// backward:  λ̂_{N−1} = 0
+///            λ̃_k = −c e_k / S + C̃ᵀ λ̂_k,   x̂_k|N = x⁻_k − P λ̃_k,   λ̂_{k−1} = Aᵀ λ̃_k
+/// ```
+///
+/// The backward recursion runs through (A C̃)ᵀ, whose spectral radius is the
+/// (checked, < 1) closed-loop radius of the filter, so it is stable. The
+/// force estimate is the F_k component of x̂_k|N (N).
 #[derive(Clone, Debug)]
 pub struct Smoother {
     a: DMatrix<f64>,
@@ -113,7 +112,7 @@ impl Smoother {
         })
     }
 
-    /// One forward step (module doc) from the prior x⁻_k (in `prior`, left
+    /// One forward step ([`Smoother`]) from the prior x⁻_k (in `prior`, left
     /// holding x⁻_{k+1}; `next` is scratch): returns the prior's force
     /// component x⁻_k[F] and the innovation e_k, all the backward pass needs.
     fn forward_step(&self, prior: &mut DVector<f64>, next: &mut DVector<f64>, yk: f64) -> (f64, f64) {
@@ -125,7 +124,7 @@ impl Smoother {
         (prior_force, e)
     }
 
-    /// One backward step (module doc) from λ̂_k (in `lambda_hat`, left
+    /// One backward step ([`Smoother`]) from λ̂_k (in `lambda_hat`, left
     /// holding λ̂_{k−1}): returns F̂_k|N given x⁻_k[F] and e_k.
     fn backward_step(&self, lambda_hat: &mut DVector<f64>, p_row: &DVector<f64>, prior_force: f64, e: f64) -> f64 {
         // λ̃ = −c e/S + (I − K cᵀ)ᵀ λ̂ = −c e/S + λ̂ − c (Kᵀ λ̂)
@@ -146,8 +145,9 @@ impl Smoother {
     ///
     /// Memory: 16 bytes per sample besides `y` and the result. The
     /// backward pass needs, of the forward pass, only each sample's
-    /// innovation e_k and the force component of its prior x⁻_k (module
-    /// doc: F̂_k|N = x⁻_k[F] − (P λ̃_k)[F]), so only those two are kept.
+    /// innovation e_k and the force component of its prior x⁻_k
+    /// (F̂_k|N = x⁻_k\[F\] − (P λ̃_k)\[F\], [`Smoother`]), so only those two are
+    /// kept.
     /// [`SpilledForward`] is the same computation with those 16 bytes on
     /// disk.
     pub fn smooth(&self, y: &[f64]) -> Vec<f64> {
@@ -171,10 +171,8 @@ impl Smoother {
 /// Pairs (x⁻_k[F], e_k) per chunk of the spilled backward pass: 1 MiB.
 const SPILL_CHUNK: usize = 1 << 16;
 
-/// The smoother of one axis over a record of any length (issue #14,
-/// "a backward pass over blocks spilled to a temporary file"): the
-/// forward pass takes the record block by block and writes each sample's
-/// x⁻_k[F] and e_k (16 bytes, f64) to an unnamed temporary file; then
+/// The smoother of one axis over a record of any length: the forward pass takes the record block by block and writes each sample's
+/// x⁻_k\[F\] and e_k (16 bytes, f64) to an unnamed temporary file; then
 /// [`SpilledForward::backward`] reads that file from its end in chunks and
 /// writes the estimates in their places to a second one, which
 /// [`SpilledEstimate`] reads forward. Same steps, same arithmetic, same bits
@@ -395,7 +393,7 @@ pub fn build_priors(opts: &PriorOptions, rec: &SignalRecord, shown: &str, design
         let y = rec.channel(d.axis).ok_or_else(|| anyhow::anyhow!("{shown}: no column f{name} for axis {name}; the force record needs every designed axis"))?;
         let dm = &d.discrete.as_ref().ok_or_else(|| anyhow::anyhow!("axis {name}: no discrete model"))?.0;
         let rv = r[d.axis].expect("R set for every designed axis");
-        let built = build_axis_prior(&opts, dm, &|f| d.model.frf(f), rv, d.kalman.q, d.compensated_band_hz, y)
+        let built = build_axis_prior(opts, dm, &|f| d.model.frf(f), rv, d.kalman.q, d.compensated_band_hz, y)
             .with_context(|| format!("{shown}: axis {name}: --force-prior harmonics"))?;
         Smoother::with_force_prior(dm, &built.prior, rv).with_context(|| format!("axis {name}: the smoother with the force prior"))?;
         let p = built.prediction;

@@ -30,14 +30,14 @@ const MAX_CHOICE_TERM_GROWTH: f64 = 2.0;
 /// Candidates: the valid realizations (one per fast/slow pole split,
 /// `modal::realize_candidates`), each fully verified by `quantize` over
 /// 0..`f_band_hz`, and for each one with FIR taps its shortest FIR that
-/// still verifies with a score ≤ max(10x its own, [`TRIM_SCORE_FLOOR`])
+/// still verifies with a score ≤ max(10x its own, `TRIM_SCORE_FLOOR`)
 /// (taps bought for nothing: the kernel's cost falls, the verification
 /// limits hold). Only candidates scaled no worse than the most accurate one
-/// or [`MAX_CHOICE_TERM_GROWTH`] are considered. Choice, the cheapest (ties:
+/// or `MAX_CHOICE_TERM_GROWTH` are considered. Choice, the cheapest (ties:
 /// the most accurate) of the first non-empty of: within `axis_budget`
 /// (cycles per sample this axis may cost, high estimate of
 /// `dynocomp_core::budget::CostModel::CORTEX_M4`) and within the score
-/// bound max(10x the best score, [`TRIM_SCORE_FLOOR`]); within the budget;
+/// bound max(10x the best score, `TRIM_SCORE_FLOOR`); within the budget;
 /// within the score bound (so the box's cost is never paid for rounding).
 pub fn choose_realization_within(
     ss: &StateSpace,
@@ -92,7 +92,7 @@ pub fn choose_realization_within(
 }
 
 /// The realization `r` (verified as `v`) with the fewest FIR taps that still
-/// passes `quantize` with a score ≤ max(10·v.score(), [`TRIM_SCORE_FLOOR`]);
+/// passes `quantize` with a score ≤ max(10·v.score(), `TRIM_SCORE_FLOOR`);
 /// `None` if no shorter FIR does.
 fn shortest_fir(r: &ModalRealization, v: &Verification, reference: &quantize::Reference) -> Option<(ModalRealization, AxisFilter, Verification)> {
     let bound = (10.0 * v.score()).max(TRIM_SCORE_FLOOR);

@@ -1,14 +1,5 @@
 //! Rounding a realization to the kernel's f32 coefficients and verifying the
-//! result before it may be written (DESIGN.md step 7).
-//!
-//! Checks, each with a reason on failure:
-//! * every f32 section stable with margin (pole radius ≤ 1 − [`POLE_MARGIN`]);
-//! * pole displacement by rounding, relative to the pole's distance from
-//!   z = 1 (what sets a mode's frequency and damping);
-//! * frequency response of the f32 filter against the f64 design over the
-//!   band (relative to the design's peak response);
-//! * a time-domain run of the real f32 core kernel against an f64 simulation
-//!   of the design (relative to the design's output RMS).
+//! result before it may be written (DESIGN.md step 7, [`quantize`]).
 
 use anyhow::{bail, Result};
 use dynocomp_core::kernel::{AxisFilter, AxisState, Section};
@@ -177,6 +168,15 @@ impl Reference {
 
 /// Round to f32 and verify against the f64 design, whose responses
 /// `reference` holds ([`Reference::of`] the design `ss` over 0..`f_band_hz`).
+///
+/// Checks, each with a reason on failure:
+/// * every f32 section stable with margin (pole radius ≤ 1 − [`POLE_MARGIN`]);
+/// * pole displacement by rounding, relative to the pole's distance from
+///   z = 1 (what sets a mode's frequency and damping);
+/// * frequency response of the f32 filter against the f64 design over the
+///   band (relative to the design's peak response);
+/// * a time-domain run of the real f32 core kernel against an f64 simulation
+///   of the design (relative to the design's output RMS).
 pub fn quantize(real: &ModalRealization, reference: &Reference) -> Result<(AxisFilter, Verification)> {
     let Reference { fs_hz, grid, peak, u, y64, rms } = reference;
     let (fs_hz, peak, rms) = (*fs_hz, *peak, *rms);

@@ -1,26 +1,9 @@
-//! `dynocomp compensate --report DIR` (issue #14): what the compensation did
-//! to a record, after the paper's Figs. 10-12, per axis:
-//!
-//! * `a_overview.svg`: the whole record, measured and compensated (and the
-//!   true force and the error with `--truth`), drawn as min/max envelopes
-//!   over at most [`ENVELOPE_COLUMNS`]-2x that many buckets, never every
-//!   sample;
-//! * `a_zoom.svg`: a few tooth periods where the cut is steady, every
-//!   sample, measured and compensated overlaid;
-//! * `a_spectrum.svg`: Welch amplitude spectra of measured and compensated
-//!   (and true) forces with the tooth-passing frequency and its harmonics
-//!   marked (given by `--spindle-rpm`/`--teeth`, else the strongest line of
-//!   the compensated spectrum).
-//!
-//! Everything is accumulated while the record streams through
-//! ([`ReportAccumulator::observe`]): envelopes that halve their resolution
-//! when full, a Welch spectrum summed segment by segment, and a short kept
-//! window for the zoom, so the report's memory does not grow with the record.
-//! The one exception is the NRMSE against `--truth`, which follows the
-//! project's single convention ([`crate::metrics::accuracy`]: zero-phase
-//! FFT band limit over the whole record) and therefore keeps the
-//! compensated, measured and true forces of each axis (24 bytes per sample
-//! and axis) when `--truth` is given.
+//! `dynocomp compensate --report DIR`: what the compensation did to a
+//! record, after the paper's Figs. 10-12, per axis: the whole record, a zoom
+//! on a steady stretch of the cut and the amplitude spectra
+//! ([`ReportAccumulator::write`]). Everything is accumulated while the record
+//! streams through ([`ReportAccumulator::observe`]), so the report's memory
+//! does not grow with the record, except for the NRMSE against `--truth`.
 
 use anyhow::{Context, Result};
 use plotters::prelude::*;
@@ -213,7 +196,14 @@ struct AxisAcc {
     keep: Option<[Vec<f64>; 3]>,
 }
 
-/// Everything the compensation report needs, accumulated block by block.
+/// Everything the compensation report needs, accumulated block by block:
+/// envelopes that halve their resolution when full, a Welch spectrum summed
+/// segment by segment, and a short kept window for the zoom. The one
+/// exception is the NRMSE against `--truth`, which follows the project's
+/// single convention ([`crate::metrics::accuracy`]: zero-phase FFT band limit
+/// over the whole record) and therefore keeps the compensated, measured and
+/// true forces of each axis (24 bytes per sample and axis) when `--truth` is
+/// given.
 pub struct ReportAccumulator {
     fs_hz: f64,
     axes: Vec<AxisAcc>,
@@ -349,8 +339,12 @@ impl ReportAccumulator {
     /// Render the report into `dir`: three SVGs per axis and `index.html`
     /// with `summary` on top. `band_hz`: the NRMSE's band limit per axis.
     /// Returns the files written, `index.html` last, and the NRMSE lines.
-    pub fn write(mut self, dir: &Path, summary: &str, band_hz: &dyn Fn(usize) -> f64) -> Result<(Vec<PathBuf>, Vec<String>)> {
-        let fs = self.fs_hz;
+    pub fn write(
+        mut self,
+        dir: &Path,
+        summary: &str,
+        band_hz: &dyn Fn(usize) -> f64,
+    ) -> Result<(Vec<PathBuf>, Vec<String>)> {
         let mut pages = Vec::new();
         let mut sections = Vec::new();
         let mut score_lines = Vec::new();
@@ -359,100 +353,158 @@ impl ReportAccumulator {
             Some((s, _, w)) => (s, w),
             None => (self.cur_start, self.cur.clone()),
         };
+        let how = Rendering { fs: self.fs_hz, has_truth: self.has_truth, tpf_given: self.tpf_given, zoom_start };
         for (i, a) in self.axes.iter_mut().enumerate() {
             let name = axis_name(a.axis);
-            let (f, am) = a.w_meas.spectrum(fs);
-            let (_, ac) = a.w_comp.spectrum(fs);
-            let at = if self.has_truth { Some(a.w_truth.spectrum(fs).1) } else { None };
-            let (tpf, tpf_how) = match self.tpf_given {
-                Some(t) => (Some(t), "from --spindle-rpm and --teeth".to_string()),
-                None => match strongest_line(&f, &ac, 20.0) {
-                    Some(t) => (Some(t), "the strongest line of the compensated spectrum".to_string()),
-                    None => (None, String::new()),
-                },
-            };
-            let mut score = String::new();
-            if let Some(k) = &a.keep {
-                let b = band_hz(a.axis);
-                let comp = crate::metrics::accuracy(&k[1], &k[2], fs, b);
-                let raw = crate::metrics::accuracy(&k[0], &k[2], fs, b);
-                score = format!(
-                    "NRMSE against the true force (RMS error / std of the true force, both low-passed at {b:.0} Hz, \
-                     5 % of the record excluded at each end): measured {:.3} %, compensated {:.3} % \
-                     (peak-to-peak normalization: {:.3} % and {:.3} %).",
-                    raw.nrmse * 100.0,
-                    comp.nrmse * 100.0,
-                    raw.nrmse_p2p * 100.0,
-                    comp.nrmse_p2p * 100.0
-                );
-                score_lines.push(format!(
-                    "f{name}: NRMSE measured {:.3} %, compensated {:.3} % (band {b:.0} Hz; p2p-normalized {:.3} % / {:.3} %)",
-                    raw.nrmse * 100.0,
-                    comp.nrmse * 100.0,
-                    raw.nrmse_p2p * 100.0,
-                    comp.nrmse_p2p * 100.0
-                ));
-            }
-            let mut zw = zoom[i].clone();
-            if let Some(t) = tpf.filter(|t| *t > 0.0) {
-                let keep = ((ZOOM_TOOTH_PERIODS * fs / t).round() as usize).max(16);
-                zw.iter_mut().for_each(|v| v.truncate(keep));
-            }
-            let overview = plot_overview(a, fs, self.has_truth).with_context(|| format!("report: axis {name}: overview"))?;
-            let zoom_svg =
-                plot_zoom(&zw, zoom_start, fs, self.has_truth, name).with_context(|| format!("report: axis {name}: zoom"))?;
-            let spec = plot_spectrum(&f, &am, &ac, at.as_deref(), tpf, name).with_context(|| format!("report: axis {name}: spectrum"))?;
-            let dur = a.meas.len() as f64 / fs;
-            let entries = vec![
-                (
-                    format!("{name}_overview.svg"),
-                    format!("Axis {name}: the whole record"),
-                    format!(
-                        "{} samples ({dur:.3} s). Shaded bands: the minimum and maximum of each pixel column (min/max envelope) of the \
-                         measured force (grey) and the compensated force (blue){}.{}",
-                        a.meas.len(),
-                        if self.has_truth { ", the true force (green) and, below, the error compensated − true (red), unfiltered: it includes the noise above \
-                             the compensated band that the band-limited NRMSE leaves out" } else { "" },
-                        if score.is_empty() { String::new() } else { format!(" {score}") }
-                    ),
-                ),
-                (
-                    format!("{name}_zoom.svg"),
-                    format!("Axis {name}: zoom on a steady stretch of the cut"),
-                    format!(
-                        "{} samples from t = {:.4} s, every sample drawn: the window whose level agrees best with the two before it \
-                         among those at least 30 % as strong as the strongest.",
-                        zw[0].len(),
-                        zoom_start as f64 / fs
-                    ),
-                ),
-                (
-                    format!("{name}_spectrum.svg"),
-                    format!("Axis {name}: amplitude spectra"),
-                    format!(
-                        "Welch amplitude spectra (Hann window of {WELCH_N} samples, {:.2} Hz resolution, 50 % overlap, mean power) \
-                         of the measured and compensated forces{}. {}",
-                        fs / WELCH_N as f64,
-                        if self.has_truth { " and of the true force" } else { "" },
-                        match tpf {
-                            Some(t) => format!("Dashed: the tooth-passing frequency {t:.1} Hz ({tpf_how}) and its harmonics."),
-                            None => "No tooth-passing frequency given or found.".to_string(),
-                        }
-                    ),
-                ),
-            ];
-            for ((file, _, _), svg) in entries.iter().zip([overview, zoom_svg, spec]) {
+            let score = a.keep.as_ref().map(|k| Score::of(k, self.fs_hz, band_hz(a.axis)));
+            let (entries, svgs) = how.axis(a, &zoom[i], score.as_ref())?;
+            for ((file, _, _), svg) in entries.iter().zip(svgs) {
                 pages.push(Page { name: file.clone(), content: svg });
             }
             sections.push((format!("Axis {name}"), entries));
+            score_lines.extend(score.map(|s| s.line(name)));
         }
         let mut text = summary.to_string();
         for l in &score_lines {
             text.push('\n');
             text.push_str(l);
         }
-        pages.push(Page { name: "index.html".into(), content: crate::report::page::index_html("dynocomp compensation report", &text, &sections) });
+        let index = crate::report::page::index_html("dynocomp compensation report", &text, &sections);
+        pages.push(Page { name: "index.html".into(), content: index });
         Ok((write_pages(dir, &pages)?, score_lines))
+    }
+}
+
+/// The NRMSE of the measured and the compensated force against the true
+/// force ([`crate::metrics::accuracy`]), both low-passed at `band_hz`.
+struct Score {
+    band_hz: f64,
+    raw: crate::metrics::Accuracy,
+    comp: crate::metrics::Accuracy,
+}
+
+impl Score {
+    /// From the kept whole records (measured, compensated, true).
+    fn of(k: &[Vec<f64>; 3], fs: f64, band_hz: f64) -> Self {
+        let comp = crate::metrics::accuracy(&k[1], &k[2], fs, band_hz);
+        let raw = crate::metrics::accuracy(&k[0], &k[2], fs, band_hz);
+        Score { band_hz, raw, comp }
+    }
+
+    /// The sentence of the overview's caption.
+    fn caption(&self) -> String {
+        let (b, raw, comp) = (self.band_hz, &self.raw, &self.comp);
+        format!(
+            "NRMSE against the true force (RMS error / std of the true force, both low-passed at {b:.0} Hz, \
+             5 % of the record excluded at each end): measured {:.3} %, compensated {:.3} % \
+             (peak-to-peak normalization: {:.3} % and {:.3} %).",
+            raw.nrmse * 100.0,
+            comp.nrmse * 100.0,
+            raw.nrmse_p2p * 100.0,
+            comp.nrmse_p2p * 100.0
+        )
+    }
+
+    /// The line of the summary and of stderr for axis `name`.
+    fn line(&self, name: &str) -> String {
+        let (b, raw, comp) = (self.band_hz, &self.raw, &self.comp);
+        format!(
+            "f{name}: NRMSE measured {:.3} %, compensated {:.3} % (band {b:.0} Hz; p2p-normalized {:.3} % / {:.3} %)",
+            raw.nrmse * 100.0,
+            comp.nrmse * 100.0,
+            raw.nrmse_p2p * 100.0,
+            comp.nrmse_p2p * 100.0
+        )
+    }
+}
+
+/// What every axis's pages of [`ReportAccumulator::write`] share.
+struct Rendering {
+    fs: f64,
+    has_truth: bool,
+    /// The tooth-passing frequency given (Hz).
+    tpf_given: Option<f64>,
+    /// The first sample of the zoom window.
+    zoom_start: u64,
+}
+
+impl Rendering {
+    /// The overview, zoom and spectrum of axis `a` with their (file, title,
+    /// caption) entries; `zoom`: its kept window, `score`: its NRMSE with a
+    /// true force.
+    fn axis(&self, a: &mut AxisAcc, zoom: &ZoomWindow, score: Option<&Score>) -> Result<(Vec<Entry>, [String; 3])> {
+        let (fs, has_truth) = (self.fs, self.has_truth);
+        let name = axis_name(a.axis);
+        let (f, am) = a.w_meas.spectrum(fs);
+        let (_, ac) = a.w_comp.spectrum(fs);
+        let at = if has_truth { Some(a.w_truth.spectrum(fs).1) } else { None };
+        let (tpf, tpf_how) = match self.tpf_given {
+            Some(t) => (Some(t), "from --spindle-rpm and --teeth".to_string()),
+            None => match strongest_line(&f, &ac, 20.0) {
+                Some(t) => (Some(t), "the strongest line of the compensated spectrum".to_string()),
+                None => (None, String::new()),
+            },
+        };
+        let score = score.map(Score::caption).unwrap_or_default();
+        let mut zw = zoom.clone();
+        if let Some(t) = tpf.filter(|t| *t > 0.0) {
+            let keep = ((ZOOM_TOOTH_PERIODS * fs / t).round() as usize).max(16);
+            zw.iter_mut().for_each(|v| v.truncate(keep));
+        }
+        let overview = plot_overview(a, fs, has_truth).with_context(|| format!("report: axis {name}: overview"))?;
+        let zoom_svg = plot_zoom(&zw, self.zoom_start, fs, has_truth, name)
+            .with_context(|| format!("report: axis {name}: zoom"))?;
+        let spec = plot_spectrum(&f, &am, &ac, at.as_deref(), tpf, name)
+            .with_context(|| format!("report: axis {name}: spectrum"))?;
+        let dur = a.meas.len() as f64 / fs;
+        let entries = vec![
+            (
+                format!("{name}_overview.svg"),
+                format!("Axis {name}: the whole record"),
+                format!(
+                    "{} samples ({dur:.3} s). Shaded bands: the minimum and maximum of each pixel column (min/max envelope) of the \
+                     measured force (grey) and the compensated force (blue){}.{}",
+                    a.meas.len(),
+                    if has_truth { ", the true force (green) and, below, the error compensated − true (red), unfiltered: it includes the noise above \
+                         the compensated band that the band-limited NRMSE leaves out" } else { "" },
+                    if score.is_empty() { String::new() } else { format!(" {score}") }
+                ),
+            ),
+            (
+                format!("{name}_zoom.svg"),
+                format!("Axis {name}: zoom on a steady stretch of the cut"),
+                format!(
+                    "{} samples from t = {:.4} s, every sample drawn: the window whose level agrees best with the two before it \
+                     among those at least 30 % as strong as the strongest.",
+                    zw[0].len(),
+                    self.zoom_start as f64 / fs
+                ),
+            ),
+            (
+                format!("{name}_spectrum.svg"),
+                format!("Axis {name}: amplitude spectra"),
+                format!(
+                    "Welch amplitude spectra (Hann window of {WELCH_N} samples, {:.2} Hz resolution, 50 % overlap, mean power) \
+                     of the measured and compensated forces{}. {}",
+                    fs / WELCH_N as f64,
+                    if has_truth { " and of the true force" } else { "" },
+                    match tpf {
+                        Some(t) => format!("Dashed: the tooth-passing frequency {t:.1} Hz ({tpf_how}) and its harmonics."),
+                        None => "No tooth-passing frequency given or found.".to_string(),
+                    }
+                ),
+            ),
+        ];
+        Ok((entries, [overview, zoom_svg, spec]))
+    }
+}
+
+/// A page's (file, title, caption) in the index.
+type Entry = (String, String, String);
+
+impl crate::offline::record::Observer for ReportAccumulator {
+    fn observe(&mut self, measured: &[&[f64]], compensated: &[&[f64]], truth: Option<&[&[f64]]>) {
+        ReportAccumulator::observe(self, measured, compensated, truth);
     }
 }
 
@@ -492,6 +544,10 @@ fn range_of<'a>(envs: impl Iterator<Item = &'a [(u64, u64, f64, f64)]>) -> (f64,
     }
 }
 
+/// `a_overview.svg`: the whole record, measured and compensated (and the
+/// true force and the error with `--truth`), drawn as min/max envelopes
+/// over at most [`ENVELOPE_COLUMNS`]-2x that many buckets, never every
+/// sample.
 fn plot_overview(a: &AxisAcc, fs: f64, has_truth: bool) -> Result<String> {
     let name = axis_name(a.axis);
     let (m, c, t, e) = (a.meas.buckets(), a.comp.buckets(), a.truth.buckets(), a.err.buckets());
@@ -523,6 +579,8 @@ fn plot_overview(a: &AxisAcc, fs: f64, has_truth: bool) -> Result<String> {
     Ok(svg)
 }
 
+/// `a_zoom.svg`: a few tooth periods where the cut is steady, every
+/// sample, measured and compensated overlaid.
 fn plot_zoom(w: &[Vec<f64>; 3], start: u64, fs: f64, has_truth: bool, name: &str) -> Result<String> {
     let t0 = start as f64 / fs;
     let pts = |x: &[f64]| -> Vec<(f64, f64)> { x.iter().enumerate().map(|(k, v)| ((t0 + k as f64 / fs) * 1e3, *v)).collect() };
@@ -548,6 +606,10 @@ fn plot_zoom(w: &[Vec<f64>; 3], start: u64, fs: f64, has_truth: bool, name: &str
     Ok(svg)
 }
 
+/// `a_spectrum.svg`: Welch amplitude spectra of measured and compensated
+/// (and true) forces with the tooth-passing frequency and its harmonics
+/// marked (given by `--spindle-rpm`/`--teeth`, else the strongest line of
+/// the compensated spectrum).
 fn plot_spectrum(f: &[f64], am: &[f64], ac: &[f64], at: Option<&[f64]>, tpf: Option<f64>, name: &str) -> Result<String> {
     let db = |v: &f64| 20.0 * v.max(1e-12).log10();
     let fmax = f.last().copied().unwrap_or(1.0);

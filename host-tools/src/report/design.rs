@@ -1,26 +1,10 @@
-//! `dynocomp design --report DIR`: plots of each axis's design, as SVG, and an
-//! `index.html` that shows the design summary and embeds them.
-//!
-//! Per axis `a` (x, y, z) three SVG files:
-//! * `a_frf_fit.svg`: measured FRF magnitude (dB) and phase with the fitted
-//!   model overlaid, and the coherence γ²; the coherent band is shaded.
-//! * `a_compensated.svg`: the compensated response H·G·e^{j2πfL/fs} (measured
-//!   G, the f32 filter H as it goes into the image, the declared latency L
-//!   removed) against the uncompensated G: an overview in dB and zooms of the
-//!   magnitude ratio and the phase with the ±5 % / ±5° tolerances; the flat
-//!   band is shaded.
-//! * `a_model_match.svg` (default method): the discrete model's match to the
-//!   sampled-data relation, |Ĝ_d(e^{j2πf/fs})/Ĝ(j2πf) − 1| in dB over
-//!   0..0.45 fs, for the design's discretization beside the first- and
-//!   zero-order holds; the compensated band is shaded.
-//! * `a_poles.svg`: the z-plane with the unit circle, the compensator's section
-//!   poles and the fitted model's poles mapped by z = exp(p/fs); whole plane
-//!   and a zoom near z = 1, where the slow (machine-structure) modes sit.
+//! `dynocomp design --report DIR`: plots of each axis's design, as SVG, and
+//! an `index.html` that shows the design summary and embeds them
+//! ([`write_report`]).
 //!
 //! Every file is rendered in memory first, then written atomically
 //! ([`crate::io::atomic`]); if writing fails, the files this run created are
 //! removed again, so a report directory never holds a half-written file.
-//!
 //! Plots use plotters' SVG backend without its font stack: text is emitted as
 //! SVG `<text>` in a generic `sans-serif` family and laid out by the viewer.
 
@@ -64,7 +48,7 @@ pub fn write_report(
 pub type Plot = (String, String, String, String);
 
 /// [`write_report`] with `extra(axis)`'s plots appended to each axis's
-/// section (e.g. the two-state design's range, `two_state_cmd`).
+/// section (e.g. the two-state design's range).
 pub fn write_report_with(
     dir: &Path,
     frf: &Frf,
@@ -89,82 +73,7 @@ pub fn write_report_with(
         if meas.frf.len() != frf.freq_hz.len() {
             bail!("report: axis {name}: {} FRF values for {} frequency lines", meas.frf.len(), frf.freq_hz.len());
         }
-        let plots = [
-            (
-                format!("{name}_frf_fit.svg"),
-                format!("Axis {name}: measured FRF and fitted model"),
-                format!(
-                    "Magnitude and phase of the measured FRF G (impact test) with the fitted model Ĝ, \
-                     and the coherence γ². Shaded: the coherent band used for the design{}.",
-                    if d.bands.is_empty() { String::new() } else { format!(" and, in violet, the fitting bands ({})", crate::design::bands::describe(&d.bands)) }
-                ),
-                plot_frf_fit(&frf.freq_hz, meas, d).with_context(|| format!("report: axis {name}: FRF plot"))?,
-            ),
-            (
-                format!("{name}_compensated.svg"),
-                format!("Axis {name}: compensated response H·G"),
-                format!(
-                    "The f32 compensator H times the measured G, with the declared latency of {} samples removed, \
-                     against the uncompensated G. Dashed: the ±5 % and ±5° tolerances. Shaded: the flat band \
-                     (green) inside the coherent band (grey).",
-                    d.kalman.lag
-                ),
-                plot_compensated(&frf.freq_hz, meas, d, fs_hz)
-                    .with_context(|| format!("report: axis {name}: compensated plot"))?,
-            ),
-            (
-                format!("{name}_poles.svg"),
-                format!("Axis {name}: pole map (z-plane)"),
-                format!(
-                    "Poles of the compensator's modal sections (×) and of the fitted sensor model (○, z = exp(p/fs)), \
-                     whole z-plane and zoom near z = 1.{}",
-                    if d.realization.fir.is_empty() {
-                        String::new()
-                    } else {
-                        format!(
-                            " The compensator's fast poles are realized as {} FIR taps and are not shown.",
-                            d.realization.fir.len()
-                        )
-                    }
-                ),
-                plot_poles(d, fs_hz).with_context(|| format!("report: axis {name}: pole map"))?,
-            ),
-        ];
-        let mut plots = plots.to_vec();
-        if let Some((dm, _)) = &d.discrete {
-            plots.push((
-                format!("{name}_model_match.svg"),
-                format!("Axis {name}: discrete model against the sampled-data relation"),
-                format!(
-                    "The Kalman design's discrete model Ĝ_d ({}, advance {} samples, {} FIR taps) against the fitted Ĝ(j2πf), \
-                     which relates the sampled force and measurement exactly for band-limited signals: |Ĝ_d/Ĝ − 1| in dB, \
-                     beside the first- and zero-order holds. Shaded: the compensated band; the maximum there is the \
-                     reported model match ({:.3} %).",
-                    dm.method.name(),
-                    dm.advance,
-                    dm.fir.len(),
-                    100.0 * d.model_match
-                ),
-                plot_model_match(d, dm, fs_hz).with_context(|| format!("report: axis {name}: model match plot"))?,
-            ));
-        }
-        if let Some(sens) = sensitivities.get(i).and_then(Option::as_ref) {
-            plots.push((
-                format!("{name}_sensitivity.svg"),
-                format!("Axis {name}: sensitivity to moving sensor modes"),
-                crate::report::sensitivity::plot_caption(sens),
-                crate::report::sensitivity::plot(name, sens).with_context(|| format!("report: axis {name}: sensitivity plot"))?,
-            ));
-        }
-        if let Some(svg) = crate::report::force_spectrum::plot(d, fs_hz).with_context(|| format!("report: axis {name}: force spectrum plot"))? {
-            let s = d.force_spectrum.as_ref().expect("plotted only with a force spectrum");
-            plots.push((
-                format!("{name}_force_spectrum.svg"),
-                format!("Axis {name}: q for the record's force spectrum"),
-                crate::report::force_spectrum::plot_caption(s),
-                svg,
-            ));
-        }
+        let mut plots = axis_plots(&frf.freq_hz, meas, d, sensitivities.get(i).and_then(Option::as_ref), fs_hz)?;
         plots.extend(extra(d.axis)?);
         let mut entries = Vec::new();
         for (file, title, caption, svg) in plots {
@@ -173,12 +82,119 @@ pub fn write_report_with(
         }
         sections.push((format!("Axis {name}"), entries));
     }
-    pages.push(Page { name: "index.html".into(), content: index_html("dynocomp design report", summary_text, &sections) });
+    let index = index_html("dynocomp design report", summary_text, &sections);
+    pages.push(Page { name: "index.html".into(), content: index });
     write_pages(dir, &pages)
+}
+
+/// The plots of one design `d` against its measured FRF `meas`: the fit,
+/// the compensated response and the pole map, then [`further_plots`].
+fn axis_plots(
+    freq: &[f64],
+    meas: &AxisFrf,
+    d: &AxisDesign,
+    sens: Option<&Sensitivity>,
+    fs_hz: f64,
+) -> Result<Vec<Plot>> {
+    let name = axis_name(d.axis);
+    let mut plots = vec![
+        (
+            format!("{name}_frf_fit.svg"),
+            format!("Axis {name}: measured FRF and fitted model"),
+            format!(
+                "Magnitude and phase of the measured FRF G (impact test) with the fitted model Ĝ, \
+                 and the coherence γ². Shaded: the coherent band used for the design{}.",
+                if d.bands.is_empty() {
+                    String::new()
+                } else {
+                    format!(" and, in violet, the fitting bands ({})", crate::design::bands::describe(&d.bands))
+                }
+            ),
+            plot_frf_fit(freq, meas, d).with_context(|| format!("report: axis {name}: FRF plot"))?,
+        ),
+        (
+            format!("{name}_compensated.svg"),
+            format!("Axis {name}: compensated response H·G"),
+            format!(
+                "The f32 compensator H times the measured G, with the declared latency of {} samples removed, \
+                 against the uncompensated G. Dashed: the ±5 % and ±5° tolerances. Shaded: the flat band \
+                 (green) inside the coherent band (grey).",
+                d.kalman.lag
+            ),
+            plot_compensated(freq, meas, d, fs_hz).with_context(|| format!("report: axis {name}: compensated plot"))?,
+        ),
+        (
+            format!("{name}_poles.svg"),
+            format!("Axis {name}: pole map (z-plane)"),
+            format!(
+                "Poles of the compensator's modal sections (×) and of the fitted sensor model (○, z = exp(p/fs)), \
+                 whole z-plane and zoom near z = 1.{}",
+                if d.realization.fir.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        " The compensator's fast poles are realized as {} FIR taps and are not shown.",
+                        d.realization.fir.len()
+                    )
+                }
+            ),
+            plot_poles(d, fs_hz).with_context(|| format!("report: axis {name}: pole map"))?,
+        ),
+    ];
+    plots.extend(further_plots(d, sens, fs_hz)?);
+    Ok(plots)
+}
+
+/// The plots of `d` that only some designs have: the discrete model's
+/// match (default method), the sensitivity `sens` to moving sensor modes and
+/// q for a record's force spectrum.
+fn further_plots(d: &AxisDesign, sens: Option<&Sensitivity>, fs_hz: f64) -> Result<Vec<Plot>> {
+    let name = axis_name(d.axis);
+    let mut plots = Vec::new();
+    if let Some((dm, _)) = &d.discrete {
+        plots.push((
+            format!("{name}_model_match.svg"),
+            format!("Axis {name}: discrete model against the sampled-data relation"),
+            format!(
+                "The Kalman design's discrete model Ĝ_d ({}, advance {} samples, {} FIR taps) against the fitted Ĝ(j2πf), \
+                 which relates the sampled force and measurement exactly for band-limited signals: |Ĝ_d/Ĝ − 1| in dB, \
+                 beside the first- and zero-order holds. Shaded: the compensated band; the maximum there is the \
+                 reported model match ({:.3} %).",
+                dm.method.name(),
+                dm.advance,
+                dm.fir.len(),
+                100.0 * d.model_match
+            ),
+            plot_model_match(d, dm, fs_hz).with_context(|| format!("report: axis {name}: model match plot"))?,
+        ));
+    }
+    if let Some(sens) = sens {
+        plots.push((
+            format!("{name}_sensitivity.svg"),
+            format!("Axis {name}: sensitivity to moving sensor modes"),
+            crate::report::sensitivity::plot_caption(sens),
+            crate::report::sensitivity::plot(name, sens)
+                .with_context(|| format!("report: axis {name}: sensitivity plot"))?,
+        ));
+    }
+    let spectrum = crate::report::force_spectrum::plot(d, fs_hz)
+        .with_context(|| format!("report: axis {name}: force spectrum plot"))?;
+    if let Some(svg) = spectrum {
+        let s = d.force_spectrum.as_ref().expect("plotted only with a force spectrum");
+        plots.push((
+            format!("{name}_force_spectrum.svg"),
+            format!("Axis {name}: q for the record's force spectrum"),
+            crate::report::force_spectrum::plot_caption(s),
+            svg,
+        ));
+    }
+    Ok(plots)
 }
 
 // ------------------------------------------------------------ plot 1: FRF fit
 
+/// `a_frf_fit.svg`: measured FRF magnitude (dB) and phase with the fitted
+/// model overlaid, and the coherence γ²; the coherent band is shaded.
 fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> {
     let name = axis_name(d.axis);
     let xr = (freq[0], *freq.last().unwrap_or(&freq[0]));
@@ -252,6 +268,11 @@ fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> 
 
 // ------------------------------------------------------------ plot 2: compensated
 
+/// `a_compensated.svg`: the compensated response H·G·e^{j2πfL/fs} (measured
+/// G, the f32 filter H as it goes into the image, the declared latency L
+/// removed) against the uncompensated G: an overview in dB and zooms of the
+/// magnitude ratio and the phase with the ±5 % / ±5° tolerances; the flat
+/// band is shaded.
 fn plot_compensated(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Result<String> {
     let name = axis_name(d.axis);
     let xr = (freq[0], *freq.last().unwrap_or(&freq[0]));
@@ -388,11 +409,17 @@ fn equal_aspect(cx: f64, cy: f64, half_x: f64, half_y: f64, px: (u32, u32)) -> (
     ((cx - hx, cx + hx), (cy - hy, cy + hy))
 }
 
+/// `a_poles.svg`, the pole map: the whole z-plane and a zoom near z = 1,
+/// where the slow (machine-structure) modes sit ([`zoom_radius`]),
+/// with equal scales on both axes, the unit circle, the fitted model's
+/// poles (○), the compensator's section poles (×) and the model's modes
+/// named.
 fn plot_poles(d: &AxisDesign, fs: f64) -> Result<String> {
     let name = axis_name(d.axis);
     let comp = &d.realization.poles;
     let modelz = model_z_poles(d, fs);
-    let all: Vec<Complex64> = comp.iter().chain(&modelz).copied().filter(|z| z.re.is_finite() && z.im.is_finite()).collect();
+    let all: Vec<Complex64> =
+        comp.iter().chain(&modelz).copied().filter(|z| z.re.is_finite() && z.im.is_finite()).collect();
 
     let r_zoom = zoom_radius(&all);
 
@@ -404,18 +431,6 @@ fn plot_poles(d: &AxisDesign, fs: f64) -> Result<String> {
     let px_zoom = plot_area_px(panel, cap_zoom)?;
     let (xf, yf) = equal_aspect(0.0, 0.0, 1.15, 1.15, px_full);
     let (xz, yz) = equal_aspect(1.0 - 0.5 * r_zoom, 0.45 * r_zoom, 0.6 * r_zoom, 0.55 * r_zoom, px_zoom);
-
-    // the unit circle, sampled finely enough to look smooth in the window
-    let circle = |(x0, x1): (f64, f64), (y0, y1): (f64, f64)| -> Vec<(f64, f64)> {
-        let n = ((2.0 * PI / ((y1 - y0) / 400.0)).ceil() as usize).clamp(720, 400_000);
-        (0..=n)
-            .map(|i| {
-                let t = 2.0 * PI * i as f64 / n as f64;
-                (t.cos(), t.sin())
-            })
-            .filter(|(x, y)| *x >= x0 && *x <= x1 && *y >= y0 && *y <= y1)
-            .collect()
-    };
     let max_r = comp.iter().map(|z| z.norm()).fold(0.0f64, f64::max);
 
     let mut buf = String::new();
@@ -433,26 +448,7 @@ fn plot_poles(d: &AxisDesign, fs: f64) -> Result<String> {
         for (area, cap, xr, yr, full) in [(&left, cap_full, xf, yf, true), (&right, cap_zoom, xz, yz, false)] {
             let mut c = build_chart(area, cap, xr, yr)?;
             mesh(&mut c, "Re z", "Im z", &fmt_num, &fmt_num, 9)?;
-            let circ = circle(xr, yr);
-            // the circle filter above may join the two ends across the gap of a
-            // zoom; split where consecutive points are far apart
-            let mut segs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
-            for w in circ.windows(2) {
-                if segs.last().is_some_and(|s| s.is_empty()) {
-                    segs.last_mut().unwrap().push(w[0]);
-                }
-                let far = ((w[1].0 - w[0].0).powi(2) + (w[1].1 - w[0].1).powi(2)).sqrt() > 0.05;
-                if far {
-                    segs.push(Vec::new());
-                } else {
-                    segs.last_mut().unwrap().push(w[1]);
-                }
-            }
-            let st = ShapeStyle::from(&C_RAW).stroke_width(1);
-            c.draw_series(segs.into_iter().filter(|s| s.len() >= 2).map(|s| PathElement::new(s, st)))
-                .map_err(perr)?
-                .label("unit circle")
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], st));
+            draw_unit_circle(&mut c, xr, yr)?;
             let inr = |z: &&Complex64| z.re >= xr.0 && z.re <= xr.1 && z.im >= yr.0 && z.im <= yr.1;
             let ms = ShapeStyle::from(&C_MEASURED).stroke_width(2);
             c.draw_series(modelz.iter().filter(inr).map(|z| Circle::new((z.re, z.im), 6, ms)))
@@ -464,34 +460,9 @@ fn plot_poles(d: &AxisDesign, fs: f64) -> Result<String> {
                 .map_err(perr)?
                 .label("compensator sections")
                 .legend(move |(x, y)| Cross::new((x + 10, y), 5, cs));
-            {
-                // name the model's modes (upper half plane) by frequency and
-                // damping: in the zoom those inside it, in the whole plane
-                // those outside the zoom
-                let labels: Vec<(Complex64, String)> = d
-                    .model
-                    .terms
-                    .iter()
-                    .filter_map(|t| match *t {
-                        Term::Pair { pole, .. } => {
-                            let wn = pole.norm();
-                            let z = (pole / fs).exp();
-                            Some((z, {
-                                let zeta = 100.0 * -pole.re / wn;
-                                let prec = if zeta < 1.0 { 2 } else { 1 };
-                                format!("{:.0} Hz, ζ {zeta:.prec$} %", wn / (2.0 * PI))
-                            }))
-                        }
-                        _ => None,
-                    })
-                    .filter(|(z, _)| inr(&z) && (!full || (1.0 - z).norm() > r_zoom))
-                    .collect();
-                c.draw_series(labels.into_iter().map(|(z, s)| {
-                    EmptyElement::at((z.re, z.im))
-                        + Text::new(s, (-14, -6), (FONT, 12).into_font().color(&BLACK).pos(Pos::new(HPos::Right, VPos::Center)))
-                }))
-                .map_err(perr)?;
-            }
+            // In the zoom the modes inside it, in the whole plane those
+            // outside the zoom.
+            draw_mode_labels(&mut c, d, fs, &|z| inr(&z) && (!full || (1.0 - z).norm() > r_zoom))?;
             legend(&mut c, if full { SeriesLabelPosition::LowerLeft } else { SeriesLabelPosition::UpperLeft })?;
         }
         root.present().map_err(perr)?;
@@ -499,10 +470,70 @@ fn plot_poles(d: &AxisDesign, fs: f64) -> Result<String> {
     Ok(buf)
 }
 
+/// The unit circle inside the window `xr` × `yr`, sampled finely enough to
+/// look smooth in it, split where the window cuts it.
+fn draw_unit_circle(c: &mut Chart<'_>, (x0, x1): (f64, f64), (y0, y1): (f64, f64)) -> Result<()> {
+    let n = ((2.0 * PI / ((y1 - y0) / 400.0)).ceil() as usize).clamp(720, 400_000);
+    let circ: Vec<(f64, f64)> = (0..=n)
+        .map(|i| {
+            let t = 2.0 * PI * i as f64 / n as f64;
+            (t.cos(), t.sin())
+        })
+        .filter(|(x, y)| *x >= x0 && *x <= x1 && *y >= y0 && *y <= y1)
+        .collect();
+    // the filter above may join the two ends across the gap of a zoom;
+    // split where consecutive points are far apart
+    let mut segs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+    for w in circ.windows(2) {
+        if segs.last().is_some_and(|s| s.is_empty()) {
+            segs.last_mut().unwrap().push(w[0]);
+        }
+        let far = ((w[1].0 - w[0].0).powi(2) + (w[1].1 - w[0].1).powi(2)).sqrt() > 0.05;
+        if far {
+            segs.push(Vec::new());
+        } else {
+            segs.last_mut().unwrap().push(w[1]);
+        }
+    }
+    let st = ShapeStyle::from(&C_RAW).stroke_width(1);
+    c.draw_series(segs.into_iter().filter(|s| s.len() >= 2).map(|s| PathElement::new(s, st)))
+        .map_err(perr)?
+        .label("unit circle")
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], st));
+    Ok(())
+}
+
+/// Name the model's modes (upper half plane) at their poles z = exp(p/fs)
+/// by frequency and damping, those for which `show(z)` holds.
+fn draw_mode_labels(c: &mut Chart<'_>, d: &AxisDesign, fs: f64, show: &dyn Fn(&Complex64) -> bool) -> Result<()> {
+    let labels: Vec<(Complex64, String)> = d
+        .model
+        .terms
+        .iter()
+        .filter_map(|t| match *t {
+            Term::Pair { pole, .. } => {
+                let wn = pole.norm();
+                let z = (pole / fs).exp();
+                let zeta = 100.0 * -pole.re / wn;
+                let prec = if zeta < 1.0 { 2 } else { 1 };
+                Some((z, format!("{:.0} Hz, ζ {zeta:.prec$} %", wn / (2.0 * PI))))
+            }
+            _ => None,
+        })
+        .filter(|(z, _)| show(z))
+        .collect();
+    let font = (FONT, 12).into_font().color(&BLACK).pos(Pos::new(HPos::Right, VPos::Center));
+    let label = |(z, s): (Complex64, String)| EmptyElement::at((z.re, z.im)) + Text::new(s, (-14, -6), font.clone());
+    c.draw_series(labels.into_iter().map(label)).map_err(perr)?;
+    Ok(())
+}
+
 // ------------------------------------------------------------ plot 4: model match
 
-/// |Ĝ_d/Ĝ − 1| (dB) over 0..0.45 fs for the design's discrete model and the
-/// two hold equivalents of the same fitted Ĝ.
+/// `a_model_match.svg` (default method): the discrete model's match to the
+/// sampled-data relation, |Ĝ_d(e^{j2πf/fs})/Ĝ(j2πf) − 1| in dB over
+/// 0..0.45 fs, for the design's discretization beside the first- and
+/// zero-order holds of the same fitted Ĝ; the compensated band is shaded.
 fn plot_model_match(d: &AxisDesign, dm: &crate::design::discretize::DiscreteModel, fs: f64) -> Result<String> {
     use crate::design::discretize::{discretize, Discretization, MATCH_BAND_FRACTION};
     let name = axis_name(d.axis);

@@ -16,9 +16,6 @@ pub struct Page {
     pub content: String,
 }
 
-/// Write the report of `designs` into `dir` (created if missing): three SVG
-/// plots per axis and `index.html` showing `summary_text` and the plots.
-
 /// Create `dir` if needed and write `pages` atomically; on error remove what
 /// this call created (files that did not exist before, and `dir` if it was
 /// created here and is empty again).

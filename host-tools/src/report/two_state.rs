@@ -1,9 +1,145 @@
-//! The two-state design's figure: each candidate's predicted error over
-//! the range between the two measured states.
+//! The two-state design's summary lines, its `--json` document and its
+//! figure: each candidate's predicted error over the range between the two
+//! measured states.
 
 use anyhow::Result;
+use std::fmt::Write as _;
 
+use crate::design::sensitivity::Sensitivity;
 use crate::design::two_state::range::{RangeDesign, RANGE_STATES};
+
+/// The summary lines of one axis designed for the range: the paired modes
+/// and the chosen state, the machine modes shared or kept apart, and the
+/// sensor modes above the compensated band fitted jointly or apart.
+pub fn describe(name: &str, rd: &RangeDesign) -> String {
+    let mut lines = String::new();
+    let (ts, cands) = (&rd.states, &rd.candidates);
+    let c = &cands[rd.best];
+    let (first, last) = (&cands[0], &cands[cands.len() - 1]);
+    let moved: Vec<String> =
+        ts.before.modes().iter().zip(ts.after.modes()).map(|(m0, m1)| format!("{:.0}→{:.0}", m0.0, m1.0)).collect();
+    let _ = writeln!(
+        lines,
+        "{name} two states: modes paired {} Hz; image for the range designed at s = {:.2}: worst-case predicted error {:.2} % over s ∈ [0, 1] (designs for the first / second FRF alone: {:.2} / {:.2} %)",
+        moved.join(", "),
+        c.s,
+        100.0 * c.worst,
+        100.0 * first.worst,
+        100.0 * last.worst
+    );
+    let shared = shared_modes_hz(rd);
+    let apart: Vec<String> = rd
+        .machine
+        .iter()
+        .filter(|m| !m.shared)
+        .map(|m| {
+            format!(
+                "{:.0}→{:.0} Hz (misfit ×{:.1} / ×{:.1} if shared)",
+                m.fn_hz.0, m.fn_hz.1, m.misfit_growth.0, m.misfit_growth.1
+            )
+        })
+        .collect();
+    if !rd.machine.is_empty() {
+        let _ = writeln!(
+            lines,
+            "{name} machine modes measured alike in both FRFs, averaged: {} Hz; kept apart: {}",
+            if shared.is_empty() { "none".to_string() } else { shared.join(", ") },
+            if apart.is_empty() { "none".to_string() } else { apart.join(", ") }
+        );
+    }
+    if let Some(m0) = rd.above_band.first() {
+        let modes: Vec<String> = rd
+            .above_band
+            .iter()
+            .map(|m| {
+                if m.joint {
+                    let (j, f) = (m.joint_fn_hz, m.fn_hz);
+                    format!("{:.0}→{:.0} Hz (separately {:.0}→{:.0} Hz)", j.0, j.1, f.0, f.1)
+                } else {
+                    format!("{:.0}→{:.0} Hz", m.fn_hz.0, m.fn_hz.1)
+                }
+            })
+            .collect();
+        let growth = 100.0 * (m0.misfit_growth - 1.0);
+        let how = if m0.joint {
+            format!("fitted to both FRFs at once, modal shares and direct term common (misfit {growth:+.2} %)")
+        } else {
+            format!(
+                "each FRF's own fit kept: fitted at once with a common static gain the misfit grows {growth:+.1} %, more than {:.0} %",
+                100.0 * crate::design::two_state::joint::JOINT_TOLERANCE
+            )
+        };
+        let _ = writeln!(lines, "{name} sensor modes above the compensated band {how}: {}", modes.join(", "));
+    }
+    lines
+}
+
+/// `--json` of a two-state design.
+#[derive(serde::Serialize)]
+pub struct RangeJson {
+    /// The image's path.
+    pub image: String,
+    /// Its id, 8 hex digits.
+    pub image_id: String,
+    /// Sample rate (Hz).
+    pub fs_hz: f64,
+    /// Declared latency (samples).
+    pub latency_samples: usize,
+    /// How the image was chosen.
+    pub criterion: &'static str,
+    /// The states the candidates are evaluated at.
+    pub range_states: [f64; 5],
+    /// Per axis.
+    pub axes: Vec<RangeAxisJson>,
+}
+
+/// One axis of [`RangeJson`].
+#[derive(serde::Serialize)]
+pub struct RangeAxisJson {
+    axis: &'static str,
+    /// (Hz, ζ) of the paired modes in each state.
+    modes_before: Vec<(f64, f64)>,
+    modes_after: Vec<(f64, f64)>,
+    /// Machine-structure modes: shared between the states or kept apart.
+    machine_modes: Vec<crate::design::two_state::range::MachineMode>,
+    /// Sensor modes above the compensated band: fitted to both FRFs at once
+    /// or each FRF's own fit kept.
+    above_band_modes: Vec<crate::design::two_state::joint::AboveBandMode>,
+    /// Model state the image was designed for.
+    chosen_state: f64,
+    /// Its worst-case predicted in-band error over the range.
+    worst_case_error: f64,
+    /// The same for the designs from the first and the second FRF alone.
+    single_state_worst_case: (f64, f64),
+    /// (state, worst case, error at each range state) of every candidate.
+    candidates: Vec<(f64, f64, Vec<f64>)>,
+    /// The image's predicted error at its own state.
+    predicted_error: f64,
+    /// Its sensitivity to shifted sensor modes.
+    sensitivity: Option<Sensitivity>,
+}
+
+impl RangeAxisJson {
+    /// Axis `axis` designed for the range, `sensitivity` that of its image.
+    pub fn new(axis: &'static str, rd: &RangeDesign, sensitivity: Option<Sensitivity>) -> Self {
+        let (ts, cands) = (&rd.states, &rd.candidates);
+        let c = &cands[rd.best];
+        let (first, last) = (&cands[0], &cands[cands.len() - 1]);
+        RangeAxisJson {
+            axis,
+            modes_before: ts.before.modes(),
+            modes_after: ts.after.modes(),
+            machine_modes: rd.machine.clone(),
+            above_band_modes: rd.above_band.clone(),
+            chosen_state: c.s,
+            worst_case_error: c.worst,
+            single_state_worst_case: (first.worst, last.worst),
+            candidates: cands.iter().map(|c| (c.s, c.worst, c.errors.clone())).collect(),
+            predicted_error: c.design.predicted_error,
+            sensitivity,
+        }
+    }
+}
 
 /// Caption of the report's range plot.
 pub fn range_caption(rd: &RangeDesign) -> String {

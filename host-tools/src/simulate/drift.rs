@@ -196,7 +196,7 @@ pub fn run(seed: u64, params: &SimParams, drift: Drift, dir: &std::path::Path) -
     params.validate()?;
     let dyno = MultiAxisDynamometer::random(sub_seed(seed, super::TAG_DYNO), params);
     let out = simulate_drifting(seed, params, dyno, drift)?;
-    super::cli::write_outputs(dir, &out.sim)?;
+    super::files::write_outputs(dir, &out.sim)?;
     crate::io::uff::write_uff58(&dir.join("frf_after.uff"), &out.frf_after, false)?;
     crate::io::frf_csv::write_frf_csv(&dir.join("frf_after.csv"), &out.frf_after)?;
     let modes_hz = |d: &Dynamometer| sensor_modes(d).iter().map(|&i| d.modes[i].fn_hz).collect::<Vec<f64>>();

@@ -28,7 +28,7 @@
 //! everywhere"). Noise and quantization are added after the filter.
 
 pub mod chain;
-pub mod cli;
+pub mod files;
 pub mod drift;
 pub mod dynamometer;
 pub mod impact;
@@ -40,7 +40,6 @@ pub mod presets;
 pub mod shaker;
 
 pub use chain::{AntiAlias, Butterworth, BRICK_WALL_FRACTION};
-pub use cli::{run, SimulateArgs};
 pub use dynamometer::{Dynamometer, Hold, Mode, ModeRanges, ModeStep, MultiAxisDynamometer};
 pub use impact::{h1_random_error, impact_freqs, impact_test, impact_test_all, impact_test_all_with, impact_test_axis, ImpactParams};
 pub use measurement::MeasurementParams;

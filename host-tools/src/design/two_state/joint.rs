@@ -1,51 +1,11 @@
-//! Sensor modes above the compensated band, fitted to both FRFs at once
-//! (issue #15).
+//! Sensor modes above the compensated band, fitted to both FRFs at once.
 //!
-//! **Why.** A sensor mode above the compensated band shows in the band only
-//! as the tail of its response. Either FRF alone pins it poorly: the fit
-//! trades the mode's frequency and modal share against the direct term d,
-//! and the two fits trade them differently. Interpolating two such fits
-//! between the states then misses the true set-up at every s. Seen on a
-//! simulated 9257-class axis (BENCHMARKS.md, seed 4 y): true 4396 → 4616 Hz,
-//! fitted 4316 → 4432 Hz, the drift smoother 1.64x the exact model's error.
-//!
-//! **What the two states share.** A loss of workpiece mass changes the
-//! modal masses, not the stiffness: each mode's modal share (its static
-//! gain, ρ·2jω_d/ω_n², the quantity [`TwoState::at`] interpolates) and the
-//! direct term (the static compliance of the modes beyond the FRF) are the
-//! same in both states, while each mode's frequency and damping may move
-//! by its own amount. This is the physics the interpolation rule already
-//! states (1/ω_n² linear in added mass at constant stiffness); it does not
-//! assume that all sensor modes move alike.
-//!
-//! **Rule (stated).** Per axis, only if its first-state model has sensor
-//! modes ([`crate::fit::modes::sensor_mode_indices`]) above the
-//! compensated band:
-//! 1. One weighted least-squares problem over both FRFs' lines (each with
-//!    the coherence weights of its fit): the above-band modes' modal shares
-//!    and d are common unknowns, as are the modal shares of terms both
-//!    states already carry alike (the shared machine modes); every other
-//!    term has its own modal share per state. The poles are fixed in it.
-//! 2. Each above-band mode's natural frequency and damping ratio, per
-//!    state, are refined to minimize that problem's residual (golden-section
-//!    search, one parameter at a time, [`SWEEPS`] sweeps; frequency within
-//!    ±[`FREQ_SPAN`], damping within ×(1 ± [`ZETA_SPAN`]) of the current
-//!    value in each step).
-//! 3. The same refinement without the common unknowns (each state its own
-//!    above-band shares and d) gives the separate fits' best misfit. The
-//!    joint fit is kept if its weighted misfit Σ w|Ĝ − H|² over both FRFs'
-//!    lines exceeds the separate fits' by at most [`JOINT_TOLERANCE`], every
-//!    solve is well conditioned and every pole stays stable; otherwise both
-//!    states keep their own fits (those of [`crate::design::two_state::model::pair`]), and
-//!    `design` says so.
-//!
-//! The test is over all lines, not a window around the mode: a changed
-//! static gain forced into a common share is absorbed by the other terms
-//! and shows across the band. On seed 4 y (4 independent impact tests of the
-//! after-state) the joint fit costs 0.1-0.7 % of misfit; with the mode's
-//! static gain also changed by +5 % / −10 % / +10 % / +30 % it costs 1.6 /
-//! 5.8 / 5.3 / 46 % (BENCHMARKS.md). Where the FRFs are too noisy to tell,
-//! the joint fit is kept: the data then cannot say it is wrong.
+//! Such a mode shows in the band only as the tail of its response, so either
+//! FRF alone pins it poorly: each fit trades the mode's frequency and modal
+//! share against the direct term d in its own way, and interpolating two
+//! such fits misses the set-up at every state in between. A loss of
+//! workpiece mass changes modal masses, not stiffness, so both states share
+//! each mode's modal share and d; [`fit_above_band_jointly`] fits them once.
 
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
@@ -100,8 +60,41 @@ impl<'a> Lines<'a> {
     }
 }
 
-/// The joint fit of `ts` (module doc), or `ts` unchanged when the axis has
-/// no sensor mode above `band_hz`; with what became of each such mode.
+/// The joint fit of `ts`, or `ts` unchanged when the axis has no sensor
+/// mode above `band_hz`; with what became of each such mode.
+///
+/// What the states share: each mode's modal share (its static gain,
+/// ρ·2jω_d/ω_n², the quantity [`TwoState::at`] interpolates) and the direct
+/// term (the static compliance of the modes beyond the FRF); each mode's
+/// frequency and damping may move by its own amount. This is the physics of
+/// the interpolation rule (1/ω_n² linear in added mass at constant
+/// stiffness); it does not assume that all sensor modes move alike.
+///
+/// **Rule (stated).** Only if the first-state model has sensor modes
+/// ([`crate::fit::modes::sensor_mode_indices`]) above the compensated band:
+/// 1. One weighted least-squares problem over both FRFs' lines (each with
+///    the coherence weights of its fit): the above-band modes' modal shares
+///    and d are common unknowns, as are the modal shares of terms both
+///    states already carry alike (the shared machine modes); every other
+///    term has its own modal share per state. The poles are fixed in it
+///    (`solve`).
+/// 2. Each above-band mode's natural frequency and damping ratio, per
+///    state, are refined to minimize that problem's residual (golden-section
+///    search, one parameter at a time, [`SWEEPS`] sweeps; frequency within
+///    ±[`FREQ_SPAN`], damping within ×(1 ± [`ZETA_SPAN`]) of the current
+///    value in each step).
+/// 3. The same refinement without the common unknowns (each state its own
+///    above-band shares and d) gives the separate fits' best misfit. The
+///    joint fit is kept if its weighted misfit Σ w|Ĝ − H|² over both FRFs'
+///    lines exceeds the separate fits' by at most [`JOINT_TOLERANCE`], every
+///    solve is well conditioned and every pole stays stable; otherwise both
+///    states keep their own fits (those of
+///    [`crate::design::two_state::model::pair`]), and `design` says so.
+///
+/// The test is over all lines, not a window around the mode: a changed
+/// static gain forced into a common share is absorbed by the other terms
+/// and shows across the band. Where the FRFs are too noisy to tell, the
+/// joint fit is kept: the data then cannot say it is wrong.
 pub fn fit_above_band_jointly(ts: &TwoState, lines: &Lines, band_hz: (f64, f64)) -> (TwoState, Vec<AboveBandMode>) {
     let sensors = crate::fit::modes::sensor_mode_indices(&ts.before);
     let above: Vec<usize> = sensors.into_iter().filter(|&i| matches!(ts.before.terms[i], Term::Pair { pole, .. } if fn_hz(pole) > band_hz.1)).collect();
@@ -189,23 +182,11 @@ fn refine(ts: &TwoState, lines: &Lines, common: &[bool], common_d: bool, above: 
     (cur.before.is_stable() && cur.after.is_stable()).then_some((cur, best))
 }
 
-/// The minimum of `cost` on [lo, hi] by golden-section search.
-fn golden(mut lo: f64, mut hi: f64, cost: impl Fn(f64) -> f64) -> f64 {
-    let g = (5f64.sqrt() - 1.0) / 2.0;
-    let (mut a, mut b) = (hi - g * (hi - lo), lo + g * (hi - lo));
-    let (mut ca, mut cb) = (cost(a), cost(b));
-    for _ in 0..STEPS {
-        if ca < cb {
-            (hi, b, cb) = (b, a, ca);
-            a = hi - g * (hi - lo);
-            ca = cost(a);
-        } else {
-            (lo, a, ca) = (a, b, cb);
-            b = lo + g * (hi - lo);
-            cb = cost(b);
-        }
-    }
-    0.5 * (lo + hi)
+/// The minimum of `cost` on [lo, hi] by golden-section search: the middle
+/// of the final bracket after [`STEPS`] reductions.
+fn golden(lo: f64, hi: f64, cost: impl Fn(f64) -> f64) -> f64 {
+    let end = crate::numeric::search::golden_bracket(&mut |v| cost(v), lo, hi, STEPS);
+    0.5 * (end.lo + end.hi)
 }
 
 /// Step 1 of the rule: the modal shares and d of both states for the
@@ -215,75 +196,10 @@ fn golden(mut lo: f64, mut hi: f64, cost: impl Fn(f64) -> f64) -> f64 {
 /// column-scaled matrix's condition number exceeds [`MAX_COND`] or the
 /// solution is not finite.
 fn solve(ts: &TwoState, lines: &Lines, common: &[bool], common_d: bool) -> Option<(TwoState, f64)> {
+    let cols = Columns::new(ts, common, common_d);
+    let (a, b) = cols.system(ts, lines);
+    let (x, residual) = scaled_least_squares(a, &b)?;
     let models = [&ts.before, &ts.after];
-    let n = ts.before.terms.len();
-    // First column of each term in each state (2 for a pair: the real and
-    // the imaginary part of its modal share; 1 for a real pole's residue).
-    let mut col = vec![[0usize; 2]; n];
-    let mut cols = 0;
-    for i in 0..n {
-        let width = if matches!(ts.before.terms[i], Term::Pair { .. }) { 2 } else { 1 };
-        col[i][0] = cols;
-        cols += width;
-        col[i][1] = if common[i] {
-            col[i][0]
-        } else {
-            cols += width;
-            cols - width
-        };
-    }
-    let d_col = [cols, if common_d { cols } else { cols + 1 }];
-    cols = d_col[1] + 1;
-    let m = lines.freq_hz.len();
-    let mut a = DMatrix::<f64>::zeros(4 * m, cols);
-    let mut b = DVector::<f64>::zeros(4 * m);
-    for (st, model) in models.iter().enumerate() {
-        for (k, &f) in lines.freq_hz.iter().enumerate() {
-            let (r, sw) = (2 * (st * m + k), lines.sw[st][k]);
-            let s = Complex64::new(0.0, 2.0 * PI * f);
-            let mut put = |c: usize, v: Complex64| {
-                a[(r, c)] += sw * v.re;
-                a[(r + 1, c)] += sw * v.im;
-            };
-            for (i, t) in model.terms.iter().enumerate() {
-                match *t {
-                    Term::Pair { pole, .. } => {
-                        // Shares c = 1 and c = j as residues ρ = c·ω_n²/(2jω_d).
-                        let rho = residue_of_share(pole, Complex64::new(1.0, 0.0));
-                        let basis = |q: Complex64| q / (s - pole) + q.conj() / (s - pole.conj());
-                        put(col[i][st], basis(rho));
-                        put(col[i][st] + 1, basis(rho * Complex64::i()));
-                    }
-                    Term::Real { pole, .. } => put(col[i][st], 1.0 / (s - pole)),
-                }
-            }
-            put(d_col[st], Complex64::new(1.0, 0.0));
-            b[r] = sw * lines.h[st][k].re;
-            b[r + 1] = sw * lines.h[st][k].im;
-        }
-    }
-    let scale: Vec<f64> = (0..cols).map(|c| a.column(c).norm()).collect();
-    if scale.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
-        return None;
-    }
-    for (c, s) in scale.iter().enumerate() {
-        a.column_mut(c).scale_mut(1.0 / s);
-    }
-    // Normal equations of the column-scaled matrix (a few columns against
-    // thousands of rows: far cheaper than an SVD of the tall matrix, which
-    // the pole refinement would repeat hundreds of times); its condition
-    // number is that of the tall matrix squared.
-    let svd = a.tr_mul(&a).svd(true, true);
-    let (smax, smin) = (svd.singular_values.max(), svd.singular_values.min());
-    if !(smin > 0.0 && smax / smin <= MAX_COND * MAX_COND) {
-        return None;
-    }
-    let x = svd.solve(&a.tr_mul(&b), 0.0).ok()?;
-    let residual = (&a * &x - &b).norm_squared();
-    let x: Vec<f64> = x.iter().zip(&scale).map(|(v, s)| v / s).collect();
-    if !(residual.is_finite() && x.iter().all(|v| v.is_finite())) {
-        return None;
-    }
     let build = |st: usize| PoleResidueModel {
         terms: models[st]
             .terms
@@ -291,15 +207,111 @@ fn solve(ts: &TwoState, lines: &Lines, common: &[bool], common_d: bool) -> Optio
             .enumerate()
             .map(|(i, t)| match *t {
                 Term::Pair { pole, .. } => {
-                    let c = Complex64::new(x[col[i][st]], x[col[i][st] + 1]);
+                    let c = Complex64::new(x[cols.term[i][st]], x[cols.term[i][st] + 1]);
                     Term::Pair { pole, residue: residue_of_share(pole, c) }
                 }
-                Term::Real { pole, .. } => Term::Real { pole, residue: x[col[i][st]] },
+                Term::Real { pole, .. } => Term::Real { pole, residue: x[cols.term[i][st]] },
             })
             .collect(),
-        d: x[d_col[st]],
+        d: x[cols.d[st]],
     };
     Some((TwoState { before: build(0), after: build(1) }, residual))
+}
+
+/// The unknowns of [`solve`]: the first column of each term in each state
+/// (2 for a pair: the real and the imaginary part of its modal share; 1 for
+/// a real pole's residue; the same column in both states for a common
+/// term), and of d in each state.
+struct Columns {
+    term: Vec<[usize; 2]>,
+    d: [usize; 2],
+    count: usize,
+}
+
+impl Columns {
+    fn new(ts: &TwoState, common: &[bool], common_d: bool) -> Self {
+        let n = ts.before.terms.len();
+        let mut term = vec![[0usize; 2]; n];
+        let mut cols = 0;
+        for i in 0..n {
+            let width = if matches!(ts.before.terms[i], Term::Pair { .. }) { 2 } else { 1 };
+            term[i][0] = cols;
+            cols += width;
+            term[i][1] = if common[i] {
+                term[i][0]
+            } else {
+                cols += width;
+                cols - width
+            };
+        }
+        let d = [cols, if common_d { cols } else { cols + 1 }];
+        Columns { term, d, count: d[1] + 1 }
+    }
+
+    /// The weighted system A x ≈ b over both FRFs' lines (real and
+    /// imaginary parts as rows, each scaled by √w).
+    fn system(&self, ts: &TwoState, lines: &Lines) -> (DMatrix<f64>, DVector<f64>) {
+        let m = lines.freq_hz.len();
+        let mut a = DMatrix::<f64>::zeros(4 * m, self.count);
+        let mut b = DVector::<f64>::zeros(4 * m);
+        for (st, model) in [&ts.before, &ts.after].iter().enumerate() {
+            for (k, &f) in lines.freq_hz.iter().enumerate() {
+                let (r, sw) = (2 * (st * m + k), lines.sw[st][k]);
+                let s = Complex64::new(0.0, 2.0 * PI * f);
+                let mut put = |c: usize, v: Complex64| {
+                    a[(r, c)] += sw * v.re;
+                    a[(r + 1, c)] += sw * v.im;
+                };
+                for (i, t) in model.terms.iter().enumerate() {
+                    match *t {
+                        Term::Pair { pole, .. } => {
+                            // Shares c = 1 and c = j as residues ρ = c·ω_n²/(2jω_d).
+                            let rho = residue_of_share(pole, Complex64::new(1.0, 0.0));
+                            let basis = |q: Complex64| q / (s - pole) + q.conj() / (s - pole.conj());
+                            put(self.term[i][st], basis(rho));
+                            put(self.term[i][st] + 1, basis(rho * Complex64::i()));
+                        }
+                        Term::Real { pole, .. } => put(self.term[i][st], 1.0 / (s - pole)),
+                    }
+                }
+                put(self.d[st], Complex64::new(1.0, 0.0));
+                b[r] = sw * lines.h[st][k].re;
+                b[r + 1] = sw * lines.h[st][k].im;
+            }
+        }
+        (a, b)
+    }
+}
+
+/// The least-squares solution of A x ≈ b with A's columns scaled to unit
+/// norm, and its residual |A x − b|²; `None` if a column is zero or not
+/// finite, the scaled matrix's condition number exceeds [`MAX_COND`] or the
+/// solution is not finite.
+///
+/// It solves the normal equations of the column-scaled matrix (a few
+/// columns against thousands of rows: far cheaper than an SVD of the tall
+/// matrix, which the pole refinement would repeat hundreds of times); their
+/// condition number is that of the tall matrix squared.
+fn scaled_least_squares(mut a: DMatrix<f64>, b: &DVector<f64>) -> Option<(Vec<f64>, f64)> {
+    let scale: Vec<f64> = (0..a.ncols()).map(|c| a.column(c).norm()).collect();
+    if scale.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+        return None;
+    }
+    for (c, s) in scale.iter().enumerate() {
+        a.column_mut(c).scale_mut(1.0 / s);
+    }
+    let svd = a.tr_mul(&a).svd(true, true);
+    let (smax, smin) = (svd.singular_values.max(), svd.singular_values.min());
+    if !(smin > 0.0 && smax / smin <= MAX_COND * MAX_COND) {
+        return None;
+    }
+    let x = svd.solve(&a.tr_mul(b), 0.0).ok()?;
+    let residual = (&a * &x - b).norm_squared();
+    let x: Vec<f64> = x.iter().zip(&scale).map(|(v, s)| v / s).collect();
+    if !(residual.is_finite() && x.iter().all(|v| v.is_finite())) {
+        return None;
+    }
+    Some((x, residual))
 }
 
 #[cfg(test)]

@@ -1,24 +1,5 @@
-//! The paired modal models of one axis in two states, and the model in
-//! between.
-//!
-//! **Pairing (stated rule).** The complex pairs of the two fitted models are
-//! sorted by natural frequency and matched in that order; the two models
-//! must have as many pairs and as many real poles, and each matched pair's
-//! natural frequencies may differ by at most [`PAIR_TOLERANCE`] (relative).
-//! Otherwise pairing fails with a message naming the axis and the modes.
-//! Real poles are matched in ascending order of their value. Machine-structure
-//! modes that both FRFs measured alike are then shared: both states carry
-//! the average of the two fits ([`share_machine_modes`]). Sensor modes above
-//! the compensated band are fitted to both FRFs at once, their modal shares
-//! and the direct term common ([`crate::design::two_state::joint`]).
-//!
-//! **Interpolation** in the state variable s ∈ [0, 1] (0 = before, 1 =
-//! after): per pair, 1/ω_n² linear in s (linear in added mass at constant
-//! stiffness), the damping ratio ζ linear, and the residue linear as a
-//! modal share (ρ·2jω_d/ω_n², the r of r·ω²/(s² + 2ζωs + ω²): the static
-//! gain the mode contributes, which a change of mass keeps; interpolating ρ
-//! itself would bend the static gain by ~0.1 % in the middle of a 5 %
-//! shift); real poles and their residues linear; the direct term linear.
+//! The paired modal models of one axis in two states ([`pair`]), and the
+//! model in between ([`TwoState::at`]).
 
 use anyhow::{bail, Result};
 use num_complex::Complex64;
@@ -42,8 +23,19 @@ fn list(f: &[f64]) -> String {
     f.iter().map(|v| format!("{v:.0}")).collect::<Vec<_>>().join(", ")
 }
 
-/// Pair the modes of `before` and `after` (module doc); `axis` names the
+/// Pair the modes of `before` and `after`; `axis` names the
 /// axis in errors.
+///
+/// **Pairing (stated rule).** The complex pairs of the two fitted models are
+/// sorted by natural frequency and matched in that order; the two models
+/// must have as many pairs and as many real poles, and each matched pair's
+/// natural frequencies may differ by at most [`PAIR_TOLERANCE`] (relative).
+/// Otherwise pairing fails with a message naming the axis and the modes.
+/// Real poles are matched in ascending order of their value. Machine-structure
+/// modes that both FRFs measured alike are then shared
+/// ([`crate::design::two_state::range::share_machine_modes`]), and sensor
+/// modes above the compensated band fitted to both FRFs at once
+/// ([`crate::design::two_state::joint`]).
 pub fn pair(axis: &str, before: &PoleResidueModel, after: &PoleResidueModel) -> Result<TwoState> {
     type Split = (Vec<(Complex64, Complex64)>, Vec<(f64, f64)>);
     let split = |m: &PoleResidueModel| -> Split {
@@ -96,7 +88,13 @@ pub fn pair(axis: &str, before: &PoleResidueModel, after: &PoleResidueModel) -> 
 }
 
 impl TwoState {
-    /// The model at state s ∈ [0, 1] (module doc).
+    /// The model at state s ∈ [0, 1] (0 = before, 1 = after): per pair,
+    /// 1/ω_n² linear in s (linear in added mass at constant stiffness), the
+    /// damping ratio ζ linear, and the residue linear as a modal share
+    /// (ρ·2jω_d/ω_n², the r of r·ω²/(s² + 2ζωs + ω²): the static gain the mode
+    /// contributes, which a change of mass keeps; interpolating ρ itself would
+    /// bend the static gain by ~0.1 % in the middle of a 5 % shift); real poles
+    /// and their residues linear; the direct term linear.
     pub fn at(&self, s: f64) -> PoleResidueModel {
         let lin = |a: f64, b: f64| a + s * (b - a);
         let terms = self

@@ -86,7 +86,7 @@ pub struct MachineMode {
     pub shared: bool,
 }
 
-/// Machine-structure modes measured twice (issue #15). The workpiece's
+/// Machine-structure modes measured twice. The workpiece's
 /// loss of mass moves the sensor modes; the modes below
 /// [`crate::fit::modes::SENSOR_FRACTION`] × the main mode's (the
 /// sensitivity's and the simulator's rule) belong to the machine and may
@@ -153,8 +153,8 @@ pub struct RangeDesign {
     pub best: usize,
 }
 
-/// The box image for a set-up that moves between two measured states
-/// (issue #15, item 2). **Criterion (stated):** the least worst-case
+/// The box image for a set-up that moves between two measured states.
+/// **Criterion (stated):** the least worst-case
 /// predicted in-band error over s ∈ [`RANGE_STATES`], chosen among
 /// candidate designs for the model states `candidate_states` (0 and 1 are
 /// designed from the two measured FRFs as a single-state design would be,
@@ -197,4 +197,28 @@ pub fn design_over_range(
     }
     let best = (0..cands.len()).min_by(|&a, &b| cands[a].worst.total_cmp(&cands[b].worst)).ok_or_else(|| anyhow::anyhow!("axis {name}: no candidate state"))?;
     Ok(RangeDesign { states: ts, machine, above_band, candidates: cands, best })
+}
+
+/// [`design_over_range`] for every axis of the FRFs `before` and `after`
+/// (the same axes on the same lines `freq_hz`), on a thread per axis, with
+/// the candidates [`RANGE_STATES`]; `r[axis]`: the measurement noise
+/// variance R of each axis (N²). The results in axis order.
+pub fn design_axes_over_range(
+    freq_hz: &[f64],
+    before: &[AxisFrf],
+    after: &[AxisFrf],
+    r: &[Option<f64>; 3],
+    opts: &DesignOptions,
+) -> Vec<Result<RangeDesign>> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = before
+            .iter()
+            .zip(after)
+            .map(|(a0, a1)| {
+                let rv = r[a0.axis].expect("R set for every FRF axis");
+                scope.spawn(move || design_over_range(freq_hz, a0, a1, rv, opts, &RANGE_STATES))
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p))).collect()
+    })
 }

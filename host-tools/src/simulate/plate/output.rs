@@ -11,7 +11,7 @@ use super::body::RigidBody;
 use super::run::PlateSimOutput;
 use super::setup::PlateSetup;
 use crate::frf::axis_name;
-use crate::simulate::cli::write_records;
+use crate::simulate::files::write_records;
 use crate::simulate::SimParams;
 
 /// One mode in truth.json.

@@ -1,14 +1,13 @@
-//! `dynocomp simulate`: arguments and the files it writes.
+//! `dynocomp simulate`: a synthetic dynamometer, impact test and milling
+//! record with known true force, written as the files `design` and
+//! `compensate` read.
 
 use anyhow::{Context, Result};
-use serde::Serialize;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use super::{simulate, AntiAlias, Chatter, MillingMode, Mode, SimOutput, SimParams};
 use crate::frf::axis_name;
-use crate::io::frf_csv::write_frf_csv;
-use crate::io::signal_csv::{write_signal_csv, SignalRecord};
-use crate::io::uff::write_uff58;
+use crate::simulate::files::{write_outputs, write_outputs_of};
+use crate::simulate::{simulate, AntiAlias, Chatter, MillingMode, SimParams};
 
 /// Arguments of `dynocomp simulate`. Every option left out takes its value
 /// from [`SimParams::default`].
@@ -164,7 +163,7 @@ impl SimulateArgs {
     /// preset's, or [`SimParams::default`]).
     pub fn params(&self) -> Result<SimParams> {
         Ok(self.params_over(match &self.preset {
-            Some(name) => super::presets::preset(name)?.params,
+            Some(name) => crate::simulate::presets::preset(name)?.params,
             None => SimParams::default(),
         }))
     }
@@ -227,115 +226,6 @@ impl SimulateArgs {
     }
 }
 
-/// One axis of `truth.json`.
-#[derive(Serialize)]
-struct TruthAxis {
-    axis: &'static str,
-    dc_gain: f64,
-    main_fn_hz: f64,
-    modes: Vec<Mode>,
-}
-
-/// Content of `truth.json`.
-#[derive(Serialize)]
-struct Truth<'a> {
-    format: &'static str,
-    version: u32,
-    seed: u64,
-    /// The paper preset (`--preset`), if any.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    preset: Option<&'a str>,
-    /// The band-fitting flags of `design --method paper` for the preset.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    preset_design_flags: Option<&'a [String]>,
-    fs_hz: f64,
-    n_samples: usize,
-    n_idle_samples: usize,
-    tooth_passing_hz: f64,
-    spindle_hz: f64,
-    /// How the model sees the force between fine samples.
-    hold: &'static str,
-    /// Acquisition chain: `ideal`, `none` or `butterworth:ORDER:FC_HZ`.
-    anti_alias: String,
-    /// Cutoff of the brick wall that band-limits truth and measurement (Hz).
-    brick_wall_hz: Option<f64>,
-    noise_variance_n2: f64,
-    adc_lsb_n: f64,
-    expected_idle_variance_n2: f64,
-    axes: Vec<TruthAxis>,
-    params: &'a SimParams,
-    files: [&'static str; 6],
-}
-
-fn truth_json(out: &SimOutput, preset: Option<&super::presets::Preset>) -> Result<String> {
-    let p = &out.params;
-    let t = Truth {
-        format: "dynocomp-simulate-truth",
-        version: 1,
-        seed: out.seed,
-        preset: preset.map(|p| p.name),
-        preset_design_flags: preset.map(|p| p.design_flags.as_slice()),
-        fs_hz: p.fs_hz,
-        n_samples: out.t_s.len(),
-        n_idle_samples: out.idle[0].len(),
-        tooth_passing_hz: p.milling.tooth_passing_hz(),
-        spindle_hz: p.milling.spindle_hz(),
-        hold: "foh",
-        anti_alias: p.anti_alias.to_string(),
-        brick_wall_hz: p.anti_alias.brick_wall_hz(p.fs_hz),
-        noise_variance_n2: p.measurement.noise_variance_n2,
-        adc_lsb_n: p.measurement.lsb_n(),
-        expected_idle_variance_n2: p.measurement.expected_idle_variance(),
-        axes: (0..3)
-            .map(|a| {
-                let d = out.dyno.axis(a);
-                TruthAxis { axis: axis_name(a), dc_gain: d.dc_gain(), main_fn_hz: d.main_mode().fn_hz, modes: d.modes.clone() }
-            })
-            .collect(),
-        params: p,
-        files: ["frf.uff", "frf.csv", "measured.csv", "true_force.csv", "idle.csv", "truth.json"],
-    };
-    Ok(serde_json::to_string_pretty(&t)?)
-}
-
-fn record(t_s: Option<&[f64]>, ch: &[Vec<f64>; 3]) -> SignalRecord {
-    SignalRecord { t_s: t_s.map(|t| t.to_vec()), channels: (0..3).map(|a| (a, ch[a].clone())).collect() }
-}
-
-/// Write the files every model writes into `dir` (created if missing): the
-/// impact test `frf` (frf.uff, frf.csv), the records `[measured, truth,
-/// idle]` at `fs_hz` (measured.csv, true_force.csv, idle.csv; the first two
-/// on `t_s`) and `truth_json` (truth.json).
-pub(crate) fn write_records(
-    dir: &Path,
-    frf: &crate::frf::Frf,
-    fs_hz: f64,
-    t_s: &[f64],
-    [measured, truth, idle]: [&[Vec<f64>; 3]; 3],
-    truth_json: &str,
-) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create output directory", dir.display()))?;
-    let t_idle: Vec<f64> = (0..idle[0].len()).map(|k| k as f64 / fs_hz).collect();
-    write_uff58(&dir.join("frf.uff"), frf, false)?;
-    write_frf_csv(&dir.join("frf.csv"), frf)?;
-    write_signal_csv(&dir.join("measured.csv"), &record(Some(t_s), measured))?;
-    write_signal_csv(&dir.join("true_force.csv"), &record(Some(t_s), truth))?;
-    write_signal_csv(&dir.join("idle.csv"), &record(Some(&t_idle), idle))?;
-    crate::io::atomic::write_bytes_atomic(&dir.join("truth.json"), format!("{truth_json}\n").as_bytes())?;
-    Ok(())
-}
-
-/// Write the output files of `out` into `dir` (created if missing).
-pub fn write_outputs(dir: &Path, out: &SimOutput) -> Result<()> {
-    write_outputs_of(dir, out, None)
-}
-
-/// [`write_outputs`], recording the preset that produced `out` in truth.json.
-pub fn write_outputs_of(dir: &Path, out: &SimOutput, preset: Option<&super::presets::Preset>) -> Result<()> {
-    let json = truth_json(out, preset)?;
-    write_records(dir, &out.frf, out.params.fs_hz, &out.t_s, [&out.measured, &out.truth, &out.idle], &json)
-}
-
 /// `dynocomp simulate`: simulate and write the files into `args.out`; a
 /// summary goes to stderr.
 pub fn run(args: &SimulateArgs) -> Result<()> {
@@ -346,15 +236,15 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         anyhow::bail!("--dyno-preset and --cut-offset describe the plate dynamometer: add --dyno plate");
     }
     let params = args.params()?;
-    let preset = args.preset.as_deref().map(super::presets::preset).transpose()?;
+    let preset = args.preset.as_deref().map(crate::simulate::presets::preset).transpose()?;
     let out = match (args.drift_percent, &preset) {
         (Some(_), Some(_)) => anyhow::bail!("--drift-percent with --preset: a drifting paper preset is not supported; simulate the drift without --preset"),
         (Some(pct), None) => {
-            let drift = super::drift::Drift { delta: pct / 100.0, start_s: args.drift_start.unwrap_or(0.0), end_s: args.drift_end.unwrap_or(params.duration_s) };
-            super::drift::run(args.seed, &params, drift, &args.out)?
+            let drift = crate::simulate::drift::Drift { delta: pct / 100.0, start_s: args.drift_start.unwrap_or(0.0), end_s: args.drift_end.unwrap_or(params.duration_s) };
+            crate::simulate::drift::run(args.seed, &params, drift, &args.out)?
         }
         (None, Some(pr)) => {
-            let out = super::simulate_with(args.seed, &params, pr.dyno.clone())?;
+            let out = crate::simulate::simulate_with(args.seed, &params, pr.dyno.clone())?;
             write_outputs_of(&args.out, &out, Some(pr))?;
             out
         }
@@ -425,7 +315,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
 /// `dynocomp simulate --dyno plate`: the physical 3x3 dynamometer, random
 /// from the seed or a `--dyno-preset`, cut at `--cut-offset` from the impact point.
 fn run_plate(args: &SimulateArgs) -> Result<()> {
-    use super::plate::{output, simulate_plate, PlateSetup, PlateSim};
+    use crate::simulate::plate::{output, simulate_plate, PlateSetup, PlateSim};
     if args.preset.is_some() {
         anyhow::bail!(
             "--preset with --dyno plate: the paper presets bring their own per-axis dynamometer; \
@@ -438,7 +328,7 @@ fn run_plate(args: &SimulateArgs) -> Result<()> {
     let params = args.params()?;
     let setup = match &args.dyno_preset {
         Some(name) => PlateSetup::preset(name)?,
-        None => PlateSetup::random(super::sub_seed(args.seed, super::TAG_DYNO))?,
+        None => PlateSetup::random(crate::simulate::sub_seed(args.seed, crate::simulate::TAG_DYNO))?,
     };
     let plate = PlateSim { setup, cut_offset_m: args.cut_offset.unwrap_or([0.0; 3]) };
     let out = simulate_plate(args.seed, &params, &plate)?;

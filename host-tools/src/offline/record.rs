@@ -1,0 +1,626 @@
+//! A force record compensated from file to file ([`compensate_file`]): read
+//! in blocks, run through the box's kernel, parallel elaboration or a
+//! smoother, written atomically in any signal format, with every written
+//! block shown to an [`Observer`] (e.g. a report) beside the true force.
+
+use anyhow::{anyhow, bail, Context, Result};
+use std::path::{Path, PathBuf};
+
+use dynocomp_core::image::{CoeffImage, ParallelImage};
+
+use crate::frf::axis_name;
+use crate::io::signal::{check_rate_value, read_all, Block, RateTracker, SignalReader, SignalWriter, BLOCK};
+use crate::io::signal_csv::SignalRecord;
+use crate::io::signal::ChannelMap;
+use crate::io::signal_file::{open_signal, writer_for, SignalFormat};
+use crate::offline::compensate::{compensate_parallel, StreamCompensator};
+use crate::offline::sidecar::{read_sidecar, sidecar_path, ModelSidecar};
+use crate::offline::smoother::{SpilledEstimate, SpilledPass};
+
+/// How a record is compensated, with the image that does it.
+pub enum Compensation {
+    /// The box's causal filter (a box image), bit-exact with the box.
+    Box(CoeffImage),
+    /// Parallel elaboration (a parallel-elaboration image), offline only.
+    Parallel(Box<ParallelImage>),
+    /// The zero-lag fixed-interval smoother on the box image's model
+    /// sidecar: stationary, or time-varying between the sidecar's two states
+    /// from `drift.0` to `drift.1` (s); with the sidecar's harmonic force
+    /// prior if `force_prior`.
+    Smoother {
+        /// The box image whose sidecar holds the models.
+        image: CoeffImage,
+        /// Drift interval (s), `None`: stationary.
+        drift: Option<(f64, f64)>,
+        /// Use the sidecar's harmonic force prior, where it has one.
+        force_prior: bool,
+    },
+}
+
+impl Compensation {
+    /// The image's sample rate (Hz).
+    pub fn fs_hz(&self) -> u32 {
+        match self {
+            Compensation::Box(i) | Compensation::Smoother { image: i, .. } => i.fs_hz,
+            Compensation::Parallel(p) => p.fs_hz,
+        }
+    }
+}
+
+/// One record to compensate: the input already opened (its rate checked
+/// against the image by the caller if it declares one).
+pub struct RecordJob {
+    /// What compensates it.
+    pub compensation: Compensation,
+    /// The image's file, beside which its model sidecar lies.
+    pub image_path: PathBuf,
+    /// The input, opened.
+    pub input: Box<dyn SignalReader>,
+    /// The input's file, read again by the smoothers.
+    pub input_path: PathBuf,
+    /// The channel map the input was opened with.
+    pub channels: Option<ChannelMap>,
+    /// The output file, written atomically.
+    pub output: PathBuf,
+    /// Its format.
+    pub output_format: SignalFormat,
+    /// Keep the box's timing: do not remove the image's declared latency.
+    pub raw_timing: bool,
+    /// The true force of the record, read alongside for the observer.
+    pub truth: Option<Truth>,
+}
+
+/// A true force record with every channel of the input.
+pub struct Truth {
+    /// Its name in messages.
+    pub source: String,
+    /// The record, opened.
+    pub reader: Box<dyn SignalReader>,
+}
+
+/// What [`compensate_file`] did.
+pub struct Compensated {
+    /// Samples written per channel.
+    pub samples: u64,
+    /// How, in words (method, latency, memory).
+    pub how: String,
+}
+
+/// Sees every block of the output as it is written.
+pub trait Observer {
+    /// The same samples of each channel: measured, compensated and, with a
+    /// [`Truth`], the true force.
+    fn observe(&mut self, measured: &[&[f64]], compensated: &[&[f64]], truth: Option<&[&[f64]]>);
+}
+
+/// Where [`compensate_file`] tells its user what happens.
+pub trait Monitor {
+    /// A note or a warning, one line.
+    fn note(&self, line: &str);
+    /// The work to do, in samples (reading and writing counted apart).
+    fn set_length(&self, samples: u64);
+    /// `samples` more done.
+    fn advance(&self, samples: u64);
+}
+
+/// Compensate `job`'s record into its output, showing the written blocks to
+/// `observer`. Returns the samples written and how.
+///
+/// Memory per sample of the record (f64 on the host):
+/// * [`Compensation::Box`]: none. The record streams through in blocks of
+///   [`BLOCK`] samples ([`StreamCompensator`]); what the observer keeps is
+///   its own affair (a report with a true force keeps the whole record);
+/// * [`Compensation::Smoother`], stationary or drifting: none. The forward
+///   pass runs over blocks and spills 16 bytes per sample and axis to a
+///   temporary file beside the output (the time-varying smoother adds its
+///   covariance every 4096 samples, about 1.2 bytes per sample), the
+///   backward pass reads it back in chunks and writes the estimates (8
+///   bytes per sample and axis) to a second one, and the input is read again
+///   to write the output block by block
+///   ([`crate::offline::smoother::SpilledForward`],
+///   [`crate::offline::drift::SpilledDriftForward`]). A pipe, which cannot
+///   be read twice, is kept in a temporary file during the first reading (8
+///   bytes per sample and column, [`crate::io::spool`]). Temporary disk
+///   space: 24-26 bytes per sample and axis, plus the spooled pipe, freed at
+///   the end;
+/// * the stationary smoother with a harmonic force prior (checked against
+///   the whole record) and [`Compensation::Parallel`]: the record is read
+///   whole (8 bytes per sample and column, `t_s` included) and the output is
+///   held whole (8 bytes per sample and axis) before it is written block by
+///   block; besides, the smoother keeps 16 bytes per sample of the axis it
+///   is smoothing, and the parallel split every band (about 8·(bands + 2)
+///   bytes per sample and axis). These are not bounded.
+pub fn compensate_file(
+    job: RecordJob,
+    observer: Option<&mut dyn Observer>,
+    monitor: &dyn Monitor,
+) -> Result<Compensated> {
+    let RecordJob {
+        compensation,
+        image_path,
+        mut input,
+        input_path,
+        channels,
+        output,
+        output_format,
+        raw_timing,
+        truth,
+    } = job;
+    let axes = input.axes().to_vec();
+    let target = Target {
+        output: &output,
+        format: output_format,
+        fs: compensation.fs_hz(),
+        source: &input_path.display().to_string(),
+        axes: &axes,
+        has_time: input.has_time(),
+        monitor,
+    };
+    let mut observed = Observed { observer, truth, queue: TruthQueue::default() };
+    let obs = &mut observed;
+    match compensation {
+        Compensation::Box(image) => compensate_box(&image, &image_path, input, raw_timing, &target, obs),
+        Compensation::Parallel(image) => {
+            let how = format!(
+                "parallel elaboration, {} bands, zero-phase split (offline only, whole record in memory)",
+                image.bands().len()
+            );
+            let rec = whole_record(&mut *input, target.fs, target.source)?;
+            let out = compensate_parallel(&image, &rec, raw_timing, target.source)?;
+            Ok(Compensated { samples: target.write_whole(&rec, &out, obs)?, how })
+        }
+        Compensation::Smoother { image, drift, force_prior } => {
+            let mut sidecar = read_sidecar(&image_path, &image)?;
+            note_spectra(&sidecar, monitor);
+            if !force_prior {
+                sidecar.axes.iter_mut().for_each(|m| m.force_prior = None);
+            }
+            let priors: Vec<&str> =
+                sidecar.axes.iter().filter(|m| m.force_prior.is_some()).map(|m| m.axis.as_str()).collect();
+            // The smoothers run in bounded memory (a pipe, read once, is
+            // spooled for its second reading); the force prior (checked
+            // against the whole record) keeps the record whole. The
+            // time-varying smoother has no force model (and a two-state
+            // design makes no prior).
+            if priors.is_empty() || drift.is_some() {
+                let reading = Reading { input, path: &input_path, channels: channels.as_ref() };
+                smooth_spilled(&image, &sidecar, drift, &priors, reading, &target, obs)
+            } else {
+                let how = format!(
+                    "fixed-interval smoother, zero lag, harmonic force prior on axis {} (offline only, whole record in memory for the force prior)",
+                    priors.join(", ")
+                );
+                let rec = whole_record(&mut *input, target.fs, target.source)?;
+                let out = crate::offline::smoother::smooth_record(&image, &sidecar, &rec, target.source)?;
+                Ok(Compensated { samples: target.write_whole(&rec, &out, obs)?, how })
+            }
+        }
+    }
+}
+
+/// An image whose q was chosen for a record's force spectrum says so every
+/// time it is used (its sidecar keeps that).
+fn note_spectra(sidecar: &ModelSidecar, monitor: &dyn Monitor) {
+    for m in &sidecar.axes {
+        if let Some(p) = &m.force_spectrum {
+            monitor.note(&p.note(&m.axis));
+        }
+    }
+}
+
+/// The output of [`compensate_file`], and where progress goes.
+struct Target<'a> {
+    output: &'a Path,
+    format: SignalFormat,
+    fs: u32,
+    /// The input's name in messages.
+    source: &'a str,
+    /// The input's channels.
+    axes: &'a [usize],
+    /// Whether the input has a `t_s` column.
+    has_time: bool,
+    monitor: &'a dyn Monitor,
+}
+
+impl Target<'_> {
+    /// Write the output atomically with a writer for the input's channels
+    /// (`len` samples, if known); `body` writes the samples and returns how
+    /// many.
+    fn write(
+        &self,
+        has_time: bool,
+        len: Option<u64>,
+        body: impl FnOnce(&mut dyn SignalWriter) -> Result<u64>,
+    ) -> Result<u64> {
+        let (path, fs) = (self.output, f64::from(self.fs));
+        let mut n = 0;
+        crate::io::atomic::write_atomic_file(path, |w, file| {
+            let mut writer = writer_for(self.format, w, Some(file), self.axes, has_time, len, fs, path)?;
+            n = body(&mut *writer)?;
+            writer.finish()
+        })?;
+        Ok(n)
+    }
+
+    /// Write a whole compensated record `out` block by block, with the
+    /// times of the input `rec`, then show it to the observer.
+    fn write_whole(&self, rec: &SignalRecord, out: &SignalRecord, observed: &mut Observed<'_>) -> Result<u64> {
+        let n = self.write(rec.t_s.is_some(), Some(rec.len() as u64), |w| {
+            for s in (0..out.len()).step_by(BLOCK) {
+                let e = (s + BLOCK).min(out.len());
+                let chans: Vec<&[f64]> = out.channels.iter().map(|c| &c.1[s..e]).collect();
+                w.write_block(rec.t_s.as_ref().map(|t| &t[s..e]), &chans)?;
+            }
+            Ok(out.len() as u64)
+        })?;
+        observed.whole(rec, out)?;
+        Ok(n)
+    }
+}
+
+/// The observer, if any, with the true force read alongside the output.
+struct Observed<'a> {
+    observer: Option<&'a mut dyn Observer>,
+    truth: Option<Truth>,
+    queue: TruthQueue,
+}
+
+impl Observed<'_> {
+    /// Show `m` samples of measured and compensated force of `axes` to the
+    /// observer, with the next `m` samples of the true force when there is
+    /// one.
+    fn block(&mut self, axes: &[usize], meas: &[&[f64]], outs: &[&[f64]], m: usize) -> Result<()> {
+        let Some(obs) = self.observer.as_deref_mut() else { return Ok(()) };
+        match &mut self.truth {
+            Some(Truth { source, reader }) => {
+                let tv = self.queue.take(&mut **reader, source, axes, m)?;
+                let tv: Vec<&[f64]> = tv.iter().map(|v| &v[..m]).collect();
+                obs.observe(meas, outs, Some(&tv));
+                self.queue.consume(m);
+            }
+            None => obs.observe(meas, outs, None),
+        }
+        Ok(())
+    }
+
+    /// Show a whole record `rec` and its compensation `out` to the
+    /// observer, with the whole true force when there is one.
+    fn whole(&mut self, rec: &SignalRecord, out: &SignalRecord) -> Result<()> {
+        let Some(obs) = self.observer.as_deref_mut() else { return Ok(()) };
+        let axes: Vec<usize> = out.channels.iter().map(|c| c.0).collect();
+        let meas: Vec<&[f64]> = rec.channels.iter().map(|c| c.1.as_slice()).collect();
+        let comp: Vec<&[f64]> = out.channels.iter().map(|c| c.1.as_slice()).collect();
+        match &mut self.truth {
+            Some(Truth { source: tsrc, reader: tr }) => {
+                let taxes = tr.axes().to_vec();
+                let (_, t) = read_all(&mut **tr)?;
+                if t.first().map_or(0, Vec::len) < out.len() {
+                    bail!("{tsrc}: the true force record is shorter than the input");
+                }
+                let tv: Vec<&[f64]> = axes
+                    .iter()
+                    .map(|ax| {
+                        taxes
+                            .iter()
+                            .position(|x| x == ax)
+                            .map(|s| &t[s][..out.len()])
+                            .ok_or_else(|| anyhow!("{tsrc}: axis missing"))
+                    })
+                    .collect::<Result<_>>()?;
+                obs.observe(&meas, &comp, Some(&tv));
+            }
+            None => obs.observe(&meas, &comp, None),
+        }
+        Ok(())
+    }
+}
+
+/// Samples of the truth record read ahead of their use, per input channel.
+#[derive(Default)]
+struct TruthQueue {
+    blk: Option<Block>,
+    queue: Vec<Vec<f64>>,
+}
+
+impl TruthQueue {
+    /// The next `m` truth samples of each of `axes` (at the front of the
+    /// returned vectors); an error if the truth record ends first.
+    fn take(&mut self, r: &mut dyn SignalReader, source: &str, axes: &[usize], m: usize) -> Result<&[Vec<f64>]> {
+        let slots: Vec<usize> = axes.iter().map(|a| r.axes().iter().position(|x| x == a).unwrap_or(0)).collect();
+        if self.queue.len() != axes.len() {
+            self.queue = vec![Vec::new(); axes.len()];
+        }
+        let blk = self.blk.get_or_insert_with(|| Block::new(r.axes().len()));
+        while self.queue[0].len() < m {
+            if r.read_block(blk, BLOCK)? == 0 {
+                bail!("{source}: the true force record is shorter than the input");
+            }
+            for (q, &s) in self.queue.iter_mut().zip(&slots) {
+                q.extend_from_slice(&blk.channels[s]);
+            }
+        }
+        Ok(&self.queue)
+    }
+
+    /// Drop the first `m` samples (handed out by [`TruthQueue::take`]).
+    fn consume(&mut self, m: usize) {
+        for q in &mut self.queue {
+            q.drain(..m);
+        }
+    }
+}
+
+/// The whole record of `reader`, its `t_s` (if any) checked against `fs`.
+fn whole_record(reader: &mut dyn SignalReader, fs: u32, source: &str) -> Result<SignalRecord> {
+    let axes = reader.axes().to_vec();
+    let (t_s, ch) = read_all(reader)?;
+    let rec = SignalRecord { t_s, channels: axes.into_iter().zip(ch).collect() };
+    crate::offline::compensate::check_rate(fs, &rec, source)?;
+    Ok(rec)
+}
+
+/// The box path, block by block ([`stream_box`]). It does not need the
+/// sidecar; one that is there may still say the image was tuned for a
+/// record's spectrum.
+fn compensate_box(
+    image: &CoeffImage,
+    image_path: &Path,
+    mut reader: Box<dyn SignalReader>,
+    raw_timing: bool,
+    target: &Target<'_>,
+    observed: &mut Observed<'_>,
+) -> Result<Compensated> {
+    if sidecar_path(image_path).exists() {
+        if let Ok(sc) = read_sidecar(image_path, image) {
+            note_spectra(&sc, target.monitor);
+        }
+    }
+    let mut comp = StreamCompensator::new(image, target.axes, raw_timing, target.source)?;
+    let how = format!(
+        "box filter, latency {} samples{}, streamed in blocks of {BLOCK}",
+        image.latency_samples,
+        if raw_timing { ", not removed" } else { ", removed" }
+    );
+    let len = reader.len_hint();
+    let samples = target.write(target.has_time, len, |w| stream_box(&mut *reader, &mut comp, w, target, observed))?;
+    Ok(Compensated { samples, how })
+}
+
+/// Read, compensate, write and observe block by block; the output lags the
+/// input by the removed latency, so the inputs (and times) wait in
+/// `pending` until their outputs exist. Parsing runs on a thread of its
+/// own, a block ahead of the kernel and the writer (two cores: parse ||
+/// compensate + format); blocks go back for reuse. Checks the record's
+/// rate. Returns the samples written.
+fn stream_box(
+    reader: &mut dyn SignalReader,
+    comp: &mut StreamCompensator<'_>,
+    w: &mut dyn SignalWriter,
+    target: &Target<'_>,
+    observed: &mut Observed<'_>,
+) -> Result<u64> {
+    let (fs, source) = (target.fs, target.source);
+    let n_ch = reader.axes().len();
+    let axes = reader.axes().to_vec();
+    let has_time = reader.has_time();
+    let mut pending = Block::new(n_ch);
+    let mut out: Vec<Vec<f64>> = vec![Vec::with_capacity(BLOCK); n_ch];
+    let mut rate = RateTracker::default();
+    let mut written = 0u64;
+    std::thread::scope(|s| -> Result<()> {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Block>>(2);
+        let (back_tx, back_rx) = std::sync::mpsc::channel::<Block>();
+        s.spawn(move || loop {
+            let mut blk = back_rx.try_recv().unwrap_or_else(|_| Block::new(n_ch));
+            let r = reader.read_block(&mut blk, BLOCK);
+            let end = !matches!(r, Ok(n) if n > 0);
+            if tx.send(r.map(|_| blk)).is_err() || end {
+                break;
+            }
+        });
+        loop {
+            let blk = rx.recv().map_err(|_| anyhow!("{source}: the reader stopped"))??;
+            let n = blk.len();
+            rate.push(&blk.t_s);
+            pending.t_s.extend_from_slice(&blk.t_s);
+            for (p, b) in pending.channels.iter_mut().zip(&blk.channels) {
+                p.extend_from_slice(b);
+            }
+            for o in &mut out {
+                o.clear();
+            }
+            let m = if n == 0 { comp.finish(&mut out) } else { comp.push(&blk.channels, &mut out) }
+                .with_context(|| source.to_string())?;
+            let _ = back_tx.send(blk);
+            let t = has_time.then(|| &pending.t_s[..m]);
+            let outs: Vec<&[f64]> = out.iter().map(Vec::as_slice).collect();
+            w.write_block(t, &outs)?;
+            let meas: Vec<&[f64]> = pending.channels.iter().map(|c| &c[..m]).collect();
+            observed.block(&axes, &meas, &outs, m)?;
+            pending.t_s.drain(..m.min(pending.t_s.len()));
+            for p in &mut pending.channels {
+                p.drain(..m);
+            }
+            written += m as u64;
+            target.monitor.advance(n as u64);
+            if n == 0 {
+                return Ok(());
+            }
+        }
+    })?;
+    if let Some(found) = rate.rate() {
+        check_rate_value(fs, found, source, "column t_s")?;
+    }
+    Ok(written)
+}
+
+/// The input of a smoother, read twice: once for the forward pass, once
+/// for its times and the observer.
+struct Reading<'a> {
+    input: Box<dyn SignalReader>,
+    path: &'a Path,
+    channels: Option<&'a ChannelMap>,
+}
+
+/// A smoother over a record of any length, in bounded memory: the
+/// time-varying one over `drift` (which has no force model: the prior of
+/// the axes `priors` is not used), else the stationary one.
+fn smooth_spilled(
+    image: &CoeffImage,
+    sidecar: &ModelSidecar,
+    drift: Option<(f64, f64)>,
+    priors: &[&str],
+    reading: Reading<'_>,
+    target: &Target<'_>,
+    observed: &mut Observed<'_>,
+) -> Result<Compensated> {
+    let dir = crate::io::atomic::output_dir(target.output);
+    let input = crate::io::spool::TwoReadings::new(reading.input, reading.path, dir)?;
+    let spilled = format!(
+        "spilled to temporary files beside the output{}, memory independent of the record's length",
+        if input.spooled() { ", with the input (a pipe) for its second reading" } else { "" }
+    );
+    let source = target.source;
+    let spill = Spill { dir, reopen: &|| Ok(open_signal(reading.path, reading.channels)?.0) };
+    match drift {
+        Some((s0, s1)) => {
+            let how = format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only; forward pass and covariance checkpoints {spilled})");
+            if !priors.is_empty() {
+                target.monitor.note(&format!(
+                    "warning: the harmonic force prior of axis {} is not used: the time-varying smoother of --drift has no force model",
+                    priors.join(", ")
+                ));
+            }
+            let drifting = target
+                .axes
+                .iter()
+                .map(|&ax| crate::offline::drift::axis_drift(image, sidecar, ax, source, (s0, s1)))
+                .collect::<Result<Vec<_>>>()?;
+            let models: Vec<Box<dyn Fn(f64) -> crate::fit::PoleResidueModel + '_>> =
+                drifting.iter().map(|(ts, _)| Box::new(move |s: f64| ts.at(s)) as Box<dyn Fn(f64) -> _>).collect();
+            let passes = models
+                .iter()
+                .zip(&drifting)
+                .zip(target.axes)
+                .map(|((m, (_, opts)), &ax)| {
+                    crate::offline::drift::SpilledDriftForward::new(&**m, opts, dir)
+                        .map(|p| Box::new(p) as Box<dyn SpilledPass>)
+                        .with_context(|| format!("{source}: axis {}", axis_name(ax)))
+                })
+                .collect::<Result<_>>()?;
+            Ok(Compensated { samples: spill.run(input, passes, target, observed)?, how })
+        }
+        None => {
+            let how = format!("fixed-interval smoother, zero lag (offline only; forward pass {spilled})");
+            let smoothers = target
+                .axes
+                .iter()
+                .map(|&ax| crate::offline::smoother::axis_smoother(image, sidecar, ax, source))
+                .collect::<Result<Vec<_>>>()?;
+            let passes = smoothers
+                .iter()
+                .map(|sm| {
+                    crate::offline::smoother::SpilledForward::new(sm, dir).map(|p| Box::new(p) as Box<dyn SpilledPass>)
+                })
+                .collect::<Result<_>>()?;
+            Ok(Compensated { samples: spill.run(input, passes, target, observed)?, how })
+        }
+    }
+}
+
+/// Where the passes of [`smooth_spilled`] spill (`dir`), and how the input
+/// is opened again for its second reading.
+struct Spill<'a> {
+    dir: &'a Path,
+    reopen: &'a dyn Fn() -> Result<Box<dyn SignalReader>>,
+}
+
+impl Spill<'_> {
+    /// The passes over the input's first reading, spilled, then their
+    /// backward passes ([`Spill::smooth`]); then the output written with
+    /// the input's second reading ([`Spill::write`]). Returns the samples
+    /// written.
+    fn run(
+        &self,
+        mut input: crate::io::spool::TwoReadings,
+        passes: Vec<Box<dyn SpilledPass + '_>>,
+        target: &Target<'_>,
+        observed: &mut Observed<'_>,
+    ) -> Result<u64> {
+        let len_hint = input.first().len_hint();
+        target.monitor.set_length(len_hint.unwrap_or(0) * 2);
+        let est = self.smooth(input.first(), passes, target)?;
+        // The input is read a second time, for its times and the observer.
+        let mut again = input.second(|| (self.reopen)())?;
+        let len = len_hint.or(again.len_hint());
+        target.write(target.has_time, len, |w| write_spilled(&mut *again, est, w, target, observed))
+    }
+
+    /// The forward pass of each axis's smoother over the blocks of
+    /// `reader`, spilled, then its backward pass
+    /// ([`crate::offline::smoother::SpilledForward`]). Checks the record's
+    /// rate.
+    fn smooth(
+        &self,
+        reader: &mut dyn SignalReader,
+        mut fwd: Vec<Box<dyn SpilledPass + '_>>,
+        target: &Target<'_>,
+    ) -> Result<Vec<SpilledEstimate>> {
+        let (axes, source) = (target.axes, target.source);
+        let mut blk = Block::new(axes.len());
+        let mut rate = RateTracker::default();
+        while reader.read_block(&mut blk, BLOCK)? > 0 {
+            rate.push(&blk.t_s);
+            for (f, y) in fwd.iter_mut().zip(&blk.channels) {
+                f.push(y)?;
+            }
+            target.monitor.advance(blk.len() as u64);
+        }
+        if let Some(found) = rate.rate() {
+            check_rate_value(target.fs, found, source, "column t_s")?;
+        }
+        let per_axis = |n: u64| target.monitor.advance(n / axes.len().max(1) as u64);
+        fwd.into_iter()
+            .zip(axes)
+            .map(|(f, &ax)| f.backward(self.dir, &format!("f{}", axis_name(ax)), source, &per_axis))
+            .collect()
+    }
+}
+
+/// Write the estimates of [`Spill::smooth`] block by block, with the times
+/// of the input read again (`again`), and show them to the observer.
+fn write_spilled(
+    again: &mut dyn SignalReader,
+    mut est: Vec<SpilledEstimate>,
+    w: &mut dyn SignalWriter,
+    target: &Target<'_>,
+    observed: &mut Observed<'_>,
+) -> Result<u64> {
+    let source = target.source;
+    let axes = again.axes().to_vec();
+    let mut blk = Block::new(axes.len());
+    let mut out: Vec<Vec<f64>> = vec![Vec::with_capacity(BLOCK); axes.len()];
+    let mut written = 0u64;
+    loop {
+        let m = again.read_block(&mut blk, BLOCK)?;
+        if m == 0 {
+            break;
+        }
+        if est.iter().any(|e| e.left() < m as u64) {
+            bail!("{source}: the input changed while it was compensated (longer on the second reading)");
+        }
+        for (e, o) in est.iter_mut().zip(&mut out) {
+            e.read(m, o)?;
+        }
+        let outs: Vec<&[f64]> = out.iter().map(Vec::as_slice).collect();
+        w.write_block((!blk.t_s.is_empty()).then_some(&blk.t_s[..]), &outs)?;
+        let meas: Vec<&[f64]> = blk.channels.iter().map(Vec::as_slice).collect();
+        observed.block(&axes, &meas, &outs, m)?;
+        written += m as u64;
+        target.monitor.advance(m as u64);
+    }
+    if est.iter().any(|e| e.left() > 0) {
+        bail!("{source}: the input changed while it was compensated (shorter on the second reading)");
+    }
+    Ok(written)
+}
