@@ -510,6 +510,14 @@ pub fn quantize(real: &MimoRealization, reference: &MimoReference) -> Result<(Mi
     Ok((filter, v))
 }
 
+/// Verify an f32 filter against the f64 compensator `ss` it realizes, over
+/// 0..`f_band_hz` at `fs_hz` (module doc: stability margin, frequency
+/// response per entry, time-domain run of the kernel): an error where it
+/// deviates beyond the limits.
+pub fn verify_filter(filter: &MimoFilter, ss: &MimoStateSpace, fs_hz: f64, f_band_hz: f64) -> Result<MimoVerification> {
+    quantize(&realization_of(filter), &MimoReference::of(ss, fs_hz, f_band_hz)).map(|(_, v)| v)
+}
+
 /// The f32 filter's coefficients as an f64 realization (for its response).
 fn realization_of(f: &MimoFilter) -> MimoRealization {
     MimoRealization {

@@ -215,7 +215,10 @@ pub fn discretize_matrix(model: &MatrixModel, fs_hz: f64, band_hz: (f64, f64)) -
     let kept: Vec<(Complex64, bool, usize)> = (0..model.terms())
         .filter_map(|k| {
             let (p, pair) = model.pole(k);
-            (!pair || p.im < nyq).then_some(((p * t).exp(), pair, k))
+            // A pair above Nyquist, or a real pole whose corner |p|/2π is,
+            // is left to the taps (its tail in the band), as per axis.
+            let below = if pair { p.im < nyq } else { p.re.abs() < nyq };
+            below.then_some(((p * t).exp(), pair, k))
         })
         .collect();
     let above = model.terms() - kept.len();

@@ -33,7 +33,8 @@ use dynocomp_core::mimo::MimoFilter;
 use num_complex::Complex64;
 use serde::Serialize;
 
-use self::combine::{combine, RowSource};
+pub use self::combine::RowSource;
+use self::combine::combine;
 use self::criterion::{choose_q, MatrixCriterion, QSearch, RowError};
 use self::discrete::{discretize_matrix, plant_states, CMatrix3, DiscreteMatch, DiscreteMatrixModel, PlantStates};
 use self::kalman::{augmented_plant, MatrixAugmentedPlant, MatrixKalman};
@@ -72,6 +73,16 @@ pub struct MatrixOptions {
 /// Highest order of the matrix fit by default: every mode of the set-up is
 /// in the one model (a per-axis fit sees only those of its entry).
 pub const MATRIX_MAX_ORDER: usize = 40;
+/// Pole-relocation iterations per order of the matrix fit by default. The
+/// plate dynamometer's rocking modes come in close pairs (e.g. 211 and
+/// 213 Hz of the off-centre preset) that 8 iterations merge into one pole,
+/// leaving 1-2 % model error at the tooth-passing harmonics next to them;
+/// 20 separate them (measured on the presets at 25.6 kHz).
+pub const MATRIX_ITERATIONS: usize = 20;
+/// Largest condition number of the measured FRF matrix on a coherent line
+/// of the compensated band: beyond it the three channels do not see three
+/// independent forces and no 3x3 inverse exists.
+pub const MAX_MATRIX_CONDITION: f64 = 1e6;
 
 /// The fit of the matrix, for the summary.
 #[derive(Clone, Debug, Serialize)]
@@ -164,6 +175,8 @@ pub struct PlantFigures {
 /// The realization's figures: what the box runs.
 #[derive(Clone, Debug, Serialize)]
 pub struct RealizationFigures {
+    /// Upper end of the band the f32 filter is verified over (Hz).
+    pub verified_to_hz: f64,
     /// Pole-pair sections.
     pub pairs: usize,
     /// Diagonal sections (two real poles each).
@@ -296,6 +309,7 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
             bail!("axis {}: no coherent band below 0.45 fs (coherence ≥ {}); repeat the impact test", axis_name(i), d.coherence_threshold);
         }
     }
+    check_invertible(frf, &bands, d.coherence_threshold)?;
     let crosstalk = crosstalk_of(frf, &bands, d.coherence_threshold);
     let prepared: Vec<Result<PreparedAxis>> =
         (0..3).map(|i| prepare_axis(&frf.freq_hz, frf.axis(i).expect("complete"), r[i], d)).collect();
@@ -304,7 +318,11 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
             notes.push(format!("axis {}: no per-axis design: {e:#}", axis_name(i)));
         }
     }
-    let vf = opts.matrix_vf.clone().unwrap_or(VfOptions { max_order: MATRIX_MAX_ORDER, ..d.vf.clone() });
+    let vf = opts.matrix_vf.clone().unwrap_or(VfOptions {
+        max_order: MATRIX_MAX_ORDER,
+        iterations: d.vf.iterations.max(MATRIX_ITERATIONS),
+        ..d.vf.clone()
+    });
     let prepared_model = match given {
         Some(m) => prepare_model(frf, &bands, fs, d.coherence_threshold, m, f64::NAN, Vec::new()),
         None => prepare_matrix(frf, &bands, fs, &vf, d.coherence_threshold),
@@ -363,7 +381,11 @@ fn check_options(frf: &Frf, r: [f64; 3], opts: &MatrixOptions) -> Result<()> {
     let d = &opts.design;
     let status = frf.matrix_status();
     if !status.is_complete() {
-        bail!("the 3x3 design needs all nine FRFs: {}", status.message().unwrap_or_default());
+        bail!(
+            "the 3x3 design needs all nine FRFs: {}; measure the missing entries (an impact test in every hammer \
+             direction, every channel recorded) to compensate the crosstalk",
+            status.message().unwrap_or_default()
+        );
     }
     if !matches!(d.method, FitMethod::Vf) {
         bail!("the 3x3 design supports the default method only (--method vf), not the paper's");
@@ -380,6 +402,32 @@ fn check_options(frf: &Frf, r: [f64; 3], opts: &MatrixOptions) -> Result<()> {
     for (i, v) in r.iter().enumerate() {
         if !(*v > 0.0 && v.is_finite()) {
             bail!("axis {}: measurement noise variance R = {v} N² must be positive and finite", axis_name(i));
+        }
+    }
+    Ok(())
+}
+
+/// Refuse a measured matrix that is singular (condition number above
+/// [`MAX_MATRIX_CONDITION`], or not finite) on a line of the compensated
+/// bands where every entry is coherent: no 3x3 compensator can separate
+/// the forces there.
+fn check_invertible(frf: &Frf, bands: &[(f64, f64); 3], threshold: f64) -> Result<()> {
+    let lo = bands.iter().map(|b| b.0).fold(f64::INFINITY, f64::min);
+    let hi = bands.iter().map(|b| b.1).fold(0.0, f64::max);
+    let entries: Vec<_> = (0..9).map(|e| frf.entry(e / 3, e % 3).expect("complete")).collect();
+    for (k, f) in frf.freq_hz.iter().enumerate() {
+        if *f < lo || *f > hi || entries.iter().any(|e| e.coherence.is_some_and(|c| c[k] < threshold)) {
+            continue;
+        }
+        let g = frf.matrix_at(k).expect("complete");
+        let sv = g.singular_values();
+        let condition = sv.max() / sv.min();
+        if !(condition <= MAX_MATRIX_CONDITION) {
+            bail!(
+                "the measured FRF matrix is singular at {f:.1} Hz (condition number {condition:.1e}, limit {MAX_MATRIX_CONDITION:.0e}): \
+                 the three channels do not see three independent forces; check the channel and hammer-direction \
+                 mapping (a repeated or mislabelled file), or design per axis from the direct FRFs"
+            );
         }
     }
     Ok(())
@@ -606,6 +654,7 @@ fn finish(
         axes: rd.axes,
         crosstalk,
         realization: RealizationFigures {
+            verified_to_hz: f_band,
             pairs: verification.pairs,
             diagonal: verification.diagonal,
             fir_taps: verification.fir_taps,
