@@ -12,9 +12,9 @@
 //! 4. beside it the per-axis design of each direct FRF
 //!    ([`crate::design::axis`], unchanged), its prediction now with the
 //!    crosstalk it leaves;
-//! 5. per output axis the row of the design that predicts less error (never
-//!    silently worse: the 3x3 row only where it beats the per-axis one),
-//!    as one block-diagonal compensator ([`combine`]);
+//! 5. per output axis the row with less error on the measured matrix (never
+//!    silently worse: the 3x3 row only where it beats the per-axis one
+//!    there, [`Criteria`]), as one block-diagonal compensator ([`combine`]);
 //! 6. realized and verified in f32 for the one 3x3 kernel
 //!    ([`crate::realize::mimo`]).
 //!
@@ -111,7 +111,8 @@ pub struct Crosstalk {
 }
 
 /// One output axis's predictions (√J, fractions of the force's RMS, with
-/// the crosstalk counted) and which row was used.
+/// the crosstalk counted, on the 3x3 model) and which row was used: the one
+/// with the smaller error on the measured matrix ([`Criteria`]).
 #[derive(Clone, Debug, Serialize)]
 pub struct AxisPrediction {
     /// Axis letter.
@@ -126,6 +127,11 @@ pub struct AxisPrediction {
     pub per_axis_direct_only: Option<f64>,
     /// The 3x3 design's row (`None` where it failed).
     pub matrix: Option<RowError>,
+    /// The per-axis design's error on the measured matrix (which judges
+    /// the choice, with its measurement noise; `None` where it failed).
+    pub per_axis_measured: Option<RowError>,
+    /// The 3x3 row's error on the measured matrix.
+    pub matrix_measured: Option<RowError>,
     /// The row used.
     pub source: RowSource,
     /// Its prediction.
@@ -339,7 +345,10 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
         Some(p) => p.model.frf(f),
         None => measured_matrix_model(frf, f),
     };
-    let criterion = MatrixCriterion::new(model_g, bands, fs, force, r);
+    let criterion = Criteria {
+        model: MatrixCriterion::new(model_g, bands, fs, force, r),
+        measured: MatrixCriterion::new(|f| measured_matrix_model(frf, f), bands, fs, force, r),
+    };
     let latencies: Vec<usize> = match opts.latency {
         Some(l) => vec![l],
         None => vec![DEFAULT_LATENCY],
@@ -531,11 +540,25 @@ fn prepare_model(
 }
 
 /// The designs at latency `lag` and each axis's choice of row.
-fn round(lag: usize, prepared: &[Result<PreparedAxis>], prep: Option<&MatrixPrep>, crit: &MatrixCriterion, r: [f64; 3], d: &DesignOptions) -> Round {
+/// The criterion on the 3x3 model Ĝ (the predictions, and the q search),
+/// and the same on the measured matrix (interpolated between its lines),
+/// which judges the choice of row: the 3x3 design is optimal for Ĝ, so on
+/// Ĝ its model error is invisible while the per-axis design's
+/// disagreement with Ĝ counts against it; on the measurement both carry
+/// their model's error and the same measurement noise.
+struct Criteria {
+    model: MatrixCriterion,
+    measured: MatrixCriterion,
+}
+
+fn round(lag: usize, prepared: &[Result<PreparedAxis>], prep: Option<&MatrixPrep>, crits: &Criteria, r: [f64; 3], d: &DesignOptions) -> Round {
+    let crit = &crits.model;
+    let judge = &crits.measured;
     let opts = DesignOptions { lag, ..d.clone() };
     let per_axis: Vec<Option<AxisDesign>> =
         prepared.iter().map(|p| p.as_ref().ok().and_then(|p| design_prepared(p, &opts).ok())).collect();
     let matrix = prep.and_then(|p| design_3x3(p, crit, r, lag, d).ok());
+    debug_assert_eq!(crit.all_freqs(), judge.all_freqs());
     let all = crit.all_freqs();
     let h_matrix = matrix.as_ref().map(|(k, _, _)| k.compensator.freq_responses(&all, d.fs_hz));
     let axes: Vec<AxisPrediction> = (0..3)
@@ -543,24 +566,35 @@ fn round(lag: usize, prepared: &[Result<PreparedAxis>], prep: Option<&MatrixPrep
             let raw = crit.raw(i);
             let per = per_axis[i].as_ref().map(|a| {
                 let h = a.kalman.compensator.freq_responses(&crit.rows[i].freqs, d.fs_hz);
-                (crit.per_axis(i, lag, &h), a.predicted_error, a.noise_gain)
+                (crit.per_axis(i, lag, &h), a.predicted_error, a.noise_gain, judge.per_axis(i, lag, &h))
             });
-            let mat = matrix.as_ref().zip(h_matrix.as_ref()).map(|((_, _, ng), h)| (crit.row_error(i, lag, h), ng[i]));
+            let mat = matrix
+                .as_ref()
+                .zip(h_matrix.as_ref())
+                .map(|((_, _, ng), h)| (crit.row_error(i, lag, h), ng[i], judge.row_error(i, lag, h)));
             let (source, chosen, noise_gain, reason) = match (per, mat) {
-                (Some((p, _, _)), Some((m, mng))) if m.error < p.error => (
+                (Some((_, _, _, pj)), Some((m, mng, mj))) if mj.error < pj.error => (
                     RowSource::Matrix,
                     m,
                     mng,
-                    format!("3x3 row: predicted {:.3} % against {:.3} % per axis", 100.0 * m.error, 100.0 * p.error),
+                    format!(
+                        "3x3 row: {:.3} % against {:.3} % per axis on the measured matrix",
+                        100.0 * mj.error,
+                        100.0 * pj.error
+                    ),
                 ),
-                (Some((p, _, png)), Some((m, _))) => (
+                (Some((p, _, png, pj)), Some((_, _, mj))) => (
                     RowSource::PerAxis,
                     p,
                     png,
-                    format!("per-axis row: predicted {:.3} %, the 3x3 row {:.3} %", 100.0 * p.error, 100.0 * m.error),
+                    format!(
+                        "per-axis row: {:.3} % against {:.3} % for the 3x3 row on the measured matrix",
+                        100.0 * pj.error,
+                        100.0 * mj.error
+                    ),
                 ),
-                (Some((p, _, png)), None) => (RowSource::PerAxis, p, png, "per-axis row: no 3x3 design".to_string()),
-                (None, Some((m, mng))) => (RowSource::Matrix, m, mng, "3x3 row: no per-axis design".to_string()),
+                (Some((p, _, png, _)), None) => (RowSource::PerAxis, p, png, "per-axis row: no 3x3 design".to_string()),
+                (None, Some((m, mng, _))) => (RowSource::Matrix, m, mng, "3x3 row: no per-axis design".to_string()),
                 (None, None) => (RowSource::PerAxis, RowError { error: f64::INFINITY, distortion: f64::INFINITY }, f64::NAN, "no design".to_string()),
             };
             AxisPrediction {
@@ -570,6 +604,8 @@ fn round(lag: usize, prepared: &[Result<PreparedAxis>], prep: Option<&MatrixPrep
                 per_axis: per.map(|p| p.0),
                 per_axis_direct_only: per.map(|p| p.1),
                 matrix: mat.map(|m| m.0),
+                per_axis_measured: per.map(|p| p.3),
+                matrix_measured: mat.map(|m| m.2),
                 source,
                 chosen,
                 reason,
