@@ -341,7 +341,10 @@ mod tests {
             let per_axis = axis_budget(fs, 600, n);
             let total = m.fixed.high.div_ceil(100) + n * per_axis;
             assert!(load_permille(total, fs) <= 600, "fs {fs} n {n}");
-            assert!(load_permille(total + n + 4, fs) > 600 || load_permille(total + 2 * n + 4, fs) > 600, "fs {fs} n {n}: budget not tight");
+            assert!(
+                load_permille(total + n + 4, fs) > 600 || load_permille(total + 2 * n + 4, fs) > 600,
+                "fs {fs} n {n}: budget not tight"
+            );
         }
         assert_eq!(axis_budget(1_000_000, 100, 3), 0);
     }

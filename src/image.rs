@@ -37,7 +37,8 @@ pub const SECTION_LEN: usize = 32;
 /// Size of the trailing CRC.
 pub const CRC_LEN: usize = 4;
 /// Largest possible image (3 axes × 24 sections × 24 FIR taps).
-pub const MAX_IMAGE_LEN: usize = HEADER_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN + MAX_FIR * TAP_LEN) + CRC_LEN;
+pub const MAX_IMAGE_LEN: usize =
+    HEADER_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN + MAX_FIR * TAP_LEN) + CRC_LEN;
 /// Smallest valid image (1 axis, 0 sections, no taps).
 pub const MIN_IMAGE_LEN: usize = HEADER_LEN + AXIS_HEADER_LEN + CRC_LEN;
 
@@ -50,8 +51,9 @@ pub const MAX_BANDS: usize = 8;
 pub const BAND_RECORD_LEN: usize = 8;
 /// Largest possible parallel image ([`MAX_BANDS`] bands × 3 full axes). It
 /// is larger than a flash slot: parallel images only live in files.
-pub const MAX_PARALLEL_IMAGE_LEN: usize =
-    HEADER_LEN + MAX_BANDS * (BAND_RECORD_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN + MAX_FIR * TAP_LEN)) + CRC_LEN;
+pub const MAX_PARALLEL_IMAGE_LEN: usize = HEADER_LEN
+    + MAX_BANDS * (BAND_RECORD_LEN + AXES * (AXIS_HEADER_LEN + MAX_SECTIONS * SECTION_LEN + MAX_FIR * TAP_LEN))
+    + CRC_LEN;
 
 /// Accepted sample-rate range of an image (Hz). The box itself narrows this
 /// to what its hardware supports.
@@ -515,7 +517,11 @@ fn envelope(bytes: &[u8], version: u16, max_len: usize) -> Result<&[u8], ImageEr
     }
     let v = r.u16().ok_or(truncated)?;
     if v != version {
-        return Err(if v == PARALLEL_FORMAT_VERSION { ImageError::ParallelOfflineOnly } else { ImageError::UnsupportedVersion(v) });
+        return Err(if v == PARALLEL_FORMAT_VERSION {
+            ImageError::ParallelOfflineOnly
+        } else {
+            ImageError::UnsupportedVersion(v)
+        });
     }
     let header_len = r.u16().ok_or(truncated)?;
     if usize::from(header_len) != HEADER_LEN {
@@ -572,9 +578,7 @@ fn write_header(w: &mut Writer<'_>, version: u16, len: usize, h: &Header) {
 /// The CRC stored at the end of the `n` encoded bytes in `buf` (0 if the
 /// encoding failed): the image id.
 fn stored_crc(buf: &[u8], n: Result<usize, ImageError>) -> u32 {
-    n.ok()
-        .and_then(|n| Reader { buf, pos: n.checked_sub(CRC_LEN)? }.u32())
-        .unwrap_or(0)
+    n.ok().and_then(|n| Reader { buf, pos: n.checked_sub(CRC_LEN)? }.u32()).unwrap_or(0)
 }
 
 /// Append the CRC of everything written so far; returns the total length.
@@ -654,11 +658,7 @@ fn read_axis(r: &mut Reader<'_>, expected: u8, bad_len: ImageError) -> Result<Ax
         for x in v.iter_mut() {
             *x = r.f32().ok_or(bad_len)?;
         }
-        *sec = Section {
-            delta: [v[0], v[1], v[2], v[3]],
-            b: [v[4], v[5]],
-            c: [v[6], v[7]],
-        };
+        *sec = Section { delta: [v[0], v[1], v[2], v[3]], b: [v[4], v[5]], c: [v[6], v[7]] };
     }
     let mut taps = [0f32; MAX_FIR];
     for h in taps.iter_mut().take(usize::from(n_taps)) {
@@ -668,10 +668,9 @@ fn read_axis(r: &mut Reader<'_>, expected: u8, bad_len: ImageError) -> Result<Ax
     let fir = taps.get(..usize::from(n_taps)).unwrap_or(&[]);
     let filter = AxisFilter::with_fir(secs, d, fir).map_err(|e| match e {
         FilterError::TooManySections => ImageError::TooManySections { axis, count },
-        FilterError::NonFinite(s) => ImageError::NonFiniteCoefficient {
-            axis,
-            section: if s >= MAX_SECTIONS { 255 } else { s as u8 },
-        },
+        FilterError::NonFinite(s) => {
+            ImageError::NonFiniteCoefficient { axis, section: if s >= MAX_SECTIONS { 255 } else { s as u8 } }
+        }
         FilterError::Unstable(s) => ImageError::UnstableSection { axis, section: s as u8 },
         FilterError::TooManyTaps => ImageError::TooManyTaps { axis, count: n_taps },
         FilterError::NonFiniteTap(t) => ImageError::NonFiniteTap { axis, tap: t as u8 },
@@ -693,10 +692,7 @@ fn read_axes(r: &mut Reader<'_>, mask: u8, bad_len: ImageError) -> Result<[Optio
 
 /// Axis mask of an axis array: bit i set when axis i is present.
 fn mask_of(axes: &[Option<AxisImage>; AXES]) -> u8 {
-    axes.iter()
-        .enumerate()
-        .filter(|(_, a)| a.is_some())
-        .fold(0, |m, (i, _)| m | (1 << i))
+    axes.iter().enumerate().filter(|(_, a)| a.is_some()).fold(0, |m, (i, _)| m | (1 << i))
 }
 
 /// Header checks shared by both versions (steps 14-16).
@@ -732,9 +728,7 @@ fn validate_axes(axes: &[Option<AxisImage>; AXES]) -> Result<(), ImageError> {
             return Err(ImageError::BadScaling { axis });
         }
         let m = &a.summary;
-        let ok = [m.fit_nrmse, m.flat_lo_hz, m.flat_hi_hz, m.noise_gain]
-            .iter()
-            .all(|v| v.is_finite() && *v >= 0.0)
+        let ok = [m.fit_nrmse, m.flat_lo_hz, m.flat_hi_hz, m.noise_gain].iter().all(|v| v.is_finite() && *v >= 0.0)
             && m.q.is_finite()
             && m.q >= 0.0
             && m.r.is_finite()
@@ -1046,7 +1040,11 @@ impl ParallelImage {
         let mut prev_hi = 0.0f32;
         for (k, b) in self.bands().iter().enumerate() {
             let band = k as u8;
-            let edges_ok = b.lo_hz.is_finite() && b.hi_hz.is_finite() && b.lo_hz >= prev_hi && b.hi_hz > b.lo_hz && b.hi_hz <= nyquist;
+            let edges_ok = b.lo_hz.is_finite()
+                && b.hi_hz.is_finite()
+                && b.lo_hz >= prev_hi
+                && b.hi_hz > b.lo_hz
+                && b.hi_hz <= nyquist;
             if !edges_ok {
                 return Err(ImageError::BadBand { band });
             }

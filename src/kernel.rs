@@ -99,20 +99,12 @@ impl Section {
     /// A section that holds a single real pole `p` (z-domain), input gain `b`
     /// and output gain `c`: `Δ = p − 1`, second state unused.
     pub fn first_order(pole: f32, b: f32, c: f32) -> Self {
-        Section {
-            delta: [pole - 1.0, 0.0, 0.0, -1.0],
-            b: [b, 0.0],
-            c: [c, 0.0],
-        }
+        Section { delta: [pole - 1.0, 0.0, 0.0, -1.0], b: [b, 0.0], c: [c, 0.0] }
     }
 
     /// Whether every coefficient is finite.
     pub fn is_finite(&self) -> bool {
-        self.delta
-            .iter()
-            .chain(self.b.iter())
-            .chain(self.c.iter())
-            .all(|v| v.is_finite())
+        self.delta.iter().chain(self.b.iter()).chain(self.c.iter()).all(|v| v.is_finite())
     }
 
     /// Whether the block's poles (eigenvalues of `I + Δ`) lie strictly inside
@@ -371,14 +363,7 @@ impl AxisFilter {
             form.push(s).map_err(|()| FilterError::NotModal(i))?;
             *dst = *s;
         }
-        Ok(AxisFilter {
-            sections: all,
-            len: sections.len(),
-            form,
-            d,
-            fir: taps,
-            fir_len: fir.len(),
-        })
+        Ok(AxisFilter { sections: all, len: sections.len(), form, d, fir: taps, fir_len: fir.len() })
     }
 
     /// Bound on the ℓ1 norm of the filter's impulse response (N/N):

@@ -25,8 +25,8 @@ use embedded_storage::nor_flash::NorFlash;
 
 use crate::image::CoeffImage;
 use crate::protocol::{
-    decode_message, AxisSummaryWire, BoxMessage, FrameError, ImageSummary, LinkError, Reply, Request,
-    RequestFrame, Status, StatusCounters, PROTOCOL_VERSION,
+    decode_message, AxisSummaryWire, BoxMessage, FrameError, ImageSummary, LinkError, Reply, Request, RequestFrame,
+    Status, StatusCounters, PROTOCOL_VERSION,
 };
 use crate::sample::BypassReason;
 use crate::store::Store;

@@ -254,9 +254,15 @@ impl core::fmt::Display for LinkError {
             LinkError::Malformed => f.write_str("the box could not decode the message (protocol version mismatch?)"),
             LinkError::NoUpload => f.write_str("no upload in progress"),
             LinkError::BadDecimation => f.write_str("stream decimation must be at least 1"),
-            LinkError::UploadTooLarge { len, max } => write!(f, "image of {len} bytes does not fit a slot (at most {max})"),
-            LinkError::OutOfOrder { expected, got } => write!(f, "upload chunk at offset {got}, the box expected {expected}"),
-            LinkError::ChunkTooLong { len } => write!(f, "upload chunk reaches past the declared length {len} or is too long"),
+            LinkError::UploadTooLarge { len, max } => {
+                write!(f, "image of {len} bytes does not fit a slot (at most {max})")
+            }
+            LinkError::OutOfOrder { expected, got } => {
+                write!(f, "upload chunk at offset {got}, the box expected {expected}")
+            }
+            LinkError::ChunkTooLong { len } => {
+                write!(f, "upload chunk reaches past the declared length {len} or is too long")
+            }
             LinkError::Incomplete { received, len } => write!(f, "commit after {received} of {len} bytes"),
             LinkError::CrcMismatch { declared, computed } => {
                 write!(f, "image corrupted in transfer: CRC {computed:#010x} read back, {declared:#010x} declared")
@@ -487,9 +493,7 @@ pub fn encode_frame<T: Serialize>(msg: &T, out: &mut [u8]) -> Result<usize, Fram
         postcard::to_slice(msg, msg_area).map_err(|_| FrameError::TooLarge)?.len()
     };
     let crc = CRC32.checksum(body.get(..n).ok_or(FrameError::TooLarge)?);
-    body.get_mut(n..n + CRC_BYTES)
-        .ok_or(FrameError::TooLarge)?
-        .copy_from_slice(&crc.to_le_bytes());
+    body.get_mut(n..n + CRC_BYTES).ok_or(FrameError::TooLarge)?.copy_from_slice(&crc.to_le_bytes());
     let src = body.get(..n + CRC_BYTES).ok_or(FrameError::TooLarge)?;
     let len = cobs::try_encode(src, out).map_err(|_| FrameError::TooLarge)?;
     *out.get_mut(len).ok_or(FrameError::TooLarge)? = 0;

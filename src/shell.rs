@@ -22,9 +22,7 @@
 //! Nothing here touches hardware, allocates or panics.
 
 use crate::image::CoeffImage;
-use crate::sample::{
-    process_sample, select_stored_mode, BypassReason, Mode, SampleFlags, SampleState,
-};
+use crate::sample::{process_sample, select_stored_mode, BypassReason, Mode, SampleFlags, SampleState};
 
 /// The image the sample path runs, with its mode decided once, when it
 /// became active (boot, upload, image switch), not on every sample.
@@ -149,11 +147,7 @@ impl TimerDivider {
         let t = self.ticks_per_period() as i128;
         let num = (i128::from(clk_hz) - i128::from(fs_hz) * t) * 1_000_000;
         let den = i128::from(fs_hz) * t;
-        let q = if num >= 0 {
-            (num + den / 2) / den
-        } else {
-            (num - den / 2) / den
-        };
+        let q = if num >= 0 { (num + den / 2) / den } else { (num - den / 2) / den };
         q as i64
     }
 }
@@ -183,10 +177,7 @@ pub fn timer_divider(clk_hz: u32, fs_hz: u32, max_arr: u32) -> Option<TimerDivid
     }
     let step = fs * psc_plus_1;
     let arr_plus_1 = ((clk + step / 2) / step).clamp(2, arr_span);
-    Some(TimerDivider {
-        psc: (psc_plus_1 - 1) as u16,
-        arr: (arr_plus_1 - 1) as u32,
-    })
+    Some(TimerDivider { psc: (psc_plus_1 - 1) as u16, arr: (arr_plus_1 - 1) as u32 })
 }
 
 /// Counter value at which the sample interrupt fires (`TIMx_CCR1`): `delay_ns`
@@ -198,9 +189,7 @@ pub fn timer_divider(clk_hz: u32, fs_hz: u32, max_arr: u32) -> Option<TimerDivid
 /// sample path (the rate is too high for this conversion time).
 pub fn compare_offset_ticks(div: &TimerDivider, clk_hz: u32, delay_ns: u32) -> Option<u32> {
     let counter_hz = u64::from(clk_hz) / (u64::from(div.psc) + 1);
-    let ticks = (u64::from(delay_ns) * counter_hz)
-        .div_ceil(1_000_000_000)
-        .max(1);
+    let ticks = (u64::from(delay_ns) * counter_hz).div_ceil(1_000_000_000).max(1);
     let period = u64::from(div.arr) + 1;
     if ticks * 2 > period {
         return None;
@@ -300,10 +289,7 @@ impl RingCursor {
         let next_after = wrap(next + available);
         let newest = if next_after == 0 { len - 1 } else { next_after - 1 };
         self.next = next_after as u16;
-        Some(RingStep {
-            available: available as u16,
-            newest: newest as u16,
-        })
+        Some(RingStep { available: available as u16, newest: newest as u16 })
     }
 }
 
@@ -418,20 +404,14 @@ impl Oversampling {
 /// `None` if `fs_hz` or the clock is 0, or if even one conversion plus
 /// [`ADC_DONE_MARGIN_NS`] does not fit in half a period (the rate is too high
 /// for the ADC).
-pub fn adc_oversampling(
-    fs_hz: u32,
-    adc_clk_hz: u32,
-    sample_half_cycles: u32,
-) -> Option<Oversampling> {
+pub fn adc_oversampling(fs_hz: u32, adc_clk_hz: u32, sample_half_cycles: u32) -> Option<Oversampling> {
     if fs_hz == 0 || adc_clk_hz == 0 {
         return None;
     }
     let half_cycles_per_conv = u64::from(sample_half_cycles) + u64::from(SAR_12BIT_HALF_CYCLES);
     // Window of `ratio` conversions in ns, rounded up:
     // ratio · half_cycles / (2 · f_adc) · 1e9.
-    let window_ns = |ratio: u64| {
-        (ratio * half_cycles_per_conv * 1_000_000_000).div_ceil(2 * u64::from(adc_clk_hz))
-    };
+    let window_ns = |ratio: u64| (ratio * half_cycles_per_conv * 1_000_000_000).div_ceil(2 * u64::from(adc_clk_hz));
     // Period rounded down: the budgets below err on the safe side.
     let period_ns = 1_000_000_000 / u64::from(fs_hz);
     let budget_ns = period_ns / OVERSAMPLING_WINDOW_DIVISOR;
@@ -506,12 +486,7 @@ pub struct AutoZero {
 impl AutoZero {
     /// An idle auto-zero.
     pub const fn new() -> Self {
-        AutoZero {
-            target: 0,
-            seen: 0,
-            sum: [0; crate::AXES],
-            saturated: 0,
-        }
+        AutoZero { target: 0, seen: 0, sum: [0; crate::AXES], saturated: 0 }
     }
 
     /// Whether an averaging is under way.
@@ -528,10 +503,7 @@ impl AutoZero {
         if n == 0 || n > AUTO_ZERO_MAX_SAMPLES {
             return Err(AutoZeroError::BadCount(n));
         }
-        *self = AutoZero {
-            target: n,
-            ..AutoZero::new()
-        };
+        *self = AutoZero { target: n, ..AutoZero::new() };
         Ok(())
     }
 
@@ -539,10 +511,7 @@ impl AutoZero {
     /// averaging; after the `n`-th sample, the per-axis mean code (exact
     /// integer quotient plus remainder fraction) or the first saturated
     /// axis, and goes idle.
-    pub fn feed(
-        &mut self,
-        codes: [u16; crate::AXES],
-    ) -> Option<Result<[f32; crate::AXES], AutoZeroError>> {
+    pub fn feed(&mut self, codes: [u16; crate::AXES]) -> Option<Result<[f32; crate::AXES], AutoZeroError>> {
         if !self.is_running() {
             return None;
         }
@@ -560,13 +529,9 @@ impl AutoZero {
         let done = *self;
         *self = AutoZero::new();
         if done.saturated != 0 {
-            return Some(Err(AutoZeroError::Saturated(
-                done.saturated.trailing_zeros() as u8,
-            )));
+            return Some(Err(AutoZeroError::Saturated(done.saturated.trailing_zeros() as u8)));
         }
-        Some(Ok(done
-            .sum
-            .map(|s| (s / n) as f32 + (s % n) as f32 / n as f32)))
+        Some(Ok(done.sum.map(|s| (s / n) as f32 + (s % n) as f32 / n as f32)))
     }
 }
 
@@ -657,10 +622,7 @@ pub fn image_switch(running_fs_hz: u32, new: &CoeffImage) -> ImageSwitch {
     if new.fs_hz == running_fs_hz {
         ImageSwitch::AtSampleBoundary
     } else {
-        ImageSwitch::Reboot {
-            from_hz: running_fs_hz,
-            to_hz: new.fs_hz,
-        }
+        ImageSwitch::Reboot { from_hz: running_fs_hz, to_hz: new.fs_hz }
     }
 }
 
@@ -753,12 +715,7 @@ impl SamplePath {
     /// switch. The image's mode was decided when it became active
     /// ([`ActiveImage`]); here only the user's switch is read.
     #[inline(always)]
-    pub fn tick(
-        &mut self,
-        codes: [u16; crate::AXES],
-        stored: &mut ActiveImage,
-        user_bypass: bool,
-    ) -> TickOutput {
+    pub fn tick(&mut self, codes: [u16; crate::AXES], stored: &mut ActiveImage, user_bypass: bool) -> TickOutput {
         // Idle (almost always): one test, no call of `feed` and no
         // returned `Option<Result<…>>` through memory.
         let auto_zero = if self.auto_zero.is_running() { self.auto_zero.feed(codes) } else { None };
@@ -775,11 +732,6 @@ impl SamplePath {
         }
         self.was_compensating = compensating;
         let (dac, flags) = process_sample(codes, mode, &mut self.state);
-        TickOutput {
-            dac,
-            flags,
-            compensating,
-            auto_zero,
-        }
+        TickOutput { dac, flags, compensating, auto_zero }
     }
 }

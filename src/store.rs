@@ -87,11 +87,7 @@ pub struct Layout {
 
 impl Layout {
     /// The box: offsets from [`FLASH_BASE`] (embassy-stm32's convention).
-    pub const STM32G474RE: Layout = Layout {
-        a: SLOT_A_ADDR - FLASH_BASE,
-        b: SLOT_B_ADDR - FLASH_BASE,
-        len: SLOT_LEN,
-    };
+    pub const STM32G474RE: Layout = Layout { a: SLOT_A_ADDR - FLASH_BASE, b: SLOT_B_ADDR - FLASH_BASE, len: SLOT_LEN };
 
     /// Offset of `slot`.
     pub fn offset(&self, slot: Slot) -> u32 {
@@ -177,9 +173,7 @@ fn record_words(seq: u32, len: u32, image_crc: u32) -> ([u8; 16], [u8; 8]) {
 pub fn encode_record(image: &[u8], seq: u32, out: &mut [u8]) -> Result<usize, ImageError> {
     CoeffImage::parse(image)?;
     let total = RECORD_HEADER_LEN + image.len().div_ceil(MAX_WRITE_SIZE) * MAX_WRITE_SIZE;
-    let dst = out
-        .get_mut(..total)
-        .ok_or(ImageError::BufferTooSmall { needed: total as u32 })?;
+    let dst = out.get_mut(..total).ok_or(ImageError::BufferTooSmall { needed: total as u32 })?;
     dst.fill(0xFF);
     let (d, c) = record_words(seq, image.len() as u32, CRC32.checksum(image));
     dst[..16].copy_from_slice(&d);
@@ -330,7 +324,13 @@ impl<F: NorFlash> Store<F> {
         let cap = flash.capacity() as u64;
         let ok_slot = |o: u32| e != 0 && o.is_multiple_of(e) && u64::from(o) + u64::from(layout.len) <= cap;
         let disjoint = layout.a.abs_diff(layout.b) >= layout.len;
-        if layout.len == 0 || e == 0 || !layout.len.is_multiple_of(e) || !ok_slot(layout.a) || !ok_slot(layout.b) || !disjoint {
+        if layout.len == 0
+            || e == 0
+            || !layout.len.is_multiple_of(e)
+            || !ok_slot(layout.a)
+            || !ok_slot(layout.b)
+            || !disjoint
+        {
             return Err(LayoutError::Slots);
         }
         let mut s = Store { flash, layout, active: None, upload: None, buf: [0; BUF_LEN] };
@@ -464,7 +464,8 @@ impl<F: NorFlash> Store<F> {
             self.flash.erase(off, off + page).map_err(fault)?;
             off += page;
         }
-        self.upload = Some(Upload { slot, len, crc, received: 0, carry: [0xFF; MAX_WRITE_SIZE], carry_len: 0, failed: false });
+        self.upload =
+            Some(Upload { slot, len, crc, received: 0, carry: [0xFF; MAX_WRITE_SIZE], carry_len: 0, failed: false });
         Ok(())
     }
 

@@ -26,15 +26,9 @@ fn exact_rates_have_zero_error() {
     for fs in [10_000u32, 50_000, 100_000, 200_000] {
         let d = timer_divider(BOX_TIMER_CLOCK_HZ, fs, ARR_MAX_16).unwrap();
         assert_eq!(d.psc, 0);
-        assert_eq!(
-            d.ticks_per_period() * u64::from(fs),
-            u64::from(BOX_TIMER_CLOCK_HZ)
-        );
+        assert_eq!(d.ticks_per_period() * u64::from(fs), u64::from(BOX_TIMER_CLOCK_HZ));
         assert_eq!(d.error_ppm(BOX_TIMER_CLOCK_HZ, fs), 0);
-        assert_eq!(
-            d.actual_fs_millihz(BOX_TIMER_CLOCK_HZ),
-            u64::from(fs) * 1000
-        );
+        assert_eq!(d.actual_fs_millihz(BOX_TIMER_CLOCK_HZ), u64::from(fs) * 1000);
     }
 }
 
@@ -45,10 +39,7 @@ fn every_box_rate_fits_a_16_bit_timer_without_prescaler() {
     for fs in BOX_FS_RANGE_HZ.clone().step_by(7) {
         let d = timer_divider(BOX_TIMER_CLOCK_HZ, fs, ARR_MAX_16).unwrap();
         assert_eq!(d.psc, 0, "fs {fs}");
-        assert!(
-            d.error_ppm(BOX_TIMER_CLOCK_HZ, fs).abs() <= 589,
-            "fs {fs}: {d:?}"
-        );
+        assert!(d.error_ppm(BOX_TIMER_CLOCK_HZ, fs).abs() <= 589, "fs {fs}: {d:?}");
     }
 }
 
@@ -60,22 +51,13 @@ fn low_rates_use_the_prescaler() {
     assert!(d.error_ppm(BOX_TIMER_CLOCK_HZ, 1).abs() < 10);
     // A 32-bit timer reaches 1 Hz without a prescaler.
     let d = timer_divider(BOX_TIMER_CLOCK_HZ, 1, ARR_MAX_32).unwrap();
-    assert_eq!(
-        d,
-        TimerDivider {
-            psc: 0,
-            arr: BOX_TIMER_CLOCK_HZ - 1
-        }
-    );
+    assert_eq!(d, TimerDivider { psc: 0, arr: BOX_TIMER_CLOCK_HZ - 1 });
 }
 
 #[test]
 fn impossible_rates_are_refused() {
     assert_eq!(timer_divider(BOX_TIMER_CLOCK_HZ, 0, ARR_MAX_16), None);
-    assert_eq!(
-        timer_divider(BOX_TIMER_CLOCK_HZ, BOX_TIMER_CLOCK_HZ, ARR_MAX_16),
-        None
-    );
+    assert_eq!(timer_divider(BOX_TIMER_CLOCK_HZ, BOX_TIMER_CLOCK_HZ, ARR_MAX_16), None);
     assert_eq!(timer_divider(0, 1000, ARR_MAX_16), None);
     // A timer without counting range.
     assert_eq!(timer_divider(BOX_TIMER_CLOCK_HZ, 1000, 0), None);
@@ -85,19 +67,13 @@ fn impossible_rates_are_refused() {
 fn interrupt_offset_after_the_conversion() {
     let d = timer_divider(BOX_TIMER_CLOCK_HZ, 51_200, ARR_MAX_32).unwrap();
     // 2 us at 170 MHz = 340 ticks.
-    assert_eq!(
-        compare_offset_ticks(&d, BOX_TIMER_CLOCK_HZ, 2_000),
-        Some(340)
-    );
+    assert_eq!(compare_offset_ticks(&d, BOX_TIMER_CLOCK_HZ, 2_000), Some(340));
     // Rounded up to whole ticks, never 0.
     assert_eq!(compare_offset_ticks(&d, BOX_TIMER_CLOCK_HZ, 1), Some(1));
     assert_eq!(compare_offset_ticks(&d, BOX_TIMER_CLOCK_HZ, 0), Some(1));
     // At 200 kHz (850 ticks) a 3 us delay would eat more than half the period.
     let fast = timer_divider(BOX_TIMER_CLOCK_HZ, 200_000, ARR_MAX_32).unwrap();
-    assert_eq!(
-        compare_offset_ticks(&fast, BOX_TIMER_CLOCK_HZ, 2_000),
-        Some(340)
-    );
+    assert_eq!(compare_offset_ticks(&fast, BOX_TIMER_CLOCK_HZ, 2_000), Some(340));
     assert_eq!(compare_offset_ticks(&fast, BOX_TIMER_CLOCK_HZ, 3_000), None);
 }
 
@@ -153,13 +129,7 @@ fn skipped_samples_are_counted_and_the_newest_is_used() {
     let mut st = SampleState::default();
     let n = ndtr_after(3, len);
     let step = c.advance(&[n, n, n]).unwrap();
-    assert_eq!(
-        step,
-        RingStep {
-            available: 3,
-            newest: 2
-        }
-    );
+    assert_eq!(step, RingStep { available: 3, newest: 2 });
     st.note_overruns(step.missed());
     assert_eq!(st.counters.overruns, 2);
     assert_eq!(c.next(), 3);
@@ -179,13 +149,7 @@ fn unfinished_conversion_yields_nothing_then_catches_up() {
     // Next interrupt: two samples, one of them missed.
     let n = ndtr_after(3, len);
     let step = c.advance(&[n, n, n]).unwrap();
-    assert_eq!(
-        step,
-        RingStep {
-            available: 2,
-            newest: 2
-        }
-    );
+    assert_eq!(step, RingStep { available: 2, newest: 2 });
     assert_eq!(step.missed(), 1);
 }
 
@@ -194,18 +158,10 @@ fn a_lagging_channel_limits_what_is_complete() {
     let len = 16;
     let mut c = RingCursor::new(len);
     // ADC1 and ADC2 transferred, ADC3's transfer not yet.
-    let step = c
-        .advance(&[ndtr_after(1, len), ndtr_after(1, len), ndtr_after(0, len)])
-        .unwrap();
+    let step = c.advance(&[ndtr_after(1, len), ndtr_after(1, len), ndtr_after(0, len)]).unwrap();
     assert_eq!(step.available, 0);
     let step = c.advance(&[ndtr_after(1, len); 3]).unwrap();
-    assert_eq!(
-        step,
-        RingStep {
-            available: 1,
-            newest: 0
-        }
-    );
+    assert_eq!(step, RingStep { available: 1, newest: 0 });
 }
 
 #[test]
@@ -310,10 +266,7 @@ fn the_box_runs_at_the_image_rate_or_the_default() {
     // A valid image at a rate the box cannot run is bypassed at the default rate.
     let slow = Ok(valid(5_000));
     let mode = select_mode(Some(&slow), false);
-    assert!(matches!(
-        mode,
-        Mode::Bypass(BypassReason::UnsupportedSampleRate(5_000))
-    ));
+    assert!(matches!(mode, Mode::Bypass(BypassReason::UnsupportedSampleRate(5_000))));
     assert_eq!(box_sample_rate(&mode), DEFAULT_FS_HZ);
     assert!(BOX_FS_RANGE_HZ.contains(&DEFAULT_FS_HZ));
 }
@@ -344,13 +297,7 @@ fn oversampling_ratios_of_the_box_rates() {
     let os = |fs| adc_oversampling(fs, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES).unwrap();
     // 870.588 ns per conversion; quarter periods 25 µs, 9.77 µs, 4.88 µs,
     // 2.5 µs, 1.25 µs.
-    let table = [
-        (10_000u32, 16u16),
-        (25_600, 8),
-        (51_200, 4),
-        (100_000, 2),
-        (200_000, 1),
-    ];
+    let table = [(10_000u32, 16u16), (25_600, 8), (51_200, 4), (100_000, 2), (200_000, 1)];
     for (fs, ratio) in table {
         let o = os(fs);
         assert_eq!(o.ratio, ratio, "fs {fs}");
@@ -366,25 +313,16 @@ fn oversampling_ratios_of_the_box_rates() {
     assert_eq!(o.centroid_delay_ns(), 1_305);
     let off = os(200_000);
     assert!(!off.enabled());
-    assert_eq!(
-        (off.window_ns, off.irq_delay_ns, off.centroid_delay_ns()),
-        (871, 2_071, 0)
-    );
+    assert_eq!((off.window_ns, off.irq_delay_ns, off.centroid_delay_ns()), (871, 2_071, 0));
 }
 
 #[test]
 fn oversampling_refuses_rates_the_adc_cannot_follow() {
-    assert_eq!(
-        adc_oversampling(0, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES),
-        None
-    );
+    assert_eq!(adc_oversampling(0, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES), None);
     assert_eq!(adc_oversampling(10_000, 0, BOX_SAMPLE_HALF_CYCLES), None);
     // 0.87 µs + 1.2 µs must fit in half a period: 240 kHz (2.08 µs) does, 250 kHz does not.
     assert!(adc_oversampling(240_000, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES).is_some());
-    assert_eq!(
-        adc_oversampling(250_000, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES),
-        None
-    );
+    assert_eq!(adc_oversampling(250_000, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES), None);
     // Very low rates stop at the hardware's 256×.
     let slow = adc_oversampling(100, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES).unwrap();
     assert_eq!((slow.ratio, slow.ovsr, slow.shift), (256, 7, 8));
@@ -438,11 +376,7 @@ fn auto_zero_averages_each_axis_exactly() {
     }
     let offsets = result.unwrap().unwrap();
     for (o, s) in offsets.iter().zip(sums) {
-        assert!(
-            (f64::from(*o) - s / 7.0).abs() < 2.5e-4,
-            "{o} vs {}",
-            s / 7.0
-        );
+        assert!((f64::from(*o) - s / 7.0).abs() < 2.5e-4, "{o} vs {}", s / 7.0);
     }
     assert!(!az.is_running());
     assert_eq!(az.feed([1, 2, 3]), None);
@@ -452,30 +386,20 @@ fn auto_zero_averages_each_axis_exactly() {
 fn auto_zero_refuses_bad_counts_overlap_and_clipped_inputs() {
     let mut az = AutoZero::new();
     assert_eq!(az.start(0), Err(AutoZeroError::BadCount(0)));
-    assert_eq!(
-        az.start(AUTO_ZERO_MAX_SAMPLES + 1),
-        Err(AutoZeroError::BadCount(65_536))
-    );
+    assert_eq!(az.start(AUTO_ZERO_MAX_SAMPLES + 1), Err(AutoZeroError::BadCount(65_536)));
     az.start(3).unwrap();
     assert_eq!(az.start(3), Err(AutoZeroError::Busy));
     assert_eq!(az.feed([2000, 2000, 2000]), None);
     assert_eq!(az.feed([2000, 4095, 0]), None);
     // The first clipped axis is reported, and no offset comes out.
-    assert_eq!(
-        az.feed([2000, 2000, 2000]),
-        Some(Err(AutoZeroError::Saturated(1)))
-    );
+    assert_eq!(az.feed([2000, 2000, 2000]), Some(Err(AutoZeroError::Saturated(1))));
     // Idle again: a new averaging may start.
     az.start(AUTO_ZERO_MAX_SAMPLES).unwrap();
     let mut last = None;
     for _ in 0..AUTO_ZERO_MAX_SAMPLES {
         last = az.feed([4094, 1, 2048]);
     }
-    assert_eq!(
-        last,
-        Some(Ok([4094.0, 1.0, 2048.0])),
-        "largest window does not overflow"
-    );
+    assert_eq!(last, Some(Ok([4094.0, 1.0, 2048.0])), "largest window does not overflow");
 }
 
 #[test]
@@ -506,11 +430,7 @@ fn auto_zero_makes_the_resting_input_read_zero_newton() {
     // x, z: 0 N → DAC offset code; y is not compensated and passes through raw.
     assert_eq!(dac, [2048, 1990, 2048]);
     // Gain is the image's: 10 codes above rest = 25 N = 10 DAC codes.
-    let (dac, _) = process_sample(
-        [2120, 1990, 1993],
-        select_mode(Some(&loaded), false),
-        &mut st,
-    );
+    let (dac, _) = process_sample([2120, 1990, 1993], select_mode(Some(&loaded), false), &mut st);
     assert_eq!(dac, [2058, 1990, 2038]);
 }
 
@@ -529,23 +449,14 @@ fn led_state_priorities() {
 
 #[test]
 fn led_patterns_are_the_documented_ones_and_distinct() {
-    let pattern = |s| -> String {
-        (0..LED_PATTERN_TICKS)
-            .map(|t| if led_on(s, t) { '#' } else { '.' })
-            .collect()
-    };
+    let pattern = |s| -> String { (0..LED_PATTERN_TICKS).map(|t| if led_on(s, t) { '#' } else { '.' }).collect() };
     // docs/firmware.md, "Status LED" (100 ms per character).
     assert_eq!(pattern(LedState::Running), "#.........");
     assert_eq!(pattern(LedState::Bypass), ".#########");
     assert_eq!(pattern(LedState::Saturated), "#.#.......");
     assert_eq!(pattern(LedState::Fault), "#.#.#.#.#.");
     // Periodic in the tick counter.
-    for s in [
-        LedState::Running,
-        LedState::Bypass,
-        LedState::Saturated,
-        LedState::Fault,
-    ] {
+    for s in [LedState::Running, LedState::Bypass, LedState::Saturated, LedState::Fault] {
         for t in 0..3 * LED_PATTERN_TICKS {
             assert_eq!(led_on(s, t), led_on(s, t % LED_PATTERN_TICKS));
         }
@@ -556,17 +467,8 @@ fn led_patterns_are_the_documented_ones_and_distinct() {
 
 #[test]
 fn a_new_image_at_the_running_rate_switches_without_reboot() {
-    assert_eq!(
-        image_switch(51_200, &valid(51_200)),
-        ImageSwitch::AtSampleBoundary
-    );
-    assert_eq!(
-        image_switch(51_200, &valid(100_000)),
-        ImageSwitch::Reboot {
-            from_hz: 51_200,
-            to_hz: 100_000
-        }
-    );
+    assert_eq!(image_switch(51_200, &valid(51_200)), ImageSwitch::AtSampleBoundary);
+    assert_eq!(image_switch(51_200, &valid(100_000)), ImageSwitch::Reboot { from_hz: 51_200, to_hz: 100_000 });
 }
 
 #[test]
@@ -599,11 +501,7 @@ fn codes(k: u16) -> [u16; 3] {
 }
 
 /// DAC codes of samples `ks` through `path` (compensating).
-fn run(
-    path: &mut SamplePath,
-    stored: &mut ActiveImage,
-    ks: std::ops::Range<u16>,
-) -> Vec<[u16; 3]> {
+fn run(path: &mut SamplePath, stored: &mut ActiveImage, ks: std::ops::Range<u16>) -> Vec<[u16; 3]> {
     ks.map(|k| path.tick(codes(k), stored, false).dac).collect()
 }
 
@@ -676,13 +574,7 @@ fn auto_zero_in_the_sample_path() {
     path.tick([4095, 1990, 2003], &mut stored, false);
     let out = path.tick(rest, &mut stored, false);
     assert_eq!(out.auto_zero, Some(Err(AutoZeroError::Saturated(0))));
-    assert_eq!(
-        stored.stored().as_ref().unwrap().axes[0]
-            .unwrap()
-            .scaling
-            .adc_offset_code,
-        2110.0
-    );
+    assert_eq!(stored.stored().as_ref().unwrap().axes[0].unwrap().scaling.adc_offset_code, 2110.0);
 
     // Without an image the average is still reported; nothing to apply.
     let mut none = ActiveImage::new(Err(BypassReason::NoImage));
@@ -701,15 +593,9 @@ fn an_image_switch_cancels_a_running_auto_zero() {
     path.tick([2100, 2000, 2000], &mut stored, false);
     path.on_image_switch();
     for _ in 0..4 {
-        assert_eq!(
-            path.tick([2100, 2000, 2000], &mut stored, false).auto_zero,
-            None
-        );
+        assert_eq!(path.tick([2100, 2000, 2000], &mut stored, false).auto_zero, None);
     }
-    assert_eq!(
-        stored.stored().unwrap().axes[0].unwrap().scaling.adc_offset_code,
-        2048.0
-    );
+    assert_eq!(stored.stored().unwrap().axes[0].unwrap().scaling.adc_offset_code, 2048.0);
 }
 
 /// An image over the box's CPU budget (3 × 24 pole pairs at 51.2 kHz:

@@ -53,9 +53,16 @@ fn llvm_tool(name: &str) -> PathBuf {
         String::from_utf8(out.stdout).expect("rustc prints UTF-8")
     };
     let sysroot = rustc(&["--print", "sysroot"]);
-    let host = rustc(&["-vV"]).lines().find_map(|l| l.strip_prefix("host: ").map(str::to_string)).expect("rustc -vV names the host");
+    let host = rustc(&["-vV"])
+        .lines()
+        .find_map(|l| l.strip_prefix("host: ").map(str::to_string))
+        .expect("rustc -vV names the host");
     let path = Path::new(sysroot.trim()).join("lib/rustlib").join(host).join("bin").join(name);
-    assert!(path.exists(), "{} is missing: `rustup component add llvm-tools` (rust-toolchain.toml lists it)", path.display());
+    assert!(
+        path.exists(),
+        "{} is missing: `rustup component add llvm-tools` (rust-toolchain.toml lists it)",
+        path.display()
+    );
     path
 }
 
@@ -100,7 +107,11 @@ fn branches(elf: &Path, name: &str) -> (Vec<u64>, Vec<String>) {
         }
         let mut it = insn.split_whitespace();
         let (Some(mnemonic), operand) = (it.next(), it.next().unwrap_or("")) else { continue };
-        let is_branch = mnemonic.starts_with('b') && !mnemonic.starts_with("bic") && !mnemonic.starts_with("bfc") && !mnemonic.starts_with("bfi") && !mnemonic.starts_with("bkpt");
+        let is_branch = mnemonic.starts_with('b')
+            && !mnemonic.starts_with("bic")
+            && !mnemonic.starts_with("bfc")
+            && !mnemonic.starts_with("bfi")
+            && !mnemonic.starts_with("bkpt");
         let is_cb = mnemonic.starts_with("cbz") || mnemonic.starts_with("cbnz");
         if is_cb {
             let target = insn.split_whitespace().nth(2).unwrap_or("");
@@ -111,7 +122,10 @@ fn branches(elf: &Path, name: &str) -> (Vec<u64>, Vec<String>) {
                 None if operand == "lr" => {}
                 None => indirect.push(insn.trim().to_string()),
             }
-        } else if insn.contains("pc,") && (mnemonic.starts_with("mov") || mnemonic.starts_with("ldr") || mnemonic.starts_with("pop")) && !insn.contains("[pc") {
+        } else if insn.contains("pc,")
+            && (mnemonic.starts_with("mov") || mnemonic.starts_with("ldr") || mnemonic.starts_with("pop"))
+            && !insn.contains("[pc")
+        {
             // `mov pc, rN` / `ldr pc, ...` / `pop {.., pc}`: returns (pop) are fine.
             if !mnemonic.starts_with("pop") {
                 indirect.push(insn.trim().to_string());
@@ -123,7 +137,12 @@ fn branches(elf: &Path, name: &str) -> (Vec<u64>, Vec<String>) {
 
 /// Everything `start` can reach; `Err` lists what is outside `region`, a
 /// thunk or an indirect branch.
-fn reachable_in(elf: &Path, syms: &Symbols, start: &str, region: &std::ops::Range<u64>) -> Result<Vec<(String, u64)>, Vec<String>> {
+fn reachable_in(
+    elf: &Path,
+    syms: &Symbols,
+    start: &str,
+    region: &std::ops::Range<u64>,
+) -> Result<Vec<(String, u64)>, Vec<String>> {
     let mut todo = vec![syms.by_name[start]];
     let mut seen = BTreeSet::new();
     let (mut ok, mut bad) = (Vec::new(), Vec::new());
@@ -163,11 +182,19 @@ fn sample_interrupt_runs_from_ccm_sram() {
     let syms = symbols(&elf);
     let sym = |n: &str| *syms.by_name.get(n).unwrap_or_else(|| panic!("symbol {n} missing from the firmware ELF"));
     let (start, end, load) = (sym("__sccmtext"), sym("__eccmtext"), sym("__siccmtext"));
-    eprintln!(".ccmram_text: VMA {start:#010x}..{end:#010x} ({} bytes), LMA {load:#010x}; _stext {:#010x}", end - start, sym("_stext"));
+    eprintln!(
+        ".ccmram_text: VMA {start:#010x}..{end:#010x} ({} bytes), LMA {load:#010x}; _stext {:#010x}",
+        end - start,
+        sym("_stext")
+    );
     assert!(CCM.contains(&start) && end <= CCM.end && start < end, ".ccmram_text {start:#x}..{end:#x} not in CCM SRAM");
-    assert!(FLASH.contains(&load) && load + (end - start) <= sym("_stext"), "load image at {load:#x} not in flash before .text");
+    assert!(
+        FLASH.contains(&load) && load + (end - start) <= sym("_stext"),
+        "load image at {load:#x} not in flash before .text"
+    );
 
-    let in_ccm = reachable_in(&elf, &syms, "TIM2", &(start..end)).unwrap_or_else(|bad| panic!("the sample path leaves CCM SRAM:\n{}", bad.join("\n")));
+    let in_ccm = reachable_in(&elf, &syms, "TIM2", &(start..end))
+        .unwrap_or_else(|bad| panic!("the sample path leaves CCM SRAM:\n{}", bad.join("\n")));
     for (name, addr) in &in_ccm {
         eprintln!("  {addr:#010x} {name}");
     }

@@ -32,7 +32,8 @@ fn spare_buffer_publish_and_take() {
 #[test]
 fn concurrent_reader_never_sees_a_partly_written_buffer() {
     let h = Arc::new(ImageHandoff::new(0));
-    let bufs: Arc<[Vec<AtomicU64>; 2]> = Arc::new([(0..64).map(|_| AtomicU64::new(0)).collect(), (0..64).map(|_| AtomicU64::new(0)).collect()]);
+    let bufs: Arc<[Vec<AtomicU64>; 2]> =
+        Arc::new([(0..64).map(|_| AtomicU64::new(0)).collect(), (0..64).map(|_| AtomicU64::new(0)).collect()]);
     let done = Arc::new(AtomicBool::new(false));
     let reader = {
         let (h, bufs, done) = (h.clone(), bufs.clone(), done.clone());

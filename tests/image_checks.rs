@@ -160,18 +160,30 @@ fn each_check_refuses_just_beyond_its_limit() {
     let too_close = (1.0f64 - MIN_POLE_MARGIN / 2.0) as f32;
     assert!(too_close < 1.0);
     assert_eq!(with(AxisFilter::new(&[real(ok, 1e-5)], 1.0).unwrap()), Ok(()));
-    assert_eq!(with(AxisFilter::new(&[real(too_close, 1e-5)], 1.0).unwrap()), Err(ImageError::PoleMarginTooSmall { axis: 0, section: 0 }));
+    assert_eq!(
+        with(AxisFilter::new(&[real(too_close, 1e-5)], 1.0).unwrap()),
+        Err(ImageError::PoleMarginTooSmall { axis: 0, section: 0 })
+    );
     // Coefficient bound: d = 1e6 passes the coefficient check (and fails
     // the gain bound), 2e6 fails the coefficient check.
-    assert!(matches!(with(AxisFilter::gain(MAX_COEFFICIENT).unwrap()), Err(ImageError::GainBoundTooLarge { axis: 0, .. })));
-    assert_eq!(with(AxisFilter::gain(2.0 * MAX_COEFFICIENT).unwrap()), Err(ImageError::CoefficientOutOfRange { axis: 0, section: 255 }));
+    assert!(matches!(
+        with(AxisFilter::gain(MAX_COEFFICIENT).unwrap()),
+        Err(ImageError::GainBoundTooLarge { axis: 0, .. })
+    ));
+    assert_eq!(
+        with(AxisFilter::gain(2.0 * MAX_COEFFICIENT).unwrap()),
+        Err(ImageError::CoefficientOutOfRange { axis: 0, section: 255 })
+    );
     assert_eq!(
         with(AxisFilter::with_fir(&[], 1.0, &[0.0, -3e6]).unwrap()),
         Err(ImageError::TapOutOfRange { axis: 0, tap: 1 })
     );
     // Gain bound: a real pole at 0.5 with b·c = g has ℓ1 gain 2g.
     let g = (MAX_GAIN_BOUND / 2.0) as f32;
-    assert_eq!(with(AxisFilter::new(&[real(0.5, 0.99 * g)], 0.0).unwrap()), Err(ImageError::DcGainOutOfRange { axis: 0 }));
+    assert_eq!(
+        with(AxisFilter::new(&[real(0.5, 0.99 * g)], 0.0).unwrap()),
+        Err(ImageError::DcGainOutOfRange { axis: 0 })
+    );
     let c = 1.02 * g;
     assert_eq!(
         with(AxisFilter::new(&[real(0.5, c)], 0.0).unwrap()),

@@ -6,7 +6,7 @@ mod common;
 use common::*;
 use dynocomp_core::image::*;
 use dynocomp_core::kernel::{AxisFilter, Section, MAX_FIR};
-use dynocomp_core::sample::{process_sample, select_mode, BypassReason, Mode, SampleState, SampleFlags};
+use dynocomp_core::sample::{process_sample, select_mode, BypassReason, Mode, SampleFlags, SampleState};
 use proptest::prelude::*;
 
 fn band(lo: f32, hi: f32, filter: AxisFilter, axes: &[usize]) -> BandImage {
@@ -127,7 +127,10 @@ fn invalid_parallel_images_are_refused() {
     assert_eq!(mk(&[band(-1.0, 300.0, g, &[0])]), Err(ImageError::BadBand { band: 0 }));
     // touching bands are fine; different axes per band are not
     assert!(mk(&[band(100.0, 300.0, g, &[0]), band(300.0, 400.0, g, &[0])]).is_ok());
-    assert_eq!(mk(&[band(100.0, 300.0, g, &[0]), band(300.0, 400.0, g, &[0, 1])]), Err(ImageError::BandAxesDiffer { band: 1 }));
+    assert_eq!(
+        mk(&[band(100.0, 300.0, g, &[0]), band(300.0, 400.0, g, &[0, 1])]),
+        Err(ImageError::BandAxesDiffer { band: 1 })
+    );
 
     // behind a valid CRC: flag cleared, band count 0 / 9, reserved byte set
     let bytes = encode(&parallel());

@@ -5,7 +5,9 @@
 //! longer than a chunk, with the state carried from block to block. The
 //! guarded variant must match `step_guarded` with the sample path's fallback
 //! (raw input) sample for sample, including the reset count.
-use dynocomp_core::kernel::{process_blocks, AxisFilter, AxisState, BlockJob, Section, BLOCK_CHUNK, MAX_FIR, MAX_SECTIONS};
+use dynocomp_core::kernel::{
+    process_blocks, AxisFilter, AxisState, BlockJob, Section, BLOCK_CHUNK, MAX_FIR, MAX_SECTIONS,
+};
 use proptest::prelude::*;
 
 /// A stable section of each shape the kernel runs: a conjugate pair
@@ -14,7 +16,17 @@ use proptest::prelude::*;
 /// magnitude, zeros included (a state with b·c = 0 is dropped).
 fn arb_section() -> impl Strategy<Value = Section> {
     let gain = prop_oneof![-2.0f32..2.0, -500.0f32..500.0, Just(0.0f32)];
-    (0u8..3, 0.0f32..0.9999, 0.0f32..std::f32::consts::PI, -0.99f32..0.99, -1.0f32..1.0, gain.clone(), gain.clone(), gain.clone(), gain)
+    (
+        0u8..3,
+        0.0f32..0.9999,
+        0.0f32..std::f32::consts::PI,
+        -0.99f32..0.99,
+        -1.0f32..1.0,
+        gain.clone(),
+        gain.clone(),
+        gain.clone(),
+        gain,
+    )
         .prop_map(|(kind, r, th, p2, t, b1, b2, c1, c2)| match kind {
             0 => {
                 let (re, im) = (r * th.cos(), r * th.sin());
@@ -101,7 +113,15 @@ fn check_blocks(
 }
 
 fn arb_lens() -> impl Strategy<Value = Vec<usize>> {
-    let len = prop_oneof![Just(0usize), Just(1), Just(2), 1usize..40, Just(BLOCK_CHUNK - 1), Just(BLOCK_CHUNK + 1), 40usize..1500];
+    let len = prop_oneof![
+        Just(0usize),
+        Just(1),
+        Just(2),
+        1usize..40,
+        Just(BLOCK_CHUNK - 1),
+        Just(BLOCK_CHUNK + 1),
+        40usize..1500
+    ];
     proptest::collection::vec(len, 1..7)
 }
 
@@ -111,7 +131,8 @@ fn arb_lens() -> impl Strategy<Value = Vec<usize>> {
 /// `lens[call][axis]` is the block length of that axis in that call.
 fn check_many(fs: &[AxisFilter], seed: u64, lens: &[Vec<usize>]) -> Result<(), TestCaseError> {
     let axes = fs.len();
-    let u: Vec<Vec<f32>> = (0..axes).map(|a| input(seed.wrapping_add(a as u64), lens.iter().map(|l| l[a]).sum())).collect();
+    let u: Vec<Vec<f32>> =
+        (0..axes).map(|a| input(seed.wrapping_add(a as u64), lens.iter().map(|l| l[a]).sum())).collect();
     let mut st_ref = vec![AxisState::default(); axes];
     let mut st_blk = vec![AxisState::default(); axes];
     let mut start = vec![0usize; axes];
@@ -132,7 +153,13 @@ fn check_many(fs: &[AxisFilter], seed: u64, lens: &[Vec<usize>]) -> Result<(), T
                     y.to_bits(),
                     want.to_bits(),
                     "call {} (lengths {:?}), axis {} of {}, sample {}: blocks {:e}, per-sample {:e}",
-                    call, l, a, axes, k, y, want
+                    call,
+                    l,
+                    a,
+                    axes,
+                    k,
+                    y,
+                    want
                 );
             }
             prop_assert_eq!(state_bits(&st_blk[a]), state_bits(&st_ref[a]), "axis {} state after call {}", a, call);
@@ -184,7 +211,10 @@ proptest! {
 /// samples, output the raw input there, and count the same resets.
 #[test]
 fn guarded_block_resets_like_step_guarded() {
-    let s = [Section::first_order(0.99, 1.0e3, 1.0e2), Section { delta: [-0.01, 0.05, -0.05, -0.01], b: [10.0, 0.0], c: [3.0, 1.0] }];
+    let s = [
+        Section::first_order(0.99, 1.0e3, 1.0e2),
+        Section { delta: [-0.01, 0.05, -0.05, -0.01], b: [10.0, 0.0], c: [3.0, 1.0] },
+    ];
     let f = AxisFilter::with_fir(&s, 2.0, &[5.0, -4.0, 3.0]).unwrap();
     let mut u = input(7, 3000);
     u[100] = 1.0e6; // drives |y| past RUNAWAY_LIMIT_N

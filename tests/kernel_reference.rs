@@ -42,12 +42,13 @@ fn run_kernel(filter: &AxisFilter, input: &[f64]) -> Vec<f64> {
 
 fn max_rel_err(got: &[f64], want: &[f64]) -> (f64, usize) {
     let peak = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let (k, e) = got
-        .iter()
-        .zip(want)
-        .map(|(g, w)| (g - w).abs())
-        .enumerate()
-        .fold((0, 0.0f64), |(bk, be), (k, e)| if e > be { (k, e) } else { (bk, be) });
+    let (k, e) = got.iter().zip(want).map(|(g, w)| (g - w).abs()).enumerate().fold((0, 0.0f64), |(bk, be), (k, e)| {
+        if e > be {
+            (k, e)
+        } else {
+            (bk, be)
+        }
+    });
     (e / peak, k)
 }
 
@@ -105,7 +106,9 @@ fn pairs_and_real_poles_in_any_order_match_f64_reference() {
         diag(0.995, 0.8, [0.5, 2.0], [0.1, -0.05]),
     ];
     let filter = kernel_filter(&blocks, d);
-    for (name, input) in [("impulse", (0..N).map(|k| if k == 0 { 1.0 } else { 0.0 }).collect::<Vec<f64>>()), ("step", vec![1.0; N])] {
+    for (name, input) in
+        [("impulse", (0..N).map(|k| if k == 0 { 1.0 } else { 0.0 }).collect::<Vec<f64>>()), ("step", vec![1.0; N])]
+    {
         let want = reference_f64(&blocks, d, &input);
         let got = run_kernel(&filter, &input);
         let (err, k) = max_rel_err(&got, &want);

@@ -21,7 +21,9 @@ impl Rng {
 /// 0.9-0.999), one diagonal section, dense `b`, `c`, `d` and `taps` FIR taps.
 fn random_filter(rng: &mut Rng, pairs: usize, taps: usize) -> (Vec<MimoSection>, Matrix3, Vec<Matrix3>) {
     let mut sections = Vec::new();
-    let m3 = |rng: &mut Rng, s: f64| -> Matrix3 { core::array::from_fn(|_| core::array::from_fn(|_| (s * rng.next()) as f32)) };
+    let m3 = |rng: &mut Rng, s: f64| -> Matrix3 {
+        core::array::from_fn(|_| core::array::from_fn(|_| (s * rng.next()) as f32))
+    };
     for _ in 0..pairs {
         let r = 0.9 + 0.0495 * (rng.next() + 1.0);
         let th = 0.5 * (rng.next() + 1.0) + 0.01;
@@ -36,7 +38,11 @@ fn random_filter(rng: &mut Rng, pairs: usize, taps: usize) -> (Vec<MimoSection>,
     }
     let b = m3(rng, 0.1);
     let c = m3(rng, 1.0);
-    sections.push(MimoSection { delta: [-0.01, 0.0, 0.0, -0.3], b: [b[0], b[1]], c: [[c[0][0], c[0][1]], [c[1][0], c[1][1]], [c[2][0], c[2][1]]] });
+    sections.push(MimoSection {
+        delta: [-0.01, 0.0, 0.0, -0.3],
+        b: [b[0], b[1]],
+        c: [[c[0][0], c[0][1]], [c[1][0], c[1][1]], [c[2][0], c[2][1]]],
+    });
     let d = m3(rng, 1.0);
     let fir = (0..taps).map(|_| m3(rng, 0.2)).collect();
     (sections, d, fir)
@@ -79,7 +85,9 @@ fn reference_f64(sections: &[MimoSection], d: &Matrix3, fir: &[Matrix3], input: 
 }
 
 fn input(rng: &mut Rng, n: usize) -> Vec<[f64; 3]> {
-    (0..n).map(|k| [100.0 * rng.next(), 50.0 * (k as f64 * 0.01).sin(), if k == 10 { 300.0 } else { 20.0 * rng.next() }]).collect()
+    (0..n)
+        .map(|k| [100.0 * rng.next(), 50.0 * (k as f64 * 0.01).sin(), if k == 10 { 300.0 } else { 20.0 * rng.next() }])
+        .collect()
 }
 
 #[test]
@@ -154,7 +162,9 @@ fn the_diagonal_embedding_of_three_axis_filters_is_bit_exact_with_them() {
     let axes: Vec<AxisFilter> = per_axis
         .iter()
         .enumerate()
-        .map(|(axis, (secs, dd, taps))| AxisFilter::with_fir(&secs.iter().map(|s| siso(s, axis)).collect::<Vec<_>>(), *dd, taps).unwrap())
+        .map(|(axis, (secs, dd, taps))| {
+            AxisFilter::with_fir(&secs.iter().map(|s| siso(s, axis)).collect::<Vec<_>>(), *dd, taps).unwrap()
+        })
         .collect();
     let mut ms = MimoState::default();
     let mut ss = [AxisState::default(); 3];

@@ -83,7 +83,8 @@ fn test_image() -> CoeffImage {
         // 24, 23 and 5 taps: the M4's assembly FIR loop (kernel_m4.rs)
         // runs blocks of four, then the rest one by one (0, 3 and 1 here).
         let taps = [24, 23, 5][axis];
-        let fir: Vec<f32> = (0..taps).map(|j| 0.3 * (-0.4 * j as f32).exp() * if j % 2 == 0 { 1.0 } else { -0.7 }).collect();
+        let fir: Vec<f32> =
+            (0..taps).map(|j| 0.3 * (-0.4 * j as f32).exp() * if j % 2 == 0 { 1.0 } else { -0.7 }).collect();
         a.filter = AxisFilter::with_fir(&secs, d as f32 - 0.1 * axis as f32, &fir).expect("valid test filter");
     }
     img
@@ -159,9 +160,11 @@ fn host_block_outputs(image: &CoeffImage, input: &[[f32; AXES]]) -> Vec<[f32; AX
 
 /// First sample whose bit pattern differs: `(index, axis, target, host)`.
 fn first_mismatch(target: &[[f32; AXES]], host: &[[f32; AXES]]) -> Option<(usize, usize, f32, f32)> {
-    target.iter().zip(host).enumerate().find_map(|(k, (t, h))| {
-        (0..AXES).find(|&a| t[a].to_bits() != h[a].to_bits()).map(|a| (k, a, t[a], h[a]))
-    })
+    target
+        .iter()
+        .zip(host)
+        .enumerate()
+        .find_map(|(k, (t, h))| (0..AXES).find(|&a| t[a].to_bits() != h[a].to_bits()).map(|a| (k, a, t[a], h[a])))
 }
 
 fn frames_to_bytes(frames: &[[f32; AXES]]) -> Vec<u8> {

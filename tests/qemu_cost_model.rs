@@ -34,7 +34,13 @@ struct Measured {
 fn shell_counts(text: &str) -> Vec<u32> {
     text.lines()
         .filter(|l| l.starts_with("shell "))
-        .map(|l| l.rsplit("streaming ").next().and_then(|v| v.trim().parse::<f64>().ok()).expect("a shell line ends with 'streaming N'").round() as u32)
+        .map(|l| {
+            l.rsplit("streaming ")
+                .next()
+                .and_then(|v| v.trim().parse::<f64>().ok())
+                .expect("a shell line ends with 'streaming N'")
+                .round() as u32
+        })
         .collect()
 }
 
@@ -43,10 +49,8 @@ fn measure() -> (Vec<Measured>, Vec<u32>) {
     if Command::new("qemu-system-arm").arg("--version").output().is_err() {
         panic!("qemu-system-arm not found: install it with `apt-get install -y --no-install-recommends qemu-system-arm`, or run `bash scripts/test.sh`");
     }
-    let out = Command::new("bash")
-        .arg(root.join("scripts/qemu_icount.sh"))
-        .output()
-        .expect("run scripts/qemu_icount.sh");
+    let out =
+        Command::new("bash").arg(root.join("scripts/qemu_icount.sh")).output().expect("run scripts/qemu_icount.sh");
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "qemu_icount.sh failed: {}\n{}", text, String::from_utf8_lossy(&out.stderr));
     let rows: Vec<Measured> = text
@@ -72,7 +76,8 @@ fn misses(model: &CostModel, rows: &[Measured]) -> Vec<String> {
     rows.iter()
         .filter_map(|m| {
             let predicted = model.sample_cost(&vec![m.shape; m.axes]).high;
-            (!insns_agree(predicted, m.insns)).then(|| format!("{:?} x{}: model {predicted}, QEMU {}", m.shape, m.axes, m.insns))
+            (!insns_agree(predicted, m.insns))
+                .then(|| format!("{:?} x{}: model {predicted}, QEMU {}", m.shape, m.axes, m.insns))
         })
         .collect()
 }

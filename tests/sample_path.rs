@@ -44,7 +44,10 @@ fn corrupted_image_leaves_the_box_in_bypass() {
     assert!(flags.has(SampleFlags::BYPASS));
     // an erased slot reads as "no image" in spirit: bad magic, bypass
     let erased = CoeffImage::parse_prefix(&vec![0xFFu8; 8192]);
-    assert!(matches!(select_mode(Some(&erased), false), Mode::Bypass(BypassReason::InvalidImage(ImageError::BadMagic))));
+    assert!(matches!(
+        select_mode(Some(&erased), false),
+        Mode::Bypass(BypassReason::InvalidImage(ImageError::BadMagic))
+    ));
 }
 
 #[test]
@@ -195,13 +198,7 @@ fn dac_rounding_equals_its_reference_on_every_float_near_the_range() {
 #[test]
 fn the_box_rate_range_is_10_to_200_khz_inclusive() {
     let f = AxisFilter::gain(1.0).unwrap();
-    for (fs, in_range) in [
-        (9_999u32, false),
-        (10_000, true),
-        (51_200, true),
-        (200_000, true),
-        (200_001, false),
-    ] {
+    for (fs, in_range) in [(9_999u32, false), (10_000, true), (51_200, true), (200_000, true), (200_001, false)] {
         let img = Ok(image_with(f, &[0], fs));
         let mode = select_mode(Some(&img), false);
         let rate_refused = matches!(mode, Mode::Bypass(BypassReason::UnsupportedSampleRate(r)) if r == fs);
@@ -223,31 +220,16 @@ fn stored_results_select_the_same_modes() {
     // same checks as a parsed slot.
     let f = AxisFilter::gain(2.0).unwrap();
     let none: Result<CoeffImage, BypassReason> = Err(BypassReason::NoImage);
-    assert!(matches!(
-        select_stored_mode(&none, false),
-        Mode::Bypass(BypassReason::NoImage)
-    ));
+    assert!(matches!(select_stored_mode(&none, false), Mode::Bypass(BypassReason::NoImage)));
     let bad = Err(BypassReason::InvalidImage(ImageError::BadMagic));
-    assert!(matches!(
-        select_stored_mode(&bad, true),
-        Mode::Bypass(BypassReason::InvalidImage(ImageError::BadMagic))
-    ));
+    assert!(matches!(select_stored_mode(&bad, true), Mode::Bypass(BypassReason::InvalidImage(ImageError::BadMagic))));
     let mut offline = image_with(f, &[0], 51_200);
     offline.flags = FLAG_OFFLINE_ONLY;
-    assert!(matches!(
-        select_stored_mode(&Ok(offline), false),
-        Mode::Bypass(BypassReason::OfflineOnly)
-    ));
+    assert!(matches!(select_stored_mode(&Ok(offline), false), Mode::Bypass(BypassReason::OfflineOnly)));
     let slow = Ok(image_with(f, &[0], 5_000));
-    assert!(matches!(
-        select_stored_mode(&slow, false),
-        Mode::Bypass(BypassReason::UnsupportedSampleRate(5_000))
-    ));
+    assert!(matches!(select_stored_mode(&slow, false), Mode::Bypass(BypassReason::UnsupportedSampleRate(5_000))));
     let good = Ok(image_with(f, &[0], 51_200));
-    assert!(matches!(
-        select_stored_mode(&good, true),
-        Mode::Bypass(BypassReason::User)
-    ));
+    assert!(matches!(select_stored_mode(&good, true), Mode::Bypass(BypassReason::User)));
     match select_stored_mode(&good, false) {
         Mode::Compensate(img) => assert_eq!(Ok(*img), good),
         m => panic!("expected compensate, got {m:?}"),

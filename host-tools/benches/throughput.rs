@@ -6,11 +6,11 @@
 //! record, 0.5 s of measured forces at 51.2 kHz).
 use clap::Parser;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use dynocomp::offline::compensate::compensate_record;
 use dynocomp::cli::design::run;
 use dynocomp::cli::design_args::DesignArgs;
 use dynocomp::io::image_file::read_image;
 use dynocomp::io::signal_csv::{read_signal_csv, SignalRecord};
+use dynocomp::offline::compensate::compensate_record;
 use dynocomp_core::kernel::{process_blocks, AxisFilter, AxisState, BlockJob, Section, MAX_FIR, MAX_SECTIONS};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};

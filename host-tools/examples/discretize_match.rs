@@ -18,7 +18,10 @@ fn main() -> anyhow::Result<()> {
         ("3.3 kHz sensor", 51_200.0, vec![(276.0, 0.03, 0.05), (600.0, 0.02, 0.05), (3300.0, 0.02, 0.9)]),
         ("100 Hz machine, 2 kHz sensor", 102_400.0, vec![(100.0, 0.01, 0.1), (2000.0, 0.02, 0.9)]),
     ];
-    println!("{:<34} {:>8} | {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9} | D taps cond", "case", "fs", "foh band", "zoh band", "fit band", "foh .45fs", "zoh .45fs", "fit .45fs");
+    println!(
+        "{:<34} {:>8} | {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9} | D taps cond",
+        "case", "fs", "foh band", "zoh band", "fit band", "foh .45fs", "zoh .45fs", "fit .45fs"
+    );
     for (label, fs, modes) in cases {
         let model = PoleResidueModel::from_modes(&modes);
         let band = (0.0, (0.4 * fs).min(4000.0));
@@ -36,7 +39,15 @@ fn main() -> anyhow::Result<()> {
         let dg = diag.unwrap();
         println!(
             "{label:<34} {fs:>8.0} | {:>8.3}% {:>8.3}% {:>8.4}% | {:>8.2}% {:>8.2}% {:>8.3}% | {} {} {:.1e}",
-            row[0].0 * 100.0, row[1].0 * 100.0, row[2].0 * 100.0, row[0].1 * 100.0, row[1].1 * 100.0, row[2].1 * 100.0, dg.advance, dg.fir_taps, dg.condition
+            row[0].0 * 100.0,
+            row[1].0 * 100.0,
+            row[2].0 * 100.0,
+            row[0].1 * 100.0,
+            row[1].1 * 100.0,
+            row[2].1 * 100.0,
+            dg.advance,
+            dg.fir_taps,
+            dg.condition
         );
     }
     Ok(())

@@ -25,11 +25,11 @@
 //! prefers the full drift over none), and whether it tells.
 use anyhow::Result;
 use dynocomp::design::axis::{design_axis, DesignOptions};
+use dynocomp::design::two_state::range::pair_second_state;
 use dynocomp::metrics::sample_variance;
+use dynocomp::offline::drift::{drift_log_likelihood, DriftSmoothing};
 use dynocomp::simulate::drift::{measure_drifting, simulate_drifting, Drift};
 use dynocomp::simulate::{milling_force, sub_seed, MillingParams, MultiAxisDynamometer, SimParams};
-use dynocomp::offline::drift::{drift_log_likelihood, DriftSmoothing};
-use dynocomp::design::two_state::range::pair_second_state;
 use std::f64::consts::PI;
 
 const FS: f64 = 51_200.0;
@@ -110,10 +110,12 @@ fn main() -> Result<()> {
                     (20.0 + i as f64 * 3980.0 / 199.0, (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 * PI)
                 })
                 .collect();
-            (0..fine_len).map(|k| {
-                let t = k as f64 / f_fine;
-                100.0 + lines.iter().map(|(f, ph)| 10.0 * (2.0 * PI * f * t + ph).cos()).sum::<f64>()
-            }).collect()
+            (0..fine_len)
+                .map(|k| {
+                    let t = k as f64 / f_fine;
+                    100.0 + lines.iter().map(|(f, ph)| 10.0 * (2.0 * PI * f * t + ph).cos()).sum::<f64>()
+                })
+                .collect()
         };
         for a in 0..3 {
             let before_frf = s.frf.axis(a).ok_or_else(|| anyhow::anyhow!("no FRF of axis {a}"))?;

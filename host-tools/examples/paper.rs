@@ -8,7 +8,9 @@
 //! restricted to the preset's fitting bands ("bands"). `--quick` simulates
 //! shorter records (the designs are the same).
 
-use dynocomp::eval::reproduce::{evaluate, local_error_single_vs_parallel, preset_bands, simulate_preset, AxisOutcome, Method};
+use dynocomp::eval::reproduce::{
+    evaluate, local_error_single_vs_parallel, preset_bands, simulate_preset, AxisOutcome, Method,
+};
 use dynocomp::simulate::presets::{dynamometer_9257a, preset, NAMES};
 use std::time::Instant;
 
@@ -49,10 +51,16 @@ fn main() -> anyhow::Result<()> {
     for (a, name) in AXES.iter().enumerate() {
         let g = d.axis(a);
         let f5 = (1..4096).map(|f| f as f64).find(|f| (g.frf(*f) - 1.0).norm() > 0.05).unwrap_or(f64::NAN);
-        println!("- axis {name}: {f5:.0} Hz (|G − 1| at 83 Hz: {}, at 277 Hz: {})", pct((g.frf(83.3) - 1.0).norm()), pct((g.frf(276.7) - 1.0).norm()));
+        println!(
+            "- axis {name}: {f5:.0} Hz (|G − 1| at 83 Hz: {}, at 277 Hz: {})",
+            pct((g.frf(83.3) - 1.0).norm()),
+            pct((g.frf(276.7) - 1.0).norm())
+        );
     }
     println!("\n### Every preset: raw and compensated NRMSE against the true force\n");
-    println!("| preset | method | axis | orders | fit err | raw (bands) | comp. (bands) | raw (0-4 kHz) | comp. (0-4 kHz) |");
+    println!(
+        "| preset | method | axis | orders | fit err | raw (bands) | comp. (bands) | raw (0-4 kHz) | comp. (0-4 kHz) |"
+    );
     println!("|---|---|---|---|---|---|---|---|---|");
     let mut chirp1300 = None;
     for name in NAMES {
@@ -80,8 +88,16 @@ fn main() -> anyhow::Result<()> {
     println!("| axis | single band-fitted | parallel |\n|---|---|---|");
     let t = Instant::now();
     for a in 0..3 {
-        let (single, parallel) = local_error_single_vs_parallel(&s, a, &bands, &[(10.0, 430.0), (470.0, 880.0), (920.0, 1300.0)], (250.0, 350.0));
-        let show = |r: Result<f64, String>| r.map(pct).unwrap_or_else(|e| format!("refused: {}", e.chars().take(120).collect::<String>()));
+        let (single, parallel) = local_error_single_vs_parallel(
+            &s,
+            a,
+            &bands,
+            &[(10.0, 430.0), (470.0, 880.0), (920.0, 1300.0)],
+            (250.0, 350.0),
+        );
+        let show = |r: Result<f64, String>| {
+            r.map(pct).unwrap_or_else(|e| format!("refused: {}", e.chars().take(120).collect::<String>()))
+        };
         println!("| {} | {} | {} |", AXES[a], show(single), show(parallel));
     }
     eprintln!("parallel: {:.1} s", t.elapsed().as_secs_f64());

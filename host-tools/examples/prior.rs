@@ -20,12 +20,12 @@
 //! - t.off: the steady cut with a prior tuned at a spindle speed 2 % off
 //!   (the design's checks skipped: `design` refuses it).
 use anyhow::{bail, Context, Result};
-use dynocomp::offline::force_prior::{build_axis_prior, check_record, PriorOptions};
+use dynocomp::eval::rates::{cases, design_options, noise_floor, RunOptions, RATES_HZ};
 use dynocomp::frf::axis_name;
 use dynocomp::metrics::{accuracy, lowpass, sample_variance, scoring_band_hz};
-use dynocomp::eval::rates::{cases, design_options, noise_floor, RunOptions, RATES_HZ};
-use dynocomp::simulate::{simulate_with, Chatter};
+use dynocomp::offline::force_prior::{build_axis_prior, check_record, PriorOptions};
 use dynocomp::offline::smoother::Smoother;
+use dynocomp::simulate::{simulate_with, Chatter};
 
 fn main() -> Result<()> {
     let (mut names, mut rates, mut width) = (Vec::new(), Vec::new(), None);
@@ -34,7 +34,9 @@ fn main() -> Result<()> {
         match a.as_str() {
             "--case" => names.push(args.next().context("--case needs a name")?),
             "--fs" => rates.push(args.next().context("--fs needs Hz")?.parse::<f64>().context("--fs: not a number")?),
-            "--width" => width = Some(args.next().context("--width needs Hz")?.parse::<f64>().context("--width: not a number")?),
+            "--width" => {
+                width = Some(args.next().context("--width needs Hz")?.parse::<f64>().context("--width: not a number")?)
+            }
             _ => bail!("prior: unknown argument {a:?} (usage: prior [--case NAME]... [--fs HZ]... [--width HZ])"),
         }
     }
@@ -64,12 +66,19 @@ fn main() -> Result<()> {
             let opts = design_options(fs, &RunOptions::default());
             let n = s.truth[0].len();
             let entry_lo = n / 20;
-            let entry_hi = ((params.milling.ramp_in_revs * 60.0 / case.spindle_rpm * fs) as usize).max(entry_lo + 64).min(n);
+            let entry_hi =
+                ((params.milling.ramp_in_revs * 60.0 / case.spindle_rpm * fs) as usize).max(entry_lo + 64).min(n);
             for a in 0..3 {
                 let raw = accuracy(&s.measured[a], &s.truth[a], fs, band);
                 let std_truth = raw.rms_error_n / raw.nrmse;
                 let chain = s.params.anti_alias;
-                let floor = noise_floor(|f| s.dyno.axis(a).frf(f) * chain.analog_frf(f), s.params.measurement.expected_idle_variance(), fs, band, std_truth);
+                let floor = noise_floor(
+                    |f| s.dyno.axis(a).frf(f) * chain.analog_frf(f),
+                    s.params.measurement.expected_idle_variance(),
+                    fs,
+                    band,
+                    std_truth,
+                );
                 let r = sample_variance(&s.idle[a]);
                 let frf = s.frf.axis(a).context("axis")?;
                 let d = match dynocomp::design::axis::design_axis(&s.frf.freq_hz, frf, r, &opts) {
@@ -79,24 +88,37 @@ fn main() -> Result<()> {
                         continue;
                     }
                 };
-                let img = dynocomp::design::image::build_image(std::slice::from_ref(&d), fs as u32, 4, 5000.0, [0; 32])?;
-                let rec = dynocomp::io::signal_csv::SignalRecord { t_s: None, channels: vec![(a, s.measured[a].clone())] };
+                let img =
+                    dynocomp::design::image::build_image(std::slice::from_ref(&d), fs as u32, 4, 5000.0, [0; 32])?;
+                let rec =
+                    dynocomp::io::signal_csv::SignalRecord { t_s: None, channels: vec![(a, s.measured[a].clone())] };
                 let boxed = dynocomp::offline::compensate::compensate_record(&img, &rec, false, "prior")?;
                 let box_nrmse = accuracy(boxed.channel(a).context("channel")?, &s.truth[a], fs, band).nrmse;
                 let dm = &d.discrete.as_ref().context("discrete model")?.0;
                 let default = Smoother::new(dm, d.kalman.q, r)?;
                 let g = |f: f64| d.model.frf(f);
                 let t0 = std::time::Instant::now();
-                let popts = PriorOptions { spindle_rpm: case.spindle_rpm, teeth: case.teeth as u32, line_width_hz: width, unchecked: false };
-                let built = match build_axis_prior(&popts, dm, &g, r, d.kalman.q, d.compensated_band_hz, &tune.measured[a]) {
-                    Ok(b) => b,
-                    Err(e) => {
-                        println!("{fs:>6} {:<14} {:>2} prior refused: {e:#}", case.name, axis_name(a));
-                        continue;
-                    }
+                let popts = PriorOptions {
+                    spindle_rpm: case.spindle_rpm,
+                    teeth: case.teeth as u32,
+                    line_width_hz: width,
+                    unchecked: false,
                 };
+                let built =
+                    match build_axis_prior(&popts, dm, &g, r, d.kalman.q, d.compensated_band_hz, &tune.measured[a]) {
+                        Ok(b) => b,
+                        Err(e) => {
+                            println!("{fs:>6} {:<14} {:>2} prior refused: {e:#}", case.name, axis_name(a));
+                            continue;
+                        }
+                    };
                 if std::env::var("PRIOR_DEBUG").is_ok() {
-                    eprintln!("q_default {:.3e} q_bb {:.3e} r {r:.3e} lines {:?}", d.kalman.q, built.prior.q_broadband, built.prior.lines.iter().map(|l| (l.freq_hz, l.power_n2)).collect::<Vec<_>>());
+                    eprintln!(
+                        "q_default {:.3e} q_bb {:.3e} r {r:.3e} lines {:?}",
+                        d.kalman.q,
+                        built.prior.q_broadband,
+                        built.prior.lines.iter().map(|l| (l.freq_hz, l.power_n2)).collect::<Vec<_>>()
+                    );
                 }
                 let with_prior = match Smoother::with_force_prior(dm, &built.prior, r) {
                     Ok(w) => w,
@@ -112,14 +134,23 @@ fn main() -> Result<()> {
                 let entry = |x: &[f64]| -> f64 {
                     let (e, t) = (lowpass(x, fs, band), lowpass(&s.truth[a], fs, band));
                     let m = (entry_hi - entry_lo) as f64;
-                    100.0 * (e[entry_lo..entry_hi].iter().zip(&t[entry_lo..entry_hi]).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / m).sqrt() / std_truth
+                    100.0
+                        * (e[entry_lo..entry_hi]
+                            .iter()
+                            .zip(&t[entry_lo..entry_hi])
+                            .map(|(a, b)| (a - b).powi(2))
+                            .sum::<f64>()
+                            / m)
+                            .sqrt()
+                        / std_truth
                 };
                 // A prior tuned at a spindle speed 2 % off (checks skipped).
                 let off_opts = PriorOptions { spindle_rpm: case.spindle_rpm * 1.02, unchecked: true, ..popts.clone() };
-                let tuned_off = build_axis_prior(&off_opts, dm, &g, r, d.kalman.q, d.compensated_band_hz, &tune.measured[a])
-                    .and_then(|b| Smoother::with_force_prior(dm, &b.prior, r))
-                    .map(|sm| score(&sm.smooth(&s.measured[a]), &s.truth[a]))
-                    .unwrap_or(f64::NAN);
+                let tuned_off =
+                    build_axis_prior(&off_opts, dm, &g, r, d.kalman.q, d.compensated_band_hz, &tune.measured[a])
+                        .and_then(|b| Smoother::with_force_prior(dm, &b.prior, r))
+                        .map(|sm| score(&sm.smooth(&s.measured[a]), &s.truth[a]))
+                        .unwrap_or(f64::NAN);
                 let verdict = |y: &[f64]| match check_record(&built.prior, y, &g, r) {
                     Ok(rs) => format!("ok {:.0e}", rs.off_line_share),
                     Err(_) => "REFUSE".to_string(),

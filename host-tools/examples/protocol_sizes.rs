@@ -11,7 +11,10 @@ use dynocomp_core::store::Store;
 use std::mem::size_of;
 
 fn main() {
-    println!("MAX_PAYLOAD {} B, MAX_FRAME {} B, MAX_CHUNK {} B, STREAM_BATCH {}", MAX_PAYLOAD, MAX_FRAME, MAX_CHUNK, STREAM_BATCH);
+    println!(
+        "MAX_PAYLOAD {} B, MAX_FRAME {} B, MAX_CHUNK {} B, STREAM_BATCH {}",
+        MAX_PAYLOAD, MAX_FRAME, MAX_CHUNK, STREAM_BATCH
+    );
     println!("FrameDecoder      {:5} B", size_of::<FrameDecoder>());
     println!("Store (w/o flash) {:5} B", size_of::<Store<SimFlash>>() - size_of::<SimFlash>());
     println!("BoxLink           {:5} B", size_of::<BoxLink>());

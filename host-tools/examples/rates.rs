@@ -20,11 +20,11 @@
 //! floor from the true G, the design's predicted error and flat band; then per
 //! fs the median and worst compensated NRMSE and the axes worse than raw.
 use anyhow::{bail, Context, Result};
-use dynocomp::frf::axis_name;
 use dynocomp::eval::rates::{cases, quick_cases, run_case_on, summarize, RunOptions, RATES_HZ};
+use dynocomp::frf::axis_name;
 use dynocomp::simulate::Chatter;
-use std::time::Instant;
 use dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE;
+use std::time::Instant;
 
 fn main() -> Result<()> {
     let mut quick = false;
@@ -63,7 +63,18 @@ fn main() -> Result<()> {
     println!("floor = exact-inverse noise floor sqrt(R·(2/fs)·∫|1/G|² df)/std(truth) with the true G");
     println!(
         "{:>7} {:<15} {:>5} {:>4} {:>4} {:>9} {:>9} {:>8} {:>9} {:>8} {:>15} {:>8}",
-        "fs", "case", "TPF", "df", "axis", "raw %", "comp %", "floor %", "comp/flr", "pred %", "flat band Hz", "design s"
+        "fs",
+        "case",
+        "TPF",
+        "df",
+        "axis",
+        "raw %",
+        "comp %",
+        "floor %",
+        "comp/flr",
+        "pred %",
+        "flat band Hz",
+        "design s"
     );
     let mut results = Vec::new();
     for &fs in &RATES_HZ {
@@ -76,7 +87,13 @@ fn main() -> Result<()> {
                 Err(e) => println!("{fs:>7} {:<15} simulation failed: {e:#}", case.name),
                 Ok(r) => {
                     for a in &r.axes {
-                        let head = format!("{fs:>7} {:<15} {:>5.0} {:>4} {:>4}", case.name, case.tpf_hz(), case.frf_df_hz, axis_name(a.axis));
+                        let head = format!(
+                            "{fs:>7} {:<15} {:>5.0} {:>4} {:>4}",
+                            case.name,
+                            case.tpf_hz(),
+                            case.frf_df_hz,
+                            axis_name(a.axis)
+                        );
                         match &a.comp_nrmse {
                             Ok(c) => println!(
                                 "{head} {:>9.3} {:>9.3} {:>8.3} {:>9.2} {:>8.2} {:>6.0}-{:<8.0} {:>8.3}{}",
@@ -95,11 +112,19 @@ fn main() -> Result<()> {
                     }
                     match r.box_load() {
                         Some((c, lo, hi)) => {
-                            let shapes: Vec<String> = r.axes.iter().filter_map(|a| a.shape).map(|s| format!("{}+{}r+{}", s.pairs, s.reals, s.taps)).collect();
+                            let shapes: Vec<String> = r
+                                .axes
+                                .iter()
+                                .filter_map(|a| a.shape)
+                                .map(|s| format!("{}+{}r+{}", s.pairs, s.reals, s.taps))
+                                .collect();
                             // This benchmark builds its images without `design`, which
                             // marks an image over the box's limit offline-only: say so here.
                             let offline = if hi > BOX_LOAD_LIMIT_PERMILLE {
-                                format!("  OFFLINE-ONLY: over the box's {} % limit, the box would refuse it", BOX_LOAD_LIMIT_PERMILLE / 10)
+                                format!(
+                                    "  OFFLINE-ONLY: over the box's {} % limit, the box would refuse it",
+                                    BOX_LOAD_LIMIT_PERMILLE / 10
+                                )
                             } else {
                                 String::new()
                             };
@@ -126,16 +151,28 @@ fn main() -> Result<()> {
     }
     println!();
     println!("predicted box load (budget::CostModel::CORTEX_M4, 170 MHz), median over the cases' designs");
-    println!("{:>7} {:>13} {:>13} {:>6}  offline-only (high > {} %: the box refuses them)", "fs", "median low %", "median high %", "cases", BOX_LOAD_LIMIT_PERMILLE / 10);
+    println!(
+        "{:>7} {:>13} {:>13} {:>6}  offline-only (high > {} %: the box refuses them)",
+        "fs",
+        "median low %",
+        "median high %",
+        "cases",
+        BOX_LOAD_LIMIT_PERMILLE / 10
+    );
     for &fs in &RATES_HZ {
-        let loads: Vec<(u32, u32)> = results.iter().filter(|r| r.fs_hz == fs).filter_map(|r| r.box_load()).map(|(_, lo, hi)| (lo, hi)).collect();
+        let loads: Vec<(u32, u32)> =
+            results.iter().filter(|r| r.fs_hz == fs).filter_map(|r| r.box_load()).map(|(_, lo, hi)| (lo, hi)).collect();
         if loads.is_empty() {
             continue;
         }
         let median = |mut v: Vec<u32>| {
             v.sort_unstable();
             let n = v.len();
-            if n % 2 == 1 { f64::from(v[n / 2]) } else { (f64::from(v[n / 2 - 1]) + f64::from(v[n / 2])) / 2.0 }
+            if n % 2 == 1 {
+                f64::from(v[n / 2])
+            } else {
+                (f64::from(v[n / 2 - 1]) + f64::from(v[n / 2])) / 2.0
+            }
         };
         let (lo, hi) = (median(loads.iter().map(|l| l.0).collect()), median(loads.iter().map(|l| l.1).collect()));
         let offline = loads.iter().filter(|l| l.1 > BOX_LOAD_LIMIT_PERMILLE).count();

@@ -17,7 +17,10 @@ fn main() -> Result<()> {
     let fmax: f64 = a.get(5).map_or(Ok(4000.0), |s| s.parse()).context("F_MAX_HZ")?;
     println!("accuracy against the true force below {fmax} Hz (NRMSE = RMS error / std of the band-limited truth;");
     println!("p2p: RMS error / peak-to-peak of the truth, a second figure for comparison only):");
-    println!("{:<5} {:>12} {:>12} {:>12} {:>16} {:>16}", "axis", "raw", "compensated", "improvement", "raw (p2p)", "comp. (p2p)");
+    println!(
+        "{:<5} {:>12} {:>12} {:>12} {:>16} {:>16}",
+        "axis", "raw", "compensated", "improvement", "raw (p2p)", "comp. (p2p)"
+    );
     for (axis, t) in &truth.channels {
         let (Some(c), Some(r)) = (comp.channel(*axis), raw.channel(*axis)) else { continue };
         let ac = accuracy(c, t, fs, fmax);

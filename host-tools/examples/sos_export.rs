@@ -12,9 +12,9 @@
 //! space. The kernel's filter is d + Σ sections + FIR (parallel form).
 //! Prints `compensate_samples_per_s <axes> <value>` (best of REPEATS, default 200: the first runs after start-up are up to 1.4x slower).
 use anyhow::{ensure, Context, Result};
-use dynocomp::offline::compensate::compensate_record;
 use dynocomp::io::image_file::read_image;
 use dynocomp::io::signal_csv::{read_signal_csv, SignalRecord};
+use dynocomp::offline::compensate::compensate_record;
 use serde_json::json;
 use std::path::Path;
 use std::time::Instant;
@@ -81,11 +81,8 @@ fn main() -> Result<()> {
 
     // The box's path for comparison: `step` per sample, the three axes
     // interleaved sample by sample; same kernel, same results per axis.
-    let filters: Vec<_> = rec
-        .channels
-        .iter()
-        .filter_map(|(a, _)| image.axes.get(*a).copied().flatten().map(|ai| ai.filter))
-        .collect();
+    let filters: Vec<_> =
+        rec.channels.iter().filter_map(|(a, _)| image.axes.get(*a).copied().flatten().map(|ai| ai.filter)).collect();
     let inputs: Vec<Vec<f32>> = rec.channels.iter().map(|(_, v)| v.iter().map(|&x| x as f32).collect()).collect();
     ensure!(filters.len() == inputs.len(), "every column needs a compensator in the image");
     let n = rec.len();

@@ -21,7 +21,10 @@ fn main() -> anyhow::Result<()> {
             let t0 = std::time::Instant::now();
             let d = match design_axis(&sim.frf.freq_hz, frf, r, &opts) {
                 Ok(d) => d,
-                Err(e) => { println!("seed {seed} axis {ax}: {e:#}"); continue; }
+                Err(e) => {
+                    println!("seed {seed} axis {ax}: {e:#}");
+                    continue;
+                }
             };
             let dt = t0.elapsed();
             let mut st = AxisState::default();

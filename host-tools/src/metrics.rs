@@ -93,9 +93,5 @@ fn accuracy_filtered(estimate: &[f64], truth: &[f64], filter: impl Fn(&[f64]) ->
     let (lo, hi) = t.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
     let mean = t.iter().sum::<f64>() / m;
     let std = (t.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / m).sqrt();
-    Accuracy {
-        nrmse: rms / std,
-        nrmse_p2p: rms / (hi - lo),
-        rms_error_n: rms,
-    }
+    Accuracy { nrmse: rms / std, nrmse_p2p: rms / (hi - lo), rms_error_n: rms }
 }

@@ -134,7 +134,12 @@ fn paths_at(code: &[u8], mut pos: usize, base: Vec<String>, out: &mut Vec<Vec<St
             pos += 2;
         } else {
             // `as name`, `;`, `(`, … end the path
-            while pos < code.len() && code[pos] != b',' && code[pos] != b'}' && code[pos] != b';' && !code[pos].is_ascii_whitespace() {
+            while pos < code.len()
+                && code[pos] != b','
+                && code[pos] != b'}'
+                && code[pos] != b';'
+                && !code[pos].is_ascii_whitespace()
+            {
                 if !(code[pos].is_ascii_alphanumeric() || code[pos] == b'_') {
                     break;
                 }

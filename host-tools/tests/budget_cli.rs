@@ -47,7 +47,10 @@ fn over_the_load_limit_the_image_is_offline_only_and_flash_refuses_it() {
     let heavy = heavy.to_str().unwrap();
     let (ok, out, err) = design(heavy, &["--max-load", "20"]);
     assert!(ok, "{err}");
-    assert!(err.contains("OFFLINE-ONLY IMAGE") && err.contains("exceeds the limit of 20 %") && err.contains("run it up to"), "{err}");
+    assert!(
+        err.contains("OFFLINE-ONLY IMAGE") && err.contains("exceeds the limit of 20 %") && err.contains("run it up to"),
+        "{err}"
+    );
     assert!(out.contains("OVER THE LIMIT: offline-only image"), "{out}");
     let j = inspect_json(heavy);
     assert_eq!(j["offline_only"], true);
@@ -57,7 +60,10 @@ fn over_the_load_limit_the_image_is_offline_only_and_flash_refuses_it() {
     assert!(j["box_load"]["load_pct"][1].as_f64().unwrap() > 20.0, "{j}");
     let (ok, _, err) = dynocomp(&["flash", heavy, "--probe", "--dry-run"]);
     assert!(!ok);
-    assert!(err.contains("heavy.dcimg") && err.contains("offline-only image") && err.trim().lines().count() == 1, "{err}");
+    assert!(
+        err.contains("heavy.dcimg") && err.contains("offline-only image") && err.trim().lines().count() == 1,
+        "{err}"
+    );
 
     // A limit above the box's own is refused, and nothing is written.
     let none = tmp("none.dcimg");

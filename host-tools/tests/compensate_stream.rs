@@ -2,8 +2,8 @@
 //! the whole-record path; `--report` draws what it did; bad input leaves no
 //! output behind.
 
-use dynocomp::offline::compensate::{compensate_record, StreamCompensator};
 use dynocomp::io::signal_csv::{read_signal_csv, SignalRecord};
+use dynocomp::offline::compensate::{compensate_record, StreamCompensator};
 use dynocomp_core::image::CoeffImage;
 use dynocomp_core::kernel::{AxisFilter, Section};
 
@@ -31,7 +31,9 @@ fn image(latency: u16) -> CoeffImage {
 fn record(n: usize) -> SignalRecord {
     SignalRecord {
         t_s: None,
-        channels: (0..3).map(|a| (a, (0..n).map(|k| ((k * (a + 2)) as f64 * 0.031).sin() * 80.0 + (k % 13) as f64).collect())).collect(),
+        channels: (0..3)
+            .map(|a| (a, (0..n).map(|k| ((k * (a + 2)) as f64 * 0.031).sin() * 80.0 + (k % 13) as f64).collect()))
+            .collect(),
     }
 }
 
@@ -70,7 +72,10 @@ fn streaming_is_bit_exact_with_the_whole_record() {
             for block in [1, 3, 4, 5, 4096, 8192, 20_011, 50_000] {
                 let got = streamed(&img, &rec, raw, block);
                 for (a, g) in got.iter().enumerate() {
-                    assert!(same_bits(g, want.channel(a).unwrap()), "latency {latency}, raw {raw}, block {block}, axis {a}");
+                    assert!(
+                        same_bits(g, want.channel(a).unwrap()),
+                        "latency {latency}, raw {raw}, block {block}, axis {a}"
+                    );
                 }
             }
         }
@@ -84,12 +89,17 @@ fn streaming_is_bit_exact_with_the_whole_record() {
 /// `compensate` of the example's measured force with image(4), `--report`
 /// and `--truth` (a file of the example) and `extra` flags: (success,
 /// stderr, output, report folder).
-fn compensate_example_with_report(tag: &str, truth: &str, extra: &[&str]) -> (bool, String, std::path::PathBuf, std::path::PathBuf) {
+fn compensate_example_with_report(
+    tag: &str,
+    truth: &str,
+    extra: &[&str],
+) -> (bool, String, std::path::PathBuf, std::path::PathBuf) {
     let img_path = tmp(tag, "img.dcimg");
     std::fs::write(&img_path, common::bytes(&image(4))).unwrap();
     let (out, rep) = (tmp(tag, "out.csv"), tmp(tag, "report"));
     let (inp, tr) = (example("measured.csv"), example(truth));
-    let mut args = vec!["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", &inp, "--output", out.to_str().unwrap()];
+    let mut args =
+        vec!["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", &inp, "--output", out.to_str().unwrap()];
     args.extend(["--report", rep.to_str().unwrap(), "--truth", &tr]);
     args.extend_from_slice(extra);
     let (ok, _, err) = dynocomp(&args);
@@ -101,12 +111,16 @@ fn compensate_example_with_report(tag: &str, truth: &str, extra: &[&str]) -> (bo
 /// per axis and states an NRMSE that is below the measured force's.
 #[test]
 fn cli_streams_the_example_and_reports() {
-    let (ok, err, out, rep) = compensate_example_with_report("stream", "measured.csv", &["--spindle-rpm", "16500", "--teeth", "4"]);
+    let (ok, err, out, rep) =
+        compensate_example_with_report("stream", "measured.csv", &["--spindle-rpm", "16500", "--teeth", "4"]);
     assert!(ok, "{err}");
     let input = read_signal_csv(std::path::Path::new(&example("measured.csv"))).unwrap();
     let want = compensate_record(&image(4), &input, false, "x").unwrap();
     let got = read_signal_csv(&out).unwrap();
-    assert_eq!(got.t_s.as_ref().map(|t| t.iter().map(|v| v.to_bits()).collect::<Vec<_>>()), input.t_s.map(|t| t.iter().map(|v| v.to_bits()).collect()));
+    assert_eq!(
+        got.t_s.as_ref().map(|t| t.iter().map(|v| v.to_bits()).collect::<Vec<_>>()),
+        input.t_s.map(|t| t.iter().map(|v| v.to_bits()).collect())
+    );
     for a in 0..3 {
         assert!(same_bits(got.channel(a).unwrap(), want.channel(a).unwrap()), "axis {a}");
     }
@@ -114,7 +128,10 @@ fn cli_streams_the_example_and_reports() {
         assert!(rep.join(f).is_file(), "{f} missing");
     }
     let html = std::fs::read_to_string(rep.join("index.html")).unwrap();
-    assert!(html.contains("NRMSE") && html.contains("TPF") || html.contains("tooth-passing frequency 1100.0 Hz"), "{html}");
+    assert!(
+        html.contains("NRMSE") && html.contains("TPF") || html.contains("tooth-passing frequency 1100.0 Hz"),
+        "{html}"
+    );
     // The truth here is the measured force itself: its NRMSE must read 0.
     assert!(err.contains("NRMSE measured 0.000 %"), "{err}");
 }
@@ -134,22 +151,50 @@ fn bad_input_leaves_nothing_behind() {
     text.push_str("0.5,abc\n");
     std::fs::write(&bad, &text).unwrap();
     let out = tmp("streambad", "out.csv");
-    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", bad.to_str().unwrap(), "--output", out.to_str().unwrap()]);
+    let (ok, _, err) = dynocomp(&[
+        "compensate",
+        "--coeffs",
+        img_path.to_str().unwrap(),
+        "--input",
+        bad.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+    ]);
     assert!(!ok);
     assert!(err.contains("bad.csv: line 20002, column 2") && err.lines().count() == 1, "{err}");
     assert!(!out.exists());
     let slow = tmp("streambad", "slow.csv");
-    let text: String = std::iter::once("t_s,fx\n".to_string()).chain((0..20_000).map(|k| format!("{},{}\n", k as f64 / 48000.0, k % 7))).collect();
+    let text: String = std::iter::once("t_s,fx\n".to_string())
+        .chain((0..20_000).map(|k| format!("{},{}\n", k as f64 / 48000.0, k % 7)))
+        .collect();
     std::fs::write(&slow, text).unwrap();
-    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", slow.to_str().unwrap(), "--output", out.to_str().unwrap()]);
+    let (ok, _, err) = dynocomp(&[
+        "compensate",
+        "--coeffs",
+        img_path.to_str().unwrap(),
+        "--input",
+        slow.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+    ]);
     assert!(!ok);
     assert!(err.contains("48000.000 Hz") && err.contains("51200"), "{err}");
     assert!(!out.exists());
     // positive control: the same record at the image's rate passes
     let fine = tmp("streambad", "fine.csv");
-    let text: String = std::iter::once("t_s,fx\n".to_string()).chain((0..20_000).map(|k| format!("{},{}\n", k as f64 / 51200.0, k % 7))).collect();
+    let text: String = std::iter::once("t_s,fx\n".to_string())
+        .chain((0..20_000).map(|k| format!("{},{}\n", k as f64 / 51200.0, k % 7)))
+        .collect();
     std::fs::write(&fine, text).unwrap();
-    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", fine.to_str().unwrap(), "--output", out.to_str().unwrap()]);
+    let (ok, _, err) = dynocomp(&[
+        "compensate",
+        "--coeffs",
+        img_path.to_str().unwrap(),
+        "--input",
+        fine.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+    ]);
     assert!(ok, "{err}");
     assert!(out.exists());
 }
@@ -172,7 +217,17 @@ fn report_size_does_not_grow_with_the_record() {
         std::fs::write(&inp, text).unwrap();
         let rep = tmp("streamlong", &format!("rep{n}"));
         let out = tmp("streamlong", &format!("out{n}.csv"));
-        let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", inp.to_str().unwrap(), "--output", out.to_str().unwrap(), "--report", rep.to_str().unwrap()]);
+        let (ok, _, err) = dynocomp(&[
+            "compensate",
+            "--coeffs",
+            img_path.to_str().unwrap(),
+            "--input",
+            inp.to_str().unwrap(),
+            "--output",
+            out.to_str().unwrap(),
+            "--report",
+            rep.to_str().unwrap(),
+        ]);
         assert!(ok, "{err}");
         sizes.push(std::fs::metadata(rep.join("x_overview.svg")).unwrap().len());
     }
@@ -191,12 +246,18 @@ fn report_nrmse_uses_the_scoring_band() {
     let truth = read_signal_csv(std::path::Path::new(&example("true_force.csv"))).unwrap();
     let meas = read_signal_csv(std::path::Path::new(&example("measured.csv"))).unwrap();
     let comp = read_signal_csv(&out).unwrap();
-    let fig = |est: &[f64], t: &[f64], band: f64| format!("{:.3} %", 100.0 * dynocomp::metrics::accuracy(est, t, 51200.0, band).nrmse);
+    let fig = |est: &[f64], t: &[f64], band: f64| {
+        format!("{:.3} %", 100.0 * dynocomp::metrics::accuracy(est, t, 51200.0, band).nrmse)
+    };
     for (a, name) in ["x", "y", "z"].iter().enumerate() {
-        let line = err.lines().find(|l| l.starts_with(&format!("f{name}: NRMSE"))).unwrap_or_else(|| panic!("no NRMSE line for f{name}: {err}"));
+        let line = err
+            .lines()
+            .find(|l| l.starts_with(&format!("f{name}: NRMSE")))
+            .unwrap_or_else(|| panic!("no NRMSE line for f{name}: {err}"));
         let t = truth.channel(a).unwrap();
         let (c, m) = (comp.channel(a).unwrap(), meas.channel(a).unwrap());
-        let want = format!("f{name}: NRMSE measured {}, compensated {} (band 4000 Hz;", fig(m, t, 4000.0), fig(c, t, 4000.0));
+        let want =
+            format!("f{name}: NRMSE measured {}, compensated {} (band 4000 Hz;", fig(m, t, 4000.0), fig(c, t, 4000.0));
         assert!(line.starts_with(&want), "report: {line}\nscore: {want}");
         assert_ne!(fig(c, t, 4000.0), fig(c, t, 25600.0), "axis {name}: the band makes no difference here");
     }
@@ -213,11 +274,23 @@ fn uff_output_spills_beside_the_output() {
     let img_path = tmp("spilldir", "img.dcimg");
     std::fs::write(&img_path, common::bytes(&image(4))).unwrap();
     let input = tmp("spilldir", "in.csv");
-    let text: String = std::iter::once("t_s,fx\n".to_string()).chain((0..20_000).map(|k| format!("{},{}\n", k as f64 / 51200.0, k % 7))).collect();
+    let text: String = std::iter::once("t_s,fx\n".to_string())
+        .chain((0..20_000).map(|k| format!("{},{}\n", k as f64 / 51200.0, k % 7)))
+        .collect();
     std::fs::write(&input, text).unwrap();
     let run = |out: &std::path::Path| {
         let o = std::process::Command::new(env!("CARGO_BIN_EXE_dynocomp"))
-            .args(["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", input.to_str().unwrap(), "--output", out.to_str().unwrap(), "--output-format", "uff58b"])
+            .args([
+                "compensate",
+                "--coeffs",
+                img_path.to_str().unwrap(),
+                "--input",
+                input.to_str().unwrap(),
+                "--output",
+                out.to_str().unwrap(),
+                "--output-format",
+                "uff58b",
+            ])
             .env("TMPDIR", "/nonexistent-dynocomp-tmp")
             .output()
             .unwrap();

@@ -1,9 +1,9 @@
 //! Each numerical stage of the design against an independent truth.
 
-use dynocomp::fit::vf::{coherence_weights, vector_fit, VfOptions};
 use dynocomp::design::discretize::{discretize, DiscreteModel, Discretization};
-use dynocomp::fit::PoleResidueModel;
 use dynocomp::design::kalman::{self, solve_filter_dare};
+use dynocomp::fit::vf::{coherence_weights, vector_fit, VfOptions};
+use dynocomp::fit::PoleResidueModel;
 use dynocomp::numeric::lti::StateSpace;
 use dynocomp::realize::modal::realize;
 use nalgebra::{DMatrix, DVector};
@@ -46,7 +46,13 @@ fn filter_dare_matches_the_scalar_closed_form() {
     for (a, q, r) in [(0.9f64, 0.5f64, 2.0f64), (1.0, 1e-3, 0.05), (0.2, 3.0, 1e-2)] {
         let b = r - a * a * r - q;
         let p_true = (-b + (b * b + 4.0 * q * r).sqrt()) / 2.0;
-        let sol = solve_filter_dare(&DMatrix::from_element(1, 1, a), &DVector::from_element(1, 1.0), &DMatrix::from_element(1, 1, q), r).unwrap();
+        let sol = solve_filter_dare(
+            &DMatrix::from_element(1, 1, a),
+            &DVector::from_element(1, 1.0),
+            &DMatrix::from_element(1, 1, q),
+            r,
+        )
+        .unwrap();
         assert!((sol.p[(0, 0)] - p_true).abs() < 1e-10 * p_true, "a={a} q={q} r={r}: {} vs {p_true}", sol.p[(0, 0)]);
     }
 }
@@ -56,7 +62,8 @@ fn random_walk_kalman_gain_matches_the_steady_state_formula() {
     // A pure gain sensor (G = 1, no modes) with a random-walk force: the
     // Kalman filter is the scalar one above with a = 1, and the compensator
     // is F̂[k] = F̂[k−1] + K (y[k] − F̂[k−1]) with K = P/(P + r).
-    let model = DiscreteModel { fs_hz: 51_200.0, method: Discretization::Foh, terms: vec![], d: 1.0, fir: vec![], advance: 0 };
+    let model =
+        DiscreteModel { fs_hz: 51_200.0, method: Discretization::Foh, terms: vec![], d: 1.0, fir: vec![], advance: 0 };
     let (q, r): (f64, f64) = (0.3, 0.05);
     let d = kalman::design(&model, q, r, 0).unwrap();
     let b = -q;
@@ -97,7 +104,12 @@ fn realization_reproduces_the_dense_transfer_function() {
 fn white_noise_gain_is_exact_where_a_frequency_grid_is_not() {
     // H(z) = d + b·c/(z − a): Σ h_k² = d² + (b c)²/(1 − a²) (geometric series).
     for (a, b, c, d) in [(0.5f64, 1.0f64, 2.0f64, 0.3f64), (0.9996, 0.02, 1.0, 1.0), (-0.7, 1.0, -1.5, 0.0)] {
-        let ss = StateSpace { a: DMatrix::from_element(1, 1, a), b: DVector::from_element(1, b), c: DVector::from_element(1, c), d };
+        let ss = StateSpace {
+            a: DMatrix::from_element(1, 1, a),
+            b: DVector::from_element(1, b),
+            c: DVector::from_element(1, c),
+            d,
+        };
         let truth = (d * d + (b * c).powi(2) / (1.0 - a * a)).sqrt();
         let got = ss.white_noise_gain().unwrap();
         assert!((got - truth).abs() < 1e-9 * truth, "a={a}: {got} vs {truth}");
@@ -109,6 +121,11 @@ fn white_noise_gain_is_exact_where_a_frequency_grid_is_not() {
         }
     }
     // An unstable A has no finite gain.
-    let ss = StateSpace { a: DMatrix::from_element(1, 1, 1.01), b: DVector::from_element(1, 1.0), c: DVector::from_element(1, 1.0), d: 0.0 };
+    let ss = StateSpace {
+        a: DMatrix::from_element(1, 1, 1.01),
+        b: DVector::from_element(1, 1.0),
+        c: DVector::from_element(1, 1.0),
+        d: 0.0,
+    };
     assert!(ss.white_noise_gain().is_none());
 }

@@ -7,8 +7,8 @@
 //! the filter is designed on, its advance and its FIR taps.
 
 use dynocomp::design::discretize::{discretize, DiscreteModel, Discretization, MATCH_TARGET};
-use dynocomp::fit::PoleResidueModel;
 use dynocomp::design::kalman::augmented_plant;
+use dynocomp::fit::PoleResidueModel;
 use nalgebra::DVector;
 use num_complex::Complex64;
 use rand::SeedableRng;
@@ -29,7 +29,11 @@ fn band_limited_pair(model: &PoleResidueModel, fs: f64, f_hi: f64, seed: u64) ->
         if f > f_hi {
             break;
         }
-        let v = if k == 0 { Complex64::new(nd.sample(&mut rng), 0.0) } else { Complex64::new(nd.sample(&mut rng), nd.sample(&mut rng)) };
+        let v = if k == 0 {
+            Complex64::new(nd.sample(&mut rng), 0.0)
+        } else {
+            Complex64::new(nd.sample(&mut rng), nd.sample(&mut rng))
+        };
         let g = model.frf(f);
         fspec[k] = v;
         yspec[k] = v * g;
@@ -97,16 +101,36 @@ fn the_fitted_discrete_model_reproduces_the_sampled_data_relation_where_holds_do
             errs.push(e);
         }
         let sensor = modes.last().unwrap().0;
-        eprintln!("fs {fs} sensor {sensor} Hz: fit {:.4} %, FOH {:.3} %, ZOH {:.3} %", errs[0] * 100.0, errs[1] * 100.0, errs[2] * 100.0);
+        eprintln!(
+            "fs {fs} sensor {sensor} Hz: fit {:.4} %, FOH {:.3} %, ZOH {:.3} %",
+            errs[0] * 100.0,
+            errs[1] * 100.0,
+            errs[2] * 100.0
+        );
         // The fit: near the match target where a mode is not near Nyquist,
         // and still well below 1 % where it is.
         let limit = if fs > 20_000.0 { MATCH_TARGET } else { 5e-3 };
-        assert!(errs[0] < limit, "fs {fs}: fitted model {:.4} % of the exact relation (limit {:.2} %)", errs[0] * 100.0, limit * 100.0);
+        assert!(
+            errs[0] < limit,
+            "fs {fs}: fitted model {:.4} % of the exact relation (limit {:.2} %)",
+            errs[0] * 100.0,
+            limit * 100.0
+        );
         // Negative controls: the hold equivalents miss the same limit (FOH
         // only just at 102.4 kHz: its error falls as (f/fs)²), and the fit
         // is several times better than the better hold everywhere.
-        assert!(errs[1] > limit && errs[2] > limit, "fs {fs}: a hold equivalent met the limit ({:.4} %, {:.4} %)", errs[1] * 100.0, errs[2] * 100.0);
-        assert!(errs[0] < errs[1].min(errs[2]) / 4.0, "fs {fs}: fit {:.4} % not 4x better than FOH {:.4} %", errs[0] * 100.0, errs[1] * 100.0);
+        assert!(
+            errs[1] > limit && errs[2] > limit,
+            "fs {fs}: a hold equivalent met the limit ({:.4} %, {:.4} %)",
+            errs[1] * 100.0,
+            errs[2] * 100.0
+        );
+        assert!(
+            errs[0] < errs[1].min(errs[2]) / 4.0,
+            "fs {fs}: fit {:.4} % not 4x better than FOH {:.4} %",
+            errs[0] * 100.0,
+            errs[1] * 100.0
+        );
     }
 }
 
@@ -116,8 +140,13 @@ fn the_first_order_hold_is_exact_for_a_force_linear_between_samples() {
     // (`simulate::dynamometer`, its own discretization of each mode).
     use dynocomp::simulate::dynamometer::{Dynamometer, Hold, Mode};
     let fs = 25_600.0;
-    let dyno = Dynamometer::from_modes(vec![Mode { fn_hz: 450.0, zeta: 0.04, residue: 0.3 }, Mode { fn_hz: 2600.0, zeta: 0.02, residue: 0.7 }]).unwrap();
-    let model = PoleResidueModel::from_modes(&dyno.modes.iter().map(|m| (m.fn_hz, m.zeta, m.residue)).collect::<Vec<_>>());
+    let dyno = Dynamometer::from_modes(vec![
+        Mode { fn_hz: 450.0, zeta: 0.04, residue: 0.3 },
+        Mode { fn_hz: 2600.0, zeta: 0.02, residue: 0.7 },
+    ])
+    .unwrap();
+    let model =
+        PoleResidueModel::from_modes(&dyno.modes.iter().map(|m| (m.fn_hz, m.zeta, m.residue)).collect::<Vec<_>>());
     let force: Vec<f64> = (0..N).map(|k| ((k * 7919) % 1000) as f64 - 500.0).collect();
     let truth = dyno.measure_with(&force, fs, Hold::Foh);
     let (dm, _) = discretize(&model, fs, Discretization::Foh, (0.0, 0.0)).unwrap();
@@ -174,7 +203,9 @@ fn the_static_gain_is_matched_where_a_cutting_force_has_its_mean() {
         assert!((modes.iter().map(|m| m.2).sum::<f64>() - 1.0).abs() < 1e-12);
         let model = PoleResidueModel::from_modes(&modes);
         for band_lo in [0.0, 7.0] {
-            let fit = |s: StaticGain| discretize_to(&model, fs, Discretization::Fit, (band_lo, band_hi), MATCH_BAND_FRACTION, s).unwrap().0;
+            let fit = |s: StaticGain| {
+                discretize_to(&model, fs, Discretization::Fit, (band_lo, band_hi), MATCH_BAND_FRACTION, s).unwrap().0
+            };
             let (exact, fitted) = (fit(StaticGain::Exact), fit(StaticGain::Fitted));
             let err = |dm: &DiscreteModel| (dm.frf(0.0) - 1.0).norm();
             let band: Vec<f64> = (0..=400).map(|i| band_lo + (band_hi - band_lo) * i as f64 / 400.0).collect();
@@ -189,7 +220,12 @@ fn the_static_gain_is_matched_where_a_cutting_force_has_its_mean() {
             assert!(err(&exact) < 1e-9, "fs {fs}: static gain {:.3e} off with the exact constraint", err(&exact));
             assert!(err(&fitted) > 1e-4, "fs {fs}: the fitted static gain was already exact ({:.3e})", err(&fitted));
             // The constraint costs little elsewhere in the band.
-            assert!(in_band(&exact) < 2.0 * in_band(&fitted).max(MATCH_TARGET), "fs {fs}: in-band match {:.3e} with the constraint, {:.3e} without", in_band(&exact), in_band(&fitted));
+            assert!(
+                in_band(&exact) < 2.0 * in_band(&fitted).max(MATCH_TARGET),
+                "fs {fs}: in-band match {:.3e} with the constraint, {:.3e} without",
+                in_band(&exact),
+                in_band(&fitted)
+            );
         }
     }
 }

@@ -18,7 +18,9 @@ fn force(n: usize) -> Vec<f64> {
     (0..n)
         .map(|k| {
             let t = k as f64 / F_FINE;
-            50.0 + 30.0 * (2.0 * PI * 800.0 * t).sin() + 20.0 * (2.0 * PI * 2330.0 * t).sin() + 10.0 * (2.0 * PI * (500.0 + 20_000.0 * t) * t).sin()
+            50.0 + 30.0 * (2.0 * PI * 800.0 * t).sin()
+                + 20.0 * (2.0 * PI * 2330.0 * t).sin()
+                + 10.0 * (2.0 * PI * (500.0 + 20_000.0 * t) * t).sin()
         })
         .collect()
 }
@@ -138,7 +140,10 @@ fn sensor_modes_rule_and_shift() {
     let f: Vec<f64> = s.modes.iter().map(|m| m.fn_hz).collect();
     assert_eq!(f[0], 300.0);
     assert!((f[1] - 2369.0).abs() < 1e-9 && (f[2] - 4223.0).abs() < 1e-9, "{f:?}");
-    assert_eq!(s.modes.iter().map(|m| m.residue).collect::<Vec<_>>(), d.modes.iter().map(|m| m.residue).collect::<Vec<_>>());
+    assert_eq!(
+        s.modes.iter().map(|m| m.residue).collect::<Vec<_>>(),
+        d.modes.iter().map(|m| m.residue).collect::<Vec<_>>()
+    );
 }
 
 #[test]
@@ -155,7 +160,10 @@ fn drifting_simulation_writes_both_end_states() {
     // The after-FRF peaks 3 % higher (main mode 2300 → 2369 Hz).
     let peak = |frf: &dynocomp::frf::Frf| {
         let a = &frf.axes[0];
-        let i = (0..a.frf.len()).filter(|&i| frf.freq_hz[i] > 1500.0 && frf.freq_hz[i] < 3000.0).max_by(|&i, &j| a.frf[i].norm().total_cmp(&a.frf[j].norm())).unwrap();
+        let i = (0..a.frf.len())
+            .filter(|&i| frf.freq_hz[i] > 1500.0 && frf.freq_hz[i] < 3000.0)
+            .max_by(|&i, &j| a.frf[i].norm().total_cmp(&a.frf[j].norm()))
+            .unwrap();
         frf.freq_hz[i]
     };
     let (b, a) = (peak(&out.sim.frf), peak(&out.frf_after));
@@ -167,20 +175,36 @@ fn cli_writes_before_and_after_frfs_and_refuses_bad_drift() {
     let dir = cli_common::tmp("drift-sim", "out");
     let _ = std::fs::remove_dir_all(&dir);
     let d = dir.to_str().unwrap();
-    let (ok, _, err) = cli_common::dynocomp(&["simulate", "--out", d, "--duration", "0.1", "--idle-duration", "0.05", "--drift-percent", "-3", "--drift-end", "0.08"]);
+    let (ok, _, err) = cli_common::dynocomp(&[
+        "simulate",
+        "--out",
+        d,
+        "--duration",
+        "0.1",
+        "--idle-duration",
+        "0.05",
+        "--drift-percent",
+        "-3",
+        "--drift-end",
+        "0.08",
+    ]);
     assert!(ok, "{err}");
-    for f in ["frf.uff", "frf_after.uff", "frf_after.csv", "drift.json", "measured.csv", "true_force.csv", "truth.json"] {
+    for f in ["frf.uff", "frf_after.uff", "frf_after.csv", "drift.json", "measured.csv", "true_force.csv", "truth.json"]
+    {
         assert!(dir.join(f).is_file(), "{f} missing: {err}");
     }
     let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("drift.json")).unwrap()).unwrap();
     assert_eq!(j["delta"].as_f64().unwrap(), -0.03);
     assert_eq!(j["end_s"].as_f64().unwrap(), 0.08);
-    let (b, a) = (j["sensor_modes_before_hz"][0][0].as_f64().unwrap(), j["sensor_modes_after_hz"][0][0].as_f64().unwrap());
+    let (b, a) =
+        (j["sensor_modes_before_hz"][0][0].as_f64().unwrap(), j["sensor_modes_after_hz"][0][0].as_f64().unwrap());
     assert!((a / b - 0.97).abs() < 1e-12, "{b} → {a}");
     // Bad drifts: one-line error naming the flag, nothing written.
     let bad = cli_common::tmp("drift-sim", "bad");
     let _ = std::fs::remove_dir_all(&bad);
-    for args in [vec!["--drift-percent", "80"], vec!["--drift-percent", "2", "--drift-start", "0.5", "--drift-end", "0.2"]] {
+    for args in
+        [vec!["--drift-percent", "80"], vec!["--drift-percent", "2", "--drift-start", "0.5", "--drift-end", "0.2"]]
+    {
         let mut a = vec!["simulate", "--out", bad.to_str().unwrap(), "--duration", "0.1"];
         a.extend(args.iter());
         let (ok, _, err) = cli_common::dynocomp(&a);

@@ -8,11 +8,11 @@
 //! peak-to-peak, about 5 % of its std: these are tighter.) The same targets
 //! at the other DAQ rates: `e2e_rates.rs`.
 
-use dynocomp::offline::compensate::compensate_record;
 use dynocomp::design::axis::AxisDesign;
 use dynocomp::design::image::build_image;
 use dynocomp::io::signal_csv::SignalRecord;
 use dynocomp::metrics::accuracy;
+use dynocomp::offline::compensate::compensate_record;
 use dynocomp::simulate::SimOutput;
 
 mod sim_common;
@@ -30,8 +30,19 @@ fn score(s: &SimOutput, designs: &[AxisDesign], lag: usize) -> Vec<(f64, f64)> {
     // The box's predicted interrupt load of this design (issue #16: every
     // end-to-end design's load recorded, BENCHMARKS.md).
     let load = dynocomp_core::budget::image_load(&image);
-    let shape: Vec<String> = image.axes.iter().flatten().map(|a| format!("{}+{}", a.filter.kernel_counts().0, a.filter.fir().len())).collect();
-    eprintln!("box load at {} Hz: {:.1} % ({} cycles, high estimate; pairs+taps {})", image.fs_hz, load.permille as f64 / 10.0, load.cycles, shape.join(", "));
+    let shape: Vec<String> = image
+        .axes
+        .iter()
+        .flatten()
+        .map(|a| format!("{}+{}", a.filter.kernel_counts().0, a.filter.fir().len()))
+        .collect();
+    eprintln!(
+        "box load at {} Hz: {:.1} % ({} cycles, high estimate; pairs+taps {})",
+        image.fs_hz,
+        load.permille as f64 / 10.0,
+        load.cycles,
+        shape.join(", ")
+    );
     let rec = SignalRecord { t_s: None, channels: (0..3).map(|a| (a, s.measured[a].clone())).collect() };
     let out = compensate_record(&image, &rec, false, "sim").unwrap();
     (0..3)

@@ -35,7 +35,15 @@ const CYCLING: [f64; 12] = [
 
 fn companion(a: &[f64]) -> DMatrix<f64> {
     let n = a.len() - 1;
-    DMatrix::from_fn(n, n, |i, j| if i == 0 { -a[n - 1 - j] / a[n] } else if i == j + 1 { 1.0 } else { 0.0 })
+    DMatrix::from_fn(n, n, |i, j| {
+        if i == 0 {
+            -a[n - 1 - j] / a[n]
+        } else if i == j + 1 {
+            1.0
+        } else {
+            0.0
+        }
+    })
 }
 
 /// Time allowed for one call on these small problems, however loaded the
@@ -53,7 +61,10 @@ fn the_cycling_companion_matrix_is_solved_by_the_fallback() {
     assert_eq!(roots.len(), 11);
     let sum: Complex64 = roots.iter().sum();
     let want = -CYCLING[10];
-    assert!((sum.re - want).abs() < 1e-6 * want.abs() && sum.im.abs() < 1e-6 * want.abs(), "Σ roots {sum} against {want}");
+    assert!(
+        (sum.re - want).abs() < 1e-6 * want.abs() && sum.im.abs() < 1e-6 * want.abs(),
+        "Σ roots {sum} against {want}"
+    );
     // Each root nearly zeroes the polynomial relative to the size of its
     // terms (backward error), far below what a root moved by 10⁻³ of its
     // size gives; and the roots come in conjugate pairs or are real.
@@ -124,7 +135,8 @@ fn arb_frf() -> impl Strategy<Value = (Vec<f64>, Vec<Complex64>)> {
 /// A polynomial with coefficients of random sign spread over 10⁻²⁰..10²⁰.
 fn arb_poly() -> impl Strategy<Value = Vec<f64>> {
     proptest::collection::vec((-20.0f64..20.0, any::<bool>()), 2..=22).prop_map(|c| {
-        let mut a: Vec<f64> = c.into_iter().map(|(e, neg)| if neg { -(10f64.powf(e)) } else { 10f64.powf(e) }).collect();
+        let mut a: Vec<f64> =
+            c.into_iter().map(|(e, neg)| if neg { -(10f64.powf(e)) } else { 10f64.powf(e) }).collect();
         *a.last_mut().unwrap() = 1.0;
         a
     })
@@ -134,8 +146,11 @@ fn arb_poly() -> impl Strategy<Value = Vec<f64>> {
 /// repeated entries.
 fn arb_matrix() -> impl Strategy<Value = DMatrix<f64>> {
     (1usize..=16).prop_flat_map(|n| {
-        proptest::collection::vec(prop_oneof![Just(0.0), Just(1.0), (-30.0f64..30.0).prop_map(|e| 10f64.powf(e)), -1e3f64..1e3], n * n)
-            .prop_map(move |v| DMatrix::from_vec(n, n, v))
+        proptest::collection::vec(
+            prop_oneof![Just(0.0), Just(1.0), (-30.0f64..30.0).prop_map(|e| 10f64.powf(e)), -1e3f64..1e3],
+            n * n,
+        )
+        .prop_map(move |v| DMatrix::from_vec(n, n, v))
     })
 }
 

@@ -9,8 +9,7 @@ use std::cell::Cell;
 use std::path::PathBuf;
 
 use dynocomp::link::flash_probe::{
-    execute, fake_session, loader_for, plan, read_slots, run_with, FlashPlan, SlotArg,
-    DEFAULT_CHIP, SLOTS_LEN,
+    execute, fake_session, loader_for, plan, read_slots, run_with, FlashPlan, SlotArg, DEFAULT_CHIP, SLOTS_LEN,
 };
 use dynocomp::link::sim_flash::SimFlash;
 use dynocomp_core::image::{CoeffImage, CRC32};
@@ -87,12 +86,7 @@ fn a_newer_but_broken_record_does_not_hide_the_running_one() {
     // A runs (seq 5); B holds a committed record (seq 6) whose image was torn:
     // the box boots A, so the probe must write B, with seq 7.
     let img = common::good(3);
-    let mut slots = with_record(
-        with_record(erased(), Slot::A, &common::good(30), 5),
-        Slot::B,
-        &common::good(31),
-        6,
-    );
+    let mut slots = with_record(with_record(erased(), Slot::A, &common::good(30), 5), Slot::B, &common::good(31), 6);
     slots[8 * 1024 + 100] ^= 0xFF;
     let p = plan(&img, SlotArg::Auto, &slots).unwrap();
     assert_eq!((p.slot, p.seq), (Slot::B, 7));
@@ -103,30 +97,17 @@ fn a_newer_but_broken_record_does_not_hide_the_running_one() {
 #[test]
 fn the_running_slot_is_never_overwritten() {
     let img = common::good(3);
-    let slots = with_record(
-        with_record(erased(), Slot::A, &common::good(32), 5),
-        Slot::B,
-        &common::good(33),
-        4,
-    );
+    let slots = with_record(with_record(erased(), Slot::A, &common::good(32), 5), Slot::B, &common::good(33), 4);
     let e = plan(&img, SlotArg::A, &slots).unwrap_err().to_string();
     assert!(e.contains("--slot a") && e.contains("sequence 5"), "{e}");
     let slots = with_record(erased(), Slot::B, &common::good(34), 1);
     let e = plan(&img, SlotArg::B, &slots).unwrap_err().to_string();
     assert!(e.contains("--slot b"), "{e}");
-    assert!(
-        plan(&img, SlotArg::B, &slots[..100]).is_err(),
-        "short slot read refused"
-    );
+    assert!(plan(&img, SlotArg::B, &slots[..100]).is_err(), "short slot read refused");
 }
 
 /// What the box's store makes of the flash after the probe wrote.
-fn box_boots(
-    flash: SimFlash,
-) -> (
-    Result<CoeffImage, dynocomp_core::sample::BypassReason>,
-    Option<Slot>,
-) {
+fn box_boots(flash: SimFlash) -> (Result<CoeffImage, dynocomp_core::sample::BypassReason>, Option<Slot>) {
     let mut store = Store::open(flash, Layout::STM32G474RE).unwrap();
     let boot = store.boot();
     (boot.image, boot.active.map(|a| a.slot))
@@ -196,10 +177,7 @@ fn fake_probe_refuses_addresses_outside_the_flash() {
     let session = fake_session(DEFAULT_CHIP).unwrap();
     let mut p = plan(&img, SlotArg::B, &erased()).unwrap();
     p.address = 0x0808_0000;
-    let e = loader_for(&session, &p)
-        .err()
-        .expect("outside flash")
-        .to_string();
+    let e = loader_for(&session, &p).err().expect("outside flash").to_string();
     assert!(e.contains("0x08080000"), "{e}");
 }
 
@@ -232,10 +210,7 @@ fn bad_images_are_refused_before_any_probe_is_opened() {
         .unwrap_err()
         .to_string();
         assert!(!opened.get(), "{name}: probe opened for a bad image");
-        assert!(
-            e.contains(name) && e.contains("nothing was written"),
-            "{name}: {e}"
-        );
+        assert!(e.contains(name) && e.contains("nothing was written"), "{name}: {e}");
         assert!(e.contains(why), "{name}: expected {why} in: {e}");
     }
     // A good image does reach the probe.
@@ -253,10 +228,7 @@ fn bad_images_are_refused_before_any_probe_is_opened() {
 #[test]
 fn cli_dry_run_needs_no_hardware() {
     let (_dir, path) = temp_image("good.dcimg", &common::good(8));
-    run_with(&path, DEFAULT_CHIP, SlotArg::Auto, true, |_| {
-        panic!("dry run opened a real probe")
-    })
-    .unwrap();
+    run_with(&path, DEFAULT_CHIP, SlotArg::Auto, true, |_| panic!("dry run opened a real probe")).unwrap();
     // An unknown chip is a clear error, not a panic.
     let e = run_with(&path, "NOT_A_CHIP", SlotArg::Auto, true, |_| unreachable!()).unwrap_err();
     assert!(format!("{e:#}").contains("NOT_A_CHIP"), "{e:#}");

@@ -20,11 +20,13 @@
 //!   output, a record at another spindle speed.
 
 use dynocomp::design::discretize::{DTerm, DiscreteModel, Discretization};
-use dynocomp::offline::force_prior::{build_axis_prior, check_record, wiener_response, HarmonicLine, HarmonicPrior, PriorOptions};
-use dynocomp::metrics::{accuracy, sample_variance, scoring_band_hz};
 use dynocomp::eval::rates::{cases, design_options, noise_floor, RateCase, RunOptions};
-use dynocomp::simulate::{simulate_with, Chatter, SimOutput};
+use dynocomp::metrics::{accuracy, sample_variance, scoring_band_hz};
+use dynocomp::offline::force_prior::{
+    build_axis_prior, check_record, wiener_response, HarmonicLine, HarmonicPrior, PriorOptions,
+};
 use dynocomp::offline::smoother::Smoother;
+use dynocomp::simulate::{simulate_with, Chatter, SimOutput};
 use rustfft::{num_complex::Complex64, FftPlanner};
 
 mod cli_common;
@@ -47,7 +49,11 @@ fn small_model() -> DiscreteModel {
 fn smoother_is_the_wiener_filter_of_the_prior() {
     let dm = small_model();
     let fs = dm.fs_hz;
-    let lines = [100.0, 200.0, 300.0, 1500.0].iter().enumerate().map(|(i, f)| HarmonicLine { k: i as u32 + 1, freq_hz: *f, power_n2: 50.0 / (1.0 + i as f64) }).collect();
+    let lines = [100.0, 200.0, 300.0, 1500.0]
+        .iter()
+        .enumerate()
+        .map(|(i, f)| HarmonicLine { k: i as u32 + 1, freq_hz: *f, power_n2: 50.0 / (1.0 + i as f64) })
+        .collect();
     let prior = HarmonicPrior {
         fs_hz: fs,
         spindle_hz: 100.0,
@@ -110,7 +116,14 @@ fn record_analysis_measures_known_lines() {
     };
     let t = |k: usize| k as f64 / fs;
     let steady: Vec<f64> = (0..n)
-        .map(|k| amps.iter().map(|(h, a)| a * (2.0 * std::f64::consts::PI * f64::from(*h) * f_sp * t(k) + 0.3 * f64::from(*h)).sin()).sum::<f64>() + r.sqrt() * noise())
+        .map(|k| {
+            amps.iter()
+                .map(|(h, a)| {
+                    a * (2.0 * std::f64::consts::PI * f64::from(*h) * f_sp * t(k) + 0.3 * f64::from(*h)).sin()
+                })
+                .sum::<f64>()
+                + r.sqrt() * noise()
+        })
         .collect();
     let flat = |_: f64| Complex64::new(1.0, 0.0);
     let rs = analyze_record(&steady, fs, &flat, r, f_sp, 4000.0, 10.0).unwrap();
@@ -123,7 +136,8 @@ fn record_analysis_measures_known_lines() {
     // A 1710 Hz sine with 1 % of the line power: its share is measured.
     let total: f64 = amps.iter().map(|(_, a)| a * a / 2.0).sum();
     let a_c = (0.01 * total * 2.0f64).sqrt();
-    let chat: Vec<f64> = steady.iter().enumerate().map(|(k, y)| y + a_c * (2.0 * std::f64::consts::PI * 1710.0 * t(k)).sin()).collect();
+    let chat: Vec<f64> =
+        steady.iter().enumerate().map(|(k, y)| y + a_c * (2.0 * std::f64::consts::PI * 1710.0 * t(k)).sin()).collect();
     let rc = analyze_record(&chat, fs, &flat, r, f_sp, 4000.0, 10.0).unwrap();
     assert!((rc.off_line_share / (0.01 / 1.01) - 1.0).abs() < 0.05, "chatter share {}", rc.off_line_share);
     // The same record read with a spindle speed 1 % off: the best fit finds 40 Hz.
@@ -150,38 +164,77 @@ fn harmonic_prior_beats_the_noise_floor_on_a_steady_cut() {
     let s = simulate_with(case.seed, &params, dyno.clone()).unwrap();
     let tune = simulate_with(case.seed + 1000, &params, dyno.clone()).unwrap();
     let r = sample_variance(&s.idle[a]);
-    let d = dynocomp::design::axis::design_axis(&s.frf.freq_hz, s.frf.axis(a).unwrap(), r, &design_options(fs, &RunOptions::default())).unwrap();
+    let d = dynocomp::design::axis::design_axis(
+        &s.frf.freq_hz,
+        s.frf.axis(a).unwrap(),
+        r,
+        &design_options(fs, &RunOptions::default()),
+    )
+    .unwrap();
     let dm = &d.discrete.as_ref().unwrap().0;
     let g = |f: f64| d.model.frf(f);
-    let popts = PriorOptions { spindle_rpm: case.spindle_rpm, teeth: case.teeth as u32, line_width_hz: None, unchecked: false };
+    let popts =
+        PriorOptions { spindle_rpm: case.spindle_rpm, teeth: case.teeth as u32, line_width_hz: None, unchecked: false };
     let built = build_axis_prior(&popts, dm, &g, r, d.kalman.q, d.compensated_band_hz, &tune.measured[a]).unwrap();
     let default = Smoother::new(dm, d.kalman.q, r).unwrap();
     let with_prior = Smoother::with_force_prior(dm, &built.prior, r).unwrap();
-    let run = |sim: &SimOutput| Scored { default: nrmse(&default.smooth(&sim.measured[a]), sim, a), prior: nrmse(&with_prior.smooth(&sim.measured[a]), sim, a) };
+    let run = |sim: &SimOutput| Scored {
+        default: nrmse(&default.smooth(&sim.measured[a]), sim, a),
+        prior: nrmse(&with_prior.smooth(&sim.measured[a]), sim, a),
+    };
 
     // The claim: at most 0.7x the default smoother (measured 0.54x), below
     // 0.8x the exact inverse's noise floor (measured 0.54x) and below 2 %.
     let band = scoring_band_hz(fs);
     let raw = accuracy(&s.measured[a], &s.truth[a], fs, band);
     let chain = s.params.anti_alias;
-    let floor = noise_floor(|f| s.dyno.axis(a).frf(f) * chain.analog_frf(f), s.params.measurement.expected_idle_variance(), fs, band, raw.rms_error_n / raw.nrmse);
+    let floor = noise_floor(
+        |f| s.dyno.axis(a).frf(f) * chain.analog_frf(f),
+        s.params.measurement.expected_idle_variance(),
+        fs,
+        band,
+        raw.rms_error_n / raw.nrmse,
+    );
     let claim = |e: &Scored| e.prior <= 0.7 * e.default && e.prior <= 0.8 * floor && e.prior <= 0.02;
     let steady = run(&s);
-    assert!(claim(&steady), "prior {:.3} % against default {:.3} %, floor {:.3} %", 100.0 * steady.prior, 100.0 * steady.default, 100.0 * floor);
+    assert!(
+        claim(&steady),
+        "prior {:.3} % against default {:.3} %, floor {:.3} %",
+        100.0 * steady.prior,
+        100.0 * steady.default,
+        100.0 * floor
+    );
     assert!(check_record(&built.prior, &s.measured[a], &g, r).is_ok(), "the steady cut must pass the record check");
     // The predicted error (steady cut) is within 1.5x of the measured one.
     let pred = built.prediction.with_prior;
-    assert!(pred < 1.5 * steady.prior && steady.prior < 1.5 * pred, "predicted {pred:.4} against measured {:.4}", steady.prior);
+    assert!(
+        pred < 1.5 * steady.prior && steady.prior < 1.5 * pred,
+        "predicted {pred:.4} against measured {:.4}",
+        steady.prior
+    );
 
     // Negative control 1: a prior tuned at a spindle speed 2 % off. The tool
     // refuses to build it; built anyway, it loses the claim.
     let wrong = PriorOptions { spindle_rpm: case.spindle_rpm * 1.02, ..popts.clone() };
     let err = build_axis_prior(&wrong, dm, &g, r, d.kalman.q, d.compensated_band_hz, &tune.measured[a]).unwrap_err();
     assert!(format!("{err:#}").contains("rpm"), "{err:#}");
-    let forced = build_axis_prior(&PriorOptions { unchecked: true, ..wrong }, dm, &g, r, d.kalman.q, d.compensated_band_hz, &tune.measured[a]).unwrap();
+    let forced = build_axis_prior(
+        &PriorOptions { unchecked: true, ..wrong },
+        dm,
+        &g,
+        r,
+        d.kalman.q,
+        d.compensated_band_hz,
+        &tune.measured[a],
+    )
+    .unwrap();
     let off = Smoother::with_force_prior(dm, &forced.prior, r).unwrap();
     let off_scored = Scored { default: steady.default, prior: nrmse(&off.smooth(&s.measured[a]), &s, a) };
-    assert!(!claim(&off_scored), "a prior at the wrong speed must not pass the claim: {:.3} %", 100.0 * off_scored.prior);
+    assert!(
+        !claim(&off_scored),
+        "a prior at the wrong speed must not pass the claim: {:.3} %",
+        100.0 * off_scored.prior
+    );
 
     // Negative control 2: the same cut 2 % faster, the nominal prior: the
     // check of `compensate --offline` refuses the record.
@@ -198,7 +251,12 @@ fn harmonic_prior_beats_the_noise_floor_on_a_steady_cut() {
     chat.milling.chatter = Some(Chatter { freq_hz: 1710.0, amplitude_mm: 0.02, onset_s: 0.2, growth_s: 0.02 });
     let s_chat = simulate_with(case.seed, &chat, dyno).unwrap();
     let chatter = run(&s_chat);
-    assert!(chatter.prior > chatter.default, "chatter: prior {:.3} % against default {:.3} %", 100.0 * chatter.prior, 100.0 * chatter.default);
+    assert!(
+        chatter.prior > chatter.default,
+        "chatter: prior {:.3} % against default {:.3} %",
+        100.0 * chatter.prior,
+        100.0 * chatter.default
+    );
     assert!(!claim(&chatter));
     let err = check_record(&built.prior, &s_chat.measured[a], &g, r).unwrap_err();
     assert!(format!("{err:#}").contains("away from the harmonics"), "{err:#}");
@@ -214,7 +272,19 @@ fn design_and_offline_compensate_with_the_prior() {
     let fast = tmp("sim-fast");
     let sim = |out: &std::path::Path, rpm: &str| {
         let (ok, _, err) = dynocomp(&[
-            "simulate", "--out", out.to_str().unwrap(), "--fs", "25600", "--spindle-rpm", rpm, "--teeth", "2", "--duration", "0.4", "--idle-duration", "0.2",
+            "simulate",
+            "--out",
+            out.to_str().unwrap(),
+            "--fs",
+            "25600",
+            "--spindle-rpm",
+            rpm,
+            "--teeth",
+            "2",
+            "--duration",
+            "0.4",
+            "--idle-duration",
+            "0.2",
         ]);
         assert!(ok, "{err}");
     };
@@ -223,12 +293,28 @@ fn design_and_offline_compensate_with_the_prior() {
     let p = |f: &str| dir.join(f).to_str().unwrap().to_string();
     let img = tmp("box.dcimg");
     let img_s = img.to_str().unwrap();
-    let base = ["design", "--frf", &p("frf.uff"), "--fs", "25600", "--idle", &p("idle.csv"), "--out", img_s, "--spindle-rpm", "1800", "--teeth", "2"];
+    let base = [
+        "design",
+        "--frf",
+        &p("frf.uff"),
+        "--fs",
+        "25600",
+        "--idle",
+        &p("idle.csv"),
+        "--out",
+        img_s,
+        "--spindle-rpm",
+        "1800",
+        "--teeth",
+        "2",
+    ];
     // Without its record: a one-line error saying what is missing, no image.
     let (ok, _, err) = dynocomp(&[&base[..], &["--force-prior", "harmonics"]].concat());
     assert!(!ok && err.contains("--force-record") && err.trim().lines().count() == 1, "{err}");
     assert!(!img.exists());
-    let (ok, json, err) = dynocomp(&[&base[..], &["--force-prior", "harmonics", "--force-record", &p("measured.csv"), "--json"]].concat());
+    let (ok, json, err) = dynocomp(
+        &[&base[..], &["--force-prior", "harmonics", "--force-record", &p("measured.csv"), "--json"]].concat(),
+    );
     assert!(ok, "{err}");
     let j: serde_json::Value = serde_json::from_str(&json).unwrap();
     for ax in j["axes"].as_array().unwrap() {
@@ -243,17 +329,45 @@ fn design_and_offline_compensate_with_the_prior() {
     assert!(sidecar.contains("force_prior"));
 
     let out = tmp("comp.csv");
-    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img_s, "--input", &p("measured.csv"), "--output", out.to_str().unwrap(), "--offline"]);
+    let (ok, _, err) = dynocomp(&[
+        "compensate",
+        "--coeffs",
+        img_s,
+        "--input",
+        &p("measured.csv"),
+        "--output",
+        out.to_str().unwrap(),
+        "--offline",
+    ]);
     assert!(ok, "{err}");
     assert!(err.contains("harmonic force prior on axis x, y, z"), "{err}");
     // A cut 2 % faster: refused in one line, nothing written.
     let out2 = tmp("comp-fast.csv");
     let fast_rec = fast.join("measured.csv");
-    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img_s, "--input", fast_rec.to_str().unwrap(), "--output", out2.to_str().unwrap(), "--offline"]);
+    let (ok, _, err) = dynocomp(&[
+        "compensate",
+        "--coeffs",
+        img_s,
+        "--input",
+        fast_rec.to_str().unwrap(),
+        "--output",
+        out2.to_str().unwrap(),
+        "--offline",
+    ]);
     assert!(!ok && err.contains("rpm") && err.contains("--no-force-prior") && err.trim().lines().count() == 1, "{err}");
     assert!(!out2.exists());
     // ... and accepted without the prior.
-    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img_s, "--input", fast_rec.to_str().unwrap(), "--output", out2.to_str().unwrap(), "--offline", "--no-force-prior"]);
+    let (ok, _, err) = dynocomp(&[
+        "compensate",
+        "--coeffs",
+        img_s,
+        "--input",
+        fast_rec.to_str().unwrap(),
+        "--output",
+        out2.to_str().unwrap(),
+        "--offline",
+        "--no-force-prior",
+    ]);
     assert!(ok, "{err}");
     assert!(!err.contains("harmonic force prior"), "{err}");
 }

@@ -37,7 +37,8 @@ fn system(poles: &[f64], seed: u64) -> (StateSpace, impl Fn(Complex64) -> Comple
 
 /// Largest |H − truth| over the grid, relative to max |truth|.
 fn worst_error(h: &[Complex64], truth: &dyn Fn(Complex64) -> Complex64, freqs: &[f64], fs: f64) -> f64 {
-    let t: Vec<Complex64> = freqs.iter().map(|f| truth(Complex64::from_polar(1.0, 2.0 * std::f64::consts::PI * f / fs))).collect();
+    let t: Vec<Complex64> =
+        freqs.iter().map(|f| truth(Complex64::from_polar(1.0, 2.0 * std::f64::consts::PI * f / fs))).collect();
     let peak = t.iter().map(|v| v.norm()).fold(0.0, f64::max);
     h.iter().zip(&t).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max) / peak
 }
@@ -103,7 +104,9 @@ fn the_3x3_grid_response_matches_the_analytic_response() {
     let c = DMatrix::<f64>::from_fn(3, n, |_, _| g.next());
     let d = DMatrix::<f64>::from_fn(3, 3, |i, j| 0.1 * (i + 2 * j) as f64);
     let (ct, bt) = (&c * &t, &t_inv * &b);
-    let truth = |i: usize, j: usize, z: Complex64| (0..n).map(|k| ct[(i, k)] * bt[(k, j)] / (z - poles[k])).sum::<Complex64>() + d[(i, j)];
+    let truth = |i: usize, j: usize, z: Complex64| {
+        (0..n).map(|k| ct[(i, k)] * bt[(k, j)] / (z - poles[k])).sum::<Complex64>() + d[(i, j)]
+    };
     let ss = MimoStateSpace { a: build(&poles), b: b.clone(), c: c.clone(), d: d.clone() };
     let h = ss.freq_responses(&freqs, fs);
     let mut moved = poles.clone();
@@ -115,7 +118,10 @@ fn the_3x3_grid_response_matches_the_analytic_response() {
             let e = worst_error(&entry, &|z| truth(i, j, z), &freqs, fs);
             assert!(e < 1e-11, "entry ({i}, {j}): {e:.1e} from the analytic response");
             let wrong: Vec<Complex64> = h_moved.iter().map(|m| m[(i, j)]).collect();
-            assert!(worst_error(&wrong, &|z| truth(i, j, z), &freqs, fs) > 1e-8, "entry ({i}, {j}): a moved pole is invisible");
+            assert!(
+                worst_error(&wrong, &|z| truth(i, j, z), &freqs, fs) > 1e-8,
+                "entry ({i}, {j}): a moved pole is invisible"
+            );
         }
     }
 }
@@ -137,7 +143,8 @@ fn the_3x3_white_noise_gains_are_the_impulse_responses_energy() {
     let gains = ss.white_noise_gains().expect("stable");
     let mut energy = [0.0f64; 3];
     for j in 0..3 {
-        let input: Vec<DVector<f64>> = (0..2000).map(|k| DVector::from_fn(3, |i, _| if k == 0 && i == j { 1.0 } else { 0.0 })).collect();
+        let input: Vec<DVector<f64>> =
+            (0..2000).map(|k| DVector::from_fn(3, |i, _| if k == 0 && i == j { 1.0 } else { 0.0 })).collect();
         for y in ss.simulate(&input) {
             for i in 0..3 {
                 energy[i] += y[i] * y[i];
@@ -145,7 +152,12 @@ fn the_3x3_white_noise_gains_are_the_impulse_responses_energy() {
         }
     }
     for i in 0..3 {
-        assert!((gains[i] - energy[i].sqrt()).abs() < 1e-9 * gains[i], "output {i}: {} against {}", gains[i], energy[i].sqrt());
+        assert!(
+            (gains[i] - energy[i].sqrt()).abs() < 1e-9 * gains[i],
+            "output {i}: {} against {}",
+            gains[i],
+            energy[i].sqrt()
+        );
     }
     // Negative control: an unstable system has no gain (its Gramian's norm
     // overflows before its entries do; that must not read as convergence),

@@ -45,7 +45,12 @@ fn clustered_machine_modes_the_box_design_compensates_x() {
     let band = dynocomp::metrics::scoring_band_hz(fs);
     let comp = accuracy(out.channel(0).unwrap(), truth.channel(0).unwrap(), fs, band).nrmse;
     let raw = accuracy(measured.channel(0).unwrap(), truth.channel(0).unwrap(), fs, band).nrmse;
-    eprintln!("x: raw {:.2} %, compensated {:.3} %, predicted {:.3} %", 100.0 * raw, 100.0 * comp, 100.0 * x.predicted_error);
+    eprintln!(
+        "x: raw {:.2} %, compensated {:.3} %, predicted {:.3} %",
+        100.0 * raw,
+        100.0 * comp,
+        100.0 * x.predicted_error
+    );
     assert!(comp < 0.003, "x: {:.2} % NRMSE against the true force (target ≤ 0.3 %)", 100.0 * comp);
     // Negative control: the raw force is far off, so the score can see it.
     assert!(raw > 0.5, "raw x only {:.2} %", 100.0 * raw);

@@ -9,47 +9,26 @@ use num_complex::Complex64;
 use proptest::prelude::*;
 
 fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures/uff")
-        .join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/uff").join(name)
 }
 
 /// Compare what we read with what pyuff was told to write.
 fn assert_close(got: &Frf, want: &Frf, rtol: f64, what: &str) {
-    assert_eq!(
-        got.freq_hz.len(),
-        want.freq_hz.len(),
-        "{what}: number of lines"
-    );
+    assert_eq!(got.freq_hz.len(), want.freq_hz.len(), "{what}: number of lines");
     for (i, (a, b)) in got.freq_hz.iter().zip(&want.freq_hz).enumerate() {
-        assert!(
-            (a - b).abs() <= 1e-9 * b.abs().max(1.0),
-            "{what}: freq line {i}: {a} vs {b}"
-        );
+        assert!((a - b).abs() <= 1e-9 * b.abs().max(1.0), "{what}: freq line {i}: {a} vs {b}");
     }
     let axes = |f: &Frf| f.axes.iter().map(|a| a.axis).collect::<Vec<_>>();
     assert_eq!(axes(got), axes(want), "{what}: axes");
     for (g, w) in got.axes.iter().zip(&want.axes) {
         let scale = w.frf.iter().map(|v| v.norm()).fold(0.0, f64::max);
         for (i, (a, b)) in g.frf.iter().zip(&w.frf).enumerate() {
-            assert!(
-                (a - b).norm() <= rtol * scale,
-                "{what}: axis {} line {i}: {a} vs {b}",
-                g.axis
-            );
+            assert!((a - b).norm() <= rtol * scale, "{what}: axis {} line {i}: {a} vs {b}", g.axis);
         }
-        assert_eq!(
-            g.coherence.is_some(),
-            w.coherence.is_some(),
-            "{what}: coherence presence"
-        );
+        assert_eq!(g.coherence.is_some(), w.coherence.is_some(), "{what}: coherence presence");
         if let (Some(gc), Some(wc)) = (&g.coherence, &w.coherence) {
             for (i, (a, b)) in gc.iter().zip(wc).enumerate() {
-                assert!(
-                    (a - b).abs() <= rtol,
-                    "{what}: axis {} coherence line {i}: {a} vs {b}",
-                    g.axis
-                );
+                assert!((a - b).abs() <= rtol, "{what}: axis {} coherence line {i}: {a} vs {b}", g.axis);
             }
         }
     }
@@ -58,8 +37,7 @@ fn assert_close(got: &Frf, want: &Frf, rtol: f64, what: &str) {
 fn check_fixture(name: &str, rtol: f64, axes: &[usize]) -> Frf {
     let uff_path = fixture(&format!("{name}.uff"));
     let got = uff::read_uff58(&uff_path).unwrap_or_else(|e| panic!("{e:#}"));
-    let want = frf_csv::read_frf_csv(&fixture(&format!("{name}.expected.csv")))
-        .unwrap_or_else(|e| panic!("{e:#}"));
+    let want = frf_csv::read_frf_csv(&fixture(&format!("{name}.expected.csv"))).unwrap_or_else(|e| panic!("{e:#}"));
     assert_eq!(got.axes.iter().map(|a| a.axis).collect::<Vec<_>>(), axes);
     assert_close(&got, &want, rtol, name);
     // The dispatcher picks the UFF reader by extension.
@@ -75,11 +53,7 @@ fn pyuff_ascii_double_three_axes_with_sign_flip_and_header_datasets() {
     assert_eq!(f.freq_hz.len(), 129);
     assert_eq!(f.freq_hz[128], 1024.0);
     let z = f.axis(2).unwrap();
-    assert!(
-        (z.frf[0] - Complex64::new(1.0, 0.0)).norm() < 1e-10,
-        "z sign: {}",
-        z.frf[0]
-    );
+    assert!((z.frf[0] - Complex64::new(1.0, 0.0)).norm() < 1e-10, "z sign: {}", z.frf[0]);
     // Coherence is not flipped.
     assert!(z.coherence.as_ref().unwrap()[1..].iter().all(|&c| c > 0.4));
 }
@@ -120,17 +94,12 @@ fn sample_frf(freq: Vec<f64>, coh_axes: &[usize], axes: &[usize]) -> Frf {
                 frf: (0..n)
                     .map(|i| {
                         let t = i as f64 * 0.37 + axis as f64;
-                        Complex64::new(
-                            t.cos() / (1.0 + i as f64 * 1e-3),
-                            -t.sin() * 1e-7 * (i as f64 + 0.5),
-                        )
+                        Complex64::new(t.cos() / (1.0 + i as f64 * 1e-3), -t.sin() * 1e-7 * (i as f64 + 0.5))
                     })
                     .collect(),
-                coherence: coh_axes.contains(&axis).then(|| {
-                    (0..n)
-                        .map(|i| ((i * 7919 + axis) % 1000) as f64 / 999.0)
-                        .collect()
-                }),
+                coherence: coh_axes
+                    .contains(&axis)
+                    .then(|| (0..n).map(|i| ((i * 7919 + axis) % 1000) as f64 / 999.0).collect()),
             })
             .collect(),
         freq_hz: freq,
@@ -184,12 +153,7 @@ fn uff_round_trip_ascii_and_binary() {
     // A non-integer spacing survives (7 significant digits in record 7).
     let frf = sample_frf((0..513).map(|i| i as f64 * 0.78125).collect(), &[1], &[1]);
     let bytes = uff::uff58_to_bytes(&frf, false).unwrap();
-    assert_close(
-        &uff::parse_uff58(&bytes, "mem").unwrap(),
-        &frf,
-        1e-12,
-        "0.78125 Hz",
-    );
+    assert_close(&uff::parse_uff58(&bytes, "mem").unwrap(), &frf, 1e-12, "0.78125 Hz");
     // Content sniffing when the extension says nothing.
     let path = dir.path().join("frf.dat");
     std::fs::write(&path, &bytes).unwrap();
@@ -202,10 +166,7 @@ fn writers_refuse_bad_frf_and_leave_no_file() {
     let path = dir.path().join("out.uff");
     let uneven = sample_frf(vec![0.0, 1.0, 3.0], &[], &[0]);
     let e = format!("{:#}", uff::write_uff58(&path, &uneven, true).unwrap_err());
-    assert!(
-        e.contains("out.uff") && e.contains("evenly spaced") && e.contains("line 2 is 1 Hz"),
-        "{e}"
-    );
+    assert!(e.contains("out.uff") && e.contains("evenly spaced") && e.contains("line 2 is 1 Hz"), "{e}");
     let mut nan = sample_frf(vec![0.0, 1.0], &[0], &[0]);
     nan.axes[0].frf[1].re = f64::NAN;
     let csv = dir.path().join("out.csv");
@@ -214,11 +175,7 @@ fn writers_refuse_bad_frf_and_leave_no_file() {
     let mut bad_coh = sample_frf(vec![0.0, 1.0], &[0], &[0]);
     bad_coh.axes[0].coherence.as_mut().unwrap()[0] = 1.5;
     assert!(uff::write_uff58(&path, &bad_coh, false).is_err());
-    assert_eq!(
-        std::fs::read_dir(dir.path()).unwrap().count(),
-        0,
-        "nothing left behind"
-    );
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "nothing left behind");
 }
 
 // ----- malformed CSV -------------------------------------------------------
@@ -242,79 +199,28 @@ fn csv_errors_name_file_line_column_and_problem() {
     has(&csv_err(""), &["empty file"]);
     has(&csv_err("\n  \n"), &["empty file"]);
     has(&csv_err("freq_hz,x_re,x_im\n"), &["no data rows"]);
-    has(
-        &csv_err("freq_hz,x_re,x_im\n0,1,0\n10,1,0\n10,1,0\n"),
-        &["line 4, column 1 (freq_hz)", "strictly ascending"],
-    );
-    has(
-        &csv_err("freq_hz,x_re,x_im\n5,1,0\n2,1,0\n"),
-        &["line 3", "strictly ascending"],
-    );
-    has(
-        &csv_err("freq_hz,x_re,x_im\n-1,1,0\n"),
-        &["line 2, column 1", "negative frequency"],
-    );
-    has(
-        &csv_err("freq_hz,x_re,x_im\n0,NaN,0\n"),
-        &["line 2, column 2 (x_re)", "not finite"],
-    );
-    has(
-        &csv_err("freq_hz,x_re,x_im\n0,1,inf\n"),
-        &["line 2, column 3 (x_im)", "not finite"],
-    );
-    has(
-        &csv_err("freq_hz,x_re,x_im\n0,1,abc\n"),
-        &["line 2, column 3 (x_im)", "cannot read \"abc\""],
-    );
-    has(
-        &csv_err("freq_hz,x_re,x_im\n0,,0\n"),
-        &["line 2, column 2 (x_re)", "empty value"],
-    );
-    has(
-        &csv_err("freq_hz,x_re,y_im\n0,1,0\n"),
-        &["line 1", "x_re", "no matching x_im"],
-    );
-    has(
-        &csv_err("freq_hz,x_coh\n0,1\n"),
-        &["line 1", "x_coh", "without x_re and x_im"],
-    );
+    has(&csv_err("freq_hz,x_re,x_im\n0,1,0\n10,1,0\n10,1,0\n"), &["line 4, column 1 (freq_hz)", "strictly ascending"]);
+    has(&csv_err("freq_hz,x_re,x_im\n5,1,0\n2,1,0\n"), &["line 3", "strictly ascending"]);
+    has(&csv_err("freq_hz,x_re,x_im\n-1,1,0\n"), &["line 2, column 1", "negative frequency"]);
+    has(&csv_err("freq_hz,x_re,x_im\n0,NaN,0\n"), &["line 2, column 2 (x_re)", "not finite"]);
+    has(&csv_err("freq_hz,x_re,x_im\n0,1,inf\n"), &["line 2, column 3 (x_im)", "not finite"]);
+    has(&csv_err("freq_hz,x_re,x_im\n0,1,abc\n"), &["line 2, column 3 (x_im)", "cannot read \"abc\""]);
+    has(&csv_err("freq_hz,x_re,x_im\n0,,0\n"), &["line 2, column 2 (x_re)", "empty value"]);
+    has(&csv_err("freq_hz,x_re,y_im\n0,1,0\n"), &["line 1", "x_re", "no matching x_im"]);
+    has(&csv_err("freq_hz,x_coh\n0,1\n"), &["line 1", "x_coh", "without x_re and x_im"]);
     has(
         &csv_err("freq_hz,x_re,x_im,x_coh\n0,1,0,0.5\n1,1,0,1.5\n"),
         &["line 3, column 4 (x_coh)", "coherence 1.5 outside [0, 1]"],
     );
-    has(
-        &csv_err("freq_hz,x_re,x_im,x_coh\n0,1,0,-0.1\n"),
-        &["line 2, column 4", "outside [0, 1]"],
-    );
-    has(
-        &csv_err("freq_hz,x_re,x_im\n0,1,0\n1,1\n"),
-        &["line 3", "2 fields", "3 columns"],
-    );
-    has(
-        &csv_err("freq_hz,x_re,x_im\n0,1,0,7\n"),
-        &["line 2", "4 fields"],
-    );
-    has(
-        &csv_err("freq_hz,fx_re,x_im\n0,1,0\n"),
-        &["line 1, column 2", "unknown column name \"fx_re\""],
-    );
-    has(
-        &csv_err("freq_hz,x_re,x_im,X_RE\n0,1,0,1\n"),
-        &["line 1, column 4", "duplicate column x_re", "axis x"],
-    );
-    has(
-        &csv_err("freq_hz,freq_hz,x_re,x_im\n0,0,1,0\n"),
-        &["column 2", "duplicate column freq_hz"],
-    );
-    has(
-        &csv_err("x_re,x_im\n1,0\n"),
-        &["line 1", "missing column freq_hz"],
-    );
+    has(&csv_err("freq_hz,x_re,x_im,x_coh\n0,1,0,-0.1\n"), &["line 2, column 4", "outside [0, 1]"]);
+    has(&csv_err("freq_hz,x_re,x_im\n0,1,0\n1,1\n"), &["line 3", "2 fields", "3 columns"]);
+    has(&csv_err("freq_hz,x_re,x_im\n0,1,0,7\n"), &["line 2", "4 fields"]);
+    has(&csv_err("freq_hz,fx_re,x_im\n0,1,0\n"), &["line 1, column 2", "unknown column name \"fx_re\""]);
+    has(&csv_err("freq_hz,x_re,x_im,X_RE\n0,1,0,1\n"), &["line 1, column 4", "duplicate column x_re", "axis x"]);
+    has(&csv_err("freq_hz,freq_hz,x_re,x_im\n0,0,1,0\n"), &["column 2", "duplicate column freq_hz"]);
+    has(&csv_err("x_re,x_im\n1,0\n"), &["line 1", "missing column freq_hz"]);
     has(&csv_err("freq_hz\n1\n"), &["no FRF columns"]);
-    let e = format!(
-        "{}",
-        frf_csv::parse_frf_csv_bytes(b"freq_hz,x_re,x_im\n\xff,1,0\n", "bad.csv").unwrap_err()
-    );
+    let e = format!("{}", frf_csv::parse_frf_csv_bytes(b"freq_hz,x_re,x_im\n\xff,1,0\n", "bad.csv").unwrap_err());
     has(&e, &["bad.csv", "line 2", "UTF-8"]);
 }
 
@@ -344,20 +250,9 @@ fn ds58(
         ft, 0, 0, 0, "NONE", 1, rsp, "NONE", 1, refd
     ));
     let e = |x: f64| format!("{:>13}", format!("{x:.5e}"));
-    s.push_str(&format!(
-        "{:>10}{:>10}{:>10}{}{}{}\n",
-        ord,
-        n,
-        spacing,
-        e(min),
-        e(inc),
-        e(0.0)
-    ));
+    s.push_str(&format!("{:>10}{:>10}{:>10}{}{}{}\n", ord, n, spacing, e(min), e(inc), e(0.0)));
     for spec in [specs[0], specs[1], specs[2], 0] {
-        s.push_str(&format!(
-            "{:>10}{:>5}{:>5}{:>5} {:<20} {:<20}\n",
-            spec, 0, 0, 0, "NONE", "NONE"
-        ));
+        s.push_str(&format!("{:>10}{:>5}{:>5}{:>5} {:<20} {:<20}\n", spec, 0, 0, 0, "NONE", "NONE"));
     }
     s.push_str(data);
     s.push_str("    -1\n");
@@ -366,18 +261,7 @@ fn ds58(
 
 /// A good x FRF (3 lines, complex double, even 0/10/20 Hz).
 fn frf_x() -> String {
-    ds58(
-        4,
-        1,
-        1,
-        6,
-        3,
-        1,
-        0.0,
-        10.0,
-        [18, 9, 13],
-        "  1.0 0.0  0.9 -0.1\n  0.8 -0.2\n",
-    )
+    ds58(4, 1, 1, 6, 3, 1, 0.0, 10.0, [18, 9, 13], "  1.0 0.0  0.9 -0.1\n  0.8 -0.2\n")
 }
 
 fn coh_x(data: &str, n: usize) -> String {
@@ -402,46 +286,16 @@ fn uff_hand_made_reads_and_sign_rules() {
     for (rsp, refd, sign) in [(-1, 1, -1.0), (1, -1, -1.0), (-1, -1, 1.0), (1, 0, 1.0)] {
         let t = ds58(4, rsp, refd, 6, 1, 1, 0.0, 1.0, [18, 9, 13], "2.0 3.0\n");
         let f = uff::parse_uff58(t.as_bytes(), "ok.uff").unwrap();
-        assert_eq!(
-            f.axes[0].frf[0],
-            Complex64::new(2.0 * sign, 3.0 * sign),
-            "rsp {rsp} ref {refd}"
-        );
+        assert_eq!(f.axes[0].frf[0], Complex64::new(2.0 * sign, 3.0 * sign), "rsp {rsp} ref {refd}");
     }
     // Real single precision FRF, uneven abscissa, Fortran D exponents, CRLF.
-    let t = ds58(
-        4,
-        2,
-        2,
-        2,
-        2,
-        0,
-        0.0,
-        0.0,
-        [18, 0, 0],
-        "  1.0D+00  5.0E-01\r\n  2.5 0.25\r\n",
-    )
-    .replace('\n', "\r\n");
+    let t = ds58(4, 2, 2, 2, 2, 0, 0.0, 0.0, [18, 0, 0], "  1.0D+00  5.0E-01\r\n  2.5 0.25\r\n").replace('\n', "\r\n");
     let f = uff::parse_uff58(t.as_bytes(), "ok.uff").unwrap();
     assert_eq!(f.freq_hz, vec![1.0, 2.5]);
     assert_eq!(f.axes[0].axis, 1);
-    assert_eq!(
-        f.axes[0].frf,
-        vec![Complex64::new(0.5, 0.0), Complex64::new(0.25, 0.0)]
-    );
+    assert_eq!(f.axes[0].frf, vec![Complex64::new(0.5, 0.0), Complex64::new(0.25, 0.0)]);
     // Touching fixed-width fields (E13.5 with 3-digit exponents).
-    let t = ds58(
-        4,
-        3,
-        3,
-        5,
-        1,
-        1,
-        0.0,
-        1.0,
-        [18, 9, 13],
-        "-1.23456e+100-2.00000e-100\n",
-    );
+    let t = ds58(4, 3, 3, 5, 1, 1, 0.0, 1.0, [18, 9, 13], "-1.23456e+100-2.00000e-100\n");
     let f = uff::parse_uff58(t.as_bytes(), "ok.uff").unwrap();
     assert_eq!(f.axes[0].frf[0], Complex64::new(-1.23456e100, -2e-100));
     // Other function types are skipped next to the FRF; a cross-axis FRF
@@ -460,213 +314,86 @@ fn uff_errors_name_file_line_record_and_problem() {
     has(&uff_err(b" \n\n"), &["empty file"]);
     has(&uff_err(b"hello\n"), &["line 1", "expected '    -1'"]);
     has(&uff_err(b"    -1\n"), &["line 1", "dataset number missing"]);
-    has(
-        &uff_err(b"    -1\n  abc\n    -1\n"),
-        &["line 2", "expected a dataset number"],
-    );
+    has(&uff_err(b"    -1\n  abc\n    -1\n"), &["line 2", "expected a dataset number"]);
     // Only non-58 datasets, or only rotational reference directions: no FRF
     // at all (a cross FRF alone is an entry of the matrix, io_frf_matrix.rs).
     let t = "    -1\n   151\nmodel\n    -1\n";
-    has(
-        &uff_err(t.as_bytes()),
-        &["no FRF found", "dataset #1 at line 1: type 151"],
-    );
+    has(&uff_err(t.as_bytes()), &["no FRF found", "dataset #1 at line 1: type 151"]);
     let t = ds58(4, 1, 5, 6, 1, 1, 0.0, 1.0, [18, 9, 13], "1 0\n");
     has(&uff_err(t.as_bytes()), &["no FRF found", "reference direction 5 is not a translation"]);
     // Unclosed datasets.
-    has(
-        &uff_err(b"    -1\n   151\nmodel\n"),
-        &["line 1", "dataset #1 (type 151)", "not closed"],
-    );
+    has(&uff_err(b"    -1\n   151\nmodel\n"), &["line 1", "dataset #1 (type 151)", "not closed"]);
     let t = frf_x();
-    has(
-        &uff_err(&t.as_bytes()[..t.len() - 7]),
-        &["record 12", "not closed"],
-    );
+    has(&uff_err(&t.as_bytes()[..t.len() - 7]), &["record 12", "not closed"]);
     // Cut inside record 8 (line 10): the header ends before record 9.
-    has(
-        &uff_err(&t.as_bytes()[..200]),
-        &[
-            "dataset #1",
-            "record 9",
-            "file ends inside the dataset header",
-        ],
-    );
+    has(&uff_err(&t.as_bytes()[..200]), &["dataset #1", "record 9", "file ends inside the dataset header"]);
     // Record 6 / 7 problems.
     let t = frf_x().replace("    4         0", "    x         y");
-    has(
-        &uff_err(t.as_bytes()),
-        &["line 8", "record 6", "cannot read function type"],
-    );
+    has(&uff_err(t.as_bytes()), &["line 8", "record 6", "cannot read function type"]);
     let t = ds58(4, 1, 1, 7, 1, 1, 0.0, 1.0, [18, 9, 13], "1 0\n");
-    has(
-        &uff_err(t.as_bytes()),
-        &["line 9", "record 7", "ordinate data type 7 not supported"],
-    );
+    has(&uff_err(t.as_bytes()), &["line 9", "record 7", "ordinate data type 7 not supported"]);
     let t = ds58(4, 1, 1, 6, 1, 3, 0.0, 1.0, [18, 9, 13], "1 0\n");
-    has(
-        &uff_err(t.as_bytes()),
-        &["line 9", "record 7", "abscissa spacing 3"],
-    );
+    has(&uff_err(t.as_bytes()), &["line 9", "record 7", "abscissa spacing 3"]);
     let t = ds58(4, 1, 1, 6, 0, 1, 0.0, 1.0, [18, 9, 13], "\n");
     has(&uff_err(t.as_bytes()), &["record 7", "no data"]);
     let t = ds58(4, 1, 1, 6, 2, 1, 0.0, -1.0, [18, 9, 13], "1 0 1 0\n");
-    has(
-        &uff_err(t.as_bytes()),
-        &["line 9", "record 7", "increment", "strictly ascending"],
-    );
+    has(&uff_err(t.as_bytes()), &["line 9", "record 7", "increment", "strictly ascending"]);
     let t = ds58(4, 1, 1, 6, 999_999_999, 1, 0.0, 1.0, [18, 9, 13], "1 0\n");
-    has(
-        &uff_err(t.as_bytes()),
-        &["record 7", "more than the file can hold"],
-    );
+    has(&uff_err(t.as_bytes()), &["record 7", "more than the file can hold"]);
     // Value count and content.
     let t = ds58(4, 1, 1, 6, 3, 1, 0.0, 1.0, [18, 9, 13], "1 0 1 0\n");
-    has(
-        &uff_err(t.as_bytes()),
-        &[
-            "line 14",
-            "record 12",
-            "4 values",
-            "declares 3 points (6 values)",
-        ],
-    );
+    has(&uff_err(t.as_bytes()), &["line 14", "record 12", "4 values", "declares 3 points (6 values)"]);
     let t = ds58(4, 1, 1, 6, 1, 1, 0.0, 1.0, [18, 9, 13], "1 0\n1 0\n");
-    has(
-        &uff_err(t.as_bytes()),
-        &["line 15", "record 12", "more values"],
-    );
+    has(&uff_err(t.as_bytes()), &["line 15", "record 12", "more values"]);
     let t = ds58(4, 1, 1, 6, 2, 1, 0.0, 1.0, [18, 9, 13], "1 0\n NaN 0\n");
-    has(
-        &uff_err(t.as_bytes()),
-        &["line 15", "record 12", "value 3 is NaN"],
-    );
+    has(&uff_err(t.as_bytes()), &["line 15", "record 12", "value 3 is NaN"]);
     let t = ds58(4, 1, 1, 6, 2, 1, 0.0, 1.0, [18, 9, 13], "1 0\n 1.0 zz\n");
-    has(
-        &uff_err(t.as_bytes()),
-        &["line 15", "record 12", "cannot read \"zz\""],
-    );
+    has(&uff_err(t.as_bytes()), &["line 15", "record 12", "cannot read \"zz\""]);
     // Uneven abscissa not ascending.
-    let t = ds58(
-        4,
-        1,
-        1,
-        6,
-        3,
-        0,
-        0.0,
-        0.0,
-        [18, 9, 13],
-        "0 1 0\n5 1 0\n5 1 0\n",
-    );
-    has(
-        &uff_err(t.as_bytes()),
-        &[
-            "line 16",
-            "record 12",
-            "frequency 5 Hz",
-            "strictly ascending",
-        ],
-    );
+    let t = ds58(4, 1, 1, 6, 3, 0, 0.0, 0.0, [18, 9, 13], "0 1 0\n5 1 0\n5 1 0\n");
+    has(&uff_err(t.as_bytes()), &["line 16", "record 12", "frequency 5 Hz", "strictly ascending"]);
     // Units: abscissa time, accelerance, label not Hz.
     let t = ds58(4, 1, 1, 6, 1, 1, 0.0, 1.0, [17, 9, 13], "1 0\n");
-    has(
-        &uff_err(t.as_bytes()),
-        &["line 10", "record 8", "abscissa is time", "not frequency"],
-    );
+    has(&uff_err(t.as_bytes()), &["line 10", "record 8", "abscissa is time", "not frequency"]);
     let t = ds58(4, 1, 1, 6, 1, 1, 0.0, 1.0, [18, 12, 13], "1 0\n");
-    has(
-        &uff_err(t.as_bytes()),
-        &[
-            "line 11",
-            "record 9",
-            "numerator is acceleration",
-            "not a force",
-        ],
-    );
+    has(&uff_err(t.as_bytes()), &["line 11", "record 9", "numerator is acceleration", "not a force"]);
     let t = ds58(4, 1, 1, 6, 1, 1, 0.0, 1.0, [18, 9, 13], "1 0\n").replace(
         "    0    0    0 NONE                 NONE                \n        13",
         "    0    0    0 NONE                 g/N                 \n        13",
     );
-    has(
-        &uff_err(t.as_bytes()),
-        &["line 11", "record 9", "units \"g/N\"", "not a force"],
-    );
+    has(&uff_err(t.as_bytes()), &["line 11", "record 9", "units \"g/N\"", "not a force"]);
     let t = ds58(4, 1, 1, 6, 1, 1, 0.0, 1.0, [18, 9, 13], "1 0\n").replacen(
         "NONE                 NONE",
         "Time                 s   ",
         1,
     );
-    has(
-        &uff_err(t.as_bytes()),
-        &["line 10", "record 8", "units \"s\" are not Hz"],
-    );
+    has(&uff_err(t.as_bytes()), &["line 10", "record 8", "units \"s\" are not Hz"]);
     // Coherence problems.
     let t = frf_x() + &coh_x("0.5 1.5 1.0\n", 3);
     has(
         &uff_err(t.as_bytes()),
-        &[
-            "line 30",
-            "dataset #2 (58, starting line 17)",
-            "record 12",
-            "coherence 1.5",
-            "outside [0, 1]",
-        ],
+        &["line 30", "dataset #2 (58, starting line 17)", "record 12", "coherence 1.5", "outside [0, 1]"],
     );
     let t = frf_x() + &coh_x("0.5 0.9\n", 2);
-    has(
-        &uff_err(t.as_bytes()),
-        &[
-            "line 17: dataset #2 (coherence x)",
-            "2 frequency lines",
-            "dataset #1",
-            "has 3",
-        ],
-    );
+    has(&uff_err(t.as_bytes()), &["line 17: dataset #2 (coherence x)", "2 frequency lines", "dataset #1", "has 3"]);
     let t = ds58(6, 2, 2, 4, 1, 1, 0.0, 1.0, [18, 0, 0], "0.5\n") + &frf_x();
-    has(
-        &uff_err(t.as_bytes()),
-        &["dataset #1", "coherence for axis y", "no FRF for axis y"],
-    );
+    has(&uff_err(t.as_bytes()), &["dataset #1", "coherence for axis y", "no FRF for axis y"]);
     let t = ds58(6, 1, 1, 6, 1, 1, 0.0, 1.0, [18, 0, 0], "0.5 0.1\n");
-    has(
-        &uff_err(t.as_bytes()),
-        &["record 12", "non-zero imaginary part"],
-    );
+    has(&uff_err(t.as_bytes()), &["record 12", "non-zero imaginary part"]);
     // Axes with different lines; duplicate axis.
     let y = ds58(4, 2, 2, 6, 3, 1, 0.0, 20.0, [18, 9, 13], "1 0 1 0 1 0\n");
     has(
         &uff_err((frf_x() + &y).as_bytes()),
-        &[
-            "dataset #2 (FRF y)",
-            "frequency line 2 is 20 Hz",
-            "10 Hz in dataset #1",
-        ],
+        &["dataset #2 (FRF y)", "frequency line 2 is 20 Hz", "10 Hz in dataset #1"],
     );
     has(
         &uff_err((frf_x() + &frf_x()).as_bytes()),
-        &[
-            "line 17",
-            "dataset #2",
-            "second FRF for axis x",
-            "dataset #1 at line 1",
-            "duplicate axis",
-        ],
+        &["line 17", "dataset #2", "second FRF for axis x", "dataset #1 at line 1", "duplicate axis"],
     );
     let t = frf_x() + &coh_x("1 1 1\n", 3) + &coh_x("1 1 1\n", 3);
-    has(
-        &uff_err(t.as_bytes()),
-        &[
-            "dataset #3",
-            "second coherence for axis x",
-            "duplicate axis",
-        ],
-    );
+    has(&uff_err(t.as_bytes()), &["dataset #3", "second coherence for axis x", "duplicate axis"]);
     // Junk between datasets.
-    has(
-        &uff_err((frf_x() + "garbage\n").as_bytes()),
-        &["line 17", "expected '    -1'", "\"garbage\""],
-    );
+    has(&uff_err((frf_x() + "garbage\n").as_bytes()), &["line 17", "expected '    -1'", "\"garbage\""]);
 }
 
 #[test]
@@ -675,53 +402,28 @@ fn uff_binary_errors() {
     let good = uff::uff58_to_bytes(&frf, true).unwrap();
     assert_eq!(uff::parse_uff58(&good, "ok.uff").unwrap(), frf);
     // Truncated binary data.
-    has(
-        &uff_err(&good[..good.len() - 20]),
-        &["record 12", "128 bytes of binary data", "only"],
-    );
+    has(&uff_err(&good[..good.len() - 20]), &["record 12", "128 bytes of binary data", "only"]);
     // Data longer than record 7 says: no closing -1 where expected.
     let t = String::from_utf8_lossy(&good).into_owned();
     let bad = t.replacen("         6         8", "         6         7", 1);
     has(
         &uff_err(bad.as_bytes()),
-        &[
-            "record 12",
-            "no closing '    -1' after the 112 bytes",
-            "58b header says 128 bytes",
-        ],
+        &["record 12", "no closing '    -1' after the 112 bytes", "58b header says 128 bytes"],
     );
     // Unknown float format / byte order.
     let h = "    58b     1     2          11";
     assert!(t.contains(h));
     has(
-        &uff_err(
-            t.replacen(h, "    58b     1     3          11", 1)
-                .as_bytes(),
-        ),
+        &uff_err(t.replacen(h, "    58b     1     3          11", 1).as_bytes()),
         &["line 2", "binary header", "floating point format 3"],
     );
-    has(
-        &uff_err(
-            t.replacen(h, "    58b     7     2          11", 1)
-                .as_bytes(),
-        ),
-        &["line 2", "byte order 7"],
-    );
-    has(
-        &uff_err(
-            t.replacen(h, "    58b     1     2           9", 1)
-                .as_bytes(),
-        ),
-        &["line 2", "9 ASCII lines"],
-    );
+    has(&uff_err(t.replacen(h, "    58b     7     2          11", 1).as_bytes()), &["line 2", "byte order 7"]);
+    has(&uff_err(t.replacen(h, "    58b     1     2           9", 1).as_bytes()), &["line 2", "9 ASCII lines"]);
     // NaN in binary: named by byte offset.
     let mut nan = good.clone();
     let start = good.len() - 7 - 128;
     nan[start + 8..start + 16].copy_from_slice(&f64::NAN.to_le_bytes());
-    has(
-        &uff_err(&nan),
-        &["record 12 (binary value 2 at byte offset", "is NaN"],
-    );
+    has(&uff_err(&nan), &["record 12 (binary value 2 at byte offset", "is NaN"]);
     // Big endian and a line break before the closing -1 (seen in the wild).
     let mut be = good[..start].to_vec();
     let be_hdr = String::from_utf8_lossy(&be).replacen(h, "    58b     2     2          11", 1);
@@ -745,11 +447,7 @@ fn export_for_pyuff_check() {
     };
     let dir = PathBuf::from(dir);
     std::fs::create_dir_all(&dir).unwrap();
-    let frf = sample_frf(
-        (0..=256).map(|i| i as f64 * 16.0).collect(),
-        &[0, 2],
-        &[0, 1, 2],
-    );
+    let frf = sample_frf((0..=256).map(|i| i as f64 * 16.0).collect(), &[0, 2], &[0, 1, 2]);
     for (name, binary) in [("ours_ascii", false), ("ours_binary", true)] {
         uff::write_uff58(&dir.join(format!("{name}.uff")), &frf, binary).unwrap();
         frf_csv::write_frf_csv(&dir.join(format!("{name}.expected.csv")), &frf).unwrap();

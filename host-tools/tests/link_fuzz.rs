@@ -16,7 +16,9 @@ use proptest::prelude::*;
 fn replies(bytes: &[u8]) -> Vec<BoxMessage> {
     let mut dec = FrameDecoder::new();
     let mut out = vec![];
-    dec.push(bytes, |r| out.push(decode_message::<BoxMessage>(r.expect("the box sends valid frames")).expect("decodes")));
+    dec.push(bytes, |r| {
+        out.push(decode_message::<BoxMessage>(r.expect("the box sends valid frames")).expect("decodes"))
+    });
     out
 }
 
@@ -118,15 +120,35 @@ fn requests_map_to_actions() {
     use dynocomp_core::link::{Actions, BoxLink, Telemetry};
     let mut store = Store::open(SimFlash::g474_slots(), Layout::STM32G474RE).unwrap();
     let mut link = BoxLink::new();
-    let counters = StatusCounters { overruns: 2, isr_cycles_last: 1_100, isr_cycles_max: 3_000, isr_cycles_mean: 1_234, ..Default::default() };
-    let tel = Telemetry { firmware: [1, 2, 3], fs_hz: 51_200, core_clock_hz: 170_000_000, bypass: None, image: None, counters, stream_next_seq: 7 };
+    let counters = StatusCounters {
+        overruns: 2,
+        isr_cycles_last: 1_100,
+        isr_cycles_max: 3_000,
+        isr_cycles_mean: 1_234,
+        ..Default::default()
+    };
+    let tel = Telemetry {
+        firmware: [1, 2, 3],
+        fs_hz: 51_200,
+        core_clock_hz: 170_000_000,
+        bypass: None,
+        image: None,
+        counters,
+        stream_next_seq: 7,
+    };
     let run = |req: Request<'_>, link: &mut BoxLink, store: &mut Store<SimFlash>| {
         let mut act = Actions::default();
         let reply = link.handle(req, store, &tel, &mut act);
         (reply, act)
     };
-    assert_eq!(run(Request::SetBypass(true), &mut link, &mut store), (Reply::Ack, Actions { bypass: Some(true), ..Default::default() }));
-    assert_eq!(run(Request::AutoZero, &mut link, &mut store), (Reply::Ack, Actions { auto_zero: true, ..Default::default() }));
+    assert_eq!(
+        run(Request::SetBypass(true), &mut link, &mut store),
+        (Reply::Ack, Actions { bypass: Some(true), ..Default::default() })
+    );
+    assert_eq!(
+        run(Request::AutoZero, &mut link, &mut store),
+        (Reply::Ack, Actions { auto_zero: true, ..Default::default() })
+    );
     assert_eq!(
         run(Request::StartStream { decimation: 0 }, &mut link, &mut store),
         (Reply::Error(LinkError::BadDecimation), Actions::default())
@@ -138,20 +160,32 @@ fn requests_map_to_actions() {
     match run(Request::GetStatus, &mut link, &mut store) {
         (Reply::Status(s), act) => {
             assert_eq!(act, Actions::default());
-            assert_eq!((s.firmware, s.fs_hz, s.stream_decimation, s.stream_next_seq, s.active), ([1, 2, 3], 51_200, Some(4), 7, None));
+            assert_eq!(
+                (s.firmware, s.fs_hz, s.stream_decimation, s.stream_next_seq, s.active),
+                ([1, 2, 3], 51_200, Some(4), 7, None)
+            );
             assert_eq!((s.protocol, s.core_clock_hz, s.counters), (PROTOCOL_VERSION, 170_000_000, counters));
         }
         other => panic!("{other:?}"),
     }
-    assert_eq!(run(Request::StopStream, &mut link, &mut store), (Reply::Ack, Actions { stream: Some(None), ..Default::default() }));
+    assert_eq!(
+        run(Request::StopStream, &mut link, &mut store),
+        (Reply::Ack, Actions { stream: Some(None), ..Default::default() })
+    );
     let img = common::good(5);
     assert_eq!(
         run(Request::UploadBegin { len: img.len() as u32, crc: CRC32.checksum(&img) }, &mut link, &mut store).1,
         Actions::default()
     );
     for (i, c) in img.chunks(MAX_CHUNK).enumerate() {
-        assert_eq!(run(Request::UploadChunk { offset: (i * MAX_CHUNK) as u32, bytes: c }, &mut link, &mut store).0, Reply::Ack);
+        assert_eq!(
+            run(Request::UploadChunk { offset: (i * MAX_CHUNK) as u32, bytes: c }, &mut link, &mut store).0,
+            Reply::Ack
+        );
     }
-    assert_eq!(run(Request::UploadCommit, &mut link, &mut store), (Reply::Ack, Actions { switch_image: true, ..Default::default() }));
+    assert_eq!(
+        run(Request::UploadCommit, &mut link, &mut store),
+        (Reply::Ack, Actions { switch_image: true, ..Default::default() })
+    );
     assert_eq!(store.active().map(|a| a.image_id), Some(common::id(&img)));
 }

@@ -95,10 +95,8 @@ fn noise(out: &PlateSimOutput) -> [f64; 3] {
 }
 
 fn design(frf: &Frf, out: &PlateSimOutput) -> anyhow::Result<MatrixDesign> {
-    let opts = MatrixOptions {
-        design: DesignOptions { fs_hz: out.params.fs_hz, ..Default::default() },
-        ..Default::default()
-    };
+    let opts =
+        MatrixOptions { design: DesignOptions { fs_hz: out.params.fs_hz, ..Default::default() }, ..Default::default() };
     design_matrix(frf, noise(out), &opts)
 }
 
@@ -116,7 +114,8 @@ fn evaluate(md: &MatrixDesign, out: &PlateSimOutput) -> Figures {
     let lag = md.summary.latency;
     let n = out.measured[0].len();
     let mut st = MimoState::default();
-    let est: Vec<[f32; 3]> = (0..n).map(|k| md.filter.step(&mut st, [0, 1, 2].map(|i| out.measured[i][k] as f32))).collect();
+    let est: Vec<[f32; 3]> =
+        (0..n).map(|k| md.filter.step(&mut st, [0, 1, 2].map(|i| out.measured[i][k] as f32))).collect();
     let used = std::array::from_fn(|i| score(&est.iter().map(|y| f64::from(y[i])).collect::<Vec<_>>(), out, i, lag));
     let per_axis = std::array::from_fn(|i| {
         md.per_axis[i].as_ref().map_or(f64::INFINITY, |a| {
@@ -186,12 +185,18 @@ fn large_crosstalk(name: &str, fs: f64) {
     let fig = evaluate(&md, &out);
     eprintln!("{}", fig.line(name, fs));
     assert!(fig.peak_crosstalk > 0.5, "{name}: the crosstalk should be large, peak {:.2}", fig.peak_crosstalk);
-    assert!(crosstalk_compensated(&fig), "{name} at {fs} Hz: the 3x3 design does not beat per-axis compensation: {fig:?}");
+    assert!(
+        crosstalk_compensated(&fig),
+        "{name} at {fs} Hz: the 3x3 design does not beat per-axis compensation: {fig:?}"
+    );
     check_no_worse_and_floor(&fig, name);
     let blind = design(&without_crosstalk(&out.frf), &out).unwrap();
     let blind_fig = evaluate(&blind, &out);
     eprintln!("{}", blind_fig.line(&format!("{name}-diag"), fs));
-    assert!(!crosstalk_compensated(&blind_fig), "negative control: a design blind to the crosstalk passed: {blind_fig:?}");
+    assert!(
+        !crosstalk_compensated(&blind_fig),
+        "negative control: a design blind to the crosstalk passed: {blind_fig:?}"
+    );
 }
 
 #[test]
@@ -228,7 +233,12 @@ fn flat_no_worse_and_f32_verified() {
     // times the largest response of any row (computed here from the f64
     // compensator): its entry then deviates by ≥ 10× the limit of its row.
     let freqs: Vec<f64> = (0..=200).map(|k| f_band * k as f64 / 200.0).collect();
-    let peak = md.compensator.freq_responses(&freqs, fs).iter().flat_map(|h| h.iter().map(|v| v.norm()).collect::<Vec<_>>()).fold(0.0, f64::max);
+    let peak = md
+        .compensator
+        .freq_responses(&freqs, fs)
+        .iter()
+        .flat_map(|h| h.iter().map(|v| v.norm()).collect::<Vec<_>>())
+        .fold(0.0, f64::max);
     let mut d = *md.filter.d();
     d[0][0] += (10.0 * 1e-4 * peak) as f32;
     let bad = MimoFilter::new(md.filter.sections(), d, md.filter.fir()).unwrap();
@@ -300,7 +310,8 @@ fn seed_study() {
             Ok(md) => {
                 let fig = evaluate(&md, &out);
                 eprintln!("{}", fig.line(&name, fs));
-                let ok = (0..3).all(|i| fig.used[i] <= NO_WORSE * fig.per_axis[i] && fig.used[i] <= FLOOR_FACTOR * fig.floor[i]);
+                let ok = (0..3)
+                    .all(|i| fig.used[i] <= NO_WORSE * fig.per_axis[i] && fig.used[i] <= FLOOR_FACTOR * fig.floor[i]);
                 if !ok {
                     failures.push(format!("{name} at {fs}"));
                 }

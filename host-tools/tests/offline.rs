@@ -3,23 +3,26 @@
 //! against the causal L-lag box filter, sidecar checks).
 
 mod sim_common;
-use sim_common::{design_all, sim, FS, F_MAX};
-use dynocomp::offline::compensate::compensate_record;
-use dynocomp::design::image::build_image;
 use dynocomp::design::discretize::{discretize, DiscreteModel, Discretization};
+use dynocomp::design::image::build_image;
 use dynocomp::fit::PoleResidueModel;
 use dynocomp::io::signal_csv::SignalRecord;
 use dynocomp::metrics::accuracy;
-use dynocomp::simulate::dynamometer::{Dynamometer, Hold, Mode};
-use dynocomp::offline::smoother::{smooth_record, Smoother};
+use dynocomp::offline::compensate::compensate_record;
 use dynocomp::offline::sidecar::{read_sidecar, sidecar_path, write_sidecar, ModelSidecar};
+use dynocomp::offline::smoother::{smooth_record, Smoother};
+use dynocomp::simulate::dynamometer::{Dynamometer, Hold, Mode};
+use sim_common::{design_all, sim, FS, F_MAX};
 use std::f64::consts::PI;
-
 
 /// A dynamometer with a machine mode at 450 Hz and a sensor mode at
 /// 2.6 kHz, |G(0)| = 1.
 fn two_mode_dyno() -> Dynamometer {
-    Dynamometer::from_modes(vec![Mode { fn_hz: 450.0, zeta: 0.04, residue: 0.3 }, Mode { fn_hz: 2600.0, zeta: 0.02, residue: 0.7 }]).unwrap()
+    Dynamometer::from_modes(vec![
+        Mode { fn_hz: 450.0, zeta: 0.04, residue: 0.3 },
+        Mode { fn_hz: 2600.0, zeta: 0.02, residue: 0.7 },
+    ])
+    .unwrap()
 }
 
 /// G(s) of [`two_mode_dyno`].
@@ -145,9 +148,19 @@ fn offline_smoother_on_simulated_milling_records() {
             let c4 = accuracy(causal.channel(a).unwrap(), &s.truth[a], FS, F_MAX).nrmse;
             let c0 = accuracy(causal0.channel(a).unwrap(), &s.truth[a], FS, F_MAX).nrmse;
             let o = accuracy(smoothed.channel(a).unwrap(), &s.truth[a], FS, F_MAX).nrmse;
-            eprintln!("seed {seed} axis {a}: causal L=0 {:.4} %, L=4 {:.4} %, offline smoother {:.4} %", c0 * 100.0, c4 * 100.0, o * 100.0);
+            eprintln!(
+                "seed {seed} axis {a}: causal L=0 {:.4} %, L=4 {:.4} %, offline smoother {:.4} %",
+                c0 * 100.0,
+                c4 * 100.0,
+                o * 100.0
+            );
             assert!(o < c0 / 5.0, "axis {a}: offline {:.4} % not far below causal L=0 {:.4} %", o * 100.0, c0 * 100.0);
-            assert!(o < 1.2 * c4, "axis {a}: offline {:.4} % not within 20 % of causal L=4 {:.4} %", o * 100.0, c4 * 100.0);
+            assert!(
+                o < 1.2 * c4,
+                "axis {a}: offline {:.4} % not within 20 % of causal L=4 {:.4} %",
+                o * 100.0,
+                c4 * 100.0
+            );
             // (std convention; was 1 % of peak-to-peak, about 3.5 % of std)
             assert!(o < 0.02, "axis {a}: offline NRMSE {:.4} % ≥ 2 %", o * 100.0);
         }
@@ -187,7 +200,12 @@ fn the_sidecar_is_tied_to_its_image() {
         };
         img.axes[0] = Some(dynocomp_core::image::AxisImage {
             axis: 0,
-            scaling: dynocomp_core::image::AxisScaling { adc_offset_code: 2048.0, newton_per_code: 2.0, dac_code_per_newton: 0.5, dac_offset_code: 2048.0 },
+            scaling: dynocomp_core::image::AxisScaling {
+                adc_offset_code: 2048.0,
+                newton_per_code: 2.0,
+                dac_code_per_newton: 0.5,
+                dac_offset_code: 2048.0,
+            },
             filter: dynocomp_core::kernel::AxisFilter::gain(1.0).unwrap(),
             summary: dynocomp_core::image::AxisSummary { model_order: 4, q: 1.0, r: 0.05, ..Default::default() },
         });

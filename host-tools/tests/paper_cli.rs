@@ -18,8 +18,26 @@ fn paper_method_writes_a_paper_image_with_the_bands_and_diagnostics() {
     let frf = example("frf.uff");
     let idle = example("idle.csv");
     let (ok, stdout, stderr) = dynocomp(&[
-        "design", "--frf", &frf, "--fs", "51200", "--idle", &idle, "--out", out.to_str().unwrap(), "--method", "paper", "--paper-orders", "2:4",
-        "--spindle-rpm", "33000", "--teeth", "4", "--harmonics", "1", "--json",
+        "design",
+        "--frf",
+        &frf,
+        "--fs",
+        "51200",
+        "--idle",
+        &idle,
+        "--out",
+        out.to_str().unwrap(),
+        "--method",
+        "paper",
+        "--paper-orders",
+        "2:4",
+        "--spindle-rpm",
+        "33000",
+        "--teeth",
+        "4",
+        "--harmonics",
+        "1",
+        "--json",
     ]);
     // (TPF 2.2 kHz, near the sensor modes: at the example's 1.1 kHz TPF the
     // paper's 2:4 fit of axis z is predicted worse than no compensation in
@@ -70,8 +88,22 @@ fn bad_paper_and_band_flags_fail_with_one_line_and_write_nothing() {
 fn compare_reports_every_method_per_axis_and_failures_as_rows() {
     let dir = tmp("compare");
     let (ok, stdout, stderr) = dynocomp(&[
-        "compare", "--frf", &example("frf.uff"), "--fs", "51200", "--idle", &example("idle.csv"), "--spindle-rpm", "16500", "--teeth", "4",
-        "--harmonics", "3", "--out-dir", dir.to_str().unwrap(), "--json",
+        "compare",
+        "--frf",
+        &example("frf.uff"),
+        "--fs",
+        "51200",
+        "--idle",
+        &example("idle.csv"),
+        "--spindle-rpm",
+        "16500",
+        "--teeth",
+        "4",
+        "--harmonics",
+        "3",
+        "--out-dir",
+        dir.to_str().unwrap(),
+        "--json",
     ]);
     assert!(ok, "{stderr}");
     let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
@@ -80,7 +112,16 @@ fn compare_reports_every_method_per_axis_and_failures_as_rows() {
     for ax in axes {
         let rows = ax["rows"].as_array().unwrap();
         let names: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
-        assert_eq!(names, ["paper, whole band", "paper, band-fitted", "paper, parallel", "default (vf), whole band", "default (vf), band-weighted"]);
+        assert_eq!(
+            names,
+            [
+                "paper, whole band",
+                "paper, band-fitted",
+                "paper, parallel",
+                "default (vf), whole band",
+                "default (vf), band-weighted"
+            ]
+        );
         for r in rows {
             // a row either has a diagnostic or all its figures
             match r["diagnostic"].as_str() {
@@ -108,23 +149,67 @@ fn never_worse_than_raw_a_paper_design_predicted_worse_is_refused_and_nothing_wr
     let out = tmp("worse.dcimg");
     let _ = std::fs::remove_file(&out);
     let (ok, _, stderr) = dynocomp(&[
-        "design", "--frf", &example("frf.uff"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", out.to_str().unwrap(), "--method", "paper",
-        "--paper-orders", "2:4", "--spindle-rpm", "16500", "--teeth", "4", "--harmonics", "1",
+        "design",
+        "--frf",
+        &example("frf.uff"),
+        "--fs",
+        "51200",
+        "--idle",
+        &example("idle.csv"),
+        "--out",
+        out.to_str().unwrap(),
+        "--method",
+        "paper",
+        "--paper-orders",
+        "2:4",
+        "--spindle-rpm",
+        "16500",
+        "--teeth",
+        "4",
+        "--harmonics",
+        "1",
     ]);
     assert!(!ok, "a design worse than raw was written");
-    assert!(stderr.contains("axis z") && stderr.contains("worse than no compensation") && stderr.contains("uncompensated"), "{stderr}");
-    assert!(stderr.contains("--paper-orders") && stderr.contains("--method vf"), "the message says what to try: {stderr}");
+    assert!(
+        stderr.contains("axis z") && stderr.contains("worse than no compensation") && stderr.contains("uncompensated"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("--paper-orders") && stderr.contains("--method vf"),
+        "the message says what to try: {stderr}"
+    );
     assert!(!out.exists(), "an image was left behind");
     // Positive control: the default method on the whole band writes it.
     // (With these bands it is refused too: its band-weighted fit is 9 %
     // off at 0 Hz on axis x, see `design::MAX_STATIC_ERROR`.)
     let (ok, _, stderr) = dynocomp(&[
-        "design", "--frf", &example("frf.uff"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", out.to_str().unwrap(),
+        "design",
+        "--frf",
+        &example("frf.uff"),
+        "--fs",
+        "51200",
+        "--idle",
+        &example("idle.csv"),
+        "--out",
+        out.to_str().unwrap(),
     ]);
     assert!(ok && out.exists(), "{stderr}");
     let (ok, _, stderr) = dynocomp(&[
-        "design", "--frf", &example("frf.uff"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", out.to_str().unwrap(),
-        "--spindle-rpm", "16500", "--teeth", "4", "--harmonics", "1",
+        "design",
+        "--frf",
+        &example("frf.uff"),
+        "--fs",
+        "51200",
+        "--idle",
+        &example("idle.csv"),
+        "--out",
+        out.to_str().unwrap(),
+        "--spindle-rpm",
+        "16500",
+        "--teeth",
+        "4",
+        "--harmonics",
+        "1",
     ]);
     assert!(!ok && stderr.contains("not flat below the FRF's first coherent line"), "{stderr}");
 }
@@ -137,17 +222,34 @@ fn paper_orders_are_chosen_per_axis_with_the_reason_and_forced_orders_still_hold
     // without --paper-orders every axis gets orders that work, and says why.
     let dir = tmp("preset-cut-2");
     let d = dir.to_str().unwrap();
-    let (ok, _, stderr) = dynocomp(&["simulate", "--preset", "cut-2", "--duration", "0.1", "--idle-duration", "0.2", "--out", d]);
+    let (ok, _, stderr) =
+        dynocomp(&["simulate", "--preset", "cut-2", "--duration", "0.1", "--idle-duration", "0.2", "--out", d]);
     assert!(ok, "{stderr}");
     assert!(stderr.contains("--spindle-rpm 4150 --teeth 4"), "simulate says how to design it: {stderr}");
     let frf = dir.join("frf.uff");
     let idle = dir.join("idle.csv");
     let out = dir.join("paper.dcimg");
     let args = |extra: &[&str]| -> Vec<String> {
-        let mut v: Vec<String> = ["design", "--frf", frf.to_str().unwrap(), "--idle", idle.to_str().unwrap(), "--fs", "51200", "--method", "paper", "--spindle-rpm", "4150", "--teeth", "4", "--out", out.to_str().unwrap()]
-            .iter()
-            .map(|s| s.to_string())
-            .collect();
+        let mut v: Vec<String> = [
+            "design",
+            "--frf",
+            frf.to_str().unwrap(),
+            "--idle",
+            idle.to_str().unwrap(),
+            "--fs",
+            "51200",
+            "--method",
+            "paper",
+            "--spindle-rpm",
+            "4150",
+            "--teeth",
+            "4",
+            "--out",
+            out.to_str().unwrap(),
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
         v.extend(extra.iter().map(|s| s.to_string()));
         v
     };
@@ -159,7 +261,10 @@ fn paper_orders_are_chosen_per_axis_with_the_reason_and_forced_orders_still_hold
     let (ok, stdout, stderr) = run(args(&[]));
     assert!(ok && out.exists(), "{stderr}");
     for axis in ["x", "y", "z"] {
-        assert!(stdout.contains(&format!("axis {axis}: paper orders")) && stdout.contains("chosen automatically"), "{stdout}");
+        assert!(
+            stdout.contains(&format!("axis {axis}: paper orders")) && stdout.contains("chosen automatically"),
+            "{stdout}"
+        );
     }
 }
 
@@ -170,15 +275,39 @@ fn a_fit_beyond_the_fit_error_limit_is_refused_whatever_it_predicts() {
     let out = tmp("badfit.dcimg");
     let _ = std::fs::remove_file(&out);
     let (ok, _, stderr) = dynocomp(&[
-        "design", "--frf", &example("frf.uff"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", out.to_str().unwrap(), "--method", "paper",
-        "--paper-orders", "1:2", "--band", "10:3000",
+        "design",
+        "--frf",
+        &example("frf.uff"),
+        "--fs",
+        "51200",
+        "--idle",
+        &example("idle.csv"),
+        "--out",
+        out.to_str().unwrap(),
+        "--method",
+        "paper",
+        "--paper-orders",
+        "1:2",
+        "--band",
+        "10:3000",
     ]);
     assert!(!ok && !out.exists(), "{stderr}");
     assert!(stderr.contains("from the measured FRF") && stderr.contains("limit of 15 %"), "{stderr}");
     // Positive control: the same band with the orders chosen is written.
     let (ok, _, stderr) = dynocomp(&[
-        "design", "--frf", &example("frf.uff"), "--fs", "51200", "--idle", &example("idle.csv"), "--out", out.to_str().unwrap(), "--method", "paper",
-        "--band", "10:3000",
+        "design",
+        "--frf",
+        &example("frf.uff"),
+        "--fs",
+        "51200",
+        "--idle",
+        &example("idle.csv"),
+        "--out",
+        out.to_str().unwrap(),
+        "--method",
+        "paper",
+        "--band",
+        "10:3000",
     ]);
     assert!(ok && out.exists(), "{stderr}");
 }

@@ -8,8 +8,8 @@
 //! no flags beyond the preset's band flags, and the compensated error in the
 //! bands is below the raw error there.
 
-use dynocomp::metrics::accuracy_in_bands;
 use dynocomp::eval::reproduce::{evaluate, preset_bands, simulate_preset, Method};
+use dynocomp::metrics::accuracy_in_bands;
 use dynocomp::simulate::presets::{preset, NAMES};
 
 /// Records long enough for ≥ 20 tooth periods at TPF 83 Hz and the whole
@@ -43,7 +43,12 @@ fn every_preset_paper_method_with_band_fitting_beats_raw_in_the_bands_on_every_a
                         100.0 * sc.comp_full
                     );
                     if !(sc.comp_in_bands < sc.raw_in_bands) {
-                        failures.push(format!("{name} axis {}: compensated {:.2} % ≥ raw {:.2} % in the bands", o.axis, 100.0 * sc.comp_in_bands, 100.0 * sc.raw_in_bands));
+                        failures.push(format!(
+                            "{name} axis {}: compensated {:.2} % ≥ raw {:.2} % in the bands",
+                            o.axis,
+                            100.0 * sc.comp_in_bands,
+                            100.0 * sc.raw_in_bands
+                        ));
                     }
                 }
                 Err(e) => failures.push(format!("{name} axis {}: no image: {e}", o.axis)),
@@ -68,7 +73,12 @@ fn the_in_band_check_fails_on_a_wrong_estimate_and_the_presets_need_compensation
         let mut late = vec![s.measured[a][0]; 10];
         late.extend_from_slice(&s.measured[a][..s.measured[a].len() - 10]);
         let wrong = accuracy_in_bands(&late, &s.truth[a], fs, &ranges).nrmse;
-        assert!(!(wrong < raw), "axis {a}: a delayed raw force ({:.2} %) passed as better than raw ({:.2} %)", 100.0 * wrong, 100.0 * raw);
+        assert!(
+            !(wrong < raw),
+            "axis {a}: a delayed raw force ({:.2} %) passed as better than raw ({:.2} %)",
+            100.0 * wrong,
+            100.0 * raw
+        );
         // At TPF 277 Hz the raw force is visibly off in the bands (the paper's
         // "more relevant distortions at higher TPF"), so beating it means something.
         assert!(raw > 0.03, "axis {a}: raw in-band error only {:.2} %", 100.0 * raw);

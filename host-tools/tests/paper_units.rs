@@ -3,8 +3,11 @@
 //! the continuous Riccati equation, Tustin with prewarping, band
 //! construction.
 
+use dynocomp::design::paper::{
+    self, companion_form, continuous_response, observability, solve_filter_care, tustin_prewarped, ContinuousSs,
+    PaperDiagnostics,
+};
 use dynocomp::fit::rfp::{poly_eval, poly_from_roots, rfp_fit, RationalTf, RfpOptions};
-use dynocomp::design::paper::{self, companion_form, continuous_response, observability, solve_filter_care, tustin_prewarped, ContinuousSs, PaperDiagnostics};
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
 use std::f64::consts::PI;
@@ -35,7 +38,8 @@ fn rfp_and_gauss_newton_recover_the_poles_of_a_known_rational_function() {
     let freq: Vec<f64> = (0..=4000).step_by(2).map(f64::from).collect();
     let h: Vec<Complex64> = freq.iter().map(|f| two_mode(Complex64::new(0.0, 2.0 * PI * f))).collect();
     let w = vec![1.0; freq.len()];
-    let fit = rfp_fit(&freq, &h, &w, &RfpOptions { nb: 2, na: 4, ..Default::default() }).unwrap_or_else(|e| panic!("{e:#}"));
+    let fit =
+        rfp_fit(&freq, &h, &w, &RfpOptions { nb: 2, na: 4, ..Default::default() }).unwrap_or_else(|e| panic!("{e:#}"));
     for t in true_poles() {
         let near = fit.tf.poles().unwrap().iter().map(|p| (p - t).norm() / t.norm()).fold(f64::INFINITY, f64::min);
         assert!(near < 1e-6, "pole {t} not recovered (closest relative distance {near:e})");
@@ -73,7 +77,11 @@ fn gauss_newton_reduces_the_output_error_that_the_linearized_rfp_misweights() {
 
 #[test]
 fn companion_form_has_the_transfer_function_of_eq_1() {
-    let tf = RationalTf { b: vec![1.5, -0.3, 0.2], a: poly_from_roots(&[Complex64::new(-0.1, 0.8), Complex64::new(-0.1, -0.8), Complex64::new(-0.4, 0.0)]), omega_scale: 1.0 };
+    let tf = RationalTf {
+        b: vec![1.5, -0.3, 0.2],
+        a: poly_from_roots(&[Complex64::new(-0.1, 0.8), Complex64::new(-0.1, -0.8), Complex64::new(-0.4, 0.0)]),
+        omega_scale: 1.0,
+    };
     let ss = companion_form(&tf);
     for w in [0.0, 0.3, 0.8, 2.0] {
         let x = Complex64::new(0.0, w);
@@ -92,7 +100,11 @@ fn companion_form_has_the_transfer_function_of_eq_1() {
 #[test]
 fn observability_rank_drops_on_a_pole_zero_cancellation() {
     // (s'+0.5) cancels: a 3rd-order companion form with only 2 observable modes
-    let tf = RationalTf { b: poly_from_roots(&[Complex64::new(-0.5, 0.0)]), a: poly_from_roots(&[Complex64::new(-0.5, 0.0), Complex64::new(-0.1, 0.9), Complex64::new(-0.1, -0.9)]), omega_scale: 1.0 };
+    let tf = RationalTf {
+        b: poly_from_roots(&[Complex64::new(-0.5, 0.0)]),
+        a: poly_from_roots(&[Complex64::new(-0.5, 0.0), Complex64::new(-0.1, 0.9), Complex64::new(-0.1, -0.9)]),
+        omega_scale: 1.0,
+    };
     let ss = companion_form(&tf);
     let (rank, cond) = observability(&ss.a, &ss.c);
     assert_eq!(rank, 2, "condition {cond:e}");
@@ -106,7 +118,13 @@ fn observability_rank_drops_on_a_pole_zero_cancellation() {
 fn continuous_riccati_matches_scalar_and_double_integrator_closed_forms() {
     // scalar: 2aP − P²/r + q = 0 ⇒ P = r(a + √(a² + q/r))
     for (a, q, r) in [(-1.0f64, 2.0f64, 0.5f64), (0.0, 1e-2, 3.0), (0.5, 10.0, 0.01)] {
-        let sol = solve_filter_care(&DMatrix::from_element(1, 1, a), &DVector::from_element(1, 1.0), &DMatrix::from_element(1, 1, q), r).unwrap();
+        let sol = solve_filter_care(
+            &DMatrix::from_element(1, 1, a),
+            &DVector::from_element(1, 1.0),
+            &DMatrix::from_element(1, 1, q),
+            r,
+        )
+        .unwrap();
         let p = r * (a + (a * a + q / r).sqrt());
         assert!((sol.p[(0, 0)] - p).abs() < 1e-10 * p, "a={a}: {} vs {p}", sol.p[(0, 0)]);
     }
@@ -130,7 +148,12 @@ fn continuous_riccati_matches_scalar_and_double_integrator_closed_forms() {
 fn tustin_with_prewarping_is_exact_at_the_prewarp_frequency_and_warps_elsewhere() {
     // a lightly damped resonance at 3 kHz sampled at 20 kHz (strong warping)
     let wn = 2.0 * PI * 3000.0;
-    let ss = ContinuousSs { a: DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -wn * wn, -2.0 * 0.05 * wn]), b: DVector::from_column_slice(&[0.0, wn * wn]), c: DVector::from_column_slice(&[1.0, 0.0]), d: 0.1 };
+    let ss = ContinuousSs {
+        a: DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -wn * wn, -2.0 * 0.05 * wn]),
+        b: DVector::from_column_slice(&[0.0, wn * wn]),
+        c: DVector::from_column_slice(&[1.0, 0.0]),
+        d: 0.1,
+    };
     let fs = 20_000.0;
     let fp = 3000.0;
     let disc = tustin_prewarped(&ss, 1.0 / fs, 2.0 * PI * fp).unwrap();

@@ -4,18 +4,18 @@
 //! simulator's true force, overall and inside each band.
 
 mod sim_common;
-use sim_common::{design_all, sim, FS, F_MAX};
-use dynocomp::design::bands::Band;
-use dynocomp::offline::compensate::{compensate_parallel, compensate_record};
-use dynocomp::design::axis::{design_axis, DesignOptions};
 use dynocomp::cli::design_args::BandArgs;
+use dynocomp::design::axis::{design_axis, DesignOptions};
+use dynocomp::design::bands::Band;
 use dynocomp::design::image::build_image;
+use dynocomp::design::image::build_parallel_image;
+use dynocomp::design::parallel::design_parallel;
 use dynocomp::io::signal_csv::SignalRecord;
 use dynocomp::metrics::{accuracy, lowpass, sample_variance};
-use dynocomp::design::parallel::design_parallel;
-use dynocomp::design::image::build_parallel_image;
+use dynocomp::offline::compensate::{compensate_parallel, compensate_record};
 use dynocomp::simulate::SimOutput;
 use dynocomp_core::image::{BandImage, CoeffImage, DesignMethod, ImageError, ParallelImage, MAX_PARALLEL_IMAGE_LEN};
+use sim_common::{design_all, sim, FS, F_MAX};
 
 /// Stated bound on the in-band error of parallel elaboration (NRMSE in the
 /// std convention, see `band_error`; was 0.5 % of the truth's peak-to-peak,
@@ -23,7 +23,8 @@ use dynocomp_core::image::{BandImage, CoeffImage, DesignMethod, ImageError, Para
 const BAND_BOUND: f64 = 0.015;
 
 fn bands_for(s: &SimOutput, rpm: f64, teeth: u32) -> Vec<Band> {
-    let args = BandArgs { spindle_rpm: Some(rpm), teeth: Some(teeth), harmonics: 3, band_width: 0.1, ..Default::default() };
+    let args =
+        BandArgs { spindle_rpm: Some(rpm), teeth: Some(teeth), harmonics: 3, band_width: 0.1, ..Default::default() };
     args.resolve(&s.frf, FS).unwrap()
 }
 
@@ -75,7 +76,12 @@ fn parallel_image_compensates_a_simulated_record_in_every_band() {
     assert_eq!(rep.bands.len(), 4);
     assert_eq!(rep.bands[1].split_hz, [(292.5 + 1170.0) / 2.0, (1430.0 + 2340.0) / 2.0]);
     let text = dynocomp::report::inspect::render(&rep);
-    assert!(text.contains("offline only: parallel elaboration, 4 bands: 0-292 Hz, 1170-1430 Hz, 2340-2860 Hz, 3510-4096 Hz"), "{text}");
+    assert!(
+        text.contains(
+            "offline only: parallel elaboration, 4 bands: 0-292 Hz, 1170-1430 Hz, 2340-2860 Hz, 3510-4096 Hz"
+        ),
+        "{text}"
+    );
     let json = serde_json::to_value(&rep).unwrap();
     assert_eq!(json["offline_only"], true);
     assert_eq!(json["runs_in_box"], false);
@@ -83,11 +89,16 @@ fn parallel_image_compensates_a_simulated_record_in_every_band() {
     let rec = SignalRecord { t_s: None, channels: (0..3).map(|a| (a, s.measured[a].clone())).collect() };
     let out = compensate_parallel(&img, &rec, false, "sim").unwrap();
     let default = design_all(&s, 4);
-    let default_out = compensate_record(&build_image(&default, FS as u32, 4, 5000.0, [0; 32]).unwrap(), &rec, false, "sim").unwrap();
+    let default_out =
+        compensate_record(&build_image(&default, FS as u32, 4, 5000.0, [0; 32]).unwrap(), &rec, false, "sim").unwrap();
     for a in 0..3 {
         let est = out.channel(a).unwrap();
         let d_est = default_out.channel(a).unwrap();
-        eprintln!("axis {a}: default (whole band) NRMSE {:.3} %, static band {:.4} %", accuracy(d_est, &s.truth[a], FS, F_MAX).nrmse * 100.0, band_error(d_est, &s.truth[a], bands[0].lo_hz, bands[0].hi_hz) * 100.0);
+        eprintln!(
+            "axis {a}: default (whole band) NRMSE {:.3} %, static band {:.4} %",
+            accuracy(d_est, &s.truth[a], FS, F_MAX).nrmse * 100.0,
+            band_error(d_est, &s.truth[a], bands[0].lo_hz, bands[0].hi_hz) * 100.0
+        );
         let acc = accuracy(est, &s.truth[a], FS, F_MAX);
         let whole = acc.nrmse;
         let raw = accuracy(&s.measured[a], &s.truth[a], FS, F_MAX).nrmse;
@@ -97,12 +108,30 @@ fn parallel_image_compensates_a_simulated_record_in_every_band() {
         // whole-band error of parallel elaboration includes the uncompensated
         // gaps between the bands; its accuracy claim is the in-band one below).
         let bound = 0.015 * acc.nrmse / acc.nrmse_p2p;
-        assert!(whole < bound, "axis {a}: parallel NRMSE {:.3} % ≥ {:.2} % (1.5 % of peak-to-peak)", whole * 100.0, bound * 100.0);
+        assert!(
+            whole < bound,
+            "axis {a}: parallel NRMSE {:.3} % ≥ {:.2} % (1.5 % of peak-to-peak)",
+            whole * 100.0,
+            bound * 100.0
+        );
         for b in bands.iter().filter(|b| b.hi_hz <= F_MAX) {
             let e = band_error(est, &s.truth[a], b.lo_hz, b.hi_hz);
             let e_raw = band_error(&s.measured[a], &s.truth[a], b.lo_hz, b.hi_hz);
-            eprintln!("  band {:.0}-{:.0} Hz ({}): NRMSE in band {:.4} % (raw {:.3} %)", b.lo_hz, b.hi_hz, b.label, e * 100.0, e_raw * 100.0);
-            assert!(e < BAND_BOUND, "axis {a}, band {}: in-band NRMSE {:.4} % ≥ {} %", b.label, e * 100.0, BAND_BOUND * 100.0);
+            eprintln!(
+                "  band {:.0}-{:.0} Hz ({}): NRMSE in band {:.4} % (raw {:.3} %)",
+                b.lo_hz,
+                b.hi_hz,
+                b.label,
+                e * 100.0,
+                e_raw * 100.0
+            );
+            assert!(
+                e < BAND_BOUND,
+                "axis {a}, band {}: in-band NRMSE {:.4} % ≥ {} %",
+                b.label,
+                e * 100.0,
+                BAND_BOUND * 100.0
+            );
             assert!(e < e_raw / 5.0 || e_raw < BAND_BOUND, "axis {a}, band {}: not compensated", b.label);
         }
     }

@@ -5,11 +5,11 @@
 //! f32 kernel runs the image's coefficients. Bound: f32 rounding, ~1e-6 of
 //! peak-to-peak (the kernel's floor on the example's axes x and z).
 use dynocomp::design::axis::{design_axis, DesignOptions};
-use dynocomp::realize::choose::choose_realization;
 use dynocomp::io;
 use dynocomp::numeric::lti::StateSpace;
-use dynocomp::realize::quantize::term_growth;
+use dynocomp::realize::choose::choose_realization;
 use dynocomp::realize::modal::ModalRealization;
+use dynocomp::realize::quantize::term_growth;
 use dynocomp_core::kernel::{AxisFilter, AxisState};
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
@@ -74,7 +74,11 @@ fn example_axes_are_scaled_and_accurate_in_f32() {
             d.filter.fir().len()
         );
         assert!(g <= MAX_TERM_GROWTH, "axis {}: a part of the kernel's sum reaches {g:.1}x the output", a.axis);
-        assert!(e <= lim, "axis {}: f32 kernel deviates {e:.2e} of peak-to-peak from the f64 design (allowed {lim:.2e})", a.axis);
+        assert!(
+            e <= lim,
+            "axis {}: f32 kernel deviates {e:.2e} of peak-to-peak from the f64 design (allowed {lim:.2e})",
+            a.axis
+        );
     }
 }
 
@@ -100,7 +104,15 @@ fn pair(r: f64, th: f64) -> [Complex64; 2] {
 fn companion(num: &[f64], den: &[f64]) -> StateSpace {
     let n = den.len() - 1;
     let b0 = num[0];
-    let a = DMatrix::from_fn(n, n, |i, j| if i == 0 { -den[j + 1] } else if i == j + 1 { 1.0 } else { 0.0 });
+    let a = DMatrix::from_fn(n, n, |i, j| {
+        if i == 0 {
+            -den[j + 1]
+        } else if i == j + 1 {
+            1.0
+        } else {
+            0.0
+        }
+    });
     let mut b = DVector::zeros(n);
     b[0] = 1.0;
     let c = DVector::from_fn(n, |j, _| num[j + 1] - den[j + 1] * b0);

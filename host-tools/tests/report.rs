@@ -49,7 +49,8 @@ fn report_writes_svgs_and_index() {
     // a directory that does not exist yet: write_report creates it
     let dir = tmp.path().join("out").join("report");
     let summary = "axis x: summary <with> & special \"chars\"\nsecond line";
-    let files = write_report(&dir, &sim.frf, std::slice::from_ref(&d), &[predict(&d, &opts)], opts.fs_hz, summary).unwrap();
+    let files =
+        write_report(&dir, &sim.frf, std::slice::from_ref(&d), &[predict(&d, &opts)], opts.fs_hz, summary).unwrap();
 
     let names: Vec<String> = files.iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
     for n in ["x_frf_fit.svg", "x_compensated.svg", "x_poles.svg", "index.html"] {
@@ -66,17 +67,27 @@ fn report_writes_svgs_and_index() {
     assert_eq!(listed.len(), files.len(), "unexpected files in the report dir: {listed:?}");
 
     let n_lines = sim.frf.freq_hz.len();
-    let fit = check_svg(&dir.join("x_frf_fit.svg"), &["Axis x", "Frequency (Hz)", "measured G", "fitted model", "Coherence"]);
+    let fit =
+        check_svg(&dir.join("x_frf_fit.svg"), &["Axis x", "Frequency (Hz)", "measured G", "fitted model", "Coherence"]);
     assert!(longest_polyline(&fit) > n_lines / 4, "FRF plot has no long line");
-    let comp =
-        check_svg(&dir.join("x_compensated.svg"), &["Axis x", "Frequency (Hz)", "uncompensated |G|", "tolerance", "flat band"]);
+    let comp = check_svg(
+        &dir.join("x_compensated.svg"),
+        &["Axis x", "Frequency (Hz)", "uncompensated |G|", "tolerance", "flat band"],
+    );
     assert!(longest_polyline(&comp) > n_lines / 4, "compensated plot has no long line");
-    let poles = check_svg(&dir.join("x_poles.svg"), &["Axis x", "Re z", "Im z", "unit circle", "compensator", "fitted model"]);
+    let poles =
+        check_svg(&dir.join("x_poles.svg"), &["Axis x", "Re z", "Im z", "unit circle", "compensator", "fitted model"]);
     assert!(longest_polyline(&poles) > 100, "pole map has no unit circle");
     assert!(poles.contains("<circle"), "pole map has no model poles");
     // Issue #15: the sensitivity curve, one point per shift of −5…+5 %.
-    let sens = check_svg(&dir.join("x_sensitivity.svg"), &["Axis x", "Sensor-mode shift", "predicted error", "twice the nominal"]);
-    assert!(longest_polyline(&sens) >= dynocomp::design::sensitivity::SHIFTS_PCT.len(), "sensitivity plot has no curve");
+    let sens = check_svg(
+        &dir.join("x_sensitivity.svg"),
+        &["Axis x", "Sensor-mode shift", "predicted error", "twice the nominal"],
+    );
+    assert!(
+        longest_polyline(&sens) >= dynocomp::design::sensitivity::SHIFTS_PCT.len(),
+        "sensitivity plot has no curve"
+    );
 
     let html = std::fs::read_to_string(dir.join("index.html")).unwrap();
     assert!(html.starts_with("<!DOCTYPE html>"));
@@ -93,7 +104,8 @@ fn report_writes_svgs_and_index() {
     }
 
     // writing again over an existing report succeeds and leaves the same files
-    let again = write_report(&dir, &sim.frf, std::slice::from_ref(&d), &[predict(&d, &opts)], opts.fs_hz, summary).unwrap();
+    let again =
+        write_report(&dir, &sim.frf, std::slice::from_ref(&d), &[predict(&d, &opts)], opts.fs_hz, summary).unwrap();
     assert_eq!(again, files);
 
     // a write that fails midway removes the files this run created: make the
@@ -101,7 +113,8 @@ fn report_writes_svgs_and_index() {
     let dir2 = tmp.path().join("failing");
     std::fs::create_dir_all(dir2.join("x_poles.svg")).unwrap();
     std::fs::write(dir2.join("x_frf_fit.svg"), "old").unwrap();
-    let err = write_report(&dir2, &sim.frf, std::slice::from_ref(&d), &[predict(&d, &opts)], opts.fs_hz, summary).unwrap_err();
+    let err = write_report(&dir2, &sim.frf, std::slice::from_ref(&d), &[predict(&d, &opts)], opts.fs_hz, summary)
+        .unwrap_err();
     assert!(format!("{err:#}").contains("x_poles.svg"), "{err:#}");
     let mut left: Vec<String> =
         std::fs::read_dir(&dir2).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();

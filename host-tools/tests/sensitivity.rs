@@ -40,10 +40,16 @@ fn table(seed: u64, rpm: f64) -> Vec<(u64, f64, f64, f64, f64)> {
     let milling = milling_force(&p.milling, f_fine, fine_len);
     let mut rows = Vec::new();
     for (a, cut) in milling.iter().enumerate() {
-        let d = design_axis(&s.frf.freq_hz, s.frf.axis(a).unwrap(), sample_variance(&s.idle[a]), &opts).unwrap_or_else(|e| panic!("axis {a}: {e:#}"));
+        let d = design_axis(&s.frf.freq_hz, s.frf.axis(a).unwrap(), sample_variance(&s.idle[a]), &opts)
+            .unwrap_or_else(|e| panic!("axis {a}: {e:#}"));
         let sens = dynocomp::design::sensitivity::predict(&d, &opts).expect("sensitivity");
         // The unshifted point is the design's own predicted error (same criterion, same filter).
-        assert!((sens.nominal - d.predicted_error).abs() <= 1e-9 * d.predicted_error, "axis {a}: {} vs {}", sens.nominal, d.predicted_error);
+        assert!(
+            (sens.nominal - d.predicted_error).abs() <= 1e-9 * d.predicted_error,
+            "axis {a}: {} vs {}",
+            sens.nominal,
+            d.predicted_error
+        );
         let flat = sim_common::flat_force(fine_len, f_fine, d.compensated_band_hz.1, FORCE_RMS, 77 + a as u64);
         for pct in std::iter::once(0.0).chain(SHIFTS_PCT) {
             let pred = sens.at(pct).expect("point");
@@ -70,7 +76,10 @@ fn predicted_sensitivity_agrees_with_measured_error() {
     for &(a, pct, pred, m_flat, _) in rows.iter().filter(|r| r.1 != 0.0) {
         let ratio = pred / m_flat;
         worst = worst.max(ratio.max(1.0 / ratio));
-        assert!((1.0 / FACTOR..=FACTOR).contains(&ratio), "axis {a} shift {pct:+} %: predicted {pred:.4}, measured {m_flat:.4} (ratio {ratio:.2})");
+        assert!(
+            (1.0 / FACTOR..=FACTOR).contains(&ratio),
+            "axis {a} shift {pct:+} %: predicted {pred:.4}, measured {m_flat:.4} (ratio {ratio:.2})"
+        );
     }
     eprintln!("worst factor between predicted and measured at ±1/±3 %: {worst:.2}");
     // Negative control: the nominal prediction (no shift) used at ±1 % and
@@ -78,6 +87,9 @@ fn predicted_sensitivity_agrees_with_measured_error() {
     for &(a, pct, _, m_flat, _) in rows.iter().filter(|r| r.1 != 0.0) {
         let nominal = rows.iter().find(|r| r.0 == a && r.1 == 0.0).map(|r| r.2).unwrap();
         let wrong = nominal / m_flat;
-        assert!(wrong < 1.0 / FACTOR, "axis {a} shift {pct:+} %: the unshifted prediction {nominal:.4} is within the factor of {m_flat:.4}");
+        assert!(
+            wrong < 1.0 / FACTOR,
+            "axis {a} shift {pct:+} %: the unshifted prediction {nominal:.4} is within the factor of {m_flat:.4}"
+        );
     }
 }

@@ -14,8 +14,15 @@ fn design_states_sensitivity_in_text_and_json() {
     let (ok, out, err) = dynocomp(&base);
     assert!(ok, "{err}");
     for axis in ["x", "y", "z"] {
-        let line = out.lines().find(|l| l.starts_with(&format!("{axis} sensor modes moved"))).unwrap_or_else(|| panic!("no sensitivity line for {axis}:\n{out}"));
-        assert!(line.contains("at −3 / −1 / 0 / +1 / +3 %") && line.contains("re-measure the FRF when the sensor modes may have moved by more than"), "{line}");
+        let line = out
+            .lines()
+            .find(|l| l.starts_with(&format!("{axis} sensor modes moved")))
+            .unwrap_or_else(|| panic!("no sensitivity line for {axis}:\n{out}"));
+        assert!(
+            line.contains("at −3 / −1 / 0 / +1 / +3 %")
+                && line.contains("re-measure the FRF when the sensor modes may have moved by more than"),
+            "{line}"
+        );
     }
     let mut a = base.to_vec();
     a.push("--json");

@@ -94,7 +94,10 @@ fn malformed_rows_are_named_by_line_and_column() {
         (b"t_s,fx\n0,\xff,x\n", "rec.csv: line 2: not valid UTF-8 text"),
         (b"t_s,fx\nx,1,2\n", "rec.csv: line 2: 3 fields, header has 2"),
         (b"t_s,fx\n0,inf\n", "rec.csv: line 2, column 2 (`fx`): value is not finite"),
-        (b"t_s,fx\r\n0,1\r\n0.5,1\r\n0.5,2\r\n", "rec.csv: line 4, column 1 (`t_s`): time 0.5 does not increase (previous 0.5)"),
+        (
+            b"t_s,fx\r\n0,1\r\n0.5,1\r\n0.5,2\r\n",
+            "rec.csv: line 4, column 1 (`t_s`): time 0.5 does not increase (previous 0.5)",
+        ),
         (b"t_s,fx\n0,1\n1,1e400\n", "rec.csv: line 3, column 2 (`fx`): value is not finite"),
     ];
     for (text, want) in cases {
@@ -121,7 +124,9 @@ fn written_rows_read_back_in_order_and_bit_identical() {
     for n in [1usize, 2047, 2048, 8191] {
         let t: Vec<f64> = (0..n).map(|k| k as f64 / 51_200.0).collect();
         let x: Vec<f64> = (0..n).map(|k| ((k as f64) * 0.37).sin() as f32 as f64 * 1e3).collect();
-        let z: Vec<f64> = (0..n).map(|k| f64::from_bits(0x3ff0_0000_0000_0000 ^ (k as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 12)).collect();
+        let z: Vec<f64> = (0..n)
+            .map(|k| f64::from_bits(0x3ff0_0000_0000_0000 ^ (k as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 12))
+            .collect();
         let mut out = Vec::new();
         let mut w = CsvWriter::new(&mut out, &[0, 2], true).unwrap();
         w.write_block(Some(&t), &[&x, &z]).unwrap();

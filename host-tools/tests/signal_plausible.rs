@@ -16,7 +16,10 @@ fn csv(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
 
 /// Read the whole record of `p` (full scale `fs`), or the error message.
 fn read(p: &Path, fs: f64) -> Result<Vec<Vec<f64>>, String> {
-    open_signal_checked(p, None, fs).and_then(|(mut r, _)| read_all(&mut *r)).map(|(_, c)| c).map_err(|e| format!("{e:#}"))
+    open_signal_checked(p, None, fs)
+        .and_then(|(mut r, _)| read_all(&mut *r))
+        .map(|(_, c)| c)
+        .map_err(|e| format!("{e:#}"))
 }
 
 #[test]
@@ -25,7 +28,10 @@ fn a_csv_value_beyond_the_full_scale_is_an_error_naming_file_line_and_column() {
     let rows = "t_s,fx,fy\n0,1,2\n0.00002,3,4\n0.00004,5,1e30\n0.00006,7,8\n";
     let p = csv(dir.path(), "rec.csv", rows);
     let e = read(&p, DEFAULT_FULL_SCALE_N).unwrap_err();
-    assert!(e.contains("rec.csv") && e.contains("line 4") && e.contains("column 3 (`fy`)") && e.contains("full scale"), "{e}");
+    assert!(
+        e.contains("rec.csv") && e.contains("line 4") && e.contains("column 3 (`fy`)") && e.contains("full scale"),
+        "{e}"
+    );
     // At the bound and just beyond it; a larger full scale takes 1e30's
     // neighbours that are below it.
     let edge = csv(dir.path(), "edge.csv", "fx\n100000\n-100000\n");
@@ -59,7 +65,10 @@ fn tdms_and_uff_values_beyond_the_full_scale_name_the_sample_and_channel() {
         }
         std::fs::File::create(&path).unwrap().write_all(&bytes).unwrap();
         let e = read(&path, DEFAULT_FULL_SCALE_N).unwrap_err();
-        assert!(e.contains(&format!("rec.{ext}")) && e.contains("sample 3 of fz") && e.contains("full scale"), "{fmt:?}: {e}");
+        assert!(
+            e.contains(&format!("rec.{ext}")) && e.contains("sample 3 of fz") && e.contains("full scale"),
+            "{fmt:?}: {e}"
+        );
         // Within a full scale that allows it, the record reads.
         assert_eq!(read(&path, 1e20).unwrap()[1][2], 3e19, "{fmt:?}");
     }

@@ -4,9 +4,9 @@
 //! and the plate flags are refused where they mean nothing.
 
 use clap::Parser;
+use dynocomp::cli::simulate::SimulateArgs;
 use dynocomp::frf::MatrixKind;
 use dynocomp::simulate::plate::{simulate_plate, PlateModal, PlateSetup, PlateSim};
-use dynocomp::cli::simulate::SimulateArgs;
 
 #[derive(Parser)]
 struct Cli {
@@ -81,8 +81,9 @@ fn the_per_axis_model_stays_the_default_and_plate_flags_need_it() {
     let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("truth.json")).unwrap()).unwrap();
     assert_eq!(j["version"], 1);
     assert!(j.get("dynamometer").is_none());
-    let err =
-        |extra: &[&str]| format!("{:#}", dynocomp::cli::simulate::run(&parse(extra, &dir.path().join("x"))).unwrap_err());
+    let err = |extra: &[&str]| {
+        format!("{:#}", dynocomp::cli::simulate::run(&parse(extra, &dir.path().join("x"))).unwrap_err())
+    };
     assert!(err(&["--dyno-preset", "tall"]).contains("add --dyno plate"));
     assert!(err(&["--cut-offset", "10:0:0"]).contains("add --dyno plate"));
     assert!(err(&["--dyno", "plate", "--preset", "cut-1"]).contains("use --dyno-preset"));

@@ -5,8 +5,9 @@
 #![allow(clippy::needless_range_loop)] // axis/line indices index several arrays at once
 
 use dynocomp::simulate::{
-    h1_random_error, impact_test, measure_decimated, milling_force, simulate, AntiAlias, Butterworth, Chatter, Dynamometer, Hold,
-    ImpactParams, MeasurementParams, MillingMode, MillingParams, Mode, MultiAxisDynamometer, SimParams,
+    h1_random_error, impact_test, measure_decimated, milling_force, simulate, AntiAlias, Butterworth, Chatter,
+    Dynamometer, Hold, ImpactParams, MeasurementParams, MillingMode, MillingParams, Mode, MultiAxisDynamometer,
+    SimParams,
 };
 use num_complex::Complex64;
 use std::f64::consts::PI;
@@ -88,7 +89,9 @@ fn step_analytic(m: &Mode, t: f64) -> f64 {
 fn step_response_matches_continuous_model() {
     // A dynamometer mode at the output rate, and a slow machine mode at a high
     // rate (small ωh: the series branch of the exponential integrals).
-    for (m, fs) in [(mode(2500.0, 0.03, 1.0), 51_200.0), (mode(150.0, 0.02, 1.0), 409_600.0), (mode(4800.0, 0.01, 1.0), 20_000.0)] {
+    for (m, fs) in
+        [(mode(2500.0, 0.03, 1.0), 51_200.0), (mode(150.0, 0.02, 1.0), 409_600.0), (mode(4800.0, 0.01, 1.0), 20_000.0)]
+    {
         let d = Dynamometer::from_modes(vec![m]).unwrap();
         let n = (0.05 * fs) as usize;
         let u = vec![1.0; n];
@@ -103,7 +106,9 @@ fn step_response_matches_continuous_model() {
     let d = Dynamometer::from_modes(ms.to_vec()).unwrap();
     let fs = 51_200.0;
     let y = d.measure(&vec![1.0; 4096], fs);
-    let err = (0..4096).map(|k| (y[k] - ms.iter().map(|m| step_analytic(m, k as f64 / fs)).sum::<f64>()).abs()).fold(0.0, f64::max);
+    let err = (0..4096)
+        .map(|k| (y[k] - ms.iter().map(|m| step_analytic(m, k as f64 / fs)).sum::<f64>()).abs())
+        .fold(0.0, f64::max);
     assert!(err < 1e-10, "two-mode step error {err}");
 }
 
@@ -122,7 +127,11 @@ fn sinusoid_response_matches_frf_amplitude_and_phase() {
         // Sampling the output at fs folds every image f0 + m·fs back onto f0.
         let sinc = |f: f64| {
             let x = PI * f / fs;
-            if x == 0.0 { 1.0 } else { x.sin() / x }
+            if x == 0.0 {
+                1.0
+            } else {
+                x.sin() / x
+            }
         };
         let folded = |hold: Hold| -> Complex64 {
             (-400i32..=400)
@@ -186,7 +195,10 @@ fn impact_frf_equals_true_frf_within_noise_where_coherent() {
     assert!(checked > 3000, "only {checked} coherent lines");
     assert!((outside as f64) < 0.005 * checked as f64, "{outside} of {checked} coherent lines outside 5σ");
     // Flat band: sub-percent agreement.
-    let rms: f64 = ((100..2000).map(|k| ((a.frf[k] - d.frf(k as f64)).norm() / d.frf(k as f64).norm()).powi(2)).sum::<f64>() / 1900.0).sqrt();
+    let rms: f64 =
+        ((100..2000).map(|k| ((a.frf[k] - d.frf(k as f64)).norm() / d.frf(k as f64).norm()).powi(2)).sum::<f64>()
+            / 1900.0)
+            .sqrt();
     let bound = 1.5 * p.output_noise_rel / (p.n_impacts as f64).sqrt();
     assert!(rms < bound, "rms relative error {rms} > {bound}");
     // Without noise the estimate is the true FRF and the coherence is 1.
@@ -203,7 +215,8 @@ fn impact_coherence_drops_where_hammer_spectrum_falls_and_at_dc() {
     let d = test_dyno();
     // A soft tip: cutoff 1.5 kHz, 4th order, so that 3.6-4.1 kHz has partial
     // (not zero) coherence to compare with the theory.
-    let p = ImpactParams { hammer_cutoff_hz: 1500.0, hammer_order: 4.0, output_noise_rel: 0.02, ..ImpactParams::default() };
+    let p =
+        ImpactParams { hammer_cutoff_hz: 1500.0, hammer_order: 4.0, output_noise_rel: 0.02, ..ImpactParams::default() };
     let a = impact_test(&d, 4097, 1.0, 11, &p);
     let coh = a.coherence.as_ref().unwrap();
     let band = |lo: usize, hi: usize| mean(&coh[lo..hi]);
@@ -270,8 +283,14 @@ fn altintas_mean(p: &MillingParams) -> [f64; 3] {
         MillingMode::Down => ((2.0 * r - 1.0).acos(), PI),
     };
     let (z, ap, c) = (p.teeth as f64, p.axial_depth_mm, p.feed_per_tooth_mm);
-    let fx = |f: f64| z * ap * c / (8.0 * PI) * (p.kt * (2.0 * f).cos() - p.kr * (2.0 * f - (2.0 * f).sin())) + z * ap / (2.0 * PI) * (-p.kte * f.sin() + p.kre * f.cos());
-    let fy = |f: f64| z * ap * c / (8.0 * PI) * (p.kt * (2.0 * f - (2.0 * f).sin()) + p.kr * (2.0 * f).cos()) - z * ap / (2.0 * PI) * (p.kte * f.cos() + p.kre * f.sin());
+    let fx = |f: f64| {
+        z * ap * c / (8.0 * PI) * (p.kt * (2.0 * f).cos() - p.kr * (2.0 * f - (2.0 * f).sin()))
+            + z * ap / (2.0 * PI) * (-p.kte * f.sin() + p.kre * f.cos())
+    };
+    let fy = |f: f64| {
+        z * ap * c / (8.0 * PI) * (p.kt * (2.0 * f - (2.0 * f).sin()) + p.kr * (2.0 * f).cos())
+            - z * ap / (2.0 * PI) * (p.kte * f.cos() + p.kre * f.sin())
+    };
     let fz = |f: f64| z * ap / (2.0 * PI) * (-p.ka * c * f.cos() + p.kae * f);
     [fx(ex) - fx(st), fy(ex) - fy(st), fz(ex) - fz(st)]
 }
@@ -289,7 +308,14 @@ fn milling_mean_force_matches_altintas_closed_form() {
         let scale = expect.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         for a in 0..3 {
             let m = mean(&f[a]);
-            assert!((m - expect[a]).abs() < 5e-3 * scale, "{:?} Z{} ae {}: axis {a} mean {m} expected {}", p.mode, p.teeth, p.radial_depth_mm, expect[a]);
+            assert!(
+                (m - expect[a]).abs() < 5e-3 * scale,
+                "{:?} Z{} ae {}: axis {a} mean {m} expected {}",
+                p.mode,
+                p.teeth,
+                p.radial_depth_mm,
+                expect[a]
+            );
         }
     }
 }
@@ -333,7 +359,8 @@ fn milling_tooth_passing_harmonics_match_closed_form() {
 #[test]
 fn runout_creates_a_spindle_frequency_component() {
     let fs = 51_200.0;
-    let base = MillingParams { teeth: 4, radial_depth_mm: 3.0, helix_deg: 30.0, axial_slices: 32, ..MillingParams::default() };
+    let base =
+        MillingParams { teeth: 4, radial_depth_mm: 3.0, helix_deg: 30.0, axial_slices: 32, ..MillingParams::default() };
     let base = MillingParams { spindle_rpm: 6000.0, ramp_in_revs: 0.0, runout_mm: 0.0, ..base };
     let with = MillingParams { runout_mm: 0.01, runout_angle_deg: 20.0, ..base.clone() };
     let n = 5120;
@@ -358,7 +385,10 @@ fn chatter_adds_a_non_harmonic_growing_component_and_ramp_in_starts_at_zero() {
     let n = 51_200;
     let base = MillingParams { spindle_rpm: 6000.0, runout_mm: 0.0, ..MillingParams::default() };
     let fc = 1435.0; // not a multiple of the 400 Hz TPF; whole periods in 0.2 s windows
-    let chat = MillingParams { chatter: Some(Chatter { freq_hz: fc, amplitude_mm: 0.01, onset_s: 0.4, growth_s: 0.05 }), ..base.clone() };
+    let chat = MillingParams {
+        chatter: Some(Chatter { freq_hz: fc, amplitude_mm: 0.01, onset_s: 0.4, growth_s: 0.05 }),
+        ..base.clone()
+    };
     let f0 = milling_force(&base, fs, n);
     let f1 = milling_force(&chat, fs, n);
     // Ramp-in: zero force at t = 0, full force after the ramp.
@@ -465,8 +495,25 @@ fn run_writes_all_files_readable_by_the_io_layer() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("sim");
     let cli = Cli::parse_from([
-        "simulate", "--out", out.to_str().unwrap(), "--seed", "9", "--duration", "0.1", "--idle-duration", "0.2",
-        "--spindle-rpm", "9000", "--teeth", "3", "--chatter-hz", "1710", "--frf-lines", "1025", "--frf-df", "4",
+        "simulate",
+        "--out",
+        out.to_str().unwrap(),
+        "--seed",
+        "9",
+        "--duration",
+        "0.1",
+        "--idle-duration",
+        "0.2",
+        "--spindle-rpm",
+        "9000",
+        "--teeth",
+        "3",
+        "--chatter-hz",
+        "1710",
+        "--frf-lines",
+        "1025",
+        "--frf-df",
+        "4",
     ]);
     dynocomp::cli::simulate::run(&cli.args).unwrap();
     for f in ["frf.uff", "frf.csv", "measured.csv", "true_force.csv", "idle.csv", "truth.json"] {
@@ -558,7 +605,9 @@ fn sine_through(chain: AntiAlias, f0: f64) -> (Vec<f64>, Vec<f64>) {
 fn phasor(x: &[f64], f0: f64) -> Complex64 {
     let k0 = CHAIN_N / 4;
     let t0 = k0 as f64 / CHAIN_FS;
-    dft_amp(&x[k0..k0 + CHAIN_N / 2], CHAIN_FS, f0) * Complex64::from_polar(1.0, 2.0 * PI * f0 * t0) * Complex64::new(0.0, 1.0)
+    dft_amp(&x[k0..k0 + CHAIN_N / 2], CHAIN_FS, f0)
+        * Complex64::from_polar(1.0, 2.0 * PI * f0 * t0)
+        * Complex64::new(0.0, 1.0)
 }
 
 fn rms_mid(x: &[f64]) -> f64 {
@@ -575,7 +624,9 @@ fn a_sine_below_the_brick_wall_passes_with_its_analytic_response() {
     // fundamental is the sine's × sinc²(πf0/f_fine).
     let sinc2 = |f: f64| ((PI * f / ff).sin() / (PI * f / ff)).powi(2);
     for f0 in [1000.0, 3000.0, 4400.0] {
-        for (chain, b) in [(AntiAlias::Ideal, Complex64::new(1.0, 0.0)), (AntiAlias::Butterworth(bw), butterworth4(f0, bw.fc_hz))] {
+        for (chain, b) in
+            [(AntiAlias::Ideal, Complex64::new(1.0, 0.0)), (AntiAlias::Butterworth(bw), butterworth4(f0, bw.fc_hz))]
+        {
             let (truth, clean) = sine_through(chain, f0);
             let t = phasor(&truth, f0);
             assert!((t - sinc2(f0)).norm() < 1e-6, "{chain} f0 {f0}: truth phasor {t}, expected {}", sinc2(f0));
@@ -618,7 +669,11 @@ fn a_sine_above_the_brick_wall_leaves_no_trace_but_aliases_without_it() {
         // in both records at full size.
         let (truth, clean) = sine_through(AntiAlias::None, f0);
         let alias = if f0 < CHAIN_FS / 2.0 { f0 } else { CHAIN_FS - f0 };
-        assert!((phasor(&truth, alias).norm() - 1.0).abs() < 0.05, "f0 {f0}: alias at {alias} Hz {}", phasor(&truth, alias).norm());
+        assert!(
+            (phasor(&truth, alias).norm() - 1.0).abs() < 0.05,
+            "f0 {f0}: alias at {alias} Hz {}",
+            phasor(&truth, alias).norm()
+        );
         assert!(rms_mid(&clean) > 0.05, "f0 {f0}: measurement alias {}", rms_mid(&clean));
     }
 }
@@ -629,7 +684,13 @@ fn the_impact_test_runs_through_the_analog_front_end() {
     let bw = Butterworth { order: 4, fc_hz: 2500.0 };
     let dyno = MultiAxisDynamometer { axes: [d.clone(), d.clone(), d.clone()] };
     // An FRF to 8 kHz at fs = 10.24 kHz, as impact analyzers measure.
-    let mut p = SimParams { fs_hz: CHAIN_FS, duration_s: 0.05, idle_duration_s: 0.0, anti_alias: AntiAlias::Butterworth(bw), ..Default::default() };
+    let mut p = SimParams {
+        fs_hz: CHAIN_FS,
+        duration_s: 0.05,
+        idle_duration_s: 0.0,
+        anti_alias: AntiAlias::Butterworth(bw),
+        ..Default::default()
+    };
     p.impact.n_lines = 4001;
     p.impact.df_hz = 2.0;
     p.impact.hammer_cutoff_hz = 9000.0;
@@ -658,8 +719,19 @@ fn the_impact_test_runs_through_the_analog_front_end() {
 fn anti_alias_option_parses_and_rejects_bad_values() {
     assert_eq!("ideal".parse::<AntiAlias>().unwrap(), AntiAlias::Ideal);
     assert_eq!("none".parse::<AntiAlias>().unwrap(), AntiAlias::None);
-    assert_eq!("butterworth:4:12000".parse::<AntiAlias>().unwrap(), AntiAlias::Butterworth(Butterworth { order: 4, fc_hz: 12_000.0 }));
-    for bad in ["", "brick", "butterworth:4", "butterworth:x:12000", "butterworth:0:12000", "butterworth:4:-1", "butterworth:4:nan"] {
+    assert_eq!(
+        "butterworth:4:12000".parse::<AntiAlias>().unwrap(),
+        AntiAlias::Butterworth(Butterworth { order: 4, fc_hz: 12_000.0 })
+    );
+    for bad in [
+        "",
+        "brick",
+        "butterworth:4",
+        "butterworth:x:12000",
+        "butterworth:0:12000",
+        "butterworth:4:-1",
+        "butterworth:4:nan",
+    ] {
         let e = bad.parse::<AntiAlias>().unwrap_err().to_string();
         assert!(e.contains("--anti-alias") || e.contains("anti-alias"), "{bad:?}: {e}");
     }
@@ -700,7 +772,11 @@ fn harness_records_a_failed_design_in_its_row_and_summarizes() {
     for a in [0, 2] {
         let c = *r.axes[a].comp_nrmse.as_ref().unwrap();
         assert!(c < r.axes[a].raw_nrmse, "axis {a}: compensated {c} vs raw {}", r.axes[a].raw_nrmse);
-        assert!(r.axes[a].noise_floor > 0.0 && r.axes[a].noise_floor < c * 1.5, "axis {a}: floor {}", r.axes[a].noise_floor);
+        assert!(
+            r.axes[a].noise_floor > 0.0 && r.axes[a].noise_floor < c * 1.5,
+            "axis {a}: floor {}",
+            r.axes[a].noise_floor
+        );
     }
     let sum = summarize(std::slice::from_ref(&r));
     assert_eq!(sum.len(), 1);

@@ -61,7 +61,10 @@ fn cut_everywhere(initial: &SimFlash, old: Option<&[u8]>, new: &[u8]) {
             let r = upload(&mut s, new);
             let flash = s.into_flash();
             assert!(flash.is_dead(), "op {op} {mode:?}: the cut did not happen");
-            assert!(r.is_err() || (op == total - 1 && mode == CutMode::After), "op {op} {mode:?}: upload reported success");
+            assert!(
+                r.is_err() || (op == total - 1 && mode == CutMode::After),
+                "op {op} {mode:?}: upload reported success"
+            );
 
             let mut s = open(flash.reboot());
             let boot = s.boot();
@@ -71,7 +74,10 @@ fn cut_everywhere(initial: &SimFlash, old: Option<&[u8]>, new: &[u8]) {
                 (Ok(img), _) if *img == new_img => {
                     // Only a completed (or torn-but-complete) commit word may
                     // make the new image win.
-                    assert!(last && mode != CutMode::Before, "op {op}/{total} {mode:?}: new image before its commit word");
+                    assert!(
+                        last && mode != CutMode::Before,
+                        "op {op}/{total} {mode:?}: new image before its commit word"
+                    );
                     assert_eq!(boot.active.map(|a| a.image_id), Some(common::id(new)));
                 }
                 (Ok(img), Some(o)) => assert_eq!(*img, o, "op {op} {mode:?}: neither old nor new image"),

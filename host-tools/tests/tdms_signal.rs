@@ -5,12 +5,12 @@
 //! `compensate`, and refused with a message naming the file, segment or
 //! channel when they are wrong.
 
-use dynocomp::offline::compensate::compensate_record;
+use dynocomp::io::signal::ChannelMap;
 use dynocomp::io::signal::{read_all, SignalWriter};
 use dynocomp::io::signal_csv::read_signal_csv;
 use dynocomp::io::signal_file::{open_signal, SignalFormat};
-use dynocomp::io::signal::ChannelMap;
 use dynocomp::io::tdms::TdmsWriter;
+use dynocomp::offline::compensate::compensate_record;
 use std::path::{Path, PathBuf};
 
 mod cli_common;
@@ -87,7 +87,19 @@ fn segment(toc: u32, objs: Option<&[Obj]>, raw: &[u8]) -> Vec<u8> {
             match o.index {
                 Index::None => m.u32(0xFFFF_FFFF),
                 Index::Same => m.u32(0),
-                Index::Daqmx => m.u32(0x6912_0000).u32(0xFFFF_FFFF).u32(1).u64(4).u32(1).u32(3).u32(0).u32(0).b(0).u32(0).u32(1).u32(2),
+                Index::Daqmx => m
+                    .u32(0x6912_0000)
+                    .u32(0xFFFF_FFFF)
+                    .u32(1)
+                    .u64(4)
+                    .u32(1)
+                    .u32(3)
+                    .u32(0)
+                    .u32(0)
+                    .b(0)
+                    .u32(0)
+                    .u32(1)
+                    .u32(2),
                 Index::New(ty, n) => m.u32(20).u32(ty).u32(1).u64(n),
             };
             m.u32(o.props.len() as u32);
@@ -226,7 +238,11 @@ fn hand_built_segments_read_as_built() {
         *x *= 1000.0;
     }
     // Segment 4: big-endian, interleaved, new object list: i16, i32, f32.
-    let objs = [ch("Force X", Index::New(2, 3), vec![]), ch("Force Y", Index::New(3, 3), vec![]), ch("Force Z", Index::New(9, 3), vec![])];
+    let objs = [
+        ch("Force X", Index::New(2, 3), vec![]),
+        ch("Force Y", Index::New(3, 3), vec![]),
+        ch("Force Z", Index::New(9, 3), vec![]),
+    ];
     let mut raw = Vec::new();
     for k in 0..3i32 {
         raw.extend_from_slice(&(-300 - k as i16).to_be_bytes());
@@ -282,7 +298,10 @@ fn bad_tdms_records_are_refused_clearly() {
     let first = good.len() - 2 * seg;
     std::fs::write(&p, &good[..first + 10]).unwrap();
     let e = read(&p, None).unwrap_err();
-    assert!(e.contains("bad.tdms") && e.contains(&format!("offset {first}")) && e.contains("lead-in of segment 2"), "{e}");
+    assert!(
+        e.contains("bad.tdms") && e.contains(&format!("offset {first}")) && e.contains("lead-in of segment 2"),
+        "{e}"
+    );
     // an unfinished segment (next-segment offset all ones)
     let mut b = good.clone();
     b[first + 12..first + 20].copy_from_slice(&u64::MAX.to_le_bytes());
@@ -297,16 +316,28 @@ fn bad_tdms_records_are_refused_clearly() {
     let e = read(&p, None).unwrap_err();
     assert!(e.contains("dynocomp/Fy") && e.contains("sample 1500") && e.contains("not finite"), "{e}");
     // a unit that is not a force in N
-    let file = segment(META | NEW_LIST | RAW, Some(&[ch("Fx", Index::New(10, 1), vec![("unit_string", P::Str("lbf"))])]), &1.0f64.to_le_bytes());
+    let file = segment(
+        META | NEW_LIST | RAW,
+        Some(&[ch("Fx", Index::New(10, 1), vec![("unit_string", P::Str("lbf"))])]),
+        &1.0f64.to_le_bytes(),
+    );
     std::fs::write(&p, file).unwrap();
     let e = read(&p, None).unwrap_err();
     assert!(e.contains("Cut 1/Fx") && e.contains("lbf"), "{e}");
     // a start time that is not finite; control: a finite one reads
-    let file = segment(META | NEW_LIST | RAW, Some(&[ch("Fx", Index::New(10, 1), vec![("wf_start_offset", P::F64(f64::INFINITY))])]), &1.0f64.to_le_bytes());
+    let file = segment(
+        META | NEW_LIST | RAW,
+        Some(&[ch("Fx", Index::New(10, 1), vec![("wf_start_offset", P::F64(f64::INFINITY))])]),
+        &1.0f64.to_le_bytes(),
+    );
     std::fs::write(&p, file).unwrap();
     let e = read(&p, None).unwrap_err();
     assert!(e.contains("Cut 1/Fx") && e.contains("wf_start_offset") && e.contains("not finite"), "{e}");
-    let file = segment(META | NEW_LIST | RAW, Some(&[ch("Fx", Index::New(10, 1), vec![("wf_start_offset", P::F64(2.5))])]), &1.0f64.to_le_bytes());
+    let file = segment(
+        META | NEW_LIST | RAW,
+        Some(&[ch("Fx", Index::New(10, 1), vec![("wf_start_offset", P::F64(2.5))])]),
+        &1.0f64.to_le_bytes(),
+    );
     std::fs::write(&p, file).unwrap();
     assert!(read(&p, None).is_ok());
     // DAQmx raw data
@@ -329,7 +360,11 @@ fn bad_tdms_records_are_refused_clearly() {
     for v in [1.0f64, 2.0, 3.0] {
         raw.extend_from_slice(&v.to_le_bytes());
     }
-    let file = segment(META | NEW_LIST | RAW, Some(&[ch("Fx", Index::New(10, 2), vec![]), ch("Fy", Index::New(10, 1), vec![])]), &raw);
+    let file = segment(
+        META | NEW_LIST | RAW,
+        Some(&[ch("Fx", Index::New(10, 2), vec![]), ch("Fy", Index::New(10, 1), vec![])]),
+        &raw,
+    );
     std::fs::write(&p, file).unwrap();
     let e = read(&p, None).unwrap_err();
     assert!(e.contains("Cut 1/Fy") && e.contains("same length"), "{e}");
@@ -355,7 +390,15 @@ fn compensate_reads_and_writes_tdms() {
     let inp = tmp("tdmscli", "measured.tdms");
     write_tdms(&inp, &chans, 51200.0, 4096);
     let run = |inp: &PathBuf, out: &PathBuf, extra: &[&str]| {
-        let mut args = vec!["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", inp.to_str().unwrap(), "--output", out.to_str().unwrap()];
+        let mut args = vec![
+            "compensate",
+            "--coeffs",
+            img_path.to_str().unwrap(),
+            "--input",
+            inp.to_str().unwrap(),
+            "--output",
+            out.to_str().unwrap(),
+        ];
         args.extend_from_slice(extra);
         dynocomp(&args)
     };
@@ -421,18 +464,40 @@ fn outputs_keep_the_time_base() {
     let img_path = tmp("tdmst0", "img.dcimg");
     std::fs::write(&img_path, common::bytes(&common::image(1, 51200, 0))).unwrap();
     let inp = tmp("tdmst0", "in.csv");
-    let text: String = std::iter::once("t_s,fx\n".to_string()).chain((0..5000).map(|k| format!("{},{}\n", 1.25 + k as f64 / 51200.0, k % 7))).collect();
+    let text: String = std::iter::once("t_s,fx\n".to_string())
+        .chain((0..5000).map(|k| format!("{},{}\n", 1.25 + k as f64 / 51200.0, k % 7)))
+        .collect();
     std::fs::write(&inp, text).unwrap();
     let notime = tmp("tdmst0", "notime.csv");
     std::fs::write(&notime, "fx\n1\n2\n3\n4\n").unwrap();
     for (input, t0) in [(&inp, 1.25), (&notime, 0.0)] {
         let out = tmp("tdmst0", "out.tdms");
-        let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", input.to_str().unwrap(), "--output", out.to_str().unwrap(), "--output-format", "tdms"]);
+        let (ok, _, err) = dynocomp(&[
+            "compensate",
+            "--coeffs",
+            img_path.to_str().unwrap(),
+            "--input",
+            input.to_str().unwrap(),
+            "--output",
+            out.to_str().unwrap(),
+            "--output-format",
+            "tdms",
+        ]);
         assert!(ok, "{err}");
         let r = dynocomp::io::tdms::TdmsReader::open(&out, None).unwrap();
         assert_eq!(r.start_offset_s(), Some(t0));
         let uff = tmp("tdmst0", "out.uff");
-        let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", input.to_str().unwrap(), "--output", uff.to_str().unwrap(), "--output-format", "uff"]);
+        let (ok, _, err) = dynocomp(&[
+            "compensate",
+            "--coeffs",
+            img_path.to_str().unwrap(),
+            "--input",
+            input.to_str().unwrap(),
+            "--output",
+            uff.to_str().unwrap(),
+            "--output-format",
+            "uff",
+        ]);
         assert!(ok, "{err}");
         let text = std::fs::read_to_string(&uff).unwrap();
         let rec7 = text.lines().nth(8).unwrap();
@@ -442,7 +507,17 @@ fn outputs_keep_the_time_base() {
     // A TDMS or UFF input's time base goes on too: to a CSV output as its
     // t_s column (from the start and the increment), to TDMS as its start.
     let run = |input: &std::path::Path, out: &std::path::Path, fmt: &str| {
-        let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", input.to_str().unwrap(), "--output", out.to_str().unwrap(), "--output-format", fmt]);
+        let (ok, _, err) = dynocomp(&[
+            "compensate",
+            "--coeffs",
+            img_path.to_str().unwrap(),
+            "--input",
+            input.to_str().unwrap(),
+            "--output",
+            out.to_str().unwrap(),
+            "--output-format",
+            fmt,
+        ]);
         assert!(ok, "{err}");
     };
     let (tdms_in, uff_in) = (tmp("tdmst0", "timed.tdms"), tmp("tdmst0", "timed.uff"));
@@ -459,6 +534,11 @@ fn outputs_keep_the_time_base() {
         }
         let again = tmp("tdmst0", "again.tdms");
         run(from, &again, "tdms");
-        assert_eq!(dynocomp::io::tdms::TdmsReader::open(&again, None).unwrap().start_offset_s(), Some(1.25), "{}", from.display());
+        assert_eq!(
+            dynocomp::io::tdms::TdmsReader::open(&again, None).unwrap().start_offset_s(),
+            Some(1.25),
+            "{}",
+            from.display()
+        );
     }
 }

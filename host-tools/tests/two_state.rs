@@ -10,22 +10,26 @@
 mod sim_common;
 
 use dynocomp::design::axis::{design_axis, DesignOptions};
+use dynocomp::design::discretize::fit_with_structure;
 use dynocomp::design::discretize::{discretize, Discretization};
+use dynocomp::design::kalman::{augmented_plant, solve_filter_dare};
+use dynocomp::design::two_state::model::{pair, TwoState};
+use dynocomp::design::two_state::range::{
+    design_over_range, pair_second_state, RangeCandidate, RangeDesign, RANGE_STATES,
+};
 use dynocomp::fit::vf::VfOptions;
 use dynocomp::fit::PoleResidueModel;
 use dynocomp::metrics::{accuracy, sample_variance};
+use dynocomp::offline::drift::{
+    drift_log_likelihood, smooth_drifting, smooth_drifting_in_segments, state_at, DriftSmoothing, S_LEVELS,
+};
+use dynocomp::offline::smoother::Smoother;
 use dynocomp::simulate::drift::{measure_drifting, shift_sensor_modes, simulate_drifting, Drift};
 use dynocomp::simulate::MultiAxisDynamometer;
-use dynocomp::offline::smoother::Smoother;
-use dynocomp::design::discretize::fit_with_structure;
-use dynocomp::design::kalman::{augmented_plant, solve_filter_dare};
-use dynocomp::offline::drift::{drift_log_likelihood, smooth_drifting, smooth_drifting_in_segments, state_at, DriftSmoothing, S_LEVELS};
-use dynocomp::design::two_state::range::{design_over_range, pair_second_state, RangeCandidate, RangeDesign, RANGE_STATES};
-use dynocomp::design::two_state::model::{pair, TwoState};
 use nalgebra::DVector;
 
-use dynocomp::simulate::impact::impact_test_axis;
 use dynocomp::design::two_state::joint::JOINT_TOLERANCE;
+use dynocomp::simulate::impact::impact_test_axis;
 use sim_common::FS;
 /// Issue target: two-state within 1.5x of the exact model. Met on all 9
 /// axes below (worst 1.28x): seed 4 x was 1.66x before the machine modes
@@ -66,13 +70,38 @@ fn with_a_constant_model_the_time_varying_smoother_is_the_stationary_one() {
     let (q, r) = (10.0, 0.05);
     let reference = Smoother::new(&dm, q, r).unwrap().smooth(&y);
     let ts = TwoState { before: m.clone(), after: m.clone() };
-    let tv = smooth_drifting(&y, &|s| ts.at(s), &DriftSmoothing { fs_hz: FS, interval_s: (0.01, 0.05), band_hz: band, structure: (dm.fir.len(), dm.advance), q, r }).unwrap();
+    let tv = smooth_drifting(
+        &y,
+        &|s| ts.at(s),
+        &DriftSmoothing {
+            fs_hz: FS,
+            interval_s: (0.01, 0.05),
+            band_hz: band,
+            structure: (dm.fir.len(), dm.advance),
+            q,
+            r,
+        },
+    )
+    .unwrap();
     let scale = reference.iter().fold(0.0f64, |a, v| a.max(v.abs()));
     let err = tv.iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
     assert!(err < 1e-9 * scale, "{err:e}");
     // Negative control: a model that really moves gives another estimate.
-    let moved = TwoState { before: m.clone(), after: PoleResidueModel::from_modes(&[(400.0, 0.03, 0.1), (2400.0, 0.02, 0.9)]) };
-    let tv2 = smooth_drifting(&y, &|s| moved.at(s), &DriftSmoothing { fs_hz: FS, interval_s: (0.01, 0.05), band_hz: band, structure: (dm.fir.len(), dm.advance), q, r }).unwrap();
+    let moved =
+        TwoState { before: m.clone(), after: PoleResidueModel::from_modes(&[(400.0, 0.03, 0.1), (2400.0, 0.02, 0.9)]) };
+    let tv2 = smooth_drifting(
+        &y,
+        &|s| moved.at(s),
+        &DriftSmoothing {
+            fs_hz: FS,
+            interval_s: (0.01, 0.05),
+            band_hz: band,
+            structure: (dm.fir.len(), dm.advance),
+            q,
+            r,
+        },
+    )
+    .unwrap();
     assert!(tv2.iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max) > 1e-3 * scale);
 }
 
@@ -129,8 +158,17 @@ fn drift_fixture(len: usize, interval_s: (f64, f64)) -> (TwoState, Vec<f64>, Dri
     let ts = TwoState { before, after };
     let band = (0.0, 4000.0);
     let (dm, _) = discretize(&ts.before, FS, Discretization::Fit, band).unwrap();
-    let y: Vec<f64> = (0..len).map(|k| (k as f64 * 0.013).sin() * 50.0 + (k as f64 * 0.71).sin() * 9.0 + ((k * 7919) % 13) as f64).collect();
-    let opts = DriftSmoothing { fs_hz: FS, interval_s, band_hz: band, structure: (dm.fir.len(), dm.advance), q: 10.0, r: 0.05 };
+    let y: Vec<f64> = (0..len)
+        .map(|k| (k as f64 * 0.013).sin() * 50.0 + (k as f64 * 0.71).sin() * 9.0 + ((k * 7919) % 13) as f64)
+        .collect();
+    let opts = DriftSmoothing {
+        fs_hz: FS,
+        interval_s,
+        band_hz: band,
+        structure: (dm.fir.len(), dm.advance),
+        q: 10.0,
+        r: 0.05,
+    };
     (ts, y, opts)
 }
 
@@ -167,8 +205,8 @@ fn checkpointed_smoother_equals_the_dense_reference_for_any_segment_length() {
 /// spill segments, with the drift crossing a segment boundary.
 #[test]
 fn spilled_drift_smoother_equals_the_dense_reference() {
-    use dynocomp::offline::smoother::SpilledPass;
     use dynocomp::offline::drift::{SpilledDriftForward, SPILLED_SEGMENT};
+    use dynocomp::offline::smoother::SpilledPass;
     let len = 2 * SPILLED_SEGMENT + 777;
     // The drift runs from 0.05 s to 0.12 s, across the boundary at 4096 samples (0.08 s).
     let (ts, y, opts) = drift_fixture(len, (0.05, 0.12));
@@ -230,11 +268,27 @@ fn drift_case(seed: u64, rpm: f64, delta: f64) -> Vec<(f64, f64, f64)> {
         let single = Smoother::new(&dm, q, rr).unwrap().smooth(y);
         // Two states: the after FRF fitted at the before model's order,
         // paired, machine modes measured alike shared (what `design` does).
-        let paired = pair_second_state(&s.frf.freq_hz, s.frf.axis(a).unwrap(), &d, out.frf_after.axis(a).unwrap(), &VfOptions::default()).unwrap();
+        let paired = pair_second_state(
+            &s.frf.freq_hz,
+            s.frf.axis(a).unwrap(),
+            &d,
+            out.frf_after.axis(a).unwrap(),
+            &VfOptions::default(),
+        )
+        .unwrap();
         let (ts, machine) = (paired.states, paired.machine);
         let shared: Vec<String> = machine.iter().filter(|m| m.shared).map(|m| format!("{:.0}", m.fn_hz.0)).collect();
-        eprintln!("seed {seed} axis {a}: machine modes shared {} Hz, {} kept apart", shared.join(", "), machine.len() - shared.len());
-        let two = smooth_drifting(y, &|s| ts.at(s), &DriftSmoothing { fs_hz: FS, interval_s: (0.0, p.duration_s), band_hz: band, structure, q, r: rr }).unwrap();
+        eprintln!(
+            "seed {seed} axis {a}: machine modes shared {} Hz, {} kept apart",
+            shared.join(", "),
+            machine.len() - shared.len()
+        );
+        let two = smooth_drifting(
+            y,
+            &|s| ts.at(s),
+            &DriftSmoothing { fs_hz: FS, interval_s: (0.0, p.duration_s), band_hz: band, structure, q, r: rr },
+        )
+        .unwrap();
         // Exact: the true set-up at every instant (the simulator's modes).
         let true_axis = s.dyno.axis(a).clone();
         let exact_at = |sv: f64| {
@@ -243,16 +297,44 @@ fn drift_case(seed: u64, rpm: f64, delta: f64) -> Vec<(f64, f64, f64)> {
             PoleResidueModel::from_modes(&m.modes.iter().map(|m| (m.fn_hz, m.zeta, m.residue)).collect::<Vec<_>>())
         };
         let exact_dm = discretize(&exact_at(0.0), FS, Discretization::Fit, band).unwrap().0;
-        let exact = smooth_drifting(y, &exact_at, &DriftSmoothing { fs_hz: FS, interval_s: (0.0, p.duration_s), band_hz: band, structure: (exact_dm.fir.len(), exact_dm.advance), q, r: rr }).unwrap();
+        let exact = smooth_drifting(
+            y,
+            &exact_at,
+            &DriftSmoothing {
+                fs_hz: FS,
+                interval_s: (0.0, p.duration_s),
+                band_hz: band,
+                structure: (exact_dm.fir.len(), exact_dm.advance),
+                q,
+                r: rr,
+            },
+        )
+        .unwrap();
         let score = |x: &[f64]| accuracy(x, &s.truth[a], FS, f_max).nrmse;
         // The interpolation rule with the TRUE end states reproduces the
         // exact model (the simulator's mass-linear drift): what separates
         // two-state from exact is the fit of the two FRFs, not the rule.
         let true_states = pair("true", &exact_at(0.0), &exact_at(1.0)).unwrap();
-        let rule = smooth_drifting(y, &|s| true_states.at(s), &DriftSmoothing { fs_hz: FS, interval_s: (0.0, p.duration_s), band_hz: band, structure: (exact_dm.fir.len(), exact_dm.advance), q, r: rr }).unwrap();
+        let rule = smooth_drifting(
+            y,
+            &|s| true_states.at(s),
+            &DriftSmoothing {
+                fs_hz: FS,
+                interval_s: (0.0, p.duration_s),
+                band_hz: band,
+                structure: (exact_dm.fir.len(), exact_dm.advance),
+                q,
+                r: rr,
+            },
+        )
+        .unwrap();
         let row = (score(&single), score(&two), score(&exact));
         let e_rule = score(&rule);
-        assert!((e_rule / row.2 - 1.0).abs() < 0.02, "axis {a}: rule with true end states {e_rule:.5} vs exact {:.5}", row.2);
+        assert!(
+            (e_rule / row.2 - 1.0).abs() < 0.02,
+            "axis {a}: rule with true end states {e_rule:.5} vs exact {:.5}",
+            row.2
+        );
         eprintln!(
             "seed {seed} drift {:+.0} % axis {a}: single-FRF {:.3} %, two-state {:.3} %, exact {:.3} % (two/exact {:.2})",
             100.0 * delta,
@@ -306,21 +388,43 @@ fn box_image_for_the_range_beats_either_single_state_design() {
     let f_fine = FS * p.oversample as f64;
     for a in [0, 1] {
         let r = sample_variance(&s.idle[a]);
-        let RangeDesign { candidates: cands, best, .. } = design_over_range(&s.frf.freq_hz, s.frf.axis(a).unwrap(), out.frf_after.axis(a).unwrap(), r, &opts, &[0.0, 0.25, 0.5, 0.75, 1.0]).unwrap();
+        let RangeDesign { candidates: cands, best, .. } = design_over_range(
+            &s.frf.freq_hz,
+            s.frf.axis(a).unwrap(),
+            out.frf_after.axis(a).unwrap(),
+            r,
+            &opts,
+            &[0.0, 0.25, 0.5, 0.75, 1.0],
+        )
+        .unwrap();
         let single = [&cands[0], &cands[cands.len() - 1]];
         let chosen = &cands[best];
         // Measured worst case over the range: flat force, true set-up at each state.
         let flat = sim_common::flat_force(fine_len, f_fine, chosen.design.compensated_band_hz.1, 100.0, 55);
         let measured_worst = |c: &RangeCandidate| {
-            RANGE_STATES.iter().map(|&sv| sim_common::measured_shifted(s, &c.design, &flat, 100.0 * drift.shift_at(sv))).fold(0.0, f64::max)
+            RANGE_STATES
+                .iter()
+                .map(|&sv| sim_common::measured_shifted(s, &c.design, &flat, 100.0 * drift.shift_at(sv)))
+                .fold(0.0, f64::max)
         };
         let m: Vec<f64> = cands.iter().map(measured_worst).collect();
         for (c, mw) in cands.iter().zip(&m) {
-            eprintln!("axis {a} candidate s = {:.2}: predicted worst {:.2} % ({:?}), measured worst {:.2} %", c.s, 100.0 * c.worst, c.errors.iter().map(|e| (1e4 * e).round() / 100.0).collect::<Vec<_>>(), 100.0 * mw);
+            eprintln!(
+                "axis {a} candidate s = {:.2}: predicted worst {:.2} % ({:?}), measured worst {:.2} %",
+                c.s,
+                100.0 * c.worst,
+                c.errors.iter().map(|e| (1e4 * e).round() / 100.0).collect::<Vec<_>>(),
+                100.0 * mw
+            );
         }
         eprintln!("axis {a}: chosen s = {:.2}", chosen.s);
         for (i, sd) in single.iter().enumerate() {
-            assert!(chosen.worst < sd.worst, "axis {a}: predicted worst case {} not below single state {i}'s {}", chosen.worst, sd.worst);
+            assert!(
+                chosen.worst < sd.worst,
+                "axis {a}: predicted worst case {} not below single state {i}'s {}",
+                chosen.worst,
+                sd.worst
+            );
         }
         let (m0, m1, mc) = (m[0], m[cands.len() - 1], m[best]);
         assert!(mc < m0 && mc < m1, "axis {a}: measured worst case {mc:.4} vs single-state {m0:.4} / {m1:.4}");
@@ -355,18 +459,31 @@ fn drift_likelihood_tells_drift_from_none_with_the_exact_model() {
     };
     let exact_dm = discretize(&exact_at(0.0), FS, Discretization::Fit, band).unwrap().0;
     let ts = pair("true", &exact_at(0.0), &exact_at(1.0)).unwrap();
-    let smoothing = DriftSmoothing { fs_hz: FS, interval_s: (0.0, p.duration_s), band_hz: band, structure: (exact_dm.fir.len(), exact_dm.advance), q: d.kalman.q, r: d.kalman.r };
+    let smoothing = DriftSmoothing {
+        fs_hz: FS,
+        interval_s: (0.0, p.duration_s),
+        band_hz: band,
+        structure: (exact_dm.fir.len(), exact_dm.advance),
+        q: d.kalman.q,
+        r: d.kalman.r,
+    };
     let (n, os) = (p.n_samples(), p.oversample.max(1));
     let f_fine = FS * os as f64;
     let force = sim_common::flat_force(p.anti_alias.fine_len(n, os), f_fine, band.1, 100.0, 77);
     let grid = [0.0, 0.25, 0.5, 0.75, 1.0, 1.25];
     let best_c = |actual: f64| -> (f64, f64) {
-        let y_fine = measure_drifting(&true_axis, &Drift { delta: actual, start_s: 0.0, end_s: p.duration_s }, &force, f_fine);
+        let y_fine =
+            measure_drifting(&true_axis, &Drift { delta: actual, start_s: 0.0, end_s: p.duration_s }, &force, f_fine);
         let (_, clean) = p.anti_alias.acquire_response(&force, &y_fine, FS, os, n);
         let y = p.measurement.apply(&clean, 91);
-        let l: Vec<f64> = grid.iter().map(|&c| drift_log_likelihood(&y, &|sv| ts.at(sv * c), &smoothing).unwrap()).collect();
+        let l: Vec<f64> =
+            grid.iter().map(|&c| drift_log_likelihood(&y, &|sv| ts.at(sv * c), &smoothing).unwrap()).collect();
         let best = (0..grid.len()).max_by(|&i, &j| l[i].total_cmp(&l[j])).unwrap();
-        eprintln!("shift {:+.1} %: log-likelihood − max over c = {:?}", 100.0 * actual, grid.iter().zip(&l).map(|(c, v)| (*c, (v - l[best]).round())).collect::<Vec<_>>());
+        eprintln!(
+            "shift {:+.1} %: log-likelihood − max over c = {:?}",
+            100.0 * actual,
+            grid.iter().zip(&l).map(|(c, v)| (*c, (v - l[best]).round())).collect::<Vec<_>>()
+        );
         (grid[best], l[best] - l[0])
     };
     let (c_full, gain_full) = best_c(delta);
@@ -407,7 +524,14 @@ fn machine_modes_are_shared_only_where_both_frfs_measured_them_alike() {
     let (d0, ip) = (&d0.0, &p.impact);
     let sensors_moved = shift_sensor_modes(&before, 0.05);
     // The machine mode nearest 413 Hz (ζ ≈ 0.017) moved as well.
-    let m = sensors_moved.modes.iter().enumerate().filter(|(_, m)| m.fn_hz < 1000.0).min_by(|a, b| (a.1.fn_hz - 413.0).abs().total_cmp(&(b.1.fn_hz - 413.0).abs())).unwrap().0;
+    let m = sensors_moved
+        .modes
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| m.fn_hz < 1000.0)
+        .min_by(|a, b| (a.1.fn_hz - 413.0).abs().total_cmp(&(b.1.fn_hz - 413.0).abs()))
+        .unwrap()
+        .0;
     let f_m = sensors_moved.modes[m].fn_hz;
     let run = |after: &dynocomp::simulate::Dynamometer| {
         let frf1 = impact_test_axis(after, 0, ip.n_lines, ip.df_hz, 42, ip);
@@ -420,7 +544,11 @@ fn machine_modes_are_shared_only_where_both_frfs_measured_them_alike() {
     let sensors = dynocomp::fit::modes::sensor_mode_indices(&ts.before);
     for (i, (a, b)) in ts.before.terms.iter().zip(&ts.after.terms).enumerate() {
         // Shared modes are one mode in both states; sensor modes keep their shift.
-        assert_eq!(a == b, !sensors.contains(&i) && matches!(a, dynocomp::fit::Term::Pair { .. }), "term {i}: {a:?} / {b:?}");
+        assert_eq!(
+            a == b,
+            !sensors.contains(&i) && matches!(a, dynocomp::fit::Term::Pair { .. }),
+            "term {i}: {a:?} / {b:?}"
+        );
     }
     for shift in [0.002, 0.005, 0.01] {
         let mut moved = sensors_moved.clone();
@@ -458,7 +586,11 @@ fn above_band_modes_are_fitted_jointly_only_where_the_frfs_agree_on_their_static
     let [m] = &p.above_band[..] else { panic!("one above-band mode expected: {:?}", p.above_band) };
     assert!(m.joint, "{m:?}");
     let miss = |f: (f64, f64)| ((f.0 / top(&before) - 1.0).abs()).max((f.1 / top(&after) - 1.0).abs());
-    eprintln!("largest frequency error: separate {:.2} %, joint {:.2} %", 100.0 * miss(m.fn_hz), 100.0 * miss(m.joint_fn_hz));
+    eprintln!(
+        "largest frequency error: separate {:.2} %, joint {:.2} %",
+        100.0 * miss(m.fn_hz),
+        100.0 * miss(m.joint_fn_hz)
+    );
     assert!(miss(m.joint_fn_hz) < 0.5 * miss(m.fn_hz), "{m:?}");
     // The states carry the joint fit: one modal share and one d.
     assert_eq!(p.states.before.d, p.states.after.d);

@@ -14,7 +14,21 @@ use dynocomp::metrics::accuracy;
 fn two_state_design_and_drifting_smoother_follow_the_change() {
     let dir = cli_common::tmp("two-state-cli", "sim");
     let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
-    let (ok, _, err) = dynocomp(&["simulate", "--out", &d(""), "--seed", "3", "--spindle-rpm", "20000", "--duration", "0.3", "--idle-duration", "0.2", "--drift-percent", "4"]);
+    let (ok, _, err) = dynocomp(&[
+        "simulate",
+        "--out",
+        &d(""),
+        "--seed",
+        "3",
+        "--spindle-rpm",
+        "20000",
+        "--duration",
+        "0.3",
+        "--idle-duration",
+        "0.2",
+        "--drift-percent",
+        "4",
+    ]);
     assert!(ok, "{err}");
     let design = |out: &str, frfs: &[&str]| {
         let idle = d("idle.csv");
@@ -33,28 +47,40 @@ fn two_state_design_and_drifting_smoother_follow_the_change() {
     let (ok, out, err) = design("two.dcimg", &["frf.uff", "frf_after.uff"]);
     assert!(ok, "{err}");
     for axis in ["x", "y", "z"] {
-        let line = out.lines().find(|l| l.starts_with(&format!("{axis} two states: modes paired"))).unwrap_or_else(|| panic!("{out}"));
-        assert!(line.contains("worst-case predicted error") && line.contains("designs for the first / second FRF alone"), "{line}");
+        let line = out
+            .lines()
+            .find(|l| l.starts_with(&format!("{axis} two states: modes paired")))
+            .unwrap_or_else(|| panic!("{out}"));
+        assert!(
+            line.contains("worst-case predicted error") && line.contains("designs for the first / second FRF alone"),
+            "{line}"
+        );
     }
     assert!(out.lines().any(|l| l.starts_with("x machine modes measured alike in both FRFs, averaged: ")), "{out}");
     let side = std::fs::read_to_string(d("two.dcimg.model.json")).unwrap();
     assert!(side.contains("\"two_state\"") && side.contains("\"d_after\""), "sidecar keeps both states");
     // The report shows each axis's candidates over the range.
     let (frf, after, idle, img, rep) = (d("frf.uff"), d("frf_after.uff"), d("idle.csv"), d("two_rep.dcimg"), d("rep"));
-    let (ok, _, err) = dynocomp(&["design", "--fs", "51200", "--idle", &idle, "--frf", &frf, "--frf", &after, "--out", &img, "--report", &rep]);
+    let (ok, _, err) = dynocomp(&[
+        "design", "--fs", "51200", "--idle", &idle, "--frf", &frf, "--frf", &after, "--out", &img, "--report", &rep,
+    ]);
     assert!(ok, "{err}");
     for axis in ["x", "y", "z"] {
         let svg = std::fs::read_to_string(dir.join("rep").join(format!("{axis}_range.svg"))).unwrap();
         assert!(svg.contains("worst case") && svg.contains("(the image)"), "{axis}");
     }
     let index = std::fs::read_to_string(dir.join("rep/index.html")).unwrap();
-    assert!(index.contains("x_range.svg") && index.contains("Machine modes shared by both states"), "index links the range plots");
+    assert!(
+        index.contains("x_range.svg") && index.contains("Machine modes shared by both states"),
+        "index links the range plots"
+    );
     let (ok, out, err) = design("two_json.dcimg", &["frf.uff", "frf_after.uff", "--json"]);
     assert!(ok, "{err}");
     let j: serde_json::Value = serde_json::from_str(&out).unwrap();
     for ax in j["axes"].as_array().unwrap() {
         let w = ax["worst_case_error"].as_f64().unwrap();
-        let (s0, s1) = (ax["single_state_worst_case"][0].as_f64().unwrap(), ax["single_state_worst_case"][1].as_f64().unwrap());
+        let (s0, s1) =
+            (ax["single_state_worst_case"][0].as_f64().unwrap(), ax["single_state_worst_case"][1].as_f64().unwrap());
         assert!(w < s0 && w < s1, "issue target: the range image beats either single-state design: {ax}");
         assert_eq!(ax["candidates"].as_array().unwrap().len(), 5);
         // This set-up moves only its sensor modes: every machine mode is shared.
@@ -82,9 +108,30 @@ fn two_state_design_and_drifting_smoother_follow_the_change() {
     // kept in a temporary file for its second reading. The same bytes.
     assert!(err.contains("checkpoints spilled"), "{err}");
     let c_pipe = d("c_two_pipe.csv");
-    let (ok, err_pipe, fed) = dynocomp_piped(&["compensate", "--coeffs", &two, "--input", "/dev/stdin", "--output", &c_pipe, "--offline", "--drift", "0:0.3"], std::fs::read(d("measured.csv")).unwrap());
-    assert!(ok && fed && err_pipe.contains("checkpoints spilled") && err_pipe.contains("with the input (a pipe)"), "{err_pipe}");
-    assert_eq!(std::fs::read(&c_two).unwrap(), std::fs::read(&c_pipe).unwrap(), "a file and a pipe smoothed differently");
+    let (ok, err_pipe, fed) = dynocomp_piped(
+        &[
+            "compensate",
+            "--coeffs",
+            &two,
+            "--input",
+            "/dev/stdin",
+            "--output",
+            &c_pipe,
+            "--offline",
+            "--drift",
+            "0:0.3",
+        ],
+        std::fs::read(d("measured.csv")).unwrap(),
+    );
+    assert!(
+        ok && fed && err_pipe.contains("checkpoints spilled") && err_pipe.contains("with the input (a pipe)"),
+        "{err_pipe}"
+    );
+    assert_eq!(
+        std::fs::read(&c_two).unwrap(),
+        std::fs::read(&c_pipe).unwrap(),
+        "a file and a pipe smoothed differently"
+    );
     let truth = read_signal_csv(&dir.join("true_force.csv")).unwrap();
     let (rt, ro) = (read_signal_csv(&dir.join("c_two.csv")).unwrap(), read_signal_csv(&dir.join("c_one.csv")).unwrap());
     let (mut worst_two, mut worst_one) = (0.0f64, 0.0f64);
@@ -108,12 +155,30 @@ fn two_state_errors_are_clear() {
     let (ok, _, err) = dynocomp(&["simulate", "--out", &d(""), "--duration", "0.05", "--idle-duration", "0.05"]);
     assert!(ok, "{err}");
     let other = cli_common::tmp("two-state-cli", "other");
-    let (ok, _, err) = dynocomp(&["simulate", "--out", other.to_str().unwrap(), "--duration", "0.05", "--idle-duration", "0.05", "--frf-lines", "2049"]);
+    let (ok, _, err) = dynocomp(&[
+        "simulate",
+        "--out",
+        other.to_str().unwrap(),
+        "--duration",
+        "0.05",
+        "--idle-duration",
+        "0.05",
+        "--frf-lines",
+        "2049",
+    ]);
     assert!(ok, "{err}");
     let other_frf = other.join("frf.uff").to_str().unwrap().to_string();
     let img = d("x.dcimg");
     let base = |frfs: &[&str]| {
-        let mut a = vec!["design".to_string(), "--fs".into(), "51200".into(), "--noise-variance".into(), "0.05".into(), "--out".into(), img.clone()];
+        let mut a = vec![
+            "design".to_string(),
+            "--fs".into(),
+            "51200".into(),
+            "--noise-variance".into(),
+            "0.05".into(),
+            "--out".into(),
+            img.clone(),
+        ];
         for f in frfs {
             a.push("--frf".into());
             a.push((*f).into());
@@ -130,7 +195,18 @@ fn two_state_errors_are_clear() {
     let (ok, _, err) = base(&[&d("frf.uff")]);
     assert!(ok, "{err}");
     for (iv, msg) in [("0:0.04", "design with `--frf BEFORE --frf AFTER`"), ("0.04:0.01", "expected START:END")] {
-        let (ok, _, err) = dynocomp(&["compensate", "--coeffs", &img, "--input", &d("measured.csv"), "--output", &d("c.csv"), "--offline", "--drift", iv]);
+        let (ok, _, err) = dynocomp(&[
+            "compensate",
+            "--coeffs",
+            &img,
+            "--input",
+            &d("measured.csv"),
+            "--output",
+            &d("c.csv"),
+            "--offline",
+            "--drift",
+            iv,
+        ]);
         assert!(!ok && err.contains(msg), "{iv}: {err}");
         assert!(!dir.join("c.csv").exists());
     }
@@ -143,10 +219,38 @@ fn two_state_errors_are_clear() {
 fn design_reports_the_joint_fit_of_modes_above_the_band() {
     let dir = cli_common::tmp("two-state-cli", "above");
     let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
-    let (ok, _, err) = dynocomp(&["simulate", "--out", &d(""), "--seed", "4", "--spindle-rpm", "6000", "--duration", "0.05", "--idle-duration", "0.2", "--drift-percent", "5"]);
+    let (ok, _, err) = dynocomp(&[
+        "simulate",
+        "--out",
+        &d(""),
+        "--seed",
+        "4",
+        "--spindle-rpm",
+        "6000",
+        "--duration",
+        "0.05",
+        "--idle-duration",
+        "0.2",
+        "--drift-percent",
+        "5",
+    ]);
     assert!(ok, "{err}");
     let args = |json: bool| {
-        let mut a: Vec<String> = ["design", "--fs", "51200", "--idle", &d("idle.csv"), "--frf", &d("frf.uff"), "--frf", &d("frf_after.uff"), "--out", &d("two.dcimg")].map(String::from).to_vec();
+        let mut a: Vec<String> = [
+            "design",
+            "--fs",
+            "51200",
+            "--idle",
+            &d("idle.csv"),
+            "--frf",
+            &d("frf.uff"),
+            "--frf",
+            &d("frf_after.uff"),
+            "--out",
+            &d("two.dcimg"),
+        ]
+        .map(String::from)
+        .to_vec();
         if json {
             a.push("--json".into());
         }
@@ -158,7 +262,10 @@ fn design_reports_the_joint_fit_of_modes_above_the_band() {
     };
     let (ok, out, err) = run(false);
     assert!(ok, "{err}");
-    let line = out.lines().find(|l| l.starts_with("y sensor modes above the compensated band")).unwrap_or_else(|| panic!("{out}"));
+    let line = out
+        .lines()
+        .find(|l| l.starts_with("y sensor modes above the compensated band"))
+        .unwrap_or_else(|| panic!("{out}"));
     assert!(line.contains("fitted to both FRFs at once") && line.contains("separately"), "{line}");
     assert!(!out.lines().any(|l| l.starts_with("x sensor modes above")), "x has no sensor mode above its band: {out}");
     let (ok, out, err) = run(true);

@@ -2,12 +2,12 @@
 //! written and read back, through `compensate`, and refused with a message
 //! naming the file, dataset and record when they are wrong.
 
-use dynocomp::offline::compensate::compensate_record;
+use dynocomp::io::signal::ChannelMap;
 use dynocomp::io::signal::{read_all, SignalWriter};
 use dynocomp::io::signal_csv::read_signal_csv;
 use dynocomp::io::signal_file::{open_signal, SignalFormat};
-use dynocomp::io::signal::ChannelMap;
 use dynocomp::io::uff_signal::UffWriter;
+use dynocomp::offline::compensate::compensate_record;
 use std::path::{Path, PathBuf};
 
 mod cli_common;
@@ -61,7 +61,10 @@ fn time_histories_round_trip() {
     let p = tmp("uffrt", "neg.uff");
     write_uff(&p, &x, 51200.0, false);
     let text = std::fs::read_to_string(&p).unwrap();
-    let text = text.replace("       DYN         1   2     HAMMER         1   2", "       DYN         1  -2     HAMMER         1  -2");
+    let text = text.replace(
+        "       DYN         1   2     HAMMER         1   2",
+        "       DYN         1  -2     HAMMER         1  -2",
+    );
     std::fs::write(&p, text).unwrap();
     let (mut r, _) = open_signal(&p, None).unwrap();
     let (_, got) = read_all(&mut *r).unwrap();
@@ -84,7 +87,15 @@ fn compensate_reads_and_writes_uff() {
     write_uff(&inp, &chans, 51200.0, true);
     let out = tmp("uffcli", "out.uff");
     let run = |inp: &PathBuf, out: &PathBuf, extra: &[&str]| {
-        let mut args = vec!["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", inp.to_str().unwrap(), "--output", out.to_str().unwrap()];
+        let mut args = vec![
+            "compensate",
+            "--coeffs",
+            img_path.to_str().unwrap(),
+            "--input",
+            inp.to_str().unwrap(),
+            "--output",
+            out.to_str().unwrap(),
+        ];
         args.extend_from_slice(extra);
         dynocomp(&args)
     };
@@ -123,7 +134,8 @@ fn bad_uff_records_are_refused_clearly() {
     let good = std::fs::read_to_string(&p).unwrap();
     // truncated: drop 5 data lines of the dataset
     let lines: Vec<&str> = good.lines().collect();
-    let cut: String = lines[..lines.len() - 6].iter().chain(&lines[lines.len() - 1..]).map(|l| format!("{l}\n")).collect();
+    let cut: String =
+        lines[..lines.len() - 6].iter().chain(&lines[lines.len() - 1..]).map(|l| format!("{l}\n")).collect();
     std::fs::write(&p, cut).unwrap();
     let e = read(&p, None).unwrap_err();
     assert!(e.contains("a.uff") && e.contains("dataset #1") && e.contains("record 12"), "{e}");
@@ -168,7 +180,10 @@ fn ordinate_units_are_checked_and_scaled() {
         }
         assert_eq!(r9.len(), rec9.len());
         std::fs::write(&p, good.replacen(&rec9, &r9, 1)).unwrap();
-        open_signal(&p, None).and_then(|(mut r, _)| read_all(&mut *r)).map(|(_, c)| c[0].clone()).map_err(|e| format!("{e:#}"))
+        open_signal(&p, None)
+            .and_then(|(mut r, _)| read_all(&mut *r))
+            .map(|(_, c)| c[0].clone())
+            .map_err(|e| format!("{e:#}"))
     };
     let n = with_unit("N").unwrap();
     for (u, k) in [("kN", 1000.0), ("mN", 0.001)] {
@@ -194,7 +209,10 @@ fn foreign_binary_dataset_with_impossible_counts_is_refused() {
         for id in ["seed", "NONE", "NONE", "NONE", "NONE"] {
             s.push_str(&format!("{id:<80}\n"));
         }
-        s.push_str(&format!("{:>5}{:>10}{:>5}{:>10} {:>10}{:>10}{:>4} {:>10}{:>10}{:>4}\n", 1, 1, 0, 0, "DYN", 1, dir, "HAMMER", 1, dir));
+        s.push_str(&format!(
+            "{:>5}{:>10}{:>5}{:>10} {:>10}{:>10}{:>4} {:>10}{:>10}{:>4}\n",
+            1, 1, 0, 0, "DYN", 1, dir, "HAMMER", 1, dir
+        ));
         s.push_str(&format!("{:>10}{:>10}{:>10}{:>13.6e}{:>13.6e}{:>13.6e}\n", 4, 4, 1, 0.0, 1.0 / 51200.0, 0.0));
         for (spec, label, units) in [(17, "Time", "s"), (9, "Force", "N"), (0, "NONE", "NONE"), (0, "NONE", "NONE")] {
             s.push_str(&format!("{spec:>10}{:>5}{:>5}{:>5} {label:<20} {units:<20}\n", 0, 0, 0));
@@ -202,7 +220,9 @@ fn foreign_binary_dataset_with_impossible_counts_is_refused() {
         s.push_str("  1.0  2.0  3.0  4.0\n    -1\n");
         s
     };
-    let foreign = |lines: &str, bytes: &str| format!("    -1\n    29b     2     2 {lines:>11} {bytes:>11}     0     0\nheader\n\x01\x02\x03\x04\n    -1\n");
+    let foreign = |lines: &str, bytes: &str| {
+        format!("    -1\n    29b     2     2 {lines:>11} {bytes:>11}     0     0\nheader\n\x01\x02\x03\x04\n    -1\n")
+    };
     let cases = [
         ("lines", foreign("222222222222222222", "4"), Some("header lines")),
         ("bytes", foreign("1", "18446744073709551000"), Some("byte count")),
@@ -215,14 +235,22 @@ fn foreign_binary_dataset_with_impossible_counts_is_refused() {
         let (tx, rx) = std::sync::mpsc::channel();
         let q = p.clone();
         std::thread::spawn(move || {
-            let r = open_signal(&q, None).and_then(|(mut r, _)| read_all(&mut *r)).map(|(_, c)| c[0].clone()).map_err(|e| format!("{e:#}"));
+            let r = open_signal(&q, None)
+                .and_then(|(mut r, _)| read_all(&mut *r))
+                .map(|(_, c)| c[0].clone())
+                .map_err(|e| format!("{e:#}"));
             let _ = tx.send(r);
         });
-        let got = rx.recv_timeout(std::time::Duration::from_secs(120)).unwrap_or_else(|_| panic!("{name}: the reader did not return"));
+        let got = rx
+            .recv_timeout(std::time::Duration::from_secs(120))
+            .unwrap_or_else(|_| panic!("{name}: the reader did not return"));
         match want {
             Some(w) => {
                 let e = got.expect_err(name);
-                assert!(e.starts_with(&format!("{}: line 1: dataset #1 (29b)", p.display())) && e.contains(w), "{name}: {e}");
+                assert!(
+                    e.starts_with(&format!("{}: line 1: dataset #1 (29b)", p.display())) && e.contains(w),
+                    "{name}: {e}"
+                );
             }
             None => assert_eq!(got.unwrap(), vec![1.0, 2.0, 3.0, 4.0], "{name}"),
         }
@@ -278,7 +306,10 @@ fn placed_writer_matches_the_streamed_one() {
                 let mut placed = Vec::new();
                 file.rewind().unwrap();
                 file.read_to_end(&mut placed).unwrap();
-                assert!(placed == streamed, "binary {binary}, n {n}, t0 {t0:?}: the in-place file differs from the streamed one");
+                assert!(
+                    placed == streamed,
+                    "binary {binary}, n {n}, t0 {t0:?}: the in-place file differs from the streamed one"
+                );
                 if n > odd.len() && t0.is_none() {
                     let p = tmp("uffplaced", if binary { "b.uff" } else { "a.uff" });
                     std::fs::write(&p, &placed).unwrap();
@@ -287,7 +318,10 @@ fn placed_writer_matches_the_streamed_one() {
                     assert_eq!(got[0].len(), n);
                     // 58b bit for bit; ASCII (13 significant digits) to the f32 value.
                     let (a, b) = (got[2][n - 1], chans[2][n - 1]);
-                    assert!(if binary { a.to_bits() == b.to_bits() } else { a as f32 == b as f32 }, "{a} read back for {b}");
+                    assert!(
+                        if binary { a.to_bits() == b.to_bits() } else { a as f32 == b as f32 },
+                        "{a} read back for {b}"
+                    );
                 }
             }
         }

@@ -200,7 +200,10 @@ fn malformed_truncated_and_out_of_order_frames_get_error_replies() {
     // The link still works, and both bad frames were answered with errors.
     link.status().unwrap();
     assert_eq!(link.unreadable_replies.len(), 2, "{:?}", link.unreadable_replies);
-    assert!(matches!(link.unreadable_replies[0], LinkError::Frame(FrameError::BadCrc | FrameError::Cobs | FrameError::Truncated)));
+    assert!(matches!(
+        link.unreadable_replies[0],
+        LinkError::Frame(FrameError::BadCrc | FrameError::Cobs | FrameError::Truncated)
+    ));
     assert_eq!(link.unreadable_replies[1], LinkError::Frame(FrameError::Oversized));
 
     // Out-of-order chunk.
@@ -241,7 +244,14 @@ fn stream_reports_exactly_the_injected_frame_losses() {
     // The virtual box has no CPU cycles to count and misses no deadlines.
     assert_eq!(
         report.box_load,
-        dynocomp::link::stream::BoxLoad { fs_hz: 51_200, core_clock_hz: 0, overruns: 0, overruns_since_boot: 0, isr_cycles_mean: 0, isr_cycles_max: 0 }
+        dynocomp::link::stream::BoxLoad {
+            fs_hz: 51_200,
+            core_clock_hz: 0,
+            overruns: 0,
+            overruns_since_boot: 0,
+            isr_cycles_mean: 0,
+            isr_cycles_max: 0
+        }
     );
 
     // The CSV: header, 400 rows, raw forces equal the virtual box's
@@ -276,7 +286,17 @@ fn stream_reports_exactly_the_injected_frame_losses() {
     let vbox2 = VBox::start(&flash, &["--drop-frames", "2"]);
     let csv = dir.path().join("cli.csv");
     let o = Command::new(EXE)
-        .args(["stream", "--serial", &vbox2.pty, "--output", csv.to_str().unwrap(), "--samples", "200", "--decimation", "2"])
+        .args([
+            "stream",
+            "--serial",
+            &vbox2.pty,
+            "--output",
+            csv.to_str().unwrap(),
+            "--samples",
+            "200",
+            "--decimation",
+            "2",
+        ])
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);

@@ -25,23 +25,14 @@ pub fn mode_block(f_hz: f64, zeta: f64, fs_hz: f64, c: [f64; 2]) -> Block64 {
     let z_re = r * co;
     let z_im = r * s;
     let gain = ((1.0 - z_re).powi(2) + z_im.powi(2)).sqrt();
-    Block64 {
-        a: [[r * co, r * s], [-r * s, r * co]],
-        b: [gain, 0.0],
-        c,
-    }
+    Block64 { a: [[r * co, r * s], [-r * s, r * co]], b: [gain, 0.0], c }
 }
 
 /// Round an f64 block to the kernel's f32 delta form. `A − I` is formed in
 /// f64 before rounding, which is the point of the delta form.
 pub fn to_section(b: &Block64) -> Section {
     Section {
-        delta: [
-            (b.a[0][0] - 1.0) as f32,
-            b.a[0][1] as f32,
-            b.a[1][0] as f32,
-            (b.a[1][1] - 1.0) as f32,
-        ],
+        delta: [(b.a[0][0] - 1.0) as f32, b.a[0][1] as f32, b.a[1][0] as f32, (b.a[1][1] - 1.0) as f32],
         b: [b.b[0] as f32, b.b[1] as f32],
         c: [b.c[0] as f32, b.c[1] as f32],
     }

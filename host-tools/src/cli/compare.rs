@@ -66,7 +66,8 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         for ax in &c.axes {
             pages.push(crate::report::page::Page {
                 name: format!("{}_compare.svg", ax.axis),
-                content: plot_axis(&frf.freq_hz, ax, &c.bands).with_context(|| format!("compare: axis {} plot", ax.axis))?,
+                content: plot_axis(&frf.freq_hz, ax, &c.bands)
+                    .with_context(|| format!("compare: axis {} plot", ax.axis))?,
             });
         }
         pages.push(crate::report::page::Page { name: "compare.json".into(), content: json.clone() });

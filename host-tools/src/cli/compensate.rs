@@ -86,11 +86,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
     let done = compensate_file(job, acc.as_mut().map(|r| r as &mut dyn Observer), &Terminal(&progress))?;
     progress.finish_and_clear();
     let Compensated { samples: n_samples, how } = done;
-    eprintln!(
-        "compensated {n_samples} samples x {} axes at {fs} Hz ({how}) -> {}",
-        axes.len(),
-        a.output.display()
-    );
+    eprintln!("compensated {n_samples} samples x {} axes at {fs} Hz ({how}) -> {}", axes.len(), a.output.display());
     if let (Some(acc), Some(dir)) = (acc, &a.report) {
         let summary = format!(
             "input:  {}\nimage:  {}\noutput: {}\n{n_samples} samples x {} axes at {fs} Hz ({:.3} s); {how}",
@@ -218,7 +214,11 @@ fn progress_bar(len: Option<u64>) -> indicatif::ProgressBar {
 /// Give `pb` the length `len` (a bar with an ETA; a spinner if unknown),
 /// counting `unit`.
 fn restyle(pb: &indicatif::ProgressBar, len: Option<u64>, unit: &'static str) {
-    let style = if len.is_some() { "{wide_bar} {human_pos}/{human_len} {msg}, eta {eta}" } else { "{spinner} {human_pos} {msg}, {per_sec}" };
+    let style = if len.is_some() {
+        "{wide_bar} {human_pos}/{human_len} {msg}, eta {eta}"
+    } else {
+        "{spinner} {human_pos} {msg}, {per_sec}"
+    };
     if let Ok(s) = indicatif::ProgressStyle::with_template(style) {
         pb.set_style(s);
     }

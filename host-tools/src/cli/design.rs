@@ -59,8 +59,14 @@ fn design_axes(args: &DesignArgs, s: &DesignSetup) -> Result<Designed> {
     let rv: Vec<f64> = frf.axes.iter().map(|a| s.r[a.axis].expect("R set for every FRF axis")).collect();
     let (results, latency_choice) = if s.auto_latency {
         let progress = |_: usize, what: &str| eprintln!("  {what}…");
-        let (d, c) =
-            crate::design::latency::design_axes_choosing_latency(&frf.freq_hz, &frf.axes, &rv, &s.opts, Some(s.limit_permille), progress);
+        let (d, c) = crate::design::latency::design_axes_choosing_latency(
+            &frf.freq_hz,
+            &frf.axes,
+            &rv,
+            &s.opts,
+            Some(s.limit_permille),
+            progress,
+        );
         (d, Some(c))
     } else {
         (crate::design::latency::design_axes(&frf.freq_hz, &frf.axes, &rv, &s.opts), None)
@@ -115,7 +121,12 @@ fn image_within_load(args: &DesignArgs, s: &DesignSetup, d: &Designed) -> Result
 
 /// Write the image and, for the default method, the model sidecar of
 /// `compensate --offline` ([`crate::offline::sidecar`]).
-fn write_image_and_sidecar(args: &DesignArgs, image: &CoeffImage, designs: &[AxisDesign], priors: &[Option<AxisPrior>]) -> Result<()> {
+fn write_image_and_sidecar(
+    args: &DesignArgs,
+    image: &CoeffImage,
+    designs: &[AxisDesign],
+    priors: &[Option<AxisPrior>],
+) -> Result<()> {
     io::image_file::write_image(&args.out, image)?;
     if args.method == Method::Paper {
         return Ok(());
@@ -145,7 +156,15 @@ fn render(
     let (designs, latency) = (&d.designs, d.latency);
     let id = image.id();
     let sensitivities = crate::design::sensitivity::predict_all(designs, &s.opts);
-    let mut summary = render_summary(designs, &sensitivities, args.input.fs, latency, &args.out.display().to_string(), id, args.method.name());
+    let mut summary = render_summary(
+        designs,
+        &sensitivities,
+        args.input.fs,
+        latency,
+        &args.out.display().to_string(),
+        id,
+        args.method.name(),
+    );
     if let Some(c) = &d.latency_choice {
         let names: Vec<&str> = designs.iter().map(|d| axis_name(d.axis)).collect();
         summary.push_str(&crate::design::latency::describe(c, &names));
@@ -170,7 +189,9 @@ fn render(
         eprintln!("designed in {:.0} ms", t0.elapsed().as_secs_f64() * 1e3);
         return Ok(());
     }
-    let axes = (0..designs.len()).map(|i| AxisJson::new(&designs[i], d.times[i], priors[i].as_ref(), &sensitivities[i])).collect();
+    let axes = (0..designs.len())
+        .map(|i| AxisJson::new(&designs[i], d.times[i], priors[i].as_ref(), &sensitivities[i]))
+        .collect();
     let j = DesignJson {
         image: args.out.display().to_string(),
         image_id: format!("{id:08x}"),

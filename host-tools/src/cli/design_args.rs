@@ -173,7 +173,8 @@ impl PaperArgs {
     /// orders of parallel elaboration's per-segment search).
     pub fn orders(&self) -> Result<(usize, usize)> {
         let Some(text) = &self.paper_orders else { return Ok((6, 8)) };
-        let bad = || anyhow::anyhow!("--paper-orders `{text}`: expected NB:NA, e.g. 6:8 (numerator ≤ denominator order)");
+        let bad =
+            || anyhow::anyhow!("--paper-orders `{text}`: expected NB:NA, e.g. 6:8 (numerator ≤ denominator order)");
         let (nb, na) = text.split_once(':').ok_or_else(bad)?;
         let (nb, na): (usize, usize) = (nb.trim().parse().map_err(|_| bad())?, na.trim().parse().map_err(|_| bad())?);
         if na == 0 || nb > na || na > 40 {
@@ -314,7 +315,6 @@ impl DesignArgs {
     }
 }
 
-
 /// `design`'s arguments for one FRF, validated: what one design run needs.
 pub struct DesignSetup {
     /// The measured FRF and the SHA-256 of its file.
@@ -364,8 +364,10 @@ impl DesignSetup {
             spec.tooth_passing = None;
         }
         let bands = spec.resolve(&frf, args.input.fs).with_context(|| format!("{}", path.display()))?;
-        let method = if paper { args.paper.method(args.bands.tooth_passing_hz(), args.input.fs)? } else { FitMethod::Vf };
-        let axis_budget = dynocomp_core::budget::axis_budget(args.input.fs as u32, limit_permille, frf.axes.len().max(1) as u32);
+        let method =
+            if paper { args.paper.method(args.bands.tooth_passing_hz(), args.input.fs)? } else { FitMethod::Vf };
+        let axis_budget =
+            dynocomp_core::budget::axis_budget(args.input.fs as u32, limit_permille, frf.axes.len().max(1) as u32);
         let opts = DesignOptions {
             method,
             bands: bands.clone(),
@@ -377,7 +379,16 @@ impl DesignSetup {
         };
         // Without --latency, the default method's latency is chosen (crate::design::latency).
         let auto_latency = !paper && args.latency.is_none() && !args.parallel;
-        Ok(DesignSetup { frf, sha: Sha256::digest(&bytes).into(), r, bands, opts, latency, auto_latency, limit_permille })
+        Ok(DesignSetup {
+            frf,
+            sha: Sha256::digest(&bytes).into(),
+            r,
+            bands,
+            opts,
+            latency,
+            auto_latency,
+            limit_permille,
+        })
     }
 }
 
@@ -441,9 +452,11 @@ pub fn read_force_record(path: &std::path::Path, fs_hz: f64) -> Result<crate::io
     let rec = crate::io::signal_csv::read_signal_csv(path)?;
     if let Some((rate, _)) = rec.sample_rate_from_time() {
         if (rate - fs_hz).abs() > 1e-6 * fs_hz {
-            bail!("{}: sampled at {rate:.1} Hz (column t_s), not at --fs {fs_hz}; record the cut at the box's rate", path.display());
+            bail!(
+                "{}: sampled at {rate:.1} Hz (column t_s), not at --fs {fs_hz}; record the cut at the box's rate",
+                path.display()
+            );
         }
     }
     Ok(rec)
 }
-

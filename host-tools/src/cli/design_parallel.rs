@@ -4,9 +4,9 @@
 use anyhow::{Context, Result};
 
 use crate::cli::design_args::{DesignArgs, DesignSetup};
+use crate::design::bands::Band;
 use crate::design::image::build_parallel_image;
 use crate::design::parallel::{design_parallel, design_regions};
-use crate::design::bands::Band;
 use crate::frf::axis_name;
 
 /// `dynocomp design --parallel`: design per band, write the parallel image
@@ -71,11 +71,17 @@ pub fn run(args: &DesignArgs, setup: &DesignSetup) -> Result<()> {
         });
         println!("{}", serde_json::to_string_pretty(&doc)?);
     } else {
-        println!("parallel-elaboration image {shown} (id {id:08x}), OFFLINE ONLY (the box never runs it), {} bands:", bands.len());
+        println!(
+            "parallel-elaboration image {shown} (id {id:08x}), OFFLINE ONLY (the box never runs it), {} bands:",
+            bands.len()
+        );
         for (k, (b, ds)) in bands.iter().zip(&per_band).enumerate() {
             println!("band {k}: {:.0}-{:.0} Hz ({})", b.lo_hz, b.hi_hz, b.label);
             let sensitivities = crate::design::sensitivity::predict_all(ds, opts);
-            print!("{}", crate::report::summary::render_summary(ds, &sensitivities, args.input.fs, latency, &shown, id, method));
+            print!(
+                "{}",
+                crate::report::summary::render_summary(ds, &sensitivities, args.input.fs, latency, &shown, id, method)
+            );
         }
         eprintln!("designed in {:.0} ms", t0.elapsed().as_secs_f64() * 1e3);
     }

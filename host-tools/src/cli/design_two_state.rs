@@ -44,7 +44,9 @@ fn check_args(args: &DesignArgs) -> Result<usize> {
         || !bands.band.is_empty()
         || bands.bands_from.is_some()
     {
-        bail!("--frf given twice (a set-up in two states): only the default method, without fitting bands or --parallel");
+        bail!(
+            "--frf given twice (a set-up in two states): only the default method, without fitting bands or --parallel"
+        );
     }
     let latency = args.latency.unwrap_or(crate::design::latency::DEFAULT_LATENCY);
     if latency > 16 {

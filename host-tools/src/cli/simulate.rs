@@ -285,8 +285,13 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         );
     }
     for a in 0..3 {
-        let modes: Vec<String> =
-            out.dyno.axis(a).modes.iter().map(|md| format!("{:.0} Hz ζ {:.3} r {:+.3}", md.fn_hz, md.zeta, md.residue)).collect();
+        let modes: Vec<String> = out
+            .dyno
+            .axis(a)
+            .modes
+            .iter()
+            .map(|md| format!("{:.0} Hz ζ {:.3} r {:+.3}", md.fn_hz, md.zeta, md.residue))
+            .collect();
         let peak = out.truth[a].iter().fold(0.0f64, |acc, v| acc.max(v.abs()));
         eprintln!("  axis {}: peak true force {:.1} N; modes: {}", axis_name(a), peak, modes.join(", "));
     }
@@ -300,7 +305,10 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         p.impact.df_hz,
         p.impact.n_impacts
     );
-    eprintln!("  wrote {}/{{frf.uff, frf.csv, measured.csv, true_force.csv, idle.csv, truth.json}}", args.out.display());
+    eprintln!(
+        "  wrote {}/{{frf.uff, frf.csv, measured.csv, true_force.csv, idle.csv, truth.json}}",
+        args.out.display()
+    );
     if let Some(pr) = &preset {
         let d = args.out.display();
         eprintln!(

@@ -49,4 +49,3 @@ pub fn run(args: &StreamArgs) -> Result<StreamReport> {
     }
     Ok(report)
 }
-

@@ -13,16 +13,16 @@ use num_complex::Complex64;
 use crate::design::bands::{band_mask, Band};
 use crate::design::criterion::{criterion_cells, criterion_grid, criterion_j_weighted, criterion_ranges, flat_band};
 use crate::design::discretize::{discretize_to, DiscreteModel, Discretization, FitDiagnostics, MATCH_BAND_FRACTION};
+use crate::design::kalman::{self, KalmanDesign};
+use crate::design::paper::{self, PaperDiagnostics};
 use crate::fit::rfp::{paper_weights, rfp_fit, RationalTf, RfpOptions};
 use crate::fit::vf::{coherence_weights, vector_fit, VfOptions};
 use crate::fit::{relative_rms_error, PoleResidueModel};
 use crate::frf::{axis_name, AxisFrf};
-use crate::design::kalman::{self, KalmanDesign};
 use crate::numeric::search::golden_section;
 use crate::realize::choose::choose_realization_within;
-use crate::design::paper::{self, PaperDiagnostics};
-use crate::realize::quantize::{self, Verification};
 use crate::realize::modal::ModalRealization;
+use crate::realize::quantize::{self, Verification};
 
 /// Design options shared by all axes.
 #[derive(Clone, Debug)]
@@ -394,7 +394,10 @@ fn axis_lines(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> Result<Ax
     let coh = frf.coherence.as_deref();
     let band = coherent_band(freq_hz, coh, opts.coherence_threshold);
     if band.1 <= band.0 {
-        bail!("axis {name}: no coherent band (coherence ≥ {} nowhere); repeat the impact test", opts.coherence_threshold);
+        bail!(
+            "axis {name}: no coherent band (coherence ≥ {} nowhere); repeat the impact test",
+            opts.coherence_threshold
+        );
     }
     // The box's band ends at 0.45 fs (the pass band of the DAQ's and the
     // box's anti-aliasing filters): lines above it still inform the fit (a
@@ -456,8 +459,13 @@ fn fit_axis(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions, lines: &AxisLi
         FitMethod::Paper { rfp, .. } => {
             let fit_mask: &[bool] = if opts.bands.is_empty() { &lines.in_band } else { &lines.eval_band };
             let weights = paper_weights(coh, fit_mask);
-            let fit = rfp_fit(freq_hz, &frf.frf, &weights, rfp).with_context(|| format!("axis {name}: paper fit (RFP + Gauss–Newton)"))?;
-            let diag = PaperDiagnostics { rfp_condition: fit.rfp_condition, jacobian_condition: fit.jacobian_condition, ..Default::default() };
+            let fit = rfp_fit(freq_hz, &frf.frf, &weights, rfp)
+                .with_context(|| format!("axis {name}: paper fit (RFP + Gauss–Newton)"))?;
+            let diag = PaperDiagnostics {
+                rfp_condition: fit.rfp_condition,
+                jacobian_condition: fit.jacobian_condition,
+                ..Default::default()
+            };
             let model = fit.tf.to_pole_residue().with_context(|| format!("axis {name}: paper fit"))?;
             Fitted { model, order_trace: vec![(fit.tf.na(), fit.final_error)], paper: Some((fit.tf, diag)) }
         }
@@ -499,7 +507,10 @@ pub fn probe_paper_fit(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> 
         bail!("augmented system not observable in floating point (rank {rank} of {})", ae.nrows());
     }
     if !(cond < paper::MAX_OBSERVABILITY_CONDITION) {
-        bail!("augmented system ill-conditioned (observability condition {cond:.1e} ≥ {:.0e})", paper::MAX_OBSERVABILITY_CONDITION);
+        bail!(
+            "augmented system ill-conditioned (observability condition {cond:.1e} ≥ {:.0e})",
+            paper::MAX_OBSERVABILITY_CONDITION
+        );
     }
     let fit_nrmse = relative_rms_error(|f| fitted.frf(f), freq_hz, &frf.frf, &lines.target);
     Ok((fit_nrmse, diag))
@@ -533,7 +544,9 @@ fn check_static(name: &str, freq_hz: &[f64], f_coherent: f64, opts: &DesignOptio
         .fold((0.0, 0.0), |a, b| if b.0 > a.0 || b.0.is_nan() { b } else { a });
     if !(worst.0 <= MAX_STATIC_ERROR) {
         let next = match &fitted.paper {
-            Some(_) => "let the orders be chosen (omit --paper-orders) or try others, or use the default method (--method vf)",
+            Some(_) => {
+                "let the orders be chosen (omit --paper-orders) or try others, or use the default method (--method vf)"
+            }
             None => "check the FRF's first lines (coherence near 0 Hz, units N/N) or raise --max-order",
         };
         bail!(
@@ -614,7 +627,10 @@ pub fn prepare_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions
         None => None,
         Some(rec) => {
             let y = rec.channels.get(frf.axis).and_then(|c| c.as_deref()).ok_or_else(|| {
-                anyhow::anyhow!("{}: no column f{name} for axis {name}; the force record needs every designed axis", rec.source)
+                anyhow::anyhow!(
+                    "{}: no column f{name} for axis {name}; the force record needs every designed axis",
+                    rec.source
+                )
             })?;
             let cells = criterion_cells(&ranges);
             let s = crate::design::force_spectrum::estimate(y, opts.fs_hz, &|f| fitted.frf(f), r, &cells)
@@ -645,8 +661,19 @@ pub fn prepare_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions
 
 /// The discrete model of the Kalman design (default method), matched to the
 /// sampled-data relation over the compensated band `band_hz`.
-fn discrete_model(fitted: &Fitted, band_hz: (f64, f64), opts: &DesignOptions) -> Result<(DiscreteModel, FitDiagnostics)> {
-    discretize_to(&fitted.model, opts.fs_hz, opts.discretization, band_hz, opts.discrete_fit_top, opts.discrete_static_gain)
+fn discrete_model(
+    fitted: &Fitted,
+    band_hz: (f64, f64),
+    opts: &DesignOptions,
+) -> Result<(DiscreteModel, FitDiagnostics)> {
+    discretize_to(
+        &fitted.model,
+        opts.fs_hz,
+        opts.discretization,
+        band_hz,
+        opts.discrete_fit_top,
+        opts.discrete_static_gain,
+    )
 }
 
 /// The latency-dependent part of [`design_axis`]: `opts` must be the

@@ -51,7 +51,13 @@ pub fn tooth_passing_hz(spindle_rpm: f64, teeth: u32) -> f64 {
 /// (paper §3.2, Fig. 5). Each band is `k·TPF · (1 ± rel_half_width)` (Hz).
 /// Harmonics above `max_hz` (the usable band: Nyquist or the FRF's last
 /// coherent line) are dropped; it is an error if none remains.
-pub fn from_tooth_passing(spindle_rpm: f64, teeth: u32, harmonics: u32, rel_half_width: f64, max_hz: f64) -> Result<Vec<Band>> {
+pub fn from_tooth_passing(
+    spindle_rpm: f64,
+    teeth: u32,
+    harmonics: u32,
+    rel_half_width: f64,
+    max_hz: f64,
+) -> Result<Vec<Band>> {
     if !(spindle_rpm.is_finite() && spindle_rpm > 0.0) {
         bail!("--spindle-rpm {spindle_rpm}: must be a positive number of rev/min");
     }
@@ -147,11 +153,7 @@ pub fn band_mask(freq_hz: &[f64], bands: &[Band]) -> Vec<bool> {
 
 /// One-line list of bands, e.g. `180–220 Hz (TPF 200.0 Hz), 380–420 Hz (…)`.
 pub fn describe(bands: &[Band]) -> String {
-    bands
-        .iter()
-        .map(|b| format!("{:.0}–{:.0} Hz ({})", b.lo_hz, b.hi_hz, b.label))
-        .collect::<Vec<_>>()
-        .join(", ")
+    bands.iter().map(|b| format!("{:.0}–{:.0} Hz ({})", b.lo_hz, b.hi_hz, b.label)).collect::<Vec<_>>().join(", ")
 }
 
 /// One-sided power spectral density by Welch's method (Hann window, 50 %
@@ -161,7 +163,8 @@ pub fn welch_psd(x: &[f64], fs_hz: f64, segment_len: usize) -> Result<(Vec<f64>,
     if segment_len < 16 || x.len() < segment_len {
         bail!("record of {} samples is too short for a spectrum with {segment_len}-sample segments", x.len());
     }
-    let window: Vec<f64> = (0..segment_len).map(|i| 0.5 - 0.5 * (2.0 * PI * i as f64 / segment_len as f64).cos()).collect();
+    let window: Vec<f64> =
+        (0..segment_len).map(|i| 0.5 - 0.5 * (2.0 * PI * i as f64 / segment_len as f64).cos()).collect();
     let w_power: f64 = window.iter().map(|w| w * w).sum();
     let fft = FftPlanner::<f64>::new().plan_fft_forward(segment_len);
     let half = segment_len / 2;
@@ -210,7 +213,14 @@ pub struct SpectrumPeakOptions {
 
 impl Default for SpectrumPeakOptions {
     fn default() -> Self {
-        Self { segment_len: 4096, min_prominence: 30.0, min_relative_power: 1e-3, rel_half_width: 0.05, min_half_width_hz: 20.0, max_bands: 12 }
+        Self {
+            segment_len: 4096,
+            min_prominence: 30.0,
+            min_relative_power: 1e-3,
+            rel_half_width: 0.05,
+            min_half_width_hz: 20.0,
+            max_bands: 12,
+        }
     }
 }
 
@@ -287,7 +297,12 @@ mod tests {
         assert!(parse_band("800-1200").is_err());
         assert!(parse_band("1200:800").is_err());
         assert!(parse_band("x:800").is_err());
-        let v = validate(vec![parse_band("900:1500").unwrap(), parse_band("100:200").unwrap(), parse_band("800:1000").unwrap()], 5000.0, 10.0).unwrap();
+        let v = validate(
+            vec![parse_band("900:1500").unwrap(), parse_band("100:200").unwrap(), parse_band("800:1000").unwrap()],
+            5000.0,
+            10.0,
+        )
+        .unwrap();
         assert_eq!(v.len(), 2);
         assert_eq!((v[0].lo_hz, v[0].hi_hz), (100.0, 200.0));
         assert_eq!((v[1].lo_hz, v[1].hi_hz), (800.0, 1500.0));
@@ -306,10 +321,15 @@ mod tests {
         let x: Vec<f64> = (0..60_000)
             .map(|i| {
                 let t = i as f64 / fs;
-                50.0 + 20.0 * (2.0 * PI * 300.0 * t).sin() + 8.0 * (2.0 * PI * 600.0 * t).sin() + 3.0 * (2.0 * PI * 1370.0 * t).sin() + rng.random_range(-1.0..1.0)
+                50.0 + 20.0 * (2.0 * PI * 300.0 * t).sin()
+                    + 8.0 * (2.0 * PI * 600.0 * t).sin()
+                    + 3.0 * (2.0 * PI * 1370.0 * t).sin()
+                    + rng.random_range(-1.0..1.0)
             })
             .collect();
-        let bands = validate(from_record_spectrum(&x, fs, 5000.0, &SpectrumPeakOptions::default()).unwrap(), 5000.0, 5.0).unwrap();
+        let bands =
+            validate(from_record_spectrum(&x, fs, 5000.0, &SpectrumPeakOptions::default()).unwrap(), 5000.0, 5.0)
+                .unwrap();
         assert_eq!(bands.len(), 3, "{bands:?}");
         for (b, f) in bands.iter().zip([300.0, 600.0, 1370.0]) {
             assert!(b.contains(f), "{b:?} should contain {f}");
@@ -423,10 +443,18 @@ impl BandSpec {
         while let Some(flag) = it.next() {
             let mut value = || it.next().with_context(|| format!("{flag} needs a value"));
             match flag.as_str() {
-                "--spindle-rpm" => rpm = Some(value()?.parse::<f64>().with_context(|| format!("{flag}: not a number"))?),
-                "--teeth" => teeth = Some(value()?.parse::<u32>().with_context(|| format!("{flag}: not a whole number"))?),
-                "--harmonics" => spec.harmonics = value()?.parse().with_context(|| format!("{flag}: not a whole number"))?,
-                "--band-width" => spec.band_width = value()?.parse().with_context(|| format!("{flag}: not a number"))?,
+                "--spindle-rpm" => {
+                    rpm = Some(value()?.parse::<f64>().with_context(|| format!("{flag}: not a number"))?)
+                }
+                "--teeth" => {
+                    teeth = Some(value()?.parse::<u32>().with_context(|| format!("{flag}: not a whole number"))?)
+                }
+                "--harmonics" => {
+                    spec.harmonics = value()?.parse().with_context(|| format!("{flag}: not a whole number"))?
+                }
+                "--band-width" => {
+                    spec.band_width = value()?.parse().with_context(|| format!("{flag}: not a number"))?
+                }
                 "--band" => spec.bands.push(value()?.clone()),
                 "--bands-from" => spec.bands_from = Some(value()?.into()),
                 _ => bail!("{flag}: not a band flag"),

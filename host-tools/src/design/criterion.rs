@@ -15,9 +15,7 @@ use crate::design::bands::Band;
 /// [`crate::numeric::lti::StateSpace::white_noise_gain`].
 pub fn noise_gain(response: impl Fn(f64) -> Complex64, fs_hz: f64) -> f64 {
     let n = 512;
-    let s: f64 = (0..n)
-        .map(|i| response((i as f64 + 0.5) / n as f64 * fs_hz / 2.0).norm_sqr())
-        .sum();
+    let s: f64 = (0..n).map(|i| response((i as f64 + 0.5) / n as f64 * fs_hz / 2.0).norm_sqr()).sum();
     (s / n as f64).sqrt()
 }
 
@@ -94,7 +92,14 @@ pub fn distortion(f_hz: f64, g: Complex64, h: Complex64, lag: usize, fs_hz: f64)
 /// `None` (flat), else with the distortion of line i weighted by
 /// `weights[i]` (Σ = 1: the force's share there, [`crate::design::force_spectrum`]);
 /// the noise term stays the mean over the lines (white noise).
-pub fn criterion_j_weighted(grid: &[(f64, Complex64)], h: &[Complex64], weights: Option<&[f64]>, lag: usize, fs_hz: f64, noise: f64) -> f64 {
+pub fn criterion_j_weighted(
+    grid: &[(f64, Complex64)],
+    h: &[Complex64],
+    weights: Option<&[f64]>,
+    lag: usize,
+    fs_hz: f64,
+    noise: f64,
+) -> f64 {
     let Some(weights) = weights else {
         return criterion_j(grid, h, lag, fs_hz, noise);
     };

@@ -187,7 +187,12 @@ pub struct FitDiagnostics {
 /// Discrete model by `method` for the fitted Ĝ(s) at `fs_hz`. `band_hz` is
 /// the band where the compensator must be exact (weighted fully); the rest
 /// of 0..0.45 fs is matched with a lower weight ([`Discretization::Fit`]).
-pub fn discretize(model: &PoleResidueModel, fs_hz: f64, method: Discretization, band_hz: (f64, f64)) -> Result<(DiscreteModel, FitDiagnostics)> {
+pub fn discretize(
+    model: &PoleResidueModel,
+    fs_hz: f64,
+    method: Discretization,
+    band_hz: (f64, f64),
+) -> Result<(DiscreteModel, FitDiagnostics)> {
     discretize_to(model, fs_hz, method, band_hz, MATCH_BAND_FRACTION, StaticGain::Exact)
 }
 
@@ -213,7 +218,14 @@ pub enum StaticGain {
 /// [`discretize`] with the fit's grid running up to `top_fraction`·fs
 /// ([`MATCH_BAND_FRACTION`] or [`NYQUIST_FIT_FRACTION`]); the hold
 /// equivalents ignore it and `static_gain`).
-pub fn discretize_to(model: &PoleResidueModel, fs_hz: f64, method: Discretization, band_hz: (f64, f64), top_fraction: f64, static_gain: StaticGain) -> Result<(DiscreteModel, FitDiagnostics)> {
+pub fn discretize_to(
+    model: &PoleResidueModel,
+    fs_hz: f64,
+    method: Discretization,
+    band_hz: (f64, f64),
+    top_fraction: f64,
+    static_gain: StaticGain,
+) -> Result<(DiscreteModel, FitDiagnostics)> {
     match method {
         Discretization::Foh => Ok((hold(model, fs_hz, true), FitDiagnostics::default())),
         Discretization::Zoh => Ok((hold(model, fs_hz, false), FitDiagnostics::default())),
@@ -319,17 +331,31 @@ pub(crate) fn fit_grid(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64)
 /// and advance `advance` (e.g. those [`discretize`] chose for a neighbouring
 /// model), so that models of a set-up that changes share one state layout
 /// (the time-varying smoother of [`crate::design::two_state`]).
-pub fn fit_with_structure(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64), taps: usize, advance: usize) -> Result<DiscreteModel> {
+pub fn fit_with_structure(
+    model: &PoleResidueModel,
+    fs_hz: f64,
+    band_hz: (f64, f64),
+    taps: usize,
+    advance: usize,
+) -> Result<DiscreteModel> {
     if taps > MAX_FIR_TAPS || advance > MAX_ADVANCE {
         bail!("discrete model: {taps} FIR taps / advance {advance} exceed the fit's limits ({MAX_FIR_TAPS} / {MAX_ADVANCE})");
     }
     let (ls, _, _) = unit_circle_problem(model, fs_hz, band_hz, MATCH_BAND_FRACTION, StaticGain::Exact)?;
-    ls.solve(taps, advance).map(|x| x.0).ok_or_else(|| anyhow::anyhow!("discrete model: the fit with {taps} taps and advance {advance} is ill-conditioned"))
+    ls.solve(taps, advance).map(|x| x.0).ok_or_else(|| {
+        anyhow::anyhow!("discrete model: the fit with {taps} taps and advance {advance} is ill-conditioned")
+    })
 }
 
 /// The least-squares problem of the unit-circle fit of `model`, its grid's
 /// lines in the band, and the number of modes above Nyquist.
-fn unit_circle_problem(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64), top_fraction: f64, static_gain: StaticGain) -> Result<(LeastSquares, Vec<f64>, usize)> {
+fn unit_circle_problem(
+    model: &PoleResidueModel,
+    fs_hz: f64,
+    band_hz: (f64, f64),
+    top_fraction: f64,
+    static_gain: StaticGain,
+) -> Result<(LeastSquares, Vec<f64>, usize)> {
     let t = 1.0 / fs_hz;
     let nyq = PI * fs_hz; // rad/s
     let kept: Vec<(Complex64, bool)> = model
@@ -356,7 +382,13 @@ fn unit_circle_problem(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64)
 
 /// The unit-circle least-squares fit ([`Discretization::Fit`]); the number of FIR taps
 /// is raised while each tap lowers the in-band match error enough.
-fn fit_unit_circle(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64), top_fraction: f64, static_gain: StaticGain) -> Result<(DiscreteModel, FitDiagnostics)> {
+fn fit_unit_circle(
+    model: &PoleResidueModel,
+    fs_hz: f64,
+    band_hz: (f64, f64),
+    top_fraction: f64,
+    static_gain: StaticGain,
+) -> Result<(DiscreteModel, FitDiagnostics)> {
     let (ls, band_grid, above) = unit_circle_problem(model, fs_hz, band_hz, top_fraction, static_gain)?;
     // Every (advance, taps) pair, then the least complex one whose in-band
     // match error is within reach of the best: below MATCH_TARGET, or within
@@ -374,13 +406,10 @@ fn fit_unit_circle(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64), to
         bail!("discrete model: every unit-circle fit was ill-conditioned (condition > {MAX_CONDITION:.0e}); two fitted modes may coincide: lower --max-order or use --discretization foh");
     }
     let good_enough = MATCH_TARGET.max(MATCH_SLACK * best_err);
-    let best = tried
-        .into_iter()
-        .filter(|t| t.2 <= good_enough)
-        .min_by(|a, b| {
-            let cost = |t: &(DiscreteModel, FitDiagnostics, f64)| t.0.advance + t.0.fir.len();
-            cost(a).cmp(&cost(b)).then(a.2.total_cmp(&b.2))
-        });
+    let best = tried.into_iter().filter(|t| t.2 <= good_enough).min_by(|a, b| {
+        let cost = |t: &(DiscreteModel, FitDiagnostics, f64)| t.0.advance + t.0.fir.len();
+        cost(a).cmp(&cost(b)).then(a.2.total_cmp(&b.2))
+    });
     let (dm, diag, _) = best.expect("at least one fit");
     Ok((dm, diag))
 }
@@ -434,7 +463,15 @@ pub(crate) fn columns_at(poles: &[(Complex64, bool)], z: Complex64) -> Vec<Compl
 }
 
 impl LeastSquares {
-    fn new(kept: &[(Complex64, bool)], fs_hz: f64, t: f64, grid: &[f64], truth: &[Complex64], band_hz: (f64, f64), static_gain: Option<f64>) -> Self {
+    fn new(
+        kept: &[(Complex64, bool)],
+        fs_hz: f64,
+        t: f64,
+        grid: &[f64],
+        truth: &[Complex64],
+        band_hz: (f64, f64),
+        static_gain: Option<f64>,
+    ) -> Self {
         let poles: Vec<(Complex64, bool)> = kept.iter().map(|(p, pair)| ((p * t).exp(), *pair)).collect();
         let base_cols = poles.iter().map(|(_, pair)| if *pair { 2 } else { 1 }).sum::<usize>() + 1;
         let ncol = base_cols + MAX_FIR_TAPS;

@@ -87,7 +87,13 @@ impl CellSpectrum {
 /// record (Welch average of [`WELCH_SEGMENT`]-sample segments), summed per
 /// cell, less the noise R·Σw²/|Ĝ|² each bin carries.
 /// The errors say what is wrong and what to do.
-pub fn estimate(y: &[f64], fs_hz: f64, g: &dyn Fn(f64) -> Complex64, r: f64, cells: &[(f64, f64)]) -> Result<CellSpectrum> {
+pub fn estimate(
+    y: &[f64],
+    fs_hz: f64,
+    g: &dyn Fn(f64) -> Complex64,
+    r: f64,
+    cells: &[(f64, f64)],
+) -> Result<CellSpectrum> {
     let n = y.len();
     if let Some(k) = y.iter().position(|v| !v.is_finite()) {
         bail!("sample {k} is not finite");

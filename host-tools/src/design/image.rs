@@ -30,9 +30,16 @@ impl AxisDesign {
 
 /// The image of the per-axis `designs` (method Paper when they were
 /// designed by `--method paper`).
-pub fn build_image(designs: &[AxisDesign], fs_hz: u32, latency: usize, full_scale_n: f64, source_sha256: [u8; 32]) -> Result<CoeffImage> {
+pub fn build_image(
+    designs: &[AxisDesign],
+    fs_hz: u32,
+    latency: usize,
+    full_scale_n: f64,
+    source_sha256: [u8; 32],
+) -> Result<CoeffImage> {
     let axes: Vec<ImageAxis> = designs.iter().map(AxisDesign::image_axis).collect();
-    let method = if designs.iter().any(|d| d.paper.is_some()) { DesignMethod::Paper } else { DesignMethod::VectorFitting };
+    let method =
+        if designs.iter().any(|d| d.paper.is_some()) { DesignMethod::Paper } else { DesignMethod::VectorFitting };
     crate::realize::image::build_image(&axes, method, fs_hz, latency, full_scale_n, source_sha256)
 }
 
@@ -56,6 +63,6 @@ pub fn build_parallel_image(
         images.push(BandImage { lo_hz: band.lo_hz as f32, hi_hz: band.hi_hz as f32, axes: img.axes });
     }
     let latency = u16::try_from(latency).context("latency too large")?;
-    ParallelImage::new(fs_hz, latency, method, source_sha256, created, &images).map_err(|e| anyhow::anyhow!("parallel image: {e}"))
+    ParallelImage::new(fs_hz, latency, method, source_sha256, created, &images)
+        .map_err(|e| anyhow::anyhow!("parallel image: {e}"))
 }
-

@@ -205,12 +205,7 @@ pub fn design(dm: &DiscreteModel, q: f64, r: f64, lag: usize) -> Result<KalmanDe
     let n = plant.a.nrows();
     let i_kc = DMatrix::<f64>::identity(n, n) - &k * plant.c.transpose();
     let out = plant.output_index();
-    let comp = StateSpace {
-        a: &plant.a * &i_kc,
-        b: &plant.a * &k,
-        c: i_kc.row(out).transpose(),
-        d: k[out],
-    };
+    let comp = StateSpace { a: &plant.a * &i_kc, b: &plant.a * &k, c: i_kc.row(out).transpose(), d: k[out] };
     let radius = comp.spectral_radius();
     if !(radius < 1.0) {
         bail!("Kalman compensator is not stable (spectral radius {radius:.9}); the fitted model may be unobservable");

@@ -12,9 +12,9 @@ use dynocomp_core::budget::{load_permille, AxisShape, CostModel};
 use serde::Serialize;
 use std::time::Instant;
 
-use crate::design::paper_orders::design_axis;
 use crate::design::axis::{design_prepared, prepare_axis, AxisDesign, DesignOptions, PreparedAxis};
 use crate::design::discretize::{Discretization, NYQUIST_FIT_FRACTION};
+use crate::design::paper_orders::design_axis;
 use crate::frf::AxisFrf;
 
 /// Latency designed first, and kept unless a longer one buys accuracy (samples).
@@ -124,8 +124,13 @@ fn shortfall(designs: &[TimedDesign], axis_names: &[String]) -> String {
                 if flat < FLAT_BAND_SHORT * comp {
                     Some(format!("axis {name} flat to {flat:.0} of {comp:.0} Hz"))
                 } else {
-                    (d.predicted_distortion > PREDICTED_SHORT)
-                        .then(|| format!("axis {name} predicts {:.2} % of distortion (> {:.1} %)", 100.0 * d.predicted_distortion, 100.0 * PREDICTED_SHORT))
+                    (d.predicted_distortion > PREDICTED_SHORT).then(|| {
+                        format!(
+                            "axis {name} predicts {:.2} % of distortion (> {:.1} %)",
+                            100.0 * d.predicted_distortion,
+                            100.0 * PREDICTED_SHORT
+                        )
+                    })
                 }
             }
         })
@@ -139,7 +144,8 @@ fn box_load(designs: &[TimedDesign], fs_hz: f64) -> Option<u32> {
 }
 
 fn box_load_of<'a>(designs: impl Iterator<Item = &'a TimedDesign>, fs_hz: f64) -> Option<u32> {
-    let shapes: Option<Vec<AxisShape>> = designs.map(|(d, _)| d.as_ref().ok().map(|d| AxisShape::of(&d.filter))).collect();
+    let shapes: Option<Vec<AxisShape>> =
+        designs.map(|(d, _)| d.as_ref().ok().map(|d| AxisShape::of(&d.filter))).collect();
     Some(load_permille(CostModel::CORTEX_M4.sample_cost(&shapes?).high, fs_hz as u32))
 }
 
@@ -181,7 +187,9 @@ pub fn pick(trials: &[LatencyTrial], limit_permille: Option<u32>) -> usize {
         .iter()
         .copied()
         .find(|i| good(&trials[*i]))
-        .or_else(|| candidates.iter().copied().min_by(|a, b| worst_ratio(&trials[*a]).total_cmp(&worst_ratio(&trials[*b]))))
+        .or_else(|| {
+            candidates.iter().copied().min_by(|a, b| worst_ratio(&trials[*a]).total_cmp(&worst_ratio(&trials[*b])))
+        })
         .unwrap_or(0)
 }
 
@@ -214,8 +222,18 @@ pub fn design_axes_choosing_latency(
     let names: Vec<String> = axes.iter().map(|a| crate::frf::axis_name(a.axis).to_string()).collect();
     // Each axis fitted once for all rounds: only the discrete model's fit
     // top, the latency and what follows from them change between rounds.
-    let prepared = if opts.paper_orders_auto { Vec::new() } else { on_threads(axes.iter().zip(r), |(a, rv)| prepare_axis(freq_hz, a, *rv, opts)) };
-    let round = |o: &DesignOptions| if opts.paper_orders_auto { design_axes(freq_hz, axes, r, o) } else { design_round(&prepared, o) };
+    let prepared = if opts.paper_orders_auto {
+        Vec::new()
+    } else {
+        on_threads(axes.iter().zip(r), |(a, rv)| prepare_axis(freq_hz, a, *rv, opts))
+    };
+    let round = |o: &DesignOptions| {
+        if opts.paper_orders_auto {
+            design_axes(freq_hz, axes, r, o)
+        } else {
+            design_round(&prepared, o)
+        }
+    };
     let first = round(&DesignOptions { lag: DEFAULT_LATENCY, ..opts.clone() });
     let reason = shortfall(&first, &names);
     let mut trials = vec![trial(DEFAULT_LATENCY, &first, opts.fs_hz)];
@@ -273,13 +291,18 @@ pub fn describe(c: &LatencyChoice, axis_names: &[&str]) -> String {
         .tried
         .iter()
         .map(|t| {
-            let e: Vec<String> = t.predicted_error.iter().map(|e| e.map_or("failed".into(), |e| format!("{:.2}", 100.0 * e))).collect();
+            let e: Vec<String> =
+                t.predicted_error.iter().map(|e| e.map_or("failed".into(), |e| format!("{:.2}", 100.0 * e))).collect();
             let load = t.load_permille.map_or(String::new(), |p| format!(", load {:.1} %", f64::from(p) / 10.0));
             format!("{} at {}{}", e.join("/"), t.latency, load)
         })
         .collect();
     let nyq: Vec<&str> = axis_names.iter().zip(&c.fit_to_nyquist).filter(|(_, t)| **t).map(|(n, _)| *n).collect();
-    let nyq = if nyq.is_empty() { String::new() } else { format!("; discrete model of {} fitted up to Nyquist (smaller predicted error)", nyq.join(", ")) };
+    let nyq = if nyq.is_empty() {
+        String::new()
+    } else {
+        format!("; discrete model of {} fitted up to Nyquist (smaller predicted error)", nyq.join(", "))
+    };
     format!(
         "latency {} samples, chosen because at {}: {}; predicted error {} %: {}{nyq}",
         c.chosen,
@@ -301,22 +324,38 @@ mod tests {
     #[test]
     fn keeps_the_shortest_latency_within_reach_of_every_axis_best() {
         // x gains 3x from 4 to 6, nothing more at 8: 6 is kept.
-        let tr = [t(4, &[Some(0.09), Some(0.01)], Some(80)), t(6, &[Some(0.03), Some(0.01)], Some(85)), t(8, &[Some(0.029), Some(0.01)], Some(90))];
+        let tr = [
+            t(4, &[Some(0.09), Some(0.01)], Some(80)),
+            t(6, &[Some(0.03), Some(0.01)], Some(85)),
+            t(8, &[Some(0.029), Some(0.01)], Some(90)),
+        ];
         assert_eq!(pick(&tr, Some(600)), 1);
         // Negative control: with no gain anywhere, the default stays.
-        let flat = [t(4, &[Some(0.03), Some(0.01)], Some(80)), t(6, &[Some(0.029), Some(0.01)], Some(85)), t(8, &[Some(0.028), Some(0.01)], Some(90))];
+        let flat = [
+            t(4, &[Some(0.03), Some(0.01)], Some(80)),
+            t(6, &[Some(0.029), Some(0.01)], Some(85)),
+            t(8, &[Some(0.028), Some(0.01)], Some(90)),
+        ];
         assert_eq!(pick(&flat, Some(600)), 0);
     }
 
     #[test]
     fn an_axis_that_fails_at_the_default_is_rescued_and_the_load_limit_is_respected() {
-        let tr = [t(4, &[None, Some(0.01)], None), t(6, &[Some(0.05), Some(0.01)], Some(90)), t(8, &[Some(0.02), Some(0.01)], Some(700))];
+        let tr = [
+            t(4, &[None, Some(0.01)], None),
+            t(6, &[Some(0.05), Some(0.01)], Some(90)),
+            t(8, &[Some(0.02), Some(0.01)], Some(700)),
+        ];
         // 8 is best but over the box's limit: 6, the best the box can run.
         assert_eq!(pick(&tr, Some(600)), 1);
         // Without a limit, 8.
         assert_eq!(pick(&tr, None), 2);
         // Axes whose bests lie apart: the least worst ratio (6: 1.2x, 8: 2x).
-        let apart = [t(4, &[Some(0.09), Some(0.09)], Some(80)), t(6, &[Some(0.03), Some(0.024)], Some(85)), t(8, &[Some(0.06), Some(0.02)], Some(90))];
+        let apart = [
+            t(4, &[Some(0.09), Some(0.09)], Some(80)),
+            t(6, &[Some(0.03), Some(0.024)], Some(85)),
+            t(8, &[Some(0.06), Some(0.02)], Some(90)),
+        ];
         assert_eq!(pick(&apart, Some(600)), 1);
     }
 }

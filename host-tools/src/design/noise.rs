@@ -16,14 +16,27 @@ pub fn noise_variances(idle: Option<&Path>, noise_variance: Option<f64>, frf: &F
             let rec = io::signal_csv::read_signal_csv(path)?;
             for a in &frf.axes {
                 let Some(x) = rec.channel(a.axis) else {
-                    bail!("{}: no column f{} for axis {} of the FRF", path.display(), axis_name(a.axis), axis_name(a.axis));
+                    bail!(
+                        "{}: no column f{} for axis {} of the FRF",
+                        path.display(),
+                        axis_name(a.axis),
+                        axis_name(a.axis)
+                    );
                 };
                 if x.len() < 100 {
-                    bail!("{}: only {} samples; an idle record needs at least 100 to estimate R", path.display(), x.len());
+                    bail!(
+                        "{}: only {} samples; an idle record needs at least 100 to estimate R",
+                        path.display(),
+                        x.len()
+                    );
                 }
                 let var = crate::metrics::sample_variance(x);
                 if !(var > 0.0) {
-                    bail!("{}: column f{} has zero variance; is it a real idle record?", path.display(), axis_name(a.axis));
+                    bail!(
+                        "{}: column f{} has zero variance; is it a real idle record?",
+                        path.display(),
+                        axis_name(a.axis)
+                    );
                 }
                 r[a.axis] = Some(var);
             }
@@ -36,7 +49,9 @@ pub fn noise_variances(idle: Option<&Path>, noise_variance: Option<f64>, frf: &F
                 r[a.axis] = Some(v);
             }
         }
-        (None, None) => bail!("give --idle FILE (a record without engagement) or --noise-variance N2 to set the measurement noise R"),
+        (None, None) => bail!(
+            "give --idle FILE (a record without engagement) or --noise-variance N2 to set the measurement noise R"
+        ),
     }
     Ok(r)
 }

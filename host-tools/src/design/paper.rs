@@ -10,9 +10,9 @@ use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 use std::f64::consts::PI;
 
+use crate::design::kalman::KalmanDesign;
 pub use crate::fit::rfp::condition_number;
 use crate::fit::rfp::RationalTf;
-use crate::design::kalman::KalmanDesign;
 use crate::numeric::lti::StateSpace;
 
 /// Condition numbers and ranks along the paper's path (reported by
@@ -64,7 +64,15 @@ pub struct ContinuousSs {
 pub fn companion_form(tf: &RationalTf) -> ContinuousSs {
     let n = tf.na();
     let d = if tf.nb() == n { tf.b[n] } else { 0.0 };
-    let a = DMatrix::<f64>::from_fn(n, n, |i, j| if i == 0 { -tf.a[n - 1 - j] } else if i == j + 1 { 1.0 } else { 0.0 });
+    let a = DMatrix::<f64>::from_fn(n, n, |i, j| {
+        if i == 0 {
+            -tf.a[n - 1 - j]
+        } else if i == j + 1 {
+            1.0
+        } else {
+            0.0
+        }
+    });
     let mut b = DVector::<f64>::zeros(n);
     b[0] = 1.0;
     // strictly proper numerator B − d·A, coefficient of s'^(n−1−j) in C_j
@@ -271,7 +279,14 @@ pub fn tustin_prewarped(ss: &ContinuousSs, t: f64, omega_p: f64) -> Result<State
 ///    x̂̇ = (A_e − K C_e) x̂ + K F_m, F̂_a = C_0 x̂;
 /// 5. the bilinear (Tustin) transform with frequency prewarping at f_p, exact
 ///    at f_p: H_d(e^{j2πf_p/fs}) = H_c(j2πf_p) ([`tustin_prewarped`]).
-pub fn design(tf: &RationalTf, fs_hz: f64, q: f64, r: f64, prewarp_hz: f64, diag: &mut PaperDiagnostics) -> Result<KalmanDesign> {
+pub fn design(
+    tf: &RationalTf,
+    fs_hz: f64,
+    q: f64,
+    r: f64,
+    prewarp_hz: f64,
+    diag: &mut PaperDiagnostics,
+) -> Result<KalmanDesign> {
     if !(r > 0.0 && r.is_finite() && q > 0.0 && q.is_finite()) {
         bail!("Q and R must be positive and finite (q = {q}, R = {r})");
     }
@@ -314,7 +329,15 @@ pub fn design(tf: &RationalTf, fs_hz: f64, q: f64, r: f64, prewarp_hz: f64, diag
     if !(radius < 1.0) {
         bail!("discretized compensator is not stable (spectral radius {radius:.9})");
     }
-    Ok(KalmanDesign { compensator: disc, kalman_gain: k, dare_residual: care.residual, closed_loop_radius: radius, lag: 0, q, r })
+    Ok(KalmanDesign {
+        compensator: disc,
+        kalman_gain: k,
+        dare_residual: care.residual,
+        closed_loop_radius: radius,
+        lag: 0,
+        q,
+        r,
+    })
 }
 
 /// Continuous response C (jωI − A)⁻¹ B + D of `ss` at ω (rad per time unit).

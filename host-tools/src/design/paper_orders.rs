@@ -53,7 +53,8 @@ pub fn design_axis_auto(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOpt
     };
     let with = |nb: usize, na: usize| {
         let mut o = opts.clone();
-        o.method = FitMethod::Paper { rfp: crate::fit::rfp::RfpOptions { nb, na, ..rfp.clone() }, prewarp_hz: *prewarp_hz };
+        o.method =
+            FitMethod::Paper { rfp: crate::fit::rfp::RfpOptions { nb, na, ..rfp.clone() }, prewarp_hz: *prewarp_hz };
         o
     };
     let mut workable: Vec<(usize, usize, f64)> = Vec::new();
@@ -79,7 +80,11 @@ pub fn design_axis_auto(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOpt
     for &(nb, na, fit) in workable.iter().take(MAX_FULL_TRIALS) {
         match axis::design_axis(freq_hz, frf, r, &with(nb, na)) {
             Ok(mut d) => {
-                let skipped = if failures.is_empty() { String::new() } else { format!("; better-fitting pairs failed the design: {}", failures.join("; ")) };
+                let skipped = if failures.is_empty() {
+                    String::new()
+                } else {
+                    format!("; better-fitting pairs failed the design: {}", failures.join("; "))
+                };
                 d.notes.insert(
                     0,
                     format!(

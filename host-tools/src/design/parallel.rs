@@ -6,9 +6,9 @@
 use anyhow::{bail, Context, Result};
 use dynocomp_core::image::MAX_BANDS;
 
-use crate::design::bands::Band;
-use crate::design::bands::crossovers;
 use crate::design::axis::{AxisDesign, DesignOptions};
+use crate::design::bands::crossovers;
+use crate::design::bands::Band;
 use crate::design::paper_orders::design_axis;
 use crate::frf::{axis_name, Frf};
 
@@ -44,12 +44,20 @@ pub fn design_regions(bands: &[Band], f_first: f64, f_last: f64) -> Result<Vec<B
 /// Design every axis of `frf` once per band over its region
 /// ([`design_regions`]); `r[axis]` is R
 /// (N²). Returns the designs per band, then per axis.
-pub fn design_parallel(frf: &Frf, r: &[Option<f64>; 3], opts: &DesignOptions, bands: &[Band]) -> Result<Vec<Vec<AxisDesign>>> {
+pub fn design_parallel(
+    frf: &Frf,
+    r: &[Option<f64>; 3],
+    opts: &DesignOptions,
+    bands: &[Band],
+) -> Result<Vec<Vec<AxisDesign>>> {
     if bands.is_empty() {
         bail!("--parallel needs bands: give --spindle-rpm and --teeth, --band LO:HI or --bands-from RECORD");
     }
     if bands.len() > MAX_BANDS {
-        bail!("--parallel: {} bands, a parallel image holds at most {MAX_BANDS}; use fewer --harmonics or bands", bands.len());
+        bail!(
+            "--parallel: {} bands, a parallel image holds at most {MAX_BANDS}; use fewer --harmonics or bands",
+            bands.len()
+        );
     }
     let n = frf.freq_hz.len();
     let regions = design_regions(bands, frf.freq_hz[0], frf.freq_hz[n - 1])?;
@@ -60,7 +68,10 @@ pub fn design_parallel(frf: &Frf, r: &[Option<f64>; 3], opts: &DesignOptions, ba
         for a in &frf.axes {
             let rv = r[a.axis].ok_or_else(|| anyhow::anyhow!("no R for axis {}", axis_name(a.axis)))?;
             let d = design_axis(&frf.freq_hz, a, rv, &band_opts).with_context(|| {
-                format!("band {k} ({:.0}-{:.0} Hz, {}; designed over {:.0}-{:.0} Hz)", band.lo_hz, band.hi_hz, band.label, region.lo_hz, region.hi_hz)
+                format!(
+                    "band {k} ({:.0}-{:.0} Hz, {}; designed over {:.0}-{:.0} Hz)",
+                    band.lo_hz, band.hi_hz, band.label, region.lo_hz, region.hi_hz
+                )
             })?;
             per_axis.push(d);
         }

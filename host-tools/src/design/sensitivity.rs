@@ -72,7 +72,9 @@ impl Sensitivity {
     /// The sentence a user acts on.
     pub fn advice(&self) -> String {
         let one = match self.one_percent_pct() {
-            Some(x) => format!("; it exceeds {:.0} % beyond {}", 100.0 * ONE_PERCENT.max(2.0 * self.nominal), fmt_mag(x)),
+            Some(x) => {
+                format!("; it exceeds {:.0} % beyond {}", 100.0 * ONE_PERCENT.max(2.0 * self.nominal), fmt_mag(x))
+            }
             None => String::new(),
         };
         match self.remeasure_pct() {
@@ -209,7 +211,8 @@ pub fn predict(d: &AxisDesign, opts: &DesignOptions) -> Option<Sensitivity> {
     let width: f64 = ranges.iter().map(|b| b.1 - b.0).sum();
     let freqs = criterion_grid(&ranges);
     let h = d.kalman.compensator.freq_responses(&freqs, fs);
-    let base: Vec<(Complex64, Complex64)> = freqs.iter().map(|f| (d.fitted_frf(*f), terms_frf(&d.model, &idx, *f))).collect();
+    let base: Vec<(Complex64, Complex64)> =
+        freqs.iter().map(|f| (d.fitted_frf(*f), terms_frf(&d.model, &idx, *f))).collect();
     // The design's own force spectrum: flat of `force_rms`, or the record's.
     let force = d.force_spectrum.as_ref();
     let noise = noise_term(d.kalman.r, fs, width, force.map_or(opts.force_rms, |s| s.force_rms_n));
@@ -254,12 +257,14 @@ mod tests {
         assert_eq!(idx, vec![1, 2]);
         let s = shifted_model(&m, &idx, 0.03);
         // Independent truth: the same modes built at 1.03 × f.
-        let truth = PoleResidueModel::from_modes(&[(400.0, 0.03, 0.1), (2300.0 * 1.03, 0.02, 0.8), (4000.0 * 1.03, 0.03, 0.1)]);
+        let truth =
+            PoleResidueModel::from_modes(&[(400.0, 0.03, 0.1), (2300.0 * 1.03, 0.02, 0.8), (4000.0 * 1.03, 0.03, 0.1)]);
         for f in [0.0, 100.0, 1000.0, 2300.0, 2369.0, 3000.0, 4120.0] {
             assert!((s.frf(f) - truth.frf(f)).norm() < 1e-9 * truth.frf(f).norm().max(1.0), "f {f}");
         }
         // Negative control: the machine mode did not move.
-        let wrong = PoleResidueModel::from_modes(&[(412.0, 0.03, 0.1), (2300.0 * 1.03, 0.02, 0.8), (4000.0 * 1.03, 0.03, 0.1)]);
+        let wrong =
+            PoleResidueModel::from_modes(&[(412.0, 0.03, 0.1), (2300.0 * 1.03, 0.02, 0.8), (4000.0 * 1.03, 0.03, 0.1)]);
         assert!((s.frf(412.0) - wrong.frf(412.0)).norm() > 0.1);
     }
 

@@ -9,13 +9,13 @@ use serde::Serialize;
 use std::f64::consts::PI;
 use std::time::Instant;
 
-use crate::design::bands::{band_mask, Band};
 use crate::design::axis::{coherent_band, AxisDesign, DesignOptions, FitMethod};
-use crate::design::paper_orders::design_axis;
+use crate::design::bands::{band_mask, Band};
 use crate::design::criterion::flat_band;
+use crate::design::paper::PaperDiagnostics;
+use crate::design::paper_orders::design_axis;
 use crate::fit::relative_rms_error;
 use crate::frf::{axis_name, AxisFrf, Frf};
-use crate::design::paper::PaperDiagnostics;
 use crate::realize::quantize::filter_response;
 
 /// One method on one axis.
@@ -120,7 +120,9 @@ fn masks(setup: &CompareSetup, a: &AxisFrf) -> (Vec<bool>, Vec<bool>, (f64, f64)
         .freq_hz
         .iter()
         .enumerate()
-        .map(|(k, f)| *f >= band.0 && *f <= band.1 && a.coherence.as_ref().is_none_or(|c| c[k] >= setup.base.coherence_threshold))
+        .map(|(k, f)| {
+            *f >= band.0 && *f <= band.1 && a.coherence.as_ref().is_none_or(|c| c[k] >= setup.base.coherence_threshold)
+        })
         .collect();
     if setup.bands.is_empty() {
         return (coherent, vec![false; setup.freq_hz.len()], band);
@@ -223,13 +225,20 @@ impl ParallelDesign {
         self.segments
             .iter()
             .enumerate()
-            .map(|(k, (_, d))| filter_response(&d.filter, f_hz, self.fs_hz) * crate::offline::bandsplit::band_gain(f_hz, k, &self.crossovers_hz))
+            .map(|(k, (_, d))| {
+                filter_response(&d.filter, f_hz, self.fs_hz)
+                    * crate::offline::bandsplit::band_gain(f_hz, k, &self.crossovers_hz)
+            })
             .sum()
     }
 
     /// Combined model Σ_k B_k(f)·Ĝ_k(f).
     pub fn fitted_frf(&self, f_hz: f64) -> Complex64 {
-        self.segments.iter().enumerate().map(|(k, (_, d))| d.fitted_frf(f_hz) * crate::offline::bandsplit::band_gain(f_hz, k, &self.crossovers_hz)).sum()
+        self.segments
+            .iter()
+            .enumerate()
+            .map(|(k, (_, d))| d.fitted_frf(f_hz) * crate::offline::bandsplit::band_gain(f_hz, k, &self.crossovers_hz))
+            .sum()
     }
 
     /// Total order (sum over the segments).
@@ -250,13 +259,21 @@ pub fn design_parallel(setup: &CompareSetup, a: &AxisFrf, r: f64) -> Result<Para
     for (k, (seg, fit)) in segments.iter().enumerate() {
         // Orders na = 2, 4, …, the user's na (same na − nb): keep the one
         // with the smallest fit error on the segment's coherent lines.
-        let seg_lines: Vec<bool> = setup.freq_hz.iter().zip(inside.iter().zip(&outside)).map(|(f, (i, o))| (*i || *o) && *f >= seg.0 && *f <= seg.1).collect();
+        let seg_lines: Vec<bool> = setup
+            .freq_hz
+            .iter()
+            .zip(inside.iter().zip(&outside))
+            .map(|(f, (i, o))| (*i || *o) && *f >= seg.0 && *f <= seg.1)
+            .collect();
         let mut best: Option<(f64, AxisDesign)> = None;
         let mut errors = Vec::new();
         for na in (2..=rfp.na).step_by(2) {
             let nb = na.saturating_sub(rfp.na - rfp.nb);
             let opts = DesignOptions {
-                method: FitMethod::Paper { rfp: crate::fit::rfp::RfpOptions { nb, na, ..rfp.clone() }, prewarp_hz: None },
+                method: FitMethod::Paper {
+                    rfp: crate::fit::rfp::RfpOptions { nb, na, ..rfp.clone() },
+                    prewarp_hz: None,
+                },
                 bands: vec![Band { lo_hz: fit.0, hi_hz: fit.1, label: format!("segment {}", k + 1) }],
                 // this loop is the segment's order search
                 paper_orders_auto: false,
@@ -264,7 +281,8 @@ pub fn design_parallel(setup: &CompareSetup, a: &AxisFrf, r: f64) -> Result<Para
             };
             match design_axis(setup.freq_hz, a, r, &opts) {
                 Ok(d) => {
-                    let err = finite(relative_rms_error(|f| d.fitted_frf(f), setup.freq_hz, &a.frf, &seg_lines)).unwrap_or(f64::INFINITY);
+                    let err = finite(relative_rms_error(|f| d.fitted_frf(f), setup.freq_hz, &a.frf, &seg_lines))
+                        .unwrap_or(f64::INFINITY);
                     if best.as_ref().is_none_or(|b| err < b.0) {
                         best = Some((err, d));
                     }
@@ -273,7 +291,14 @@ pub fn design_parallel(setup: &CompareSetup, a: &AxisFrf, r: f64) -> Result<Para
             }
         }
         let Some((_, d)) = best else {
-            anyhow::bail!("segment {} ({:.0}–{:.0} Hz), every order 2..={} failed: {}", k + 1, seg.0, seg.1, rfp.na, errors.join("; "));
+            anyhow::bail!(
+                "segment {} ({:.0}–{:.0} Hz), every order 2..={} failed: {}",
+                k + 1,
+                seg.0,
+                seg.1,
+                rfp.na,
+                errors.join("; ")
+            );
         };
         designs.push((*seg, d));
     }
@@ -339,7 +364,11 @@ pub fn compare_axis(setup: &CompareSetup, a: &AxisFrf, r: f64) -> AxisComparison
     let whole_paper = DesignOptions { method: setup.paper.clone(), bands: Vec::new(), ..setup.base.clone() };
     rows.push(run_design("paper, whole band", setup, a, r, &whole_paper));
     if setup.bands.is_empty() {
-        rows.push(failed("paper, band-fitted", anyhow::anyhow!("no bands: give --spindle-rpm/--teeth, --band or --bands-from"), 0.0));
+        rows.push(failed(
+            "paper, band-fitted",
+            anyhow::anyhow!("no bands: give --spindle-rpm/--teeth, --band or --bands-from"),
+            0.0,
+        ));
     } else {
         let banded = DesignOptions { method: setup.paper.clone(), bands: setup.bands.clone(), ..setup.base.clone() };
         rows.push(run_design("paper, band-fitted", setup, a, r, &banded));
@@ -371,7 +400,12 @@ pub struct CompareInputs {
 
 /// Run the comparison on every axis of `frf` (no output files).
 pub fn compare(frf: &Frf, inputs: &CompareInputs) -> Comparison {
-    let setup = CompareSetup { freq_hz: &frf.freq_hz, base: inputs.base.clone(), paper: inputs.paper.clone(), bands: inputs.bands.clone() };
+    let setup = CompareSetup {
+        freq_hz: &frf.freq_hz,
+        base: inputs.base.clone(),
+        paper: inputs.paper.clone(),
+        bands: inputs.bands.clone(),
+    };
     let mut axes = Vec::new();
     for a in &frf.axes {
         eprintln!("comparing axis {}…", axis_name(a.axis));

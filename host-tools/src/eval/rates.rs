@@ -12,13 +12,15 @@ use anyhow::Result;
 use num_complex::Complex64;
 use std::time::Instant;
 
-use crate::simulate::{simulate_with, Chatter, Dynamometer, Mode, ModeRanges, MultiAxisDynamometer, SimOutput, SimParams};
-use crate::offline::compensate::compensate_record;
 use crate::design::axis::DesignOptions;
-use dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE;
 use crate::design::image::build_image;
 use crate::io::signal_csv::SignalRecord;
 use crate::metrics::{accuracy, sample_variance};
+use crate::offline::compensate::compensate_record;
+use crate::simulate::{
+    simulate_with, Chatter, Dynamometer, Mode, ModeRanges, MultiAxisDynamometer, SimOutput, SimParams,
+};
+use dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE;
 
 /// The DAQ sample rates of the harness (Hz).
 pub const RATES_HZ: [f64; 4] = [10_240.0, 25_600.0, 51_200.0, 102_400.0];
@@ -78,7 +80,8 @@ impl RateCase {
         let mut p = SimParams { fs_hz, duration_s: 0.4, idle_duration_s: 0.3, ..Default::default() };
         p.milling.spindle_rpm = self.spindle_rpm;
         p.milling.teeth = self.teeth;
-        p.milling.chatter = self.chatter_hz.map(|f| Chatter { freq_hz: f, amplitude_mm: 0.01, onset_s: 0.2, growth_s: 0.02 });
+        p.milling.chatter =
+            self.chatter_hz.map(|f| Chatter { freq_hz: f, amplitude_mm: 0.01, onset_s: 0.2, growth_s: 0.02 });
         p.impact.df_hz = self.frf_df_hz;
         // The impact test covers frf_max_hz whatever the box's rate (an impact
         // analyzer has its own; the design compensates up to 0.45 fs and fits
@@ -129,7 +132,11 @@ pub fn cases() -> Vec<RateCase> {
         RateCase {
             name: "low-modes",
             seed: 12,
-            dyno: DynoSpec::Random(ModeRanges { main_xy_hz: (1800.0, 2000.0), main_z_hz: (1900.0, 2200.0), ..d.clone() }),
+            dyno: DynoSpec::Random(ModeRanges {
+                main_xy_hz: (1800.0, 2000.0),
+                main_z_hz: (1900.0, 2200.0),
+                ..d.clone()
+            }),
             frf_df_hz: 0.5,
             frf_max_hz: 4096.0,
             spindle_rpm: 1800.0,
@@ -215,7 +222,14 @@ pub struct RunOptions {
 
 impl Default for RunOptions {
     fn default() -> Self {
-        Self { lag: None, discretization: crate::design::discretize::Discretization::Fit, exact_frf: false, force_spectrum: false, force_level_only: false, static_gain: crate::design::discretize::StaticGain::Exact }
+        Self {
+            lag: None,
+            discretization: crate::design::discretize::Discretization::Fit,
+            exact_frf: false,
+            force_spectrum: false,
+            force_level_only: false,
+            static_gain: crate::design::discretize::StaticGain::Exact,
+        }
     }
 }
 
@@ -224,7 +238,13 @@ pub const REPRESENTATIVE_SEED_OFFSET: u64 = 1000;
 
 /// The one place where the harness builds its [`DesignOptions`].
 pub fn design_options(fs_hz: f64, run: &RunOptions) -> DesignOptions {
-    DesignOptions { fs_hz, lag: run.lag.unwrap_or(crate::design::latency::DEFAULT_LATENCY), discretization: run.discretization, discrete_static_gain: run.static_gain, ..Default::default() }
+    DesignOptions {
+        fs_hz,
+        lag: run.lag.unwrap_or(crate::design::latency::DEFAULT_LATENCY),
+        discretization: run.discretization,
+        discrete_static_gain: run.static_gain,
+        ..Default::default()
+    }
 }
 
 /// Figures of one axis of one case at one rate.
@@ -303,7 +323,10 @@ pub fn run_case_on(case: &RateCase, params: &SimParams, run: &RunOptions) -> Res
         true => {
             let rep = simulate_with(case.seed + REPRESENTATIVE_SEED_OFFSET, &steady, dyno.clone())?;
             let channels = [0, 1, 2].map(|a| Some(rep.measured[a].clone()));
-            Some(std::sync::Arc::new(crate::design::force_spectrum::ForceRecord { source: format!("{} representative record", case.name), channels }))
+            Some(std::sync::Arc::new(crate::design::force_spectrum::ForceRecord {
+                source: format!("{} representative record", case.name),
+                channels,
+            }))
         }
     };
     let s = simulate_with(case.seed, &params, dyno)?;
@@ -316,10 +339,19 @@ pub fn score_sim(name: &'static str, s: &SimOutput, run: &RunOptions) -> CaseRes
 }
 
 /// [`score_sim`] designed on the force spectrum of `record` when given.
-fn score_sim_with(name: &'static str, s: &SimOutput, run: &RunOptions, record: Option<std::sync::Arc<crate::design::force_spectrum::ForceRecord>>) -> CaseResult {
+fn score_sim_with(
+    name: &'static str,
+    s: &SimOutput,
+    run: &RunOptions,
+    record: Option<std::sync::Arc<crate::design::force_spectrum::ForceRecord>>,
+) -> CaseResult {
     let fs = s.params.fs_hz;
     let band = scoring_band_hz(fs);
-    let opts = DesignOptions { force_record: record, force_record_level_only: run.force_level_only, ..design_options(fs, run) };
+    let opts = DesignOptions {
+        force_record: record,
+        force_record_level_only: run.force_level_only,
+        ..design_options(fs, run)
+    };
     let r_true = s.params.measurement.expected_idle_variance();
     // All three axes designed together, as `design` does: one latency per image.
     let t0 = Instant::now();
@@ -328,7 +360,14 @@ fn score_sim_with(name: &'static str, s: &SimOutput, run: &RunOptions, record: O
     let (designs, latency) = match run.lag {
         Some(l) => (crate::design::latency::design_axes(&s.frf.freq_hz, &frfs, &r, &opts), l),
         None => {
-            let (d, c) = crate::design::latency::design_axes_choosing_latency(&s.frf.freq_hz, &frfs, &r, &opts, Some(BOX_LOAD_LIMIT_PERMILLE), |_, _| {});
+            let (d, c) = crate::design::latency::design_axes_choosing_latency(
+                &s.frf.freq_hz,
+                &frfs,
+                &r,
+                &opts,
+                Some(BOX_LOAD_LIMIT_PERMILLE),
+                |_, _| {},
+            );
             (d, c.chosen)
         }
     };
@@ -355,12 +394,25 @@ fn score_sim_with(name: &'static str, s: &SimOutput, run: &RunOptions, record: O
                     compensate_record(&img, &rec, false, "rates")
                 });
                 let nrmse = comp
-                    .and_then(|out| out.channel(a).map(|c| accuracy(c, &s.truth[a], fs, band).nrmse).ok_or_else(|| anyhow::anyhow!("axis {a} missing")))
+                    .and_then(|out| {
+                        out.channel(a)
+                            .map(|c| accuracy(c, &s.truth[a], fs, band).nrmse)
+                            .ok_or_else(|| anyhow::anyhow!("axis {a} missing"))
+                    })
                     .map_err(|e| format!("{e:#}"));
                 (nrmse, d.predicted_error, d.flat_band_hz)
             }
         };
-        axes.push(AxisScore { axis: a, raw_nrmse: raw.nrmse, comp_nrmse, noise_floor, predicted_error, flat_band_hz, design_s, shape });
+        axes.push(AxisScore {
+            axis: a,
+            raw_nrmse: raw.nrmse,
+            comp_nrmse,
+            noise_floor,
+            predicted_error,
+            flat_band_hz,
+            design_s,
+            shape,
+        });
     }
     CaseResult { case: name, fs_hz: fs, band_hz: band, axes, latency }
 }
@@ -425,7 +477,13 @@ pub fn summarize(results: &[CaseResult]) -> Vec<RateSummary> {
             } else {
                 0.5 * (v[v.len() / 2 - 1] + v[v.len() / 2])
             };
-            RateSummary { fs_hz: fs, median, worst: v.last().copied().unwrap_or(f64::NAN), worse_than_raw: worse, failed }
+            RateSummary {
+                fs_hz: fs,
+                median,
+                worst: v.last().copied().unwrap_or(f64::NAN),
+                worse_than_raw: worse,
+                failed,
+            }
         })
         .collect()
 }

@@ -6,20 +6,20 @@
 
 use anyhow::{Context, Result};
 
-use crate::design::bands::{Band, BandSpec};
-use crate::offline::compensate::compensate_record;
-use crate::eval::compare::{design_parallel, CompareSetup};
-use crate::realize::quantize::filter_response;
-use num_complex::Complex64;
 use crate::design::axis::{AxisDesign, DesignOptions, FitMethod};
-use crate::design::paper_orders::design_axis;
+use crate::design::bands::{Band, BandSpec};
 use crate::design::image::build_image;
+use crate::design::paper_orders::design_axis;
+use crate::eval::compare::{design_parallel, CompareSetup};
 use crate::fit::rfp::RfpOptions;
 use crate::frf::Frf;
 use crate::io::signal_csv::SignalRecord;
 use crate::metrics::{accuracy, accuracy_in_bands, sample_variance};
+use crate::offline::compensate::compensate_record;
+use crate::realize::quantize::filter_response;
 use crate::simulate::presets::Preset;
 use crate::simulate::{simulate_with, SimOutput};
+use num_complex::Complex64;
 
 /// Upper edge of the whole-record score (Hz): the impact test's band.
 pub const F_MAX_HZ: f64 = 4_000.0;
@@ -27,7 +27,8 @@ pub const F_MAX_HZ: f64 = 4_000.0;
 /// The fitting bands of `preset` for `frf`, exactly as `design` resolves
 /// the preset's flags (so the static band is added as the CLI adds it).
 pub fn preset_bands(preset: &Preset, frf: &Frf) -> Result<Vec<Band>> {
-    let spec = BandSpec::from_flags(&preset.design_flags).with_context(|| format!("preset {}: design flags", preset.name))?;
+    let spec =
+        BandSpec::from_flags(&preset.design_flags).with_context(|| format!("preset {}: design flags", preset.name))?;
     spec.resolve(frf, preset.params.fs_hz)
 }
 
@@ -194,8 +195,13 @@ pub fn local_error_single_vs_parallel(
         freq_hz: &s.frf.freq_hz,
         base: DesignOptions { fs_hz: fs, lag: 0, ..Default::default() },
         paper: FitMethod::Paper { rfp: RfpOptions::default(), prewarp_hz: None },
-        bands: parallel_bands.iter().map(|b| Band { lo_hz: b.0, hi_hz: b.1, label: format!("{:.0}-{:.0} Hz", b.0, b.1) }).collect(),
+        bands: parallel_bands
+            .iter()
+            .map(|b| Band { lo_hz: b.0, hi_hz: b.1, label: format!("{:.0}-{:.0} Hz", b.0, b.1) })
+            .collect(),
     };
-    let parallel = design_parallel(&setup, a, r).map(|p| true_response_error(s, axis, |f| p.response(f), window)).map_err(|e| format!("{e:#}"));
+    let parallel = design_parallel(&setup, a, r)
+        .map(|p| true_response_error(s, axis, |f| p.response(f), window))
+        .map_err(|e| format!("{e:#}"));
     (single, parallel)
 }

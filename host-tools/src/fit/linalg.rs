@@ -83,7 +83,15 @@ pub fn poly_roots(a: &[f64], what: &str) -> Result<Vec<Complex64>> {
     if !(lead != 0.0 && lead.is_finite()) {
         bail!("{what}: leading coefficient {lead}, roots undefined");
     }
-    let m = DMatrix::<f64>::from_fn(n, n, |i, j| if i == 0 { -a[n - 1 - j] / lead } else if i == j + 1 { 1.0 } else { 0.0 });
+    let m = DMatrix::<f64>::from_fn(n, n, |i, j| {
+        if i == 0 {
+            -a[n - 1 - j] / lead
+        } else if i == j + 1 {
+            1.0
+        } else {
+            0.0
+        }
+    });
     eigenvalues(&m, &format!("{what} (companion matrix)"))
 }
 
@@ -134,6 +142,9 @@ pub fn symmetric_eigenvalues(m: &DMatrix<f64>, what: &str) -> Result<DVector<f64
     }
     match SymmetricEigen::try_new(m.clone(), f64::EPSILON, sweeps(n)) {
         Some(e) => Ok(e.eigenvalues),
-        None => bail!("{what}: the symmetric eigenvalue iteration of the {n}×{n} matrix did not converge within {} sweeps", sweeps(n)),
+        None => bail!(
+            "{what}: the symmetric eigenvalue iteration of the {n}×{n} matrix did not converge within {} sweeps",
+            sweeps(n)
+        ),
     }
 }

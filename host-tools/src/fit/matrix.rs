@@ -341,7 +341,8 @@ impl MatrixData<'_> {
             .filter(|f| f.2.is_finite())
             .map(|f| f.2 / (n - (f.0 + ENTRIES * (f.0 + 1)) as f64).max(1.0))
             .fold(f64::INFINITY, f64::min);
-        let bic = |f: &(usize, MatrixModel, f64)| if f.2.is_finite() { self.bic(f.2, f.0, sigma2) } else { f64::INFINITY };
+        let bic =
+            |f: &(usize, MatrixModel, f64)| if f.2.is_finite() { self.bic(f.2, f.0, sigma2) } else { f64::INFINITY };
         (0..fits.len()).min_by(|&a, &b| bic(&fits[a]).total_cmp(&bic(&fits[b]))).unwrap_or(0)
     }
 }

@@ -51,7 +51,10 @@ impl PoleResidueModel {
             .map(|&(f, z, share)| {
                 let wn = 2.0 * PI * f;
                 let wd = wn * (1.0 - z * z).sqrt();
-                Term::Pair { pole: Complex64::new(-z * wn, wd), residue: Complex64::new(0.0, -share * wn * wn / (2.0 * wd)) }
+                Term::Pair {
+                    pole: Complex64::new(-z * wn, wd),
+                    residue: Complex64::new(0.0, -share * wn * wn / (2.0 * wd)),
+                }
             })
             .collect();
         PoleResidueModel { terms, d: 0.0 }

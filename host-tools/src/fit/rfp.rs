@@ -130,7 +130,10 @@ impl RationalTf {
         for p in &roots {
             let dp = poly_eval(&da, *p);
             if dp.norm() < 1e-10 * (1.0 + p.norm()).powi(self.na() as i32 - 1) {
-                bail!("repeated pole near {:.1} Hz: no partial-fraction form", (p * self.omega_scale).norm() / (2.0 * PI));
+                bail!(
+                    "repeated pole near {:.1} Hz: no partial-fraction form",
+                    (p * self.omega_scale).norm() / (2.0 * PI)
+                );
             }
             let r = poly_eval(&b, *p) / dp * self.omega_scale;
             let pole = p * self.omega_scale;
@@ -289,7 +292,8 @@ pub fn rfp_fit(freq_hz: &[f64], h: &[Complex64], w: &[f64], opts: &RfpOptions) -
             xp *= x;
         }
     }
-    let (theta, rfp_condition) = lstsq(mat, &rhs, &format!("the {nb}:{na} rational fraction polynomial least squares"))?;
+    let (theta, rfp_condition) =
+        lstsq(mat, &rhs, &format!("the {nb}:{na} rational fraction polynomial least squares"))?;
     if !(rfp_condition < MAX_CONDITION) || theta.iter().any(|v| !v.is_finite()) {
         bail!(
             "rational fraction polynomial fit {nb}:{na} over {:.0}–{f_max:.0} Hz is ill-conditioned: condition number {rfp_condition:.2e} (limit {MAX_CONDITION:.0e}); lower the orders or fit narrower bands (--band, --spindle-rpm)",
@@ -303,7 +307,12 @@ pub fn rfp_fit(freq_hz: &[f64], h: &[Complex64], w: &[f64], opts: &RfpOptions) -
     let roots = poly_roots(&a0, &format!("the denominator of the {nb}:{na} initial estimate"))?;
     let reflected_poles = roots.iter().filter(|r| r.re >= 0.0).count();
     let a0 = if reflected_poles > 0 {
-        poly_from_roots(&roots.iter().map(|r| if r.re >= 0.0 { Complex64::new(-r.re.abs().max(1e-6 * r.norm()), r.im) } else { *r }).collect::<Vec<_>>())
+        poly_from_roots(
+            &roots
+                .iter()
+                .map(|r| if r.re >= 0.0 { Complex64::new(-r.re.abs().max(1e-6 * r.norm()), r.im) } else { *r })
+                .collect::<Vec<_>>(),
+        )
     } else {
         a0
     };

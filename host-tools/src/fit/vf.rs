@@ -29,12 +29,7 @@ pub struct VfOptions {
 
 impl Default for VfOptions {
     fn default() -> Self {
-        VfOptions {
-            max_order: 24,
-            iterations: 8,
-            improvement_tol: 0.03,
-            decimate: 4,
-        }
+        VfOptions { max_order: 24, iterations: 8, improvement_tol: 0.03, decimate: 4 }
     }
 }
 
@@ -106,7 +101,10 @@ pub(crate) fn basis_row(s: Complex64, poles: &[Pole], out: &mut Vec<Complex64>) 
 pub(crate) fn lstsq(mut a: DMatrix<f64>, b: DVector<f64>) -> Result<DVector<f64>> {
     let ncols = a.ncols();
     if a.nrows() < ncols {
-        bail!("vector fitting: {} equations for {ncols} unknowns; lower the model order or give more frequency lines", a.nrows());
+        bail!(
+            "vector fitting: {} equations for {ncols} unknowns; lower the model order or give more frequency lines",
+            a.nrows()
+        );
     }
     if a.iter().chain(b.iter()).any(|v| !v.is_finite()) {
         bail!("vector fitting: the least-squares system has a non-finite entry (a pole on a measured line?)");
@@ -253,10 +251,7 @@ pub(crate) fn to_model(poles: &[Pole], c: &[f64], d: f64, w_scale: f64) -> PoleR
     let mut j = 0;
     for p in poles {
         if p.pair {
-            terms.push(Term::Pair {
-                pole: p.p * w_scale,
-                residue: Complex64::new(c[j], c[j + 1]) * w_scale,
-            });
+            terms.push(Term::Pair { pole: p.p * w_scale, residue: Complex64::new(c[j], c[j + 1]) * w_scale });
             j += 2;
         } else {
             terms.push(Term::Real { pole: p.p.re * w_scale, residue: c[j] * w_scale });
@@ -309,7 +304,13 @@ pub(crate) fn starting_poles(freq_hz: &[f64], f_max: f64, order: usize) -> Vec<P
 }
 
 /// Fit a model of a fixed (even) order.
-pub fn fit_order(freq_hz: &[f64], h: &[Complex64], weights: &[f64], order: usize, opts: &VfOptions) -> Result<PoleResidueModel> {
+pub fn fit_order(
+    freq_hz: &[f64],
+    h: &[Complex64],
+    weights: &[f64],
+    order: usize,
+    opts: &VfOptions,
+) -> Result<PoleResidueModel> {
     let f_max = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
     if f_max <= 0.0 {
         bail!("vector fitting needs positive frequencies");

@@ -278,7 +278,10 @@ pub fn write_pair_atomic(
             };
             match restored {
                 Ok(()) => Err(e.context(format!("{}: left as it was", first.display()))),
-                Err(r) => Err(e.context(format!("{}: could not be put back ({r}); it holds the new content", first.display()))),
+                Err(r) => {
+                    Err(e
+                        .context(format!("{}: could not be put back ({r}); it holds the new content", first.display())))
+                }
             }
         }
     }
@@ -340,7 +343,8 @@ impl Staged {
         let dir = output_dir(&target);
         sweep_stale_once(dir);
         let mode = existing_mode(&target);
-        let tmp = new_temp(dir).with_context(|| format!("{}: cannot create a temporary file in {}", path.display(), dir.display()))?;
+        let tmp = new_temp(dir)
+            .with_context(|| format!("{}: cannot create a temporary file in {}", path.display(), dir.display()))?;
         let listed = Listed::new(tmp.path());
         Ok(Staged { shown: path.to_path_buf(), target, tmp, listed, mode })
     }
@@ -354,8 +358,9 @@ impl Staged {
         #[cfg(unix)]
         if let Some(mode) = self.mode {
             use std::os::unix::fs::PermissionsExt;
-            file.set_permissions(std::fs::Permissions::from_mode(mode))
-                .with_context(|| format!("{}: cannot keep the mode {mode:o} of the file it replaces", path.display()))?;
+            file.set_permissions(std::fs::Permissions::from_mode(mode)).with_context(|| {
+                format!("{}: cannot keep the mode {mode:o} of the file it replaces", path.display())
+            })?;
         }
         file.sync_all().with_context(|| format!("{}: sync failed", path.display()))
     }
@@ -372,7 +377,9 @@ impl Staged {
             Ok(t) => Ok(t),
             Err(_) => temp_builder().make_in(dir, |p| std::fs::copy(&self.target, p).map(drop)),
         }
-        .with_context(|| format!("{}: cannot keep the old file while the new one is put in place", self.shown.display()))?;
+        .with_context(|| {
+            format!("{}: cannot keep the old file while the new one is put in place", self.shown.display())
+        })?;
         let path = kept.into_temp_path();
         let listed = Listed::new(&path);
         Ok(Some((path, listed)))
@@ -491,7 +498,11 @@ impl Owner {
         let pid = parts.next()?.parse().ok()?;
         let start = parts.next()?.parse().ok()?;
         parts.next()?;
-        (tag == "0" || (tag.len() == 8 && tag.bytes().all(|b| b.is_ascii_hexdigit()))).then(|| Owner { tag: tag.into(), pid, start })
+        (tag == "0" || (tag.len() == 8 && tag.bytes().all(|b| b.is_ascii_hexdigit()))).then(|| Owner {
+            tag: tag.into(),
+            pid,
+            start,
+        })
     }
 }
 
@@ -604,7 +615,6 @@ impl Live {
         self.0.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-
     /// Remove every listed file for which `which` holds, and its entry;
     /// returns how many files were removed.
     fn remove(&self, which: impl Fn(&Path) -> bool) -> usize {
@@ -659,7 +669,8 @@ pub fn remove_live_temporaries() -> usize {
 #[cfg(unix)]
 pub fn install_signal_cleanup() -> Result<()> {
     use signal_hook::consts::{SIGINT, SIGTERM};
-    let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM]).context("cannot install the signal handlers")?;
+    let mut signals =
+        signal_hook::iterator::Signals::new([SIGINT, SIGTERM]).context("cannot install the signal handlers")?;
     std::thread::Builder::new()
         .name("dynocomp-signals".into())
         .spawn(move || {
@@ -679,7 +690,6 @@ pub fn install_signal_cleanup() -> Result<()> {
 pub fn install_signal_cleanup() -> Result<()> {
     Ok(())
 }
-
 
 #[cfg(test)]
 mod tests {
@@ -817,7 +827,8 @@ mod tests {
         let hard = dir.path().join("hard.csv");
         std::fs::hard_link(&rec, &hard).unwrap();
         for out in [&rec, &dotted, &link, &hard] {
-            let e = ensure_not_an_input(&[("--output", out)], &[("--coeffs", Path::new("a.dcimg")), ("--input", &rec)]).unwrap_err();
+            let e = ensure_not_an_input(&[("--output", out)], &[("--coeffs", Path::new("a.dcimg")), ("--input", &rec)])
+                .unwrap_err();
             let msg = e.to_string();
             assert!(msg.contains("--output") && msg.contains("--input") && !msg.contains('\n'), "{msg}");
         }
@@ -884,7 +895,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let (img, side) = (dir.path().join("box.dcimg"), dir.path().join("box.dcimg.model.json"));
         write_bytes_pair_atomic(&img, b"image 1", &side, b"sidecar 1").unwrap();
-        assert_eq!((std::fs::read(&img).unwrap(), std::fs::read(&side).unwrap()), (b"image 1".to_vec(), b"sidecar 1".to_vec()));
+        assert_eq!(
+            (std::fs::read(&img).unwrap(), std::fs::read(&side).unwrap()),
+            (b"image 1".to_vec(), b"sidecar 1".to_vec())
+        );
         let old = |()| (std::fs::read(&img).unwrap(), std::fs::read(&side).unwrap());
         for step in [fault::Step::CommitFirst, fault::Step::CommitSecond] {
             fault::FAIL_AT.with(|f| f.set(Some(step)));
@@ -945,7 +959,8 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let (img, side) = (dir.path().join("box.dcimg"), dir.path().join("box.dcimg.model.json"));
         write_bytes_pair_atomic(&img, b"image 1", &side, b"sidecar 1").unwrap();
-        let chattr = |flag: &str| std::process::Command::new("chattr").arg(flag).arg(&side).status().is_ok_and(|s| s.success());
+        let chattr =
+            |flag: &str| std::process::Command::new("chattr").arg(flag).arg(&side).status().is_ok_and(|s| s.success());
         if !chattr("+i") {
             eprintln!("chattr +i not available here: nothing to check");
             return;
@@ -1051,7 +1066,8 @@ mod tests {
                 std::thread::sleep(Duration::from_millis(20));
             }
             std::thread::sleep(Duration::from_millis(100));
-            let killed = std::process::Command::new("kill").arg(format!("-{sig}")).arg(child.id().to_string()).status().unwrap();
+            let killed =
+                std::process::Command::new("kill").arg(format!("-{sig}")).arg(child.id().to_string()).status().unwrap();
             assert!(killed.success());
             let status = child.wait().unwrap();
             assert!(!status.success(), "SIG{sig}: {status:?}");

@@ -14,7 +14,8 @@
 
 /// 10^0 … 10^22, all exact in f64.
 const POW10: [f64; 23] = [
-    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20,
+    1e21, 1e22,
 ];
 
 /// The f64 of a field, as `str::parse::<f64>` reads it after `str::trim`,
@@ -121,12 +122,38 @@ mod tests {
 
     #[test]
     fn typical_daq_fields_take_the_fast_path_and_equal_std() {
-        for f in ["0.386455", "-13.228708", "267.337580", "0.000019531", "1.953125e-5", "-0", "+7", "5.", ".5", "1E+05", "  42.5 ", "9007199254740992"] {
+        for f in [
+            "0.386455",
+            "-13.228708",
+            "267.337580",
+            "0.000019531",
+            "1.953125e-5",
+            "-0",
+            "+7",
+            "5.",
+            ".5",
+            "1E+05",
+            "  42.5 ",
+            "9007199254740992",
+        ] {
             assert!(clinger_fast_path(f.trim().as_bytes()).is_some(), "{f} missed the fast path");
             assert!(same(parse_f64(f.as_bytes()), std_parse(f.as_bytes())), "{f}");
         }
         // Negative control: these must leave the fast path (and std decides).
-        for f in ["9007199254740993", "1e23", "12345678901234567890", "inf", "NaN", "1e", ".", "-", "1.2.3", "0x10", "1_0", "\u{a0}1"] {
+        for f in [
+            "9007199254740993",
+            "1e23",
+            "12345678901234567890",
+            "inf",
+            "NaN",
+            "1e",
+            ".",
+            "-",
+            "1.2.3",
+            "0x10",
+            "1_0",
+            "\u{a0}1",
+        ] {
             assert!(clinger_fast_path(f.as_bytes()).is_none(), "{f} took the fast path");
             assert!(same(parse_f64(f.as_bytes()), std_parse(f.as_bytes())), "{f}");
         }

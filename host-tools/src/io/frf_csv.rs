@@ -46,9 +46,7 @@ pub fn parse_frf_csv_bytes(bytes: &[u8], source: &str) -> Result<Frf> {
         Err(e) => {
             let off = e.valid_up_to();
             let line = 1 + bytes[..off].iter().filter(|&&b| b == b'\n').count();
-            bail!(
-                "{source}: line {line}: not a text (UTF-8) CSV file (invalid byte at offset {off})"
-            )
+            bail!("{source}: line {line}: not a text (UTF-8) CSV file (invalid byte at offset {off})")
         }
     }
 }
@@ -63,11 +61,7 @@ enum Kind {
 /// Parse FRF CSV text; `source` names the input (file name) in error messages.
 pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l))
-        .filter(|(_, l)| !l.trim().is_empty());
+    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l)).filter(|(_, l)| !l.trim().is_empty());
     let Some((hline, header)) = lines.next() else {
         bail!("{source}: empty file (expected a header row starting with freq_hz)");
     };
@@ -94,10 +88,7 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
         let colno = c + 1;
         if name == "freq_hz" {
             if let Some(prev) = freq_col {
-                bail!(
-                    "{source}: line {hline}, column {colno}: duplicate column freq_hz (also column {})",
-                    prev + 1
-                );
+                bail!("{source}: line {hline}, column {colno}: duplicate column freq_hz (also column {})", prev + 1);
             }
             freq_col = Some(c);
             cols.push(None);
@@ -151,18 +142,15 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
         match (s[0], s[1], s[2]) {
             (None, None, None) => {}
             (Some(_), Some(_), _) => present.push(entry),
-            (Some(c), None, _) => bail!(
-                "{source}: line {hline}: column {a}_re (column {}) has no matching {a}_im column",
-                c + 1
-            ),
-            (None, Some(c), _) => bail!(
-                "{source}: line {hline}: column {a}_im (column {}) has no matching {a}_re column",
-                c + 1
-            ),
-            (None, None, Some(c)) => bail!(
-                "{source}: line {hline}: column {a}_coh (column {}) without {a}_re and {a}_im columns",
-                c + 1
-            ),
+            (Some(c), None, _) => {
+                bail!("{source}: line {hline}: column {a}_re (column {}) has no matching {a}_im column", c + 1)
+            }
+            (None, Some(c), _) => {
+                bail!("{source}: line {hline}: column {a}_im (column {}) has no matching {a}_re column", c + 1)
+            }
+            (None, None, Some(c)) => {
+                bail!("{source}: line {hline}: column {a}_coh (column {}) without {a}_re and {a}_im columns", c + 1)
+            }
         }
     }
     if present.is_empty() {
@@ -180,10 +168,7 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
     for (lineno, line) in lines {
         let fields: Vec<&str> = line.split(delim).collect();
         if fields.len() != ncols {
-            bail!(
-                "{source}: line {lineno}: {} fields, but the header has {ncols} columns",
-                fields.len()
-            );
+            bail!("{source}: line {lineno}: {} fields, but the header has {ncols} columns", fields.len());
         }
         for (c, raw) in fields.iter().enumerate() {
             let at = || format!("{source}: line {lineno}, column {} ({})", c + 1, names[c]);
@@ -191,9 +176,7 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
             if tok.is_empty() {
                 bail!("{}: empty value", at());
             }
-            let v: f64 = tok
-                .parse()
-                .map_err(|_| anyhow!("{}: cannot read {:?} as a number", at(), tok))?;
+            let v: f64 = tok.parse().map_err(|_| anyhow!("{}: cannot read {:?} as a number", at(), tok))?;
             if !v.is_finite() {
                 bail!("{}: value {tok} is not finite (NaN or infinite)", at());
             }
@@ -265,18 +248,14 @@ fn column_entry(name: &str) -> Option<(usize, Kind, String)> {
 /// Trim blanks and one pair of surrounding double quotes.
 fn unquote(s: &str) -> &str {
     let t = s.trim();
-    t.strip_prefix('"')
-        .and_then(|t| t.strip_suffix('"'))
-        .map(str::trim)
-        .unwrap_or(t)
+    t.strip_prefix('"').and_then(|t| t.strip_suffix('"')).map(str::trim).unwrap_or(t)
 }
 
 /// Write an FRF CSV file atomically (nothing is left behind on error).
 /// Values are written in Rust's shortest round-trip form: reading the file
 /// back gives bit-identical values.
 pub fn write_frf_csv(path: &Path, frf: &Frf) -> Result<()> {
-    let text =
-        frf_csv_to_string(frf).with_context(|| format!("{}: not written", path.display()))?;
+    let text = frf_csv_to_string(frf).with_context(|| format!("{}: not written", path.display()))?;
     super::atomic::write_atomic(path, |w: &mut dyn Write| {
         w.write_all(text.as_bytes())?;
         Ok(())
@@ -343,11 +322,7 @@ pub(crate) fn validate_frf(frf: &Frf) -> Result<()> {
         }
         if let Some(p) = prev {
             if a.axis <= p {
-                bail!(
-                    "axes must be unique and ascending (axis {} after {})",
-                    axis_name(a.axis),
-                    axis_name(p)
-                );
+                bail!("axes must be unique and ascending (axis {} after {})", axis_name(a.axis), axis_name(p));
             }
         }
         prev = Some(a.axis);

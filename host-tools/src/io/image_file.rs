@@ -3,7 +3,9 @@
 //! only and is read with [`read_any_image`].
 
 use anyhow::{Context, Result};
-use dynocomp_core::image::{peek_version, CoeffImage, ImageError, ParallelImage, MAX_IMAGE_LEN, MAX_PARALLEL_IMAGE_LEN, PARALLEL_FORMAT_VERSION};
+use dynocomp_core::image::{
+    peek_version, CoeffImage, ImageError, ParallelImage, MAX_IMAGE_LEN, MAX_PARALLEL_IMAGE_LEN, PARALLEL_FORMAT_VERSION,
+};
 use std::path::Path;
 
 use crate::io::atomic::write_bytes_atomic;
@@ -26,7 +28,8 @@ pub fn encode_image(image: &CoeffImage) -> Result<Vec<u8>> {
 /// decodes to the same value (the file on disk is what the box will get).
 pub fn write_image(path: &Path, image: &CoeffImage) -> Result<()> {
     let bytes = encode_image(image)?;
-    let back = CoeffImage::parse(&bytes).map_err(|e| anyhow::anyhow!("{}: encoded image does not parse: {e}", path.display()))?;
+    let back = CoeffImage::parse(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: encoded image does not parse: {e}", path.display()))?;
     anyhow::ensure!(back == *image, "{}: encoded image does not decode to the design", path.display());
     write_bytes_atomic(path, &bytes)
 }
@@ -88,7 +91,8 @@ pub fn write_parallel_image(path: &Path, image: &ParallelImage) -> Result<()> {
     let mut buf = vec![0u8; MAX_PARALLEL_IMAGE_LEN];
     let n = image.encode(&mut buf).map_err(|e| anyhow::anyhow!("cannot encode parallel image: {e}"))?;
     buf.truncate(n);
-    let back = ParallelImage::parse(&buf).map_err(|e| anyhow::anyhow!("{}: encoded parallel image does not parse: {e}", path.display()))?;
+    let back = ParallelImage::parse(&buf)
+        .map_err(|e| anyhow::anyhow!("{}: encoded parallel image does not parse: {e}", path.display()))?;
     anyhow::ensure!(back == *image, "{}: encoded parallel image does not decode to the design", path.display());
     write_bytes_atomic(path, &buf)
 }

@@ -4,16 +4,16 @@ pub use frf_set::{read_frf_set, split_frf_list};
 
 pub mod atomic;
 pub mod decimal;
+pub mod frf_csv;
+pub mod frf_set;
+pub mod image_file;
 pub mod signal;
 pub mod signal_csv;
 pub mod signal_file;
 pub mod spool;
-pub mod image_file;
-pub mod frf_csv;
-pub mod frf_set;
+pub mod tdms;
 pub mod uff;
 pub mod uff_signal;
-pub mod tdms;
 
 /// Most characters of input text that one error message shows.
 pub const ECHO_CHARS: usize = 120;

@@ -197,12 +197,21 @@ impl<R: BufRead> CsvReader<R> {
                 }
                 if let Some(&last) = self.axes.last() {
                     if axis < last {
-                        bail!("{source}: line {}, column {}: columns must be in the order fx, fy, fz", self.lineno, col + 1);
+                        bail!(
+                            "{source}: line {}, column {}: columns must be in the order fx, fy, fz",
+                            self.lineno,
+                            col + 1
+                        );
                     }
                 }
                 self.axes.push(axis);
             } else {
-                bail!("{source}: line {}, column {}: unknown column `{}` (expected t_s, fx, fy, fz)", self.lineno, col + 1, one_line(name));
+                bail!(
+                    "{source}: line {}, column {}: unknown column `{}` (expected t_s, fx, fy, fz)",
+                    self.lineno,
+                    col + 1,
+                    one_line(name)
+                );
             }
         }
         if self.axes.is_empty() {
@@ -240,7 +249,8 @@ impl<R: BufRead> CsvReader<R> {
     }
 
     fn line_str(&self) -> Result<&str> {
-        std::str::from_utf8(&self.line).map_err(|_| anyhow!("{}: line {}: not valid UTF-8 text", self.source, self.lineno))
+        std::str::from_utf8(&self.line)
+            .map_err(|_| anyhow!("{}: line {}: not valid UTF-8 text", self.source, self.lineno))
     }
 
     /// Parse the current line (`self.line`) into `blk`.
@@ -258,7 +268,14 @@ fn is_blank(line: &[u8]) -> bool {
 /// over its bytes, each field parsed in place ([`decimal::parse_f64`]).
 /// Any problem is diagnosed by [`row_error`], which checks the row in the
 /// order the messages promise (text, field count, then field by field).
-fn parse_row(line: &[u8], cols: &Columns, prev_t: &mut Option<f64>, blk: &mut Block, source: &str, lineno: usize) -> Result<()> {
+fn parse_row(
+    line: &[u8],
+    cols: &Columns,
+    prev_t: &mut Option<f64>,
+    blk: &mut Block,
+    source: &str,
+    lineno: usize,
+) -> Result<()> {
     let Columns { names, slot_of, has_time, full_scale_n } = cols;
     let t_before = *prev_t;
     let mut col = 0;
@@ -305,17 +322,29 @@ fn row_error(line: &[u8], cols: &Columns, prev_t: Option<f64>, source: &str, lin
     for (col, field) in line.split(',').enumerate() {
         let field = field.trim();
         let Ok(v) = field.parse::<f64>() else {
-            return anyhow!("{source}: line {lineno}, column {} (`{}`): `{}` is not a number", col + 1, names[col], one_line(field));
+            return anyhow!(
+                "{source}: line {lineno}, column {} (`{}`): `{}` is not a number",
+                col + 1,
+                names[col],
+                one_line(field)
+            );
         };
         if !v.is_finite() {
             return anyhow!("{source}: line {lineno}, column {} (`{}`): value is not finite", col + 1, names[col]);
         }
         if *has_time && col == 0 {
             if let Some(prev) = prev_t.filter(|p| v <= *p) {
-                return anyhow!("{source}: line {lineno}, column 1 (`t_s`): time {v} does not increase (previous {prev})");
+                return anyhow!(
+                    "{source}: line {lineno}, column 1 (`t_s`): time {v} does not increase (previous {prev})"
+                );
             }
         } else if slot_of[col].is_some() && !plausible(v, *full_scale_n) {
-            return implausible(source, &format!("line {lineno}, column {} (`{}`)", col + 1, names[col]), v, *full_scale_n);
+            return implausible(
+                source,
+                &format!("line {lineno}, column {} (`{}`)", col + 1, names[col]),
+                v,
+                *full_scale_n,
+            );
         }
     }
     anyhow!("{source}: line {lineno}: internal error: the row reads back valid")
@@ -336,7 +365,10 @@ impl<R: BufRead + Send> SignalReader for CsvReader<R> {
         while !self.done && blk.len() < max {
             // A whole line in the reader's buffer is parsed in place; one
             // that runs past the buffer's end is copied out (`next_line`).
-            let buf = self.r.fill_buf().with_context(|| format!("{}: read failed after line {}", self.source, self.lineno))?;
+            let buf = self
+                .r
+                .fill_buf()
+                .with_context(|| format!("{}: read failed after line {}", self.source, self.lineno))?;
             if let Some(end) = memchr::memchr(b'\n', buf) {
                 self.lineno += 1;
                 let line = buf[..end].strip_suffix(b"\r").unwrap_or(&buf[..end]);
@@ -414,7 +446,11 @@ fn format_rows(out: &mut Vec<u8>, t_s: Option<&[f64]>, channels: &[&[f64]], rows
 impl SignalWriter for CsvWriter<'_> {
     fn write_block(&mut self, t_s: Option<&[f64]>, channels: &[&[f64]]) -> Result<()> {
         let n = channels.first().map_or(0, |c| c.len());
-        if channels.len() != self.n_channels || channels.iter().any(|c| c.len() != n) || t_s.is_some() != self.has_time || t_s.is_some_and(|t| t.len() != n) {
+        if channels.len() != self.n_channels
+            || channels.iter().any(|c| c.len() != n)
+            || t_s.is_some() != self.has_time
+            || t_s.is_some_and(|t| t.len() != n)
+        {
             bail!("internal error: a block does not match the output's columns");
         }
         let [first, second] = &mut self.halves;

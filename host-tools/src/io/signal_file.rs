@@ -5,7 +5,7 @@ use anyhow::{bail, Context, Result};
 use std::io::Write;
 use std::path::Path;
 
-use crate::io::signal::{ChannelMap, Bounded, SignalReader, SignalWriter, DEFAULT_FULL_SCALE_N};
+use crate::io::signal::{Bounded, ChannelMap, SignalReader, SignalWriter, DEFAULT_FULL_SCALE_N};
 use crate::io::signal_csv::{CsvReader, CsvWriter};
 use crate::io::tdms::{looks_like_tdms, TdmsReader, TdmsWriter};
 use crate::io::uff_signal::{UffReader, UffWriter};
@@ -44,7 +44,11 @@ pub fn open_signal(path: &Path, map: Option<&ChannelMap>) -> Result<(Box<dyn Sig
 /// `-` is standard input, read as CSV: the other formats cannot come from a
 /// pipe (a TDMS file is read through its segment index and at offsets, a
 /// UFF record is indexed in a first pass and read in a second).
-pub fn open_signal_checked(path: &Path, map: Option<&ChannelMap>, full_scale_n: f64) -> Result<(Box<dyn SignalReader>, SignalFormat)> {
+pub fn open_signal_checked(
+    path: &Path,
+    map: Option<&ChannelMap>,
+    full_scale_n: f64,
+) -> Result<(Box<dyn SignalReader>, SignalFormat)> {
     if crate::io::atomic::is_stdio(path) {
         if map.is_some() {
             bail!("standard input (`-`) is read as CSV, whose columns are named fx, fy, fz; --channels applies to UFF and TDMS files");
@@ -61,7 +65,11 @@ pub fn open_signal_checked(path: &Path, map: Option<&ChannelMap>, full_scale_n: 
 
 /// The reader of `path` by its format; the CSV reader checks its values
 /// against `full_scale_n` itself (with line numbers), the others do not.
-fn open_by_format(path: &Path, map: Option<&ChannelMap>, full_scale_n: f64) -> Result<(Box<dyn SignalReader>, SignalFormat)> {
+fn open_by_format(
+    path: &Path,
+    map: Option<&ChannelMap>,
+    full_scale_n: f64,
+) -> Result<(Box<dyn SignalReader>, SignalFormat)> {
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     let sniff = || -> Result<Vec<u8>> {
         let mut head = vec![0u8; 4096];
@@ -118,8 +126,12 @@ pub fn writer_for<'w>(
     let dir = crate::io::atomic::output_dir(path);
     let inner: Box<dyn SignalWriter + 'w> = match (fmt, file, len) {
         (SignalFormat::Csv, ..) => Box::new(CsvWriter::new(w, axes, has_time)?),
-        (SignalFormat::Uff | SignalFormat::Uff58b, Some(f), Some(n)) => Box::new(UffWriter::placed(f, n, axes, fs_hz, fmt == SignalFormat::Uff58b)?),
-        (SignalFormat::Uff | SignalFormat::Uff58b, ..) => Box::new(UffWriter::new_in(w, axes, fs_hz, fmt == SignalFormat::Uff58b, dir)?),
+        (SignalFormat::Uff | SignalFormat::Uff58b, Some(f), Some(n)) => {
+            Box::new(UffWriter::placed(f, n, axes, fs_hz, fmt == SignalFormat::Uff58b)?)
+        }
+        (SignalFormat::Uff | SignalFormat::Uff58b, ..) => {
+            Box::new(UffWriter::new_in(w, axes, fs_hz, fmt == SignalFormat::Uff58b, dir)?)
+        }
         (SignalFormat::Tdms, ..) => Box::new(TdmsWriter::new(w, axes, fs_hz, 0.0)?),
     };
     Ok(Box::new(FiniteOnly { inner, axes: axes.to_vec(), written: 0 }))
@@ -139,11 +151,16 @@ struct FiniteOnly<'w> {
 impl SignalWriter for FiniteOnly<'_> {
     fn write_block(&mut self, t_s: Option<&[f64]>, channels: &[&[f64]]) -> Result<()> {
         // (column, axis; None for the time column)
-        let columns = t_s.map(|t| (t, None)).into_iter().chain(channels.iter().zip(&self.axes).map(|(c, &a)| (*c, Some(a))));
+        let columns =
+            t_s.map(|t| (t, None)).into_iter().chain(channels.iter().zip(&self.axes).map(|(c, &a)| (*c, Some(a))));
         for (c, axis) in columns {
             if let Some(i) = c.iter().position(|v| !v.is_finite()) {
                 let name = axis.map_or_else(|| "t_s".to_string(), |a| format!("f{}", crate::frf::axis_name(a)));
-                bail!("sample {} of {name} is {}: the output formats cannot carry a non-finite value; nothing is written", self.written + i as u64, c[i]);
+                bail!(
+                    "sample {} of {name} is {}: the output formats cannot carry a non-finite value; nothing is written",
+                    self.written + i as u64,
+                    c[i]
+                );
             }
         }
         self.written += channels.first().map_or(0, |c| c.len()) as u64;
@@ -170,7 +187,10 @@ mod tests {
             let mut w = writer_for(fmt, &mut buf, None, &[0, 2], true, None, 1000.0, &path).unwrap();
             let t = [0.0, 0.001, 0.002];
             w.write_block(Some(&t), &[&[1.0, 2.0, 3.0], &[4.0, 5.0, 6.0]]).unwrap();
-            let e = w.write_block(Some(&[0.003, 0.004, 0.005]), &[&[1.0, 2.0, 3.0], &[4.0, f64::NAN, 6.0]]).unwrap_err().to_string();
+            let e = w
+                .write_block(Some(&[0.003, 0.004, 0.005]), &[&[1.0, 2.0, 3.0], &[4.0, f64::NAN, 6.0]])
+                .unwrap_err()
+                .to_string();
             assert!(e.contains("sample 4 of fz is NaN"), "{fmt:?}: {e}");
             let e = w.write_block(Some(&[0.003, f64::INFINITY]), &[&[1.0, 2.0], &[4.0, 5.0]]).unwrap_err().to_string();
             assert!(e.contains("sample 4 of t_s is inf"), "{fmt:?}: {e}");

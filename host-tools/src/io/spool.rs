@@ -34,7 +34,9 @@ impl Spooling {
     /// Spool `inner` to an unnamed temporary file in `dir` (the output's
     /// folder: the disk chosen for a large output).
     pub fn new(inner: Box<dyn SignalReader>, dir: &Path) -> Result<Self> {
-        let file = tempfile::tempfile_in(dir).with_context(|| format!("{}: cannot create a temporary file to keep the input for its second reading", dir.display()))?;
+        let file = tempfile::tempfile_in(dir).with_context(|| {
+            format!("{}: cannot create a temporary file to keep the input for its second reading", dir.display())
+        })?;
         let (axes, has_time) = (inner.axes().to_vec(), inner.has_time());
         Ok(Spooling { inner, axes, has_time, spool: BufWriter::with_capacity(1 << 20, file), samples: 0, ended: false })
     }
@@ -45,9 +47,19 @@ impl Spooling {
         if !self.ended {
             bail!("internal: the input was replayed before its first reading ended");
         }
-        let mut file = self.spool.into_inner().map_err(|e| e.into_error()).context("cannot write the temporary copy of the input")?;
+        let mut file = self
+            .spool
+            .into_inner()
+            .map_err(|e| e.into_error())
+            .context("cannot write the temporary copy of the input")?;
         file.seek(SeekFrom::Start(0)).context("cannot rewind the temporary copy of the input")?;
-        Ok(Replay { file: BufReader::with_capacity(1 << 20, file), axes: self.axes, has_time: self.has_time, left: self.samples, row: Vec::new() })
+        Ok(Replay {
+            file: BufReader::with_capacity(1 << 20, file),
+            axes: self.axes,
+            has_time: self.has_time,
+            left: self.samples,
+            row: Vec::new(),
+        })
     }
 }
 
@@ -134,7 +146,11 @@ impl TwoReadings {
     /// The readings of `first`, opened from `path`; a spool (if `path` is
     /// not a regular file) goes to `dir`.
     pub fn new(first: Box<dyn SignalReader>, path: &Path, dir: &Path) -> Result<Self> {
-        Ok(if super::signal_file::can_read_twice(path) { TwoReadings::Reopen(first) } else { TwoReadings::Spool(Spooling::new(first, dir)?) })
+        Ok(if super::signal_file::can_read_twice(path) {
+            TwoReadings::Reopen(first)
+        } else {
+            TwoReadings::Spool(Spooling::new(first, dir)?)
+        })
     }
 
     /// Whether the input is kept in a temporary file for its second reading.

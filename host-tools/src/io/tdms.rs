@@ -37,8 +37,8 @@ use std::fs::File;
 use std::io::{BufReader, Read, Write};
 use std::path::Path;
 
-use super::signal::{newton_per_unit, Block, SignalReader, SignalWriter};
 use super::signal::ChannelMap;
+use super::signal::{newton_per_unit, Block, SignalReader, SignalWriter};
 use crate::frf::axis_name;
 
 /// The lead-in's tag.
@@ -194,7 +194,8 @@ impl Src {
 
     fn seek(&mut self, to: u64) -> Result<()> {
         if to != self.pos {
-            let d = i64::try_from(i128::from(to) - i128::from(self.pos)).map_err(|_| anyhow!("{}: offset {to}: seek out of range", self.source))?;
+            let d = i64::try_from(i128::from(to) - i128::from(self.pos))
+                .map_err(|_| anyhow!("{}: offset {to}: seek out of range", self.source))?;
             self.r.seek_relative(d).with_context(|| format!("{}: offset {to}: seek failed", self.source))?;
             self.pos = to;
         }
@@ -239,7 +240,12 @@ struct Meta<'a> {
 impl Meta<'_> {
     fn bytes(&mut self, n: u64, what: &str) -> Result<Vec<u8>> {
         if self.src.pos.saturating_add(n) > self.end {
-            bail!("{}: segment {}, offset {}: {what} of {n} bytes runs past the segment's metadata", self.src.source, self.seg, self.src.pos);
+            bail!(
+                "{}: segment {}, offset {}: {what} of {n} bytes runs past the segment's metadata",
+                self.src.source,
+                self.seg,
+                self.src.pos
+            );
         }
         let mut b = vec![0u8; n as usize];
         let seg = self.seg;
@@ -261,7 +267,8 @@ impl Meta<'_> {
         let at = self.src.pos;
         let n = self.u32(what)?;
         let b = self.bytes(u64::from(n), what)?;
-        String::from_utf8(b).map_err(|_| anyhow!("{}: segment {}, offset {at}: {what} is not UTF-8", self.src.source, self.seg))
+        String::from_utf8(b)
+            .map_err(|_| anyhow!("{}: segment {}, offset {at}: {what} is not UTF-8", self.src.source, self.seg))
     }
 }
 
@@ -300,18 +307,29 @@ impl Walker {
         let mut lead = [0u8; LEAD_IN as usize];
         self.src.read(&mut lead, &|| format!("the lead-in of segment {no}"))?;
         if &lead[..4] != TAG {
-            bail!("{source}: segment {no}, offset {at}: no TDMS lead-in (tag {:?}, expected \"TDSm\")", String::from_utf8_lossy(&lead[..4]));
+            bail!(
+                "{source}: segment {no}, offset {at}: no TDMS lead-in (tag {:?}, expected \"TDSm\")",
+                String::from_utf8_lossy(&lead[..4])
+            );
         }
         let toc = u32::from_le_bytes([lead[4], lead[5], lead[6], lead[7]]);
         let big = toc & TOC_BIG_ENDIAN != 0;
         let rd32 = |b: &[u8]| {
             let a = [b[0], b[1], b[2], b[3]];
-            if big { u32::from_be_bytes(a) } else { u32::from_le_bytes(a) }
+            if big {
+                u32::from_be_bytes(a)
+            } else {
+                u32::from_le_bytes(a)
+            }
         };
         let rd64 = |b: &[u8]| {
             let mut a = [0u8; 8];
             a.copy_from_slice(b);
-            if big { u64::from_be_bytes(a) } else { u64::from_le_bytes(a) }
+            if big {
+                u64::from_be_bytes(a)
+            } else {
+                u64::from_le_bytes(a)
+            }
         };
         let version = rd32(&lead[8..12]);
         if version != 4712 && version != 4713 {
@@ -346,7 +364,8 @@ impl Walker {
             ..Segment::default()
         };
         if toc & TOC_META != 0 {
-            let mut list: Vec<(usize, RawIndex)> = if toc & TOC_NEW_OBJ_LIST != 0 { Vec::new() } else { self.prev.list.clone() };
+            let mut list: Vec<(usize, RawIndex)> =
+                if toc & TOC_NEW_OBJ_LIST != 0 { Vec::new() } else { self.prev.list.clone() };
             let mut m = Meta { src: &mut self.src, big, seg: no, end: body + raw_off };
             let n_obj = m.u32("the number of objects")?;
             let mut found: Vec<FoundObject> = Vec::new();
@@ -431,7 +450,10 @@ impl Walker {
                         ri
                     }
                     Some(None) => o.index.ok_or_else(|| {
-                        anyhow!("{source}: segment {no}: object {}: raw data index \"same as before\", but it had none", shown(&o.path))
+                        anyhow!(
+                            "{source}: segment {no}: object {}: raw data index \"same as before\", but it had none",
+                            shown(&o.path)
+                        )
                     })?,
                 };
                 o.index = Some(ri);
@@ -459,9 +481,11 @@ impl Walker {
         }
         let raw = seg.data_end - seg.data_start;
         seg.list.retain(|e| e.1.n > 0);
-        seg.chunk_bytes = seg.list.iter().try_fold(0u64, |s, e| s.checked_add(e.1.bytes)).ok_or_else(|| {
-            anyhow!("{source}: segment {no}, offset {at}: raw data sizes overflow")
-        })?;
+        seg.chunk_bytes = seg
+            .list
+            .iter()
+            .try_fold(0u64, |s, e| s.checked_add(e.1.bytes))
+            .ok_or_else(|| anyhow!("{source}: segment {no}, offset {at}: raw data sizes overflow"))?;
         if seg.chunk_bytes == 0 {
             seg.list.clear();
             seg.chunks = 0;
@@ -641,7 +665,11 @@ impl Cursor {
 fn take_rows(cursors: &mut [Cursor], m: usize, scale: &[f64], outs: &mut [Vec<f64>]) -> Result<()> {
     let stride = cursors[0].stride;
     let base = cursors.iter().map(|c| c.off).min().unwrap_or(0);
-    let span = cursors.iter().map(|c| c.off - base + (m as u64 - 1) * stride + type_size(c.ty).unwrap_or(8)).max().unwrap_or(0);
+    let span = cursors
+        .iter()
+        .map(|c| c.off - base + (m as u64 - 1) * stride + type_size(c.ty).unwrap_or(8))
+        .max()
+        .unwrap_or(0);
     let (first, _) = cursors.split_at_mut(1);
     let c0 = &mut first[0];
     let mut buf = std::mem::take(&mut c0.buf);
@@ -696,7 +724,9 @@ impl TdmsReader {
                 for (axis, want) in &m.pairs {
                     let hits: Vec<&(usize, String, String)> = chans
                         .iter()
-                        .filter(|(_, g, c)| c.eq_ignore_ascii_case(want) || format!("{g}/{c}").eq_ignore_ascii_case(want))
+                        .filter(|(_, g, c)| {
+                            c.eq_ignore_ascii_case(want) || format!("{g}/{c}").eq_ignore_ascii_case(want)
+                        })
                         .collect();
                     match hits.as_slice() {
                         [one] => picked.push((*axis, one.0)),
@@ -705,7 +735,10 @@ impl TdmsReader {
                             axis_name(*axis),
                             list()
                         ),
-                        _ => bail!("{source}: --channels f{}={want}: several groups have it; give GROUP/NAME", axis_name(*axis)),
+                        _ => bail!(
+                            "{source}: --channels f{}={want}: several groups have it; give GROUP/NAME",
+                            axis_name(*axis)
+                        ),
                     }
                 }
             }
@@ -756,7 +789,8 @@ impl TdmsReader {
                 bail!("{here}: {} values; a force channel must be real numbers", type_name(ty));
             }
             let k = match o.props.get("unit_string") {
-                Some(Prop::Str(u)) => newton_per_unit(u).ok_or_else(|| anyhow!("{here}: unit {u:?}; expected N (kN and mN are scaled)"))?,
+                Some(Prop::Str(u)) => newton_per_unit(u)
+                    .ok_or_else(|| anyhow!("{here}: unit {u:?}; expected N (kN and mN are scaled)"))?,
                 _ => 1.0,
             };
             match o.props.get("wf_increment") {
@@ -781,7 +815,9 @@ impl TdmsReader {
                 _ => {}
             }
             match &n {
-                Some((n0, c0)) if *n0 != o.total => bail!("{here}: {} samples, but channel {c0} has {n0}: channels must have the same length", o.total),
+                Some((n0, c0)) if *n0 != o.total => {
+                    bail!("{here}: {} samples, but channel {c0} has {n0}: channels must have the same length", o.total)
+                }
                 Some(_) => {}
                 None => n = Some((o.total, name.clone())),
             }
@@ -860,9 +896,17 @@ impl SignalReader for TdmsReader {
                     bail!("{}: a channel ends early (internal error: the index pass counted more values)", self.source);
                 }
             }
-            let m = self.cursors.iter().map(|c| c.left).min().map_or(0, |l| usize::try_from(l).unwrap_or(usize::MAX)).min(left - got);
+            let m = self
+                .cursors
+                .iter()
+                .map(|c| c.left)
+                .min()
+                .map_or(0, |l| usize::try_from(l).unwrap_or(usize::MAX))
+                .min(left - got);
             let seg0 = self.cursors[0].interleaved_segment();
-            if seg0.is_some() && self.cursors.iter().all(|c| c.interleaved_segment() == seg0 && c.stride == self.cursors[0].stride) {
+            if seg0.is_some()
+                && self.cursors.iter().all(|c| c.interleaved_segment() == seg0 && c.stride == self.cursors[0].stride)
+            {
                 // Interleaved rows: one read for all channels.
                 take_rows(&mut self.cursors, m, &self.scale, &mut blk.channels)?;
             } else {
@@ -1022,7 +1066,16 @@ mod tests {
 
     #[test]
     fn names_say_the_axis() {
-        for (n, a) in [("Fx", Some(0)), ("Force Y", Some(1)), ("force_z", Some(2)), ("F-X", Some(0)), ("Z", Some(2)), ("Fxy", None), ("Torque", None), ("", None)] {
+        for (n, a) in [
+            ("Fx", Some(0)),
+            ("Force Y", Some(1)),
+            ("force_z", Some(2)),
+            ("F-X", Some(0)),
+            ("Z", Some(2)),
+            ("Fxy", None),
+            ("Torque", None),
+            ("", None),
+        ] {
             assert_eq!(axis_from_name(n), a, "{n}");
         }
     }

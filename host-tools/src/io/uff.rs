@@ -54,10 +54,7 @@ pub fn read_uff58(path: &Path) -> Result<Frf> {
 
 /// True if the first non-blank line of `bytes` is a UFF block delimiter `-1`.
 pub fn looks_like_uff(bytes: &[u8]) -> bool {
-    let mut cur = Cursor {
-        data: bytes,
-        pos: 0,
-    };
+    let mut cur = Cursor { data: bytes, pos: 0 };
     while let Some((_, line)) = cur.next_line() {
         let t = trim(line);
         if !t.is_empty() {
@@ -94,10 +91,7 @@ impl<'a> Cursor<'a> {
 
 /// 1-based line number of byte offset `off`.
 fn line_of(data: &[u8], off: usize) -> usize {
-    1 + data[..off.min(data.len())]
-        .iter()
-        .filter(|&&b| b == b'\n')
-        .count()
+    1 + data[..off.min(data.len())].iter().filter(|&&b| b == b'\n').count()
 }
 
 fn is_blank(b: u8) -> bool {
@@ -126,11 +120,7 @@ pub(super) fn trim(mut b: &[u8]) -> &[u8] {
 pub(super) fn show(line: &[u8]) -> String {
     let s = String::from_utf8_lossy(line);
     let s = s.trim();
-    let mut out: String = s
-        .chars()
-        .take(40)
-        .map(|c| if c.is_control() { '?' } else { c })
-        .collect();
+    let mut out: String = s.chars().take(40).map(|c| if c.is_control() { '?' } else { c }).collect();
     if s.chars().count() > 40 {
         out.push('…');
     }
@@ -162,9 +152,7 @@ pub(super) fn parse_real(s: &str) -> Option<f64> {
 }
 
 pub(super) fn tokens(line: &[u8]) -> Vec<&str> {
-    std::str::from_utf8(line)
-        .map(|s| s.split_whitespace().collect())
-        .unwrap_or_default()
+    std::str::from_utf8(line).map(|s| s.split_whitespace().collect()).unwrap_or_default()
 }
 
 /// Where we are, for error messages.
@@ -222,10 +210,7 @@ pub(super) fn parse_bin_header(rest: &[u8], ctx: &Ctx, off: usize) -> Result<Bin
     let big_endian = match bo {
         1 => false,
         2 => true,
-        _ => bail!(
-            "{}: byte order {bo} unknown (1 = little endian, 2 = big endian)",
-            ctx.at(off, "binary header")
-        ),
+        _ => bail!("{}: byte order {bo} unknown (1 = little endian, 2 = big endian)", ctx.at(off, "binary header")),
     };
     if fp != 2 {
         bail!(
@@ -234,16 +219,9 @@ pub(super) fn parse_bin_header(rest: &[u8], ctx: &Ctx, off: usize) -> Result<Bin
         );
     }
     if !(11..=1000).contains(&nl) {
-        bail!(
-            "{}: {nl} ASCII lines declared, dataset 58 has 11 (records 1 to 11)",
-            ctx.at(off, "binary header")
-        );
+        bail!("{}: {nl} ASCII lines declared, dataset 58 has 11 (records 1 to 11)", ctx.at(off, "binary header"));
     }
-    Ok(BinHeader {
-        big_endian,
-        n_ascii_lines: nl as usize,
-        n_bytes: nb.and_then(|v| u64::try_from(v).ok()),
-    })
+    Ok(BinHeader { big_endian, n_ascii_lines: nl as usize, n_bytes: nb.and_then(|v| u64::try_from(v).ok()) })
 }
 
 /// Find a closing `-1` at `pos` (after optional blanks / line breaks); return
@@ -266,14 +244,7 @@ pub(super) fn closing_at(data: &[u8], mut pos: usize) -> Option<usize> {
 }
 
 /// Skip a dataset other than 58 up to and including its closing `-1`.
-fn skip_other(
-    cur: &mut Cursor,
-    ctx: &Ctx,
-    num: u64,
-    binary: bool,
-    rest: &[u8],
-    id_off: usize,
-) -> Result<()> {
+fn skip_other(cur: &mut Cursor, ctx: &Ctx, num: u64, binary: bool, rest: &[u8], id_off: usize) -> Result<()> {
     if binary {
         // Another binary dataset: n_ascii_lines ASCII lines, then n_bytes.
         if let Ok(h) = parse_bin_header(rest, ctx, id_off) {
@@ -283,9 +254,7 @@ fn skip_other(
                         break;
                     }
                 }
-                let end = usize::try_from(nb)
-                    .ok()
-                    .and_then(|nb| cur.pos.checked_add(nb));
+                let end = usize::try_from(nb).ok().and_then(|nb| cur.pos.checked_add(nb));
                 if let Some(next) = end.and_then(|e| closing_at(cur.data, e)) {
                     cur.pos = next;
                     return Ok(());
@@ -355,9 +324,7 @@ fn obviously_not_force(label: &str) -> bool {
     if l.is_empty() || l == "none" {
         return false;
     }
-    const NOT: [&str; 12] = [
-        "m/s", "mm", "µm", "um", "in/", "/s", "s^2", "pa", "mv", "v/", "g/", "m/n",
-    ];
+    const NOT: [&str; 12] = ["m/s", "mm", "µm", "um", "in/", "/s", "s^2", "pa", "mv", "v/", "g/", "m/n"];
     NOT.iter().any(|p| l.contains(p)) || ["g", "m", "v", "in", "s", "rad"].contains(&l.as_str())
 }
 
@@ -369,26 +336,15 @@ fn units_label(label: &str) -> Option<String> {
 
 /// Data characteristics record (8 to 11): specific data type and units label.
 pub(super) fn data_characteristics(line: &[u8]) -> (Option<i64>, String) {
-    let spec = field(line, 0, 10)
-        .and_then(parse_int)
-        .or_else(|| tokens(line).first().and_then(|t| parse_int(t)));
+    let spec = field(line, 0, 10).and_then(parse_int).or_else(|| tokens(line).first().and_then(|t| parse_int(t)));
     let units = field(line, 46, 21).unwrap_or("").to_string();
     (spec, units)
 }
 
 enum Found58 {
     Skipped(String),
-    Frf {
-        entry: usize,
-        freq: Vec<f64>,
-        frf: Vec<Complex64>,
-        units: Option<String>,
-    },
-    Coh {
-        entry: usize,
-        freq: Vec<f64>,
-        coh: Vec<f64>,
-    },
+    Frf { entry: usize, freq: Vec<f64>, frf: Vec<Complex64>, units: Option<String> },
+    Coh { entry: usize, freq: Vec<f64>, coh: Vec<f64> },
 }
 
 /// Record 6 (DOF identification, Format(2(I5,I10),2(1X,10A1,I10,I4))):
@@ -496,28 +452,16 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
     let even = match spacing {
         1 => true,
         0 => false,
-        _ => bail!(
-            "{}: abscissa spacing {spacing} is neither 0 (uneven) nor 1 (even)",
-            ctx.at(off7, "record 7")
-        ),
+        _ => bail!("{}: abscissa spacing {spacing} is neither 0 (uneven) nor 1 (even)", ctx.at(off7, "record 7")),
     };
     if num_pts < 1 {
-        bail!(
-            "{}: number of data points is {num_pts}: no data",
-            ctx.at(off7, "record 7")
-        );
+        bail!("{}: number of data points is {num_pts}: no data", ctx.at(off7, "record 7"));
     }
     let per_point = usize::from(!even) + if complex { 2 } else { 1 };
-    let total = usize::try_from(num_pts)
-        .ok()
-        .and_then(|n| n.checked_mul(per_point))
-        .filter(|&t| t <= data.len())
-        .ok_or_else(|| {
-            anyhow!(
-                "{}: {num_pts} data points declared, more than the file can hold",
-                ctx.at(off7, "record 7")
-            )
-        })?;
+    let total =
+        usize::try_from(num_pts).ok().and_then(|n| n.checked_mul(per_point)).filter(|&t| t <= data.len()).ok_or_else(
+            || anyhow!("{}: {num_pts} data points declared, more than the file can hold", ctx.at(off7, "record 7")),
+        )?;
 
     // Which datasets we use: G_ij is response (channel) i over reference
     // (force) j; an unknown reference direction (0) is taken as the direct FRF.
@@ -578,20 +522,10 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
             if skip.is_none() {
                 for (i, chunk) in data[start..start + need].chunks_exact(elem).enumerate() {
                     let v = match (double, h.big_endian) {
-                        (true, false) => {
-                            chunk.try_into().map(f64::from_le_bytes).unwrap_or(f64::NAN)
-                        }
-                        (true, true) => {
-                            chunk.try_into().map(f64::from_be_bytes).unwrap_or(f64::NAN)
-                        }
-                        (false, false) => chunk
-                            .try_into()
-                            .map(f32::from_le_bytes)
-                            .map_or(f64::NAN, f64::from),
-                        (false, true) => chunk
-                            .try_into()
-                            .map(f32::from_be_bytes)
-                            .map_or(f64::NAN, f64::from),
+                        (true, false) => chunk.try_into().map(f64::from_le_bytes).unwrap_or(f64::NAN),
+                        (true, true) => chunk.try_into().map(f64::from_be_bytes).unwrap_or(f64::NAN),
+                        (false, false) => chunk.try_into().map(f32::from_le_bytes).map_or(f64::NAN, f64::from),
+                        (false, true) => chunk.try_into().map(f32::from_be_bytes).map_or(f64::NAN, f64::from),
                     };
                     vals.push(v);
                     offs.push(start + i * elem);
@@ -617,11 +551,7 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
                     continue;
                 }
                 read_numbers(line, widths, &mut vals).map_err(|tok| {
-                    anyhow!(
-                        "{}: cannot read {} as a number",
-                        ctx.at(off, "record 12"),
-                        show(tok.as_bytes())
-                    )
+                    anyhow!("{}: cannot read {} as a number", ctx.at(off, "record 12"), show(tok.as_bytes()))
                 })?;
                 offs.resize(vals.len(), off);
                 if vals.len() > total {
@@ -663,10 +593,7 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
     }
     let au = abs_units.to_ascii_lowercase();
     if !au.is_empty() && au != "none" && !au.contains("hz") {
-        bail!(
-            "{}: abscissa units {abs_units:?} are not Hz",
-            ctx.at(off8, "record 8")
-        );
+        bail!("{}: abscissa units {abs_units:?} are not Hz", ctx.at(off8, "record 8"));
     }
     let mut labels = Vec::new();
     if func_type == 4 {
@@ -700,30 +627,18 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
     // Every value finite.
     if let Some(i) = vals.iter().position(|v| !v.is_finite()) {
         let what = if bin.is_some() {
-            format!(
-                "record 12 (binary value {} at byte offset {})",
-                i + 1,
-                offs[i]
-            )
+            format!("record 12 (binary value {} at byte offset {})", i + 1, offs[i])
         } else {
             "record 12".to_string()
         };
-        bail!(
-            "{}: value {} is {} (values must be finite)",
-            ctx.at(offs[i], &what),
-            i + 1,
-            vals[i]
-        );
+        bail!("{}: value {} is {} (values must be finite)", ctx.at(offs[i], &what), i + 1, vals[i]);
     }
 
     // Abscissa.
     let n = total / per_point;
     let freq: Vec<f64> = if even {
         if x_min < 0.0 || !x_min.is_finite() {
-            bail!(
-                "{}: abscissa minimum {x_min} Hz is not a non-negative frequency",
-                ctx.at(off7, "record 7")
-            );
+            bail!("{}: abscissa minimum {x_min} Hz is not a non-negative frequency", ctx.at(off7, "record 7"));
         }
         if n > 1 && !(x_inc > 0.0 && x_inc.is_finite()) {
             bail!(
@@ -760,11 +675,7 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
         let s = sign as f64;
         let frf = (0..n)
             .map(|k| {
-                let v = if complex {
-                    Complex64::new(ord(k, 0), ord(k, 1))
-                } else {
-                    Complex64::new(ord(k, 0), 0.0)
-                };
+                let v = if complex { Complex64::new(ord(k, 0), ord(k, 1)) } else { Complex64::new(ord(k, 0), 0.0) };
                 v * s
             })
             .collect();
@@ -783,12 +694,7 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
                 );
             }
             if !(-COHERENCE_SLACK..=1.0 + COHERENCE_SLACK).contains(&c) {
-                bail!(
-                    "{}: coherence {c} at point {} ({} Hz) outside [0, 1]",
-                    ctx.at(o, "record 12"),
-                    k + 1,
-                    freq[k]
-                );
+                bail!("{}: coherence {c} at point {} ({} Hz) outside [0, 1]", ctx.at(o, "record 12"), k + 1, freq[k]);
             }
             coh.push(c.clamp(0.0, 1.0));
         }
@@ -799,11 +705,7 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
 /// Numbers of one ASCII data line: split at blanks; if a token does not
 /// parse (fields touching), the line is cut at the fixed Fortran widths.
 /// On failure returns the offending token.
-pub(super) fn read_numbers(
-    line: &[u8],
-    widths: &[usize],
-    out: &mut Vec<f64>,
-) -> std::result::Result<(), String> {
+pub(super) fn read_numbers(line: &[u8], widths: &[usize], out: &mut Vec<f64>) -> std::result::Result<(), String> {
     let Ok(text) = std::str::from_utf8(line) else {
         return Err(String::from_utf8_lossy(line).into_owned());
     };
@@ -883,10 +785,7 @@ pub fn parse_uff58_units(bytes: &[u8], source: &str) -> Result<(Frf, Option<Stri
     if trim(bytes).is_empty() {
         bail!("{source}: empty file");
     }
-    let mut cur = Cursor {
-        data: bytes,
-        pos: 0,
-    };
+    let mut cur = Cursor { data: bytes, pos: 0 };
     let mut set_no = 0usize;
     let mut skipped: Vec<String> = Vec::new();
     let mut frfs: [Option<(Item, Vec<Complex64>)>; 9] = Default::default();
@@ -899,10 +798,7 @@ pub fn parse_uff58_units(bytes: &[u8], source: &str) -> Result<(Frf, Option<Stri
         }
         let start_line = line_of(bytes, off);
         if t != b"-1" {
-            bail!(
-                "{source}: line {start_line}: expected '    -1' opening a UFF dataset, found {}",
-                show(t)
-            );
+            bail!("{source}: line {start_line}: expected '    -1' opening a UFF dataset, found {}", show(t));
         }
         // The dataset number line; a lone trailing "-1" ends the file.
         let (id_off, id) = loop {
@@ -914,9 +810,7 @@ pub fn parse_uff58_units(bytes: &[u8], source: &str) -> Result<(Frf, Option<Stri
         };
         let idt = trim(id);
         let digits = idt.iter().take_while(|b| b.is_ascii_digit()).count();
-        let num: Option<u64> = std::str::from_utf8(&idt[..digits])
-            .ok()
-            .and_then(|s| s.parse().ok());
+        let num: Option<u64> = std::str::from_utf8(&idt[..digits]).ok().and_then(|s| s.parse().ok());
         let Some(num) = num.filter(|_| digits <= 6) else {
             bail!(
                 "{source}: line {}: expected a dataset number after '-1', found {}",
@@ -928,31 +822,15 @@ pub fn parse_uff58_units(bytes: &[u8], source: &str) -> Result<(Frf, Option<Stri
         let binary = matches!(rest.first(), Some(b'b' | b'B'));
         let rest = if binary { &rest[1..] } else { rest };
         set_no += 1;
-        let ctx = Ctx {
-            source,
-            data: bytes,
-            no: set_no,
-            line: start_line,
-        };
+        let ctx = Ctx { source, data: bytes, no: set_no, line: start_line };
         if num != 58 {
             skip_other(&mut cur, &ctx, num, binary, rest, id_off)?;
-            skipped.push(format!(
-                "dataset #{set_no} at line {start_line}: type {num}"
-            ));
+            skipped.push(format!("dataset #{set_no} at line {start_line}: type {num}"));
             continue;
         }
-        let bin = if binary {
-            Some(parse_bin_header(rest, &ctx, id_off)?)
-        } else {
-            None
-        };
-        let item = |entry: usize, freq: Vec<f64>, what: &'static str| Item {
-            no: set_no,
-            line: start_line,
-            entry,
-            freq,
-            what,
-        };
+        let bin = if binary { Some(parse_bin_header(rest, &ctx, id_off)?) } else { None };
+        let item =
+            |entry: usize, freq: Vec<f64>, what: &'static str| Item { no: set_no, line: start_line, entry, freq, what };
         // Store a dataset for its entry, refusing a second one of the same kind.
         fn store<T>(slot: &mut Option<(Item, T)>, new: (Item, T), source: &str) -> Result<()> {
             if let Some((p, _)) = slot {
@@ -999,15 +877,9 @@ pub fn parse_uff58_units(bytes: &[u8], source: &str) -> Result<(Frf, Option<Stri
         bail!("{source}: no UFF dataset found");
     }
     // The reference frequency lines: the first FRF in the file.
-    let Some(reference) = frfs
-        .iter()
-        .flatten()
-        .map(|(it, _)| it)
-        .min_by_key(|it| it.no)
-    else {
-        let mut msg = format!(
-            "{source}: no FRF found (dataset 58 with function type 4 and response direction ±1, ±2 or ±3)"
-        );
+    let Some(reference) = frfs.iter().flatten().map(|(it, _)| it).min_by_key(|it| it.no) else {
+        let mut msg =
+            format!("{source}: no FRF found (dataset 58 with function type 4 and response direction ±1, ±2 or ±3)");
         if !skipped.is_empty() {
             let shown: Vec<&str> = skipped.iter().take(4).map(String::as_str).collect();
             msg.push_str(&format!("; skipped {}", shown.join("; ")));
@@ -1032,12 +904,7 @@ pub fn parse_uff58_units(bytes: &[u8], source: &str) -> Result<(Frf, Option<Stri
                 a.len()
             );
         }
-        let scale = a
-            .last()
-            .copied()
-            .unwrap_or(0.0)
-            .abs()
-            .max(b.last().copied().unwrap_or(0.0).abs());
+        let scale = a.last().copied().unwrap_or(0.0).abs().max(b.last().copied().unwrap_or(0.0).abs());
         if let Some(i) = (0..a.len()).find(|&i| (a[i] - b[i]).abs() > 1e-6 * scale) {
             bail!(
                 "{}: frequency line {} is {} Hz, but {} Hz in dataset #{} (FRF {}, line {}): \
@@ -1114,8 +981,7 @@ fn short(entry: usize) -> String {
 /// be evenly spaced (the abscissa is written as minimum and increment, with 7
 /// significant digits).
 pub fn write_uff58(path: &Path, frf: &Frf, binary: bool) -> Result<()> {
-    let bytes = uff58_to_bytes(frf, binary)
-        .map_err(|e| anyhow!("{}: not written: {e:#}", path.display()))?;
+    let bytes = uff58_to_bytes(frf, binary).map_err(|e| anyhow!("{}: not written: {e:#}", path.display()))?;
     super::atomic::write_atomic(path, |w: &mut dyn Write| {
         w.write_all(&bytes)?;
         Ok(())
@@ -1128,11 +994,7 @@ pub fn uff58_to_bytes(frf: &Frf, binary: bool) -> Result<Vec<u8>> {
     let f = &frf.freq_hz;
     let n = f.len();
     let f0 = f[0];
-    let df = if n > 1 {
-        (f[n - 1] - f0) / (n - 1) as f64
-    } else {
-        1.0
-    };
+    let df = if n > 1 { (f[n - 1] - f0) / (n - 1) as f64 } else { 1.0 };
     if let Some(i) = (0..n).find(|&i| (f[i] - (f0 + i as f64 * df)).abs() > 1e-6 * df) {
         bail!(
             "UFF 58 export requires evenly spaced frequency lines, but line {} is {} Hz where a spacing of \
@@ -1206,7 +1068,9 @@ pub(super) fn dataset_header_ref(
     let mut s = String::new();
     s.push_str(&format!("{:>6}\n", -1));
     match binary_bytes {
-        Some(nb) => s.push_str(&format!("{:>6}b{:>6}{:>6}{:>12}{:>12}{:>6}{:>6}{:>12}{:>12}\n", 58, 1, 2, 11, nb, 0, 0, 0, 0)),
+        Some(nb) => {
+            s.push_str(&format!("{:>6}b{:>6}{:>6}{:>12}{:>12}{:>6}{:>6}{:>12}{:>12}\n", 58, 1, 2, 11, nb, 0, 0, 0, 0))
+        }
         None => s.push_str(&format!("{:>6}{:74}\n", 58, "")),
     }
     for id in [id1, "NONE", "NONE", "NONE", "NONE"] {
@@ -1216,7 +1080,15 @@ pub(super) fn dataset_header_ref(
         "{:>5}{:>10}{:>5}{:>10} {:>10}{:>10}{:>4} {:>10}{:>10}{:>4}\n",
         func_type, func_id, 0, 0, "DYN", 1, dir, "HAMMER", 1, ref_dir
     ));
-    s.push_str(&format!("{:>10}{:>10}{:>10}{}{}{}\n", ord_type, n, 1, fmt_e(x0, 6, 13), fmt_e(dx, 6, 13), fmt_e(0.0, 6, 13)));
+    s.push_str(&format!(
+        "{:>10}{:>10}{:>10}{}{}{}\n",
+        ord_type,
+        n,
+        1,
+        fmt_e(x0, 6, 13),
+        fmt_e(dx, 6, 13),
+        fmt_e(0.0, 6, 13)
+    ));
     for (spec, label, units) in recs {
         s.push_str(&format!("{:>10}{:>5}{:>5}{:>5} {:<20} {:<20}\n", spec, 0, 0, 0, label, units));
     }

@@ -19,8 +19,8 @@ use std::fs::File;
 use std::io::{BufRead, BufReader, Read, Seek, SeekFrom, Write};
 use std::path::Path;
 
-use super::signal::{newton_per_unit, Block, SignalReader, SignalWriter};
 use super::signal::ChannelMap;
+use super::signal::{newton_per_unit, Block, SignalReader, SignalWriter};
 use super::uff::{data_characteristics, dataset_header, read_numbers, record6, record7, spec_type_name, tokens, trim};
 use crate::frf::axis_name;
 
@@ -89,7 +89,10 @@ impl UffReader {
                 if trim(&line).is_empty() {
                     continue;
                 }
-                bail!("{source}: line {lineno}: expected a '    -1' line opening a dataset, found {}", super::uff::show(&line));
+                bail!(
+                    "{source}: line {lineno}: expected a '    -1' line opening a dataset, found {}",
+                    super::uff::show(&line)
+                );
             }
             let start_line = lineno;
             if !next(&mut r, &mut line, &mut off, &mut lineno)? {
@@ -99,14 +102,20 @@ impl UffReader {
             let t: Vec<String> = tokens(&line).into_iter().map(str::to_string).collect();
             let head = t.first().cloned().unwrap_or_default();
             no += 1;
-            let here = |what: &str, l: usize| format!("{source}: line {l}: dataset #{no} (58, starting line {start_line}), {what}");
+            let here = |what: &str, l: usize| {
+                format!("{source}: line {l}: dataset #{no} (58, starting line {start_line}), {what}")
+            };
             let binary = match head.as_str() {
                 "58" => None,
                 "58b" => {
                     let g = |i: usize| t.get(i).and_then(|s| s.parse::<i64>().ok());
                     match (g(1), g(2), g(3)) {
                         (Some(bo @ 1..=2), Some(2), Some(11)) => Some(bo == 2),
-                        _ => bail!("{}: unsupported 58b header {:?} (need byte order 1/2, IEEE 754, 11 ASCII lines)", here("binary header", lineno), id),
+                        _ => bail!(
+                            "{}: unsupported 58b header {:?} (need byte order 1/2, IEEE 754, 11 ASCII lines)",
+                            here("binary header", lineno),
+                            id
+                        ),
                     }
                 }
                 _ => {
@@ -123,13 +132,16 @@ impl UffReader {
                             }
                         }
                         // A byte count above i64::MAX would seek backwards (and loop).
-                        let skip = i64::try_from(nb).map_err(|_| anyhow!("{}: binary byte count {nb} out of range", here()))?;
+                        let skip = i64::try_from(nb)
+                            .map_err(|_| anyhow!("{}: binary byte count {nb} out of range", here()))?;
                         r.seek_relative(skip).with_context(|| format!("{source}: seek failed"))?;
                         off += nb;
                     }
                     loop {
                         if !next(&mut r, &mut line, &mut off, &mut lineno)? {
-                            bail!("{source}: line {start_line}: dataset #{no} ({head}) is not closed by a '    -1' line");
+                            bail!(
+                                "{source}: line {start_line}: dataset #{no} ({head}) is not closed by a '    -1' line"
+                            );
                         }
                         if trim(&line) == b"-1" {
                             break;
@@ -146,18 +158,27 @@ impl UffReader {
                 recs.push((lineno, line.clone()));
             }
             let (l6, r6) = (recs[5].0, &recs[5].1);
-            let (func, rsp_dir, _) = record6(r6).ok_or_else(|| anyhow!("{}: cannot read function type and directions", here("record 6", l6)))?;
-            let node = super::uff::field(r6, 41, 10).and_then(super::uff::parse_int).or_else(|| tokens(r6).get(5).and_then(|s| s.parse().ok()));
+            let (func, rsp_dir, _) = record6(r6)
+                .ok_or_else(|| anyhow!("{}: cannot read function type and directions", here("record 6", l6)))?;
+            let node = super::uff::field(r6, 41, 10)
+                .and_then(super::uff::parse_int)
+                .or_else(|| tokens(r6).get(5).and_then(|s| s.parse().ok()));
             let (l7, r7) = (recs[6].0, &recs[6].1);
-            let (ord, num, spacing, x0, dx) = record7(r7).ok_or_else(|| anyhow!("{}: cannot read data form", here("record 7", l7)))?;
+            let (ord, num, spacing, x0, dx) =
+                record7(r7).ok_or_else(|| anyhow!("{}: cannot read data form", here("record 7", l7)))?;
             let double = match ord {
                 2 | 5 => false,
                 4 | 6 => true,
                 _ if func != 1 => false,
-                _ => bail!("{}: ordinate data type {ord}: a time history must be real (2 = single, 4 = double precision)", here("record 7", l7)),
+                _ => bail!(
+                    "{}: ordinate data type {ord}: a time history must be real (2 = single, 4 = double precision)",
+                    here("record 7", l7)
+                ),
             };
             let complex = matches!(ord, 5 | 6);
-            let elem = if matches!(ord, 4 | 6) { 8 } else { 4 } * if complex { 2 } else { 1 } * if spacing == 0 { 2 } else { 1 };
+            let elem = if matches!(ord, 4 | 6) { 8 } else { 4 }
+                * if complex { 2 } else { 1 }
+                * if spacing == 0 { 2 } else { 1 };
             let n = u64::try_from(num).map_err(|_| anyhow!("{}: {num} data points", here("record 7", l7)))?;
             let data_off = off;
             let data_line = lineno + 1;
@@ -168,17 +189,27 @@ impl UffReader {
             }
             loop {
                 if !next(&mut r, &mut line, &mut off, &mut lineno)? {
-                    bail!("{}: the dataset is not closed by a '    -1' line before the end of the file", here("record 12", lineno));
+                    bail!(
+                        "{}: the dataset is not closed by a '    -1' line before the end of the file",
+                        here("record 12", lineno)
+                    );
                 }
                 if trim(&line) == b"-1" {
                     break;
                 }
                 if binary.is_some() && !trim(&line).is_empty() {
-                    bail!("{}: no closing '    -1' after the {} bytes of binary data record 7 declares", here("record 12", lineno), n * elem as u64);
+                    bail!(
+                        "{}: no closing '    -1' after the {} bytes of binary data record 7 declares",
+                        here("record 12", lineno),
+                        n * elem as u64
+                    );
                 }
             }
             if func == 1 && complex {
-                bail!("{}: ordinate data type {ord}: a time history must be real (2 = single, 4 = double precision)", here("record 7", l7));
+                bail!(
+                    "{}: ordinate data type {ord}: a time history must be real (2 = single, 4 = double precision)",
+                    here("record 7", l7)
+                );
             }
             if func != 1 {
                 skipped.push(format!("dataset #{no}: function type {func}"));
@@ -199,16 +230,36 @@ impl UffReader {
             let (l8, r8) = (recs[7].0, &recs[7].1);
             let (spec, units) = data_characteristics(r8);
             if let Some(t) = spec.filter(|t| ![0, 1, 17].contains(t)) {
-                bail!("{}: the abscissa is {} (specific data type {t}), not time", here("record 8", l8), spec_type_name(t));
+                bail!(
+                    "{}: the abscissa is {} (specific data type {t}), not time",
+                    here("record 8", l8),
+                    spec_type_name(t)
+                );
             }
             let u = units.trim().to_ascii_lowercase();
             if !(u.is_empty() || u == "none" || u == "s" || u.starts_with("sec")) {
                 bail!("{}: abscissa units {units:?} are not seconds", here("record 8", l8));
             }
             let name = String::from_utf8_lossy(trim(&recs[0].1)).to_string();
-            let ch = Channel { axis: 9, sign: if rsp_dir < 0 { -1.0 } else { 1.0 }, no, line: start_line, n, dt: dx, t0: x0, double, binary, data_off, data_line };
+            let ch = Channel {
+                axis: 9,
+                sign: if rsp_dir < 0 { -1.0 } else { 1.0 },
+                no,
+                line: start_line,
+                n,
+                dt: dx,
+                t0: x0,
+                double,
+                binary,
+                data_off,
+                data_line,
+            };
             let axis = match map {
-                Some(m) => m.pairs.iter().find(|(_, v)| *v == name || node.is_some_and(|nd| v.parse::<i64>() == Ok(nd))).map(|p| p.0),
+                Some(m) => m
+                    .pairs
+                    .iter()
+                    .find(|(_, v)| *v == name || node.is_some_and(|nd| v.parse::<i64>() == Ok(nd)))
+                    .map(|p| p.0),
                 None => match rsp_dir.abs() {
                     d @ 1..=3 => Some((d - 1) as usize),
                     _ => None,
@@ -227,7 +278,10 @@ impl UffReader {
                     let ou = ounits.trim();
                     if !ou.eq_ignore_ascii_case("none") {
                         ch.sign *= newton_per_unit(ou).ok_or_else(|| {
-                            anyhow!("{}: ordinate units {ou:?} are not a force in N (kN and mN are scaled)", here("record 9", l9))
+                            anyhow!(
+                                "{}: ordinate units {ou:?} are not a force in N (kN and mN are scaled)",
+                                here("record 9", l9)
+                            )
                         })?;
                     }
                     found.push((ch, name, String::new()));
@@ -239,7 +293,11 @@ impl UffReader {
             bail!(
                 "{source}: no time history (dataset 58, function type 1) for fx, fy or fz{}{}",
                 if skipped.is_empty() { String::new() } else { format!("; skipped: {}", skipped.join(", ")) },
-                if map.is_none() { " (give --channels fx=NAME,... if the response directions do not say the axis)" } else { "" }
+                if map.is_none() {
+                    " (give --channels fx=NAME,... if the response directions do not say the axis)"
+                } else {
+                    ""
+                }
             );
         }
         found.sort_by_key(|c| c.0.axis);
@@ -294,7 +352,9 @@ impl UffReader {
     /// Read up to `want` values of channel `i` into `out`.
     fn fill(&mut self, i: usize, want: usize, out: &mut Vec<f64>) -> Result<()> {
         let c = &self.chans[i];
-        let at = |l: usize, what: &str| format!("{}: line {l}: dataset #{} (58, starting line {}), record 12, {what}", self.source, c.no, c.line);
+        let at = |l: usize, what: &str| {
+            format!("{}: line {l}: dataset #{} (58, starting line {}), record 12, {what}", self.source, c.no, c.line)
+        };
         match c.binary {
             Some(big) => {
                 let elem = if c.double { 8 } else { 4 };
@@ -308,7 +368,13 @@ impl UffReader {
                         (false, true) => f64::from(f32::from_be_bytes(b.try_into().unwrap_or([0; 4]))),
                     };
                     if !v.is_finite() {
-                        bail!("{}", at(c.data_line, &format!("value {} is {v} (values must be finite)", self.done[i] + k as u64 + 1)));
+                        bail!(
+                            "{}",
+                            at(
+                                c.data_line,
+                                &format!("value {} is {v} (values must be finite)", self.done[i] + k as u64 + 1)
+                            )
+                        );
                     }
                     out.push(c.sign * v);
                 }
@@ -317,9 +383,21 @@ impl UffReader {
                 let widths: &[usize] = if c.double { &[20] } else { &[13] };
                 while self.pending[i].len() < want {
                     self.text.clear();
-                    let n = self.readers[i].read_line(&mut self.text).with_context(|| at(self.lines[i], "read failed (not text?)"))?;
+                    let n = self.readers[i]
+                        .read_line(&mut self.text)
+                        .with_context(|| at(self.lines[i], "read failed (not text?)"))?;
                     if n == 0 || trim(self.text.as_bytes()) == b"-1" {
-                        bail!("{}", at(self.lines[i], &format!("{} values, but record 7 declares {}", self.done[i] + self.pending[i].len() as u64, c.n)));
+                        bail!(
+                            "{}",
+                            at(
+                                self.lines[i],
+                                &format!(
+                                    "{} values, but record 7 declares {}",
+                                    self.done[i] + self.pending[i].len() as u64,
+                                    c.n
+                                )
+                            )
+                        );
                     }
                     self.nums.clear();
                     read_numbers(self.text.trim_end().as_bytes(), widths, &mut self.nums)
@@ -410,9 +488,15 @@ pub struct UffWriter<'w> {
 }
 
 enum Sink<'w> {
-    Spilled { w: &'w mut dyn Write, spill: Vec<std::io::BufWriter<File>> },
+    Spilled {
+        w: &'w mut dyn Write,
+        spill: Vec<std::io::BufWriter<File>>,
+    },
     /// `len` samples per dataset, each at its place in `file`.
-    Placed { file: &'w File, len: u64 },
+    Placed {
+        file: &'w File,
+        len: u64,
+    },
     /// After [`SignalWriter::finish`].
     Done,
 }
@@ -450,7 +534,18 @@ impl<'w> UffWriter<'w> {
     }
 
     fn with_sink(sink: Sink<'w>, axes: &[usize], fs_hz: f64, binary: bool) -> Self {
-        UffWriter { sink, axes: axes.to_vec(), n: 0, dt: 1.0 / fs_hz, t0: None, binary, data_at: Vec::new(), text: String::new(), scratch: String::new(), bytes: Vec::new() }
+        UffWriter {
+            sink,
+            axes: axes.to_vec(),
+            n: 0,
+            dt: 1.0 / fs_hz,
+            t0: None,
+            binary,
+            data_at: Vec::new(),
+            text: String::new(),
+            scratch: String::new(),
+            bytes: Vec::new(),
+        }
     }
 
     /// Header of dataset `k` (of `n` points).
@@ -577,10 +672,14 @@ impl SignalWriter for UffWriter<'_> {
             Sink::Done => bail!("UFF writer: finished twice"),
             Sink::Placed { file, len } => {
                 if self.n != len {
-                    bail!("the record ended after {} of the {len} samples announced for the UFF datasets' headers", self.n);
+                    bail!(
+                        "the record ended after {} of the {len} samples announced for the UFF datasets' headers",
+                        self.n
+                    );
                 }
                 // An empty record: no block fixed the layout.
-                let data_at = if self.data_at.is_empty() { self.layout(len)?.0 } else { std::mem::take(&mut self.data_at) };
+                let data_at =
+                    if self.data_at.is_empty() { self.layout(len)?.0 } else { std::mem::take(&mut self.data_at) };
                 for (k, at) in data_at.iter().enumerate() {
                     let head = self.header(k, n);
                     write_at(file, head.as_bytes(), at - head.len() as u64)?;

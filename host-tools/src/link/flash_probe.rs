@@ -16,8 +16,8 @@ use dynocomp_core::image::{CoeffImage, CRC32};
 use dynocomp_core::protocol::SlotInfo;
 use dynocomp_core::shell::Slot;
 use dynocomp_core::store::{
-    encode_record, other, parse_header, seq_newer, trailing_id, verify_image, Header, Layout, Store,
-    RECORD_HEADER_LEN, SLOT_A_ADDR, SLOT_B_ADDR, SLOT_LEN,
+    encode_record, other, parse_header, seq_newer, trailing_id, verify_image, Header, Layout, Store, RECORD_HEADER_LEN,
+    SLOT_A_ADDR, SLOT_B_ADDR, SLOT_LEN,
 };
 #[cfg(feature = "probe")]
 use probe_rs::flashing::{DownloadOptions, FlashLoader};
@@ -73,8 +73,8 @@ pub fn slot_address(slot: Slot) -> u64 {
 /// Read and verify an image file for the box; the error names the file.
 pub fn read_box_image(path: &Path) -> Result<(Vec<u8>, CoeffImage)> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    use dynocomp_core::sample::BypassReason;
     use dynocomp_core::protocol::LinkError;
+    use dynocomp_core::sample::BypassReason;
     let img = verify_image(&bytes, CRC32.checksum(&bytes)).map_err(|e| match e {
         LinkError::NotRunnable(BypassReason::OfflineOnly) => anyhow::anyhow!(
             "{}: offline-only image (OfflineOnly: over the box's CPU budget at its sample rate, or parallel elaboration; see `dynocomp inspect`): the box never runs it, nothing was written — use it with `dynocomp compensate`, or re-run `dynocomp design` at a lower --fs",
@@ -107,8 +107,8 @@ pub fn running_slot(slots: &[u8]) -> Result<Option<SlotInfo>> {
     }
     let mut flash = SimFlash::g474_slots();
     flash.bytes_mut().copy_from_slice(slots);
-    let mut store = Store::open(flash, Layout::STM32G474RE)
-        .map_err(|e| anyhow::anyhow!("store layout refused: {e:?}"))?;
+    let mut store =
+        Store::open(flash, Layout::STM32G474RE).map_err(|e| anyhow::anyhow!("store layout refused: {e:?}"))?;
     Ok(store.boot().active)
 }
 
@@ -156,13 +156,7 @@ pub fn plan(image: &[u8], slot: SlotArg, slots: &[u8]) -> Result<FlashPlan> {
     let n = encode_record(image, seq, &mut record)
         .map_err(|e| anyhow::anyhow!("image does not fit a slot record: {e:?}"))?;
     record.truncate(n);
-    Ok(FlashPlan {
-        slot: target,
-        address: slot_address(target),
-        seq,
-        record,
-        image_id: trailing_id(image),
-    })
+    Ok(FlashPlan { slot: target, address: slot_address(target), seq, record, image_id: trailing_id(image) })
 }
 
 #[cfg(feature = "probe")]
@@ -171,9 +165,7 @@ pub fn read_slots(session: &mut Session) -> Result<Vec<u8>> {
     let mut core = session.core(0).context("probe: cannot access core 0")?;
     let mut out = vec![0u8; SLOTS_LEN];
     core.read(u64::from(SLOT_A_ADDR), &mut out)
-        .with_context(|| {
-            format!("probe: cannot read the coefficient slots at {SLOT_A_ADDR:#010x}")
-        })?;
+        .with_context(|| format!("probe: cannot read the coefficient slots at {SLOT_A_ADDR:#010x}"))?;
     Ok(out)
 }
 
@@ -184,13 +176,7 @@ pub fn loader_for(session: &Session, plan: &FlashPlan) -> Result<FlashLoader> {
     let mut loader = session.target().flash_loader();
     loader
         .add_data(plan.address, &plan.record)
-        .with_context(|| {
-            format!(
-                "probe: {:#010x} is not flash of {}",
-                plan.address,
-                session.target().name
-            )
-        })?;
+        .with_context(|| format!("probe: {:#010x} is not flash of {}", plan.address, session.target().name))?;
     Ok(loader)
 }
 
@@ -205,9 +191,7 @@ pub fn execute(session: &mut Session, plan: &FlashPlan, dry_run: bool) -> Result
     // Keep the rest of the erased sectors as they were (the slot is 4 pages;
     // a record is shorter).
     options.keep_unwritten_bytes = true;
-    loader
-        .commit(session, options)
-        .with_context(|| format!("probe: writing slot at {:#010x} failed", plan.address))?;
+    loader.commit(session, options).with_context(|| format!("probe: writing slot at {:#010x} failed", plan.address))?;
     Ok(())
 }
 
@@ -217,9 +201,7 @@ pub fn fake_session(chip: &str) -> Result<Session> {
     FakeProbe::with_mocked_core()
         .into_probe()
         .attach(chip, Permissions::default())
-        .with_context(|| {
-            format!("dry run: probe-rs has no usable target description for chip {chip:?}")
-        })
+        .with_context(|| format!("dry run: probe-rs has no usable target description for chip {chip:?}"))
 }
 
 #[cfg(feature = "probe")]
@@ -231,12 +213,8 @@ fn real_session(chip: &str) -> Result<Session> {
     if probes.len() > 1 {
         eprintln!("{} probes found; using the first: {info}", probes.len());
     }
-    let probe: Probe = info
-        .open()
-        .with_context(|| format!("cannot open probe {info}"))?;
-    probe
-        .attach(chip, Permissions::default())
-        .with_context(|| format!("cannot attach to {chip} through {info}"))
+    let probe: Probe = info.open().with_context(|| format!("cannot open probe {info}"))?;
+    probe.attach(chip, Permissions::default()).with_context(|| format!("cannot attach to {chip} through {info}"))
 }
 
 /// One-line description of a plan.
@@ -291,18 +269,10 @@ pub fn run_with(
     open: impl FnOnce(&str) -> Result<Session>,
 ) -> Result<()> {
     let (bytes, img) = read_box_image(image)?;
-    let mut session = if dry_run {
-        fake_session(chip)?
-    } else {
-        open(chip)?
-    };
+    let mut session = if dry_run { fake_session(chip)? } else { open(chip)? };
     // The fake probe has no flash contents (it reads zeros and logs every
     // byte): a dry run plans against erased slots.
-    let slots = if dry_run {
-        vec![0xFF; SLOTS_LEN]
-    } else {
-        read_slots(&mut session)?
-    };
+    let slots = if dry_run { vec![0xFF; SLOTS_LEN] } else { read_slots(&mut session)? };
     let plan = plan(&bytes, slot, &slots)?;
     execute(&mut session, &plan, dry_run)?;
     if dry_run {
@@ -319,10 +289,7 @@ pub fn run_with(
             .core(0)
             .and_then(|mut core| core.reset())
             .context("written and verified, but the reset failed: reset the box by hand")?;
-        println!(
-            "wrote and verified {} on {chip}; box reset, it boots the newest valid slot",
-            describe(&plan)
-        );
+        println!("wrote and verified {} on {chip}; box reset, it boots the newest valid slot", describe(&plan));
     }
     Ok(())
 }

@@ -51,10 +51,13 @@ pub fn open_port(path: &str) -> Result<Box<dyn Transport>> {
     loop {
         match serialport::new(path, 115_200).timeout(Duration::from_millis(20)).open() {
             Ok(port) => return Ok(Box::new(port)),
-            Err(e) if e.description.contains("lock") && start.elapsed() < PORT_BUSY_WAIT => std::thread::sleep(Duration::from_millis(50)),
-            Err(e) if e.description.contains("lock") => {
-                return Err(anyhow::anyhow!("{path}: cannot open serial port: {e} (busy for {} s: another program holds it; close it and retry)", PORT_BUSY_WAIT.as_secs()))
+            Err(e) if e.description.contains("lock") && start.elapsed() < PORT_BUSY_WAIT => {
+                std::thread::sleep(Duration::from_millis(50))
             }
+            Err(e) if e.description.contains("lock") => return Err(anyhow::anyhow!(
+                "{path}: cannot open serial port: {e} (busy for {} s: another program holds it; close it and retry)",
+                PORT_BUSY_WAIT.as_secs()
+            )),
             Err(e) => return Err(anyhow::Error::new(e).context(format!("{path}: cannot open serial port"))),
         }
     }
@@ -158,7 +161,11 @@ impl Link {
                 bail!("{}: {}", self.name, version_mismatch(v));
             }
             if Instant::now() > deadline {
-                bail!("{}: no reply from the box within {:.1} s (is it running this firmware?)", self.name, self.timeout.as_secs_f64());
+                bail!(
+                    "{}: no reply from the box within {:.1} s (is it running this firmware?)",
+                    self.name,
+                    self.timeout.as_secs_f64()
+                );
             }
         }
     }
@@ -175,7 +182,9 @@ impl Link {
     /// The box's status.
     pub fn status(&mut self) -> Result<Status> {
         match self.request(Request::GetStatus)? {
-            Reply::Status(s) if s.protocol != PROTOCOL_VERSION => bail!("{}: {}", self.name, version_mismatch(s.protocol)),
+            Reply::Status(s) if s.protocol != PROTOCOL_VERSION => {
+                bail!("{}: {}", self.name, version_mismatch(s.protocol))
+            }
             Reply::Status(s) => Ok(s),
             Reply::Error(e) => bail!("{}: status request refused: {}", self.name, describe_error(&e)),
             other => bail!("{}: unexpected reply to GetStatus: {other:?}", self.name),

@@ -116,7 +116,8 @@ impl SimFlash {
             );
             f.mem = bytes;
         } else {
-            let mut file = File::create(path).with_context(|| format!("{}: cannot create flash file", path.display()))?;
+            let mut file =
+                File::create(path).with_context(|| format!("{}: cannot create flash file", path.display()))?;
             file.write_all(&f.mem).with_context(|| format!("{}: cannot write flash file", path.display()))?;
         }
         let file = std::fs::OpenOptions::new()

@@ -89,9 +89,19 @@ impl BoxLoad {
         if measured {
             let pct = |c: u32| 100.0 * f64::from(c) / period;
             let mean = if self.isr_cycles_mean > 0 {
-                format!("mean {}, max {} cycles = {:.1} % (max {:.1} %)", self.isr_cycles_mean, self.isr_cycles_max, pct(self.isr_cycles_mean), pct(self.isr_cycles_max))
+                format!(
+                    "mean {}, max {} cycles = {:.1} % (max {:.1} %)",
+                    self.isr_cycles_mean,
+                    self.isr_cycles_max,
+                    pct(self.isr_cycles_mean),
+                    pct(self.isr_cycles_max)
+                )
             } else {
-                format!("mean not yet available, max {} cycles = {:.1} %", self.isr_cycles_max, pct(self.isr_cycles_max))
+                format!(
+                    "mean not yet available, max {} cycles = {:.1} %",
+                    self.isr_cycles_max,
+                    pct(self.isr_cycles_max)
+                )
             };
             lines.push(format!(
                 "sample interrupt: {mean} of the sample period at {} Hz and {} MHz ({:.0} cycles per sample)",
@@ -108,7 +118,8 @@ impl BoxLoad {
                 self.overruns
             ));
         } else if before > 0 {
-            lines.push(format!("note: {before} overrun(s) happened before this recording (since boot), none during it"));
+            lines
+                .push(format!("note: {before} overrun(s) happened before this recording (since boot), none during it"));
         }
         if measured && f64::from(self.isr_cycles_max) >= period {
             lines.push(format!(
@@ -123,11 +134,8 @@ impl BoxLoad {
 impl StreamReport {
     /// One line for the user.
     pub fn summary(&self) -> String {
-        let ranges: Vec<String> = self
-            .lost_ranges
-            .iter()
-            .map(|&(a, b)| if a == b { a.to_string() } else { format!("{a}..{b}") })
-            .collect();
+        let ranges: Vec<String> =
+            self.lost_ranges.iter().map(|&(a, b)| if a == b { a.to_string() } else { format!("{a}..{b}") }).collect();
         format!(
             "{} samples in {} frames; lost frames: {}{}",
             self.samples,
@@ -208,7 +216,10 @@ pub fn record(
 ) -> Result<StreamReport> {
     let status = link.status()?;
     let Some(image) = status.image else {
-        bail!("the box runs no image ({:?}): no scaling to convert codes to newtons; flash an image first", status.bypass);
+        bail!(
+            "the box runs no image ({:?}): no scaling to convert codes to newtons; flash an image first",
+            status.bypass
+        );
     };
     let fs = status.fs_hz;
     let dec = decimation.unwrap_or_else(|| fs.div_ceil(DEFAULT_STREAM_RATE).clamp(1, u32::from(u16::MAX)) as u16);
@@ -255,7 +266,8 @@ pub fn record(
         rows.truncate(m);
     }
     loss.report.samples = rows.len();
-    write_rows(output, &axes, &rows, fs).with_context(|| format!("{}: cannot write the recording", output.display()))?;
+    write_rows(output, &axes, &rows, fs)
+        .with_context(|| format!("{}: cannot write the recording", output.display()))?;
     Ok(loss.report)
 }
 
@@ -359,16 +371,27 @@ mod tests {
         );
         // Another clock and rate: 100 kHz at 168.5 MHz = 1 685 cycles.
         let l = BoxLoad { fs_hz: 100_000, core_clock_hz: 168_500_000, ..load(0, 0, 337, 1_685) }.summary();
-        assert!(l[1].contains("= 20.0 % (max 100.0 %) of the sample period at 100000 Hz and 168.5 MHz (1685 cycles"), "{l:?}");
+        assert!(
+            l[1].contains("= 20.0 % (max 100.0 %) of the sample period at 100000 Hz and 168.5 MHz (1685 cycles"),
+            "{l:?}"
+        );
         // The interrupt took a whole period: warned.
-        assert!(l.iter().any(|s| s.starts_with("WARNING: the slowest sample interrupt (1685 cycles) took longer than a sample period (1685 cycles)")), "{l:?}");
+        assert!(
+            l.iter().any(|s| s.starts_with(
+                "WARNING: the slowest sample interrupt (1685 cycles) took longer than a sample period (1685 cycles)"
+            )),
+            "{l:?}"
+        );
     }
 
     #[test]
     fn overruns_during_the_recording_are_a_warning() {
         let l = load(3, 5, 1_000, 1_500).summary();
         assert!(l[0].contains("3 during this recording, 5 since boot"), "{l:?}");
-        assert!(l.iter().any(|s| s.starts_with("WARNING: the box missed 3 sample deadline(s) during this recording")), "{l:?}");
+        assert!(
+            l.iter().any(|s| s.starts_with("WARNING: the box missed 3 sample deadline(s) during this recording")),
+            "{l:?}"
+        );
         // Only before the recording: a note, no warning.
         let l = load(0, 5, 1_000, 1_500).summary();
         assert!(l.iter().all(|s| !s.contains("WARNING")), "{l:?}");
@@ -398,7 +421,10 @@ mod tests {
         b.counters.isr_cycles_mean = 1_100;
         b.counters.isr_cycles_max = 2_000;
         b.counters.isr_cycles_last = 1_050;
-        assert_eq!(BoxLoad::from_statuses(&a, &b), BoxLoad { overruns: 2, overruns_since_boot: 1, ..load(0, 0, 1_100, 2_000) });
+        assert_eq!(
+            BoxLoad::from_statuses(&a, &b),
+            BoxLoad { overruns: 2, overruns_since_boot: 1, ..load(0, 0, 1_100, 2_000) }
+        );
     }
 
     #[test]
@@ -414,6 +440,9 @@ mod tests {
         }
         // Max known but no complete mean window yet.
         let l = load(0, 0, 0, 1_660).summary();
-        assert!(l[1].starts_with("sample interrupt: mean not yet available, max 1660 cycles = 50.0 % of the sample period"), "{l:?}");
+        assert!(
+            l[1].starts_with("sample interrupt: mean not yet available, max 1660 cycles = 50.0 % of the sample period"),
+            "{l:?}"
+        );
     }
 }

@@ -74,7 +74,8 @@ impl VirtualBox {
     /// Boot from `flash`; stream frames whose sequence numbers are in `drop`
     /// are never sent (simulated loss on the link).
     pub fn boot(flash: SimFlash, drop: impl IntoIterator<Item = u32>) -> Result<VirtualBox> {
-        let mut store = Store::open(flash, Layout::STM32G474RE).map_err(|e| anyhow::anyhow!("simulated flash: {e:?}"))?;
+        let mut store =
+            Store::open(flash, Layout::STM32G474RE).map_err(|e| anyhow::anyhow!("simulated flash: {e:?}"))?;
         let boot = store.boot();
         let (image, boot_reason) = match boot.image {
             Ok(img) => (Some(img), BypassReason::NoImage),
@@ -256,7 +257,14 @@ impl VirtualBox {
         loop {
             let n = match port.read(&mut buf) {
                 Ok(n) => n,
-                Err(e) if matches!(e.kind(), std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock | std::io::ErrorKind::Interrupted) => 0,
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock | std::io::ErrorKind::Interrupted
+                    ) =>
+                {
+                    0
+                }
                 Err(_) => return Exit::LinkClosed,
             };
             let mut out = self.receive(&buf[..n]);
@@ -351,6 +359,10 @@ pub fn spawn(exe: &Path, args: &[&str]) -> Result<(std::process::Child, String)>
     let stdout = child.stdout.take().context("virtual box stdout")?;
     let mut line = String::new();
     std::io::BufReader::new(stdout).read_line(&mut line).context("virtual box did not start")?;
-    let path = line.trim().strip_prefix("PTY ").map(str::to_string).with_context(|| format!("virtual box printed `{}`", line.trim()))?;
+    let path = line
+        .trim()
+        .strip_prefix("PTY ")
+        .map(str::to_string)
+        .with_context(|| format!("virtual box printed `{}`", line.trim()))?;
     Ok((child, path))
 }

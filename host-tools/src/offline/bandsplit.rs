@@ -76,7 +76,8 @@ pub fn split(x: &[f64], fs_hz: f64, crossovers_hz: &[f64]) -> Result<Vec<Vec<f64
     let freq: Vec<f64> = (0..m).map(|i| i.min(m - i) as f64 * fs_hz / m as f64).collect();
     let mut out = Vec::with_capacity(n_bands);
     for k in 0..n_bands {
-        let mut buf: Vec<Complex64> = spec.iter().zip(&freq).map(|(s, f)| s * band_gain(*f, k, crossovers_hz)).collect();
+        let mut buf: Vec<Complex64> =
+            spec.iter().zip(&freq).map(|(s, f)| s * band_gain(*f, k, crossovers_hz)).collect();
         inv.process(&mut buf);
         out.push(buf[pad..pad + n].iter().map(|v| v.re / m as f64).collect());
     }

@@ -30,7 +30,12 @@ pub fn check_sample_rate(image: &CoeffImage, rec: &SignalRecord, source: &str) -
 /// shifting the output back by L samples; to keep the record's length the
 /// kernel is fed L extra samples that hold the record's last value, so the
 /// last L output samples are estimates made with that held input.
-pub fn compensate_record(image: &CoeffImage, rec: &SignalRecord, raw_timing: bool, source: &str) -> Result<SignalRecord> {
+pub fn compensate_record(
+    image: &CoeffImage,
+    rec: &SignalRecord,
+    raw_timing: bool,
+    source: &str,
+) -> Result<SignalRecord> {
     let latency = if raw_timing { 0 } else { usize::from(image.latency_samples) };
     let mut axes = Vec::with_capacity(rec.channels.len());
     for (axis, samples) in &rec.channels {
@@ -40,7 +45,10 @@ pub fn compensate_record(image: &CoeffImage, rec: &SignalRecord, raw_timing: boo
     for ((axis, _), out) in rec.channels.iter().zip(run_axes(&axes, latency)) {
         match out {
             Ok(out) => channels.push((*axis, out)),
-            Err(k) => bail!("{source}: compensated f{} became non-finite at sample {k}; the image is unusable for this record", axis_name(*axis)),
+            Err(k) => bail!(
+                "{source}: compensated f{} became non-finite at sample {k}; the image is unusable for this record",
+                axis_name(*axis)
+            ),
         }
     }
     Ok(SignalRecord { t_s: rec.t_s.clone(), channels })
@@ -225,7 +233,12 @@ impl<'a> StreamCompensator<'a> {
 /// [`compensate_record`] (the core kernel, as for any image), and sum the
 /// bands. The split adds no phase and its bands sum to the input, so the
 /// result differs from the input only by what the band compensators do.
-pub fn compensate_parallel(image: &ParallelImage, rec: &SignalRecord, raw_timing: bool, source: &str) -> Result<SignalRecord> {
+pub fn compensate_parallel(
+    image: &ParallelImage,
+    rec: &SignalRecord,
+    raw_timing: bool,
+    source: &str,
+) -> Result<SignalRecord> {
     let edges: Vec<(f64, f64)> = image.bands().iter().map(|b| (f64::from(b.lo_hz), f64::from(b.hi_hz))).collect();
     let crossovers = crate::design::bands::crossovers(&edges)?;
     let fs = f64::from(image.fs_hz);
@@ -302,7 +315,8 @@ mod tests {
                     fed.map(|&v| f64::from(f.step(&mut st, v as f32))).skip(latency).collect()
                 })
                 .collect();
-            let axes: Vec<(&AxisFilter, &[f64])> = filters.iter().zip(&inputs).map(|(f, u)| (f, u.as_slice())).collect();
+            let axes: Vec<(&AxisFilter, &[f64])> =
+                filters.iter().zip(&inputs).map(|(f, u)| (f, u.as_slice())).collect();
             let got = run_axes(&axes, latency);
             assert_eq!(got.len(), n_axes);
             for (a, (g, w)) in got.iter().zip(&want).enumerate() {

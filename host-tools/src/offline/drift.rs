@@ -6,7 +6,6 @@
 //! does not grow with the record beyond 16 bytes per sample, on disk with
 //! [`SpilledDriftForward`].
 
-
 use anyhow::{bail, Context, Result};
 use nalgebra::{DMatrix, DVector};
 use std::f64::consts::PI;
@@ -157,7 +156,15 @@ impl Covariance {
     /// P_{k+1} = A_k (P_k − K_k S_k K_kᵀ) A_kᵀ + q·g gᵀ (g the force's
     /// unit vector), or P held if frozen and the next step keeps the model;
     /// true if held.
-    fn advance(&mut self, pl: &Plant, gain: &Gain, same_model_next: bool, q: f64, force: usize, w: &mut Scratch) -> bool {
+    fn advance(
+        &mut self,
+        pl: &Plant,
+        gain: &Gain,
+        same_model_next: bool,
+        q: f64,
+        force: usize,
+        w: &mut Scratch,
+    ) -> bool {
         if self.frozen && same_model_next {
             return true;
         }
@@ -223,7 +230,11 @@ pub struct DriftSmoothing {
 /// gains from its checkpoint. A is applied as its nonzero entries (≤ 3 per
 /// row), and P is held where it has converged and the model does not change
 /// (before and after the drift).
-pub fn smooth_drifting(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing) -> Result<Vec<f64>> {
+pub fn smooth_drifting(
+    y: &[f64],
+    model_at: &dyn Fn(f64) -> PoleResidueModel,
+    opts: &DriftSmoothing,
+) -> Result<Vec<f64>> {
     smooth_drifting_in_segments(y, model_at, opts, segment_len(y.len()), &|_| {})
 }
 
@@ -260,7 +271,11 @@ pub fn smooth_drifting_in_segments(
 /// front). Differences of ℓ between models say how much better one
 /// explains the record; used to ask whether a record can tell the drift's
 /// end state (`examples/drift_from_record.rs`).
-pub fn drift_log_likelihood(y: &[f64], model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing) -> Result<f64> {
+pub fn drift_log_likelihood(
+    y: &[f64],
+    model_at: &dyn Fn(f64) -> PoleResidueModel,
+    opts: &DriftSmoothing,
+) -> Result<f64> {
     Ok(drift_passes(y, model_at, opts, None, &|_| {})?.1)
 }
 
@@ -318,10 +333,15 @@ impl<'m> DriftForward<'m> {
         })
     }
 
-    fn discrete(model_at: &dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing, level: usize) -> Result<DiscreteModel> {
+    fn discrete(
+        model_at: &dyn Fn(f64) -> PoleResidueModel,
+        opts: &DriftSmoothing,
+        level: usize,
+    ) -> Result<DiscreteModel> {
         let s = level as f64 / S_LEVELS as f64;
         let (taps, advance) = opts.structure;
-        fit_with_structure(&model_at(s), opts.fs_hz, opts.band_hz, taps, advance).with_context(|| format!("model at state s = {s:.3}"))
+        fit_with_structure(&model_at(s), opts.fs_hz, opts.band_hz, taps, advance)
+            .with_context(|| format!("model at state s = {s:.3}"))
     }
 
     /// P⁻ of the next step, for a checkpoint (its gain is recomputed: the
@@ -338,7 +358,11 @@ impl<'m> DriftForward<'m> {
         if self.plants[level].is_none() {
             let pl = augmented_plant(&Self::discrete(self.model_at, &self.opts, level)?, 0);
             if pl.a.nrows() != n {
-                bail!("the model at state s = {:.3} has another state size ({} vs {n}); a mode crossed fs/2", level as f64 / S_LEVELS as f64, pl.a.nrows());
+                bail!(
+                    "the model at state s = {:.3} has another state size ({} vs {n}); a mode crossed fs/2",
+                    level as f64 / S_LEVELS as f64,
+                    pl.a.nrows()
+                );
             }
             self.plants[level] = Some(Plant::new(&pl.a, pl.c));
         }
@@ -428,7 +452,8 @@ fn drift_passes(
     let mut fwd = DriftForward::new(model_at, opts)?;
     let advance = opts.structure.1;
     // ỹ_k = y_{k−D}: D copies of y_0 in front (as the stationary smoother).
-    let yt: Vec<f64> = std::iter::repeat_n(y.first().copied().unwrap_or(0.0), advance).chain(y.iter().copied()).collect();
+    let yt: Vec<f64> =
+        std::iter::repeat_n(y.first().copied().unwrap_or(0.0), advance).chain(y.iter().copied()).collect();
     let len = yt.len();
     let kept = if segment.is_some() { len } else { 0 };
     let mut es = Vec::with_capacity(kept);
@@ -495,9 +520,9 @@ impl<'m> SpilledDriftForward<'m> {
     pub fn new(model_at: &'m dyn Fn(f64) -> PoleResidueModel, opts: &DriftSmoothing, dir: &Path) -> Result<Self> {
         let fwd = DriftForward::new(model_at, opts)?;
         let temp = || {
-            tempfile::tempfile_in(dir)
-                .map(|f| std::io::BufWriter::with_capacity(1 << 20, f))
-                .with_context(|| format!("{}: cannot create a temporary file for the drift smoother's forward pass", dir.display()))
+            tempfile::tempfile_in(dir).map(|f| std::io::BufWriter::with_capacity(1 << 20, f)).with_context(|| {
+                format!("{}: cannot create a temporary file for the drift smoother's forward pass", dir.display())
+            })
         };
         Ok(SpilledDriftForward { fwd, pairs: temp()?, checkpoints: temp()?, n_y: 0 })
     }
@@ -525,9 +550,16 @@ impl SpilledPass for SpilledDriftForward<'_> {
         Ok(())
     }
 
-    fn backward(self: Box<Self>, dir: &Path, name: &str, source: &str, on_chunk: &dyn Fn(u64)) -> Result<SpilledEstimate> {
+    fn backward(
+        self: Box<Self>,
+        dir: &Path,
+        name: &str,
+        source: &str,
+        on_chunk: &dyn Fn(u64),
+    ) -> Result<SpilledEstimate> {
         use std::io::{Read, Seek, SeekFrom, Write};
-        let io_err = |e: std::io::Error| anyhow::anyhow!("{}: temporary file of the drift smoother: {e}", dir.display());
+        let io_err =
+            |e: std::io::Error| anyhow::anyhow!("{}: temporary file of the drift smoother: {e}", dir.display());
         let SpilledDriftForward { fwd, pairs, checkpoints, n_y } = *self;
         let mut pairs = pairs.into_inner().map_err(|e| io_err(e.into_error()))?;
         let mut checkpoints = checkpoints.into_inner().map_err(|e| io_err(e.into_error()))?;
@@ -574,7 +606,13 @@ impl SpilledPass for SpilledDriftForward<'_> {
 
 /// The two states of `axis` from the sidecar and the drift smoother's
 /// settings (q and R from the image), or why the column cannot follow a drift.
-pub fn axis_drift(image: &CoeffImage, sidecar: &ModelSidecar, axis: usize, source: &str, interval_s: (f64, f64)) -> Result<(TwoState, DriftSmoothing)> {
+pub fn axis_drift(
+    image: &CoeffImage,
+    sidecar: &ModelSidecar,
+    axis: usize,
+    source: &str,
+    interval_s: (f64, f64),
+) -> Result<(TwoState, DriftSmoothing)> {
     let name = axis_name(axis);
     let Some(a) = image.axes.get(axis).copied().flatten() else {
         bail!("{source}: column f{name} has no compensator (and no q, R) in the image; drop the column or design for that axis");

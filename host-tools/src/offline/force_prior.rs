@@ -135,7 +135,10 @@ impl HarmonicPrior {
             && pos(self.band_hz.1)
             && self.band_hz.1 <= 0.5 * self.fs_hz
             && self.lines.len() <= MAX_LINES
-            && self.lines.iter().all(|l| l.power_n2.is_finite() && l.power_n2 >= 0.0 && l.freq_hz > 0.0 && l.freq_hz <= self.band_hz.1);
+            && self
+                .lines
+                .iter()
+                .all(|l| l.power_n2.is_finite() && l.power_n2 >= 0.0 && l.freq_hz > 0.0 && l.freq_hz <= self.band_hz.1);
         if !ok {
             bail!("the force prior is not valid (non-finite or out-of-range values, or more than {MAX_LINES} lines); re-run `dynocomp design --force-prior harmonics`");
         }
@@ -250,7 +253,15 @@ pub struct RecordSpectrum {
 /// Power around each harmonic k·`spindle_hz` (within ±max(B/2, 2 bins))
 /// is that line's; the rest of (f_sp/2, band] is off the lines. The
 /// expected noise (R·Σw² per bin through 1/|Ĝ|²) is removed from both.
-pub fn analyze_record(y: &[f64], fs_hz: f64, g: &dyn Fn(f64) -> Complex64, r: f64, spindle_hz: f64, band_hz: f64, width_hz: f64) -> Result<RecordSpectrum> {
+pub fn analyze_record(
+    y: &[f64],
+    fs_hz: f64,
+    g: &dyn Fn(f64) -> Complex64,
+    r: f64,
+    spindle_hz: f64,
+    band_hz: f64,
+    width_hz: f64,
+) -> Result<RecordSpectrum> {
     let n = y.len();
     if let Some(k) = y.iter().position(|v| !v.is_finite()) {
         bail!("sample {k} of the force record is not finite");
@@ -397,7 +408,14 @@ impl CutSpectrum {
 /// (W the band width): the terms of the default q criterion
 /// ([`crate::design::axis`]) with the record's spectrum for the flat one. With
 /// `flat`, for a flat spectrum of the same total power.
-fn criterion(h: &dyn Fn(f64) -> Complex64, g: &dyn Fn(f64) -> Complex64, cut: &CutSpectrum, r: f64, fs_hz: f64, flat: bool) -> f64 {
+fn criterion(
+    h: &dyn Fn(f64) -> Complex64,
+    g: &dyn Fn(f64) -> Complex64,
+    cut: &CutSpectrum,
+    r: f64,
+    fs_hz: f64,
+    flat: bool,
+) -> f64 {
     let grid = crate::design::criterion::criterion_grid(&[cut.band_hz]);
     let width = cut.band_hz.1 - cut.band_hz.0;
     let m = grid.len() as f64;
@@ -431,7 +449,14 @@ fn criterion(h: &dyn Fn(f64) -> Complex64, g: &dyn Fn(f64) -> Complex64, cut: &C
 /// [`MIN_BROADBAND_SHARE`] of the total. A force that is not a steady cut
 /// (chatter, transients, a wrong spindle speed) is not in J; [`analyze_record`]
 /// refuses a record whose force is not on the harmonics.
-pub fn tune_and_predict(prior: &mut HarmonicPrior, dm: &DiscreteModel, g: &dyn Fn(f64) -> Complex64, cut: &CutSpectrum, r: f64, q_default: f64) -> PriorPrediction {
+pub fn tune_and_predict(
+    prior: &mut HarmonicPrior,
+    dm: &DiscreteModel,
+    g: &dyn Fn(f64) -> Complex64,
+    cut: &CutSpectrum,
+    r: f64,
+    q_default: f64,
+) -> PriorPrediction {
     let fs = prior.fs_hz;
     let j_of = |p: &HarmonicPrior, flat: bool| {
         let h = |f: f64| wiener_response(dm, p.force_psd(f), r, f);
@@ -449,8 +474,15 @@ pub fn tune_and_predict(prior: &mut HarmonicPrior, dm: &DiscreteModel, g: &dyn F
     // q_default·1e-9 on the rates harness's high-mode case at 10.24 kHz).
     let l0 = q_default.log10();
     let (lo, hi) = (l0 - 6.0, l0 + 1.0);
-    let best = (-6..=1).map(|i| l0 + f64::from(i)).map(|lq| (lq, at(lq))).fold((l0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
-    let [p1, p2] = crate::numeric::search::golden_section(&mut |lq| at(lq), (best.0 - 1.0).max(lo), (best.0 + 1.0).min(hi), 30);
+    let best = (-6..=1).map(|i| l0 + f64::from(i)).map(|lq| (lq, at(lq))).fold((l0, f64::INFINITY), |a, b| {
+        if b.1 < a.1 {
+            b
+        } else {
+            a
+        }
+    });
+    let [p1, p2] =
+        crate::numeric::search::golden_section(&mut |lq| at(lq), (best.0 - 1.0).max(lo), (best.0 + 1.0).min(hi), 30);
     let pick = [best, p1, p2].into_iter().fold((l0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
     prior.q_broadband = 10f64.powf(pick.0);
     let default = HarmonicPrior { lines: Vec::new(), q_broadband: q_default, ..prior.clone() };
@@ -468,7 +500,9 @@ pub fn tune_and_predict(prior: &mut HarmonicPrior, dm: &DiscreteModel, g: &dyn F
 /// the noise in their window, the [`MAX_LINES`] strongest against it.
 pub fn select_lines(rs: &RecordSpectrum) -> Vec<HarmonicLine> {
     let mut idx: Vec<usize> = (0..rs.lines.len()).filter(|&i| rs.lines[i].power_n2 > rs.line_noise_n2[i]).collect();
-    idx.sort_by(|&a, &b| (rs.lines[b].power_n2 / rs.line_noise_n2[b]).total_cmp(&(rs.lines[a].power_n2 / rs.line_noise_n2[a])));
+    idx.sort_by(|&a, &b| {
+        (rs.lines[b].power_n2 / rs.line_noise_n2[b]).total_cmp(&(rs.lines[a].power_n2 / rs.line_noise_n2[a]))
+    });
     idx.truncate(MAX_LINES);
     idx.sort_unstable();
     idx.into_iter().map(|i| rs.lines[i].clone()).collect()
@@ -542,7 +576,17 @@ pub fn build_axis_prior(
     let cut = CutSpectrum::from_record(&rs, band_hz);
     let total = cut.lines.iter().map(|l| l.1).sum::<f64>() + cut.broadband_n2;
     let broadband_share = cut.broadband_n2 / total;
-    let mut prior = HarmonicPrior { fs_hz: fs, spindle_hz, teeth: opts.teeth, line_width_hz: width, lines, q_broadband: q_default, band_hz, broadband_share, record_off_line_share: rs.off_line_share };
+    let mut prior = HarmonicPrior {
+        fs_hz: fs,
+        spindle_hz,
+        teeth: opts.teeth,
+        line_width_hz: width,
+        lines,
+        q_broadband: q_default,
+        band_hz,
+        broadband_share,
+        record_off_line_share: rs.off_line_share,
+    };
     let prediction = tune_and_predict(&mut prior, dm, g, &cut, r, q_default);
     Ok(AxisPrior { prior, record: rs, prediction })
 }
@@ -551,7 +595,13 @@ pub fn build_axis_prior(
 /// the record's force may lie off the lines, and its harmonics must sit
 /// where the prior puts them (the best spindle frequency moves the highest
 /// modelled line by less than half a line width, or one bin).
-fn check_spectrum(rs: &RecordSpectrum, lines: &[HarmonicLine], spindle_hz: f64, width: f64, max_share: f64) -> Result<()> {
+fn check_spectrum(
+    rs: &RecordSpectrum,
+    lines: &[HarmonicLine],
+    spindle_hz: f64,
+    width: f64,
+    max_share: f64,
+) -> Result<()> {
     if rs.off_line_share > max_share {
         bail!(
             "{:.2} % of the record's in-band force lies away from the harmonics of {:.2} Hz (limit {:.2} %): not the steady cut at {:.1} rpm the prior expects (chatter, transients, another speed), and the prior would suppress it; drop the force prior or record a steady cut",
@@ -582,11 +632,21 @@ fn check_spectrum(rs: &RecordSpectrum, lines: &[HarmonicLine], spindle_hz: f64, 
 /// analysis is returned.
 pub fn check_record(prior: &HarmonicPrior, y: &[f64], g: &dyn Fn(f64) -> Complex64, r: f64) -> Result<RecordSpectrum> {
     prior.validate()?;
-    let rs = analyze_record(y, prior.fs_hz, g, r, prior.spindle_hz, prior.band_hz.1, prior.line_width_hz)
-        .map_err(|e| anyhow::anyhow!("{e:#}; cannot check the record against the force prior (use --no-force-prior)"))?;
+    let rs =
+        analyze_record(y, prior.fs_hz, g, r, prior.spindle_hz, prior.band_hz.1, prior.line_width_hz).map_err(|e| {
+            anyhow::anyhow!("{e:#}; cannot check the record against the force prior (use --no-force-prior)")
+        })?;
     let limit = (OFF_LINE_MARGIN * prior.record_off_line_share).max(MIN_OFF_LINE_LIMIT);
     check_spectrum(&rs, &prior.lines, prior.spindle_hz, prior.line_width_hz, limit).map_err(|e| {
-        anyhow::anyhow!("{}", format!("{e:#}").replace("drop the force prior or record a steady cut", "compensate without it (--no-force-prior)").replace("correct --spindle-rpm, or drop the force prior", "re-design with the right --spindle-rpm, or compensate without it (--no-force-prior)"))
+        anyhow::anyhow!(
+            "{}",
+            format!("{e:#}")
+                .replace("drop the force prior or record a steady cut", "compensate without it (--no-force-prior)")
+                .replace(
+                    "correct --spindle-rpm, or drop the force prior",
+                    "re-design with the right --spindle-rpm, or compensate without it (--no-force-prior)"
+                )
+        )
     })?;
     Ok(rs)
 }

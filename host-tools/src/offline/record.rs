@@ -9,9 +9,9 @@ use std::path::{Path, PathBuf};
 use dynocomp_core::image::{CoeffImage, ParallelImage};
 
 use crate::frf::axis_name;
+use crate::io::signal::ChannelMap;
 use crate::io::signal::{check_rate_value, read_all, Block, RateTracker, SignalReader, SignalWriter, BLOCK};
 use crate::io::signal_csv::SignalRecord;
-use crate::io::signal::ChannelMap;
 use crate::io::signal_file::{open_signal, writer_for, SignalFormat};
 use crate::offline::compensate::{compensate_parallel, StreamCompensator};
 use crate::offline::sidecar::{read_sidecar, sidecar_path, ModelSidecar};

@@ -76,7 +76,9 @@ pub fn terms_to_json(m: &PoleResidueModel) -> Vec<TermJson> {
         .iter()
         .map(|t| match *t {
             Term::Real { pole, residue } => TermJson::Real { pole, residue },
-            Term::Pair { pole, residue } => TermJson::Pair { pole: [pole.re, pole.im], residue: [residue.re, residue.im] },
+            Term::Pair { pole, residue } => {
+                TermJson::Pair { pole: [pole.re, pole.im], residue: [residue.re, residue.im] }
+            }
         })
         .collect()
 }
@@ -182,7 +184,9 @@ impl ModelSidecar {
             && dm.fir.iter().all(|v| v.is_finite())
             && dm.terms.iter().all(|t| match *t {
                 crate::design::discretize::DTerm::Real { pole, residue } => pole.is_finite() && residue.is_finite(),
-                crate::design::discretize::DTerm::Pair { pole, residue } => [pole.0, pole.1, residue.0, residue.1].iter().all(|v| v.is_finite()),
+                crate::design::discretize::DTerm::Pair { pole, residue } => {
+                    [pole.0, pole.1, residue.0, residue.1].iter().all(|v| v.is_finite())
+                }
             });
         if !finite || !(dm.pole_radius() < 1.0) || dm.fs_hz != self.fs_hz || dm.advance > 64 || dm.fir.len() > 64 {
             bail!("{source}: axis {name}: the discrete model is not valid (non-finite, unstable, another rate, or too long); re-run `dynocomp design`");
@@ -226,7 +230,12 @@ pub fn parse_sidecar(text: &str, shown: &str, image: &CoeffImage, image_path: &P
         let msg = e.to_string();
         let place = format!(" at line {} column {}", e.line(), e.column());
         let what = msg.strip_suffix(&place).unwrap_or(&msg);
-        anyhow::anyhow!("{shown}: line {} column {}: not a valid model sidecar: {}", e.line(), e.column(), one_line(what))
+        anyhow::anyhow!(
+            "{shown}: line {} column {}: not a valid model sidecar: {}",
+            e.line(),
+            e.column(),
+            one_line(what)
+        )
     })?;
     if s.format != SIDECAR_FORMAT {
         bail!("{shown}: format `{}`, expected `{SIDECAR_FORMAT}`", one_line(&s.format));

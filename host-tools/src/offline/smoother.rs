@@ -9,11 +9,11 @@ use anyhow::{bail, Context, Result};
 use nalgebra::{DMatrix, DVector};
 use std::path::Path;
 
+use crate::design::axis::AxisDesign;
 use crate::design::discretize::DiscreteModel;
+use crate::design::kalman;
 use crate::frf::axis_name;
 use crate::io::signal_csv::SignalRecord;
-use crate::design::kalman;
-use crate::design::axis::AxisDesign;
 use crate::offline::force_prior::{build_axis_prior, AxisPrior, PriorOptions};
 use crate::offline::sidecar::ModelSidecar;
 use dynocomp_core::image::CoeffImage;
@@ -81,7 +81,11 @@ impl Smoother {
     /// Build the smoother for the discrete model `dm` with the harmonic
     /// force prior `prior` (its q_bb and line intensities,
     /// [`crate::offline::force_prior`]) and measurement noise R (N²).
-    pub fn with_force_prior(dm: &DiscreteModel, prior: &crate::offline::force_prior::HarmonicPrior, r: f64) -> Result<Self> {
+    pub fn with_force_prior(
+        dm: &DiscreteModel,
+        prior: &crate::offline::force_prior::HarmonicPrior,
+        r: f64,
+    ) -> Result<Self> {
         if !(prior.q_broadband > 0.0 && prior.q_broadband.is_finite() && r > 0.0 && r.is_finite()) {
             bail!("smoother needs q_bb > 0 and R > 0 (got q_bb = {}, R = {r})", prior.q_broadband);
         }
@@ -89,7 +93,13 @@ impl Smoother {
         Self::from_plant(plant, &qm, force_row, r, dm.advance)
     }
 
-    fn from_plant(plant: kalman::AugmentedPlant, qm: &DMatrix<f64>, force_row: DVector<f64>, r: f64, advance: usize) -> Result<Self> {
+    fn from_plant(
+        plant: kalman::AugmentedPlant,
+        qm: &DMatrix<f64>,
+        force_row: DVector<f64>,
+        r: f64,
+        advance: usize,
+    ) -> Result<Self> {
         let sol = kalman::solve_filter_dare(&plant.a, &plant.c, qm, r)?;
         let s = (plant.c.transpose() * &sol.p * &plant.c)[(0, 0)] + r;
         let k = &sol.p * &plant.c / s;
@@ -156,7 +166,8 @@ impl Smoother {
         let y_tilde = std::iter::repeat_n(y.first().copied().unwrap_or(0.0), d).chain(y.iter().copied());
         let n = self.a.nrows();
         let (mut prior, mut next) = (DVector::<f64>::zeros(n), DVector::<f64>::zeros(n));
-        let (mut prior_force, mut innov): (Vec<f64>, Vec<f64>) = y_tilde.map(|yk| self.forward_step(&mut prior, &mut next, yk)).unzip();
+        let (mut prior_force, mut innov): (Vec<f64>, Vec<f64>) =
+            y_tilde.map(|yk| self.forward_step(&mut prior, &mut next, yk)).unzip();
         let p_row = self.p_row();
         let mut lambda_hat = DVector::<f64>::zeros(n);
         for k in (0..prior_force.len()).rev() {
@@ -198,13 +209,24 @@ pub trait SpilledPass {
     /// temporary file in `dir`. `on_chunk` is told the samples done (for a
     /// progress bar). Refuses a non-finite estimate, naming `name` and the
     /// sample.
-    fn backward(self: Box<Self>, dir: &Path, name: &str, source: &str, on_chunk: &dyn Fn(u64)) -> Result<SpilledEstimate>;
+    fn backward(
+        self: Box<Self>,
+        dir: &Path,
+        name: &str,
+        source: &str,
+        on_chunk: &dyn Fn(u64),
+    ) -> Result<SpilledEstimate>;
 }
 
 /// Feed the block `y` to `step` as ỹ_k = y_{k−D} (the smoothers' delayed
 /// measurement): in front of the record's first samples (`first`: nothing
 /// taken yet), D = `advance` copies of y_0.
-pub(crate) fn feed_delayed(y: &[f64], advance: usize, first: bool, mut step: impl FnMut(f64) -> Result<()>) -> Result<()> {
+pub(crate) fn feed_delayed(
+    y: &[f64],
+    advance: usize,
+    first: bool,
+    mut step: impl FnMut(f64) -> Result<()>,
+) -> Result<()> {
     if let (true, Some(&y0)) = (first, y.first()) {
         for _ in 0..advance {
             step(y0)?;
@@ -218,7 +240,13 @@ impl SpilledPass for SpilledForward<'_> {
         SpilledForward::push(self, y)
     }
 
-    fn backward(self: Box<Self>, dir: &Path, name: &str, source: &str, on_chunk: &dyn Fn(u64)) -> Result<SpilledEstimate> {
+    fn backward(
+        self: Box<Self>,
+        dir: &Path,
+        name: &str,
+        source: &str,
+        on_chunk: &dyn Fn(u64),
+    ) -> Result<SpilledEstimate> {
         SpilledForward::backward(*self, dir, name, source, on_chunk)
     }
 }
@@ -227,8 +255,17 @@ impl<'s> SpilledForward<'s> {
     /// Start the forward pass; the temporary files go to `dir`.
     pub fn new(sm: &'s Smoother, dir: &Path) -> Result<Self> {
         let n = sm.a.nrows();
-        let file = tempfile::tempfile_in(dir).with_context(|| format!("{}: cannot create a temporary file for the smoother's forward pass", dir.display()))?;
-        Ok(SpilledForward { sm, prior: DVector::zeros(n), next: DVector::zeros(n), spill: std::io::BufWriter::with_capacity(1 << 20, file), n_y: 0, n_pairs: 0 })
+        let file = tempfile::tempfile_in(dir).with_context(|| {
+            format!("{}: cannot create a temporary file for the smoother's forward pass", dir.display())
+        })?;
+        Ok(SpilledForward {
+            sm,
+            prior: DVector::zeros(n),
+            next: DVector::zeros(n),
+            spill: std::io::BufWriter::with_capacity(1 << 20, file),
+            n_y: 0,
+            n_pairs: 0,
+        })
     }
 
     /// Take the next samples of y (N).
@@ -353,7 +390,12 @@ pub fn axis_smoother(image: &CoeffImage, sidecar: &ModelSidecar, axis: usize, so
 
 /// `compensate --offline`: smooth every force column of `rec` with the
 /// model of its axis from the sidecar and q, R from the image.
-pub fn smooth_record(image: &CoeffImage, sidecar: &ModelSidecar, rec: &SignalRecord, source: &str) -> Result<SignalRecord> {
+pub fn smooth_record(
+    image: &CoeffImage,
+    sidecar: &ModelSidecar,
+    rec: &SignalRecord,
+    source: &str,
+) -> Result<SignalRecord> {
     let mut channels = Vec::with_capacity(rec.channels.len());
     for (axis, y) in &rec.channels {
         let name = axis_name(*axis);
@@ -386,16 +428,25 @@ pub fn smooth_record(image: &CoeffImage, sidecar: &ModelSidecar, rec: &SignalRec
 /// residual, closed-loop stability) and the refusal of a prior predicted
 /// worse than no compensation.
 /// `rec` is the representative record (`shown` names it in errors).
-pub fn build_priors(opts: &PriorOptions, rec: &SignalRecord, shown: &str, designs: &[AxisDesign], r: &[Option<f64>; 3]) -> Result<Vec<Option<AxisPrior>>> {
+pub fn build_priors(
+    opts: &PriorOptions,
+    rec: &SignalRecord,
+    shown: &str,
+    designs: &[AxisDesign],
+    r: &[Option<f64>; 3],
+) -> Result<Vec<Option<AxisPrior>>> {
     let mut out = Vec::new();
     for d in designs {
         let name = axis_name(d.axis);
-        let y = rec.channel(d.axis).ok_or_else(|| anyhow::anyhow!("{shown}: no column f{name} for axis {name}; the force record needs every designed axis"))?;
+        let y = rec.channel(d.axis).ok_or_else(|| {
+            anyhow::anyhow!("{shown}: no column f{name} for axis {name}; the force record needs every designed axis")
+        })?;
         let dm = &d.discrete.as_ref().ok_or_else(|| anyhow::anyhow!("axis {name}: no discrete model"))?.0;
         let rv = r[d.axis].expect("R set for every designed axis");
         let built = build_axis_prior(opts, dm, &|f| d.model.frf(f), rv, d.kalman.q, d.compensated_band_hz, y)
             .with_context(|| format!("{shown}: axis {name}: --force-prior harmonics"))?;
-        Smoother::with_force_prior(dm, &built.prior, rv).with_context(|| format!("axis {name}: the smoother with the force prior"))?;
+        Smoother::with_force_prior(dm, &built.prior, rv)
+            .with_context(|| format!("axis {name}: the smoother with the force prior"))?;
         let p = built.prediction;
         if p.with_prior.partial_cmp(&p.raw) != Some(std::cmp::Ordering::Less) {
             bail!(
@@ -408,4 +459,3 @@ pub fn build_priors(opts: &PriorOptions, rec: &SignalRecord, shown: &str, design
     }
     Ok(out)
 }
-

@@ -11,7 +11,11 @@ use crate::realize::quantize::{self, Verification};
 
 /// Realize the compensator `ss` and round it to f32, with no CPU budget:
 /// [`choose_realization_within`] with `axis_budget = None`.
-pub fn choose_realization(ss: &StateSpace, fs_hz: f64, f_band_hz: f64) -> Result<(ModalRealization, AxisFilter, Verification)> {
+pub fn choose_realization(
+    ss: &StateSpace,
+    fs_hz: f64,
+    f_band_hz: f64,
+) -> Result<(ModalRealization, AxisFilter, Verification)> {
     choose_realization_within(ss, fs_hz, f_band_hz, None)
 }
 
@@ -94,7 +98,11 @@ pub fn choose_realization_within(
 /// The realization `r` (verified as `v`) with the fewest FIR taps that still
 /// passes `quantize` with a score ≤ max(10·v.score(), `TRIM_SCORE_FLOOR`);
 /// `None` if no shorter FIR does.
-fn shortest_fir(r: &ModalRealization, v: &Verification, reference: &quantize::Reference) -> Option<(ModalRealization, AxisFilter, Verification)> {
+fn shortest_fir(
+    r: &ModalRealization,
+    v: &Verification,
+    reference: &quantize::Reference,
+) -> Option<(ModalRealization, AxisFilter, Verification)> {
     let bound = (10.0 * v.score()).max(TRIM_SCORE_FLOOR);
     let total: f64 = r.fir.iter().map(|h| h.abs()).sum::<f64>();
     (0..r.fir.len()).find_map(|len| {

@@ -21,7 +21,12 @@ pub struct ImageAxis {
 /// ±`full_scale_n` N.
 pub fn scaling(full_scale_n: f64) -> AxisScaling {
     let newton_per_code = (2.0 * full_scale_n / 4096.0) as f32;
-    AxisScaling { adc_offset_code: 2048.0, newton_per_code, dac_code_per_newton: 1.0 / newton_per_code, dac_offset_code: 2048.0 }
+    AxisScaling {
+        adc_offset_code: 2048.0,
+        newton_per_code,
+        dac_code_per_newton: 1.0 / newton_per_code,
+        dac_offset_code: 2048.0,
+    }
 }
 
 /// The image of `axes`, created now.
@@ -44,7 +49,10 @@ pub fn build_image(
         flags: 0,
         method,
         source_sha256,
-        created_unix_s: std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0),
+        created_unix_s: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_secs())
+            .unwrap_or(0),
         axes: slots,
     })
 }

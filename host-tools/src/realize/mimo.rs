@@ -191,7 +191,10 @@ impl MimoVerification {
 fn ordered_schur(a: &DMatrix<f64>, rho: f64) -> Result<(DMatrix<Complex64>, DMatrix<Complex64>, usize)> {
     let n = a.nrows();
     let schur = Schur::try_new(a.map(|v| Complex64::new(v, 0.0)), f64::EPSILON, sweeps(n)).ok_or_else(|| {
-        anyhow::anyhow!("realization: the Schur decomposition of the {n}x{n} compensator did not converge within {} sweeps", sweeps(n))
+        anyhow::anyhow!(
+            "realization: the Schur decomposition of the {n}x{n} compensator did not converge within {} sweeps",
+            sweeps(n)
+        )
     })?;
     let (mut q, mut t) = schur.unpack();
     for i in 0..n {
@@ -245,7 +248,11 @@ fn decouple(t: &DMatrix<Complex64>, m: usize) -> DMatrix<Complex64> {
 /// The fast cluster's taps H_m = C₂ T22^{m−1} B₂ (module doc, step 4), the
 /// shortest length whose tail is below [`FIR_TAIL_TOL`] of Σ‖H_m‖ (or
 /// [`FIR_TAIL_TOL_FULL`] at [`MAX_MIMO_FIR`]), and the tail's relative size.
-fn fast_taps(t22: &DMatrix<Complex64>, b2: &DMatrix<Complex64>, c2: &DMatrix<Complex64>) -> Result<(Vec<[[f64; 3]; 3]>, f64)> {
+fn fast_taps(
+    t22: &DMatrix<Complex64>,
+    b2: &DMatrix<Complex64>,
+    c2: &DMatrix<Complex64>,
+) -> Result<(Vec<[[f64; 3]; 3]>, f64)> {
     if t22.nrows() == 0 {
         return Ok((Vec::new(), 0.0));
     }
@@ -270,7 +277,9 @@ fn fast_taps(t22: &DMatrix<Complex64>, b2: &DMatrix<Complex64>, c2: &DMatrix<Com
     }
     let imag = taps[..len].iter().flat_map(|h| h.iter().map(|v| v.im.abs())).fold(0.0, f64::max);
     if imag > 1e-9 * total {
-        bail!("realization: FIR taps are not real (imaginary part {imag:.1e}); the fast cluster is not conjugate-closed");
+        bail!(
+            "realization: FIR taps are not real (imaginary part {imag:.1e}); the fast cluster is not conjugate-closed"
+        );
     }
     let out = taps[..len].iter().map(|h| std::array::from_fn(|i| std::array::from_fn(|j| h[(i, j)].re))).collect();
     Ok((out, tail(len) / total))
@@ -345,7 +354,9 @@ fn balance(beta: &DVector<Complex64>, gamma: &DVector<Complex64>) -> (DVector<Co
 }
 
 /// The kernel's sections of the modes (λ, β, γ) (module doc, step 5).
-fn sections_of(modes: &[(Complex64, DVector<Complex64>, DVector<Complex64>)]) -> Result<(Vec<MimoSection64>, Vec<Complex64>)> {
+fn sections_of(
+    modes: &[(Complex64, DVector<Complex64>, DVector<Complex64>)],
+) -> Result<(Vec<MimoSection64>, Vec<Complex64>)> {
     let scale = modes.iter().map(|e| e.0.norm()).fold(1.0, f64::max);
     let mut used = vec![false; modes.len()];
     let (mut sections, mut poles, mut reals) = (Vec::new(), Vec::new(), Vec::new());
@@ -447,8 +458,9 @@ pub fn quantize(real: &MimoRealization, reference: &MimoReference) -> Result<(Mi
             fir.len()
         );
     }
-    let filter = MimoFilter::new(&sections, d, &fir)
-        .map_err(|e| anyhow::anyhow!("the f32 3x3 compensator is invalid ({e:?}); its poles do not survive rounding"))?;
+    let filter = MimoFilter::new(&sections, d, &fir).map_err(|e| {
+        anyhow::anyhow!("the f32 3x3 compensator is invalid ({e:?}); its poles do not survive rounding")
+    })?;
     let mut v = MimoVerification { fir_taps: fir.len(), ..Default::default() };
     (v.pairs, v.diagonal) = filter.kernel_counts();
     for (s64, s32) in real.sections.iter().zip(filter.sections()) {
@@ -501,7 +513,13 @@ pub fn quantize(real: &MimoRealization, reference: &MimoReference) -> Result<(Mi
     let len = reference.y64.len().max(1) as f64;
     for i in 0..3 {
         let rms = (ss[i] / len).sqrt();
-        v.time_error[i] = if rms > 0.0 { err[i] / rms } else if err[i] == 0.0 { 0.0 } else { f64::INFINITY };
+        v.time_error[i] = if rms > 0.0 {
+            err[i] / rms
+        } else if err[i] == 0.0 {
+            0.0
+        } else {
+            f64::INFINITY
+        };
     }
     let worst_t = v.time_error.iter().fold(0.0f64, |m, e| m.max(*e));
     if !(worst_t <= MAX_TIME_ERROR) {
@@ -543,7 +561,8 @@ fn block_candidates(ss: &MimoStateSpace) -> Result<Vec<MimoRealization>> {
         let d = std::array::from_fn(|i| std::array::from_fn(|j| ss.d[(i, j)]));
         return Ok(vec![MimoRealization { d, modal_condition: 1.0, decoupling_norm: 1.0, ..Default::default() }]);
     }
-    let moduli: Vec<f64> = crate::fit::linalg::eigenvalues(&ss.a, "the compensator's state matrix")?.iter().map(|z| z.norm()).collect();
+    let moduli: Vec<f64> =
+        crate::fit::linalg::eigenvalues(&ss.a, "the compensator's state matrix")?.iter().map(|z| z.norm()).collect();
     let mut out = Vec::new();
     let mut last_err = None;
     for rho in thresholds(&moduli) {
@@ -562,7 +581,11 @@ fn block_candidates(ss: &MimoStateSpace) -> Result<Vec<MimoRealization>> {
 /// Realize the compensator given as `blocks` (their sum, block diagonal)
 /// and round it to f32, verified over 0..`f_band_hz` at `fs_hz` (module
 /// doc). Per block the split that verifies best in f32 is kept.
-pub fn realize_blocks(blocks: &[MimoStateSpace], fs_hz: f64, f_band_hz: f64) -> Result<(MimoRealization, MimoFilter, MimoVerification)> {
+pub fn realize_blocks(
+    blocks: &[MimoStateSpace],
+    fs_hz: f64,
+    f_band_hz: f64,
+) -> Result<(MimoRealization, MimoFilter, MimoVerification)> {
     let mut total = MimoRealization { modal_condition: 1.0, decoupling_norm: 1.0, ..Default::default() };
     for (k, blk) in blocks.iter().enumerate() {
         let candidates = block_candidates(blk).with_context(|| format!("3x3 compensator, block {k}"))?;

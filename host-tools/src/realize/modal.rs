@@ -362,7 +362,9 @@ fn fast_fir(t: &DMatrix<Complex64>, m: usize, b2: Vec<Complex64>, c2: Vec<Comple
     let fir_truncation = taps[len..].iter().map(|h| h.norm()).sum::<f64>() / total;
     let imag = taps[..len].iter().map(|h| h.im.abs()).fold(0.0, f64::max);
     if imag > 1e-9 * total {
-        bail!("realization: FIR taps are not real (imaginary part {imag:.1e}); the fast cluster is not conjugate-closed");
+        bail!(
+            "realization: FIR taps are not real (imaginary part {imag:.1e}); the fast cluster is not conjugate-closed"
+        );
     }
     Ok((taps[..len].iter().map(|h| h.re).collect(), fir_truncation))
 }

@@ -87,11 +87,7 @@ pub fn term_growth(f: &AxisFilter) -> f64 {
 pub const TERM_GROWTH_MAX_LEN: usize = 1 << 20;
 
 fn round_section(s: &crate::realize::modal::Section64) -> Section {
-    Section {
-        delta: s.delta.map(|v| v as f32),
-        b: s.b.map(|v| v as f32),
-        c: s.c.map(|v| v as f32),
-    }
+    Section { delta: s.delta.map(|v| v as f32), b: s.b.map(|v| v as f32), c: s.c.map(|v| v as f32) }
 }
 
 /// Frequency response of the f32 filter, evaluated in f64 from its
@@ -194,7 +190,8 @@ pub fn quantize(real: &ModalRealization, reference: &Reference) -> Result<(AxisF
             max_radius = max_radius.max(p32.norm());
         }
         for p64 in &e64 {
-            let shift = e32.iter().map(|q| (q - p64).norm()).fold(f64::INFINITY, f64::min) / (1.0 - p64).norm().max(1e-300);
+            let shift =
+                e32.iter().map(|q| (q - p64).norm()).fold(f64::INFINITY, f64::min) / (1.0 - p64).norm().max(1e-300);
             max_shift = max_shift.max(shift);
         }
         if !s32.poles_within(1.0 - POLE_MARGIN) {
@@ -212,14 +209,13 @@ pub fn quantize(real: &ModalRealization, reference: &Reference) -> Result<(AxisF
     }
     // time domain through the real kernel
     let mut st = AxisState::default();
-    let time_error = u
-        .iter()
-        .zip(y64)
-        .map(|(u, y)| (f64::from(filter.step(&mut st, *u as f32)) - y).abs())
-        .fold(0.0, f64::max)
-        / rms;
+    let time_error =
+        u.iter().zip(y64).map(|(u, y)| (f64::from(filter.step(&mut st, *u as f32)) - y).abs()).fold(0.0, f64::max)
+            / rms;
     if !(time_error <= MAX_TIME_ERROR) {
-        bail!("f32 kernel output deviates from the f64 design by {time_error:.1e} of its RMS (limit {MAX_TIME_ERROR:e})");
+        bail!(
+            "f32 kernel output deviates from the f64 design by {time_error:.1e} of its RMS (limit {MAX_TIME_ERROR:e})"
+        );
     }
     Ok((
         filter,

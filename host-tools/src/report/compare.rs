@@ -21,11 +21,25 @@ pub fn render(c: &Comparison) -> String {
         let _ = writeln!(s, "fitting bands: {}", crate::design::bands::describe(&c.bands));
     }
     for ax in &c.axes {
-        let _ = writeln!(s, "\naxis {} (coherent {:.0}–{:.0} Hz)", ax.axis, ax.coherent_band_hz.0, ax.coherent_band_hz.1);
+        let _ =
+            writeln!(s, "\naxis {} (coherent {:.0}–{:.0} Hz)", ax.axis, ax.coherent_band_hz.0, ax.coherent_band_hz.1);
         let _ = writeln!(
             s,
             "{:<28} {:>5} {:>8} {:>8} {:>8} {:>8} {:>13} {:>6} {:>3} {:>8} {:>8} {:>8} {:>5} {:>8}",
-            "method", "order", "fit in", "fit out", "comp in", "comp out", "flat (Hz)", "noise", "L", "cond RFP", "cond GN", "cond obs", "rank", "time"
+            "method",
+            "order",
+            "fit in",
+            "fit out",
+            "comp in",
+            "comp out",
+            "flat (Hz)",
+            "noise",
+            "L",
+            "cond RFP",
+            "cond GN",
+            "cond obs",
+            "rank",
+            "time"
         );
         for r in &ax.rows {
             if let Some(diag) = &r.diagnostic {
@@ -71,7 +85,13 @@ pub fn render(c: &Comparison) -> String {
     s
 }
 
-const COLORS: [RGBColor; 5] = [RGBColor(214, 39, 40), RGBColor(255, 127, 14), RGBColor(148, 103, 189), RGBColor(31, 119, 180), RGBColor(44, 160, 44)];
+const COLORS: [RGBColor; 5] = [
+    RGBColor(214, 39, 40),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(31, 119, 180),
+    RGBColor(44, 160, 44),
+];
 
 /// SVG of one axis: |H·G·delay| and the phase of every method that produced
 /// a filter, with the fitting bands shaded.
@@ -82,7 +102,9 @@ pub fn plot_axis(freq: &[f64], ax: &AxisComparison, bands: &[Band]) -> Result<St
     {
         let root = SVGBackend::with_string(&mut buf, (1100, 760)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
-        let root = root.titled(&format!("Axis {} — compensated response H·G of each method (measured G)", ax.axis), (FONT, 20)).map_err(perr)?;
+        let root = root
+            .titled(&format!("Axis {} — compensated response H·G of each method (measured G)", ax.axis), (FONT, 20))
+            .map_err(perr)?;
         let (top, bot) = root.split_vertically(380);
         let yr_m = (0.5, 1.5);
         let mut c = build_chart(&top, "Magnitude |H·G| (1 = exact)", xr, yr_m)?;
@@ -98,7 +120,8 @@ pub fn plot_axis(freq: &[f64], ax: &AxisComparison, bands: &[Band]) -> Result<St
                 continue;
             }
             let mag: Vec<(f64, f64)> = freq.iter().zip(&r.compensated).map(|(f, h)| (*f, h.norm())).collect();
-            let ph: Vec<(f64, f64)> = freq.iter().zip(&r.compensated).map(|(f, h)| (*f, h.arg().to_degrees())).collect();
+            let ph: Vec<(f64, f64)> =
+                freq.iter().zip(&r.compensated).map(|(f, h)| (*f, h.arg().to_degrees())).collect();
             draw_line(&mut c, &mag, yr_m, 0.3, *color, 1, false, &r.method)?;
             draw_line(&mut cp, &ph, yr_p, 30.0, *color, 1, false, &r.method)?;
         }
@@ -108,4 +131,3 @@ pub fn plot_axis(freq: &[f64], ax: &AxisComparison, bands: &[Band]) -> Result<St
     }
     Ok(buf)
 }
-

@@ -43,7 +43,13 @@ pub struct Envelope {
 
 impl Default for Envelope {
     fn default() -> Self {
-        Envelope { span: 1, buckets: Vec::with_capacity(2 * ENVELOPE_COLUMNS), cur: (f64::INFINITY, f64::NEG_INFINITY), cur_n: 0, n: 0 }
+        Envelope {
+            span: 1,
+            buckets: Vec::with_capacity(2 * ENVELOPE_COLUMNS),
+            cur: (f64::INFINITY, f64::NEG_INFINITY),
+            cur_n: 0,
+            n: 0,
+        }
     }
 }
 
@@ -83,8 +89,12 @@ impl Envelope {
     /// The buckets as (first sample, last sample, min, max), the partial
     /// last one included.
     pub fn buckets(&self) -> Vec<(u64, u64, f64, f64)> {
-        let mut v: Vec<(u64, u64, f64, f64)> =
-            self.buckets.iter().enumerate().map(|(i, b)| (i as u64 * self.span, (i as u64 + 1) * self.span - 1, b.0, b.1)).collect();
+        let mut v: Vec<(u64, u64, f64, f64)> = self
+            .buckets
+            .iter()
+            .enumerate()
+            .map(|(i, b)| (i as u64 * self.span, (i as u64 + 1) * self.span - 1, b.0, b.1))
+            .collect();
         if self.cur_n > 0 {
             let s = self.buckets.len() as u64 * self.span;
             v.push((s, s + self.cur_n - 1, self.cur.0, self.cur.1));
@@ -111,7 +121,15 @@ impl Welch {
     pub fn new(n: usize) -> Welch {
         let win = hann(n);
         let fft = FftPlanner::new().plan_fft_forward(n);
-        Welch { n, win, buf: Vec::with_capacity(2 * n), acc: vec![0.0; n / 2 + 1], segs: 0, fft, scratch: vec![Complex64::default(); n] }
+        Welch {
+            n,
+            win,
+            buf: Vec::with_capacity(2 * n),
+            acc: vec![0.0; n / 2 + 1],
+            segs: 0,
+            fft,
+            scratch: vec![Complex64::default(); n],
+        }
     }
 
     /// Take the next samples.
@@ -510,7 +528,14 @@ impl crate::offline::record::Observer for ReportAccumulator {
 
 /// Draw an envelope as a filled band (one polygon, max edge then min edge
 /// backwards), or as a line when every bucket is a single sample.
-fn draw_envelope(chart: &mut crate::report::plot::Chart<'_>, env: &[(u64, u64, f64, f64)], fs: f64, color: RGBColor, alpha: f64, label: &str) -> Result<()> {
+fn draw_envelope(
+    chart: &mut crate::report::plot::Chart<'_>,
+    env: &[(u64, u64, f64, f64)],
+    fs: f64,
+    color: RGBColor,
+    alpha: f64,
+    label: &str,
+) -> Result<()> {
     let t = |s: u64| s as f64 / fs;
     let mut pts: Vec<(f64, f64)> = Vec::with_capacity(4 * env.len());
     for &(a, b, _, hi) in env {
@@ -583,11 +608,14 @@ fn plot_overview(a: &AxisAcc, fs: f64, has_truth: bool) -> Result<String> {
 /// sample, measured and compensated overlaid.
 fn plot_zoom(w: &[Vec<f64>; 3], start: u64, fs: f64, has_truth: bool, name: &str) -> Result<String> {
     let t0 = start as f64 / fs;
-    let pts = |x: &[f64]| -> Vec<(f64, f64)> { x.iter().enumerate().map(|(k, v)| ((t0 + k as f64 / fs) * 1e3, *v)).collect() };
+    let pts = |x: &[f64]| -> Vec<(f64, f64)> {
+        x.iter().enumerate().map(|(k, v)| ((t0 + k as f64 / fs) * 1e3, *v)).collect()
+    };
     let n = w[0].len().max(2);
     let xr = (t0 * 1e3, (t0 + (n - 1) as f64 / fs) * 1e3);
     let all = w[0].iter().chain(&w[1]).chain(if has_truth { &w[2][..] } else { &[][..] }).copied();
-    let yr = crate::report::plot::finite_range(all).map_or((-1.0, 1.0), |r| crate::report::plot::pad_range(r, 0.05, 1e-9));
+    let yr =
+        crate::report::plot::finite_range(all).map_or((-1.0, 1.0), |r| crate::report::plot::pad_range(r, 0.05, 1e-9));
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (1100, 440)).into_drawing_area();
@@ -610,7 +638,14 @@ fn plot_zoom(w: &[Vec<f64>; 3], start: u64, fs: f64, has_truth: bool, name: &str
 /// (and true) forces with the tooth-passing frequency and its harmonics
 /// marked (given by `--spindle-rpm`/`--teeth`, else the strongest line of
 /// the compensated spectrum).
-fn plot_spectrum(f: &[f64], am: &[f64], ac: &[f64], at: Option<&[f64]>, tpf: Option<f64>, name: &str) -> Result<String> {
+fn plot_spectrum(
+    f: &[f64],
+    am: &[f64],
+    ac: &[f64],
+    at: Option<&[f64]>,
+    tpf: Option<f64>,
+    name: &str,
+) -> Result<String> {
     let db = |v: &f64| 20.0 * v.max(1e-12).log10();
     let fmax = f.last().copied().unwrap_or(1.0);
     let xr = (0.0, fmax);
@@ -628,9 +663,11 @@ fn plot_spectrum(f: &[f64], am: &[f64], ac: &[f64], at: Option<&[f64]>, tpf: Opt
             let mut k = 1;
             while k as f64 * t < fmax && k <= 40 {
                 let x = k as f64 * t;
-                let ann = ch.draw_series(DashedLineSeries::new(vec![(x, yr.0), (x, yr.1)], 5, 4, style)).map_err(perr)?;
+                let ann =
+                    ch.draw_series(DashedLineSeries::new(vec![(x, yr.0), (x, yr.1)], 5, 4, style)).map_err(perr)?;
                 if k == 1 {
-                    ann.label(format!("TPF {t:.1} Hz and harmonics")).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+                    ann.label(format!("TPF {t:.1} Hz and harmonics"))
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
                 }
                 k += 1;
             }
@@ -689,7 +726,8 @@ mod tests {
     #[test]
     fn welch_reads_a_sine_amplitude_and_its_frequency() {
         let fs = 51200.0;
-        let x: Vec<f64> = (0..200_000).map(|k| 3.0 * (2.0 * std::f64::consts::PI * 1100.0 * k as f64 / fs).sin() + 5.0).collect();
+        let x: Vec<f64> =
+            (0..200_000).map(|k| 3.0 * (2.0 * std::f64::consts::PI * 1100.0 * k as f64 / fs).sin() + 5.0).collect();
         let mut w = Welch::new(WELCH_N);
         x.chunks(777).for_each(|c| w.push(c));
         let (f, a) = w.spectrum(fs);

@@ -16,14 +16,13 @@ use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
 use crate::design::axis::AxisDesign;
-use crate::design::sensitivity::Sensitivity;
 use crate::design::bands::ranges_hz;
-use crate::report::page::{index_html, write_pages, Page, Section};
-use crate::report::plot::*;
+use crate::design::sensitivity::Sensitivity;
 use crate::fit::Term;
 use crate::frf::{axis_name, AxisFrf, Frf};
 use crate::realize::quantize::filter_response;
-
+use crate::report::page::{index_html, write_pages, Page, Section};
+use crate::report::plot::*;
 
 const C_MEASURED: RGBColor = RGBColor(31, 119, 180);
 const C_MODEL: RGBColor = RGBColor(214, 39, 40);
@@ -278,8 +277,10 @@ fn plot_compensated(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Re
     let xr = (freq[0], *freq.last().unwrap_or(&freq[0]));
     let xr = if xr.1 > xr.0 { xr } else { (xr.0, xr.0 + 1.0) };
     let lag = d.kalman.lag as f64;
-    let h: Vec<Complex64> =
-        freq.iter().map(|f| filter_response(&d.filter, *f, fs) * Complex64::from_polar(1.0, 2.0 * PI * f * lag / fs)).collect();
+    let h: Vec<Complex64> = freq
+        .iter()
+        .map(|f| filter_response(&d.filter, *f, fs) * Complex64::from_polar(1.0, 2.0 * PI * f * lag / fs))
+        .collect();
     let hg: Vec<Complex64> = h.iter().zip(&meas.frf).map(|(h, g)| h * g).collect();
     let hg_model: Vec<Complex64> = h.iter().zip(freq).map(|(h, f)| h * d.fitted_frf(*f)).collect();
     let g = &meas.frf;
@@ -303,9 +304,13 @@ fn plot_compensated(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Re
     {
         let root = SVGBackend::with_string(&mut buf, (1100, 1000)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
-        let flat_txt =
-            if flat.1 > flat.0 { format!("flat band {:.0}–{:.0} Hz", flat.0, flat.1) } else { "no flat band".to_string() };
-        let title = format!("Axis {name} — compensated response H·G (latency {} samples removed), {flat_txt}", d.kalman.lag);
+        let flat_txt = if flat.1 > flat.0 {
+            format!("flat band {:.0}–{:.0} Hz", flat.0, flat.1)
+        } else {
+            "no flat band".to_string()
+        };
+        let title =
+            format!("Axis {name} — compensated response H·G (latency {} samples removed), {flat_txt}", d.kalman.lag);
         let root = root.titled(&title, (FONT, 20)).map_err(perr)?;
         let (top, rest) = root.split_vertically(340);
         let (midp, bot) = rest.split_vertically(320);
@@ -372,7 +377,8 @@ fn model_z_poles(d: &AxisDesign, fs: f64) -> Vec<Complex64> {
 /// between consecutive distances |1 − z| (below 0.9), if that gap is at
 /// least 2×; otherwise all poles within 0.9.
 fn zoom_radius(poles: &[Complex64]) -> f64 {
-    let mut dist: Vec<f64> = poles.iter().map(|z| (1.0 - z).norm()).filter(|r| r.is_finite() && *r > 1e-9 && *r < 0.9).collect();
+    let mut dist: Vec<f64> =
+        poles.iter().map(|z| (1.0 - z).norm()).filter(|r| r.is_finite() && *r > 1e-9 && *r < 0.9).collect();
     dist.sort_by(f64::total_cmp);
     dist.dedup_by(|a, b| (*a / *b) < 1.02);
     let Some(&last) = dist.last() else {
@@ -548,7 +554,12 @@ fn plot_model_match(d: &AxisDesign, dm: &crate::design::discretize::DiscreteMode
     for m in [Discretization::Foh, Discretization::Zoh] {
         if m != dm.method {
             let (h, _) = discretize(&d.model, fs, m, band)?;
-            lines.push((curve(&h), if m == Discretization::Foh { C_MEASURED } else { C_RAW }, 1, format!("{} (hold)", m.name())));
+            lines.push((
+                curve(&h),
+                if m == Discretization::Foh { C_MEASURED } else { C_RAW },
+                1,
+                format!("{} (hold)", m.name()),
+            ));
         }
     }
     let yr = (-100.0, 20.0);
@@ -556,7 +567,10 @@ fn plot_model_match(d: &AxisDesign, dm: &crate::design::discretize::DiscreteMode
     {
         let root = SVGBackend::with_string(&mut buf, (1100, 420)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
-        let title = format!("Axis {name} — discrete model match |Ĝ_d/Ĝ − 1|: max {:.3} % in the compensated band", 100.0 * d.model_match);
+        let title = format!(
+            "Axis {name} — discrete model match |Ĝ_d/Ĝ − 1|: max {:.3} % in the compensated band",
+            100.0 * d.model_match
+        );
         let root = root.titled(&title, (FONT, 20)).map_err(perr)?;
         let mut c = build_chart(&root, "Relative model error (dB; −40 dB = 1 %, −60 dB = 0.1 %)", xr, yr)?;
         mesh(&mut c, "Frequency (Hz)", "|Ĝ_d/Ĝ − 1| (dB)", &hz, &|v| format!("{v:.0}"), 7)?;

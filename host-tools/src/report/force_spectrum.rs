@@ -19,7 +19,8 @@ pub fn plot(d: &crate::design::axis::AxisDesign, fs_hz: f64) -> Result<Option<St
     let ranges = crate::design::criterion::criterion_ranges(&d.bands, d.compensated_band_hz);
     let freqs = crate::design::criterion::criterion_grid(&ranges);
     let n = freqs.len() as f64;
-    let force: Vec<(f64, f64)> = freqs.iter().zip(&s.weights).map(|(f, w)| (*f, 10.0 * (w * n).max(1e-12).log10())).collect();
+    let force: Vec<(f64, f64)> =
+        freqs.iter().zip(&s.weights).map(|(f, w)| (*f, 10.0 * (w * n).max(1e-12).log10())).collect();
     let lag = d.kalman.lag;
     let h = d.kalman.compensator.freq_responses(&freqs, fs_hz);
     let dist: Vec<(f64, f64)> = freqs
@@ -48,8 +49,26 @@ pub fn plot(d: &crate::design::axis::AxisDesign, fs_hz: f64) -> Result<Option<St
         let root = root.titled(&title, (FONT, 16)).map_err(perr)?;
         let mut c = build_chart(&root, "Where the force is, and where the filter is accurate", xr, yr)?;
         mesh(&mut c, "Frequency (Hz)", "dB", &crate::report::plot::hz, &|v| format!("{v:.0}"), 8)?;
-        draw_line(&mut c, &force, yr, f64::INFINITY, RGBColor(31, 119, 180), 2, false, "record's force power per line, dB re a flat spectrum")?;
-        draw_line(&mut c, &dist, yr, f64::INFINITY, RGBColor(214, 39, 40), 2, false, "distortion |H·Ĝ·e^{jωL} − 1| of this filter, dB")?;
+        draw_line(
+            &mut c,
+            &force,
+            yr,
+            f64::INFINITY,
+            RGBColor(31, 119, 180),
+            2,
+            false,
+            "record's force power per line, dB re a flat spectrum",
+        )?;
+        draw_line(
+            &mut c,
+            &dist,
+            yr,
+            f64::INFINITY,
+            RGBColor(214, 39, 40),
+            2,
+            false,
+            "distortion |H·Ĝ·e^{jωL} − 1| of this filter, dB",
+        )?;
         legend(&mut c, SeriesLabelPosition::LowerRight)?;
         root.present().map_err(perr)?;
     }

@@ -163,7 +163,8 @@ pub fn report_parallel(image: &ParallelImage) -> Result<InspectReport> {
             axes: axis_reports(&b.axes),
         })
         .collect();
-    let list = bands.iter().map(|b| format!("{:.0}-{:.0} Hz", b.band_hz[0], b.band_hz[1])).collect::<Vec<_>>().join(", ");
+    let list =
+        bands.iter().map(|b| format!("{:.0}-{:.0} Hz", b.band_hz[0], b.band_hz[1])).collect::<Vec<_>>().join(", ");
     Ok(InspectReport {
         format_version: PARALLEL_FORMAT_VERSION,
         image_id: format!("{:08x}", image.id()),
@@ -195,7 +196,10 @@ pub fn render(r: &InspectReport) -> String {
     if r.offline_only {
         let why = r.offline_reason.as_deref().unwrap_or("marked offline only");
         let _ = writeln!(s, "offline only: {why}");
-        let _ = writeln!(s, "this image is for `dynocomp compensate`; the box never runs it (it stays in bypass, reason OfflineOnly)");
+        let _ = writeln!(
+            s,
+            "this image is for `dynocomp compensate`; the box never runs it (it stays in bypass, reason OfflineOnly)"
+        );
     } else if r.box_load.as_ref().is_some_and(|l| !l.fits) {
         let _ = writeln!(s, "the box cannot run this image inline: its predicted CPU load exceeds the limit (it stays in bypass, reason OverBudget)");
     } else if !r.runs_in_box {

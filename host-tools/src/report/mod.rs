@@ -10,9 +10,9 @@
 pub mod compare;
 pub mod compensation;
 pub mod design;
+pub mod force_spectrum;
 pub mod inspect;
 pub mod page;
-pub mod force_spectrum;
 pub mod plot;
 pub mod sensitivity;
 pub mod summary;

@@ -171,7 +171,13 @@ pub fn shade<'a>(
 }
 
 /// Shade each fitting band (labelled once when `labelled`).
-pub fn shade_bands<'a>(chart: &mut Chart<'a>, bands_hz: &[(f64, f64)], x: (f64, f64), y: (f64, f64), labelled: bool) -> Result<()> {
+pub fn shade_bands<'a>(
+    chart: &mut Chart<'a>,
+    bands_hz: &[(f64, f64)],
+    x: (f64, f64),
+    y: (f64, f64),
+    labelled: bool,
+) -> Result<()> {
     for (i, b) in bands_hz.iter().enumerate() {
         let label = if labelled && i == 0 { "fitting bands" } else { "" };
         shade(chart, *b, x, y, C_FIT_BAND, 0.18, label)?;

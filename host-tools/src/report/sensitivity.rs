@@ -39,7 +39,14 @@ pub fn plot(axis: &str, s: &Sensitivity) -> anyhow::Result<String> {
         );
         let root = root.titled(&title, (FONT, 16)).map_err(perr)?;
         let mut c = build_chart(&root, "Predicted in-band RMS error (% of the force's std)", xr, yr)?;
-        mesh(&mut c, "Sensor-mode shift δ (%)", "Predicted error (%)", &|v| format!("{v:+.1}"), &|v| format!("{v:.1}"), 8)?;
+        mesh(
+            &mut c,
+            "Sensor-mode shift δ (%)",
+            "Predicted error (%)",
+            &|v| format!("{v:+.1}"),
+            &|v| format!("{v:.1}"),
+            8,
+        )?;
         draw_line(&mut c, &pts, yr, f64::INFINITY, RGBColor(214, 39, 40), 2, false, "predicted error, this filter")?;
         let twice = [(xr.0, 200.0 * s.nominal), (xr.1, 200.0 * s.nominal)];
         draw_line(&mut c, &twice, yr, f64::INFINITY, RGBColor(127, 127, 127), 1, true, "twice the nominal error")?;

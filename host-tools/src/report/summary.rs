@@ -88,7 +88,12 @@ pub struct AxisJson {
 impl AxisJson {
     /// The JSON summary of design `d`, designed in `design_time_s` (s), with
     /// its force prior and the sensitivity analysis of it.
-    pub fn new(d: &AxisDesign, design_time_s: f64, prior: Option<&AxisPrior>, sensitivity: &Option<Sensitivity>) -> Self {
+    pub fn new(
+        d: &AxisDesign,
+        design_time_s: f64,
+        prior: Option<&AxisPrior>,
+        sensitivity: &Option<Sensitivity>,
+    ) -> Self {
         AxisJson {
             axis: axis_name(d.axis),
             model_order: d.model.order(),
@@ -116,7 +121,8 @@ impl AxisJson {
             max_pole_radius: d.verification.max_pole_radius,
             modes: d.model.modes(),
             design_time_s,
-            fit_nrmse_out_of_band: (!d.bands.is_empty() && d.fit_nrmse_out_of_band.is_finite()).then_some(d.fit_nrmse_out_of_band),
+            fit_nrmse_out_of_band: (!d.bands.is_empty() && d.fit_nrmse_out_of_band.is_finite())
+                .then_some(d.fit_nrmse_out_of_band),
             paper: d.paper.as_ref().map(|p| p.1.clone()),
             sensitivity: sensitivity.clone(),
             force_prior: prior.map(|p| ForcePriorJson {
@@ -176,7 +182,15 @@ pub struct DesignJson {
 }
 
 /// One-screen text summary.
-pub fn render_summary(designs: &[AxisDesign], sensitivities: &[Option<Sensitivity>], fs: f64, latency: usize, image: &str, id: u32, method: &str) -> String {
+pub fn render_summary(
+    designs: &[AxisDesign],
+    sensitivities: &[Option<Sensitivity>],
+    fs: f64,
+    latency: usize,
+    image: &str,
+    id: u32,
+    method: &str,
+) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
@@ -189,7 +203,18 @@ pub fn render_summary(designs: &[AxisDesign], sensitivities: &[Option<Sensitivit
     let _ = writeln!(
         s,
         "{:<4} {:>5} {:>7} {:>13} {:>10} {:>9} {:>15} {:>6} {:>7} {:>7} {:>8} {:>7}",
-        "axis", "order", "fit err", "coherent (Hz)", "Q (N²)", "R (N²)", "flat band (Hz)", "noise", "pred.", "raw", "match", "sec+fir"
+        "axis",
+        "order",
+        "fit err",
+        "coherent (Hz)",
+        "Q (N²)",
+        "R (N²)",
+        "flat band (Hz)",
+        "noise",
+        "pred.",
+        "raw",
+        "match",
+        "sec+fir"
     );
     for d in designs {
         let _ = writeln!(

@@ -184,11 +184,25 @@ pub fn plot_range(axis: &str, rd: &RangeDesign) -> Result<String> {
         );
         let root = root.titled(&title, (FONT, 16)).map_err(perr)?;
         let mut c = build_chart(&root, "Predicted in-band RMS error (% of the force's std)", (0.0, 1.0), yr)?;
-        mesh(&mut c, "State s (0 = first FRF, 1 = second FRF)", "Predicted error (%)", &|v| format!("{v:.2}"), &|v| format!("{v:.1}"), 8)?;
-        const PALETTE: [RGBColor; 5] = [RGBColor(31, 119, 180), RGBColor(44, 160, 44), RGBColor(148, 103, 189), RGBColor(140, 86, 75), RGBColor(255, 127, 14)];
+        mesh(
+            &mut c,
+            "State s (0 = first FRF, 1 = second FRF)",
+            "Predicted error (%)",
+            &|v| format!("{v:.2}"),
+            &|v| format!("{v:.1}"),
+            8,
+        )?;
+        const PALETTE: [RGBColor; 5] = [
+            RGBColor(31, 119, 180),
+            RGBColor(44, 160, 44),
+            RGBColor(148, 103, 189),
+            RGBColor(140, 86, 75),
+            RGBColor(255, 127, 14),
+        ];
         for (i, cand) in rd.candidates.iter().enumerate() {
             let pts: Vec<(f64, f64)> = RANGE_STATES.iter().zip(&cand.errors).map(|(s, e)| (*s, 100.0 * e)).collect();
-            let (color, width) = if i == rd.best { (RGBColor(214, 39, 40), 3) } else { (PALETTE[i % PALETTE.len()], 1) };
+            let (color, width) =
+                if i == rd.best { (RGBColor(214, 39, 40), 3) } else { (PALETTE[i % PALETTE.len()], 1) };
             let label = format!("designed at s = {:.2}{}", cand.s, if i == rd.best { " (the image)" } else { "" });
             draw_line(&mut c, &pts, yr, f64::INFINITY, color, width, i != rd.best, &label)?;
         }

@@ -86,8 +86,10 @@ impl std::str::FromStr for AntiAlias {
             ["ideal"] => Ok(AntiAlias::Ideal),
             ["none"] => Ok(AntiAlias::None),
             ["butterworth", order, fc] => {
-                let order: u32 = order.parse().with_context(|| format!("--anti-alias {s}: order {order:?} is not an integer"))?;
-                let fc_hz: f64 = fc.parse().with_context(|| format!("--anti-alias {s}: cutoff {fc:?} is not a number"))?;
+                let order: u32 =
+                    order.parse().with_context(|| format!("--anti-alias {s}: order {order:?} is not an integer"))?;
+                let fc_hz: f64 =
+                    fc.parse().with_context(|| format!("--anti-alias {s}: cutoff {fc:?} is not a number"))?;
                 let b = AntiAlias::Butterworth(Butterworth { order, fc_hz });
                 b.validate()?;
                 Ok(b)
@@ -112,7 +114,11 @@ impl AntiAlias {
     pub fn validate(&self) -> Result<()> {
         if let AntiAlias::Butterworth(b) = self {
             if !((1..=12).contains(&b.order) && b.fc_hz.is_finite() && b.fc_hz > 0.0) {
-                bail!("anti-alias butterworth: order {} must be in 1..=12 and cutoff {} Hz finite and > 0", b.order, b.fc_hz);
+                bail!(
+                    "anti-alias butterworth: order {} must be in 1..=12 and cutoff {} Hz finite and > 0",
+                    b.order,
+                    b.fc_hz
+                );
             }
         }
         Ok(())
@@ -158,7 +164,14 @@ impl AntiAlias {
     /// Measure `force_fine` (rate fs·oversample, from t = 0, at least
     /// [`Self::fine_len`] samples) with `dyn_` through this chain: returns
     /// (band-limited truth, noise-free measurement), `n` samples each at fs.
-    pub fn acquire(&self, dyn_: &Dynamometer, force_fine: &[f64], fs_hz: f64, oversample: usize, n: usize) -> (Vec<f64>, Vec<f64>) {
+    pub fn acquire(
+        &self,
+        dyn_: &Dynamometer,
+        force_fine: &[f64],
+        fs_hz: f64,
+        oversample: usize,
+        n: usize,
+    ) -> (Vec<f64>, Vec<f64>) {
         let f_fine = fs_hz * oversample.max(1) as f64;
         let y = match self.analog() {
             None => dyn_.measure(force_fine, f_fine),
@@ -171,7 +184,14 @@ impl AntiAlias {
     /// `force_fine` (rate fs·oversample, including any analog front end)
     /// already computed, e.g. by a drifting model
     /// ([`super::drift::measure_drifting`]).
-    pub fn acquire_response(&self, force_fine: &[f64], y: &[f64], fs_hz: f64, oversample: usize, n: usize) -> (Vec<f64>, Vec<f64>) {
+    pub fn acquire_response(
+        &self,
+        force_fine: &[f64],
+        y: &[f64],
+        fs_hz: f64,
+        oversample: usize,
+        n: usize,
+    ) -> (Vec<f64>, Vec<f64>) {
         let os = oversample.max(1);
         let f_fine = fs_hz * os as f64;
         let decimate = |x: &[f64]| -> Vec<f64> { x.iter().step_by(os).take(n).copied().collect() };
@@ -223,10 +243,13 @@ fn band_limit(x: &[f64], f_fine: f64, os: usize, gain: impl Fn(f64) -> f64) -> V
 /// come in pairs, so the imaginary parts cancel).
 pub fn measure_through(dyn_: &Dynamometer, b: &Butterworth, force: &[f64], fs_hz: f64) -> Vec<f64> {
     let g_at = |s: Complex64| -> Complex64 {
-        dyn_.modes.iter().map(|m| {
-            let w = m.omega();
-            m.residue * w * w / (s * s + 2.0 * m.zeta * w * s + w * w)
-        }).sum()
+        dyn_.modes
+            .iter()
+            .map(|m| {
+                let w = m.omega();
+                m.residue * w * w / (s * s + 2.0 * m.zeta * w * s + w * w)
+            })
+            .sum()
     };
     let mut terms: Vec<(Complex64, Complex64)> = Vec::new();
     for m in &dyn_.modes {

@@ -24,8 +24,8 @@ use anyhow::{bail, Result};
 
 use super::dynamometer::{Dynamometer, Hold, Mode, ModeStep, MultiAxisDynamometer};
 use super::{impact_test_all_with, milling_force, simulate_with, sub_seed, SimOutput, SimParams, TAG_NOISE};
-use crate::frf::Frf;
 use crate::fit::modes::SENSOR_FRACTION;
+use crate::frf::Frf;
 
 /// Fine samples per block of constant modal parameters in a drifting record.
 pub const DRIFT_BLOCK: usize = 64;
@@ -143,7 +143,12 @@ pub struct DriftOutput {
 /// Simulate `seed` with `params` on `dyno` (the set-up before the drift)
 /// while its sensor modes drift by `drift` (module doc). Refused with an
 /// analog front end in the chain (only the DAQ's brick wall or none).
-pub fn simulate_drifting(seed: u64, params: &SimParams, dyno: MultiAxisDynamometer, drift: Drift) -> Result<DriftOutput> {
+pub fn simulate_drifting(
+    seed: u64,
+    params: &SimParams,
+    dyno: MultiAxisDynamometer,
+    drift: Drift,
+) -> Result<DriftOutput> {
     drift.validate()?;
     let chain = params.anti_alias;
     if chain.analog().is_some() {
@@ -160,11 +165,16 @@ pub fn simulate_drifting(seed: u64, params: &SimParams, dyno: MultiAxisDynamomet
         sim.measured[a] = params.measurement.apply(&clean, sub_seed(seed, TAG_NOISE + a as u64));
         sim.clean[a] = clean;
     }
-    let dyno_after = MultiAxisDynamometer {
-        axes: [0, 1, 2].map(|a| shift_sensor_modes(sim.dyno.axis(a), drift.delta)),
-    };
+    let dyno_after =
+        MultiAxisDynamometer { axes: [0, 1, 2].map(|a| shift_sensor_modes(sim.dyno.axis(a), drift.delta)) };
     let ip = &params.impact;
-    let frf_after = impact_test_all_with(&|a, f| dyno_after.axis(a).frf(f), ip.n_lines, ip.df_hz, sub_seed(seed, TAG_IMPACT_AFTER), ip);
+    let frf_after = impact_test_all_with(
+        &|a, f| dyno_after.axis(a).frf(f),
+        ip.n_lines,
+        ip.df_hz,
+        sub_seed(seed, TAG_IMPACT_AFTER),
+        ip,
+    );
     Ok(DriftOutput { sim, drift, dyno_after, frf_after })
 }
 

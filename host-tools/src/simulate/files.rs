@@ -73,7 +73,12 @@ fn truth_json(out: &SimOutput, preset: Option<&super::presets::Preset>) -> Resul
         axes: (0..3)
             .map(|a| {
                 let d = out.dyno.axis(a);
-                TruthAxis { axis: axis_name(a), dc_gain: d.dc_gain(), main_fn_hz: d.main_mode().fn_hz, modes: d.modes.clone() }
+                TruthAxis {
+                    axis: axis_name(a),
+                    dc_gain: d.dc_gain(),
+                    main_fn_hz: d.main_mode().fn_hz,
+                    modes: d.modes.clone(),
+                }
             })
             .collect(),
         params: p,
@@ -119,4 +124,3 @@ pub fn write_outputs_of(dir: &Path, out: &SimOutput, preset: Option<&super::pres
     let json = truth_json(out, preset)?;
     write_records(dir, &out.frf, out.params.fs_hz, &out.t_s, [&out.measured, &out.truth, &out.idle], &json)
 }
-

@@ -95,13 +95,27 @@ pub fn impact_test(dyn_: &Dynamometer, n_lines: usize, df_hz: f64, seed: u64, pa
 }
 
 /// As [`impact_test`], labelled with `axis`.
-pub fn impact_test_axis(dyn_: &Dynamometer, axis: usize, n_lines: usize, df_hz: f64, seed: u64, params: &ImpactParams) -> AxisFrf {
+pub fn impact_test_axis(
+    dyn_: &Dynamometer,
+    axis: usize,
+    n_lines: usize,
+    df_hz: f64,
+    seed: u64,
+    params: &ImpactParams,
+) -> AxisFrf {
     impact_test_fn(&|f| dyn_.frf(f), axis, n_lines, df_hz, seed, params)
 }
 
 /// As [`impact_test_axis`], for any true response `g(f_hz)` (e.g. the
 /// dynamometer through an analog front end).
-pub fn impact_test_fn(g: &dyn Fn(f64) -> Complex64, axis: usize, n_lines: usize, df_hz: f64, seed: u64, params: &ImpactParams) -> AxisFrf {
+pub fn impact_test_fn(
+    g: &dyn Fn(f64) -> Complex64,
+    axis: usize,
+    n_lines: usize,
+    df_hz: f64,
+    seed: u64,
+    params: &ImpactParams,
+) -> AxisFrf {
     let mut out = impact_test_channels(&|f, y: &mut [Complex64]| y[0] = g(f), 1, n_lines, df_hz, seed, params);
     let (frf, coh) = out.remove(0);
     AxisFrf { axis, frf, coherence: Some(coh) }
@@ -128,8 +142,11 @@ pub fn impact_test_channels(
         let u: f64 = rand::RngExt::random_range(rng, -1.0..1.0);
         1.0 + spread * u
     };
-    let impacts: Vec<(f64, f64)> =
-        (0..n_imp).map(|_| (uni(&mut rng, params.amplitude_spread), params.hammer_cutoff_hz * uni(&mut rng, params.cutoff_spread))).collect();
+    let impacts: Vec<(f64, f64)> = (0..n_imp)
+        .map(|_| {
+            (uni(&mut rng, params.amplitude_spread), params.hammer_cutoff_hz * uni(&mut rng, params.cutoff_spread))
+        })
+        .collect();
     let cgauss = |rng: &mut ChaCha8Rng, rms: f64, real_only: bool| {
         // Circular complex Gaussian with E|n|² = rms² (real Gaussian at DC).
         let a: f64 = StandardNormal.sample(rng);
@@ -176,13 +193,25 @@ pub fn impact_test_channels(
 
 /// Impact tests of all three axes (independent noise per axis) on
 /// `n_lines` lines at `df_hz`.
-pub fn impact_test_all(dyno: &MultiAxisDynamometer, n_lines: usize, df_hz: f64, seed: u64, params: &ImpactParams) -> Frf {
+pub fn impact_test_all(
+    dyno: &MultiAxisDynamometer,
+    n_lines: usize,
+    df_hz: f64,
+    seed: u64,
+    params: &ImpactParams,
+) -> Frf {
     impact_test_all_with(&|a, f| dyno.axis(a).frf(f), n_lines, df_hz, seed, params)
 }
 
 /// As [`impact_test_all`], for the true responses `g(axis, f_hz)` of the
 /// three axes (e.g. through the acquisition chain's analog front end).
-pub fn impact_test_all_with(g: &dyn Fn(usize, f64) -> Complex64, n_lines: usize, df_hz: f64, seed: u64, params: &ImpactParams) -> Frf {
+pub fn impact_test_all_with(
+    g: &dyn Fn(usize, f64) -> Complex64,
+    n_lines: usize,
+    df_hz: f64,
+    seed: u64,
+    params: &ImpactParams,
+) -> Frf {
     let axes = (0..3)
         .map(|a| {
             let s = seed.wrapping_mul(0xA076_1D64_78BD_642F).wrapping_add(0xE703_7ED1_A0B4_28DB ^ (a as u64 + 1));

@@ -172,7 +172,11 @@ impl MillingParams {
             anyhow::bail!("milling parameter axial_slices must be ≥ 1");
         }
         if self.radial_depth_mm > self.diameter_mm {
-            anyhow::bail!("milling parameter radial_depth_mm = {} exceeds the diameter {}", self.radial_depth_mm, self.diameter_mm);
+            anyhow::bail!(
+                "milling parameter radial_depth_mm = {} exceeds the diameter {}",
+                self.radial_depth_mm,
+                self.diameter_mm
+            );
         }
         if self.helix_deg.is_nan() || self.helix_deg.abs() >= 89.0 {
             anyhow::bail!("milling parameter helix_deg = {} must be within ±89°", self.helix_deg);

@@ -28,9 +28,9 @@
 //! everywhere"). Noise and quantization are added after the filter.
 
 pub mod chain;
-pub mod files;
 pub mod drift;
 pub mod dynamometer;
+pub mod files;
 pub mod impact;
 pub mod measurement;
 pub mod milling;
@@ -41,7 +41,9 @@ pub mod shaker;
 
 pub use chain::{AntiAlias, Butterworth, BRICK_WALL_FRACTION};
 pub use dynamometer::{Dynamometer, Hold, Mode, ModeRanges, ModeStep, MultiAxisDynamometer};
-pub use impact::{h1_random_error, impact_freqs, impact_test, impact_test_all, impact_test_all_with, impact_test_axis, ImpactParams};
+pub use impact::{
+    h1_random_error, impact_freqs, impact_test, impact_test_all, impact_test_all_with, impact_test_axis, ImpactParams,
+};
 pub use measurement::MeasurementParams;
 pub use milling::{milling_force, Chatter, MillingMode, MillingParams};
 pub use shaker::Excitation;
@@ -122,7 +124,12 @@ impl SimParams {
         }
         let i = &self.impact;
         if i.n_lines < 2 || !(i.df_hz.is_finite() && i.df_hz > 0.0) || i.n_impacts == 0 {
-            bail!("simulate: impact test needs ≥ 2 lines, df > 0 and ≥ 1 impact (got {} lines, df {} Hz, {} impacts)", i.n_lines, i.df_hz, i.n_impacts);
+            bail!(
+                "simulate: impact test needs ≥ 2 lines, df > 0 and ≥ 1 impact (got {} lines, df {} Hz, {} impacts)",
+                i.n_lines,
+                i.df_hz,
+                i.n_impacts
+            );
         }
         if !(i.hammer_cutoff_hz.is_finite() && i.hammer_cutoff_hz > 0.0) {
             bail!("simulate: hammer cutoff = {} Hz must be > 0", i.hammer_cutoff_hz);
@@ -227,7 +234,13 @@ pub fn simulate_with(seed: u64, params: &SimParams, dyno: MultiAxisDynamometer) 
     let ip = &params.impact;
     // The impact test runs through the same analog front end.
     let chain = &params.anti_alias;
-    let frf = impact_test_all_with(&|a, f| dyno.axis(a).frf(f) * chain.analog_frf(f), ip.n_lines, ip.df_hz, sub_seed(seed, TAG_IMPACT), ip);
+    let frf = impact_test_all_with(
+        &|a, f| dyno.axis(a).frf(f) * chain.analog_frf(f),
+        ip.n_lines,
+        ip.df_hz,
+        sub_seed(seed, TAG_IMPACT),
+        ip,
+    );
     let n = params.n_samples();
     let os = params.oversample;
     let fine = params.applied_force(chain.fine_len(n, os));

@@ -45,21 +45,10 @@ pub struct Preset {
 }
 
 /// Names of every preset, in the paper's order.
-pub const NAMES: [&str; 6] = [
-    "sine-1185",
-    "chirp-650",
-    "chirp-1300",
-    "cut-1",
-    "cut-2",
-    "cut-3",
-];
+pub const NAMES: [&str; 6] = ["sine-1185", "chirp-650", "chirp-1300", "cut-1", "cut-2", "cut-3"];
 
 fn mode(fn_hz: f64, zeta: f64, residue: f64) -> Mode {
-    Mode {
-        fn_hz,
-        zeta,
-        residue,
-    }
+    Mode { fn_hz, zeta, residue }
 }
 
 /// The 9257A-like table dynamometer on the machine (module doc): per axis,
@@ -73,8 +62,26 @@ pub fn dynamometer_9257a() -> MultiAxisDynamometer {
     };
     MultiAxisDynamometer {
         axes: [
-            axis(vec![mode(280.0, 0.04, 0.04), mode(420.0, 0.035, -0.04), mode(610.0, 0.03, 0.04), mode(3350.0, 0.03, 0.05)], 2480.0, 0.025),
-            axis(vec![mode(300.0, 0.04, 0.035), mode(480.0, 0.03, 0.04), mode(640.0, 0.03, -0.03), mode(3800.0, 0.03, 0.04)], 2560.0, 0.025),
+            axis(
+                vec![
+                    mode(280.0, 0.04, 0.04),
+                    mode(420.0, 0.035, -0.04),
+                    mode(610.0, 0.03, 0.04),
+                    mode(3350.0, 0.03, 0.05),
+                ],
+                2480.0,
+                0.025,
+            ),
+            axis(
+                vec![
+                    mode(300.0, 0.04, 0.035),
+                    mode(480.0, 0.03, 0.04),
+                    mode(640.0, 0.03, -0.03),
+                    mode(3800.0, 0.03, 0.04),
+                ],
+                2560.0,
+                0.025,
+            ),
             axis(vec![mode(310.0, 0.05, 0.035), mode(520.0, 0.04, 0.04)], 3480.0, 0.02),
         ],
     }
@@ -83,11 +90,7 @@ pub fn dynamometer_9257a() -> MultiAxisDynamometer {
 /// The parameters every preset shares: R = 0.0519 N², 7 impacts, lines
 /// 0-4096 Hz at 1 Hz with a hammer tip flat beyond them.
 fn base(duration_s: f64) -> SimParams {
-    let mut p = SimParams {
-        duration_s,
-        idle_duration_s: 0.5,
-        ..Default::default()
-    };
+    let mut p = SimParams { duration_s, idle_duration_s: 0.5, ..Default::default() };
     p.measurement.noise_variance_n2 = PAPER_R_N2;
     p.impact.n_impacts = 7;
     p.impact.n_lines = 4097;
@@ -164,18 +167,8 @@ pub fn preset(name: &str) -> Result<Preset> {
         ),
         other => bail!("--preset `{other}`: unknown; the presets are {}", NAMES.join(", ")),
     };
-    let name = NAMES
-        .iter()
-        .find(|n| **n == name)
-        .copied()
-        .expect("matched above");
-    Ok(Preset {
-        name,
-        description,
-        params,
-        dyno,
-        design_flags,
-    })
+    let name = NAMES.iter().find(|n| **n == name).copied().expect("matched above");
+    Ok(Preset { name, description, params, dyno, design_flags })
 }
 
 #[cfg(test)]
@@ -206,17 +199,9 @@ mod tests {
     #[test]
     fn the_9257a_like_modes_sit_where_the_paper_puts_them() {
         let d = dynamometer_9257a();
-        for (a, lo, hi) in [
-            (0, 2300.0, 2700.0),
-            (1, 2300.0, 2700.0),
-            (2, 3300.0, 3700.0),
-        ] {
+        for (a, lo, hi) in [(0, 2300.0, 2700.0), (1, 2300.0, 2700.0), (2, 3300.0, 3700.0)] {
             let m = d.axis(a).main_mode();
-            assert!(
-                m.fn_hz > lo && m.fn_hz < hi,
-                "axis {a}: main mode {} Hz",
-                m.fn_hz
-            );
+            assert!(m.fn_hz > lo && m.fn_hz < hi, "axis {a}: main mode {} Hz", m.fn_hz);
             assert!((d.axis(a).dc_gain() - 1.0).abs() < 1e-12);
         }
     }

@@ -48,17 +48,10 @@ impl Excitation {
     /// Check the parameters; the error names the offending one.
     pub fn validate(&self, fs_hz: f64) -> anyhow::Result<()> {
         let (lo, hi, a, taper) = match self {
-            Excitation::Sine {
-                freq_hz,
-                amplitude_n,
-                taper_s,
-            } => (*freq_hz, *freq_hz, *amplitude_n, *taper_s),
-            Excitation::Chirp {
-                f0_hz,
-                f1_hz,
-                amplitude_n,
-                taper_s,
-            } => (f0_hz.min(*f1_hz), f0_hz.max(*f1_hz), *amplitude_n, *taper_s),
+            Excitation::Sine { freq_hz, amplitude_n, taper_s } => (*freq_hz, *freq_hz, *amplitude_n, *taper_s),
+            Excitation::Chirp { f0_hz, f1_hz, amplitude_n, taper_s } => {
+                (f0_hz.min(*f1_hz), f0_hz.max(*f1_hz), *amplitude_n, *taper_s)
+            }
         };
         if !(lo.is_finite() && lo > 0.0 && hi < fs_hz / 2.0) {
             anyhow::bail!(
@@ -81,22 +74,10 @@ impl Excitation {
     pub fn force(&self, fs_hz: f64, n: usize, total_s: f64) -> [Vec<f64>; 3] {
         let total = total_s;
         let (taper, f): (f64, Vec<f64>) = match self {
-            Excitation::Sine {
-                freq_hz,
-                amplitude_n,
-                taper_s,
-            } => (
-                *taper_s,
-                (0..n)
-                    .map(|k| amplitude_n * (2.0 * PI * freq_hz * k as f64 / fs_hz).sin())
-                    .collect(),
-            ),
-            Excitation::Chirp {
-                f0_hz,
-                f1_hz,
-                amplitude_n,
-                taper_s,
-            } => {
+            Excitation::Sine { freq_hz, amplitude_n, taper_s } => {
+                (*taper_s, (0..n).map(|k| amplitude_n * (2.0 * PI * freq_hz * k as f64 / fs_hz).sin()).collect())
+            }
+            Excitation::Chirp { f0_hz, f1_hz, amplitude_n, taper_s } => {
                 let rate = (f1_hz - f0_hz) / total;
                 let f = (0..n)
                     .map(|k| {
@@ -107,11 +88,7 @@ impl Excitation {
                 (*taper_s, f)
             }
         };
-        let f: Vec<f64> = f
-            .iter()
-            .enumerate()
-            .map(|(k, v)| v * fade(k as f64 / fs_hz, total, taper))
-            .collect();
+        let f: Vec<f64> = f.iter().enumerate().map(|(k, v)| v * fade(k as f64 / fs_hz, total, taper)).collect();
         [f.clone(), f.clone(), f]
     }
 }
@@ -142,48 +119,24 @@ mod tests {
         // near t = T/2 it must be (f0 + f1)/2.
         let fs = 51_200.0;
         let n = 51_200;
-        let e = Excitation::Chirp {
-            f0_hz: 10.0,
-            f1_hz: 1300.0,
-            amplitude_n: 1.0,
-            taper_s: 0.0,
-        };
+        let e = Excitation::Chirp { f0_hz: 10.0, f1_hz: 1300.0, amplitude_n: 1.0, taper_s: 0.0 };
         let x = &e.force(fs, n, 1.0)[0];
         let mid = n / 2;
-        let crossings: Vec<f64> = (mid - 2000..mid + 2000)
-            .filter(|&k| x[k] <= 0.0 && x[k + 1] > 0.0)
-            .map(|k| k as f64 / fs)
-            .collect();
+        let crossings: Vec<f64> =
+            (mid - 2000..mid + 2000).filter(|&k| x[k] <= 0.0 && x[k + 1] > 0.0).map(|k| k as f64 / fs).collect();
         let f_mid = (crossings.len() - 1) as f64 / (crossings[crossings.len() - 1] - crossings[0]);
-        assert!(
-            (f_mid - 655.0).abs() < 5.0,
-            "mid-sweep frequency {f_mid} Hz, expected 655 Hz"
-        );
+        assert!((f_mid - 655.0).abs() < 5.0, "mid-sweep frequency {f_mid} Hz, expected 655 Hz");
         // negative control: a sine at f0 has no such frequency there
-        let s = Excitation::Sine {
-            freq_hz: 10.0,
-            amplitude_n: 1.0,
-            taper_s: 0.0,
-        }
-        .force(fs, n, 1.0);
-        let c2 = (mid - 2000..mid + 2000)
-            .filter(|&k| s[0][k] <= 0.0 && s[0][k + 1] > 0.0)
-            .count();
+        let s = Excitation::Sine { freq_hz: 10.0, amplitude_n: 1.0, taper_s: 0.0 }.force(fs, n, 1.0);
+        let c2 = (mid - 2000..mid + 2000).filter(|&k| s[0][k] <= 0.0 && s[0][k + 1] > 0.0).count();
         assert!(c2 < 3);
     }
 
     #[test]
     fn taper_removes_the_step_at_both_ends() {
-        let e = Excitation::Sine {
-            freq_hz: 1185.0,
-            amplitude_n: 20.0,
-            taper_s: 0.01,
-        };
+        let e = Excitation::Sine { freq_hz: 1185.0, amplitude_n: 20.0, taper_s: 0.01 };
         let x = &e.force(51_200.0, 25_600, 0.5)[0];
-        assert!(
-            x[..20].iter().all(|v| v.abs() < 0.2)
-                && x[x.len() - 20..].iter().all(|v| v.abs() < 0.2)
-        );
+        assert!(x[..20].iter().all(|v| v.abs() < 0.2) && x[x.len() - 20..].iter().all(|v| v.abs() < 0.2));
         let peak = x[5_000..20_000].iter().fold(0.0f64, |m, v| m.max(v.abs()));
         assert!((peak - 20.0).abs() < 0.1, "peak {peak}");
     }

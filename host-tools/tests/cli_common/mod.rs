@@ -12,7 +12,11 @@ pub fn example(name: &str) -> String {
 /// Run `dynocomp` with `args`: (success, stdout, stderr).
 pub fn dynocomp(args: &[&str]) -> (bool, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_dynocomp")).args(args).output().expect("run dynocomp");
-    (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
 
 /// Run `dynocomp` with `args` and `input` on its stdin (fed from a thread,

@@ -2,8 +2,8 @@
 #![allow(dead_code)]
 
 use dynocomp_core::image::{
-    AxisImage, AxisScaling, AxisSummary, CoeffImage, DesignMethod, AXIS_HEADER_LEN, CRC32,
-    FLAG_OFFLINE_ONLY, HEADER_LEN, MAX_IMAGE_LEN,
+    AxisImage, AxisScaling, AxisSummary, CoeffImage, DesignMethod, AXIS_HEADER_LEN, CRC32, FLAG_OFFLINE_ONLY,
+    HEADER_LEN, MAX_IMAGE_LEN,
 };
 use dynocomp_core::kernel::{AxisFilter, Section};
 

@@ -30,7 +30,10 @@ pub fn sim(seed: u64, rpm: f64, teeth: usize) -> SimOutput {
 pub fn design_all(s: &SimOutput, lag: usize) -> Vec<AxisDesign> {
     let opts = DesignOptions { lag, fs_hz: FS, ..Default::default() };
     (0..3)
-        .map(|ax| design_axis(&s.frf.freq_hz, s.frf.axis(ax).unwrap(), sample_variance(&s.idle[ax]), &opts).unwrap_or_else(|e| panic!("axis {ax}: {e:#}")))
+        .map(|ax| {
+            design_axis(&s.frf.freq_hz, s.frf.axis(ax).unwrap(), sample_variance(&s.idle[ax]), &opts)
+                .unwrap_or_else(|e| panic!("axis {ax}: {e:#}"))
+        })
         .collect()
 }
 
@@ -58,8 +61,11 @@ pub fn measured_shifted(s: &SimOutput, d: &AxisDesign, force_fine: &[f64], pct: 
     let dyn_ = dynocomp::simulate::drift::shift_sensor_modes(s.dyno.axis(a), pct / 100.0);
     let (truth, clean) = p.anti_alias.acquire(&dyn_, force_fine, p.fs_hz, p.oversample, p.n_samples());
     let meas = p.measurement.apply(&clean, 1000 + a as u64);
-    let img = dynocomp::design::image::build_image(std::slice::from_ref(d), p.fs_hz as u32, d.kalman.lag, 5000.0, [0; 32]).expect("image");
+    let img =
+        dynocomp::design::image::build_image(std::slice::from_ref(d), p.fs_hz as u32, d.kalman.lag, 5000.0, [0; 32])
+            .expect("image");
     let rec = SignalRecord { t_s: None, channels: vec![(a, meas)] };
-    let out = dynocomp::offline::compensate::compensate_record(&img, &rec, false, "measured_shifted").expect("compensate");
+    let out =
+        dynocomp::offline::compensate::compensate_record(&img, &rec, false, "measured_shifted").expect("compensate");
     dynocomp::metrics::accuracy(out.channel(a).expect("axis"), &truth, p.fs_hz, d.compensated_band_hz.1).nrmse
 }

@@ -27,8 +27,7 @@ mod usb;
 use defmt::{error, info, warn};
 use dynocomp_core::sample::{select_stored_mode, BypassReason, Mode};
 use dynocomp_core::shell::{
-    box_sample_rate, led_on, led_state, LedState, Slot, BOX_CORE_CLOCK_HZ, DEFAULT_FS_HZ,
-    LED_PATTERN_TICKS,
+    box_sample_rate, led_on, led_state, LedState, Slot, BOX_CORE_CLOCK_HZ, DEFAULT_FS_HZ, LED_PATTERN_TICKS,
 };
 use dynocomp_core::store::{Layout, Store};
 use embassy_executor::Spawner;
@@ -70,15 +69,11 @@ struct BootInfo {
 
 fn clock_config() -> Config {
     use embassy_stm32::rcc::{
-        AHBPrescaler, APBPrescaler, Hse, HseMode, Pll, PllMul, PllPreDiv, PllRDiv, PllSource,
-        Sysclk,
+        AHBPrescaler, APBPrescaler, Hse, HseMode, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk,
     };
     let mut config = Config::default();
     // Nucleo-G474RE: 24 MHz crystal X3 on HSE. 24 / 6 * 85 / 2 = 170 MHz.
-    config.rcc.hse = Some(Hse {
-        freq: Hertz(24_000_000),
-        mode: HseMode::Oscillator,
-    });
+    config.rcc.hse = Some(Hse { freq: Hertz(24_000_000), mode: HseMode::Oscillator });
     config.rcc.pll = Some(Pll {
         source: PllSource::HSE,
         prediv: PllPreDiv::DIV6,
@@ -97,9 +92,7 @@ fn clock_config() -> Config {
     config.rcc.apb2_pre = APBPrescaler::DIV1;
     // USB: 48 MHz from HSI48, kept on frequency by the CRS from the host's
     // 1 kHz start-of-frame packets (RM0440 §7.2.4, §8).
-    config.rcc.hsi48 = Some(embassy_stm32::rcc::Hsi48Config {
-        sync_from_usb: true,
-    });
+    config.rcc.hsi48 = Some(embassy_stm32::rcc::Hsi48Config { sync_from_usb: true });
     config.rcc.mux.clk48sel = embassy_stm32::rcc::mux::Clk48sel::HSI48;
     // Nothing of embassy's own DMA use may compete with the sample interrupt.
     config.bdma_interrupt_priority = Priority::P6;
@@ -165,10 +158,7 @@ async fn main(spawner: Spawner) {
     let timing = match sampler::timing_for(fs_hz) {
         Ok(t) => t,
         Err(e) => {
-            error!(
-                "no timer setting for {} Hz ({}); using {} Hz",
-                fs_hz, e, DEFAULT_FS_HZ
-            );
+            error!("no timer setting for {} Hz ({}); using {} Hz", fs_hz, e, DEFAULT_FS_HZ);
             defmt::unwrap!(sampler::timing_for(DEFAULT_FS_HZ))
         }
     };
@@ -207,10 +197,7 @@ async fn main(spawner: Spawner) {
         None => false,
     };
     if cycle_counter {
-        info!(
-            "DWT cycle counter on: sample interrupt cost in cycles of {} Hz",
-            BOX_CORE_CLOCK_HZ
-        );
+        info!("DWT cycle counter on: sample interrupt cost in cycles of {} Hz", BOX_CORE_CLOCK_HZ);
     } else {
         warn!("DWT cycle counter not available: the sample interrupt's cost is not measured (0)");
     }
@@ -227,11 +214,7 @@ async fn main(spawner: Spawner) {
         }
     };
 
-    let boot = BootInfo {
-        reason,
-        slot,
-        fs_hz: timing.fs_hz,
-    };
+    let boot = BootInfo { reason, slot, fs_hz: timing.fs_hz };
 
     // ---- lower-priority tasks
     // Status LED on PB5 (Arduino D4): LD2 sits on PA5, which is DAC1_OUT2.
@@ -353,10 +336,7 @@ async fn status_task(
 /// User button B1 (PC13) toggles bypass. The pin's idle level is read at
 /// start, so the board's button polarity does not matter.
 #[embassy_executor::task]
-async fn button_task(
-    pin: Peri<'static, peripherals::PC13>,
-    ch: Peri<'static, peripherals::EXTI13>,
-) {
+async fn button_task(pin: Peri<'static, peripherals::PC13>, ch: Peri<'static, peripherals::EXTI13>) {
     // The Nucleo has its own pull resistor on B1.
     let mut button = ExtiInput::new(pin, ch, Pull::None, Irqs);
     Timer::after(DEBOUNCE).await;

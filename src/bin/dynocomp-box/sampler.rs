@@ -66,24 +66,21 @@ use dynocomp_core::image::CoeffImage;
 use dynocomp_core::protocol::{StatusCounters, StreamSample};
 use dynocomp_core::sample::{BypassReason, SampleState};
 use dynocomp_core::shell::{
-    adc_oversampling, compare_offset_ticks, timer_divider, ActiveImage, Oversampling, RingCursor,
-    SamplePath,
+    adc_oversampling, compare_offset_ticks, timer_divider, ActiveImage, Oversampling, RingCursor, SamplePath,
     TimerDivider, ARR_MAX_32, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES, BOX_TIMER_CLOCK_HZ,
 };
+use dynocomp_core::stream_queue::{Producer, StreamItem, StreamQueue};
 use dynocomp_core::AXES;
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::pac;
-use embassy_stm32::pac::adc::vals::{
-    Adcaldif, Dmacfg, Dmaen, Exten, Ovrmod, Res, SampleTime, Trovs,
-};
+use embassy_stm32::pac::adc::vals::{Adcaldif, Dmacfg, Dmaen, Exten, Ovrmod, Res, SampleTime, Trovs};
 use embassy_stm32::pac::adccommon::vals::Ckmode;
 use embassy_stm32::pac::bdma::vals::{Dir, Pl, Size};
 use embassy_stm32::pac::dac::vals::Mode as DacMode;
 use embassy_stm32::pac::gpio::vals::{Moder, Pupdr};
 use embassy_stm32::pac::timer::vals::Mms;
 use embassy_stm32::{peripherals, rcc, Peri};
-use dynocomp_core::stream_queue::{Producer, StreamItem, StreamQueue};
 
 /// Entries per DMA ring. The interrupt may be held off (critical sections of
 /// the lower-priority code, debugger) for up to `RING_LEN - 1` samples
@@ -184,12 +181,11 @@ pub struct Timing {
 /// ADCs: oversampling ratio and interrupt delay from
 /// `dynocomp_core::shell::adc_oversampling`.
 pub fn timing_for(fs_hz: u32) -> Result<Timing, StartError> {
-    let divider =
-        timer_divider(BOX_TIMER_CLOCK_HZ, fs_hz, ARR_MAX_32).ok_or(StartError::Rate(fs_hz))?;
-    let oversampling = adc_oversampling(fs_hz, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES)
-        .ok_or(StartError::Rate(fs_hz))?;
-    let irq_at_tick = compare_offset_ticks(&divider, BOX_TIMER_CLOCK_HZ, oversampling.irq_delay_ns)
-        .ok_or(StartError::Rate(fs_hz))?;
+    let divider = timer_divider(BOX_TIMER_CLOCK_HZ, fs_hz, ARR_MAX_32).ok_or(StartError::Rate(fs_hz))?;
+    let oversampling =
+        adc_oversampling(fs_hz, BOX_ADC_CLOCK_HZ, BOX_SAMPLE_HALF_CYCLES).ok_or(StartError::Rate(fs_hz))?;
+    let irq_at_tick =
+        compare_offset_ticks(&divider, BOX_TIMER_CLOCK_HZ, oversampling.irq_delay_ns).ok_or(StartError::Rate(fs_hz))?;
     Ok(Timing {
         fs_hz,
         divider,
@@ -367,10 +363,8 @@ struct ImageBuffers([UnsafeCell<MaybeUninit<ActiveImage>>; 2]);
 // returns, which the interrupt does not use, and the interrupt reads (and,
 // for an auto-zero, writes) only the active one.
 unsafe impl Sync for ImageBuffers {}
-static IMAGES: ImageBuffers = ImageBuffers([
-    UnsafeCell::new(MaybeUninit::uninit()),
-    UnsafeCell::new(MaybeUninit::uninit()),
-]);
+static IMAGES: ImageBuffers =
+    ImageBuffers([UnsafeCell::new(MaybeUninit::uninit()), UnsafeCell::new(MaybeUninit::uninit())]);
 /// Which buffer the interrupt uses; a new image is switched in between two
 /// samples.
 static HANDOFF: ImageHandoff = ImageHandoff::new(0);
@@ -398,7 +392,6 @@ pub fn hand_over(image: CoeffImage) -> bool {
 
 // ---------------------------------------------------- interrupt context --
 
-
 /// Everything the sample interrupt owns.
 pub struct Sampler {
     path: SamplePath,
@@ -410,12 +403,7 @@ pub struct Sampler {
 impl Sampler {
     /// The sample path; streamed samples go to `stream`.
     pub fn new(stream: Producer<'static, STREAM_QUEUE_LEN>) -> Self {
-        Sampler {
-            path: SamplePath::new(),
-            cursor: RingCursor::new(RING_LEN),
-            stream,
-            cycles: IsrCycles::new(),
-        }
+        Sampler { path: SamplePath::new(), cursor: RingCursor::new(RING_LEN), stream, cycles: IsrCycles::new() }
     }
 
     /// One sample interrupt, given the three DMA counters; returns whether
@@ -476,11 +464,7 @@ impl Sampler {
             let item = StreamItem {
                 index,
                 step: decimation,
-                sample: StreamSample {
-                    raw: codes,
-                    out: out.dac,
-                    flags: out.flags.0,
-                },
+                sample: StreamSample { raw: codes, out: out.dac, flags: out.flags.0 },
             };
             if self.stream.push(&item).is_err() {
                 TELEMETRY.stream_dropped.fetch_add(1, Relaxed);
@@ -579,9 +563,7 @@ fn TIM2() {
     // also counted by the ring cursor as a separate sample).
     if tim.sr().read().ccif(0) {
         sampler.path.state.note_overruns(1);
-        TELEMETRY
-            .overruns
-            .store(sampler.path.state.counters.overruns, Relaxed);
+        TELEMETRY.overruns.store(sampler.path.state.counters.overruns, Relaxed);
     }
 }
 
@@ -693,12 +675,7 @@ fn dma_setup(ch: usize, request: u8, adc: pac::adc::Adc, axis: usize) {
 
 /// Bring up DACs, ADCs, DMA and TIM2 and start sampling at `timing` with
 /// the store's boot result `image` (a verified image or the bypass reason).
-pub fn start(
-    _hw: Hardware,
-    timing: &Timing,
-    image: Stored,
-    sampler: Sampler,
-) -> Result<(), StartError> {
+pub fn start(_hw: Hardware, timing: &Timing, image: Stored, sampler: Sampler) -> Result<(), StartError> {
     // The DMA cannot reach CCM SRAM (0x2001_8000.., RM0440 §2.1 bus matrix).
     let rings = ring_addr(0);
     if rings >= 0x2001_8000 {
@@ -715,14 +692,9 @@ pub fn start(
     rcc::enable_and_reset::<peripherals::TIM2>();
 
     // Pins: analog mode, no pull (GPIOx_MODER = 11, GPIOx_PUPDR = 00).
-    for (port, pin) in [
-        (pac::GPIOA, 0),
-        (pac::GPIOA, 1),
-        (pac::GPIOB, 0),
-        (pac::GPIOA, 4),
-        (pac::GPIOA, 5),
-        (pac::GPIOA, 6),
-    ] {
+    for (port, pin) in
+        [(pac::GPIOA, 0), (pac::GPIOA, 1), (pac::GPIOB, 0), (pac::GPIOA, 4), (pac::GPIOA, 5), (pac::GPIOA, 6)]
+    {
         set_analog(port, pin);
     }
 
@@ -735,20 +707,14 @@ pub fn start(
         w.set_mode(0, DacMode::NORMAL_EXT_BUFEN);
         w.set_mode(1, DacMode::NORMAL_EXT_BUFEN);
     });
-    pac::DAC2
-        .mcr()
-        .modify(|w| w.set_mode(0, DacMode::NORMAL_EXT_BUFEN));
+    pac::DAC2.mcr().modify(|w| w.set_mode(0, DacMode::NORMAL_EXT_BUFEN));
     write_dacs([DAC_MIDSCALE; AXES]);
     pac::DAC1.cr().modify(|w| {
         w.set_en(0, true);
         w.set_en(1, true);
     });
     pac::DAC2.cr().modify(|w| w.set_en(0, true));
-    for (dac, n, ch) in [
-        (pac::DAC1, 1u8, 0usize),
-        (pac::DAC1, 1, 1),
-        (pac::DAC2, 2, 0),
-    ] {
+    for (dac, n, ch) in [(pac::DAC1, 1u8, 0usize), (pac::DAC1, 1, 1), (pac::DAC2, 2, 0)] {
         if !spin_until(|| dac.sr().read().dacrdy(ch)) {
             return Err(StartError::Dac(n, ch as u8 + 1));
         }

@@ -24,14 +24,8 @@ extern "C" {
 /// both slots). Only the symbols' addresses are taken, never their values.
 pub fn memory_x_matches_store() -> bool {
     let span = |s: *const u8, e: *const u8| (s as usize, (e as usize).wrapping_sub(s as usize));
-    let a = span(
-        core::ptr::addr_of!(__coeff_slot_a_start),
-        core::ptr::addr_of!(__coeff_slot_a_end),
-    );
-    let b = span(
-        core::ptr::addr_of!(__coeff_slot_b_start),
-        core::ptr::addr_of!(__coeff_slot_b_end),
-    );
+    let a = span(core::ptr::addr_of!(__coeff_slot_a_start), core::ptr::addr_of!(__coeff_slot_a_end));
+    let b = span(core::ptr::addr_of!(__coeff_slot_b_start), core::ptr::addr_of!(__coeff_slot_b_end));
     a == (SLOT_A_ADDR as usize, SLOT_LEN as usize) && b == (SLOT_B_ADDR as usize, SLOT_LEN as usize)
 }
 

@@ -23,10 +23,9 @@ use dynocomp_core::image::CoeffImage;
 use dynocomp_core::link::{Actions, BoxLink, Telemetry};
 use dynocomp_core::protocol::{encode_frame, BoxMessage, FrameDecoder, StreamBatcher, MAX_FRAME};
 use dynocomp_core::sample::{select_stored_mode, Mode};
-use dynocomp_core::shell::{
-    apply_adc_offsets, image_switch, parse_version, ImageSwitch, BOX_CORE_CLOCK_HZ,
-};
+use dynocomp_core::shell::{apply_adc_offsets, image_switch, parse_version, ImageSwitch, BOX_CORE_CLOCK_HZ};
 use dynocomp_core::store::Store;
+use dynocomp_core::stream_queue::Consumer;
 use embassy_futures::join::join;
 use embassy_futures::select::{select, Either};
 use embassy_stm32::flash::{Blocking, Flash};
@@ -35,10 +34,9 @@ use embassy_stm32::usb::Driver;
 use embassy_time::{Duration, Timer};
 use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use embassy_usb::driver::EndpointError;
-use dynocomp_core::stream_queue::Consumer;
 
 use crate::sampler::{
-    hand_over, Stored, AUTO_ZERO_REQUEST, STREAM_QUEUE_LEN, STREAM_DECIMATION, TELEMETRY, USER_BYPASS,
+    hand_over, Stored, AUTO_ZERO_REQUEST, STREAM_DECIMATION, STREAM_QUEUE_LEN, TELEMETRY, USER_BYPASS,
 };
 
 /// USB IDs: pid.codes test VID/PID (0x1209/0x0001), for development only;
@@ -89,14 +87,8 @@ pub async fn usb_task(driver: Driver<'static, USB>, link: &'static mut Link) {
     let msos_descriptor = defmt::unwrap!(cortex_m::singleton!(: [u8; 0] = [0; 0]));
     let control_buf = defmt::unwrap!(cortex_m::singleton!(: [u8; 64] = [0; 64]));
     let state = defmt::unwrap!(cortex_m::singleton!(: State<'static> = State::new()));
-    let mut builder = embassy_usb::Builder::new(
-        driver,
-        config,
-        config_descriptor,
-        bos_descriptor,
-        msos_descriptor,
-        control_buf,
-    );
+    let mut builder =
+        embassy_usb::Builder::new(driver, config, config_descriptor, bos_descriptor, msos_descriptor, control_buf);
     let mut class = CdcAcmClass::new(&mut builder, state, PACKET as u16);
     let mut device = builder.build();
     join(device.run(), serve(&mut class, link)).await;
@@ -130,10 +122,7 @@ async fn send_message(class: &mut Class, msg: &BoxMessage) -> Result<(), Endpoin
 
 /// The status the link handler reports.
 fn telemetry(image: &Stored, fs_hz: u32, stream_next_seq: u32) -> Telemetry<'_> {
-    let bypass = match select_stored_mode(
-        image,
-        USER_BYPASS.load(core::sync::atomic::Ordering::Relaxed),
-    ) {
+    let bypass = match select_stored_mode(image, USER_BYPASS.load(core::sync::atomic::Ordering::Relaxed)) {
         Mode::Compensate(_) => None,
         Mode::Bypass(r) => Some(r),
     };
@@ -156,8 +145,7 @@ async fn apply(act: Actions, link: &mut Link) {
         info!("USB: user bypass {}", if on { "ON" } else { "OFF" });
     }
     if act.auto_zero {
-        let n = (link.fs_hz / AUTO_ZERO_PER_SECOND)
-            .clamp(1, dynocomp_core::shell::AUTO_ZERO_MAX_SAMPLES);
+        let n = (link.fs_hz / AUTO_ZERO_PER_SECOND).clamp(1, dynocomp_core::shell::AUTO_ZERO_MAX_SAMPLES);
         AUTO_ZERO_REQUEST.store(n, Relaxed);
         info!("USB: auto-zero over {} samples", n);
     }
@@ -200,10 +188,7 @@ async fn switch_image(link: &mut Link) {
         Ok(img) => img,
         Err(r) => {
             // The store verified it before committing; keep running the old one.
-            warn!(
-                "USB: committed image does not load ({}); sample path unchanged",
-                r
-            );
+            warn!("USB: committed image does not load ({}); sample path unchanged", r);
             return;
         }
     };
@@ -212,10 +197,7 @@ async fn switch_image(link: &mut Link) {
             // A previous switch may be pending for one sample period.
             for _ in 0..100 {
                 if hand_over(img) {
-                    info!(
-                        "USB: new image {=u32:#010x} handed to the sample path",
-                        img.id()
-                    );
+                    info!("USB: new image {=u32:#010x} handed to the sample path", img.id());
                     link.image = Ok(img);
                     return;
                 }
@@ -224,10 +206,7 @@ async fn switch_image(link: &mut Link) {
             warn!("USB: sample path did not take the new image; it runs after a reset");
         }
         ImageSwitch::Reboot { from_hz, to_hz } => {
-            info!(
-                "USB: new image runs at {} Hz (now {} Hz): rebooting",
-                to_hz, from_hz
-            );
+            info!("USB: new image runs at {} Hz (now {} Hz): rebooting", to_hz, from_hz);
             // Let the commit's Ack leave before the reset.
             Timer::after_millis(50).await;
             cortex_m::peripheral::SCB::sys_reset();

@@ -63,7 +63,13 @@ pub struct RowError {
 
 impl MatrixCriterion {
     /// The criterion of `g` over the bands `bands_hz` (one per output axis).
-    pub fn new(g: impl Fn(f64) -> CMatrix3, bands_hz: [(f64, f64); 3], fs_hz: f64, force_rms: [f64; 3], r: [f64; 3]) -> Self {
+    pub fn new(
+        g: impl Fn(f64) -> CMatrix3,
+        bands_hz: [(f64, f64); 3],
+        fs_hz: f64,
+        force_rms: [f64; 3],
+        r: [f64; 3],
+    ) -> Self {
         let rows = bands_hz.map(|band_hz| {
             let freqs = criterion_grid(&[band_hz]);
             let g = freqs.iter().map(|f| g(*f)).collect();

@@ -141,7 +141,15 @@ struct RowProblem {
 }
 
 impl RowProblem {
-    fn new(cols: &[Vec<Complex64>], zs: &[Complex64], truth: &[CMatrix3], w: &[f64], at_one: &[Complex64], g0: [f64; 3], i: usize) -> Self {
+    fn new(
+        cols: &[Vec<Complex64>],
+        zs: &[Complex64],
+        truth: &[CMatrix3],
+        w: &[f64],
+        at_one: &[Complex64],
+        g0: [f64; 3],
+        i: usize,
+    ) -> Self {
         let (rows, ncol) = (cols.len(), cols[0].len());
         let mut a = DMatrix::<f64>::zeros(2 * rows, ncol);
         for (k, (c, wk)) in cols.iter().zip(w).enumerate() {
@@ -209,7 +217,11 @@ impl RowProblem {
 
 /// The discrete model of `model` at `fs_hz` matched over `band_hz` (module
 /// doc), with its match over the band.
-pub fn discretize_matrix(model: &MatrixModel, fs_hz: f64, band_hz: (f64, f64)) -> Result<(DiscreteMatrixModel, DiscreteMatch)> {
+pub fn discretize_matrix(
+    model: &MatrixModel,
+    fs_hz: f64,
+    band_hz: (f64, f64),
+) -> Result<(DiscreteMatrixModel, DiscreteMatch)> {
     let t = 1.0 / fs_hz;
     let nyq = PI * fs_hz;
     let kept: Vec<(Complex64, bool, usize)> = (0..model.terms())
@@ -305,7 +317,13 @@ pub fn discretize_matrix(model: &MatrixModel, fs_hz: f64, band_hz: (f64, f64)) -
 
 /// The discrete model from the rows' coefficients (per pole its residue's
 /// real and, for a pair, imaginary part, then d, then the taps).
-fn assemble(fs_hz: f64, poles: &[(Complex64, bool)], coef: &[[Vec<f64>; 3]], taps: usize, advance: usize) -> DiscreteMatrixModel {
+fn assemble(
+    fs_hz: f64,
+    poles: &[(Complex64, bool)],
+    coef: &[[Vec<f64>; 3]],
+    taps: usize,
+    advance: usize,
+) -> DiscreteMatrixModel {
     let at = |col: usize| Matrix3::from_fn(|i, j| coef[i][j][col]);
     let mut residues = Vec::with_capacity(poles.len());
     let mut col = 0;
@@ -362,12 +380,16 @@ fn residue_svd(r: &CMatrix3, real: bool) -> Result<Vec<(f64, [Complex64; 3], [Co
         let svd = SVD::try_new(r.map(|v| v.re), true, true, eps, limit).ok_or_else(fail)?;
         let (u, vt) = (svd.u.ok_or_else(fail)?, svd.v_t.ok_or_else(fail)?);
         let c = |v: f64| Complex64::new(v, 0.0);
-        Ok((0..3).map(|k| (svd.singular_values[k], [0, 1, 2].map(|i| c(u[(i, k)])), [0, 1, 2].map(|j| c(vt[(k, j)])))).collect())
+        Ok((0..3)
+            .map(|k| (svd.singular_values[k], [0, 1, 2].map(|i| c(u[(i, k)])), [0, 1, 2].map(|j| c(vt[(k, j)]))))
+            .collect())
     } else {
         let svd = SVD::try_new(*r, true, true, eps, limit).ok_or_else(fail)?;
         let (u, vt) = (svd.u.ok_or_else(fail)?, svd.v_t.ok_or_else(fail)?);
         // R = Σ σ_k u_k (vᴴ)_k: v_t's rows are the vᴴ rows.
-        Ok((0..3).map(|k| (svd.singular_values[k], [0, 1, 2].map(|i| u[(i, k)]), [0, 1, 2].map(|j| vt[(k, j)]))).collect())
+        Ok((0..3)
+            .map(|k| (svd.singular_values[k], [0, 1, 2].map(|i| u[(i, k)]), [0, 1, 2].map(|j| vt[(k, j)])))
+            .collect())
     }
 }
 
@@ -452,7 +474,8 @@ pub fn plant_states(dm: &DiscreteMatrixModel, band: &[(f64, CMatrix3)]) -> Resul
 
 /// max_f ‖Ĝ⁻¹(C(zI − A)⁻¹B + d + Σ h_m z^{−m} − M(z))‖_F over `band`.
 fn realization_error(p: &PlantStates, dm: &DiscreteMatrixModel, band: &[(f64, CMatrix3)]) -> f64 {
-    let ss = crate::numeric::lti::MimoStateSpace { a: p.a.clone(), b: p.b.clone(), c: p.c.clone(), d: DMatrix::zeros(3, 3) };
+    let ss =
+        crate::numeric::lti::MimoStateSpace { a: p.a.clone(), b: p.b.clone(), c: p.c.clone(), d: DMatrix::zeros(3, 3) };
     let freqs: Vec<f64> = band.iter().map(|b| b.0).collect();
     let h = ss.freq_responses(&freqs, dm.fs_hz);
     let mut poles_only = dm.clone();

@@ -147,15 +147,13 @@ pub fn design(plant: &MatrixAugmentedPlant, q: [f64; 3], r: [f64; 3], lag: usize
     let k = &p * c.transpose() * &s_inv;
     let i_kc = DMatrix::<f64>::identity(n, n) - &k * c;
     let out = plant.output_index();
-    let comp = MimoStateSpace {
-        a: a * &i_kc,
-        b: a * &k,
-        c: i_kc.rows(out, 3).into_owned(),
-        d: k.rows(out, 3).into_owned(),
-    };
+    let comp =
+        MimoStateSpace { a: a * &i_kc, b: a * &k, c: i_kc.rows(out, 3).into_owned(), d: k.rows(out, 3).into_owned() };
     let radius = eigenvalues(&comp.a, "the 3x3 compensator")?.iter().map(|z| z.norm()).fold(0.0, f64::max);
     if !(radius < 1.0) {
-        bail!("3x3 Kalman compensator is not stable (spectral radius {radius:.9}); the fitted model may be unobservable");
+        bail!(
+            "3x3 Kalman compensator is not stable (spectral radius {radius:.9}); the fitted model may be unobservable"
+        );
     }
     Ok(MatrixKalman {
         compensator: comp,

@@ -33,8 +33,8 @@ use dynocomp_core::mimo::MimoFilter;
 use num_complex::Complex64;
 use serde::Serialize;
 
-pub use self::combine::RowSource;
 use self::combine::combine;
+pub use self::combine::RowSource;
 use self::criterion::{choose_q, MatrixCriterion, QSearch, RowError};
 use self::discrete::{discretize_matrix, plant_states, CMatrix3, DiscreteMatch, DiscreteMatrixModel, PlantStates};
 use self::kalman::{augmented_plant, MatrixAugmentedPlant, MatrixKalman};
@@ -295,7 +295,12 @@ pub fn design_matrix(frf: &Frf, r: [f64; 3], opts: &MatrixOptions) -> Result<Mat
 /// FRF still gives the bands, the per-axis designs and the model's error
 /// against the measurement): for studies with a known model, e.g. the
 /// simulator's exact one.
-pub fn design_matrix_with_model(frf: &Frf, model: MatrixModel, r: [f64; 3], opts: &MatrixOptions) -> Result<MatrixDesign> {
+pub fn design_matrix_with_model(
+    frf: &Frf,
+    model: MatrixModel,
+    r: [f64; 3],
+    opts: &MatrixOptions,
+) -> Result<MatrixDesign> {
     design(frf, r, opts, Some(model))
 }
 
@@ -312,7 +317,11 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
     });
     for (i, b) in bands.iter().enumerate() {
         if !(b.1 > b.0) {
-            bail!("axis {}: no coherent band below 0.45 fs (coherence ≥ {}); repeat the impact test", axis_name(i), d.coherence_threshold);
+            bail!(
+                "axis {}: no coherent band below 0.45 fs (coherence ≥ {}); repeat the impact test",
+                axis_name(i),
+                d.coherence_threshold
+            );
         }
     }
     check_invertible(frf, &bands, d.coherence_threshold)?;
@@ -353,7 +362,8 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
         Some(l) => vec![l],
         None => vec![DEFAULT_LATENCY],
     };
-    let mut rounds: Vec<Round> = latencies.iter().map(|l| round(*l, &prepared, prep.as_ref(), &criterion, r, d)).collect();
+    let mut rounds: Vec<Round> =
+        latencies.iter().map(|l| round(*l, &prepared, prep.as_ref(), &criterion, r, d)).collect();
     if opts.latency.is_none() && rounds[0].axes.iter().any(|a| a.chosen.distortion > PREDICTED_SHORT) {
         for l in LONGER_LATENCIES {
             rounds.push(round(l, &prepared, prep.as_ref(), &criterion, r, d));
@@ -363,11 +373,10 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
         .iter()
         .map(|rd| LatencyRound { latency: rd.lag, predicted: std::array::from_fn(|i| Some(rd.axes[i].chosen.error)) })
         .collect();
-    let best: [f64; 3] = std::array::from_fn(|i| rounds.iter().map(|rd| rd.axes[i].chosen.error).fold(f64::INFINITY, f64::min));
-    let pick = rounds
-        .iter()
-        .position(|rd| (0..3).all(|i| rd.axes[i].chosen.error <= GAIN_NOT_WORTH * best[i]))
-        .unwrap_or(0);
+    let best: [f64; 3] =
+        std::array::from_fn(|i| rounds.iter().map(|rd| rd.axes[i].chosen.error).fold(f64::INFINITY, f64::min));
+    let pick =
+        rounds.iter().position(|rd| (0..3).all(|i| rd.axes[i].chosen.error <= GAIN_NOT_WORTH * best[i])).unwrap_or(0);
     let chosen = rounds.swap_remove(pick);
     for a in &chosen.axes {
         if !(a.chosen.error < a.raw.error) || !(a.chosen.error < MAX_PREDICTED_ERROR) {
@@ -529,13 +538,8 @@ fn prepare_model(
     let grid = crate::design::criterion::criterion_grid(&[band]);
     let lines: Vec<(f64, CMatrix3)> = grid.iter().map(|f| (*f, model.frf(*f))).collect();
     let plant = plant_states(&dm, &lines).context("plant of the 3x3 model")?;
-    let figures = MatrixFitFigures {
-        order: model.order(),
-        weighted_rms,
-        order_trace,
-        entry_error,
-        modes: model.modes(),
-    };
+    let figures =
+        MatrixFitFigures { order: model.order(), weighted_rms, order_trace, entry_error, modes: model.modes() };
     Ok(MatrixPrep { fit: figures, model, dm, matching, plant })
 }
 
@@ -551,7 +555,14 @@ struct Criteria {
     measured: MatrixCriterion,
 }
 
-fn round(lag: usize, prepared: &[Result<PreparedAxis>], prep: Option<&MatrixPrep>, crits: &Criteria, r: [f64; 3], d: &DesignOptions) -> Round {
+fn round(
+    lag: usize,
+    prepared: &[Result<PreparedAxis>],
+    prep: Option<&MatrixPrep>,
+    crits: &Criteria,
+    r: [f64; 3],
+    d: &DesignOptions,
+) -> Round {
     let crit = &crits.model;
     let judge = &crits.measured;
     let opts = DesignOptions { lag, ..d.clone() };
@@ -595,7 +606,12 @@ fn round(lag: usize, prepared: &[Result<PreparedAxis>], prep: Option<&MatrixPrep
                 ),
                 (Some((p, _, png, _)), None) => (RowSource::PerAxis, p, png, "per-axis row: no 3x3 design".to_string()),
                 (None, Some((m, mng, _))) => (RowSource::Matrix, m, mng, "3x3 row: no per-axis design".to_string()),
-                (None, None) => (RowSource::PerAxis, RowError { error: f64::INFINITY, distortion: f64::INFINITY }, f64::NAN, "no design".to_string()),
+                (None, None) => (
+                    RowSource::PerAxis,
+                    RowError { error: f64::INFINITY, distortion: f64::INFINITY },
+                    f64::NAN,
+                    "no design".to_string(),
+                ),
             };
             AxisPrediction {
                 axis: axis_name(i),
@@ -619,14 +635,26 @@ fn round(lag: usize, prepared: &[Result<PreparedAxis>], prep: Option<&MatrixPrep
 
 /// The 3x3 Kalman design at latency `lag` with q chosen by the criterion
 /// (or `d.q_override` on every axis), and its noise gains.
-fn design_3x3(p: &MatrixPrep, crit: &MatrixCriterion, r: [f64; 3], lag: usize, d: &DesignOptions) -> Result<(MatrixKalman, QSearch, [f64; 3])> {
+fn design_3x3(
+    p: &MatrixPrep,
+    crit: &MatrixCriterion,
+    r: [f64; 3],
+    lag: usize,
+    d: &DesignOptions,
+) -> Result<(MatrixKalman, QSearch, [f64; 3])> {
     let aug = augmented_plant(&p.dm, &p.plant, lag);
     let all = crit.all_freqs();
     let evaluate = |q: [f64; 3]| -> Option<(MatrixKalman, [f64; 3], [f64; 3])> {
         let k = kalman::design(&aug, q, r, lag).ok()?;
         let ng = k.compensator.white_noise_gains()?;
         let h = k.compensator.freq_responses(&all, d.fs_hz);
-        let j = std::array::from_fn(|i| if ng[i] > d.max_noise_gain { f64::INFINITY } else { crit.row_error(i, lag, &h).error });
+        let j = std::array::from_fn(|i| {
+            if ng[i] > d.max_noise_gain {
+                f64::INFINITY
+            } else {
+                crit.row_error(i, lag, &h).error
+            }
+        });
         Some((k, j, [ng[0], ng[1], ng[2]]))
     };
     let search = match d.q_override {
@@ -717,4 +745,3 @@ fn finish(
         filter,
     })
 }
-

@@ -11,9 +11,9 @@ use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
 use std::f64::consts::PI;
 
-use crate::fit::{PoleResidueModel, Term};
-use crate::fit::modes::{fn_hz, pole_at, residue_of_share};
 use crate::design::two_state::model::TwoState;
+use crate::fit::modes::{fn_hz, pole_at, residue_of_share};
+use crate::fit::{PoleResidueModel, Term};
 
 /// Largest relative growth of the weighted misfit over both FRFs at which
 /// the joint fit is kept (rule step 3).
@@ -97,7 +97,10 @@ impl<'a> Lines<'a> {
 /// joint fit is kept: the data then cannot say it is wrong.
 pub fn fit_above_band_jointly(ts: &TwoState, lines: &Lines, band_hz: (f64, f64)) -> (TwoState, Vec<AboveBandMode>) {
     let sensors = crate::fit::modes::sensor_mode_indices(&ts.before);
-    let above: Vec<usize> = sensors.into_iter().filter(|&i| matches!(ts.before.terms[i], Term::Pair { pole, .. } if fn_hz(pole) > band_hz.1)).collect();
+    let above: Vec<usize> = sensors
+        .into_iter()
+        .filter(|&i| matches!(ts.before.terms[i], Term::Pair { pole, .. } if fn_hz(pole) > band_hz.1))
+        .collect();
     if above.is_empty() {
         return (ts.clone(), Vec::new());
     }
@@ -118,7 +121,9 @@ pub fn fit_above_band_jointly(ts: &TwoState, lines: &Lines, band_hz: (f64, f64))
         .iter()
         .map(|&i| AboveBandMode {
             fn_hz: (pair_fn_hz(&ts.before, i), pair_fn_hz(&ts.after, i)),
-            joint_fn_hz: joint.as_ref().map_or((f64::NAN, f64::NAN), |(j, _)| (pair_fn_hz(&j.before, i), pair_fn_hz(&j.after, i))),
+            joint_fn_hz: joint
+                .as_ref()
+                .map_or((f64::NAN, f64::NAN), |(j, _)| (pair_fn_hz(&j.before, i), pair_fn_hz(&j.after, i))),
             misfit_growth: growth,
             joint: kept,
         })
@@ -143,11 +148,19 @@ fn pole_of(f_hz: f64, zeta: f64) -> Complex64 {
 
 /// State `st` (0 before, 1 after) of `t`.
 fn state(t: &TwoState, st: usize) -> &PoleResidueModel {
-    if st == 0 { &t.before } else { &t.after }
+    if st == 0 {
+        &t.before
+    } else {
+        &t.after
+    }
 }
 
 fn state_mut(t: &mut TwoState, st: usize) -> &mut PoleResidueModel {
-    if st == 0 { &mut t.before } else { &mut t.after }
+    if st == 0 {
+        &mut t.before
+    } else {
+        &mut t.after
+    }
 }
 
 /// Step 2 of the rule: the above-band poles refined, one parameter at a
@@ -168,7 +181,11 @@ fn refine(ts: &TwoState, lines: &Lines, common: &[bool], common_d: bool, above: 
                         t
                     };
                     let cost = |v: f64| solve(&with(v), lines, common, common_d).map_or(f64::INFINITY, |s| s.1);
-                    let (lo, hi) = if which == 0 { (f * (1.0 - FREQ_SPAN), f * (1.0 + FREQ_SPAN)) } else { (z * (1.0 - ZETA_SPAN), (z * (1.0 + ZETA_SPAN)).min(0.5)) };
+                    let (lo, hi) = if which == 0 {
+                        (f * (1.0 - FREQ_SPAN), f * (1.0 + FREQ_SPAN))
+                    } else {
+                        (z * (1.0 - ZETA_SPAN), (z * (1.0 + ZETA_SPAN)).min(0.5))
+                    };
                     let v = golden(lo, hi, cost);
                     if let Some((t, c)) = solve(&with(v), lines, common, common_d) {
                         if c < best {
@@ -323,8 +340,14 @@ mod tests {
     /// golden-section search finds a known minimum.
     #[test]
     fn the_joint_solve_recovers_known_states_and_golden_finds_a_minimum() {
-        let before = PoleResidueModel { d: 0.01, ..PoleResidueModel::from_modes(&[(500.0, 0.03, -0.03), (2300.0, 0.025, 0.9), (4400.0, 0.045, 0.076)]) };
-        let after = PoleResidueModel { d: 0.01, ..PoleResidueModel::from_modes(&[(500.0, 0.03, -0.03), (2430.0, 0.025, 0.9), (4620.0, 0.045, 0.076)]) };
+        let before = PoleResidueModel {
+            d: 0.01,
+            ..PoleResidueModel::from_modes(&[(500.0, 0.03, -0.03), (2300.0, 0.025, 0.9), (4400.0, 0.045, 0.076)])
+        };
+        let after = PoleResidueModel {
+            d: 0.01,
+            ..PoleResidueModel::from_modes(&[(500.0, 0.03, -0.03), (2430.0, 0.025, 0.9), (4620.0, 0.045, 0.076)])
+        };
         let freq: Vec<f64> = (1..=800).map(|k| k as f64 * 5.0).collect();
         let (h0, h1): (Vec<_>, Vec<_>) = freq.iter().map(|f| (before.frf(*f), after.frf(*f))).unzip();
         let w = vec![1.0; freq.len()];

@@ -65,7 +65,11 @@ pub fn pair(axis: &str, before: &PoleResidueModel, after: &PoleResidueModel) -> 
         );
     }
     if r0.len() != r1.len() {
-        bail!("axis {axis}: cannot pair the two FRFs' models: {} real poles in the first, {} in the second", r0.len(), r1.len());
+        bail!(
+            "axis {axis}: cannot pair the two FRFs' models: {} real poles in the first, {} in the second",
+            r0.len(),
+            r1.len()
+        );
     }
     for (a, b) in f0.iter().zip(&f1) {
         if ((b - a) / a).abs() > PAIR_TOLERANCE {

@@ -50,10 +50,17 @@ pub struct Paired {
 /// modes the two FRFs measured alike are shared ([`share_machine_modes`])
 /// and the sensor modes above `d0`'s compensated band are fitted to both
 /// FRFs at once ([`crate::design::two_state::joint`]).
-pub fn pair_second_state(freq_hz: &[f64], first: &AxisFrf, d0: &AxisDesign, second: &AxisFrf, vf: &VfOptions) -> Result<Paired> {
+pub fn pair_second_state(
+    freq_hz: &[f64],
+    first: &AxisFrf,
+    d0: &AxisDesign,
+    second: &AxisFrf,
+    vf: &VfOptions,
+) -> Result<Paired> {
     let name = axis_name(second.axis);
     let w = coherence_weights(&second.frf, second.coherence.as_deref());
-    let after = fit_order(freq_hz, &second.frf, &w, d0.model.order(), vf).with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?;
+    let after = fit_order(freq_hz, &second.frf, &w, d0.model.order(), vf)
+        .with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?;
     let ts = pair(name, &d0.model, &after)?;
     let w0 = coherence_weights(&first.frf, first.coherence.as_deref());
     let frfs = [(&first.frf[..], &w0[..]), (&second.frf[..], &w[..])];
@@ -103,7 +110,11 @@ pub struct MachineMode {
 /// FRFs, √(Σ w|Ĝ_shared − H|² / Σ w|Ĝ − H|²) ≤ [`SHARE_TOLERANCE`], i.e. the
 /// data cannot tell the two fits apart; otherwise (the mode moved, or is
 /// not resolved by [`SHARE_MIN_LINES`] lines) both states keep their own.
-pub fn share_machine_modes(ts: &TwoState, freq_hz: &[f64], frfs: [(&[Complex64], &[f64]); 2]) -> (TwoState, Vec<MachineMode>) {
+pub fn share_machine_modes(
+    ts: &TwoState,
+    freq_hz: &[f64],
+    frfs: [(&[Complex64], &[f64]); 2],
+) -> (TwoState, Vec<MachineMode>) {
     let sensors = sensor_mode_indices(&ts.before);
     let mut out = ts.clone();
     let mut report = Vec::new();
@@ -122,7 +133,8 @@ pub fn share_machine_modes(ts: &TwoState, freq_hz: &[f64], frfs: [(&[Complex64],
         let growth = |m: &PoleResidueModel, (h, w): (&[Complex64], &[f64])| {
             let mut shared = m.clone();
             shared.terms[i] = mean;
-            let chi = |g: &PoleResidueModel| lines.iter().map(|&k| w[k] * (g.frf(freq_hz[k]) - h[k]).norm_sqr()).sum::<f64>();
+            let chi =
+                |g: &PoleResidueModel| lines.iter().map(|&k| w[k] * (g.frf(freq_hz[k]) - h[k]).norm_sqr()).sum::<f64>();
             (chi(&shared) / chi(m)).sqrt()
         };
         let g = (growth(&ts.before, frfs[0]), growth(&ts.after, frfs[1]));
@@ -176,8 +188,13 @@ pub fn design_over_range(
     let ranges = criterion_ranges(&d0.bands, d0.compensated_band_hz);
     let width: f64 = ranges.iter().map(|b| b.1 - b.0).sum();
     let freqs = criterion_grid(&ranges);
-    let plants: Vec<Vec<(f64, Complex64)>> =
-        RANGE_STATES.iter().map(|&s| { let m = ts.at(s); freqs.iter().map(|f| (*f, m.frf(*f))).collect() }).collect();
+    let plants: Vec<Vec<(f64, Complex64)>> = RANGE_STATES
+        .iter()
+        .map(|&s| {
+            let m = ts.at(s);
+            freqs.iter().map(|f| (*f, m.frf(*f))).collect()
+        })
+        .collect();
     let mut cands = Vec::new();
     for &s in candidate_states {
         let design = if s == 0.0 {
@@ -186,16 +203,23 @@ pub fn design_over_range(
             design_axis(freq_hz, second, r, opts).context("second FRF")?
         } else {
             let m = ts.at(s);
-            let synthetic = AxisFrf { axis: first.axis, frf: freq_hz.iter().map(|f| m.frf(*f)).collect(), coherence: first.coherence.clone() };
+            let synthetic = AxisFrf {
+                axis: first.axis,
+                frf: freq_hz.iter().map(|f| m.frf(*f)).collect(),
+                coherence: first.coherence.clone(),
+            };
             design_axis(freq_hz, &synthetic, r, opts).with_context(|| format!("model state s = {s}"))?
         };
         let h = design.kalman.compensator.freq_responses(&freqs, opts.fs_hz);
         let noise = noise_term(design.kalman.r, opts.fs_hz, width, opts.force_rms);
-        let errors: Vec<f64> = plants.iter().map(|g| criterion_j(g, &h, design.kalman.lag, opts.fs_hz, noise).sqrt()).collect();
+        let errors: Vec<f64> =
+            plants.iter().map(|g| criterion_j(g, &h, design.kalman.lag, opts.fs_hz, noise).sqrt()).collect();
         let worst = errors.iter().copied().fold(0.0, f64::max);
         cands.push(RangeCandidate { s, design, errors, worst });
     }
-    let best = (0..cands.len()).min_by(|&a, &b| cands[a].worst.total_cmp(&cands[b].worst)).ok_or_else(|| anyhow::anyhow!("axis {name}: no candidate state"))?;
+    let best = (0..cands.len())
+        .min_by(|&a, &b| cands[a].worst.total_cmp(&cands[b].worst))
+        .ok_or_else(|| anyhow::anyhow!("axis {name}: no candidate state"))?;
     Ok(RangeDesign { states: ts, machine, above_band, candidates: cands, best })
 }
 
