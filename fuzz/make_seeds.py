@@ -114,12 +114,15 @@ put("tdms", "contiguous_be.tdms", tdms_segment(0x4E, be, raw + raw, big=True))
 one = [("/'c'/'force_y'", (10, 2), [])]
 put("tdms", "incremental.tdms", tdms_segment(0x0E, one, struct.pack("<dd", 1, 2)) + tdms_segment(0x0A, [("/'c'/'force_y'", "same", [("unit_string", "kN")])], struct.pack("<dd", 3, 4)))
 
-# Image codec: mode byte (bit 0: repair CRC, bit 1: format 2 first) + image.
+# Image codec: mode byte (bit 0: repair CRC, bit 1: format 2 first, bit 2:
+# format 3 first) + image. matrix*.dcimg are 3x3 images (format 3): the
+# realistic filter of tests/image_matrix.rs and the worked example of
+# docs/image-format.md section 13.7.
 for name in sorted(os.listdir(os.path.join(ROOT, "fuzz", "images"))):
     if not name.endswith(".dcimg"):
         continue
     img = read(f"fuzz/images/{name}")
-    for mode in (0, 1, 2, 3):
+    for mode in (0, 1, 4, 5) if name.startswith("matrix") else (0, 1, 2, 3):
         put("image", f"{name}.mode{mode}", bytes([mode]) + img)
 
 # Protocol: mode 1 (payload, framed by the target) and mode 0 (raw wire).

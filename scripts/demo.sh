@@ -5,7 +5,8 @@
 # against the simulator's true force. Outputs go to out/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cargo build --release -q -p dynocomp --bin dynocomp --example score
+echo "building dynocomp (release; the first build takes a few minutes)" >&2
+cargo build --release -p dynocomp --bin dynocomp --example score
 tgt="${CARGO_TARGET_DIR:-target}"
 bin="$tgt/release/dynocomp"
 mkdir -p out

@@ -5,7 +5,9 @@
 #   when the stable toolchain is already there; tests/firmware_layout.rs
 #   reads the firmware's symbols with llvm-nm),
 # - qemu-system-arm for tests/qemu_bit_exact.rs, which runs the kernel on an
-#   emulated Cortex-M4F and fails if QEMU is missing.
+#   emulated Cortex-M4F and fails if QEMU is missing,
+# - the Python package's venv, build and tests (scripts/python_test.sh; skip
+#   them with DYNOCOMP_SKIP_PYTHON=1).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -18,3 +20,7 @@ qemu_dir="$(bash scripts/install_qemu.sh)"
 if [ -n "$qemu_dir" ]; then export PATH="$qemu_dir:$PATH"; fi
 
 cargo test --workspace "$@"
+
+if [ "${DYNOCOMP_SKIP_PYTHON:-0}" != 1 ]; then
+    bash scripts/python_test.sh
+fi

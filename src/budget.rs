@@ -19,8 +19,7 @@
 //! `model …` lines; `tests/qemu_cost_model.rs` fails if they drift apart
 //! by more than [`INSN_TOLERANCE`]). Instructions become cycles with the
 //! Cortex-M4 TRM timings of each part's instruction mix (BENCHMARKS.md,
-//! "Interrupt budget on the STM32G474 at 170 MHz" and "Cost model of the
-//! sample interrupt"); FIXED also holds the interrupt shell around
+//! "Interrupt budget and box load"); FIXED also holds the interrupt shell around
 //! `SamplePath::tick` (exception entry/exit, lazy FP stacking, the ADC ring
 //! reads, the DAC writes, the stream push and the cycle statistics).
 //!
@@ -31,8 +30,9 @@
 //! Everything here is integer arithmetic: no
 //! allocation, no panics, no floating point.
 
-use crate::image::CoeffImage;
+use crate::image::{CoeffImage, ImageRef};
 use crate::kernel::AxisFilter;
+use crate::mimo::MimoFilter;
 use crate::shell::BOX_CORE_CLOCK_HZ;
 
 /// The box's hard limit on the predicted interrupt load (high estimate), in
@@ -147,8 +147,8 @@ impl CostModel {
     /// Instructions per call of `SamplePath::tick` (`process_sample` and
     /// the decisions around it) on the Cortex-M4F (no interrupt shell),
     /// fitted to the QEMU counts (`model …` lines of
-    /// `scripts/qemu_icount.sh`; BENCHMARKS.md, "The sample interrupt's
-    /// fixed part"). low = high: the count is exact per shape.
+    /// `scripts/qemu_icount.sh`; BENCHMARKS.md, "Cost model of
+    /// the sample interrupt"). low = high: the count is exact per shape.
     pub const QEMU_INSNS: CostModel = CostModel {
         fixed: Cost::new(8_737, 8_737),
         axis: Cost::new(6_428, 6_428),
@@ -286,16 +286,143 @@ pub struct Load {
     pub permille: u32,
 }
 
-/// Predicted load of `image` at its sample rate (high estimate of
-/// [`CostModel::CORTEX_M4`]).
-pub fn image_load(image: &CoeffImage) -> Load {
-    let cycles = CostModel::CORTEX_M4.image_cost(image).high;
-    Load { cycles, permille: load_permille(cycles, image.fs_hz) }
+/// Shape of a 3x3 filter as the kernel runs it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MimoShape {
+    /// Normal-form pole pairs.
+    pub pairs: u32,
+    /// Diagonal sections (two real poles each, both always run).
+    pub diagonals: u32,
+    /// FIR taps (each a 3x3 matrix).
+    pub taps: u32,
+}
+
+impl MimoShape {
+    /// The shape of a built 3x3 filter.
+    pub fn of(f: &MimoFilter) -> Self {
+        let (pairs, diagonals) = f.kernel_counts();
+        MimoShape { pairs: pairs as u32, diagonals: diagonals as u32, taps: f.fir().len() as u32 }
+    }
+}
+
+/// Coefficients of the cost of a sample with a 3x3 image, in hundredths of
+/// a cycle (or of an instruction), in the form
+///
+/// ```text
+/// cost = FIXED + MATRIX + PAIR·pairs + DIAGONAL·diagonals
+///        + SECTION_SETUP·(sections > 0) + EVEN_SECTIONS·(sections > 0 and even)
+///        + TAP·taps + FIR_SETUP·(taps > 0) + EVEN_TAPS·(taps > 0 and even)
+/// ```
+///
+/// `fixed` is [`CostModel::fixed`] (the same interrupt around either kind
+/// of image); `matrix` is the 3x3 path's own work per sample (three
+/// scalings, the 3x3 direct term, the runaway guard, three DAC codes). The
+/// compiled section and tap loops run two sections (taps) per pass, hence
+/// the even/odd terms.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MimoCostModel {
+    /// Per sample, whatever the image (as [`CostModel::fixed`]).
+    pub fixed: Cost,
+    /// Per sample with a 3x3 image.
+    pub matrix: Cost,
+    /// Per normal-form pair.
+    pub pair: Cost,
+    /// Per diagonal section.
+    pub diagonal: Cost,
+    /// Once when the filter has sections.
+    pub section_setup: Cost,
+    /// Once more when the section count is even (and not 0).
+    pub even_sections: Cost,
+    /// Per FIR tap (a 3x3 matrix).
+    pub tap: Cost,
+    /// Once when the filter has FIR taps.
+    pub fir_setup: Cost,
+    /// Once more when the tap count is even (and not 0).
+    pub even_taps: Cost,
+}
+
+impl MimoCostModel {
+    /// Instructions per call of `SamplePath::tick` with a 3x3 image on the
+    /// Cortex-M4F, fitted to the QEMU counts (`mimo P D T …` lines of
+    /// `scripts/qemu_icount.sh`; `tests/qemu_cost_model.rs`): 49.5 per pair
+    /// (16 coefficient and 2 state `vldr`, 12 `vmla`, 4 `vmul`, 4 `vadd`, 2
+    /// `vstr`, the pair/diagonal test), 46.5 per diagonal section, 29.5 per
+    /// tap. low = high: the count is exact per shape.
+    pub const QEMU_INSNS: MimoCostModel = MimoCostModel {
+        fixed: CostModel::QEMU_INSNS.fixed,
+        matrix: Cost::new(12_985, 12_985),
+        pair: Cost::new(4_950, 4_950),
+        diagonal: Cost::new(4_650, 4_650),
+        section_setup: Cost::new(350, 350),
+        even_sections: Cost::new(550, 550),
+        tap: Cost::new(2_950, 2_950),
+        fir_setup: Cost::new(550, 550),
+        even_taps: Cost::new(150, 150),
+    };
+
+    /// Cycles on the STM32G474 at 170 MHz, code in CCM SRAM: each part's
+    /// instruction mix at the Cortex-M4 TRM timings (`vldr`/`vstr` 2, `vmla`
+    /// 3, `vmul`/`vadd`/`vcmp`/`vmrs` 1, branches 2-4), plus the interrupt
+    /// shell in `fixed` ([`CostModel::CORTEX_M4`]).
+    ///
+    /// * pair: 18 `vldr` (36), 12 `vmla` (36), 8 `vmul`/`vadd` (8), 2
+    ///   `vstr` (4), test and loop (8-13): 95-100 by the table, 102 with a
+    ///   `vmrs` stall; low 78 if back-to-back `vldr`s pipeline to one cycle;
+    /// * diagonal section: two `vmla` fewer: 70-92;
+    /// * tap: 12 `vldr` (24), 9 `vmla` (27), 3 `vstr` (6), history shift and
+    ///   loop (6-9): 50-66 (low again with pipelined loads);
+    /// * the 3x3 path's scalar part and set-ups: 1.0-1.5 cycles per
+    ///   instruction (its direct term is 9 multiply-adds).
+    pub const CORTEX_M4: MimoCostModel = MimoCostModel {
+        fixed: CostModel::CORTEX_M4.fixed,
+        matrix: Cost::new(12_985, 19_478),
+        pair: Cost::new(7_800, 10_200),
+        diagonal: Cost::new(7_000, 9_200),
+        section_setup: Cost::new(350, 473),
+        even_sections: Cost::new(550, 743),
+        tap: Cost::new(5_000, 6_600),
+        fir_setup: Cost::new(550, 743),
+        even_taps: Cost::new(150, 203),
+    };
+
+    /// Cost of one sample with a 3x3 filter of shape `s`, rounded up to
+    /// whole cycles (instructions).
+    pub fn sample_cost(&self, s: MimoShape) -> Cost {
+        let sections = s.pairs + s.diagonals;
+        let c = self
+            .fixed
+            .add_scaled(self.matrix, 1)
+            .add_scaled(self.pair, s.pairs)
+            .add_scaled(self.diagonal, s.diagonals)
+            .add_scaled(self.section_setup, u32::from(sections > 0))
+            .add_scaled(self.even_sections, u32::from(sections > 0 && sections.is_multiple_of(2)))
+            .add_scaled(self.tap, s.taps)
+            .add_scaled(self.fir_setup, u32::from(s.taps > 0))
+            .add_scaled(self.even_taps, u32::from(s.taps > 0 && s.taps.is_multiple_of(2)));
+        Cost { low: c.low.div_ceil(100), high: c.high.div_ceil(100) }
+    }
+}
+
+/// Cost of one sample of any image the box runs, in cycles
+/// ([`CostModel::CORTEX_M4`] / [`MimoCostModel::CORTEX_M4`]).
+pub fn image_cycles<'a>(image: impl Into<ImageRef<'a>>) -> Cost {
+    match image.into() {
+        ImageRef::PerAxis(i) => CostModel::CORTEX_M4.image_cost(i),
+        ImageRef::Matrix(m) => MimoCostModel::CORTEX_M4.sample_cost(MimoShape::of(&m.filter)),
+    }
+}
+
+/// Predicted load of `image` (per-axis or 3x3) at its sample rate (high
+/// estimate of the Cortex-M4 cost models).
+pub fn image_load<'a>(image: impl Into<ImageRef<'a>>) -> Load {
+    let image = image.into();
+    let cycles = image_cycles(image).high;
+    Load { cycles, permille: load_permille(cycles, image.fs_hz()) }
 }
 
 /// `Err` with the predicted load when the image's high estimate exceeds
 /// `limit_permille` of its sample period.
-pub fn check_load(image: &CoeffImage, limit_permille: u32) -> Result<Load, Load> {
+pub fn check_load<'a>(image: impl Into<ImageRef<'a>>, limit_permille: u32) -> Result<Load, Load> {
     let l = image_load(image);
     if l.permille > limit_permille {
         Err(l)
@@ -358,6 +485,25 @@ mod tests {
         assert_eq!(period_cycles(51_200), 3_320);
         assert_eq!(max_fs_hz(0, 600), 0);
         assert_eq!(period_cycles(0), 0);
+    }
+
+    #[test]
+    fn mimo_cost_grows_with_every_part_and_low_never_exceeds_high() {
+        let m = MimoCostModel::CORTEX_M4;
+        let s = |pairs, diagonals, taps| MimoShape { pairs, diagonals, taps };
+        let base = m.sample_cost(s(10, 0, 8));
+        for more in [s(11, 0, 8), s(10, 1, 8), s(10, 0, 9)] {
+            let c = m.sample_cost(more);
+            assert!(c.low > base.low && c.high > base.high, "{more:?}: {c:?} vs {base:?}");
+        }
+        for shape in [s(0, 0, 0), s(40, 8, 24), s(13, 3, 5)] {
+            let c = m.sample_cost(shape);
+            assert!(c.low < c.high, "{shape:?}: {c:?}");
+        }
+        // A 3x3 filter costs more than the per-axis filters of the same
+        // section count on one axis (dense B and C).
+        let per_axis = CostModel::CORTEX_M4.sample_cost(&[AxisShape { pairs: 10, reals: 0, taps: 8 }]);
+        assert!(base.low > per_axis.high);
     }
 
     #[test]

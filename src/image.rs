@@ -17,9 +17,16 @@
 //!   compensator per band and axis plus the band edges. **Offline only**:
 //!   [`CoeffImage::parse`] and [`CoeffImage::parse_prefix`] refuse it from its
 //!   version field ([`ImageError::ParallelOfflineOnly`]), so the box never
-//!   runs any part of it, and it always carries [`FLAG_OFFLINE_ONLY`].
+//!   runs any part of it, and it always carries [`FLAG_OFFLINE_ONLY`];
+//! * version 3, [`MatrixImage`]: one 3-input, 3-output compensator
+//!   ([`MimoFilter`]) whose modes are shared by the three force estimates
+//!   (crosstalk compensation). The box runs it like version 1.
+//!
+//! [`BoxImage`] is what the box runs: a version-1 or a version-3 image
+//! ([`BoxImage::parse`] chooses by the version field).
 
 use crate::kernel::{AxisFilter, FilterError, Section, MAX_FIR, MAX_SECTIONS};
+use crate::mimo::{Matrix3, MimoFilter, MimoSection, MAX_MIMO_FIR, MAX_MIMO_SECTIONS, MIMO_AXES};
 use crate::AXES;
 
 /// Magic bytes at offset 0.
@@ -84,6 +91,43 @@ pub const MAX_GAIN_BOUND: f64 = 1.0e4;
 /// parallel image: ≈ 0); beyond 100 the image does not belong to a
 /// calibrated force channel.
 pub const MAX_DC_GAIN: f64 = 100.0;
+
+/// Format version of a 3x3 image ([`MatrixImage`]): one 3-input, 3-output
+/// compensator for the three axes.
+pub const MATRIX_FORMAT_VERSION: u16 = 3;
+/// Size of one axis block of a 3x3 image: scaling and design summary, no
+/// filter (bytes).
+pub const MATRIX_AXIS_LEN: usize = 56;
+/// Size of the 3x3 filter's header: counts, reserved, the 3x3 direct term
+/// (bytes).
+pub const MATRIX_FILTER_HEADER_LEN: usize = 40;
+/// Size of one section record of a 3x3 image (16 × f32: Δ, B, C).
+pub const MIMO_SECTION_LEN: usize = 64;
+/// Size of one FIR tap of a 3x3 image (a 3x3 matrix of f32).
+pub const MIMO_TAP_LEN: usize = 36;
+/// Size of the row record of a 3x3 image (one byte per output row, one
+/// reserved byte).
+pub const ROW_RECORD_LEN: usize = 4;
+/// Smallest 3x3 image (a pure 3x3 gain: no section, no tap).
+pub const MIN_MATRIX_IMAGE_LEN: usize =
+    HEADER_LEN + MIMO_AXES * MATRIX_AXIS_LEN + MATRIX_FILTER_HEADER_LEN + ROW_RECORD_LEN + CRC_LEN;
+/// Largest 3x3 image ([`MAX_MIMO_SECTIONS`] sections, [`MAX_MIMO_FIR`] taps).
+pub const MAX_MATRIX_IMAGE_LEN: usize =
+    MIN_MATRIX_IMAGE_LEN + MAX_MIMO_SECTIONS * MIMO_SECTION_LEN + MAX_MIMO_FIR * MIMO_TAP_LEN;
+/// Largest image the box runs (either version): what a flash slot must hold.
+pub const MAX_BOX_IMAGE_LEN: usize =
+    if MAX_MATRIX_IMAGE_LEN > MAX_IMAGE_LEN { MAX_MATRIX_IMAGE_LEN } else { MAX_IMAGE_LEN };
+/// Largest deviation of a 3x3 filter's DC gain row from the identity row,
+/// `Σ_j |H_ij(1) − δ_ij|` (N/N). A dynamometer's static matrix is the
+/// identity within its calibration (sensitivity ≲ 1 %) and its static
+/// crosstalk (≲ 2 % per pair of axes, datasheets of the 9257 class): the
+/// rigid top plate passes a static force to the sensors whatever its point
+/// of application. So a compensator's static gain row is the identity row
+/// within a few per cent. 0.5 leaves an order of magnitude for the fit's
+/// extrapolation to DC (impact tests are poor below ≈ 50 Hz) and refuses a
+/// row that turns a static force into 1.5 times itself, or reads half of
+/// another axis's static force: not a calibrated force/force compensator.
+pub const MAX_DC_ROW_DEVIATION: f64 = 0.5;
 
 /// Image flag: the image holds an offline-only design (e.g. parallel
 /// elaboration); the box must never run it.
@@ -352,6 +396,70 @@ pub enum ImageError {
         /// Axis index.
         axis: u8,
     },
+    /// A 3x3 image (format version 3) where a per-axis image (version 1) is
+    /// expected: read it with [`BoxImage::parse`] or [`MatrixImage::parse`].
+    NotPerAxisImage,
+    /// A 3x3 image's row record holds an unknown design code.
+    BadRowDesign {
+        /// Output row (axis index).
+        row: u8,
+        /// The code found.
+        code: u8,
+    },
+    /// A 3x3 filter with more than [`MAX_MIMO_SECTIONS`] sections.
+    MatrixTooManySections(u8),
+    /// A 3x3 filter with more than [`MAX_MIMO_FIR`] FIR taps.
+    MatrixTooManyTaps(u8),
+    /// A 3x3 filter coefficient is non-finite (section index; 255 for `d`).
+    MatrixNonFinite {
+        /// Section index (255: the direct term).
+        section: u8,
+    },
+    /// A 3x3 FIR tap is non-finite.
+    MatrixNonFiniteTap {
+        /// Tap index (0 = delay 1).
+        tap: u8,
+    },
+    /// A 3x3 section has a pole on or outside the unit circle.
+    MatrixUnstableSection {
+        /// Section index.
+        section: u8,
+    },
+    /// A 3x3 section is neither a normal-form pair nor diagonal.
+    MatrixNotModalSection {
+        /// Section index.
+        section: u8,
+    },
+    /// A 3x3 filter coefficient's magnitude exceeds [`MAX_COEFFICIENT`]
+    /// (section index; 255 for `d`).
+    MatrixCoefficientOutOfRange {
+        /// Section index (255: the direct term).
+        section: u8,
+    },
+    /// A 3x3 FIR tap entry's magnitude exceeds [`MAX_COEFFICIENT`].
+    MatrixTapOutOfRange {
+        /// Tap index (0 = delay 1).
+        tap: u8,
+    },
+    /// A 3x3 section has a pole within [`MIN_POLE_MARGIN`] of the unit circle.
+    MatrixPoleMarginTooSmall {
+        /// Section index.
+        section: u8,
+    },
+    /// The bound on an output row's ℓ1 gain exceeds [`MAX_GAIN_BOUND`] or is
+    /// not finite.
+    MatrixGainBoundTooLarge {
+        /// Output row (axis index).
+        row: u8,
+        /// The bound, rounded (N/N; `u32::MAX` if larger or not finite).
+        bound: u32,
+    },
+    /// An output row's DC gain is not finite or deviates from the identity
+    /// row by more than [`MAX_DC_ROW_DEVIATION`].
+    MatrixDcGainOutOfRange {
+        /// Output row (axis index).
+        row: u8,
+    },
 }
 
 impl core::fmt::Display for ImageError {
@@ -360,7 +468,9 @@ impl core::fmt::Display for ImageError {
         match *self {
             Truncated { needed, have } => write!(f, "image truncated: {have} bytes, need {needed}"),
             BadMagic => write!(f, "not a dynocomp coefficient image (bad magic)"),
-            UnsupportedVersion(v) => write!(f, "unsupported image format version {v} (this build reads {FORMAT_VERSION})"),
+            UnsupportedVersion(v) => {
+                write!(f, "unsupported image format version {v} (this build reads {FORMAT_VERSION} to {MATRIX_FORMAT_VERSION})")
+            }
             BadHeaderLength(l) => write!(f, "bad header length {l} (expected {HEADER_LEN})"),
             BadLength(l) => write!(f, "declared image length {l} is inconsistent with its contents"),
             BadCrc { stored, computed } => write!(f, "CRC mismatch: stored {stored:#010x}, computed {computed:#010x} (image corrupted)"),
@@ -409,6 +519,44 @@ impl core::fmt::Display for ImageError {
             BadBandCount(n) => write!(f, "parallel image with {n} bands (allowed 1..={MAX_BANDS})"),
             BadBand { band } => write!(f, "band {band}: edges non-finite, empty, above Nyquist or overlapping the previous band"),
             BandAxesDiffer { band } => write!(f, "band {band} covers other axes than band 0"),
+            NotPerAxisImage => write!(
+                f,
+                "3x3 image (format {MATRIX_FORMAT_VERSION}) where a per-axis image (format {FORMAT_VERSION}) is expected"
+            ),
+            BadRowDesign { row, code } => write!(f, "3x3 image: row {row} has unknown design code {code} (0 per-axis, 1 3x3)"),
+            MatrixTooManySections(n) => write!(f, "3x3 filter: {n} sections exceeds the maximum {MAX_MIMO_SECTIONS}"),
+            MatrixTooManyTaps(n) => write!(f, "3x3 filter: {n} FIR taps exceeds the maximum {MAX_MIMO_FIR}"),
+            MatrixNonFinite { section: 255 } => write!(f, "3x3 filter: the direct term d has a non-finite entry"),
+            MatrixNonFinite { section } => write!(f, "3x3 filter: section {section} has a non-finite coefficient"),
+            MatrixNonFiniteTap { tap } => write!(f, "3x3 filter: FIR tap {tap} has a non-finite entry"),
+            MatrixUnstableSection { section } => {
+                write!(f, "3x3 filter: section {section} has a pole on or outside the unit circle")
+            }
+            MatrixNotModalSection { section } => write!(
+                f,
+                "3x3 filter: section {section} is neither a normal-form pole pair (Δ11 = Δ22, Δ21 = −Δ12) nor diagonal"
+            ),
+            MatrixCoefficientOutOfRange { section: 255 } => {
+                write!(f, "3x3 filter: the direct term d has an entry beyond ±{MAX_COEFFICIENT:e} (image corrupted)")
+            }
+            MatrixCoefficientOutOfRange { section } => {
+                write!(f, "3x3 filter: section {section} has a coefficient beyond ±{MAX_COEFFICIENT:e} (image corrupted)")
+            }
+            MatrixTapOutOfRange { tap } => {
+                write!(f, "3x3 filter: FIR tap {tap} has an entry beyond ±{MAX_COEFFICIENT:e} (image corrupted)")
+            }
+            MatrixPoleMarginTooSmall { section } => {
+                write!(f, "3x3 filter: section {section} has a pole within {MIN_POLE_MARGIN:e} of the unit circle")
+            }
+            MatrixGainBoundTooLarge { row, bound } => write!(
+                f,
+                "3x3 filter: row {row} may amplify bounded forces up to {bound} times (limit {MAX_GAIN_BOUND:e}): image corrupted or unstable"
+            ),
+            MatrixDcGainOutOfRange { row } => write!(
+                f,
+                "3x3 filter: row {row}'s DC gain is not finite or deviates from the identity row by more than {MAX_DC_ROW_DEVIATION} \
+                 (not a calibrated force/force compensator)"
+            ),
         }
     }
 }
@@ -505,7 +653,7 @@ struct Header {
 
 /// Check everything up to and including the CRC (steps 1-8 of
 /// `docs/image-format.md` §8) and return the body (all bytes before the CRC).
-fn envelope(bytes: &[u8], version: u16, max_len: usize) -> Result<&[u8], ImageError> {
+fn envelope(bytes: &[u8], version: u16, min_len: usize, max_len: usize) -> Result<&[u8], ImageError> {
     let have = bytes.len() as u32;
     if bytes.len() < MIN_IMAGE_LEN {
         return Err(ImageError::Truncated { needed: MIN_IMAGE_LEN as u32, have });
@@ -517,10 +665,10 @@ fn envelope(bytes: &[u8], version: u16, max_len: usize) -> Result<&[u8], ImageEr
     }
     let v = r.u16().ok_or(truncated)?;
     if v != version {
-        return Err(if v == PARALLEL_FORMAT_VERSION {
-            ImageError::ParallelOfflineOnly
-        } else {
-            ImageError::UnsupportedVersion(v)
+        return Err(match v {
+            PARALLEL_FORMAT_VERSION => ImageError::ParallelOfflineOnly,
+            MATRIX_FORMAT_VERSION => ImageError::NotPerAxisImage,
+            _ => ImageError::UnsupportedVersion(v),
         });
     }
     let header_len = r.u16().ok_or(truncated)?;
@@ -528,7 +676,7 @@ fn envelope(bytes: &[u8], version: u16, max_len: usize) -> Result<&[u8], ImageEr
         return Err(ImageError::BadHeaderLength(header_len));
     }
     let total = r.u32().ok_or(truncated)?;
-    if (total as usize) < MIN_IMAGE_LEN || total as usize > max_len {
+    if (total as usize) < min_len || total as usize > max_len {
         return Err(ImageError::BadLength(total));
     }
     if bytes.len() < total as usize {
@@ -709,6 +857,25 @@ fn validate_header(fs_hz: u32, latency_samples: u16, flags: u8) -> Result<(), Im
     Ok(())
 }
 
+/// Scaling finite with non-zero gains, then summary finite and ≥ 0
+/// (steps 17-18 of version 1; the same for every axis of version 3).
+fn validate_channel(axis: u8, s: &AxisScaling, m: &AxisSummary) -> Result<(), ImageError> {
+    let finite =
+        [s.adc_offset_code, s.newton_per_code, s.dac_code_per_newton, s.dac_offset_code].iter().all(|v| v.is_finite());
+    if !finite || s.newton_per_code == 0.0 || s.dac_code_per_newton == 0.0 {
+        return Err(ImageError::BadScaling { axis });
+    }
+    let ok = [m.fit_nrmse, m.flat_lo_hz, m.flat_hi_hz, m.noise_gain].iter().all(|v| v.is_finite() && *v >= 0.0)
+        && m.q.is_finite()
+        && m.q >= 0.0
+        && m.r.is_finite()
+        && m.r >= 0.0;
+    if !ok {
+        return Err(ImageError::BadSummary { axis });
+    }
+    Ok(())
+}
+
 /// Per-axis semantic checks (steps 17-18 plus the repeated structural ones).
 fn validate_axes(axes: &[Option<AxisImage>; AXES]) -> Result<(), ImageError> {
     if mask_of(axes) == 0 {
@@ -720,22 +887,7 @@ fn validate_axes(axes: &[Option<AxisImage>; AXES]) -> Result<(), ImageError> {
         if a.axis != axis {
             return Err(ImageError::AxisMismatch { expected: axis, found: a.axis });
         }
-        let s = &a.scaling;
-        let finite = [s.adc_offset_code, s.newton_per_code, s.dac_code_per_newton, s.dac_offset_code]
-            .iter()
-            .all(|v| v.is_finite());
-        if !finite || s.newton_per_code == 0.0 || s.dac_code_per_newton == 0.0 {
-            return Err(ImageError::BadScaling { axis });
-        }
-        let m = &a.summary;
-        let ok = [m.fit_nrmse, m.flat_lo_hz, m.flat_hi_hz, m.noise_gain].iter().all(|v| v.is_finite() && *v >= 0.0)
-            && m.q.is_finite()
-            && m.q >= 0.0
-            && m.r.is_finite()
-            && m.r >= 0.0;
-        if !ok {
-            return Err(ImageError::BadSummary { axis });
-        }
+        validate_channel(axis, &a.scaling, &a.summary)?;
         if !a.filter.d().is_finite() {
             return Err(ImageError::NonFiniteCoefficient { axis, section: 255 });
         }
@@ -855,7 +1007,7 @@ impl CoeffImage {
     /// [`ImageError::ParallelOfflineOnly`]: read it with
     /// [`ParallelImage::parse`].
     pub fn parse(bytes: &[u8]) -> Result<CoeffImage, ImageError> {
-        let body = envelope(bytes, FORMAT_VERSION, MAX_IMAGE_LEN)?;
+        let body = envelope(bytes, FORMAT_VERSION, MIN_IMAGE_LEN, MAX_IMAGE_LEN)?;
         // From here on the bytes are exactly what an encoder wrote; what
         // remains are structural and semantic checks.
         let bad_len = ImageError::BadLength(bytes.len() as u32);
@@ -893,23 +1045,7 @@ impl CoeffImage {
     /// before its length or anything else is read: the box never runs any
     /// part of it.
     pub fn parse_prefix(region: &[u8]) -> Result<CoeffImage, ImageError> {
-        let have = region.len() as u32;
-        if region.len() < MIN_IMAGE_LEN {
-            return Err(ImageError::Truncated { needed: MIN_IMAGE_LEN as u32, have });
-        }
-        if region.get(..4) != Some(&MAGIC[..]) {
-            return Err(ImageError::BadMagic);
-        }
-        let len = declared_len(region).unwrap_or(0);
-        if !(MIN_IMAGE_LEN..=MAX_IMAGE_LEN).contains(&len) {
-            // Let `parse` report version/header problems first.
-            return Self::parse(region.get(..MIN_IMAGE_LEN).unwrap_or(region))
-                .and(Err(ImageError::BadLength(len as u32)));
-        }
-        match region.get(..len) {
-            Some(prefix) => Self::parse(prefix),
-            None => Err(ImageError::Truncated { needed: len as u32, have }),
-        }
+        parse_prefix_with(region, MIN_IMAGE_LEN, MAX_IMAGE_LEN, Self::parse)
     }
 }
 
@@ -1092,7 +1228,7 @@ impl ParallelImage {
     /// Parse and validate a parallel image that occupies exactly `bytes`
     /// (`docs/image-format.md` §12). Never panics.
     pub fn parse(bytes: &[u8]) -> Result<ParallelImage, ImageError> {
-        let body = envelope(bytes, PARALLEL_FORMAT_VERSION, MAX_PARALLEL_IMAGE_LEN)?;
+        let body = envelope(bytes, PARALLEL_FORMAT_VERSION, MIN_IMAGE_LEN, MAX_PARALLEL_IMAGE_LEN)?;
         let bad_len = ImageError::BadLength(bytes.len() as u32);
         let mut r = Reader { buf: body, pos: 12 };
         let h = read_header(&mut r, bad_len)?;
@@ -1131,5 +1267,549 @@ impl ParallelImage {
         };
         image.validate()?;
         Ok(image)
+    }
+}
+
+/// [`CoeffImage::parse_prefix`] and [`MatrixImage::parse_prefix`]: an image
+/// of `min_len..=max_len` bytes at the start of `region`, read by `parse`.
+fn parse_prefix_with<T>(
+    region: &[u8],
+    min_len: usize,
+    max_len: usize,
+    parse: impl Fn(&[u8]) -> Result<T, ImageError>,
+) -> Result<T, ImageError> {
+    let have = region.len() as u32;
+    if region.len() < MIN_IMAGE_LEN {
+        return Err(ImageError::Truncated { needed: MIN_IMAGE_LEN as u32, have });
+    }
+    if region.get(..4) != Some(&MAGIC[..]) {
+        return Err(ImageError::BadMagic);
+    }
+    let len = declared_len(region).unwrap_or(0);
+    if !(min_len..=max_len).contains(&len) {
+        // Let `parse` report version/header problems first.
+        return parse(region.get(..MIN_IMAGE_LEN).unwrap_or(region)).and(Err(ImageError::BadLength(len as u32)));
+    }
+    match region.get(..len) {
+        Some(prefix) => parse(prefix),
+        None => Err(ImageError::Truncated { needed: len as u32, have }),
+    }
+}
+
+// ---------------------------------------------------- version 3: the 3x3 --
+
+/// How one output row of a 3x3 image was designed (its byte in the row
+/// record). It tells `inspect` and the status what the row compensates; the
+/// filter runs the same either way.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum RowDesign {
+    /// Code 0: designed per axis, from the direct FRF alone (crosstalk not
+    /// compensated on this axis; the 3x3 design predicted no gain here).
+    PerAxis = 0,
+    /// Code 1: designed on the 3x3 model (crosstalk compensated).
+    Matrix = 1,
+}
+
+impl RowDesign {
+    fn from_u8(v: u8) -> Option<Self> {
+        match v {
+            0 => Some(Self::PerAxis),
+            1 => Some(Self::Matrix),
+            _ => None,
+        }
+    }
+}
+
+/// One axis of a 3x3 image: its converters' scaling and the design summary
+/// of its output row. The filter is shared ([`MatrixImage::filter`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AxisChannel {
+    /// Axis index (0 = x, 1 = y, 2 = z); must equal its position.
+    pub axis: u8,
+    /// Code ↔ newton conversion of this axis's ADC input and DAC output.
+    pub scaling: AxisScaling,
+    /// Design summary of this axis's output row.
+    pub summary: AxisSummary,
+}
+
+/// A decoded, validated 3x3 image (format version 3): one 3-input,
+/// 3-output compensator whose modes are shared by the three force
+/// estimates, and the three axes' scaling. Always covers x, y and z.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MatrixImage {
+    /// Sample rate the filter was designed for (Hz).
+    pub fs_hz: u32,
+    /// Declared output latency of the compensated forces (samples).
+    pub latency_samples: u16,
+    /// Flags (`FLAG_*`).
+    pub flags: u8,
+    /// Design method.
+    pub method: DesignMethod,
+    /// SHA-256 of the FRF file the design came from (zeros if none).
+    pub source_sha256: [u8; 32],
+    /// Creation time, seconds since the Unix epoch (0 if unknown).
+    pub created_unix_s: u64,
+    /// Scaling and design summary of x, y, z.
+    pub axes: [AxisChannel; MIMO_AXES],
+    /// The 3x3 compensator (N → N).
+    pub filter: MimoFilter,
+    /// How each output row was designed.
+    pub rows: [RowDesign; MIMO_AXES],
+}
+
+/// Total length of a 3x3 image (bytes).
+pub fn matrix_encoded_len(image: &MatrixImage) -> usize {
+    MIN_MATRIX_IMAGE_LEN + image.filter.sections().len() * MIMO_SECTION_LEN + image.filter.fir().len() * MIMO_TAP_LEN
+}
+
+/// Write the 56-byte axis block of a 3x3 image.
+fn write_channel(w: &mut Writer<'_>, a: &AxisChannel) {
+    w.put(&[a.axis, 0, 0, 0]);
+    w.put(&a.summary.model_order.to_le_bytes());
+    w.put(&[0, 0]);
+    let s = &a.scaling;
+    let m = &a.summary;
+    for v in [s.adc_offset_code, s.newton_per_code, s.dac_code_per_newton, s.dac_offset_code] {
+        w.put(&v.to_le_bytes());
+    }
+    for v in [m.fit_nrmse, m.flat_lo_hz, m.flat_hi_hz, m.noise_gain] {
+        w.put(&v.to_le_bytes());
+    }
+    w.put(&m.q.to_le_bytes());
+    w.put(&m.r.to_le_bytes());
+}
+
+/// Read the axis block of a 3x3 image that must belong to axis `expected`.
+fn read_channel(r: &mut Reader<'_>, expected: u8, bad_len: ImageError) -> Result<AxisChannel, ImageError> {
+    let axis = r.u8().ok_or(bad_len)?;
+    if axis != expected {
+        return Err(ImageError::AxisMismatch { expected, found: axis });
+    }
+    if r.bytes::<3>().ok_or(bad_len)? != [0; 3] {
+        return Err(ImageError::ReservedNotZero);
+    }
+    let model_order = r.u16().ok_or(bad_len)?;
+    if r.u16().ok_or(bad_len)? != 0 {
+        return Err(ImageError::ReservedNotZero);
+    }
+    let scaling = AxisScaling {
+        adc_offset_code: r.f32().ok_or(bad_len)?,
+        newton_per_code: r.f32().ok_or(bad_len)?,
+        dac_code_per_newton: r.f32().ok_or(bad_len)?,
+        dac_offset_code: r.f32().ok_or(bad_len)?,
+    };
+    let summary = AxisSummary {
+        model_order,
+        fit_nrmse: r.f32().ok_or(bad_len)?,
+        flat_lo_hz: r.f32().ok_or(bad_len)?,
+        flat_hi_hz: r.f32().ok_or(bad_len)?,
+        noise_gain: r.f32().ok_or(bad_len)?,
+        q: r.f64().ok_or(bad_len)?,
+        r: r.f64().ok_or(bad_len)?,
+    };
+    Ok(AxisChannel { axis, scaling, summary })
+}
+
+/// `N` f32 values in a row.
+fn read_f32s<const N: usize>(r: &mut Reader<'_>, bad_len: ImageError) -> Result<[f32; N], ImageError> {
+    let mut v = [0f32; N];
+    for x in v.iter_mut() {
+        *x = r.f32().ok_or(bad_len)?;
+    }
+    Ok(v)
+}
+
+/// A 3x3 matrix stored row-major.
+fn read_matrix3(r: &mut Reader<'_>, bad_len: ImageError) -> Result<Matrix3, ImageError> {
+    let v = read_f32s::<9>(r, bad_len)?;
+    Ok([[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]])
+}
+
+/// What the design verified, checked again on the 3x3 filter that will run
+/// (steps 18-22 of `docs/image-format.md` §13.5): coefficients bounded,
+/// pole margin, ℓ1 gain bound per output row, DC gain rows near the
+/// identity. The structure (finite, stable, modal) holds for every
+/// [`MimoFilter`].
+// `!(x <= limit)` on purpose: a NaN bound or gain must fail the check.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+fn validate_mimo(filter: &MimoFilter) -> Result<(), ImageError> {
+    if !filter.d().iter().flatten().all(|v| in_range(*v)) {
+        return Err(ImageError::MatrixCoefficientOutOfRange { section: 255 });
+    }
+    if let Some(tap) = filter.fir().iter().position(|h| !h.iter().flatten().all(|v| in_range(*v))) {
+        return Err(ImageError::MatrixTapOutOfRange { tap: tap as u8 });
+    }
+    for (j, s) in filter.sections().iter().enumerate() {
+        let section = j as u8;
+        if !s.delta.iter().chain(s.b.iter().flatten()).chain(s.c.iter().flatten()).all(|v| in_range(*v)) {
+            return Err(ImageError::MatrixCoefficientOutOfRange { section });
+        }
+        if !s.block().poles_within(1.0 - MIN_POLE_MARGIN) {
+            return Err(ImageError::MatrixPoleMarginTooSmall { section });
+        }
+    }
+    for row in 0..MIMO_AXES {
+        let bound = filter.row_gain_bound(row);
+        if !(bound <= MAX_GAIN_BOUND) {
+            let rounded = if bound < u32::MAX as f64 { bound as u32 } else { u32::MAX };
+            return Err(ImageError::MatrixGainBoundTooLarge { row: row as u8, bound: rounded });
+        }
+    }
+    for (i, g) in filter.dc_gain().iter().enumerate() {
+        let deviation: f64 = g.iter().enumerate().map(|(j, v)| (v - if i == j { 1.0 } else { 0.0 }).abs()).sum();
+        if !(deviation <= MAX_DC_ROW_DEVIATION) {
+            return Err(ImageError::MatrixDcGainOutOfRange { row: i as u8 });
+        }
+    }
+    Ok(())
+}
+
+impl MatrixImage {
+    /// Whether the image is marked offline-only (never run in the box).
+    pub fn is_offline_only(&self) -> bool {
+        self.flags & FLAG_OFFLINE_ONLY != 0
+    }
+
+    /// An identifier of the image's content: its CRC-32.
+    pub fn id(&self) -> u32 {
+        let mut buf = [0u8; MAX_MATRIX_IMAGE_LEN];
+        let n = self.encode(&mut buf);
+        stored_crc(&buf, n)
+    }
+
+    /// Check the semantic rules every 3x3 image must satisfy (steps 16-22
+    /// of `docs/image-format.md` §13.5).
+    fn validate(&self) -> Result<(), ImageError> {
+        validate_header(self.fs_hz, self.latency_samples, self.flags)?;
+        for (i, a) in self.axes.iter().enumerate() {
+            let axis = i as u8;
+            if a.axis != axis {
+                return Err(ImageError::AxisMismatch { expected: axis, found: a.axis });
+            }
+            validate_channel(axis, &a.scaling, &a.summary)?;
+        }
+        validate_mimo(&self.filter)
+    }
+
+    /// Encode into `buf`; returns the number of bytes written. Validated
+    /// first, so an encoded image always parses back to an equal value.
+    pub fn encode(&self, buf: &mut [u8]) -> Result<usize, ImageError> {
+        self.validate()?;
+        let len = matrix_encoded_len(self);
+        if buf.len() < len {
+            return Err(ImageError::BufferTooSmall { needed: len as u32 });
+        }
+        let mut w = Writer { buf, pos: 0 };
+        let h = Header {
+            fs_hz: self.fs_hz,
+            latency_samples: self.latency_samples,
+            mask: 0b111,
+            flags: self.flags,
+            method_code: self.method as u8,
+            extra: [0; 3],
+            source_sha256: self.source_sha256,
+            created_unix_s: self.created_unix_s,
+        };
+        write_header(&mut w, MATRIX_FORMAT_VERSION, len, &h);
+        for a in &self.axes {
+            write_channel(&mut w, a);
+        }
+        let f = &self.filter;
+        w.put(&[f.sections().len() as u8, f.fir().len() as u8, 0, 0]);
+        for v in f.d().iter().flatten() {
+            w.put(&v.to_le_bytes());
+        }
+        for s in f.sections() {
+            for v in s.delta.iter().chain(s.b.iter().flatten()).chain(s.c.iter().flatten()) {
+                w.put(&v.to_le_bytes());
+            }
+        }
+        for v in f.fir().iter().flatten().flatten() {
+            w.put(&v.to_le_bytes());
+        }
+        w.put(&[self.rows[0] as u8, self.rows[1] as u8, self.rows[2] as u8, 0]);
+        Ok(finish_crc(&mut w))
+    }
+
+    /// Parse and validate a 3x3 image that occupies exactly `bytes`
+    /// (`docs/image-format.md` §13). Never panics.
+    pub fn parse(bytes: &[u8]) -> Result<MatrixImage, ImageError> {
+        let body = envelope(bytes, MATRIX_FORMAT_VERSION, MIN_MATRIX_IMAGE_LEN, MAX_MATRIX_IMAGE_LEN)?;
+        let bad_len = ImageError::BadLength(bytes.len() as u32);
+        let mut r = Reader { buf: body, pos: 12 };
+        let h = read_header(&mut r, bad_len)?;
+        if h.extra != [0; 3] {
+            return Err(ImageError::ReservedNotZero);
+        }
+        if h.mask != 0b111 {
+            return Err(ImageError::BadAxisMask(h.mask));
+        }
+        let method = DesignMethod::from_u8(h.method_code).ok_or(ImageError::UnknownMethod(h.method_code))?;
+        let axes =
+            [read_channel(&mut r, 0, bad_len)?, read_channel(&mut r, 1, bad_len)?, read_channel(&mut r, 2, bad_len)?];
+        let n_sections = r.u8().ok_or(bad_len)?;
+        if usize::from(n_sections) > MAX_MIMO_SECTIONS {
+            return Err(ImageError::MatrixTooManySections(n_sections));
+        }
+        let n_taps = r.u8().ok_or(bad_len)?;
+        if usize::from(n_taps) > MAX_MIMO_FIR {
+            return Err(ImageError::MatrixTooManyTaps(n_taps));
+        }
+        if r.u16().ok_or(bad_len)? != 0 {
+            return Err(ImageError::ReservedNotZero);
+        }
+        let d = read_matrix3(&mut r, bad_len)?;
+        let mut sections = [MimoSection::default(); MAX_MIMO_SECTIONS];
+        for s in sections.iter_mut().take(usize::from(n_sections)) {
+            let v = read_f32s::<16>(&mut r, bad_len)?;
+            *s = MimoSection {
+                delta: [v[0], v[1], v[2], v[3]],
+                b: [[v[4], v[5], v[6]], [v[7], v[8], v[9]]],
+                c: [[v[10], v[11]], [v[12], v[13]], [v[14], v[15]]],
+            };
+        }
+        let mut taps = [[[0f32; MIMO_AXES]; MIMO_AXES]; MAX_MIMO_FIR];
+        for h in taps.iter_mut().take(usize::from(n_taps)) {
+            *h = read_matrix3(&mut r, bad_len)?;
+        }
+        let record = r.bytes::<ROW_RECORD_LEN>().ok_or(bad_len)?;
+        let mut rows = [RowDesign::PerAxis; MIMO_AXES];
+        for (row, (dst, &code)) in rows.iter_mut().zip(&record).enumerate() {
+            *dst = RowDesign::from_u8(code).ok_or(ImageError::BadRowDesign { row: row as u8, code })?;
+        }
+        if record[3] != 0 {
+            return Err(ImageError::ReservedNotZero);
+        }
+        if r.pos != body.len() {
+            return Err(bad_len);
+        }
+        let secs = sections.get(..usize::from(n_sections)).unwrap_or(&[]);
+        let fir = taps.get(..usize::from(n_taps)).unwrap_or(&[]);
+        let filter = MimoFilter::new(secs, d, fir).map_err(|e| match e {
+            FilterError::TooManySections => ImageError::MatrixTooManySections(n_sections),
+            FilterError::TooManyTaps => ImageError::MatrixTooManyTaps(n_taps),
+            FilterError::NonFinite(s) => {
+                ImageError::MatrixNonFinite { section: if s >= MAX_MIMO_SECTIONS { 255 } else { s as u8 } }
+            }
+            FilterError::NonFiniteTap(t) => ImageError::MatrixNonFiniteTap { tap: t as u8 },
+            FilterError::Unstable(s) => ImageError::MatrixUnstableSection { section: s as u8 },
+            FilterError::NotModal(s) => ImageError::MatrixNotModalSection { section: s as u8 },
+        })?;
+        let image = MatrixImage {
+            fs_hz: h.fs_hz,
+            latency_samples: h.latency_samples,
+            flags: h.flags,
+            method,
+            source_sha256: h.source_sha256,
+            created_unix_s: h.created_unix_s,
+            axes,
+            filter,
+            rows,
+        };
+        image.validate()?;
+        Ok(image)
+    }
+
+    /// Parse a 3x3 image stored at the start of a larger region (a flash
+    /// slot): the declared length selects the prefix, the rest is ignored.
+    pub fn parse_prefix(region: &[u8]) -> Result<MatrixImage, ImageError> {
+        parse_prefix_with(region, MIN_MATRIX_IMAGE_LEN, MAX_MATRIX_IMAGE_LEN, Self::parse)
+    }
+}
+
+// ------------------------------------------------- what the box runs --
+
+/// An image the box runs: per-axis (version 1) or 3x3 (version 3). The
+/// store, the sample path, the status and the host match on it.
+// The variants are the same size within 5 % (≈ 4 KiB each).
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BoxImage {
+    /// One compensator per axis (format version 1).
+    PerAxis(CoeffImage),
+    /// One 3x3 compensator (format version 3).
+    Matrix(MatrixImage),
+}
+
+impl From<CoeffImage> for BoxImage {
+    fn from(i: CoeffImage) -> Self {
+        BoxImage::PerAxis(i)
+    }
+}
+
+impl From<MatrixImage> for BoxImage {
+    fn from(i: MatrixImage) -> Self {
+        BoxImage::Matrix(i)
+    }
+}
+
+/// A borrowed image the box runs, for what reads either version (the cost
+/// model): `From` a `&CoeffImage`, `&MatrixImage` or `&BoxImage`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ImageRef<'a> {
+    /// A per-axis image (version 1).
+    PerAxis(&'a CoeffImage),
+    /// A 3x3 image (version 3).
+    Matrix(&'a MatrixImage),
+}
+
+impl<'a> From<&'a CoeffImage> for ImageRef<'a> {
+    fn from(i: &'a CoeffImage) -> Self {
+        ImageRef::PerAxis(i)
+    }
+}
+
+impl<'a> From<&'a MatrixImage> for ImageRef<'a> {
+    fn from(i: &'a MatrixImage) -> Self {
+        ImageRef::Matrix(i)
+    }
+}
+
+impl<'a> From<&'a BoxImage> for ImageRef<'a> {
+    fn from(i: &'a BoxImage) -> Self {
+        match i {
+            BoxImage::PerAxis(p) => ImageRef::PerAxis(p),
+            BoxImage::Matrix(m) => ImageRef::Matrix(m),
+        }
+    }
+}
+
+impl ImageRef<'_> {
+    /// Sample rate (Hz).
+    pub fn fs_hz(&self) -> u32 {
+        match self {
+            ImageRef::PerAxis(i) => i.fs_hz,
+            ImageRef::Matrix(m) => m.fs_hz,
+        }
+    }
+}
+
+impl BoxImage {
+    /// Parse and validate an image that occupies exactly `bytes`: version 3
+    /// as [`MatrixImage`], anything else as [`CoeffImage::parse`] does
+    /// (version 1; version 2 gives [`ImageError::ParallelOfflineOnly`]).
+    pub fn parse(bytes: &[u8]) -> Result<BoxImage, ImageError> {
+        if peek_version(bytes) == Some(MATRIX_FORMAT_VERSION) {
+            MatrixImage::parse(bytes).map(BoxImage::Matrix)
+        } else {
+            CoeffImage::parse(bytes).map(BoxImage::PerAxis)
+        }
+    }
+
+    /// Parse an image at the start of a larger region (a flash slot), as
+    /// [`CoeffImage::parse_prefix`] / [`MatrixImage::parse_prefix`].
+    pub fn parse_prefix(region: &[u8]) -> Result<BoxImage, ImageError> {
+        if peek_version(region) == Some(MATRIX_FORMAT_VERSION) {
+            MatrixImage::parse_prefix(region).map(BoxImage::Matrix)
+        } else {
+            CoeffImage::parse_prefix(region).map(BoxImage::PerAxis)
+        }
+    }
+
+    /// Encode into `buf` (at most [`MAX_BOX_IMAGE_LEN`] bytes); returns the
+    /// number of bytes written.
+    pub fn encode(&self, buf: &mut [u8]) -> Result<usize, ImageError> {
+        match self {
+            BoxImage::PerAxis(i) => i.encode(buf),
+            BoxImage::Matrix(m) => m.encode(buf),
+        }
+    }
+
+    /// An identifier of the image's content: its CRC-32.
+    pub fn id(&self) -> u32 {
+        match self {
+            BoxImage::PerAxis(i) => i.id(),
+            BoxImage::Matrix(m) => m.id(),
+        }
+    }
+
+    /// The format version (1 or 3).
+    pub fn format_version(&self) -> u16 {
+        match self {
+            BoxImage::PerAxis(_) => FORMAT_VERSION,
+            BoxImage::Matrix(_) => MATRIX_FORMAT_VERSION,
+        }
+    }
+
+    /// Sample rate the filters were designed for (Hz).
+    pub fn fs_hz(&self) -> u32 {
+        ImageRef::from(self).fs_hz()
+    }
+
+    /// Declared output latency (samples).
+    pub fn latency_samples(&self) -> u16 {
+        match self {
+            BoxImage::PerAxis(i) => i.latency_samples,
+            BoxImage::Matrix(m) => m.latency_samples,
+        }
+    }
+
+    /// Design method.
+    pub fn method(&self) -> DesignMethod {
+        match self {
+            BoxImage::PerAxis(i) => i.method,
+            BoxImage::Matrix(m) => m.method,
+        }
+    }
+
+    /// Whether the image is marked offline-only (never run in the box).
+    pub fn is_offline_only(&self) -> bool {
+        match self {
+            BoxImage::PerAxis(i) => i.is_offline_only(),
+            BoxImage::Matrix(m) => m.is_offline_only(),
+        }
+    }
+
+    /// Scaling of each axis (`None` for an axis a per-axis image does not
+    /// cover).
+    pub fn scaling(&self) -> [Option<AxisScaling>; AXES] {
+        match self {
+            BoxImage::PerAxis(i) => i.axes.map(|a| a.map(|a| a.scaling)),
+            BoxImage::Matrix(m) => m.axes.map(|a| Some(a.scaling)),
+        }
+    }
+
+    /// Design summary of each axis (output row).
+    pub fn summaries(&self) -> [Option<AxisSummary>; AXES] {
+        match self {
+            BoxImage::PerAxis(i) => i.axes.map(|a| a.map(|a| a.summary)),
+            BoxImage::Matrix(m) => m.axes.map(|a| Some(a.summary)),
+        }
+    }
+
+    /// How each output row was designed: `None` for a per-axis image.
+    pub fn rows(&self) -> Option<[RowDesign; AXES]> {
+        match self {
+            BoxImage::PerAxis(_) => None,
+            BoxImage::Matrix(m) => Some(m.rows),
+        }
+    }
+
+    /// Set the ADC offset (code of 0 N) of every axis the image covers;
+    /// returns the mask of axes changed (bit i = axis i). Inlined: the
+    /// sample interrupt calls it (auto-zero), and its code must stay in
+    /// CCM SRAM with the interrupt.
+    #[inline(always)]
+    pub fn set_adc_offsets(&mut self, offsets: [f32; AXES]) -> u8 {
+        let mut mask = 0u8;
+        match self {
+            BoxImage::PerAxis(img) => {
+                for (i, (axis, &off)) in img.axes.iter_mut().zip(offsets.iter()).enumerate() {
+                    if let Some(a) = axis {
+                        a.scaling.adc_offset_code = off;
+                        mask |= 1 << i;
+                    }
+                }
+            }
+            BoxImage::Matrix(m) => {
+                for (i, (a, &off)) in m.axes.iter_mut().zip(offsets.iter()).enumerate() {
+                    a.scaling.adc_offset_code = off;
+                    mask |= 1 << i;
+                }
+            }
+        }
+        mask
     }
 }

@@ -23,7 +23,7 @@
 
 use embedded_storage::nor_flash::NorFlash;
 
-use crate::image::CoeffImage;
+use crate::image::BoxImage;
 use crate::protocol::{
     decode_message, AxisSummaryWire, BoxMessage, FrameError, ImageSummary, LinkError, Reply, Request, RequestFrame,
     Status, StatusCounters, PROTOCOL_VERSION,
@@ -43,7 +43,7 @@ pub struct Telemetry<'a> {
     /// `None` when compensating, else why the box is in bypass.
     pub bypass: Option<BypassReason>,
     /// The image the sample path runs (None if there is none).
-    pub image: Option<&'a CoeffImage>,
+    pub image: Option<&'a BoxImage>,
     /// Counters.
     pub counters: StatusCounters,
     /// [`StreamBatcher::next_seq`](crate::protocol::StreamBatcher::next_seq)
@@ -74,24 +74,28 @@ pub struct BoxLink {
 }
 
 /// Design summary of `img` for [`Status`].
-pub fn image_summary(img: &CoeffImage) -> ImageSummary {
+pub fn image_summary(img: &BoxImage) -> ImageSummary {
+    let (scaling, summaries) = (img.scaling(), img.summaries());
+    let axes = core::array::from_fn(|i| match (scaling[i], summaries[i]) {
+        (Some(s), Some(m)) => Some(AxisSummaryWire {
+            adc_offset_code: s.adc_offset_code,
+            newton_per_code: s.newton_per_code,
+            dac_code_per_newton: s.dac_code_per_newton,
+            dac_offset_code: s.dac_offset_code,
+            model_order: m.model_order,
+            flat_lo_hz: m.flat_lo_hz,
+            flat_hi_hz: m.flat_hi_hz,
+            noise_gain: m.noise_gain,
+        }),
+        _ => None,
+    });
     ImageSummary {
         id: img.id(),
-        fs_hz: img.fs_hz,
-        latency_samples: img.latency_samples,
-        method: img.method,
-        axes: img.axes.map(|a| {
-            a.map(|a| AxisSummaryWire {
-                adc_offset_code: a.scaling.adc_offset_code,
-                newton_per_code: a.scaling.newton_per_code,
-                dac_code_per_newton: a.scaling.dac_code_per_newton,
-                dac_offset_code: a.scaling.dac_offset_code,
-                model_order: a.summary.model_order,
-                flat_lo_hz: a.summary.flat_lo_hz,
-                flat_hi_hz: a.summary.flat_hi_hz,
-                noise_gain: a.summary.noise_gain,
-            })
-        }),
+        fs_hz: img.fs_hz(),
+        latency_samples: img.latency_samples(),
+        method: img.method(),
+        axes,
+        rows: img.rows(),
     }
 }
 

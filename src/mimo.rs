@@ -146,6 +146,57 @@ impl MimoFilter {
         (pairs, self.len - pairs)
     }
 
+    /// Bound on the ℓ1 norm of output `row`'s impulse response, summed over
+    /// the three inputs (N/N): for |u_j| ≤ U on every input, |y_row| never
+    /// exceeds this times U (exact arithmetic). Per section, the bound of
+    /// [`Section::gain_bound`] with `b` the row sums of |B| and `c` the
+    /// magnitudes of the row's output gains (for a pair:
+    /// `2·‖c_row‖₁·Σ_j ‖b_j‖₁ / (1 − ρ²)`), plus `Σ_j |d_row,j|` and the
+    /// taps' `Σ_m Σ_j |h_m,row,j|`. `∞` for an unstable section; 0 for a
+    /// row outside 0..3. Computed in f64 from the stored f32 values.
+    pub fn row_gain_bound(&self, row: usize) -> f64 {
+        let Some(d) = self.d.get(row) else { return 0.0 };
+        let abs_sum = |v: &[f32]| v.iter().map(|x| f64::from(x.abs())).sum::<f64>();
+        let mut bound = abs_sum(d);
+        for h in self.fir() {
+            bound += h.get(row).map_or(0.0, |r| abs_sum(r));
+        }
+        for s in self.sections() {
+            let c = s.c.get(row).copied().unwrap_or([0.0; 2]);
+            let folded = Section {
+                delta: s.delta,
+                b: [abs_sum(&s.b[0]) as f32, abs_sum(&s.b[1]) as f32],
+                c: [c[0].abs(), c[1].abs()],
+            };
+            // The f32 row sums round to nearest: make the bound an upper
+            // bound again by one relative ulp.
+            bound += folded.gain_bound() * (1.0 + f64::from(f32::EPSILON));
+        }
+        bound
+    }
+
+    /// The DC gain matrix `H(1)` (N/N; row = output, column = input):
+    /// `d + Σ_m h_m + Σ_sections C·(−Δ)⁻¹·B`, the filter's response to a
+    /// constant force. Non-finite entries when a section has a pole at
+    /// z = 1. Computed in f64 from the stored f32 values.
+    pub fn dc_gain(&self) -> [[f64; MIMO_AXES]; MIMO_AXES] {
+        let mut g = [[0.0f64; MIMO_AXES]; MIMO_AXES];
+        for (i, gi) in g.iter_mut().enumerate() {
+            for (j, gij) in gi.iter_mut().enumerate() {
+                let mut v = f64::from(self.d[i][j]);
+                for h in self.fir() {
+                    v += f64::from(h[i][j]);
+                }
+                for s in self.sections() {
+                    let sec = Section { delta: s.delta, b: [s.b[0][j], s.b[1][j]], c: s.c[i] };
+                    v += sec.dc_gain();
+                }
+                *gij = v;
+            }
+        }
+        g
+    }
+
     /// One sample: the three estimates `y[k]` (N) from the three measured
     /// forces `u[k]` (N), advancing the state (module equation). No
     /// allocation, no panics, O(sections + 9·taps).

@@ -37,7 +37,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::image::{DesignMethod, ImageError, CRC32};
+use crate::image::{DesignMethod, ImageError, RowDesign, CRC32};
 use crate::sample::BypassReason;
 use crate::shell::Slot;
 use crate::AXES;
@@ -49,7 +49,10 @@ use crate::AXES;
 /// * 2: [`Status::core_clock_hz`] and the sample interrupt's cycle counts
 ///   in [`StatusCounters`] (`isr_cycles_last`, `isr_cycles_max`,
 ///   `isr_cycles_mean`).
-pub const PROTOCOL_VERSION: u16 = 2;
+/// * 3: [`ImageSummary::rows`] (a 3x3 image, format version 3, and how each
+///   of its output rows was designed); new [`ImageError`] variants of the
+///   3x3 image at the end of the enum.
+pub const PROTOCOL_VERSION: u16 = 3;
 /// Largest decoded frame body: postcard message + 4-byte CRC.
 pub const MAX_PAYLOAD: usize = 320;
 /// Largest encoded frame: COBS overhead + the 0x00 delimiter.
@@ -125,6 +128,9 @@ pub enum BoxMessage {
 }
 
 /// Reply to one request.
+// The box has no heap to box the status in, and a reply lives only until it
+// is encoded into its frame: the size difference costs a few stack bytes.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Reply {
     /// Request done.
@@ -312,7 +318,7 @@ pub struct SlotInfo {
     pub slot: Slot,
     /// Its sequence number (newest wins, wrapping comparison).
     pub seq: u32,
-    /// Id of the image in the slot ([`crate::image::CoeffImage::id`]: the
+    /// Id of the image in the slot ([`crate::image::BoxImage::id`]: the
     /// image's own trailing CRC-32, as `dynocomp inspect` shows it).
     pub image_id: u32,
 }
@@ -320,7 +326,7 @@ pub struct SlotInfo {
 /// Design summary of the running image (what `dynocomp inspect` shows).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ImageSummary {
-    /// Image id: its CRC-32 ([`crate::image::CoeffImage::id`]).
+    /// Image id: its CRC-32 ([`crate::image::BoxImage::id`]).
     pub id: u32,
     /// Design sample rate, Hz.
     pub fs_hz: u32,
@@ -330,6 +336,9 @@ pub struct ImageSummary {
     pub method: DesignMethod,
     /// Per axis (x, y, z): scaling and design figures, None if absent.
     pub axes: [Option<AxisSummaryWire>; AXES],
+    /// `None` for a per-axis image (format version 1); for a 3x3 image
+    /// (version 3), how each output row was designed.
+    pub rows: Option<[RowDesign; AXES]>,
 }
 
 /// One axis of [`ImageSummary`]: what the host needs to convert streamed

@@ -6,8 +6,9 @@
 //! go wrong on the sample path (saturation, runaway state, missing or invalid
 //! coefficients) is decided here, where host tests exercise it.
 
-use crate::image::{CoeffImage, ImageError};
+use crate::image::{BoxImage, ImageError, MatrixImage};
 use crate::kernel::AxisState;
+use crate::mimo::MimoState;
 use crate::AXES;
 
 /// Largest code of the 12-bit ADC.
@@ -68,8 +69,9 @@ impl core::fmt::Display for BypassReason {
 /// What the sample path does.
 #[derive(Clone, Copy, Debug)]
 pub enum Mode<'a> {
-    /// Run the compensator of this (validated) image.
-    Compensate(&'a CoeffImage),
+    /// Run the compensator of this (validated) image: per axis (version 1)
+    /// or 3x3 (version 3).
+    Compensate(&'a BoxImage),
     /// Copy the raw ADC codes to the DAC.
     Bypass(BypassReason),
 }
@@ -77,7 +79,7 @@ pub enum Mode<'a> {
 /// Decide the sample path's mode from the result of loading the image and
 /// the user's bypass switch. Only a validated, inline-capable image at a
 /// supported rate is ever run.
-pub fn select_mode(loaded: Option<&Result<CoeffImage, ImageError>>, user_bypass: bool) -> Mode<'_> {
+pub fn select_mode(loaded: Option<&Result<BoxImage, ImageError>>, user_bypass: bool) -> Mode<'_> {
     match loaded {
         None => Mode::Bypass(BypassReason::NoImage),
         Some(Err(ImageError::ParallelOfflineOnly)) => Mode::Bypass(BypassReason::OfflineOnly),
@@ -90,7 +92,7 @@ pub fn select_mode(loaded: Option<&Result<CoeffImage, ImageError>>, user_bypass:
 /// `Store::load_active`: a verified image, or why there is none). The
 /// image checks are repeated here, so an image that is not runnable still
 /// never runs, whoever produced the result.
-pub fn select_stored_mode(stored: &Result<CoeffImage, BypassReason>, user_bypass: bool) -> Mode<'_> {
+pub fn select_stored_mode(stored: &Result<BoxImage, BypassReason>, user_bypass: bool) -> Mode<'_> {
     match stored {
         Err(r) => Mode::Bypass(*r),
         Ok(img) => image_mode(img, user_bypass),
@@ -99,11 +101,11 @@ pub fn select_stored_mode(stored: &Result<CoeffImage, BypassReason>, user_bypass
 
 /// The mode of a parsed image: offline-only images, out-of-range rates and
 /// images over the box's CPU budget are never run; otherwise the user's bypass decides.
-fn image_mode(img: &CoeffImage, user_bypass: bool) -> Mode<'_> {
+fn image_mode(img: &BoxImage, user_bypass: bool) -> Mode<'_> {
     if img.is_offline_only() {
         Mode::Bypass(BypassReason::OfflineOnly)
-    } else if !BOX_FS_RANGE_HZ.contains(&img.fs_hz) {
-        Mode::Bypass(BypassReason::UnsupportedSampleRate(img.fs_hz))
+    } else if !BOX_FS_RANGE_HZ.contains(&img.fs_hz()) {
+        Mode::Bypass(BypassReason::UnsupportedSampleRate(img.fs_hz()))
     } else if let Err(load) = crate::budget::check_load(img, crate::budget::BOX_LOAD_LIMIT_PERMILLE) {
         Mode::Bypass(BypassReason::OverBudget(load))
     } else if user_bypass {
@@ -126,11 +128,16 @@ pub struct Counters {
     pub saturated: [u32; AXES],
 }
 
-/// All mutable state of the sample path: filter memory per axis plus counters.
+/// All mutable state of the sample path: filter memory per axis, of the
+/// 3x3 filter, and counters. Both filter states are always there, whichever
+/// image runs: an image switch never changes the state's layout.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SampleState {
-    /// Filter state per axis (also counts non-finite resets).
+    /// Filter state per axis (per-axis images; also counts runaway resets).
     pub axes: [AxisState; AXES],
+    /// Filter state of a 3x3 image (also counts its runaway resets, each of
+    /// which resets all three axes).
+    pub matrix: MimoState,
     /// Event counters.
     pub counters: Counters,
 }
@@ -147,6 +154,13 @@ impl SampleState {
         for a in self.axes.iter_mut() {
             a.reset();
         }
+        self.matrix.reset();
+    }
+
+    /// Runaway-guard resets per axis: the axis's own (per-axis images) plus
+    /// those of the 3x3 filter, which reset every axis (wrapping).
+    pub fn nonfinite_resets(&self) -> [u32; AXES] {
+        self.axes.map(|a| a.nonfinite_resets.wrapping_add(self.matrix.nonfinite_resets))
     }
 }
 
@@ -199,6 +213,25 @@ fn compensate_axis(a: &crate::image::AxisImage, state: &mut AxisState, code: u16
     (to_dac_code(a.scaling.dac_offset_code + y * a.scaling.dac_code_per_newton), reset)
 }
 
+/// [`process_sample`] in compensate mode with a 3x3 image: the three codes
+/// to N, one step of the 3x3 filter, the three estimates to DAC codes. If
+/// the runaway guard fires, the 3x3 state is reset, and the raw forces are
+/// output and the reset flagged on every axis.
+#[inline(always)]
+fn compensate_matrix(m: &MatrixImage, state: &mut MimoState, codes: [u16; AXES], out: &mut [u16; AXES]) -> u8 {
+    let [sx, sy, sz] = &m.axes;
+    let [cx, cy, cz] = codes;
+    let u = [sx.scaling.code_to_newton(cx), sy.scaling.code_to_newton(cy), sz.scaling.code_to_newton(cz)];
+    let (y, flags) = match m.filter.step_guarded(state, u) {
+        Some(y) => (y, 0),
+        None => (u, SampleFlags::reset(0) | SampleFlags::reset(1) | SampleFlags::reset(2)),
+    };
+    for ((dst, a), v) in out.iter_mut().zip(&m.axes).zip(y) {
+        *dst = to_dac_code(a.scaling.dac_offset_code + v * a.scaling.dac_code_per_newton);
+    }
+    flags
+}
+
 /// One sample of the box: ADC codes in, DAC codes and flags out.
 ///
 /// * Bypass: each DAC code is the ADC code (12 bit → 12 bit), i.e. the raw
@@ -208,6 +241,10 @@ fn compensate_axis(a: &crate::image::AxisImage, state: &mut AxisState, code: u16
 ///   passed through raw. If the runaway guard fires, that axis's state is
 ///   reset, the event counted and flagged, and the raw force is output for
 ///   that sample.
+/// * Compensate with a 3x3 image: the three codes are scaled to N, one step
+///   of the 3x3 filter gives the three estimates, each scaled to its DAC
+///   code. A runaway resets the 3x3 state, counts once, outputs the raw
+///   forces and flags a reset on all three axes for that sample.
 ///
 /// ADC codes at 0 or [`ADC_MAX_CODE`] are flagged and counted as saturated
 /// in both modes.
@@ -228,7 +265,8 @@ pub fn process_sample(codes: [u16; AXES], mode: Mode<'_>, state: &mut SampleStat
     }
     match mode {
         Mode::Bypass(_) => flags |= SampleFlags::BYPASS,
-        Mode::Compensate(img) => {
+        Mode::Compensate(BoxImage::Matrix(m)) => flags |= compensate_matrix(m, &mut state.matrix, codes, &mut out),
+        Mode::Compensate(BoxImage::PerAxis(img)) => {
             // One straight-line copy per axis (the loop over the three
             // lanes is unrolled): no search for the next present axis.
             let lanes = img.axes.iter().zip(state.axes.iter_mut()).zip(out.iter_mut()).zip(codes);

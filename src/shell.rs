@@ -21,7 +21,7 @@
 //!
 //! Nothing here touches hardware, allocates or panics.
 
-use crate::image::CoeffImage;
+use crate::image::BoxImage;
 use crate::sample::{process_sample, select_stored_mode, BypassReason, Mode, SampleFlags, SampleState};
 
 /// The image the sample path runs, with its mode decided once, when it
@@ -36,11 +36,11 @@ use crate::sample::{process_sample, select_stored_mode, BypassReason, Mode, Samp
 /// `ActiveImage`, whoever built it, and the sample interrupt pays for a
 /// stored verdict and the user's bypass switch instead of the checks (the
 /// budget check alone, with its 64-bit division, was ≈ 500 instructions per
-/// sample for a three-axis image: BENCHMARKS.md, "The sample interrupt's
-/// fixed part").
+/// sample for a three-axis image: BENCHMARKS.md, "Cost model of the
+/// sample interrupt").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ActiveImage {
-    stored: Result<CoeffImage, BypassReason>,
+    stored: Result<BoxImage, BypassReason>,
     /// `Some(reason)` when the checks refuse the image (or there is none).
     refused: Option<BypassReason>,
 }
@@ -48,7 +48,7 @@ pub struct ActiveImage {
 impl ActiveImage {
     /// Check `stored` (the coefficient store's result: a verified image or
     /// why there is none) and keep the verdict.
-    pub fn new(stored: Result<CoeffImage, BypassReason>) -> Self {
+    pub fn new(stored: Result<BoxImage, BypassReason>) -> Self {
         let refused = match select_stored_mode(&stored, false) {
             Mode::Compensate(_) => None,
             Mode::Bypass(r) => Some(r),
@@ -57,7 +57,7 @@ impl ActiveImage {
     }
 
     /// The image (or why there is none), as given.
-    pub fn stored(&self) -> &Result<CoeffImage, BypassReason> {
+    pub fn stored(&self) -> &Result<BoxImage, BypassReason> {
         &self.stored
     }
 
@@ -87,6 +87,7 @@ impl ActiveImage {
     /// the cost model's filter shapes), and it runs in the sample
     /// interrupt, where deciding again would cost the budget check's
     /// ≈ 500 instructions in that one sample (and copying the image).
+    #[inline(always)]
     pub fn apply_adc_offsets(&mut self, offsets: [f32; crate::AXES]) -> u8 {
         match self.stored.as_mut() {
             Ok(img) => apply_adc_offsets(img, offsets),
@@ -316,7 +317,7 @@ impl core::fmt::Display for Slot {
 /// compensating, [`DEFAULT_FS_HZ`] in bypass.
 pub fn box_sample_rate(mode: &Mode<'_>) -> u32 {
     match mode {
-        Mode::Compensate(img) => img.fs_hz,
+        Mode::Compensate(img) => img.fs_hz(),
         Mode::Bypass(_) => DEFAULT_FS_HZ,
     }
 }
@@ -539,15 +540,9 @@ impl AutoZero {
 /// `offsets` (from [`AutoZero`]); returns the mask of axes changed (bit i =
 /// axis i). Call between two samples and reset the filter state after it:
 /// the offset step would otherwise ring through the compensator.
-pub fn apply_adc_offsets(img: &mut CoeffImage, offsets: [f32; crate::AXES]) -> u8 {
-    let mut mask = 0u8;
-    for (i, (axis, &off)) in img.axes.iter_mut().zip(offsets.iter()).enumerate() {
-        if let Some(a) = axis {
-            a.scaling.adc_offset_code = off;
-            mask |= 1 << i;
-        }
-    }
-    mask
+#[inline(always)]
+pub fn apply_adc_offsets(img: &mut BoxImage, offsets: [f32; crate::AXES]) -> u8 {
+    img.set_adc_offsets(offsets)
 }
 
 // ------------------------------------------------------------- status LED --
@@ -618,11 +613,11 @@ pub enum ImageSwitch {
 }
 
 /// How to switch from the sample path running at `running_fs_hz` to `new`.
-pub fn image_switch(running_fs_hz: u32, new: &CoeffImage) -> ImageSwitch {
-    if new.fs_hz == running_fs_hz {
+pub fn image_switch(running_fs_hz: u32, new: &BoxImage) -> ImageSwitch {
+    if new.fs_hz() == running_fs_hz {
         ImageSwitch::AtSampleBoundary
     } else {
-        ImageSwitch::Reboot { from_hz: running_fs_hz, to_hz: new.fs_hz }
+        ImageSwitch::Reboot { from_hz: running_fs_hz, to_hz: new.fs_hz() }
     }
 }
 

@@ -43,7 +43,7 @@
 
 use embedded_storage::nor_flash::{NorFlash, NorFlashError, NorFlashErrorKind};
 
-use crate::image::{CoeffImage, ImageError, CRC32, MAX_IMAGE_LEN};
+use crate::image::{BoxImage, ImageError, CRC32, MAX_BOX_IMAGE_LEN};
 use crate::protocol::{FlashFault, LinkError, SlotInfo};
 use crate::sample::{select_mode, BypassReason, Mode};
 use crate::shell::Slot;
@@ -67,7 +67,7 @@ pub const COMMIT_MAGIC: [u8; 4] = *b"CMT1";
 /// must be separate writes).
 pub const MAX_WRITE_SIZE: usize = 16;
 /// Read-back buffer: the largest image rounded up to [`MAX_WRITE_SIZE`].
-const BUF_LEN: usize = MAX_IMAGE_LEN.div_ceil(MAX_WRITE_SIZE) * MAX_WRITE_SIZE;
+const BUF_LEN: usize = MAX_BOX_IMAGE_LEN.div_ceil(MAX_WRITE_SIZE) * MAX_WRITE_SIZE;
 
 // A slot must hold the largest image plus the record header.
 const _: () = assert!(RECORD_HEADER_LEN + BUF_LEN <= SLOT_LEN as usize);
@@ -99,7 +99,7 @@ impl Layout {
 
     /// Largest image a slot holds.
     pub fn max_image_len(&self) -> u32 {
-        (self.len as usize).saturating_sub(RECORD_HEADER_LEN).min(MAX_IMAGE_LEN) as u32
+        (self.len as usize).saturating_sub(RECORD_HEADER_LEN).min(MAX_BOX_IMAGE_LEN) as u32
     }
 }
 
@@ -168,10 +168,10 @@ fn record_words(seq: u32, len: u32, image_crc: u32) -> ([u8; 16], [u8; 8]) {
 /// in one go, e.g. by `dynocomp flash --probe` at the slot's address.
 /// Returns the record's length (a multiple of [`MAX_WRITE_SIZE`]).
 ///
-/// The image must parse ([`CoeffImage::parse`]); the record is then exactly
+/// The image must parse ([`BoxImage::parse`]: version 1 or 3); the record is then exactly
 /// what an upload leaves in the slot with sequence number `seq`.
 pub fn encode_record(image: &[u8], seq: u32, out: &mut [u8]) -> Result<usize, ImageError> {
-    CoeffImage::parse(image)?;
+    BoxImage::parse(image)?;
     let total = RECORD_HEADER_LEN + image.len().div_ceil(MAX_WRITE_SIZE) * MAX_WRITE_SIZE;
     let dst = out.get_mut(..total).ok_or(ImageError::BufferTooSmall { needed: total as u32 })?;
     dst.fill(0xFF);
@@ -182,16 +182,17 @@ pub fn encode_record(image: &[u8], seq: u32, out: &mut [u8]) -> Result<usize, Im
     Ok(total)
 }
 
-/// Verify image bytes for the box: CRC against `crc`, full parse (version,
+/// Verify image bytes for the box: CRC against `crc`, full parse (version 1
+/// or 3,
 /// ranges, finiteness, section stability), and runnable on the box (not
 /// offline-only, sample rate in [`crate::sample::BOX_FS_RANGE_HZ`], predicted
 /// interrupt load within [`crate::budget::BOX_LOAD_LIMIT_PERMILLE`]).
-pub fn verify_image(bytes: &[u8], crc: u32) -> Result<CoeffImage, LinkError> {
+pub fn verify_image(bytes: &[u8], crc: u32) -> Result<BoxImage, LinkError> {
     let computed = CRC32.checksum(bytes);
     if computed != crc {
         return Err(LinkError::CrcMismatch { declared: crc, computed });
     }
-    let img = CoeffImage::parse(bytes).map_err(LinkError::Image)?;
+    let img = BoxImage::parse(bytes).map_err(LinkError::Image)?;
     match select_mode(Some(&Ok(img)), false) {
         Mode::Compensate(_) => Ok(img),
         Mode::Bypass(r) => Err(LinkError::NotRunnable(r)),
@@ -251,7 +252,7 @@ pub struct Boot {
     /// The verified image of the newest valid slot, or the bypass reason:
     /// [`BypassReason::NoImage`] if both slots are empty, else the
     /// verification error of the newest committed slot.
-    pub image: Result<CoeffImage, BypassReason>,
+    pub image: Result<BoxImage, BypassReason>,
     /// The active slot (None if no slot is valid).
     pub active: Option<SlotInfo>,
 }
@@ -364,7 +365,7 @@ impl<F: NorFlash> Store<F> {
         let n = len as usize;
         let padded = n.div_ceil(MAX_WRITE_SIZE) * MAX_WRITE_SIZE;
         let off = self.layout.offset(slot) + RECORD_HEADER_LEN as u32;
-        let dst = self.buf.get_mut(..padded).ok_or(LinkError::UploadTooLarge { len, max: MAX_IMAGE_LEN as u32 })?;
+        let dst = self.buf.get_mut(..padded).ok_or(LinkError::UploadTooLarge { len, max: MAX_BOX_IMAGE_LEN as u32 })?;
         self.flash.read(off, dst).map_err(fault)?;
         self.buf.get(..n).ok_or(LinkError::Flash(FlashFault::Other))
     }
@@ -380,7 +381,7 @@ impl<F: NorFlash> Store<F> {
         self.check_image(slot).1
     }
 
-    fn check_image(&mut self, slot: Slot) -> (Option<CoeffImage>, SlotState) {
+    fn check_image(&mut self, slot: Slot) -> (Option<BoxImage>, SlotState) {
         let (seq, len, image_crc) = match self.read_header(slot) {
             Err(_) => return (None, SlotState::Invalid(VerifyFailure::Flash)),
             Ok(Header::Erased | Header::Uncommitted) => return (None, SlotState::Empty),
@@ -431,7 +432,7 @@ impl<F: NorFlash> Store<F> {
 
     /// Load and verify the active slot's image (after a commit: the image
     /// to hand to the sample path).
-    pub fn load_active(&mut self) -> Result<CoeffImage, BypassReason> {
+    pub fn load_active(&mut self) -> Result<BoxImage, BypassReason> {
         let Some(info) = self.active else { return Err(BypassReason::NoImage) };
         match self.check_image(info.slot) {
             (Some(img), SlotState::Valid(_)) => Ok(img),
@@ -549,7 +550,7 @@ impl<F: NorFlash> Store<F> {
     }
 }
 
-/// The image id ([`CoeffImage::id`]) of encoded image bytes: the image's
+/// The image id ([`BoxImage::id`]) of encoded image bytes: the image's
 /// own trailing CRC-32 (valid once the image has parsed). Not to be confused
 /// with the record's `image_crc`, the CRC-32 of all the image bytes, which
 /// protects the transfer and the slot.

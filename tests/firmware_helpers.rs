@@ -259,12 +259,12 @@ fn valid(fs: u32) -> dynocomp_core::image::CoeffImage {
 
 #[test]
 fn the_box_runs_at_the_image_rate_or_the_default() {
-    let img = Ok(valid(100_000));
+    let img = Ok(valid(100_000).into());
     let mode = select_mode(Some(&img), false);
     assert_eq!(box_sample_rate(&mode), 100_000);
     assert_eq!(box_sample_rate(&select_mode(None, false)), DEFAULT_FS_HZ);
     // A valid image at a rate the box cannot run is bypassed at the default rate.
-    let slow = Ok(valid(5_000));
+    let slow = Ok(valid(5_000).into());
     let mode = select_mode(Some(&slow), false);
     assert!(matches!(mode, Mode::Bypass(BypassReason::UnsupportedSampleRate(5_000))));
     assert_eq!(box_sample_rate(&mode), DEFAULT_FS_HZ);
@@ -407,7 +407,7 @@ fn auto_zero_makes_the_resting_input_read_zero_newton() {
     use dynocomp_core::sample::process_sample;
     // Pass-through compensator (gain 1) on x and z; image scaling from
     // common::image_with: force = (code − 2048)·2.5 N, dac = 2048 + 0.4·y.
-    let mut img = image_with(AxisFilter::gain(1.0).unwrap(), &[0, 2], 51_200);
+    let mut img: dynocomp_core::image::BoxImage = image_with(AxisFilter::gain(1.0).unwrap(), &[0, 2], 51_200).into();
     let rest = [2110u16, 1990, 2003];
     {
         let loaded = Ok(img);
@@ -467,8 +467,8 @@ fn led_patterns_are_the_documented_ones_and_distinct() {
 
 #[test]
 fn a_new_image_at_the_running_rate_switches_without_reboot() {
-    assert_eq!(image_switch(51_200, &valid(51_200)), ImageSwitch::AtSampleBoundary);
-    assert_eq!(image_switch(51_200, &valid(100_000)), ImageSwitch::Reboot { from_hz: 51_200, to_hz: 100_000 });
+    assert_eq!(image_switch(51_200, &valid(51_200).into()), ImageSwitch::AtSampleBoundary);
+    assert_eq!(image_switch(51_200, &valid(100_000).into()), ImageSwitch::Reboot { from_hz: 51_200, to_hz: 100_000 });
 }
 
 #[test]
@@ -500,6 +500,11 @@ fn codes(k: u16) -> [u16; 3] {
     [2048 + (k * 37) % 200, 2000, 2100]
 }
 
+/// A stored image, as the coefficient store gives it.
+fn ok(img: impl Into<dynocomp_core::image::BoxImage>) -> Result<dynocomp_core::image::BoxImage, BypassReason> {
+    Ok(img.into())
+}
+
 /// DAC codes of samples `ks` through `path` (compensating).
 fn run(path: &mut SamplePath, stored: &mut ActiveImage, ks: std::ops::Range<u16>) -> Vec<[u16; 3]> {
     ks.map(|k| path.tick(codes(k), stored, false).dac).collect()
@@ -507,7 +512,7 @@ fn run(path: &mut SamplePath, stored: &mut ActiveImage, ks: std::ops::Range<u16>
 
 #[test]
 fn leaving_bypass_starts_the_filters_from_rest() {
-    let mut stored = ActiveImage::new(Ok(image_with_memory(2_500.0)));
+    let mut stored = ActiveImage::new(ok(image_with_memory(2_500.0)));
     let mut path = SamplePath::new();
     for k in 0..50 {
         assert!(path.tick(codes(k), &mut stored, false).compensating);
@@ -534,15 +539,15 @@ fn leaving_bypass_starts_the_filters_from_rest() {
 
 #[test]
 fn a_new_image_starts_from_rest() {
-    let mut stored = ActiveImage::new(Ok(image_with_memory(2_500.0)));
+    let mut stored = ActiveImage::new(ok(image_with_memory(2_500.0)));
     let mut path = SamplePath::new();
     run(&mut path, &mut stored, 0..40);
-    stored = ActiveImage::new(Ok(image_with_memory(3_100.0)));
+    stored = ActiveImage::new(ok(image_with_memory(3_100.0)));
     path.on_image_switch();
     let after = run(&mut path, &mut stored, 40..90);
     assert_eq!(after, run(&mut SamplePath::new(), &mut stored, 40..90));
     // The new image is the one running: the old one gives other output.
-    let mut old = ActiveImage::new(Ok(image_with_memory(2_500.0)));
+    let mut old = ActiveImage::new(ok(image_with_memory(2_500.0)));
     assert_ne!(after, run(&mut SamplePath::new(), &mut old, 40..90));
     // The counters survive the switch.
     assert_eq!(path.state.counters.samples, 90);
@@ -551,7 +556,7 @@ fn a_new_image_starts_from_rest() {
 #[test]
 fn auto_zero_in_the_sample_path() {
     // Pass-through gain on x and z (dac = code while the offset is 2048).
-    let mut stored = ActiveImage::new(Ok(image_with(AxisFilter::gain(1.0).unwrap(), &[0, 2], 51_200)));
+    let mut stored = ActiveImage::new(ok(image_with(AxisFilter::gain(1.0).unwrap(), &[0, 2], 51_200)));
     let rest = [2110u16, 1990, 2003];
     let mut path = SamplePath::new();
     path.request_auto_zero(8).unwrap();
@@ -565,8 +570,8 @@ fn auto_zero_in_the_sample_path() {
     assert_eq!(out.auto_zero, Some(Ok([2110.0, 1990.0, 2003.0])));
     // From this sample on the resting input reads 0 N on the image's axes.
     assert_eq!(out.dac, [2048, 1990, 2048]);
-    let axis_x = stored.stored().as_ref().unwrap().axes[0].unwrap();
-    assert_eq!(axis_x.scaling.adc_offset_code, 2110.0);
+    let axis_x = stored.stored().as_ref().unwrap().scaling()[0].unwrap();
+    assert_eq!(axis_x.adc_offset_code, 2110.0);
     assert_eq!(path.tick(rest, &mut stored, false).dac, [2048, 1990, 2048]);
 
     // Clipped input: refused, offsets unchanged.
@@ -574,7 +579,7 @@ fn auto_zero_in_the_sample_path() {
     path.tick([4095, 1990, 2003], &mut stored, false);
     let out = path.tick(rest, &mut stored, false);
     assert_eq!(out.auto_zero, Some(Err(AutoZeroError::Saturated(0))));
-    assert_eq!(stored.stored().as_ref().unwrap().axes[0].unwrap().scaling.adc_offset_code, 2110.0);
+    assert_eq!(stored.stored().as_ref().unwrap().scaling()[0].unwrap().adc_offset_code, 2110.0);
 
     // Without an image the average is still reported; nothing to apply.
     let mut none = ActiveImage::new(Err(BypassReason::NoImage));
@@ -587,7 +592,7 @@ fn auto_zero_in_the_sample_path() {
 
 #[test]
 fn an_image_switch_cancels_a_running_auto_zero() {
-    let mut stored = ActiveImage::new(Ok(image_with(AxisFilter::gain(1.0).unwrap(), &[0], 51_200)));
+    let mut stored = ActiveImage::new(ok(image_with(AxisFilter::gain(1.0).unwrap(), &[0], 51_200)));
     let mut path = SamplePath::new();
     path.request_auto_zero(4).unwrap();
     path.tick([2100, 2000, 2000], &mut stored, false);
@@ -595,7 +600,7 @@ fn an_image_switch_cancels_a_running_auto_zero() {
     for _ in 0..4 {
         assert_eq!(path.tick([2100, 2000, 2000], &mut stored, false).auto_zero, None);
     }
-    assert_eq!(stored.stored().unwrap().axes[0].unwrap().scaling.adc_offset_code, 2048.0);
+    assert_eq!(stored.stored().unwrap().scaling()[0].unwrap().adc_offset_code, 2048.0);
 }
 
 /// An image over the box's CPU budget (3 × 24 pole pairs at 51.2 kHz:
@@ -635,16 +640,16 @@ fn an_image_over_the_budget_is_refused_on_every_route_to_activation() {
     let refused = |a: &ActiveImage| matches!(a.refused(), Some(BypassReason::OverBudget(l)) if l == image_load(&over));
 
     // Boot: the store's result becomes the active image.
-    let mut boot = ActiveImage::new(Ok(over));
+    let mut boot = ActiveImage::new(ok(over));
     assert!(refused(&boot));
     let mut path = SamplePath::new();
     assert!(!runs_any(&mut path, &mut boot, false, 20));
 
     // Upload / image switch: a running box is handed the image.
-    let mut active = ActiveImage::new(Ok(within));
+    let mut active = ActiveImage::new(ok(within));
     let mut path = SamplePath::new();
     assert!(runs_any(&mut path, &mut active, false, 5));
-    active = ActiveImage::new(Ok(over));
+    active = ActiveImage::new(ok(over));
     path.on_image_switch();
     assert!(refused(&active));
     assert!(!runs_any(&mut path, &mut active, false, 20));
@@ -657,25 +662,25 @@ fn an_image_over_the_budget_is_refused_on_every_route_to_activation() {
     // reads); still refused, and the same verdict as a fresh check.
     path.request_auto_zero(4).unwrap();
     assert!(!runs_any(&mut path, &mut active, false, 10));
-    assert_ne!(active.stored().unwrap().axes[0].unwrap().scaling.adc_offset_code, 2048.0, "the auto-zero was applied");
+    assert_ne!(active.stored().unwrap().scaling()[0].unwrap().adc_offset_code, 2048.0, "the auto-zero was applied");
     assert!(refused(&active));
     assert_eq!(active.refused(), ActiveImage::new(*active.stored()).refused());
 
     // Negative control: the same routes with the image that fits run it.
-    let mut boot = ActiveImage::new(Ok(within));
+    let mut boot = ActiveImage::new(ok(within));
     assert_eq!(boot.refused(), None);
     assert!(runs_any(&mut SamplePath::new(), &mut boot, false, 5));
     let mut path = SamplePath::new();
-    let mut active = ActiveImage::new(Ok(over));
+    let mut active = ActiveImage::new(ok(over));
     assert!(!runs_any(&mut path, &mut active, false, 5));
-    active = ActiveImage::new(Ok(within));
+    active = ActiveImage::new(ok(within));
     path.on_image_switch();
     assert!(runs_any(&mut path, &mut active, false, 5));
     assert!(!runs_any(&mut path, &mut active, true, 5));
     assert!(runs_any(&mut path, &mut active, false, 5));
     path.request_auto_zero(4).unwrap();
     assert!(runs_any(&mut path, &mut active, false, 10));
-    assert_ne!(active.stored().unwrap().axes[0].unwrap().scaling.adc_offset_code, 2048.0);
+    assert_ne!(active.stored().unwrap().scaling()[0].unwrap().adc_offset_code, 2048.0);
     assert_eq!(active.refused(), ActiveImage::new(*active.stored()).refused());
 }
 
@@ -688,10 +693,10 @@ fn the_cached_mode_is_the_checked_mode() {
     offline.flags = dynocomp_core::image::FLAG_OFFLINE_ONLY;
     let slow = image_with(AxisFilter::gain(1.0).unwrap(), &[0], 5_000);
     for stored in [
-        Ok(over),
-        Ok(within),
-        Ok(offline),
-        Ok(slow),
+        ok(over),
+        ok(within),
+        ok(offline),
+        ok(slow),
         Err(BypassReason::NoImage),
         Err(BypassReason::InvalidImage(dynocomp_core::image::ImageError::BadMagic)),
     ] {

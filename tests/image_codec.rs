@@ -96,12 +96,20 @@ fn every_truncation_is_rejected() {
 #[test]
 fn wrong_versions_are_rejected_even_with_a_valid_crc() {
     let bytes = encode(&full_image());
-    for v in [0u16, 3, 0x0100, u16::MAX] {
+    for v in [0u16, 4, 0x0100, u16::MAX] {
         let mut b = bytes.clone();
         b[4..6].copy_from_slice(&v.to_le_bytes());
         fix_crc(&mut b);
         assert_eq!(CoeffImage::parse(&b), Err(ImageError::UnsupportedVersion(v)));
+        assert_eq!(BoxImage::parse(&b), Err(ImageError::UnsupportedVersion(v)));
     }
+    // version 3 is the 3x3 image: not a per-axis image, and its own parser
+    // refuses these bytes (a version-1 body)
+    let mut b = bytes.clone();
+    b[4..6].copy_from_slice(&3u16.to_le_bytes());
+    fix_crc(&mut b);
+    assert_eq!(CoeffImage::parse(&b), Err(ImageError::NotPerAxisImage));
+    assert!(BoxImage::parse(&b).is_err());
     // version 2 is the parallel-elaboration image: named as such, never run
     let mut b = bytes.clone();
     b[4..6].copy_from_slice(&2u16.to_le_bytes());

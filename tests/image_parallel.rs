@@ -90,6 +90,7 @@ fn the_box_never_runs_a_parallel_image() {
     let loaded = CoeffImage::parse_prefix(&slot);
     assert_eq!(loaded, Err(ImageError::ParallelOfflineOnly));
     assert_eq!(CoeffImage::parse_prefix(&bytes[..200]), Err(ImageError::ParallelOfflineOnly));
+    let loaded = loaded.map(dynocomp_core::image::BoxImage::from);
     let mode = select_mode(Some(&loaded), false);
     assert!(matches!(mode, Mode::Bypass(BypassReason::OfflineOnly)), "{mode:?}");
     let mut st = SampleState::default();

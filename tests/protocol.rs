@@ -73,6 +73,7 @@ fn max_status() -> Status {
             latency_samples: u16::MAX,
             method: DesignMethod::Paper,
             axes: [Some(axis); 3],
+            rows: Some([dynocomp_core::image::RowDesign::Matrix; 3]),
         }),
         counters: StatusCounters {
             samples: u32::MAX,
@@ -175,7 +176,7 @@ fn the_status_reply_of_any_protocol_version_reveals_its_version() {
     let now = BoxMessage::Reply { id: 7, reply: Reply::Status(Status { protocol: PROTOCOL_VERSION, ..max_status() }) };
     let bytes = feed_all(&frame(&now), &[]).remove(0).unwrap();
     assert_eq!(status_protocol_version(&bytes), Some(PROTOCOL_VERSION));
-    assert_eq!(PROTOCOL_VERSION, 2, "core clock and interrupt cycle counts are version 2");
+    assert_eq!(PROTOCOL_VERSION, 3, "the 3x3 image's row record in the status is version 3");
 
     // A version-1 box's status reply: it does not decode as this version's
     // message (it would be dropped as unreadable), but its version shows.

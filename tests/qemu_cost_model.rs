@@ -19,7 +19,7 @@
 //! measured shape. If `qemu-system-arm` is missing the test FAILS (like
 //! `tests/qemu_bit_exact.rs`); `bash scripts/test.sh` installs it.
 
-use dynocomp_core::budget::{insns_agree, AxisShape, Cost, CostModel, SHELL_INSNS};
+use dynocomp_core::budget::{insns_agree, AxisShape, Cost, CostModel, MimoCostModel, MimoShape, SHELL_INSNS};
 use std::path::Path;
 use std::process::Command;
 
@@ -44,7 +44,19 @@ fn shell_counts(text: &str) -> Vec<u32> {
         .collect()
 }
 
-fn measure() -> (Vec<Measured>, Vec<u32>) {
+/// The `mimo P D T <per call> <net>` lines: `SamplePath::tick` with a 3x3
+/// image of P pairs, D diagonal sections and T taps.
+fn mimo_counts(text: &str) -> Vec<(MimoShape, u32)> {
+    text.lines()
+        .filter_map(|l| l.strip_prefix("mimo "))
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|w| w.parse().expect("number in a mimo line")).collect();
+            (MimoShape { pairs: v[0] as u32, diagonals: v[1] as u32, taps: v[2] as u32 }, v[3].round() as u32)
+        })
+        .collect()
+}
+
+fn measure() -> (Vec<Measured>, Vec<u32>, Vec<(MimoShape, u32)>) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     if Command::new("qemu-system-arm").arg("--version").output().is_err() {
         panic!("qemu-system-arm not found: install it with `apt-get install -y --no-install-recommends qemu-system-arm`, or run `bash scripts/test.sh`");
@@ -68,7 +80,19 @@ fn measure() -> (Vec<Measured>, Vec<u32>) {
     assert!(rows.len() >= 15, "expected the calibration grid's model lines, got {}:\n{text}", rows.len());
     let shell = shell_counts(&text);
     assert!(!shell.is_empty(), "expected the shell lines:\n{text}");
-    (rows, shell)
+    let mimo = mimo_counts(&text);
+    assert!(mimo.len() >= 12, "expected the 3x3 calibration grid's mimo lines, got {}:\n{text}", mimo.len());
+    (rows, shell, mimo)
+}
+
+/// The 3x3 shapes the model misses beyond its uncertainty.
+fn mimo_misses(model: &MimoCostModel, rows: &[(MimoShape, u32)]) -> Vec<String> {
+    rows.iter()
+        .filter_map(|&(shape, insns)| {
+            let predicted = model.sample_cost(shape).high;
+            (!insns_agree(predicted, insns)).then(|| format!("{shape:?}: model {predicted}, QEMU {insns}"))
+        })
+        .collect()
 }
 
 /// The shapes the model misses beyond its uncertainty (empty = agrees).
@@ -88,7 +112,7 @@ fn scaled(c: Cost, pct: u32) -> Cost {
 
 #[test]
 fn cost_model_matches_the_qemu_instruction_counts() {
-    let (rows, shell) = measure();
+    let (rows, shell, mimo) = measure();
     let bad = misses(&CostModel::QEMU_INSNS, &rows);
     assert!(bad.is_empty(), "cost model drifted from the measured counts:\n{}", bad.join("\n"));
     // The interrupt shell's software (budget::SHELL_INSNS, in CORTEX_M4's
@@ -110,5 +134,18 @@ fn cost_model_matches_the_qemu_instruction_counts() {
         ("fixed part -20 %", CostModel { fixed: scaled(base.fixed, 80), ..base }),
     ] {
         assert!(!misses(&m, &rows).is_empty(), "negative control '{what}' was not caught");
+    }
+
+    // The 3x3 path: the same check, with its own negative controls.
+    let bad = mimo_misses(&MimoCostModel::QEMU_INSNS, &mimo);
+    assert!(bad.is_empty(), "3x3 cost model drifted from the measured counts:\n{}", bad.join("\n"));
+    let base = MimoCostModel::QEMU_INSNS;
+    for (what, m) in [
+        ("3x3 pairs -10 %", MimoCostModel { pair: scaled(base.pair, 90), ..base }),
+        ("3x3 diagonals -10 %", MimoCostModel { diagonal: scaled(base.diagonal, 90), ..base }),
+        ("3x3 taps +10 %", MimoCostModel { tap: scaled(base.tap, 110), ..base }),
+        ("3x3 matrix part -20 %", MimoCostModel { matrix: scaled(base.matrix, 80), ..base }),
+    ] {
+        assert!(!mimo_misses(&m, &mimo).is_empty(), "negative control '{what}' was not caught");
     }
 }

@@ -3,7 +3,7 @@
 
 mod common;
 use common::*;
-use dynocomp_core::image::{CoeffImage, ImageError, FLAG_OFFLINE_ONLY, MAX_IMAGE_LEN};
+use dynocomp_core::image::{BoxImage, CoeffImage, ImageError, FLAG_OFFLINE_ONLY, MAX_IMAGE_LEN};
 use dynocomp_core::kernel::AxisFilter;
 use dynocomp_core::sample::*;
 
@@ -34,7 +34,7 @@ fn corrupted_image_leaves_the_box_in_bypass() {
     let mut slot = vec![0xFFu8; 8192];
     slot[..bytes.len()].copy_from_slice(&bytes);
     slot[200] ^= 0x10;
-    let loaded = CoeffImage::parse_prefix(&slot);
+    let loaded = BoxImage::parse_prefix(&slot);
     assert!(matches!(loaded, Err(ImageError::BadCrc { .. })));
     let mode = select_mode(Some(&loaded), false);
     assert!(matches!(mode, Mode::Bypass(BypassReason::InvalidImage(ImageError::BadCrc { .. }))));
@@ -43,7 +43,7 @@ fn corrupted_image_leaves_the_box_in_bypass() {
     assert_eq!(dac, [1234, 2345, 3456]);
     assert!(flags.has(SampleFlags::BYPASS));
     // an erased slot reads as "no image" in spirit: bad magic, bypass
-    let erased = CoeffImage::parse_prefix(&vec![0xFFu8; 8192]);
+    let erased = BoxImage::parse_prefix(&vec![0xFFu8; 8192]);
     assert!(matches!(
         select_mode(Some(&erased), false),
         Mode::Bypass(BypassReason::InvalidImage(ImageError::BadMagic))
@@ -55,12 +55,15 @@ fn offline_only_unsupported_rate_and_user_bypass_are_never_run() {
     let f = AxisFilter::gain(2.0).unwrap();
     let mut img = image_with(f, &[0], 51_200);
     img.flags = FLAG_OFFLINE_ONLY;
-    assert!(matches!(select_mode(Some(&Ok(img)), false), Mode::Bypass(BypassReason::OfflineOnly)));
+    assert!(matches!(select_mode(Some(&Ok(img.into())), false), Mode::Bypass(BypassReason::OfflineOnly)));
     let img = image_with(f, &[0], 5_000);
-    assert!(matches!(select_mode(Some(&Ok(img)), false), Mode::Bypass(BypassReason::UnsupportedSampleRate(5_000))));
+    assert!(matches!(
+        select_mode(Some(&Ok(img.into())), false),
+        Mode::Bypass(BypassReason::UnsupportedSampleRate(5_000))
+    ));
     let img = image_with(f, &[0], 51_200);
-    assert!(matches!(select_mode(Some(&Ok(img)), true), Mode::Bypass(BypassReason::User)));
-    assert!(matches!(select_mode(Some(&Ok(img)), false), Mode::Compensate(_)));
+    assert!(matches!(select_mode(Some(&Ok(img.into())), true), Mode::Bypass(BypassReason::User)));
+    assert!(matches!(select_mode(Some(&Ok(img.into())), false), Mode::Compensate(_)));
 }
 
 #[test]
@@ -68,7 +71,7 @@ fn compensation_scales_codes_to_newtons_and_back() {
     // gain-2 "compensator" on x only; scaling from common::image_with:
     // force = (code − 2048)·2.5 N, dac = 2048 + 0.4·y
     let img = image_with(AxisFilter::gain(2.0).unwrap(), &[0], 51_200);
-    let loaded = Ok(img);
+    let loaded = Ok(img.into());
     let mode = select_mode(Some(&loaded), false);
     let mut st = SampleState::default();
     let (dac, flags) = process_sample([2148, 1000, 3000], mode, &mut st);
@@ -96,7 +99,7 @@ fn compensated_output_follows_the_kernel_response() {
     let x1 = ((1.0 - a[1][1]) * b[0] + a[0][1] * b[1]) / det;
     let dc = blk.c[0] * x1;
     let img = image_with(kernel_filter(&[blk], 0.0), &[2], 51_200);
-    let loaded = Ok(img);
+    let loaded = Ok(img.into());
     let mode = select_mode(Some(&loaded), false);
     let mut st = SampleState::default();
     let mut last = [0u16; 3];
@@ -110,7 +113,7 @@ fn compensated_output_follows_the_kernel_response() {
 #[test]
 fn saturation_is_flagged_and_counted_in_both_modes() {
     let img = image_with(AxisFilter::gain(1.0).unwrap(), &[0, 1, 2], 51_200);
-    let loaded = Ok(img);
+    let loaded = Ok(img.into());
     for mode in [select_mode(Some(&loaded), false), select_mode(None, false)] {
         let mut st = SampleState::default();
         let (_, flags) = process_sample([0, ADC_MAX_CODE, 2000], mode, &mut st);
@@ -127,7 +130,7 @@ fn runaway_state_is_reset_flagged_counted_and_raw_force_output() {
     // 3 × 24 pairs exceed the box's CPU budget at 51.2 kHz (see
     // `images_over_the_cpu_budget_are_never_run`); at 20 kHz they fit.
     let img = image_with(kernel_filter(&blocks, d), &[0, 1, 2], 20_000);
-    let loaded = Ok(img);
+    let loaded = Ok(img.into());
     let mode = select_mode(Some(&loaded), false);
     let mut st = SampleState::default();
     st.axes[1].x[5][0] = f32::INFINITY;
@@ -199,7 +202,7 @@ fn dac_rounding_equals_its_reference_on_every_float_near_the_range() {
 fn the_box_rate_range_is_10_to_200_khz_inclusive() {
     let f = AxisFilter::gain(1.0).unwrap();
     for (fs, in_range) in [(9_999u32, false), (10_000, true), (51_200, true), (200_000, true), (200_001, false)] {
-        let img = Ok(image_with(f, &[0], fs));
+        let img = Ok(image_with(f, &[0], fs).into());
         let mode = select_mode(Some(&img), false);
         let rate_refused = matches!(mode, Mode::Bypass(BypassReason::UnsupportedSampleRate(r)) if r == fs);
         assert_eq!(rate_refused, !in_range, "fs {fs}: {mode:?}");
@@ -219,16 +222,16 @@ fn stored_results_select_the_same_modes() {
     // The store's boot result: a reason is passed through, an image gets the
     // same checks as a parsed slot.
     let f = AxisFilter::gain(2.0).unwrap();
-    let none: Result<CoeffImage, BypassReason> = Err(BypassReason::NoImage);
+    let none: Result<BoxImage, BypassReason> = Err(BypassReason::NoImage);
     assert!(matches!(select_stored_mode(&none, false), Mode::Bypass(BypassReason::NoImage)));
     let bad = Err(BypassReason::InvalidImage(ImageError::BadMagic));
     assert!(matches!(select_stored_mode(&bad, true), Mode::Bypass(BypassReason::InvalidImage(ImageError::BadMagic))));
     let mut offline = image_with(f, &[0], 51_200);
     offline.flags = FLAG_OFFLINE_ONLY;
-    assert!(matches!(select_stored_mode(&Ok(offline), false), Mode::Bypass(BypassReason::OfflineOnly)));
-    let slow = Ok(image_with(f, &[0], 5_000));
+    assert!(matches!(select_stored_mode(&Ok(offline.into()), false), Mode::Bypass(BypassReason::OfflineOnly)));
+    let slow = Ok(image_with(f, &[0], 5_000).into());
     assert!(matches!(select_stored_mode(&slow, false), Mode::Bypass(BypassReason::UnsupportedSampleRate(5_000))));
-    let good = Ok(image_with(f, &[0], 51_200));
+    let good: Result<BoxImage, BypassReason> = Ok(image_with(f, &[0], 51_200).into());
     assert!(matches!(select_stored_mode(&good, true), Mode::Bypass(BypassReason::User)));
     match select_stored_mode(&good, false) {
         Mode::Compensate(img) => assert_eq!(Ok(*img), good),
@@ -247,7 +250,7 @@ fn images_over_the_cpu_budget_are_never_run() {
     let load = image_load(&fast);
     assert!(load.permille > BOX_LOAD_LIMIT_PERMILLE, "{load:?}");
     assert!(load.cycles > period_cycles(51_200) / 2, "{load:?}");
-    for mode in [select_mode(Some(&Ok(fast)), false), select_stored_mode(&Ok(fast), false)] {
+    for mode in [select_mode(Some(&Ok(fast.into())), false), select_stored_mode(&Ok(fast.into()), false)] {
         assert!(matches!(mode, Mode::Bypass(BypassReason::OverBudget(l)) if l == load), "{mode:?}");
         let mut st = SampleState::default();
         let (dac, flags) = process_sample([100, 2048, 4000], mode, &mut st);
@@ -257,7 +260,7 @@ fn images_over_the_cpu_budget_are_never_run() {
     // Negative control: the same filter at 20 kHz, and one axis of it at
     // 51.2 kHz, fit and run.
     let slow = image_with(f, &[0, 1, 2], 20_000);
-    assert!(matches!(select_mode(Some(&Ok(slow)), false), Mode::Compensate(_)));
+    assert!(matches!(select_mode(Some(&Ok(slow.into())), false), Mode::Compensate(_)));
     let one = image_with(f, &[1], 51_200);
-    assert!(matches!(select_mode(Some(&Ok(one)), false), Mode::Compensate(_)), "{:?}", image_load(&one));
+    assert!(matches!(select_mode(Some(&Ok(one.into())), false), Mode::Compensate(_)), "{:?}", image_load(&one));
 }

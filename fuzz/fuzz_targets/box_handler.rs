@@ -15,11 +15,11 @@
 
 use dynocomp::link::sim_flash::SimFlash;
 use dynocomp::link::virtual_box::VirtualBox;
-use dynocomp_core::image::{CoeffImage, CRC32};
+use dynocomp_core::image::{BoxImage, CRC32};
 use dynocomp_core::protocol::*;
 use dynocomp_core::store::{Layout, Store};
+use dynocomp_fuzz::{box_runnable, IMAGES};
 use libfuzzer_sys::arbitrary::{self, Arbitrary};
-use dynocomp_fuzz::IMAGES;
 use libfuzzer_sys::fuzz_target;
 
 #[derive(Arbitrary, Debug)]
@@ -51,7 +51,7 @@ struct Harness {
     shadow: FrameDecoder,
     next_id: u16,
     /// Flash operation count at the last fresh boot, and what it ran.
-    booted: Option<(u64, Option<CoeffImage>)>,
+    booted: Option<(u64, Option<BoxImage>)>,
 }
 
 impl Harness {
@@ -140,7 +140,12 @@ fn upload_chunks(bytes: &[u8], first: u8) -> Vec<(u32, &[u8])> {
 }
 
 fuzz_target!(|ops: Vec<Op>| {
-    let mut h = Harness { vbox: VirtualBox::boot(SimFlash::g474_slots(), []).expect("boot"), shadow: FrameDecoder::new(), next_id: 0, booted: None };
+    let mut h = Harness {
+        vbox: VirtualBox::boot(SimFlash::g474_slots(), []).expect("boot"),
+        shadow: FrameDecoder::new(),
+        next_id: 0,
+        booted: None,
+    };
     let mut uploads = 0;
     for op in ops.into_iter().take(32) {
         match op {
@@ -162,7 +167,10 @@ fuzz_target!(|ops: Vec<Op>| {
                         let fits = (0..=bytes.len().min(MAX_PAYLOAD))
                             .rev()
                             .find(|&n| {
-                                let frame = RequestFrame { id: u16::MAX, request: Request::UploadChunk { offset: *offset, bytes: &bytes[..n] } };
+                                let frame = RequestFrame {
+                                    id: u16::MAX,
+                                    request: Request::UploadChunk { offset: *offset, bytes: &bytes[..n] },
+                                };
                                 encode_frame(&frame, &mut [0u8; MAX_FRAME]).is_ok()
                             })
                             .unwrap_or(0);
@@ -198,13 +206,14 @@ fuzz_target!(|ops: Vec<Op>| {
                 }
                 if commit {
                     let reply = h.request(Request::UploadCommit);
-                    match CoeffImage::parse(src) {
-                        Ok(img) if !changed => {
+                    match BoxImage::parse(src) {
+                        Ok(img) if !changed && box_runnable(&img) => {
                             assert_eq!(reply, Reply::Ack, "a clean upload of a box image");
                             assert_eq!(h.vbox.running(), Some(&img));
                         }
                         _ => {
-                            assert!(matches!(reply, Reply::Error(_)), "corrupted or offline-only upload committed: {reply:?}");
+                            let refused = matches!(reply, Reply::Error(_));
+                            assert!(refused, "corrupted, offline-only or over-budget upload committed: {reply:?}");
                             assert_eq!(h.vbox.running().copied(), before);
                         }
                     }

@@ -10,8 +10,8 @@
 
 use std::path::Path;
 
-use dynocomp::offline::smoother::Smoother;
 use dynocomp::offline::sidecar::parse_sidecar;
+use dynocomp::offline::smoother::Smoother;
 use dynocomp_fuzz::{assert_names_place_or, example_image};
 use libfuzzer_sys::fuzz_target;
 

@@ -16,12 +16,12 @@
 #![no_main]
 
 use dynocomp::link::sim_flash::SimFlash;
-use dynocomp_core::image::{CoeffImage, CRC32, FLAG_OFFLINE_ONLY, MAX_IMAGE_LEN};
-use dynocomp_core::sample::{BypassReason, BOX_FS_RANGE_HZ};
+use dynocomp_core::image::{BoxImage, CRC32, MAX_BOX_IMAGE_LEN};
+use dynocomp_core::sample::BypassReason;
 use dynocomp_core::shell::Slot;
 use dynocomp_core::store::*;
+use dynocomp_fuzz::{box_runnable, IMAGES};
 use libfuzzer_sys::arbitrary::{self, Arbitrary};
-use dynocomp_fuzz::IMAGES;
 use libfuzzer_sys::fuzz_target;
 
 #[derive(Arbitrary, Debug)]
@@ -47,22 +47,20 @@ fn word(b: &[u8], at: usize) -> u32 {
 
 /// Independent model of one slot: `None` if not committed, else
 /// `Some((seq, Some(image) if valid and runnable))`.
-fn model_slot(slot: &[u8]) -> Option<(u32, Option<(CoeffImage, u32)>)> {
+fn model_slot(slot: &[u8]) -> Option<(u32, Option<(BoxImage, u32)>)> {
     let h = &slot[..RECORD_HEADER_LEN];
     if h[..4] != SLOT_MAGIC || h[16..20] != COMMIT_MAGIC || word(h, 20) != CRC32.checksum(&h[..16]) {
         return None;
     }
     let (seq, len, crc) = (word(h, 4), word(h, 8) as usize, word(h, 12));
-    if len == 0 || len > (SLOT - RECORD_HEADER_LEN).min(MAX_IMAGE_LEN) {
+    if len == 0 || len > (SLOT - RECORD_HEADER_LEN).min(MAX_BOX_IMAGE_LEN) {
         return Some((seq, None));
     }
     let bytes = &slot[RECORD_HEADER_LEN..RECORD_HEADER_LEN + len];
     if CRC32.checksum(bytes) != crc {
         return Some((seq, None));
     }
-    let valid = CoeffImage::parse(bytes)
-        .ok()
-        .filter(|img| img.flags & FLAG_OFFLINE_ONLY == 0 && BOX_FS_RANGE_HZ.contains(&img.fs_hz));
+    let valid = BoxImage::parse(bytes).ok().filter(box_runnable);
     Some((seq, valid.map(|img| (img, word(bytes, len - 4)))))
 }
 

@@ -36,7 +36,10 @@ fuzz_target!(|data: &[u8]| {
             let (_, back) = read_all(&mut r).expect("a written record reads back");
             let _ = std::fs::remove_file(&out);
             for (b, c) in back.iter().zip(&chans) {
-                assert!(b.len() == c.len() && b.iter().zip(c).all(|(x, y)| x.to_bits() == y.to_bits()), "TDMS write → read changed the record");
+                assert!(
+                    b.len() == c.len() && b.iter().zip(c).all(|(x, y)| x.to_bits() == y.to_bits()),
+                    "TDMS write → read changed the record"
+                );
             }
         }
         Err(e) => assert_names_place_or(&format!("{e:#}"), &source, &["segment", "channel", "--channels"]),

@@ -23,7 +23,8 @@ fn check_roundtrip(frf: &Frf, binary: bool) {
         // Uneven lines (the CSV-only case) are refused by the writer.
         return;
     };
-    let back = parse_uff58(&bytes, "roundtrip.uff").unwrap_or_else(|e| panic!("written UFF 58 (binary {binary}) does not read back: {e:#}"));
+    let back = parse_uff58(&bytes, "roundtrip.uff")
+        .unwrap_or_else(|e| panic!("written UFF 58 (binary {binary}) does not read back: {e:#}"));
     assert_eq!(back.freq_hz.len(), frf.freq_hz.len());
     let n = frf.freq_hz.len();
     let span = frf.freq_hz[n - 1].abs().max(frf.freq_hz[0].abs());

@@ -40,7 +40,13 @@ fn check_roundtrip(axes: &[usize], fs: f64, channels: &[Vec<f64>], binary: bool)
     // the same bytes.
     let placed_path = scratch_path("placed.uff");
     {
-        let file = std::fs::OpenOptions::new().read(true).write(true).create(true).truncate(true).open(&placed_path).expect("scratch file");
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .open(&placed_path)
+            .expect("scratch file");
         let n = channels.first().map_or(0, Vec::len) as u64;
         let mut w = UffWriter::placed(&file, n, axes, fs, binary).expect("writer");
         let slices: Vec<&[f64]> = channels.iter().map(Vec::as_slice).collect();
@@ -52,7 +58,8 @@ fn check_roundtrip(axes: &[usize], fs: f64, channels: &[Vec<f64>], binary: bool)
     assert!(placed == bytes, "the in-place UFF writer differs from the streamed one (binary {binary})");
     let path = scratch_path("roundtrip.uff");
     std::fs::write(&path, &bytes).expect("scratch file");
-    let back = read(&path).unwrap_or_else(|e| panic!("written UFF time history (binary {binary}) does not read back: {e}"));
+    let back =
+        read(&path).unwrap_or_else(|e| panic!("written UFF time history (binary {binary}) does not read back: {e}"));
     let _ = std::fs::remove_file(&path);
     assert_eq!(back.0, axes, "axes");
     let fs_back = back.1.expect("the writer declares the rate");
@@ -64,7 +71,10 @@ fn check_roundtrip(axes: &[usize], fs: f64, channels: &[Vec<f64>], binary: bool)
         for (p, q) in x.iter().zip(y) {
             // ASCII: 13 significant digits; values below the normal range
             // keep fewer, so compare those absolutely.
-            assert!(close(*p, *q, rel) || (!binary && (p - q).abs() <= f64::MIN_POSITIVE), "value {q} read back as {p}");
+            assert!(
+                close(*p, *q, rel) || (!binary && (p - q).abs() <= f64::MIN_POSITIVE),
+                "value {q} read back as {p}"
+            );
         }
     }
 }

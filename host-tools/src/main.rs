@@ -6,6 +6,10 @@ use clap::Parser;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
+    // Temporary output files are removed on SIGINT and SIGTERM.
+    if let Err(e) = dynocomp::io::atomic::install_signal_cleanup() {
+        eprintln!("warning: {e:#}; an interrupted run may leave a temporary file, which the next run removes");
+    }
     match dynocomp::cli::run(dynocomp::cli::Cli::parse()) {
         Ok(status) => ExitCode::from(status),
         Err(e) => {

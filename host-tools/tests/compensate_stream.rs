@@ -304,3 +304,37 @@ fn uff_output_spills_beside_the_output() {
     let (ok, err) = run(&missing);
     assert!(!ok && err.contains("no-such-folder") && err.trim().lines().count() == 1, "{err}");
 }
+
+/// `--truth` without `--report` scores the record: one NRMSE line per axis
+/// (band-limited and as written), the same as with a report, and no report
+/// folder. Control: without `--truth` there is no NRMSE line.
+#[test]
+fn truth_alone_prints_the_scores() {
+    let img_path = tmp("truthonly", "img.dcimg");
+    std::fs::write(&img_path, common::bytes(&image(4))).unwrap();
+    let out = tmp("truthonly", "out.csv");
+    let (inp, tr) = (example("measured.csv"), example("true_force.csv"));
+    let base =
+        ["compensate", "--coeffs", img_path.to_str().unwrap(), "--input", &inp, "--output", out.to_str().unwrap()];
+    let (ok, _, err) = dynocomp(&[&base[..], &["--truth", &tr]].concat());
+    assert!(ok, "{err}");
+    let lines: Vec<&str> = err.lines().filter(|l| l.contains("NRMSE measured")).collect();
+    assert_eq!(lines.len(), 3, "{err}");
+    assert!(lines.iter().all(|l| l.contains("as written")), "{err}");
+    let (_, with_report, _, rep) = compensate_example_with_report("truthrep", "true_force.csv", &[]);
+    for l in &lines {
+        assert!(with_report.contains(l), "`{l}` differs from the report's lines: {with_report}");
+    }
+    // The report's plots: the error split at the band edge, the spectra in
+    // the band and up to Nyquist with the band marked.
+    let read = |d: &std::path::Path, f: &str| std::fs::read_to_string(d.join(f)).unwrap();
+    let overview = read(&rep, "x_overview.svg");
+    assert!(overview.contains("error in the band") && overview.contains("error above"), "error panels missing");
+    let spectrum = read(&rep, "x_spectrum.svg");
+    assert!(spectrum.contains("compensated band") && spectrum.contains("up to Nyquist"), "band not marked");
+    // Control: without a truth, no NRMSE line and no error panels.
+    let rep2 = tmp("truthonly", "report");
+    let (ok, _, err) = dynocomp(&[&base[..], &["--report", rep2.to_str().unwrap()]].concat());
+    assert!(ok && !err.contains("NRMSE"), "{err}");
+    assert!(!read(&rep2, "x_overview.svg").contains("error in the band"));
+}

@@ -12,7 +12,7 @@ use dynocomp::link::flash_probe::{
     execute, fake_session, loader_for, plan, read_slots, run_with, FlashPlan, SlotArg, DEFAULT_CHIP, SLOTS_LEN,
 };
 use dynocomp::link::sim_flash::SimFlash;
-use dynocomp_core::image::{CoeffImage, CRC32};
+use dynocomp_core::image::{BoxImage, CRC32};
 use dynocomp_core::shell::Slot;
 use dynocomp_core::store::{encode_record, Layout, Store, FLASH_BASE};
 use embedded_storage::nor_flash::NorFlash;
@@ -56,7 +56,7 @@ fn empty_box_gets_slot_a_with_sequence_1() {
     let img = common::good(1);
     let p = plan(&img, SlotArg::Auto, &erased()).unwrap();
     assert_eq!((p.slot, p.address, p.seq), (Slot::A, 0x0807_C000, 1));
-    assert_eq!(p.image_id, CoeffImage::parse(&img).unwrap().id(), "the id inspect and the box show");
+    assert_eq!(p.image_id, BoxImage::parse(&img).unwrap().id(), "the id inspect and the box show");
     assert_record_layout(&p.record, &img, 1);
 }
 
@@ -107,7 +107,7 @@ fn the_running_slot_is_never_overwritten() {
 }
 
 /// What the box's store makes of the flash after the probe wrote.
-fn box_boots(flash: SimFlash) -> (Result<CoeffImage, dynocomp_core::sample::BypassReason>, Option<Slot>) {
+fn box_boots(flash: SimFlash) -> (Result<BoxImage, dynocomp_core::sample::BypassReason>, Option<Slot>) {
     let mut store = Store::open(flash, Layout::STM32G474RE).unwrap();
     let boot = store.boot();
     (boot.image, boot.active.map(|a| a.slot))
@@ -128,7 +128,7 @@ fn the_box_boots_what_the_probe_wrote() {
     let p1 = plan(&old, SlotArg::Auto, flash.bytes()).unwrap();
     probe_write(&mut flash, &p1);
     let (img, slot) = box_boots(flash.copy());
-    assert_eq!(img.unwrap(), CoeffImage::parse(&old).unwrap());
+    assert_eq!(img.unwrap(), BoxImage::parse(&old).unwrap());
     assert_eq!(slot, Some(Slot::A));
 
     // Second flash, planned from the slots as the probe reads them.
@@ -136,7 +136,7 @@ fn the_box_boots_what_the_probe_wrote() {
     assert_eq!((p2.slot, p2.seq), (Slot::B, 2));
     probe_write(&mut flash, &p2);
     let (img, slot) = box_boots(flash.copy());
-    assert_eq!(img.unwrap(), CoeffImage::parse(&new).unwrap());
+    assert_eq!(img.unwrap(), BoxImage::parse(&new).unwrap());
     assert_eq!(slot, Some(Slot::B));
 
     // A write cut short (last double word of the image missing) is not
@@ -145,7 +145,7 @@ fn the_box_boots_what_the_probe_wrote() {
     let off = 8 * 1024 + p2.record.len() - 16;
     torn.bytes_mut()[off..off + 16].fill(0xFF);
     let (img, slot) = box_boots(torn);
-    assert_eq!(img.unwrap(), CoeffImage::parse(&old).unwrap());
+    assert_eq!(img.unwrap(), BoxImage::parse(&old).unwrap());
     assert_eq!(slot, Some(Slot::A));
 }
 
@@ -194,11 +194,11 @@ fn bad_images_are_refused_before_any_probe_is_opened() {
     let mid = corrupt.len() / 2;
     corrupt[mid] ^= 0x01; // CRC no longer matches
     let cases: [(&str, Vec<u8>, &str); 5] = [
-        ("corrupt.dcimg", corrupt, "BadCrc"),
-        ("offline.dcimg", common::offline_only(), "OfflineOnly"),
-        ("slow.dcimg", common::slow(), "UnsupportedSampleRate"),
-        ("unstable.dcimg", common::unstable(), "Unstable"),
-        ("empty.dcimg", Vec::new(), "Truncated"),
+        ("corrupt.dcimg", corrupt, "CRC mismatch"),
+        ("offline.dcimg", common::offline_only(), "offline-only"),
+        ("slow.dcimg", common::slow(), "sample rate 5000 Hz"),
+        ("unstable.dcimg", common::unstable(), "outside the unit circle"),
+        ("empty.dcimg", Vec::new(), "truncated"),
     ];
     for (name, bytes, why) in cases {
         let (_dir, path) = temp_image(name, &bytes);
@@ -232,4 +232,27 @@ fn cli_dry_run_needs_no_hardware() {
     // An unknown chip is a clear error, not a panic.
     let e = run_with(&path, "NOT_A_CHIP", SlotArg::Auto, true, |_| unreachable!()).unwrap_err();
     assert!(format!("{e:#}").contains("NOT_A_CHIP"), "{e:#}");
+}
+
+/// `flash --probe --dry-run` prints what it does in one line; the simulated
+/// probe's register traces (about 56 lines on stdout) only with `-v`.
+#[test]
+fn dry_run_is_quiet_unless_verbose() {
+    let image = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/images/example.dcimg");
+    let run = |extra: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_dynocomp"))
+            .args(["flash", image.to_str().unwrap(), "--probe", "--dry-run"])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let quiet = run(&[]);
+    assert_eq!(quiet.lines().count(), 1, "{quiet}");
+    assert!(quiet.starts_with("dry run (fake probe, nothing written): would write slot"), "{quiet}");
+    // Control: the traces are there with -v, and the summary still last.
+    let verbose = run(&["-v"]);
+    assert!(verbose.lines().count() > 10, "{verbose}");
+    assert_eq!(verbose.lines().last(), quiet.lines().last());
 }

@@ -138,6 +138,17 @@ fn compare_reports_every_method_per_axis_and_failures_as_rows() {
         let name = ax["axis"].as_str().unwrap();
         let svg = std::fs::read_to_string(dir.join(format!("{name}_compare.svg"))).unwrap();
         assert!(svg.contains("<svg") && svg.contains("fitting bands"));
+        // Every method is in the plot's key, a failed one marked as such.
+        for r in rows {
+            let m = r["method"].as_str().unwrap();
+            let shown = if r["diagnostic"].is_null() { m.to_string() } else { format!("{m}: FAILED") };
+            assert!(svg.contains(&shown), "{name}: `{shown}` missing from the plot's key");
+        }
+    }
+    // Failure rows of the table stay short; compare.json has the message.
+    let table = std::fs::read_to_string(dir.join("compare.txt")).unwrap();
+    for l in table.lines().filter(|l| l.contains("FAILED")) {
+        assert!(l.chars().count() < 200, "failure row too long: {l}");
     }
     assert!(dir.join("compare.json").exists() && dir.join("compare.txt").exists());
 }

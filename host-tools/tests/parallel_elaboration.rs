@@ -25,7 +25,7 @@ const BAND_BOUND: f64 = 0.015;
 fn bands_for(s: &SimOutput, rpm: f64, teeth: u32) -> Vec<Band> {
     let args =
         BandArgs { spindle_rpm: Some(rpm), teeth: Some(teeth), harmonics: 3, band_width: 0.1, ..Default::default() };
-    args.resolve(&s.frf, FS).unwrap()
+    args.resolve(&s.frf, FS, dynocomp::io::signal::DEFAULT_FULL_SCALE_N).unwrap()
 }
 
 fn parallel_image(s: &SimOutput, bands: &[Band]) -> ParallelImage {

@@ -67,8 +67,10 @@ fn report_writes_svgs_and_index() {
     assert_eq!(listed.len(), files.len(), "unexpected files in the report dir: {listed:?}");
 
     let n_lines = sim.frf.freq_hz.len();
-    let fit =
-        check_svg(&dir.join("x_frf_fit.svg"), &["Axis x", "Frequency (Hz)", "measured G", "fitted model", "Coherence"]);
+    let fit = check_svg(
+        &dir.join("x_frf_fit.svg"),
+        &["Axis x", "Frequency (Hz)", "measured G (on top)", "fitted model", "Residual", "Coherence"],
+    );
     assert!(longest_polyline(&fit) > n_lines / 4, "FRF plot has no long line");
     let comp = check_svg(
         &dir.join("x_compensated.svg"),
@@ -79,10 +81,10 @@ fn report_writes_svgs_and_index() {
         check_svg(&dir.join("x_poles.svg"), &["Axis x", "Re z", "Im z", "unit circle", "compensator", "fitted model"]);
     assert!(longest_polyline(&poles) > 100, "pole map has no unit circle");
     assert!(poles.contains("<circle"), "pole map has no model poles");
-    // Issue #15: the sensitivity curve, one point per shift of −5…+5 %.
+    // The sensitivity curve, one point per shift of −5…+5 %, on a log scale.
     let sens = check_svg(
         &dir.join("x_sensitivity.svg"),
-        &["Axis x", "Sensor-mode shift", "predicted error", "twice the nominal"],
+        &["Axis x", "Sensor-mode shift", "predicted error", "twice the nominal", "log scale"],
     );
     assert!(
         longest_polyline(&sens) >= dynocomp::design::sensitivity::SHIFTS_PCT.len(),
@@ -92,6 +94,8 @@ fn report_writes_svgs_and_index() {
     let html = std::fs::read_to_string(dir.join("index.html")).unwrap();
     assert!(html.starts_with("<!DOCTYPE html>"));
     assert!(html.contains("<pre>") && html.contains("</pre>"));
+    // The summary wraps instead of running off the page's edge.
+    assert!(html.contains("white-space: pre-wrap"), "the summary does not wrap");
     assert!(
         html.contains("axis x: summary &lt;with&gt; &amp; special &quot;chars&quot;\nsecond line"),
         "summary not escaped/shown"

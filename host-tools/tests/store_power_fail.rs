@@ -8,7 +8,7 @@
 mod common;
 
 use dynocomp::link::sim_flash::{CutMode, SimFlash};
-use dynocomp_core::image::{CoeffImage, CRC32};
+use dynocomp_core::image::{BoxImage, CRC32};
 use dynocomp_core::protocol::{LinkError, MAX_CHUNK};
 use dynocomp_core::sample::BypassReason;
 use dynocomp_core::shell::Slot;
@@ -27,8 +27,8 @@ fn upload(store: &mut Store<SimFlash>, bytes: &[u8]) -> Result<(), LinkError> {
     store.commit().map(|_| ())
 }
 
-fn parsed(b: &[u8]) -> CoeffImage {
-    CoeffImage::parse(b).expect("fixture parses")
+fn parsed(b: &[u8]) -> BoxImage {
+    BoxImage::parse(b).expect("fixture parses")
 }
 
 /// A flash holding the given images, uploaded in order.

@@ -615,3 +615,41 @@ fn above_band_modes_are_fitted_jointly_only_where_the_frfs_agree_on_their_static
         assert_ne!(q.states.before.d, q.states.after.d, "each state keeps its own fit");
     }
 }
+
+/// Background terms of one fit (a heavily damped pair, real poles far
+/// outside the band) are not paired: each state keeps its own and carries
+/// the other's with a zero residue, so both states are reproduced exactly
+/// and in between one background fades into the other. A physical mode
+/// that only one fit holds still refuses the pairing, naming the modes
+/// (negative control: the rule does not pair everything).
+#[test]
+fn background_terms_of_one_fit_are_not_paired_but_physical_modes_must_match() {
+    use dynocomp::fit::Term;
+    let real = |f: f64, share: f64| Term::Real {
+        pole: -std::f64::consts::TAU * f,
+        residue: std::f64::consts::TAU * f * share,
+    };
+    let modes0 = PoleResidueModel::from_modes(&[(260.0, 0.03, 0.05), (1988.0, 0.5, -0.0065), (3450.0, 0.02, 0.45)]);
+    let modes1 = PoleResidueModel::from_modes(&[(260.0, 0.03, 0.05), (3536.0, 0.02, 0.45)]);
+    let before = PoleResidueModel { terms: [modes0.terms, vec![real(118e3, 0.48), real(3.8, 0.01)]].concat(), d: 0.0 };
+    let after =
+        PoleResidueModel { terms: [modes1.terms, vec![real(88.7e3, 0.5), real(122.0, 0.002)]].concat(), d: 0.0 };
+    let ts = pair("z", &before, &after).unwrap();
+    for (s, m) in [(0.0, &before), (1.0, &after)] {
+        for f in [1.0, 100.0, 1988.0, 3450.0, 4000.0] {
+            assert!((ts.at(s).frf(f) - m.frf(f)).norm() < 1e-9 * m.frf(f).norm(), "s {s} f {f}");
+        }
+    }
+    let physical: Vec<usize> = (0..ts.before.terms.len()).filter(|&i| !ts.is_background(i)).collect();
+    assert_eq!(physical.len(), 2, "{ts:?}");
+    // The sidecar's check accepts what pair() made.
+    TwoState::checked("z", ts.before.clone(), ts.after.clone()).unwrap();
+    // A lightly damped mode of real weight in one fit only is refused.
+    let extra = PoleResidueModel::from_modes(&[(260.0, 0.03, 0.05), (1988.0, 0.05, 0.05), (3450.0, 0.02, 0.45)]);
+    let e = pair("z", &extra, &modes1_only()).unwrap_err().to_string();
+    assert!(e.contains("axis z") && e.contains("260, 1988, 3450 Hz") && e.contains("260, 3536 Hz"), "{e}");
+}
+
+fn modes1_only() -> PoleResidueModel {
+    PoleResidueModel::from_modes(&[(260.0, 0.03, 0.05), (3536.0, 0.02, 0.45)])
+}

@@ -100,9 +100,9 @@ fn the_box_rejects_bad_images_and_keeps_running_the_old_one() {
 
     // The box's own checks (the host's local check is bypassed here).
     for (bad, want) in [
-        (common::offline_only(), "cannot run this image: OfflineOnly"),
-        (common::slow(), "cannot run this image: UnsupportedSampleRate(5000)"),
-        (common::over_budget(), "cannot run this image: OverBudget(Load { cycles: "),
+        (common::offline_only(), "cannot run this image: the image is offline-only"),
+        (common::slow(), "cannot run this image: sample rate 5000 Hz outside the box's"),
+        (common::over_budget(), "cannot run this image: predicted CPU load "),
         (common::unstable(), "pole on or outside the unit circle"),
     ] {
         let err = upload(&mut link, &bad, |_, _| {}).unwrap_err().to_string();

@@ -108,3 +108,104 @@ pub fn fix_crc(bytes: &mut [u8]) {
     let crc = dynocomp_core::image::CRC32.checksum(&bytes[..n - 4]);
     bytes[n - 4..].copy_from_slice(&crc.to_le_bytes());
 }
+
+/// A deterministic generator of values in [-1, 1) (xorshift64).
+pub struct Xorshift(pub u64);
+
+impl Xorshift {
+    pub fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+}
+
+/// A realistic 3x3 compensator at `fs_hz`: `pairs` normal-form pairs
+/// (modes 100 Hz … 22 kHz, 1-5 % damping), `diagonals` diagonal sections
+/// (real poles 0.97 and 0.6), `taps` FIR taps, every B, C and tap entry
+/// non-zero (dense), output gains scaled to each mode's decay (as a
+/// compensator's residues are), and the direct term chosen so that the DC
+/// gain is the identity (to f32 rounding).
+#[allow(dead_code)]
+pub fn mimo_test_filter(
+    fs_hz: f64,
+    pairs: usize,
+    diagonals: usize,
+    taps: usize,
+    seed: u64,
+) -> dynocomp_core::mimo::MimoFilter {
+    use dynocomp_core::mimo::{MimoFilter, MimoSection};
+    let mut rng = Xorshift(seed);
+    let mut secs = Vec::new();
+    for k in 0..pairs {
+        let f = (100.0 * 200.0f64.powf(k as f64 / (pairs.max(2) - 1) as f64)).min(22_000.0);
+        let zeta = 0.01 + 0.01 * (k % 5) as f64;
+        let w = 2.0 * std::f64::consts::PI * f / fs_hz;
+        let r = (-zeta * w).exp();
+        let th = w * (1.0 - zeta * zeta).sqrt();
+        let (sigma, omega) = ((r * th.cos() - 1.0) as f32, (r * th.sin()) as f32);
+        let g = 0.3 * (1.0 - r * r);
+        let b = [[0; 3].map(|_| rng.next() as f32), [0; 3].map(|_| rng.next() as f32)];
+        let c = [
+            [0; 2].map(|_| (g * rng.next()) as f32),
+            [0; 2].map(|_| (g * rng.next()) as f32),
+            [0; 2].map(|_| (g * rng.next()) as f32),
+        ];
+        secs.push(MimoSection { delta: [sigma, omega, -omega, sigma], b, c });
+    }
+    for _ in 0..diagonals {
+        let b = [[0; 3].map(|_| rng.next() as f32), [0; 3].map(|_| rng.next() as f32)];
+        let c = [
+            [0; 2].map(|_| (0.01 * rng.next()) as f32),
+            [0; 2].map(|_| (0.01 * rng.next()) as f32),
+            [0; 2].map(|_| (0.01 * rng.next()) as f32),
+        ];
+        secs.push(MimoSection { delta: [0.97 - 1.0, 0.0, 0.0, 0.6 - 1.0], b, c });
+    }
+    let fir: Vec<[[f32; 3]; 3]> = (0..taps)
+        .map(|m| {
+            let s = 0.1 * (-0.4 * m as f64).exp();
+            [
+                [0; 3].map(|_| (s * rng.next()) as f32),
+                [0; 3].map(|_| (s * rng.next()) as f32),
+                [0; 3].map(|_| (s * rng.next()) as f32),
+            ]
+        })
+        .collect();
+    let zero = [[0.0f32; 3]; 3];
+    let rest = MimoFilter::new(&secs, zero, &fir).expect("test filter is valid").dc_gain();
+    let d = core::array::from_fn(|i| core::array::from_fn(|j| (if i == j { 1.0 } else { 0.0 } - rest[i][j]) as f32));
+    MimoFilter::new(&secs, d, &fir).expect("test filter is valid")
+}
+
+/// A valid 3x3 image of `filter` (scaling as [`image_with`]).
+#[allow(dead_code)]
+pub fn matrix_image(filter: dynocomp_core::mimo::MimoFilter, fs_hz: u32) -> dynocomp_core::image::MatrixImage {
+    use dynocomp_core::image::{AxisChannel, MatrixImage, RowDesign};
+    let per_axis = image_with(AxisFilter::gain(1.0).expect("gain"), &[0, 1, 2], fs_hz);
+    let ch = |i: usize| {
+        let a = per_axis.axes[i].expect("all axes");
+        AxisChannel { axis: i as u8, scaling: a.scaling, summary: a.summary }
+    };
+    MatrixImage {
+        fs_hz,
+        latency_samples: 4,
+        flags: 0,
+        method: DesignMethod::VectorFitting,
+        source_sha256: [7; 32],
+        created_unix_s: 1_790_000_000,
+        axes: [ch(0), ch(1), ch(2)],
+        filter,
+        rows: [RowDesign::Matrix, RowDesign::PerAxis, RowDesign::Matrix],
+    }
+}
+
+/// The encoded bytes of a valid 3x3 image.
+#[allow(dead_code)]
+pub fn encode_matrix(img: &dynocomp_core::image::MatrixImage) -> Vec<u8> {
+    let mut buf = vec![0u8; dynocomp_core::image::MAX_MATRIX_IMAGE_LEN];
+    let n = img.encode(&mut buf).expect("encode 3x3 test image");
+    buf.truncate(n);
+    buf
+}

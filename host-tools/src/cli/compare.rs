@@ -3,7 +3,7 @@
 
 use anyhow::{Context, Result};
 use clap::Args;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use crate::cli::design_args::{BandArgs, DesignInputArgs, PaperArgs};
 use crate::design::axis::DesignOptions;
@@ -26,7 +26,8 @@ pub struct CompareArgs {
     /// Fitting bands.
     #[command(flatten)]
     pub bands: BandArgs,
-    /// Write the plots (one SVG per axis) and compare.json into this directory.
+    /// Write the plots (one SVG per axis), compare.txt (the printed table)
+    /// and compare.json into this directory.
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
     /// Print the comparison as JSON on stdout.
@@ -36,9 +37,12 @@ pub struct CompareArgs {
 
 /// The comparison's inputs from `args`, validated, for `frf`.
 fn inputs(args: &CompareArgs, frf: &Frf) -> Result<CompareInputs> {
-    args.input.check_fs()?;
+    args.input.check_values(&args.bands)?;
     let r = args.input.noise_variances(frf)?;
-    let bands = args.bands.resolve(frf, args.input.fs).with_context(|| format!("{}", args.input.frf().display()))?;
+    let bands = args
+        .bands
+        .resolve(frf, args.input.fs, args.input.max_force)
+        .with_context(|| format!("{}", args.input.frf().display()))?;
     let base = DesignOptions {
         fs_hz: args.input.fs,
         lag: args.latency,
@@ -52,10 +56,25 @@ fn inputs(args: &CompareArgs, frf: &Frf) -> Result<CompareInputs> {
     Ok(CompareInputs { frf_name: args.input.frf().display().to_string(), r, bands, base, paper })
 }
 
+/// Refuse to write a file of `--out-dir` (the pages of [`run`]) over one
+/// of the inputs.
+fn check_pages_are_not_inputs(args: &CompareArgs, dir: &Path) -> Result<()> {
+    let names = ["compare.json", "compare.txt", "x_compare.svg", "y_compare.svg", "z_compare.svg"];
+    let files: Vec<PathBuf> = names.iter().map(|n| dir.join(n)).collect();
+    let outputs: Vec<(&str, &Path)> = files.iter().map(|f| ("a file of --out-dir", f.as_path())).collect();
+    let mut inputs: Vec<(&str, &Path)> = args.input.frf.iter().map(|p| ("--frf", p.as_path())).collect();
+    inputs.extend(args.input.idle.as_deref().map(|p| ("--idle", p)));
+    inputs.extend(args.bands.bands_from.as_deref().map(|p| ("--bands-from", p)));
+    crate::io::atomic::ensure_not_an_input(&outputs, &inputs)
+}
+
 /// Run `dynocomp compare`.
 pub fn run(args: &CompareArgs) -> Result<()> {
     if args.input.frf.len() != 1 {
         anyhow::bail!("compare: --frf given {} times; compare takes one FRF", args.input.frf.len());
+    }
+    if let Some(dir) = &args.out_dir {
+        check_pages_are_not_inputs(args, dir)?;
     }
     let frf = crate::io::read_frf(args.input.frf())?;
     let c = compare(&frf, &inputs(args, &frf)?);

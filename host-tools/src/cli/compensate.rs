@@ -9,8 +9,9 @@ use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 
 use crate::io::image_file::{read_any_image, AnyImage};
+use crate::io::signal::check_max_force;
 use crate::io::signal::{check_rate_value, ChannelMap};
-use crate::io::signal_file::{open_signal, SignalFormat};
+use crate::io::signal_file::{open_signal_checked, SignalFormat};
 use crate::offline::record::{compensate_file, Compensated, Compensation, Monitor, Observer, RecordJob, Truth};
 use crate::report::compensation::ReportAccumulator;
 
@@ -26,10 +27,14 @@ pub struct CompensateArgs {
     #[arg(long)]
     pub input: PathBuf,
     /// Output force record (same channels), written atomically; its format
-    /// follows the input unless --output-format says otherwise.
+    /// is --output-format, else the output's extension (.csv, .tdms,
+    /// .uff/.unv/.uf), else the input's. An extension that contradicts
+    /// --output-format is an error. `-` writes
+    /// it to standard output (the input `-` reads CSV from standard input).
     #[arg(long)]
     pub output: PathBuf,
-    /// Output format: csv, uff (ASCII dataset 58), uff58b (binary) or tdms.
+    /// Output format: csv, uff (ASCII dataset 58), uff58b (binary) or tdms
+    /// (it must agree with the output's extension, if that names a format).
     #[arg(long, value_enum)]
     pub output_format: Option<SignalFormat>,
     /// Channel-to-axis map for UFF records whose response directions do not
@@ -51,7 +56,7 @@ pub struct CompensateArgs {
     /// With --offline: the set-up drifts from the first FRF's state at START
     /// to the second's at END (seconds; linear in the state variable,
     /// constant outside): a time-varying smoother with the two states of a
-    /// `design --frf BEFORE --frf AFTER` sidecar (issue #15).
+    /// `design --frf BEFORE --frf AFTER` sidecar.
     #[arg(long, value_name = "START:END", requires = "offline")]
     pub drift: Option<String>,
     /// With --offline: ignore the harmonic force prior of the model sidecar
@@ -62,8 +67,10 @@ pub struct CompensateArgs {
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
     /// True force of the record (e.g. from `simulate`), same format rules as
-    /// --input: the report adds it, the error and the NRMSE.
-    #[arg(long, value_name = "FILE", requires = "report")]
+    /// --input: prints, per axis, the NRMSE of the measured and the
+    /// compensated force against it (band-limited, and the output as
+    /// written; README "Accuracy"); with --report the pages show it too.
+    #[arg(long, value_name = "FILE")]
     pub truth: Option<PathBuf>,
     /// Spindle speed (rpm) for the report's tooth-passing frequency marks.
     #[arg(long, requires = "teeth")]
@@ -71,8 +78,13 @@ pub struct CompensateArgs {
     /// Number of teeth of the cutter (with --spindle-rpm).
     #[arg(long, requires = "spindle_rpm")]
     pub teeth: Option<u32>,
-    /// Band limit of the report's NRMSE (Hz); default: the project's
-    /// scoring band, min(4 kHz, 0.4 fs).
+    /// Largest plausible force (N): the full scale of the charge amplifier
+    /// or ADC. A value of the input or the true force beyond ± this, or not
+    /// finite, is an input error that names the sample.
+    #[arg(long, default_value_t = crate::io::signal::DEFAULT_FULL_SCALE_N, value_name = "N")]
+    pub max_force: f64,
+    /// Band limit of the NRMSE against --truth (Hz); default: the
+    /// project's scoring band, min(4 kHz, 0.4 fs).
     #[arg(long)]
     pub band_hz: Option<f64>,
 }
@@ -81,12 +93,21 @@ pub struct CompensateArgs {
 pub fn run(a: &CompensateArgs) -> Result<()> {
     let Options { job, axes, fs, tpf } = Options::new(a)?;
     let has_truth = job.truth.is_some();
-    let mut acc = a.report.as_ref().map(|_| ReportAccumulator::new(&axes, f64::from(fs), tpf, has_truth));
+    let keep = a.report.is_some() || has_truth;
+    let mut acc = keep.then(|| ReportAccumulator::new(&axes, f64::from(fs), tpf, has_truth));
     let progress = progress_bar(job.input.len_hint());
     let done = compensate_file(job, acc.as_mut().map(|r| r as &mut dyn Observer), &Terminal(&progress))?;
     progress.finish_and_clear();
     let Compensated { samples: n_samples, how } = done;
     eprintln!("compensated {n_samples} samples x {} axes at {fs} Hz ({how}) -> {}", axes.len(), a.output.display());
+    // The project's one scoring band (the same as `examples/score.rs` and
+    // the rates harness), not the image's flat band.
+    let band = |_axis: usize| -> f64 { a.band_hz.unwrap_or_else(|| crate::metrics::scoring_band_hz(f64::from(fs))) };
+    if let (Some(acc), None) = (&acc, &a.report) {
+        for s in acc.score_lines(&band) {
+            eprintln!("{s}");
+        }
+    }
     if let (Some(acc), Some(dir)) = (acc, &a.report) {
         let summary = format!(
             "input:  {}\nimage:  {}\noutput: {}\n{n_samples} samples x {} axes at {fs} Hz ({:.3} s); {how}",
@@ -96,7 +117,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
             axes.len(),
             n_samples as f64 / f64::from(fs),
         );
-        write_report(a, acc, dir, &summary, fs)?;
+        write_report(acc, dir, &summary, &band)?;
     }
     Ok(())
 }
@@ -117,24 +138,29 @@ struct Options {
 
 impl Options {
     fn new(a: &CompensateArgs) -> Result<Self> {
+        let sidecar = crate::offline::sidecar::sidecar_path(&a.coeffs);
+        let mut inputs = vec![
+            ("--input", a.input.as_path()),
+            ("--coeffs", a.coeffs.as_path()),
+            ("the model sidecar of --coeffs", &sidecar),
+        ];
+        inputs.extend(a.truth.as_deref().map(|p| ("--truth", p)));
+        crate::io::atomic::ensure_not_an_input(&[("--output", &a.output)], &inputs)?;
         let img = read_any_image(&a.coeffs)?;
         let source = a.input.display().to_string();
         let map = a.channels.as_deref().map(ChannelMap::parse).transpose().context("--channels")?;
-        let (input, in_fmt) = open_signal(&a.input, map.as_ref())?;
+        let max_force = check_max_force(a.max_force)?;
+        let (input, in_fmt) = open_signal_checked(&a.input, map.as_ref(), max_force)?;
         let fs = img.fs_hz();
         if let Some(f) = input.declared_fs_hz() {
             check_rate_value(fs, (f, 0.0), &source, "the file's sampling interval")?;
         }
         let axes = input.axes().to_vec();
-        if let Some(r) = a.spindle_rpm {
-            if !(r.is_finite() && r > 0.0) {
-                bail!("--spindle-rpm {r}: must be > 0");
-            }
-        }
+        crate::cli::design_args::check_spindle(a.spindle_rpm, a.teeth)?;
         let tpf = a.spindle_rpm.zip(a.teeth).map(|(r, z)| r / 60.0 * f64::from(z));
         let truth = match &a.truth {
             Some(p) => {
-                let (t, _) = open_signal(p, map.as_ref())?;
+                let (t, _) = open_signal_checked(p, map.as_ref(), max_force)?;
                 for ax in &axes {
                     if !t.axes().contains(ax) {
                         bail!("{}: no f{} channel, but the input has one", p.display(), crate::frf::axis_name(*ax));
@@ -152,6 +178,10 @@ impl Options {
                 force_prior: !a.no_force_prior,
                 image,
             },
+            (AnyImage::Matrix(_), _) => bail!(
+                "{}: a 3x3 image (format 3): `compensate` cannot run it yet; the box and `dynocomp virtual-box` do",
+                a.coeffs.display()
+            ),
             (AnyImage::Parallel(_), true) => bail!(
                 "{}: --offline needs a box image (format 1) and its model sidecar; this is a parallel-elaboration image",
                 a.coeffs.display()
@@ -163,8 +193,9 @@ impl Options {
             input,
             input_path: a.input.clone(),
             channels: map,
+            full_scale_n: max_force,
             output: a.output.clone(),
-            output_format: a.output_format.unwrap_or(in_fmt),
+            output_format: output_format(&a.output, a.output_format, in_fmt)?,
             raw_timing: a.raw_timing,
             truth,
         };
@@ -172,13 +203,35 @@ impl Options {
     }
 }
 
+/// The format of the output `path`: `given` (`--output-format`), else the
+/// one its extension names, else the input's `input`; an error when `given`
+/// contradicts the extension (TDMS bytes in `x.csv`).
+fn output_format(path: &Path, given: Option<SignalFormat>, input: SignalFormat) -> Result<SignalFormat> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let named: Option<&[SignalFormat]> = match ext.as_deref() {
+        Some("csv") => Some(&[SignalFormat::Csv]),
+        Some("tdms") => Some(&[SignalFormat::Tdms]),
+        Some("uff" | "unv" | "uf") => Some(&[SignalFormat::Uff, SignalFormat::Uff58b]),
+        _ => None,
+    };
+    match (given, named) {
+        (Some(g), Some(n)) if !n.contains(&g) => bail!(
+            "{}: the extension .{} does not fit --output-format {}; name the output after its format",
+            path.display(),
+            ext.unwrap_or_default(),
+            clap::ValueEnum::to_possible_value(&g).map_or_else(String::new, |v| v.get_name().to_string())
+        ),
+        (Some(g), _) => Ok(g),
+        (None, Some(n)) if n.contains(&input) => Ok(input),
+        (None, Some(n)) => Ok(n[0]),
+        (None, None) => Ok(input),
+    }
+}
+
 /// Write the report into `dir` with `summary` on top and print its NRMSE
 /// lines and where it is.
-fn write_report(a: &CompensateArgs, acc: ReportAccumulator, dir: &Path, summary: &str, fs: u32) -> Result<()> {
-    // The project's one scoring band (the same as `examples/score.rs`
-    // and the rates harness), not the image's flat band.
-    let band = |_axis: usize| -> f64 { a.band_hz.unwrap_or_else(|| crate::metrics::scoring_band_hz(f64::from(fs))) };
-    let (files, scores) = acc.write(dir, summary, &band)?;
+fn write_report(acc: ReportAccumulator, dir: &Path, summary: &str, band: &dyn Fn(usize) -> f64) -> Result<()> {
+    let (files, scores) = acc.write(dir, summary, band)?;
     for s in scores {
         eprintln!("{s}");
     }

@@ -8,20 +8,32 @@ use std::time::Instant;
 
 use dynocomp_core::image::CoeffImage;
 
-use crate::cli::design_args::{check_prior_flags, read_force_record, DesignArgs, DesignSetup, ForcePrior, Method};
+use crate::cli::design_args::{
+    check_outputs_are_not_inputs, check_prior_flags, read_force_record, DesignArgs, DesignSetup, ForcePrior, Method,
+};
 use crate::design::axis::AxisDesign;
 use crate::design::image::build_image;
 use crate::design::latency::LatencyChoice;
+use crate::design::versus_default::VersusDefault;
 use crate::frf::axis_name;
-use crate::io;
 use crate::offline::force_prior::{AxisPrior, PriorOptions};
 use crate::offline::smoother::build_priors;
 use crate::realize::load::LoadReport;
 use crate::report::summary::{prior_line, render_summary, spectrum_line, AxisJson, DesignJson};
 
-/// Run `dynocomp design`.
+/// Run `dynocomp design`: the summary (text or JSON) on stdout.
 pub fn run(args: &DesignArgs) -> Result<()> {
+    print!("{}", design(args)?);
+    Ok(())
+}
+
+/// Everything `dynocomp design` does (image, sidecar, report; progress on
+/// stderr) except printing: returns the summary, text or with `--json` the
+/// JSON document, that it prints on stdout. Other front ends (the Python
+/// package) call this with the same arguments.
+pub fn design(args: &DesignArgs) -> Result<String> {
     check_prior_flags(args)?;
+    check_outputs_are_not_inputs(args)?;
     match args.input.frf.len() {
         1 => {}
         2 => return crate::cli::design_two_state::run(args),
@@ -49,6 +61,9 @@ struct Designed {
     latency_choice: Option<LatencyChoice>,
     /// The declared latency (samples).
     latency: usize,
+    /// Band-fitted or paper-method axes beside the default design, and
+    /// whether the default replaced them.
+    versus: Vec<(VersusDefault, bool)>,
 }
 
 /// Design the axes on parallel threads (the box has three, the host at
@@ -80,7 +95,54 @@ fn design_axes(args: &DesignArgs, s: &DesignSetup) -> Result<Designed> {
         times.push(dt);
         designs.push(d);
     }
-    Ok(Designed { designs, times, latency_choice, latency })
+    let versus = against_default(args, s, &mut designs, latency, &rv);
+    Ok(Designed { designs, times, latency_choice, latency, versus })
+}
+
+/// A band-fitted or paper-method design beside the default design of the
+/// same FRF ([`crate::design::versus_default`]), at the image's latency
+/// (band-fitted) or the default latency (paper method, latency 0).
+/// Where the default predicts less error, a band-fitted axis is replaced by
+/// it (the image then says so); a paper-method axis is kept (the method
+/// exists to reproduce the paper) with a warning naming the better command.
+/// Returns each axis's comparison and whether it was replaced; empty for
+/// the default design.
+fn against_default(
+    args: &DesignArgs,
+    s: &DesignSetup,
+    designs: &mut [AxisDesign],
+    latency: usize,
+    rv: &[f64],
+) -> Vec<(VersusDefault, bool)> {
+    let paper = args.method == Method::Paper;
+    if s.bands.is_empty() && !paper {
+        return Vec::new();
+    }
+    let opts = crate::design::axis::DesignOptions {
+        method: crate::design::axis::FitMethod::Vf,
+        bands: Vec::new(),
+        paper_orders_auto: false,
+        // The paper's filter has no lag; the default command it is judged
+        // against has the default latency (a paper axis is only warned about).
+        lag: if paper { crate::design::latency::DEFAULT_LATENCY } else { latency },
+        ..s.opts.clone()
+    };
+    let frf = &s.frf;
+    let defaults = crate::design::latency::design_axes(&frf.freq_hz, &frf.axes, rv, &opts);
+    let mut out = Vec::new();
+    for (d, (def, _)) in designs.iter_mut().zip(defaults) {
+        let Ok(def) = def else {
+            // No default design to prefer: the asked-for one stands.
+            continue;
+        };
+        let v = crate::design::versus_default::compare(d, &def, s.opts.force_rms, args.input.fs);
+        let replace = v.default_better && !paper;
+        if replace {
+            *d = def;
+        }
+        out.push((v, replace));
+    }
+    out
 }
 
 /// The harmonic force prior of each axis (`--force-prior harmonics`), or none.
@@ -89,7 +151,7 @@ fn harmonic_priors(args: &DesignArgs, designs: &[AxisDesign], r: &[Option<f64>; 
         return Ok(designs.iter().map(|_| None).collect());
     }
     let path = args.prior.force_record.as_ref().expect("checked by check_prior_flags");
-    let rec = read_force_record(path, args.input.fs)?;
+    let rec = read_force_record(path, args.input.fs, args.input.max_force)?;
     let opts = PriorOptions {
         spindle_rpm: args.bands.spindle_rpm.expect("checked"),
         teeth: args.bands.teeth.expect("checked"),
@@ -127,9 +189,8 @@ fn write_image_and_sidecar(
     designs: &[AxisDesign],
     priors: &[Option<AxisPrior>],
 ) -> Result<()> {
-    io::image_file::write_image(&args.out, image)?;
     if args.method == Method::Paper {
-        return Ok(());
+        return crate::offline::sidecar::write_image_and_sidecar(&args.out, image, None);
     }
     let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
     let mut sidecar = crate::offline::sidecar::ModelSidecar::new(image, &models);
@@ -140,7 +201,7 @@ fn write_image_and_sidecar(
         // no note for `compensate`.
         m.force_spectrum = d.force_spectrum.as_ref().filter(|s| !s.level_only).map(|s| s.provenance(record.clone()));
     }
-    crate::offline::sidecar::write_sidecar(&args.out, &sidecar)
+    crate::offline::sidecar::write_image_and_sidecar(&args.out, image, Some(&sidecar))
 }
 
 /// The summary (text or JSON) and the report.
@@ -152,10 +213,11 @@ fn render(
     image: &CoeffImage,
     box_load: LoadReport,
     t0: Instant,
-) -> Result<()> {
+) -> Result<String> {
     let (designs, latency) = (&d.designs, d.latency);
     let id = image.id();
-    let sensitivities = crate::design::sensitivity::predict_all(designs, &s.opts);
+    let mut sensitivities = crate::design::sensitivity::predict_all(designs, &s.opts);
+    crate::design::sensitivity::set_line_spacing(&mut sensitivities, &s.frf.freq_hz);
     let mut summary = render_summary(
         designs,
         &sensitivities,
@@ -178,6 +240,18 @@ fn render(
             summary.push_str(&spectrum_line(d.axis, s, args.input.force_rms));
         }
     }
+    let better = if args.method == Method::Paper {
+        "the default method is better: drop --method paper"
+    } else {
+        "the design without fitting bands: drop --spindle-rpm/--teeth, --band and --bands-from"
+    };
+    for (v, replaced) in &d.versus {
+        let line = crate::design::versus_default::describe(v, *replaced, better);
+        if v.default_better {
+            eprint!("{line}");
+        }
+        summary.push_str(&line);
+    }
     summary.push_str(&crate::realize::load::describe(&box_load, image.fs_hz));
     summary.push_str(if box_load.fits { "\n" } else { "  OVER THE LIMIT: offline-only image\n" });
     if let Some(dir) = &args.report {
@@ -185,9 +259,8 @@ fn render(
         eprintln!("report: {} files in {} (open index.html)", files.len(), dir.display());
     }
     if !args.json {
-        print!("{summary}");
         eprintln!("designed in {:.0} ms", t0.elapsed().as_secs_f64() * 1e3);
-        return Ok(());
+        return Ok(summary);
     }
     let axes = (0..designs.len())
         .map(|i| AxisJson::new(&designs[i], d.times[i], priors[i].as_ref(), &sensitivities[i]))
@@ -202,9 +275,16 @@ fn render(
         design_time_s: t0.elapsed().as_secs_f64(),
         offline_only: image.is_offline_only(),
         latency_choice: d.latency_choice.clone(),
+        versus_default: d
+            .versus
+            .iter()
+            .map(|(v, replaced)| crate::report::summary::VersusDefaultJson {
+                comparison: v.clone(),
+                replaced_by_default: *replaced,
+            })
+            .collect(),
         box_load,
         axes,
     };
-    println!("{}", serde_json::to_string_pretty(&j)?);
-    Ok(())
+    Ok(format!("{}\n", serde_json::to_string_pretty(&j)?))
 }

@@ -36,7 +36,7 @@ impl Method {
 /// Discrete model of the Kalman design (`--discretization`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum DiscretizationArg {
-    /// Fit on the unit circle to the sampled-data relation (module doc)
+    /// Fit on the unit circle to the sampled-data relation (README "Discrete model")
     #[default]
     Fit,
     /// First-order hold: force linear between samples
@@ -81,9 +81,11 @@ pub struct BandArgs {
 }
 
 impl BandArgs {
-    /// The library's band specification of these flags.
+    /// The library's band specification of these flags (the record of
+    /// `--bands-from` checked against the default full scale).
     pub fn spec(&self) -> BandSpec {
         BandSpec {
+            max_force_n: None,
             tooth_passing: self.spindle_rpm.zip(self.teeth),
             harmonics: self.harmonics,
             band_width: self.band_width,
@@ -97,9 +99,10 @@ impl BandArgs {
         self.spec().tooth_passing_hz()
     }
 
-    /// The validated bands for this FRF and sample rate ([`BandSpec::resolve`]).
-    pub fn resolve(&self, frf: &Frf, fs_hz: f64) -> Result<Vec<Band>> {
-        self.spec().resolve(frf, fs_hz)
+    /// The validated bands for this FRF and sample rate ([`BandSpec::resolve`]),
+    /// the record of `--bands-from` within ±`max_force_n` (N).
+    pub fn resolve(&self, frf: &Frf, fs_hz: f64, max_force_n: f64) -> Result<Vec<Band>> {
+        BandSpec { max_force_n: Some(max_force_n), ..self.spec() }.resolve(frf, fs_hz)
     }
 }
 
@@ -111,10 +114,10 @@ pub enum ForcePrior {
     Default,
     /// Tooth-passing and runout harmonics of --spindle-rpm in the Kalman
     /// state of `compensate --offline`, tuned from --force-record
-    /// (`crate::offline::force_prior`); the box image stays the default design.
+    /// (README "Force priors"); the box image stays the default design.
     Harmonics,
     /// q of the box design chosen for the force spectrum of --force-record
-    /// instead of a flat spectrum of --force-rms (`crate::design::force_spectrum`):
+    /// instead of a flat spectrum of --force-rms (README "Force priors"):
     /// the same filter structure and cost, tuned for the cut.
     Spectrum,
     /// q of the box design chosen for a flat force spectrum at the in-band
@@ -200,8 +203,9 @@ impl PaperArgs {
 /// sample rate, the noise model and the assumptions of the Q criterion.
 #[derive(Args, Debug, Clone)]
 pub struct DesignInputArgs {
-    /// Measured FRF: UFF58 (.uff/.unv) or CSV. `design` takes it twice for
-    /// a set-up in two states (before and after machining, issue #15).
+    /// Measured FRF: UFF58 (.uff/.unv) or CSV (README "File formats",
+    /// docs/frf-matrix.md). With `design` only, give it twice for a set-up
+    /// in two states (before and after machining; README "Two states").
     #[arg(long, required = true)]
     pub frf: Vec<PathBuf>,
     /// Sample rate of the box (Hz).
@@ -224,6 +228,12 @@ pub struct DesignInputArgs {
     /// to 0.45 fs), or the hold equivalents `foh`/`zoh` for comparison.
     #[arg(long, value_enum, default_value_t = DiscretizationArg::Fit)]
     pub discretization: DiscretizationArg,
+    /// Largest plausible force (N) in the records read (--idle,
+    /// --force-record, --bands-from): the full scale of the charge
+    /// amplifier or ADC. A value beyond ± this, or not finite, is an input
+    /// error that names the sample.
+    #[arg(long, default_value_t = crate::io::signal::DEFAULT_FULL_SCALE_N, value_name = "N")]
+    pub max_force: f64,
 }
 
 impl DesignInputArgs {
@@ -233,17 +243,28 @@ impl DesignInputArgs {
     }
 
     /// `--fs` must be a whole number of Hz that an image can hold.
-    pub fn check_fs(&self) -> Result<()> {
+    /// `--force-rms` and `--max-noise-gain` must be positive, and the
+    /// spindle of the bands a real one.
+    pub fn check_values(&self, bands: &BandArgs) -> Result<()> {
         let fs = self.fs;
         if !(fs.is_finite() && (1_000.0..=1_000_000.0).contains(&fs) && fs.fract() == 0.0) {
             bail!("--fs {fs}: the sample rate must be a whole number of Hz in 1000..=1000000");
         }
-        Ok(())
+        if !(self.force_rms.is_finite() && self.force_rms > 0.0) {
+            bail!("--force-rms {}: the assumed in-band force must be a positive number of N", self.force_rms);
+        }
+        if !(self.max_noise_gain.is_finite() && self.max_noise_gain > 0.0) {
+            bail!("--max-noise-gain {}: must be a positive number", self.max_noise_gain);
+        }
+        check_spindle(bands.spindle_rpm, bands.teeth)
     }
 
-    /// R per axis (N²) from `--idle` or `--noise-variance`.
+    /// R per axis (N²) from `--idle` (sampled at `--fs`, values within
+    /// `--max-force`) or `--noise-variance`.
     pub fn noise_variances(&self, frf: &Frf) -> Result<[Option<f64>; 3]> {
-        crate::design::noise::noise_variances(self.idle.as_deref(), self.noise_variance, frf)
+        let max_force = crate::io::signal::check_max_force(self.max_force)?;
+        let checks = crate::design::noise::IdleChecks { fs_hz: Some(self.fs), full_scale_n: max_force };
+        crate::design::noise::noise_variances_checked(self.idle.as_deref(), self.noise_variance, frf, &checks)
     }
 }
 
@@ -256,8 +277,10 @@ pub struct DesignArgs {
     /// Output coefficient image (.dcimg), written atomically.
     #[arg(long)]
     pub out: PathBuf,
-    /// Declared output latency L (samples): the fixed lag of the smoother
-    /// (default 4; the paper's method has no lag and accepts only 0).
+    /// Declared output latency L (samples): the fixed lag of the smoother.
+    /// Without it the design starts at 4 and takes up to 8 where that
+    /// predicts a clearly smaller error (README "Latency"); the paper's
+    /// method has no lag and accepts only 0.
     #[arg(long)]
     pub latency: Option<usize>,
     /// Highest model order the fit may use.
@@ -344,7 +367,7 @@ impl DesignSetup {
             (true, _) => 0,
             (false, l) => l.unwrap_or(crate::design::latency::DEFAULT_LATENCY),
         };
-        args.input.check_fs()?;
+        args.input.check_values(&args.bands)?;
         if latency > 16 {
             bail!("--latency {}: at most 16 samples", latency);
         }
@@ -359,7 +382,7 @@ impl DesignSetup {
         let r = args.input.noise_variances(&frf)?;
         // With the harmonic prior, --spindle-rpm/--teeth place the prior's
         // lines, not fitting bands: the design covers the whole band.
-        let mut spec = args.bands.spec();
+        let mut spec = BandSpec { max_force_n: Some(args.input.max_force), ..args.bands.spec() };
         if args.prior.force_prior == ForcePrior::Harmonics {
             spec.tooth_passing = None;
         }
@@ -392,8 +415,41 @@ impl DesignSetup {
     }
 }
 
+/// Most teeth of a cutter `--teeth` takes.
+pub const MAX_TEETH: u32 = 100;
+/// Fastest spindle `--spindle-rpm` takes (rev/min).
+pub const MAX_SPINDLE_RPM: f64 = 200_000.0;
+
+/// `--spindle-rpm` in (0, 200000] and `--teeth` in 1..=100, where given.
+pub fn check_spindle(rpm: Option<f64>, teeth: Option<u32>) -> Result<()> {
+    if let Some(r) = rpm {
+        if !(r.is_finite() && r > 0.0 && r <= MAX_SPINDLE_RPM) {
+            bail!("--spindle-rpm {r}: the spindle speed must be above 0 and at most {MAX_SPINDLE_RPM} rev/min");
+        }
+    }
+    if let Some(z) = teeth {
+        if !(1..=MAX_TEETH).contains(&z) {
+            bail!("--teeth {z}: a cutter has 1 to {MAX_TEETH} teeth");
+        }
+    }
+    Ok(())
+}
+
+/// Refuse an `--out` (or its model sidecar) that is one of the inputs:
+/// writing it would destroy that input.
+pub fn check_outputs_are_not_inputs(args: &DesignArgs) -> Result<()> {
+    let sidecar = crate::offline::sidecar::sidecar_path(&args.out);
+    let outputs = [("--out", args.out.as_path()), ("the model sidecar of --out", sidecar.as_path())];
+    let mut inputs: Vec<(&str, &std::path::Path)> = args.input.frf.iter().map(|p| ("--frf", p.as_path())).collect();
+    inputs.extend(args.input.idle.as_deref().map(|p| ("--idle", p)));
+    inputs.extend(args.bands.bands_from.as_deref().map(|p| ("--bands-from", p)));
+    inputs.extend(args.prior.force_record.as_deref().map(|p| ("--force-record", p)));
+    crate::io::atomic::ensure_not_an_input(&outputs, &inputs)
+}
+
 /// Check the force-prior flags against the rest (before anything is read).
 pub fn check_prior_flags(args: &DesignArgs) -> Result<()> {
+    args.input.check_values(&args.bands)?;
     match args.prior.force_prior {
         ForcePrior::Harmonics => check_prior_args(args),
         ForcePrior::Spectrum | ForcePrior::Level => check_spectrum_args(args),
@@ -411,7 +467,7 @@ fn force_record(args: &DesignArgs) -> Result<Option<std::sync::Arc<ForceRecord>>
         return Ok(None);
     }
     let path = args.prior.force_record.as_ref().expect("checked by check_spectrum_args");
-    let rec = read_force_record(path, args.input.fs)?;
+    let rec = read_force_record(path, args.input.fs, args.input.max_force)?;
     let channels = [0, 1, 2].map(|a| rec.channel(a).map(|c| c.to_vec()));
     Ok(Some(std::sync::Arc::new(ForceRecord { source: path.display().to_string(), channels })))
 }
@@ -447,16 +503,17 @@ fn check_spectrum_args(args: &DesignArgs) -> Result<()> {
     Ok(())
 }
 
-/// Read a representative record (`--force-record`) sampled at `fs_hz`.
-pub fn read_force_record(path: &std::path::Path, fs_hz: f64) -> Result<crate::io::signal_csv::SignalRecord> {
-    let rec = crate::io::signal_csv::read_signal_csv(path)?;
-    if let Some((rate, _)) = rec.sample_rate_from_time() {
-        if (rate - fs_hz).abs() > 1e-6 * fs_hz {
-            bail!(
-                "{}: sampled at {rate:.1} Hz (column t_s), not at --fs {fs_hz}; record the cut at the box's rate",
-                path.display()
-            );
-        }
+/// Read a representative record (`--force-record`) sampled at `fs_hz`,
+/// its values within ±`full_scale_n` (N).
+pub fn read_force_record(
+    path: &std::path::Path,
+    fs_hz: f64,
+    full_scale_n: f64,
+) -> Result<crate::io::signal_csv::SignalRecord> {
+    let rec = crate::io::signal_csv::read_signal_csv_checked(path, full_scale_n)?;
+    if let Some(found) = rec.sample_rate_from_time() {
+        let why = "record the cut at the box's rate";
+        crate::io::signal::check_rate_against_fs(found, fs_hz, &path.display().to_string(), why)?;
     }
     Ok(rec)
 }

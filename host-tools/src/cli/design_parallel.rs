@@ -10,14 +10,15 @@ use crate::design::parallel::{design_parallel, design_regions};
 use crate::frf::axis_name;
 
 /// `dynocomp design --parallel`: design per band, write the parallel image
-/// atomically, print a summary per band.
-pub fn run(args: &DesignArgs, setup: &DesignSetup) -> Result<()> {
+/// atomically; returns the summary per band (text or JSON) for stdout.
+pub fn run(args: &DesignArgs, setup: &DesignSetup) -> Result<String> {
     let DesignSetup { frf, r, opts, bands, latency, sha, .. } = setup;
     let (latency, sha) = (*latency, *sha);
     let t0 = std::time::Instant::now();
     let per_band = design_parallel(frf, r, opts, bands).with_context(|| format!("{}", args.input.frf().display()))?;
     let image = build_parallel_image(&per_band, bands, args.input.fs as u32, latency, args.full_scale, sha)?;
     crate::io::image_file::write_parallel_image(&args.out, &image)?;
+    crate::offline::sidecar::remove_stale_sidecar(&args.out)?;
     let id = image.id();
     let method = args.method.name();
     let shown = args.out.display().to_string();
@@ -69,21 +70,18 @@ pub fn run(args: &DesignArgs, setup: &DesignSetup) -> Result<()> {
             "method": method,
             "design_time_s": t0.elapsed().as_secs_f64(),
         });
-        println!("{}", serde_json::to_string_pretty(&doc)?);
-    } else {
-        println!(
-            "parallel-elaboration image {shown} (id {id:08x}), OFFLINE ONLY (the box never runs it), {} bands:",
-            bands.len()
-        );
-        for (k, (b, ds)) in bands.iter().zip(&per_band).enumerate() {
-            println!("band {k}: {:.0}-{:.0} Hz ({})", b.lo_hz, b.hi_hz, b.label);
-            let sensitivities = crate::design::sensitivity::predict_all(ds, opts);
-            print!(
-                "{}",
-                crate::report::summary::render_summary(ds, &sensitivities, args.input.fs, latency, &shown, id, method)
-            );
-        }
-        eprintln!("designed in {:.0} ms", t0.elapsed().as_secs_f64() * 1e3);
+        return Ok(format!("{}\n", serde_json::to_string_pretty(&doc)?));
     }
-    Ok(())
+    let mut out = format!(
+        "parallel-elaboration image {shown} (id {id:08x}), OFFLINE ONLY (the box never runs it), {} bands:\n",
+        bands.len()
+    );
+    for (k, (b, ds)) in bands.iter().zip(&per_band).enumerate() {
+        out.push_str(&format!("band {k}: {:.0}-{:.0} Hz ({})\n", b.lo_hz, b.hi_hz, b.label));
+        let sensitivities = crate::design::sensitivity::predict_all(ds, opts);
+        let fs = args.input.fs;
+        out.push_str(&crate::report::summary::render_summary(ds, &sensitivities, fs, latency, &shown, id, method));
+    }
+    eprintln!("designed in {:.0} ms", t0.elapsed().as_secs_f64() * 1e3);
+    Ok(out)
 }

@@ -21,8 +21,8 @@ use crate::offline::sidecar::TwoStateJson;
 use crate::report::summary::render_summary;
 use crate::report::two_state::{RangeAxisJson, RangeJson};
 
-/// Run `design` with two FRFs.
-pub fn run(args: &DesignArgs) -> Result<()> {
+/// Run `design` with two FRFs; returns the summary (text or JSON) for stdout.
+pub fn run(args: &DesignArgs) -> Result<String> {
     let latency = check_args(args)?;
     let frfs = TwoFrfs::read(args)?;
     let r = args.input.noise_variances(&frfs.before)?;
@@ -31,7 +31,8 @@ pub fn run(args: &DesignArgs) -> Result<()> {
     let designs: Vec<AxisDesign> = axes.iter().map(|a| a.range.candidates[a.range.best].design.clone()).collect();
     let image = build_image(&designs, args.input.fs as u32, latency, args.full_scale, frfs.sha)?;
     write_image_and_sidecar(args, &image, &designs, &axes)?;
-    let sensitivities = crate::design::sensitivity::predict_all(&designs, &opts);
+    let mut sensitivities = crate::design::sensitivity::predict_all(&designs, &opts);
+    crate::design::sensitivity::set_line_spacing(&mut sensitivities, &frfs.before.freq_hz);
     render(args, &frfs.before, &axes, &designs, &sensitivities, &image, latency)
 }
 
@@ -52,7 +53,7 @@ fn check_args(args: &DesignArgs) -> Result<usize> {
     if latency > 16 {
         bail!("--latency {latency}: at most 16 samples");
     }
-    args.input.check_fs()?;
+    args.input.check_values(&args.bands)?;
     Ok(latency)
 }
 
@@ -128,7 +129,6 @@ fn write_image_and_sidecar(
     designs: &[AxisDesign],
     axes: &[RangeAxis],
 ) -> Result<()> {
-    io::image_file::write_image(&args.out, image)?;
     let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
     let mut sidecar = crate::offline::sidecar::ModelSidecar::new(image, &models);
     for a in axes {
@@ -136,7 +136,7 @@ fn write_image_and_sidecar(
             m.two_state = Some(a.sidecar.clone());
         }
     }
-    crate::offline::sidecar::write_sidecar(&args.out, &sidecar)
+    crate::offline::sidecar::write_image_and_sidecar(&args.out, image, Some(&sidecar))
 }
 
 /// The summary (text or JSON) and the report, with each axis's range plot.
@@ -148,7 +148,7 @@ fn render(
     sensitivities: &[Option<Sensitivity>],
     image: &CoeffImage,
     latency: usize,
-) -> Result<()> {
+) -> Result<String> {
     let shown = args.out.display().to_string();
     let mut summary = render_summary(designs, sensitivities, args.input.fs, latency, &shown, image.id(), "vf");
     for a in axes {
@@ -173,8 +173,7 @@ fn render(
         crate::report::design::write_report_with(dir, frf, designs, sensitivities, args.input.fs, &summary, &extra)?;
     }
     if !args.json {
-        print!("{summary}");
-        return Ok(());
+        return Ok(summary);
     }
     let j = RangeJson {
         image: shown,
@@ -189,6 +188,5 @@ fn render(
             .map(|(a, s)| RangeAxisJson::new(axis_name(a.axis), &a.range, s.clone()))
             .collect(),
     };
-    println!("{}", serde_json::to_string_pretty(&j)?);
-    Ok(())
+    Ok(format!("{}\n", serde_json::to_string_pretty(&j)?))
 }

@@ -27,6 +27,10 @@ pub struct FlashArgs {
     /// hardware.
     #[arg(long, conflicts_with = "serial")]
     pub dry_run: bool,
+    /// Show the probe's register traces (with --dry-run, the simulated
+    /// probe's); by default flash prints only what it does.
+    #[arg(short, long)]
+    pub verbose: bool,
 }
 
 /// Which slot `--slot` asks for.
@@ -55,7 +59,7 @@ pub fn run(a: &FlashArgs) -> Result<()> {
     match (&a.serial, a.probe || a.dry_run) {
         (Some(port), _) => crate::link::flash_serial::run(&a.image, port),
         #[cfg(feature = "probe")]
-        (None, true) => crate::link::flash_probe::run(&a.image, &a.chip, a.slot.into(), a.dry_run),
+        (None, true) => crate::link::flash_probe::run(&a.image, &a.chip, a.slot.into(), a.dry_run, a.verbose),
         #[cfg(not(feature = "probe"))]
         (None, true) => bail!("flash --probe: this dynocomp was built without the `probe` feature (probe-rs); rebuild with default features"),
         (None, false) => bail!("flash: give --probe (debug probe) or --serial PORT (USB)"),

@@ -21,6 +21,7 @@ pub fn run(args: &InspectArgs) -> Result<()> {
     let report = match read_any_image(&args.image)? {
         AnyImage::Inline(img) => inspect::report(&img),
         AnyImage::Parallel(p) => inspect::report_parallel(&p)?,
+        AnyImage::Matrix(m) => inspect::report_matrix(&m),
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);

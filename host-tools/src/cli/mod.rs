@@ -28,18 +28,22 @@ pub struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Design a compensator from a measured FRF and write its coefficient image.
+    #[command(allow_negative_numbers = true)]
     Design(design_args::DesignArgs),
     /// Compare the seed paper's method (whole band, band-fitted, parallel)
     /// with the default method on the same FRF: tables and plots.
+    #[command(allow_negative_numbers = true)]
     Compare(compare::CompareArgs),
     /// Show what a coefficient image holds.
     Inspect(inspect::InspectArgs),
     /// Compensate a recorded force file offline: bit-exact with the box, or
     /// band by band for a parallel-elaboration image, or with the zero-lag
     /// fixed-interval smoother (`--offline`).
+    #[command(allow_negative_numbers = true)]
     Compensate(compensate::CompensateArgs),
     /// Simulate a dynamometer, an impact test and a milling record with known
     /// true force (for demos and tests).
+    #[command(allow_negative_numbers = true)]
     Simulate(simulate::SimulateArgs),
     /// Write a coefficient image into the box: through a debug probe
     /// (--probe) or over the box's USB port (--serial PORT).

@@ -26,10 +26,11 @@ pub struct SimulateArgs {
     /// dynamometer is the preset's, not a random one.
     #[arg(long, value_name = "NAME")]
     pub preset: Option<String>,
-    /// Sample rate (Hz) [default: 51200].
+    /// Sample rate (Hz), 1000..=1000000 [default: 51200].
     #[arg(long)]
     pub fs: Option<f64>,
-    /// Length of the cutting record (s) [default: 1].
+    /// Length of the cutting record (s) [default: 1]. At most 2.5e7
+    /// internal samples (duration × fs × oversample: 60 s at 51.2 kHz).
     #[arg(long)]
     pub duration: Option<f64>,
     /// Length of the idle record (s) [default: 1].
@@ -45,10 +46,10 @@ pub struct SimulateArgs {
     /// sees it too).
     #[arg(long, default_value = "ideal", value_parser = clap::value_parser!(AntiAlias))]
     pub anti_alias: AntiAlias,
-    /// Spindle speed (rpm) [default: 4125].
+    /// Spindle speed (rpm), at most 200000 [default: 4125].
     #[arg(long)]
     pub spindle_rpm: Option<f64>,
-    /// Number of teeth [default: 4].
+    /// Number of teeth, 1..=100 [default: 4].
     #[arg(long)]
     pub teeth: Option<usize>,
     /// Tool diameter (mm) [default: 10].
@@ -93,13 +94,13 @@ pub struct SimulateArgs {
     /// ADC full scale ±N [default: 2000].
     #[arg(long)]
     pub adc_range: Option<f64>,
-    /// Impact test: number of frequency lines from 0 Hz [default: 4097].
+    /// Impact test: number of frequency lines from 0 Hz, at most 1048576 [default: 4097].
     #[arg(long)]
     pub frf_lines: Option<usize>,
     /// Impact test: line spacing (Hz) [default: 1].
     #[arg(long)]
     pub frf_df: Option<f64>,
-    /// Impact test: number of averaged impacts [default: 7].
+    /// Impact test: number of averaged impacts, at most 1000 [default: 7].
     #[arg(long)]
     pub impacts: Option<usize>,
     /// Impact test: hammer spectrum cutoff (Hz) [default: 3000].

@@ -38,6 +38,8 @@ pub fn run(args: &StreamArgs) -> Result<StreamReport> {
             bail!("--duration {d}: must be a positive number of seconds");
         }
     }
+    let port = std::path::Path::new(&args.serial);
+    crate::io::atomic::ensure_not_an_input(&[("--output", &args.output)], &[("--serial", port)])?;
     let mut link = Link::open(&args.serial)?;
     let (dur, n) = (args.duration, args.samples);
     let report = record(&mut link, args.decimation, &args.output, n, |got, t| {

@@ -499,7 +499,7 @@ pub fn probe_paper_fit(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> 
     let ss = paper::companion_form(&tf);
     diag.companion_condition = paper::condition_number(&ss.a);
     let (ae, _, ce) = paper::augmented(&ss);
-    let (rank, cond) = paper::observability(&ae, &ce);
+    let (rank, cond) = paper::observability(&ae, &ce)?;
     diag.observability_rank = rank;
     diag.observability_dim = ae.nrows();
     diag.observability_condition = cond;

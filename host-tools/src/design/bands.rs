@@ -386,6 +386,9 @@ pub struct BandSpec {
     pub bands: Vec<String>,
     /// A measured force record (signal CSV) whose spectral peaks are bands.
     pub bands_from: Option<std::path::PathBuf>,
+    /// Largest plausible force (N) of that record's values (`None`: the
+    /// default, [`crate::io::signal::DEFAULT_FULL_SCALE_N`]).
+    pub max_force_n: Option<f64>,
 }
 
 impl BandSpec {
@@ -408,7 +411,8 @@ impl BandSpec {
             out.push(parse_band(b)?);
         }
         if let Some(path) = &self.bands_from {
-            let rec = crate::io::signal_csv::read_signal_csv(path)?;
+            let full_scale = self.max_force_n.unwrap_or(crate::io::signal::DEFAULT_FULL_SCALE_N);
+            let rec = crate::io::signal_csv::read_signal_csv_checked(path, full_scale)?;
             let rate = match rec.sample_rate_from_time() {
                 Some((r, _)) => r,
                 None => fs_hz,

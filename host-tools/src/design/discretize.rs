@@ -516,7 +516,8 @@ impl LeastSquares {
         let g = self.gram.view((0, 0), (n, n)).into_owned();
         let (atb, btb) = &self.rhs[advance];
         let atb = atb.rows(0, n).into_owned();
-        let eig = g.clone().symmetric_eigenvalues();
+        // No convergence within the iteration limit: not a usable fit.
+        let eig = crate::fit::linalg::symmetric_eigenvalues(&g, "the normal equations of the discrete fit").ok()?;
         let (lmin, lmax) = (eig.min(), eig.max());
         // cond(A) = sqrt(cond(AᵀA)).
         let condition = (lmax / lmin).sqrt();

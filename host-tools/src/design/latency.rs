@@ -30,8 +30,7 @@ pub const FLAT_BAND_SHORT: f64 = 0.95;
 /// of distortion on a flat force even where their flat band reaches the top
 /// of the band: the smoother's own distortion near the band's top. Latency 8
 /// brings stiff axes from 2.2-3.0x to 1.05-1.09x their noise floor there
-/// (BENCHMARKS.md, "Looking further ahead where the design predicts missing
-/// the target"). The noise part is left out: an axis whose predicted error
+/// (BENCHMARKS.md, "The declared latency, chosen"). The noise part is left out: an axis whose predicted error
 /// is mostly noise (a weak force, `--force-prior level`) gains nothing from
 /// looking further ahead. Designs that predict less, like the bundled
 /// example's 0.02 % of distortion at 51.2 kHz, are designed once.

@@ -27,3 +27,4 @@ pub mod paper_orders;
 pub mod parallel;
 pub mod sensitivity;
 pub mod two_state;
+pub mod versus_default;

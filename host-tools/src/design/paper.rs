@@ -11,6 +11,7 @@ use serde::Serialize;
 use std::f64::consts::PI;
 
 use crate::design::kalman::KalmanDesign;
+use crate::fit::linalg;
 pub use crate::fit::rfp::condition_number;
 use crate::fit::rfp::RationalTf;
 use crate::numeric::lti::StateSpace;
@@ -101,8 +102,8 @@ pub fn augmented(ss: &ContinuousSs) -> (DMatrix<f64>, DVector<f64>, DVector<f64>
 /// Numerical rank and condition number of the observability matrix
 /// [C; C A; …; C A^{n−1}] with each row normalized (so the figure measures
 /// the loss of independence, not the growth of ‖A^k‖). Rank tolerance:
-/// σ_max · n · ε.
-pub fn observability(a: &DMatrix<f64>, c: &DVector<f64>) -> (usize, f64) {
+/// σ_max · n · ε. An error if the singular values do not converge.
+pub fn observability(a: &DMatrix<f64>, c: &DVector<f64>) -> Result<(usize, f64)> {
     let n = a.nrows();
     let mut o = DMatrix::<f64>::zeros(n, n);
     let mut row = c.transpose();
@@ -113,11 +114,11 @@ pub fn observability(a: &DMatrix<f64>, c: &DVector<f64>) -> (usize, f64) {
         }
         row = &row * a;
     }
-    let sv = o.singular_values();
+    let sv = linalg::singular_values(&o, "the observability matrix of the augmented system")?;
     let max = sv.iter().copied().fold(0.0, f64::max);
     let tol = max * n as f64 * f64::EPSILON;
     let rank = sv.iter().filter(|s| **s > tol).count();
-    (rank, condition_number(&o))
+    Ok((rank, condition_number(&o)))
 }
 
 /// Solution of the continuous filter Riccati equation (7).
@@ -180,7 +181,9 @@ pub fn solve_filter_care(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r
     let mut rhs = DMatrix::<f64>::zeros(2 * n, n);
     rhs.view_mut((0, 0), (n, n)).copy_from(&(-(&w11 + &id)));
     rhs.view_mut((n, 0), (n, n)).copy_from(&(-&w21));
-    let p = lhs.svd(true, true).solve(&rhs, 0.0).map_err(|e| anyhow::anyhow!("continuous Riccati: {e}"))?;
+    let p = linalg::svd(lhs, "continuous Riccati (7): the sign-function subspace")?
+        .solve(&rhs, 0.0)
+        .map_err(|e| anyhow::anyhow!("continuous Riccati: {e}"))?;
     let mut p = (&p + p.transpose()) * 0.5;
     let residual_of = |p: &DMatrix<f64>| {
         let pcp = p * &g * p;
@@ -209,7 +212,10 @@ pub fn solve_filter_care(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r
     }
     let k = &p * c / r;
     let closed = a - &k * c.transpose();
-    let max_re = closed.complex_eigenvalues().iter().map(|z| z.re).fold(f64::NEG_INFINITY, f64::max);
+    let max_re = linalg::eigenvalues(&closed, "continuous Riccati (7): A_e − K C_e")?
+        .iter()
+        .map(|z| z.re)
+        .fold(f64::NEG_INFINITY, f64::max);
     if !(max_re < 0.0) {
         bail!("continuous Riccati (7): A_e − K C_e is not Hurwitz (max Re λ = {max_re:.3e}); the augmented system is not detectable");
     }
@@ -296,7 +302,7 @@ pub fn design(
     let ss = companion_form(tf);
     diag.companion_condition = condition_number(&ss.a);
     let (ae, gamma, ce) = augmented(&ss);
-    let (rank, ocond) = observability(&ae, &ce);
+    let (rank, ocond) = observability(&ae, &ce)?;
     diag.observability_rank = rank;
     diag.observability_dim = ae.nrows();
     diag.observability_condition = ocond;
@@ -325,7 +331,7 @@ pub fn design(
     c0[n - 1] = 1.0;
     let comp = ContinuousSs { a: &ae - &k * ce.transpose(), b: k.clone(), c: c0, d: 0.0 };
     let disc = tustin_prewarped(&comp, w0 / fs_hz, 2.0 * PI * prewarp_hz / w0)?;
-    let radius = disc.spectral_radius();
+    let radius = disc.spectral_radius()?;
     if !(radius < 1.0) {
         bail!("discretized compensator is not stable (spectral radius {radius:.9})");
     }

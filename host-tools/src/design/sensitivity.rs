@@ -48,6 +48,21 @@ pub struct Sensitivity {
     pub one_percent_below_pct: Option<f64>,
     /// The same upward.
     pub one_percent_above_pct: Option<f64>,
+    /// Line spacing of the measured FRF (Hz), for the advice in Hz
+    /// ([`set_line_spacing`]); `None` until set.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frf_line_spacing_hz: Option<f64>,
+}
+
+/// Record the FRF's line spacing (the median step of `freq_hz`) in every
+/// sensitivity, for the advice in Hz ([`Sensitivity::advice`]).
+pub fn set_line_spacing(sensitivities: &mut [Option<Sensitivity>], freq_hz: &[f64]) {
+    let mut steps: Vec<f64> = freq_hz.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+    steps.sort_by(f64::total_cmp);
+    let spacing = steps.get(steps.len() / 2).copied();
+    for s in sensitivities.iter_mut().flatten() {
+        s.frf_line_spacing_hz = spacing;
+    }
 }
 
 impl Sensitivity {
@@ -69,6 +84,28 @@ impl Sensitivity {
         smaller(self.one_percent_below_pct, self.one_percent_above_pct)
     }
 
+    /// The shift of `pct` % in quantities a user acts on: Hz at the lowest
+    /// sensor mode against the FRF's line spacing, and the change of the
+    /// workpiece's mass that causes it. **Assumption (stated):** the mode
+    /// is loaded by the workpiece's mass at constant stiffness, f ∝ 1/√m,
+    /// so Δm/m ≈ −2·Δf/f.
+    fn in_units(&self, pct: f64) -> String {
+        let Some(f) = self.sensor_modes_hz.iter().copied().reduce(f64::min) else { return String::new() };
+        let hz = f * pct / 100.0;
+        let lines = match self.frf_line_spacing_hz {
+            Some(df) if hz < df => format!(
+                ", below the FRF's line spacing of {df:.3} Hz: a shift the FRF cannot resolve costs that much; \
+                 design for both states (`--frf BEFORE --frf AFTER`) or follow the change offline (`compensate --offline --drift`)"
+            ),
+            Some(df) => format!(", {:.1} lines of the FRF ({df:.3} Hz)", hz / df),
+            None => String::new(),
+        };
+        format!(
+            ": {hz:.2} Hz at the {f:.0} Hz mode{lines}; a workpiece mass change of about {:.2} % (Δm/m ≈ −2·Δf/f for a mode loaded by its mass)",
+            2.0 * pct
+        )
+    }
+
     /// The sentence a user acts on.
     pub fn advice(&self) -> String {
         let one = match self.one_percent_pct() {
@@ -79,10 +116,12 @@ impl Sensitivity {
         };
         match self.remeasure_pct() {
             Some(x) => format!(
-                "re-measure the FRF when the sensor modes may have moved by more than {} (predicted error doubles at {} / {}){one}",
+                "re-measure the FRF when the sensor modes may have moved by more than {} (predicted error doubles, to {:.2} %, at {} / {}){}{one}",
                 fmt_mag(x),
+                200.0 * self.nominal,
                 fmt_pct(self.doubles_below_pct),
-                fmt_pct(self.doubles_above_pct)
+                fmt_pct(self.doubles_above_pct),
+                self.in_units(x)
             ),
             None => "the predicted error does not double for sensor-mode shifts within ±5 %".to_string(),
         }
@@ -242,6 +281,7 @@ pub fn predict(d: &AxisDesign, opts: &DesignOptions) -> Option<Sensitivity> {
         one_percent_above_pct: crossing(points[mid..].iter(), one, &err),
         points,
         nominal,
+        frf_line_spacing_hz: None,
     })
 }
 

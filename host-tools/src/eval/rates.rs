@@ -15,7 +15,7 @@ use std::time::Instant;
 use crate::design::axis::DesignOptions;
 use crate::design::image::build_image;
 use crate::io::signal_csv::SignalRecord;
-use crate::metrics::{accuracy, sample_variance};
+use crate::metrics::{accuracy, accuracy_as_written, sample_variance, AsWritten};
 use crate::offline::compensate::compensate_record;
 use crate::simulate::{
     simulate_with, Chatter, Dynamometer, Mode, ModeRanges, MultiAxisDynamometer, SimOutput, SimParams,
@@ -266,6 +266,9 @@ pub struct AxisScore {
     pub flat_band_hz: (f64, f64),
     /// Wall time of the axis's design (s).
     pub design_s: f64,
+    /// The compensated force as written against the anti-aliased truth,
+    /// beside a perfect band-limited estimate (None if the design failed).
+    pub as_written: Option<AsWritten>,
     /// Shape of the axis's filter on the box (None if the design failed).
     pub shape: Option<dynocomp_core::budget::AxisShape>,
 }
@@ -386,6 +389,7 @@ fn score_sim_with(
             None => Err(anyhow::anyhow!("no FRF for axis {a}")),
         };
         let shape = designed.as_ref().ok().map(|d| dynocomp_core::budget::AxisShape::of(&d.filter));
+        let mut as_written = None;
         let (comp_nrmse, predicted_error, flat_band_hz) = match designed {
             Err(e) => (Err(format!("{e:#}")), f64::NAN, (f64::NAN, f64::NAN)),
             Ok(d) => {
@@ -395,9 +399,9 @@ fn score_sim_with(
                 });
                 let nrmse = comp
                     .and_then(|out| {
-                        out.channel(a)
-                            .map(|c| accuracy(c, &s.truth[a], fs, band).nrmse)
-                            .ok_or_else(|| anyhow::anyhow!("axis {a} missing"))
+                        let c = out.channel(a).ok_or_else(|| anyhow::anyhow!("axis {a} missing"))?;
+                        as_written = Some(accuracy_as_written(c, &s.truth[a], fs, band));
+                        Ok(accuracy(c, &s.truth[a], fs, band).nrmse)
                     })
                     .map_err(|e| format!("{e:#}"));
                 (nrmse, d.predicted_error, d.flat_band_hz)
@@ -412,6 +416,7 @@ fn score_sim_with(
             flat_band_hz,
             design_s,
             shape,
+            as_written,
         });
     }
     CaseResult { case: name, fs_hz: fs, band_hz: band, axes, latency }

@@ -150,6 +150,15 @@ pub fn newton_per_unit(unit: &str) -> Option<f64> {
 /// a wrong data type: 10⁹ N and more). A value beyond it is an input error.
 pub const DEFAULT_FULL_SCALE_N: f64 = 1.0e5;
 
+/// `--max-force N`, checked: a positive number of newtons (`inf`: only
+/// finite values are required).
+pub fn check_max_force(n: f64) -> Result<f64> {
+    if !(n > 0.0) {
+        bail!("--max-force {n}: the full scale must be a positive force in N");
+    }
+    Ok(n)
+}
+
 /// Whether `v` is a plausible force for the bound `full_scale_n` (N): finite
 /// and |v| ≤ full scale (false for NaN).
 #[inline]
@@ -234,6 +243,22 @@ pub fn check_rate_value(fs_hz: u32, found: (f64, f64), source: &str, what: &str)
     }
     if jitter > 0.01 {
         bail!("{source}: {what} is not uniformly spaced (a step deviates {:.1} % from the mean)", jitter * 100.0);
+    }
+    Ok(())
+}
+
+/// Check the rate `found` in the `t_s` column of the record `source`
+/// against `--fs` (Hz), for a record that must be sampled at the box's
+/// rate (`why` says what for): off by more than [`FS_TOLERANCE`] or
+/// unevenly spaced is an error naming the file and both rates.
+pub fn check_rate_against_fs(found: (f64, f64), fs_hz: f64, source: &str, why: &str) -> Result<()> {
+    let (fs, jitter) = found;
+    let off = ((fs - fs_hz) / fs_hz).abs();
+    if off.is_nan() || off > FS_TOLERANCE {
+        bail!("{source}: sampled at {fs:.1} Hz (column t_s), not at --fs {fs_hz} Hz; {why}");
+    }
+    if jitter > 0.01 {
+        bail!("{source}: column t_s is not uniformly spaced (a step deviates {:.1} % from the mean)", jitter * 100.0);
     }
     Ok(())
 }

@@ -13,7 +13,7 @@ use crate::io::uff_signal::{UffReader, UffWriter};
 /// File formats of force records.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum SignalFormat {
-    /// Signal CSV (DESIGN.md).
+    /// Signal CSV: columns [t_s,] fx, fy, fz in N (README "File formats").
     Csv,
     /// UFF dataset 58 time histories, ASCII (values as E20.12).
     Uff,

@@ -577,7 +577,7 @@ impl<'w> UffWriter<'w> {
     /// What follows a dataset's `n` values: the newline of a short last
     /// ASCII line, and the line that ends the dataset.
     fn data_end(&self, n: u64) -> &'static [u8] {
-        if !self.binary && n % 4 > 0 {
+        if !self.binary && !n.is_multiple_of(4) {
             b"\n    -1\n"
         } else {
             b"    -1\n"
@@ -590,7 +590,7 @@ impl<'w> UffWriter<'w> {
         if self.binary {
             8 * n
         } else {
-            n / 4 * ASCII_LINE + if n % 4 > 0 { n % 4 * ASCII_VALUE + 1 } else { 0 }
+            n / 4 * ASCII_LINE + if n.is_multiple_of(4) { 0 } else { n % 4 * ASCII_VALUE + 1 }
         }
     }
 

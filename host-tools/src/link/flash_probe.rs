@@ -12,7 +12,7 @@
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
-use dynocomp_core::image::{CoeffImage, CRC32};
+use dynocomp_core::image::{BoxImage, CRC32};
 use dynocomp_core::protocol::SlotInfo;
 use dynocomp_core::shell::Slot;
 use dynocomp_core::store::{
@@ -57,7 +57,7 @@ pub struct FlashPlan {
     pub seq: u32,
     /// The record bytes (header + image + 0xFF padding).
     pub record: Vec<u8>,
-    /// The image id as `inspect` and the box's status show it (`CoeffImage::id`,
+    /// The image id as `inspect` and the box's status show it (`BoxImage::id`,
     /// the image's trailing CRC).
     pub image_id: u32,
 }
@@ -71,7 +71,7 @@ pub fn slot_address(slot: Slot) -> u64 {
 }
 
 /// Read and verify an image file for the box; the error names the file.
-pub fn read_box_image(path: &Path) -> Result<(Vec<u8>, CoeffImage)> {
+pub fn read_box_image(path: &Path) -> Result<(Vec<u8>, BoxImage)> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
     use dynocomp_core::protocol::LinkError;
     use dynocomp_core::sample::BypassReason;
@@ -88,7 +88,7 @@ pub fn read_box_image(path: &Path) -> Result<(Vec<u8>, CoeffImage)> {
             dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE / 10
         ),
         e => anyhow::anyhow!(
-            "{}: not a valid coefficient image for the box ({e:?}); nothing was written — re-run `dynocomp design` or check the file",
+            "{}: not a valid coefficient image for the box ({e}); nothing was written — re-run `dynocomp design` or check the file",
             path.display()
         ),
     })?;
@@ -108,7 +108,7 @@ pub fn running_slot(slots: &[u8]) -> Result<Option<SlotInfo>> {
     let mut flash = SimFlash::g474_slots();
     flash.bytes_mut().copy_from_slice(slots);
     let mut store =
-        Store::open(flash, Layout::STM32G474RE).map_err(|e| anyhow::anyhow!("store layout refused: {e:?}"))?;
+        Store::open(flash, Layout::STM32G474RE).map_err(|e| anyhow::anyhow!("store layout refused: {e}"))?;
     Ok(store.boot().active)
 }
 
@@ -153,8 +153,8 @@ pub fn plan(image: &[u8], slot: SlotArg, slots: &[u8]) -> Result<FlashPlan> {
     }
     let seq = newest_seq.map_or(1, |s| s.wrapping_add(1));
     let mut record = vec![0xFF; SLOT_LEN as usize];
-    let n = encode_record(image, seq, &mut record)
-        .map_err(|e| anyhow::anyhow!("image does not fit a slot record: {e:?}"))?;
+    let n =
+        encode_record(image, seq, &mut record).map_err(|e| anyhow::anyhow!("image does not fit a slot record: {e}"))?;
     record.truncate(n);
     Ok(FlashPlan { slot: target, address: slot_address(target), seq, record, image_id: trailing_id(image) })
 }
@@ -220,7 +220,7 @@ fn real_session(chip: &str) -> Result<Session> {
 /// One-line description of a plan.
 pub fn describe(plan: &FlashPlan) -> String {
     format!(
-        "slot {:?} at {:#010x}: record of {} bytes (image id {:#010x}, sequence {})",
+        "slot {} at {:#010x}: record of {} bytes (image id {:#010x}, sequence {})",
         plan.slot,
         plan.address,
         plan.record.len(),
@@ -254,8 +254,53 @@ pub fn describe(plan: &FlashPlan) -> String {
 /// A, sequence 1. A power cut or a pulled cable during step 4 leaves a record
 /// whose CRC or commit word does not check out; the box then boots the other
 /// slot (or bypass).
-pub fn run(image: &Path, chip: &str, slot: SlotArg, dry_run: bool) -> Result<()> {
-    run_with(image, chip, slot, dry_run, real_session)
+pub fn run(image: &Path, chip: &str, slot: SlotArg, dry_run: bool, verbose: bool) -> Result<()> {
+    // probe-rs's fake probe prints every register access on stdout (about 56
+    // lines): shown only with --verbose.
+    let quiet = (dry_run && !verbose).then(StdoutSilenced::new);
+    let result = run_with(image, chip, slot, dry_run, real_session);
+    drop(quiet);
+    let summary = result?;
+    println!("{summary}");
+    Ok(())
+}
+
+/// Stdout sent to /dev/null while it lives (the process's file descriptor
+/// 1, which a library's `println!` writes to), restored on drop. Does
+/// nothing where that is not possible.
+struct StdoutSilenced {
+    #[cfg(unix)]
+    saved: Option<std::os::fd::OwnedFd>,
+}
+
+impl StdoutSilenced {
+    fn new() -> Self {
+        use std::io::Write;
+        let _ = std::io::stdout().flush();
+        #[cfg(unix)]
+        {
+            use std::os::fd::AsFd;
+            let null = std::fs::OpenOptions::new().write(true).open("/dev/null").ok();
+            let saved = null.and_then(|null| {
+                let saved = nix::unistd::dup(std::io::stdout().as_fd()).ok()?;
+                nix::unistd::dup2_stdout(&null).ok().map(|()| saved)
+            });
+            StdoutSilenced { saved }
+        }
+        #[cfg(not(unix))]
+        StdoutSilenced {}
+    }
+}
+
+impl Drop for StdoutSilenced {
+    fn drop(&mut self) {
+        use std::io::Write;
+        let _ = std::io::stdout().flush();
+        #[cfg(unix)]
+        if let Some(saved) = &self.saved {
+            let _ = nix::unistd::dup2_stdout(saved);
+        }
+    }
 }
 
 #[cfg(feature = "probe")]
@@ -267,7 +312,7 @@ pub fn run_with(
     slot: SlotArg,
     dry_run: bool,
     open: impl FnOnce(&str) -> Result<Session>,
-) -> Result<()> {
+) -> Result<String> {
     let (bytes, img) = read_box_image(image)?;
     let mut session = if dry_run { fake_session(chip)? } else { open(chip)? };
     // The fake probe has no flash contents (it reads zeros and logs every
@@ -277,19 +322,18 @@ pub fn run_with(
     execute(&mut session, &plan, dry_run)?;
     if dry_run {
         // probe-rs's fake probe logs its register accesses on stdout, also
-        // when the session closes: close it first so the plan is the last line.
+        // when the session closes: close it first so the plan comes last.
         drop(session);
-        println!(
+        Ok(format!(
             "dry run (fake probe, nothing written): would write {} to {chip}, fs = {} Hz; the slots were not read (erased assumed)",
             describe(&plan),
-            img.fs_hz
-        );
+            img.fs_hz()
+        ))
     } else {
         session
             .core(0)
             .and_then(|mut core| core.reset())
             .context("written and verified, but the reset failed: reset the box by hand")?;
-        println!("wrote and verified {} on {chip}; box reset, it boots the newest valid slot", describe(&plan));
+        Ok(format!("wrote and verified {} on {chip}; box reset, it boots the newest valid slot", describe(&plan)))
     }
-    Ok(())
 }

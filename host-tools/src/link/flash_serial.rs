@@ -74,9 +74,9 @@ pub fn run(image: &Path, port: &str) -> Result<()> {
         before.firmware[1],
         before.firmware[2],
         fmt_id(before.image.map(|i| i.id)),
-        before.bypass.map_or("compensating".to_string(), |r| format!("bypass: {r:?}"))
+        before.bypass.map_or("compensating".to_string(), |r| format!("bypass: {r}"))
     );
-    eprintln!("uploading {} ({} bytes, {} Hz, id {:#010x})", image.display(), bytes.len(), img.fs_hz, img.id());
+    eprintln!("uploading {} ({} bytes, {} Hz, id {:#010x})", image.display(), bytes.len(), img.fs_hz(), img.id());
     let mut last_pct = usize::MAX;
     let up = upload(&mut link, &bytes, |sent, total| {
         let pct = sent * 100 / total.max(1);
@@ -85,7 +85,7 @@ pub fn run(image: &Path, port: &str) -> Result<()> {
             last_pct = pct;
         }
     })?;
-    let slot = up.status.active.map(|a| format!("slot {:?}, sequence {}", a.slot, a.seq)).unwrap_or_default();
+    let slot = up.status.active.map(|a| format!("slot {}, sequence {}", a.slot, a.seq)).unwrap_or_default();
     eprintln!("box verified and switched to image {:#010x} ({slot})", up.image_id);
     Ok(())
 }

@@ -54,10 +54,12 @@ pub fn open_port(path: &str) -> Result<Box<dyn Transport>> {
             Err(e) if e.description.contains("lock") && start.elapsed() < PORT_BUSY_WAIT => {
                 std::thread::sleep(Duration::from_millis(50))
             }
-            Err(e) if e.description.contains("lock") => return Err(anyhow::anyhow!(
+            Err(e) if e.description.contains("lock") => {
+                return Err(anyhow::anyhow!(
                 "{path}: cannot open serial port: {e} (busy for {} s: another program holds it; close it and retry)",
                 PORT_BUSY_WAIT.as_secs()
-            )),
+            ))
+            }
             Err(e) => return Err(anyhow::Error::new(e).context(format!("{path}: cannot open serial port"))),
         }
     }
@@ -99,7 +101,7 @@ impl Link {
         self.next_id = self.next_id.wrapping_add(1).max(1);
         let mut buf = [0u8; MAX_FRAME];
         let n = encode_frame(&RequestFrame { id, request }, &mut buf)
-            .map_err(|e| anyhow!("{}: request does not fit a frame: {e:?}", self.name))?;
+            .map_err(|e| anyhow!("{}: request does not fit a frame: {e}", self.name))?;
         self.send_raw(&buf[..n])?;
         Ok(id)
     }
@@ -175,7 +177,7 @@ impl Link {
         match self.request(request)? {
             Reply::Ack => Ok(()),
             Reply::Error(e) => bail!("{}: box refused {}: {}", self.name, request_name(&request), describe_error(&e)),
-            other => bail!("{}: unexpected reply to {}: {other:?}", self.name, request_name(&request)),
+            other => bail!("{}: unexpected reply to {}: {}", self.name, request_name(&request), reply_name(&other)),
         }
     }
 
@@ -187,7 +189,7 @@ impl Link {
             }
             Reply::Status(s) => Ok(s),
             Reply::Error(e) => bail!("{}: status request refused: {}", self.name, describe_error(&e)),
-            other => bail!("{}: unexpected reply to GetStatus: {other:?}", self.name),
+            other => bail!("{}: unexpected reply to GetStatus: {}", self.name, reply_name(&other)),
         }
     }
 }
@@ -214,10 +216,19 @@ pub fn request_name(r: &Request<'_>) -> &'static str {
     }
 }
 
+/// Name of a reply for messages.
+fn reply_name(r: &Reply) -> &'static str {
+    match r {
+        Reply::Ack => "an acknowledgement",
+        Reply::Status(_) => "a status",
+        Reply::Error(_) => "an error",
+    }
+}
+
 /// One-line explanation of a box error.
 pub fn describe_error(e: &LinkError) -> String {
     match e {
-        LinkError::Frame(f) => format!("the box could not read our frame ({f:?})"),
+        LinkError::Frame(f) => format!("the box could not read our frame ({f})"),
         LinkError::Malformed => "the box could not decode our message (protocol version mismatch?)".into(),
         LinkError::NoUpload => "no upload in progress".into(),
         LinkError::BadDecimation => "decimation must be at least 1".into(),
@@ -229,8 +240,8 @@ pub fn describe_error(e: &LinkError) -> String {
             format!("image corrupted in transfer: CRC {computed:#010x} read back, {declared:#010x} declared")
         }
         LinkError::Image(i) => format!("invalid image: {i}"),
-        LinkError::NotRunnable(r) => format!("the box cannot run this image: {r:?}"),
-        LinkError::Flash(f) => format!("flash write failed: {f:?}"),
+        LinkError::NotRunnable(r) => format!("the box cannot run this image: {r}"),
+        LinkError::Flash(f) => format!("flash write failed: {f}"),
         LinkError::UploadAborted => "the upload was aborted; start again".into(),
     }
 }
@@ -238,6 +249,28 @@ pub fn describe_error(e: &LinkError) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every box error reads as words, not as Rust's debug form of the
+    /// error value (`Image(BadCrc { stored: … })`, `NotAligned`).
+    #[test]
+    fn box_errors_read_as_words() {
+        use dynocomp_core::image::ImageError;
+        use dynocomp_core::protocol::{FlashFault, FrameError};
+        use dynocomp_core::sample::BypassReason;
+        let errors = [
+            LinkError::Frame(FrameError::Cobs),
+            LinkError::Image(ImageError::BadCrc { stored: 1, computed: 2 }),
+            LinkError::NotRunnable(BypassReason::InvalidImage(ImageError::BadCrc { stored: 1, computed: 2 })),
+            LinkError::NotRunnable(BypassReason::OfflineOnly),
+            LinkError::Flash(FlashFault::NotAligned),
+        ];
+        for e in &errors {
+            let text = describe_error(e);
+            let debug = format!("{e:?}");
+            let leaf = debug.rsplit('(').next().unwrap().trim_end_matches(')').to_string();
+            assert!(!text.contains('{') && !text.contains(&leaf), "{e:?}: {text}");
+        }
+    }
 
     /// A transport that answers every read with canned bytes once.
     struct Canned(std::io::Cursor<Vec<u8>>);

@@ -216,10 +216,8 @@ pub fn record(
 ) -> Result<StreamReport> {
     let status = link.status()?;
     let Some(image) = status.image else {
-        bail!(
-            "the box runs no image ({:?}): no scaling to convert codes to newtons; flash an image first",
-            status.bypass
-        );
+        let why = status.bypass.map_or_else(|| "no reason given".to_string(), |r| r.to_string());
+        bail!("the box runs no image ({why}): no scaling to convert codes to newtons; flash an image first");
     };
     let fs = status.fs_hz;
     let dec = decimation.unwrap_or_else(|| fs.div_ceil(DEFAULT_STREAM_RATE).clamp(1, u32::from(u16::MAX)) as u16);

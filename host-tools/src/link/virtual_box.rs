@@ -14,7 +14,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use dynocomp_core::handoff::ImageHandoff;
-use dynocomp_core::image::CoeffImage;
+use dynocomp_core::image::BoxImage;
 use dynocomp_core::link::{Actions, BoxLink, Telemetry};
 use dynocomp_core::protocol::{
     encode_frame, BoxMessage, FrameDecoder, StatusCounters, StreamBatcher, StreamSample, MAX_FRAME,
@@ -58,7 +58,7 @@ pub struct VirtualBox {
     link: BoxLink,
     decoder: FrameDecoder,
     /// Two image buffers and the handoff between "USB task" and "interrupt".
-    images: [Option<CoeffImage>; 2],
+    images: [Option<BoxImage>; 2],
     handoff: ImageHandoff,
     boot_reason: BypassReason,
     user_bypass: bool,
@@ -74,8 +74,7 @@ impl VirtualBox {
     /// Boot from `flash`; stream frames whose sequence numbers are in `drop`
     /// are never sent (simulated loss on the link).
     pub fn boot(flash: SimFlash, drop: impl IntoIterator<Item = u32>) -> Result<VirtualBox> {
-        let mut store =
-            Store::open(flash, Layout::STM32G474RE).map_err(|e| anyhow::anyhow!("simulated flash: {e:?}"))?;
+        let mut store = Store::open(flash, Layout::STM32G474RE).map_err(|e| anyhow::anyhow!("simulated flash: {e}"))?;
         let boot = store.boot();
         let (image, boot_reason) = match boot.image {
             Ok(img) => (Some(img), BypassReason::NoImage),
@@ -114,7 +113,7 @@ impl VirtualBox {
     }
 
     /// The image the sample path runs.
-    pub fn running(&self) -> Option<&CoeffImage> {
+    pub fn running(&self) -> Option<&BoxImage> {
         self.images[self.handoff.active()].as_ref()
     }
 
@@ -127,7 +126,7 @@ impl VirtualBox {
     }
 
     fn fs_hz(&self) -> u32 {
-        self.running().map_or(DEFAULT_FS_HZ, |i| i.fs_hz)
+        self.running().map_or(DEFAULT_FS_HZ, |i| i.fs_hz())
     }
 
     /// Telemetry without the image (the caller adds it).
@@ -147,7 +146,7 @@ impl VirtualBox {
                 samples: c.samples,
                 overruns: c.overruns,
                 saturated: c.saturated,
-                nonfinite_resets: self.state.axes.map(|a| a.nonfinite_resets),
+                nonfinite_resets: self.state.nonfinite_resets(),
                 stream_dropped: 0,
                 isr_cycles_last: 0,
                 isr_cycles_max: 0,

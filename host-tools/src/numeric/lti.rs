@@ -164,9 +164,12 @@ impl StateSpace {
         None
     }
 
-    /// Largest eigenvalue modulus of A.
-    pub fn spectral_radius(&self) -> f64 {
-        self.a.complex_eigenvalues().iter().map(|z| z.norm()).fold(0.0, f64::max)
+    /// Largest eigenvalue modulus of A; an error if the eigenvalue
+    /// iteration does not converge within its limit
+    /// ([`crate::fit::linalg::eigenvalues`]).
+    pub fn spectral_radius(&self) -> anyhow::Result<f64> {
+        let eig = crate::fit::linalg::eigenvalues(&self.a, "the compensator's state matrix A")?;
+        Ok(eig.iter().map(|z| z.norm()).fold(0.0, f64::max))
     }
 }
 
@@ -242,23 +245,32 @@ impl MimoStateSpace {
     /// W = A W Aᵀ + B Bᵀ by Smith doubling. `None` when A is not stable or
     /// the doubling does not converge in 64 steps.
     pub fn white_noise_gains(&self) -> Option<Vec<f64>> {
-        let mut ak = self.a.clone();
-        let mut w = &self.b * self.b.transpose();
-        for _ in 0..64 {
-            let step = &ak * &w * ak.transpose();
-            // Largest entries, not the Frobenius norm: that overflows on a
-            // diverging Gramian before its entries do.
-            let done = step.amax() <= 1e-15 * w.amax().max(f64::MIN_POSITIVE);
-            w += step;
-            if !w.iter().all(|v| v.is_finite()) {
-                return None;
-            }
-            if done {
-                let g = &self.d * self.d.transpose() + &self.c * &w * self.c.transpose();
-                return (0..g.nrows()).map(|i| (g[(i, i)] >= 0.0).then(|| g[(i, i)].sqrt())).collect();
-            }
-            ak = &ak * &ak;
-        }
-        None
+        let w = stein_smith(&self.a, &self.b * self.b.transpose())?;
+        let g = &self.d * self.d.transpose() + &self.c * &w * self.c.transpose();
+        (0..g.nrows()).map(|i| (g[(i, i)] >= 0.0).then(|| g[(i, i)].sqrt())).collect()
     }
+}
+
+/// The solution X of the Stein (discrete Lyapunov) equation X = A X Aᵀ + W
+/// by Smith doubling (X ← X + A_k X A_kᵀ, A_k ← A_k²; X = Σ_k Aᵏ W Aᵏᵀ).
+/// `None` when A is not stable (the sum diverges) or the doubling does not
+/// converge in 64 steps (2⁶⁴ terms).
+pub fn stein_smith(a: &DMatrix<f64>, w: DMatrix<f64>) -> Option<DMatrix<f64>> {
+    let mut ak = a.clone();
+    let mut x = w;
+    for _ in 0..64 {
+        let step = &ak * &x * ak.transpose();
+        // Largest entries, not the Frobenius norm: that overflows on a
+        // diverging sum before its entries do.
+        let done = step.amax() <= 1e-15 * x.amax().max(f64::MIN_POSITIVE);
+        x += step;
+        if !x.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        if done {
+            return Some(x);
+        }
+        ak = &ak * &ak;
+    }
+    None
 }

@@ -36,22 +36,75 @@ pub fn compensate_record(
     raw_timing: bool,
     source: &str,
 ) -> Result<SignalRecord> {
+    let axes: Vec<usize> = rec.channels.iter().map(|c| c.0).collect();
+    // Room for the latency's held samples, added in place by the kernel run.
+    let room = usize::from(image.latency_samples);
+    let inputs = rec
+        .channels
+        .iter()
+        .map(|(_, x)| {
+            let mut v = Vec::with_capacity(x.len() + room);
+            v.extend(x.iter().map(|&u| u as f32));
+            v
+        })
+        .collect();
+    let outputs = compensate_f32(image, &axes, inputs, raw_timing, source)?;
+    Ok(SignalRecord { t_s: rec.t_s.clone(), channels: axes.into_iter().zip(outputs).collect() })
+}
+
+/// [`compensate_record`] on channels already in the box's input precision
+/// (f32, N): `inputs[c]` is the channel of axis `axes[c]` (0 = x), all of
+/// the same length; the outputs (N) in the same order, aligned as
+/// [`compensate_record`] aligns them. For callers whose samples are not a
+/// [`SignalRecord`] (e.g. arrays of another language): the one conversion
+/// to f32 is theirs, the kernel run is this one.
+pub fn compensate_f32(
+    image: &CoeffImage,
+    axes: &[usize],
+    inputs: Vec<Vec<f32>>,
+    raw_timing: bool,
+    source: &str,
+) -> Result<Vec<Vec<f64>>> {
+    let mut outputs: Vec<Vec<f64>> = inputs.iter().map(|u| vec![0.0; u.len()]).collect();
+    let mut sinks: Vec<&mut [f64]> = outputs.iter_mut().map(Vec::as_mut_slice).collect();
+    compensate_f32_into(image, axes, inputs, raw_timing, source, &mut sinks)?;
+    Ok(outputs)
+}
+
+/// [`compensate_f32`] writing channel c's outputs (N) into `outputs[c]`,
+/// which has its input's length: a caller's own buffer (e.g. an array of
+/// another language), written once.
+pub fn compensate_f32_into(
+    image: &CoeffImage,
+    axes: &[usize],
+    inputs: Vec<Vec<f32>>,
+    raw_timing: bool,
+    source: &str,
+    outputs: &mut [&mut [f64]],
+) -> Result<()> {
     let latency = if raw_timing { 0 } else { usize::from(image.latency_samples) };
-    let mut axes = Vec::with_capacity(rec.channels.len());
-    for (axis, samples) in &rec.channels {
-        axes.push((axis_filter(image, *axis, source)?, samples.as_slice()));
+    anyhow::ensure!(
+        outputs.len() == axes.len()
+            && inputs.len() == axes.len()
+            && inputs.iter().zip(&*outputs).all(|(u, o)| u.len() == o.len()),
+        "{source}: one output of its input's length per channel"
+    );
+    let mut jobs = Vec::with_capacity(axes.len());
+    for (axis, input) in axes.iter().zip(inputs) {
+        jobs.push((axis_filter(image, *axis, source)?, input));
     }
-    let mut channels = Vec::with_capacity(axes.len());
-    for ((axis, _), out) in rec.channels.iter().zip(run_axes(&axes, latency)) {
-        match out {
-            Ok(out) => channels.push((*axis, out)),
-            Err(k) => bail!(
+    for ((axis, y), out) in axes.iter().zip(run_kernel(jobs, latency)).zip(outputs.iter_mut()) {
+        if let Some(k) = y.iter().position(|v| !v.is_finite()) {
+            bail!(
                 "{source}: compensated f{} became non-finite at sample {k}; the image is unusable for this record",
                 axis_name(*axis)
-            ),
+            );
+        }
+        for (o, &v) in out.iter_mut().zip(&y[latency..]) {
+            *o = f64::from(v);
         }
     }
-    Ok(SignalRecord { t_s: rec.t_s.clone(), channels })
+    Ok(())
 }
 
 /// The image's compensator for the record's column of `axis`; an error
@@ -67,11 +120,19 @@ fn axis_filter<'a>(image: &'a CoeffImage, axis: usize, source: &str) -> Result<&
     }
 }
 
+/// Every axis through [`run_kernel`], inputs in f64, outputs without the
+/// first `latency`; Err(k): the first sample k (counting the fed samples)
+/// whose output is non-finite.
+#[cfg(test)]
+fn run_axes(axes: &[(&AxisFilter, &[f64])], latency: usize) -> Vec<Result<Vec<f64>, usize>> {
+    let inputs = axes.iter().map(|(f, x)| (*f, x.iter().map(|&u| u as f32).collect())).collect();
+    run_kernel(inputs, latency).iter().map(|y| drop_latency(y, latency)).collect()
+}
+
 /// Every axis through the core kernel's block path (bit-identical to stepping
 /// it sample by sample, as the box does), each input followed by `latency`
-/// copies of its last value and the first `latency` outputs dropped; the
-/// results in the order of `axes`. Err(k): the first sample k (counting the
-/// fed samples) whose output is non-finite.
+/// copies of its last value: the f32 outputs in the order of `axes`, each
+/// `latency` samples longer than its input (the first `latency` to drop).
 ///
 /// The axes are independent. Up to [`LOCKSTEP_AXES`] of them run in
 /// lockstep on this thread, one per vector lane ([`process_blocks`], the
@@ -80,36 +141,31 @@ fn axis_filter<'a>(image: &'a CoeffImage, axis: usize, source: &str) -> Result<&
 /// time of three in turn (BENCHMARKS.md). That beats giving axes threads of
 /// their own: on two cores, x and y in lockstep on one and z on the other
 /// took 1.24x as long as all three in lockstep on one.
-fn run_axes(axes: &[(&AxisFilter, &[f64])], latency: usize) -> Vec<Result<Vec<f64>, usize>> {
-    axes.chunks(LOCKSTEP_AXES).flat_map(|group| run_group(group, latency)).collect()
+fn run_kernel(mut axes: Vec<(&AxisFilter, Vec<f32>)>, latency: usize) -> Vec<Vec<f32>> {
+    axes.chunks_mut(LOCKSTEP_AXES).flat_map(|group| run_group(group, latency)).collect()
 }
 
-/// The axes of one group of [`run_axes`], in lockstep.
-fn run_group(group: &[(&AxisFilter, &[f64])], latency: usize) -> Vec<Result<Vec<f64>, usize>> {
-    let inputs: Vec<Vec<f32>> = group
-        .iter()
-        .map(|(_, samples)| {
-            let last = samples.last().copied().unwrap_or(0.0) as f32;
-            let mut input = Vec::with_capacity(samples.len() + latency);
-            input.extend(samples.iter().map(|&u| u as f32));
-            input.resize(samples.len() + latency, last);
-            input
-        })
-        .collect();
-    let mut outputs: Vec<Vec<f32>> = inputs.iter().map(|u| vec![0.0f32; u.len()]).collect();
+/// The axes of one group of [`run_kernel`], in lockstep; each input is
+/// extended in place by `latency` copies of its last value.
+fn run_group(group: &mut [(&AxisFilter, Vec<f32>)], latency: usize) -> Vec<Vec<f32>> {
+    for (_, input) in group.iter_mut() {
+        let last = input.last().copied().unwrap_or(0.0);
+        input.resize(input.len() + latency, last);
+    }
+    let mut outputs: Vec<Vec<f32>> = group.iter().map(|(_, u)| vec![0.0f32; u.len()]).collect();
     let mut states = vec![AxisState::default(); group.len()];
     let mut jobs: Vec<BlockJob<'_>> = group
         .iter()
-        .zip(&inputs)
         .zip(outputs.iter_mut().zip(states.iter_mut()))
-        .map(|(((filter, _), input), (output, state))| BlockJob { filter, state, input, output })
+        .map(|((filter, input), (output, state))| BlockJob { filter, state, input, output })
         .collect();
     process_blocks(&mut jobs);
-    outputs.iter().map(|y| drop_latency(y, latency)).collect()
+    outputs
 }
 
 /// The kernel's outputs as f64 without the first `latency`; Err(k): the
 /// first non-finite output k.
+#[cfg(test)]
 fn drop_latency(y: &[f32], latency: usize) -> Result<Vec<f64>, usize> {
     match y.iter().position(|v| !v.is_finite()) {
         Some(k) => Err(k),
@@ -124,8 +180,10 @@ fn drop_latency(y: &[f32], latency: usize) -> Result<Vec<f64>, usize> {
 /// per-sample `step` for any block lengths): the first `latency` outputs
 /// dropped and, at [`StreamCompensator::finish`], `latency` copies of the
 /// last input fed to produce the last `latency` outputs.
-pub struct StreamCompensator<'a> {
-    filters: Vec<&'a AxisFilter>,
+pub struct StreamCompensator {
+    /// The image's compensators of the record's channels (copies: a
+    /// compensator outlives the image it came from).
+    filters: Vec<AxisFilter>,
     states: Vec<AxisState>,
     axes: Vec<usize>,
     /// Outputs still to drop (the declared latency, at the start).
@@ -138,10 +196,10 @@ pub struct StreamCompensator<'a> {
     output: Vec<Vec<f32>>,
 }
 
-impl<'a> StreamCompensator<'a> {
+impl StreamCompensator {
     /// Compensators for the channels `axes` of a record from `source`.
-    pub fn new(image: &'a CoeffImage, axes: &[usize], raw_timing: bool, source: &str) -> Result<Self> {
-        let filters = axes.iter().map(|&axis| axis_filter(image, axis, source)).collect::<Result<Vec<_>>>()?;
+    pub fn new(image: &CoeffImage, axes: &[usize], raw_timing: bool, source: &str) -> Result<Self> {
+        let filters = axes.iter().map(|&axis| axis_filter(image, axis, source).cloned()).collect::<Result<Vec<_>>>()?;
         let latency = if raw_timing { 0 } else { usize::from(image.latency_samples) };
         let n = axes.len();
         Ok(StreamCompensator {

@@ -12,7 +12,7 @@ use crate::frf::axis_name;
 use crate::io::signal::ChannelMap;
 use crate::io::signal::{check_rate_value, read_all, Block, RateTracker, SignalReader, SignalWriter, BLOCK};
 use crate::io::signal_csv::SignalRecord;
-use crate::io::signal_file::{open_signal, writer_for, SignalFormat};
+use crate::io::signal_file::{open_signal_checked, writer_for, SignalFormat};
 use crate::offline::compensate::{compensate_parallel, StreamCompensator};
 use crate::offline::sidecar::{read_sidecar, sidecar_path, ModelSidecar};
 use crate::offline::smoother::{SpilledEstimate, SpilledPass};
@@ -60,7 +60,10 @@ pub struct RecordJob {
     pub input_path: PathBuf,
     /// The channel map the input was opened with.
     pub channels: Option<ChannelMap>,
-    /// The output file, written atomically.
+    /// The full scale the input was opened with (N): a second reading
+    /// checks its values against the same bound.
+    pub full_scale_n: f64,
+    /// The output file, written atomically (`-`: standard output).
     pub output: PathBuf,
     /// Its format.
     pub output_format: SignalFormat,
@@ -141,6 +144,7 @@ pub fn compensate_file(
         mut input,
         input_path,
         channels,
+        full_scale_n,
         output,
         output_format,
         raw_timing,
@@ -183,7 +187,7 @@ pub fn compensate_file(
             // time-varying smoother has no force model (and a two-state
             // design makes no prior).
             if priors.is_empty() || drift.is_some() {
-                let reading = Reading { input, path: &input_path, channels: channels.as_ref() };
+                let reading = Reading { input, path: &input_path, channels: channels.as_ref(), full_scale_n };
                 smooth_spilled(&image, &sidecar, drift, &priors, reading, &target, obs)
             } else {
                 let how = format!(
@@ -234,8 +238,8 @@ impl Target<'_> {
     ) -> Result<u64> {
         let (path, fs) = (self.output, f64::from(self.fs));
         let mut n = 0;
-        crate::io::atomic::write_atomic_file(path, |w, file| {
-            let mut writer = writer_for(self.format, w, Some(file), self.axes, has_time, len, fs, path)?;
+        crate::io::atomic::write_atomic_output(path, |w, file| {
+            let mut writer = writer_for(self.format, w, file, self.axes, has_time, len, fs, path)?;
             n = body(&mut *writer)?;
             writer.finish()
         })?;
@@ -376,11 +380,17 @@ fn compensate_box(
         }
     }
     let mut comp = StreamCompensator::new(image, target.axes, raw_timing, target.source)?;
-    let how = format!(
-        "box filter, latency {} samples{}, streamed in blocks of {BLOCK}",
-        image.latency_samples,
-        if raw_timing { ", not removed" } else { ", removed" }
-    );
+    let l = image.latency_samples;
+    let removed = match (raw_timing, l) {
+        (true, _) => ", not removed".to_string(),
+        (false, 0) => ", removed".to_string(),
+        // The fixed-lag smoother's last L estimates have no look-ahead: the
+        // last input is held in its place, so they are not accurate.
+        (false, l) => {
+            format!(", removed; the last {l} samples lack their look-ahead (last input held) and are less accurate")
+        }
+    };
+    let how = format!("box filter, latency {l} samples{removed}, streamed in blocks of {BLOCK}");
     let len = reader.len_hint();
     let samples = target.write(target.has_time, len, |w| stream_box(&mut *reader, &mut comp, w, target, observed))?;
     Ok(Compensated { samples, how })
@@ -394,7 +404,7 @@ fn compensate_box(
 /// rate. Returns the samples written.
 fn stream_box(
     reader: &mut dyn SignalReader,
-    comp: &mut StreamCompensator<'_>,
+    comp: &mut StreamCompensator,
     w: &mut dyn SignalWriter,
     target: &Target<'_>,
     observed: &mut Observed<'_>,
@@ -460,6 +470,8 @@ struct Reading<'a> {
     input: Box<dyn SignalReader>,
     path: &'a Path,
     channels: Option<&'a ChannelMap>,
+    /// The bound of its values (N).
+    full_scale_n: f64,
 }
 
 /// A smoother over a record of any length, in bounded memory: the
@@ -481,7 +493,8 @@ fn smooth_spilled(
         if input.spooled() { ", with the input (a pipe) for its second reading" } else { "" }
     );
     let source = target.source;
-    let spill = Spill { dir, reopen: &|| Ok(open_signal(reading.path, reading.channels)?.0) };
+    let (path, channels, full_scale) = (reading.path, reading.channels, reading.full_scale_n);
+    let spill = Spill { dir, reopen: &|| Ok(open_signal_checked(path, channels, full_scale)?.0) };
     match drift {
         Some((s0, s1)) => {
             let how = format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only; forward pass and covariance checkpoints {spilled})");

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use dynocomp_core::image::{CoeffImage, DesignMethod};
 
 use crate::design::discretize::{discretize, DiscreteModel, Discretization};
-use crate::design::two_state::model::{pair, TwoState};
+use crate::design::two_state::model::TwoState;
 use crate::fit::{PoleResidueModel, Term};
 use crate::frf::axis_name;
 use crate::io::one_line;
@@ -195,11 +195,45 @@ impl ModelSidecar {
     }
 }
 
-/// Write the sidecar of `image` (at `image_path`) atomically.
+/// Write the sidecar of the image at `image_path` alone, atomically (the
+/// image already written; see [`write_image_and_sidecar`] for both).
 pub fn write_sidecar(image_path: &Path, sidecar: &ModelSidecar) -> Result<()> {
-    let path = sidecar_path(image_path);
     let text = serde_json::to_string_pretty(sidecar)?;
-    crate::io::atomic::write_bytes_atomic(&path, text.as_bytes())
+    crate::io::atomic::write_bytes_atomic(&sidecar_path(image_path), text.as_bytes())
+}
+
+/// Write `image` at `image_path` and its sidecar so that the pair changes
+/// together or not at all ([`crate::io::atomic::write_bytes_pair_atomic`]).
+/// With no sidecar (the paper's method) a sidecar left by an earlier design
+/// is removed after the image is written: it belongs to the old image.
+pub fn write_image_and_sidecar(image_path: &Path, image: &CoeffImage, sidecar: Option<&ModelSidecar>) -> Result<()> {
+    let bytes = crate::io::image_file::encode_image_checked(image_path, image)?;
+    let path = sidecar_path(image_path);
+    match sidecar {
+        Some(s) => {
+            let text = serde_json::to_string_pretty(s)?;
+            crate::io::atomic::write_bytes_pair_atomic(image_path, &bytes, &path, text.as_bytes())
+        }
+        None => {
+            crate::io::atomic::write_bytes_atomic(image_path, &bytes)?;
+            remove_stale_sidecar(image_path)
+        }
+    }
+}
+
+/// Remove the sidecar beside `image_path`, if there is one: after an image
+/// without a sidecar was written there, it describes another image.
+pub fn remove_stale_sidecar(image_path: &Path) -> Result<()> {
+    if crate::io::atomic::is_stdio(image_path) {
+        return Ok(());
+    }
+    let path = sidecar_path(image_path);
+    match std::fs::remove_file(&path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e).with_context(|| {
+            format!("{}: the image was written, but this sidecar of the old image could not be removed", path.display())
+        }),
+        _ => Ok(()),
+    }
 }
 
 /// Read the sidecar of the image at `image_path` and check that it belongs
@@ -286,10 +320,11 @@ impl TwoStateJson {
         }
     }
 
-    /// The paired states, validated (the pairing is checked again).
+    /// The paired states, validated (the pairing is checked again,
+    /// [`TwoState::checked`]).
     pub fn states(&self, source: &str, name: &str) -> Result<TwoState> {
         let b = model_from_json(self.d_before, &self.before, source, name)?;
         let a = model_from_json(self.d_after, &self.after, source, name)?;
-        pair(name, &b, &a).with_context(|| source.to_string())
+        TwoState::checked(name, b, a).with_context(|| source.to_string())
     }
 }

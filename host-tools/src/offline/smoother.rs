@@ -105,7 +105,8 @@ impl Smoother {
         let k = &sol.p * &plant.c / s;
         let n = plant.a.nrows();
         let closed = &plant.a * (DMatrix::<f64>::identity(n, n) - &k * plant.c.transpose());
-        let radius = closed.complex_eigenvalues().iter().map(|z| z.norm()).fold(0.0, f64::max);
+        let eig = crate::fit::linalg::eigenvalues(&closed, "smoother: the filter's closed loop")?;
+        let radius = eig.iter().map(|z| z.norm()).fold(0.0, f64::max);
         if radius.is_nan() || radius >= 1.0 {
             bail!("smoother: the filter's closed loop is not stable (spectral radius {radius:.9}); the model may be unobservable");
         }

@@ -2,8 +2,10 @@
 //! (`design`, `inspect`): the core's cost model (`dynocomp_core::budget`)
 //! at the image's sample rate on the 170 MHz STM32G474.
 
-use dynocomp_core::budget::{image_load, load_permille, max_fs_hz, period_cycles, CostModel, BOX_LOAD_LIMIT_PERMILLE};
-use dynocomp_core::image::CoeffImage;
+use dynocomp_core::budget::{
+    image_cycles, image_load, load_permille, max_fs_hz, period_cycles, BOX_LOAD_LIMIT_PERMILLE,
+};
+use dynocomp_core::image::ImageRef;
 use serde::Serialize;
 
 /// Predicted interrupt load of an image at its sample rate.
@@ -24,16 +26,19 @@ pub struct LoadReport {
     pub max_fs_hz: u32,
 }
 
-/// The load report of `image` against `limit_permille` (the box's own
+/// The load report of `image` (per-axis or 3x3: `&CoeffImage`,
+/// `&MatrixImage` or `&BoxImage`) against `limit_permille` (the box's own
 /// limit is [`BOX_LOAD_LIMIT_PERMILLE`]).
-pub fn report(image: &CoeffImage, limit_permille: u32) -> LoadReport {
-    let c = CostModel::CORTEX_M4.image_cost(image);
+pub fn report<'a>(image: impl Into<ImageRef<'a>>, limit_permille: u32) -> LoadReport {
+    let image = image.into();
+    let fs_hz = image.fs_hz();
+    let c = image_cycles(image);
     let high = image_load(image);
     let limit = limit_permille.min(BOX_LOAD_LIMIT_PERMILLE);
     LoadReport {
         cycles: [c.low, c.high],
-        period_cycles: period_cycles(image.fs_hz),
-        load_pct: [f64::from(load_permille(c.low, image.fs_hz)) / 10.0, f64::from(high.permille) / 10.0],
+        period_cycles: period_cycles(fs_hz),
+        load_pct: [f64::from(load_permille(c.low, fs_hz)) / 10.0, f64::from(high.permille) / 10.0],
         limit_pct: f64::from(limit) / 10.0,
         fits: high.permille <= limit,
         max_fs_hz: max_fs_hz(c.high, limit),

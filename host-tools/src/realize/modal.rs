@@ -152,7 +152,8 @@ pub(crate) fn thresholds(moduli: &[f64]) -> Vec<f64> {
 /// survives f32 rounding best. Fails with the reason of the last attempt
 /// when no split works.
 pub fn realize_candidates(ss: &StateSpace) -> Result<Vec<ModalRealization>> {
-    let moduli: Vec<f64> = ss.a.complex_eigenvalues().iter().map(|z| z.norm()).collect();
+    let eig = crate::fit::linalg::eigenvalues(&ss.a, "realization: the compensator's state matrix A")?;
+    let moduli: Vec<f64> = eig.iter().map(|z| z.norm()).collect();
     let mut out: Vec<ModalRealization> = Vec::new();
     let mut last_err = None;
     for rho in thresholds(&moduli) {

@@ -179,7 +179,7 @@ pub fn quantize(real: &ModalRealization, reference: &Reference) -> Result<(AxisF
     let sections: Vec<Section> = real.sections.iter().map(round_section).collect();
     let fir: Vec<f32> = real.fir.iter().map(|v| *v as f32).collect();
     let filter = AxisFilter::with_fir(&sections, real.d as f32, &fir)
-        .map_err(|e| anyhow::anyhow!("the f32 compensator is invalid ({e:?}); its poles do not survive rounding"))?;
+        .map_err(|e| anyhow::anyhow!("the f32 compensator is invalid ({e}); its poles do not survive rounding"))?;
     // stability margin and pole displacement
     let mut max_radius = 0.0f64;
     let mut max_shift = 0.0f64;

@@ -43,7 +43,13 @@ pub fn render(c: &Comparison) -> String {
         );
         for r in &ax.rows {
             if let Some(diag) = &r.diagnostic {
-                let _ = writeln!(s, "{:<28} FAILED after {:.0} ms: {diag}", r.method, r.design_time_s * 1e3);
+                let _ = writeln!(
+                    s,
+                    "{:<28} FAILED after {:.0} ms: {}",
+                    r.method,
+                    r.design_time_s * 1e3,
+                    short_diagnostic(diag)
+                );
                 continue;
             }
             let (c1, c2, c3, rank) = match &r.paper {
@@ -85,6 +91,20 @@ pub fn render(c: &Comparison) -> String {
     s
 }
 
+/// The first [`DIAG_CHARS`] characters of a failure's diagnostic, cut at a
+/// word, for the table; compare.json keeps the whole message.
+fn short_diagnostic(diag: &str) -> String {
+    if diag.chars().count() <= DIAG_CHARS {
+        return diag.to_string();
+    }
+    let cut: String = diag.chars().take(DIAG_CHARS).collect();
+    let cut = cut.rsplit_once(' ').map_or(cut.as_str(), |(head, _)| head).trim_end_matches([',', ';', ':']);
+    format!("{cut} … (whole message in compare.json)")
+}
+
+/// Characters of a failure's diagnostic in the table.
+const DIAG_CHARS: usize = 110;
+
 const COLORS: [RGBColor; 5] = [
     RGBColor(214, 39, 40),
     RGBColor(255, 127, 14),
@@ -94,9 +114,11 @@ const COLORS: [RGBColor; 5] = [
 ];
 
 /// SVG of one axis: |H·G·delay| and the phase of every method that produced
-/// a filter, with the fitting bands shaded.
+/// a filter, with the fitting bands shaded. Earlier methods are drawn wider,
+/// so a later one on top does not hide them; the legend sits in its own
+/// column, and lists the methods that failed.
 pub fn plot_axis(freq: &[f64], ax: &AxisComparison, bands: &[Band]) -> Result<String> {
-    use crate::report::plot::{build_chart, draw_line, legend, mesh, perr, shade, shade_bands, FONT};
+    use crate::report::plot::{build_chart, draw_line, mesh, perr, shade, shade_bands, FONT};
     let xr = (freq[0], freq[freq.len() - 1].max(freq[0] + 1.0));
     let mut buf = String::new();
     {
@@ -105,29 +127,68 @@ pub fn plot_axis(freq: &[f64], ax: &AxisComparison, bands: &[Band]) -> Result<St
         let root = root
             .titled(&format!("Axis {} — compensated response H·G of each method (measured G)", ax.axis), (FONT, 20))
             .map_err(perr)?;
-        let (top, bot) = root.split_vertically(380);
+        let (plots, key) = root.split_horizontally(840);
+        let (top, bot) = plots.split_vertically(370);
         let yr_m = (0.5, 1.5);
         let mut c = build_chart(&top, "Magnitude |H·G| (1 = exact)", xr, yr_m)?;
         mesh(&mut c, "Frequency (Hz)", "|H·G|", &crate::report::plot::hz, &|v| format!("{v:.1}"), 6)?;
-        shade(&mut c, ax.coherent_band_hz, xr, yr_m, RGBColor(150, 150, 150), 0.10, "coherent band")?;
-        shade_bands(&mut c, &crate::design::bands::ranges_hz(bands), xr, yr_m, true)?;
+        shade(&mut c, ax.coherent_band_hz, xr, yr_m, RGBColor(150, 150, 150), 0.10, "")?;
+        shade_bands(&mut c, &crate::design::bands::ranges_hz(bands), xr, yr_m, false)?;
         let yr_p = (-45.0, 45.0);
         let mut cp = build_chart(&bot, "Phase ∠(H·G) (0 = exact)", xr, yr_p)?;
         mesh(&mut cp, "Frequency (Hz)", "Phase (°)", &crate::report::plot::hz, &|v| format!("{v:.0}"), 7)?;
         shade_bands(&mut cp, &crate::design::bands::ranges_hz(bands), xr, yr_p, false)?;
-        for (r, color) in ax.rows.iter().zip(COLORS.iter().cycle()) {
+        let n = ax.rows.len() as u32;
+        let mut entries: Vec<(String, Option<(RGBColor, u32)>)> = Vec::new();
+        for (i, (r, color)) in ax.rows.iter().zip(COLORS.iter().cycle()).enumerate() {
             if r.compensated.is_empty() {
+                entries.push((format!("{}: FAILED (see the table)", r.method), None));
                 continue;
             }
+            let width = 1 + (n - 1 - i as u32).min(2);
             let mag: Vec<(f64, f64)> = freq.iter().zip(&r.compensated).map(|(f, h)| (*f, h.norm())).collect();
             let ph: Vec<(f64, f64)> =
                 freq.iter().zip(&r.compensated).map(|(f, h)| (*f, h.arg().to_degrees())).collect();
-            draw_line(&mut c, &mag, yr_m, 0.3, *color, 1, false, &r.method)?;
-            draw_line(&mut cp, &ph, yr_p, 30.0, *color, 1, false, &r.method)?;
+            draw_line(&mut c, &mag, yr_m, 0.3, *color, width, false, "")?;
+            draw_line(&mut cp, &ph, yr_p, 30.0, *color, width, false, "")?;
+            entries.push((r.method.clone(), Some((*color, width))));
         }
-        legend(&mut c, SeriesLabelPosition::UpperLeft)?;
-        legend(&mut cp, SeriesLabelPosition::LowerLeft)?;
+        draw_key(&key, &entries, !bands.is_empty())?;
         root.present().map_err(perr)?;
     }
     Ok(buf)
+}
+
+/// The legend column of [`plot_axis`]: a swatch and the name of each method
+/// (failed ones in grey, without a swatch), then the shaded bands.
+fn draw_key(
+    area: &crate::report::plot::Area<'_>,
+    entries: &[(String, Option<(RGBColor, u32)>)],
+    bands: bool,
+) -> Result<()> {
+    use crate::report::plot::{perr, FONT};
+    let mut y = 40;
+    let text = |area: &crate::report::plot::Area<'_>, s: &str, y: i32, color: RGBColor| {
+        area.draw(&Text::new(s.to_string(), (40, y - 7), (FONT, 13).into_font().color(&color))).map_err(perr)
+    };
+    for (name, style) in entries {
+        match style {
+            Some((color, width)) => {
+                area.draw(&PathElement::new(vec![(4, y), (32, y)], ShapeStyle::from(color).stroke_width(*width)))
+                    .map_err(perr)?;
+                text(area, name, y, BLACK)?;
+            }
+            None => text(area, name, y, RGBColor(120, 120, 120))?,
+        }
+        y += 24;
+    }
+    y += 12;
+    let swatches =
+        [(RGBColor(150, 150, 150), 0.10, "coherent band"), (crate::report::plot::C_FIT_BAND, 0.18, "fitting bands")];
+    for (color, alpha, name) in swatches.into_iter().filter(|s| bands || s.2 != "fitting bands") {
+        area.draw(&Rectangle::new([(4, y - 6), (32, y + 6)], color.mix(alpha).filled())).map_err(perr)?;
+        text(area, name, y, BLACK)?;
+        y += 24;
+    }
+    Ok(())
 }

@@ -28,6 +28,10 @@ const C_COMP: RGBColor = RGBColor(31, 119, 180);
 const C_TRUE: RGBColor = RGBColor(44, 160, 44);
 const C_ERR: RGBColor = RGBColor(214, 39, 40);
 const C_TPF: RGBColor = RGBColor(230, 120, 0);
+/// Error above the band.
+const C_ABOVE: RGBColor = RGBColor(255, 127, 14);
+/// The compensated band's shading.
+const C_BAND: RGBColor = RGBColor(31, 119, 180);
 
 /// Min/max envelope of a stream of samples in bounded memory: buckets of
 /// `span` samples; when [`ENVELOPE_COLUMNS`]·2 buckets are full, neighbours
@@ -354,6 +358,14 @@ impl ReportAccumulator {
         self.cur.iter_mut().for_each(|c| c.iter_mut().for_each(Vec::clear));
     }
 
+    /// The NRMSE line of each axis against the true force (empty without
+    /// one), as [`ReportAccumulator::write`] prints them, without a report.
+    pub fn score_lines(&self, band_hz: &dyn Fn(usize) -> f64) -> Vec<String> {
+        let fs = self.fs_hz;
+        let scored = self.axes.iter().filter_map(|a| a.keep.as_ref().map(|k| (a.axis, k)));
+        scored.map(|(axis, k)| Score::of(k, fs, band_hz(axis)).line(axis_name(axis))).collect()
+    }
+
     /// Render the report into `dir`: three SVGs per axis and `index.html`
     /// with `summary` on top. `band_hz`: the NRMSE's band limit per axis.
     /// Returns the files written, `index.html` last, and the NRMSE lines.
@@ -375,7 +387,7 @@ impl ReportAccumulator {
         for (i, a) in self.axes.iter_mut().enumerate() {
             let name = axis_name(a.axis);
             let score = a.keep.as_ref().map(|k| Score::of(k, self.fs_hz, band_hz(a.axis)));
-            let (entries, svgs) = how.axis(a, &zoom[i], score.as_ref())?;
+            let (entries, svgs) = how.axis(a, &zoom[i], score.as_ref(), band_hz(a.axis))?;
             for ((file, _, _), svg) in entries.iter().zip(svgs) {
                 pages.push(Page { name: file.clone(), content: svg });
             }
@@ -394,11 +406,13 @@ impl ReportAccumulator {
 }
 
 /// The NRMSE of the measured and the compensated force against the true
-/// force ([`crate::metrics::accuracy`]), both low-passed at `band_hz`.
+/// force ([`crate::metrics::accuracy`]), both low-passed at `band_hz`, and
+/// the compensated force as written ([`crate::metrics::accuracy_as_written`]).
 struct Score {
     band_hz: f64,
     raw: crate::metrics::Accuracy,
     comp: crate::metrics::Accuracy,
+    written: crate::metrics::AsWritten,
 }
 
 impl Score {
@@ -406,32 +420,36 @@ impl Score {
     fn of(k: &[Vec<f64>; 3], fs: f64, band_hz: f64) -> Self {
         let comp = crate::metrics::accuracy(&k[1], &k[2], fs, band_hz);
         let raw = crate::metrics::accuracy(&k[0], &k[2], fs, band_hz);
-        Score { band_hz, raw, comp }
+        let written = crate::metrics::accuracy_as_written(&k[1], &k[2], fs, band_hz);
+        Score { band_hz, raw, comp, written }
+    }
+
+    /// The figures in %: raw, compensated, both peak-to-peak normalized,
+    /// the output as written and the perfect band-limited estimate.
+    fn percents(&self) -> [f64; 6] {
+        let (r, c, w) = (&self.raw, &self.comp, &self.written);
+        [r.nrmse, c.nrmse, r.nrmse_p2p, c.nrmse_p2p, w.output.nrmse, w.perfect.nrmse].map(|v| v * 100.0)
     }
 
     /// The sentence of the overview's caption.
     fn caption(&self) -> String {
-        let (b, raw, comp) = (self.band_hz, &self.raw, &self.comp);
+        let (b, [raw, comp, raw_p2p, comp_p2p, written, perfect]) = (self.band_hz, self.percents());
         format!(
             "NRMSE against the true force (RMS error / std of the true force, both low-passed at {b:.0} Hz, \
-             5 % of the record excluded at each end): measured {:.3} %, compensated {:.3} % \
-             (peak-to-peak normalization: {:.3} % and {:.3} %).",
-            raw.nrmse * 100.0,
-            comp.nrmse * 100.0,
-            raw.nrmse_p2p * 100.0,
-            comp.nrmse_p2p * 100.0
+             5 % of the record excluded at each end): measured {raw:.3} %, compensated {comp:.3} % \
+             (peak-to-peak normalization: {raw_p2p:.3} % and {comp_p2p:.3} %). As written, unfiltered, against the \
+             true force through the anti-aliasing filter alone: {written:.3} %, where a perfect estimate \
+             band-limited to {b:.0} Hz reaches {perfect:.3} %.",
         )
     }
 
     /// The line of the summary and of stderr for axis `name`.
     fn line(&self, name: &str) -> String {
-        let (b, raw, comp) = (self.band_hz, &self.raw, &self.comp);
+        let (b, [raw, comp, raw_p2p, comp_p2p, written, perfect]) = (self.band_hz, self.percents());
         format!(
-            "f{name}: NRMSE measured {:.3} %, compensated {:.3} % (band {b:.0} Hz; p2p-normalized {:.3} % / {:.3} %)",
-            raw.nrmse * 100.0,
-            comp.nrmse * 100.0,
-            raw.nrmse_p2p * 100.0,
-            comp.nrmse_p2p * 100.0
+            "f{name}: NRMSE measured {raw:.3} %, compensated {comp:.3} % (band {b:.0} Hz; p2p-normalized \
+             {raw_p2p:.3} % / {comp_p2p:.3} %); as written {written:.3} % vs {perfect:.3} % for a perfect \
+             band-limited estimate",
         )
     }
 }
@@ -450,7 +468,13 @@ impl Rendering {
     /// The overview, zoom and spectrum of axis `a` with their (file, title,
     /// caption) entries; `zoom`: its kept window, `score`: its NRMSE with a
     /// true force.
-    fn axis(&self, a: &mut AxisAcc, zoom: &ZoomWindow, score: Option<&Score>) -> Result<(Vec<Entry>, [String; 3])> {
+    fn axis(
+        &self,
+        a: &mut AxisAcc,
+        zoom: &ZoomWindow,
+        score: Option<&Score>,
+        band_hz: f64,
+    ) -> Result<(Vec<Entry>, [String; 3])> {
         let (fs, has_truth) = (self.fs, self.has_truth);
         let name = axis_name(a.axis);
         let (f, am) = a.w_meas.spectrum(fs);
@@ -469,10 +493,10 @@ impl Rendering {
             let keep = ((ZOOM_TOOTH_PERIODS * fs / t).round() as usize).max(16);
             zw.iter_mut().for_each(|v| v.truncate(keep));
         }
-        let overview = plot_overview(a, fs, has_truth).with_context(|| format!("report: axis {name}: overview"))?;
+        let overview = plot_overview(a, fs, band_hz).with_context(|| format!("report: axis {name}: overview"))?;
         let zoom_svg = plot_zoom(&zw, self.zoom_start, fs, has_truth, name)
             .with_context(|| format!("report: axis {name}: zoom"))?;
-        let spec = plot_spectrum(&f, &am, &ac, at.as_deref(), tpf, name)
+        let spec = plot_spectrum(&f, [&am, &ac], at.as_deref(), tpf, band_hz, name)
             .with_context(|| format!("report: axis {name}: spectrum"))?;
         let dur = a.meas.len() as f64 / fs;
         let entries = vec![
@@ -483,8 +507,13 @@ impl Rendering {
                     "{} samples ({dur:.3} s). Shaded bands: the minimum and maximum of each pixel column (min/max envelope) of the \
                      measured force (grey) and the compensated force (blue){}.{}",
                     a.meas.len(),
-                    if has_truth { ", the true force (green) and, below, the error compensated − true (red), unfiltered: it includes the noise above \
-                         the compensated band that the band-limited NRMSE leaves out" } else { "" },
+                    if has_truth {
+                        ", the true force on top (green outline) and, below, the error compensated − true split at the band \
+                         edge: in the band (red, what the NRMSE scores) and above it (orange, noise the NRMSE leaves out; \
+                         low-pass the output to remove it)"
+                    } else {
+                        ""
+                    },
                     if score.is_empty() { String::new() } else { format!(" {score}") }
                 ),
             ),
@@ -503,11 +532,12 @@ impl Rendering {
                 format!("Axis {name}: amplitude spectra"),
                 format!(
                     "Welch amplitude spectra (Hann window of {WELCH_N} samples, {:.2} Hz resolution, 50 % overlap, mean power) \
-                     of the measured and compensated forces{}. {}",
+                     of the measured and compensated forces{}. Top: the compensated band (shaded, up to {band_hz:.0} Hz) \
+                     and a little beyond; bottom: up to Nyquist, where everything right of the band is out of band. {}",
                     fs / WELCH_N as f64,
-                    if has_truth { " and of the true force" } else { "" },
+                    if has_truth { " and of the true force (dashed, on top)" } else { "" },
                     match tpf {
-                        Some(t) => format!("Dashed: the tooth-passing frequency {t:.1} Hz ({tpf_how}) and its harmonics."),
+                        Some(t) => format!("Dotted: the tooth-passing frequency {t:.1} Hz ({tpf_how}) and its harmonics in the band."),
                         None => "No tooth-passing frequency given or found.".to_string(),
                     }
                 ),
@@ -552,11 +582,16 @@ fn draw_envelope(
     let top: Vec<(f64, f64)> = env.iter().map(|&(a, b, _, hi)| (0.5 * (t(a) + t(b)), hi)).collect();
     let bot: Vec<(f64, f64)> = env.iter().map(|&(a, b, lo, _)| (0.5 * (t(a) + t(b)), lo)).collect();
     chart.draw_series(std::iter::once(PathElement::new(bot, edge))).map_err(perr)?;
-    chart
-        .draw_series(std::iter::once(PathElement::new(top, edge)))
-        .map_err(perr)?
-        .label(label)
-        .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 20, y + 6)], fill));
+    chart.draw_series(std::iter::once(PathElement::new(top, edge))).map_err(perr)?.label(label).legend(
+        move |(x, y)| {
+            let swatch: DynElement<'static, SVGBackend, (i32, i32)> = if alpha > 0.0 {
+                Rectangle::new([(x, y - 6), (x + 20, y + 6)], fill).into_dyn()
+            } else {
+                PathElement::new(vec![(x, y - 4), (x + 20, y - 4)], edge).into_dyn()
+            };
+            swatch
+        },
+    );
     Ok(())
 }
 
@@ -572,36 +607,69 @@ fn range_of<'a>(envs: impl Iterator<Item = &'a [(u64, u64, f64, f64)]>) -> (f64,
 /// `a_overview.svg`: the whole record, measured and compensated (and the
 /// true force and the error with `--truth`), drawn as min/max envelopes
 /// over at most [`ENVELOPE_COLUMNS`]-2x that many buckets, never every
-/// sample.
-fn plot_overview(a: &AxisAcc, fs: f64, has_truth: bool) -> Result<String> {
+/// sample. With the truth, the error is split at `band_hz` (the kept
+/// records, zero-phase FFT split as [`crate::metrics::lowpass`]): in the
+/// band, what the NRMSE scores, and above it, each on its own scale.
+fn plot_overview(a: &AxisAcc, fs: f64, band_hz: f64) -> Result<String> {
     let name = axis_name(a.axis);
-    let (m, c, t, e) = (a.meas.buckets(), a.comp.buckets(), a.truth.buckets(), a.err.buckets());
+    let (m, c, t) = (a.meas.buckets(), a.comp.buckets(), a.truth.buckets());
+    let errors = a.keep.as_ref().map(|k| {
+        let e: Vec<f64> = k[1].iter().zip(&k[2]).map(|(c, t)| c - t).collect();
+        let low = crate::metrics::lowpass(&e, fs, band_hz);
+        let high: Vec<f64> = e.iter().zip(&low).map(|(e, l)| e - l).collect();
+        [envelope_of(&low), envelope_of(&high)]
+    });
     let xr = (0.0, (a.meas.len().max(2) - 1) as f64 / fs);
     let mut svg = String::new();
     {
-        let h = if has_truth { 720 } else { 440 };
+        let h = if errors.is_some() { 900 } else { 440 };
         let root = SVGBackend::with_string(&mut svg, (1100, h)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
-        let (top, bottom) = if has_truth { root.split_vertically(440) } else { (root.clone(), root.clone()) };
+        let (top, bottom) = if errors.is_some() { root.split_vertically(440) } else { (root.clone(), root.clone()) };
         let yr = range_of([m.as_slice(), c.as_slice(), t.as_slice()].into_iter());
         let mut ch = build_chart(&top, &format!("f{name}: measured and compensated force, whole record"), xr, yr)?;
         mesh(&mut ch, "time (s)", "force (N)", &fmt_s, &fmt_n, 8)?;
         draw_envelope(&mut ch, &m, fs, C_MEAS, 0.35, "measured")?;
-        if has_truth {
-            draw_envelope(&mut ch, &t, fs, C_TRUE, 0.35, "true")?;
-        }
         draw_envelope(&mut ch, &c, fs, C_COMP, 0.35, "compensated")?;
+        if errors.is_some() {
+            draw_envelope(&mut ch, &t, fs, C_TRUE, 0.0, "true")?;
+        }
         legend(&mut ch, SeriesLabelPosition::UpperRight)?;
-        if has_truth {
-            let yr = range_of(std::iter::once(e.as_slice()));
-            let mut ch = build_chart(&bottom, &format!("f{name}: error, compensated − true"), xr, yr)?;
-            mesh(&mut ch, "time (s)", "error (N)", &fmt_s, &fmt_n, 6)?;
-            draw_envelope(&mut ch, &e, fs, C_ERR, 0.35, "error")?;
-            legend(&mut ch, SeriesLabelPosition::UpperRight)?;
+        if let Some([low, high]) = errors {
+            let (band_area, above_area) = bottom.split_vertically(230);
+            let panels = [
+                (band_area, low, C_ERR, format!("f{name}: error in the band, 0-{band_hz:.0} Hz (scored by the NRMSE)")),
+                (above_area, high, C_ABOVE, format!("f{name}: error above {band_hz:.0} Hz (out of band, not scored)")),
+            ];
+            // The NRMSE leaves out 5 % at each end (filter edges, start-up):
+            // the scale follows the scored part, the ends are shaded.
+            let n = a.meas.len();
+            let (s0, s1) = (n / 20, n - n / 20);
+            let edges = [(xr.0, s0 as f64 / fs), (s1 as f64 / fs, xr.1)];
+            for (area, env, color, title) in panels {
+                let scored: Vec<_> = env.iter().copied().filter(|b| b.0 >= s0 && b.1 < s1).collect();
+                let yr = range_of(std::iter::once(if scored.is_empty() { env.as_slice() } else { scored.as_slice() }));
+                let mut ch = build_chart(&area, &title, xr, yr)?;
+                mesh(&mut ch, "time (s)", "error (N)", &fmt_s, &fmt_n, 5)?;
+                for (k, e) in edges.iter().enumerate() {
+                    let label = if k == 0 { "not scored (ends)" } else { "" };
+                    crate::report::plot::shade(&mut ch, *e, xr, yr, C_MEAS, 0.15, label)?;
+                }
+                let clipped: Vec<_> = env.iter().map(|&(a, b, lo, hi)| (a, b, lo.max(yr.0), hi.min(yr.1))).collect();
+                draw_envelope(&mut ch, &clipped, fs, color, 0.35, "compensated − true")?;
+                legend(&mut ch, SeriesLabelPosition::UpperRight)?;
+            }
         }
         root.present().map_err(perr)?;
     }
     Ok(svg)
+}
+
+/// The min/max envelope of a whole record.
+fn envelope_of(x: &[f64]) -> Vec<(u64, u64, f64, f64)> {
+    let mut e = Envelope::default();
+    e.push(x);
+    e.buckets()
 }
 
 /// `a_zoom.svg`: a few tooth periods where the cut is steady, every
@@ -634,51 +702,62 @@ fn plot_zoom(w: &[Vec<f64>; 3], start: u64, fs: f64, has_truth: bool, name: &str
     Ok(svg)
 }
 
-/// `a_spectrum.svg`: Welch amplitude spectra of measured and compensated
-/// (and true) forces with the tooth-passing frequency and its harmonics
-/// marked (given by `--spindle-rpm`/`--teeth`, else the strongest line of
-/// the compensated spectrum).
+/// `a_spectrum.svg`: Welch amplitude spectra of the measured and
+/// compensated (`[am, ac]`) and true forces in two panels: the compensated
+/// band (up to `band_hz`, shaded) and a little beyond, with the
+/// tooth-passing frequency and its harmonics in the band marked (given by
+/// `--spindle-rpm`/`--teeth`, else the strongest line of the compensated
+/// spectrum); and the whole range up to Nyquist, the band shaded.
 fn plot_spectrum(
     f: &[f64],
-    am: &[f64],
-    ac: &[f64],
+    [am, ac]: [&[f64]; 2],
     at: Option<&[f64]>,
     tpf: Option<f64>,
+    band_hz: f64,
     name: &str,
 ) -> Result<String> {
     let db = |v: &f64| 20.0 * v.max(1e-12).log10();
     let fmax = f.last().copied().unwrap_or(1.0);
-    let xr = (0.0, fmax);
     let peak = am.iter().chain(ac).copied().fold(0.0f64, f64::max).max(1e-9);
     let yr = (db(&peak) - 100.0, db(&peak) + 10.0);
-    let pts = |a: &[f64]| -> Vec<(f64, f64)> { f.iter().zip(a).skip(1).map(|(f, a)| (*f, db(a))).collect() };
+    let pts = |a: &[f64], hi: f64| -> Vec<(f64, f64)> {
+        f.iter().zip(a).skip(1).take_while(|(f, _)| **f <= hi).map(|(f, a)| (*f, db(a))).collect()
+    };
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (1100, 480)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut svg, (1100, 860)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
-        let mut ch = build_chart(&root, &format!("f{name}: amplitude spectra"), xr, yr)?;
-        mesh(&mut ch, "frequency (Hz)", "amplitude (dB re 1 N)", &crate::report::plot::hz, &fmt_n, 10)?;
-        if let Some(t) = tpf.filter(|t| *t > 0.0) {
-            let style = ShapeStyle::from(&C_TPF).stroke_width(1);
-            let mut k = 1;
-            while k as f64 * t < fmax && k <= 40 {
-                let x = k as f64 * t;
-                let ann =
-                    ch.draw_series(DashedLineSeries::new(vec![(x, yr.0), (x, yr.1)], 5, 4, style)).map_err(perr)?;
-                if k == 1 {
-                    ann.label(format!("TPF {t:.1} Hz and harmonics"))
-                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+        let (top, bottom) = root.split_vertically(470);
+        let zoom_hi = (1.25 * band_hz).min(fmax);
+        let panels = [
+            (top, zoom_hi, format!("f{name}: amplitude spectra in the compensated band (0-{band_hz:.0} Hz)")),
+            (bottom, fmax, format!("f{name}: amplitude spectra up to Nyquist")),
+        ];
+        for (i, (area, hi, title)) in panels.into_iter().enumerate() {
+            let xr = (0.0, hi);
+            let mut ch = build_chart(&area, &title, xr, yr)?;
+            mesh(&mut ch, "frequency (Hz)", "amplitude (dB re 1 N)", &crate::report::plot::hz, &fmt_n, 10)?;
+            crate::report::plot::shade(&mut ch, (0.0, band_hz), xr, yr, C_BAND, 0.12, "compensated band")?;
+            if let Some(t) = tpf.filter(|t| *t > 0.0 && i == 0) {
+                let style = ShapeStyle::from(&C_TPF.mix(0.7)).stroke_width(1);
+                let harmonics = (1..=40).map(|k| k as f64 * t).take_while(|x| *x <= band_hz.min(hi));
+                for (k, x) in harmonics.enumerate() {
+                    let ann =
+                        ch.draw_series(DashedLineSeries::new(vec![(x, yr.0), (x, yr.1)], 2, 5, style)).map_err(perr)?;
+                    if k == 0 {
+                        ann.label(format!("TPF {t:.1} Hz and harmonics"))
+                            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+                    }
                 }
-                k += 1;
             }
+            let big = 1e9;
+            draw_line(&mut ch, &pts(am, hi), yr, big, C_MEAS, 2, false, "measured")?;
+            draw_line(&mut ch, &pts(ac, hi), yr, big, C_COMP, 1, false, "compensated")?;
+            if let Some(at) = at {
+                draw_line(&mut ch, &pts(at, hi), yr, big, C_TRUE, 2, true, "true")?;
+            }
+            legend(&mut ch, SeriesLabelPosition::LowerRight)?;
         }
-        let big = 1e9;
-        draw_line(&mut ch, &pts(am), yr, big, C_MEAS, 2, false, "measured")?;
-        if let Some(at) = at {
-            draw_line(&mut ch, &pts(at), yr, big, C_TRUE, 1, false, "true")?;
-        }
-        draw_line(&mut ch, &pts(ac), yr, big, C_COMP, 1, false, "compensated")?;
-        legend(&mut ch, SeriesLabelPosition::UpperRight)?;
         root.present().map_err(perr)?;
     }
     Ok(svg)

@@ -210,7 +210,7 @@ fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> 
 
     let mut buf = String::new();
     {
-        let root = SVGBackend::with_string(&mut buf, (1100, 980)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut buf, (1100, 1240)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
         let title = format!(
             "Axis {name} — measured FRF and fitted model (order {}, fit error {:.2} % in the {})",
@@ -220,15 +220,16 @@ fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> 
         );
         let root = root.titled(&title, (FONT, 20)).map_err(perr)?;
         let (top, rest) = root.split_vertically(380);
-        let (midp, bot) = rest.split_vertically(320);
+        let (midp, rest) = rest.split_vertically(300);
+        let (resp, bot) = rest.split_vertically(260);
 
         let band_txt = format!("coherent band {:.0}–{:.0} Hz", band.0, band.1);
         let mut c = build_chart(&top, &format!("Magnitude |G| ({band_txt})"), xr, yr_mag)?;
         mesh(&mut c, "Frequency (Hz)", "|G| (dB re 1 N/N)", &hz, &|v| format!("{v:.0}"), 7)?;
         shade(&mut c, band, xr, yr_mag, C_COH_BAND, 0.15, "coherent band")?;
         shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_mag, true)?;
-        draw_line(&mut c, &mag_m, yr_mag, f64::INFINITY, C_MEASURED, 1, false, "measured G")?;
-        draw_line(&mut c, &mag_f, yr_mag, f64::INFINITY, C_MODEL, 2, false, "fitted model Ĝ")?;
+        draw_line(&mut c, &mag_f, yr_mag, f64::INFINITY, C_MODEL, 3, false, "fitted model Ĝ")?;
+        draw_line(&mut c, &mag_m, yr_mag, f64::INFINITY, C_MEASURED, 1, false, "measured G (on top)")?;
         legend(&mut c, SeriesLabelPosition::UpperLeft)?;
 
         let yr_ph = (-190.0, 190.0);
@@ -236,9 +237,25 @@ fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> 
         mesh(&mut c, "Frequency (Hz)", "Phase (°)", &hz, &|v| format!("{v:.0}"), 9)?;
         shade(&mut c, band, xr, yr_ph, C_COH_BAND, 0.15, "")?;
         shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_ph, false)?;
-        draw_line(&mut c, &ph_m, yr_ph, 180.0, C_MEASURED, 1, false, "measured G")?;
-        draw_line(&mut c, &ph_f, yr_ph, 180.0, C_MODEL, 2, false, "fitted model Ĝ")?;
+        draw_line(&mut c, &ph_f, yr_ph, 180.0, C_MODEL, 3, false, "fitted model Ĝ")?;
+        draw_line(&mut c, &ph_m, yr_ph, 180.0, C_MEASURED, 1, false, "measured G (on top)")?;
         legend(&mut c, SeriesLabelPosition::LowerLeft)?;
+
+        // The residual |Ĝ − G|/|G| per line: where the fit departs from the
+        // measurement, on a log scale (1e-4 % to 100 %).
+        let resid: Vec<(f64, f64)> = freq
+            .iter()
+            .zip(&meas.frf)
+            .zip(&model)
+            .map(|((f, g), m)| (*f, (100.0 * (m - g).norm() / g.norm()).clamp(1e-4, 1e3).log10()))
+            .collect();
+        let yr_r = (-4.0, 2.0);
+        let mut c = build_chart(&resp, "Residual |Ĝ − G| / |G| of the fit (%, log scale)", xr, yr_r)?;
+        mesh(&mut c, "Frequency (Hz)", "residual (%)", &hz, &|v| format!("{}", 10f64.powf(*v)), 7)?;
+        shade(&mut c, band, xr, yr_r, C_COH_BAND, 0.15, "")?;
+        shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_r, false)?;
+        draw_line(&mut c, &resid, yr_r, f64::INFINITY, C_MEASURED, 1, false, "residual")?;
+        legend(&mut c, SeriesLabelPosition::UpperLeft)?;
 
         let yr_c = (0.0, 1.05);
         let mut c = build_chart(&bot, &format!("Coherence γ² ({band_txt})"), xr, yr_c)?;

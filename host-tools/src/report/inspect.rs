@@ -1,9 +1,14 @@
 //! `dynocomp inspect`: what an image holds, for people and for scripts.
 
 use anyhow::Result;
-use dynocomp_core::image::{AxisImage, CoeffImage, DesignMethod, ParallelImage, PARALLEL_FORMAT_VERSION};
+use dynocomp_core::image::{
+    AxisImage, AxisScaling, AxisSummary, BoxImage, CoeffImage, DesignMethod, MatrixImage, ParallelImage, RowDesign,
+    PARALLEL_FORMAT_VERSION,
+};
 use serde::Serialize;
 use std::fmt::Write;
+
+use dynocomp_core::kernel::Section;
 
 use crate::frf::axis_name;
 
@@ -38,6 +43,33 @@ pub struct AxisReport {
     pub r: f64,
     /// Largest pole radius of the compensator (z-plane).
     pub max_pole_radius: f64,
+    /// 3x3 image only: how this axis's output row was designed, `3x3`
+    /// (crosstalk compensated) or `per-axis` (direct FRF only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub row_design: Option<&'static str>,
+}
+
+/// The shared filter of a 3x3 image (format 3).
+#[derive(Debug, Serialize)]
+pub struct MatrixReport {
+    /// 2x2 sections shared by the three outputs.
+    pub sections: usize,
+    /// Of which normal-form pole pairs.
+    pub pairs: usize,
+    /// Of which diagonal (real-pole) sections.
+    pub diagonals: usize,
+    /// Filter order (states).
+    pub filter_order: usize,
+    /// FIR taps, each a 3x3 matrix.
+    pub fir_taps: usize,
+    /// Largest pole radius (z-plane).
+    pub max_pole_radius: f64,
+    /// DC gain, output row × input column (N/N); near the identity for a
+    /// calibrated compensator.
+    pub dc_gain: [[f64; 3]; 3],
+    /// Bound on each output row's gain for bounded forces (ℓ1 norm of its
+    /// impulse response over the three inputs, N/N).
+    pub row_gain_bound: [f64; 3],
 }
 
 /// Inspection report of a whole image.
@@ -71,6 +103,9 @@ pub struct InspectReport {
     /// Predicted CPU load of the box's sample interrupt at `fs_hz`
     /// (`dynocomp_core::budget`); `null` for a parallel image.
     pub box_load: Option<crate::realize::load::LoadReport>,
+    /// The shared 3x3 filter of a 3x3 image (absent otherwise).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub matrix: Option<MatrixReport>,
 }
 
 /// One band of a parallel-elaboration image.
@@ -95,7 +130,7 @@ fn method_name(m: DesignMethod) -> &'static str {
 }
 
 /// Largest pole radius over all sections (eigenvalues of I + Δ, in f64).
-pub fn max_pole_radius(sections: &[dynocomp_core::kernel::Section]) -> f64 {
+pub fn max_pole_radius(sections: &[Section]) -> f64 {
     sections
         .iter()
         .flat_map(|s| crate::realize::modal::section_poles(s.delta.map(f64::from)))
@@ -103,48 +138,104 @@ pub fn max_pole_radius(sections: &[dynocomp_core::kernel::Section]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// One axis's row of the table: its scaling and design summary, and the
+/// filter it runs (its own, or the shared 3x3 one).
+fn axis_report(
+    axis: u8,
+    scaling: &AxisScaling,
+    summary: &AxisSummary,
+    sections: &[Section],
+    order: usize,
+) -> AxisReport {
+    AxisReport {
+        axis: axis_name(axis as usize),
+        sections: sections.len(),
+        filter_order: order,
+        model_order: summary.model_order,
+        adc_offset_code: scaling.adc_offset_code,
+        newton_per_code: scaling.newton_per_code,
+        dac_code_per_newton: scaling.dac_code_per_newton,
+        dac_offset_code: scaling.dac_offset_code,
+        fit_nrmse: summary.fit_nrmse,
+        flat_band_hz: [summary.flat_lo_hz, summary.flat_hi_hz],
+        noise_gain: summary.noise_gain,
+        q: summary.q,
+        r: summary.r,
+        max_pole_radius: max_pole_radius(sections),
+        row_design: None,
+    }
+}
+
 fn axis_reports(axes: &[Option<AxisImage>]) -> Vec<AxisReport> {
     axes.iter()
         .flatten()
-        .map(|a| AxisReport {
-            axis: axis_name(a.axis as usize),
-            sections: a.filter.sections().len(),
-            filter_order: a.filter.order(),
-            model_order: a.summary.model_order,
-            adc_offset_code: a.scaling.adc_offset_code,
-            newton_per_code: a.scaling.newton_per_code,
-            dac_code_per_newton: a.scaling.dac_code_per_newton,
-            dac_offset_code: a.scaling.dac_offset_code,
-            fit_nrmse: a.summary.fit_nrmse,
-            flat_band_hz: [a.summary.flat_lo_hz, a.summary.flat_hi_hz],
-            noise_gain: a.summary.noise_gain,
-            q: a.summary.q,
-            r: a.summary.r,
-            max_pole_radius: max_pole_radius(a.filter.sections()),
-        })
+        .map(|a| axis_report(a.axis, &a.scaling, &a.summary, a.filter.sections(), a.filter.order()))
         .collect()
+}
+
+/// The report of an image the box runs (format 1 or 3), with its axes and,
+/// for a 3x3 image, its shared filter.
+fn box_report(image: BoxImage, axes: Vec<AxisReport>, matrix: Option<MatrixReport>) -> InspectReport {
+    let (source_sha256, created_unix_s) = match &image {
+        BoxImage::PerAxis(i) => (i.source_sha256, i.created_unix_s),
+        BoxImage::Matrix(m) => (m.source_sha256, m.created_unix_s),
+    };
+    let loaded = Ok(image);
+    let box_mode = dynocomp_core::sample::select_mode(Some(&loaded), false);
+    InspectReport {
+        format_version: image.format_version(),
+        image_id: format!("{:08x}", image.id()),
+        fs_hz: image.fs_hz(),
+        latency_samples: image.latency_samples(),
+        offline_only: image.is_offline_only(),
+        runs_in_box: matches!(box_mode, dynocomp_core::sample::Mode::Compensate(_)),
+        method: method_name(image.method()),
+        source_sha256: source_sha256.iter().map(|b| format!("{b:02x}")).collect(),
+        created_unix_s,
+        offline_reason: image.is_offline_only().then(|| "marked offline only (flag 0x01)".to_string()),
+        axes,
+        bands: Vec::new(),
+        box_load: Some(crate::realize::load::report(&image, dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE)),
+        matrix,
+    }
 }
 
 /// Build the report of a box image (format 1).
 pub fn report(image: &CoeffImage) -> InspectReport {
-    let axes = axis_reports(&image.axes);
-    let loaded = Ok(*image);
-    let box_mode = dynocomp_core::sample::select_mode(Some(&loaded), false);
-    InspectReport {
-        format_version: dynocomp_core::image::FORMAT_VERSION,
-        image_id: format!("{:08x}", image.id()),
-        fs_hz: image.fs_hz,
-        latency_samples: image.latency_samples,
-        offline_only: image.is_offline_only(),
-        runs_in_box: matches!(box_mode, dynocomp_core::sample::Mode::Compensate(_)),
-        method: method_name(image.method),
-        source_sha256: image.source_sha256.iter().map(|b| format!("{b:02x}")).collect(),
-        created_unix_s: image.created_unix_s,
-        offline_reason: image.is_offline_only().then(|| "marked offline only (flag 0x01)".to_string()),
-        axes,
-        bands: Vec::new(),
-        box_load: Some(crate::realize::load::report(image, dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE)),
-    }
+    box_report((*image).into(), axis_reports(&image.axes), None)
+}
+
+/// Build the report of a 3x3 image (format 3): the shared filter's shape,
+/// each axis's scaling, summary and row design, and the box's predicted
+/// cost per sample against its budget.
+pub fn report_matrix(image: &MatrixImage) -> InspectReport {
+    let f = &image.filter;
+    let blocks: Vec<Section> = f.sections().iter().map(|s| s.block()).collect();
+    let (pairs, diagonals) = f.kernel_counts();
+    let order = 2 * pairs + 2 * diagonals;
+    let axes = image
+        .axes
+        .iter()
+        .zip(image.rows)
+        .map(|(a, row)| AxisReport {
+            row_design: Some(match row {
+                RowDesign::Matrix => "3x3",
+                RowDesign::PerAxis => "per-axis",
+            }),
+            ..axis_report(a.axis, &a.scaling, &a.summary, &blocks, order)
+        })
+        .collect();
+    let matrix = MatrixReport {
+        sections: f.sections().len(),
+        pairs,
+        diagonals,
+        filter_order: order,
+        fir_taps: f.fir().len(),
+        max_pole_radius: max_pole_radius(&blocks),
+        dc_gain: f.dc_gain(),
+        row_gain_bound: std::array::from_fn(|i| f.row_gain_bound(i)),
+    };
+    box_report((*image).into(), axes, Some(matrix))
 }
 
 /// Build the report of a parallel-elaboration image (format 2): offline
@@ -179,6 +270,7 @@ pub fn report_parallel(image: &ParallelImage) -> Result<InspectReport> {
         axes: Vec::new(),
         bands,
         box_load: None,
+        matrix: None,
     })
 }
 
@@ -209,6 +301,9 @@ pub fn render(r: &InspectReport) -> String {
         let _ = writeln!(s, "{}", crate::realize::load::describe(l, r.fs_hz));
     }
     let _ = writeln!(s, "source sha256 {}", r.source_sha256);
+    if let Some(m) = &r.matrix {
+        render_matrix(&mut s, m, &r.axes);
+    }
     if r.bands.is_empty() {
         render_axes(&mut s, &r.axes);
     }
@@ -221,6 +316,30 @@ pub fn render(r: &InspectReport) -> String {
         render_axes(&mut s, &b.axes);
     }
     s
+}
+
+/// The shared filter of a 3x3 image: its shape, which rows compensate
+/// crosstalk, and its DC gain matrix.
+fn render_matrix(s: &mut String, m: &MatrixReport, axes: &[AxisReport]) {
+    let _ = writeln!(
+        s,
+        "3x3 filter (shared by x, y, z): {} sections ({} pole pairs, {} diagonal), order {}, {} FIR taps (3x3 each), \
+         max |p| {:.7}",
+        m.sections, m.pairs, m.diagonals, m.filter_order, m.fir_taps, m.max_pole_radius
+    );
+    let rows: Vec<String> = axes.iter().map(|a| format!("{} {}", a.axis, a.row_design.unwrap_or("?"))).collect();
+    let _ = writeln!(s, "output rows: {} (3x3 = crosstalk compensated, per-axis = direct FRF only)", rows.join(", "));
+    for (i, row) in m.dc_gain.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "DC gain {} <- (x, y, z): {:>9.4} {:>9.4} {:>9.4}   gain bound {:.3}",
+            axis_name(i),
+            row[0],
+            row[1],
+            row[2],
+            m.row_gain_bound[i]
+        );
+    }
 }
 
 fn render_axes(s: &mut String, axes: &[AxisReport]) {

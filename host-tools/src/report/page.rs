@@ -70,7 +70,7 @@ pub fn index_html(title: &str, summary: &str, sections: &[Section]) -> String {
         &"<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{title}</title>\n\
          <style>\n\
          body { font-family: sans-serif; margin: 2em auto; max-width: 1150px; padding: 0 1em; color: #222; }\n\
-         pre { background: #f4f4f4; border: 1px solid #ddd; padding: 1em; overflow-x: auto; }\n\
+         pre { background: #f4f4f4; border: 1px solid #ddd; padding: 1em; white-space: pre-wrap; overflow-wrap: anywhere; }\n\
          img { width: 100%; max-width: 1100px; border: 1px solid #ddd; }\n\
          nav a { margin-right: 1em; }\n\
          p.caption { color: #444; }\n\

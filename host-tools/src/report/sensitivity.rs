@@ -18,38 +18,48 @@ pub fn plot_caption(s: &Sensitivity) -> String {
     )
 }
 
-/// The report's SVG: predicted error (%) against the shift δ (%).
+/// The report's SVG: predicted error (%) against the shift δ (%), the
+/// error on a log scale so that the nominal error, twice it and the shifts
+/// where it doubles (dotted) can be read beside errors of tens of %.
 pub fn plot(axis: &str, s: &Sensitivity) -> anyhow::Result<String> {
     use plotters::prelude::*;
-    let pts: Vec<(f64, f64)> = s.points.iter().map(|p| (p.0, 100.0 * p.1)).collect();
-    let top = pts.iter().map(|p| p.1).fold(2.0 * 100.0 * s.nominal, f64::max);
-    let yr = (0.0, if top.is_finite() && top > 0.0 { 1.08 * top } else { 1.0 });
+    let lg = |pct: f64| pct.max(1e-6).log10();
+    let pts: Vec<(f64, f64)> = s.points.iter().map(|p| (p.0, lg(100.0 * p.1))).collect();
+    let nominal = 100.0 * s.nominal;
+    let top = s.points.iter().map(|p| 100.0 * p.1).fold(2.0 * nominal, f64::max);
+    let yr = if top.is_finite() && nominal > 0.0 { (lg(0.5 * nominal), lg(1.5 * top)) } else { (-2.0, 2.0) };
     let xr = (SHIFTS_PCT[0], SHIFTS_PCT[SHIFTS_PCT.len() - 1]);
     let mut buf = String::new();
     {
-        let root = SVGBackend::with_string(&mut buf, (1100, 420)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut buf, (1100, 440)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
         let title = format!(
             "Axis {axis} — predicted in-band error vs sensor-mode shift: {:.2} % nominal, {:.2} / {:.2} % at ±1 %, {:.2} / {:.2} % at ±3 %",
-            100.0 * s.nominal,
+            nominal,
             100.0 * s.at(-1.0).unwrap_or(f64::NAN),
             100.0 * s.at(1.0).unwrap_or(f64::NAN),
             100.0 * s.at(-3.0).unwrap_or(f64::NAN),
             100.0 * s.at(3.0).unwrap_or(f64::NAN)
         );
         let root = root.titled(&title, (FONT, 16)).map_err(perr)?;
-        let mut c = build_chart(&root, "Predicted in-band RMS error (% of the force's std)", xr, yr)?;
-        mesh(
-            &mut c,
-            "Sensor-mode shift δ (%)",
-            "Predicted error (%)",
-            &|v| format!("{v:+.1}"),
-            &|v| format!("{v:.1}"),
-            8,
-        )?;
+        let mut c = build_chart(&root, "Predicted in-band RMS error (% of the force's std, log scale)", xr, yr)?;
+        let ytick = |v: &f64| {
+            let p = 10f64.powf(*v);
+            if p >= 1.0 {
+                format!("{p:.1}")
+            } else {
+                format!("{p:.2}")
+            }
+        };
+        mesh(&mut c, "Sensor-mode shift δ (%)", "Predicted error (%)", &|v| format!("{v:+.1}"), &ytick, 8)?;
         draw_line(&mut c, &pts, yr, f64::INFINITY, RGBColor(214, 39, 40), 2, false, "predicted error, this filter")?;
-        let twice = [(xr.0, 200.0 * s.nominal), (xr.1, 200.0 * s.nominal)];
+        let twice = [(xr.0, lg(2.0 * nominal)), (xr.1, lg(2.0 * nominal))];
         draw_line(&mut c, &twice, yr, f64::INFINITY, RGBColor(127, 127, 127), 1, true, "twice the nominal error")?;
+        let doubling = [s.doubles_below_pct, s.doubles_above_pct];
+        for (k, x) in doubling.into_iter().flatten().enumerate() {
+            let label = if k == 0 { "where the error doubles" } else { "" };
+            draw_line(&mut c, &[(x, yr.0), (x, yr.1)], yr, f64::INFINITY, RGBColor(31, 119, 180), 1, true, label)?;
+        }
         legend(&mut c, SeriesLabelPosition::UpperMiddle)?;
         root.present().map_err(perr)?;
     }

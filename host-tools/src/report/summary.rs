@@ -179,6 +179,20 @@ pub struct DesignJson {
     /// How the latency was chosen (absent when `--latency` was given).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub latency_choice: Option<crate::design::latency::LatencyChoice>,
+    /// Band-fitted or paper-method axes beside the default design (absent
+    /// for the default design).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub versus_default: Vec<VersusDefaultJson>,
+}
+
+/// One axis of [`DesignJson::versus_default`].
+#[derive(Debug, serde::Serialize)]
+pub struct VersusDefaultJson {
+    /// The comparison ([`crate::design::versus_default::compare`]).
+    #[serde(flatten)]
+    pub comparison: crate::design::versus_default::VersusDefault,
+    /// Whether the image carries the default design for the axis.
+    pub replaced_by_default: bool,
 }
 
 /// One-screen text summary.

@@ -15,18 +15,29 @@ pub fn describe(name: &str, rd: &RangeDesign) -> String {
     let mut lines = String::new();
     let (ts, cands) = (&rd.states, &rd.candidates);
     let c = &cands[rd.best];
-    let (first, last) = (&cands[0], &cands[cands.len() - 1]);
-    let moved: Vec<String> =
-        ts.before.modes().iter().zip(ts.after.modes()).map(|(m0, m1)| format!("{:.0}→{:.0}", m0.0, m1.0)).collect();
+    let (first, last) = rd.single_state_worst();
+    let (moved, background) = paired_and_background(ts);
     let _ = writeln!(
         lines,
-        "{name} two states: modes paired {} Hz; image for the range designed at s = {:.2}: worst-case predicted error {:.2} % over s ∈ [0, 1] (designs for the first / second FRF alone: {:.2} / {:.2} %)",
+        "{name} two states: modes paired {} Hz{}; {}: worst-case predicted error {:.2} % over s ∈ [0, 1] and both measured FRFs (designs for the first / second FRF alone: {:.2} / {:.2} %)",
         moved.join(", "),
-        c.s,
+        if background.is_empty() {
+            String::new()
+        } else {
+            format!(" (background terms of one fit only, faded between the states: {})", background.join(", "))
+        },
+        if rd.kept_single_state() {
+            "kept the first FRF's single-state design for this axis: no design for the range predicts less error over it".to_string()
+        } else {
+            format!("image for the range designed at s = {:.2}", c.s)
+        },
         100.0 * c.worst,
-        100.0 * first.worst,
-        100.0 * last.worst
+        100.0 * first,
+        100.0 * last
     );
+    for (s, why) in &rd.skipped {
+        let _ = writeln!(lines, "{name} candidate state s = {s:.2} not designed: {why}");
+    }
     let shared = shared_modes_hz(rd);
     let apart: Vec<String> = rd
         .machine
@@ -111,8 +122,15 @@ pub struct RangeAxisJson {
     worst_case_error: f64,
     /// The same for the designs from the first and the second FRF alone.
     single_state_worst_case: (f64, f64),
+    /// Whether the image keeps the first FRF's single-state design for
+    /// this axis (no design for the range predicts less error over it).
+    kept_single_state: bool,
     /// (state, worst case, error at each range state) of every candidate.
     candidates: Vec<(f64, f64, Vec<f64>)>,
+    /// Each candidate's predicted error on the first / second FRF as measured.
+    measured_frf_errors: Vec<(f64, f64)>,
+    /// Candidate states that could not be designed, with why.
+    skipped_states: Vec<(f64, String)>,
     /// The image's predicted error at its own state.
     predicted_error: f64,
     /// Its sensitivity to shifted sensor modes.
@@ -124,7 +142,6 @@ impl RangeAxisJson {
     pub fn new(axis: &'static str, rd: &RangeDesign, sensitivity: Option<Sensitivity>) -> Self {
         let (ts, cands) = (&rd.states, &rd.candidates);
         let c = &cands[rd.best];
-        let (first, last) = (&cands[0], &cands[cands.len() - 1]);
         RangeAxisJson {
             axis,
             modes_before: ts.before.modes(),
@@ -133,8 +150,11 @@ impl RangeAxisJson {
             above_band_modes: rd.above_band.clone(),
             chosen_state: c.s,
             worst_case_error: c.worst,
-            single_state_worst_case: (first.worst, last.worst),
+            single_state_worst_case: rd.single_state_worst(),
+            kept_single_state: rd.kept_single_state(),
             candidates: cands.iter().map(|c| (c.s, c.worst, c.errors.clone())).collect(),
+            measured_frf_errors: cands.iter().map(|c| c.measured).collect(),
+            skipped_states: rd.skipped.clone(),
             predicted_error: c.design.predicted_error,
             sensitivity,
         }
@@ -170,7 +190,7 @@ pub fn plot_range(axis: &str, rd: &RangeDesign) -> Result<String> {
     let top = rd.candidates.iter().flat_map(|c| c.errors.iter()).fold(0.0f64, |a, e| a.max(100.0 * e));
     let yr = (0.0, if top.is_finite() && top > 0.0 { 1.1 * top } else { 1.0 });
     let chosen = &rd.candidates[rd.best];
-    let (first, last) = (&rd.candidates[0], &rd.candidates[rd.candidates.len() - 1]);
+    let (first, last) = rd.single_state_worst();
     let mut buf = String::new();
     {
         let root = SVGBackend::with_string(&mut buf, (1100, 420)).into_drawing_area();
@@ -179,8 +199,8 @@ pub fn plot_range(axis: &str, rd: &RangeDesign) -> Result<String> {
             "Axis {axis} — image designed at s = {:.2}: worst case {:.2} % over the range (first / second FRF's design alone: {:.2} / {:.2} %)",
             chosen.s,
             100.0 * chosen.worst,
-            100.0 * first.worst,
-            100.0 * last.worst
+            100.0 * first,
+            100.0 * last
         );
         let root = root.titled(&title, (FONT, 16)).map_err(perr)?;
         let mut c = build_chart(&root, "Predicted in-band RMS error (% of the force's std)", (0.0, 1.0), yr)?;
@@ -210,6 +230,32 @@ pub fn plot_range(axis: &str, rd: &RangeDesign) -> Result<String> {
         root.present().map_err(perr)?;
     }
     Ok(buf)
+}
+
+/// The paired physical modes ("f0→f1") and the background terms of one
+/// fit ("f Hz" pairs, "real pole f Hz") of the two states, by frequency.
+fn paired_and_background(ts: &crate::design::two_state::model::TwoState) -> (Vec<String>, Vec<String>) {
+    use crate::fit::modes::fn_hz;
+    use crate::fit::Term;
+    let mut moved = Vec::new();
+    let mut background = Vec::new();
+    for (i, (a, b)) in ts.before.terms.iter().zip(&ts.after.terms).enumerate() {
+        match (*a, *b) {
+            (Term::Pair { pole: p0, .. }, Term::Pair { pole: p1, .. }) if !ts.is_background(i) => {
+                moved.push((fn_hz(p0), format!("{:.0}→{:.0}", fn_hz(p0), fn_hz(p1))));
+            }
+            (Term::Pair { pole, .. }, _) => background.push((fn_hz(pole), format!("{:.0} Hz", fn_hz(pole)))),
+            (Term::Real { pole, .. }, _) => {
+                let f = pole.abs() / (2.0 * std::f64::consts::PI);
+                background.push((f, format!("real pole {f:.1} Hz")));
+            }
+        }
+    }
+    let sorted = |mut v: Vec<(f64, String)>| {
+        v.sort_by(|a, b| a.0.total_cmp(&b.0));
+        v.into_iter().map(|x| x.1).collect::<Vec<_>>()
+    };
+    (sorted(moved), sorted(background))
 }
 
 /// The shared machine modes' frequencies (Hz, mean of the two states).

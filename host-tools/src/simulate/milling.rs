@@ -165,8 +165,12 @@ impl MillingParams {
         pos(self.axial_depth_mm, "axial_depth_mm")?;
         pos(self.radial_depth_mm, "radial_depth_mm")?;
         pos(self.feed_per_tooth_mm, "feed_per_tooth_mm")?;
-        if self.teeth == 0 {
-            anyhow::bail!("milling parameter teeth must be ≥ 1");
+        if self.teeth == 0 || self.teeth > super::MAX_TEETH {
+            anyhow::bail!("milling parameter teeth = {} must be in 1..={}", self.teeth, super::MAX_TEETH);
+        }
+        if self.spindle_rpm > super::MAX_SPINDLE_RPM {
+            let max = super::MAX_SPINDLE_RPM;
+            anyhow::bail!("milling parameter spindle_rpm = {} must be at most {max}", self.spindle_rpm);
         }
         if self.axial_slices == 0 {
             anyhow::bail!("milling parameter axial_slices must be ≥ 1");

@@ -99,11 +99,32 @@ impl Default for SimParams {
     }
 }
 
+/// Most samples at the internal rate fs·oversample of one simulated record
+/// (cutting and idle): about 110 bytes each are held, so 2.5·10⁷ (60 s at
+/// 51.2 kHz with the default oversampling of 8) stay near 3 GB.
+pub const MAX_FINE_SAMPLES: f64 = 2.5e7;
+
+/// Sample rates the simulator takes (Hz): the box's and `design`'s range.
+pub const FS_RANGE_HZ: (f64, f64) = (1.0e3, 1.0e6);
+
+/// Most teeth of a cutter (face mills have up to about 30).
+pub const MAX_TEETH: usize = 100;
+
+/// Fastest spindle (rev/min): high-speed spindles reach 60 000-100 000.
+pub const MAX_SPINDLE_RPM: f64 = 200_000.0;
+
+/// Most impact-test lines and impacts.
+pub const MAX_FRF_LINES: usize = 1 << 20;
+/// Most averaged impacts.
+pub const MAX_IMPACTS: usize = 1000;
+
 impl SimParams {
-    /// Check the parameters; the error names the offending one.
+    /// Check the parameters against their physical ranges (and the memory
+    /// of [`MAX_FINE_SAMPLES`]); the error names the offending one.
     pub fn validate(&self) -> Result<()> {
-        if !(self.fs_hz.is_finite() && self.fs_hz > 0.0) {
-            bail!("simulate: sample rate fs = {} Hz must be > 0", self.fs_hz);
+        let (fs_lo, fs_hi) = FS_RANGE_HZ;
+        if !(self.fs_hz.is_finite() && self.fs_hz >= fs_lo && self.fs_hz <= fs_hi) {
+            bail!("simulate: sample rate fs = {} Hz must be within {fs_lo}..={fs_hi} Hz", self.fs_hz);
         }
         if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
             bail!("simulate: duration = {} s must be > 0", self.duration_s);
@@ -114,6 +135,18 @@ impl SimParams {
         if self.oversample == 0 || self.oversample > 64 {
             bail!("simulate: oversample = {} must be in 1..=64", self.oversample);
         }
+        for (what, d) in [("duration", self.duration_s), ("idle duration", self.idle_duration_s)] {
+            let fine = d * self.fs_hz * self.oversample as f64;
+            if fine > MAX_FINE_SAMPLES {
+                bail!(
+                    "simulate: {what} = {d} s at {} Hz with oversample {} needs {fine:.3e} internal samples, more than the limit of \
+                     {MAX_FINE_SAMPLES:.1e} (at most {:.1} s at this rate)",
+                    self.fs_hz,
+                    self.oversample,
+                    MAX_FINE_SAMPLES / (self.fs_hz * self.oversample as f64)
+                );
+            }
+        }
         self.anti_alias.validate()?;
         let m = &self.measurement;
         if !(m.noise_variance_n2.is_finite() && m.noise_variance_n2 >= 0.0) {
@@ -123,6 +156,9 @@ impl SimParams {
             bail!("simulate: ADC {} bits over ±{} N is not valid (bits ≤ 32, range > 0)", m.adc_bits, m.adc_range_n);
         }
         let i = &self.impact;
+        if i.n_lines > MAX_FRF_LINES || i.n_impacts > MAX_IMPACTS {
+            bail!("simulate: impact test of {} lines and {} impacts: at most {MAX_FRF_LINES} lines and {MAX_IMPACTS} impacts", i.n_lines, i.n_impacts);
+        }
         if i.n_lines < 2 || !(i.df_hz.is_finite() && i.df_hz > 0.0) || i.n_impacts == 0 {
             bail!(
                 "simulate: impact test needs ≥ 2 lines, df > 0 and ≥ 1 impact (got {} lines, df {} Hz, {} impacts)",

@@ -38,8 +38,32 @@ pub fn dynocomp_piped(args: &[&str], input: Vec<u8>) -> (bool, String, bool) {
 }
 
 /// A path `name` in a per-test-binary, per-process temporary folder `tag`.
+/// The first call of a process removes the folders of test processes that
+/// have ended (`dynocomp-TAG-PID` with no /proc/PID), so runs do not pile up.
 pub fn tmp(tag: &str, name: &str) -> PathBuf {
+    static SWEPT: std::sync::Once = std::sync::Once::new();
+    SWEPT.call_once(sweep_ended_runs);
     let dir = std::env::temp_dir().join(format!("dynocomp-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     dir.join(name)
+}
+
+/// Remove `dynocomp-*-PID` folders in the temporary folder whose process has
+/// ended. Only where /proc tells which processes live (Linux).
+fn sweep_ended_runs() {
+    let proc = std::path::Path::new("/proc");
+    if !proc.join("self").exists() {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else { return };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let Some(pid) = name.strip_prefix("dynocomp-").and_then(|r| r.rsplit_once('-')).map(|(_, p)| p.to_string())
+        else {
+            continue;
+        };
+        if pid.parse::<u32>().is_ok() && !proc.join(&pid).exists() && e.path().is_dir() {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
 }

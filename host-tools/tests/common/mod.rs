@@ -94,3 +94,60 @@ pub fn fix_crc(b: &mut [u8]) {
 pub fn id(b: &[u8]) -> u32 {
     CoeffImage::parse(b).expect("fixture parses").id()
 }
+
+/// A valid 3x3 image (format 3) on x, y, z at `fs_hz`: `pairs` lightly
+/// damped pole pairs from 200 Hz up, every pair fed by all three inputs and
+/// seen by all three outputs (crosstalk terms non-zero), `taps` FIR taps,
+/// and the direct term chosen so that the DC gain is the identity. Scaling
+/// as [`image`] (0.5·(i+1) N/code in, 2/(i+1) codes/N out, mid-scale 2048).
+pub fn matrix_image(variant: u32, fs_hz: u32, pairs: usize, taps: usize) -> dynocomp_core::image::MatrixImage {
+    use dynocomp_core::image::{AxisChannel, MatrixImage, RowDesign};
+    use dynocomp_core::mimo::{MimoFilter, MimoSection};
+    let fs = f64::from(fs_hz);
+    let v = variant as f32;
+    let sections: Vec<MimoSection> = (0..pairs)
+        .map(|k| {
+            let w = 2.0 * std::f64::consts::PI * 200.0 * 1.7f64.powi(k as i32) / fs;
+            let r = (-0.02 * w).exp();
+            let (sigma, omega) = ((r * w.cos() - 1.0) as f32, (r * w.sin()) as f32);
+            let g = (0.2 * (1.0 - r)) as f32;
+            let kf = k as f32;
+            MimoSection {
+                delta: [sigma, omega, -omega, sigma],
+                b: [[1.0, 0.3 + 0.01 * v, -0.2], [0.1 * kf, -0.5, 0.4]],
+                c: [[g, -0.5 * g], [0.3 * g, g], [-0.2 * g, 0.7 * g]],
+            }
+        })
+        .collect();
+    let fir: Vec<[[f32; 3]; 3]> = (0..taps)
+        .map(|m| {
+            let s = 0.02 / (m as f32 + 1.0);
+            [[s, -0.5 * s, 0.2 * s], [0.1 * s, s, -0.3 * s], [0.4 * s, 0.0, s]]
+        })
+        .collect();
+    let zero = [[0.0f32; 3]; 3];
+    let rest = MimoFilter::new(&sections, zero, &fir).expect("valid 3x3 filter").dc_gain();
+    let d = std::array::from_fn(|i| std::array::from_fn(|j| (f64::from(u8::from(i == j)) - rest[i][j]) as f32));
+    let filter = MimoFilter::new(&sections, d, &fir).expect("valid 3x3 filter");
+    let per_axis = image(variant, fs_hz, 0);
+    let ch = |i: usize| {
+        let a = per_axis.axes[i].expect("all axes");
+        AxisChannel { axis: i as u8, scaling: a.scaling, summary: a.summary }
+    };
+    MatrixImage {
+        fs_hz,
+        latency_samples: 2,
+        flags: 0,
+        method: DesignMethod::VectorFitting,
+        source_sha256: [variant as u8; 32],
+        created_unix_s: u64::from(variant),
+        axes: [ch(0), ch(1), ch(2)],
+        filter,
+        rows: [RowDesign::Matrix, RowDesign::PerAxis, RowDesign::Matrix],
+    }
+}
+
+/// Encoded bytes of a 3x3 image.
+pub fn matrix_bytes(img: &dynocomp_core::image::MatrixImage) -> Vec<u8> {
+    dynocomp::io::image_file::encode_matrix_image(img).expect("3x3 fixture encodes")
+}

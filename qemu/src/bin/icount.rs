@@ -53,16 +53,19 @@
 #![no_main]
 
 use core::hint::black_box;
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering::Relaxed};
 use cortex_m_rt::entry;
 use cortex_m_semihosting::hprintln;
 use dsp_process::SplitProcess;
-use dynocomp_core::image::{AxisImage, AxisScaling, AxisSummary, CoeffImage, DesignMethod};
-use dynocomp_core::kernel::{AxisFilter, AxisState, Section};
-use dynocomp_core::sample::{process_sample, Mode, SampleState};
-use core::sync::atomic::{AtomicBool, AtomicU32, Ordering::Relaxed};
 use dynocomp_core::cycles::IsrCycles;
 use dynocomp_core::handoff::ImageHandoff;
+use dynocomp_core::image::{
+    AxisChannel, AxisImage, AxisScaling, AxisSummary, BoxImage, CoeffImage, DesignMethod, MatrixImage, RowDesign,
+};
+use dynocomp_core::kernel::{AxisFilter, AxisState, Section};
+use dynocomp_core::mimo::{MimoFilter, MimoSection, MimoState};
 use dynocomp_core::protocol::StreamSample;
+use dynocomp_core::sample::{process_sample, Mode, SampleState};
 use dynocomp_core::shell::{ActiveImage, RingCursor, SamplePath};
 use dynocomp_core::stream_queue::{Consumer, Producer, StreamItem, StreamQueue};
 use dynocomp_core::AXES;
@@ -241,8 +244,65 @@ fn mixed_filter(pairs: usize, reals: usize, taps: usize) -> AxisFilter {
     }
 }
 
-fn box_image(sections: usize, taps: usize) -> CoeffImage {
-    image_of(kernel_filter(sections, taps), AXES)
+fn box_image(sections: usize, taps: usize) -> BoxImage {
+    image_of(kernel_filter(sections, taps), AXES).into()
+}
+
+/// A 3x3 filter with `pairs` normal-form pairs, `diagonals` diagonal
+/// sections and `taps` FIR taps, every B and C entry non-zero (dense).
+fn mimo_filter(pairs: usize, diagonals: usize, taps: usize) -> MimoFilter {
+    let mut secs = [MimoSection::default(); 48];
+    let n = (pairs + diagonals).min(48);
+    for (i, s) in secs.iter_mut().take(n).enumerate() {
+        let k = i as f32;
+        let b = [[0.1, -0.02 * k, 0.03], [0.01, 0.05, -0.04]];
+        let c = [[0.5, -0.2], [0.03, 0.1 + 0.001 * k], [-0.02, 0.04]];
+        *s = if i < pairs {
+            let w = 0.001 + 0.0015 * k;
+            MimoSection { delta: [-0.002, w, -w, -0.002], b, c }
+        } else {
+            MimoSection { delta: [-0.1 - 0.01 * k, 0.0, 0.0, -0.3], b, c }
+        };
+    }
+    let mut fir = [[[0.0f32; 3]; 3]; 24];
+    for (m, h) in fir.iter_mut().enumerate() {
+        *h = [[0.01, 0.002, -0.003], [0.001, 0.01, 0.002], [-0.002, 0.001, 0.01]]
+            .map(|r| r.map(|v| v / (m as f32 + 1.0)));
+    }
+    let d = [[1.0, 0.01, -0.02], [0.015, 1.0, 0.01], [-0.01, 0.02, 1.0]];
+    match MimoFilter::new(&secs[..n], d, &fir[..taps]) {
+        Ok(f) => f,
+        Err(_) => dynocomp_qemu::fail("icount: 3x3 test filter rejected"),
+    }
+}
+
+/// A 3x3 image of `filter` at 10 kHz (every shape of the grid fits the
+/// box's budget there), scaling as [`image_of`].
+fn matrix_image(filter: MimoFilter) -> BoxImage {
+    let scaling = AxisScaling {
+        adc_offset_code: 2048.0,
+        newton_per_code: 2.5,
+        dac_code_per_newton: 0.4,
+        dac_offset_code: 2048.0,
+    };
+    let ch = |axis: u8| AxisChannel { axis, scaling, summary: AxisSummary::default() };
+    BoxImage::Matrix(MatrixImage {
+        fs_hz: 10_000,
+        latency_samples: 4,
+        flags: 0,
+        method: DesignMethod::Manual,
+        source_sha256: [0; 32],
+        created_unix_s: 0,
+        axes: [ch(0), ch(1), ch(2)],
+        filter,
+        rows: [RowDesign::Matrix; 3],
+    })
+}
+
+#[inline(never)]
+fn mimo_step(f: &MimoFilter, st: &mut MimoState, u: f32) -> f32 {
+    let y = f.step(st, [u, 0.5 * u, -0.25 * u]);
+    y[0] + y[1] + y[2]
 }
 
 fn image_of(filter: AxisFilter, n_axes: usize) -> CoeffImage {
@@ -272,7 +332,7 @@ fn image_of(filter: AxisFilter, n_axes: usize) -> CoeffImage {
 }
 
 #[inline(never)]
-fn sample_isr_body(img: &CoeffImage, st: &mut SampleState, code: u16) -> u16 {
+fn sample_isr_body(img: &BoxImage, st: &mut SampleState, code: u16) -> u16 {
     let (dac, flags) = process_sample([code, code ^ 0x155, code ^ 0x2AA], Mode::Compensate(img), st);
     dac[0] ^ dac[1] ^ dac[2] ^ u16::from(flags.0)
 }
@@ -340,10 +400,16 @@ struct Shell {
 /// the ring reads by `ring` (volatile, as the firmware), the DAC writes by
 /// a `black_box`, the two DWT readings by `t0`/`t0 + 1 000`, the TIM2
 /// status write and read left out. What is left out is the hardware part
-/// of the shell's estimate (BENCHMARKS.md, "The sample interrupt's fixed
-/// part").
+/// of the shell's estimate (BENCHMARKS.md, "Cost model of the
+/// sample interrupt").
 #[inline(never)]
-fn isr_software(sh: &mut Shell, stored: &mut ActiveImage, ring: &[[u16; RING_LEN as usize]; AXES], ndtr: [u16; AXES], t0: u32) -> u16 {
+fn isr_software(
+    sh: &mut Shell,
+    stored: &mut ActiveImage,
+    ring: &[[u16; RING_LEN as usize]; AXES],
+    ndtr: [u16; AXES],
+    t0: u32,
+) -> u16 {
     if HANDOFF.take().is_some() {
         sh.path.on_image_switch();
     }
@@ -375,8 +441,8 @@ fn isr_software(sh: &mut Shell, stored: &mut ActiveImage, ring: &[[u16; RING_LEN
     for (dst, &src) in TELEMETRY.saturated.iter().zip(c.saturated.iter()) {
         dst.store(src, Relaxed);
     }
-    for (dst, a) in TELEMETRY.resets.iter().zip(sh.path.state.axes.iter()) {
-        dst.store(a.nonfinite_resets, Relaxed);
+    for (dst, n) in TELEMETRY.resets.iter().zip(sh.path.state.nonfinite_resets()) {
+        dst.store(n, Relaxed);
     }
     TELEMETRY.compensating.store(out.compensating, Relaxed);
     match out.auto_zero {
@@ -391,7 +457,11 @@ fn isr_software(sh: &mut Shell, stored: &mut ActiveImage, ring: &[[u16; RING_LEN
     let decimation = STREAM_DECIMATION.load(Relaxed);
     let index = sh.path.state.counters.samples;
     if decimation != 0 && index.is_multiple_of(decimation) {
-        let item = StreamItem { index, step: decimation, sample: StreamSample { raw: codes, out: out.dac, flags: out.flags.0 } };
+        let item = StreamItem {
+            index,
+            step: decimation,
+            sample: StreamSample { raw: codes, out: out.dac, flags: out.flags.0 },
+        };
         if sh.stream.push(&item).is_err() {
             TELEMETRY.stream_dropped.fetch_add(1, Relaxed);
         }
@@ -406,9 +476,20 @@ fn isr_software(sh: &mut Shell, stored: &mut ActiveImage, ring: &[[u16; RING_LEN
 /// Instructions per call of [`isr_software`] for one image, streaming
 /// every sample (`stream` = the USB task's end, emptied by the harness
 /// after each call, whose cost is measured apart and subtracted) or not.
-fn measure_shell(ticks: &Ticks, img: CoeffImage, streaming: bool, consumer: &mut Consumer<'static, QLEN>, producer: Producer<'static, QLEN>) -> (f32, Producer<'static, QLEN>) {
-    let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..img }));
-    let mut sh = Shell { path: SamplePath::new(), cursor: RingCursor::new(RING_LEN), stream: producer, cycles: IsrCycles::new() };
+fn measure_shell(
+    ticks: &Ticks,
+    img: CoeffImage,
+    streaming: bool,
+    consumer: &mut Consumer<'static, QLEN>,
+    producer: Producer<'static, QLEN>,
+) -> (f32, Producer<'static, QLEN>) {
+    let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..img }.into()));
+    let mut sh = Shell {
+        path: SamplePath::new(),
+        cursor: RingCursor::new(RING_LEN),
+        stream: producer,
+        cycles: IsrCycles::new(),
+    };
     let ring = [[2048u16; RING_LEN as usize]; AXES];
     STREAM_DECIMATION.store(u32::from(streaming), Relaxed);
     let mut written = 0u32;
@@ -455,7 +536,9 @@ fn main() -> ! {
     let nops = measure(&ticks, nop200) - measure(&ticks, nop100);
     hprintln!("{:<28} {:>8.2} (must be 100.00)", "calibration: 200-100 NOPs", nops);
     if (nops - 100.0).abs() > 0.05 {
-        dynocomp_qemu::fail("icount: calibration failed, SysTick is not 40 instructions per tick (run with -icount shift=0)");
+        dynocomp_qemu::fail(
+            "icount: calibration failed, SysTick is not 40 instructions per tick (run with -icount shift=0)",
+        );
     }
 
     for &s in &[8usize, 16, 24] {
@@ -483,16 +566,8 @@ fn main() -> ! {
     let mut st = AxisState::default();
     report("kernel S24+F24 (n=72)", measure(&ticks, |u| kernel_step(black_box(&full), &mut st, u)), empty, 72);
     let mut st = AxisState::default();
-    report(
-        "kernel S24+F24 guarded",
-        measure(&ticks, |u| kernel_step_guarded(black_box(&full), &mut st, u)),
-        empty,
-        72,
-    );
-    for (name, sections, taps) in [
-        ("process_sample 3x(S24+F24)", 24, 24),
-        ("process_sample 3x(S3+F19)", 3, 19),
-    ] {
+    report("kernel S24+F24 guarded", measure(&ticks, |u| kernel_step_guarded(black_box(&full), &mut st, u)), empty, 72);
+    for (name, sections, taps) in [("process_sample 3x(S24+F24)", 24, 24), ("process_sample 3x(S3+F19)", 3, 19)] {
         let img = box_image(sections, taps);
         let mut sst = SampleState::default();
         report(
@@ -533,7 +608,7 @@ fn main() -> ! {
         (1, 0, 15, 3),
         (4, 0, 5, 3),
     ] {
-        let img = image_of(mixed_filter(p, r, t), a);
+        let img = image_of(mixed_filter(p, r, t), a).into();
         let mut sst = SampleState::default();
         let body = measure(&ticks, |u| f32::from(sample_isr_body(black_box(&img), &mut sst, (u as i32 + 2048) as u16)));
         // The same shape through `SamplePath::tick` (what the interrupt
@@ -541,14 +616,54 @@ fn main() -> ! {
         // where every shape of the grid is within the box's budget. The
         // `model` line's count is the tick's; `tick` minus `process_sample`
         // is printed on its own line.
-        let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..image_of(mixed_filter(p, r, t), a) }));
+        let mut stored =
+            ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..image_of(mixed_filter(p, r, t), a) }.into()));
         if stored.refused().is_some() {
             dynocomp_qemu::fail("icount: a calibration shape is refused at 20 kHz");
         }
         let mut path = SamplePath::new();
-        let per_call = measure(&ticks, |u| f32::from(tick_body(&mut path, black_box(&mut stored), (u as i32 + 2048) as u16)));
+        let per_call =
+            measure(&ticks, |u| f32::from(tick_body(&mut path, black_box(&mut stored), (u as i32 + 2048) as u16)));
         hprintln!("model {} {} {} {} {:.2} {:.2}", p, r, t, a, per_call, per_call - empty);
         hprintln!("tick-minus-process_sample {} {} {} {} {:.2}", p, r, t, a, per_call - body);
+    }
+
+    // The 3x3 kernel alone (`MimoFilter::step`), and its calibration grid
+    // through `SamplePath::tick` with a 3x3 image: (pairs, diagonal
+    // sections, taps). `mimo P D T <per call> <net>` lines.
+    for (p, dg, t) in [(20usize, 2usize, 8usize), (40, 0, 24), (10, 0, 8)] {
+        let f = mimo_filter(p, dg, t);
+        let mut st = MimoState::default();
+        let k = measure(&ticks, |u| mimo_step(black_box(&f), &mut st, u));
+        hprintln!("kernel3x3 {} {} {} {:.2} {:.2}", p, dg, t, k, k - empty);
+    }
+    for (p, dg, t) in [
+        (0usize, 0usize, 0usize),
+        (1, 0, 0),
+        (2, 0, 0),
+        (10, 0, 0),
+        (20, 0, 0),
+        (40, 0, 0),
+        (0, 1, 0),
+        (0, 4, 0),
+        (0, 0, 1),
+        (0, 0, 8),
+        (0, 0, 24),
+        (10, 0, 8),
+        (20, 2, 8),
+        (30, 0, 24),
+        (40, 0, 8),
+        (40, 8, 24),
+        (13, 3, 5),
+    ] {
+        let mut stored = ActiveImage::new(Ok(matrix_image(mimo_filter(p, dg, t))));
+        if stored.refused().is_some() {
+            dynocomp_qemu::fail("icount: a 3x3 calibration shape is refused at 10 kHz");
+        }
+        let mut path = SamplePath::new();
+        let per_call =
+            measure(&ticks, |u| f32::from(tick_body(&mut path, black_box(&mut stored), (u as i32 + 2048) as u16)));
+        hprintln!("mimo {} {} {} {:.2} {:.2}", p, dg, t, per_call, per_call - empty);
     }
 
     // The interrupt's software shell around `SamplePath::tick`: the same
@@ -563,7 +678,11 @@ fn main() -> ! {
     let mut pop_only = {
         let mut sh_prod = producer;
         let pop = measure(&ticks, |u| {
-            let _ = sh_prod.push(&StreamItem { index: u as u32, step: 1, sample: StreamSample { raw: [1, 2, 3], out: [4, 5, 6], flags: 0 } });
+            let _ = sh_prod.push(&StreamItem {
+                index: u as u32,
+                step: 1,
+                sample: StreamSample { raw: [1, 2, 3], out: [4, 5, 6], flags: 0 },
+            });
             black_box(consumer.pop()).map_or(0.0, |i| i.index as f32)
         });
         producer = sh_prod;
@@ -572,7 +691,11 @@ fn main() -> ! {
     let push_only = {
         let mut sh_prod = producer;
         let push = measure(&ticks, |u| {
-            let r = sh_prod.push(&StreamItem { index: u as u32, step: 1, sample: StreamSample { raw: [1, 2, 3], out: [4, 5, 6], flags: 0 } });
+            let r = sh_prod.push(&StreamItem {
+                index: u as u32,
+                step: 1,
+                sample: StreamSample { raw: [1, 2, 3], out: [4, 5, 6], flags: 0 },
+            });
             black_box(r.is_ok());
             black_box(consumer.pop()).map_or(0.0, |i| i.index as f32) * 0.0
         });
@@ -584,9 +707,10 @@ fn main() -> ! {
     pop_only = 0.5 * (pop_only + push_only);
     for (p, r, t, a) in [(0usize, 0usize, 0usize, 3usize), (3, 0, 13, 3), (24, 0, 24, 3)] {
         let img = image_of(mixed_filter(p, r, t), a);
-        let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..img }));
+        let mut stored = ActiveImage::new(Ok(CoeffImage { fs_hz: 20_000, ..img }.into()));
         let mut path = SamplePath::new();
-        let tick = measure(&ticks, |u| f32::from(tick_body(&mut path, black_box(&mut stored), (u as i32 + 2048) as u16)));
+        let tick =
+            measure(&ticks, |u| f32::from(tick_body(&mut path, black_box(&mut stored), (u as i32 + 2048) as u16)));
         let (quiet, prod) = measure_shell(&ticks, img, false, &mut consumer, producer);
         let (streaming, prod) = measure_shell(&ticks, img, true, &mut consumer, prod);
         producer = prod;

@@ -5,6 +5,8 @@
 //! directory, runs every sample of each axis the image covers through
 //! `AxisFilter::step` of `dynocomp-core` (the same crate the box and
 //! `dynocomp compensate` use; axes the image does not cover are copied),
+//! or, for a 3x3 image (format version 3), every frame through
+//! `MimoFilter::step`,
 //! and writes `output.bin` in the same layout. Prints `FPSCR=0x........`
 //! (the float environment the outputs were computed in) and exits 0, or
 //! prints the reason and exits 1. Driven by `tests/qemu_bit_exact.rs`.
@@ -13,8 +15,9 @@
 
 use cortex_m_rt::entry;
 use cortex_m_semihosting::hprintln;
-use dynocomp_core::image::{CoeffImage, MAX_IMAGE_LEN};
+use dynocomp_core::image::{BoxImage, MAX_BOX_IMAGE_LEN};
 use dynocomp_core::kernel::AxisState;
+use dynocomp_core::mimo::MimoState;
 use dynocomp_core::AXES;
 use dynocomp_qemu::{f32_le, fail, success, HostFile};
 
@@ -27,13 +30,14 @@ fn main() -> ! {
     let fpscr = cortex_m::register::fpscr::read().bits();
     hprintln!("FPSCR=0x{:08x}", fpscr);
 
-    let mut img_buf = [0u8; MAX_IMAGE_LEN];
+    let mut img_buf = [0u8; MAX_BOX_IMAGE_LEN];
     let n = HostFile::open_read(b"image.dcimg\0").read_full(&mut img_buf);
-    let image = match CoeffImage::parse(&img_buf[..n]) {
+    let image = match BoxImage::parse(&img_buf[..n]) {
         Ok(i) => i,
         Err(_) => fail("image.dcimg is not a valid coefficient image"),
     };
     let mut states = [AxisState::default(); AXES];
+    let mut matrix_state = MimoState::default();
     let mut input = HostFile::open_read(b"input.bin\0");
     let mut output = HostFile::create(b"output.bin\0");
     let mut inb = [0u8; CHUNK_FRAMES * FRAME_BYTES];
@@ -47,17 +51,17 @@ fn main() -> ! {
         if got == 0 {
             break;
         }
-        for (fin, fout) in inb[..got]
-            .chunks_exact(FRAME_BYTES)
-            .zip(outb.chunks_exact_mut(FRAME_BYTES))
-        {
-            for axis in 0..AXES {
-                let u = f32_le(&fin[4 * axis..]);
-                let y = match &image.axes[axis] {
-                    Some(a) => a.filter.step(&mut states[axis], u),
-                    None => u,
-                };
-                fout[4 * axis..4 * axis + 4].copy_from_slice(&y.to_le_bytes());
+        for (fin, fout) in inb[..got].chunks_exact(FRAME_BYTES).zip(outb.chunks_exact_mut(FRAME_BYTES)) {
+            let u: [f32; AXES] = core::array::from_fn(|axis| f32_le(&fin[4 * axis..]));
+            let y = match &image {
+                BoxImage::Matrix(m) => m.filter.step(&mut matrix_state, u),
+                BoxImage::PerAxis(img) => core::array::from_fn(|axis| match &img.axes[axis] {
+                    Some(a) => a.filter.step(&mut states[axis], u[axis]),
+                    None => u[axis],
+                }),
+            };
+            for (axis, v) in y.iter().enumerate() {
+                fout[4 * axis..4 * axis + 4].copy_from_slice(&v.to_le_bytes());
             }
         }
         output.write_all(&outb[..got]);

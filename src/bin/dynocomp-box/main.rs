@@ -138,12 +138,12 @@ async fn main(spawner: Spawner) {
     let reason = match boot_mode {
         Mode::Compensate(img) => {
             info!(
-                "compensating: slot {}, image {=u32:#010x}, fs = {} Hz, latency {} samples, axes mask {=u8:#05b}",
+                "compensating: slot {}, image {=u32:#010x} (format {}), fs = {} Hz, latency {} samples",
                 slot,
                 img.id(),
-                img.fs_hz,
-                img.latency_samples,
-                img.axis_mask()
+                img.format_version(),
+                img.fs_hz(),
+                img.latency_samples()
             );
             None
         }

@@ -62,7 +62,7 @@ use core::sync::atomic::{
 use cortex_m::peripheral::{DCB, DWT};
 use dynocomp_core::cycles::IsrCycles;
 use dynocomp_core::handoff::ImageHandoff;
-use dynocomp_core::image::CoeffImage;
+use dynocomp_core::image::BoxImage;
 use dynocomp_core::protocol::{StatusCounters, StreamSample};
 use dynocomp_core::sample::{BypassReason, SampleState};
 use dynocomp_core::shell::{
@@ -317,8 +317,8 @@ impl Telemetry {
         for (dst, &src) in self.saturated.iter().zip(c.saturated.iter()) {
             dst.store(src, Relaxed);
         }
-        for (dst, a) in self.resets.iter().zip(st.axes.iter()) {
-            dst.store(a.nonfinite_resets, Relaxed);
+        for (dst, n) in self.resets.iter().zip(st.nonfinite_resets()) {
+            dst.store(n, Relaxed);
         }
         self.compensating.store(compensating, Relaxed);
     }
@@ -350,7 +350,7 @@ impl Snapshot {
 // ------------------------------------------------------- image buffers --
 
 /// What the store gave: a verified image, or why the box is in bypass.
-pub type Stored = Result<CoeffImage, BypassReason>;
+pub type Stored = Result<BoxImage, BypassReason>;
 
 /// The two coefficient-image buffers of `dynocomp_core::handoff`: the
 /// interrupt uses `[HANDOFF.active()]`, the USB task fills the other one.
@@ -373,7 +373,7 @@ static HANDOFF: ImageHandoff = ImageHandoff::new(0);
 /// to it at the next sample boundary (and resets the filter state). Returns
 /// `false` if the previous switch is still pending (retry after a sample
 /// period) or the sample path is not running.
-pub fn hand_over(image: CoeffImage) -> bool {
+pub fn hand_over(image: BoxImage) -> bool {
     if !SAMPLER_READY.load(Acquire) {
         return false;
     }

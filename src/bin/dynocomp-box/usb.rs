@@ -19,7 +19,7 @@
 //! sample interrupt keeps running.
 
 use defmt::{info, warn};
-use dynocomp_core::image::CoeffImage;
+use dynocomp_core::image::BoxImage;
 use dynocomp_core::link::{Actions, BoxLink, Telemetry};
 use dynocomp_core::protocol::{encode_frame, BoxMessage, FrameDecoder, StreamBatcher, MAX_FRAME};
 use dynocomp_core::sample::{select_stored_mode, Mode};
@@ -184,7 +184,7 @@ async fn pump_stream(
 
 /// After a commit: run the new image.
 async fn switch_image(link: &mut Link) {
-    let img: CoeffImage = match link.store.load_active() {
+    let img: BoxImage = match link.store.load_active() {
         Ok(img) => img,
         Err(r) => {
             // The store verified it before committing; keep running the old one.

@@ -71,7 +71,8 @@ impl<'a> Lines<'a> {
 /// stiffness); it does not assume that all sensor modes move alike.
 ///
 /// **Rule (stated).** Only if the first-state model has sensor modes
-/// ([`crate::fit::modes::sensor_mode_indices`]) above the compensated band:
+/// ([`crate::fit::modes::sensor_mode_indices`], not background terms of the
+/// fit, [`TwoState::is_background`]) above the compensated band:
 /// 1. One weighted least-squares problem over both FRFs' lines (each with
 ///    the coherence weights of its fit): the above-band modes' modal shares
 ///    and d are common unknowns, as are the modal shares of terms both
@@ -99,7 +100,9 @@ pub fn fit_above_band_jointly(ts: &TwoState, lines: &Lines, band_hz: (f64, f64))
     let sensors = crate::fit::modes::sensor_mode_indices(&ts.before);
     let above: Vec<usize> = sensors
         .into_iter()
-        .filter(|&i| matches!(ts.before.terms[i], Term::Pair { pole, .. } if fn_hz(pole) > band_hz.1))
+        .filter(|&i| {
+            !ts.is_background(i) && matches!(ts.before.terms[i], Term::Pair { pole, .. } if fn_hz(pole) > band_hz.1)
+        })
         .collect();
     if above.is_empty() {
         return (ts.clone(), Vec::new());
@@ -317,7 +320,8 @@ fn scaled_least_squares(mut a: DMatrix<f64>, b: &DVector<f64>) -> Option<(Vec<f6
     for (c, s) in scale.iter().enumerate() {
         a.column_mut(c).scale_mut(1.0 / s);
     }
-    let svd = a.tr_mul(&a).svd(true, true);
+    // No convergence within the iteration limit: no solution.
+    let svd = crate::fit::linalg::svd(a.tr_mul(&a), "the joint two-state fit").ok()?;
     let (smax, smin) = (svd.singular_values.max(), svd.singular_values.min());
     if !(smin > 0.0 && smax / smin <= MAX_COND * MAX_COND) {
         return None;

@@ -23,75 +23,156 @@ fn list(f: &[f64]) -> String {
     f.iter().map(|v| format!("{v:.0}")).collect::<Vec<_>>().join(", ")
 }
 
+/// Largest damping ratio of a physical mode ([`pair`]); a fitted pair more
+/// heavily damped is a background term of the fit.
+pub const PHYSICAL_MAX_ZETA: f64 = 0.2;
+
+/// Smallest |modal share| of a physical mode relative to the model's
+/// largest ([`pair`]); a pair with less is a background term of the fit.
+pub const PHYSICAL_MIN_SHARE: f64 = 1e-3;
+
+/// Whether term `i` of `m` is a physical mode: a pair with ζ ≤
+/// [`PHYSICAL_MAX_ZETA`] and |modal share| ≥ [`PHYSICAL_MIN_SHARE`] × the
+/// largest pair's. Real poles and other pairs are the fit's background: the
+/// static compliance beyond the band, the roll-off below it, and poles the
+/// fit placed to absorb noise.
+pub fn is_physical(m: &PoleResidueModel, i: usize) -> bool {
+    let largest = m
+        .terms
+        .iter()
+        .filter_map(|t| match *t {
+            Term::Pair { pole, residue } => Some(modal_share(pole, residue).norm()),
+            Term::Real { .. } => None,
+        })
+        .fold(0.0, f64::max);
+    match m.terms[i] {
+        Term::Pair { pole, residue } => {
+            let zeta = -pole.re / pole.norm();
+            zeta <= PHYSICAL_MAX_ZETA && modal_share(pole, residue).norm() >= PHYSICAL_MIN_SHARE * largest
+        }
+        Term::Real { .. } => false,
+    }
+}
+
+/// The same term with a zero residue (a background term of the other state).
+fn silenced(t: Term) -> Term {
+    match t {
+        Term::Pair { pole, .. } => Term::Pair { pole, residue: Complex64::new(0.0, 0.0) },
+        Term::Real { pole, .. } => Term::Real { pole, residue: 0.0 },
+    }
+}
+
 /// Pair the modes of `before` and `after`; `axis` names the
 /// axis in errors.
 ///
-/// **Pairing (stated rule).** The complex pairs of the two fitted models are
-/// sorted by natural frequency and matched in that order; the two models
-/// must have as many pairs and as many real poles, and each matched pair's
-/// natural frequencies may differ by at most [`PAIR_TOLERANCE`] (relative).
-/// Otherwise pairing fails with a message naming the axis and the modes.
-/// Real poles are matched in ascending order of their value. Machine-structure
-/// modes that both FRFs measured alike are then shared
+/// **Pairing (stated rule).** Only physical modes are paired
+/// ([`is_physical`]): those of each model are sorted by natural frequency
+/// and matched in that order; the two models must have as many, and each
+/// matched pair's natural frequencies may differ by at most
+/// [`PAIR_TOLERANCE`] (relative). Otherwise pairing fails with a message
+/// naming the axis and both models' physical modes. The background terms
+/// (real poles, heavily damped or negligible pairs) are not modes of the
+/// set-up that a change of mass moves, and the two fits place them where
+/// each fit's noise led it: each state keeps its own, and the other state
+/// carries them with a zero residue, so that in between ([`TwoState::at`])
+/// the first state's background fades out as the second's fades in.
+/// Machine-structure modes that both FRFs measured alike are then shared
 /// ([`crate::design::two_state::range::share_machine_modes`]), and sensor
 /// modes above the compensated band fitted to both FRFs at once
 /// ([`crate::design::two_state::joint`]).
 pub fn pair(axis: &str, before: &PoleResidueModel, after: &PoleResidueModel) -> Result<TwoState> {
-    type Split = (Vec<(Complex64, Complex64)>, Vec<(f64, f64)>);
-    let split = |m: &PoleResidueModel| -> Split {
-        let mut pairs = Vec::new();
-        let mut reals = Vec::new();
-        for t in &m.terms {
-            match *t {
-                Term::Pair { pole, residue } => pairs.push((pole, residue)),
-                Term::Real { pole, residue } => reals.push((pole, residue)),
+    let split = |m: &PoleResidueModel| -> (Vec<Term>, Vec<Term>) {
+        let (mut modes, mut background) = (Vec::new(), Vec::new());
+        for (i, t) in m.terms.iter().enumerate() {
+            if is_physical(m, i) {
+                modes.push(*t)
+            } else {
+                background.push(*t)
             }
         }
-        pairs.sort_by(|a, b| a.0.norm().total_cmp(&b.0.norm()));
-        reals.sort_by(|a, b| a.0.total_cmp(&b.0));
-        (pairs, reals)
+        modes.sort_by(|a, b| term_fn_hz(a).total_cmp(&term_fn_hz(b)));
+        (modes, background)
     };
-    let (p0, r0) = split(before);
-    let (p1, r1) = split(after);
-    let f0: Vec<f64> = p0.iter().map(|p| fn_hz(p.0)).collect();
-    let f1: Vec<f64> = p1.iter().map(|p| fn_hz(p.0)).collect();
-    if p0.len() != p1.len() {
+    let (m0, b0) = split(before);
+    let (m1, b1) = split(after);
+    let f0: Vec<f64> = m0.iter().map(term_fn_hz).collect();
+    let f1: Vec<f64> = m1.iter().map(term_fn_hz).collect();
+    if m0.len() != m1.len() {
         bail!(
-            "axis {axis}: cannot pair the modes of the two FRFs: the first has {} modes ({} Hz), the second {} ({} Hz); measure both states over the same band or fix --max-order",
-            p0.len(),
+            "axis {axis}: cannot pair the modes of the two FRFs: the first has {} modes ({} Hz), the second {} ({} Hz) (pairs with ζ ≤ {PHYSICAL_MAX_ZETA} and a modal share ≥ {PHYSICAL_MIN_SHARE:e} of the largest); measure both states over the same band or fix --max-order",
+            m0.len(),
             list(&f0),
-            p1.len(),
+            m1.len(),
             list(&f1)
-        );
-    }
-    if r0.len() != r1.len() {
-        bail!(
-            "axis {axis}: cannot pair the two FRFs' models: {} real poles in the first, {} in the second",
-            r0.len(),
-            r1.len()
         );
     }
     for (a, b) in f0.iter().zip(&f1) {
         if ((b - a) / a).abs() > PAIR_TOLERANCE {
             bail!(
-                "axis {axis}: cannot pair mode {a:.0} Hz (first FRF) with {b:.0} Hz (second FRF): {:+.1} % apart, more than ±{:.0} %",
+                "axis {axis}: cannot pair mode {a:.0} Hz (first FRF) with {b:.0} Hz (second FRF): {:+.1} % apart, more than ±{:.0} % (modes: {} Hz / {} Hz)",
                 100.0 * (b / a - 1.0),
-                100.0 * PAIR_TOLERANCE
+                100.0 * PAIR_TOLERANCE,
+                list(&f0),
+                list(&f1)
             );
         }
     }
-    let model = |pairs: &[(Complex64, Complex64)], reals: &[(f64, f64)], d: f64| PoleResidueModel {
-        terms: pairs
-            .iter()
-            .map(|&(pole, residue)| Term::Pair { pole, residue })
-            .chain(reals.iter().map(|&(pole, residue)| Term::Real { pole, residue }))
-            .collect(),
-        d,
-    };
-    Ok(TwoState { before: model(&p0, &r0, before.d), after: model(&p1, &r1, after.d) })
+    let before_terms = m0.iter().chain(&b0).copied().chain(b1.iter().map(|t| silenced(*t))).collect();
+    let after_terms = m1.iter().copied().chain(b0.iter().map(|t| silenced(*t))).chain(b1.iter().copied()).collect();
+    Ok(TwoState {
+        before: PoleResidueModel { terms: before_terms, d: before.d },
+        after: PoleResidueModel { terms: after_terms, d: after.d },
+    })
+}
+
+fn term_fn_hz(t: &Term) -> f64 {
+    match *t {
+        Term::Pair { pole, .. } => fn_hz(pole),
+        Term::Real { pole, .. } => pole.abs() / (2.0 * std::f64::consts::PI),
+    }
 }
 
 impl TwoState {
+    /// Two states as [`pair`] made them, checked again (a model sidecar read
+    /// back): as many terms of the same kinds in the same order, and each
+    /// pair's partner within [`PAIR_TOLERANCE`] of its frequency (a
+    /// background pair's partner is the same pole).
+    pub fn checked(axis: &str, before: PoleResidueModel, after: PoleResidueModel) -> Result<TwoState> {
+        if before.terms.len() != after.terms.len() {
+            bail!("axis {axis}: the two states have {} and {} terms", before.terms.len(), after.terms.len());
+        }
+        for (a, b) in before.terms.iter().zip(&after.terms) {
+            let ok = match (*a, *b) {
+                (Term::Pair { pole: p0, .. }, Term::Pair { pole: p1, .. }) => {
+                    ((fn_hz(p1) - fn_hz(p0)) / fn_hz(p0)).abs() <= PAIR_TOLERANCE
+                }
+                (Term::Real { .. }, Term::Real { .. }) => true,
+                _ => false,
+            };
+            if !ok {
+                bail!(
+                    "axis {axis}: the two states' terms at {:.0} Hz and {:.0} Hz are not partners",
+                    term_fn_hz(a),
+                    term_fn_hz(b)
+                );
+            }
+        }
+        Ok(TwoState { before, after })
+    }
+
+    /// Whether term `i` is a background term of one state ([`pair`]): the
+    /// same pole in both states and a zero residue in one.
+    pub fn is_background(&self, i: usize) -> bool {
+        match (self.before.terms[i], self.after.terms[i]) {
+            (Term::Pair { pole: p0, residue: r0 }, Term::Pair { pole: p1, residue: r1 }) => {
+                p0 == p1 && (r0.norm() == 0.0 || r1.norm() == 0.0)
+            }
+            (Term::Real { pole: p0, residue: r0 }, Term::Real { pole: p1, residue: r1 }) => {
+                p0 == p1 && (r0 == 0.0 || r1 == 0.0)
+            }
+            _ => false,
+        }
+    }
     /// The model at state s ∈ [0, 1] (0 = before, 1 = after): per pair,
     /// 1/ω_n² linear in s (linear in added mass at constant stiffness), the
     /// damping ratio ζ linear, and the residue linear as a modal share

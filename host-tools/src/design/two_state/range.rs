@@ -28,7 +28,12 @@ pub struct RangeCandidate {
     pub design: AxisDesign,
     /// Predicted in-band error of its filter at each of [`RANGE_STATES`].
     pub errors: Vec<f64>,
-    /// The largest of `errors`.
+    /// Predicted in-band error of its filter on the first and the second
+    /// FRF as measured (their lines in the criterion's band), not their
+    /// fitted models: the check that the paired models tell the truth at
+    /// the ends of the range.
+    pub measured: (f64, f64),
+    /// The largest of `errors` and `measured`.
     pub worst: f64,
 }
 
@@ -103,7 +108,8 @@ pub struct MachineMode {
 /// limits the smoother (BENCHMARKS.md, the seed-4 gap).
 ///
 /// **Rule (stated).** Per machine mode (a pair of the first state's model
-/// below the sensor modes), the shared mode is the average of the two
+/// below the sensor modes, not a background term of the fit,
+/// [`TwoState::is_background`]), the shared mode is the average of the two
 /// fits' poles and modal shares. Each FRF `(H, w)` (`w` the coherence
 /// weights of the fit) is judged over its lines within ±[`SHARE_WINDOW`]
 /// half-power bandwidths of the mode: the shared mode is kept if, on both
@@ -120,7 +126,7 @@ pub fn share_machine_modes(
     let mut report = Vec::new();
     for (i, (t0, t1)) in ts.before.terms.iter().zip(&ts.after.terms).enumerate() {
         let (Term::Pair { pole: p0, residue: r0 }, Term::Pair { pole: p1, residue: r1 }) = (*t0, *t1) else { continue };
-        if sensors.contains(&i) {
+        if sensors.contains(&i) || ts.is_background(i) {
             continue;
         }
         let pole = (p0 + p1) * 0.5;
@@ -163,17 +169,39 @@ pub struct RangeDesign {
     pub candidates: Vec<RangeCandidate>,
     /// Index of the chosen one in `candidates`.
     pub best: usize,
+    /// Candidate states that could not be designed, with why.
+    pub skipped: Vec<(f64, String)>,
+}
+
+impl RangeDesign {
+    /// Whether the chosen design is the first FRF's own (single-state)
+    /// design: no design for the range predicts less error over it.
+    pub fn kept_single_state(&self) -> bool {
+        self.candidates[self.best].s == 0.0
+    }
+
+    /// Worst-case predicted error of the first and the second FRF's own
+    /// designs (NaN for one that could not be designed).
+    pub fn single_state_worst(&self) -> (f64, f64) {
+        let at = |s: f64| self.candidates.iter().find(|c| c.s == s).map_or(f64::NAN, |c| c.worst);
+        (at(0.0), at(1.0))
+    }
 }
 
 /// The box image for a set-up that moves between two measured states.
 /// **Criterion (stated):** the least worst-case
-/// predicted in-band error over s ∈ [`RANGE_STATES`], chosen among
-/// candidate designs for the model states `candidate_states` (0 and 1 are
+/// predicted in-band error over s ∈ [`RANGE_STATES`] and over both FRFs as
+/// measured ([`RangeCandidate::measured`]), chosen among
+/// candidate designs for the model states `candidate_states` and 0 (0 and 1 are
 /// designed from the two measured FRFs as a single-state design would be,
 /// states in between from the interpolated model's response on the same
 /// lines, with the first FRF's coherence). Each candidate's filter is
 /// evaluated against the interpolated model at every s with the design's own
 /// criterion ([`crate::design::criterion::criterion_j`], the first FRF's band).
+/// A state whose design fails is skipped ([`RangeDesign::skipped`]); the
+/// first FRF's own design is always a candidate, and it wins ties, so the
+/// image never predicts more error over the range than the single-state
+/// design ([`RangeDesign::kept_single_state`]).
 pub fn design_over_range(
     freq_hz: &[f64],
     first: &AxisFrf,
@@ -195,12 +223,20 @@ pub fn design_over_range(
             freqs.iter().map(|f| (*f, m.frf(*f))).collect()
         })
         .collect();
+    let in_band: Vec<usize> =
+        (0..freq_hz.len()).filter(|&k| ranges.iter().any(|b| freq_hz[k] >= b.0 && freq_hz[k] <= b.1)).collect();
+    let measured_freqs: Vec<f64> = in_band.iter().map(|&k| freq_hz[k]).collect();
+    let measured_plants: [Vec<(f64, Complex64)>; 2] =
+        [first, second].map(|a| in_band.iter().map(|&k| (freq_hz[k], a.frf[k])).collect());
     let mut cands = Vec::new();
-    for &s in candidate_states {
+    let mut skipped = Vec::new();
+    let mut states = vec![0.0];
+    states.extend(candidate_states.iter().copied().filter(|&s| s != 0.0));
+    for &s in &states {
         let design = if s == 0.0 {
-            d0.clone()
+            Ok(d0.clone())
         } else if s == 1.0 {
-            design_axis(freq_hz, second, r, opts).context("second FRF")?
+            design_axis(freq_hz, second, r, opts).context("second FRF")
         } else {
             let m = ts.at(s);
             let synthetic = AxisFrf {
@@ -208,19 +244,33 @@ pub fn design_over_range(
                 frf: freq_hz.iter().map(|f| m.frf(*f)).collect(),
                 coherence: first.coherence.clone(),
             };
-            design_axis(freq_hz, &synthetic, r, opts).with_context(|| format!("model state s = {s}"))?
+            design_axis(freq_hz, &synthetic, r, opts).with_context(|| format!("model state s = {s}"))
+        };
+        // A state that cannot be designed is not a candidate; the first
+        // FRF's own design always is.
+        let design = match design {
+            Ok(d) => d,
+            Err(e) => {
+                skipped.push((s, format!("{e:#}")));
+                continue;
+            }
         };
         let h = design.kalman.compensator.freq_responses(&freqs, opts.fs_hz);
         let noise = noise_term(design.kalman.r, opts.fs_hz, width, opts.force_rms);
-        let errors: Vec<f64> =
-            plants.iter().map(|g| criterion_j(g, &h, design.kalman.lag, opts.fs_hz, noise).sqrt()).collect();
-        let worst = errors.iter().copied().fold(0.0, f64::max);
-        cands.push(RangeCandidate { s, design, errors, worst });
+        let j =
+            |g: &[(f64, Complex64)], h: &[Complex64]| criterion_j(g, h, design.kalman.lag, opts.fs_hz, noise).sqrt();
+        let errors: Vec<f64> = plants.iter().map(|g| j(g, &h)).collect();
+        let hm = design.kalman.compensator.freq_responses(&measured_freqs, opts.fs_hz);
+        let measured = (j(&measured_plants[0], &hm), j(&measured_plants[1], &hm));
+        let worst = errors.iter().copied().fold(measured.0.max(measured.1), f64::max);
+        cands.push(RangeCandidate { s, design, errors, measured, worst });
     }
+    // Ties go to the first FRF's own design (candidate 0): a range design
+    // must predict strictly less to replace it.
     let best = (0..cands.len())
         .min_by(|&a, &b| cands[a].worst.total_cmp(&cands[b].worst))
         .ok_or_else(|| anyhow::anyhow!("axis {name}: no candidate state"))?;
-    Ok(RangeDesign { states: ts, machine, above_band, candidates: cands, best })
+    Ok(RangeDesign { states: ts, machine, above_band, candidates: cands, best, skipped })
 }
 
 /// [`design_over_range`] for every axis of the FRFs `before` and `after`

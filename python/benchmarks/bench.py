@@ -1,0 +1,68 @@
+"""Benchmarks of the Python package (BENCHMARKS.md, "From Python"), not
+timed tests. Run from the repository's root after scripts/python_test.sh:
+
+    target/python-venv/bin/python python/benchmarks/bench.py
+
+1. compensate from numpy (box mode, in memory) vs the Rust kernel alone on
+   the same record, in one run: the bundled measured record tiled to
+   N samples per axis, best of R runs each.
+2. design from Python vs the CLI (`dynocomp design`, a new process), same
+   inputs, no report, best of R runs each.
+"""
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import dynocomp
+
+ROOT = Path(__file__).resolve().parents[2]
+EX = ROOT / "data" / "example"
+CLI = Path(os.environ.get("DYNOCOMP_BIN", ROOT / "target" / "release" / "dynocomp"))
+N = int(os.environ.get("BENCH_SAMPLES", 4_000_000))
+R = int(os.environ.get("BENCH_RUNS", 5))
+
+
+def best(f, runs=R):
+    ts = []
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        f()
+        ts.append(time.perf_counter() - t0)
+    return min(ts)
+
+
+def main():
+    with tempfile.TemporaryDirectory() as tmp:
+        img_path = Path(tmp) / "example.dcimg"
+        argv = [str(CLI), "design", "--frf", str(EX / "frf.uff"), "--fs", "51200",
+                "--idle", str(EX / "idle.csv"), "--out", str(img_path)]
+        subprocess.run(argv, check=True, capture_output=True)
+        img = dynocomp.Image.load(img_path)
+        x = dynocomp.read_record(EX / "measured.csv").forces
+        x = np.asfortranarray(np.tile(x, (N // x.shape[0] + 1, 1))[:N])
+        samples = x.size
+        t_py = best(lambda: img.compensate(x))
+        t_k = min(img._kernel_seconds(x) for _ in range(R))
+        print(f"compensate, box mode, {N} samples x 3 axes ({samples / 1e6:.0f} M samples), best of {R}:")
+        print(f"  from numpy (float64, F order): {t_py * 1e3:8.1f} ms  {samples / t_py / 1e6:7.1f} M samples/s")
+        print(f"  Rust kernel alone:             {t_k * 1e3:8.1f} ms  {samples / t_k / 1e6:7.1f} M samples/s")
+        print(f"  ratio numpy / kernel: {t_py / t_k:.2f}")
+        xc = np.ascontiguousarray(x)
+        t_c = best(lambda: img.compensate(xc))
+        print(f"  from numpy (float64, C order): {t_c * 1e3:8.1f} ms  ratio {t_c / t_k:.2f}")
+
+        frf = dynocomp.read_frf(EX / "frf.uff")
+        t_dpy = best(lambda: dynocomp.design(frf, fs=51200, idle=EX / "idle.csv", report=False), runs=3)
+        t_dcli = best(lambda: subprocess.run(argv, check=True, capture_output=True), runs=3)
+        print(f"design (bundled example, no report), best of 3:")
+        print(f"  from Python: {t_dpy:.2f} s   CLI: {t_dcli:.2f} s   ratio {t_dpy / t_dcli:.2f}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# The Python package's tests (python/): a venv under target/ (never the
+# system Python) with pinned build and test tools, one release build of the
+# extension (`pip install ./python`, maturin), pytest, and the quickstart
+# notebook executed. Called by scripts/test.sh; runs alone too.
+# Needs python3 >= 3.10 with the venv module (Debian: python3-venv).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+tgt="${CARGO_TARGET_DIR:-target}"
+venv="$tgt/python-venv"
+py="${PYTHON:-python3}"
+if [ ! -x "$venv/bin/python" ]; then
+    "$py" -m venv "$venv" || {
+        echo "error: $py -m venv failed: install Python >= 3.10 with its venv module (Debian: python3-venv)" >&2
+        exit 1
+    }
+fi
+# Pinned: the build backend, the test runner, the notebook's kernel and
+# plots (numpy 2.4 is the last release for Python 3.11).
+"$venv/bin/python" -m pip install -q --disable-pip-version-check \
+    maturin==1.16.0 pytest==9.2.0 numpy==2.4.6 matplotlib==3.11.2 \
+    nbclient==0.11.0 nbformat==5.11.1 ipykernel==7.4.0
+
+# The build backend runs the venv's `maturin`.
+export PATH="$PWD/$venv/bin:$PATH"
+
+# One release build of the extension, in its own cargo target directory
+# (python/ is outside the root workspace: its own Cargo.lock).
+t0=$(date +%s)
+CARGO_TARGET_DIR="$tgt/python-ext" "$venv/bin/python" -m pip install -q --disable-pip-version-check \
+    --no-build-isolation --force-reinstall --no-deps ./python
+echo "python: built and installed the extension in $(( $(date +%s) - t0 )) s"
+
+# The tests compare against the CLI's own outputs: the same release binary
+# the demo builds (or DYNOCOMP_BIN, a `dynocomp` built already).
+if [ -z "${DYNOCOMP_BIN:-}" ]; then
+    cargo build --release -q -p dynocomp --bin dynocomp
+    export DYNOCOMP_BIN="$PWD/$tgt/release/dynocomp"
+fi
+"$venv/bin/python" -m pytest -q python/tests
+"$venv/bin/python" python/examples/run_notebook.py python/examples/quickstart.ipynb
