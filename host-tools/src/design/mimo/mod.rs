@@ -26,6 +26,7 @@
 pub mod combine;
 pub mod criterion;
 pub mod discrete;
+pub mod image;
 pub mod kalman;
 
 use anyhow::{bail, Context, Result};
@@ -281,6 +282,8 @@ struct Round {
     lag: usize,
     per_axis: Vec<Option<AxisDesign>>,
     matrix: Option<(MatrixKalman, QSearch, [f64; 3])>,
+    /// Why there is no 3x3 design where the model exists.
+    matrix_error: Option<String>,
     axes: Vec<AxisPrediction>,
     rows: [RowSource; 3],
 }
@@ -568,7 +571,11 @@ fn round(
     let opts = DesignOptions { lag, ..d.clone() };
     let per_axis: Vec<Option<AxisDesign>> =
         prepared.iter().map(|p| p.as_ref().ok().and_then(|p| design_prepared(p, &opts).ok())).collect();
-    let matrix = prep.and_then(|p| design_3x3(p, crit, r, lag, d).ok());
+    let (matrix, matrix_error) = match prep.map(|p| design_3x3(p, crit, r, lag, d)) {
+        Some(Ok(m)) => (Some(m), None),
+        Some(Err(e)) => (None, Some(format!("no 3x3 Kalman design at latency {lag}: {e:#}"))),
+        None => (None, None),
+    };
     debug_assert_eq!(crit.all_freqs(), judge.all_freqs());
     let all = crit.all_freqs();
     let h_matrix = matrix.as_ref().map(|(k, _, _)| k.compensator.freq_responses(&all, d.fs_hz));
@@ -630,7 +637,7 @@ fn round(
         })
         .collect();
     let rows = std::array::from_fn(|i| axes[i].source);
-    Round { lag, per_axis, matrix, axes, rows }
+    Round { lag, per_axis, matrix, matrix_error, axes, rows }
 }
 
 /// The 3x3 Kalman design at latency `lag` with q chosen by the criterion
@@ -672,7 +679,7 @@ fn design_3x3(
 #[allow(clippy::too_many_arguments)]
 fn finish(
     frf: &Frf,
-    rd: Round,
+    mut rd: Round,
     prep: Option<MatrixPrep>,
     crosstalk: Crosstalk,
     latency_rounds: Vec<LatencyRound>,
@@ -683,14 +690,29 @@ fn finish(
     let _ = frf;
     let per_axis_ss: [Option<&crate::numeric::lti::StateSpace>; 3] =
         std::array::from_fn(|i| rd.per_axis[i].as_ref().map(|a| &a.kalman.compensator));
-    let (blocks, compensator) = combine(rd.rows, rd.matrix.as_ref().map(|m| &m.0.compensator), per_axis_ss)?;
     let f_band = bands.iter().map(|b| b.1).fold(0.0, f64::max);
-    let (realization, filter, verification) = realize_blocks(&blocks, fs, f_band)?;
-    for a in &rd.axes {
-        if a.source == RowSource::PerAxis {
-            notes.push(format!("axis {}: {}", a.axis, a.reason));
+    let (blocks, compensator) = combine(rd.rows, rd.matrix.as_ref().map(|m| &m.0.compensator), per_axis_ss)?;
+    let (compensator, (realization, filter, verification)) = match realize_blocks(&blocks, fs, f_band) {
+        Ok(r) => (compensator, r),
+        // A 3x3 row that cannot be realized in f32 is not used: the
+        // per-axis rows are (never silently worse, never unverified).
+        Err(e) if rd.rows.contains(&RowSource::Matrix) && rd.per_axis.iter().all(Option::is_some) => {
+            notes.push(format!("the 3x3 rows were not used: {e:#}; every axis is designed per axis"));
+            for (a, d) in rd.axes.iter_mut().zip(&rd.per_axis) {
+                if a.source == RowSource::Matrix {
+                    a.noise_gain = d.as_ref().map_or(f64::NAN, |d| d.noise_gain);
+                    a.source = RowSource::PerAxis;
+                    a.chosen = a.per_axis.expect("per-axis design present");
+                    a.reason = "per-axis row: the 3x3 compensator does not verify in f32".to_string();
+                }
+            }
+            rd.rows = [RowSource::PerAxis; 3];
+            let (blocks, compensator) = combine(rd.rows, None, per_axis_ss)?;
+            (compensator, realize_blocks(&blocks, fs, f_band)?)
         }
-    }
+        Err(e) => return Err(e),
+    };
+    notes.extend(rd.matrix_error.iter().cloned());
     let kalman_fig = rd.matrix.as_ref().map(|(k, s, ng)| KalmanFigures {
         q: k.q,
         r: k.r,
