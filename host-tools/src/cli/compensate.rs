@@ -178,8 +178,10 @@ impl Options {
                 force_prior: !a.no_force_prior,
                 image,
             },
-            (AnyImage::Matrix(_), _) => bail!(
-                "{}: a 3x3 image (format 3): `compensate` cannot run it yet; the box and `dynocomp virtual-box` do",
+            (AnyImage::Matrix(m), false) => Compensation::Matrix(m),
+            (AnyImage::Matrix(_), true) => bail!(
+                "{}: a 3x3 image (format 3): the zero-lag smoother (--offline) does not take the 3x3 model yet; \
+                 run without --offline (the box's 3x3 filter, its latency removed)",
                 a.coeffs.display()
             ),
             (AnyImage::Parallel(_), true) => bail!(

@@ -11,6 +11,7 @@ use dynocomp_core::image::CoeffImage;
 use crate::cli::design_args::{
     check_outputs_are_not_inputs, check_prior_flags, read_force_record, DesignArgs, DesignSetup, ForcePrior, Method,
 };
+use crate::cli::design_matrix::MatrixOutcome;
 use crate::design::axis::AxisDesign;
 use crate::design::image::build_image;
 use crate::design::latency::LatencyChoice;
@@ -41,6 +42,16 @@ pub fn design(args: &DesignArgs) -> Result<String> {
     }
     let t0 = Instant::now();
     let setup = DesignSetup::new(args)?;
+    let mut crosstalk = String::new();
+    if crate::cli::design_matrix::wanted(args, &setup.frf)? {
+        match crate::cli::design_matrix::run(args, &setup, t0)? {
+            MatrixOutcome::Written(summary) => return Ok(summary),
+            MatrixOutcome::PerAxis(lines) => {
+                eprint!("{lines}");
+                crosstalk = lines;
+            }
+        }
+    }
     if args.parallel {
         return crate::cli::design_parallel::run(args, &setup);
     }
@@ -49,7 +60,8 @@ pub fn design(args: &DesignArgs) -> Result<String> {
     let priors = harmonic_priors(args, &designed.designs, &setup.r)?;
     let (image, box_load) = image_within_load(args, &setup, &designed)?;
     write_image_and_sidecar(args, &image, &designed.designs, &priors)?;
-    render(args, &setup, &designed, &priors, &image, box_load, t0)
+    let summary = render(args, &setup, &designed, &priors, &image, box_load, t0)?;
+    Ok(if args.json { summary } else { summary + &crosstalk })
 }
 
 /// Every axis designed, in axis order.

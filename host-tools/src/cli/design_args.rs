@@ -3,7 +3,6 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use sha2::{Digest, Sha256};
 use std::path::PathBuf;
 
 use crate::design::axis::{DesignOptions, FitMethod};
@@ -320,6 +319,11 @@ pub struct DesignArgs {
     /// it is still written, marked offline-only.
     #[arg(long, default_value_t = 60.0, value_name = "PCT")]
     pub max_load: f64,
+    /// Design each axis from its direct FRF alone even when the FRF file
+    /// holds all nine entries: crosstalk is not compensated. Without it a
+    /// complete matrix gets the 3x3 design (README "Crosstalk").
+    #[arg(long)]
+    pub per_axis: bool,
 }
 
 impl DesignArgs {
@@ -377,8 +381,7 @@ impl DesignSetup {
         }
         let limit_permille = (args.max_load * 10.0).floor() as u32;
         let path = args.input.frf();
-        let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-        let frf = crate::io::parse_frf(path, &bytes)?;
+        let (frf, sha) = crate::io::read_frf_arg(path)?;
         let r = args.input.noise_variances(&frf)?;
         // With the harmonic prior, --spindle-rpm/--teeth place the prior's
         // lines, not fitting bands: the design covers the whole band.
@@ -402,16 +405,7 @@ impl DesignSetup {
         };
         // Without --latency, the default method's latency is chosen (crate::design::latency).
         let auto_latency = !paper && args.latency.is_none() && !args.parallel;
-        Ok(DesignSetup {
-            frf,
-            sha: Sha256::digest(&bytes).into(),
-            r,
-            bands,
-            opts,
-            latency,
-            auto_latency,
-            limit_permille,
-        })
+        Ok(DesignSetup { frf, sha, r, bands, opts, latency, auto_latency, limit_permille })
     }
 }
 

@@ -72,6 +72,13 @@ impl TwoFrfs {
         let b1 = std::fs::read(p1).with_context(|| format!("{}: cannot read", p1.display()))?;
         let f0 = io::parse_frf(p0, &b0)?;
         let f1 = io::parse_frf(p1, &b1)?;
+        if (f0.has_cross() || f1.has_cross()) && !args.per_axis {
+            bail!(
+                "{}: holds cross FRFs, and the two-state design is per axis (it cannot take the 3x3 model); \
+                 add --per-axis to design each axis from its direct FRFs, crosstalk not compensated",
+                if f0.has_cross() { p0.display() } else { p1.display() }
+            );
+        }
         if f0.freq_hz != f1.freq_hz || f0.axes.iter().map(|a| a.axis).ne(f1.axes.iter().map(|a| a.axis)) {
             bail!(
                 "{}: the second FRF must have the same frequency lines and axes as the first ({})",

@@ -6,6 +6,7 @@ pub mod compare;
 pub mod compensate;
 pub mod design;
 pub mod design_args;
+pub mod design_matrix;
 pub mod design_parallel;
 pub mod design_two_state;
 pub mod flash;

@@ -289,23 +289,23 @@ fn hold_weights(p: Complex64, t: f64) -> (Complex64, Complex64, Complex64) {
 }
 
 /// Weight of grid lines outside the compensated band, relative to those inside.
-const OUT_OF_BAND_WEIGHT: f64 = 0.2;
+pub(crate) const OUT_OF_BAND_WEIGHT: f64 = 0.2;
 /// Most FIR taps tried.
-const MAX_FIR_TAPS: usize = 12;
+pub(crate) const MAX_FIR_TAPS: usize = 12;
 /// Largest advance D tried (samples).
-const MAX_ADVANCE: usize = 6;
+pub(crate) const MAX_ADVANCE: usize = 6;
 /// In-band match error max|Ĝ_d/Ĝ − 1| that is good enough: well below the
 /// distortion budget of the compensated force (0.5 % NRMSE).
 pub const MATCH_TARGET: f64 = 1e-3;
 /// Above the target, the least complex model within this factor of the best.
-const MATCH_SLACK: f64 = 1.5;
+pub(crate) const MATCH_SLACK: f64 = 1.5;
 /// Largest condition number of the scaled least-squares matrix accepted.
-const MAX_CONDITION: f64 = 1e12;
+pub(crate) const MAX_CONDITION: f64 = 1e12;
 
 /// The dense frequency grid of the fit: uniform over 0..`top_fraction`·fs
 /// (0.45 fs by default), plus fine points around every mapped mode below
 /// that (± 8 half-power bandwidths).
-fn fit_grid(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64), top_fraction: f64) -> Vec<f64> {
+pub(crate) fn fit_grid(model: &PoleResidueModel, fs_hz: f64, band_hz: (f64, f64), top_fraction: f64) -> Vec<f64> {
     let f_hi = top_fraction * fs_hz;
     let mut g: Vec<f64> = (0..=1200).map(|i| f_hi * i as f64 / 1200.0).collect();
     // The compensated band gets its own uniform grid (it may be narrow at high fs).
@@ -440,7 +440,7 @@ struct LeastSquares {
 /// The columns of the fit at z ([`Discretization::Fit`]): per mapped pole 1/(z − ζ)
 /// (a pair: the real and imaginary part of its residue), the direct term,
 /// then z^{−1}..z^{−MAX_FIR_TAPS}.
-fn columns_at(poles: &[(Complex64, bool)], z: Complex64) -> Vec<Complex64> {
+pub(crate) fn columns_at(poles: &[(Complex64, bool)], z: Complex64) -> Vec<Complex64> {
     let mut v = Vec::with_capacity(2 * poles.len() + 1 + MAX_FIR_TAPS);
     for (zeta, pair) in poles {
         let u = (z - zeta).inv();

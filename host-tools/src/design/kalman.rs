@@ -143,21 +143,17 @@ pub fn dare_residual(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r: f6
     (p - (apa - corr + q)).norm() / scale.max(f64::MIN_POSITIVE)
 }
 
-/// Solve P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + Q by structured doubling
-/// (dual form: Â = Aᵀ, G = Cᵀ C / R, H = Q), then polish P by Newton's
-/// method (defect correction): with Acl = A − K̄ cᵀ the closed loop of P,
-/// Ric(P + X) ≈ Ric(P) + Acl X Aclᵀ, so X solves the Stein equation
-/// X = Acl X Aclᵀ + (Ric(P) − P) ([`crate::numeric::lti::stein_smith`]); a
-/// step is kept only if it lowers the residual. The doubling's own rounding
-/// grows with the spread of the plant's time scales (a real pole near z = 1
-/// beside one near z = 0); the Newton steps work on the residual itself.
-/// Rejected unless [`dare_residual`] < [`DARE_TOLERANCE`].
-pub fn solve_filter_dare(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r: f64) -> Result<DareSolution> {
-    let n = a.nrows();
+/// The structured doubling iteration (Chu, Fan & Lin 2005) of the DARE in
+/// its dual form, from Â₀ = `ak`, G₀ = `gk`, H₀ = `hk`: at most 200 steps,
+/// stopping when H changes by less than 10⁻¹⁴ of its norm. Returns H (the
+/// solution P) and the steps taken; the caller checks the residual.
+pub(crate) fn structured_doubling(
+    mut ak: DMatrix<f64>,
+    mut gk: DMatrix<f64>,
+    mut hk: DMatrix<f64>,
+) -> Result<(DMatrix<f64>, usize)> {
+    let n = ak.nrows();
     let id = DMatrix::<f64>::identity(n, n);
-    let mut ak = a.transpose();
-    let mut gk = c * c.transpose() / r;
-    let mut hk = q.clone();
     let mut iterations = 0;
     for it in 1..=200 {
         iterations = it;
@@ -179,6 +175,20 @@ pub fn solve_filter_dare(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r
             break;
         }
     }
+    Ok((hk, iterations))
+}
+
+/// Solve P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + Q by structured doubling
+/// (dual form: Â = Aᵀ, G = Cᵀ C / R, H = Q), then polish P by Newton's
+/// method (defect correction): with Acl = A − K̄ cᵀ the closed loop of P,
+/// Ric(P + X) ≈ Ric(P) + Acl X Aclᵀ, so X solves the Stein equation
+/// X = Acl X Aclᵀ + (Ric(P) − P) ([`crate::numeric::lti::stein_smith`]); a
+/// step is kept only if it lowers the residual. The doubling's own rounding
+/// grows with the spread of the plant's time scales (a real pole near z = 1
+/// beside one near z = 0); the Newton steps work on the residual itself.
+/// Rejected unless [`dare_residual`] < [`DARE_TOLERANCE`].
+pub fn solve_filter_dare(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r: f64) -> Result<DareSolution> {
+    let (hk, iterations) = structured_doubling(a.transpose(), c * c.transpose() / r, q.clone())?;
     let mut p = hk;
     let mut residual = dare_residual(a, c, q, r, &p);
     for _ in 0..NEWTON_STEPS {

@@ -20,6 +20,7 @@ pub mod force_spectrum;
 pub mod image;
 pub mod kalman;
 pub mod latency;
+pub mod mimo;
 pub mod noise;
 pub mod paper;
 pub mod paper_orders;

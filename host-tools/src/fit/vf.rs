@@ -67,18 +67,20 @@ pub fn coherence_weights(frf: &[Complex64], coherence: Option<&[f64]>) -> Vec<f6
         .collect()
 }
 
+/// A pole of the fit in normalized frequency: a real pole, or the
+/// representative (Im > 0) of a conjugate pair.
 #[derive(Clone, Copy, Debug)]
-struct Pole {
-    p: Complex64,
-    pair: bool,
+pub(crate) struct Pole {
+    pub(crate) p: Complex64,
+    pub(crate) pair: bool,
 }
 
-fn n_cols(poles: &[Pole]) -> usize {
+pub(crate) fn n_cols(poles: &[Pole]) -> usize {
     poles.iter().map(|p| if p.pair { 2 } else { 1 }).sum()
 }
 
 /// Basis functions φ_j(s) of the real pole-residue form at one frequency.
-fn basis_row(s: Complex64, poles: &[Pole], out: &mut Vec<Complex64>) {
+pub(crate) fn basis_row(s: Complex64, poles: &[Pole], out: &mut Vec<Complex64>) {
     out.clear();
     let j = Complex64::new(0.0, 1.0);
     for p in poles {
@@ -96,7 +98,7 @@ fn basis_row(s: Complex64, poles: &[Pole], out: &mut Vec<Complex64>) {
 /// Solve min ‖A x − b‖ by QR after column equilibration; an error (never a
 /// panic) when A has fewer rows than columns, a non-finite entry, or is
 /// numerically rank deficient.
-fn lstsq(mut a: DMatrix<f64>, b: DVector<f64>) -> Result<DVector<f64>> {
+pub(crate) fn lstsq(mut a: DMatrix<f64>, b: DVector<f64>) -> Result<DVector<f64>> {
     let ncols = a.ncols();
     if a.nrows() < ncols {
         bail!(
@@ -164,7 +166,13 @@ fn relocate(s: &[Complex64], h: &[Complex64], sw: &[f64], poles: &[Pole]) -> Res
     rhs[2 * k] = scale * k as f64;
     let x = lstsq(a, rhs)?;
     let c_t: Vec<f64> = (0..n).map(|j| x[n + 1 + j]).collect();
-    let mut d_t = x[2 * n + 1];
+    sigma_zeros(poles, &c_t, x[2 * n + 1])
+}
+
+/// The zeros of σ(s) = d̃ + Σ c̃_j φ_j(s) (the relocated poles, stable):
+/// eigenvalues of A − b·c̃ᵀ/d̃ in real form, |d̃| kept ≥ 10⁻⁸.
+pub(crate) fn sigma_zeros(poles: &[Pole], c_t: &[f64], mut d_t: f64) -> Result<Vec<Pole>> {
+    let n = n_cols(poles);
     if d_t.abs() < 1e-8 {
         d_t = 1e-8f64.copysign(d_t);
     }
@@ -197,7 +205,7 @@ fn relocate(s: &[Complex64], h: &[Complex64], sw: &[f64], poles: &[Pole]) -> Res
 
 /// Turn eigenvalues into stable poles: flip unstable ones (Re > 0 → −Re),
 /// keep one representative (Im > 0) per conjugate pair.
-fn classify(eig: impl Iterator<Item = Complex64>) -> Vec<Pole> {
+pub(crate) fn classify(eig: impl Iterator<Item = Complex64>) -> Vec<Pole> {
     let mut out = Vec::new();
     for mut z in eig {
         if z.re > 0.0 {
@@ -217,7 +225,7 @@ fn classify(eig: impl Iterator<Item = Complex64>) -> Vec<Pole> {
 }
 
 /// Residues and direct term for fixed poles (weighted linear least squares).
-fn residues(s: &[Complex64], h: &[Complex64], sw: &[f64], poles: &[Pole]) -> Result<(Vec<f64>, f64)> {
+pub(crate) fn residues(s: &[Complex64], h: &[Complex64], sw: &[f64], poles: &[Pole]) -> Result<(Vec<f64>, f64)> {
     let n = n_cols(poles);
     let k = s.len();
     let mut a = DMatrix::<f64>::zeros(2 * k, n + 1);
@@ -238,7 +246,7 @@ fn residues(s: &[Complex64], h: &[Complex64], sw: &[f64], poles: &[Pole]) -> Res
     Ok(((0..n).map(|j| x[j]).collect(), x[n]))
 }
 
-fn to_model(poles: &[Pole], c: &[f64], d: f64, w_scale: f64) -> PoleResidueModel {
+pub(crate) fn to_model(poles: &[Pole], c: &[f64], d: f64, w_scale: f64) -> PoleResidueModel {
     let mut terms = Vec::with_capacity(poles.len());
     let mut j = 0;
     for p in poles {
@@ -277,9 +285,22 @@ pub fn max_order_for(lines: usize) -> usize {
 /// Every how many lines the relocation uses for `order` poles: `decimate`,
 /// lowered where fewer lines would be kept than [`min_lines`] (the largest
 /// step s with ⌈lines/s⌉ ≥ min_lines, i.e. s ≤ (lines − 1)/(min_lines − 1)).
-fn relocation_step(lines: usize, order: usize, decimate: usize) -> usize {
+pub(crate) fn relocation_step(lines: usize, order: usize, decimate: usize) -> usize {
     let need = min_lines(order).max(2);
     decimate.min(lines.saturating_sub(1) / (need - 1)).max(1)
+}
+
+/// Starting poles of a fit of `order` poles: linearly spaced pairs over the
+/// band of `freq_hz` (normalized by `f_max`), 1 % damping.
+pub(crate) fn starting_poles(freq_hz: &[f64], f_max: f64, order: usize) -> Vec<Pole> {
+    let n_pairs = (order / 2).max(1);
+    let f_min = freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(f_max / 100.0) / f_max;
+    (0..n_pairs)
+        .map(|i| {
+            let beta = if n_pairs == 1 { 0.5 } else { f_min + (1.0 - f_min) * i as f64 / (n_pairs - 1) as f64 };
+            Pole { p: Complex64::new(-beta / 100.0, beta), pair: true }
+        })
+        .collect()
 }
 
 /// Fit a model of a fixed (even) order.
@@ -310,15 +331,7 @@ pub fn fit_order(
     let hs: Vec<Complex64> = idx.iter().map(|&i| h[i]).collect();
     let sw: Vec<f64> = idx.iter().map(|&i| sw_all[i]).collect();
 
-    // Starting poles: linearly spaced pairs over the band, 1 % damping.
-    let n_pairs = (order / 2).max(1);
-    let f_min = freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(f_max / 100.0) / f_max;
-    let mut poles: Vec<Pole> = (0..n_pairs)
-        .map(|i| {
-            let beta = if n_pairs == 1 { 0.5 } else { f_min + (1.0 - f_min) * i as f64 / (n_pairs - 1) as f64 };
-            Pole { p: Complex64::new(-beta / 100.0, beta), pair: true }
-        })
-        .collect();
+    let mut poles = starting_poles(freq_hz, f_max, order);
     for _ in 0..opts.iterations {
         let new = relocate(&s, &hs, &sw, &poles)?;
         let moved = new.len() != poles.len()
@@ -391,6 +404,47 @@ pub const MIN_MODE_DAMPING: f64 = 1e-3;
 const EDGE_FRACTION: f64 = 0.97;
 const EDGE_MODE_DAMPING: f64 = 5e-3;
 
+/// A term the data cannot identify (skimmed by [`skim`]): a real pole below
+/// the lowest measured line `f_low` (it would become a near-integrator), a
+/// pair damped less than [`MIN_MODE_DAMPING`], or less than
+/// [`EDGE_MODE_DAMPING`] above [`EDGE_FRACTION`] of `f_top` (Hz).
+pub(crate) fn spurious(t: &Term, f_low: f64, f_top: f64) -> bool {
+    match *t {
+        Term::Real { pole, .. } => pole.abs() / (2.0 * PI) < f_low,
+        Term::Pair { pole, .. } => {
+            let wn = pole.norm();
+            let zeta = -pole.re / wn;
+            let f_n = wn / (2.0 * PI);
+            zeta < MIN_MODE_DAMPING || (f_n > EDGE_FRACTION * f_top && zeta < EDGE_MODE_DAMPING)
+        }
+    }
+}
+
+/// Whether term `t` reaches 10⁻³ of |G| on any line of (`freq_hz`, `h`).
+pub(crate) fn contributes(t: &Term, freq_hz: &[f64], h: &[Complex64]) -> bool {
+    freq_hz.iter().zip(h).any(|(f, g)| {
+        let s = Complex64::new(0.0, 2.0 * PI * f);
+        let c = match *t {
+            Term::Real { pole, residue } => residue / (s - pole),
+            Term::Pair { pole, residue } => residue / (s - pole) + residue.conj() / (s - pole.conj()),
+        };
+        c.norm() > 1e-3 * g.norm()
+    })
+}
+
+/// The poles of the `terms` marked in `keep`, normalized by `w_scale` (rad/s).
+pub(crate) fn kept_poles(terms: &[Term], keep: &[bool], w_scale: f64) -> Vec<Pole> {
+    terms
+        .iter()
+        .zip(keep)
+        .filter(|(_, k)| **k)
+        .map(|(t, _)| match *t {
+            Term::Real { pole, .. } => Pole { p: Complex64::new(pole / w_scale, 0.0), pair: false },
+            Term::Pair { pole, .. } => Pole { p: pole / w_scale, pair: true },
+        })
+        .collect()
+}
+
 /// Remove pairs whose contribution is negligible everywhere in the band, and
 /// spurious lightly damped pairs (ζ < [`MIN_MODE_DAMPING`], or ζ < 0.5 % at
 /// the band edge), and real poles below the lowest measured line, then refit
@@ -398,50 +452,14 @@ const EDGE_MODE_DAMPING: f64 = 5e-3;
 fn skim(freq_hz: &[f64], h: &[Complex64], weights: &[f64], model: PoleResidueModel) -> Result<PoleResidueModel> {
     let f_top = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
     let f_low = freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0);
-    let keep: Vec<bool> = model
-        .terms
-        .iter()
-        .map(|t| {
-            // A real pole below the lowest measured line cannot be
-            // identified from the data; it would become a near-integrator.
-            if let Term::Real { pole, .. } = t {
-                if pole.abs() / (2.0 * PI) < f_low {
-                    return false;
-                }
-            }
-            if let Term::Pair { pole, .. } = t {
-                let wn = pole.norm();
-                let zeta = -pole.re / wn;
-                let f_n = wn / (2.0 * PI);
-                if zeta < MIN_MODE_DAMPING || (f_n > EDGE_FRACTION * f_top && zeta < EDGE_MODE_DAMPING) {
-                    return false;
-                }
-            }
-            freq_hz.iter().zip(h).any(|(f, g)| {
-                let s = Complex64::new(0.0, 2.0 * PI * f);
-                let c = match *t {
-                    Term::Real { pole, residue } => residue / (s - pole),
-                    Term::Pair { pole, residue } => residue / (s - pole) + residue.conj() / (s - pole.conj()),
-                };
-                c.norm() > 1e-3 * g.norm()
-            })
-        })
-        .collect();
+    let keep: Vec<bool> =
+        model.terms.iter().map(|t| !spurious(t, f_low, f_top) && contributes(t, freq_hz, h)).collect();
     if keep.iter().all(|k| *k) {
         return Ok(model);
     }
     let f_max = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
     let w_scale = 2.0 * PI * f_max;
-    let poles: Vec<Pole> = model
-        .terms
-        .iter()
-        .zip(&keep)
-        .filter(|(_, k)| **k)
-        .map(|(t, _)| match *t {
-            Term::Real { pole, .. } => Pole { p: Complex64::new(pole / w_scale, 0.0), pair: false },
-            Term::Pair { pole, .. } => Pole { p: pole / w_scale, pair: true },
-        })
-        .collect();
+    let poles = kept_poles(&model.terms, &keep, w_scale);
     let s: Vec<Complex64> = freq_hz.iter().map(|f| Complex64::new(0.0, 2.0 * PI * f / w_scale)).collect();
     let sw: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
     let (c, d) = residues(&s, h, &sw, &poles)?;

@@ -72,6 +72,24 @@ pub fn read_frf_set(paths: &[PathBuf]) -> Result<Frf> {
     merge_frf_files(&files)
 }
 
+/// Read one `--frf` value: a file, or the files of one matrix separated by
+/// commas ([`split_frf_list`], merged by [`merge_frf_files`]). Returns the
+/// FRF set and the SHA-256 of the files' bytes in the order given (of the
+/// file's bytes for one file), which the image records.
+pub fn read_frf_arg(value: &Path) -> Result<(Frf, [u8; 32])> {
+    use sha2::{Digest, Sha256};
+    let text = value.to_string_lossy();
+    let paths = if value.exists() || !text.contains(',') { vec![value.to_path_buf()] } else { split_frf_list(&text)? };
+    let mut sha = Sha256::new();
+    let mut files = Vec::with_capacity(paths.len());
+    for p in &paths {
+        let bytes = std::fs::read(p).with_context(|| format!("{}: cannot read", p.display()))?;
+        sha.update(&bytes);
+        files.push(parse_frf_file(p, &bytes)?);
+    }
+    Ok((merge_frf_files(&files)?, sha.finalize().into()))
+}
+
 /// Split one `--frf` value into the files of one matrix: `a.uff,b.uff` →
 /// `[a.uff, b.uff]`. An empty name (`a.uff,,b.uff`, a trailing comma) or a
 /// file named twice is refused.

@@ -1,6 +1,6 @@
 //! File input/output: FRF (CSV, UFF58, a matrix from several files), signal CSV, atomic writes.
 
-pub use frf_set::{read_frf_set, split_frf_list};
+pub use frf_set::{read_frf_arg, read_frf_set, split_frf_list};
 
 pub mod atomic;
 pub mod decimal;

@@ -7,7 +7,7 @@
 //! ([`compensate_parallel`]).
 
 use anyhow::{bail, Context, Result};
-use dynocomp_core::image::{CoeffImage, ParallelImage};
+use dynocomp_core::image::{CoeffImage, MatrixImage, ParallelImage};
 use dynocomp_core::kernel::{process_blocks, AxisFilter, AxisState, BlockJob, LOCKSTEP_AXES};
 
 use crate::frf::axis_name;
@@ -322,6 +322,41 @@ pub fn compensate_parallel(
         }
     }
     Ok(SignalRecord { t_s: rec.t_s.clone(), channels: sum })
+}
+
+/// A whole record through a 3x3 image's filter (format 3), as the box runs
+/// it: the one f32 kernel ([`dynocomp_core::mimo::MimoFilter`]) on the
+/// three force channels together, so the record must have fx, fy and fz.
+/// Unless `raw_timing`, the output is shifted back by the declared latency
+/// L, the last L samples computed from the last input held.
+pub fn compensate_matrix(
+    image: &MatrixImage,
+    rec: &SignalRecord,
+    raw_timing: bool,
+    source: &str,
+) -> Result<SignalRecord> {
+    let axes: Vec<usize> = rec.channels.iter().map(|c| c.0).collect();
+    if axes != [0, 1, 2] {
+        let have: Vec<&str> = axes.iter().map(|a| axis_name(*a)).collect();
+        bail!(
+            "{source}: a 3x3 image compensates fx, fy and fz together, and the record has {}; \
+             record all three force channels",
+            if have.is_empty() { "none".to_string() } else { have.join(", ") }
+        );
+    }
+    let n = rec.len();
+    let lag = if raw_timing { 0 } else { usize::from(image.latency_samples) };
+    let at = |k: usize| -> [f32; 3] { std::array::from_fn(|c| rec.channels[c].1[k.min(n - 1)] as f32) };
+    let input: Vec<[f32; 3]> = if n == 0 { Vec::new() } else { (0..n + lag).map(at).collect() };
+    let mut output = vec![[0.0f32; 3]; input.len()];
+    let mut state = dynocomp_core::mimo::MimoState::default();
+    image.filter.process(&mut state, &input, &mut output);
+    if let Some(k) = output.iter().position(|y| !y.iter().all(|v| v.is_finite())) {
+        bail!("{source}: the compensated force became non-finite at sample {k}; the image is unusable for this record");
+    }
+    let channels =
+        (0..3).map(|c| (c, output[lag.min(output.len())..].iter().map(|y| f64::from(y[c])).collect())).collect();
+    Ok(SignalRecord { t_s: rec.t_s.clone(), channels })
 }
 
 /// Check a record's `t_s` column (if any) against a sample rate (Hz)

@@ -6,14 +6,14 @@
 use anyhow::{anyhow, bail, Context, Result};
 use std::path::{Path, PathBuf};
 
-use dynocomp_core::image::{CoeffImage, ParallelImage};
+use dynocomp_core::image::{CoeffImage, MatrixImage, ParallelImage};
 
 use crate::frf::axis_name;
 use crate::io::signal::ChannelMap;
 use crate::io::signal::{check_rate_value, read_all, Block, RateTracker, SignalReader, SignalWriter, BLOCK};
 use crate::io::signal_csv::SignalRecord;
 use crate::io::signal_file::{open_signal_checked, writer_for, SignalFormat};
-use crate::offline::compensate::{compensate_parallel, StreamCompensator};
+use crate::offline::compensate::{compensate_matrix, compensate_parallel, StreamCompensator};
 use crate::offline::sidecar::{read_sidecar, sidecar_path, ModelSidecar};
 use crate::offline::smoother::{SpilledEstimate, SpilledPass};
 
@@ -23,6 +23,9 @@ pub enum Compensation {
     Box(CoeffImage),
     /// Parallel elaboration (a parallel-elaboration image), offline only.
     Parallel(Box<ParallelImage>),
+    /// A 3x3 image's filter (format 3) on fx, fy and fz together, bit-exact
+    /// with the box.
+    Matrix(Box<MatrixImage>),
     /// The zero-lag fixed-interval smoother on the box image's model
     /// sidecar: stationary, or time-varying between the sidecar's two states
     /// from `drift.0` to `drift.1` (s); with the sidecar's harmonic force
@@ -43,6 +46,7 @@ impl Compensation {
         match self {
             Compensation::Box(i) | Compensation::Smoother { image: i, .. } => i.fs_hz,
             Compensation::Parallel(p) => p.fs_hz,
+            Compensation::Matrix(m) => m.fs_hz,
         }
     }
 }
@@ -171,6 +175,22 @@ pub fn compensate_file(
             );
             let rec = whole_record(&mut *input, target.fs, target.source)?;
             let out = compensate_parallel(&image, &rec, raw_timing, target.source)?;
+            Ok(Compensated { samples: target.write_whole(&rec, &out, obs)?, how })
+        }
+        Compensation::Matrix(image) => {
+            let l = image.latency_samples;
+            let how = if raw_timing {
+                format!(
+                    "3x3 filter of the box, crosstalk compensated, latency {l} samples kept (whole record in memory)"
+                )
+            } else {
+                format!(
+                    "3x3 filter of the box, crosstalk compensated, latency {l} samples removed; the last {l} samples \
+                     lack their look-ahead (last input held) and are less accurate (whole record in memory)"
+                )
+            };
+            let rec = whole_record(&mut *input, target.fs, target.source)?;
+            let out = compensate_matrix(&image, &rec, raw_timing, target.source)?;
             Ok(Compensated { samples: target.write_whole(&rec, &out, obs)?, how })
         }
         Compensation::Smoother { image, drift, force_prior } => {

@@ -12,5 +12,6 @@
 pub mod choose;
 pub mod image;
 pub mod load;
+pub mod mimo;
 pub mod modal;
 pub mod quantize;

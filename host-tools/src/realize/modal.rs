@@ -80,9 +80,9 @@ pub fn section_poles(delta: [f64; 4]) -> [Complex64; 2] {
 
 /// Poles at or beyond this modulus always go to the modal sections (an FIR of
 /// 24 taps cannot carry them: 0.6^24 ≈ 5e-6).
-const RHO_FAST_MAX: f64 = 0.6;
+pub(crate) const RHO_FAST_MAX: f64 = 0.6;
 /// Required relative size of the FIR truncation tail (of Σ|h_j|).
-const FIR_TAIL_TOL: f64 = 1e-7;
+pub(crate) const FIR_TAIL_TOL: f64 = 1e-7;
 /// Largest relative truncation tail accepted at the full length
 /// [`MAX_FIR`], when [`FIR_TAIL_TOL`] would need more taps. The tail adds at
 /// most tail·max|u| to the output, ≤ 1e-6 of Σ|h_j|·max|u| here: the size
@@ -92,13 +92,13 @@ const FIR_TAIL_TOL: f64 = 1e-7;
 /// a residue ∝ 1/|z|^(cluster size) that the FIR taps must cancel, so its
 /// section and the taps sum terms 10³ times the output (on axis y of the
 /// bundled example, 1.6e-4 of peak-to-peak lost to f32 rounding).
-const FIR_TAIL_TOL_FULL: f64 = 1e-6;
+pub(crate) const FIR_TAIL_TOL_FULL: f64 = 1e-6;
 /// Largest acceptable modal-transform condition number.
-const MAX_MODAL_CONDITION: f64 = 1e8;
+pub(crate) const MAX_MODAL_CONDITION: f64 = 1e8;
 
 /// Swap adjacent diagonal entries i, i+1 of the upper triangular T,
 /// updating Q so that A = Q T Qᴴ still holds.
-fn swap_adjacent(t: &mut DMatrix<Complex64>, q: &mut DMatrix<Complex64>, i: usize) {
+pub(crate) fn swap_adjacent(t: &mut DMatrix<Complex64>, q: &mut DMatrix<Complex64>, i: usize) {
     let n = t.nrows();
     let (a, b, x) = (t[(i, i)], t[(i + 1, i + 1)], t[(i, i + 1)]);
     // eigenvector of [[a, x], [0, b]] for b: v = [x, b − a]
@@ -130,7 +130,7 @@ fn swap_adjacent(t: &mut DMatrix<Complex64>, q: &mut DMatrix<Complex64>, i: usiz
 
 /// Candidate fast/slow thresholds: the midpoints of the gaps between the
 /// distinct eigenvalue moduli below [`RHO_FAST_MAX`] (and 0: no fast cluster).
-fn thresholds(moduli: &[f64]) -> Vec<f64> {
+pub(crate) fn thresholds(moduli: &[f64]) -> Vec<f64> {
     let mut m: Vec<f64> = moduli.iter().copied().filter(|v| *v < RHO_FAST_MAX).collect();
     m.sort_by(f64::total_cmp);
     let mut out = vec![0.0];

@@ -145,9 +145,9 @@ pub struct Reference {
 }
 
 /// Points of the frequency check over the band (plus one).
-const VERIFY_GRID: usize = 400;
+pub(crate) const VERIFY_GRID: usize = 400;
 /// Samples of the time-domain check.
-const VERIFY_SAMPLES: usize = 20_000;
+pub(crate) const VERIFY_SAMPLES: usize = 20_000;
 
 impl Reference {
     /// The f64 design `ss`'s responses over 0..`f_band_hz` at `fs_hz`.

@@ -66,8 +66,8 @@ pub fn html_escape(s: &str) -> String {
 /// section's plots with their titles and captions.
 pub fn index_html(title: &str, summary: &str, sections: &[Section]) -> String {
     let mut h = String::new();
-    h.push_str(&
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{title}</title>\n\
+    h.push_str(
+        &"<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{title}</title>\n\
          <style>\n\
          body { font-family: sans-serif; margin: 2em auto; max-width: 1150px; padding: 0 1em; color: #222; }\n\
          pre { background: #f4f4f4; border: 1px solid #ddd; padding: 1em; white-space: pre-wrap; overflow-wrap: anywhere; }\n\

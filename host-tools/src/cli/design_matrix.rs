@@ -1,0 +1,238 @@
+//! `dynocomp design` on a complete FRF matrix: the 3x3 design
+//! ([`crate::design::mimo`]) → a 3x3 image (format 3), marked offline-only
+//! over the box's load limit → summary (text or JSON) with the crosstalk and
+//! each axis's choice of row (README "Crosstalk").
+
+use anyhow::{bail, Result};
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::time::Instant;
+
+use crate::cli::design_args::{DesignArgs, DesignSetup, ForcePrior, Method};
+use crate::design::mimo::image::build_matrix_image;
+use crate::design::mimo::{design_matrix, MatrixDesign, MatrixOptions, MatrixSummary, RowSource};
+use crate::frf::{axis_name, Frf};
+use crate::realize::load::LoadReport;
+
+/// Whether `design` takes the 3x3 route for `frf`: a complete matrix and no
+/// `--per-axis`. Options the 3x3 design cannot take are refused here, by
+/// name, rather than silently designed per axis; an incomplete matrix is
+/// designed per axis with a note saying which entries are missing.
+pub fn wanted(args: &DesignArgs, frf: &Frf) -> Result<bool> {
+    if !frf.has_cross() {
+        return Ok(false);
+    }
+    let status = frf.matrix_status();
+    if args.per_axis {
+        eprintln!("note: --per-axis: the cross FRFs are not used; crosstalk is not compensated");
+        return Ok(false);
+    }
+    if !status.is_complete() {
+        eprintln!("note: {}", status.message().unwrap_or_default());
+        return Ok(false);
+    }
+    let refuse = |what: &str| -> Result<bool> {
+        bail!(
+            "{what} is not available with the 3x3 design (the FRF file holds all nine entries); \
+             add --per-axis to design each axis from its direct FRF, crosstalk not compensated"
+        )
+    };
+    if args.parallel {
+        return refuse("--parallel");
+    }
+    if args.method == Method::Paper {
+        return refuse("--method paper");
+    }
+    if args.bands.spindle_rpm.is_some() || !args.bands.band.is_empty() || args.bands.bands_from.is_some() {
+        return refuse("a fitting band (--spindle-rpm/--teeth, --band, --bands-from)");
+    }
+    if args.prior.force_prior != ForcePrior::Default {
+        return refuse("--force-prior");
+    }
+    Ok(true)
+}
+
+/// What the 3x3 route did.
+pub enum MatrixOutcome {
+    /// A 3x3 image was written; the summary (text or JSON) `design` prints.
+    Written(String),
+    /// Every output row is better per axis: nothing was written, and the
+    /// per-axis design goes on (its image is format 1, which every command
+    /// takes). The lines say so, with the crosstalk and the predictions
+    /// that count it.
+    PerAxis(String),
+}
+
+/// Run the 3x3 design and write its image, unless every row is better per
+/// axis ([`MatrixOutcome`]).
+pub fn run(args: &DesignArgs, s: &DesignSetup, t0: Instant) -> Result<MatrixOutcome> {
+    let r: [f64; 3] = std::array::from_fn(|i| s.r[i].expect("R set for every axis of a complete matrix"));
+    let opts = MatrixOptions { design: s.opts.clone(), latency: args.latency, ..Default::default() };
+    eprintln!(
+        "designing the 3x3 compensator ({} lines, nine FRFs): matrix fit, then the Kalman design per latency…",
+        s.frf.freq_hz.len()
+    );
+    let md = design_matrix(&s.frf, r, &opts)?;
+    if md.rows.iter().all(|r| *r == RowSource::PerAxis) {
+        let mut t = crosstalk_and_predictions(&md.summary);
+        for n in &md.summary.notes {
+            let _ = writeln!(t, "note: {n}");
+        }
+        let _ = writeln!(
+            t,
+            "no axis uses the 3x3 design: the per-axis image (format 1) is written, crosstalk not compensated; \
+             the predictions above count the crosstalk it leaves"
+        );
+        return Ok(MatrixOutcome::PerAxis(t));
+    }
+    let mut image = build_matrix_image(&md, &s.frf, args.full_scale, s.sha)?;
+    let load = crate::realize::load::report(&image, s.limit_permille);
+    if !load.fits {
+        image.flags |= dynocomp_core::image::FLAG_OFFLINE_ONLY;
+        eprintln!(
+            "WARNING: OFFLINE-ONLY IMAGE: predicted box CPU load {:.1} % ({} cycles per sample) at {} Hz exceeds the limit of {:.0} %; \
+             the box could run it up to {} Hz. Written for `dynocomp compensate` only: `flash` refuses it.",
+            load.load_pct[1], load.cycles[1], image.fs_hz, load.limit_pct, load.max_fs_hz
+        );
+    }
+    crate::io::image_file::write_matrix_image(&args.out, &image)?;
+    let id = image.id();
+    let text = summary_text(args, &md, id, &load, image.fs_hz);
+    if args.report.is_some() {
+        eprintln!("note: --report draws per-axis designs only; the 3x3 design's figures are in this summary");
+    }
+    if !args.json {
+        eprintln!("designed in {:.1} s", t0.elapsed().as_secs_f64());
+        return Ok(MatrixOutcome::Written(text));
+    }
+    let j = MatrixJson {
+        kind: "3x3",
+        image: args.out.display().to_string(),
+        image_id: format!("{id:08x}"),
+        fs_hz: args.input.fs,
+        latency_samples: md.summary.latency,
+        design_time_s: t0.elapsed().as_secs_f64(),
+        offline_only: image.flags & dynocomp_core::image::FLAG_OFFLINE_ONLY != 0,
+        box_load: load,
+        design: &md.summary,
+    };
+    Ok(MatrixOutcome::Written(serde_json::to_string_pretty(&j)? + "\n"))
+}
+
+/// `design --json` of a 3x3 design.
+#[derive(Serialize)]
+struct MatrixJson<'a> {
+    /// `"3x3"`.
+    kind: &'static str,
+    image: String,
+    image_id: String,
+    fs_hz: f64,
+    latency_samples: usize,
+    design_time_s: f64,
+    offline_only: bool,
+    box_load: LoadReport,
+    /// Every figure of the design: fit, crosstalk, per-axis predictions and
+    /// choice of row, Kalman and realization figures, notes.
+    design: &'a MatrixSummary,
+}
+
+/// Percent with three significant digits, or "-" for a missing figure.
+fn pct(v: Option<f64>) -> String {
+    match v {
+        Some(v) if v.is_finite() => format!("{:.3} %", 100.0 * v),
+        _ => "-".to_string(),
+    }
+}
+
+/// The text summary of a 3x3 design.
+fn summary_text(args: &DesignArgs, md: &MatrixDesign, id: u32, load: &LoadReport, fs_hz: u32) -> String {
+    let s = &md.summary;
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "3x3 design at {} Hz, latency {} samples -> {} (image {id:08x}, format 3)",
+        args.input.fs,
+        s.latency,
+        args.out.display()
+    );
+    if let Some(f) = &s.fit {
+        let rows: Vec<String> =
+            (0..3).map(|i| format!("{}{} {}", axis_name(i), axis_name(i), pct(Some(f.entry_error[i][i])))).collect();
+        let _ = writeln!(
+            t,
+            "matrix fit: order {} ({} modes, common to all nine FRFs); relative RMS error of the direct FRFs: {}",
+            f.order,
+            f.modes.len(),
+            rows.join(", ")
+        );
+    }
+    t.push_str(&crosstalk_and_predictions(s));
+    if let Some(k) = &s.kalman {
+        let _ = writeln!(
+            t,
+            "3x3 Kalman: {} states, q = {:.3e} / {:.3e} / {:.3e} N²/sample, DARE residual {:.1e}, spectral radius {:.4}",
+            k.order, k.q[0], k.q[1], k.q[2], k.dare_residual, k.closed_loop_radius
+        );
+    }
+    let rz = &s.realization;
+    let _ = writeln!(
+        t,
+        "realized: {} pole pairs, {} diagonal sections, {} FIR taps (3x3); f32 verified to {:.0} Hz, largest error {:.2e}",
+        rz.pairs,
+        rz.diagonal,
+        rz.fir_taps,
+        rz.verified_to_hz,
+        rz.verification.score()
+    );
+    t.push_str(&crate::realize::load::describe(load, fs_hz));
+    t.push_str(if load.fits { "\n" } else { "  OVER THE LIMIT: offline-only image\n" });
+    for n in &s.notes {
+        let _ = writeln!(t, "note: {n}");
+    }
+    t
+}
+
+/// The crosstalk table and each axis's predictions (raw, per axis with the
+/// crosstalk counted and as it claims without, 3x3) and choice of row.
+fn crosstalk_and_predictions(s: &MatrixSummary) -> String {
+    let mut t = String::new();
+    let _ = writeln!(t, "crosstalk, peak |G_ij|/|G_ii| over each row's compensated band (force direction j):");
+    let _ = writeln!(t, "  channel        from x            from y            from z");
+    for i in 0..3 {
+        let cells: Vec<String> = (0..3)
+            .map(|j| {
+                if i == j {
+                    format!("{:<18}", "-")
+                } else {
+                    let (p, f) = (s.crosstalk.peak[i][j], s.crosstalk.at_hz[i][j]);
+                    format!("{:<18}", format!("{:.1} % at {:.0} Hz", 100.0 * p, f))
+                }
+            })
+            .collect();
+        let _ = writeln!(t, "  {:<14} {}", axis_name(i), cells.join(""));
+    }
+    let _ = writeln!(
+        t,
+        "predicted in-band error (√J of a flat force, crosstalk counted; per axis: what it claims ignoring crosstalk):"
+    );
+    let _ = writeln!(t, "  axis  band (Hz)       raw        per axis (claims)      3x3        used");
+    for a in &s.axes {
+        let used = match a.source {
+            RowSource::Matrix => "3x3 row",
+            RowSource::PerAxis => "per-axis row",
+        };
+        let _ = writeln!(
+            t,
+            "  {:<5} {:<15} {:<10} {:<22} {:<10} {used}",
+            a.axis,
+            format!("{:.0}-{:.0}", a.band_hz.0, a.band_hz.1),
+            pct(Some(a.raw.error)),
+            format!("{} ({})", pct(a.per_axis.map(|p| p.error)), pct(a.per_axis_direct_only)),
+            pct(a.matrix.map(|m| m.error)),
+        );
+    }
+    for a in &s.axes {
+        let _ = writeln!(t, "  {}: {}", a.axis, a.reason);
+    }
+    t
+}

@@ -1,0 +1,168 @@
+//! The disturbance Kalman filter and fixed-lag smoother of the 3x3 model
+//! ([`crate::design::kalman`] with a 3-component force state).
+//!
+//! 1. Augmented state x = [x_p; F_k; F_{k−1}; …; F_{k−N}] (each F a 3-vector,
+//!    N = max(L + D, M)), with the plant states x_p of
+//!    [`super::discrete::plant_states`] driven by F_k and the force a random
+//!    walk F_{k+1} = F_k + w_k, E[w wᵀ] = Q = diag(q_x, q_y, q_z) (N²/sample).
+//! 2. Measurement ỹ_k = y_{k−D} = C_p x_p + d F_k + Σ h_m F_{k−m} + v_k,
+//!    E[v vᵀ] = R = diag(R_x, R_y, R_z) (N²).
+//! 3. Filter DARE P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + Γ Q Γᵀ by
+//!    structured doubling with G = Cᵀ R⁻¹ C ([`structured_doubling`]).
+//!    Its residual is judged against the size of the equation's terms,
+//!    ‖P − Ric(P)‖_F / (‖A P Aᵀ‖_F + ‖A P Cᵀ S⁻¹ C P Aᵀ‖_F + ‖Γ Q Γᵀ‖_F),
+//!    which a backward-stable solution keeps near machine precision however
+//!    ill-conditioned the equation (a residual relative to ‖P‖ alone reads
+//!    the cancellation between the terms as error); the closed loop
+//!    A(I − K C) must be stable.
+//! 4. Compensator from ỹ to F̂[k−L−D] (3 in, 3 out), K = P Cᵀ S⁻¹, S = C P Cᵀ + R:
+//!    x̂⁻[k+1] = A(I − K C) x̂⁻[k] + A K ỹ[k],
+//!    F̂[k−L−D] = E (I − K C) x̂⁻[k] + E K ỹ[k],
+//!    E selecting F_{k−L−D}. Fed with y (D samples earlier than ỹ), it
+//!    outputs F̂[k−L]: the declared latency is L.
+
+use anyhow::{bail, Result};
+use nalgebra::DMatrix;
+
+use super::discrete::{DiscreteMatrixModel, PlantStates};
+use crate::design::kalman::structured_doubling;
+use crate::fit::linalg::eigenvalues;
+use crate::numeric::lti::MimoStateSpace;
+
+/// Largest accepted DARE residual relative to its terms (module doc).
+pub const MAX_DARE_RESIDUAL: f64 = 1e-9;
+
+/// The augmented plant of the 3x3 estimator (module doc, steps 1-2).
+#[derive(Clone, Debug)]
+pub struct MatrixAugmentedPlant {
+    /// State transition (n × n).
+    pub a: DMatrix<f64>,
+    /// Process-noise input Γ (n × 3): the force increments w.
+    pub g: DMatrix<f64>,
+    /// Measurement (3 × n).
+    pub c: DMatrix<f64>,
+    /// Plant states n_p.
+    pub n_plant: usize,
+    /// Lag of the estimate in the model's time frame: L + D (samples).
+    pub lag: usize,
+}
+
+impl MatrixAugmentedPlant {
+    /// Index of the first of the three states F_{k−L−D} the compensator outputs.
+    pub fn output_index(&self) -> usize {
+        self.n_plant + 3 * self.lag
+    }
+}
+
+/// The augmented plant of `dm` (its poles' part realized as `plant`) for a
+/// declared latency of `lag` samples: also the model of an offline
+/// smoother of the 3x3 system.
+pub fn augmented_plant(dm: &DiscreteMatrixModel, plant: &PlantStates, lag: usize) -> MatrixAugmentedPlant {
+    let n_plant = plant.a.nrows();
+    let model_lag = lag + dm.advance;
+    let n_delay = model_lag.max(dm.fir.len());
+    let n = n_plant + 3 * (1 + n_delay);
+    let f = n_plant;
+    let mut a = DMatrix::<f64>::zeros(n, n);
+    let mut g = DMatrix::<f64>::zeros(n, 3);
+    let mut c = DMatrix::<f64>::zeros(3, n);
+    a.view_mut((0, 0), (n_plant, n_plant)).copy_from(&plant.a);
+    a.view_mut((0, f), (n_plant, 3)).copy_from(&plant.b);
+    c.view_mut((0, 0), (3, n_plant)).copy_from(&plant.c);
+    for k in 0..3 {
+        a[(f + k, f + k)] = 1.0;
+        g[(f + k, k)] = 1.0;
+        for j in 1..=n_delay {
+            a[(f + 3 * j + k, f + 3 * (j - 1) + k)] = 1.0;
+        }
+    }
+    for i in 0..3 {
+        for k in 0..3 {
+            c[(i, f + k)] = dm.d[(i, k)];
+            for (m, h) in dm.fir.iter().enumerate() {
+                c[(i, f + 3 * (m + 1) + k)] = h[(i, k)];
+            }
+        }
+    }
+    MatrixAugmentedPlant { a, g, c, n_plant, lag: model_lag }
+}
+
+/// The 3x3 compensator with its diagnostics.
+#[derive(Clone, Debug)]
+pub struct MatrixKalman {
+    /// Compensator y → F̂[k−L] (3 in, 3 out, f64).
+    pub compensator: MimoStateSpace,
+    /// DARE residual relative to its terms (module doc).
+    pub dare_residual: f64,
+    /// Doubling steps.
+    pub dare_iterations: usize,
+    /// Condition number of S = C P Cᵀ + R.
+    pub innovation_condition: f64,
+    /// Spectral radius of A(I − K C).
+    pub closed_loop_radius: f64,
+    /// Declared latency L (samples).
+    pub lag: usize,
+    /// Process noise q per force axis (N²/sample).
+    pub q: [f64; 3],
+    /// Measurement noise R per channel (N²).
+    pub r: [f64; 3],
+}
+
+/// Design the compensator of `plant` for process noise `q` and measurement
+/// noise `r` (module doc, steps 3-4); `lag` is the declared latency L.
+pub fn design(plant: &MatrixAugmentedPlant, q: [f64; 3], r: [f64; 3], lag: usize) -> Result<MatrixKalman> {
+    for (k, (qk, rk)) in q.iter().zip(&r).enumerate() {
+        if !(*rk > 0.0 && rk.is_finite()) {
+            bail!("measurement noise variance R of channel {k} must be positive and finite, got {rk}");
+        }
+        if !(*qk > 0.0 && qk.is_finite()) {
+            bail!("process noise intensity q of force {k} must be positive and finite, got {qk}");
+        }
+    }
+    let (a, c, g) = (&plant.a, &plant.c, &plant.g);
+    let n = a.nrows();
+    let q_m = g * DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&q)) * g.transpose();
+    let r_inv = DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(3, r.iter().map(|v| 1.0 / v)));
+    let (p, iterations) = structured_doubling(a.transpose(), c.transpose() * r_inv * c, q_m.clone())?;
+    let s = c * &p * c.transpose() + DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&r));
+    let s = (&s + s.transpose()) * 0.5;
+    let Some(chol) = s.clone().cholesky() else {
+        bail!("3x3 Kalman filter: the innovation covariance C P Cᵀ + R is not positive definite");
+    };
+    let s_inv = chol.inverse();
+    let apa = a * &p * a.transpose();
+    let apc = a * &p * c.transpose();
+    let gain_term = &apc * &s_inv * apc.transpose();
+    let ric = &apa - &gain_term + &q_m;
+    let scale = apa.norm() + gain_term.norm() + q_m.norm();
+    let dare_residual = (&p - ric).norm() / scale.max(f64::MIN_POSITIVE);
+    if !(dare_residual <= MAX_DARE_RESIDUAL) {
+        bail!(
+            "3x3 Riccati solution rejected: residual {dare_residual:.2e} of its terms after {iterations} doubling steps \
+             (needs ≤ {MAX_DARE_RESIDUAL:.0e})"
+        );
+    }
+    let s_eig = crate::fit::linalg::symmetric_eigenvalues(&s, "the innovation covariance")?;
+    let innovation_condition = s_eig.max() / s_eig.min();
+    let k = &p * c.transpose() * &s_inv;
+    let i_kc = DMatrix::<f64>::identity(n, n) - &k * c;
+    let out = plant.output_index();
+    let comp =
+        MimoStateSpace { a: a * &i_kc, b: a * &k, c: i_kc.rows(out, 3).into_owned(), d: k.rows(out, 3).into_owned() };
+    let radius = eigenvalues(&comp.a, "the 3x3 compensator")?.iter().map(|z| z.norm()).fold(0.0, f64::max);
+    if !(radius < 1.0) {
+        bail!(
+            "3x3 Kalman compensator is not stable (spectral radius {radius:.9}); the fitted model may be unobservable"
+        );
+    }
+    Ok(MatrixKalman {
+        compensator: comp,
+        dare_residual,
+        dare_iterations: iterations,
+        innovation_condition,
+        closed_loop_radius: radius,
+        lag,
+        q,
+        r,
+    })
+}

@@ -1,0 +1,769 @@
+//! The 3x3 design: from the full FRF matrix to one verified 3-in, 3-out
+//! compensator that counts the crosstalk (DESIGN.md, "Signal chain": the
+//! dynamometer as one 3x3 system).
+//!
+//! [`design_matrix`] runs the chain of the per-axis design on the matrix:
+//! 1. fit all nine FRFs with common poles ([`crate::fit::matrix`]);
+//! 2. the discrete model of the sampled-data relation and its plant states
+//!    ([`discrete`]);
+//! 3. the disturbance Kalman filter and fixed-lag smoother with a
+//!    3-component force state ([`kalman`]), q per output axis by the
+//!    predicted in-band error counting the crosstalk ([`criterion`]);
+//! 4. beside it the per-axis design of each direct FRF
+//!    ([`crate::design::axis`], unchanged), its prediction now with the
+//!    crosstalk it leaves;
+//! 5. per output axis the row with less error on the measured matrix (never
+//!    silently worse: the 3x3 row only where it beats the per-axis one
+//!    there, [`Criteria`]), as one block-diagonal compensator ([`combine`]);
+//! 6. realized and verified in f32 for the one 3x3 kernel
+//!    ([`crate::realize::mimo`]).
+//!
+//! The latency follows the per-axis rule ([`crate::design::latency`]):
+//! [`DEFAULT_LATENCY`], and [`LONGER_LATENCIES`] only where an axis's best
+//! row predicts more than [`PREDICTED_SHORT`] of distortion, keeping the
+//! shortest within [`GAIN_NOT_WORTH`] of each axis's best.
+
+pub mod combine;
+pub mod criterion;
+pub mod discrete;
+pub mod image;
+pub mod kalman;
+
+use anyhow::{bail, Context, Result};
+use dynocomp_core::mimo::MimoFilter;
+use num_complex::Complex64;
+use serde::Serialize;
+
+use self::combine::combine;
+pub use self::combine::RowSource;
+use self::criterion::{choose_q, MatrixCriterion, QSearch, RowError};
+use self::discrete::{discretize_matrix, plant_states, CMatrix3, DiscreteMatch, DiscreteMatrixModel, PlantStates};
+use self::kalman::{augmented_plant, MatrixAugmentedPlant, MatrixKalman};
+use crate::design::axis::{
+    coherent_band, design_prepared, prepare_axis, AxisDesign, DesignOptions, FitMethod, PreparedAxis, MAX_FIT_ERROR,
+    MAX_PREDICTED_ERROR,
+};
+use crate::design::discretize::{Discretization, MATCH_BAND_FRACTION};
+use crate::design::latency::{DEFAULT_LATENCY, GAIN_NOT_WORTH, LONGER_LATENCIES, PREDICTED_SHORT};
+use crate::fit::matrix::{matrix_vector_fit, MatrixData, MatrixModel};
+use crate::fit::relative_rms_error;
+use crate::fit::vf::{coherence_weights, VfOptions};
+use crate::frf::{axis_name, entry_name, Frf};
+use crate::numeric::lti::MimoStateSpace;
+use crate::realize::mimo::{realize_blocks, MimoRealization, MimoVerification};
+
+/// Options of the 3x3 design.
+#[derive(Clone, Debug, Default)]
+pub struct MatrixOptions {
+    /// The per-axis design's options: rate, force RMS, noise-gain limit,
+    /// coherence threshold, fit options, q override. Fitting bands, the
+    /// paper's method, hold discretizations and force records are not
+    /// supported by the 3x3 design yet (refused).
+    pub design: DesignOptions,
+    /// Declared latency L (samples); `None`: chosen by the latency rule
+    /// (module doc).
+    pub latency: Option<usize>,
+    /// In-band force RMS per axis F_j (N) of the criterion; `None`:
+    /// `design.force_rms` on every axis.
+    pub force_rms_axes: Option<[f64; 3]>,
+    /// Options of the matrix fit; `None`: `design.vf` (the per-axis fits')
+    /// with the highest order [`MATRIX_MAX_ORDER`].
+    pub matrix_vf: Option<VfOptions>,
+}
+
+/// Highest order of the matrix fit by default: every mode of the set-up is
+/// in the one model (a per-axis fit sees only those of its entry).
+pub const MATRIX_MAX_ORDER: usize = 40;
+/// Pole-relocation iterations per order of the matrix fit by default. The
+/// plate dynamometer's rocking modes come in close pairs (e.g. 211 and
+/// 213 Hz of the off-centre preset) that 8 iterations merge into one pole,
+/// leaving 1-2 % model error at the tooth-passing harmonics next to them;
+/// 20 separate them (measured on the presets at 25.6 kHz).
+pub const MATRIX_ITERATIONS: usize = 20;
+/// Largest condition number of the measured FRF matrix on a coherent line
+/// of the compensated band: beyond it the three channels do not see three
+/// independent forces and no 3x3 inverse exists.
+pub const MAX_MATRIX_CONDITION: f64 = 1e6;
+
+/// The fit of the matrix, for the summary.
+#[derive(Clone, Debug, Serialize)]
+pub struct MatrixFitFigures {
+    /// Model order (poles, a pair counting two).
+    pub order: usize,
+    /// Weighted RMS residual over all entries.
+    pub weighted_rms: f64,
+    /// `(order, weighted_rms)` of every order tried.
+    pub order_trace: Vec<(usize, f64)>,
+    /// Per entry the relative RMS error on its coherent lines in its row's
+    /// compensated band (`[i][j]`; NaN without such lines).
+    pub entry_error: [[f64; 3]; 3],
+    /// Natural frequencies (Hz) and damping ratios of the pairs.
+    pub modes: Vec<(f64, f64)>,
+}
+
+/// The peak crosstalk |G_ij|/|G_ii| over the compensated band (coherent
+/// lines of both entries), per entry.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct Crosstalk {
+    /// Peak |G_ij|/|G_ii| (`[i][j]`; 1 on the diagonal, NaN without lines).
+    pub peak: [[f64; 3]; 3],
+    /// Where it peaks (Hz).
+    pub at_hz: [[f64; 3]; 3],
+}
+
+/// One output axis's predictions (√J, fractions of the force's RMS, with
+/// the crosstalk counted, on the 3x3 model) and which row was used: the one
+/// with the smaller error on the measured matrix ([`Criteria`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct AxisPrediction {
+    /// Axis letter.
+    pub axis: &'static str,
+    /// Compensated band (Hz).
+    pub band_hz: (f64, f64),
+    /// No compensation.
+    pub raw: RowError,
+    /// The per-axis design (`None` where it failed).
+    pub per_axis: Option<RowError>,
+    /// What the per-axis design predicts for itself, ignoring the crosstalk.
+    pub per_axis_direct_only: Option<f64>,
+    /// The 3x3 design's row (`None` where it failed).
+    pub matrix: Option<RowError>,
+    /// The per-axis design's error on the measured matrix (which judges
+    /// the choice, with its measurement noise; `None` where it failed).
+    pub per_axis_measured: Option<RowError>,
+    /// The 3x3 row's error on the measured matrix.
+    pub matrix_measured: Option<RowError>,
+    /// The row used.
+    pub source: RowSource,
+    /// Its prediction.
+    pub chosen: RowError,
+    /// Why that row.
+    pub reason: String,
+    /// White-noise gain of the row used (RMS ratio for unit noise on every input).
+    pub noise_gain: f64,
+}
+
+/// The 3x3 Kalman design's figures.
+#[derive(Clone, Debug, Serialize)]
+pub struct KalmanFigures {
+    /// q per force axis (N²/sample).
+    pub q: [f64; 3],
+    /// Measurement noise per channel (N²).
+    pub r: [f64; 3],
+    /// Compensator order (states).
+    pub order: usize,
+    /// DARE residual relative to its terms.
+    pub dare_residual: f64,
+    /// Doubling steps.
+    pub dare_iterations: usize,
+    /// Condition number of the innovation covariance.
+    pub innovation_condition: f64,
+    /// Spectral radius of the compensator.
+    pub closed_loop_radius: f64,
+    /// White-noise gain per output.
+    pub noise_gains: [f64; 3],
+    /// The q search.
+    pub q_search: QSearch,
+}
+
+/// The plant realization's figures.
+#[derive(Clone, Debug, Serialize)]
+pub struct PlantFigures {
+    /// Plant states.
+    pub states: usize,
+    /// Rank kept of each discrete pole's residue.
+    pub ranks: Vec<usize>,
+    /// Force-error bound of the dropped rank.
+    pub dropped_bound: f64,
+    /// Realization against the pole-residue form.
+    pub realization_error: f64,
+}
+
+/// The realization's figures: what the box runs.
+#[derive(Clone, Debug, Serialize)]
+pub struct RealizationFigures {
+    /// Upper end of the band the f32 filter is verified over (Hz).
+    pub verified_to_hz: f64,
+    /// Pole-pair sections.
+    pub pairs: usize,
+    /// Diagonal sections (two real poles each).
+    pub diagonal: usize,
+    /// FIR taps (3x3 each).
+    pub fir_taps: usize,
+    /// Largest modal-transform condition number.
+    pub modal_condition: f64,
+    /// Largest cluster-decoupling norm.
+    pub decoupling_norm: f64,
+    /// Largest truncated FIR tail (relative).
+    pub fir_truncation: f64,
+    /// The f32 verification.
+    pub verification: MimoVerification,
+}
+
+/// One latency designed: each axis's chosen predicted error (`None` where
+/// neither design worked).
+#[derive(Clone, Debug, Serialize)]
+pub struct LatencyRound {
+    /// Latency (samples).
+    pub latency: usize,
+    /// Chosen √J per axis.
+    pub predicted: [Option<f64>; 3],
+}
+
+/// Every figure of a 3x3 design (serializable, for the summary and `--json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct MatrixSummary {
+    /// Sample rate (Hz).
+    pub fs_hz: f64,
+    /// Declared latency L (samples).
+    pub latency: usize,
+    /// The latencies designed.
+    pub latency_rounds: Vec<LatencyRound>,
+    /// The fit (`None` where it failed; the notes say why).
+    pub fit: Option<MatrixFitFigures>,
+    /// The discrete model's match.
+    pub discrete: Option<DiscreteMatch>,
+    /// The plant's realization.
+    pub plant: Option<PlantFigures>,
+    /// The 3x3 Kalman design at the chosen latency.
+    pub kalman: Option<KalmanFigures>,
+    /// Per output axis.
+    pub axes: Vec<AxisPrediction>,
+    /// The crosstalk in the measured FRFs.
+    pub crosstalk: Crosstalk,
+    /// The realization the box runs.
+    pub realization: RealizationFigures,
+    /// Notes for the user.
+    pub notes: Vec<String>,
+}
+
+/// Everything the 3x3 design made.
+#[derive(Clone, Debug)]
+pub struct MatrixDesign {
+    /// The figures.
+    pub summary: MatrixSummary,
+    /// The fitted model Ĝ (`None` where the fit failed).
+    pub model: Option<MatrixModel>,
+    /// The discrete model and its plant states.
+    pub discrete: Option<(DiscreteMatrixModel, PlantStates)>,
+    /// The 3x3 Kalman design at the chosen latency.
+    pub kalman: Option<MatrixKalman>,
+    /// The per-axis designs at the chosen latency.
+    pub per_axis: Vec<Option<AxisDesign>>,
+    /// Which row each output axis uses.
+    pub rows: [RowSource; 3],
+    /// The combined compensator y → F̂[k−L] (f64).
+    pub compensator: MimoStateSpace,
+    /// Its realization (f64).
+    pub realization: MimoRealization,
+    /// The f32 filter the box runs.
+    pub filter: MimoFilter,
+}
+
+impl MatrixDesign {
+    /// The augmented plant of the 3x3 model at latency `lag`: the model of
+    /// an offline smoother (`None` where the 3x3 model failed).
+    pub fn augmented_plant(&self, lag: usize) -> Option<MatrixAugmentedPlant> {
+        self.discrete.as_ref().map(|(dm, plant)| augmented_plant(dm, plant, lag))
+    }
+}
+
+/// The 3x3 model's part that does not depend on the latency.
+struct MatrixPrep {
+    fit: MatrixFitFigures,
+    model: MatrixModel,
+    dm: DiscreteMatrixModel,
+    matching: DiscreteMatch,
+    plant: PlantStates,
+}
+
+/// One latency's designs.
+struct Round {
+    lag: usize,
+    per_axis: Vec<Option<AxisDesign>>,
+    matrix: Option<(MatrixKalman, QSearch, [f64; 3])>,
+    /// Why there is no 3x3 design where the model exists.
+    matrix_error: Option<String>,
+    axes: Vec<AxisPrediction>,
+    rows: [RowSource; 3],
+}
+
+/// Design the 3x3 compensator of the complete FRF matrix `frf` for the
+/// measurement noise variances `r` (N², per channel) (module doc).
+pub fn design_matrix(frf: &Frf, r: [f64; 3], opts: &MatrixOptions) -> Result<MatrixDesign> {
+    design(frf, r, opts, None)
+}
+
+/// [`design_matrix`] on a given 3x3 model instead of the fit of `frf` (the
+/// FRF still gives the bands, the per-axis designs and the model's error
+/// against the measurement): for studies with a known model, e.g. the
+/// simulator's exact one.
+pub fn design_matrix_with_model(
+    frf: &Frf,
+    model: MatrixModel,
+    r: [f64; 3],
+    opts: &MatrixOptions,
+) -> Result<MatrixDesign> {
+    design(frf, r, opts, Some(model))
+}
+
+fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixModel>) -> Result<MatrixDesign> {
+    let d = &opts.design;
+    check_options(frf, r, opts)?;
+    let fs = d.fs_hz;
+    let f_cap = MATCH_BAND_FRACTION * fs;
+    let mut notes = Vec::new();
+    let bands: [(f64, f64); 3] = std::array::from_fn(|i| {
+        let a = frf.axis(i).expect("checked complete");
+        let b = coherent_band(&frf.freq_hz, a.coherence.as_deref(), d.coherence_threshold);
+        (b.0, b.1.min(f_cap))
+    });
+    for (i, b) in bands.iter().enumerate() {
+        if !(b.1 > b.0) {
+            bail!(
+                "axis {}: no coherent band below 0.45 fs (coherence ≥ {}); repeat the impact test",
+                axis_name(i),
+                d.coherence_threshold
+            );
+        }
+    }
+    check_invertible(frf, &bands, d.coherence_threshold)?;
+    let crosstalk = crosstalk_of(frf, &bands, d.coherence_threshold);
+    let prepared: Vec<Result<PreparedAxis>> =
+        (0..3).map(|i| prepare_axis(&frf.freq_hz, frf.axis(i).expect("complete"), r[i], d)).collect();
+    for (i, p) in prepared.iter().enumerate() {
+        if let Err(e) = p {
+            notes.push(format!("axis {}: no per-axis design: {e:#}", axis_name(i)));
+        }
+    }
+    let vf = opts.matrix_vf.clone().unwrap_or(VfOptions {
+        max_order: MATRIX_MAX_ORDER,
+        iterations: d.vf.iterations.max(MATRIX_ITERATIONS),
+        ..d.vf.clone()
+    });
+    let prepared_model = match given {
+        Some(m) => prepare_model(frf, &bands, fs, d.coherence_threshold, m, f64::NAN, Vec::new()),
+        None => prepare_matrix(frf, &bands, fs, &vf, d.coherence_threshold),
+    };
+    let prep = match prepared_model {
+        Ok(p) => Some(p),
+        Err(e) => {
+            notes.push(format!("no 3x3 design: {e:#}; every axis is designed per axis, crosstalk not compensated"));
+            None
+        }
+    };
+    let force = opts.force_rms_axes.unwrap_or([d.force_rms; 3]);
+    let model_g = |f: f64| match &prep {
+        Some(p) => p.model.frf(f),
+        None => measured_matrix_model(frf, f),
+    };
+    let criterion = Criteria {
+        model: MatrixCriterion::new(model_g, bands, fs, force, r),
+        measured: MatrixCriterion::new(|f| measured_matrix_model(frf, f), bands, fs, force, r),
+    };
+    let latencies: Vec<usize> = match opts.latency {
+        Some(l) => vec![l],
+        None => vec![DEFAULT_LATENCY],
+    };
+    let mut rounds: Vec<Round> =
+        latencies.iter().map(|l| round(*l, &prepared, prep.as_ref(), &criterion, r, d)).collect();
+    if opts.latency.is_none() && rounds[0].axes.iter().any(|a| a.chosen.distortion > PREDICTED_SHORT) {
+        for l in LONGER_LATENCIES {
+            rounds.push(round(l, &prepared, prep.as_ref(), &criterion, r, d));
+        }
+    }
+    let latency_rounds: Vec<LatencyRound> = rounds
+        .iter()
+        .map(|rd| LatencyRound { latency: rd.lag, predicted: std::array::from_fn(|i| Some(rd.axes[i].chosen.error)) })
+        .collect();
+    let best: [f64; 3] =
+        std::array::from_fn(|i| rounds.iter().map(|rd| rd.axes[i].chosen.error).fold(f64::INFINITY, f64::min));
+    let pick =
+        rounds.iter().position(|rd| (0..3).all(|i| rd.axes[i].chosen.error <= GAIN_NOT_WORTH * best[i])).unwrap_or(0);
+    let chosen = rounds.swap_remove(pick);
+    for a in &chosen.axes {
+        if !(a.chosen.error < a.raw.error) || !(a.chosen.error < MAX_PREDICTED_ERROR) {
+            bail!(
+                "axis {}: neither the 3x3 nor the per-axis compensator beats no compensation in its band ({:.0}–{:.0} Hz): \
+                 predicted {:.2} % against {:.2} % uncompensated (crosstalk counted); no image written",
+                a.axis,
+                a.band_hz.0,
+                a.band_hz.1,
+                100.0 * a.chosen.error,
+                100.0 * a.raw.error
+            );
+        }
+    }
+    finish(frf, chosen, prep, crosstalk, latency_rounds, notes, fs, &bands)
+}
+
+/// Refuse what the 3x3 design cannot do (yet), with the reason.
+fn check_options(frf: &Frf, r: [f64; 3], opts: &MatrixOptions) -> Result<()> {
+    let d = &opts.design;
+    let status = frf.matrix_status();
+    if !status.is_complete() {
+        bail!(
+            "the 3x3 design needs all nine FRFs: {}; measure the missing entries (an impact test in every hammer \
+             direction, every channel recorded) to compensate the crosstalk",
+            status.message().unwrap_or_default()
+        );
+    }
+    if !matches!(d.method, FitMethod::Vf) {
+        bail!("the 3x3 design supports the default method only (--method vf), not the paper's");
+    }
+    if !d.bands.is_empty() {
+        bail!("the 3x3 design does not support fitting bands (--band, --spindle-rpm) yet");
+    }
+    if d.discretization != Discretization::Fit {
+        bail!("the 3x3 design supports only the fitted discrete model (--discretization fit)");
+    }
+    if d.force_record.is_some() {
+        bail!("the 3x3 design does not support --force-record yet; give the force level per axis instead");
+    }
+    for (i, v) in r.iter().enumerate() {
+        if !(*v > 0.0 && v.is_finite()) {
+            bail!("axis {}: measurement noise variance R = {v} N² must be positive and finite", axis_name(i));
+        }
+    }
+    Ok(())
+}
+
+/// Refuse a measured matrix that is singular (condition number above
+/// [`MAX_MATRIX_CONDITION`], or not finite) on a line of the compensated
+/// bands where every entry is coherent: no 3x3 compensator can separate
+/// the forces there.
+fn check_invertible(frf: &Frf, bands: &[(f64, f64); 3], threshold: f64) -> Result<()> {
+    let lo = bands.iter().map(|b| b.0).fold(f64::INFINITY, f64::min);
+    let hi = bands.iter().map(|b| b.1).fold(0.0, f64::max);
+    let entries: Vec<_> = (0..9).map(|e| frf.entry(e / 3, e % 3).expect("complete")).collect();
+    for (k, f) in frf.freq_hz.iter().enumerate() {
+        if *f < lo || *f > hi || entries.iter().any(|e| e.coherence.is_some_and(|c| c[k] < threshold)) {
+            continue;
+        }
+        let g = frf.matrix_at(k).expect("complete");
+        let sv = g.singular_values();
+        let condition = sv.max() / sv.min();
+        if !(condition <= MAX_MATRIX_CONDITION) {
+            bail!(
+                "the measured FRF matrix is singular at {f:.1} Hz (condition number {condition:.1e}, limit {MAX_MATRIX_CONDITION:.0e}): \
+                 the three channels do not see three independent forces; check the channel and hammer-direction \
+                 mapping (a repeated or mislabelled file), or design per axis from the direct FRFs"
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Ĝ(j2πf) by linear interpolation of the measured lines (where the 3x3
+/// fit failed: the predictions then read the measurement itself).
+fn measured_matrix_model(frf: &Frf, f: f64) -> CMatrix3 {
+    let k = frf.freq_hz.partition_point(|x| *x < f).clamp(1, frf.freq_hz.len() - 1);
+    let (f0, f1) = (frf.freq_hz[k - 1], frf.freq_hz[k]);
+    let t = ((f - f0) / (f1 - f0)).clamp(0.0, 1.0);
+    let (a, b) = (frf.matrix_at(k - 1).expect("complete"), frf.matrix_at(k).expect("complete"));
+    a * Complex64::new(1.0 - t, 0.0) + b * Complex64::new(t, 0.0)
+}
+
+/// Peak |G_ij|/|G_ii| per entry over each row's band, on the lines where
+/// both entries are coherent.
+fn crosstalk_of(frf: &Frf, bands: &[(f64, f64); 3], threshold: f64) -> Crosstalk {
+    let mut x = Crosstalk { peak: [[f64::NAN; 3]; 3], at_hz: [[f64::NAN; 3]; 3] };
+    for i in 0..3 {
+        let direct = frf.entry(i, i).expect("complete");
+        for j in 0..3 {
+            let e = frf.entry(i, j).expect("complete");
+            for (k, f) in frf.freq_hz.iter().enumerate() {
+                let coherent = |c: Option<&[f64]>| c.is_none_or(|c| c[k] >= threshold);
+                if *f < bands[i].0 || *f > bands[i].1 || !coherent(e.coherence) || !coherent(direct.coherence) {
+                    continue;
+                }
+                let v = e.frf[k].norm() / direct.frf[k].norm();
+                if x.peak[i][j].is_nan() || v > x.peak[i][j] {
+                    x.peak[i][j] = v;
+                    x.at_hz[i][j] = *f;
+                }
+            }
+        }
+    }
+    x
+}
+
+/// Fit, discrete model and plant of the matrix (the latency-independent
+/// part), the fit with `vf`, its error scored on the lines of coherence ≥
+/// `threshold`.
+fn prepare_matrix(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, vf: &VfOptions, threshold: f64) -> Result<MatrixPrep> {
+    let entries: Vec<_> = (0..9).map(|e| frf.entry(e / 3, e % 3).expect("complete")).collect();
+    let weights: Vec<Vec<f64>> = entries.iter().map(|e| coherence_weights(e.frf, e.coherence)).collect();
+    let data = MatrixData {
+        freq_hz: &frf.freq_hz,
+        h: std::array::from_fn(|e| entries[e].frf),
+        w: std::array::from_fn(|e| weights[e].as_slice()),
+    };
+    let fit = matrix_vector_fit(&data, vf).context("fit of the 3x3 matrix")?;
+    prepare_model(frf, bands, fs, threshold, fit.model, fit.weighted_rms, fit.order_trace)
+}
+
+/// [`prepare_matrix`] from the model: its error against the measurement,
+/// the discrete model and the plant.
+fn prepare_model(
+    frf: &Frf,
+    bands: &[(f64, f64); 3],
+    fs: f64,
+    threshold: f64,
+    model: MatrixModel,
+    weighted_rms: f64,
+    order_trace: Vec<(usize, f64)>,
+) -> Result<MatrixPrep> {
+    let entries: Vec<_> = (0..9).map(|e| frf.entry(e / 3, e % 3).expect("complete")).collect();
+    let mut entry_error = [[f64::NAN; 3]; 3];
+    for (e, ent) in entries.iter().enumerate() {
+        let (i, j) = (e / 3, e % 3);
+        let mask: Vec<bool> = frf
+            .freq_hz
+            .iter()
+            .enumerate()
+            .map(|(k, f)| *f >= bands[i].0 && *f <= bands[i].1 && ent.coherence.is_none_or(|c| c[k] >= threshold))
+            .collect();
+        entry_error[i][j] = relative_rms_error(|f| model.entry(i, j).frf(f), &frf.freq_hz, ent.frf, &mask);
+    }
+    for i in 0..3 {
+        if !(entry_error[i][i] <= MAX_FIT_ERROR) {
+            bail!(
+                "the 3x3 model is {:.1} % (relative RMS) from the measured {} FRF on its coherent lines, above the limit of {:.0} %",
+                100.0 * entry_error[i][i],
+                entry_name(i, i),
+                100.0 * MAX_FIT_ERROR
+            );
+        }
+    }
+    let band = (bands.iter().map(|b| b.0).fold(f64::INFINITY, f64::min), bands.iter().map(|b| b.1).fold(0.0, f64::max));
+    let (dm, matching) = discretize_matrix(&model, fs, band).context("discrete 3x3 model")?;
+    let grid = crate::design::criterion::criterion_grid(&[band]);
+    let lines: Vec<(f64, CMatrix3)> = grid.iter().map(|f| (*f, model.frf(*f))).collect();
+    let plant = plant_states(&dm, &lines).context("plant of the 3x3 model")?;
+    let figures =
+        MatrixFitFigures { order: model.order(), weighted_rms, order_trace, entry_error, modes: model.modes() };
+    Ok(MatrixPrep { fit: figures, model, dm, matching, plant })
+}
+
+/// The designs at latency `lag` and each axis's choice of row.
+/// The criterion on the 3x3 model Ĝ (the predictions, and the q search),
+/// and the same on the measured matrix (interpolated between its lines),
+/// which judges the choice of row: the 3x3 design is optimal for Ĝ, so on
+/// Ĝ its model error is invisible while the per-axis design's
+/// disagreement with Ĝ counts against it; on the measurement both carry
+/// their model's error and the same measurement noise.
+struct Criteria {
+    model: MatrixCriterion,
+    measured: MatrixCriterion,
+}
+
+fn round(
+    lag: usize,
+    prepared: &[Result<PreparedAxis>],
+    prep: Option<&MatrixPrep>,
+    crits: &Criteria,
+    r: [f64; 3],
+    d: &DesignOptions,
+) -> Round {
+    let crit = &crits.model;
+    let judge = &crits.measured;
+    let opts = DesignOptions { lag, ..d.clone() };
+    let per_axis: Vec<Option<AxisDesign>> =
+        prepared.iter().map(|p| p.as_ref().ok().and_then(|p| design_prepared(p, &opts).ok())).collect();
+    let (matrix, matrix_error) = match prep.map(|p| design_3x3(p, crit, r, lag, d)) {
+        Some(Ok(m)) => (Some(m), None),
+        Some(Err(e)) => (None, Some(format!("no 3x3 Kalman design at latency {lag}: {e:#}"))),
+        None => (None, None),
+    };
+    debug_assert_eq!(crit.all_freqs(), judge.all_freqs());
+    let all = crit.all_freqs();
+    let h_matrix = matrix.as_ref().map(|(k, _, _)| k.compensator.freq_responses(&all, d.fs_hz));
+    let axes: Vec<AxisPrediction> = (0..3)
+        .map(|i| {
+            let raw = crit.raw(i);
+            let per = per_axis[i].as_ref().map(|a| {
+                let h = a.kalman.compensator.freq_responses(&crit.rows[i].freqs, d.fs_hz);
+                (crit.per_axis(i, lag, &h), a.predicted_error, a.noise_gain, judge.per_axis(i, lag, &h))
+            });
+            let mat = matrix
+                .as_ref()
+                .zip(h_matrix.as_ref())
+                .map(|((_, _, ng), h)| (crit.row_error(i, lag, h), ng[i], judge.row_error(i, lag, h)));
+            let (source, chosen, noise_gain, reason) = match (per, mat) {
+                (Some((_, _, _, pj)), Some((m, mng, mj))) if mj.error < pj.error => (
+                    RowSource::Matrix,
+                    m,
+                    mng,
+                    format!(
+                        "3x3 row: {:.3} % against {:.3} % per axis on the measured matrix",
+                        100.0 * mj.error,
+                        100.0 * pj.error
+                    ),
+                ),
+                (Some((p, _, png, pj)), Some((_, _, mj))) => (
+                    RowSource::PerAxis,
+                    p,
+                    png,
+                    format!(
+                        "per-axis row: {:.3} % against {:.3} % for the 3x3 row on the measured matrix",
+                        100.0 * pj.error,
+                        100.0 * mj.error
+                    ),
+                ),
+                (Some((p, _, png, _)), None) => (RowSource::PerAxis, p, png, "per-axis row: no 3x3 design".to_string()),
+                (None, Some((m, mng, _))) => (RowSource::Matrix, m, mng, "3x3 row: no per-axis design".to_string()),
+                (None, None) => (
+                    RowSource::PerAxis,
+                    RowError { error: f64::INFINITY, distortion: f64::INFINITY },
+                    f64::NAN,
+                    "no design".to_string(),
+                ),
+            };
+            AxisPrediction {
+                axis: axis_name(i),
+                band_hz: crit.rows[i].band_hz,
+                raw,
+                per_axis: per.map(|p| p.0),
+                per_axis_direct_only: per.map(|p| p.1),
+                matrix: mat.map(|m| m.0),
+                per_axis_measured: per.map(|p| p.3),
+                matrix_measured: mat.map(|m| m.2),
+                source,
+                chosen,
+                reason,
+                noise_gain,
+            }
+        })
+        .collect();
+    let rows = std::array::from_fn(|i| axes[i].source);
+    Round { lag, per_axis, matrix, matrix_error, axes, rows }
+}
+
+/// The 3x3 Kalman design at latency `lag` with q chosen by the criterion
+/// (or `d.q_override` on every axis), and its noise gains.
+fn design_3x3(
+    p: &MatrixPrep,
+    crit: &MatrixCriterion,
+    r: [f64; 3],
+    lag: usize,
+    d: &DesignOptions,
+) -> Result<(MatrixKalman, QSearch, [f64; 3])> {
+    let aug = augmented_plant(&p.dm, &p.plant, lag);
+    let all = crit.all_freqs();
+    let evaluate = |q: [f64; 3]| -> Option<(MatrixKalman, [f64; 3], [f64; 3])> {
+        let k = kalman::design(&aug, q, r, lag).ok()?;
+        let ng = k.compensator.white_noise_gains()?;
+        let h = k.compensator.freq_responses(&all, d.fs_hz);
+        let j = std::array::from_fn(|i| {
+            if ng[i] > d.max_noise_gain {
+                f64::INFINITY
+            } else {
+                crit.row_error(i, lag, &h).error
+            }
+        });
+        Some((k, j, [ng[0], ng[1], ng[2]]))
+    };
+    let search = match d.q_override {
+        Some(q) => QSearch { q: [q; 3], ..Default::default() },
+        None => choose_q(&|q| evaluate(q).map_or([f64::INFINITY; 3], |e| e.1), r)?,
+    };
+    let Some((k, j, ng)) = evaluate(search.q) else {
+        bail!("the 3x3 Kalman design failed at the chosen q = {:?}", search.q);
+    };
+    let search = QSearch { predicted: j, ..search };
+    Ok((k, search, ng))
+}
+
+/// The combined compensator of the chosen round, realized and verified.
+#[allow(clippy::too_many_arguments)]
+fn finish(
+    frf: &Frf,
+    mut rd: Round,
+    prep: Option<MatrixPrep>,
+    crosstalk: Crosstalk,
+    latency_rounds: Vec<LatencyRound>,
+    mut notes: Vec<String>,
+    fs: f64,
+    bands: &[(f64, f64); 3],
+) -> Result<MatrixDesign> {
+    let _ = frf;
+    let per_axis_ss: [Option<&crate::numeric::lti::StateSpace>; 3] =
+        std::array::from_fn(|i| rd.per_axis[i].as_ref().map(|a| &a.kalman.compensator));
+    let f_band = bands.iter().map(|b| b.1).fold(0.0, f64::max);
+    let (blocks, compensator) = combine(rd.rows, rd.matrix.as_ref().map(|m| &m.0.compensator), per_axis_ss)?;
+    let (compensator, (realization, filter, verification)) = match realize_blocks(&blocks, fs, f_band) {
+        Ok(r) => (compensator, r),
+        // A 3x3 row that cannot be realized in f32 is not used: the
+        // per-axis rows are (never silently worse, never unverified).
+        Err(e) if rd.rows.contains(&RowSource::Matrix) && rd.per_axis.iter().all(Option::is_some) => {
+            notes.push(format!("the 3x3 rows were not used: {e:#}; every axis is designed per axis"));
+            for (a, d) in rd.axes.iter_mut().zip(&rd.per_axis) {
+                if a.source == RowSource::Matrix {
+                    a.noise_gain = d.as_ref().map_or(f64::NAN, |d| d.noise_gain);
+                    a.source = RowSource::PerAxis;
+                    a.chosen = a.per_axis.expect("per-axis design present");
+                    a.reason = "per-axis row: the 3x3 compensator does not verify in f32".to_string();
+                }
+            }
+            rd.rows = [RowSource::PerAxis; 3];
+            let (blocks, compensator) = combine(rd.rows, None, per_axis_ss)?;
+            (compensator, realize_blocks(&blocks, fs, f_band)?)
+        }
+        Err(e) => return Err(e),
+    };
+    notes.extend(rd.matrix_error.iter().cloned());
+    let kalman_fig = rd.matrix.as_ref().map(|(k, s, ng)| KalmanFigures {
+        q: k.q,
+        r: k.r,
+        order: k.compensator.a.nrows(),
+        dare_residual: k.dare_residual,
+        dare_iterations: k.dare_iterations,
+        innovation_condition: k.innovation_condition,
+        closed_loop_radius: k.closed_loop_radius,
+        noise_gains: *ng,
+        q_search: s.clone(),
+    });
+    let summary = MatrixSummary {
+        fs_hz: fs,
+        latency: rd.lag,
+        latency_rounds,
+        fit: prep.as_ref().map(|p| p.fit.clone()),
+        discrete: prep.as_ref().map(|p| p.matching),
+        plant: prep.as_ref().map(|p| PlantFigures {
+            states: p.plant.a.nrows(),
+            ranks: p.plant.ranks.clone(),
+            dropped_bound: p.plant.dropped_bound,
+            realization_error: p.plant.error,
+        }),
+        kalman: kalman_fig,
+        axes: rd.axes,
+        crosstalk,
+        realization: RealizationFigures {
+            verified_to_hz: f_band,
+            pairs: verification.pairs,
+            diagonal: verification.diagonal,
+            fir_taps: verification.fir_taps,
+            modal_condition: realization.modal_condition,
+            decoupling_norm: realization.decoupling_norm,
+            fir_truncation: realization.fir_truncation,
+            verification,
+        },
+        notes,
+    };
+    let (model, discrete) = match prep {
+        Some(p) => (Some(p.model), Some((p.dm, p.plant))),
+        None => (None, None),
+    };
+    Ok(MatrixDesign {
+        summary,
+        model,
+        discrete,
+        kalman: rd.matrix.map(|m| m.0),
+        per_axis: rd.per_axis,
+        rows: rd.rows,
+        compensator,
+        realization,
+        filter,
+    })
+}

@@ -1,0 +1,404 @@
+//! The 3x3 design against the plate simulator's truth: impact-test matrix →
+//! `design_matrix` → the realized f32 `MimoFilter` run on the simulated
+//! measurement → NRMSE against the simulator's band-limited true force per
+//! axis (DESIGN.md, "Accuracy"), beside the per-axis design's f32 filters
+//! on the same record, no compensation, and the noise floor of the exact
+//! 3x3 inverse (`inverse_noise_floor`, computed from the simulator's exact
+//! FRF at the cut point, not from anything the design made).
+//!
+//! Thresholds, fixed before the figures were looked at:
+//! * where the crosstalk is large (offcentre, tall: peak |G_ij|/|G_ii| of
+//!   0.5-1.7) the worst axis of the 3x3 filter is at most half the worst
+//!   axis of the per-axis filters;
+//! * on every axis the filter used is no worse than 1.25 times the per-axis
+//!   filter alone (the choice is made on predictions, which carry the
+//!   model's error, so a small margin);
+//! * on every axis within [`FLOOR_FACTOR`] of the exact inverse's floor.
+//!
+//! Negative controls: the same design from a matrix whose cross entries are
+//! zeroed fails the crosstalk assertion; a filter perturbed by ten times the
+//! verification limit fails the f32 verification; a matrix with a missing
+//! or a repeated row is refused with a message saying what to do.
+//!
+//! `seed_study` (ignored: run it in release) reports the figures of the
+//! presets at the four user rates and of random set-ups from seeds 1..=6.
+
+#![allow(clippy::needless_range_loop)] // axis indices index several arrays at once
+
+use dynocomp::design::axis::DesignOptions;
+use dynocomp::design::mimo::{design_matrix, MatrixDesign, MatrixOptions, RowSource};
+use dynocomp::frf::Frf;
+use dynocomp::metrics::{accuracy, lowpass, sample_variance, scoring_band_hz};
+use dynocomp::realize::mimo::verify_filter;
+use dynocomp::simulate::plate::{inverse_noise_floor, simulate_plate, FloorSpec, PlateSetup, PlateSim, PlateSimOutput};
+use dynocomp::simulate::SimParams;
+use dynocomp_core::kernel::AxisState;
+use dynocomp_core::mimo::{MimoFilter, MimoState};
+use num_complex::Complex64;
+
+/// Largest accepted ratio of the compensated NRMSE to the exact 3x3
+/// inverse's noise floor, per axis.
+const FLOOR_FACTOR: f64 = 8.0;
+/// Largest accepted ratio of the filter used to the per-axis filter alone.
+const NO_WORSE: f64 = 1.25;
+/// Where the crosstalk is large: worst 3x3 axis ≤ this × worst per-axis axis.
+const CROSSTALK_GAIN: f64 = 0.5;
+
+/// The figures of one set-up at one rate (NRMSE, fractions).
+#[derive(Debug)]
+struct Figures {
+    raw: [f64; 3],
+    per_axis: [f64; 3],
+    used: [f64; 3],
+    floor: [f64; 3],
+    rows: [RowSource; 3],
+    predicted: [f64; 3],
+    peak_crosstalk: f64,
+}
+
+impl Figures {
+    fn worst(v: &[f64; 3]) -> f64 {
+        v.iter().fold(0.0f64, |m, x| m.max(*x))
+    }
+
+    fn line(&self, name: &str, fs: f64) -> String {
+        let p = |v: [f64; 3]| format!("{:.3}/{:.3}/{:.3}", 100.0 * v[0], 100.0 * v[1], 100.0 * v[2]);
+        format!(
+            "{name:>10} {:>6.2} kHz  xtalk {:>5.2}  raw {}  per-axis {}  3x3 {}  floor {}  pred {}  rows {:?}",
+            fs / 1e3,
+            self.peak_crosstalk,
+            p(self.raw),
+            p(self.per_axis),
+            p(self.used),
+            p(self.floor),
+            p(self.predicted),
+            self.rows
+        )
+    }
+}
+
+fn setup(name: &str) -> PlateSetup {
+    match name.parse::<u64>() {
+        Ok(seed) => PlateSetup::random(seed).unwrap(),
+        Err(_) => PlateSetup::preset(name).unwrap(),
+    }
+}
+
+/// A 0.4 s milling record (0.3 s idle) of `name` (a preset or a seed) at `fs`.
+fn record(name: &str, fs: f64) -> PlateSimOutput {
+    let params = SimParams { fs_hz: fs, duration_s: 0.4, idle_duration_s: 0.3, ..Default::default() };
+    simulate_plate(7, &params, &PlateSim { setup: setup(name), cut_offset_m: [0.0; 3] }).unwrap()
+}
+
+fn noise(out: &PlateSimOutput) -> [f64; 3] {
+    std::array::from_fn(|i| sample_variance(&out.idle[i]))
+}
+
+fn design(frf: &Frf, out: &PlateSimOutput) -> anyhow::Result<MatrixDesign> {
+    let opts =
+        MatrixOptions { design: DesignOptions { fs_hz: out.params.fs_hz, ..Default::default() }, ..Default::default() };
+    design_matrix(frf, noise(out), &opts)
+}
+
+/// NRMSE of `est` (delayed by `lag`) against axis i's truth.
+fn score(est: &[f64], out: &PlateSimOutput, i: usize, lag: usize) -> f64 {
+    let fs = out.params.fs_hz;
+    let n = est.len();
+    accuracy(&est[lag..], &out.truth[i][..n - lag], fs, scoring_band_hz(fs)).nrmse
+}
+
+/// Run the design's f32 filters on the record and score them (module doc).
+fn evaluate(md: &MatrixDesign, out: &PlateSimOutput) -> Figures {
+    let fs = out.params.fs_hz;
+    let band = scoring_band_hz(fs);
+    let lag = md.summary.latency;
+    let n = out.measured[0].len();
+    let mut st = MimoState::default();
+    let est: Vec<[f32; 3]> =
+        (0..n).map(|k| md.filter.step(&mut st, [0, 1, 2].map(|i| out.measured[i][k] as f32))).collect();
+    let used = std::array::from_fn(|i| score(&est.iter().map(|y| f64::from(y[i])).collect::<Vec<_>>(), out, i, lag));
+    let per_axis = std::array::from_fn(|i| {
+        md.per_axis[i].as_ref().map_or(f64::INFINITY, |a| {
+            let mut st = AxisState::default();
+            let y: Vec<f64> = out.measured[i].iter().map(|u| f64::from(a.filter.step(&mut st, *u as f32))).collect();
+            score(&y, out, i, lag)
+        })
+    });
+    let raw = std::array::from_fn(|i| score(&out.measured[i], out, i, 0));
+    let std_truth = std::array::from_fn(|i| {
+        let t = lowpass(&out.truth[i], fs, band);
+        let s = &t[t.len() / 20..t.len() - t.len() / 20];
+        let m = s.iter().sum::<f64>() / s.len() as f64;
+        (s.iter().map(|v| (v - m).powi(2)).sum::<f64>() / s.len() as f64).sqrt()
+    });
+    let spec = FloorSpec { r_n2: noise(out), fs_hz: fs, band_hz: (0.0, band), std_truth_n: std_truth };
+    let floor = inverse_noise_floor(&|f| out.cut_modal.frf(f), &spec).unwrap();
+    let x = &md.summary.crosstalk.peak;
+    let peak_crosstalk = (0..9).filter(|e| e / 3 != e % 3).map(|e| x[e / 3][e % 3]).fold(0.0, f64::max);
+    Figures {
+        raw,
+        per_axis,
+        used,
+        floor,
+        rows: md.rows,
+        predicted: std::array::from_fn(|i| md.summary.axes[i].chosen.error),
+        peak_crosstalk,
+    }
+}
+
+/// The FRF with every cross entry zeroed (the negative control of the
+/// crosstalk assertion).
+fn without_crosstalk(frf: &Frf) -> Frf {
+    let mut f = frf.clone();
+    for c in &mut f.cross {
+        c.frf.iter_mut().for_each(|v| *v = Complex64::new(0.0, 0.0));
+    }
+    f
+}
+
+fn check_no_worse_and_floor(fig: &Figures, what: &str) {
+    for i in 0..3 {
+        assert!(
+            fig.used[i] <= NO_WORSE * fig.per_axis[i],
+            "{what} axis {i}: the filter used ({:.3} %) is worse than the per-axis filter ({:.3} %)",
+            100.0 * fig.used[i],
+            100.0 * fig.per_axis[i]
+        );
+        assert!(
+            fig.used[i] <= FLOOR_FACTOR * fig.floor[i],
+            "{what} axis {i}: {:.3} % is more than {FLOOR_FACTOR} times the exact inverse's floor {:.3} %",
+            100.0 * fig.used[i],
+            100.0 * fig.floor[i]
+        );
+    }
+}
+
+fn crosstalk_compensated(fig: &Figures) -> bool {
+    Figures::worst(&fig.used) <= CROSSTALK_GAIN * Figures::worst(&fig.per_axis)
+}
+
+/// Large crosstalk: the 3x3 design beats per-axis compensation, and the
+/// design without the cross entries does not (negative control).
+fn large_crosstalk(name: &str, fs: f64) {
+    let out = record(name, fs);
+    let md = design(&out.frf, &out).unwrap();
+    let fig = evaluate(&md, &out);
+    eprintln!("{}", fig.line(name, fs));
+    assert!(fig.peak_crosstalk > 0.5, "{name}: the crosstalk should be large, peak {:.2}", fig.peak_crosstalk);
+    assert!(
+        crosstalk_compensated(&fig),
+        "{name} at {fs} Hz: the 3x3 design does not beat per-axis compensation: {fig:?}"
+    );
+    check_no_worse_and_floor(&fig, name);
+    let blind = design(&without_crosstalk(&out.frf), &out).unwrap();
+    let blind_fig = evaluate(&blind, &out);
+    eprintln!("{}", blind_fig.line(&format!("{name}-diag"), fs));
+    assert!(
+        !crosstalk_compensated(&blind_fig),
+        "negative control: a design blind to the crosstalk passed: {blind_fig:?}"
+    );
+}
+
+#[test]
+#[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
+fn offcentre_10k() {
+    large_crosstalk("offcentre", 10_240.0);
+}
+
+/// The f32 filter of a 3x3 design verifies against its f64 compensator, a
+/// perturbed one does not (negative control).
+#[test]
+#[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
+fn flat_f32_verified() {
+    let fs = 25_600.0;
+    let out = record("flat", fs);
+    let md = design(&out.frf, &out).unwrap();
+    let f_band = md.summary.realization.verified_to_hz;
+    let v = verify_filter(&md.filter, &md.compensator, fs, f_band).unwrap();
+    assert!(v.score() <= 1e-4, "f32 verification score {:.1e}", v.score());
+    // Perturb the direct term by ten times the limit of the frequency check
+    // times the largest response of any row (computed here from the f64
+    // compensator): its entry then deviates by ≥ 10× the limit of its row.
+    let freqs: Vec<f64> = (0..=200).map(|k| f_band * k as f64 / 200.0).collect();
+    let peak = md
+        .compensator
+        .freq_responses(&freqs, fs)
+        .iter()
+        .flat_map(|h| h.iter().map(|v| v.norm()).collect::<Vec<_>>())
+        .fold(0.0, f64::max);
+    let mut d = *md.filter.d();
+    d[0][0] += (10.0 * 1e-4 * peak) as f32;
+    let bad = MimoFilter::new(md.filter.sections(), d, md.filter.fir()).unwrap();
+    let err = verify_filter(&bad, &md.compensator, fs, f_band).unwrap_err();
+    assert!(format!("{err:#}").contains("deviates"), "{err:#}");
+}
+
+/// Ill-posed input: a missing cross entry, or a matrix whose y row repeats
+/// its x row (a file given twice), is refused with what to do.
+#[test]
+#[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
+fn ill_posed_matrices_are_refused() {
+    let out = record("offcentre", 10_240.0);
+    let mut missing = out.frf.clone();
+    missing.cross.retain(|c| !(c.channel == 1 && c.direction == 0));
+    let e = format!("{:#}", design(&missing, &out).unwrap_err());
+    assert!(e.contains("nine") && e.contains("yx"), "{e}");
+
+    let mut repeated = out.frf.clone();
+    let row_x: Vec<Vec<Complex64>> = (0..3).map(|j| out.frf.entry(0, j).unwrap().frf.to_vec()).collect();
+    repeated.axes[1].frf = row_x[1].clone();
+    for c in &mut repeated.cross {
+        if c.channel == 1 {
+            c.frf = row_x[c.direction].clone();
+        }
+    }
+    let e = format!("{:#}", design(&repeated, &out).unwrap_err());
+    assert!(e.contains("singular") && e.contains("mapping"), "{e}");
+}
+
+/// Figures of random set-ups from seeds 1..=6 (chosen before the results)
+/// at 25.6 kHz and of the presets at the four user rates; asserts the
+/// no-worse and floor thresholds on every one.
+#[test]
+#[ignore = "minutes of designs: run with --release -- --ignored --nocapture"]
+fn seed_study() {
+    let mut failures = Vec::new();
+    let mut cases: Vec<(String, f64)> = Vec::new();
+    for seed in 1..=6u64 {
+        cases.push((seed.to_string(), 25_600.0));
+    }
+    for fs in [10_240.0, 25_600.0, 51_200.0, 102_400.0] {
+        for p in ["flat", "offcentre", "tall"] {
+            cases.push((p.to_string(), fs));
+        }
+    }
+    // MIMO_STUDY="name@fs,…" runs a subset.
+    if let Ok(list) = std::env::var("MIMO_STUDY") {
+        cases = list
+            .split(',')
+            .map(|c| {
+                let (n, f) = c.split_once('@').expect("name@fs");
+                (n.to_string(), f.parse().expect("fs in Hz"))
+            })
+            .collect();
+    }
+    for (name, fs) in cases {
+        let out = record(&name, fs);
+        match design(&out.frf, &out) {
+            Ok(md) => {
+                let fig = evaluate(&md, &out);
+                eprintln!("{}", fig.line(&name, fs));
+                let ok = (0..3)
+                    .all(|i| fig.used[i] <= NO_WORSE * fig.per_axis[i] && fig.used[i] <= FLOOR_FACTOR * fig.floor[i]);
+                if !ok {
+                    failures.push(format!("{name} at {fs}"));
+                }
+            }
+            Err(e) => {
+                eprintln!("{name:>10} {:>6.2} kHz  refused: {e:#}", fs / 1e3);
+                failures.push(format!("{name} at {fs}: {e:#}"));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:?}");
+}
+
+mod cli_common;
+
+/// NRMSE (fractions) per axis of `compensate --truth`'s "compensated" lines.
+fn compensated_nrmse(stderr: &str) -> [f64; 3] {
+    let v: Vec<f64> = ["fx", "fy", "fz"]
+        .iter()
+        .map(|a| {
+            let line = stderr.lines().find(|l| l.starts_with(&format!("{a}: NRMSE"))).expect("an NRMSE line per axis");
+            let rest = line.split("compensated ").nth(1).expect("compensated figure");
+            rest.split(' ').next().unwrap().parse::<f64>().unwrap() / 100.0
+        })
+        .collect();
+    [v[0], v[1], v[2]]
+}
+
+/// The command line on a record with large crosstalk: `design` of the nine
+/// FRFs writes a 3x3 image (format 3) whose JSON shows the crosstalk,
+/// `compensate` runs it, and against the simulator's true force its worst
+/// axis is at most half the per-axis image's (`design --per-axis`, the
+/// negative control: it fails the same bound against the 3x3 image), no
+/// axis worse than 1.25 times. What the 3x3 design cannot take is refused
+/// by name.
+#[test]
+#[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
+fn cli_offcentre_3x3_image_beats_per_axis() {
+    use cli_common::{dynocomp, tmp};
+    let dir = tmp("mimo", "offcentre");
+    let p = |n: &str| dir.join(n).display().to_string();
+    let (ok, _, err) = dynocomp(&[
+        "simulate",
+        "--out",
+        &p(""),
+        "--dyno",
+        "plate",
+        "--dyno-preset",
+        "offcentre",
+        "--fs",
+        "10240",
+        "--duration",
+        "0.5",
+        "--seed",
+        "1",
+    ]);
+    assert!(ok, "{err}");
+    let design = |out: &str, extra: &[&str]| {
+        let (frf, idle, out) = (p("frf.uff"), p("idle.csv"), p(out));
+        let mut a = vec!["design", "--frf", &frf, "--fs", "10240", "--idle", &idle, "--out", &out];
+        a.extend(extra);
+        dynocomp(&a)
+    };
+    let (ok, json, err) = design("c.dcimg", &["--json"]);
+    assert!(ok, "{err}");
+    let j: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(j["kind"], "3x3", "{json}");
+    let peak = j["design"]["crosstalk"]["peak"].as_array().unwrap();
+    let largest = (0..9).filter(|e| e / 3 != e % 3).map(|e| peak[e / 3][e % 3].as_f64().unwrap()).fold(0.0, f64::max);
+    assert!(largest > 0.5, "crosstalk peak {largest}");
+    let (ok, inspect, err) = dynocomp(&["inspect", &p("c.dcimg")]);
+    assert!(ok && inspect.contains("format v3"), "{inspect}{err}");
+    let (ok, _, err) = design("p.dcimg", &["--per-axis"]);
+    assert!(ok, "{err}");
+    let score = |img: &str| {
+        let (ok, _, err) = dynocomp(&[
+            "compensate",
+            "--coeffs",
+            &p(img),
+            "--input",
+            &p("measured.csv"),
+            "--output",
+            &p("out.csv"),
+            "--truth",
+            &p("true_force.csv"),
+        ]);
+        assert!(ok, "{err}");
+        compensated_nrmse(&err)
+    };
+    let (m, a) = (score("c.dcimg"), score("p.dcimg"));
+    eprintln!("3x3 {m:?}  per axis {a:?}");
+    assert!(Figures::worst(&m) <= CROSSTALK_GAIN * Figures::worst(&a), "3x3 {m:?} against per axis {a:?}");
+    assert!(!(Figures::worst(&a) <= CROSSTALK_GAIN * Figures::worst(&m)), "negative control");
+    for i in 0..3 {
+        assert!(m[i] <= NO_WORSE * a[i], "axis {i}: 3x3 {m:?} against per axis {a:?}");
+    }
+    let (ok, _, err) = dynocomp(&[
+        "compensate",
+        "--coeffs",
+        &p("c.dcimg"),
+        "--input",
+        &p("measured.csv"),
+        "--output",
+        &p("o2.csv"),
+        "--offline",
+    ]);
+    assert!(!ok && err.contains("--offline") && err.contains("3x3"), "{err}");
+    assert!(!dir.join("o2.csv").exists());
+    let (ok, _, err) = design("q.dcimg", &["--band", "100:900"]);
+    assert!(!ok && err.contains("--per-axis"), "{err}");
+    assert!(!dir.join("q.dcimg").exists());
+}
