@@ -177,16 +177,76 @@ fn flash_dry_run_takes_a_3x3_image_and_refuses_one_over_budget() {
     assert!(err.contains("heavy-flash.dcimg") && err.contains("limit"), "{err}");
 }
 
+/// `compensate` runs a 3x3 image with the box's kernel: the output is the
+/// kernel's, stepped here on the same f32 inputs, shifted back by the
+/// declared latency (last input held for the last samples), written in
+/// full; a record without all three forces, and `--offline`, are refused
+/// by name, leaving no output.
 #[test]
-fn compensate_says_it_cannot_run_a_3x3_image() {
+fn compensate_runs_a_3x3_image_like_the_kernel() {
+    use dynocomp_core::mimo::MimoState;
+    let image = common::matrix_image(8, 51_200, 2, 3);
     let img = tmp("c.dcimg");
-    std::fs::write(&img, common::matrix_bytes(&common::matrix_image(8, 51_200, 2, 0))).unwrap();
+    std::fs::write(&img, common::matrix_bytes(&image)).unwrap();
+    let n = 200;
+    let u: Vec<[f32; 3]> = (0..n)
+        .map(|k| {
+            let t = k as f32;
+            [(0.3 * t).sin() * 50.0, (0.11 * t).cos() * 20.0 + 5.0, if k > 50 { 30.0 } else { -10.0 }]
+        })
+        .collect();
+    let mut csv = String::from("fx,fy,fz\n");
+    for v in &u {
+        csv.push_str(&format!("{},{},{}\n", v[0], v[1], v[2]));
+    }
     let input = tmp("in.csv");
-    std::fs::write(&input, "t_s,fx,fy,fz\n0,1,2,3\n1.953125e-5,1,2,3\n").unwrap();
+    std::fs::write(&input, csv).unwrap();
     let out = tmp("out.csv");
-    let (img, input, out_s) = (img.to_str().unwrap(), input.to_str().unwrap(), out.to_str().unwrap());
-    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img, "--input", input, "--output", out_s]);
-    assert!(!ok);
-    assert!(err.contains("c.dcimg") && err.contains("3x3 image"), "{err}");
-    assert!(!out.exists(), "partial output left behind");
+    let (img_s, input_s, out_s) = (img.to_str().unwrap(), input.to_str().unwrap(), out.to_str().unwrap());
+    let (ok, _, err) = dynocomp(&["compensate", "--coeffs", img_s, "--input", input_s, "--output", out_s]);
+    assert!(ok, "{err}");
+    let lag = usize::from(image.latency_samples);
+    let mut st = MimoState::default();
+    let expected: Vec<[f32; 3]> = (0..n + lag).map(|k| image.filter.step(&mut st, u[k.min(n - 1)])).skip(lag).collect();
+    let text = std::fs::read_to_string(&out).unwrap();
+    let rows: Vec<Vec<f64>> =
+        text.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+    assert_eq!(rows.len(), n);
+    for (k, (r, e)) in rows.iter().zip(&expected).enumerate() {
+        for c in 0..3 {
+            let tol = 1e-6 * f64::from(e[c].abs()).max(1.0);
+            assert!((r[c] - f64::from(e[c])).abs() <= tol, "sample {k} axis {c}: {} against {}", r[c], e[c]);
+        }
+    }
+    // Negative control: the unshifted kernel output differs from what was written.
+    let mut st = MimoState::default();
+    let unshifted: Vec<[f32; 3]> = u.iter().map(|v| image.filter.step(&mut st, *v)).collect();
+    assert!(rows.iter().zip(&unshifted).any(|(r, e)| (r[0] - f64::from(e[0])).abs() > 1e-3));
+
+    let only_xy = tmp("xy.csv");
+    std::fs::write(&only_xy, "fx,fy\n1,2\n3,4\n").unwrap();
+    let out2 = tmp("out2.csv");
+    let (ok, _, err) = dynocomp(&[
+        "compensate",
+        "--coeffs",
+        img_s,
+        "--input",
+        only_xy.to_str().unwrap(),
+        "--output",
+        out2.to_str().unwrap(),
+    ]);
+    assert!(!ok && err.contains("fx, fy and fz") && err.contains("xy.csv"), "{err}");
+    assert!(!out2.exists(), "partial output left behind");
+    let (ok, _, err) = dynocomp(&[
+        "compensate",
+        "--coeffs",
+        img_s,
+        "--input",
+        input_s,
+        "--output",
+        out2.to_str().unwrap(),
+        "--offline",
+    ]);
+    assert!(!ok && err.contains("c.dcimg") && err.contains("--offline"), "{err}");
+    assert!(!out2.exists(), "partial output left behind");
 }

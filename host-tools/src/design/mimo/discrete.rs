@@ -371,8 +371,11 @@ struct Triplet {
     bound: f64,
 }
 
+/// One rank-one term of a residue: singular value σ, output vector u and input vector v (R = Σ σ·u·vᴴ).
+type RankOne = (f64, [Complex64; 3], [Complex64; 3]);
+
 /// The SVD of a residue, with an iteration limit.
-fn residue_svd(r: &CMatrix3, real: bool) -> Result<Vec<(f64, [Complex64; 3], [Complex64; 3])>> {
+fn residue_svd(r: &CMatrix3, real: bool) -> Result<Vec<RankOne>> {
     let eps = f64::EPSILON;
     let limit = sweeps(3);
     let fail = || anyhow::anyhow!("the SVD of a 3x3 residue did not converge within {limit} sweeps");

@@ -23,6 +23,8 @@
 //! row predicts more than [`PREDICTED_SHORT`] of distortion, keeping the
 //! shortest within [`GAIN_NOT_WORTH`] of each axis's best.
 
+#![allow(clippy::needless_range_loop)] // axis indices index several per-axis arrays at once
+
 pub mod combine;
 pub mod criterion;
 pub mod discrete;
