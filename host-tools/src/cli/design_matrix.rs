@@ -13,6 +13,7 @@ use crate::design::mimo::image::build_matrix_image;
 use crate::design::mimo::{design_matrix, MatrixDesign, MatrixOptions, MatrixSummary, RowSource};
 use crate::frf::{axis_name, Frf};
 use crate::realize::load::LoadReport;
+use crate::realize::mimo::NotVerified;
 
 /// Whether `design` takes the 3x3 route for `frf`: a complete matrix and no
 /// `--per-axis`. Options the 3x3 design cannot take are refused here, by
@@ -72,7 +73,16 @@ pub fn run(args: &DesignArgs, s: &DesignSetup, t0: Instant) -> Result<MatrixOutc
         "designing the 3x3 compensator ({} lines, nine FRFs): matrix fit, then the Kalman design per latency…",
         s.frf.freq_hz.len()
     );
-    let md = design_matrix(&s.frf, r, &opts)?;
+    let md = match design_matrix(&s.frf, r, &opts) {
+        Ok(md) => md,
+        Err(e) if e.downcast_ref::<NotVerified>().is_some() => {
+            return Ok(MatrixOutcome::PerAxis(format!(
+                "note: {e:#}\nno axis uses the 3x3 design: the per-axis image (format 1) is written, crosstalk not \
+                 compensated\n"
+            )));
+        }
+        Err(e) => return Err(e),
+    };
     if md.rows.iter().all(|r| *r == RowSource::PerAxis) {
         let mut t = crosstalk_and_predictions(&md.summary);
         for n in &md.summary.notes {

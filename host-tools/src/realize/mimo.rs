@@ -186,6 +186,21 @@ impl MimoVerification {
     }
 }
 
+/// The error context of a 3x3 compensator none of whose realizations
+/// verifies in f32: the design cannot be run as a 3x3 image (a caller may
+/// fall back to the per-axis image, which has its own realization).
+#[derive(Debug, Clone, Copy)]
+pub struct NotVerified {
+    /// The block (output rows sharing states) that failed.
+    pub block: usize,
+}
+
+impl std::fmt::Display for NotVerified {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "3x3 compensator, block {}: no realization verifies in f32", self.block)
+    }
+}
+
 /// The complex Schur form of `a` with the eigenvalues of modulus ≥ `rho`
 /// first: (Q, T, number of slow eigenvalues).
 fn ordered_schur(a: &DMatrix<f64>, rho: f64) -> Result<(DMatrix<Complex64>, DMatrix<Complex64>, usize)> {
@@ -608,7 +623,7 @@ pub fn realize_blocks(
         }
         let Some((_, r)) = best else {
             let e = last_err.unwrap_or_else(|| anyhow::anyhow!("no realization"));
-            return Err(e.context(format!("3x3 compensator, block {k}: no realization verifies in f32")));
+            return Err(e.context(NotVerified { block: k }));
         };
         total = total.plus(&r);
     }
