@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use crate::cli::design_args::{DesignArgs, DesignSetup, ForcePrior, Method};
 use crate::design::mimo::image::build_matrix_image;
-use crate::design::mimo::{design_matrix, MatrixDesign, MatrixOptions, MatrixSummary, RowSource};
+use crate::design::mimo::{design_matrix, MatrixDesign, MatrixOptions, MatrixSummary, Progress, RowSource};
 use crate::frf::{axis_name, Frf};
 use crate::realize::load::LoadReport;
 use crate::realize::mimo::NotVerified;
@@ -68,11 +68,10 @@ pub enum MatrixOutcome {
 /// axis ([`MatrixOutcome`]).
 pub fn run(args: &DesignArgs, s: &DesignSetup, t0: Instant) -> Result<MatrixOutcome> {
     let r: [f64; 3] = std::array::from_fn(|i| s.r[i].expect("R set for every axis of a complete matrix"));
-    let opts = MatrixOptions { design: s.opts.clone(), latency: args.latency, ..Default::default() };
-    eprintln!(
-        "designing the 3x3 compensator ({} lines, nine FRFs): matrix fit, then the Kalman design per latency…",
-        s.frf.freq_hz.len()
-    );
+    let progress = Progress(std::sync::Arc::new(|line: &str| eprintln!("  {line}")));
+    let opts =
+        MatrixOptions { design: s.opts.clone(), latency: args.latency, progress: Some(progress), ..Default::default() };
+    eprintln!("designing the 3x3 compensator ({} lines, nine FRFs; about a minute)…", s.frf.freq_hz.len());
     let md = match design_matrix(&s.frf, r, &opts) {
         Ok(md) => md,
         Err(e) if e.downcast_ref::<NotVerified>().is_some() => {

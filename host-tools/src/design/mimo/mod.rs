@@ -54,9 +54,22 @@ use crate::frf::{axis_name, entry_name, Frf};
 use crate::numeric::lti::MimoStateSpace;
 use crate::realize::mimo::{realize_blocks, MimoRealization, MimoVerification};
 
+/// Where the 3x3 design reports its stages (one line each, e.g. to a
+/// terminal): it takes up to a minute.
+#[derive(Clone)]
+pub struct Progress(pub std::sync::Arc<dyn Fn(&str) + Send + Sync>);
+
+impl std::fmt::Debug for Progress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Progress")
+    }
+}
+
 /// Options of the 3x3 design.
 #[derive(Clone, Debug, Default)]
 pub struct MatrixOptions {
+    /// Where the stages are reported (`None`: nowhere).
+    pub progress: Option<Progress>,
     /// The per-axis design's options: rate, force RMS, noise-gain limit,
     /// coherence threshold, fit options, q override. Fitting bands, the
     /// paper's method, hold discretizations and force records are not
@@ -343,6 +356,18 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
         iterations: d.vf.iterations.max(MATRIX_ITERATIONS),
         ..d.vf.clone()
     });
+    let say = |line: &str| {
+        if let Some(p) = &opts.progress {
+            (p.0)(line);
+        }
+    };
+    if given.is_none() {
+        say(&format!(
+            "fitting the nine FRFs with common poles (order up to {}, {} iterations per order)…",
+            vf.max_order, vf.iterations
+        ));
+    }
+    let t = std::time::Instant::now();
     let prepared_model = match given {
         Some(m) => prepare_model(frf, &bands, fs, d.coherence_threshold, m, f64::NAN, Vec::new()),
         None => prepare_matrix(frf, &bands, fs, &vf, d.coherence_threshold),
@@ -354,6 +379,9 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
             None
         }
     };
+    if let Some(p) = &prep {
+        say(&format!("  fit: order {}, {:.1} s", p.fit.order, t.elapsed().as_secs_f64()));
+    }
     let force = opts.force_rms_axes.unwrap_or([d.force_rms; 3]);
     let model_g = |f: f64| match &prep {
         Some(p) => p.model.frf(f),
@@ -367,13 +395,24 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
         Some(l) => vec![l],
         None => vec![DEFAULT_LATENCY],
     };
-    let mut rounds: Vec<Round> =
-        latencies.iter().map(|l| round(*l, &prepared, prep.as_ref(), &criterion, r, d)).collect();
+    let timed_round = |l: usize| {
+        say(&format!("3x3 Kalman smoother and per-axis designs at latency {l}: choosing q…"));
+        let t = std::time::Instant::now();
+        let rd = round(l, &prepared, prep.as_ref(), &criterion, r, d);
+        say(&format!("  latency {l}: {:.1} s", t.elapsed().as_secs_f64()));
+        rd
+    };
+    let mut rounds: Vec<Round> = latencies.iter().map(|l| timed_round(*l)).collect();
     if opts.latency.is_none() && rounds[0].axes.iter().any(|a| a.chosen.distortion > PREDICTED_SHORT) {
-        for l in LONGER_LATENCIES {
-            rounds.push(round(l, &prepared, prep.as_ref(), &criterion, r, d));
-        }
+        // The longer latencies are independent: one thread each (the host
+        // has at least two cores).
+        let longer: Vec<Round> = std::thread::scope(|scope| {
+            let handles: Vec<_> = LONGER_LATENCIES.iter().map(|l| scope.spawn(|| timed_round(*l))).collect();
+            handles.into_iter().map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))).collect()
+        });
+        rounds.extend(longer);
     }
+    say("realizing the compensator and verifying it in f32…");
     let latency_rounds: Vec<LatencyRound> = rounds
         .iter()
         .map(|rd| LatencyRound { latency: rd.lag, predicted: std::array::from_fn(|i| Some(rd.axes[i].chosen.error)) })
