@@ -250,3 +250,74 @@ fn compensate_runs_a_3x3_image_like_the_kernel() {
     assert!(!ok && err.contains("c.dcimg") && err.contains("--offline"), "{err}");
     assert!(!out2.exists(), "partial output left behind");
 }
+
+/// One `--frf` value holds one matrix as comma-separated files, one per
+/// hammer direction: the per-axis design from the three files is the one
+/// from the single file (same `inspect` apart from the id, time and source
+/// hash); a missing file is named and nothing is written; an incomplete
+/// matrix is designed per axis with a note naming the missing entries.
+#[test]
+fn one_frf_value_holds_a_matrix_as_files_per_hammer_direction() {
+    let dir = tmp("split");
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = |n: &str| dir.join(n).display().to_string();
+    let (ok, _, err) = dynocomp(&[
+        "simulate",
+        "--out",
+        &p("sim"),
+        "--dyno",
+        "plate",
+        "--dyno-preset",
+        "offcentre",
+        "--fs",
+        "10240",
+        "--duration",
+        "0.1",
+        "--idle-duration",
+        "0.2",
+    ]);
+    assert!(ok, "{err}");
+    let csv = std::fs::read_to_string(dir.join("sim/frf.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    for j in ["x", "y", "z"] {
+        let keep: Vec<usize> = (0..header.len()).filter(|&c| c == 0 || header[c][1..2] == *j).collect();
+        let mut out = keep.iter().map(|&c| header[c]).collect::<Vec<_>>().join(",") + "\n";
+        for r in &rows {
+            out += &(keep.iter().map(|&c| r[c]).collect::<Vec<_>>().join(",") + "\n");
+        }
+        std::fs::write(dir.join(format!("h{j}.csv")), out).unwrap();
+    }
+    let idle = p("sim/idle.csv");
+    let design = |frf: &str, out: &str, extra: &[&str]| {
+        let out = p(out);
+        let mut a = vec!["design", "--frf", frf, "--fs", "10240", "--idle", &idle, "--out", &out];
+        a.extend(extra);
+        dynocomp(&a)
+    };
+    let inspect = |img: &str| {
+        let (ok, out, err) = dynocomp(&["inspect", &p(img)]);
+        assert!(ok, "{err}");
+        out.lines()
+            .filter(|l| !l.starts_with("image ") && !l.starts_with("source sha256"))
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    let (ok, _, err) = design(&p("sim/frf.csv"), "one.dcimg", &["--per-axis"]);
+    assert!(ok, "{err}");
+    let list = format!("{},{},{}", p("hx.csv"), p("hy.csv"), p("hz.csv"));
+    let (ok, _, err) = design(&list, "three.dcimg", &["--per-axis"]);
+    assert!(ok, "{err}");
+    assert_eq!(inspect("one.dcimg"), inspect("three.dcimg"));
+
+    let missing = format!("{},{},{}", p("hx.csv"), p("nothere.csv"), p("hz.csv"));
+    let (ok, _, err) = design(&missing, "m.dcimg", &["--per-axis"]);
+    assert!(!ok && err.contains("nothere.csv"), "{err}");
+    assert!(!dir.join("m.dcimg").exists());
+
+    let two = format!("{},{}", p("hx.csv"), p("hy.csv"));
+    let (ok, _, err) = design(&two, "two.dcimg", &[]);
+    assert!(ok, "{err}");
+    assert!(err.contains("missing") && err.contains("xz") && err.contains("zz"), "{err}");
+}
