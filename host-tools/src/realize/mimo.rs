@@ -38,7 +38,7 @@
 
 use anyhow::{bail, Context, Result};
 use dynocomp_core::mimo::{Matrix3, MimoFilter, MimoSection, MimoState, MAX_MIMO_FIR, MAX_MIMO_SECTIONS};
-use nalgebra::{DMatrix, DVector, Schur};
+use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
 use serde::Serialize;
 use std::f64::consts::PI;
@@ -46,7 +46,7 @@ use std::f64::consts::PI;
 use crate::fit::linalg::sweeps;
 use crate::numeric::lti::MimoStateSpace;
 use crate::realize::modal::{
-    section_poles, swap_adjacent, thresholds, FIR_TAIL_TOL, FIR_TAIL_TOL_FULL, MAX_MODAL_CONDITION,
+    schur_slow_first, section_poles, thresholds, FIR_TAIL_TOL, FIR_TAIL_TOL_FULL, MAX_MODAL_CONDITION,
 };
 use crate::realize::quantize::{
     test_signal, MAX_FREQ_ERROR, MAX_POLE_SHIFT, MAX_TIME_ERROR, POLE_MARGIN, VERIFY_GRID, VERIFY_SAMPLES,
@@ -205,35 +205,12 @@ impl std::fmt::Display for NotVerified {
 /// first: (Q, T, number of slow eigenvalues).
 fn ordered_schur(a: &DMatrix<f64>, rho: f64) -> Result<(DMatrix<Complex64>, DMatrix<Complex64>, usize)> {
     let n = a.nrows();
-    let schur = Schur::try_new(a.map(|v| Complex64::new(v, 0.0)), f64::EPSILON, sweeps(n)).ok_or_else(|| {
+    schur_slow_first(a, rho, f64::EPSILON, sweeps(n), || {
         anyhow::anyhow!(
             "realization: the Schur decomposition of the {n}x{n} compensator did not converge within {} sweeps",
             sweeps(n)
         )
-    })?;
-    let (mut q, mut t) = schur.unpack();
-    for i in 0..n {
-        for j in 0..i {
-            t[(i, j)] = Complex64::new(0.0, 0.0);
-        }
-    }
-    for _ in 0..n {
-        let mut swapped = false;
-        for i in 0..n.saturating_sub(1) {
-            if t[(i, i)].norm() < rho && t[(i + 1, i + 1)].norm() >= rho {
-                swap_adjacent(&mut t, &mut q, i);
-                swapped = true;
-            }
-        }
-        if !swapped {
-            break;
-        }
-    }
-    let m = (0..n).take_while(|&i| t[(i, i)].norm() >= rho).count();
-    if (m..n).any(|i| t[(i, i)].norm() >= rho) {
-        bail!("realization: eigenvalue reordering failed");
-    }
-    Ok((q, t, m))
+    })
 }
 
 /// X of T11 X − X T22 = −T12 (the first `m` rows slow), column by column.

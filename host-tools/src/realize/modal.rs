@@ -234,10 +234,24 @@ struct OrderedSchur {
 /// slow eigenvalues (|λ| ≥ `rho`) bubbled to the front by adjacent swaps
 /// (the order otherwise kept).
 fn ordered_schur(ss: &StateSpace, rho: f64) -> Result<OrderedSchur> {
-    let n = ss.a.nrows();
-    let ac = ss.a.map(|v| Complex64::new(v, 0.0));
-    let schur = Schur::try_new(ac, 1e-15, 10_000)
-        .ok_or_else(|| anyhow::anyhow!("realization: Schur decomposition did not converge"))?;
+    let no_convergence = || anyhow::anyhow!("realization: Schur decomposition did not converge");
+    let (q, t, slow) = schur_slow_first(&ss.a, rho, 1e-15, 10_000, no_convergence)?;
+    Ok(OrderedSchur { q, t, slow })
+}
+
+/// The complex Schur form A = Q·T·Qᴴ of `a` (tolerance `eps`, at most
+/// `max_sweeps` sweeps, else the error `no_convergence` makes) with the
+/// eigenvalues of modulus ≥ `rho` bubbled to the front of T's diagonal by
+/// adjacent swaps, the order otherwise kept: (Q, T, their number).
+pub(crate) fn schur_slow_first(
+    a: &DMatrix<f64>,
+    rho: f64,
+    eps: f64,
+    max_sweeps: usize,
+    no_convergence: impl FnOnce() -> anyhow::Error,
+) -> Result<(DMatrix<Complex64>, DMatrix<Complex64>, usize)> {
+    let n = a.nrows();
+    let schur = Schur::try_new(a.map(|v| Complex64::new(v, 0.0)), eps, max_sweeps).ok_or_else(no_convergence)?;
     let (mut q, mut t) = schur.unpack();
     for i in 0..n {
         for j in 0..i {
@@ -260,7 +274,7 @@ fn ordered_schur(ss: &StateSpace, rho: f64) -> Result<OrderedSchur> {
     if (slow..n).any(|i| t[(i, i)].norm() >= rho) {
         bail!("realization: eigenvalue reordering failed");
     }
-    Ok(OrderedSchur { q, t, slow })
+    Ok((q, t, slow))
 }
 
 /// Step 3 of [`realize_split`]: X of T11 X − X T22 = −T12 for the first `m`
