@@ -46,7 +46,7 @@ use std::f64::consts::PI;
 use crate::fit::linalg::sweeps;
 use crate::numeric::lti::MimoStateSpace;
 use crate::realize::modal::{
-    schur_slow_first, section_poles, thresholds, FIR_TAIL_TOL, FIR_TAIL_TOL_FULL, MAX_MODAL_CONDITION,
+    schur_slow_first, section_poles, thresholds, triangular_eigenvectors, FIR_TAIL_TOL, FIR_TAIL_TOL_FULL,
 };
 use crate::realize::quantize::{
     test_signal, MAX_FREQ_ERROR, MAX_POLE_SHIFT, MAX_TIME_ERROR, POLE_MARGIN, VERIFY_GRID, VERIFY_SAMPLES,
@@ -275,36 +275,6 @@ fn fast_taps(
     }
     let out = taps[..len].iter().map(|h| std::array::from_fn(|i| std::array::from_fn(|j| h[(i, j)].re))).collect();
     Ok((out, tail(len) / total))
-}
-
-/// The eigenvectors W of the upper triangular `t11` (unit diagonal, back
-/// substitution) and W⁻¹, with W's condition number estimate.
-fn triangular_eigenvectors(t11: &DMatrix<Complex64>) -> Result<(DMatrix<Complex64>, DMatrix<Complex64>, f64)> {
-    let m = t11.nrows();
-    let mut w = DMatrix::<Complex64>::identity(m, m);
-    for k in 0..m {
-        let lam = t11[(k, k)];
-        for i in (0..k).rev() {
-            let mut s = Complex64::new(0.0, 0.0);
-            for l in i + 1..=k {
-                s += t11[(i, l)] * w[(l, k)];
-            }
-            let den = t11[(i, i)] - lam;
-            if den.norm() == 0.0 {
-                bail!("realization: repeated pole {lam}; nearly coincident modes cannot be split into sections");
-            }
-            w[(i, k)] = -s / den;
-        }
-    }
-    let w_inv = w
-        .clone()
-        .solve_upper_triangular(&DMatrix::identity(m, m))
-        .ok_or_else(|| anyhow::anyhow!("realization: modal transform is singular"))?;
-    let condition = w.norm() * w_inv.norm() / (m.max(1) as f64);
-    if !(condition < MAX_MODAL_CONDITION) {
-        bail!("realization: modal transform is ill-conditioned (condition {condition:.1e}); nearly coincident compensator poles");
-    }
-    Ok((w, w_inv, condition))
 }
 
 /// Realize one block with the fast/slow threshold `rho` (module doc).

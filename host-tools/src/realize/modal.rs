@@ -385,25 +385,21 @@ fn fast_fir(t: &DMatrix<Complex64>, m: usize, b2: Vec<Complex64>, c2: Vec<Comple
 }
 
 /// Step 5 of [`realize_split`], first half: the slow cluster's eigenvalues
-/// λ_i (the first `m` of `t`'s diagonal) with their residues ρ_i = ĉ_i·b̂_i,
-/// through the eigenvectors of the triangular T11 (a unit upper triangular
-/// W, by back substitution); with W's condition number estimate, at most
-/// [`MAX_MODAL_CONDITION`].
-fn slow_modes(
-    t: &DMatrix<Complex64>,
-    m: usize,
-    b1: Vec<Complex64>,
-    c1: Vec<Complex64>,
-) -> Result<(Vec<(Complex64, Complex64)>, f64)> {
+/// The eigenvectors W of the upper triangular `t11` (unit diagonal, back
+/// substitution) and W⁻¹, with W's condition number estimate.
+pub(crate) fn triangular_eigenvectors(
+    t11: &DMatrix<Complex64>,
+) -> Result<(DMatrix<Complex64>, DMatrix<Complex64>, f64)> {
+    let m = t11.nrows();
     let mut w = DMatrix::<Complex64>::identity(m, m);
     for k in 0..m {
-        let lam = t[(k, k)];
+        let lam = t11[(k, k)];
         for i in (0..k).rev() {
             let mut s = Complex64::new(0.0, 0.0);
             for l in i + 1..=k {
-                s += t[(i, l)] * w[(l, k)];
+                s += t11[(i, l)] * w[(l, k)];
             }
-            let den = t[(i, i)] - lam;
+            let den = t11[(i, i)] - lam;
             if den.norm() == 0.0 {
                 bail!("realization: repeated pole {lam}; nearly coincident modes cannot be split into sections");
             }
@@ -414,12 +410,24 @@ fn slow_modes(
         .clone()
         .solve_upper_triangular(&DMatrix::identity(m, m))
         .ok_or_else(|| anyhow::anyhow!("realization: modal transform is singular"))?;
-    let modal_condition = w.norm() * w_inv.norm() / (m.max(1) as f64);
-    if !(modal_condition < MAX_MODAL_CONDITION) {
-        bail!(
-            "realization: modal transform is ill-conditioned (condition {modal_condition:.1e}); nearly coincident compensator poles"
-        );
+    let condition = w.norm() * w_inv.norm() / (m.max(1) as f64);
+    if !(condition < MAX_MODAL_CONDITION) {
+        bail!("realization: modal transform is ill-conditioned (condition {condition:.1e}); nearly coincident compensator poles");
     }
+    Ok((w, w_inv, condition))
+}
+
+/// λ_i (the first `m` of `t`'s diagonal) with their residues ρ_i = ĉ_i·b̂_i,
+/// through the eigenvectors of the triangular T11 (a unit upper triangular
+/// W, by back substitution); with W's condition number estimate, at most
+/// [`MAX_MODAL_CONDITION`].
+fn slow_modes(
+    t: &DMatrix<Complex64>,
+    m: usize,
+    b1: Vec<Complex64>,
+    c1: Vec<Complex64>,
+) -> Result<(Vec<(Complex64, Complex64)>, f64)> {
+    let (w, w_inv, modal_condition) = triangular_eigenvectors(&t.view((0, 0), (m, m)).into_owned())?;
     let bh = &w_inv * DVector::from_vec(b1);
     let ch = DVector::from_vec(c1).transpose() * &w;
     Ok(((0..m).map(|i| (t[(i, i)], ch[i] * bh[i])).collect(), modal_condition))
