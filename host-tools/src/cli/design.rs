@@ -180,15 +180,7 @@ fn image_within_load(args: &DesignArgs, s: &DesignSetup, d: &Designed) -> Result
     let box_load = crate::realize::load::report(&image, s.limit_permille);
     if !box_load.fits {
         image.flags |= dynocomp_core::image::FLAG_OFFLINE_ONLY;
-        eprintln!(
-            "WARNING: OFFLINE-ONLY IMAGE: predicted box CPU load {:.1} % ({} cycles per sample) at {} Hz exceeds the limit of {:.0} %; \
-             the box could run it up to {} Hz. Written for `dynocomp compensate` only: `flash` refuses it and the box would stay in bypass.",
-            box_load.load_pct[1],
-            box_load.cycles[1],
-            image.fs_hz,
-            box_load.limit_pct,
-            box_load.max_fs_hz
-        );
+        eprintln!("{}", crate::realize::load::offline_only_warning(&box_load, image.fs_hz));
     }
     Ok((image, box_load))
 }

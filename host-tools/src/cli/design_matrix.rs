@@ -98,11 +98,7 @@ pub fn run(args: &DesignArgs, s: &DesignSetup, t0: Instant) -> Result<MatrixOutc
     let load = crate::realize::load::report(&image, s.limit_permille);
     if !load.fits {
         image.flags |= dynocomp_core::image::FLAG_OFFLINE_ONLY;
-        eprintln!(
-            "WARNING: OFFLINE-ONLY IMAGE: predicted box CPU load {:.1} % ({} cycles per sample) at {} Hz exceeds the limit of {:.0} %; \
-             the box could run it up to {} Hz. Written for `dynocomp compensate` only: `flash` refuses it.",
-            load.load_pct[1], load.cycles[1], image.fs_hz, load.limit_pct, load.max_fs_hz
-        );
+        eprintln!("{}", crate::realize::load::offline_only_warning(&load, image.fs_hz));
     }
     crate::io::image_file::write_matrix_image(&args.out, &image)?;
     let id = image.id();

@@ -52,3 +52,16 @@ pub fn describe(r: &LoadReport, fs_hz: u32) -> String {
         r.cycles[0], r.cycles[1], r.period_cycles, r.load_pct[0], r.load_pct[1], r.limit_pct, r.max_fs_hz
     )
 }
+
+/// The warning for an image marked offline-only, over the load limit at
+/// `fs_hz` (per-axis and 3x3 images alike).
+pub fn offline_only_warning(load: &LoadReport, fs_hz: u32) -> String {
+    format!(
+        "WARNING: OFFLINE-ONLY IMAGE: predicted box CPU load {:.1} % ({} cycles per sample) at {fs_hz} Hz exceeds the limit of {:.0} %; \
+         the box could run it up to {} Hz. Written for `dynocomp compensate` only: `flash` refuses it and the box would stay in bypass.",
+        load.load_pct[1],
+        load.cycles[1],
+        load.limit_pct,
+        load.max_fs_hz
+    )
+}
