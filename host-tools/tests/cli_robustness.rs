@@ -638,19 +638,20 @@ fn design_on_a_few_frf_lines_never_panics() {
     }
 }
 
-/// With the latency removed, the last L outputs have no look-ahead: the
-/// summary says so. Against the simulator's true force, their error is
-/// far above the record's (which is why it must be said); control: with
+/// With the latency removed, the last L outputs have no measured
+/// look-ahead: the summary says a predicted one stands in. Against the
+/// simulator's true force, their error stays within 3x the record's RMS
+/// error (it was 5-70x with the last value held); control: with
 /// --raw-timing nothing is extrapolated and nothing is said.
 #[test]
-fn the_tail_without_look_ahead_is_announced() {
+fn the_tail_with_a_predicted_look_ahead_is_announced_and_accurate() {
     let dir = fresh_dir("tail");
     let img = example_image(&dir);
     let out = dir.join("c.csv");
     let (ok, _, err) =
         dynocomp(&["compensate", "--coeffs", s(&img), "--input", &example("measured.csv"), "--output", s(&out)]);
     assert!(ok, "{err}");
-    assert!(err.contains("the last 4 samples lack their look-ahead"), "{err}");
+    assert!(err.contains("the last 4 samples use a predicted look-ahead"), "{err}");
     let column = |p: &Path, k: usize| -> Vec<f64> {
         std::fs::read_to_string(p)
             .unwrap()
@@ -670,7 +671,8 @@ fn the_tail_without_look_ahead_is_announced() {
             tail / interior
         })
         .fold(0.0, f64::max);
-    assert!(worst_ratio > 5.0, "the tail's error is only {worst_ratio:.1} times the interior's RMS error");
+    eprintln!("worst |tail error| / interior RMS error: {worst_ratio:.2}");
+    assert!(worst_ratio < 3.0, "the tail's error is {worst_ratio:.1} times the interior's RMS error");
     let (ok, _, err) = dynocomp(&[
         "compensate",
         "--coeffs",

@@ -113,8 +113,8 @@ class Image:
 
         Default: the box's causal f32 filter, bit-exact with
         `dynocomp compensate` and the box; the output is shifted back by the
-        declared latency (the last L samples are estimated with the last
-        input held), or kept in the box's timing with raw_timing=True.
+        declared latency (the last L samples are estimated with the
+        record's predicted continuation as their look-ahead), or kept in the box's timing with raw_timing=True.
         offline=True: the zero-lag fixed-interval smoother in f64 (needs the
         model sidecar; `force_prior=False` ignores its harmonic prior).
         A parallel-elaboration image is run band by band.

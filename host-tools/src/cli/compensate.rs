@@ -45,7 +45,9 @@ pub struct CompensateArgs {
     #[arg(long)]
     pub channels: Option<String>,
     /// Keep the box's timing: do not shift the output back by the image's
-    /// declared latency.
+    /// declared latency. Without it, the last L samples are finished with
+    /// the record's predicted continuation as their look-ahead (README,
+    /// "Latency").
     #[arg(long)]
     pub raw_timing: bool,
     /// Offline only: zero-lag fixed-interval (Rauch-Tung-Striebel

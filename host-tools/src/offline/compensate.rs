@@ -12,6 +12,7 @@ use dynocomp_core::kernel::{process_blocks, AxisFilter, AxisState, BlockJob, LOC
 
 use crate::frf::axis_name;
 use crate::io::signal_csv::SignalRecord;
+use crate::numeric::predict::{predict_after, WINDOW as PREDICT_WINDOW};
 
 /// Relative tolerance between the rate implied by `t_s` and the image's rate.
 pub use crate::io::signal::FS_TOLERANCE;
@@ -28,8 +29,9 @@ pub fn check_sample_rate(image: &CoeffImage, rec: &SignalRecord, source: &str) -
 /// the box does after its ADC scaling. With `raw_timing == false` the output is
 /// aligned to the input: the image's declared latency L (samples) is removed by
 /// shifting the output back by L samples; to keep the record's length the
-/// kernel is fed L extra samples that hold the record's last value, so the
-/// last L output samples are estimates made with that held input.
+/// kernel is fed L extra samples, the record's continuation predicted from
+/// its end ([`look_ahead`]), so the last L output samples are estimates made
+/// with a predicted rather than a measured look-ahead.
 pub fn compensate_record(
     image: &CoeffImage,
     rec: &SignalRecord,
@@ -37,7 +39,7 @@ pub fn compensate_record(
     source: &str,
 ) -> Result<SignalRecord> {
     let axes: Vec<usize> = rec.channels.iter().map(|c| c.0).collect();
-    // Room for the latency's held samples, added in place by the kernel run.
+    // Room for the latency's look-ahead, added in place by the kernel run.
     let room = usize::from(image.latency_samples);
     let inputs = rec
         .channels
@@ -130,8 +132,8 @@ fn run_axes(axes: &[(&AxisFilter, &[f64])], latency: usize) -> Vec<Result<Vec<f6
 }
 
 /// Every axis through the core kernel's block path (bit-identical to stepping
-/// it sample by sample, as the box does), each input followed by `latency`
-/// copies of its last value: the f32 outputs in the order of `axes`, each
+/// it sample by sample, as the box does), each input followed by its
+/// `latency` samples of [`look_ahead`]: the f32 outputs in the order of `axes`, each
 /// `latency` samples longer than its input (the first `latency` to drop).
 ///
 /// The axes are independent. Up to [`LOCKSTEP_AXES`] of them run in
@@ -146,11 +148,11 @@ fn run_kernel(mut axes: Vec<(&AxisFilter, Vec<f32>)>, latency: usize) -> Vec<Vec
 }
 
 /// The axes of one group of [`run_kernel`], in lockstep; each input is
-/// extended in place by `latency` copies of its last value.
+/// extended in place by its `latency` samples of [`look_ahead`].
 fn run_group(group: &mut [(&AxisFilter, Vec<f32>)], latency: usize) -> Vec<Vec<f32>> {
     for (_, input) in group.iter_mut() {
-        let last = input.last().copied().unwrap_or(0.0);
-        input.resize(input.len() + latency, last);
+        let tail = look_ahead(input, latency);
+        input.extend(tail);
     }
     let mut outputs: Vec<Vec<f32>> = group.iter().map(|(_, u)| vec![0.0f32; u.len()]).collect();
     let mut states = vec![AxisState::default(); group.len()];
@@ -161,6 +163,23 @@ fn run_group(group: &mut [(&AxisFilter, Vec<f32>)], latency: usize) -> Vec<Vec<f
         .collect();
     process_blocks(&mut jobs);
     outputs
+}
+
+/// The `latency` samples fed after a record's last one (`history`, f32 as
+/// the kernel takes it), so that its last outputs have the look-ahead of
+/// the fixed-lag smoother: the measurement's continuation predicted by
+/// [`predict_after`] (an AR model of the record's end), or the last value
+/// held if the record is too short to fit one (under 16 samples).
+pub fn look_ahead(history: &[f32], latency: usize) -> Vec<f32> {
+    if latency == 0 {
+        return Vec::new();
+    }
+    let window: Vec<f64> =
+        history[history.len().saturating_sub(PREDICT_WINDOW)..].iter().map(|&v| f64::from(v)).collect();
+    match predict_after(&window, latency) {
+        Some(p) => p.iter().map(|&v| v as f32).collect(),
+        None => vec![history.last().copied().unwrap_or(0.0); latency],
+    }
 }
 
 /// The kernel's outputs as f64 without the first `latency`; Err(k): the
@@ -178,8 +197,8 @@ fn drop_latency(y: &[f32], latency: usize) -> Result<Vec<f64>, usize> {
 /// over, so memory does not grow with the record. The outputs are those of
 /// [`compensate_record`] bit for bit (the kernel's block path equals its
 /// per-sample `step` for any block lengths): the first `latency` outputs
-/// dropped and, at [`StreamCompensator::finish`], `latency` copies of the
-/// last input fed to produce the last `latency` outputs.
+/// dropped and, at [`StreamCompensator::finish`], the input's predicted
+/// continuation ([`look_ahead`]) fed to produce the last `latency` outputs.
 pub struct StreamCompensator {
     /// The image's compensators of the record's channels (copies: a
     /// compensator outlives the image it came from).
@@ -191,7 +210,9 @@ pub struct StreamCompensator {
     latency: usize,
     /// Samples fed per axis so far.
     fed: usize,
-    last: Vec<f32>,
+    /// Each channel's last inputs (up to twice the prediction window), for
+    /// the look-ahead fed at [`StreamCompensator::finish`].
+    history: Vec<Vec<f32>>,
     input: Vec<Vec<f32>>,
     output: Vec<Vec<f32>>,
 }
@@ -209,7 +230,7 @@ impl StreamCompensator {
             to_drop: latency,
             latency,
             fed: 0,
-            last: vec![0.0; n],
+            history: vec![Vec::new(); n],
             input: vec![Vec::new(); n],
             output: vec![Vec::new(); n],
         })
@@ -224,22 +245,23 @@ impl StreamCompensator {
     /// append the outputs it completes to `out` (one vector per channel):
     /// as many as the block has, fewer while the latency is being dropped.
     pub fn push(&mut self, block: &[Vec<f64>], out: &mut [Vec<f64>]) -> Result<usize> {
-        for ((inp, b), last) in self.input.iter_mut().zip(block).zip(&mut self.last) {
+        for ((inp, b), hist) in self.input.iter_mut().zip(block).zip(&mut self.history) {
             inp.clear();
             inp.extend(b.iter().map(|&u| u as f32));
-            if let Some(&l) = inp.last() {
-                *last = l;
+            hist.extend_from_slice(inp);
+            if hist.len() > 2 * PREDICT_WINDOW {
+                hist.drain(..hist.len() - PREDICT_WINDOW);
             }
         }
         self.run(out)
     }
 
-    /// Feed the latency's held copies of the last input and append the last
-    /// outputs to `out`.
+    /// Feed the latency's look-ahead ([`look_ahead`]: the input's
+    /// continuation predicted from its end) and append the last outputs to
+    /// `out`.
     pub fn finish(&mut self, out: &mut [Vec<f64>]) -> Result<usize> {
-        for (inp, &last) in self.input.iter_mut().zip(&self.last) {
-            inp.clear();
-            inp.resize(self.latency, last);
+        for (inp, hist) in self.input.iter_mut().zip(&self.history) {
+            *inp = look_ahead(hist, self.latency);
         }
         self.run(out)
     }
@@ -328,7 +350,8 @@ pub fn compensate_parallel(
 /// it: the one f32 kernel ([`dynocomp_core::mimo::MimoFilter`]) on the
 /// three force channels together, so the record must have fx, fy and fz.
 /// Unless `raw_timing`, the output is shifted back by the declared latency
-/// L, the last L samples computed from the last input held.
+/// L, the last L samples computed from each channel's predicted
+/// continuation ([`look_ahead`]).
 pub fn compensate_matrix(
     image: &MatrixImage,
     rec: &SignalRecord,
@@ -346,8 +369,17 @@ pub fn compensate_matrix(
     }
     let n = rec.len();
     let lag = if raw_timing { 0 } else { usize::from(image.latency_samples) };
-    let at = |k: usize| -> [f32; 3] { std::array::from_fn(|c| rec.channels[c].1[k.min(n - 1)] as f32) };
-    let input: Vec<[f32; 3]> = if n == 0 { Vec::new() } else { (0..n + lag).map(at).collect() };
+    let columns: Vec<Vec<f32>> = rec
+        .channels
+        .iter()
+        .map(|(_, x)| {
+            let mut v: Vec<f32> = x.iter().map(|&u| u as f32).collect();
+            let tail = look_ahead(&v, if n == 0 { 0 } else { lag });
+            v.extend(tail);
+            v
+        })
+        .collect();
+    let input: Vec<[f32; 3]> = (0..columns[0].len()).map(|k| std::array::from_fn(|c| columns[c][k])).collect();
     let mut output = vec![[0.0f32; 3]; input.len()];
     let mut state = dynocomp_core::mimo::MimoState::default();
     image.filter.process(&mut state, &input, &mut output);
@@ -389,8 +421,8 @@ mod tests {
 
     /// 1-5 axes (one lockstep group, or a group and a rest) give each axis,
     /// in its own place, exactly the box's per-sample `step` outputs (bit for bit,
-    /// latency dropped), and names the first non-finite sample of the axis
-    /// that has one.
+    /// latency dropped, the look-ahead fed after the input), and names the
+    /// first non-finite sample of the axis that has one.
     #[test]
     fn every_axis_gets_the_box_outputs_in_its_place() {
         let latency = 3;
@@ -404,8 +436,9 @@ mod tests {
                 .zip(&inputs)
                 .map(|(f, u)| {
                     let mut st = AxisState::default();
-                    let fed = u.iter().chain(std::iter::repeat_n(u.last().unwrap(), latency));
-                    fed.map(|&v| f64::from(f.step(&mut st, v as f32))).skip(latency).collect()
+                    let mut fed: Vec<f32> = u.iter().map(|&v| v as f32).collect();
+                    fed.extend(look_ahead(&fed, latency));
+                    fed.iter().map(|&v| f64::from(f.step(&mut st, v))).skip(latency).collect()
                 })
                 .collect();
             let axes: Vec<(&AxisFilter, &[f64])> =

@@ -186,7 +186,7 @@ pub fn compensate_file(
             } else {
                 format!(
                     "3x3 filter of the box, crosstalk compensated, latency {l} samples removed; the last {l} samples \
-                     lack their look-ahead (last input held) and are less accurate (whole record in memory)"
+                     use a predicted look-ahead (whole record in memory)"
                 )
             };
             let rec = whole_record(&mut *input, target.fs, target.source)?;
@@ -404,11 +404,9 @@ fn compensate_box(
     let removed = match (raw_timing, l) {
         (true, _) => ", not removed".to_string(),
         (false, 0) => ", removed".to_string(),
-        // The fixed-lag smoother's last L estimates have no look-ahead: the
-        // last input is held in its place, so they are not accurate.
-        (false, l) => {
-            format!(", removed; the last {l} samples lack their look-ahead (last input held) and are less accurate")
-        }
+        // The fixed-lag smoother's last L estimates have no measured
+        // look-ahead: the record's predicted continuation stands in for it.
+        (false, l) => format!(", removed; the last {l} samples use a predicted look-ahead"),
     };
     let how = format!("box filter, latency {l} samples{removed}, streamed in blocks of {BLOCK}");
     let len = reader.len_hint();
