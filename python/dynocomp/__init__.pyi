@@ -114,10 +114,13 @@ class Image:
         Default: the box's causal f32 filter, bit-exact with
         `dynocomp compensate` and the box; the output is shifted back by the
         declared latency (the last L samples are estimated with the
-        record's predicted continuation as their look-ahead), or kept in the box's timing with raw_timing=True.
+        record's predicted continuation as their look-ahead), or kept in the
+        box's timing with raw_timing=True.
         offline=True: the zero-lag fixed-interval smoother in f64 (needs the
         model sidecar; `force_prior=False` ignores its harmonic prior).
-        A parallel-elaboration image is run band by band.
+        A parallel-elaboration image is run band by band; a 3x3 image
+        (format 3) runs on fx, fy and fz together (x must have those three
+        columns; offline=True is refused).
         `axes`: the axis of each column; default x, y, z for 3 columns, else
         the image's axes. The GIL is released while it computes.
         Raises TypeError (not a float64/float32 array), ValueError (shape,

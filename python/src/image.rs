@@ -1,7 +1,8 @@
 //! `Image` (a coefficient image, `.dcimg`) and the streaming `Compensator`:
 //! the box's kernel through `dynocomp::offline::compensate` (bit-exact with
 //! `dynocomp compensate` and the box), parallel elaboration and the zero-lag
-//! smoother through the same library calls `compensate` makes.
+//! smoother, and a 3x3 image's filter on fx, fy and fz together, through
+//! the same library calls `compensate` makes.
 
 use std::path::{Path, PathBuf};
 
@@ -14,7 +15,9 @@ use pyo3::types::PyBytes;
 use dynocomp::frf::axis_name;
 use dynocomp::io::image_file::{parse_any_image, AnyImage};
 use dynocomp::io::signal_csv::SignalRecord;
-use dynocomp::offline::compensate::{compensate_f32, compensate_f32_into, compensate_parallel, StreamCompensator};
+use dynocomp::offline::compensate::{
+    compensate_f32, compensate_f32_into, compensate_matrix, compensate_parallel, StreamCompensator,
+};
 use dynocomp::offline::sidecar::{parse_sidecar, read_sidecar, ModelSidecar};
 use dynocomp_core::image::CoeffImage;
 
@@ -60,15 +63,6 @@ pub struct Image {
     sidecar: Option<String>,
     /// Its name in messages.
     source: String,
-}
-
-/// `any`, or an error for a 3x3 image (format 3), which the package cannot
-/// run yet (nor can `dynocomp compensate`).
-fn runnable(any: AnyImage, source: &str) -> anyhow::Result<AnyImage> {
-    if let AnyImage::Matrix(_) = any {
-        bail!("{source}: a 3x3 image (format 3): the Python package cannot run it yet; use the per-axis image of `dynocomp design`");
-    }
-    Ok(any)
 }
 
 impl Image {
@@ -150,7 +144,7 @@ impl Image {
                 let source = path.display().to_string();
                 let bytes = std::fs::read(&path)
                     .map_err(|e| anyhow::Error::from(e).context(format!("{source}: cannot read")))?;
-                let any = runnable(parse_any_image(&bytes, &source)?, &source)?;
+                let any = parse_any_image(&bytes, &source)?;
                 Ok(Image { any, bytes, path: Some(path), sidecar: None, source })
             })
         })
@@ -163,7 +157,7 @@ impl Image {
     fn from_bytes(data: Vec<u8>, sidecar: Option<String>, name: Option<String>) -> PyResult<Image> {
         let source = name.unwrap_or_else(|| "<image bytes>".into());
         guarded(|| {
-            let any = runnable(parse_any_image(&data, &source)?, &source)?;
+            let any = parse_any_image(&data, &source)?;
             Ok(Image { any, bytes: data, path: None, sidecar, source })
         })
     }
@@ -281,7 +275,15 @@ impl Image {
                     Ok(out.channels.into_iter().map(|c| c.1).collect())
                 }
                 (AnyImage::Parallel(_), true) => self.inline("offline=True").map(|_| Vec::new()),
-                (AnyImage::Matrix(_), _) => self.inline("compensate").map(|_| Vec::new()),
+                (AnyImage::Matrix(m), false) => {
+                    let rec =
+                        SignalRecord { t_s: None, channels: axes.iter().copied().zip(view.columns_f64()).collect() };
+                    Ok(compensate_matrix(m, &rec, raw_timing, source)?.channels.into_iter().map(|c| c.1).collect())
+                }
+                (AnyImage::Matrix(_), true) => bail!(
+                    "{source}: a 3x3 image (format 3): the zero-lag smoother (offline=True) does not take the 3x3 \
+                     model yet; run without offline=True (the box's 3x3 filter, its latency removed)"
+                ),
             })
         })?;
         Ok(channels_to_array(py, &out, n, one_d))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import dynocomp
-from conftest import EXAMPLE, FS, cli_error, run_cli
+from conftest import EXAMPLE, FS, ROOT, cli_error, run_cli
 
 
 def bits(a):
@@ -266,3 +266,64 @@ def test_simulate_returns_the_cli_files(tmp_path):
     # so the true force, is the seed's too only through its parameters).
     meas = dynocomp.read_record(tmp_path / "measured.csv").forces
     assert not same_bits(dynocomp.simulate(seed=4, **opts).measured, meas)
+
+
+# --- a 3x3 image (format 3) -------------------------------------------------
+
+
+def test_a_3x3_image_runs_bit_exact_with_the_cli(measured, tmp_path):
+    path = ROOT / "fuzz" / "images" / "matrix.dcimg"
+    img = dynocomp.Image.load(path)
+    assert img.axes == [0, 1, 2] and not img.parallel
+    out = tmp_path / "c.csv"
+    run_cli("compensate", "--coeffs", path, "--input", EXAMPLE / "measured.csv", "--output", out)
+    want = dynocomp.read_record(out).forces
+    got = img.compensate(measured.forces)
+    assert same_bits(got, want)
+    # Negative controls: the box's timing, and the columns fed in another
+    # order (the 3x3 filter mixes them), give other bits.
+    assert not same_bits(img.compensate(measured.forces, raw_timing=True), want)
+    assert not same_bits(img.compensate(measured.forces[:, [1, 0, 2]]), want)
+    with pytest.raises(ValueError, match="offline=True"):
+        img.compensate(measured.forces, offline=True)
+    with pytest.raises(ValueError, match="fx, fy and fz together"):
+        img.compensate(measured.forces[:, :2], axes="xy")
+
+
+# --- the GIL -------------------------------------------------------------------
+
+
+def _longest_main_thread_stall(call):
+    """Run `call` on a worker thread; returns the longest time (s) between
+    the main thread's loop turns while the call ran, and the call's length."""
+    import threading
+    import time
+
+    span = {}
+
+    def worker():
+        span["t0"] = time.perf_counter()
+        call()
+        span["t1"] = time.perf_counter()
+
+    stamps = []
+    th = threading.Thread(target=worker)
+    th.start()
+    while th.is_alive():
+        stamps.append(time.perf_counter())
+    th.join()
+    t0, t1 = span["t0"], span["t1"]
+    inside = [t0] + [s for s in stamps if t0 < s < t1] + [t1]
+    return max(b - a for a, b in zip(inside, inside[1:])), t1 - t0
+
+
+def test_compensate_lets_other_threads_run(cli_design):
+    img = dynocomp.Image.load(cli_design[0])
+    x = np.random.default_rng(3).normal(0.0, 50.0, (2_000_000, 3))
+    stall, seconds = _longest_main_thread_stall(lambda: img.compensate(x))
+    assert seconds > 0.05 and stall < 0.5 * seconds, f"the main thread stalled {stall:.3f} s of {seconds:.3f} s"
+    # Negative control: a C call that holds the GIL (sorting Python floats)
+    # stalls the main thread for most of its length.
+    big = [float(v) for v in np.random.default_rng(4).random(1_500_000)]
+    stall, seconds = _longest_main_thread_stall(big.sort)
+    assert seconds > 0.05 and stall > 0.5 * seconds, f"control: stalled only {stall:.3f} s of {seconds:.3f} s"
