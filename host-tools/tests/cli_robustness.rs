@@ -685,3 +685,20 @@ fn the_tail_with_a_predicted_look_ahead_is_announced_and_accurate() {
     ]);
     assert!(ok && !err.contains("look-ahead"), "{err}");
 }
+
+/// `simulate` says what it is about to compute before it starts, and when
+/// it writes: the announced sample count is the written record's.
+#[test]
+fn simulate_announces_its_work_before_doing_it() {
+    let dir = fresh_dir("sim_progress");
+    let out = dir.join("sim");
+    let (ok, _, err) = dynocomp(&["simulate", "--out", s(&out), "--duration", "0.1", "--frf-lines", "513"]);
+    assert!(ok, "{err}");
+    let lines: Vec<&str> = err.lines().collect();
+    let at = |what: &str| lines.iter().position(|l| l.contains(what)).unwrap_or_else(|| panic!("no {what:?} in {err}"));
+    let (start, writing, wrote) = (at("samples × 3 axes at"), at("simulate: writing"), at("wrote "));
+    assert!(start == 0 && start < writing && writing < wrote, "{err}");
+    let announced: usize = lines[start].trim_start_matches("simulate: ").split(' ').next().unwrap().parse().unwrap();
+    let rows = std::fs::read_to_string(out.join("measured.csv")).unwrap().lines().count() - 1;
+    assert_eq!(announced, rows, "{}", lines[start]);
+}
