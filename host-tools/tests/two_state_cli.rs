@@ -4,7 +4,6 @@
 //! --drift START:END` follows the change; scored against the simulator's
 //! true force, with today's single-FRF `--offline` as the negative control.
 
-#[allow(dead_code)]
 mod cli_common;
 use cli_common::{dynocomp, dynocomp_piped};
 use dynocomp::io::signal_csv::read_signal_csv;
