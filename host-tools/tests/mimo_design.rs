@@ -353,8 +353,17 @@ fn cli_offcentre_3x3_image_beats_per_axis() {
         a.extend(extra);
         dynocomp(&a)
     };
-    let (ok, json, err) = design("c.dcimg", &["--json"]);
+    let rep = p("report");
+    let (ok, json, err) = design("c.dcimg", &["--json", "--report", &rep]);
     assert!(ok, "{err}");
+    // The 3x3 report: its page names both plots, each a 3x3 grid of panels.
+    let index = std::fs::read_to_string(dir.join("report/index.html")).unwrap();
+    for svg in ["matrix_frf.svg", "matrix_rows.svg"] {
+        assert!(index.contains(svg), "{svg} not on the page");
+        let text = std::fs::read_to_string(dir.join("report").join(svg)).unwrap();
+        let panels = ["x", "y", "z"].iter().flat_map(|i| ["x", "y", "z"].map(|j| format!("channel {i}, hammer {j}")));
+        assert!(panels.into_iter().all(|c| text.contains(&c)), "{svg}: a panel is missing");
+    }
     let j: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(j["kind"], "3x3", "{json}");
     let peak = j["design"]["crosstalk"]["peak"].as_array().unwrap();

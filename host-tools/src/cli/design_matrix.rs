@@ -103,8 +103,9 @@ pub fn run(args: &DesignArgs, s: &DesignSetup, t0: Instant) -> Result<MatrixOutc
     crate::io::image_file::write_matrix_image(&args.out, &image)?;
     let id = image.id();
     let text = summary_text(args, &md, id, &load, image.fs_hz);
-    if args.report.is_some() {
-        eprintln!("note: --report draws per-axis designs only; the 3x3 design's figures are in this summary");
+    if let Some(dir) = &args.report {
+        let files = crate::report::matrix::write_matrix_report(dir, &md, &s.frf, args.input.fs, &text)?;
+        eprintln!("report: {} files in {} (open index.html)", files.len(), dir.display());
     }
     if !args.json {
         eprintln!("designed in {:.1} s", t0.elapsed().as_secs_f64());

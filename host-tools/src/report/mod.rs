@@ -2,9 +2,9 @@
 //!
 //! Plot helpers ([`plot`]) and the HTML page ([`page`]) know nothing of the
 //! design; one module per report or figure draws a design ([`design`],
-//! [`sensitivity`], [`force_spectrum`], [`two_state`], [`summary`]), a
-//! compensated record ([`compensation`]), an image ([`inspect`]) or a
-//! comparison ([`compare`]). May import every stage below the command line
+//! [`sensitivity`], [`force_spectrum`], [`two_state`], [`summary`]), a 3x3
+//! design ([`matrix`]), a compensated record ([`compensation`]), an image
+//! ([`inspect`]) or a comparison ([`compare`]). May import every stage below the command line
 //! except the box link.
 
 pub mod compare;
@@ -12,6 +12,7 @@ pub mod compensation;
 pub mod design;
 pub mod force_spectrum;
 pub mod inspect;
+pub mod matrix;
 pub mod page;
 pub mod plot;
 pub mod sensitivity;
