@@ -368,7 +368,8 @@ impl Walker {
         }
         if raw_off > next_off {
             bail!(
-                "{source}: segment {no}, offset {at}: raw data offset {raw_off} is beyond the segment's end ({next_off})"
+                "{source}: segment {no}, offset {at}: raw data offset {raw_off} is beyond the segment's end \
+                 ({next_off})"
             );
         }
         self.next = body + next_off;
