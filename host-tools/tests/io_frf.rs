@@ -508,3 +508,196 @@ proptest! {
         prop_assert_eq!(frf_csv::parse_frf_csv(&text, "rt").unwrap(), frf);
     }
 }
+
+/// Header, row and whole-file refusals of the CSV and UFF 58 readers, word
+/// for word (the tests above check the parts of each message).
+#[test]
+fn frf_refusals_word_for_word() {
+    let csv = |t: &str| format!("{:#}", frf_csv::parse_frf_csv(t, "bad.csv").unwrap_err());
+    let uff = |t: &str| format!("{:#}", uff::parse_uff58(t.as_bytes(), "bad.uff").unwrap_err());
+    let cases = [
+        (csv(""), "bad.csv: empty file (expected a header row starting with freq_hz)"),
+        (csv("freq_hz,x_re,x_im\n"), "bad.csv: no data rows after the header (line 1)"),
+        (
+            csv("freq_hz,freq_hz,x_re,x_im\n0,0,1,0\n"),
+            "bad.csv: line 1, column 2: duplicate column freq_hz (also column 1)",
+        ),
+        (
+            csv("freq_hz,fx_re,x_im\n0,1,0\n"),
+            "bad.csv: line 1, column 2: unknown column name \"fx_re\" (expected freq_hz, then \
+                <a>_re, <a>_im and optionally <a>_coh for a = x, y, z, or <i><j>_re, <i><j>_im, \
+                <i><j>_coh for channel i and force direction j)",
+        ),
+        (
+            csv("freq_hz,x_re,x_im,xx_im\n0,1,0,0\n"),
+            "bad.csv: line 1, column 4: column xx_im and column 2 (x_re) are the same entry xx (x_re \
+                means xx_re): give each entry once, in one spelling",
+        ),
+        (
+            csv("freq_hz,xy_re,xy_im,xy_re\n0,1,0,0\n"),
+            "bad.csv: line 1, column 4: duplicate column xy_re (also column 2): entry xy (channel x, \
+                force y) given twice",
+        ),
+        (csv("x_re,x_im\n1,0\n"), "bad.csv: line 1: missing column freq_hz in the header"),
+        (csv("freq_hz,x_re,y_im\n0,1,0\n"), "bad.csv: line 1: column x_re (column 2) has no matching x_im column"),
+        (csv("freq_hz,y_im\n0,1\n"), "bad.csv: line 1: column y_im (column 2) has no matching y_re column"),
+        (csv("freq_hz,z_coh\n0,1\n"), "bad.csv: line 1: column z_coh (column 2) without z_re and z_im columns"),
+        (
+            csv("freq_hz\n1\n"),
+            "bad.csv: line 1: no FRF columns in the header (expected x_re/x_im, y_re/y_im or \
+                z_re/z_im, or <i><j>_re/<i><j>_im)",
+        ),
+        (csv("freq_hz;x_re;x_im\n0;1\n"), "bad.csv: line 2: 2 fields, but the header has 3 columns"),
+        (csv("freq_hz,x_re,x_im\n0,\"\",0\n"), "bad.csv: line 2, column 2 (x_re): empty value"),
+        (csv("freq_hz,x_re,x_im\n0,1,abc\n"), "bad.csv: line 2, column 3 (x_im): cannot read \"abc\" as a number"),
+        (
+            csv("freq_hz,x_re,x_im\n0,1,inf\n"),
+            "bad.csv: line 2, column 3 (x_im): value inf is not finite (NaN or infinite)",
+        ),
+        (csv("freq_hz,x_re,x_im\n-1,1,0\n"), "bad.csv: line 2, column 1 (freq_hz): negative frequency -1 Hz"),
+        (
+            csv("freq_hz,x_re,x_im\n5,1,0\n5,1,0\n"),
+            "bad.csv: line 3, column 1 (freq_hz): frequency 5 Hz is not greater than the previous \
+                line's 5 Hz (frequencies must be strictly ascending)",
+        ),
+        (
+            csv("freq_hz\tx_re\tx_im\tx_coh\n0\t1\t0\t1.5\n"),
+            "bad.csv: line 2, column 4 (x_coh): coherence 1.5 outside [0, 1]",
+        ),
+        (uff("hello\n"), "bad.uff: line 1: expected '    -1' opening a UFF dataset, found \"hello\""),
+        (uff("    -1\n"), "bad.uff: line 1: the file ends after '-1' (dataset number missing)"),
+        (uff("    -1\n  abc\n    -1\n"), "bad.uff: line 2: expected a dataset number after '-1', found \"abc\""),
+        (
+            uff("    -1\n   151\nmodel\n    -1\n"),
+            "bad.uff: no FRF found (dataset 58 with function type 4 and response direction ±1, ±2 or \
+                ±3); skipped dataset #1 at line 1: type 151",
+        ),
+        (
+            uff(&frf_x()[..200]),
+            "bad.uff: line 10: dataset #1 (58, starting line 1), record 9: the file ends inside the \
+                dataset header",
+        ),
+        (
+            uff(&(frf_x().lines().take(5).map(|l| format!("{l}\n")).collect::<String>() + "    -1\n")),
+            "bad.uff: line 6: dataset #1 (58, starting line 1), record 4: the dataset ends ('-1') \
+                before its 11 header records",
+        ),
+        (
+            uff(&frf_x().replace("    4         0", "    x         y")),
+            concat!(
+                "bad.uff: line 8: dataset #1 (58, starting line 1), record 6: cannot read function type, ",
+                "response direction and reference direction from \"x         y    0         0       NONE   …\""
+            ),
+        ),
+        (
+            uff(&ds58(4, 1, 1, 7, 1, 1, 0.0, 1.0, [18, 9, 13], "1 0\n")),
+            "bad.uff: line 9: dataset #1 (58, starting line 1), record 7: ordinate data type 7 not \
+                supported (2/4 = real single/double, 5/6 = complex single/double)",
+        ),
+        (
+            uff(&ds58(4, 1, 1, 6, 1, 3, 0.0, 1.0, [18, 9, 13], "1 0\n")),
+            "bad.uff: line 9: dataset #1 (58, starting line 1), record 7: abscissa spacing 3 is \
+                neither 0 (uneven) nor 1 (even)",
+        ),
+        (
+            uff(&ds58(4, 1, 1, 6, 0, 1, 0.0, 1.0, [18, 9, 13], "\n")),
+            "bad.uff: line 9: dataset #1 (58, starting line 1), record 7: number of data points is 0: no data",
+        ),
+        (
+            uff(&ds58(4, 1, 1, 6, 999_999_999, 1, 0.0, 1.0, [18, 9, 13], "1 0\n")),
+            "bad.uff: line 9: dataset #1 (58, starting line 1), record 7: 999999999 data points \
+                declared, more than the file can hold",
+        ),
+        (
+            uff(&ds58(4, 1, 1, 6, 3, 1, 0.0, 1.0, [18, 9, 13], "1 0 1 0\n")),
+            "bad.uff: line 14: dataset #1 (58, starting line 1), record 12: 4 values, but record 7 \
+                declares 3 points (6 values)",
+        ),
+        (
+            uff(&ds58(4, 1, 1, 6, 1, 1, 0.0, 1.0, [18, 9, 13], "1 0\n1 0\n")),
+            "bad.uff: line 15: dataset #1 (58, starting line 1), record 12: more values than the 1 \
+                points declared in record 7 (2 values)",
+        ),
+        (
+            uff(&ds58(4, 1, 1, 6, 2, 1, 0.0, 1.0, [18, 9, 13], "1 0\n 1.0 zz\n")),
+            "bad.uff: line 15: dataset #1 (58, starting line 1), record 12: cannot read \"zz\" as a number",
+        ),
+        (
+            uff(&ds58(4, 1, 1, 6, 2, 1, 0.0, 1.0, [18, 9, 13], "1 0\n NaN 0\n")),
+            "bad.uff: line 15: dataset #1 (58, starting line 1), record 12: value 3 is NaN (values \
+                must be finite)",
+        ),
+        (
+            uff(&ds58(4, 1, 1, 6, 2, 1, -1.0, 1.0, [18, 9, 13], "1 0 1 0\n")),
+            "bad.uff: line 9: dataset #1 (58, starting line 1), record 7: abscissa minimum -1 Hz is \
+                not a non-negative frequency",
+        ),
+        (
+            uff(&ds58(4, 1, 1, 6, 2, 1, 0.0, -1.0, [18, 9, 13], "1 0 1 0\n")),
+            "bad.uff: line 9: dataset #1 (58, starting line 1), record 7: abscissa increment -1 Hz \
+                must be positive (frequencies strictly ascending)",
+        ),
+        (
+            uff(&ds58(4, 1, 1, 6, 2, 0, 0.0, 0.0, [18, 9, 13], "-1 1 0\n2 1 0\n")),
+            "bad.uff: line 14: dataset #1 (58, starting line 1), record 12: negative frequency -1 Hz",
+        ),
+        (
+            uff(&ds58(4, 1, 1, 6, 2, 0, 0.0, 0.0, [18, 9, 13], "5 1 0\n5 1 0\n")),
+            "bad.uff: line 15: dataset #1 (58, starting line 1), record 12: frequency 5 Hz is not \
+                greater than the previous point's 5 Hz (frequencies must be strictly ascending)",
+        ),
+        (
+            uff(&ds58(4, 1, 1, 6, 1, 1, 0.0, 1.0, [17, 9, 13], "1 0\n")),
+            "bad.uff: line 10: dataset #1 (58, starting line 1), record 8: the abscissa is time \
+                (specific data type 17), not frequency",
+        ),
+        (
+            uff(&ds58(4, 1, 1, 6, 1, 1, 0.0, 1.0, [18, 9, 12], "1 0\n")),
+            "bad.uff: line 12: dataset #1 (58, starting line 1), record 10: the FRF denominator is \
+                acceleration (specific data type 12), not a force: dynocomp needs the dynamometer's \
+                force/force FRF (N/N)",
+        ),
+        (
+            uff(&(frf_x() + &coh_x("0.5 1.5 1.0\n", 3))),
+            "bad.uff: line 30: dataset #2 (58, starting line 17), record 12: coherence 1.5 at point \
+                2 (10 Hz) outside [0, 1]",
+        ),
+        (
+            uff(&ds58(6, 1, 1, 6, 1, 1, 0.0, 1.0, [18, 0, 0], "0.5 0.1\n")),
+            "bad.uff: line 14: dataset #1 (58, starting line 1), record 12: coherence at point 1 has \
+                a non-zero imaginary part 0.1",
+        ),
+        (
+            uff(&ds58(4, 1, 5, 6, 1, 1, 0.0, 1.0, [18, 9, 13], "1 0\n")),
+            "bad.uff: no FRF found (dataset 58 with function type 4 and response direction ±1, ±2 or \
+                ±3); skipped dataset #1 at line 1: reference direction 5 is not a translation (±1/±2/±3)",
+        ),
+        (
+            uff(&ds58(4, 7, 1, 6, 1, 1, 0.0, 1.0, [18, 9, 13], "1 0\n")),
+            "bad.uff: no FRF found (dataset 58 with function type 4 and response direction ±1, ±2 or \
+                ±3); skipped dataset #1 at line 1: response direction 7 is not a translation (±1/±2/±3)",
+        ),
+        (
+            uff(&(frf_x() + &frf_x())),
+            "bad.uff: line 17: dataset #2 is a second FRF for axis x (the first is dataset #1 at \
+                line 1): duplicate axis",
+        ),
+        (
+            uff(&(frf_x() + &ds58(4, 2, 2, 6, 3, 1, 0.0, 20.0, [18, 9, 13], "1 0 1 0 1 0\n"))),
+            "bad.uff: line 17: dataset #2 (FRF y): frequency line 2 is 20 Hz, but 10 Hz in dataset \
+                #1 (FRF x, line 1): all datasets must share the same frequency lines",
+        ),
+        (
+            uff(&(frf_x() + &coh_x("0.5 0.9\n", 2))),
+            "bad.uff: line 17: dataset #2 (coherence x): 2 frequency lines, but dataset #1 (FRF x, \
+                line 1) has 3: all datasets must share the same frequency lines",
+        ),
+        (
+            uff(&(ds58(6, 2, 2, 4, 1, 1, 0.0, 1.0, [18, 0, 0], "0.5\n") + &frf_x())),
+            "bad.uff: line 1: dataset #1 is a coherence for axis y but the file has no FRF for axis y",
+        ),
+    ];
+    let bad: Vec<String> =
+        cases.iter().enumerate().filter(|(_, (g, w))| g != w).map(|(k, (g, _))| format!("case {k}: {g:?}")).collect();
+    assert!(bad.is_empty(), "\n{}", bad.join("\n"));
+}

@@ -200,3 +200,43 @@ fn paper_compensator_inverts_a_known_sensor_in_band() {
     };
     assert!((slow.compensator.freq_response(1000.0, fs) * g - 1.0).norm() > 0.3);
 }
+
+/// The fit's refusals, word for word: orders, too few lines, an
+/// ill-conditioned linear problem.
+#[test]
+fn rfp_refusals_word_for_word() {
+    let freq: Vec<f64> = (0..200).map(|k| 10.0 * (k + 1) as f64).collect();
+    let h: Vec<Complex64> = freq.iter().map(|&f| two_mode(Complex64::new(0.0, 2.0 * PI * f))).collect();
+    let ones = vec![1.0; freq.len()];
+    let few: Vec<f64> = (0..freq.len()).map(|k| if k < 5 { 1.0 } else { 0.0 }).collect();
+    // Twenty lines within a millihertz: the powers of x are nearly equal columns.
+    let close: Vec<f64> = (0..20).map(|k| 1000.0 + 5e-5 * k as f64).collect();
+    let hc: Vec<Complex64> = close.iter().map(|&f| two_mode(Complex64::new(0.0, 2.0 * PI * f))).collect();
+    let fit = |f: &[f64], h: &[Complex64], w: &[f64], nb, na| {
+        rfp_fit(f, h, w, &RfpOptions { nb, na, ..Default::default() })
+            .map(|_| "accepted".to_string())
+            .unwrap_or_else(|e| format!("{e:#}"))
+    };
+    let cases = [
+        (
+            fit(&freq, &h, &ones, 0, 0),
+            "--paper-orders 0:0: need 1 ≤ denominator order and numerator order ≤ denominator order",
+        ),
+        (
+            fit(&freq, &h, &ones, 5, 4),
+            "--paper-orders 5:4: need 1 ≤ denominator order and numerator order ≤ denominator order",
+        ),
+        (
+            fit(&freq, &h, &few, 2, 4),
+            "5 weighted lines cannot determine 7 coefficients of a 2:4 fit: widen the bands or lower the orders",
+        ),
+        (
+            fit(&close, &hc, &[1.0; 20], 4, 6),
+            "rational fraction polynomial fit 4:6 over 1000–1000 Hz is ill-conditioned: condition \
+                number inf (limit 1e12); lower the orders or fit narrower bands (--band, --spindle-rpm)",
+        ),
+    ];
+    let bad: Vec<String> =
+        cases.iter().enumerate().filter(|(_, (g, w))| g != w).map(|(k, (g, _))| format!("case {k}: {g:?}")).collect();
+    assert!(bad.is_empty(), "\n{}", bad.join("\n"));
+}

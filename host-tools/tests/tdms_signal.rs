@@ -542,3 +542,174 @@ fn outputs_keep_the_time_base() {
         );
     }
 }
+
+/// Every refusal of the segment walk (lead-in, metadata, raw-data layout) and
+/// of the channel pick, word for word: the messages name the file, segment,
+/// offset or channel as they always have.
+#[test]
+fn tdms_refusals_word_for_word() {
+    let p = tmp("tdmsexact", "e.tdms");
+    let s = p.display().to_string();
+    let one = |objs: &[Obj], raw: &[u8]| segment(META | NEW_LIST | RAW, Some(objs), raw);
+    let f1 = 1.0f64.to_le_bytes();
+    let f2 = [1.0f64.to_le_bytes(), 2.0f64.to_le_bytes()].concat();
+    let fx = || one(&[ch("Fx", Index::New(10, 1), vec![])], &f1);
+    let patch = |mut b: Vec<u8>, at: usize, v: &[u8]| {
+        b[at..at + v.len()].copy_from_slice(v);
+        b
+    };
+    // Offsets in `fx()`: lead-in 0..28, object count 28, path 32..49, index length 49,
+    // type 53, dimension 57, values 61, property count 69.
+    let with_prop = one(&[ch("Fx", Index::New(10, 1), vec![("a", P::F64(1.0))])], &f1);
+    let wf = |d: f64| vec![("wf_increment", P::F64(d))];
+    let g = |grp: &str, name: &str, index: Index| Obj { path: format!("/'{grp}'/'{name}'"), index, props: vec![] };
+    let fx_map = ChannelMap::parse("fx=Fx").unwrap();
+    let kraft = ChannelMap::parse("fx=Kraft").unwrap();
+    let cases: Vec<(Vec<u8>, Option<&ChannelMap>, &str)> = vec![
+        (Vec::new(), None, "{s}: empty file (no TDMS segment)"),
+        (patch(fx(), 0, b"XDSm"), None, "{s}: segment 1, offset 0: no TDMS lead-in (tag \"XDSm\", expected \"TDSm\")"),
+        (
+            patch(fx(), 8, &4711u32.to_le_bytes()),
+            None,
+            "{s}: segment 1, offset 0: TDMS version 4711 (this reader knows 4712 and 4713)",
+        ),
+        (
+            patch(fx(), 12, &(1u64 << 40).to_le_bytes()),
+            None,
+            "{s}: segment 1, offset 0: the segment declares 1099511627776 bytes after its lead-in, \
+                the file has 53: the file is truncated",
+        ),
+        (
+            patch(fx(), 20, &1000u64.to_le_bytes()),
+            None,
+            "{s}: segment 1, offset 0: raw data offset 1000 is beyond the segment's end (53)",
+        ),
+        (
+            patch(fx(), 57, &2u32.to_le_bytes()),
+            None,
+            "{s}: segment 1, offset 49: object /'Cut 1'/'Fx': array dimension 2 (TDMS allows 1)",
+        ),
+        (
+            patch(fx(), 49, &24u32.to_le_bytes()),
+            None,
+            "{s}: segment 1, offset 49: object /'Cut 1'/'Fx': raw data index of 24 bytes for f64 values",
+        ),
+        (
+            one(&[ch("Fx", Index::New(10, u64::MAX), vec![])], &f1),
+            None,
+            "{s}: segment 1, offset 49: object /'Cut 1'/'Fx': 18446744073709551615 values overflow",
+        ),
+        (
+            patch(with_prop, 78, &0x99u32.to_le_bytes()),
+            None,
+            "{s}: segment 1, offset 78: property \"a\" of /'Cut 1'/'Fx': unknown data type 0x99",
+        ),
+        (
+            one(&[ch("Fx", Index::Same, vec![])], &f1),
+            None,
+            "{s}: segment 1: object /'Cut 1'/'Fx': raw data index \"same as before\", but it had none",
+        ),
+        (
+            one(&[ch("Fx", Index::New(10, u64::MAX / 8), vec![]), ch("Fy", Index::New(10, u64::MAX / 8), vec![])], &f1),
+            None,
+            "{s}: segment 1, offset 0: raw data sizes overflow",
+        ),
+        (
+            one(&[ch("Fx", Index::New(10, 2), vec![])], &[f2.clone(), f1.to_vec()].concat()),
+            None,
+            "{s}: segment 1, offset 0: 24 bytes of raw data are not a whole number of chunks of 16 \
+                bytes (the metadata's channels)",
+        ),
+        (
+            segment(
+                META | NEW_LIST | RAW | INTERLEAVED,
+                Some(&[ch("Fx", Index::New(10, 2), vec![]), ch("Fy", Index::New(10, 1), vec![])]),
+                &[f2.clone(), f1.to_vec()].concat(),
+            ),
+            None,
+            "{s}: segment 1, offset 0: interleaved data, but object /'Cut 1'/'Fy' has 1 f64 values \
+                where the first has 2",
+        ),
+        (fx(), Some(&kraft), "{s}: --channels fx=Kraft: no such channel (channels: Cut 1/Fx)"),
+        (
+            one(&[g("A", "Fx", Index::New(10, 1)), g("B", "Fx", Index::New(10, 1))], &f2),
+            Some(&fx_map),
+            "{s}: --channels fx=Fx: several groups have it; give GROUP/NAME",
+        ),
+        (
+            one(&[ch("Fx", Index::New(10, 1), vec![]), ch("Force X", Index::New(10, 1), vec![])], &f2),
+            None,
+            "{s}: channels /'Cut 1'/'Fx' and Cut 1/Force X are both axis x; pick one with --channels \
+                fx=GROUP/NAME",
+        ),
+        (
+            one(&[ch("Torque", Index::New(10, 1), vec![])], &f1),
+            None,
+            "{s}: no channel named for a force axis (Fx, Force X, ...); channels: Cut 1/Torque; give \
+                --channels fx=NAME,...",
+        ),
+        (
+            segment(META | NEW_LIST | RAW | DAQMX, Some(&[ch("Fx", Index::Daqmx, vec![])]), &[0u8; 8]),
+            None,
+            "{s}: channel Cut 1/Fx (fx): DAQmx raw data (ADC codes with NI_Scaling properties) is \
+                not supported; log scaled data or convert the file",
+        ),
+        (
+            one(&[ch("Fx", Index::New(10, 1), vec![("NI_Scaling_Status", P::Str("unscaled"))])], &f1),
+            None,
+            "{s}: channel Cut 1/Fx (fx): NI_Scaling_Status is \"unscaled\" (raw values needing NI \
+                scaling); log scaled data",
+        ),
+        (one(&[ch("Fx", Index::None, vec![])], &[]), None, "{s}: channel Cut 1/Fx (fx): no data"),
+        (
+            one(&[ch("Fx", Index::New(0x21, 1), vec![])], &[1u8]),
+            None,
+            "{s}: channel Cut 1/Fx (fx): boolean values; a force channel must be real numbers",
+        ),
+        (
+            one(&[ch("Fx", Index::New(10, 1), vec![("unit_string", P::Str("lbf"))])], &f1),
+            None,
+            "{s}: channel Cut 1/Fx (fx): unit \"lbf\"; expected N (kN and mN are scaled)",
+        ),
+        (
+            one(&[ch("Fx", Index::New(10, 1), wf(-1.0))], &f1),
+            None,
+            "{s}: channel Cut 1/Fx (fx): property wf_increment = -1 s is not a positive sampling interval",
+        ),
+        (
+            one(&[ch("Fx", Index::New(10, 1), wf(1e-4)), ch("Fy", Index::New(10, 1), wf(2e-4))], &f2),
+            None,
+            "{s}: channel Cut 1/Fy (fy): wf_increment 0.0002 s, but channel Cut 1/Fx has 0.0001 s: \
+                channels must share a rate",
+        ),
+        (
+            one(&[ch("Fx", Index::New(10, 1), vec![("wf_increment", P::Str("x"))])], &f1),
+            None,
+            "{s}: channel Cut 1/Fx (fx): property wf_increment is not a number",
+        ),
+        (
+            one(&[ch("Fx", Index::New(10, 1), vec![("wf_start_offset", P::F64(f64::NAN))])], &f1),
+            None,
+            "{s}: channel Cut 1/Fx (fx): property wf_start_offset = NaN s is not finite",
+        ),
+        (
+            one(
+                &[ch("Fx", Index::New(10, 2), vec![]), ch("Fy", Index::New(10, 1), vec![])],
+                &[f2.clone(), f1.to_vec()].concat(),
+            ),
+            None,
+            "{s}: channel Cut 1/Fy (fy): 1 samples, but channel Cut 1/Fx has 2: channels must have \
+                the same length",
+        ),
+    ];
+    let mut bad = Vec::new();
+    for (k, (bytes, map, want)) in cases.iter().enumerate() {
+        std::fs::write(&p, bytes).unwrap();
+        let got = read(&p, *map).map(|_| "accepted".to_string()).unwrap_or_else(|e| e);
+        let want = want.replace("{s}", &s);
+        if got != want {
+            bad.push(format!("case {k}: {:?}", got.replace(&s, "{s}")));
+        }
+    }
+    assert!(bad.is_empty(), "\n{}", bad.join("\n"));
+}

@@ -347,3 +347,127 @@ fn placed_writer_refuses_a_length_other_than_announced() {
     let mut w = UffWriter::placed(&file, 10, &[0, 1, 2], 51200.0, false).unwrap();
     write_blocks(&mut w, &chans, None, 4).unwrap();
 }
+
+/// Every refusal of the index pass (dataset framing, records 6 to 9, the
+/// channel set), word for word: the messages name the file, line, dataset
+/// and record as they always have.
+#[test]
+fn uff_refusals_word_for_word() {
+    let x = signals(4);
+    let p = tmp("uffexact", "e.uff");
+    let s = p.display().to_string();
+    let written = |chans: &[Vec<f64>], binary: bool| {
+        write_uff(&p, chans, 51200.0, binary);
+        std::fs::read(&p).unwrap()
+    };
+    let good = String::from_utf8(written(&x[..1], false)).unwrap();
+    // Line `l` (1-based) of the one-dataset file replaced: 8 is record 6,
+    // 9 record 7, 11 record 9.
+    let line = |l: usize, new: &str| {
+        let mut ls: Vec<String> = good.lines().map(str::to_string).collect();
+        ls[l - 1] = new.to_string();
+        ls.join("\n") + "\n"
+    };
+    let rec7 = good.lines().nth(8).unwrap().to_string();
+    let rec7_with = |at: usize, new: &str| {
+        let mut r = rec7.clone();
+        r.replace_range(at..at + new.len(), new);
+        line(9, &r)
+    };
+    let rec9 = good.lines().nth(10).unwrap().to_string();
+    // Two channels of different lengths: dataset 1 of a 2-channel file of 4
+    // samples, dataset 2 of one of 6.
+    let datasets = |b: Vec<u8>| {
+        let t = String::from_utf8(b).unwrap();
+        let mut out = vec![String::new()];
+        let mut open = false;
+        for l in t.lines() {
+            out.last_mut().unwrap().push_str(&format!("{l}\n"));
+            if l.trim() == "-1" {
+                if open {
+                    out.push(String::new());
+                }
+                open = !open;
+            }
+        }
+        out
+    };
+    let mismatch = datasets(written(&x[..2], false))[0].clone() + &datasets(written(&signals(6)[..2], false))[1];
+    let mut bin = written(&x[..1], true);
+    let bin_len = bin.len();
+    bin.truncate(bin_len - 7);
+    bin.extend_from_slice(b"junk\n    -1\n");
+    let cases: Vec<(Vec<u8>, &str)> = vec![
+        (
+            format!("hello\n{good}").into_bytes(),
+            "{s}: line 1: expected a '    -1' line opening a dataset, found \"hello\"",
+        ),
+        (
+            line(2, "    58b     1     2          12").into_bytes(),
+            "{s}: line 2: dataset #1 (58, starting line 1), binary header: unsupported 58b header \
+                \"58b     1     2          12\" (need byte order 1/2, IEEE 754, 11 ASCII lines)",
+        ),
+        (
+            b"    -1\n  2412b     1     2          99         100\n".to_vec(),
+            "{s}: line 1: dataset #1 (2412b): the file ends inside its 99 header lines",
+        ),
+        (
+            b"    -1\n  2412b     1     2           0 18446744073709551615\n".to_vec(),
+            "{s}: line 1: dataset #1 (2412b): binary byte count 18446744073709551615 out of range",
+        ),
+        (b"    -1\n   151\nmodel\n".to_vec(), "{s}: line 1: dataset #1 (151) is not closed by a '    -1' line"),
+        (
+            line(8, "x").into_bytes(),
+            "{s}: line 8: dataset #1 (58, starting line 1), record 6: cannot read function type and directions",
+        ),
+        (line(9, "x").into_bytes(), "{s}: line 9: dataset #1 (58, starting line 1), record 7: cannot read data form"),
+        (
+            rec7_with(10, "        -1").into_bytes(),
+            "{s}: line 9: dataset #1 (58, starting line 1), record 7: -1 data points",
+        ),
+        (
+            bin,
+            "{s}: line 14: dataset #1 (58, starting line 1), record 12: no closing '    -1' after \
+                the 32 bytes of binary data record 7 declares",
+        ),
+        (
+            rec7_with(20, "         0").into_bytes(),
+            "{s}: line 9: dataset #1 (58, starting line 1), record 7: uneven abscissa: a time \
+                history needs evenly spaced samples",
+        ),
+        (
+            rec7_with(10, "         0").into_bytes(),
+            "{s}: line 9: dataset #1 (58, starting line 1), record 7: no data points",
+        ),
+        (
+            rec7_with(30, "          inf").into_bytes(),
+            "{s}: line 9: dataset #1 (58, starting line 1), record 7: abscissa start inf s is not finite",
+        ),
+        (
+            line(11, &rec9.replacen(" N  ", " lbf", 1)).into_bytes(),
+            "{s}: line 11: dataset #1 (58, starting line 1), record 9: ordinate units \"lbf\" are \
+                not a force in N (kN and mN are scaled)",
+        ),
+        (
+            line(8, &good.lines().nth(7).unwrap().replacen("    1", "    4", 1)).into_bytes(),
+            "{s}: no time history (dataset 58, function type 1) for fx, fy or fz; skipped: dataset \
+                #1: function type 4 (give --channels fx=NAME,... if the response directions do not say \
+                the axis)",
+        ),
+        (
+            mismatch.into_bytes(),
+            "{s}: dataset #1 (fx) has 4 points every 0.00001953125 s, dataset #2 (fy) 6 points every \
+                0.00001953125 s: channels must match",
+        ),
+    ];
+    let mut bad = Vec::new();
+    for (k, (bytes, want)) in cases.iter().enumerate() {
+        std::fs::write(&p, bytes).unwrap();
+        let got = read(&p, None).map(|_| "accepted".to_string()).unwrap_or_else(|e| e);
+        let want = want.replace("{s}", &s);
+        if got != want {
+            bad.push(format!("case {k}: {:?}", got.replace(&s, "{s}")));
+        }
+    }
+    assert!(bad.is_empty(), "\n{}\n{good}", bad.join("\n"));
+}

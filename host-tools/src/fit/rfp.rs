@@ -252,28 +252,80 @@ fn output_error(tf_b: &[f64], tf_a: &[f64], xs: &[Complex64], h: &[Complex64], w
 }
 
 /// Fit eq. (1) to the lines `freq_hz`/`h` with weights `w` (zero = unused),
-/// frequencies rescaled by ω_0 = 2π·(highest weighted line) (module doc).
+/// frequencies rescaled by ω_0 = 2π·(highest weighted line) (module doc):
+/// the RFP initial estimate (step 1), then damped Gauss–Newton (step 2).
 pub fn rfp_fit(freq_hz: &[f64], h: &[Complex64], w: &[f64], opts: &RfpOptions) -> Result<RfpFit> {
     let (nb, na) = (opts.nb, opts.na);
     if na == 0 || nb > na {
         bail!("--paper-orders {nb}:{na}: need 1 ≤ denominator order and numerator order ≤ denominator order");
     }
-    let used: Vec<usize> = (0..freq_hz.len()).filter(|&k| w[k] > 0.0 && h[k].norm() > 0.0).collect();
-    let unknowns = nb + 1 + na;
-    if 2 * used.len() < 2 * unknowns {
-        bail!("{} weighted lines cannot determine {unknowns} coefficients of a {nb}:{na} fit: widen the bands or lower the orders", used.len());
+    let lines = FitLines::new(freq_hz, h, w, nb, na)?;
+    let (b0, a0, rfp_condition, reflected_poles) = initial_estimate(&lines, nb, na)?;
+    let initial_error = output_error(&b0, &a0, &lines.xs, &lines.hs, &lines.ws);
+    let gn = gauss_newton(&lines, b0, a0, initial_error, opts)?;
+    // An ill-conditioned Jacobian (near pole-zero cancellation: more poles
+    // than the data support) is reported, not fatal: the SVD step is the
+    // minimum-norm one, and what breaks downstream (observability, Riccati)
+    // is checked there.
+    let tf = RationalTf { b: gn.b, a: gn.a, omega_scale: 2.0 * PI * lines.f_max };
+    if !tf.is_stable()? {
+        bail!("the {nb}:{na} fit has unstable poles after Gauss–Newton; lower the orders or fit narrower bands");
     }
-    let f_max = used.iter().map(|&k| freq_hz[k]).fold(0.0, f64::max);
-    let omega_scale = 2.0 * PI * f_max;
-    let xs: Vec<Complex64> = used.iter().map(|&k| Complex64::new(0.0, freq_hz[k] / f_max)).collect();
-    let hs: Vec<Complex64> = used.iter().map(|&k| h[k]).collect();
-    let ws: Vec<f64> = used.iter().map(|&k| w[k]).collect();
+    Ok(RfpFit {
+        tf,
+        rfp_condition,
+        jacobian_condition: gn.jacobian_condition,
+        initial_error,
+        final_error: gn.error,
+        iterations: gn.iterations,
+        reflected_poles,
+    })
+}
 
-    // 1. RFP / Levy: rows sqrt(w)·[x^i (i ≤ nb) | −G x^i (i < na)] = sqrt(w)·G x^na.
-    let m = used.len();
-    let mut mat = DMatrix::<f64>::zeros(2 * m, unknowns);
+/// The weighted lines of a fit, in rescaled frequency.
+struct FitLines {
+    /// s'_k = j f_k / f_max.
+    xs: Vec<Complex64>,
+    hs: Vec<Complex64>,
+    ws: Vec<f64>,
+    /// Lowest and highest weighted line (Hz).
+    f_min: f64,
+    f_max: f64,
+}
+
+impl FitLines {
+    /// The lines with a positive weight and a non-zero FRF: enough to
+    /// determine the nb + 1 + na coefficients.
+    fn new(freq_hz: &[f64], h: &[Complex64], w: &[f64], nb: usize, na: usize) -> Result<FitLines> {
+        let used: Vec<usize> = (0..freq_hz.len()).filter(|&k| w[k] > 0.0 && h[k].norm() > 0.0).collect();
+        let unknowns = nb + 1 + na;
+        if 2 * used.len() < 2 * unknowns {
+            bail!(
+                "{} weighted lines cannot determine {unknowns} coefficients of a {nb}:{na} fit: widen the bands or \
+                 lower the orders",
+                used.len()
+            );
+        }
+        let f_max = used.iter().map(|&k| freq_hz[k]).fold(0.0, f64::max);
+        Ok(FitLines {
+            xs: used.iter().map(|&k| Complex64::new(0.0, freq_hz[k] / f_max)).collect(),
+            hs: used.iter().map(|&k| h[k]).collect(),
+            ws: used.iter().map(|&k| w[k]).collect(),
+            f_min: used.iter().map(|&k| freq_hz[k]).fold(f64::INFINITY, f64::min),
+            f_max,
+        })
+    }
+}
+
+/// Step 1, the RFP / Levy initial estimate: least squares on the rows
+/// sqrt(w)·[x^i (i ≤ nb) | −G x^i (i < na)] = sqrt(w)·G x^na, unstable roots
+/// of A reflected. Returns B, A (monic), the condition number and the number
+/// of roots reflected.
+fn initial_estimate(lines: &FitLines, nb: usize, na: usize) -> Result<(Vec<f64>, Vec<f64>, f64, usize)> {
+    let m = lines.xs.len();
+    let mut mat = DMatrix::<f64>::zeros(2 * m, nb + 1 + na);
     let mut rhs = DVector::<f64>::zeros(2 * m);
-    for (k, ((x, g), wk)) in xs.iter().zip(&hs).zip(&ws).enumerate() {
+    for (k, ((x, g), wk)) in lines.xs.iter().zip(&lines.hs).zip(&lines.ws).enumerate() {
         let sw = wk.sqrt();
         let mut xp = Complex64::new(1.0, 0.0);
         for i in 0..=na {
@@ -296,8 +348,11 @@ pub fn rfp_fit(freq_hz: &[f64], h: &[Complex64], w: &[f64], opts: &RfpOptions) -
         lstsq(mat, &rhs, &format!("the {nb}:{na} rational fraction polynomial least squares"))?;
     if !(rfp_condition < MAX_CONDITION) || theta.iter().any(|v| !v.is_finite()) {
         bail!(
-            "rational fraction polynomial fit {nb}:{na} over {:.0}–{f_max:.0} Hz is ill-conditioned: condition number {rfp_condition:.2e} (limit {MAX_CONDITION:.0e}); lower the orders or fit narrower bands (--band, --spindle-rpm)",
-            used.iter().map(|&k| freq_hz[k]).fold(f64::INFINITY, f64::min)
+            "rational fraction polynomial fit {nb}:{na} over {:.0}–{:.0} Hz is ill-conditioned: condition number \
+             {rfp_condition:.2e} (limit {MAX_CONDITION:.0e}); lower the orders or fit narrower bands (--band, \
+             --spindle-rpm)",
+            lines.f_min,
+            lines.f_max
         );
     }
     let b0: Vec<f64> = theta.iter().take(nb + 1).copied().collect();
@@ -316,76 +371,95 @@ pub fn rfp_fit(freq_hz: &[f64], h: &[Complex64], w: &[f64], opts: &RfpOptions) -
     } else {
         a0
     };
-    let initial_error = output_error(&b0, &a0, &xs, &hs, &ws);
+    Ok((b0, a0, rfp_condition, reflected_poles))
+}
 
-    // 2. Damped Gauss–Newton on the output error; parameters [b_0..b_nb, a_0..a_{na−1}].
-    let (mut b, mut a) = (b0, a0);
-    let mut err = initial_error;
-    let mut iterations = 0;
-    let mut jacobian_condition = f64::NAN;
+/// The result of step 2.
+struct GaussNewton {
+    b: Vec<f64>,
+    a: Vec<f64>,
+    /// Output error after the last accepted step.
+    error: f64,
+    iterations: usize,
+    /// Condition number of the last Jacobian (NaN without iterations).
+    jacobian_condition: f64,
+}
+
+/// Step 2, damped Gauss–Newton on the output error from (b, a) with error
+/// `err`; parameters [b_0..b_nb, a_0..a_{na−1}]. Stops when a step does not
+/// lower the error by more than `opts.tol` (relative), or after
+/// `opts.max_iterations`.
+fn gauss_newton(lines: &FitLines, b: Vec<f64>, a: Vec<f64>, err: f64, opts: &RfpOptions) -> Result<GaussNewton> {
+    let (nb, na) = (opts.nb, opts.na);
+    let mut gn = GaussNewton { b, a, error: err, iterations: 0, jacobian_condition: f64::NAN };
     for it in 1..=opts.max_iterations {
-        iterations = it;
-        let mut jac = DMatrix::<f64>::zeros(2 * m, unknowns);
-        let mut res = DVector::<f64>::zeros(2 * m);
-        for (k, ((x, g), wk)) in xs.iter().zip(&hs).zip(&ws).enumerate() {
-            let sw = wk.sqrt();
-            let (bv, av) = (poly_eval(&b, *x), poly_eval(&a, *x));
-            let e = sw * (g - bv / av);
-            res[2 * k] = e.re;
-            res[2 * k + 1] = e.im;
-            let mut xp = Complex64::new(1.0, 0.0);
-            for i in 0..na {
-                if i <= nb {
-                    let d = sw * xp / av;
-                    jac[(2 * k, i)] = d.re;
-                    jac[(2 * k + 1, i)] = d.im;
-                }
-                let d = -sw * bv * xp / (av * av);
-                jac[(2 * k, nb + 1 + i)] = d.re;
-                jac[(2 * k + 1, nb + 1 + i)] = d.im;
-                xp *= x;
-            }
-            if nb == na {
-                let d = sw * xp / av;
-                jac[(2 * k, nb)] = d.re;
-                jac[(2 * k + 1, nb)] = d.im;
-            }
-        }
+        gn.iterations = it;
+        let (jac, res) = jacobian(lines, &gn.b, &gn.a, nb, na);
         let (step, cond) = lstsq(jac, &res, &format!("the {nb}:{na} Gauss–Newton step {it}"))?;
-        jacobian_condition = cond;
-        let mut lambda = 1.0;
-        let mut accepted = false;
-        for _ in 0..20 {
-            let bt: Vec<f64> = b.iter().enumerate().map(|(i, v)| v + lambda * step[i]).collect();
-            let mut at: Vec<f64> = (0..na).map(|i| a[i] + lambda * step[nb + 1 + i]).collect();
-            at.push(1.0);
-            let et = output_error(&bt, &at, &xs, &hs, &ws);
-            // A trial whose roots do not converge is a rejected step, like
-            // one that is unstable or does not lower the error.
-            let stable = || poly_roots(&at, "trial denominator").is_ok_and(|r| r.iter().all(|r| r.re < 0.0));
-            if et.is_finite() && et < err && stable() {
-                let improvement = (err - et) / err;
-                b = bt;
-                a = at;
-                err = et;
-                accepted = improvement > opts.tol;
-                break;
-            }
-            lambda *= 0.5;
-        }
-        if !accepted {
+        gn.jacobian_condition = cond;
+        if !damped_step(lines, &mut gn, &step, nb, na, opts.tol) {
             break;
         }
     }
-    // An ill-conditioned Jacobian (near pole-zero cancellation: more poles
-    // than the data support) is reported, not fatal: the SVD step is the
-    // minimum-norm one, and what breaks downstream (observability, Riccati)
-    // is checked there.
-    let tf = RationalTf { b, a, omega_scale };
-    if !tf.is_stable()? {
-        bail!("the {nb}:{na} fit has unstable poles after Gauss–Newton; lower the orders or fit narrower bands");
+    Ok(gn)
+}
+
+/// The weighted residual sqrt(w)·(G − B/A) and its Jacobian with respect to
+/// [b_0..b_nb, a_0..a_{na−1}], real and imaginary parts in alternate rows.
+fn jacobian(lines: &FitLines, b: &[f64], a: &[f64], nb: usize, na: usize) -> (DMatrix<f64>, DVector<f64>) {
+    let m = lines.xs.len();
+    let mut jac = DMatrix::<f64>::zeros(2 * m, nb + 1 + na);
+    let mut res = DVector::<f64>::zeros(2 * m);
+    for (k, ((x, g), wk)) in lines.xs.iter().zip(&lines.hs).zip(&lines.ws).enumerate() {
+        let sw = wk.sqrt();
+        let (bv, av) = (poly_eval(b, *x), poly_eval(a, *x));
+        let e = sw * (g - bv / av);
+        res[2 * k] = e.re;
+        res[2 * k + 1] = e.im;
+        let mut xp = Complex64::new(1.0, 0.0);
+        for i in 0..na {
+            if i <= nb {
+                let d = sw * xp / av;
+                jac[(2 * k, i)] = d.re;
+                jac[(2 * k + 1, i)] = d.im;
+            }
+            let d = -sw * bv * xp / (av * av);
+            jac[(2 * k, nb + 1 + i)] = d.re;
+            jac[(2 * k + 1, nb + 1 + i)] = d.im;
+            xp *= x;
+        }
+        if nb == na {
+            let d = sw * xp / av;
+            jac[(2 * k, nb)] = d.re;
+            jac[(2 * k + 1, nb)] = d.im;
+        }
     }
-    Ok(RfpFit { tf, rfp_condition, jacobian_condition, initial_error, final_error: err, iterations, reflected_poles })
+    (jac, res)
+}
+
+/// Take `step`, halved up to 20 times until the output error decreases and
+/// A stays stable; true if a step was taken and lowered the error by more
+/// than `tol` (relative).
+fn damped_step(lines: &FitLines, gn: &mut GaussNewton, step: &DVector<f64>, nb: usize, na: usize, tol: f64) -> bool {
+    let mut lambda = 1.0;
+    for _ in 0..20 {
+        let bt: Vec<f64> = gn.b.iter().enumerate().map(|(i, v)| v + lambda * step[i]).collect();
+        let mut at: Vec<f64> = (0..na).map(|i| gn.a[i] + lambda * step[nb + 1 + i]).collect();
+        at.push(1.0);
+        let et = output_error(&bt, &at, &lines.xs, &lines.hs, &lines.ws);
+        // A trial whose roots do not converge is a rejected step, like
+        // one that is unstable or does not lower the error.
+        let stable = || poly_roots(&at, "trial denominator").is_ok_and(|r| r.iter().all(|r| r.re < 0.0));
+        if et.is_finite() && et < gn.error && stable() {
+            let improvement = (gn.error - et) / gn.error;
+            gn.b = bt;
+            gn.a = at;
+            gn.error = et;
+            return improvement > tol;
+        }
+        lambda *= 0.5;
+    }
+    false
 }
 
 /// Paper fit weights: coherence γ² per line (1 without coherence), zero

@@ -65,39 +65,94 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
     let Some((hline, header)) = lines.next() else {
         bail!("{source}: empty file (expected a header row starting with freq_hz)");
     };
-    let delim = if header.contains(',') {
-        ','
-    } else if header.contains(';') {
-        ';'
-    } else if header.contains('\t') {
-        '\t'
-    } else {
-        ','
-    };
+    let header = Header::parse(header, hline, source)?;
+    let mut rows = Rows::default();
+    for (lineno, line) in lines {
+        rows.push(&header, lineno, line, source)?;
+    }
+    if rows.freq.is_empty() {
+        bail!("{source}: no data rows after the header (line {hline})");
+    }
+    Ok(rows.into_frf(&header))
+}
 
-    // Header: map each column to freq or (entry, kind); entry = 3·channel + direction.
-    let mut freq_col: Option<usize> = None;
-    let mut cols: Vec<Option<(usize, Kind)>> = Vec::new();
-    // Column names as written (lower case), for messages.
-    let mut names: Vec<String> = Vec::new();
-    // slot[entry][kind] = column index; spelling[entry] = how the entry is named.
-    let mut slot = [[None::<usize>; 3]; 9];
-    let mut spelling: [Option<(String, usize)>; 9] = Default::default();
-    for (c, raw) in header.split(delim).enumerate() {
-        let name = unquote(raw).to_ascii_lowercase();
-        let colno = c + 1;
-        if name == "freq_hz" {
-            if let Some(prev) = freq_col {
-                bail!("{source}: line {hline}, column {colno}: duplicate column freq_hz (also column {})", prev + 1);
+/// The header row: what each column holds.
+struct Header {
+    delim: char,
+    /// Per column: None for freq_hz, else (entry, kind); entry = 3·channel + direction.
+    cols: Vec<Option<(usize, Kind)>>,
+    /// Column names as written (lower case), for messages.
+    names: Vec<String>,
+    /// `slot[entry][kind]`: the column of that part of the entry.
+    slot: [[Option<usize>; 3]; 9],
+    /// Entries with both re and im columns, in entry order.
+    present: Vec<usize>,
+}
+
+impl Header {
+    /// Parse the header row (line `hline`): known, unique column names,
+    /// freq_hz, and re/im pairs.
+    fn parse(header: &str, hline: usize, source: &str) -> Result<Header> {
+        let delim = if header.contains(',') {
+            ','
+        } else if header.contains(';') {
+            ';'
+        } else if header.contains('\t') {
+            '\t'
+        } else {
+            ','
+        };
+        let mut h = Header { delim, cols: Vec::new(), names: Vec::new(), slot: [[None; 3]; 9], present: Vec::new() };
+        let mut freq_col: Option<usize> = None;
+        // How each entry is spelled (`x` or `xx`), and its first column.
+        let mut spelling: [Option<(String, usize)>; 9] = Default::default();
+        for (c, raw) in header.split(delim).enumerate() {
+            let name = unquote(raw).to_ascii_lowercase();
+            if name == "freq_hz" {
+                if let Some(prev) = freq_col {
+                    bail!(
+                        "{source}: line {hline}, column {}: duplicate column freq_hz (also column {})",
+                        c + 1,
+                        prev + 1
+                    );
+                }
+                freq_col = Some(c);
+                h.cols.push(None);
+                h.names.push(name);
+                continue;
             }
-            freq_col = Some(c);
-            cols.push(None);
-            names.push(name);
-            continue;
+            let at = format!("{source}: line {hline}, column {}", c + 1);
+            let (entry, kind) = h.entry_column(&at, raw, &name, c, &mut spelling)?;
+            h.cols.push(Some((entry, kind)));
+            h.names.push(name);
         }
-        let Some((entry, kind, spelled)) = column_entry(&name) else {
+        if freq_col.is_none() {
+            bail!("{source}: line {hline}: missing column freq_hz in the header");
+        }
+        h.present = pairs(&h.slot, &spelling, &format!("{source}: line {hline}"))?;
+        if h.present.is_empty() {
             bail!(
-                "{source}: line {hline}, column {colno}: unknown column name {:?} \
+                "{source}: line {hline}: no FRF columns in the header (expected x_re/x_im, y_re/y_im or z_re/z_im, \
+                 or <i><j>_re/<i><j>_im)"
+            );
+        }
+        Ok(h)
+    }
+
+    /// Column `c` (`raw` as written, `name` lower case; `at` names it in
+    /// messages) of an FRF entry: the entry and kind, given once, in one
+    /// spelling per entry.
+    fn entry_column(
+        &mut self,
+        at: &str,
+        raw: &str,
+        name: &str,
+        c: usize,
+        spelling: &mut [Option<(String, usize)>; 9],
+    ) -> Result<(usize, Kind)> {
+        let Some((entry, kind, spelled)) = column_entry(name) else {
+            bail!(
+                "{at}: unknown column name {:?} \
                  (expected freq_hz, then <a>_re, <a>_im and optionally <a>_coh for a = x, y, z, \
                  or <i><j>_re, <i><j>_im, <i><j>_coh for channel i and force direction j)",
                 unquote(raw)
@@ -106,10 +161,10 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
         let (i, j) = (entry / 3, entry % 3);
         match &spelling[entry] {
             Some((s, first)) if *s != spelled => bail!(
-                "{source}: line {hline}, column {colno}: column {name} and column {} ({}) are the same entry {} \
+                "{at}: column {name} and column {} ({}) are the same entry {} \
                  ({}_re means {}_re): give each entry once, in one spelling",
                 first + 1,
-                names[*first],
+                self.names[*first],
                 entry_name(i, j),
                 axis_name(i),
                 entry_name(i, j)
@@ -118,60 +173,60 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
             None => spelling[entry] = Some((spelled.clone(), c)),
         }
         let k = kind as usize;
-        if let Some(prev) = slot[entry][k] {
+        if let Some(prev) = self.slot[entry][k] {
             let what = if spelled.len() == 1 {
                 format!("axis {}", axis_name(i))
             } else {
                 format!("entry {} (channel {}, force {})", entry_name(i, j), axis_name(i), axis_name(j))
             };
-            bail!(
-                "{source}: line {hline}, column {colno}: duplicate column {name} (also column {}): {what} given twice",
-                prev + 1
-            );
+            bail!("{at}: duplicate column {name} (also column {}): {what} given twice", prev + 1);
         }
-        slot[entry][k] = Some(c);
-        cols.push(Some((entry, kind)));
-        names.push(name);
+        self.slot[entry][k] = Some(c);
+        Ok((entry, kind))
     }
-    if freq_col.is_none() {
-        bail!("{source}: line {hline}: missing column freq_hz in the header");
-    }
+}
+
+/// The entries with both re and im columns; a lone re, im or coh column is
+/// refused (`at` names the header line).
+fn pairs(slot: &[[Option<usize>; 3]; 9], spelling: &[Option<(String, usize)>; 9], at: &str) -> Result<Vec<usize>> {
     let mut present = Vec::new();
     for (entry, s) in slot.iter().enumerate() {
         let a = spelling[entry].as_ref().map_or("?", |(s, _)| s.as_str());
         match (s[0], s[1], s[2]) {
             (None, None, None) => {}
             (Some(_), Some(_), _) => present.push(entry),
-            (Some(c), None, _) => {
-                bail!("{source}: line {hline}: column {a}_re (column {}) has no matching {a}_im column", c + 1)
-            }
-            (None, Some(c), _) => {
-                bail!("{source}: line {hline}: column {a}_im (column {}) has no matching {a}_re column", c + 1)
-            }
+            (Some(c), None, _) => bail!("{at}: column {a}_re (column {}) has no matching {a}_im column", c + 1),
+            (None, Some(c), _) => bail!("{at}: column {a}_im (column {}) has no matching {a}_re column", c + 1),
             (None, None, Some(c)) => {
-                bail!("{source}: line {hline}: column {a}_coh (column {}) without {a}_re and {a}_im columns", c + 1)
+                bail!("{at}: column {a}_coh (column {}) without {a}_re and {a}_im columns", c + 1)
             }
         }
     }
-    if present.is_empty() {
-        bail!(
-            "{source}: line {hline}: no FRF columns in the header (expected x_re/x_im, y_re/y_im or z_re/z_im, \
-             or <i><j>_re/<i><j>_im)"
-        );
-    }
+    Ok(present)
+}
 
-    let ncols = cols.len();
-    let mut freq: Vec<f64> = Vec::new();
-    let mut re: [Vec<f64>; 9] = Default::default();
-    let mut im: [Vec<f64>; 9] = Default::default();
-    let mut coh: [Vec<f64>; 9] = Default::default();
-    for (lineno, line) in lines {
-        let fields: Vec<&str> = line.split(delim).collect();
+/// The data rows read so far, by column kind and entry.
+#[derive(Default)]
+struct Rows {
+    /// Frequency lines (Hz).
+    freq: Vec<f64>,
+    re: [Vec<f64>; 9],
+    im: [Vec<f64>; 9],
+    /// Coherence γ², clamped to [0, 1].
+    coh: [Vec<f64>; 9],
+}
+
+impl Rows {
+    /// Read data row `line` (line `lineno`): one finite number per column,
+    /// frequencies non-negative and strictly ascending, coherence in [0, 1].
+    fn push(&mut self, header: &Header, lineno: usize, line: &str, source: &str) -> Result<()> {
+        let ncols = header.cols.len();
+        let fields: Vec<&str> = line.split(header.delim).collect();
         if fields.len() != ncols {
             bail!("{source}: line {lineno}: {} fields, but the header has {ncols} columns", fields.len());
         }
         for (c, raw) in fields.iter().enumerate() {
-            let at = || format!("{source}: line {lineno}, column {} ({})", c + 1, names[c]);
+            let at = || format!("{source}: line {lineno}, column {} ({})", c + 1, header.names[c]);
             let tok = unquote(raw);
             if tok.is_empty() {
                 bail!("{}: empty value", at());
@@ -180,12 +235,12 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
             if !v.is_finite() {
                 bail!("{}: value {tok} is not finite (NaN or infinite)", at());
             }
-            match cols[c] {
+            match header.cols[c] {
                 None => {
                     if v < 0.0 {
                         bail!("{}: negative frequency {v} Hz", at());
                     }
-                    if let Some(&prev) = freq.last() {
+                    if let Some(&prev) = self.freq.last() {
                         if v <= prev {
                             bail!(
                                 "{}: frequency {v} Hz is not greater than the previous line's {prev} Hz \
@@ -194,35 +249,37 @@ pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
                             );
                         }
                     }
-                    freq.push(v);
+                    self.freq.push(v);
                 }
-                Some((e, Kind::Re)) => re[e].push(v),
-                Some((e, Kind::Im)) => im[e].push(v),
+                Some((e, Kind::Re)) => self.re[e].push(v),
+                Some((e, Kind::Im)) => self.im[e].push(v),
                 Some((e, Kind::Coh)) => {
                     if !(-COHERENCE_SLACK..=1.0 + COHERENCE_SLACK).contains(&v) {
                         bail!("{}: coherence {v} outside [0, 1]", at());
                     }
-                    coh[e].push(v.clamp(0.0, 1.0));
+                    self.coh[e].push(v.clamp(0.0, 1.0));
                 }
             }
         }
+        Ok(())
     }
-    if freq.is_empty() {
-        bail!("{source}: no data rows after the header (line {hline})");
-    }
-    let mut axes = Vec::new();
-    let mut cross = Vec::new();
-    for e in present {
-        let frf = re[e].iter().zip(&im[e]).map(|(&r, &i)| Complex64::new(r, i)).collect();
-        let coherence = slot[e][Kind::Coh as usize].map(|_| std::mem::take(&mut coh[e]));
-        let (i, j) = (e / 3, e % 3);
-        if i == j {
-            axes.push(AxisFrf { axis: i, frf, coherence });
-        } else {
-            cross.push(CrossFrf { channel: i, direction: j, frf, coherence });
+
+    /// The FRF of the entries the header has.
+    fn into_frf(mut self, header: &Header) -> Frf {
+        let mut axes = Vec::new();
+        let mut cross = Vec::new();
+        for &e in &header.present {
+            let frf = self.re[e].iter().zip(&self.im[e]).map(|(&r, &i)| Complex64::new(r, i)).collect();
+            let coherence = header.slot[e][Kind::Coh as usize].map(|_| std::mem::take(&mut self.coh[e]));
+            let (i, j) = (e / 3, e % 3);
+            if i == j {
+                axes.push(AxisFrf { axis: i, frf, coherence });
+            } else {
+                cross.push(CrossFrf { channel: i, direction: j, frf, coherence });
+            }
         }
+        Frf { freq_hz: self.freq, axes, cross }
     }
-    Ok(Frf { freq_hz: freq, axes, cross })
 }
 
 /// The entry (3·channel + direction), kind and spelling (`x` or `xy`) of an

@@ -294,15 +294,47 @@ impl Walker {
         self.objects.len() - 1
     }
 
-    /// The next segment, None at the end of the file.
+    /// The next segment, None at the end of the file: its lead-in, then its
+    /// metadata (or the previous segment's object list), then the layout of
+    /// its raw data.
     fn next_segment(&mut self) -> Result<Option<Segment>> {
-        let at = self.next;
-        let source = self.src.source.clone();
-        if at >= self.src.len {
+        if self.next >= self.src.len {
             return Ok(None);
         }
         self.no += 1;
-        let no = self.no;
+        let lead = self.lead_in()?;
+        let mut seg = Segment {
+            no: lead.no,
+            data_start: lead.body + lead.raw_off,
+            data_end: lead.body + lead.next_off,
+            interleaved: lead.toc & TOC_INTERLEAVED != 0,
+            big: lead.big,
+            ..Segment::default()
+        };
+        seg.list = if lead.toc & TOC_META != 0 { self.metadata(&lead)? } else { self.prev.list.clone() };
+        self.prev = Segment { list: seg.list.clone(), ..Segment::default() };
+        if lead.toc & TOC_RAW == 0 {
+            seg.list.clear();
+        }
+        if lead.toc & TOC_DAQMX != 0 {
+            // DAQmx raw buffers: not laid out here; their channels are
+            // refused if selected, the others of the segment too.
+            for e in &seg.list {
+                self.objects[e.0].daqmx = true;
+            }
+            seg.list.clear();
+            return Ok(Some(seg));
+        }
+        self.lay_out(&mut seg, lead.at)?;
+        Ok(Some(seg))
+    }
+
+    /// Read and check the 28-byte lead-in at the next segment's offset
+    /// (tag, ToC mask, version, next-segment and raw-data offsets); moves
+    /// the next segment's offset past this one.
+    fn lead_in(&mut self) -> Result<LeadIn> {
+        let (at, no) = (self.next, self.no);
+        let source = self.src.source.clone();
         self.src.seek(at)?;
         let mut lead = [0u8; LEAD_IN as usize];
         self.src.read(&mut lead, &|| format!("the lead-in of segment {no}"))?;
@@ -314,171 +346,89 @@ impl Walker {
         }
         let toc = u32::from_le_bytes([lead[4], lead[5], lead[6], lead[7]]);
         let big = toc & TOC_BIG_ENDIAN != 0;
-        let rd32 = |b: &[u8]| {
-            let a = [b[0], b[1], b[2], b[3]];
-            if big {
-                u32::from_be_bytes(a)
-            } else {
-                u32::from_le_bytes(a)
-            }
-        };
-        let rd64 = |b: &[u8]| {
-            let mut a = [0u8; 8];
-            a.copy_from_slice(b);
-            if big {
-                u64::from_be_bytes(a)
-            } else {
-                u64::from_le_bytes(a)
-            }
-        };
-        let version = rd32(&lead[8..12]);
+        let version = u32_in(&lead[8..12], big);
         if version != 4712 && version != 4713 {
             bail!("{source}: segment {no}, offset {at}: TDMS version {version} (this reader knows 4712 and 4713)");
         }
-        let next_off = rd64(&lead[12..20]);
-        let raw_off = rd64(&lead[20..28]);
+        let next_off = u64_in(&lead[12..20], big);
+        let raw_off = u64_in(&lead[20..28], big);
         let body = at + LEAD_IN;
         let left = self.src.len - body;
         if next_off == INCOMPLETE {
             bail!(
-                "{source}: segment {no}, offset {at}: the segment was never finished (next-segment offset unset: the writer stopped); \
-                 the record is incomplete"
+                "{source}: segment {no}, offset {at}: the segment was never finished (next-segment offset unset: \
+                 the writer stopped); the record is incomplete"
             );
         }
         if next_off > left {
             bail!(
-                "{source}: segment {no}, offset {at}: the segment declares {next_off} bytes after its lead-in, the file has {left}: the file is truncated"
+                "{source}: segment {no}, offset {at}: the segment declares {next_off} bytes after its lead-in, \
+                 the file has {left}: the file is truncated"
             );
         }
         if raw_off > next_off {
-            bail!("{source}: segment {no}, offset {at}: raw data offset {raw_off} is beyond the segment's end ({next_off})");
+            bail!(
+                "{source}: segment {no}, offset {at}: raw data offset {raw_off} is beyond the segment's end \
+                 ({next_off})"
+            );
         }
         self.next = body + next_off;
-        let mut seg = Segment {
-            no,
+        Ok(LeadIn { at, no, toc, big, body, next_off, raw_off })
+    }
 
-            data_start: body + raw_off,
-            data_end: body + next_off,
-            interleaved: toc & TOC_INTERLEAVED != 0,
-            big,
-            ..Segment::default()
-        };
-        if toc & TOC_META != 0 {
-            let mut list: Vec<(usize, RawIndex)> =
-                if toc & TOC_NEW_OBJ_LIST != 0 { Vec::new() } else { self.prev.list.clone() };
-            let mut m = Meta { src: &mut self.src, big, seg: no, end: body + raw_off };
-            let n_obj = m.u32("the number of objects")?;
-            let mut found: Vec<FoundObject> = Vec::new();
-            for _ in 0..n_obj {
-                let path = m.string("an object path")?;
-                let at_idx = m.src.pos;
-                let idx_len = m.u32("a raw data index")?;
-                // None: no data; Some(None): as before; Some(Some): new.
-                let (index, daqmx) = match idx_len {
-                    0xFFFF_FFFF => (None, false),
-                    0 => (Some(None), false),
-                    0x6912_0000..=0x6913_FFFF => {
-                        // DAQmx format-changing scaler / digital line scaler: skip its description.
-                        let ty = m.u32("a DAQmx index")?;
-                        let _dim = m.u32("a DAQmx index")?;
-                        let n = m.u64("a DAQmx index")?;
-                        let n_scalers = m.u32("a DAQmx index")?;
-                        let sz = if idx_len >> 16 == 0x6912 { 17u64 } else { 9 };
-                        m.bytes(u64::from(n_scalers).saturating_mul(sz), "DAQmx scalers")?;
-                        let n_widths = m.u32("a DAQmx index")?;
-                        let widths = m.bytes(u64::from(n_widths).saturating_mul(4), "DAQmx raw data widths")?;
-                        let w: u64 = widths.chunks_exact(4).map(|c| u64::from(rd32(c))).sum();
-                        (Some(Some(RawIndex { ty, n, bytes: n.saturating_mul(w) })), true)
-                    }
-                    l => {
-                        let ty = m.u32("a raw data index")?;
-                        let dim = m.u32("a raw data index")?;
-                        let n = m.u64("a raw data index")?;
-                        if dim != 1 {
-                            bail!("{source}: segment {no}, offset {at_idx}: object {}: array dimension {dim} (TDMS allows 1)", shown(&path));
-                        }
-                        let bytes = match type_size(ty) {
-                            Some(s) if l == 20 => n.checked_mul(s),
-                            None if ty == TY_STRING && l == 28 => Some(m.u64("a raw data index")?),
-                            _ => bail!("{source}: segment {no}, offset {at_idx}: object {}: raw data index of {l} bytes for {} values", shown(&path), type_name(ty)),
-                        }
-                        .ok_or_else(|| anyhow!("{source}: segment {no}, offset {at_idx}: object {}: {n} values overflow", shown(&path)))?;
-                        (Some(Some(RawIndex { ty, n, bytes })), false)
-                    }
-                };
-                let n_props = m.u32("the number of properties")?;
-                let mut props = Vec::new();
-                for _ in 0..n_props {
-                    let name = m.string("a property name")?;
-                    let at_p = m.src.pos;
-                    let ty = m.u32("a property type")?;
-                    let v = match ty {
-                        TY_STRING => Prop::Str(m.string("a string property")?),
-                        t if is_real(t) => {
-                            let sz = type_size(t).unwrap_or(8);
-                            let b = m.bytes(sz, "a property value")?;
-                            Prop::Num(decode(t, big, &b))
-                        }
-                        t => match type_size(t) {
-                            Some(sz) => {
-                                m.bytes(sz, "a property value")?;
-                                Prop::Other
-                            }
-                            None => bail!("{source}: segment {no}, offset {at_p}: property {name:?} of {}: unknown data type 0x{t:X}", shown(&path)),
-                        },
-                    };
-                    if self.keep_props {
-                        props.push((name, v));
-                    }
-                }
-                found.push((path, index, daqmx, props));
-            }
-            for (path, index, daqmx, props) in found {
-                let i = self.object(path);
-                let o = &mut self.objects[i];
-                for (k, v) in props {
-                    o.props.insert(k, v);
-                }
-                let ri = match index {
-                    None => {
-                        // No data in this segment: off the list.
-                        list.retain(|e| e.0 != i);
-                        continue;
-                    }
-                    Some(Some(ri)) => {
-                        o.daqmx = daqmx;
-                        ri
-                    }
-                    Some(None) => o.index.ok_or_else(|| {
-                        anyhow!(
-                            "{source}: segment {no}: object {}: raw data index \"same as before\", but it had none",
-                            shown(&o.path)
-                        )
-                    })?,
-                };
-                o.index = Some(ri);
-                match list.iter_mut().find(|e| e.0 == i) {
-                    Some(e) => e.1 = ri,
-                    None => list.push((i, ri)),
-                }
-            }
-            seg.list = list;
-        } else {
-            seg.list = self.prev.list.clone();
+    /// Read the segment's metadata and apply it to the objects; returns the
+    /// objects with raw data in this segment, in order, with their index.
+    fn metadata(&mut self, lead: &LeadIn) -> Result<Vec<(usize, RawIndex)>> {
+        let mut list = if lead.toc & TOC_NEW_OBJ_LIST != 0 { Vec::new() } else { self.prev.list.clone() };
+        let keep_props = self.keep_props;
+        let mut m = Meta { src: &mut self.src, big: lead.big, seg: lead.no, end: lead.body + lead.raw_off };
+        let n_obj = m.u32("the number of objects")?;
+        let mut found: Vec<FoundObject> = Vec::new();
+        for _ in 0..n_obj {
+            let path = m.string("an object path")?;
+            let (index, daqmx) = raw_index(&mut m, &path)?;
+            let props = properties(&mut m, &path, keep_props)?;
+            found.push((path, index, daqmx, props));
         }
-        self.prev = Segment { list: seg.list.clone(), ..Segment::default() };
-        if toc & TOC_RAW == 0 {
-            seg.list.clear();
-        }
-        if toc & TOC_DAQMX != 0 {
-            // DAQmx raw buffers: not laid out here; their channels are
-            // refused if selected, the others of the segment too.
-            for e in &seg.list {
-                self.objects[e.0].daqmx = true;
+        for (path, index, daqmx, props) in found {
+            let i = self.object(path);
+            let o = &mut self.objects[i];
+            for (k, v) in props {
+                o.props.insert(k, v);
             }
-            seg.list.clear();
-            return Ok(Some(seg));
+            let ri = match index {
+                None => {
+                    // No data in this segment: off the list.
+                    list.retain(|e| e.0 != i);
+                    continue;
+                }
+                Some(Some(ri)) => {
+                    o.daqmx = daqmx;
+                    ri
+                }
+                Some(None) => o.index.ok_or_else(|| {
+                    anyhow!(
+                        "{}: segment {}: object {}: raw data index \"same as before\", but it had none",
+                        self.src.source,
+                        lead.no,
+                        shown(&o.path)
+                    )
+                })?,
+            };
+            o.index = Some(ri);
+            match list.iter_mut().find(|e| e.0 == i) {
+                Some(e) => e.1 = ri,
+                None => list.push((i, ri)),
+            }
         }
+        Ok(list)
+    }
+
+    /// Lay out the raw data of `seg` (lead-in at offset `at`): drop objects
+    /// without values, count the chunks, check an interleaved segment's
+    /// rows, add the values to the objects' totals.
+    fn lay_out(&mut self, seg: &mut Segment, at: u64) -> Result<()> {
+        let (source, no) = (&self.src.source, seg.no);
         let raw = seg.data_end - seg.data_start;
         seg.list.retain(|e| e.1.n > 0);
         seg.chunk_bytes = seg
@@ -489,11 +439,12 @@ impl Walker {
         if seg.chunk_bytes == 0 {
             seg.list.clear();
             seg.chunks = 0;
-            return Ok(Some(seg));
+            return Ok(());
         }
         if !raw.is_multiple_of(seg.chunk_bytes) {
             bail!(
-                "{source}: segment {no}, offset {at}: {raw} bytes of raw data are not a whole number of chunks of {} bytes (the metadata's channels)",
+                "{source}: segment {no}, offset {at}: {raw} bytes of raw data are not a whole number of chunks of {} \
+                 bytes (the metadata's channels)",
                 seg.chunk_bytes
             );
         }
@@ -502,7 +453,8 @@ impl Walker {
             let n0 = seg.list[0].1.n;
             if let Some(e) = seg.list.iter().find(|e| e.1.n != n0 || type_size(e.1.ty).is_none()) {
                 bail!(
-                    "{source}: segment {no}, offset {at}: interleaved data, but object {} has {} {} values where the first has {n0}",
+                    "{source}: segment {no}, offset {at}: interleaved data, but object {} has {} {} values where the \
+                     first has {n0}",
                     shown(&self.objects[e.0].path),
                     e.1.n,
                     type_name(e.1.ty)
@@ -513,8 +465,122 @@ impl Walker {
             let o = &mut self.objects[e.0];
             o.total = o.total.saturating_add(e.1.n.saturating_mul(seg.chunks));
         }
-        Ok(Some(seg))
+        Ok(())
     }
+}
+
+/// A segment's lead-in, checked.
+struct LeadIn {
+    /// File offset and 1-based number of the segment.
+    at: u64,
+    no: usize,
+    /// Table of contents mask.
+    toc: u32,
+    big: bool,
+    /// Offset of the metadata (after the lead-in).
+    body: u64,
+    /// Next segment and raw data, in bytes from `body`.
+    next_off: u64,
+    raw_off: u64,
+}
+
+/// A u32 from the 4 bytes `b` in the given byte order.
+fn u32_in(b: &[u8], big: bool) -> u32 {
+    let a = [b[0], b[1], b[2], b[3]];
+    if big {
+        u32::from_be_bytes(a)
+    } else {
+        u32::from_le_bytes(a)
+    }
+}
+
+/// A u64 from the 8 bytes `b` in the given byte order.
+fn u64_in(b: &[u8], big: bool) -> u64 {
+    let mut a = [0u8; 8];
+    a.copy_from_slice(b);
+    if big {
+        u64::from_be_bytes(a)
+    } else {
+        u64::from_le_bytes(a)
+    }
+}
+
+/// An object's raw-data index in the metadata (None: no data; Some(None):
+/// as before; Some(Some): new) and whether it is DAQmx raw data, whose
+/// scaler description is skipped.
+fn raw_index(m: &mut Meta, path: &str) -> Result<(Option<Option<RawIndex>>, bool)> {
+    let (source, no) = (m.src.source.clone(), m.seg);
+    let at_idx = m.src.pos;
+    let idx_len = m.u32("a raw data index")?;
+    Ok(match idx_len {
+        0xFFFF_FFFF => (None, false),
+        0 => (Some(None), false),
+        0x6912_0000..=0x6913_FFFF => {
+            // DAQmx format-changing scaler / digital line scaler: skip its description.
+            let ty = m.u32("a DAQmx index")?;
+            let _dim = m.u32("a DAQmx index")?;
+            let n = m.u64("a DAQmx index")?;
+            let n_scalers = m.u32("a DAQmx index")?;
+            let sz = if idx_len >> 16 == 0x6912 { 17u64 } else { 9 };
+            m.bytes(u64::from(n_scalers).saturating_mul(sz), "DAQmx scalers")?;
+            let n_widths = m.u32("a DAQmx index")?;
+            let widths = m.bytes(u64::from(n_widths).saturating_mul(4), "DAQmx raw data widths")?;
+            let w: u64 = widths.chunks_exact(4).map(|c| u64::from(u32_in(c, m.big))).sum();
+            (Some(Some(RawIndex { ty, n, bytes: n.saturating_mul(w) })), true)
+        }
+        l => {
+            let ty = m.u32("a raw data index")?;
+            let dim = m.u32("a raw data index")?;
+            let n = m.u64("a raw data index")?;
+            let here = || format!("{source}: segment {no}, offset {at_idx}: object {}", shown(path));
+            if dim != 1 {
+                bail!("{}: array dimension {dim} (TDMS allows 1)", here());
+            }
+            let bytes = match type_size(ty) {
+                Some(s) if l == 20 => n.checked_mul(s),
+                None if ty == TY_STRING && l == 28 => Some(m.u64("a raw data index")?),
+                _ => bail!("{}: raw data index of {l} bytes for {} values", here(), type_name(ty)),
+            }
+            .ok_or_else(|| anyhow!("{}: {n} values overflow", here()))?;
+            (Some(Some(RawIndex { ty, n, bytes })), false)
+        }
+    })
+}
+
+/// An object's properties in the metadata; real values kept as numbers,
+/// strings as strings. Returned only if `keep` (else read past).
+fn properties(m: &mut Meta, path: &str, keep: bool) -> Result<Vec<(String, Prop)>> {
+    let n_props = m.u32("the number of properties")?;
+    let mut props = Vec::new();
+    for _ in 0..n_props {
+        let name = m.string("a property name")?;
+        let at_p = m.src.pos;
+        let ty = m.u32("a property type")?;
+        let v = match ty {
+            TY_STRING => Prop::Str(m.string("a string property")?),
+            t if is_real(t) => {
+                let sz = type_size(t).unwrap_or(8);
+                let b = m.bytes(sz, "a property value")?;
+                Prop::Num(decode(t, m.big, &b))
+            }
+            t => match type_size(t) {
+                Some(sz) => {
+                    m.bytes(sz, "a property value")?;
+                    Prop::Other
+                }
+                None => bail!(
+                    "{}: segment {}, offset {at_p}: property {name:?} of {}: unknown data type 0x{t:X}",
+                    m.src.source,
+                    m.seg,
+                    shown(path)
+                ),
+            },
+        };
+        if keep {
+            props.push((name, v));
+        }
+    }
+    Ok(props)
 }
 
 /// A name or path from the file as shown in a one-line message.
@@ -689,6 +755,156 @@ fn take_rows(cursors: &mut [Cursor], m: usize, scale: &[f64], outs: &mut [Vec<f6
     Ok(())
 }
 
+/// The channels of the file: (object, group, name).
+fn channels(w: &Walker) -> Vec<(usize, String, String)> {
+    w.objects.iter().enumerate().filter_map(|(i, o)| split_path(&o.path).map(|(g, c)| (i, g, c))).collect()
+}
+
+/// The channels of the file as `group/name`, for messages.
+fn channel_list(chans: &[(usize, String, String)]) -> String {
+    chans.iter().map(|c| shown(&format!("{}/{}", c.1, c.2))).collect::<Vec<_>>().join(", ")
+}
+
+/// (axis, object) of each channel `--channels` names, by name or GROUP/NAME.
+fn pick_by_map(w: &Walker, source: &str, m: &ChannelMap) -> Result<Vec<(usize, usize)>> {
+    let chans = channels(w);
+    let mut picked = Vec::new();
+    for (axis, want) in &m.pairs {
+        let hits: Vec<&(usize, String, String)> = chans
+            .iter()
+            .filter(|(_, g, c)| c.eq_ignore_ascii_case(want) || format!("{g}/{c}").eq_ignore_ascii_case(want))
+            .collect();
+        match hits.as_slice() {
+            [one] => picked.push((*axis, one.0)),
+            [] => bail!(
+                "{source}: --channels f{}={want}: no such channel (channels: {})",
+                axis_name(*axis),
+                channel_list(&chans)
+            ),
+            _ => bail!("{source}: --channels f{}={want}: several groups have it; give GROUP/NAME", axis_name(*axis)),
+        }
+    }
+    Ok(picked)
+}
+
+/// (axis, object) of each channel whose name says a force axis ([`axis_from_name`]), one per axis.
+fn pick_by_name(w: &Walker, source: &str) -> Result<Vec<(usize, usize)>> {
+    let chans = channels(w);
+    let mut picked: Vec<(usize, usize)> = Vec::new();
+    for (i, g, c) in &chans {
+        if let Some(axis) = axis_from_name(c) {
+            if let Some(other) = picked.iter().find(|p| p.0 == axis) {
+                bail!(
+                    "{source}: channels {} and {} are both axis {}; pick one with --channels f{}=GROUP/NAME",
+                    shown(&w.objects[other.1].path),
+                    shown(&format!("{g}/{c}")),
+                    axis_name(axis),
+                    axis_name(axis)
+                );
+            }
+            picked.push((axis, *i));
+        }
+    }
+    if picked.is_empty() {
+        bail!(
+            "{source}: no channel named for a force axis (Fx, Force X, ...); channels: {}; give --channels fx=NAME,...",
+            if chans.is_empty() { "none".to_string() } else { channel_list(&chans) }
+        );
+    }
+    Ok(picked)
+}
+
+/// The picked channels as one record: names, scale to N, sampling interval
+/// (s, from `wf_increment`) and length.
+struct Record {
+    names: Vec<String>,
+    scale: Vec<f64>,
+    dt: Option<f64>,
+    n: u64,
+}
+
+/// Check the picked channels (axis, object): scaled real data, a force
+/// unit, one sampling interval and one length for all.
+fn check_channels(w: &Walker, source: &str, picked: &[(usize, usize)]) -> Result<Record> {
+    let mut names = Vec::new();
+    let mut scale = Vec::new();
+    let mut dt: Option<(f64, String)> = None;
+    let mut n: Option<(u64, String)> = None;
+    for &(axis, i) in picked {
+        let o = &w.objects[i];
+        let (g, c) = split_path(&o.path).unwrap_or_default();
+        let name = shown(&format!("{g}/{c}"));
+        let here = format!("{source}: channel {name} (f{})", axis_name(axis));
+        let k = channel_scale(o, &here)?;
+        check_rate(o, &here, &name, &mut dt)?;
+        match &n {
+            Some((n0, c0)) if *n0 != o.total => {
+                bail!("{here}: {} samples, but channel {c0} has {n0}: channels must have the same length", o.total)
+            }
+            Some(_) => {}
+            None => n = Some((o.total, name.clone())),
+        }
+        names.push(name);
+        scale.push(k);
+    }
+    Ok(Record { names, scale, dt: dt.map(|x| x.0), n: n.map_or(0, |x| x.0) })
+}
+
+/// A channel's data must be scaled real numbers; returns N per unit of its
+/// `unit_string` (N, kN, mN; 1 without one). `here` names the channel.
+fn channel_scale(o: &Object, here: &str) -> Result<f64> {
+    if o.daqmx {
+        bail!(
+            "{here}: DAQmx raw data (ADC codes with NI_Scaling properties) is not supported; log scaled data or \
+             convert the file"
+        );
+    }
+    if matches!(o.props.get("NI_Scaling_Status"), Some(Prop::Str(s)) if s.eq_ignore_ascii_case("unscaled")) {
+        bail!("{here}: NI_Scaling_Status is \"unscaled\" (raw values needing NI scaling); log scaled data");
+    }
+    let ty = o.index.map_or(0, |r| r.ty);
+    if o.total == 0 {
+        bail!("{here}: no data");
+    }
+    if !is_real(ty) {
+        bail!("{here}: {} values; a force channel must be real numbers", type_name(ty));
+    }
+    Ok(match o.props.get("unit_string") {
+        Some(Prop::Str(u)) => {
+            newton_per_unit(u).ok_or_else(|| anyhow!("{here}: unit {u:?}; expected N (kN and mN are scaled)"))?
+        }
+        _ => 1.0,
+    })
+}
+
+/// A channel's `wf_increment` (s), if any, must be a positive sampling
+/// interval, the same as the first channel's (`dt`: interval and channel
+/// name); its `wf_start_offset`, if a number, finite.
+fn check_rate(o: &Object, here: &str, name: &str, dt: &mut Option<(f64, String)>) -> Result<()> {
+    match o.props.get("wf_increment") {
+        Some(Prop::Num(d)) => {
+            if !(d.is_finite() && *d > 0.0) {
+                bail!("{here}: property wf_increment = {d} s is not a positive sampling interval");
+            }
+            match &dt {
+                Some((d0, c0)) if ((d - d0) / d0).abs() > 1e-6 => {
+                    bail!("{here}: wf_increment {d} s, but channel {c0} has {d0} s: channels must share a rate")
+                }
+                Some(_) => {}
+                None => *dt = Some((*d, name.to_string())),
+            }
+        }
+        Some(_) => bail!("{here}: property wf_increment is not a number"),
+        None => {}
+    }
+    match o.props.get("wf_start_offset") {
+        Some(Prop::Num(t)) if !t.is_finite() => bail!("{here}: property wf_start_offset = {t} s is not finite"),
+        // Another type (none in NI's writers) is ignored: times start at 0.
+        _ => {}
+    }
+    Ok(())
+}
+
 /// A reader of the force channels of a TDMS file.
 pub struct TdmsReader {
     source: String,
@@ -714,116 +930,12 @@ impl TdmsReader {
         if n_seg == 0 {
             bail!("{source}: empty file (no TDMS segment)");
         }
-        // Channels: (object, group, name).
-        let chans: Vec<(usize, String, String)> =
-            w.objects.iter().enumerate().filter_map(|(i, o)| split_path(&o.path).map(|(g, c)| (i, g, c))).collect();
-        let list = || chans.iter().map(|c| shown(&format!("{}/{}", c.1, c.2))).collect::<Vec<_>>().join(", ");
-        let mut picked: Vec<(usize, usize)> = Vec::new(); // (axis, object)
-        match map {
-            Some(m) => {
-                for (axis, want) in &m.pairs {
-                    let hits: Vec<&(usize, String, String)> = chans
-                        .iter()
-                        .filter(|(_, g, c)| {
-                            c.eq_ignore_ascii_case(want) || format!("{g}/{c}").eq_ignore_ascii_case(want)
-                        })
-                        .collect();
-                    match hits.as_slice() {
-                        [one] => picked.push((*axis, one.0)),
-                        [] => bail!(
-                            "{source}: --channels f{}={want}: no such channel (channels: {})",
-                            axis_name(*axis),
-                            list()
-                        ),
-                        _ => bail!(
-                            "{source}: --channels f{}={want}: several groups have it; give GROUP/NAME",
-                            axis_name(*axis)
-                        ),
-                    }
-                }
-            }
-            None => {
-                for (i, g, c) in &chans {
-                    if let Some(axis) = axis_from_name(c) {
-                        if let Some(other) = picked.iter().find(|p| p.0 == axis) {
-                            bail!(
-                                "{source}: channels {} and {} are both axis {}; pick one with --channels f{}=GROUP/NAME",
-                                shown(&w.objects[other.1].path),
-                                shown(&format!("{g}/{c}")),
-                                axis_name(axis),
-                                axis_name(axis)
-                            );
-                        }
-                        picked.push((axis, *i));
-                    }
-                }
-                if picked.is_empty() {
-                    bail!(
-                        "{source}: no channel named for a force axis (Fx, Force X, ...); channels: {}; give --channels fx=NAME,...",
-                        if chans.is_empty() { "none".to_string() } else { list() }
-                    );
-                }
-            }
-        }
+        let mut picked = match map {
+            Some(m) => pick_by_map(&w, &source, m)?,
+            None => pick_by_name(&w, &source)?,
+        };
         picked.sort_by_key(|p| p.0);
-        let mut names = Vec::new();
-        let mut scale = Vec::new();
-        let mut dt: Option<(f64, String)> = None;
-        let mut n: Option<(u64, String)> = None;
-        for &(axis, i) in &picked {
-            let o = &w.objects[i];
-            let (g, c) = split_path(&o.path).unwrap_or_default();
-            let name = shown(&format!("{g}/{c}"));
-            let here = format!("{source}: channel {name} (f{})", axis_name(axis));
-            if o.daqmx {
-                bail!("{here}: DAQmx raw data (ADC codes with NI_Scaling properties) is not supported; log scaled data or convert the file");
-            }
-            if matches!(o.props.get("NI_Scaling_Status"), Some(Prop::Str(s)) if s.eq_ignore_ascii_case("unscaled")) {
-                bail!("{here}: NI_Scaling_Status is \"unscaled\" (raw values needing NI scaling); log scaled data");
-            }
-            let ty = o.index.map_or(0, |r| r.ty);
-            if o.total == 0 {
-                bail!("{here}: no data");
-            }
-            if !is_real(ty) {
-                bail!("{here}: {} values; a force channel must be real numbers", type_name(ty));
-            }
-            let k = match o.props.get("unit_string") {
-                Some(Prop::Str(u)) => newton_per_unit(u)
-                    .ok_or_else(|| anyhow!("{here}: unit {u:?}; expected N (kN and mN are scaled)"))?,
-                _ => 1.0,
-            };
-            match o.props.get("wf_increment") {
-                Some(Prop::Num(d)) => {
-                    if !(d.is_finite() && *d > 0.0) {
-                        bail!("{here}: property wf_increment = {d} s is not a positive sampling interval");
-                    }
-                    match &dt {
-                        Some((d0, c0)) if ((d - d0) / d0).abs() > 1e-6 => {
-                            bail!("{here}: wf_increment {d} s, but channel {c0} has {d0} s: channels must share a rate")
-                        }
-                        Some(_) => {}
-                        None => dt = Some((*d, name.clone())),
-                    }
-                }
-                Some(_) => bail!("{here}: property wf_increment is not a number"),
-                None => {}
-            }
-            match o.props.get("wf_start_offset") {
-                Some(Prop::Num(t)) if !t.is_finite() => bail!("{here}: property wf_start_offset = {t} s is not finite"),
-                // Another type (none in NI's writers) is ignored, as before: times start at 0.
-                _ => {}
-            }
-            match &n {
-                Some((n0, c0)) if *n0 != o.total => {
-                    bail!("{here}: {} samples, but channel {c0} has {n0}: channels must have the same length", o.total)
-                }
-                Some(_) => {}
-                None => n = Some((o.total, name.clone())),
-            }
-            names.push(name);
-            scale.push(k);
-        }
+        let rec = check_channels(&w, &source, &picked)?;
         let mut cursors = Vec::new();
         for &(_, i) in &picked {
             cursors.push(Cursor {
@@ -842,12 +954,12 @@ impl TdmsReader {
         Ok(TdmsReader {
             source,
             axes: picked.iter().map(|p| p.0).collect(),
-            names,
+            names: rec.names,
             cursors,
-            scale,
-            n: n.map_or(0, |x| x.0),
+            scale: rec.scale,
+            n: rec.n,
             done: 0,
-            dt: dt.map(|x| x.0),
+            dt: rec.dt,
             start: picked.first().and_then(|p| match w.objects[p.1].props.get("wf_start_offset") {
                 Some(Prop::Num(v)) => Some(*v),
                 _ => None,

@@ -392,11 +392,42 @@ pub(super) fn record7(r7: &[u8]) -> Option<(i64, i64, i64, f64, f64)> {
     }
 }
 
-/// Parse one dataset 58 whose id line was just read.
+/// Parse one dataset 58 whose id line was just read: header records 1 to 11,
+/// data (record 12), then the checks of units, values and abscissa.
 fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found58> {
+    let recs = header_records(cur, ctx, bin)?;
+    let dof = dof_id(ctx, recs[5])?;
+    let form = data_form(ctx, recs[6])?;
+    let target = target(ctx, &dof);
+    let keep = matches!(target, Target::Entry(_));
+    let values = match bin {
+        Some(h) => binary_values(cur, ctx, &form, h, keep)?,
+        None => ascii_values(cur, ctx, &form, keep)?,
+    };
+    let entry = match target {
+        Target::Entry(entry) => entry,
+        Target::Skip(note) => return Ok(Found58::Skipped(note)),
+    };
+    check_abscissa(ctx, recs[7])?;
+    let units = if dof.func_type == 4 { frf_units(ctx, &recs)? } else { None };
+    check_finite(ctx, &values, bin.is_some())?;
+    let freq = frequencies(ctx, &form, &values)?;
+    if dof.func_type == 4 {
+        Ok(frf_found(&form, &dof, &values, entry, freq, units))
+    } else {
+        coherence_found(ctx, &form, &values, entry, freq)
+    }
+}
+
+/// Header lines of a dataset 58, each with the offset of its line: records
+/// 1 to 11 (58b: the first 11 of its ASCII lines).
+type Records<'a> = Vec<(usize, &'a [u8])>;
+
+/// Read the header lines of a dataset 58 (11, or the 58b header's count).
+fn header_records<'a>(cur: &mut Cursor<'a>, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Records<'a>> {
     let data = cur.data;
     let n_ascii = bin.map_or(11, |b| b.n_ascii_lines);
-    let mut recs: Vec<(usize, &[u8])> = Vec::with_capacity(11);
+    let mut recs: Records<'a> = Vec::with_capacity(11);
     for r in 0..n_ascii {
         let Some((off, line)) = cur.next_line() else {
             bail!(
@@ -418,9 +449,19 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
             recs.push((off, line));
         }
     }
+    Ok(recs)
+}
 
-    // Record 6: DOF identification, Format(2(I5,I10),2(1X,10A1,I10,I4)).
-    let (off6, r6) = recs[5];
+/// Record 6 (DOF identification): function type, response and reference
+/// direction (1/2/3 = +X/+Y/+Z, negative: reversed).
+struct DofId {
+    func_type: i64,
+    rsp_dir: i64,
+    ref_dir: i64,
+}
+
+/// Read record 6, Format(2(I5,I10),2(1X,10A1,I10,I4)).
+fn dof_id(ctx: &Ctx, (off6, r6): (usize, &[u8])) -> Result<DofId> {
     let Some((func_type, rsp_dir, ref_dir)) = record6(r6) else {
         bail!(
             "{}: cannot read function type, response direction and reference direction from {}",
@@ -428,9 +469,41 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
             show(r6)
         );
     };
+    Ok(DofId { func_type, rsp_dir, ref_dir })
+}
 
-    // Record 7: data form, Format(3I10,3E13.5).
-    let (off7, r7) = recs[6];
+/// Record 7 (data form), checked: the layout of the values of record 12.
+struct DataForm {
+    /// Offset of the record's line, for messages.
+    off: usize,
+    num_pts: i64,
+    complex: bool,
+    double: bool,
+    /// Even abscissa (minimum + i·increment, Hz); uneven: stored with every point.
+    even: bool,
+    x_min: f64,
+    x_inc: f64,
+    /// Values per point: the abscissa if uneven, then re (and im if complex).
+    per_point: usize,
+    /// Values in record 12.
+    total: usize,
+}
+
+impl DataForm {
+    /// Number of points (frequency lines).
+    fn points(&self) -> usize {
+        self.total / self.per_point
+    }
+
+    /// Ordinate part `j` (0 = re, 1 = im) of point `k`.
+    fn ord(&self, vals: &[f64], k: usize, j: usize) -> f64 {
+        vals[k * self.per_point + usize::from(!self.even) + j]
+    }
+}
+
+/// Read and check record 7, Format(3I10,3E13.5): a supported ordinate data
+/// type and spacing, and no more values than the file can hold.
+fn data_form(ctx: &Ctx, (off7, r7): (usize, &[u8])) -> Result<DataForm> {
     let Some((ord_type, num_pts, spacing, x_min, x_inc)) = record7(r7) else {
         bail!(
             "{}: cannot read ordinate data type, number of points, spacing, abscissa minimum \
@@ -458,13 +531,28 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
         bail!("{}: number of data points is {num_pts}: no data", ctx.at(off7, "record 7"));
     }
     let per_point = usize::from(!even) + if complex { 2 } else { 1 };
-    let total =
-        usize::try_from(num_pts).ok().and_then(|n| n.checked_mul(per_point)).filter(|&t| t <= data.len()).ok_or_else(
-            || anyhow!("{}: {num_pts} data points declared, more than the file can hold", ctx.at(off7, "record 7")),
-        )?;
+    let total = usize::try_from(num_pts)
+        .ok()
+        .and_then(|n| n.checked_mul(per_point))
+        .filter(|&t| t <= ctx.data.len())
+        .ok_or_else(|| {
+        anyhow!("{}: {num_pts} data points declared, more than the file can hold", ctx.at(off7, "record 7"))
+    })?;
+    Ok(DataForm { off: off7, num_pts, complex, double, even, x_min, x_inc, per_point, total })
+}
 
-    // Which datasets we use: G_ij is response (channel) i over reference
-    // (force) j; an unknown reference direction (0) is taken as the direct FRF.
+/// What a dataset 58 is used for.
+enum Target {
+    /// Entry 3·i + j of the FRF matrix: response (channel) i, reference (force) j.
+    Entry(usize),
+    /// Not used, with the note saying why.
+    Skip(String),
+}
+
+/// The entry of an FRF or coherence with translational directions; an
+/// unknown reference direction (0) is taken as the direct FRF.
+fn target(ctx: &Ctx, dof: &DofId) -> Target {
+    let DofId { func_type, rsp_dir, ref_dir } = *dof;
     let axis = match rsp_dir.abs() {
         d @ 1..=3 => Some((d - 1) as usize),
         _ => None,
@@ -474,115 +562,128 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
         d @ 1..=3 => Some((d - 1) as usize),
         _ => None,
     };
-    let skip = if func_type != 4 && func_type != 6 {
-        Some(format!(
+    match (axis, direction) {
+        _ if func_type != 4 && func_type != 6 => Target::Skip(format!(
             "dataset #{} at line {}: function type {func_type} ({})",
             ctx.no,
             ctx.line,
             function_type_name(func_type)
-        ))
-    } else if axis.is_none() {
-        Some(format!(
+        )),
+        (None, _) => Target::Skip(format!(
             "dataset #{} at line {}: response direction {rsp_dir} is not a translation (±1/±2/±3)",
             ctx.no, ctx.line
-        ))
-    } else if direction.is_none() {
-        Some(format!(
+        )),
+        (Some(_), None) => Target::Skip(format!(
             "dataset #{} at line {}: reference direction {ref_dir} is not a translation (±1/±2/±3)",
             ctx.no, ctx.line
-        ))
-    } else {
-        None
+        )),
+        (Some(i), Some(j)) => Target::Entry(3 * i + j),
+    }
+}
+
+/// The values of record 12, each with the offset of its line (ASCII) or of
+/// the value itself (binary), for messages.
+struct Values {
+    vals: Vec<f64>,
+    offs: Vec<usize>,
+}
+
+impl Values {
+    fn with_capacity(total: usize) -> Values {
+        Values { vals: Vec::with_capacity(total.min(1 << 20)), offs: Vec::with_capacity(total.min(1 << 20)) }
+    }
+}
+
+/// Record 12 of a 58b dataset: the raw values of record 7's size, then the
+/// closing `-1`; the values are decoded only if `keep`.
+fn binary_values(cur: &mut Cursor, ctx: &Ctx, form: &DataForm, h: BinHeader, keep: bool) -> Result<Values> {
+    let data = cur.data;
+    let (num_pts, total, double) = (form.num_pts, form.total, form.double);
+    let mut v = Values::with_capacity(total);
+    let elem = if double { 8 } else { 4 };
+    let start = cur.pos;
+    let need = total * elem; // total <= data.len(), no overflow
+    let avail = data.len() - start;
+    if avail < need {
+        bail!(
+            "{}: record 7 declares {num_pts} points, {need} bytes of binary data, but only {avail} bytes follow",
+            ctx.at(start, "record 12")
+        );
+    }
+    let Some(next) = closing_at(data, start + need) else {
+        bail!(
+            "{}: no closing '    -1' after the {need} bytes of binary data declared by record 7 \
+             (the 58b header says {} bytes)",
+            ctx.at(start + need, "record 12"),
+            h.n_bytes.map_or("?".to_string(), |b| b.to_string())
+        );
     };
-
-    // Record 12: the data values, with the offset of the line (ASCII) or
-    // of the value itself (binary) for error messages.
-    let mut vals: Vec<f64> = Vec::with_capacity(total.min(1 << 20));
-    let mut offs: Vec<usize> = Vec::with_capacity(total.min(1 << 20));
-    match bin {
-        Some(h) => {
-            let elem = if double { 8 } else { 4 };
-            let start = cur.pos;
-            let need = total * elem; // total <= data.len(), no overflow
-            let avail = data.len() - start;
-            if avail < need {
-                bail!(
-                    "{}: record 7 declares {num_pts} points, {need} bytes of binary data, but only {avail} bytes follow",
-                    ctx.at(start, "record 12")
-                );
-            }
-            let Some(next) = closing_at(data, start + need) else {
-                bail!(
-                    "{}: no closing '    -1' after the {need} bytes of binary data declared by record 7 \
-                     (the 58b header says {} bytes)",
-                    ctx.at(start + need, "record 12"),
-                    h.n_bytes.map_or("?".to_string(), |b| b.to_string())
-                );
+    if keep {
+        for (i, chunk) in data[start..start + need].chunks_exact(elem).enumerate() {
+            let x = match (double, h.big_endian) {
+                (true, false) => chunk.try_into().map(f64::from_le_bytes).unwrap_or(f64::NAN),
+                (true, true) => chunk.try_into().map(f64::from_be_bytes).unwrap_or(f64::NAN),
+                (false, false) => chunk.try_into().map(f32::from_le_bytes).map_or(f64::NAN, f64::from),
+                (false, true) => chunk.try_into().map(f32::from_be_bytes).map_or(f64::NAN, f64::from),
             };
-            if skip.is_none() {
-                for (i, chunk) in data[start..start + need].chunks_exact(elem).enumerate() {
-                    let v = match (double, h.big_endian) {
-                        (true, false) => chunk.try_into().map(f64::from_le_bytes).unwrap_or(f64::NAN),
-                        (true, true) => chunk.try_into().map(f64::from_be_bytes).unwrap_or(f64::NAN),
-                        (false, false) => chunk.try_into().map(f32::from_le_bytes).map_or(f64::NAN, f64::from),
-                        (false, true) => chunk.try_into().map(f32::from_be_bytes).map_or(f64::NAN, f64::from),
-                    };
-                    vals.push(v);
-                    offs.push(start + i * elem);
-                }
-            }
-            cur.pos = next;
-        }
-        None => {
-            let widths: &[usize] = match (double, even, complex) {
-                (false, _, _) => &[13],
-                (true, true, _) => &[20],
-                (true, false, false) => &[13, 20],
-                (true, false, true) => &[13, 20, 20],
-            };
-            let mut closed = false;
-            while let Some((off, line)) = cur.next_line() {
-                let t = trim(line);
-                if t == b"-1" {
-                    closed = true;
-                    break;
-                }
-                if skip.is_some() || t.is_empty() {
-                    continue;
-                }
-                read_numbers(line, widths, &mut vals).map_err(|tok| {
-                    anyhow!("{}: cannot read {} as a number", ctx.at(off, "record 12"), show(tok.as_bytes()))
-                })?;
-                offs.resize(vals.len(), off);
-                if vals.len() > total {
-                    bail!(
-                        "{}: more values than the {num_pts} points declared in record 7 ({total} values)",
-                        ctx.at(off, "record 12")
-                    );
-                }
-            }
-            if !closed {
-                bail!(
-                    "{}: the dataset is not closed by a '    -1' line before the end of the file",
-                    ctx.at(data.len(), "record 12")
-                );
-            }
-            if skip.is_none() && vals.len() < total {
-                bail!(
-                    "{}: {} values, but record 7 declares {num_pts} points ({total} values)",
-                    ctx.at(offs.last().copied().unwrap_or(off7), "record 12"),
-                    vals.len()
-                );
-            }
+            v.vals.push(x);
+            v.offs.push(start + i * elem);
         }
     }
-    if let Some(note) = skip {
-        return Ok(Found58::Skipped(note));
-    }
-    let entry = 3 * axis.unwrap_or(0) + direction.unwrap_or(0);
+    cur.pos = next;
+    Ok(v)
+}
 
-    // Units: the abscissa must be frequency, an FRF force over force.
-    let (off8, r8) = recs[7];
+/// Record 12 of an ASCII dataset: numbers up to the closing `-1`, exactly
+/// as many as record 7 declares; read only if `keep`.
+fn ascii_values(cur: &mut Cursor, ctx: &Ctx, form: &DataForm, keep: bool) -> Result<Values> {
+    let (num_pts, total) = (form.num_pts, form.total);
+    let mut v = Values::with_capacity(total);
+    let widths: &[usize] = match (form.double, form.even, form.complex) {
+        (false, _, _) => &[13],
+        (true, true, _) => &[20],
+        (true, false, false) => &[13, 20],
+        (true, false, true) => &[13, 20, 20],
+    };
+    let mut closed = false;
+    while let Some((off, line)) = cur.next_line() {
+        let t = trim(line);
+        if t == b"-1" {
+            closed = true;
+            break;
+        }
+        if !keep || t.is_empty() {
+            continue;
+        }
+        read_numbers(line, widths, &mut v.vals)
+            .map_err(|tok| anyhow!("{}: cannot read {} as a number", ctx.at(off, "record 12"), show(tok.as_bytes())))?;
+        v.offs.resize(v.vals.len(), off);
+        if v.vals.len() > total {
+            bail!(
+                "{}: more values than the {num_pts} points declared in record 7 ({total} values)",
+                ctx.at(off, "record 12")
+            );
+        }
+    }
+    if !closed {
+        bail!(
+            "{}: the dataset is not closed by a '    -1' line before the end of the file",
+            ctx.at(cur.data.len(), "record 12")
+        );
+    }
+    if keep && v.vals.len() < total {
+        bail!(
+            "{}: {} values, but record 7 declares {num_pts} points ({total} values)",
+            ctx.at(v.offs.last().copied().unwrap_or(form.off), "record 12"),
+            v.vals.len()
+        );
+    }
+    Ok(v)
+}
+
+/// Record 8: the abscissa must be frequency (specific data type 18, or
+/// unknown/general), in Hz if labelled.
+fn check_abscissa(ctx: &Ctx, (off8, r8): (usize, &[u8])) -> Result<()> {
     let (abs_type, abs_units) = data_characteristics(r8);
     if let Some(t) = abs_type.filter(|t| ![0, 1, 18].contains(t)) {
         bail!(
@@ -595,111 +696,124 @@ fn parse58(cur: &mut Cursor, ctx: &Ctx, bin: Option<BinHeader>) -> Result<Found5
     if !au.is_empty() && au != "none" && !au.contains("hz") {
         bail!("{}: abscissa units {abs_units:?} are not Hz", ctx.at(off8, "record 8"));
     }
+    Ok(())
+}
+
+/// Records 9 and 10 of an FRF: numerator and denominator must be forces
+/// (force over force, N/N). Returns the units as labelled, e.g. "N/N";
+/// None when either is unlabelled.
+fn frf_units(ctx: &Ctx, recs: &Records) -> Result<Option<String>> {
     let mut labels = Vec::new();
-    if func_type == 4 {
-        for (r, part) in [(8usize, "numerator"), (9, "denominator")] {
-            let (off, line) = recs[r];
-            let (t, units) = data_characteristics(line);
-            if let Some(t) = t.filter(|t| ![0, 1, 9, 13].contains(t)) {
-                bail!(
-                    "{}: the FRF {part} is {} (specific data type {t}), not a force: \
-                     dynocomp needs the dynamometer's force/force FRF (N/N)",
-                    ctx.at(off, &format!("record {}", r + 1)),
-                    spec_type_name(t)
-                );
-            }
-            if obviously_not_force(&units) {
-                bail!(
-                    "{}: the FRF {part} units {units:?} are not a force: \
-                     dynocomp needs the dynamometer's force/force FRF (N/N)",
-                    ctx.at(off, &format!("record {}", r + 1))
-                );
-            }
-            labels.push(units_label(&units));
+    for (r, part) in [(8usize, "numerator"), (9, "denominator")] {
+        let (off, line) = recs[r];
+        let (t, units) = data_characteristics(line);
+        if let Some(t) = t.filter(|t| ![0, 1, 9, 13].contains(t)) {
+            bail!(
+                "{}: the FRF {part} is {} (specific data type {t}), not a force: \
+                 dynocomp needs the dynamometer's force/force FRF (N/N)",
+                ctx.at(off, &format!("record {}", r + 1)),
+                spec_type_name(t)
+            );
         }
+        if obviously_not_force(&units) {
+            bail!(
+                "{}: the FRF {part} units {units:?} are not a force: \
+                 dynocomp needs the dynamometer's force/force FRF (N/N)",
+                ctx.at(off, &format!("record {}", r + 1))
+            );
+        }
+        labels.push(units_label(&units));
     }
-    // The FRF's units as labelled, e.g. "N/N"; None when either is unlabelled.
-    let units = match labels.as_slice() {
+    Ok(match labels.as_slice() {
         [Some(n), Some(d)] => Some(format!("{n}/{d}")),
         _ => None,
-    };
+    })
+}
 
-    // Every value finite.
-    if let Some(i) = vals.iter().position(|v| !v.is_finite()) {
-        let what = if bin.is_some() {
-            format!("record 12 (binary value {} at byte offset {})", i + 1, offs[i])
+/// Every value of record 12 finite; a binary value is named by its byte offset.
+fn check_finite(ctx: &Ctx, v: &Values, binary: bool) -> Result<()> {
+    if let Some(i) = v.vals.iter().position(|x| !x.is_finite()) {
+        let what = if binary {
+            format!("record 12 (binary value {} at byte offset {})", i + 1, v.offs[i])
         } else {
             "record 12".to_string()
         };
-        bail!("{}: value {} is {} (values must be finite)", ctx.at(offs[i], &what), i + 1, vals[i]);
+        bail!("{}: value {} is {} (values must be finite)", ctx.at(v.offs[i], &what), i + 1, v.vals[i]);
     }
+    Ok(())
+}
 
-    // Abscissa.
-    let n = total / per_point;
-    let freq: Vec<f64> = if even {
+/// The frequency lines (Hz): from record 7's minimum and increment when even,
+/// else the abscissa of every point of record 12; non-negative, strictly
+/// ascending.
+fn frequencies(ctx: &Ctx, form: &DataForm, v: &Values) -> Result<Vec<f64>> {
+    let (n, x_min, x_inc) = (form.points(), form.x_min, form.x_inc);
+    if form.even {
         if x_min < 0.0 || !x_min.is_finite() {
-            bail!("{}: abscissa minimum {x_min} Hz is not a non-negative frequency", ctx.at(off7, "record 7"));
+            bail!("{}: abscissa minimum {x_min} Hz is not a non-negative frequency", ctx.at(form.off, "record 7"));
         }
         if n > 1 && !(x_inc > 0.0 && x_inc.is_finite()) {
             bail!(
                 "{}: abscissa increment {x_inc} Hz must be positive (frequencies strictly ascending)",
-                ctx.at(off7, "record 7")
+                ctx.at(form.off, "record 7")
             );
         }
-        (0..n).map(|i| x_min + i as f64 * x_inc).collect()
-    } else {
-        let f: Vec<f64> = vals.iter().step_by(per_point).copied().collect();
-        for i in 0..f.len() {
-            let o = offs[i * per_point];
-            if f[i] < 0.0 {
-                bail!("{}: negative frequency {} Hz", ctx.at(o, "record 12"), f[i]);
-            }
-            if i > 0 && f[i] <= f[i - 1] {
-                bail!(
-                    "{}: frequency {} Hz is not greater than the previous point's {} Hz \
-                     (frequencies must be strictly ascending)",
-                    ctx.at(o, "record 12"),
-                    f[i],
-                    f[i - 1]
-                );
-            }
-        }
-        f
-    };
-    let first = usize::from(!even);
-    let ord = |k: usize, j: usize| vals[k * per_point + first + j];
-
-    if func_type == 4 {
-        // H = (s_rsp · response) / (s_ref · force): undo the direction signs.
-        let sign = rsp_dir.signum() * if ref_dir < 0 { -1 } else { 1 };
-        let s = sign as f64;
-        let frf = (0..n)
-            .map(|k| {
-                let v = if complex { Complex64::new(ord(k, 0), ord(k, 1)) } else { Complex64::new(ord(k, 0), 0.0) };
-                v * s
-            })
-            .collect();
-        Ok(Found58::Frf { entry, freq, frf, units })
-    } else {
-        let mut coh = Vec::with_capacity(n);
-        for k in 0..n {
-            let o = offs[k * per_point];
-            let c = ord(k, 0);
-            if complex && ord(k, 1) != 0.0 {
-                bail!(
-                    "{}: coherence at point {} has a non-zero imaginary part {}",
-                    ctx.at(o, "record 12"),
-                    k + 1,
-                    ord(k, 1)
-                );
-            }
-            if !(-COHERENCE_SLACK..=1.0 + COHERENCE_SLACK).contains(&c) {
-                bail!("{}: coherence {c} at point {} ({} Hz) outside [0, 1]", ctx.at(o, "record 12"), k + 1, freq[k]);
-            }
-            coh.push(c.clamp(0.0, 1.0));
-        }
-        Ok(Found58::Coh { entry, freq, coh })
+        return Ok((0..n).map(|i| x_min + i as f64 * x_inc).collect());
     }
+    let f: Vec<f64> = v.vals.iter().step_by(form.per_point).copied().collect();
+    for i in 0..f.len() {
+        let o = v.offs[i * form.per_point];
+        if f[i] < 0.0 {
+            bail!("{}: negative frequency {} Hz", ctx.at(o, "record 12"), f[i]);
+        }
+        if i > 0 && f[i] <= f[i - 1] {
+            bail!(
+                "{}: frequency {} Hz is not greater than the previous point's {} Hz \
+                 (frequencies must be strictly ascending)",
+                ctx.at(o, "record 12"),
+                f[i],
+                f[i - 1]
+            );
+        }
+    }
+    Ok(f)
+}
+
+/// An FRF dataset: H = (s_rsp · response) / (s_ref · force), the direction
+/// signs undone.
+fn frf_found(form: &DataForm, dof: &DofId, v: &Values, entry: usize, freq: Vec<f64>, units: Option<String>) -> Found58 {
+    let sign = dof.rsp_dir.signum() * if dof.ref_dir < 0 { -1 } else { 1 };
+    let s = sign as f64;
+    let frf = (0..form.points())
+        .map(|k| {
+            let re = form.ord(&v.vals, k, 0);
+            let x = if form.complex { Complex64::new(re, form.ord(&v.vals, k, 1)) } else { Complex64::new(re, 0.0) };
+            x * s
+        })
+        .collect();
+    Found58::Frf { entry, freq, frf, units }
+}
+
+/// A coherence dataset: real, within [0, 1] up to [`COHERENCE_SLACK`] (clamped).
+fn coherence_found(ctx: &Ctx, form: &DataForm, v: &Values, entry: usize, freq: Vec<f64>) -> Result<Found58> {
+    let mut coh = Vec::with_capacity(freq.len());
+    for (k, f) in freq.iter().enumerate() {
+        let o = v.offs[k * form.per_point];
+        let c = form.ord(&v.vals, k, 0);
+        if form.complex && form.ord(&v.vals, k, 1) != 0.0 {
+            bail!(
+                "{}: coherence at point {} has a non-zero imaginary part {}",
+                ctx.at(o, "record 12"),
+                k + 1,
+                form.ord(&v.vals, k, 1)
+            );
+        }
+        if !(-COHERENCE_SLACK..=1.0 + COHERENCE_SLACK).contains(&c) {
+            bail!("{}: coherence {c} at point {} ({} Hz) outside [0, 1]", ctx.at(o, "record 12"), k + 1, f);
+        }
+        coh.push(c.clamp(0.0, 1.0));
+    }
+    Ok(Found58::Coh { entry, freq, coh })
 }
 
 /// Numbers of one ASCII data line: split at blanks; if a token does not
@@ -786,177 +900,243 @@ pub fn parse_uff58_units(bytes: &[u8], source: &str) -> Result<(Frf, Option<Stri
         bail!("{source}: empty file");
     }
     let mut cur = Cursor { data: bytes, pos: 0 };
-    let mut set_no = 0usize;
-    let mut skipped: Vec<String> = Vec::new();
-    let mut frfs: [Option<(Item, Vec<Complex64>)>; 9] = Default::default();
-    let mut cohs: [Option<(Item, Vec<f64>)>; 9] = Default::default();
-    let mut units: Option<(String, usize, usize)> = None;
-    while let Some((off, line)) = cur.next_line() {
-        let t = trim(line);
-        if t.is_empty() {
+    let mut sets = Datasets::default();
+    while let Some(id) = next_dataset(&mut cur, source)? {
+        sets.count += 1;
+        let ctx = Ctx { source, data: bytes, no: sets.count, line: id.line };
+        if id.num != 58 {
+            skip_other(&mut cur, &ctx, id.num, id.binary, id.rest, id.off)?;
+            sets.skipped.push(format!("dataset #{} at line {}: type {}", ctx.no, ctx.line, id.num));
             continue;
         }
-        let start_line = line_of(bytes, off);
-        if t != b"-1" {
-            bail!("{source}: line {start_line}: expected '    -1' opening a UFF dataset, found {}", show(t));
-        }
-        // The dataset number line; a lone trailing "-1" ends the file.
-        let (id_off, id) = loop {
-            match cur.next_line() {
-                Some((o, l)) if !trim(l).is_empty() => break (o, l),
-                Some(_) => continue,
-                None => bail!("{source}: line {start_line}: the file ends after '-1' (dataset number missing)"),
-            }
-        };
-        let idt = trim(id);
-        let digits = idt.iter().take_while(|b| b.is_ascii_digit()).count();
-        let num: Option<u64> = std::str::from_utf8(&idt[..digits]).ok().and_then(|s| s.parse().ok());
-        let Some(num) = num.filter(|_| digits <= 6) else {
-            bail!(
-                "{source}: line {}: expected a dataset number after '-1', found {}",
-                line_of(bytes, id_off),
-                show(idt)
-            );
-        };
-        let rest = &idt[digits..];
-        let binary = matches!(rest.first(), Some(b'b' | b'B'));
-        let rest = if binary { &rest[1..] } else { rest };
-        set_no += 1;
-        let ctx = Ctx { source, data: bytes, no: set_no, line: start_line };
-        if num != 58 {
-            skip_other(&mut cur, &ctx, num, binary, rest, id_off)?;
-            skipped.push(format!("dataset #{set_no} at line {start_line}: type {num}"));
-            continue;
-        }
-        let bin = if binary { Some(parse_bin_header(rest, &ctx, id_off)?) } else { None };
-        let item =
-            |entry: usize, freq: Vec<f64>, what: &'static str| Item { no: set_no, line: start_line, entry, freq, what };
-        // Store a dataset for its entry, refusing a second one of the same kind.
-        fn store<T>(slot: &mut Option<(Item, T)>, new: (Item, T), source: &str) -> Result<()> {
-            if let Some((p, _)) = slot {
-                let n = &new.0;
-                let dup = if n.entry / 3 == n.entry % 3 { "duplicate axis" } else { "duplicate entry" };
-                bail!(
-                    "{source}: line {}: dataset #{} is a second {} for {} \
-                     (the first is dataset #{} at line {}): {dup}",
-                    n.line,
-                    n.no,
-                    n.what,
-                    n.name(),
-                    p.no,
-                    p.line
-                );
-            }
-            *slot = Some(new);
-            Ok(())
-        }
-        match parse58(&mut cur, &ctx, bin)? {
-            Found58::Skipped(note) => skipped.push(note),
-            Found58::Frf { entry, freq, frf, units: u } => {
-                if let Some(u) = u {
-                    match &units {
-                        Some((first, no, line)) if !first.eq_ignore_ascii_case(&u) => bail!(
-                            "{source}: line {start_line}: dataset #{set_no} ({}) is in units {}, but dataset #{no} \
-                             (line {line}) in {}: export every FRF of the file in the same units (N/N)",
-                            entry_label(entry),
-                            super::one_line(&u),
-                            super::one_line(first)
-                        ),
-                        Some(_) => {}
-                        None => units = Some((u, set_no, start_line)),
-                    }
-                }
-                store(&mut frfs[entry], (item(entry, freq, "FRF"), frf), source)?
-            }
-            Found58::Coh { entry, freq, coh } => {
-                store(&mut cohs[entry], (item(entry, freq, "coherence"), coh), source)?
-            }
-        }
+        let bin = if id.binary { Some(parse_bin_header(id.rest, &ctx, id.off)?) } else { None };
+        sets.add(parse58(&mut cur, &ctx, bin)?, &ctx)?;
     }
-    if set_no == 0 {
+    if sets.count == 0 {
         bail!("{source}: no UFF dataset found");
     }
-    // The reference frequency lines: the first FRF in the file.
-    let Some(reference) = frfs.iter().flatten().map(|(it, _)| it).min_by_key(|it| it.no) else {
-        let mut msg =
-            format!("{source}: no FRF found (dataset 58 with function type 4 and response direction ±1, ±2 or ±3)");
-        if !skipped.is_empty() {
-            let shown: Vec<&str> = skipped.iter().take(4).map(String::as_str).collect();
-            msg.push_str(&format!("; skipped {}", shown.join("; ")));
-            if skipped.len() > 4 {
-                msg.push_str(&format!("; and {} more", skipped.len() - 4));
-            }
+    sets.into_frf(source)
+}
+
+/// The opening `-1` and the dataset number line of a block.
+struct DatasetId<'a> {
+    /// Line of the opening `-1`.
+    line: usize,
+    /// Offset of the dataset number line.
+    off: usize,
+    num: u64,
+    /// `58b`-style binary dataset.
+    binary: bool,
+    /// The rest of the number line (the binary header's fields).
+    rest: &'a [u8],
+}
+
+/// Read the next block's `-1` and dataset number; None at the end of the file.
+fn next_dataset<'a>(cur: &mut Cursor<'a>, source: &str) -> Result<Option<DatasetId<'a>>> {
+    let bytes = cur.data;
+    let (off, t) = loop {
+        match cur.next_line() {
+            Some((off, line)) if !trim(line).is_empty() => break (off, trim(line)),
+            Some(_) => continue,
+            None => return Ok(None),
         }
-        bail!(msg);
     };
-    let check = |it: &Item| -> Result<()> {
-        let (a, b) = (&reference.freq, &it.freq);
-        let head = || format!("{source}: line {}: dataset #{} ({} {})", it.line, it.no, it.what, short(it.entry));
-        if a.len() != b.len() {
-            bail!(
-                "{}: {} frequency lines, but dataset #{} (FRF {}, line {}) has {}: \
-                 all datasets must share the same frequency lines",
-                head(),
-                b.len(),
-                reference.no,
-                short(reference.entry),
-                reference.line,
-                a.len()
-            );
+    let start_line = line_of(bytes, off);
+    if t != b"-1" {
+        bail!("{source}: line {start_line}: expected '    -1' opening a UFF dataset, found {}", show(t));
+    }
+    // The dataset number line; a lone trailing "-1" ends the file.
+    let (id_off, id) = loop {
+        match cur.next_line() {
+            Some((o, l)) if !trim(l).is_empty() => break (o, l),
+            Some(_) => continue,
+            None => bail!("{source}: line {start_line}: the file ends after '-1' (dataset number missing)"),
         }
-        let scale = a.last().copied().unwrap_or(0.0).abs().max(b.last().copied().unwrap_or(0.0).abs());
-        if let Some(i) = (0..a.len()).find(|&i| (a[i] - b[i]).abs() > 1e-6 * scale) {
-            bail!(
-                "{}: frequency line {} is {} Hz, but {} Hz in dataset #{} (FRF {}, line {}): \
-                 all datasets must share the same frequency lines",
-                head(),
-                i + 1,
-                b[i],
-                a[i],
-                reference.no,
-                short(reference.entry),
-                reference.line
-            );
+    };
+    let idt = trim(id);
+    let digits = idt.iter().take_while(|b| b.is_ascii_digit()).count();
+    let num: Option<u64> = std::str::from_utf8(&idt[..digits]).ok().and_then(|s| s.parse().ok());
+    let Some(num) = num.filter(|_| digits <= 6) else {
+        bail!("{source}: line {}: expected a dataset number after '-1', found {}", line_of(bytes, id_off), show(idt));
+    };
+    let rest = &idt[digits..];
+    let binary = matches!(rest.first(), Some(b'b' | b'B'));
+    let rest = if binary { &rest[1..] } else { rest };
+    Ok(Some(DatasetId { line: start_line, off: id_off, num, binary, rest }))
+}
+
+/// The datasets of a file so far: FRFs and coherences by entry, notes on
+/// those skipped, and the first FRF's units label.
+#[derive(Default)]
+struct Datasets {
+    /// Datasets read (of any type).
+    count: usize,
+    skipped: Vec<String>,
+    frfs: [Option<(Item, Vec<Complex64>)>; 9],
+    cohs: [Option<(Item, Vec<f64>)>; 9],
+    /// The first units label, with its dataset number and line.
+    units: Option<(String, usize, usize)>,
+}
+
+impl Datasets {
+    /// Add the dataset 58 of `ctx`: refuse a second FRF or coherence of an
+    /// entry, and FRFs labelled in other units than the first.
+    fn add(&mut self, found: Found58, ctx: &Ctx) -> Result<()> {
+        let item =
+            |entry: usize, freq: Vec<f64>, what: &'static str| Item { no: ctx.no, line: ctx.line, entry, freq, what };
+        match found {
+            Found58::Skipped(note) => self.skipped.push(note),
+            Found58::Frf { entry, freq, frf, units } => {
+                if let Some(u) = units {
+                    self.check_units(u, entry, ctx)?;
+                }
+                store(&mut self.frfs[entry], (item(entry, freq, "FRF"), frf), ctx.source)?
+            }
+            Found58::Coh { entry, freq, coh } => {
+                store(&mut self.cohs[entry], (item(entry, freq, "coherence"), coh), ctx.source)?
+            }
         }
         Ok(())
-    };
-    for entry in 0..9 {
-        if let Some((it, _)) = &frfs[entry] {
-            check(it)?;
+    }
+
+    /// Units `u` of the FRF of `entry` must be the first FRF's, if labelled.
+    fn check_units(&mut self, u: String, entry: usize, ctx: &Ctx) -> Result<()> {
+        match &self.units {
+            Some((first, no, line)) if !first.eq_ignore_ascii_case(&u) => bail!(
+                "{}: line {}: dataset #{} ({}) is in units {}, but dataset #{no} \
+                 (line {line}) in {}: export every FRF of the file in the same units (N/N)",
+                ctx.source,
+                ctx.line,
+                ctx.no,
+                entry_label(entry),
+                super::one_line(&u),
+                super::one_line(first)
+            ),
+            Some(_) => {}
+            None => self.units = Some((u, ctx.no, ctx.line)),
         }
-        if let Some((it, _)) = &cohs[entry] {
-            if frfs[entry].is_none() {
+        Ok(())
+    }
+
+    /// The FRF matrix: every dataset on the first FRF's frequency lines,
+    /// every coherence with its FRF.
+    fn into_frf(mut self, source: &str) -> Result<(Frf, Option<String>)> {
+        // The reference frequency lines: the first FRF in the file.
+        let Some(reference) = self.frfs.iter().flatten().map(|(it, _)| it).min_by_key(|it| it.no) else {
+            bail!(no_frf_message(source, &self.skipped));
+        };
+        self.check_lines(source, reference)?;
+        let freq_hz = reference.freq.clone();
+        let mut axes = Vec::new();
+        let mut cross = Vec::new();
+        for entry in 0..9 {
+            if let Some((_, frf)) = self.frfs[entry].take() {
+                let coherence = self.cohs[entry].take().map(|(_, c)| c);
                 let (i, j) = (entry / 3, entry % 3);
-                let what = match i == j {
-                    true => format!("axis {}", axis_name(i)),
-                    false => format!("entry {}", entry_name(i, j)),
-                };
-                bail!(
-                    "{source}: line {}: dataset #{} is a coherence for {} but the file has no FRF for {}",
-                    it.line,
-                    it.no,
-                    it.name(),
-                    what
-                );
-            }
-            check(it)?;
-        }
-    }
-    let freq_hz = reference.freq.clone();
-    let mut axes = Vec::new();
-    let mut cross = Vec::new();
-    for entry in 0..9 {
-        if let Some((_, frf)) = frfs[entry].take() {
-            let coherence = cohs[entry].take().map(|(_, c)| c);
-            let (i, j) = (entry / 3, entry % 3);
-            if i == j {
-                axes.push(AxisFrf { axis: i, frf, coherence });
-            } else {
-                cross.push(CrossFrf { channel: i, direction: j, frf, coherence });
+                if i == j {
+                    axes.push(AxisFrf { axis: i, frf, coherence });
+                } else {
+                    cross.push(CrossFrf { channel: i, direction: j, frf, coherence });
+                }
             }
         }
+        Ok((Frf { freq_hz, axes, cross }, self.units.map(|(u, _, _)| u)))
     }
-    Ok((Frf { freq_hz, axes, cross }, units.map(|(u, _, _)| u)))
+
+    /// Every FRF and coherence on the lines of `reference`; no coherence
+    /// without the FRF of its entry.
+    fn check_lines(&self, source: &str, reference: &Item) -> Result<()> {
+        for entry in 0..9 {
+            if let Some((it, _)) = &self.frfs[entry] {
+                same_lines(source, reference, it)?;
+            }
+            if let Some((it, _)) = &self.cohs[entry] {
+                if self.frfs[entry].is_none() {
+                    let (i, j) = (entry / 3, entry % 3);
+                    let what = match i == j {
+                        true => format!("axis {}", axis_name(i)),
+                        false => format!("entry {}", entry_name(i, j)),
+                    };
+                    bail!(
+                        "{source}: line {}: dataset #{} is a coherence for {} but the file has no FRF for {}",
+                        it.line,
+                        it.no,
+                        it.name(),
+                        what
+                    );
+                }
+                same_lines(source, reference, it)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Store a dataset for its entry, refusing a second one of the same kind.
+fn store<T>(slot: &mut Option<(Item, T)>, new: (Item, T), source: &str) -> Result<()> {
+    if let Some((p, _)) = slot {
+        let n = &new.0;
+        let dup = if n.entry / 3 == n.entry % 3 { "duplicate axis" } else { "duplicate entry" };
+        bail!(
+            "{source}: line {}: dataset #{} is a second {} for {} \
+             (the first is dataset #{} at line {}): {dup}",
+            n.line,
+            n.no,
+            n.what,
+            n.name(),
+            p.no,
+            p.line
+        );
+    }
+    *slot = Some(new);
+    Ok(())
+}
+
+/// The message for a file without FRF, listing up to four datasets skipped.
+fn no_frf_message(source: &str, skipped: &[String]) -> String {
+    let mut msg =
+        format!("{source}: no FRF found (dataset 58 with function type 4 and response direction ±1, ±2 or ±3)");
+    if !skipped.is_empty() {
+        let shown: Vec<&str> = skipped.iter().take(4).map(String::as_str).collect();
+        msg.push_str(&format!("; skipped {}", shown.join("; ")));
+        if skipped.len() > 4 {
+            msg.push_str(&format!("; and {} more", skipped.len() - 4));
+        }
+    }
+    msg
+}
+
+/// Dataset `it` has the frequency lines of `reference` (to 1e-6 of the highest).
+fn same_lines(source: &str, reference: &Item, it: &Item) -> Result<()> {
+    let (a, b) = (&reference.freq, &it.freq);
+    let head = || format!("{source}: line {}: dataset #{} ({} {})", it.line, it.no, it.what, short(it.entry));
+    if a.len() != b.len() {
+        bail!(
+            "{}: {} frequency lines, but dataset #{} (FRF {}, line {}) has {}: \
+             all datasets must share the same frequency lines",
+            head(),
+            b.len(),
+            reference.no,
+            short(reference.entry),
+            reference.line,
+            a.len()
+        );
+    }
+    let scale = a.last().copied().unwrap_or(0.0).abs().max(b.last().copied().unwrap_or(0.0).abs());
+    if let Some(i) = (0..a.len()).find(|&i| (a[i] - b[i]).abs() > 1e-6 * scale) {
+        bail!(
+            "{}: frequency line {} is {} Hz, but {} Hz in dataset #{} (FRF {}, line {}): \
+             all datasets must share the same frequency lines",
+            head(),
+            i + 1,
+            b[i],
+            a[i],
+            reference.no,
+            short(reference.entry),
+            reference.line
+        );
+    }
+    Ok(())
 }
 
 /// The short name of an entry in messages: `x` for the direct entry xx (as

@@ -43,6 +43,392 @@ struct Channel {
     data_line: usize,
 }
 
+/// The index pass: every dataset of the file in turn, the time histories
+/// kept as channels (checked to form one record, in axis order).
+fn index(path: &Path, source: &str, map: Option<&ChannelMap>) -> Result<Vec<Channel>> {
+    let f = File::open(path).with_context(|| format!("{source}: cannot read"))?;
+    let mut lines = Lines { r: BufReader::with_capacity(1 << 20, f), line: Vec::new(), off: 0, lineno: 0, source };
+    let mut found: Vec<Channel> = Vec::new();
+    let mut skipped: Vec<String> = Vec::new();
+    let mut no = 0usize;
+    while lines.next()? {
+        if trim(&lines.line) != b"-1" {
+            if trim(&lines.line).is_empty() {
+                continue;
+            }
+            bail!(
+                "{source}: line {}: expected a '    -1' line opening a dataset, found {}",
+                lines.lineno,
+                super::uff::show(&lines.line)
+            );
+        }
+        let start_line = lines.lineno;
+        if !lines.next()? {
+            break;
+        }
+        no += 1;
+        let ds = Dataset { source, no, line: start_line };
+        let NumberLine::Uff58 { binary } = dataset_kind(&mut lines, &ds)? else {
+            continue;
+        };
+        match time_history(&mut lines, &ds, binary, map)? {
+            Indexed::Channel(ch) => found.push(ch),
+            Indexed::Skipped(note) => skipped.push(note),
+        }
+    }
+    one_record(source, found, &skipped, map)
+}
+
+/// Lines of the file read in turn, with the offset after the current line
+/// and its 1-based number.
+struct Lines<'a> {
+    r: BufReader<File>,
+    /// The current line, without its line break.
+    line: Vec<u8>,
+    off: u64,
+    lineno: usize,
+    source: &'a str,
+}
+
+impl Lines<'_> {
+    /// Read the next line; false at the end of the file.
+    fn next(&mut self) -> Result<bool> {
+        self.line.clear();
+        let n = self.r.read_until(b'\n', &mut self.line).with_context(|| format!("{}: read failed", self.source))?;
+        self.off += n as u64;
+        self.lineno += 1;
+        while matches!(self.line.last(), Some(b'\n' | b'\r')) {
+            self.line.pop();
+        }
+        Ok(n > 0)
+    }
+
+    /// Skip `n` bytes.
+    fn skip(&mut self, n: i64) -> Result<()> {
+        self.r.seek_relative(n).with_context(|| format!("{}: seek failed", self.source))
+    }
+}
+
+/// The dataset being indexed, for messages.
+struct Dataset<'a> {
+    source: &'a str,
+    /// Number in the file (1-based) and line of its opening `-1`.
+    no: usize,
+    line: usize,
+}
+
+impl Dataset<'_> {
+    /// `file: line L: dataset #k (58, starting line S), <what>`
+    fn at(&self, what: &str, l: usize) -> String {
+        format!("{}: line {l}: dataset #{} (58, starting line {}), {what}", self.source, self.no, self.line)
+    }
+}
+
+/// What a dataset number line says.
+enum NumberLine {
+    /// A dataset 58; 58b: Some(big endian).
+    Uff58 { binary: Option<bool> },
+    /// Another dataset, skipped.
+    Other,
+}
+
+/// The dataset number line just read: a dataset 58 or a supported 58b;
+/// another dataset is skipped up to its closing `-1` (binary ones by their
+/// byte count).
+fn dataset_kind(lines: &mut Lines, ds: &Dataset) -> Result<NumberLine> {
+    let id = String::from_utf8_lossy(trim(&lines.line)).to_string();
+    let t: Vec<String> = tokens(&lines.line).into_iter().map(str::to_string).collect();
+    let head = t.first().cloned().unwrap_or_default();
+    match head.as_str() {
+        "58" => Ok(NumberLine::Uff58 { binary: None }),
+        "58b" => {
+            let g = |i: usize| t.get(i).and_then(|s| s.parse::<i64>().ok());
+            match (g(1), g(2), g(3)) {
+                (Some(bo @ 1..=2), Some(2), Some(11)) => Ok(NumberLine::Uff58 { binary: Some(bo == 2) }),
+                _ => bail!(
+                    "{}: unsupported 58b header {:?} (need byte order 1/2, IEEE 754, 11 ASCII lines)",
+                    ds.at("binary header", lines.lineno),
+                    id
+                ),
+            }
+        }
+        _ => {
+            skip_other(lines, ds, &head, &t)?;
+            Ok(NumberLine::Other)
+        }
+    }
+}
+
+/// Skip a dataset other than 58 (number line `head`, fields `t`) up to and
+/// including its closing `-1`: a binary one first by its header line count
+/// and byte count.
+fn skip_other(lines: &mut Lines, ds: &Dataset, head: &str, t: &[String]) -> Result<()> {
+    let (source, no, start_line) = (ds.source, ds.no, ds.line);
+    let nb = if head.ends_with('b') { t.get(4).and_then(|s| s.parse::<u64>().ok()) } else { None };
+    if let Some(nb) = nb {
+        let nl = t.get(3).and_then(|s| s.parse::<usize>().ok()).unwrap_or(0);
+        let here = || format!("{source}: line {start_line}: dataset #{no} ({head})");
+        for _ in 0..nl {
+            // A declared line count past the end of the file ends the skip.
+            if !lines.next()? {
+                bail!("{}: the file ends inside its {nl} header lines", here());
+            }
+        }
+        // A byte count above i64::MAX would seek backwards (and loop).
+        let skip = i64::try_from(nb).map_err(|_| anyhow!("{}: binary byte count {nb} out of range", here()))?;
+        lines.skip(skip)?;
+        lines.off += nb;
+    }
+    loop {
+        if !lines.next()? {
+            bail!("{source}: line {start_line}: dataset #{no} ({head}) is not closed by a '    -1' line");
+        }
+        if trim(&lines.line) == b"-1" {
+            return Ok(());
+        }
+    }
+}
+
+/// Records 1 to 11 of a dataset 58, each with its line number.
+fn header_records(lines: &mut Lines, ds: &Dataset) -> Result<Vec<(usize, Vec<u8>)>> {
+    let mut recs = Vec::with_capacity(11);
+    for k in 0..11 {
+        if !lines.next()? {
+            bail!("{}: the file ends inside the dataset header", ds.at(&format!("record {}", k + 1), lines.lineno));
+        }
+        recs.push((lines.lineno, lines.line.clone()));
+    }
+    Ok(recs)
+}
+
+/// Records 6 and 7 of a dataset 58 as far as the index needs them.
+struct DataForm {
+    /// Function type (1 = time response) and response direction (record 6).
+    func: i64,
+    rsp_dir: i64,
+    /// Response node number (record 6), for `--channels`.
+    node: Option<i64>,
+    /// Record 7's line, ordinate data type, points, spacing (1 = even),
+    /// abscissa start and increment (s).
+    line: usize,
+    ord: i64,
+    n: u64,
+    spacing: i64,
+    x0: f64,
+    dx: f64,
+    double: bool,
+    complex: bool,
+    /// Bytes per point in a 58b dataset.
+    elem: u64,
+}
+
+/// Read records 6 (DOF identification) and 7 (data form).
+fn data_form(recs: &[(usize, Vec<u8>)], ds: &Dataset) -> Result<DataForm> {
+    let (l6, r6) = (recs[5].0, &recs[5].1);
+    let (func, rsp_dir, _) =
+        record6(r6).ok_or_else(|| anyhow!("{}: cannot read function type and directions", ds.at("record 6", l6)))?;
+    let node = super::uff::field(r6, 41, 10)
+        .and_then(super::uff::parse_int)
+        .or_else(|| tokens(r6).get(5).and_then(|s| s.parse().ok()));
+    let (l7, r7) = (recs[6].0, &recs[6].1);
+    let (ord, num, spacing, x0, dx) =
+        record7(r7).ok_or_else(|| anyhow!("{}: cannot read data form", ds.at("record 7", l7)))?;
+    let double = match ord {
+        2 | 5 => false,
+        4 | 6 => true,
+        _ if func != 1 => false,
+        _ => bail!(
+            "{}: ordinate data type {ord}: a time history must be real (2 = single, 4 = double precision)",
+            ds.at("record 7", l7)
+        ),
+    };
+    let complex = matches!(ord, 5 | 6);
+    let elem =
+        if matches!(ord, 4 | 6) { 8 } else { 4 } * if complex { 2 } else { 1 } * if spacing == 0 { 2 } else { 1 };
+    let n = u64::try_from(num).map_err(|_| anyhow!("{}: {num} data points", ds.at("record 7", l7)))?;
+    Ok(DataForm { func, rsp_dir, node, line: l7, ord, n, spacing, x0, dx, double, complex, elem })
+}
+
+/// Skip the data (record 12) up to the closing `-1`: a 58b dataset's by
+/// its byte count.
+fn skip_data(lines: &mut Lines, ds: &Dataset, binary: bool, form: &DataForm) -> Result<()> {
+    let bytes = form.n * form.elem;
+    if binary {
+        lines.skip(bytes as i64)?;
+        lines.off += bytes;
+    }
+    loop {
+        if !lines.next()? {
+            bail!(
+                "{}: the dataset is not closed by a '    -1' line before the end of the file",
+                ds.at("record 12", lines.lineno)
+            );
+        }
+        if trim(&lines.line) == b"-1" {
+            return Ok(());
+        }
+        if binary && !trim(&lines.line).is_empty() {
+            bail!(
+                "{}: no closing '    -1' after the {} bytes of binary data record 7 declares",
+                ds.at("record 12", lines.lineno),
+                bytes
+            );
+        }
+    }
+}
+
+/// A dataset 58 as the index pass found it.
+enum Indexed {
+    /// A time history of a force axis.
+    Channel(Channel),
+    /// Another function type or direction: the note saying so.
+    Skipped(String),
+}
+
+/// Index one dataset 58 whose number line was just read (`binary`: Some(big
+/// endian) for 58b).
+fn time_history(lines: &mut Lines, ds: &Dataset, binary: Option<bool>, map: Option<&ChannelMap>) -> Result<Indexed> {
+    let recs = header_records(lines, ds)?;
+    let form = data_form(&recs, ds)?;
+    let data_off = lines.off;
+    let data_line = lines.lineno + 1;
+    skip_data(lines, ds, binary.is_some(), &form)?;
+    if form.func == 1 && form.complex {
+        bail!(
+            "{}: ordinate data type {}: a time history must be real (2 = single, 4 = double precision)",
+            ds.at("record 7", form.line),
+            form.ord
+        );
+    }
+    if form.func != 1 {
+        return Ok(Indexed::Skipped(format!("dataset #{}: function type {}", ds.no, form.func)));
+    }
+    check_time_axis(&recs, ds, &form)?;
+    let name = String::from_utf8_lossy(trim(&recs[0].1)).to_string();
+    let Some(axis) = channel_axis(map, &name, form.node, form.rsp_dir) else {
+        return Ok(Indexed::Skipped(format!("dataset #{} ({name:?}): response direction {}", ds.no, form.rsp_dir)));
+    };
+    let sign = if map.is_some() || form.rsp_dir >= 0 { 1.0 } else { -1.0 };
+    Ok(Indexed::Channel(Channel {
+        axis,
+        sign: sign * newtons(&recs, ds)?,
+        no: ds.no,
+        line: ds.line,
+        n: form.n,
+        dt: form.dx,
+        t0: form.x0,
+        double: form.double,
+        binary,
+        data_off,
+        data_line,
+    }))
+}
+
+/// The abscissa of a time history: evenly spaced (record 7), time in seconds
+/// (record 8).
+fn check_time_axis(recs: &[(usize, Vec<u8>)], ds: &Dataset, form: &DataForm) -> Result<()> {
+    let (l7, n, x0, dx) = (form.line, form.n, form.x0, form.dx);
+    if form.spacing != 1 {
+        bail!("{}: uneven abscissa: a time history needs evenly spaced samples", ds.at("record 7", l7));
+    }
+    if n == 0 {
+        bail!("{}: no data points", ds.at("record 7", l7));
+    }
+    if !(dx > 0.0 && dx.is_finite()) {
+        bail!("{}: abscissa increment {dx} s must be positive", ds.at("record 7", l7));
+    }
+    if !x0.is_finite() {
+        bail!("{}: abscissa start {x0} s is not finite", ds.at("record 7", l7));
+    }
+    let (l8, r8) = (recs[7].0, &recs[7].1);
+    let (spec, units) = data_characteristics(r8);
+    if let Some(t) = spec.filter(|t| ![0, 1, 17].contains(t)) {
+        bail!("{}: the abscissa is {} (specific data type {t}), not time", ds.at("record 8", l8), spec_type_name(t));
+    }
+    let u = units.trim().to_ascii_lowercase();
+    if !(u.is_empty() || u == "none" || u == "s" || u.starts_with("sec")) {
+        bail!("{}: abscissa units {units:?} are not seconds", ds.at("record 8", l8));
+    }
+    Ok(())
+}
+
+/// The axis of a channel: by `--channels` (ID line 1 `name` or response
+/// `node`), else by the response direction (±1/±2/±3).
+fn channel_axis(map: Option<&ChannelMap>, name: &str, node: Option<i64>, rsp_dir: i64) -> Option<usize> {
+    match map {
+        Some(m) => {
+            m.pairs.iter().find(|(_, v)| *v == name || node.is_some_and(|nd| v.parse::<i64>() == Ok(nd))).map(|p| p.0)
+        }
+        None => match rsp_dir.abs() {
+            d @ 1..=3 => Some((d - 1) as usize),
+            _ => None,
+        },
+    }
+}
+
+/// Newtons per unit of the ordinate (record 9): N, kN or mN; NONE/blank read as N.
+fn newtons(recs: &[(usize, Vec<u8>)], ds: &Dataset) -> Result<f64> {
+    let (l9, r9) = (recs[8].0, &recs[8].1);
+    let (_, ounits) = data_characteristics(r9);
+    let ou = ounits.trim();
+    if ou.eq_ignore_ascii_case("none") {
+        return Ok(1.0);
+    }
+    newton_per_unit(ou).ok_or_else(|| {
+        anyhow!("{}: ordinate units {ou:?} are not a force in N (kN and mN are scaled)", ds.at("record 9", l9))
+    })
+}
+
+/// The channels found as one record, in axis order: at least one, one per
+/// axis, all of the same length and sampling interval.
+fn one_record(
+    source: &str,
+    mut found: Vec<Channel>,
+    skipped: &[String],
+    map: Option<&ChannelMap>,
+) -> Result<Vec<Channel>> {
+    if found.is_empty() {
+        bail!(
+            "{source}: no time history (dataset 58, function type 1) for fx, fy or fz{}{}",
+            if skipped.is_empty() { String::new() } else { format!("; skipped: {}", skipped.join(", ")) },
+            if map.is_none() {
+                " (give --channels fx=NAME,... if the response directions do not say the axis)"
+            } else {
+                ""
+            }
+        );
+    }
+    found.sort_by_key(|c| c.axis);
+    for w in found.windows(2) {
+        if w[0].axis == w[1].axis {
+            bail!(
+                "{source}: datasets #{} and #{} are both axis {}; pick one with --channels",
+                w[0].no,
+                w[1].no,
+                axis_name(w[0].axis)
+            );
+        }
+    }
+    let c0 = &found[0];
+    for c in &found[1..] {
+        if c.n != c0.n || ((c.dt - c0.dt) / c0.dt).abs() > 1e-6 {
+            bail!(
+                "{source}: dataset #{} (f{}) has {} points every {} s, dataset #{} (f{}) {} points every {} s: \
+                 channels must match",
+                c0.no,
+                axis_name(c0.axis),
+                c0.n,
+                c0.dt,
+                c.no,
+                axis_name(c.axis),
+                c.n,
+                c.dt
+            );
+        }
+    }
+    Ok(found)
+}
+
 /// A reader of the time histories of a UFF file.
 pub struct UffReader {
     source: String,
@@ -66,268 +452,7 @@ impl UffReader {
     /// Index the time histories of `path` and open one handle per channel.
     pub fn open(path: &Path, map: Option<&ChannelMap>) -> Result<UffReader> {
         let source = path.display().to_string();
-        let f = File::open(path).with_context(|| format!("{source}: cannot read"))?;
-        let mut r = BufReader::with_capacity(1 << 20, f);
-        let mut found: Vec<(Channel, String, String)> = Vec::new();
-        let mut skipped: Vec<String> = Vec::new();
-        let mut off = 0u64;
-        let mut lineno = 0usize;
-        let mut line = Vec::new();
-        let mut no = 0usize;
-        let next = |r: &mut BufReader<File>, line: &mut Vec<u8>, off: &mut u64, lineno: &mut usize| -> Result<bool> {
-            line.clear();
-            let n = r.read_until(b'\n', line).with_context(|| format!("{source}: read failed"))?;
-            *off += n as u64;
-            *lineno += 1;
-            while matches!(line.last(), Some(b'\n' | b'\r')) {
-                line.pop();
-            }
-            Ok(n > 0)
-        };
-        while next(&mut r, &mut line, &mut off, &mut lineno)? {
-            if trim(&line) != b"-1" {
-                if trim(&line).is_empty() {
-                    continue;
-                }
-                bail!(
-                    "{source}: line {lineno}: expected a '    -1' line opening a dataset, found {}",
-                    super::uff::show(&line)
-                );
-            }
-            let start_line = lineno;
-            if !next(&mut r, &mut line, &mut off, &mut lineno)? {
-                break;
-            }
-            let id = String::from_utf8_lossy(trim(&line)).to_string();
-            let t: Vec<String> = tokens(&line).into_iter().map(str::to_string).collect();
-            let head = t.first().cloned().unwrap_or_default();
-            no += 1;
-            let here = |what: &str, l: usize| {
-                format!("{source}: line {l}: dataset #{no} (58, starting line {start_line}), {what}")
-            };
-            let binary = match head.as_str() {
-                "58" => None,
-                "58b" => {
-                    let g = |i: usize| t.get(i).and_then(|s| s.parse::<i64>().ok());
-                    match (g(1), g(2), g(3)) {
-                        (Some(bo @ 1..=2), Some(2), Some(11)) => Some(bo == 2),
-                        _ => bail!(
-                            "{}: unsupported 58b header {:?} (need byte order 1/2, IEEE 754, 11 ASCII lines)",
-                            here("binary header", lineno),
-                            id
-                        ),
-                    }
-                }
-                _ => {
-                    // another dataset: skip to its closing -1 (binary ones by their byte count)
-                    let nb = if head.ends_with('b') { t.get(4).and_then(|s| s.parse::<u64>().ok()) } else { None };
-                    if let Some(nb) = nb {
-                        let nl = t.get(3).and_then(|s| s.parse::<usize>().ok()).unwrap_or(0);
-                        let here = || format!("{source}: line {start_line}: dataset #{no} ({head})");
-                        for _ in 0..nl {
-                            // A declared line count past the end of the file ends the skip (it
-                            // used to spin through up to 2^64 reads at EOF).
-                            if !next(&mut r, &mut line, &mut off, &mut lineno)? {
-                                bail!("{}: the file ends inside its {nl} header lines", here());
-                            }
-                        }
-                        // A byte count above i64::MAX would seek backwards (and loop).
-                        let skip = i64::try_from(nb)
-                            .map_err(|_| anyhow!("{}: binary byte count {nb} out of range", here()))?;
-                        r.seek_relative(skip).with_context(|| format!("{source}: seek failed"))?;
-                        off += nb;
-                    }
-                    loop {
-                        if !next(&mut r, &mut line, &mut off, &mut lineno)? {
-                            bail!(
-                                "{source}: line {start_line}: dataset #{no} ({head}) is not closed by a '    -1' line"
-                            );
-                        }
-                        if trim(&line) == b"-1" {
-                            break;
-                        }
-                    }
-                    continue;
-                }
-            };
-            let mut recs: Vec<(usize, Vec<u8>)> = Vec::with_capacity(11);
-            for k in 0..11 {
-                if !next(&mut r, &mut line, &mut off, &mut lineno)? {
-                    bail!("{}: the file ends inside the dataset header", here(&format!("record {}", k + 1), lineno));
-                }
-                recs.push((lineno, line.clone()));
-            }
-            let (l6, r6) = (recs[5].0, &recs[5].1);
-            let (func, rsp_dir, _) = record6(r6)
-                .ok_or_else(|| anyhow!("{}: cannot read function type and directions", here("record 6", l6)))?;
-            let node = super::uff::field(r6, 41, 10)
-                .and_then(super::uff::parse_int)
-                .or_else(|| tokens(r6).get(5).and_then(|s| s.parse().ok()));
-            let (l7, r7) = (recs[6].0, &recs[6].1);
-            let (ord, num, spacing, x0, dx) =
-                record7(r7).ok_or_else(|| anyhow!("{}: cannot read data form", here("record 7", l7)))?;
-            let double = match ord {
-                2 | 5 => false,
-                4 | 6 => true,
-                _ if func != 1 => false,
-                _ => bail!(
-                    "{}: ordinate data type {ord}: a time history must be real (2 = single, 4 = double precision)",
-                    here("record 7", l7)
-                ),
-            };
-            let complex = matches!(ord, 5 | 6);
-            let elem = if matches!(ord, 4 | 6) { 8 } else { 4 }
-                * if complex { 2 } else { 1 }
-                * if spacing == 0 { 2 } else { 1 };
-            let n = u64::try_from(num).map_err(|_| anyhow!("{}: {num} data points", here("record 7", l7)))?;
-            let data_off = off;
-            let data_line = lineno + 1;
-            // skip the data
-            if binary.is_some() {
-                r.seek_relative((n * elem as u64) as i64).with_context(|| format!("{source}: seek failed"))?;
-                off += n * elem as u64;
-            }
-            loop {
-                if !next(&mut r, &mut line, &mut off, &mut lineno)? {
-                    bail!(
-                        "{}: the dataset is not closed by a '    -1' line before the end of the file",
-                        here("record 12", lineno)
-                    );
-                }
-                if trim(&line) == b"-1" {
-                    break;
-                }
-                if binary.is_some() && !trim(&line).is_empty() {
-                    bail!(
-                        "{}: no closing '    -1' after the {} bytes of binary data record 7 declares",
-                        here("record 12", lineno),
-                        n * elem as u64
-                    );
-                }
-            }
-            if func == 1 && complex {
-                bail!(
-                    "{}: ordinate data type {ord}: a time history must be real (2 = single, 4 = double precision)",
-                    here("record 7", l7)
-                );
-            }
-            if func != 1 {
-                skipped.push(format!("dataset #{no}: function type {func}"));
-                continue;
-            }
-            if spacing != 1 {
-                bail!("{}: uneven abscissa: a time history needs evenly spaced samples", here("record 7", l7));
-            }
-            if n == 0 {
-                bail!("{}: no data points", here("record 7", l7));
-            }
-            if !(dx > 0.0 && dx.is_finite()) {
-                bail!("{}: abscissa increment {dx} s must be positive", here("record 7", l7));
-            }
-            if !x0.is_finite() {
-                bail!("{}: abscissa start {x0} s is not finite", here("record 7", l7));
-            }
-            let (l8, r8) = (recs[7].0, &recs[7].1);
-            let (spec, units) = data_characteristics(r8);
-            if let Some(t) = spec.filter(|t| ![0, 1, 17].contains(t)) {
-                bail!(
-                    "{}: the abscissa is {} (specific data type {t}), not time",
-                    here("record 8", l8),
-                    spec_type_name(t)
-                );
-            }
-            let u = units.trim().to_ascii_lowercase();
-            if !(u.is_empty() || u == "none" || u == "s" || u.starts_with("sec")) {
-                bail!("{}: abscissa units {units:?} are not seconds", here("record 8", l8));
-            }
-            let name = String::from_utf8_lossy(trim(&recs[0].1)).to_string();
-            let ch = Channel {
-                axis: 9,
-                sign: if rsp_dir < 0 { -1.0 } else { 1.0 },
-                no,
-                line: start_line,
-                n,
-                dt: dx,
-                t0: x0,
-                double,
-                binary,
-                data_off,
-                data_line,
-            };
-            let axis = match map {
-                Some(m) => m
-                    .pairs
-                    .iter()
-                    .find(|(_, v)| *v == name || node.is_some_and(|nd| v.parse::<i64>() == Ok(nd)))
-                    .map(|p| p.0),
-                None => match rsp_dir.abs() {
-                    d @ 1..=3 => Some((d - 1) as usize),
-                    _ => None,
-                },
-            };
-            match axis {
-                Some(a) => {
-                    let mut ch = ch;
-                    ch.axis = a;
-                    if map.is_some() {
-                        ch.sign = 1.0;
-                    }
-                    // Ordinate units (record 9): N, kN or mN (scaled to N); NONE/blank read as N.
-                    let (l9, r9) = (recs[8].0, &recs[8].1);
-                    let (_, ounits) = data_characteristics(r9);
-                    let ou = ounits.trim();
-                    if !ou.eq_ignore_ascii_case("none") {
-                        ch.sign *= newton_per_unit(ou).ok_or_else(|| {
-                            anyhow!(
-                                "{}: ordinate units {ou:?} are not a force in N (kN and mN are scaled)",
-                                here("record 9", l9)
-                            )
-                        })?;
-                    }
-                    found.push((ch, name, String::new()));
-                }
-                None => skipped.push(format!("dataset #{no} ({name:?}): response direction {rsp_dir}")),
-            }
-        }
-        if found.is_empty() {
-            bail!(
-                "{source}: no time history (dataset 58, function type 1) for fx, fy or fz{}{}",
-                if skipped.is_empty() { String::new() } else { format!("; skipped: {}", skipped.join(", ")) },
-                if map.is_none() {
-                    " (give --channels fx=NAME,... if the response directions do not say the axis)"
-                } else {
-                    ""
-                }
-            );
-        }
-        found.sort_by_key(|c| c.0.axis);
-        for w in found.windows(2) {
-            if w[0].0.axis == w[1].0.axis {
-                bail!(
-                    "{source}: datasets #{} and #{} are both axis {}; pick one with --channels",
-                    w[0].0.no,
-                    w[1].0.no,
-                    axis_name(w[0].0.axis)
-                );
-            }
-        }
-        let c0 = found[0].0.clone();
-        for (c, _, _) in &found[1..] {
-            if c.n != c0.n || ((c.dt - c0.dt) / c0.dt).abs() > 1e-6 {
-                bail!(
-                    "{source}: dataset #{} (f{}) has {} points every {} s, dataset #{} (f{}) {} points every {} s: channels must match",
-                    c0.no,
-                    axis_name(c0.axis),
-                    c0.n,
-                    c0.dt,
-                    c.no,
-                    axis_name(c.axis),
-                    c.n,
-                    c.dt
-                );
-            }
-        }
-        let chans: Vec<Channel> = found.into_iter().map(|c| c.0).collect();
+        let chans = index(path, &source, map)?;
         let mut readers = Vec::new();
         for c in &chans {
             let mut f = File::open(path).with_context(|| format!("{source}: cannot read"))?;
