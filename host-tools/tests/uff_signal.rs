@@ -471,3 +471,37 @@ fn uff_refusals_word_for_word() {
     }
     assert!(bad.is_empty(), "\n{}\n{good}", bad.join("\n"));
 }
+
+/// A 58b dataset of another function type (skipped by its byte count)
+/// whose record 7 declares more points than any file can hold is refused
+/// naming record 7, instead of overflowing the byte count; control: the
+/// same dataset with its true count is skipped and the time history after
+/// it is read.
+#[test]
+fn a_skipped_58b_dataset_with_an_impossible_count_is_refused() {
+    let p = tmp("uffhuge", "one.uff");
+    write_uff(&p, &[vec![1.0, 2.0, 3.0, 4.0]], 51200.0, true);
+    let one = std::fs::read(&p).unwrap();
+    // Lines of the text header: record 6 (7th line after the "-1"), record 7.
+    let text_end = one.windows(1).position(|w| w[0] == 0).unwrap_or(one.len());
+    let head = String::from_utf8_lossy(&one[..text_end]).to_string();
+    let lines: Vec<&str> = head.split('\n').collect();
+    let (r6, r7) = (lines[7], lines[8]);
+    let foreign = |count: &str| -> Vec<u8> {
+        // Function type 4 (an FRF): not a time history, so its data are skipped.
+        let r6_frf = format!("{:>5}{}", 4, &r6[5..]);
+        let r7_count = format!("{:>10}{:>10}{}", &r7[..10].trim(), count, &r7[20..]);
+        let mut b = one.clone();
+        let s = String::from_utf8_lossy(&one[..text_end]).replacen(r6, &r6_frf, 1).replacen(r7, &r7_count, 1);
+        b.splice(..text_end, s.into_bytes());
+        b.extend_from_slice(&one);
+        b
+    };
+    let read_back = |bytes: Vec<u8>| {
+        std::fs::write(&p, bytes).unwrap();
+        open_signal(&p, None).and_then(|(mut r, _)| read_all(&mut *r)).map(|(_, c)| c[0].clone())
+    };
+    let huge = read_back(foreign(" 4611686018427387904")).map_err(|e| format!("{e:#}")).unwrap_err();
+    assert!(huge.contains("record 7") && huge.contains("more than any file holds"), "{huge}");
+    assert_eq!(read_back(foreign("4")).unwrap(), vec![1.0, 2.0, 3.0, 4.0]);
+}

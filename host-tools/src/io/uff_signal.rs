@@ -252,7 +252,14 @@ fn data_form(recs: &[(usize, Vec<u8>)], ds: &Dataset) -> Result<DataForm> {
 /// Skip the data (record 12) up to the closing `-1`: a 58b dataset's by
 /// its byte count.
 fn skip_data(lines: &mut Lines, ds: &Dataset, binary: bool, form: &DataForm) -> Result<()> {
-    let bytes = form.n * form.elem;
+    let Some(bytes) = form.n.checked_mul(form.elem).filter(|b| i64::try_from(*b).is_ok()) else {
+        bail!(
+            "{}: {} data points of {} bytes: more than any file holds",
+            ds.at("record 7", form.line),
+            form.n,
+            form.elem
+        );
+    };
     if binary {
         lines.skip(bytes as i64)?;
         lines.off += bytes;
