@@ -75,14 +75,12 @@ fn db(v: f64) -> f64 {
     20.0 * v.max(1e-6).log10()
 }
 
+/// One line of a panel: points (Hz, dB), colour, dashed, legend label.
+type Series<'a> = (Vec<(f64, f64)>, RGBColor, bool, &'a str);
+
 /// A 3x3 grid of panels of (x, y) lines (one list of series per panel:
 /// points, colour, dashed, label), shaded over each row's band.
-fn grid(
-    title: &str,
-    x_max: f64,
-    bands: &[(f64, f64); 3],
-    panels: &[Vec<(Vec<(f64, f64)>, RGBColor, bool, &str)>],
-) -> Result<String> {
+fn grid(title: &str, x_max: f64, bands: &[(f64, f64); 3], panels: &[Vec<Series<'_>>]) -> Result<String> {
     let mut buf = String::new();
     {
         let root = SVGBackend::with_string(&mut buf, (1100, 900)).into_drawing_area();
