@@ -682,3 +682,46 @@ fn plot_model_match(d: &AxisDesign, dm: &crate::design::discretize::DiscreteMode
     }
     Ok(buf)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Whether every pole lies inside the window at least a tenth of its
+    /// size from its edges, and the poles span at least 40 % of its height
+    /// or width (the window is fitted to them, not just around them).
+    fn framed(poles: &[Complex64], (x, y): ((f64, f64), (f64, f64))) -> bool {
+        let (w, h) = (x.1 - x.0, y.1 - y.0);
+        let inside = poles
+            .iter()
+            .all(|z| z.re >= x.0 + 0.1 * w && z.re <= x.1 - 0.1 * w && z.im >= y.0 + 0.1 * h && z.im <= y.1 - 0.1 * h);
+        let (re, im) =
+            (finite_range(poles.iter().map(|z| z.re)).unwrap(), finite_range(poles.iter().map(|z| z.im)).unwrap());
+        inside && ((re.1 - re.0) >= 0.4 * w || (im.1 - im.0) >= 0.4 * h)
+    }
+
+    #[test]
+    fn the_zoom_is_framed_on_the_poles_nearest_one() {
+        let c = Complex64::new;
+        // Slow modes at 470-600 Hz at 51.2 kHz, a sensor mode at 2.5 kHz.
+        let slow = [c(0.9956, 0.0577), c(0.9941, 0.0680), c(0.9946, 0.0733), c(0.9958, 0.0554), c(0.9948, 0.0754)];
+        let mut poles: Vec<Complex64> = slow.to_vec();
+        poles.push(c(0.934, 0.300));
+        poles.extend(slow.iter().map(|z| z.conj()));
+        let zoomed = zoom_poles(&poles);
+        assert_eq!(zoomed.len(), slow.len(), "{zoomed:?}");
+        let px = (460, 480);
+        assert!(framed(&zoomed, zoom_window(&zoomed, px)));
+        // Control: a fixed window near z = 1 (Re 0.9-1.0) leaves them on its edge.
+        assert!(!framed(&zoomed, equal_aspect(0.95, 0.045, 0.05, 0.05, px)));
+        // Poles anywhere: one alone, and a cluster far from z = 1.
+        for set in [vec![c(-0.5, 0.5)], vec![c(0.2, 0.7), c(0.25, 0.72), c(0.3, 0.6)]] {
+            let zoomed = zoom_poles(&set);
+            assert_eq!(zoomed.len(), set.len());
+            let w = zoom_window(&zoomed, px);
+            let inside = zoomed.iter().all(|z| z.re > w.0 .0 && z.re < w.0 .1 && z.im > w.1 .0 && z.im < w.1 .1);
+            assert!(inside && (set.len() == 1 || framed(&zoomed, w)), "{set:?}: {w:?}");
+        }
+        assert!(describe_window((0.979, 1.006), (0.051, 0.079)).contains("Re z 0.979–1.006, Im z 0.051–0.079"));
+    }
+}
