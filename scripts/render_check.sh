@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Render report pages (index.html) in headless Chromium to PNG and fail if
 # the page or one of its images does not load, or Chromium logs an error.
+# Also fails on a caption sentence that starts in lowercase (the rule of
+# dynocomp::report::page::lowercase_sentence_starts).
 # Installs Debian's `chromium` (apt-get, as root or via sudo) when missing.
 # Usage: scripts/render_check.sh PAGE.html [PAGE.html ...]  (PNG next to each page)
 set -euo pipefail
@@ -37,6 +39,20 @@ for page in "$@"; do
             echo "render_check: $page: $src is not well-formed SVG" >&2; fail=1
         fi
     done
+    lower=$(perl -CSD -0777 -ne '
+        while (/<p class="caption">(.*?)<\/p>/gs) {
+            my $c = $1; $c =~ s/&lt;/</g; $c =~ s/&gt;/>/g; $c =~ s/&quot;/"/g; $c =~ s/&#39;/\x27/g; $c =~ s/&amp;/&/g;
+            # sentence starts: the caption start, and after . ! ? and a space (not after e.g. i.e. cf. vs. etc.)
+            while ($c =~ / (?: ^ | (?<![ (]e\.g\.) (?<![ (]i\.e\.) (?<![ (]cf\.) (?<![ (]vs\.) (?<![ (]etc\.)
+                               (?<=[.!?]) \s )
+                           \s* (\p{Ll}\S* (?:\s+\S+){0,3}) /gx) {
+                print "$1\n";
+            }
+        }' "$abs" 2>&1)
+    if [ -n "$lower" ]; then
+        echo "render_check: $page: caption sentences start in lowercase:" >&2
+        echo "$lower" | sed 's/^/  /' >&2; fail=1
+    fi
     if [ ! -s "$png" ] || [ "$n_img" -eq 0 ]; then echo "render_check: $page: no screenshot or no images rendered" >&2; fail=1; fi
     echo "render_check: $page -> $png ($n_img images)"
     rm -f "$log" "$log.dom"

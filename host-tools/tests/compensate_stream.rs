@@ -263,6 +263,8 @@ fn report_nrmse_uses_the_scoring_band() {
     }
     let html = std::fs::read_to_string(rep.join("index.html")).unwrap();
     assert!(html.contains("both low-passed at 4000 Hz"), "the page states another band");
+    let lower = dynocomp::report::page::lowercase_caption_sentences(&html);
+    assert!(lower.is_empty(), "caption sentences start in lowercase: {lower:?}");
 }
 
 /// Outputs too large for memory spill beside the output, not to the

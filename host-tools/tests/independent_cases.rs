@@ -6,6 +6,7 @@
 use dynocomp::design::axis::DesignOptions;
 use dynocomp::design::image::build_image;
 use dynocomp::design::latency::design_axes_choosing_latency;
+use dynocomp::design::progress::Progress;
 use dynocomp::io::signal_csv::read_signal_csv;
 use dynocomp::metrics::accuracy;
 use dynocomp::offline::compensate::compensate_record;
@@ -29,7 +30,7 @@ fn clustered_machine_modes_the_box_design_compensates_x() {
     let r = dynocomp::design::noise::noise_variances(Some(&idle), None, &frf).unwrap();
     let rv: Vec<f64> = frf.axes.iter().map(|a| r[a.axis].unwrap()).collect();
     let opts = DesignOptions { fs_hz: fs, ..Default::default() };
-    let (results, choice) = design_axes_choosing_latency(&frf.freq_hz, &frf.axes, &rv, &opts, None, |_, _| {});
+    let (results, choice) = design_axes_choosing_latency(&frf.freq_hz, &frf.axes, &rv, &opts, None, &Progress::none());
     let designs: Vec<_> = results.into_iter().map(|(d, _)| d.unwrap()).collect();
     let x = &designs[0];
     let (dm, fd) = x.discrete.as_ref().unwrap();

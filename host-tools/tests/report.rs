@@ -94,6 +94,9 @@ fn report_writes_svgs_and_index() {
     let html = std::fs::read_to_string(dir.join("index.html")).unwrap();
     assert!(html.starts_with("<!DOCTYPE html>"));
     assert!(html.contains("<pre>") && html.contains("</pre>"));
+    // Every caption sentence starts with a capital (the page reads as prose).
+    let lower = dynocomp::report::page::lowercase_caption_sentences(&html);
+    assert!(lower.is_empty(), "caption sentences start in lowercase: {lower:?}");
     // The summary wraps instead of running off the page's edge.
     assert!(html.contains("white-space: pre-wrap"), "the summary does not wrap");
     assert!(

@@ -73,6 +73,8 @@ fn two_state_design_and_drifting_smoother_follow_the_change() {
         index.contains("x_range.svg") && index.contains("Machine modes shared by both states"),
         "index links the range plots"
     );
+    let lower = dynocomp::report::page::lowercase_caption_sentences(&index);
+    assert!(lower.is_empty(), "caption sentences start in lowercase: {lower:?}");
     let (ok, out, err) = design("two_json.dcimg", &["frf.uff", "frf_after.uff", "--json"]);
     assert!(ok, "{err}");
     let j: serde_json::Value = serde_json::from_str(&out).unwrap();

@@ -15,6 +15,7 @@ use crate::cli::design_matrix::MatrixOutcome;
 use crate::design::axis::AxisDesign;
 use crate::design::image::build_image;
 use crate::design::latency::LatencyChoice;
+use crate::design::progress::Progress;
 use crate::design::versus_default::VersusDefault;
 use crate::frf::axis_name;
 use crate::offline::force_prior::{AxisPrior, PriorOptions};
@@ -84,19 +85,19 @@ fn design_axes(args: &DesignArgs, s: &DesignSetup) -> Result<Designed> {
     let frf = &s.frf;
     eprintln!("designing {} axes ({} lines each)…", frf.axes.len(), frf.freq_hz.len());
     let rv: Vec<f64> = frf.axes.iter().map(|a| s.r[a.axis].expect("R set for every FRF axis")).collect();
+    let progress = Progress::stderr();
     let (results, latency_choice) = if s.auto_latency {
-        let progress = |_: usize, what: &str| eprintln!("  {what}…");
         let (d, c) = crate::design::latency::design_axes_choosing_latency(
             &frf.freq_hz,
             &frf.axes,
             &rv,
             &s.opts,
             Some(s.limit_permille),
-            progress,
+            &progress,
         );
         (d, Some(c))
     } else {
-        (crate::design::latency::design_axes(&frf.freq_hz, &frf.axes, &rv, &s.opts), None)
+        (crate::design::latency::design_axes_reporting(&frf.freq_hz, &frf.axes, &rv, &s.opts, &progress), None)
     };
     let latency = latency_choice.as_ref().map_or(s.latency, |c| c.chosen);
     let mut designs = Vec::new();

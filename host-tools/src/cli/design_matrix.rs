@@ -68,7 +68,7 @@ pub enum MatrixOutcome {
 /// axis ([`MatrixOutcome`]).
 pub fn run(args: &DesignArgs, s: &DesignSetup, t0: Instant) -> Result<MatrixOutcome> {
     let r: [f64; 3] = std::array::from_fn(|i| s.r[i].expect("R set for every axis of a complete matrix"));
-    let progress = Progress(std::sync::Arc::new(|line: &str| eprintln!("  {line}")));
+    let progress = Progress::stderr();
     let opts =
         MatrixOptions { design: s.opts.clone(), latency: args.latency, progress: Some(progress), ..Default::default() };
     eprintln!("designing the 3x3 compensator ({} lines, nine FRFs; about a minute)…", s.frf.freq_hz.len());

@@ -37,8 +37,7 @@ pub fn flat_band(
             continue;
         }
         let e = response(*f) * g * Complex64::from_polar(1.0, 2.0 * PI * f * lag as f64 / fs_hz);
-        let ok = (e.norm() - 1.0).abs() <= 0.05 && e.arg().abs() <= 5f64.to_radians();
-        if !ok {
+        if !is_flat(e) {
             break;
         }
         lo.get_or_insert(*f);
@@ -48,6 +47,33 @@ pub fn flat_band(
         Some(l) => (l, hi),
         None => (0.0, 0.0),
     }
+}
+
+/// Whether a compensated response H·G·e^{jωL/fs} is flat: within 1 ± 5 % in
+/// magnitude and ±5° in phase.
+pub fn is_flat(e: Complex64) -> bool {
+    (e.norm() - 1.0).abs() <= 0.05 && e.arg().abs() <= 5f64.to_radians()
+}
+
+/// The longest run of consecutive lines `freq_hz` inside `band` (Hz) on
+/// which the compensated response `e` (H·G·e^{jωL/fs}, e.g. with a measured
+/// G) [`is_flat`]: its first and last line (Hz), or `None` if no line is.
+/// Unlike [`flat_band`] it does not stop at the first line that is not
+/// flat, so a noisy line near the band's bottom does not end it.
+pub fn longest_flat_run(freq_hz: &[f64], e: &[Complex64], band: (f64, f64)) -> Option<(f64, f64)> {
+    let mut best: Option<(usize, usize)> = None;
+    let mut start: Option<usize> = None;
+    for (i, (f, e)) in freq_hz.iter().zip(e).enumerate() {
+        if *f >= band.0 && *f <= band.1 && is_flat(*e) {
+            let s = *start.get_or_insert(i);
+            if best.is_none_or(|(b0, b1)| i - s > b1 - b0) {
+                best = Some((s, i));
+            }
+        } else {
+            start = None;
+        }
+    }
+    best.map(|(a, b)| (freq_hz[a], freq_hz[b]))
 }
 
 /// The noise factor of J ([`criterion_j`]): (2R/fs)·(f_hi − f_lo)/force_rms², the
@@ -154,4 +180,25 @@ fn band_cells(bands: &[(f64, f64)], n: usize) -> Vec<(f64, f64)> {
         out.extend((0..k).map(|i| (b.0 + w * i as f64, b.0 + w * (i + 1) as f64)));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn longest_flat_run_skips_a_bad_line_at_the_bottom_and_stops_at_one_inside() {
+        let f: Vec<f64> = (0..10).map(|i| 100.0 * i as f64).collect();
+        let one = Complex64::new(1.0, 0.0);
+        let mut e = vec![one; 10];
+        assert_eq!(longest_flat_run(&f, &e, (100.0, 800.0)), Some((100.0, 800.0)), "limited to the band");
+        e[1] = Complex64::new(1.06, 0.0); // 6 % off at the bottom
+        e[7] = Complex64::from_polar(1.0, 6f64.to_radians()); // 6° off near the top
+        assert_eq!(longest_flat_run(&f, &e, (0.0, 900.0)), Some((200.0, 600.0)));
+        // within the tolerances on both edges: still flat
+        e[1] = Complex64::new(1.049, 0.0);
+        e[7] = Complex64::from_polar(0.951, 4.9f64.to_radians());
+        assert_eq!(longest_flat_run(&f, &e, (0.0, 900.0)), Some((0.0, 900.0)));
+        assert_eq!(longest_flat_run(&f, &vec![2.0 * one; 10], (0.0, 900.0)), None);
+    }
 }

@@ -15,7 +15,8 @@ use std::time::Instant;
 use crate::design::axis::{design_prepared, prepare_axis, AxisDesign, DesignOptions, PreparedAxis};
 use crate::design::discretize::{Discretization, NYQUIST_FIT_FRACTION};
 use crate::design::paper_orders::design_axis;
-use crate::frf::AxisFrf;
+use crate::design::progress::Progress;
+use crate::frf::{axis_name, AxisFrf};
 
 /// Latency designed first, and kept unless a longer one buys accuracy (samples).
 pub const DEFAULT_LATENCY: usize = 4;
@@ -73,7 +74,46 @@ pub type TimedDesign = (Result<AxisDesign>, f64);
 /// Design every axis of `axes` (one thread each) with `opts`, at `opts.lag`.
 /// `r[i]` is axis i's noise variance (N²).
 pub fn design_axes(freq_hz: &[f64], axes: &[AxisFrf], r: &[f64], opts: &DesignOptions) -> Vec<TimedDesign> {
-    on_threads(axes.iter().zip(r), |(a, rv)| design_axis(freq_hz, a, *rv, opts))
+    design_axes_reporting(freq_hz, axes, r, opts, &Progress::none())
+}
+
+/// [`design_axes`], telling `progress` when each axis starts and when it is
+/// designed ([`axis_done`]).
+pub fn design_axes_reporting(
+    freq_hz: &[f64],
+    axes: &[AxisFrf],
+    r: &[f64],
+    opts: &DesignOptions,
+    progress: &Progress,
+) -> Vec<TimedDesign> {
+    let n = axes.len();
+    on_threads(axes.iter().zip(r).enumerate(), |(i, (a, rv))| {
+        progress.say(&format!(
+            "{}: fitting {} FRF lines and designing at latency {}…",
+            axis_of(a, i, n),
+            freq_hz.len(),
+            opts.lag
+        ));
+        let t = Instant::now();
+        let d = design_axis(freq_hz, a, *rv, opts);
+        progress.say(&axis_done(&axis_of(a, i, n), &format!("latency {}", opts.lag), &d, t.elapsed().as_secs_f64()));
+        d
+    })
+}
+
+/// "axis y (2/3)": axis `a`, the `i`-th (from 0) of `n`.
+fn axis_of(a: &AxisFrf, i: usize, n: usize) -> String {
+    format!("axis {} ({}/{n})", axis_name(a.axis), i + 1)
+}
+
+/// The stage line of one axis designed at `stage` in `seconds`: "axis y
+/// (2/3) at latency 4: predicted error 0.12 %, flat to 3634 Hz, 248 ms".
+fn axis_done(axis: &str, stage: &str, d: &Result<AxisDesign>, seconds: f64) -> String {
+    let what = match d {
+        Ok(d) => format!("predicted error {:.2} %, flat to {:.0} Hz", 100.0 * d.predicted_error, d.flat_band_hz.1),
+        Err(_) => "failed".to_string(),
+    };
+    format!("{axis} at {stage}: {what}, {:.0} ms", seconds * 1e3)
 }
 
 /// `f` of every item, one thread each, with each one's wall time (s).
@@ -99,11 +139,23 @@ type TimedPrepared = (Result<PreparedAxis>, f64);
 
 /// Design every prepared axis at `opts.lag` and `opts.discrete_fit_top`;
 /// each axis's time includes its preparation. An axis that could not be
-/// prepared fails in every round with the same message.
-fn design_round(prepared: &[TimedPrepared], opts: &DesignOptions) -> Vec<TimedDesign> {
-    on_threads(prepared.iter(), |(p, _)| match p {
-        Ok(p) => design_prepared(p, opts),
-        Err(e) => Err(anyhow!("{e:#}")),
+/// prepared fails in every round with the same message. `progress` hears
+/// each axis (labelled `labels[i]`) as it is designed at `stage`.
+fn design_round(
+    prepared: &[TimedPrepared],
+    opts: &DesignOptions,
+    labels: &[String],
+    progress: &Progress,
+    stage: &str,
+) -> Vec<TimedDesign> {
+    on_threads(prepared.iter().zip(labels), |((p, _), label)| {
+        let t = Instant::now();
+        let d = match p {
+            Ok(p) => design_prepared(p, opts),
+            Err(e) => Err(anyhow!("{e:#}")),
+        };
+        progress.say(&axis_done(label, stage, &d, t.elapsed().as_secs_f64()));
+        d
     })
     .into_iter()
     .zip(prepared)
@@ -193,9 +245,11 @@ pub fn pick(trials: &[LatencyTrial], limit_permille: Option<u32>) -> usize {
 }
 
 /// Design every axis at the chosen latency. `opts.lag` is ignored; `limit_permille` is the box's load limit the image should meet.
-/// `progress` hears each further design round as it starts: its latency
-/// and what it is for ("axis z flat to 2088 of 4096 Hz at latency 4:
-/// designing again at 6 samples").
+/// `progress` hears when each axis's fit starts ("axis y (2/3): fitting
+/// 4097 FRF lines…"), each candidate latency as its round starts, with what
+/// it is for ("latency 6 samples (candidate 2/3): axis z flat to 2088 of
+/// 4096 Hz at latency 4: designing again…"), and each axis as it is
+/// designed in a round ("axis y (2/3) at latency 6: predicted error …").
 ///
 /// its flat band stops short of its compensated band ([`FLAT_BAND_SHORT`]),
 /// or its predicted in-band distortion (the error without the noise, what
@@ -216,30 +270,46 @@ pub fn design_axes_choosing_latency(
     r: &[f64],
     opts: &DesignOptions,
     limit_permille: Option<u32>,
-    mut progress: impl FnMut(usize, &str),
+    progress: &Progress,
 ) -> (Vec<TimedDesign>, LatencyChoice) {
-    let names: Vec<String> = axes.iter().map(|a| crate::frf::axis_name(a.axis).to_string()).collect();
+    let names: Vec<String> = axes.iter().map(|a| axis_name(a.axis).to_string()).collect();
+    let n = axes.len();
+    let labels: Vec<String> = axes.iter().enumerate().map(|(i, a)| axis_of(a, i, n)).collect();
     // Each axis fitted once for all rounds: only the discrete model's fit
     // top, the latency and what follows from them change between rounds.
     let prepared = if opts.paper_orders_auto {
         Vec::new()
     } else {
-        on_threads(axes.iter().zip(r), |(a, rv)| prepare_axis(freq_hz, a, *rv, opts))
+        on_threads(axes.iter().zip(r).zip(&labels), |((a, rv), label)| {
+            progress.say(&format!("{label}: fitting {} FRF lines…", freq_hz.len()));
+            prepare_axis(freq_hz, a, *rv, opts)
+        })
     };
     let round = |o: &DesignOptions| {
         if opts.paper_orders_auto {
-            design_axes(freq_hz, axes, r, o)
+            design_axes_reporting(freq_hz, axes, r, o, progress)
         } else {
-            design_round(&prepared, o)
+            let stage = if o.discrete_fit_top == NYQUIST_FIT_FRACTION {
+                format!("latency {}, fitted up to Nyquist", o.lag)
+            } else {
+                format!("latency {}", o.lag)
+            };
+            design_round(&prepared, o, &labels, progress, &stage)
         }
     };
+    let candidates = 1 + LONGER_LATENCIES.len();
+    progress
+        .say(&format!("latency {DEFAULT_LATENCY} samples (candidate 1 of up to {candidates}): designing {n} axes…"));
     let first = round(&DesignOptions { lag: DEFAULT_LATENCY, ..opts.clone() });
     let reason = shortfall(&first, &names);
     let mut trials = vec![trial(DEFAULT_LATENCY, &first, opts.fs_hz)];
     let mut rounds = vec![first];
     if !reason.is_empty() {
-        for l in LONGER_LATENCIES {
-            progress(l, &format!("{reason} at latency {DEFAULT_LATENCY}: designing again at {l} samples"));
+        for (k, l) in LONGER_LATENCIES.into_iter().enumerate() {
+            progress.say(&format!(
+                "latency {l} samples (candidate {}/{candidates}): {reason} at latency {DEFAULT_LATENCY}: designing again…",
+                k + 2
+            ));
             let d = round(&DesignOptions { lag: l, ..opts.clone() });
             trials.push(trial(l, &d, opts.fs_hz));
             rounds.push(d);
@@ -253,7 +323,7 @@ pub fn design_axes_choosing_latency(
         // instead (crate::design::discretize::NYQUIST_FIT_FRACTION); per axis, the one
         // that predicts the smaller error, if the box can still run the image.
         let l = trials[i].latency;
-        progress(l, &format!("fitting the discrete models up to Nyquist at latency {l}"));
+        progress.say(&format!("latency {l} samples (chosen): fitting the discrete models up to Nyquist instead…"));
         let alt = round(&DesignOptions { lag: l, discrete_fit_top: NYQUIST_FIT_FRACTION, ..opts.clone() });
         let before = box_load(&designs, opts.fs_hz);
         let taken: Vec<bool> = designs

@@ -25,6 +25,7 @@ pub mod noise;
 pub mod paper;
 pub mod paper_orders;
 pub mod parallel;
+pub mod progress;
 pub mod sensitivity;
 pub mod two_state;
 pub mod versus_default;

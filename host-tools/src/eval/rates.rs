@@ -369,7 +369,7 @@ fn score_sim_with(
                 &r,
                 &opts,
                 Some(BOX_LOAD_LIMIT_PERMILLE),
-                |_, _| {},
+                &crate::design::progress::Progress::none(),
             );
             (d, c.chosen)
         }

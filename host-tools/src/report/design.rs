@@ -114,32 +114,29 @@ fn axis_plots(
         (
             format!("{name}_compensated.svg"),
             format!("Axis {name}: compensated response H·G"),
-            format!(
-                "The f32 compensator H times the measured G, with the declared latency of {} samples removed, \
-                 against the uncompensated G. Dashed: the ±5 % and ±5° tolerances. Shaded: the flat band \
-                 (green) inside the coherent band (grey).",
-                d.kalman.lag
-            ),
+            compensated_caption(d, measured_flat_band(freq, meas, d, fs_hz)),
             plot_compensated(freq, meas, d, fs_hz).with_context(|| format!("report: axis {name}: compensated plot"))?,
         ),
-        (
-            format!("{name}_poles.svg"),
-            format!("Axis {name}: pole map (z-plane)"),
-            format!(
-                "Poles of the compensator's modal sections (×) and of the fitted sensor model (○, z = exp(p/fs)), \
-                 whole z-plane and zoom near z = 1.{}",
-                if d.realization.fir.is_empty() {
-                    String::new()
-                } else {
-                    format!(
-                        " The compensator's fast poles are realized as {} FIR taps and are not shown.",
-                        d.realization.fir.len()
-                    )
-                }
-            ),
-            plot_poles(d, fs_hz).with_context(|| format!("report: axis {name}: pole map"))?,
-        ),
     ];
+    let (poles_svg, zoom) = plot_poles(d, fs_hz).with_context(|| format!("report: axis {name}: pole map"))?;
+    plots.push((
+        format!("{name}_poles.svg"),
+        format!("Axis {name}: pole map (z-plane)"),
+        format!(
+            "Poles of the compensator's modal sections (×) and of the fitted sensor model (○, z = exp(p/fs)): \
+             the whole z-plane, and a zoom on the poles nearest z = 1 in the upper half plane ({zoom}, \
+             equal scales).{}",
+            if d.realization.fir.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    " The compensator's fast poles are realized as {} FIR taps and are not shown.",
+                    d.realization.fir.len()
+                )
+            }
+        ),
+        poles_svg,
+    ));
     plots.extend(further_plots(d, sens, fs_hz)?);
     Ok(plots)
 }
@@ -284,22 +281,66 @@ fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> 
 
 // ------------------------------------------------------------ plot 2: compensated
 
+/// H·G·e^{j2πfL/fs} on every line: the f32 filter H as it goes into the
+/// image, times `g` on the same lines, the declared latency L removed.
+fn compensated(freq: &[f64], g: &[Complex64], d: &AxisDesign, fs: f64) -> Vec<Complex64> {
+    let lag = d.kalman.lag as f64;
+    freq.iter()
+        .zip(g)
+        .map(|(f, g)| filter_response(&d.filter, *f, fs) * Complex64::from_polar(1.0, 2.0 * PI * f * lag / fs) * g)
+        .collect()
+}
+
+/// The flat band of the measured G (Hz): the longest run of lines in the
+/// coherent band on which the measured H·G is flat (±5 %, ±5°,
+/// [`crate::design::criterion::longest_flat_run`]); `None` if no line is.
+/// The design's flat band (`AxisDesign::flat_band_hz`) is computed with the
+/// fitted model Ĝ instead, which is free of the measurement's noise.
+fn measured_flat_band(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Option<(f64, f64)> {
+    crate::design::criterion::longest_flat_run(freq, &compensated(freq, &meas.frf, d, fs), d.coherent_band_hz)
+}
+
+/// "4–3480 Hz", or "none".
+fn describe_band(band: Option<(f64, f64)>) -> String {
+    band.map_or("none".into(), |(a, b)| format!("{a:.0}–{b:.0} Hz"))
+}
+
+/// The caption of [`plot_compensated`]; `flat` is [`measured_flat_band`].
+fn compensated_caption(d: &AxisDesign, flat: Option<(f64, f64)>) -> String {
+    let model_flat = Some(d.flat_band_hz).filter(|b| b.1 > b.0);
+    let differ = if describe_band(model_flat) == describe_band(flat) {
+        ""
+    } else {
+        " The two differ where the measurement's noise takes the measured ratio out of the tolerances while the \
+         model's stays within them (or the reverse)."
+    };
+    format!(
+        "The f32 compensator H times the measured G, with the declared latency of {} samples removed, against the \
+         uncompensated G. Dashed orange: the ±5 % and ±5° tolerances. Grey: the coherent band ({}). Green bar (at \
+         the bottom) and dashed green edges: the flat band of the measured G, the longest run of coherent lines on \
+         which the measured |H·G| stays within ±5 % and its phase within ±5° ({}); orange ticks beside the bar: the \
+         coherent lines on which it does not. The summary's flat band, where \
+         |H·Ĝ| with the fitted model Ĝ stays within them from the band's bottom up, is {}.{differ}",
+        d.kalman.lag,
+        describe_band(Some(d.coherent_band_hz)),
+        describe_band(flat),
+        describe_band(model_flat)
+    )
+}
+
 /// `a_compensated.svg`: the compensated response H·G·e^{j2πfL/fs} (measured
 /// G, the f32 filter H as it goes into the image, the declared latency L
 /// removed) against the uncompensated G: an overview in dB and zooms of the
-/// magnitude ratio and the phase with the ±5 % / ±5° tolerances; the flat
-/// band is shaded.
+/// magnitude ratio and the phase with the ±5 % / ±5° tolerances; the
+/// coherent band shaded and the measured G's flat band
+/// ([`measured_flat_band`]) marked by a bar along the bottom.
 fn plot_compensated(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Result<String> {
     let name = axis_name(d.axis);
     let xr = (freq[0], *freq.last().unwrap_or(&freq[0]));
     let xr = if xr.1 > xr.0 { xr } else { (xr.0, xr.0 + 1.0) };
-    let lag = d.kalman.lag as f64;
-    let h: Vec<Complex64> = freq
-        .iter()
-        .map(|f| filter_response(&d.filter, *f, fs) * Complex64::from_polar(1.0, 2.0 * PI * f * lag / fs))
-        .collect();
-    let hg: Vec<Complex64> = h.iter().zip(&meas.frf).map(|(h, g)| h * g).collect();
-    let hg_model: Vec<Complex64> = h.iter().zip(freq).map(|(h, f)| h * d.fitted_frf(*f)).collect();
+    let hg = compensated(freq, &meas.frf, d, fs);
+    let model: Vec<Complex64> = freq.iter().map(|f| d.fitted_frf(*f)).collect();
+    let hg_model = compensated(freq, &model, d, fs);
     let g = &meas.frf;
 
     let mag_g_db: Vec<(f64, f64)> = freq.iter().zip(g).map(|(f, z)| (*f, db(*z))).collect();
@@ -313,19 +354,24 @@ fn plot_compensated(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Re
 
     let (lo, hi) = finite_range(mag_g_db.iter().chain(&mag_hg_db).map(|p| p.1)).unwrap_or((-20.0, 20.0));
     let yr_db = pad_range((lo.clamp(-60.0, -3.0), hi.clamp(3.0, 60.0)), 0.06, 6.0);
-    let flat = d.flat_band_hz;
+    let flat = measured_flat_band(freq, meas, d, fs);
     let band = d.coherent_band_hz;
     let tol = |y: f64| vec![(xr.0, y), (xr.1, y)];
+    // No flat line: an empty band, nothing drawn.
+    let flat_or_empty = flat.unwrap_or((f64::NAN, f64::NAN));
+    // The coherent lines where the measured H·G is not flat: they end the run.
+    let off: Vec<f64> = freq
+        .iter()
+        .zip(&hg)
+        .filter(|(f, e)| **f >= band.0 && **f <= band.1 && !crate::design::criterion::is_flat(**e))
+        .map(|(f, _)| *f)
+        .collect();
 
     let mut buf = String::new();
     {
         let root = SVGBackend::with_string(&mut buf, (1100, 1000)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
-        let flat_txt = if flat.1 > flat.0 {
-            format!("flat band {:.0}–{:.0} Hz", flat.0, flat.1)
-        } else {
-            "no flat band".to_string()
-        };
+        let flat_txt = format!("flat band of the measured G {}", describe_band(flat));
         let title =
             format!("Axis {name} — compensated response H·G (latency {} samples removed), {flat_txt}", d.kalman.lag);
         let root = root.titled(&title, (FONT, 20)).map_err(perr)?;
@@ -334,9 +380,10 @@ fn plot_compensated(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Re
 
         let mut c = build_chart(&top, "Magnitude, overview", xr, yr_db)?;
         mesh(&mut c, "Frequency (Hz)", "Magnitude (dB)", &hz, &|v| format!("{v:.0}"), 7)?;
-        shade(&mut c, band, xr, yr_db, C_COH_BAND, 0.12, "coherent band")?;
-        shade(&mut c, flat, xr, yr_db, C_FLAT_BAND, 0.13, "flat band (±5 %, ±5°)")?;
+        shade(&mut c, band, xr, yr_db, C_COH_BAND, 0.15, "coherent band")?;
         shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_db, true)?;
+        band_bar(&mut c, flat_or_empty, xr, yr_db, C_FLAT_BAND, "flat band, measured G (±5 %, ±5°)")?;
+        bottom_ticks(&mut c, &off, yr_db, C_TOL, "coherent lines off the tolerances (measured)")?;
         draw_line(&mut c, &mag_g_db, yr_db, f64::INFINITY, C_RAW, 2, false, "uncompensated |G|")?;
         draw_line(&mut c, &mag_hg_db, yr_db, f64::INFINITY, C_MEASURED, 1, false, "compensated |H·G|")?;
         legend(&mut c, SeriesLabelPosition::UpperLeft)?;
@@ -344,22 +391,24 @@ fn plot_compensated(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Re
         let yr_m = (0.8, 1.2);
         let mut c = build_chart(&midp, "Magnitude ratio, zoom (tolerance ±5 %)", xr, yr_m)?;
         mesh(&mut c, "Frequency (Hz)", "|H·G| (N/N)", &hz, &|v| format!("{v:.2}"), 9)?;
-        shade(&mut c, band, xr, yr_m, C_COH_BAND, 0.12, "")?;
-        shade(&mut c, flat, xr, yr_m, C_FLAT_BAND, 0.13, "")?;
+        shade(&mut c, band, xr, yr_m, C_COH_BAND, 0.15, "")?;
         shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_m, false)?;
+        band_bar(&mut c, flat_or_empty, xr, yr_m, C_FLAT_BAND, "")?;
+        bottom_ticks(&mut c, &off, yr_m, C_TOL, "")?;
         draw_line(&mut c, &tol(1.05), yr_m, f64::INFINITY, C_TOL, 2, true, "±5 % tolerance")?;
         draw_line(&mut c, &tol(0.95), yr_m, f64::INFINITY, C_TOL, 2, true, "")?;
         draw_line(&mut c, &mag_g, yr_m, f64::INFINITY, C_RAW, 2, false, "uncompensated |G|")?;
         draw_line(&mut c, &mag_hg, yr_m, f64::INFINITY, C_MEASURED, 1, false, "compensated |H·G| (measured G)")?;
         draw_line(&mut c, &mag_hgm, yr_m, f64::INFINITY, C_MODEL, 2, false, "|H·Ĝ| (fitted model)")?;
-        legend(&mut c, SeriesLabelPosition::LowerMiddle)?;
+        legend(&mut c, SeriesLabelPosition::UpperMiddle)?;
 
         let yr_p = (-20.0, 20.0);
         let mut c = build_chart(&bot, "Phase, zoom (tolerance ±5°)", xr, yr_p)?;
         mesh(&mut c, "Frequency (Hz)", "Phase (°)", &hz, &|v| format!("{v:.0}"), 9)?;
-        shade(&mut c, band, xr, yr_p, C_COH_BAND, 0.12, "")?;
-        shade(&mut c, flat, xr, yr_p, C_FLAT_BAND, 0.13, "")?;
+        shade(&mut c, band, xr, yr_p, C_COH_BAND, 0.15, "")?;
         shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_p, false)?;
+        band_bar(&mut c, flat_or_empty, xr, yr_p, C_FLAT_BAND, "")?;
+        bottom_ticks(&mut c, &off, yr_p, C_TOL, "")?;
         draw_line(&mut c, &tol(5.0), yr_p, f64::INFINITY, C_TOL, 2, true, "±5° tolerance")?;
         draw_line(&mut c, &tol(-5.0), yr_p, f64::INFINITY, C_TOL, 2, true, "")?;
         draw_line(&mut c, &ph_g, yr_p, 180.0, C_RAW, 2, false, "uncompensated ∠G")?;
@@ -389,17 +438,19 @@ fn model_z_poles(d: &AxisDesign, fs: f64) -> Vec<Complex64> {
     z
 }
 
-/// Radius around z = 1 of the zoom: it holds the cluster of poles nearest to
-/// z = 1 (the slow, machine-structure modes), cut at the largest ratio gap
-/// between consecutive distances |1 − z| (below 0.9), if that gap is at
-/// least 2×; otherwise all poles within 0.9.
-fn zoom_radius(poles: &[Complex64]) -> f64 {
-    let mut dist: Vec<f64> =
-        poles.iter().map(|z| (1.0 - z).norm()).filter(|r| r.is_finite() && *r > 1e-9 && *r < 0.9).collect();
+/// The poles of the zoom panel: the cluster nearest to z = 1 (the slow,
+/// machine-structure modes) in the upper half plane, cut at the largest
+/// ratio gap between consecutive distances |1 − z| (below 0.9) if that gap
+/// is at least 2×, otherwise every pole within 0.9 of z = 1; if none is
+/// that near, every pole in the upper half plane.
+fn zoom_poles(poles: &[Complex64]) -> Vec<Complex64> {
+    let upper: Vec<Complex64> =
+        poles.iter().copied().filter(|z| z.re.is_finite() && z.im.is_finite() && z.im >= 0.0).collect();
+    let mut dist: Vec<f64> = upper.iter().map(|z| (1.0 - z).norm()).filter(|r| *r > 1e-9 && *r < 0.9).collect();
     dist.sort_by(f64::total_cmp);
     dist.dedup_by(|a, b| (*a / *b) < 1.02);
     let Some(&last) = dist.last() else {
-        return 0.1;
+        return upper;
     };
     let mut cut = last;
     let mut best = 2.0;
@@ -410,7 +461,36 @@ fn zoom_radius(poles: &[Complex64]) -> f64 {
             cut = w[0];
         }
     }
-    cut * 1.3
+    // dedup kept the first of near-equal distances: keep its neighbours too
+    upper.into_iter().filter(|z| (1.0 - z).norm() <= 1.02 * cut).collect()
+}
+
+/// The zoom panel's window (Re z range, Im z range) for a plotting area of
+/// `px` pixels, at equal scales: the bounding box of `poles`
+/// ([`zoom_poles`]) with a margin of a fifth of its size on every side and
+/// room for the mode labels (drawn left of their poles) on the left. A box
+/// smaller than a fifth of its distance from z = 1 (one pole, or poles on a
+/// line) is widened to that; with no poles, the window is 0.2 wide at z = 1.
+fn zoom_window(poles: &[Complex64], px: (u32, u32)) -> ((f64, f64), (f64, f64)) {
+    let Some((re0, re1)) = finite_range(poles.iter().map(|z| z.re)) else {
+        return equal_aspect(0.95, 0.05, 0.1, 0.1, px);
+    };
+    let (im0, im1) = finite_range(poles.iter().map(|z| z.im)).unwrap_or((0.0, 0.0));
+    let far = poles.iter().map(|z| (1.0 - z).norm()).fold(0.0, f64::max);
+    let size = (re1 - re0).max(im1 - im0).max(0.2 * far).max(1e-9);
+    let margin = 0.2 * size;
+    let label_room = 0.25 * size;
+    let (x0, x1) = (re0 - margin - label_room, re1 + margin);
+    let (y0, y1) = (im0 - margin, im1 + margin);
+    equal_aspect(0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * (x1 - x0), 0.5 * (y1 - y0), px)
+}
+
+/// "Re z 0.9820–1.0060, Im z 0.0420–0.0880": a window with enough decimals
+/// to tell its edges apart.
+fn describe_window((x0, x1): (f64, f64), (y0, y1): (f64, f64)) -> String {
+    let span = (x1 - x0).min(y1 - y0).max(1e-12);
+    let p = ((-span.log10()).ceil() + 1.0).clamp(1.0, 12.0) as usize;
+    format!("Re z {x0:.p$}–{x1:.p$}, Im z {y0:.p$}–{y1:.p$}")
 }
 
 /// Pixel size of the plotting area a [`build_chart`] would get on an area of
@@ -432,28 +512,30 @@ fn equal_aspect(cx: f64, cy: f64, half_x: f64, half_y: f64, px: (u32, u32)) -> (
     ((cx - hx, cx + hx), (cy - hy, cy + hy))
 }
 
-/// `a_poles.svg`, the pole map: the whole z-plane and a zoom near z = 1,
-/// where the slow (machine-structure) modes sit ([`zoom_radius`]),
-/// with equal scales on both axes, the unit circle, the fitted model's
-/// poles (○), the compensator's section poles (×) and the model's modes
-/// named.
-fn plot_poles(d: &AxisDesign, fs: f64) -> Result<String> {
+/// `a_poles.svg`, the pole map: the whole z-plane and a zoom framed on the
+/// poles nearest z = 1, where the slow (machine-structure) modes sit
+/// ([`zoom_poles`], [`zoom_window`]), with equal scales on both axes, the
+/// unit circle, the fitted model's poles (○), the compensator's section
+/// poles (×) and the model's modes named. Returns the SVG and, for the
+/// caption, the zoom's window ([`describe_window`]).
+fn plot_poles(d: &AxisDesign, fs: f64) -> Result<(String, String)> {
     let name = axis_name(d.axis);
     let comp = &d.realization.poles;
     let modelz = model_z_poles(d, fs);
     let all: Vec<Complex64> =
         comp.iter().chain(&modelz).copied().filter(|z| z.re.is_finite() && z.im.is_finite()).collect();
 
-    let r_zoom = zoom_radius(&all);
+    let zoomed = zoom_poles(&all);
 
     let dim = (1100u32, 600u32);
     let panel = (dim.0 / 2, dim.1 - 40);
     let cap_full = "Whole z-plane";
-    let cap_zoom = "Zoom near z = 1 (upper half plane)";
+    let cap_zoom = format!("Zoom on the {} poles nearest z = 1 (upper half plane)", zoomed.len());
     let px_full = plot_area_px(panel, cap_full)?;
-    let px_zoom = plot_area_px(panel, cap_zoom)?;
+    let px_zoom = plot_area_px(panel, &cap_zoom)?;
     let (xf, yf) = equal_aspect(0.0, 0.0, 1.15, 1.15, px_full);
-    let (xz, yz) = equal_aspect(1.0 - 0.5 * r_zoom, 0.45 * r_zoom, 0.6 * r_zoom, 0.55 * r_zoom, px_zoom);
+    let (xz, yz) = zoom_window(&zoomed, px_zoom);
+    let in_zoom = |z: &Complex64| z.re >= xz.0 && z.re <= xz.1 && z.im >= yz.0 && z.im <= yz.1;
     let max_r = comp.iter().map(|z| z.norm()).fold(0.0f64, f64::max);
 
     let mut buf = String::new();
@@ -468,7 +550,7 @@ fn plot_poles(d: &AxisDesign, fs: f64) -> Result<String> {
         );
         let root = root.titled(&title, (FONT, 20)).map_err(perr)?;
         let (left, right) = root.split_horizontally(panel.0);
-        for (area, cap, xr, yr, full) in [(&left, cap_full, xf, yf, true), (&right, cap_zoom, xz, yz, false)] {
+        for (area, cap, xr, yr, full) in [(&left, cap_full, xf, yf, true), (&right, cap_zoom.as_str(), xz, yz, false)] {
             let mut c = build_chart(area, cap, xr, yr)?;
             mesh(&mut c, "Re z", "Im z", &fmt_num, &fmt_num, 9)?;
             draw_unit_circle(&mut c, xr, yr)?;
@@ -485,12 +567,12 @@ fn plot_poles(d: &AxisDesign, fs: f64) -> Result<String> {
                 .legend(move |(x, y)| Cross::new((x + 10, y), 5, cs));
             // In the zoom the modes inside it, in the whole plane those
             // outside the zoom.
-            draw_mode_labels(&mut c, d, fs, &|z| inr(&z) && (!full || (1.0 - z).norm() > r_zoom))?;
+            draw_mode_labels(&mut c, d, fs, &|z| inr(&z) && (!full || !in_zoom(z)))?;
             legend(&mut c, if full { SeriesLabelPosition::LowerLeft } else { SeriesLabelPosition::UpperLeft })?;
         }
         root.present().map_err(perr)?;
     }
-    Ok(buf)
+    Ok((buf, describe_window(xz, yz)))
 }
 
 /// The unit circle inside the window `xr` × `yr`, sampled finely enough to
@@ -599,4 +681,47 @@ fn plot_model_match(d: &AxisDesign, dm: &crate::design::discretize::DiscreteMode
         root.present().map_err(perr)?;
     }
     Ok(buf)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Whether every pole lies inside the window at least a tenth of its
+    /// size from its edges, and the poles span at least 40 % of its height
+    /// or width (the window is fitted to them, not just around them).
+    fn framed(poles: &[Complex64], (x, y): ((f64, f64), (f64, f64))) -> bool {
+        let (w, h) = (x.1 - x.0, y.1 - y.0);
+        let inside = poles
+            .iter()
+            .all(|z| z.re >= x.0 + 0.1 * w && z.re <= x.1 - 0.1 * w && z.im >= y.0 + 0.1 * h && z.im <= y.1 - 0.1 * h);
+        let (re, im) =
+            (finite_range(poles.iter().map(|z| z.re)).unwrap(), finite_range(poles.iter().map(|z| z.im)).unwrap());
+        inside && ((re.1 - re.0) >= 0.4 * w || (im.1 - im.0) >= 0.4 * h)
+    }
+
+    #[test]
+    fn the_zoom_is_framed_on_the_poles_nearest_one() {
+        let c = Complex64::new;
+        // Slow modes at 470-600 Hz at 51.2 kHz, a sensor mode at 2.5 kHz.
+        let slow = [c(0.9956, 0.0577), c(0.9941, 0.0680), c(0.9946, 0.0733), c(0.9958, 0.0554), c(0.9948, 0.0754)];
+        let mut poles: Vec<Complex64> = slow.to_vec();
+        poles.push(c(0.934, 0.300));
+        poles.extend(slow.iter().map(|z| z.conj()));
+        let zoomed = zoom_poles(&poles);
+        assert_eq!(zoomed.len(), slow.len(), "{zoomed:?}");
+        let px = (460, 480);
+        assert!(framed(&zoomed, zoom_window(&zoomed, px)));
+        // Control: a fixed window near z = 1 (Re 0.9-1.0) leaves them on its edge.
+        assert!(!framed(&zoomed, equal_aspect(0.95, 0.045, 0.05, 0.05, px)));
+        // Poles anywhere: one alone, and a cluster far from z = 1.
+        for set in [vec![c(-0.5, 0.5)], vec![c(0.2, 0.7), c(0.25, 0.72), c(0.3, 0.6)]] {
+            let zoomed = zoom_poles(&set);
+            assert_eq!(zoomed.len(), set.len());
+            let w = zoom_window(&zoomed, px);
+            let inside = zoomed.iter().all(|z| z.re > w.0 .0 && z.re < w.0 .1 && z.im > w.1 .0 && z.im < w.1 .1);
+            assert!(inside && (set.len() == 1 || framed(&zoomed, w)), "{set:?}: {w:?}");
+        }
+        assert!(describe_window((0.979, 1.006), (0.051, 0.079)).contains("Re z 0.979–1.006, Im z 0.051–0.079"));
+    }
 }

@@ -106,3 +106,91 @@ pub fn index_html(title: &str, summary: &str, sections: &[Section]) -> String {
     h.push_str("</body>\n</html>\n");
     h
 }
+
+/// `s` with its first character upper-cased: a phrase that also serves
+/// inside a sentence (after a colon) made to start one, e.g. in a caption.
+pub fn sentence_case(s: &str) -> String {
+    let mut chars = s.chars();
+    match chars.next() {
+        Some(c) => c.to_uppercase().chain(chars).collect(),
+        None => String::new(),
+    }
+}
+
+/// Words ending in a full stop that do not end a sentence.
+const ABBREVIATIONS: [&str; 5] = ["e.g.", "i.e.", "cf.", "vs.", "etc."];
+
+/// The sentences of `text` (a caption) that start with a lowercase letter,
+/// each as its first few words. A sentence starts at the beginning of the
+/// text and after `.`, `!` or `?` followed by white space, except after
+/// [`ABBREVIATIONS`]. Report tests (and `scripts/render_check.sh` on the
+/// pages) require none.
+pub fn lowercase_sentence_starts(text: &str) -> Vec<String> {
+    let mut starts = vec![0];
+    let mut prev_word_start = 0;
+    let mut prev: Option<char> = None;
+    for (i, c) in text.char_indices() {
+        if c.is_whitespace() {
+            let word = text[prev_word_start..i].trim_start_matches(['(', '[', '"']);
+            let ends = matches!(prev, Some('.' | '!' | '?')) && !ABBREVIATIONS.contains(&word);
+            if ends {
+                starts.push(i);
+            }
+            prev_word_start = i + c.len_utf8();
+        }
+        prev = Some(c);
+    }
+    starts
+        .into_iter()
+        .filter_map(|s| {
+            let rest = text[s..].trim_start();
+            let first = rest.chars().next()?;
+            first.is_lowercase().then(|| rest.split_whitespace().take(4).collect::<Vec<_>>().join(" "))
+        })
+        .collect()
+}
+
+/// The caption sentences of a report page made by [`index_html`] that start
+/// in lowercase ([`lowercase_sentence_starts`] of each caption paragraph).
+pub fn lowercase_caption_sentences(html: &str) -> Vec<String> {
+    const OPEN: &str = "<p class=\"caption\">";
+    html.split(OPEN)
+        .skip(1)
+        .filter_map(|rest| rest.split_once("</p>").map(|(caption, _)| caption))
+        .flat_map(|caption| lowercase_sentence_starts(&html_unescape(caption)))
+        .collect()
+}
+
+/// The inverse of [`html_escape`].
+fn html_unescape(s: &str) -> String {
+    s.replace("&lt;", "<").replace("&gt;", ">").replace("&quot;", "\"").replace("&#39;", "'").replace("&amp;", "&")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn finds_sentences_starting_in_lowercase() {
+        assert!(lowercase_sentence_starts("Shaded: the band. Dashed: twice it, e.g. 0.5 %.").is_empty());
+        assert!(lowercase_sentence_starts("Up to 4000 Hz (i.e. the band). The end… and on.").is_empty());
+        assert_eq!(lowercase_sentence_starts("Dashed: twice it. re-measure the FRF when"), ["re-measure the FRF when"]);
+        assert_eq!(lowercase_sentence_starts("the first. Then? no!  x"), ["the first. Then? no!", "no! x", "x"]);
+    }
+
+    #[test]
+    fn finds_lowercase_sentences_in_a_page_captions_only() {
+        let sec = |caption: &str| ("Axis x".to_string(), vec![("x_a.svg".into(), "t".into(), caption.to_string())]);
+        let good = index_html("r", "summary. lowercase in the summary is fine", &[sec("Fine &amp; <ok>. Also fine.")]);
+        assert!(lowercase_caption_sentences(&good).is_empty());
+        let bad = index_html("r", "s", &[sec("It's fine. it's not.")]);
+        assert_eq!(lowercase_caption_sentences(&bad), ["it's not."]);
+    }
+
+    #[test]
+    fn sentence_case_upper_cases_the_first_letter() {
+        assert_eq!(sentence_case("re-measure the FRF"), "Re-measure the FRF");
+        assert_eq!(sentence_case("Already"), "Already");
+        assert_eq!(sentence_case(""), "");
+    }
+}

@@ -170,6 +170,59 @@ pub fn shade<'a>(
     Ok(())
 }
 
+/// Mark the x interval `band` with a bar along the bottom of the chart (a
+/// twentieth of its height) and dashed edges over its full height, so that a
+/// band shaded underneath (e.g. the coherent band, [`shade`]) stays visible
+/// where the two coincide. The legend shows the bar.
+pub fn band_bar<'a>(
+    chart: &mut Chart<'a>,
+    band: (f64, f64),
+    (xlo, xhi): (f64, f64),
+    (ylo, yhi): (f64, f64),
+    color: RGBColor,
+    label: &str,
+) -> Result<()> {
+    let (a, b) = (band.0.max(xlo), band.1.min(xhi));
+    if b.is_nan() || a.is_nan() || b < a {
+        return Ok(());
+    }
+    let fill = color.mix(0.6).filled();
+    let top = ylo + 0.05 * (yhi - ylo);
+    let ann = chart.draw_series(std::iter::once(Rectangle::new([(a, ylo), (b, top)], fill))).map_err(perr)?;
+    if !label.is_empty() {
+        ann.label(label).legend(move |(x, y)| Rectangle::new([(x, y - 4), (x + 20, y + 4)], fill));
+    }
+    let edge = ShapeStyle::from(&color).stroke_width(1);
+    for x in [a, b] {
+        chart.draw_series(DashedLineSeries::new([(x, ylo), (x, yhi)], 5, 4, edge)).map_err(perr)?;
+    }
+    Ok(())
+}
+
+/// Short vertical ticks at `xs` in the bottom strip of the chart where
+/// [`band_bar`] draws its bar (one legend entry, if there are any).
+pub fn bottom_ticks<'a>(
+    chart: &mut Chart<'a>,
+    xs: &[f64],
+    (ylo, yhi): (f64, f64),
+    color: RGBColor,
+    label: &str,
+) -> Result<()> {
+    let top = ylo + 0.05 * (yhi - ylo);
+    let style = ShapeStyle::from(&color).stroke_width(1);
+    let ann =
+        chart.draw_series(xs.iter().map(|x| PathElement::new(vec![(*x, ylo), (*x, top)], style))).map_err(perr)?;
+    if !label.is_empty() && !xs.is_empty() {
+        ann.label(label).legend(move |(x, y)| {
+            PathElement::new(
+                (0..4).flat_map(|i| [(x + 6 * i, y + 5), (x + 6 * i, y - 5), (x + 6 * i, y + 5)]).collect::<Vec<_>>(),
+                style,
+            )
+        });
+    }
+    Ok(())
+}
+
 /// Shade each fitting band (labelled once when `labelled`).
 pub fn shade_bands<'a>(
     chart: &mut Chart<'a>,

@@ -14,7 +14,7 @@ pub fn plot_caption(s: &Sensitivity) -> String {
          move by δ, ω scaled by 1 + δ, damping and static share kept. Dashed: twice the nominal error. {}.",
         modes.join(", "),
         100.0 * SENSOR_FRACTION,
-        s.advice()
+        crate::report::page::sentence_case(&s.advice())
     )
 }
 

@@ -54,16 +54,8 @@ use crate::frf::{axis_name, entry_name, Frf};
 use crate::numeric::lti::MimoStateSpace;
 use crate::realize::mimo::{realize_blocks, MimoRealization, MimoVerification};
 
-/// Where the 3x3 design reports its stages (one line each, e.g. to a
-/// terminal): it takes up to a minute.
-#[derive(Clone)]
-pub struct Progress(pub std::sync::Arc<dyn Fn(&str) + Send + Sync>);
-
-impl std::fmt::Debug for Progress {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("Progress")
-    }
-}
+/// Where the 3x3 design reports its stages (it takes up to a minute).
+pub use crate::design::progress::Progress;
 
 /// Options of the 3x3 design.
 #[derive(Clone, Debug, Default)]
@@ -358,7 +350,7 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
     });
     let say = |line: &str| {
         if let Some(p) = &opts.progress {
-            (p.0)(line);
+            p.say(line);
         }
     };
     if given.is_none() {
