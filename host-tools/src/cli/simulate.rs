@@ -228,13 +228,16 @@ impl SimulateArgs {
 }
 
 /// What the simulation is about to compute, on stderr before it starts (a
-/// long record takes a while and says nothing until it is written).
-fn announce(p: &SimParams, what: &str) {
+/// long record takes a while and says nothing until it is written); out
+/// of range parameters are refused first, with nothing printed.
+fn announce(p: &SimParams, what: &str) -> Result<()> {
+    p.validate()?;
     let n = (p.duration_s * p.fs_hz).round();
     eprintln!(
         "simulate: {n:.0} samples × 3 axes at {} Hz ({} s, oversample {}), {} s idle, an impact test of {} lines{what}…",
         p.fs_hz, p.duration_s, p.oversample, p.idle_duration_s, p.impact.n_lines
     );
+    Ok(())
 }
 
 /// `dynocomp simulate`: simulate and write the files into `args.out`; a
@@ -248,7 +251,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     }
     let params = args.params()?;
     let preset = args.preset.as_deref().map(crate::simulate::presets::preset).transpose()?;
-    announce(&params, "");
+    announce(&params, "")?;
     let out = match (args.drift_percent, &preset) {
         (Some(_), Some(_)) => anyhow::bail!("--drift-percent with --preset: a drifting paper preset is not supported; simulate the drift without --preset"),
         (Some(pct), None) => {
@@ -353,7 +356,7 @@ fn run_plate(args: &SimulateArgs) -> Result<()> {
         None => PlateSetup::random(crate::simulate::sub_seed(args.seed, crate::simulate::TAG_DYNO))?,
     };
     let plate = PlateSim { setup, cut_offset_m: args.cut_offset.unwrap_or([0.0; 3]) };
-    announce(&params, ", plate dynamometer (impact tests in x, y and z)");
+    announce(&params, ", plate dynamometer (impact tests in x, y and z)")?;
     let out = simulate_plate(args.seed, &params, &plate)?;
     eprintln!("simulate: writing {}", args.out.display());
     output::write_plate_outputs(&args.out, &out, args.dyno_preset.as_deref())?;
