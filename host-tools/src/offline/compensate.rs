@@ -322,11 +322,21 @@ pub fn compensate_parallel(
     let edges: Vec<(f64, f64)> = image.bands().iter().map(|b| (f64::from(b.lo_hz), f64::from(b.hi_hz))).collect();
     let crossovers = crate::design::bands::crossovers(&edges)?;
     let fs = f64::from(image.fs_hz);
+    // The look-ahead of the last L samples is predicted once, on the record
+    // itself (as for a box image), and split with it: the bands then sum to
+    // what one filter would be fed, and each band keeps the box's timing
+    // until the L first outputs are dropped below.
+    let lag = if raw_timing { 0 } else { usize::from(image.latency_samples) };
     // split[c][k]: column c, band k
     let split: Vec<Vec<Vec<f64>>> = rec
         .channels
         .iter()
-        .map(|(_, x)| crate::offline::bandsplit::split(x, fs, &crossovers))
+        .map(|(_, x)| {
+            let mut fed = x.clone();
+            let history: Vec<f32> = x.iter().map(|&u| u as f32).collect();
+            fed.extend(look_ahead(&history, if x.is_empty() { 0 } else { lag }).iter().map(|&v| f64::from(v)));
+            crate::offline::bandsplit::split(&fed, fs, &crossovers)
+        })
         .collect::<Result<_>>()?;
     let mut sum: Vec<(usize, Vec<f64>)> = rec.channels.iter().map(|(a, x)| (*a, vec![0.0; x.len()])).collect();
     for k in 0..image.bands().len() {
@@ -335,10 +345,10 @@ pub fn compensate_parallel(
             t_s: None,
             channels: rec.channels.iter().zip(&split).map(|((a, _), s)| (*a, s[k].clone())).collect(),
         };
-        let out = compensate_record(&band_img, &band_rec, raw_timing, source)
+        let out = compensate_record(&band_img, &band_rec, true, source)
             .with_context(|| format!("band {k} ({:.0}-{:.0} Hz)", edges[k].0, edges[k].1))?;
         for ((_, acc), (_, y)) in sum.iter_mut().zip(&out.channels) {
-            for (a, v) in acc.iter_mut().zip(y) {
+            for (a, v) in acc.iter_mut().zip(y.iter().skip(lag)) {
                 *a += v;
             }
         }
