@@ -333,7 +333,8 @@ pub fn compensate_parallel(
         .iter()
         .map(|(_, x)| {
             let mut fed = x.clone();
-            let history: Vec<f32> = x.iter().map(|&u| u as f32).collect();
+            let end = &x[x.len().saturating_sub(PREDICT_WINDOW)..];
+            let history: Vec<f32> = end.iter().map(|&u| u as f32).collect();
             fed.extend(look_ahead(&history, if x.is_empty() { 0 } else { lag }).iter().map(|&v| f64::from(v)));
             crate::offline::bandsplit::split(&fed, fs, &crossovers)
         })

@@ -6,6 +6,7 @@
 //! per-axis filter alone, whose row is H_ii·G_ij.
 
 use anyhow::Result;
+use nalgebra::Matrix3;
 use num_complex::Complex64;
 use plotters::prelude::*;
 use std::f64::consts::PI;
@@ -31,6 +32,7 @@ pub fn write_matrix_report(
     summary: &str,
 ) -> Result<Vec<PathBuf>> {
     let bands: [(f64, f64); 3] = std::array::from_fn(|i| md.summary.axes[i].band_hz);
+    let g = measured_lines(frf, &bands);
     let entries = vec![
         (
             "matrix_frf.svg".to_string(),
@@ -60,8 +62,8 @@ pub fn write_matrix_report(
         ),
     ];
     let pages = vec![
-        Page { name: "matrix_frf.svg".into(), content: plot_frf(md, frf, &bands)? },
-        Page { name: "matrix_rows.svg".into(), content: plot_rows(md, frf, fs_hz, &bands)? },
+        Page { name: "matrix_frf.svg".into(), content: plot_frf(md, &g, &bands)? },
+        Page { name: "matrix_rows.svg".into(), content: plot_rows(md, &g, fs_hz, &bands)? },
         Page {
             name: "index.html".into(),
             content: index_html("dynocomp 3x3 design report", summary, &[("The 3x3 system".to_string(), entries)]),
@@ -113,17 +115,19 @@ fn grid(title: &str, x_max: f64, bands: &[(f64, f64); 3], panels: &[Vec<Series<'
 /// Most points a line of a panel has (an SVG of 9 panels stays light).
 const MAX_POINTS: usize = 700;
 
-/// The FRF lines up to the widest band's top, thinned to [`MAX_POINTS`].
-fn lines(frf: &Frf, bands: &[(f64, f64); 3]) -> Vec<usize> {
+/// A line of the measured matrix: frequency (Hz) and G (N/N).
+type MeasuredLine = (f64, Matrix3<Complex64>);
+
+/// The measured matrix on its lines up to the widest band's top, thinned
+/// to [`MAX_POINTS`]: what both plots draw.
+fn measured_lines(frf: &Frf, bands: &[(f64, f64); 3]) -> Vec<MeasuredLine> {
     let top = bands.iter().fold(0.0f64, |m, b| m.max(b.1));
     let inside: Vec<usize> = (0..frf.freq_hz.len()).filter(|&k| frf.freq_hz[k] <= top * 1.05).collect();
     let step = inside.len().div_ceil(MAX_POINTS).max(1);
-    inside.into_iter().step_by(step).collect()
+    inside.into_iter().step_by(step).filter_map(|k| frf.matrix_at(k).map(|m| (frf.freq_hz[k], m))).collect()
 }
 
-fn plot_frf(md: &MatrixDesign, frf: &Frf, bands: &[(f64, f64); 3]) -> Result<String> {
-    let ks = lines(frf, bands);
-    let g: Vec<_> = ks.iter().filter_map(|&k| frf.matrix_at(k).map(|m| (frf.freq_hz[k], m))).collect();
+fn plot_frf(md: &MatrixDesign, g: &[MeasuredLine], bands: &[(f64, f64); 3]) -> Result<String> {
     let panels = (0..9)
         .map(|e| {
             let (i, j) = (e / 3, e % 3);
@@ -140,10 +144,8 @@ fn plot_frf(md: &MatrixDesign, frf: &Frf, bands: &[(f64, f64); 3]) -> Result<Str
     grid("|G_ij|: the measured matrix and its fit", x_max, bands, &panels)
 }
 
-fn plot_rows(md: &MatrixDesign, frf: &Frf, fs_hz: f64, bands: &[(f64, f64); 3]) -> Result<String> {
-    let ks = lines(frf, bands);
+fn plot_rows(md: &MatrixDesign, g: &[MeasuredLine], fs_hz: f64, bands: &[(f64, f64); 3]) -> Result<String> {
     let lag = md.summary.latency as f64;
-    let g: Vec<_> = ks.iter().filter_map(|&k| frf.matrix_at(k).map(|m| (frf.freq_hz[k], m))).collect();
     let freqs: Vec<f64> = g.iter().map(|p| p.0).collect();
     let used: Vec<[[Complex64; 3]; 3]> = freqs.iter().map(|f| md.realization.freq_response(*f, fs_hz)).collect();
     let per_axis: Vec<Option<Vec<Complex64>>> =
