@@ -10,10 +10,13 @@
 //! ([`estimate`], [`CellSpectrum::weights`]).
 
 use anyhow::{bail, Result};
+use nalgebra::Matrix3;
 use num_complex::Complex64;
 use rustfft::FftPlanner;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
+
+use crate::frf::axis_name;
 
 /// Least broadband share of the force power assumed by the criterion (a
 /// steady cut is never only lines: entry, exit and feed changes are
@@ -94,15 +97,71 @@ pub fn estimate(
     r: f64,
     cells: &[(f64, f64)],
 ) -> Result<CellSpectrum> {
-    let n = y.len();
-    if let Some(k) = y.iter().position(|v| !v.is_finite()) {
-        bail!("sample {k} is not finite");
+    let inverse = |f: f64| -> Result<[[Complex64; 1]; 1]> {
+        let gi = g(f);
+        if !(gi.norm_sqr() > 0.0 && gi.norm_sqr().is_finite()) {
+            bail!("the fitted model is zero or not finite at {f:.1} Hz");
+        }
+        Ok([[gi.inv()]])
+    };
+    let [s] = welch_cells([y], fs_hz, &inverse, [r], cells)?;
+    Ok(s)
+}
+
+/// [`estimate`] for the three force directions of a 3x3 system: the power
+/// of the raw inverse Ĝ⁻¹(f)·Y(f) of the records `y` (fx, fy, fz, N, of
+/// equal length) per force direction and cell, less the noise
+/// Σw²·Σ_c |Ĝ⁻¹_jc|²·R_c each bin carries (R_c the noise variance of
+/// channel c, N²). `g` is the 3x3 model; a line where it is singular is
+/// refused.
+pub fn estimate_matrix(
+    y: [&[f64]; 3],
+    fs_hz: f64,
+    g: &dyn Fn(f64) -> Matrix3<Complex64>,
+    r: [f64; 3],
+    cells: &[(f64, f64)],
+) -> Result<[CellSpectrum; 3]> {
+    let inverse = |f: f64| -> Result<[[Complex64; 3]; 3]> {
+        let m = g(f).try_inverse().filter(|m| m.iter().all(|v| v.re.is_finite() && v.im.is_finite()));
+        let Some(m) = m else {
+            bail!("the 3x3 model is singular or not finite at {f:.1} Hz");
+        };
+        Ok(std::array::from_fn(|j| std::array::from_fn(|c| m[(j, c)])))
+    };
+    welch_cells(y, fs_hz, &inverse, r, cells)
+}
+
+/// The Welch power per cell of the raw inverse `inverse(f)·Y(f)` of the `C`
+/// records `y` (Hann segments of at most [`WELCH_SEGMENT`] samples, half
+/// overlapping), and the noise power each cell carries (noise variance
+/// `r` per record), for [`estimate`] and [`estimate_matrix`].
+fn welch_cells<const C: usize>(
+    y: [&[f64]; C],
+    fs_hz: f64,
+    inverse: &dyn Fn(f64) -> Result<[[Complex64; C]; C]>,
+    r: [f64; C],
+    cells: &[(f64, f64)],
+) -> Result<[CellSpectrum; C]> {
+    let n = y[0].len();
+    for (c, ch) in y.iter().enumerate() {
+        if ch.len() != n {
+            bail!(
+                "force f{} has {} samples, f{} {n}: the channels must be equally long",
+                axis_name(c),
+                ch.len(),
+                axis_name(0)
+            );
+        }
+        if let Some(k) = ch.iter().position(|v| !v.is_finite()) {
+            match C {
+                1 => bail!("sample {k} is not finite"),
+                _ => bail!("force f{}: sample {k} is not finite", axis_name(c)),
+            }
+        }
     }
     let Some(narrowest) = cells.iter().map(|c| c.1 - c.0).reduce(f64::min) else {
         bail!("no frequency cells to estimate the force spectrum on");
     };
-    // Welch: Hann segments of at most WELCH_SEGMENT samples, half
-    // overlapping, their powers averaged (one segment: the whole record).
     let seg = n.min(WELCH_SEGMENT);
     let df = fs_hz / seg.max(1) as f64;
     if n < 64 || df > 0.5 * narrowest {
@@ -111,29 +170,11 @@ pub fn estimate(
             2.0 / narrowest
         );
     }
-    let starts: Vec<usize> = (0..).map(|i| i * (seg / 2)).take_while(|s| s + seg <= n).collect();
-    let w: Vec<f64> = (0..seg).map(|i| 0.5 - 0.5 * (2.0 * PI * i as f64 / seg as f64).cos()).collect();
-    let sw2: f64 = w.iter().map(|v| v * v).sum();
-    let fft = FftPlanner::<f64>::new().plan_fft_forward(seg);
-    let mut periodogram = vec![0.0; seg / 2];
-    let mut buf = vec![Complex64::new(0.0, 0.0); seg];
-    for &s0 in &starts {
-        let part = &y[s0..s0 + seg];
-        let mean = part.iter().sum::<f64>() / seg as f64;
-        for ((b, v), w) in buf.iter_mut().zip(part).zip(&w) {
-            *b = Complex64::new((v - mean) * w, 0.0);
-        }
-        fft.process(&mut buf);
-        for (p, x) in periodogram.iter_mut().zip(&buf) {
-            *p += x.norm_sqr() / starts.len() as f64;
-        }
-    }
-    let scale = 2.0 / (seg as f64 * sw2);
-    let mut power = vec![0.0; cells.len()];
-    let mut noise = vec![0.0; cells.len()];
-    // Each bin b·df below Nyquist goes to the cell [lo, hi) holding it.
+    // Each bin b·df below Nyquist goes to the cell [lo, hi) holding it,
+    // with the inverse there.
+    let mut bins = Vec::new();
     let mut c = 0;
-    for (b, x) in periodogram.iter().enumerate().skip(1) {
+    for b in 1..seg / 2 {
         let f = b as f64 * df;
         while c < cells.len() && f >= cells[c].1 {
             c += 1;
@@ -141,26 +182,56 @@ pub fn estimate(
         if c == cells.len() {
             break;
         }
-        if f < cells[c].0 {
-            continue;
+        if f >= cells[c].0 {
+            bins.push((b, c, inverse(f)?));
         }
-        let gi = g(f).norm_sqr();
-        if !(gi > 0.0 && gi.is_finite()) {
-            bail!("the fitted model is zero or not finite at {f:.1} Hz");
+    }
+    let starts: Vec<usize> = (0..).map(|i| i * (seg / 2)).take_while(|s| s + seg <= n).collect();
+    let w: Vec<f64> = (0..seg).map(|i| 0.5 - 0.5 * (2.0 * PI * i as f64 / seg as f64).cos()).collect();
+    let sw2: f64 = w.iter().map(|v| v * v).sum();
+    let fft = FftPlanner::<f64>::new().plan_fft_forward(seg);
+    let mut periodogram = vec![[0.0; C]; bins.len()];
+    let mut spectra = vec![vec![Complex64::new(0.0, 0.0); seg]; C];
+    for &s0 in &starts {
+        for (buf, ch) in spectra.iter_mut().zip(&y) {
+            let part = &ch[s0..s0 + seg];
+            let mean = part.iter().sum::<f64>() / seg as f64;
+            for ((b, v), w) in buf.iter_mut().zip(part).zip(&w) {
+                *b = Complex64::new((v - mean) * w, 0.0);
+            }
+            fft.process(buf);
         }
-        power[c] += scale * x / gi;
-        noise[c] += scale * r * sw2 / gi;
+        for (p, (b, _, m)) in periodogram.iter_mut().zip(&bins) {
+            for (pj, mj) in p.iter_mut().zip(m) {
+                let x: Complex64 = mj.iter().zip(&spectra).map(|(mjc, s)| mjc * s[*b]).sum();
+                *pj += x.norm_sqr() / starts.len() as f64;
+            }
+        }
     }
-    let force: Vec<f64> = power.iter().zip(&noise).map(|(p, nz)| (p - nz).max(0.0)).collect();
-    let (p_f, p_n): (f64, f64) = (force.iter().sum(), noise.iter().sum());
-    if !(p_f > MIN_SIGNAL_TO_NOISE * p_n) {
-        bail!(
-            "its force in the band ({:.3} N RMS, noise removed) does not stand above the noise the inverse carries there ({:.3} N RMS): an idle or very light record says nothing about the cut's spectrum; give a record of the cut, or drop --force-prior spectrum",
-            p_f.sqrt(),
-            p_n.sqrt()
-        );
+    let scale = 2.0 / (seg as f64 * sw2);
+    let mut power = vec![vec![0.0; cells.len()]; C];
+    let mut noise = vec![vec![0.0; cells.len()]; C];
+    for (p, (_, cell, m)) in periodogram.iter().zip(&bins) {
+        for j in 0..C {
+            power[j][*cell] += scale * p[j];
+            noise[j][*cell] += scale * sw2 * m[j].iter().zip(&r).map(|(v, rc)| v.norm_sqr() * rc).sum::<f64>();
+        }
     }
-    Ok(CellSpectrum { power_n2: force, noise_n2: noise, resolution_hz: df })
+    let mut out = Vec::with_capacity(C);
+    for (j, (power, noise)) in power.into_iter().zip(noise).enumerate() {
+        let force: Vec<f64> = power.iter().zip(&noise).map(|(p, nz)| (p - nz).max(0.0)).collect();
+        let (p_f, p_n): (f64, f64) = (force.iter().sum(), noise.iter().sum());
+        if !(p_f > MIN_SIGNAL_TO_NOISE * p_n) {
+            let which = if C == 1 { String::new() } else { format!("force f{}: ", axis_name(j)) };
+            bail!(
+                "{which}its force in the band ({:.3} N RMS, noise removed) does not stand above the noise the inverse carries there ({:.3} N RMS): an idle or very light record says nothing about the cut's spectrum; give a record of the cut, or drop --force-prior spectrum",
+                p_f.sqrt(),
+                p_n.sqrt()
+            );
+        }
+        out.push(CellSpectrum { power_n2: force, noise_n2: noise, resolution_hz: df });
+    }
+    out.try_into().map_err(|_| anyhow::anyhow!("one force spectrum per record expected"))
 }
 
 /// What `design` reports of an axis designed on a record's force spectrum.
