@@ -44,11 +44,12 @@ pub fn wanted(args: &DesignArgs, frf: &Frf) -> Result<bool> {
     if args.method == Method::Paper {
         return refuse("--method paper");
     }
+    // Before the bands: harmonics come with --spindle-rpm and --teeth.
+    if args.prior.force_prior == ForcePrior::Harmonics {
+        return refuse("--force-prior harmonics");
+    }
     if args.bands.spindle_rpm.is_some() || !args.bands.band.is_empty() || args.bands.bands_from.is_some() {
         return refuse("a fitting band (--spindle-rpm/--teeth, --band, --bands-from)");
-    }
-    if args.prior.force_prior != ForcePrior::Default {
-        return refuse("--force-prior");
     }
     Ok(true)
 }

@@ -596,6 +596,13 @@ pub struct PreparedAxis {
     discrete: Option<(f64, (DiscreteModel, FitDiagnostics))>,
 }
 
+impl PreparedAxis {
+    /// The fitted model Ĝ(j2πf) of the axis's direct FRF (N/N).
+    pub fn model_frf(&self, f_hz: f64) -> Complex64 {
+        self.fitted.frf(f_hz)
+    }
+}
+
 /// The latency-independent part of [`design_axis`] (not for
 /// `paper_orders_auto`, which chooses its orders by whole designs).
 pub fn prepare_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions) -> Result<PreparedAxis> {

@@ -5,17 +5,22 @@
 //! For output axis i, a compensator H (3x3, or a per-axis one whose row i is
 //! H_ii·e_iᵀ) on the plant Ĝ with declared latency L predicts
 //!
-//! J_i = mean_f Σ_j (F_j/F_i)²·|(H(e^{jω})·Ĝ(jω)·e^{jωL} − I)_ij|²
-//!     + (2/fs)·(W_i/F_i²)·Σ_j R_j·mean_f |H_ij(e^{jω})|²,
+//! J_i = Σ_f Σ_j (P_j(f)/P_i)·|(H(e^{jω})·Ĝ(jω)·e^{jωL} − I)_ij|²
+//!     + (2/fs)·(W_i/P_i)·Σ_j R_j·mean_f |H_ij(e^{jω})|²,
 //!
-//! ω = 2πf over the row's compensated band of width W_i, for forces with
-//! flat spectra of RMS F_j in the band, uncorrelated, and white measurement
-//! noise of variance R_j on channel j: the distortion of force i, the
-//! crosstalk of the other forces into it, and the amplified noise, relative
-//! to force i's variance. With F_x = F_y = F_z this is DESIGN.md's criterion
-//! with every entry of the row counted; a per-axis compensator's crosstalk
-//! terms are H_ii·Ĝ_ij, which the per-axis prediction leaves out. √J_i is
-//! the predicted in-band error.
+//! ω = 2πf over the lines f of the row's compensated band of width W_i,
+//! for uncorrelated forces with power P_j(f) (N²) in line f's cell, P_i the
+//! in-band power of force i, and white measurement noise of variance R_j
+//! on channel j: the distortion of force i, the crosstalk of the other
+//! forces into it, and the amplified noise, relative to force i's variance.
+//! By default the forces are flat, P_j(f) = F_j²/n on n lines for an RMS
+//! F_j; with F_x = F_y = F_z this is DESIGN.md's criterion with every entry
+//! of the row counted. With a representative record of the cut
+//! ([`ForceWeights::Record`]) P_j(f) is the record's force spectrum
+//! ([`crate::design::force_spectrum::estimate_matrix`]), with the
+//! broadband share of [`MIN_BROADBAND_SHARE`]. A per-axis compensator's
+//! crosstalk terms are H_ii·Ĝ_ij, which the per-axis prediction leaves out.
+//! √J_i is the predicted in-band error.
 
 use anyhow::{bail, Result};
 use nalgebra::DMatrix;
@@ -24,7 +29,9 @@ use serde::Serialize;
 use std::f64::consts::PI;
 
 use super::discrete::CMatrix3;
-use crate::design::criterion::criterion_grid;
+use crate::design::criterion::{criterion_cells, criterion_grid};
+use crate::design::force_spectrum::{estimate_matrix, CellSpectrum, ForceRecord, MIN_BROADBAND_SHARE};
+use crate::frf::axis_name;
 use crate::numeric::search::golden_section;
 
 /// The lines of one output axis's criterion.
@@ -36,6 +43,76 @@ pub struct RowGrid {
     pub freqs: Vec<f64>,
     /// Ĝ(j2πf) on the lines.
     pub g: Vec<CMatrix3>,
+    /// Per force direction j and line, P_j(f)/P_i (module doc).
+    pub weight: [Vec<f64>; 3],
+    /// The in-band power of force i, P_i (N²).
+    pub force_power_n2: f64,
+}
+
+/// The force spectra the criterion assumes (module doc).
+#[derive(Clone, Debug)]
+pub enum ForceWeights {
+    /// Flat spectra of RMS F_j (N) in every row's band.
+    Flat([f64; 3]),
+    /// Per output axis i, the record's spectrum of every force direction
+    /// on row i's cells ([`criterion_cells`] of its band); `level_only`:
+    /// flat spectra of the record's in-band powers.
+    Record { spectra: Box<[[CellSpectrum; 3]; 3]>, level_only: bool },
+}
+
+impl ForceWeights {
+    /// The spectra of `record` (fx, fy, fz) through the inverse of the 3x3
+    /// model `g`, on each row's cells: what [`ForceWeights::Record`] holds.
+    pub fn from_record(
+        record: &ForceRecord,
+        g: &dyn Fn(f64) -> CMatrix3,
+        bands_hz: [(f64, f64); 3],
+        fs_hz: f64,
+        r: [f64; 3],
+        level_only: bool,
+    ) -> Result<Self> {
+        let mut channels: [&[f64]; 3] = [&[]; 3];
+        for (c, ch) in record.channels.iter().enumerate() {
+            let Some(ch) = ch else {
+                bail!(
+                    "{}: no column f{}: the 3x3 design's force record needs fx, fy and fz",
+                    record.source,
+                    axis_name(c)
+                );
+            };
+            channels[c] = ch;
+        }
+        let mut spectra = Vec::with_capacity(3);
+        for (i, band) in bands_hz.iter().enumerate() {
+            let cells = criterion_cells(&[*band]);
+            let s = estimate_matrix(channels, fs_hz, g, r, &cells)
+                .map_err(|e| anyhow::anyhow!("{}: row {} of the 3x3 design: {e:#}", record.source, axis_name(i)))?;
+            spectra.push(s);
+        }
+        let spectra: [[CellSpectrum; 3]; 3] = spectra.try_into().map_err(|_| anyhow::anyhow!("three rows expected"))?;
+        Ok(ForceWeights::Record { spectra: Box::new(spectra), level_only })
+    }
+
+    /// Row i's weights P_j(f)/P_i and P_i on `n` lines.
+    fn row(&self, i: usize, n: usize) -> ([Vec<f64>; 3], f64) {
+        let nf = n as f64;
+        match self {
+            ForceWeights::Flat(f) => (std::array::from_fn(|j| vec![(f[j] / f[i]).powi(2) / nf; n]), f[i] * f[i]),
+            ForceWeights::Record { spectra, level_only } => {
+                let s = &spectra[i];
+                let p: [f64; 3] = std::array::from_fn(|j| s[j].total_n2());
+                let weight = std::array::from_fn(|j| {
+                    if *level_only {
+                        vec![p[j] / p[i] / nf; n]
+                    } else {
+                        let b = MIN_BROADBAND_SHARE;
+                        s[j].power_n2.iter().map(|pk| ((1.0 - b) * pk + b * p[j] / nf) / p[i]).collect()
+                    }
+                });
+                (weight, p[i])
+            }
+        }
+    }
 }
 
 /// What J of every row needs (module doc).
@@ -45,8 +122,6 @@ pub struct MatrixCriterion {
     pub fs_hz: f64,
     /// Per output axis its lines.
     pub rows: [RowGrid; 3],
-    /// Force RMS per axis in the band F_j (N).
-    pub force_rms: [f64; 3],
     /// Measurement noise variance per channel R_j (N²).
     pub r: [f64; 3],
 }
@@ -62,20 +137,24 @@ pub struct RowError {
 }
 
 impl MatrixCriterion {
-    /// The criterion of `g` over the bands `bands_hz` (one per output axis).
+    /// The criterion of `g` over the bands `bands_hz` (one per output axis)
+    /// for the forces `forces`.
     pub fn new(
         g: impl Fn(f64) -> CMatrix3,
         bands_hz: [(f64, f64); 3],
         fs_hz: f64,
-        force_rms: [f64; 3],
+        forces: &ForceWeights,
         r: [f64; 3],
     ) -> Self {
+        let mut i = 0;
         let rows = bands_hz.map(|band_hz| {
             let freqs = criterion_grid(&[band_hz]);
             let g = freqs.iter().map(|f| g(*f)).collect();
-            RowGrid { band_hz, freqs, g }
+            let (weight, force_power_n2) = forces.row(i, freqs.len());
+            i += 1;
+            RowGrid { band_hz, freqs, g, weight, force_power_n2 }
         });
-        MatrixCriterion { fs_hz, rows, force_rms, r }
+        MatrixCriterion { fs_hz, rows, r }
     }
 
     /// Every row's lines, row 0's first: where a compensator's response is
@@ -84,10 +163,10 @@ impl MatrixCriterion {
         self.rows.iter().flat_map(|r| r.freqs.iter().copied()).collect()
     }
 
-    /// The noise factor (2/fs)·W_i/F_i² of row i.
+    /// The noise factor (2/fs)·W_i/P_i of row i.
     fn noise(&self, i: usize) -> f64 {
         let (lo, hi) = self.rows[i].band_hz;
-        2.0 / self.fs_hz * (hi - lo) / (self.force_rms[i] * self.force_rms[i])
+        2.0 / self.fs_hz * (hi - lo) / self.rows[i].force_power_n2
     }
 
     /// J_i (module doc) for the response `h(k, j)` = H_ij on line k of row
@@ -102,12 +181,10 @@ impl MatrixCriterion {
             for j in 0..3 {
                 let e = (hr[0] * g[(0, j)] + hr[1] * g[(1, j)] + hr[2] * g[(2, j)]) * delay
                     - if i == j { 1.0 } else { 0.0 };
-                let w = self.force_rms[j] / self.force_rms[i];
-                dist += w * w * e.norm_sqr();
+                dist += row.weight[j][k] * e.norm_sqr();
                 amp += self.r[j] * hr[j].norm_sqr();
             }
         }
-        let dist = dist / n;
         RowError { error: (dist + self.noise(i) * amp / n).sqrt(), distortion: dist.sqrt() }
     }
 
