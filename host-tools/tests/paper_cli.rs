@@ -43,6 +43,8 @@ fn paper_method_writes_a_paper_image_with_the_bands_and_diagnostics() {
     // paper's 2:4 fit of axis z is predicted worse than no compensation in
     // its bands, and design refuses it; see `never_worse_than_raw` below.)
     assert!(ok, "{stderr}");
+    // The second design, against which the paper's is judged, says so.
+    assert!(stderr.contains("designing the default method (vf, whole band, latency 4)"), "{stderr}");
     let img = read_image(&out).unwrap();
     assert_eq!(img.method, DesignMethod::Paper);
     assert_eq!(img.latency_samples, 0);
@@ -136,6 +138,19 @@ fn compare_reports_every_method_per_axis_and_failures_as_rows() {
         // the default method designs on every axis of the example
         assert!(rows[3]["diagnostic"].is_null(), "{}", rows[3]);
         let name = ax["axis"].as_str().unwrap();
+        // Progress: every method of the table said when it started and how
+        // it ended, as the table has it (verified, or failed with a diagnostic).
+        for r in rows {
+            let m = r["method"].as_str().unwrap();
+            if m == "paper, band-fitted" && r["design_time_s"].as_f64() == Some(0.0) {
+                continue; // refused before any design (no bands)
+            }
+            let outcome = if r["diagnostic"].is_null() { "verified" } else { "failed" };
+            assert!(stderr.contains(&format!("axis {name}: {m}…")), "{name}: no start line for `{m}`:\n{stderr}");
+            let end = format!("axis {name}: {m}: {outcome} in ");
+            assert!(stderr.contains(&end), "{name}: no `{end}` line:\n{stderr}");
+        }
+        assert!(stderr.contains(&format!("axis {name}: probing ")), "{name}: the order search said nothing");
         let svg = std::fs::read_to_string(dir.join(format!("{name}_compare.svg"))).unwrap();
         assert!(svg.contains("<svg") && svg.contains("fitting bands"));
         // Every method is in the plot's key, a failed one marked as such.

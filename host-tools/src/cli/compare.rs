@@ -50,10 +50,12 @@ fn inputs(args: &CompareArgs, frf: &Frf) -> Result<CompareInputs> {
         max_noise_gain: args.input.max_noise_gain,
         discretization: args.input.discretization.into(),
         paper_orders_auto: args.paper.auto(),
+        order_search_progress: Some(crate::design::progress::Progress::stderr()),
         ..Default::default()
     };
     let paper = args.paper.method(args.bands.tooth_passing_hz(), args.input.fs)?;
-    Ok(CompareInputs { frf_name: args.input.frf().display().to_string(), r, bands, base, paper })
+    let progress = crate::design::progress::Progress::stderr();
+    Ok(CompareInputs { frf_name: args.input.frf().display().to_string(), r, bands, base, paper, progress })
 }
 
 /// Refuse to write a file of `--out-dir` (the pages of [`run`]) over one

@@ -141,6 +141,10 @@ fn against_default(
         ..s.opts.clone()
     };
     let frf = &s.frf;
+    crate::design::progress::Progress::stderr().say(&format!(
+        "designing the default method (vf, whole band, latency {}) on the same FRF, to compare…",
+        opts.lag
+    ));
     let defaults = crate::design::latency::design_axes(&frf.freq_hz, &frf.axes, rv, &opts);
     let mut out = Vec::new();
     for (d, (def, _)) in designs.iter_mut().zip(defaults) {

@@ -401,6 +401,7 @@ impl DesignSetup {
             axis_cycle_budget: Some(axis_budget),
             force_record: force_record(args)?,
             force_record_level_only: args.prior.force_prior == ForcePrior::Level,
+            order_search_progress: Some(crate::design::progress::Progress::stderr()),
             ..args.base_options(latency)
         };
         // Without --latency, the default method's latency is chosen (crate::design::latency).

@@ -72,6 +72,9 @@ pub struct DesignOptions {
     /// (`--force-prior level`): honest predicted errors, the default's
     /// robustness to chatter.
     pub force_record_level_only: bool,
+    /// Where the paper's order search reports its candidates (`None`:
+    /// nowhere; [`crate::design::paper_orders::design_axis_auto`]).
+    pub order_search_progress: Option<crate::design::progress::Progress>,
 }
 
 /// Largest accepted fit error: relative RMS of Ĝ against the coherent
@@ -132,6 +135,7 @@ impl Default for DesignOptions {
             discrete_static_gain: crate::design::discretize::StaticGain::Exact,
             force_record: None,
             force_record_level_only: false,
+            order_search_progress: None,
         }
     }
 }

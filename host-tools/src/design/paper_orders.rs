@@ -57,6 +57,12 @@ pub fn design_axis_auto(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOpt
             FitMethod::Paper { rfp: crate::fit::rfp::RfpOptions { nb, na, ..rfp.clone() }, prewarp_hz: *prewarp_hz };
         o
     };
+    let say = |line: String| {
+        if let Some(p) = &opts.order_search_progress {
+            p.say(&line);
+        }
+    };
+    say(format!("axis {name}: probing {} paper-method order pairs NB:NA…", candidates().len()));
     let mut workable: Vec<(usize, usize, f64)> = Vec::new();
     let mut refused = 0usize;
     for (nb, na) in candidates() {
@@ -77,7 +83,10 @@ pub fn design_axis_auto(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOpt
         class(a.2).cmp(&class(b.2)).then(b.1.cmp(&a.1)).then(b.0.cmp(&a.0)).then(a.2.total_cmp(&b.2))
     });
     let mut failures = Vec::new();
-    for &(nb, na, fit) in workable.iter().take(MAX_FULL_TRIALS) {
+    let trials = workable.len().min(MAX_FULL_TRIALS);
+    say(format!("axis {name}: {} workable pairs; designing the best-fitting, at most {trials}", workable.len()));
+    for (k, &(nb, na, fit)) in workable.iter().take(MAX_FULL_TRIALS).enumerate() {
+        say(format!("axis {name}: orders {nb}:{na} ({} of at most {trials}): full design…", k + 1));
         match axis::design_axis(freq_hz, frf, r, &with(nb, na)) {
             Ok(mut d) => {
                 let skipped = if failures.is_empty() {

@@ -14,6 +14,7 @@ use crate::design::bands::{band_mask, Band};
 use crate::design::criterion::flat_band;
 use crate::design::paper::PaperDiagnostics;
 use crate::design::paper_orders::design_axis;
+use crate::design::progress::Progress;
 use crate::fit::relative_rms_error;
 use crate::frf::{axis_name, AxisFrf, Frf};
 use crate::realize::quantize::filter_response;
@@ -358,11 +359,22 @@ fn parallel_row(setup: &CompareSetup, a: &AxisFrf, r: f64) -> CompareRow {
 /// truth for every method), flat band, white-noise gain, order, latency, the
 /// paper path's condition numbers and observability rank, and design time. A
 /// method that fails is a row with its diagnostic.
-pub fn compare_axis(setup: &CompareSetup, a: &AxisFrf, r: f64) -> AxisComparison {
+///
+/// `progress` hears when each method starts and how it ended.
+pub fn compare_axis(setup: &CompareSetup, a: &AxisFrf, r: f64, progress: &Progress) -> AxisComparison {
     let (_, _, coherent) = masks(setup, a);
+    let name = axis_name(a.axis);
+    let timed = |method: &str, run: &dyn Fn() -> CompareRow| {
+        progress.say(&format!("axis {name}: {method}…"));
+        let row = run();
+        let outcome = if row.diagnostic.is_none() { "verified" } else { "failed" };
+        progress.say(&format!("axis {name}: {method}: {outcome} in {:.1} s", row.design_time_s));
+        row
+    };
     let mut rows = Vec::new();
     let whole_paper = DesignOptions { method: setup.paper.clone(), bands: Vec::new(), ..setup.base.clone() };
-    rows.push(run_design("paper, whole band", setup, a, r, &whole_paper));
+    let paper_whole = "paper, whole band";
+    rows.push(timed(paper_whole, &|| run_design(paper_whole, setup, a, r, &whole_paper)));
     if setup.bands.is_empty() {
         rows.push(failed(
             "paper, band-fitted",
@@ -371,16 +383,19 @@ pub fn compare_axis(setup: &CompareSetup, a: &AxisFrf, r: f64) -> AxisComparison
         ));
     } else {
         let banded = DesignOptions { method: setup.paper.clone(), bands: setup.bands.clone(), ..setup.base.clone() };
-        rows.push(run_design("paper, band-fitted", setup, a, r, &banded));
+        let paper_banded = "paper, band-fitted";
+        rows.push(timed(paper_banded, &|| run_design(paper_banded, setup, a, r, &banded)));
     }
-    rows.push(parallel_row(setup, a, r));
+    rows.push(timed("paper, parallel", &|| parallel_row(setup, a, r)));
     let vf = DesignOptions { method: FitMethod::Vf, bands: Vec::new(), ..setup.base.clone() };
-    rows.push(run_design("default (vf), whole band", setup, a, r, &vf));
+    let vf_whole = "default (vf), whole band";
+    rows.push(timed(vf_whole, &|| run_design(vf_whole, setup, a, r, &vf)));
     if !setup.bands.is_empty() {
         let vf_b = DesignOptions { method: FitMethod::Vf, bands: setup.bands.clone(), ..setup.base.clone() };
-        rows.push(run_design("default (vf), band-weighted", setup, a, r, &vf_b));
+        let vf_banded = "default (vf), band-weighted";
+        rows.push(timed(vf_banded, &|| run_design(vf_banded, setup, a, r, &vf_b)));
     }
-    AxisComparison { axis: axis_name(a.axis), coherent_band_hz: coherent, rows }
+    AxisComparison { axis: name, coherent_band_hz: coherent, rows }
 }
 
 /// What one comparison needs besides the FRF.
@@ -396,6 +411,8 @@ pub struct CompareInputs {
     pub base: DesignOptions,
     /// The paper's method at its orders and prewarp.
     pub paper: FitMethod,
+    /// Where each axis and method reports its start and outcome.
+    pub progress: Progress,
 }
 
 /// Run the comparison on every axis of `frf` (no output files).
@@ -408,8 +425,7 @@ pub fn compare(frf: &Frf, inputs: &CompareInputs) -> Comparison {
     };
     let mut axes = Vec::new();
     for a in &frf.axes {
-        eprintln!("comparing axis {}…", axis_name(a.axis));
-        axes.push(compare_axis(&setup, a, inputs.r[a.axis].expect("R for every FRF axis")));
+        axes.push(compare_axis(&setup, a, inputs.r[a.axis].expect("R for every FRF axis"), &inputs.progress));
     }
     Comparison { frf: inputs.frf_name.clone(), fs_hz: inputs.base.fs_hz, bands: inputs.bands.clone(), axes }
 }
