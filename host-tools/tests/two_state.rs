@@ -399,6 +399,13 @@ fn box_image_for_the_range_beats_either_single_state_design() {
         .unwrap();
         let single = [&cands[0], &cands[cands.len() - 1]];
         let chosen = &cands[best];
+        // A design at an interpolated state reports the measured states'
+        // fit error, not that of the model response it was fitted to (which
+        // is zero by construction: the control, below 1e-6).
+        for c in cands.iter().filter(|c| c.s > 0.0 && c.s < 1.0) {
+            let e = c.design.fit_nrmse;
+            assert!(e >= cands[0].design.fit_nrmse && e > 1e-6, "axis {a} s = {}: fit error {e:.2e}", c.s);
+        }
         // Measured worst case over the range: flat force, true set-up at each state.
         let flat = sim_common::flat_force(fine_len, f_fine, chosen.design.compensated_band_hz.1, 100.0, 55);
         let measured_worst = |c: &RangeCandidate| {

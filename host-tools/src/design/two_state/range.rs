@@ -244,7 +244,9 @@ pub fn design_over_range(
                 frf: freq_hz.iter().map(|f| m.frf(*f)).collect(),
                 coherence: first.coherence.clone(),
             };
-            design_axis(freq_hz, &synthetic, r, opts).with_context(|| format!("model state s = {s}"))
+            design_axis(freq_hz, &synthetic, r, opts)
+                .map(|d| with_measured_fit_error(d, &d0, freq_hz, second, &ts, opts.coherence_threshold))
+                .with_context(|| format!("model state s = {s}"))
         };
         // A state that cannot be designed is not a candidate; the first
         // FRF's own design always is.
@@ -271,6 +273,34 @@ pub fn design_over_range(
         .min_by(|&a, &b| cands[a].worst.total_cmp(&cands[b].worst))
         .ok_or_else(|| anyhow::anyhow!("axis {name}: no candidate state"))?;
     Ok(RangeDesign { states: ts, machine, above_band, candidates: cands, best, skipped })
+}
+
+/// A design at an interpolated state s (0 < s < 1) was fitted to its own
+/// model's response, so its fit error is zero by construction. It is
+/// given instead the worse of the two measured states' model errors: the
+/// first FRF's fit (`d0`), and the paired second state's model against the
+/// second FRF (relative RMS on its coherent lines in the first design's
+/// band). That is the error the interpolation between them carries.
+fn with_measured_fit_error(
+    mut d: AxisDesign,
+    d0: &AxisDesign,
+    freq_hz: &[f64],
+    second: &AxisFrf,
+    ts: &TwoState,
+    coherence_threshold: f64,
+) -> AxisDesign {
+    let band = d0.compensated_band_hz;
+    let mask: Vec<bool> = (0..freq_hz.len())
+        .map(|k| {
+            let coherent = second.coherence.as_ref().is_none_or(|c| c[k] >= coherence_threshold);
+            freq_hz[k] >= band.0 && freq_hz[k] <= band.1 && coherent
+        })
+        .collect();
+    let m1 = ts.at(1.0);
+    let e1 = crate::fit::relative_rms_error(|f| m1.frf(f), freq_hz, &second.frf, &mask);
+    d.fit_nrmse = d0.fit_nrmse.max(e1);
+    d.fit_nrmse_out_of_band = d0.fit_nrmse_out_of_band;
+    d
 }
 
 /// [`design_over_range`] for every axis of the FRFs `before` and `after`
