@@ -251,9 +251,12 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     }
     let params = args.params()?;
     let preset = args.preset.as_deref().map(crate::simulate::presets::preset).transpose()?;
+    if args.drift_percent.is_some() && preset.is_some() {
+        anyhow::bail!("--drift-percent with --preset: a drifting paper preset is not supported; simulate the drift without --preset");
+    }
     announce(&params, "")?;
     let out = match (args.drift_percent, &preset) {
-        (Some(_), Some(_)) => anyhow::bail!("--drift-percent with --preset: a drifting paper preset is not supported; simulate the drift without --preset"),
+        (Some(_), Some(_)) => unreachable!("refused above"),
         (Some(pct), None) => {
             let drift = crate::simulate::drift::Drift { delta: pct / 100.0, start_s: args.drift_start.unwrap_or(0.0), end_s: args.drift_end.unwrap_or(params.duration_s) };
             crate::simulate::drift::run(args.seed, &params, drift, &args.out)?
