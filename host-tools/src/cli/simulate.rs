@@ -284,7 +284,10 @@ impl DiagonalOptions {
         let params = args.params()?;
         let preset = args.preset.as_deref().map(crate::simulate::presets::preset).transpose()?;
         let dyno = match (args.drift_percent, preset) {
-            (Some(_), Some(_)) => anyhow::bail!("--drift-percent with --preset: a drifting paper preset is not supported; simulate the drift without --preset"),
+            (Some(_), Some(_)) => anyhow::bail!(
+                "--drift-percent with --preset: a drifting paper preset is not supported; simulate the drift \
+                 without --preset"
+            ),
             (Some(pct), None) => DiagonalDyno::Drifting(crate::simulate::drift::Drift {
                 delta: pct / 100.0,
                 start_s: args.drift_start.unwrap_or(0.0),
@@ -368,7 +371,8 @@ fn summary(out: &SimOutput, preset: Option<&Preset>, dir: &std::path::Path) -> V
     lines.push(format!("  wrote {d}/{{frf.uff, frf.csv, measured.csv, true_force.csv, idle.csv, truth.json}}"));
     if let Some(pr) = preset {
         lines.push(format!(
-            "  design as the paper did: dynocomp design --frf {d}/frf.uff --idle {d}/idle.csv --fs {} --method paper {} --out {d}/paper.dcimg",
+            "  design as the paper did: dynocomp design --frf {d}/frf.uff --idle {d}/idle.csv --fs {} --method paper \
+             {} --out {d}/paper.dcimg",
             p.fs_hz,
             pr.design_flags.join(" ")
         ));
@@ -383,7 +387,8 @@ fn excitation_line(p: &SimParams) -> String {
     }
     let m = &p.milling;
     format!(
-        "  milling: {} rpm, {} teeth, tooth_passing_hz {:.2} Hz (spindle {:.2} Hz), ap {} mm, ae {} mm, {:?}, runout {} µm{}",
+        "  milling: {} rpm, {} teeth, tooth_passing_hz {:.2} Hz (spindle {:.2} Hz), ap {} mm, ae {} mm, {:?}, \
+         runout {} µm{}",
         m.spindle_rpm,
         m.teeth,
         m.tooth_passing_hz(),

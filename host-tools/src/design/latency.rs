@@ -364,7 +364,8 @@ fn try_latencies(rounds: &Rounds) -> Tried {
     if !reason.is_empty() {
         for (k, l) in LONGER_LATENCIES.into_iter().enumerate() {
             progress.say(&format!(
-                "latency {l} samples (candidate {}/{candidates}): {reason} at latency {DEFAULT_LATENCY}: designing again…",
+                "latency {l} samples (candidate {}/{candidates}): {reason} at latency {DEFAULT_LATENCY}: designing \
+                 again…",
                 k + 2
             ));
             let d = rounds.at(l);
@@ -387,7 +388,8 @@ fn fitted_to_nyquist_where_better(
     limit_permille: Option<u32>,
 ) -> (Vec<TimedDesign>, Vec<bool>) {
     let fs_hz = rounds.opts.fs_hz;
-    rounds.progress.say(&format!("latency {lag} samples (chosen): fitting the discrete models up to Nyquist instead…"));
+    let stage = format!("latency {lag} samples (chosen): fitting the discrete models up to Nyquist instead…");
+    rounds.progress.say(&stage);
     let alt = rounds.design(&DesignOptions { lag, discrete_fit_top: NYQUIST_FIT_FRACTION, ..rounds.opts.clone() });
     let before = box_load(&designs, fs_hz);
     let taken: Vec<bool> = designs

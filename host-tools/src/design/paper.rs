@@ -143,7 +143,10 @@ pub fn solve_filter_care(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r
     let p = stable_subspace_solution(&w)?;
     let (p, residual) = newton_refine(a, &g, q, p);
     if !(residual < 1e-8) {
-        bail!("continuous Riccati (7) solution rejected: relative residual {residual:.2e} after {iterations} sign iterations (needs < 1e-8)");
+        bail!(
+            "continuous Riccati (7) solution rejected: relative residual {residual:.2e} after {iterations} sign \
+             iterations (needs < 1e-8)"
+        );
     }
     check_hurwitz(a, c, &(&p * c / r))?;
     Ok(CareSolution { p, residual, iterations })
@@ -172,7 +175,10 @@ fn sign_function(mut z: DMatrix<f64>) -> Result<(DMatrix<f64>, usize)> {
         iterations = it;
         let lu = z.clone().lu();
         let Some(zinv) = lu.try_inverse() else {
-            bail!("continuous Riccati: the Hamiltonian is singular (eigenvalue on the imaginary axis); the augmented system is not detectable");
+            bail!(
+                "continuous Riccati: the Hamiltonian is singular (eigenvalue on the imaginary axis); the augmented \
+                 system is not detectable"
+            );
         };
         // determinant scaling c = |det Z|^(−1/2n), from the LU diagonal
         let lu = z.clone().lu();
@@ -252,7 +258,10 @@ fn check_hurwitz(a: &DMatrix<f64>, c: &DVector<f64>, k: &DVector<f64>) -> Result
         .map(|z| z.re)
         .fold(f64::NEG_INFINITY, f64::max);
     if !(max_re < 0.0) {
-        bail!("continuous Riccati (7): A_e − K C_e is not Hurwitz (max Re λ = {max_re:.3e}); the augmented system is not detectable");
+        bail!(
+            "continuous Riccati (7): A_e − K C_e is not Hurwitz (max Re λ = {max_re:.3e}); the augmented system is \
+             not detectable"
+        );
     }
     Ok(())
 }

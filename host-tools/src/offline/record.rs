@@ -237,7 +237,8 @@ fn smooth(
         return smooth_spilled(image, &sidecar, drift, &priors, reading, target, obs);
     }
     let how = format!(
-        "fixed-interval smoother, zero lag, harmonic force prior on axis {} (offline only, whole record in memory for the force prior)",
+        "fixed-interval smoother, zero lag, harmonic force prior on axis {} (offline only, whole record in memory \
+         for the force prior)",
         priors.join(", ")
     );
     whole(reading.input, target, obs, how, |rec| {

@@ -262,7 +262,8 @@ fn table(designs: &[AxisDesign]) -> String {
     for d in designs {
         let _ = writeln!(
             s,
-            "{:<4} {:>5} {:>6.2}% {:>6.0}-{:<6.0} {:>10.3e} {:>9.4} {:>7.0}-{:<7.0} {:>6.2} {:>6.2}% {:>6.2}% {:>8} {:>4}+{}",
+            "{:<4} {:>5} {:>6.2}% {:>6.0}-{:<6.0} {:>10.3e} {:>9.4} {:>7.0}-{:<7.0} {:>6.2} {:>6.2}% {:>6.2}% {:>8} \
+             {:>4}+{}",
             axis_name(d.axis),
             d.model.order(),
             d.fit_nrmse * 100.0,
@@ -286,14 +287,18 @@ fn table(designs: &[AxisDesign]) -> String {
 /// The line of an axis's discrete model (none for the paper's Tustin).
 fn discrete_line(d: &AxisDesign) -> Option<String> {
     let (dm, fd) = d.discrete.as_ref()?;
+    let tail = match fd.modes_above_nyquist {
+        0 => String::new(),
+        n => format!(", {n} mode(s) above fs/2 fitted by their tail"),
+    };
     Some(format!(
-        "{} discrete model: {} (advance {} samples, {} FIR taps, LS condition {:.1e}{}); match {:.3} % over {:.0}-{:.0} Hz\n",
+        "{} discrete model: {} (advance {} samples, {} FIR taps, LS condition {:.1e}{tail}); match {:.3} % over \
+         {:.0}-{:.0} Hz\n",
         axis_name(d.axis),
         dm.method.name(),
         dm.advance,
         dm.fir.len(),
         fd.condition,
-        if fd.modes_above_nyquist > 0 { format!(", {} mode(s) above fs/2 fitted by their tail", fd.modes_above_nyquist) } else { String::new() },
         d.model_match * 100.0,
         d.compensated_band_hz.0,
         d.compensated_band_hz.1
@@ -309,7 +314,9 @@ fn legend(designs: &[AxisDesign], latency: usize) -> String {
         None => "a flat force spectrum",
     };
     format!(
-        "flat band: |H·Ĝ| within ±5 % and ±5° of the pure {latency}-sample delay (fitted model Ĝ); noise: white-noise gain; pred.: predicted in-band RMS error for {spectrum}; raw: the same for no compensation; match: max |Ĝ_d/Ĝ − 1| of the discrete model over the compensated band\n"
+        "flat band: |H·Ĝ| within ±5 % and ±5° of the pure {latency}-sample delay (fitted model Ĝ); noise: white-noise \
+         gain; pred.: predicted in-band RMS error for {spectrum}; raw: the same for no compensation; match: max \
+         |Ĝ_d/Ĝ − 1| of the discrete model over the compensated band\n"
     )
 }
 
