@@ -173,11 +173,13 @@ pub fn compensate_file(
                 "parallel elaboration, {} bands, zero-phase split (offline only, whole record in memory)",
                 image.bands().len()
             );
-            whole(input, &target, obs, how, |rec| compensate_parallel(&image, rec, raw_timing, target.source))
+            compensate_whole(input, &target, obs, how, |rec| {
+                compensate_parallel(&image, rec, raw_timing, target.source)
+            })
         }
         Compensation::Matrix(image) => {
             let how = matrix_how(image.latency_samples, raw_timing);
-            whole(input, &target, obs, how, |rec| compensate_matrix(&image, rec, raw_timing, target.source))
+            compensate_whole(input, &target, obs, how, |rec| compensate_matrix(&image, rec, raw_timing, target.source))
         }
         Compensation::Smoother { image, drift, force_prior } => {
             let reading = Reading { input, path: &input_path, channels: channels.as_ref(), full_scale_n };
@@ -188,7 +190,7 @@ pub fn compensate_file(
 
 /// Read the whole record into memory, compensate it with `compensate` and
 /// write it; `how` says what compensated it.
-fn whole(
+fn compensate_whole(
     mut input: Box<dyn SignalReader>,
     target: &Target<'_>,
     obs: &mut Observed<'_>,
@@ -241,7 +243,7 @@ fn smooth(
          for the force prior)",
         priors.join(", ")
     );
-    whole(reading.input, target, obs, how, |rec| {
+    compensate_whole(reading.input, target, obs, how, |rec| {
         crate::offline::smoother::smooth_record(image, &sidecar, rec, target.source)
     })
 }
