@@ -280,23 +280,16 @@ fn summary_text_lists_its_parts_in_order() {
     }
     for d in &designs {
         let (dm, fd) = d.discrete.as_ref().expect("the default design has a discrete model");
-        let tail = if fd.modes_above_nyquist > 0 {
-            format!(", {} mode(s) above fs/2 fitted by their tail", fd.modes_above_nyquist)
-        } else {
-            String::new()
-        };
-        want.push(format!(
-            "{} discrete model: {} (advance {} samples, {} FIR taps, LS condition {:.1e}{tail}); match {:.3} % over \
-             {:.0}-{:.0} Hz",
-            ["x", "y"][d.axis],
-            dm.method.name(),
-            dm.advance,
-            dm.fir.len(),
-            fd.condition,
-            d.model_match * 100.0,
-            d.compensated_band_hz.0,
-            d.compensated_band_hz.1
-        ));
+        let above = fd.modes_above_nyquist;
+        let tail = if above > 0 { format!(", {above} mode(s) above fs/2 fitted by their tail") } else { String::new() };
+        let (lo, hi) = d.compensated_band_hz;
+        let parts = [
+            format!("{} discrete model: {}", ["x", "y"][d.axis], dm.method.name()),
+            format!("(advance {} samples, {} FIR taps,", dm.advance, dm.fir.len()),
+            format!("LS condition {:.1e}{tail});", fd.condition),
+            format!("match {:.3} % over {lo:.0}-{hi:.0} Hz", 100.0 * d.model_match),
+        ];
+        want.push(parts.join(" "));
         want.extend(d.notes.iter().map(|n| format!("note: {n}")));
     }
     for (d, s) in designs.iter().zip(&sens) {
