@@ -468,6 +468,7 @@ fn out_of_range_parameters_are_refused_at_once() {
         (&["--fs", "-51200"][..], "fs"),
         (&["--spindle-rpm", "0"][..], "spindle"),
         (&["--frf-lines", "100000000"][..], "lines"),
+        (&["--drift-percent", "3", "--preset", "cut-2"][..], "--preset"),
     ];
     for (extra, word) in refused {
         let (done, ok, err) = dynocomp_within(&[&["simulate", "--out", &out][..], extra].concat(), 20);

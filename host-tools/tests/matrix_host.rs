@@ -265,21 +265,8 @@ fn one_frf_value_holds_a_matrix_as_files_per_hammer_direction() {
     let dir = tmp("split");
     std::fs::create_dir_all(&dir).unwrap();
     let p = |n: &str| dir.join(n).display().to_string();
-    let (ok, _, err) = dynocomp(&[
-        "simulate",
-        "--out",
-        &p("sim"),
-        "--dyno",
-        "plate",
-        "--dyno-preset",
-        "offcentre",
-        "--fs",
-        "10240",
-        "--duration",
-        "0.1",
-        "--idle-duration",
-        "0.2",
-    ]);
+    let (ok, _, err) =
+        cli_common::simulate_plate(&p("sim"), "offcentre", "10240", &["--duration", "0.1", "--idle-duration", "0.2"]);
     assert!(ok, "{err}");
     let csv = std::fs::read_to_string(dir.join("sim/frf.csv")).unwrap();
     let mut lines = csv.lines();
@@ -294,12 +281,7 @@ fn one_frf_value_holds_a_matrix_as_files_per_hammer_direction() {
         std::fs::write(dir.join(format!("h{j}.csv")), out).unwrap();
     }
     let idle = p("sim/idle.csv");
-    let design = |frf: &str, out: &str, extra: &[&str]| {
-        let out = p(out);
-        let mut a = vec!["design", "--frf", frf, "--fs", "10240", "--idle", &idle, "--out", &out];
-        a.extend(extra);
-        dynocomp(&a)
-    };
+    let design = |frf: &str, out: &str, extra: &[&str]| cli_common::design(frf, &idle, "10240", &p(out), extra);
     let inspect = |img: &str| {
         let (ok, out, err) = dynocomp(&["inspect", &p(img)]);
         assert!(ok, "{err}");

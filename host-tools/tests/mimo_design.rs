@@ -398,28 +398,9 @@ fn cli_offcentre_3x3_image_beats_per_axis() {
     use cli_common::{dynocomp, tmp};
     let dir = tmp("mimo", "offcentre");
     let p = |n: &str| dir.join(n).display().to_string();
-    let (ok, _, err) = dynocomp(&[
-        "simulate",
-        "--out",
-        &p(""),
-        "--dyno",
-        "plate",
-        "--dyno-preset",
-        "offcentre",
-        "--fs",
-        "10240",
-        "--duration",
-        "0.5",
-        "--seed",
-        "1",
-    ]);
+    let (ok, _, err) = cli_common::simulate_plate(&p(""), "offcentre", "10240", &["--duration", "0.5", "--seed", "1"]);
     assert!(ok, "{err}");
-    let design = |out: &str, extra: &[&str]| {
-        let (frf, idle, out) = (p("frf.uff"), p("idle.csv"), p(out));
-        let mut a = vec!["design", "--frf", &frf, "--fs", "10240", "--idle", &idle, "--out", &out];
-        a.extend(extra);
-        dynocomp(&a)
-    };
+    let design = |out: &str, extra: &[&str]| cli_common::design(&p("frf.uff"), &p("idle.csv"), "10240", &p(out), extra);
     let rep = p("report");
     let (ok, json, err) = design("c.dcimg", &["--json", "--report", &rep]);
     assert!(ok, "{err}");

@@ -639,7 +639,7 @@ fn tdms_refusals_word_for_word() {
         (
             one(&[ch("Fx", Index::New(10, 1), vec![]), ch("Force X", Index::New(10, 1), vec![])], &f2),
             None,
-            "{s}: channels /'Cut 1'/'Fx' and Cut 1/Force X are both axis x; pick one with --channels \
+            "{s}: channels Cut 1/Fx and Cut 1/Force X are both axis x; pick one with --channels \
                 fx=GROUP/NAME",
         ),
         (

@@ -223,19 +223,40 @@ fn render(
     box_load: LoadReport,
     t0: Instant,
 ) -> Result<String> {
-    let (designs, latency) = (&d.designs, d.latency);
-    let id = image.id();
-    let mut sensitivities = crate::design::sensitivity::predict_all(designs, &s.opts);
+    let mut sensitivities = crate::design::sensitivity::predict_all(&d.designs, &s.opts);
     crate::design::sensitivity::set_line_spacing(&mut sensitivities, &s.frf.freq_hz);
-    let mut summary = render_summary(
-        designs,
-        &sensitivities,
-        args.input.fs,
-        latency,
-        &args.out.display().to_string(),
-        id,
-        args.method.name(),
-    );
+    let summary = summary_text(args, d, priors, image, &box_load, &sensitivities);
+    if let Some(dir) = &args.report {
+        let files =
+            crate::report::design::write_report(dir, &s.frf, &d.designs, &sensitivities, args.input.fs, &summary)?;
+        eprintln!("report: {} files in {} (open index.html)", files.len(), dir.display());
+    }
+    if !args.json {
+        eprintln!("designed in {:.0} ms", t0.elapsed().as_secs_f64() * 1e3);
+        return Ok(summary);
+    }
+    let axes = (0..d.designs.len())
+        .map(|i| AxisJson::new(&d.designs[i], d.times[i], priors[i].as_ref(), &sensitivities[i]))
+        .collect();
+    let j = design_json(args, s, d, image, box_load, axes, t0);
+    Ok(format!("{}\n", serde_json::to_string_pretty(&j)?))
+}
+
+/// The text summary: the table of the axes ([`render_summary`]), how the
+/// latency was chosen, the force prior and spectrum of each axis, each axis
+/// against the default design, and the box's load.
+fn summary_text(
+    args: &DesignArgs,
+    d: &Designed,
+    priors: &[Option<AxisPrior>],
+    image: &CoeffImage,
+    box_load: &LoadReport,
+    sensitivities: &[Option<crate::design::sensitivity::Sensitivity>],
+) -> String {
+    let designs = &d.designs;
+    let out = args.out.display().to_string();
+    let mut summary =
+        render_summary(designs, sensitivities, args.input.fs, d.latency, &out, image.id(), args.method.name());
     if let Some(c) = &d.latency_choice {
         let names: Vec<&str> = designs.iter().map(|d| axis_name(d.axis)).collect();
         summary.push_str(&crate::design::latency::describe(c, &names));
@@ -249,36 +270,46 @@ fn render(
             summary.push_str(&spectrum_line(d.axis, s, args.input.force_rms));
         }
     }
+    summary.push_str(&versus_lines(args, d));
+    summary.push_str(&crate::realize::load::describe(box_load, image.fs_hz));
+    summary.push_str(if box_load.fits { "\n" } else { "  OVER THE LIMIT: offline-only image\n" });
+    summary
+}
+
+/// Each axis against the default design; the lines where the default is
+/// better also go to stderr at once.
+fn versus_lines(args: &DesignArgs, d: &Designed) -> String {
     let better = if args.method == Method::Paper {
         "the default method is better: drop --method paper"
     } else {
         "the design without fitting bands: drop --spindle-rpm/--teeth, --band and --bands-from"
     };
+    let mut lines = String::new();
     for (v, replaced) in &d.versus {
         let line = crate::design::versus_default::describe(v, *replaced, better);
         if v.default_better {
             eprint!("{line}");
         }
-        summary.push_str(&line);
+        lines.push_str(&line);
     }
-    summary.push_str(&crate::realize::load::describe(&box_load, image.fs_hz));
-    summary.push_str(if box_load.fits { "\n" } else { "  OVER THE LIMIT: offline-only image\n" });
-    if let Some(dir) = &args.report {
-        let files = crate::report::design::write_report(dir, &s.frf, designs, &sensitivities, args.input.fs, &summary)?;
-        eprintln!("report: {} files in {} (open index.html)", files.len(), dir.display());
-    }
-    if !args.json {
-        eprintln!("designed in {:.0} ms", t0.elapsed().as_secs_f64() * 1e3);
-        return Ok(summary);
-    }
-    let axes = (0..designs.len())
-        .map(|i| AxisJson::new(&designs[i], d.times[i], priors[i].as_ref(), &sensitivities[i]))
-        .collect();
-    let j = DesignJson {
+    lines
+}
+
+/// The `--json` document of the design with the summaries `axes` of its axes.
+fn design_json(
+    args: &DesignArgs,
+    s: &DesignSetup,
+    d: &Designed,
+    image: &CoeffImage,
+    box_load: LoadReport,
+    axes: Vec<AxisJson>,
+    t0: Instant,
+) -> DesignJson {
+    DesignJson {
         image: args.out.display().to_string(),
-        image_id: format!("{id:08x}"),
+        image_id: format!("{:08x}", image.id()),
         fs_hz: args.input.fs,
-        latency_samples: latency,
+        latency_samples: d.latency,
         method: args.method.name(),
         bands: s.bands.clone(),
         design_time_s: t0.elapsed().as_secs_f64(),
@@ -294,6 +325,5 @@ fn render(
             .collect(),
         box_load,
         axes,
-    };
-    Ok(format!("{}\n", serde_json::to_string_pretty(&j)?))
+    }
 }

@@ -7,7 +7,8 @@ use std::path::PathBuf;
 
 use crate::frf::axis_name;
 use crate::simulate::files::{write_outputs, write_outputs_of};
-use crate::simulate::{simulate, AntiAlias, Chatter, MillingMode, SimParams};
+use crate::simulate::presets::Preset;
+use crate::simulate::{simulate, AntiAlias, Chatter, MillingMode, SimOutput, SimParams};
 
 /// Arguments of `dynocomp simulate`. Every option left out takes its value
 /// from [`SimParams::default`].
@@ -246,36 +247,96 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     if args.dyno == DynoModel::Plate {
         return run_plate(args);
     }
-    if args.dyno_preset.is_some() || args.cut_offset.is_some() {
-        anyhow::bail!("--dyno-preset and --cut-offset describe the plate dynamometer: add --dyno plate");
+    let options = DiagonalOptions::new(args)?;
+    let out = simulate_and_write(&options)?;
+    for line in summary(&out, options.preset(), &options.out) {
+        eprintln!("{line}");
     }
-    let params = args.params()?;
-    let preset = args.preset.as_deref().map(crate::simulate::presets::preset).transpose()?;
-    announce(&params, "")?;
-    let out = match (args.drift_percent, &preset) {
-        (Some(_), Some(_)) => anyhow::bail!("--drift-percent with --preset: a drifting paper preset is not supported; simulate the drift without --preset"),
-        (Some(pct), None) => {
-            let drift = crate::simulate::drift::Drift { delta: pct / 100.0, start_s: args.drift_start.unwrap_or(0.0), end_s: args.drift_end.unwrap_or(params.duration_s) };
-            crate::simulate::drift::run(args.seed, &params, drift, &args.out)?
+    Ok(())
+}
+
+/// What `dynocomp simulate` of the per-axis dynamometer makes, checked.
+struct DiagonalOptions {
+    seed: u64,
+    params: SimParams,
+    dyno: DiagonalDyno,
+    /// Output directory.
+    out: PathBuf,
+}
+
+/// The per-axis dynamometer simulated.
+enum DiagonalDyno {
+    /// A random one from the seed.
+    Random,
+    /// A paper preset's.
+    Preset(Box<Preset>),
+    /// A random one whose sensor modes drift during the record.
+    Drifting(crate::simulate::drift::Drift),
+}
+
+impl DiagonalOptions {
+    /// The options `args` select; plate-only options, and a drift with a
+    /// paper preset, are refused.
+    fn new(args: &SimulateArgs) -> Result<Self> {
+        if args.dyno_preset.is_some() || args.cut_offset.is_some() {
+            anyhow::bail!("--dyno-preset and --cut-offset describe the plate dynamometer: add --dyno plate");
         }
-        (None, Some(pr)) => {
-            let out = crate::simulate::simulate_with(args.seed, &params, pr.dyno.clone())?;
-            eprintln!("simulate: writing {}", args.out.display());
-            write_outputs_of(&args.out, &out, Some(pr))?;
+        let params = args.params()?;
+        let preset = args.preset.as_deref().map(crate::simulate::presets::preset).transpose()?;
+        let dyno = match (args.drift_percent, preset) {
+            (Some(_), Some(_)) => anyhow::bail!(
+                "--drift-percent with --preset: a drifting paper preset is not supported; simulate the drift \
+                 without --preset"
+            ),
+            (Some(pct), None) => DiagonalDyno::Drifting(crate::simulate::drift::Drift {
+                delta: pct / 100.0,
+                start_s: args.drift_start.unwrap_or(0.0),
+                end_s: args.drift_end.unwrap_or(params.duration_s),
+            }),
+            (None, Some(pr)) => DiagonalDyno::Preset(Box::new(pr)),
+            (None, None) => DiagonalDyno::Random,
+        };
+        Ok(DiagonalOptions { seed: args.seed, params, dyno, out: args.out.clone() })
+    }
+
+    /// The paper preset simulated, if any.
+    fn preset(&self) -> Option<&Preset> {
+        match &self.dyno {
+            DiagonalDyno::Preset(p) => Some(p.as_ref()),
+            _ => None,
+        }
+    }
+}
+
+/// Announce, simulate and write the files.
+fn simulate_and_write(o: &DiagonalOptions) -> Result<SimOutput> {
+    announce(&o.params, "")?;
+    let writing = || eprintln!("simulate: writing {}", o.out.display());
+    Ok(match &o.dyno {
+        DiagonalDyno::Drifting(drift) => crate::simulate::drift::run(o.seed, &o.params, *drift, &o.out)?,
+        DiagonalDyno::Preset(pr) => {
+            let out = crate::simulate::simulate_with(o.seed, &o.params, pr.dyno.clone())?;
+            writing();
+            write_outputs_of(&o.out, &out, Some(pr.as_ref()))?;
             out
         }
-        (None, None) => {
-            let out = simulate(args.seed, &params)?;
-            eprintln!("simulate: writing {}", args.out.display());
-            write_outputs(&args.out, &out)?;
+        DiagonalDyno::Random => {
+            let out = simulate(o.seed, &o.params)?;
+            writing();
+            write_outputs(&o.out, &out)?;
             out
         }
-    };
+    })
+}
+
+/// What was simulated and written into `dir`, line by line.
+fn summary(out: &SimOutput, preset: Option<&Preset>, dir: &std::path::Path) -> Vec<String> {
     let p = &out.params;
-    if let Some(pr) = &preset {
-        eprintln!("simulate: preset {}: {}", pr.name, pr.description);
+    let mut lines = Vec::new();
+    if let Some(pr) = preset {
+        lines.push(format!("simulate: preset {}: {}", pr.name, pr.description));
     }
-    eprintln!(
+    lines.push(format!(
         "simulate: seed {}, fs {} Hz, {} samples ({} s), oversample {}, anti-alias {}",
         out.seed,
         p.fs_hz,
@@ -283,24 +344,8 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         p.duration_s,
         p.oversample,
         p.anti_alias
-    );
-    let m = &p.milling;
-    if let Some(e) = &p.excitation {
-        eprintln!("  shaker: {e:?} (the same force on x, y and z)");
-    } else {
-        eprintln!(
-            "  milling: {} rpm, {} teeth, tooth_passing_hz {:.2} Hz (spindle {:.2} Hz), ap {} mm, ae {} mm, {:?}, runout {} µm{}",
-            m.spindle_rpm,
-            m.teeth,
-            m.tooth_passing_hz(),
-            m.spindle_hz(),
-            m.axial_depth_mm,
-            m.radial_depth_mm,
-            m.mode,
-            m.runout_mm * 1e3,
-            m.chatter.as_ref().map(|c| format!(", chatter {} Hz", c.freq_hz)).unwrap_or_default()
-        );
-    }
+    ));
+    lines.push(excitation_line(p));
     for a in 0..3 {
         let modes: Vec<String> = out
             .dyno
@@ -310,9 +355,9 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             .map(|md| format!("{:.0} Hz ζ {:.3} r {:+.3}", md.fn_hz, md.zeta, md.residue))
             .collect();
         let peak = out.truth[a].iter().fold(0.0f64, |acc, v| acc.max(v.abs()));
-        eprintln!("  axis {}: peak true force {:.1} N; modes: {}", axis_name(a), peak, modes.join(", "));
+        lines.push(format!("  axis {}: peak true force {:.1} N; modes: {}", axis_name(a), peak, modes.join(", ")));
     }
-    eprintln!(
+    lines.push(format!(
         "  noise R {} N², ADC {} bits ±{} N (LSB {:.4} N); impact test {} lines × {} Hz, {} impacts",
         p.measurement.noise_variance_n2,
         p.measurement.adc_bits,
@@ -321,20 +366,39 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         p.impact.n_lines,
         p.impact.df_hz,
         p.impact.n_impacts
-    );
-    eprintln!(
-        "  wrote {}/{{frf.uff, frf.csv, measured.csv, true_force.csv, idle.csv, truth.json}}",
-        args.out.display()
-    );
-    if let Some(pr) = &preset {
-        let d = args.out.display();
-        eprintln!(
-            "  design as the paper did: dynocomp design --frf {d}/frf.uff --idle {d}/idle.csv --fs {} --method paper {} --out {d}/paper.dcimg",
+    ));
+    let d = dir.display();
+    lines.push(format!("  wrote {d}/{{frf.uff, frf.csv, measured.csv, true_force.csv, idle.csv, truth.json}}"));
+    if let Some(pr) = preset {
+        lines.push(format!(
+            "  design as the paper did: dynocomp design --frf {d}/frf.uff --idle {d}/idle.csv --fs {} --method paper \
+             {} --out {d}/paper.dcimg",
             p.fs_hz,
             pr.design_flags.join(" ")
-        );
+        ));
     }
-    Ok(())
+    lines
+}
+
+/// The force: the shaker's, or the milling cut's.
+fn excitation_line(p: &SimParams) -> String {
+    if let Some(e) = &p.excitation {
+        return format!("  shaker: {e:?} (the same force on x, y and z)");
+    }
+    let m = &p.milling;
+    format!(
+        "  milling: {} rpm, {} teeth, tooth_passing_hz {:.2} Hz (spindle {:.2} Hz), ap {} mm, ae {} mm, {:?}, \
+         runout {} µm{}",
+        m.spindle_rpm,
+        m.teeth,
+        m.tooth_passing_hz(),
+        m.spindle_hz(),
+        m.axial_depth_mm,
+        m.radial_depth_mm,
+        m.mode,
+        m.runout_mm * 1e3,
+        m.chatter.as_ref().map(|c| format!(", chatter {} Hz", c.freq_hz)).unwrap_or_default()
+    )
 }
 
 /// `dynocomp simulate --dyno plate`: the physical 3x3 dynamometer, random

@@ -272,82 +272,145 @@ pub fn design_axes_choosing_latency(
     limit_permille: Option<u32>,
     progress: &Progress,
 ) -> (Vec<TimedDesign>, LatencyChoice) {
-    let names: Vec<String> = axes.iter().map(|a| axis_name(a.axis).to_string()).collect();
-    let n = axes.len();
-    let labels: Vec<String> = axes.iter().enumerate().map(|(i, a)| axis_of(a, i, n)).collect();
-    // Each axis fitted once for all rounds: only the discrete model's fit
-    // top, the latency and what follows from them change between rounds.
-    let prepared = if opts.paper_orders_auto {
-        Vec::new()
-    } else {
-        on_threads(axes.iter().zip(r).zip(&labels), |((a, rv), label)| {
-            progress.say(&format!("{label}: fitting {} FRF lines…", freq_hz.len()));
-            prepare_axis(freq_hz, a, *rv, opts)
-        })
-    };
-    let round = |o: &DesignOptions| {
-        if opts.paper_orders_auto {
-            design_axes_reporting(freq_hz, axes, r, o, progress)
+    let rounds = Rounds::new(freq_hz, axes, r, opts, progress);
+    let Tried { trials, mut designed, reason } = try_latencies(&rounds);
+    let i = pick(&trials, limit_permille);
+    let mut designs = designed.swap_remove(i);
+    let mut fit_to_nyquist = vec![false; designs.len()];
+    if !reason.is_empty() && opts.discretization == Discretization::Fit {
+        (designs, fit_to_nyquist) = fitted_to_nyquist_where_better(&rounds, designs, trials[i].latency, limit_permille);
+    }
+    (designs, LatencyChoice { chosen: trials[i].latency, tried: trials, reason, fit_to_nyquist })
+}
+
+/// The axes of [`design_axes_choosing_latency`], designed a round at a time:
+/// each axis is fitted once for all rounds (only the discrete model's fit
+/// top, the latency and what follows from them change between rounds),
+/// except with `--paper-orders auto`, which designs each round whole.
+struct Rounds<'a> {
+    freq_hz: &'a [f64],
+    axes: &'a [AxisFrf],
+    r: &'a [f64],
+    opts: &'a DesignOptions,
+    progress: &'a Progress,
+    /// "axis y (2/3)" of each axis.
+    labels: Vec<String>,
+    /// Each axis fitted (empty with `paper_orders_auto`).
+    prepared: Vec<TimedPrepared>,
+}
+
+impl<'a> Rounds<'a> {
+    /// Fit every axis (one thread each), telling `progress`.
+    fn new(
+        freq_hz: &'a [f64],
+        axes: &'a [AxisFrf],
+        r: &'a [f64],
+        opts: &'a DesignOptions,
+        progress: &'a Progress,
+    ) -> Self {
+        let n = axes.len();
+        let labels: Vec<String> = axes.iter().enumerate().map(|(i, a)| axis_of(a, i, n)).collect();
+        let prepared = if opts.paper_orders_auto {
+            Vec::new()
+        } else {
+            on_threads(axes.iter().zip(r).zip(&labels), |((a, rv), label)| {
+                progress.say(&format!("{label}: fitting {} FRF lines…", freq_hz.len()));
+                prepare_axis(freq_hz, a, *rv, opts)
+            })
+        };
+        Rounds { freq_hz, axes, r, opts, progress, labels, prepared }
+    }
+
+    /// Every axis designed with `o` (at `o.lag`, `o.discrete_fit_top`).
+    fn design(&self, o: &DesignOptions) -> Vec<TimedDesign> {
+        if self.opts.paper_orders_auto {
+            design_axes_reporting(self.freq_hz, self.axes, self.r, o, self.progress)
         } else {
             let stage = if o.discrete_fit_top == NYQUIST_FIT_FRACTION {
                 format!("latency {}, fitted up to Nyquist", o.lag)
             } else {
                 format!("latency {}", o.lag)
             };
-            design_round(&prepared, o, &labels, progress, &stage)
+            design_round(&self.prepared, o, &self.labels, self.progress, &stage)
         }
-    };
+    }
+
+    /// Every axis designed at latency `lag`.
+    fn at(&self, lag: usize) -> Vec<TimedDesign> {
+        self.design(&DesignOptions { lag, ..self.opts.clone() })
+    }
+}
+
+/// The latencies tried, each with its designs, and why the default was not
+/// enough (empty when it was).
+struct Tried {
+    trials: Vec<LatencyTrial>,
+    designed: Vec<Vec<TimedDesign>>,
+    reason: String,
+}
+
+/// Design at [`DEFAULT_LATENCY`] and, where that falls short
+/// ([`shortfall`]), again at each of [`LONGER_LATENCIES`].
+fn try_latencies(rounds: &Rounds) -> Tried {
+    let (n, fs_hz, progress) = (rounds.axes.len(), rounds.opts.fs_hz, rounds.progress);
+    let names: Vec<String> = rounds.axes.iter().map(|a| axis_name(a.axis).to_string()).collect();
     let candidates = 1 + LONGER_LATENCIES.len();
     progress
         .say(&format!("latency {DEFAULT_LATENCY} samples (candidate 1 of up to {candidates}): designing {n} axes…"));
-    let first = round(&DesignOptions { lag: DEFAULT_LATENCY, ..opts.clone() });
+    let first = rounds.at(DEFAULT_LATENCY);
     let reason = shortfall(&first, &names);
-    let mut trials = vec![trial(DEFAULT_LATENCY, &first, opts.fs_hz)];
-    let mut rounds = vec![first];
+    let mut trials = vec![trial(DEFAULT_LATENCY, &first, fs_hz)];
+    let mut designed = vec![first];
     if !reason.is_empty() {
         for (k, l) in LONGER_LATENCIES.into_iter().enumerate() {
             progress.say(&format!(
-                "latency {l} samples (candidate {}/{candidates}): {reason} at latency {DEFAULT_LATENCY}: designing again…",
+                "latency {l} samples (candidate {}/{candidates}): {reason} at latency {DEFAULT_LATENCY}: designing \
+                 again…",
                 k + 2
             ));
-            let d = round(&DesignOptions { lag: l, ..opts.clone() });
-            trials.push(trial(l, &d, opts.fs_hz));
-            rounds.push(d);
+            let d = rounds.at(l);
+            trials.push(trial(l, &d, fs_hz));
+            designed.push(d);
         }
     }
-    let i = pick(&trials, limit_permille);
-    let mut designs = rounds.swap_remove(i);
-    let mut fit_to_nyquist = vec![false; designs.len()];
-    if !reason.is_empty() && opts.discretization == Discretization::Fit {
-        // At the chosen latency, the discrete model fitted up to Nyquist
-        // instead (crate::design::discretize::NYQUIST_FIT_FRACTION); per axis, the one
-        // that predicts the smaller error, if the box can still run the image.
-        let l = trials[i].latency;
-        progress.say(&format!("latency {l} samples (chosen): fitting the discrete models up to Nyquist instead…"));
-        let alt = round(&DesignOptions { lag: l, discrete_fit_top: NYQUIST_FIT_FRACTION, ..opts.clone() });
-        let before = box_load(&designs, opts.fs_hz);
-        let taken: Vec<bool> = designs
-            .iter()
-            .zip(&alt)
-            .map(|(d, a)| match (&d.0, &a.0) {
-                (Ok(d), Ok(a)) => a.predicted_error < d.predicted_error,
-                (Err(_), Ok(_)) => true,
-                _ => false,
-            })
-            .collect();
-        let pairs: Vec<(TimedDesign, TimedDesign)> = designs.into_iter().zip(alt).collect();
-        let load_with = box_load_of(pairs.iter().zip(&taken).map(|((d, a), t)| if *t { a } else { d }), opts.fs_hz);
-        let runs = |p: Option<u32>| match (limit_permille, p) {
-            (Some(lim), Some(p)) => p <= lim,
-            _ => true,
-        };
-        // Never over the box's limit where the first choice was not.
-        if runs(load_with) || !runs(before) {
-            fit_to_nyquist = taken;
-        }
-        designs = pairs.into_iter().zip(&fit_to_nyquist).map(|((d, a), t)| if *t { a } else { d }).collect();
-    }
-    (designs, LatencyChoice { chosen: trials[i].latency, tried: trials, reason, fit_to_nyquist })
+    Tried { trials, designed, reason }
+}
+
+/// At the chosen latency `lag`, the discrete models fitted up to Nyquist
+/// instead ([`NYQUIST_FIT_FRACTION`]): per axis, the design that predicts
+/// the smaller error, unless that puts the image over the box's load limit
+/// where `designs` were not. Returns the designs kept and, per axis,
+/// whether it is the one fitted up to Nyquist.
+fn fitted_to_nyquist_where_better(
+    rounds: &Rounds,
+    designs: Vec<TimedDesign>,
+    lag: usize,
+    limit_permille: Option<u32>,
+) -> (Vec<TimedDesign>, Vec<bool>) {
+    let fs_hz = rounds.opts.fs_hz;
+    let stage = format!("latency {lag} samples (chosen): fitting the discrete models up to Nyquist instead…");
+    rounds.progress.say(&stage);
+    let alt = rounds.design(&DesignOptions { lag, discrete_fit_top: NYQUIST_FIT_FRACTION, ..rounds.opts.clone() });
+    let before = box_load(&designs, fs_hz);
+    let taken: Vec<bool> = designs
+        .iter()
+        .zip(&alt)
+        .map(|(d, a)| match (&d.0, &a.0) {
+            (Ok(d), Ok(a)) => a.predicted_error < d.predicted_error,
+            (Err(_), Ok(_)) => true,
+            _ => false,
+        })
+        .collect();
+    let pairs: Vec<(TimedDesign, TimedDesign)> = designs.into_iter().zip(alt).collect();
+    let load_with = box_load_of(pairs.iter().zip(&taken).map(|((d, a), t)| if *t { a } else { d }), fs_hz);
+    let runs = |p: Option<u32>| match (limit_permille, p) {
+        (Some(lim), Some(p)) => p <= lim,
+        _ => true,
+    };
+    // Never over the box's limit where the first choice was not.
+    let fit_to_nyquist = if runs(load_with) || !runs(before) { taken } else { vec![false; pairs.len()] };
+    let designs = pairs.into_iter().zip(&fit_to_nyquist).map(|((d, a), t)| if *t { a } else { d }).collect();
+    (designs, fit_to_nyquist)
 }
 
 /// One summary line: "latency 8 samples, chosen: at 4 axis x flat to 2088 of

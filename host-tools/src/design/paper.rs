@@ -138,20 +138,47 @@ pub struct CareSolution {
 /// 1987), refined by up to three Newton (Kleinman) steps. Checks the
 /// residual (< 1e-8) and that A − K C is Hurwitz.
 pub fn solve_filter_care(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r: f64) -> Result<CareSolution> {
-    let n = a.nrows();
     let g = c * c.transpose() / r;
+    let (w, iterations) = sign_function(hamiltonian(a, &g, q))?;
+    let p = stable_subspace_solution(&w)?;
+    let (p, residual) = newton_refine(a, &g, q, p);
+    if !(residual < 1e-8) {
+        bail!(
+            "continuous Riccati (7) solution rejected: relative residual {residual:.2e} after {iterations} sign \
+             iterations (needs < 1e-8)"
+        );
+    }
+    check_hurwitz(a, c, &(&p * c / r))?;
+    Ok(CareSolution { p, residual, iterations })
+}
+
+/// The Hamiltonian H = [[Aᵀ, −G], [−Q, −A]] of eq. (7), G = Cᵀ C / R.
+fn hamiltonian(a: &DMatrix<f64>, g: &DMatrix<f64>, q: &DMatrix<f64>) -> DMatrix<f64> {
+    let n = a.nrows();
     let mut z = DMatrix::<f64>::zeros(2 * n, 2 * n);
     z.view_mut((0, 0), (n, n)).copy_from(&a.transpose());
-    z.view_mut((0, n), (n, n)).copy_from(&(-&g));
+    z.view_mut((0, n), (n, n)).copy_from(&(-g));
     z.view_mut((n, 0), (n, n)).copy_from(&(-q));
     z.view_mut((n, n), (n, n)).copy_from(&(-a));
+    z
+}
+
+/// The matrix sign function W = sign(H) by the scaled Newton iteration
+/// Z ← (c Z + Z⁻¹/c)/2, c = |det Z|^(−1/2n), until the relative change is
+/// below 1e-13 or stagnates below 1e-6 (at most 100 steps). Returns W and
+/// the iterations taken.
+fn sign_function(mut z: DMatrix<f64>) -> Result<(DMatrix<f64>, usize)> {
+    let n = z.nrows() / 2;
     let mut iterations = 0;
     let mut last_change = f64::INFINITY;
     for it in 1..=100 {
         iterations = it;
         let lu = z.clone().lu();
         let Some(zinv) = lu.try_inverse() else {
-            bail!("continuous Riccati: the Hamiltonian is singular (eigenvalue on the imaginary axis); the augmented system is not detectable");
+            bail!(
+                "continuous Riccati: the Hamiltonian is singular (eigenvalue on the imaginary axis); the augmented \
+                 system is not detectable"
+            );
         };
         // determinant scaling c = |det Z|^(−1/2n), from the LU diagonal
         let lu = z.clone().lu();
@@ -170,10 +197,17 @@ pub fn solve_filter_care(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r
         }
         last_change = change;
     }
-    let w11 = z.view((0, 0), (n, n)).into_owned();
-    let w12 = z.view((0, n), (n, n)).into_owned();
-    let w21 = z.view((n, 0), (n, n)).into_owned();
-    let w22 = z.view((n, n), (n, n)).into_owned();
+    Ok((z, iterations))
+}
+
+/// P from W = sign(H) (Byers 1987): the least-squares solution of
+/// [W12; W22 + I] P = −[W11 + I; W21], symmetrized.
+fn stable_subspace_solution(w: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+    let n = w.nrows() / 2;
+    let w11 = w.view((0, 0), (n, n)).into_owned();
+    let w12 = w.view((0, n), (n, n)).into_owned();
+    let w21 = w.view((n, 0), (n, n)).into_owned();
+    let w22 = w.view((n, n), (n, n)).into_owned();
     let id = DMatrix::<f64>::identity(n, n);
     let mut lhs = DMatrix::<f64>::zeros(2 * n, n);
     lhs.view_mut((0, 0), (n, n)).copy_from(&w12);
@@ -184,22 +218,28 @@ pub fn solve_filter_care(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r
     let p = linalg::svd(lhs, "continuous Riccati (7): the sign-function subspace")?
         .solve(&rhs, 0.0)
         .map_err(|e| anyhow::anyhow!("continuous Riccati: {e}"))?;
-    let mut p = (&p + p.transpose()) * 0.5;
+    Ok((&p + p.transpose()) * 0.5)
+}
+
+/// Up to three Newton (Kleinman 1968) steps on P, each kept only if it
+/// lowers the relative residual ‖A P + P Aᵀ − P G P + Q‖_F / max(‖P G P‖_F,
+/// ‖Q‖_F): the sign iteration stagnates at a residual set by the
+/// Hamiltonian's conditioning; each step solves the Lyapunov equation
+/// Â X + X Âᵀ = −Res, Â = A − P G. Returns P and its relative residual.
+fn newton_refine(a: &DMatrix<f64>, g: &DMatrix<f64>, q: &DMatrix<f64>, p: DMatrix<f64>) -> (DMatrix<f64>, f64) {
     let residual_of = |p: &DMatrix<f64>| {
-        let pcp = p * &g * p;
+        let pcp = p * g * p;
         let res = a * p + p * a.transpose() - &pcp + q;
         let rel = res.norm() / pcp.norm().max(q.norm()).max(f64::MIN_POSITIVE);
         (res, rel)
     };
+    let mut p = p;
     let (mut res, mut residual) = residual_of(&p);
-    // Newton (Kleinman 1968) refinement: the sign iteration stagnates at a
-    // residual set by the Hamiltonian's conditioning; each Newton step solves
-    // the Lyapunov equation Â X + X Âᵀ = −Res, Â = A − P G.
     for _ in 0..3 {
         if residual < 1e-12 {
             break;
         }
-        let Some(x) = solve_lyapunov(&(a - &p * &g), &(-&res)) else { break };
+        let Some(x) = solve_lyapunov(&(a - &p * g), &(-&res)) else { break };
         let candidate = &p + (&x + x.transpose()) * 0.5;
         let (cres, crel) = residual_of(&candidate);
         if !(crel < residual) {
@@ -207,19 +247,23 @@ pub fn solve_filter_care(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r
         }
         (p, res, residual) = (candidate, cres, crel);
     }
-    if !(residual < 1e-8) {
-        bail!("continuous Riccati (7) solution rejected: relative residual {residual:.2e} after {iterations} sign iterations (needs < 1e-8)");
-    }
-    let k = &p * c / r;
-    let closed = a - &k * c.transpose();
+    (p, residual)
+}
+
+/// Check that the filter's error dynamics A − K C (gain `k`) are Hurwitz.
+fn check_hurwitz(a: &DMatrix<f64>, c: &DVector<f64>, k: &DVector<f64>) -> Result<()> {
+    let closed = a - k * c.transpose();
     let max_re = linalg::eigenvalues(&closed, "continuous Riccati (7): A_e − K C_e")?
         .iter()
         .map(|z| z.re)
         .fold(f64::NEG_INFINITY, f64::max);
     if !(max_re < 0.0) {
-        bail!("continuous Riccati (7): A_e − K C_e is not Hurwitz (max Re λ = {max_re:.3e}); the augmented system is not detectable");
+        bail!(
+            "continuous Riccati (7): A_e − K C_e is not Hurwitz (max Re λ = {max_re:.3e}); the augmented system is \
+             not detectable"
+        );
     }
-    Ok(CareSolution { p, residual, iterations })
+    Ok(())
 }
 
 /// Solve A X + X Aᵀ = C by the Kronecker form (I⊗A + A⊗I) vec X = vec C

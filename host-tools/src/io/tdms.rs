@@ -790,19 +790,21 @@ fn pick_by_map(w: &Walker, source: &str, m: &ChannelMap) -> Result<Vec<(usize, u
 /// (axis, object) of each channel whose name says a force axis ([`axis_from_name`]), one per axis.
 fn pick_by_name(w: &Walker, source: &str) -> Result<Vec<(usize, usize)>> {
     let chans = channels(w);
-    let mut picked: Vec<(usize, usize)> = Vec::new();
+    let label = |g: &str, c: &str| shown(&format!("{g}/{c}"));
+    // (axis, object, `group/name`) of each channel picked so far.
+    let mut picked: Vec<(usize, usize, String)> = Vec::new();
     for (i, g, c) in &chans {
         if let Some(axis) = axis_from_name(c) {
             if let Some(other) = picked.iter().find(|p| p.0 == axis) {
                 bail!(
                     "{source}: channels {} and {} are both axis {}; pick one with --channels f{}=GROUP/NAME",
-                    shown(&w.objects[other.1].path),
-                    shown(&format!("{g}/{c}")),
+                    other.2,
+                    label(g, c),
                     axis_name(axis),
                     axis_name(axis)
                 );
             }
-            picked.push((axis, *i));
+            picked.push((axis, *i, label(g, c)));
         }
     }
     if picked.is_empty() {
@@ -811,7 +813,7 @@ fn pick_by_name(w: &Walker, source: &str) -> Result<Vec<(usize, usize)>> {
             if chans.is_empty() { "none".to_string() } else { channel_list(&chans) }
         );
     }
-    Ok(picked)
+    Ok(picked.into_iter().map(|(axis, object, _)| (axis, object)).collect())
 }
 
 /// The picked channels as one record: names, scale to N, sampling interval

@@ -145,7 +145,7 @@ pub fn compensate_file(
     let RecordJob {
         compensation,
         image_path,
-        mut input,
+        input,
         input_path,
         channels,
         full_scale_n,
@@ -173,53 +173,79 @@ pub fn compensate_file(
                 "parallel elaboration, {} bands, zero-phase split (offline only, whole record in memory)",
                 image.bands().len()
             );
-            let rec = whole_record(&mut *input, target.fs, target.source)?;
-            let out = compensate_parallel(&image, &rec, raw_timing, target.source)?;
-            Ok(Compensated { samples: target.write_whole(&rec, &out, obs)?, how })
+            compensate_whole(input, &target, obs, how, |rec| {
+                compensate_parallel(&image, rec, raw_timing, target.source)
+            })
         }
         Compensation::Matrix(image) => {
-            let l = image.latency_samples;
-            let how = if raw_timing {
-                format!(
-                    "3x3 filter of the box, crosstalk compensated, latency {l} samples kept (whole record in memory)"
-                )
-            } else {
-                format!(
-                    "3x3 filter of the box, crosstalk compensated, latency {l} samples removed; the last {l} samples \
-                     use a predicted look-ahead (whole record in memory)"
-                )
-            };
-            let rec = whole_record(&mut *input, target.fs, target.source)?;
-            let out = compensate_matrix(&image, &rec, raw_timing, target.source)?;
-            Ok(Compensated { samples: target.write_whole(&rec, &out, obs)?, how })
+            let how = matrix_how(image.latency_samples, raw_timing);
+            compensate_whole(input, &target, obs, how, |rec| compensate_matrix(&image, rec, raw_timing, target.source))
         }
         Compensation::Smoother { image, drift, force_prior } => {
-            let mut sidecar = read_sidecar(&image_path, &image)?;
-            note_spectra(&sidecar, monitor);
-            if !force_prior {
-                sidecar.axes.iter_mut().for_each(|m| m.force_prior = None);
-            }
-            let priors: Vec<&str> =
-                sidecar.axes.iter().filter(|m| m.force_prior.is_some()).map(|m| m.axis.as_str()).collect();
-            // The smoothers run in bounded memory (a pipe, read once, is
-            // spooled for its second reading); the force prior (checked
-            // against the whole record) keeps the record whole. The
-            // time-varying smoother has no force model (and a two-state
-            // design makes no prior).
-            if priors.is_empty() || drift.is_some() {
-                let reading = Reading { input, path: &input_path, channels: channels.as_ref(), full_scale_n };
-                smooth_spilled(&image, &sidecar, drift, &priors, reading, &target, obs)
-            } else {
-                let how = format!(
-                    "fixed-interval smoother, zero lag, harmonic force prior on axis {} (offline only, whole record in memory for the force prior)",
-                    priors.join(", ")
-                );
-                let rec = whole_record(&mut *input, target.fs, target.source)?;
-                let out = crate::offline::smoother::smooth_record(&image, &sidecar, &rec, target.source)?;
-                Ok(Compensated { samples: target.write_whole(&rec, &out, obs)?, how })
-            }
+            let reading = Reading { input, path: &input_path, channels: channels.as_ref(), full_scale_n };
+            smooth(&image, &image_path, drift, force_prior, reading, &target, obs)
         }
     }
+}
+
+/// Read the whole record into memory, compensate it with `compensate` and
+/// write it; `how` says what compensated it.
+fn compensate_whole(
+    mut input: Box<dyn SignalReader>,
+    target: &Target<'_>,
+    obs: &mut Observed<'_>,
+    how: String,
+    compensate: impl FnOnce(&SignalRecord) -> Result<SignalRecord>,
+) -> Result<Compensated> {
+    let rec = whole_record(&mut *input, target.fs, target.source)?;
+    let out = compensate(&rec)?;
+    Ok(Compensated { samples: target.write_whole(&rec, &out, obs)?, how })
+}
+
+/// How a 3x3 image of latency `l` (samples) compensates.
+fn matrix_how(l: u16, raw_timing: bool) -> String {
+    if raw_timing {
+        format!("3x3 filter of the box, crosstalk compensated, latency {l} samples kept (whole record in memory)")
+    } else {
+        format!(
+            "3x3 filter of the box, crosstalk compensated, latency {l} samples removed; the last {l} samples \
+             use a predicted look-ahead (whole record in memory)"
+        )
+    }
+}
+
+/// The smoother on the image's sidecar, with its harmonic force prior if
+/// `force_prior` (and the sidecar has one). The smoothers run in bounded
+/// memory (a pipe, read once, is spooled for its second reading); the force
+/// prior (checked against the whole record) keeps the record whole. The
+/// time-varying smoother has no force model (and a two-state design makes
+/// no prior).
+fn smooth(
+    image: &CoeffImage,
+    image_path: &Path,
+    drift: Option<(f64, f64)>,
+    force_prior: bool,
+    reading: Reading<'_>,
+    target: &Target<'_>,
+    obs: &mut Observed<'_>,
+) -> Result<Compensated> {
+    let mut sidecar = read_sidecar(image_path, image)?;
+    note_spectra(&sidecar, target.monitor);
+    if !force_prior {
+        sidecar.axes.iter_mut().for_each(|m| m.force_prior = None);
+    }
+    let priors: Vec<&str> = sidecar.axes.iter().filter(|m| m.force_prior.is_some()).map(|m| m.axis.as_str()).collect();
+    if priors.is_empty() || drift.is_some() {
+        return smooth_spilled(image, &sidecar, drift, &priors, reading, target, obs);
+    }
+    let how = format!(
+        "fixed-interval smoother, zero lag, harmonic force prior on axis {} (offline only, whole record in memory \
+         for the force prior)",
+        priors.join(", ")
+    );
+    compensate_whole(reading.input, target, obs, how, |rec| {
+        crate::offline::smoother::smooth_record(image, &sidecar, rec, target.source)
+    })
 }
 
 /// An image whose q was chosen for a record's force spectrum says so every

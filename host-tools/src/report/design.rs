@@ -190,27 +190,17 @@ fn further_plots(d: &AxisDesign, sens: Option<&Sensitivity>, fs_hz: f64) -> Resu
 // ------------------------------------------------------------ plot 1: FRF fit
 
 /// `a_frf_fit.svg`: measured FRF magnitude (dB) and phase with the fitted
-/// model overlaid, and the coherence γ²; the coherent band is shaded.
+/// model overlaid, the fit's residual, and the coherence γ²; the coherent
+/// band is shaded.
 fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> {
-    let name = axis_name(d.axis);
-    let xr = (freq[0], *freq.last().unwrap_or(&freq[0]));
-    let xr = if xr.1 > xr.0 { xr } else { (xr.0, xr.0 + 1.0) };
-    let model: Vec<Complex64> = freq.iter().map(|f| d.fitted_frf(*f)).collect();
-    let mag_m: Vec<(f64, f64)> = freq.iter().zip(&meas.frf).map(|(f, g)| (*f, db(*g))).collect();
-    let mag_f: Vec<(f64, f64)> = freq.iter().zip(&model).map(|(f, g)| (*f, db(*g))).collect();
-    let ph_m: Vec<(f64, f64)> = freq.iter().zip(&meas.frf).map(|(f, g)| (*f, wrap_deg(*g))).collect();
-    let ph_f: Vec<(f64, f64)> = freq.iter().zip(&model).map(|(f, g)| (*f, wrap_deg(*g))).collect();
-    let (lo, hi) = finite_range(mag_m.iter().chain(&mag_f).map(|p| p.1)).unwrap_or((-20.0, 20.0));
-    // keep the plot readable when a line has (almost) zero magnitude
-    let yr_mag = pad_range((lo.max(hi - 80.0), hi), 0.06, 6.0);
-    let band = d.coherent_band_hz;
-
+    let s = fit_series(freq, meas, d);
     let mut buf = String::new();
     {
         let root = SVGBackend::with_string(&mut buf, (1100, 1240)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
         let title = format!(
-            "Axis {name} — measured FRF and fitted model (order {}, fit error {:.2} % in the {})",
+            "Axis {} — measured FRF and fitted model (order {}, fit error {:.2} % in the {})",
+            axis_name(d.axis),
             d.model.order(),
             100.0 * d.fit_nrmse,
             if d.bands.is_empty() { "coherent band" } else { "fitting bands" }
@@ -219,64 +209,155 @@ fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> 
         let (top, rest) = root.split_vertically(380);
         let (midp, rest) = rest.split_vertically(300);
         let (resp, bot) = rest.split_vertically(260);
-
+        let band = d.coherent_band_hz;
         let band_txt = format!("coherent band {:.0}–{:.0} Hz", band.0, band.1);
-        let mut c = build_chart(&top, &format!("Magnitude |G| ({band_txt})"), xr, yr_mag)?;
-        mesh(&mut c, "Frequency (Hz)", "|G| (dB re 1 N/N)", &hz, &|v| format!("{v:.0}"), 7)?;
-        shade(&mut c, band, xr, yr_mag, C_COH_BAND, 0.15, "coherent band")?;
-        shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_mag, true)?;
-        draw_line(&mut c, &mag_f, yr_mag, f64::INFINITY, C_MODEL, 3, false, "fitted model Ĝ")?;
-        draw_line(&mut c, &mag_m, yr_mag, f64::INFINITY, C_MEASURED, 1, false, "measured G (on top)")?;
-        legend(&mut c, SeriesLabelPosition::UpperLeft)?;
-
+        let caption = format!("Magnitude |G| ({band_txt})");
+        let magnitude = Panel::new(&caption, "|G| (dB re 1 N/N)", s.yr_mag, true);
+        let mut c = magnitude.chart(&top, s.xr, d, &|v| format!("{v:.0}"), 7)?;
+        fitted_and_measured(&mut c, &s.mag_f, &s.mag_m, s.yr_mag, f64::INFINITY, SeriesLabelPosition::UpperLeft)?;
         let yr_ph = (-190.0, 190.0);
-        let mut c = build_chart(&midp, "Phase ∠G (wrapped)", xr, yr_ph)?;
-        mesh(&mut c, "Frequency (Hz)", "Phase (°)", &hz, &|v| format!("{v:.0}"), 9)?;
-        shade(&mut c, band, xr, yr_ph, C_COH_BAND, 0.15, "")?;
-        shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_ph, false)?;
-        draw_line(&mut c, &ph_f, yr_ph, 180.0, C_MODEL, 3, false, "fitted model Ĝ")?;
-        draw_line(&mut c, &ph_m, yr_ph, 180.0, C_MEASURED, 1, false, "measured G (on top)")?;
-        legend(&mut c, SeriesLabelPosition::LowerLeft)?;
-
-        // The residual |Ĝ − G|/|G| per line: where the fit departs from the
-        // measurement, on a log scale (1e-4 % to 100 %).
-        let resid: Vec<(f64, f64)> = freq
-            .iter()
-            .zip(&meas.frf)
-            .zip(&model)
-            .map(|((f, g), m)| (*f, (100.0 * (m - g).norm() / g.norm()).clamp(1e-4, 1e3).log10()))
-            .collect();
-        let yr_r = (-4.0, 2.0);
-        let mut c = build_chart(&resp, "Residual |Ĝ − G| / |G| of the fit (%, log scale)", xr, yr_r)?;
-        mesh(&mut c, "Frequency (Hz)", "residual (%)", &hz, &|v| format!("{}", 10f64.powf(*v)), 7)?;
-        shade(&mut c, band, xr, yr_r, C_COH_BAND, 0.15, "")?;
-        shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_r, false)?;
-        draw_line(&mut c, &resid, yr_r, f64::INFINITY, C_MEASURED, 1, false, "residual")?;
-        legend(&mut c, SeriesLabelPosition::UpperLeft)?;
-
-        let yr_c = (0.0, 1.05);
-        let mut c = build_chart(&bot, &format!("Coherence γ² ({band_txt})"), xr, yr_c)?;
-        mesh(&mut c, "Frequency (Hz)", "γ²", &hz, &|v| format!("{v:.1}"), 6)?;
-        shade(&mut c, band, xr, yr_c, C_COH_BAND, 0.15, "coherent band")?;
-        shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_c, true)?;
-        match &meas.coherence {
-            Some(coh) => {
-                let pts: Vec<(f64, f64)> = freq.iter().zip(coh).map(|(f, c)| (*f, *c)).collect();
-                draw_line(&mut c, &pts, yr_c, f64::INFINITY, C_COH, 2, false, "coherence γ²")?;
-            }
-            None => {
-                c.draw_series(std::iter::once(Text::new(
-                    "no coherence in the FRF file: the whole band counts as coherent",
-                    (xr.0 + 0.05 * (xr.1 - xr.0), 0.5),
-                    (FONT, 16),
-                )))
-                .map_err(perr)?;
-            }
-        }
-        legend(&mut c, SeriesLabelPosition::LowerLeft)?;
+        let phase = Panel::new("Phase ∠G (wrapped)", "Phase (°)", yr_ph, false);
+        let mut c = phase.chart(&midp, s.xr, d, &|v| format!("{v:.0}"), 9)?;
+        fitted_and_measured(&mut c, &s.ph_f, &s.ph_m, yr_ph, 180.0, SeriesLabelPosition::LowerLeft)?;
+        fit_residual(&resp, &s, d)?;
+        coherence(&bot, freq, meas, d, s.xr, &band_txt)?;
         root.present().map_err(perr)?;
     }
     Ok(buf)
+}
+
+/// What [`plot_frf_fit`] draws, as (Hz, value) per line of the FRF.
+struct FitSeries {
+    /// Frequency range shown (Hz).
+    xr: (f64, f64),
+    /// Measured and fitted magnitude (dB).
+    mag_m: Vec<(f64, f64)>,
+    mag_f: Vec<(f64, f64)>,
+    /// Magnitude range shown (dB).
+    yr_mag: (f64, f64),
+    /// Measured and fitted phase (°, wrapped).
+    ph_m: Vec<(f64, f64)>,
+    ph_f: Vec<(f64, f64)>,
+    /// The residual |Ĝ − G|/|G| (log10 of %, 1e-4 % to 100 %).
+    resid: Vec<(f64, f64)>,
+}
+
+/// The series of [`plot_frf_fit`]: the measured FRF and the fitted model on
+/// every line.
+fn fit_series(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> FitSeries {
+    let model: Vec<Complex64> = freq.iter().map(|f| d.fitted_frf(*f)).collect();
+    let mag_m: Vec<(f64, f64)> = freq.iter().zip(&meas.frf).map(|(f, g)| (*f, db(*g))).collect();
+    let mag_f: Vec<(f64, f64)> = freq.iter().zip(&model).map(|(f, g)| (*f, db(*g))).collect();
+    let ph_m: Vec<(f64, f64)> = freq.iter().zip(&meas.frf).map(|(f, g)| (*f, wrap_deg(*g))).collect();
+    let ph_f: Vec<(f64, f64)> = freq.iter().zip(&model).map(|(f, g)| (*f, wrap_deg(*g))).collect();
+    let (lo, hi) = finite_range(mag_m.iter().chain(&mag_f).map(|p| p.1)).unwrap_or((-20.0, 20.0));
+    // keep the plot readable when a line has (almost) zero magnitude
+    let yr_mag = pad_range((lo.max(hi - 80.0), hi), 0.06, 6.0);
+    let resid: Vec<(f64, f64)> = freq
+        .iter()
+        .zip(&meas.frf)
+        .zip(&model)
+        .map(|((f, g), m)| (*f, (100.0 * (m - g).norm() / g.norm()).clamp(1e-4, 1e3).log10()))
+        .collect();
+    FitSeries { xr: x_range(freq), mag_m, mag_f, yr_mag, ph_m, ph_f, resid }
+}
+
+/// The frequency range of a plot (Hz): the FRF's lines, at least 1 Hz wide.
+fn x_range(freq: &[f64]) -> (f64, f64) {
+    let xr = (freq[0], *freq.last().unwrap_or(&freq[0]));
+    if xr.1 > xr.0 {
+        xr
+    } else {
+        (xr.0, xr.0 + 1.0)
+    }
+}
+
+/// One panel over frequency of a design's plots: its caption, y axis and y
+/// range; `labelled`: the coherent and fitting bands get legend entries.
+struct Panel<'s> {
+    caption: &'s str,
+    y_desc: &'s str,
+    yr: (f64, f64),
+    labelled: bool,
+}
+
+impl<'s> Panel<'s> {
+    fn new(caption: &'s str, y_desc: &'s str, yr: (f64, f64), labelled: bool) -> Self {
+        Panel { caption, y_desc, yr, labelled }
+    }
+
+    /// The panel's chart on `area` over `xr` (Hz): its grid (`y_labels`
+    /// labels formatted by `yfmt`), the coherent band and `d`'s fitting
+    /// bands shaded.
+    fn chart<'a>(
+        &self,
+        area: &Area<'a>,
+        xr: (f64, f64),
+        d: &AxisDesign,
+        yfmt: &dyn Fn(&f64) -> String,
+        y_labels: usize,
+    ) -> Result<Chart<'a>> {
+        let mut c = build_chart(area, self.caption, xr, self.yr)?;
+        mesh(&mut c, "Frequency (Hz)", self.y_desc, &hz, yfmt, y_labels)?;
+        let label = if self.labelled { "coherent band" } else { "" };
+        shade(&mut c, d.coherent_band_hz, xr, self.yr, C_COH_BAND, 0.15, label)?;
+        shade_bands(&mut c, &ranges_hz(&d.bands), xr, self.yr, self.labelled)?;
+        Ok(c)
+    }
+}
+
+/// The fitted model's line under the measurement's, and the legend at `pos`.
+fn fitted_and_measured(
+    c: &mut Chart<'_>,
+    fitted: &[(f64, f64)],
+    measured: &[(f64, f64)],
+    yr: (f64, f64),
+    max_jump: f64,
+    pos: SeriesLabelPosition,
+) -> Result<()> {
+    draw_line(c, fitted, yr, max_jump, C_MODEL, 3, false, "fitted model Ĝ")?;
+    draw_line(c, measured, yr, max_jump, C_MEASURED, 1, false, "measured G (on top)")?;
+    legend(c, pos)
+}
+
+/// The residual |Ĝ − G|/|G| per line: where the fit departs from the
+/// measurement, on a log scale (1e-4 % to 100 %).
+fn fit_residual(area: &Area<'_>, s: &FitSeries, d: &AxisDesign) -> Result<()> {
+    let yr_r = (-4.0, 2.0);
+    let panel = Panel::new("Residual |Ĝ − G| / |G| of the fit (%, log scale)", "residual (%)", yr_r, false);
+    let mut c = panel.chart(area, s.xr, d, &|v| format!("{}", 10f64.powf(*v)), 7)?;
+    draw_line(&mut c, &s.resid, yr_r, f64::INFINITY, C_MEASURED, 1, false, "residual")?;
+    legend(&mut c, SeriesLabelPosition::UpperLeft)
+}
+
+/// The measured coherence γ², or a note that the FRF file has none.
+fn coherence(
+    area: &Area<'_>,
+    freq: &[f64],
+    meas: &AxisFrf,
+    d: &AxisDesign,
+    xr: (f64, f64),
+    band_txt: &str,
+) -> Result<()> {
+    let yr_c = (0.0, 1.05);
+    let caption = format!("Coherence γ² ({band_txt})");
+    let panel = Panel::new(&caption, "γ²", yr_c, true);
+    let mut c = panel.chart(area, xr, d, &|v| format!("{v:.1}"), 6)?;
+    match &meas.coherence {
+        Some(coh) => {
+            let pts: Vec<(f64, f64)> = freq.iter().zip(coh).map(|(f, c)| (*f, *c)).collect();
+            draw_line(&mut c, &pts, yr_c, f64::INFINITY, C_COH, 2, false, "coherence γ²")?;
+        }
+        None => {
+            c.draw_series(std::iter::once(Text::new(
+                "no coherence in the FRF file: the whole band counts as coherent",
+                (xr.0 + 0.05 * (xr.1 - xr.0), 0.5),
+                (FONT, 16),
+            )))
+            .map_err(perr)?;
+        }
+    }
+    legend(&mut c, SeriesLabelPosition::LowerLeft)
 }
 
 // ------------------------------------------------------------ plot 2: compensated
@@ -335,89 +416,159 @@ fn compensated_caption(d: &AxisDesign, flat: Option<(f64, f64)>) -> String {
 /// coherent band shaded and the measured G's flat band
 /// ([`measured_flat_band`]) marked by a bar along the bottom.
 fn plot_compensated(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> Result<String> {
-    let name = axis_name(d.axis);
-    let xr = (freq[0], *freq.last().unwrap_or(&freq[0]));
-    let xr = if xr.1 > xr.0 { xr } else { (xr.0, xr.0 + 1.0) };
+    let s = compensated_series(freq, meas, d, fs);
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (1100, 1000)).into_drawing_area();
+        root.fill(&WHITE).map_err(perr)?;
+        let flat_txt = format!("flat band of the measured G {}", describe_band(s.flat));
+        let title = format!(
+            "Axis {} — compensated response H·G (latency {} samples removed), {flat_txt}",
+            axis_name(d.axis),
+            d.kalman.lag
+        );
+        let root = root.titled(&title, (FONT, 20)).map_err(perr)?;
+        let (top, rest) = root.split_vertically(340);
+        let (midp, bot) = rest.split_vertically(320);
+        compensated_overview(&top, &s, d)?;
+        let magnitude = Zoom {
+            panel: Panel::new("Magnitude ratio, zoom (tolerance ±5 %)", "|H·G| (N/N)", (0.8, 1.2), false),
+            yfmt: &|v| format!("{v:.2}"),
+            tolerance: ((1.05, 0.95), "±5 % tolerance"),
+            max_jump: f64::INFINITY,
+            lines: [
+                (&s.mag_g, "uncompensated |G|"),
+                (&s.mag_hg, "compensated |H·G| (measured G)"),
+                (&s.mag_hgm, "|H·Ĝ| (fitted model)"),
+            ],
+        };
+        magnitude.draw(&midp, &s, d)?;
+        let phase = Zoom {
+            panel: Panel::new("Phase, zoom (tolerance ±5°)", "Phase (°)", (-20.0, 20.0), false),
+            yfmt: &|v| format!("{v:.0}"),
+            tolerance: ((5.0, -5.0), "±5° tolerance"),
+            max_jump: 180.0,
+            lines: [
+                (&s.ph_g, "uncompensated ∠G"),
+                (&s.ph_hg, "compensated ∠H·G (measured G)"),
+                (&s.ph_hgm, "∠H·Ĝ (fitted model)"),
+            ],
+        };
+        phase.draw(&bot, &s, d)?;
+        root.present().map_err(perr)?;
+    }
+    Ok(buf)
+}
+
+/// What [`plot_compensated`] draws, as (Hz, value) per line of the FRF: the
+/// uncompensated G, the compensated H·G of the measured G and H·Ĝ of the
+/// fitted model ([`compensated`]).
+struct CompensatedSeries {
+    /// Frequency range shown (Hz).
+    xr: (f64, f64),
+    /// |G| and |H·G| (dB), and the range shown.
+    mag_g_db: Vec<(f64, f64)>,
+    mag_hg_db: Vec<(f64, f64)>,
+    yr_db: (f64, f64),
+    /// |G|, |H·G| and |H·Ĝ| (N/N).
+    mag_g: Vec<(f64, f64)>,
+    mag_hg: Vec<(f64, f64)>,
+    mag_hgm: Vec<(f64, f64)>,
+    /// ∠G, ∠H·G and ∠H·Ĝ (°, wrapped).
+    ph_g: Vec<(f64, f64)>,
+    ph_hg: Vec<(f64, f64)>,
+    ph_hgm: Vec<(f64, f64)>,
+    /// The measured G's flat band ([`measured_flat_band`]).
+    flat: Option<(f64, f64)>,
+    /// The coherent lines (Hz) where the measured H·G is not flat: they end the run.
+    off: Vec<f64>,
+}
+
+/// The series of [`plot_compensated`].
+fn compensated_series(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> CompensatedSeries {
     let hg = compensated(freq, &meas.frf, d, fs);
     let model: Vec<Complex64> = freq.iter().map(|f| d.fitted_frf(*f)).collect();
     let hg_model = compensated(freq, &model, d, fs);
     let g = &meas.frf;
-
-    let mag_g_db: Vec<(f64, f64)> = freq.iter().zip(g).map(|(f, z)| (*f, db(*z))).collect();
-    let mag_hg_db: Vec<(f64, f64)> = freq.iter().zip(&hg).map(|(f, z)| (*f, db(*z))).collect();
-    let mag_g: Vec<(f64, f64)> = freq.iter().zip(g).map(|(f, z)| (*f, z.norm())).collect();
-    let mag_hg: Vec<(f64, f64)> = freq.iter().zip(&hg).map(|(f, z)| (*f, z.norm())).collect();
-    let mag_hgm: Vec<(f64, f64)> = freq.iter().zip(&hg_model).map(|(f, z)| (*f, z.norm())).collect();
-    let ph_g: Vec<(f64, f64)> = freq.iter().zip(g).map(|(f, z)| (*f, wrap_deg(*z))).collect();
-    let ph_hg: Vec<(f64, f64)> = freq.iter().zip(&hg).map(|(f, z)| (*f, wrap_deg(*z))).collect();
-    let ph_hgm: Vec<(f64, f64)> = freq.iter().zip(&hg_model).map(|(f, z)| (*f, wrap_deg(*z))).collect();
-
+    let each = |z: &[Complex64], f: fn(Complex64) -> f64| -> Vec<(f64, f64)> {
+        freq.iter().zip(z).map(|(x, z)| (*x, f(*z))).collect()
+    };
+    let (mag_g_db, mag_hg_db) = (each(g, db), each(&hg, db));
     let (lo, hi) = finite_range(mag_g_db.iter().chain(&mag_hg_db).map(|p| p.1)).unwrap_or((-20.0, 20.0));
-    let yr_db = pad_range((lo.clamp(-60.0, -3.0), hi.clamp(3.0, 60.0)), 0.06, 6.0);
-    let flat = measured_flat_band(freq, meas, d, fs);
     let band = d.coherent_band_hz;
-    let tol = |y: f64| vec![(xr.0, y), (xr.1, y)];
-    // No flat line: an empty band, nothing drawn.
-    let flat_or_empty = flat.unwrap_or((f64::NAN, f64::NAN));
-    // The coherent lines where the measured H·G is not flat: they end the run.
     let off: Vec<f64> = freq
         .iter()
         .zip(&hg)
         .filter(|(f, e)| **f >= band.0 && **f <= band.1 && !crate::design::criterion::is_flat(**e))
         .map(|(f, _)| *f)
         .collect();
-
-    let mut buf = String::new();
-    {
-        let root = SVGBackend::with_string(&mut buf, (1100, 1000)).into_drawing_area();
-        root.fill(&WHITE).map_err(perr)?;
-        let flat_txt = format!("flat band of the measured G {}", describe_band(flat));
-        let title =
-            format!("Axis {name} — compensated response H·G (latency {} samples removed), {flat_txt}", d.kalman.lag);
-        let root = root.titled(&title, (FONT, 20)).map_err(perr)?;
-        let (top, rest) = root.split_vertically(340);
-        let (midp, bot) = rest.split_vertically(320);
-
-        let mut c = build_chart(&top, "Magnitude, overview", xr, yr_db)?;
-        mesh(&mut c, "Frequency (Hz)", "Magnitude (dB)", &hz, &|v| format!("{v:.0}"), 7)?;
-        shade(&mut c, band, xr, yr_db, C_COH_BAND, 0.15, "coherent band")?;
-        shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_db, true)?;
-        band_bar(&mut c, flat_or_empty, xr, yr_db, C_FLAT_BAND, "flat band, measured G (±5 %, ±5°)")?;
-        bottom_ticks(&mut c, &off, yr_db, C_TOL, "coherent lines off the tolerances (measured)")?;
-        draw_line(&mut c, &mag_g_db, yr_db, f64::INFINITY, C_RAW, 2, false, "uncompensated |G|")?;
-        draw_line(&mut c, &mag_hg_db, yr_db, f64::INFINITY, C_MEASURED, 1, false, "compensated |H·G|")?;
-        legend(&mut c, SeriesLabelPosition::UpperLeft)?;
-
-        let yr_m = (0.8, 1.2);
-        let mut c = build_chart(&midp, "Magnitude ratio, zoom (tolerance ±5 %)", xr, yr_m)?;
-        mesh(&mut c, "Frequency (Hz)", "|H·G| (N/N)", &hz, &|v| format!("{v:.2}"), 9)?;
-        shade(&mut c, band, xr, yr_m, C_COH_BAND, 0.15, "")?;
-        shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_m, false)?;
-        band_bar(&mut c, flat_or_empty, xr, yr_m, C_FLAT_BAND, "")?;
-        bottom_ticks(&mut c, &off, yr_m, C_TOL, "")?;
-        draw_line(&mut c, &tol(1.05), yr_m, f64::INFINITY, C_TOL, 2, true, "±5 % tolerance")?;
-        draw_line(&mut c, &tol(0.95), yr_m, f64::INFINITY, C_TOL, 2, true, "")?;
-        draw_line(&mut c, &mag_g, yr_m, f64::INFINITY, C_RAW, 2, false, "uncompensated |G|")?;
-        draw_line(&mut c, &mag_hg, yr_m, f64::INFINITY, C_MEASURED, 1, false, "compensated |H·G| (measured G)")?;
-        draw_line(&mut c, &mag_hgm, yr_m, f64::INFINITY, C_MODEL, 2, false, "|H·Ĝ| (fitted model)")?;
-        legend(&mut c, SeriesLabelPosition::UpperMiddle)?;
-
-        let yr_p = (-20.0, 20.0);
-        let mut c = build_chart(&bot, "Phase, zoom (tolerance ±5°)", xr, yr_p)?;
-        mesh(&mut c, "Frequency (Hz)", "Phase (°)", &hz, &|v| format!("{v:.0}"), 9)?;
-        shade(&mut c, band, xr, yr_p, C_COH_BAND, 0.15, "")?;
-        shade_bands(&mut c, &ranges_hz(&d.bands), xr, yr_p, false)?;
-        band_bar(&mut c, flat_or_empty, xr, yr_p, C_FLAT_BAND, "")?;
-        bottom_ticks(&mut c, &off, yr_p, C_TOL, "")?;
-        draw_line(&mut c, &tol(5.0), yr_p, f64::INFINITY, C_TOL, 2, true, "±5° tolerance")?;
-        draw_line(&mut c, &tol(-5.0), yr_p, f64::INFINITY, C_TOL, 2, true, "")?;
-        draw_line(&mut c, &ph_g, yr_p, 180.0, C_RAW, 2, false, "uncompensated ∠G")?;
-        draw_line(&mut c, &ph_hg, yr_p, 180.0, C_MEASURED, 1, false, "compensated ∠H·G (measured G)")?;
-        draw_line(&mut c, &ph_hgm, yr_p, 180.0, C_MODEL, 2, false, "∠H·Ĝ (fitted model)")?;
-        legend(&mut c, SeriesLabelPosition::UpperMiddle)?;
-        root.present().map_err(perr)?;
+    CompensatedSeries {
+        xr: x_range(freq),
+        yr_db: pad_range((lo.clamp(-60.0, -3.0), hi.clamp(3.0, 60.0)), 0.06, 6.0),
+        mag_g_db,
+        mag_hg_db,
+        mag_g: each(g, |z| z.norm()),
+        mag_hg: each(&hg, |z| z.norm()),
+        mag_hgm: each(&hg_model, |z| z.norm()),
+        ph_g: each(g, wrap_deg),
+        ph_hg: each(&hg, wrap_deg),
+        ph_hgm: each(&hg_model, wrap_deg),
+        flat: measured_flat_band(freq, meas, d, fs),
+        off,
     }
-    Ok(buf)
+}
+
+/// The flat band as a bar along the bottom of a panel and the coherent
+/// lines off the tolerances as ticks beside it; legend entries if `labels`.
+fn flat_band_marks(c: &mut Chart<'_>, s: &CompensatedSeries, yr: (f64, f64), labels: bool) -> Result<()> {
+    // No flat line: an empty band, nothing drawn.
+    let flat = s.flat.unwrap_or((f64::NAN, f64::NAN));
+    let (bar, ticks) = if labels {
+        ("flat band, measured G (±5 %, ±5°)", "coherent lines off the tolerances (measured)")
+    } else {
+        ("", "")
+    };
+    band_bar(c, flat, s.xr, yr, C_FLAT_BAND, bar)?;
+    bottom_ticks(c, &s.off, yr, C_TOL, ticks)
+}
+
+/// The overview of [`plot_compensated`]: |G| and |H·G| in dB.
+fn compensated_overview(area: &Area<'_>, s: &CompensatedSeries, d: &AxisDesign) -> Result<()> {
+    let panel = Panel::new("Magnitude, overview", "Magnitude (dB)", s.yr_db, true);
+    let mut c = panel.chart(area, s.xr, d, &|v| format!("{v:.0}"), 7)?;
+    flat_band_marks(&mut c, s, s.yr_db, true)?;
+    draw_line(&mut c, &s.mag_g_db, s.yr_db, f64::INFINITY, C_RAW, 2, false, "uncompensated |G|")?;
+    draw_line(&mut c, &s.mag_hg_db, s.yr_db, f64::INFINITY, C_MEASURED, 1, false, "compensated |H·G|")?;
+    legend(&mut c, SeriesLabelPosition::UpperLeft)
+}
+
+/// A zoom of [`plot_compensated`] on the tolerances: the uncompensated,
+/// the compensated measured and the compensated fitted-model line.
+struct Zoom<'s> {
+    panel: Panel<'s>,
+    yfmt: &'s dyn Fn(&f64) -> String,
+    /// The tolerance lines (upper, lower) and their legend entry.
+    tolerance: ((f64, f64), &'s str),
+    /// Largest jump drawn as a line (wrapped phase).
+    max_jump: f64,
+    /// G, H·G and H·Ĝ with their legend entries.
+    lines: [(&'s Vec<(f64, f64)>, &'s str); 3],
+}
+
+impl Zoom<'_> {
+    fn draw(&self, area: &Area<'_>, s: &CompensatedSeries, d: &AxisDesign) -> Result<()> {
+        let yr = self.panel.yr;
+        let mut c = self.panel.chart(area, s.xr, d, self.yfmt, 9)?;
+        flat_band_marks(&mut c, s, yr, false)?;
+        let ((hi, lo), label) = self.tolerance;
+        let tol = |y: f64| vec![(s.xr.0, y), (s.xr.1, y)];
+        draw_line(&mut c, &tol(hi), yr, f64::INFINITY, C_TOL, 2, true, label)?;
+        draw_line(&mut c, &tol(lo), yr, f64::INFINITY, C_TOL, 2, true, "")?;
+        for ((pts, label), (color, width)) in self.lines.iter().zip([(C_RAW, 2), (C_MEASURED, 1), (C_MODEL, 2)]) {
+            draw_line(&mut c, pts, yr, self.max_jump, color, width, false, label)?;
+        }
+        legend(&mut c, SeriesLabelPosition::UpperMiddle)
+    }
 }
 
 // ------------------------------------------------------------ plot 3: poles

@@ -195,7 +195,9 @@ pub struct VersusDefaultJson {
     pub replaced_by_default: bool,
 }
 
-/// One-screen text summary.
+/// One-screen text summary: the image line and the fitting bands, a table
+/// of one row per axis, then per axis its discrete model and notes, the
+/// sensitivity and paper lines, and a legend of the table's columns.
 pub fn render_summary(
     designs: &[AxisDesign],
     sensitivities: &[Option<Sensitivity>],
@@ -214,6 +216,33 @@ pub fn render_summary(
     if let Some(d) = designs.first().filter(|d| !d.bands.is_empty()) {
         let _ = writeln!(s, "fitting bands: {}", bands::describe(&d.bands));
     }
+    s.push_str(&table(designs));
+    for d in designs {
+        if let Some(line) = discrete_line(d) {
+            s.push_str(&line);
+        }
+        for n in &d.notes {
+            let _ = writeln!(s, "note: {n}");
+        }
+    }
+    for (d, sens) in designs.iter().zip(sensitivities) {
+        if let Some(sens) = sens {
+            let _ = writeln!(s, "{}", crate::design::sensitivity::summary_line(axis_name(d.axis), sens));
+        }
+    }
+    for d in designs {
+        if let Some((tf, p)) = &d.paper {
+            let _ = writeln!(s, "{}", paper_line(d.axis, tf.nb(), tf.na(), p));
+        }
+    }
+    s.push_str(&legend(designs, latency));
+    s
+}
+
+/// The summary's table: a header and one row per axis (the columns are
+/// explained by [`legend`]).
+fn table(designs: &[AxisDesign]) -> String {
+    let mut s = String::new();
     let _ = writeln!(
         s,
         "{:<4} {:>5} {:>7} {:>13} {:>10} {:>9} {:>15} {:>6} {:>7} {:>7} {:>8} {:>7}",
@@ -233,7 +262,8 @@ pub fn render_summary(
     for d in designs {
         let _ = writeln!(
             s,
-            "{:<4} {:>5} {:>6.2}% {:>6.0}-{:<6.0} {:>10.3e} {:>9.4} {:>7.0}-{:<7.0} {:>6.2} {:>6.2}% {:>6.2}% {:>8} {:>4}+{}",
+            "{:<4} {:>5} {:>6.2}% {:>6.0}-{:<6.0} {:>10.3e} {:>9.4} {:>7.0}-{:<7.0} {:>6.2} {:>6.2}% {:>6.2}% {:>8} \
+             {:>4}+{}",
             axis_name(d.axis),
             d.model.order(),
             d.fit_nrmse * 100.0,
@@ -251,46 +281,43 @@ pub fn render_summary(
             d.filter.fir().len()
         );
     }
-    for d in designs {
-        if let Some((dm, fd)) = &d.discrete {
-            let _ = writeln!(
-                s,
-                "{} discrete model: {} (advance {} samples, {} FIR taps, LS condition {:.1e}{}); match {:.3} % over {:.0}-{:.0} Hz",
-                axis_name(d.axis),
-                dm.method.name(),
-                dm.advance,
-                dm.fir.len(),
-                fd.condition,
-                if fd.modes_above_nyquist > 0 { format!(", {} mode(s) above fs/2 fitted by their tail", fd.modes_above_nyquist) } else { String::new() },
-                d.model_match * 100.0,
-                d.compensated_band_hz.0,
-                d.compensated_band_hz.1
-            );
-        }
-        for n in &d.notes {
-            let _ = writeln!(s, "note: {n}");
-        }
-    }
-    for (d, sens) in designs.iter().zip(sensitivities) {
-        if let Some(sens) = sens {
-            let _ = writeln!(s, "{}", crate::design::sensitivity::summary_line(axis_name(d.axis), sens));
-        }
-    }
-    for d in designs {
-        if let Some((tf, p)) = &d.paper {
-            let _ = writeln!(s, "{}", paper_line(d.axis, tf.nb(), tf.na(), p));
-        }
-    }
+    s
+}
+
+/// The line of an axis's discrete model (none for the paper's Tustin).
+fn discrete_line(d: &AxisDesign) -> Option<String> {
+    let (dm, fd) = d.discrete.as_ref()?;
+    let tail = match fd.modes_above_nyquist {
+        0 => String::new(),
+        n => format!(", {n} mode(s) above fs/2 fitted by their tail"),
+    };
+    Some(format!(
+        "{} discrete model: {} (advance {} samples, {} FIR taps, LS condition {:.1e}{tail}); match {:.3} % over \
+         {:.0}-{:.0} Hz\n",
+        axis_name(d.axis),
+        dm.method.name(),
+        dm.advance,
+        dm.fir.len(),
+        fd.condition,
+        d.model_match * 100.0,
+        d.compensated_band_hz.0,
+        d.compensated_band_hz.1
+    ))
+}
+
+/// What the table's columns mean, with the force spectrum the predictions
+/// are for.
+fn legend(designs: &[AxisDesign], latency: usize) -> String {
     let spectrum = match designs.iter().find_map(|d| d.force_spectrum.as_ref()) {
         Some(s) if !s.level_only => "the force spectrum of --force-record",
         Some(_) => "a flat force spectrum at the level of --force-record",
         None => "a flat force spectrum",
     };
-    let _ = writeln!(
-        s,
-        "flat band: |H·Ĝ| within ±5 % and ±5° of the pure {latency}-sample delay (fitted model Ĝ); noise: white-noise gain; pred.: predicted in-band RMS error for {spectrum}; raw: the same for no compensation; match: max |Ĝ_d/Ĝ − 1| of the discrete model over the compensated band"
-    );
-    s
+    format!(
+        "flat band: |H·Ĝ| within ±5 % and ±5° of the pure {latency}-sample delay (fitted model Ĝ); noise: white-noise \
+         gain; pred.: predicted in-band RMS error for {spectrum}; raw: the same for no compensation; match: max \
+         |Ĝ_d/Ĝ − 1| of the discrete model over the compensated band\n"
+    )
 }
 
 /// One line of the paper's diagnostics for an axis.

@@ -19,6 +19,24 @@ pub fn dynocomp(args: &[&str]) -> (bool, String, String) {
     )
 }
 
+/// `dynocomp simulate` of the plate dynamometer's named set-up `preset`
+/// (`--dyno-preset`) at `fs` (Hz) into `out`, with `extra` options
+/// (duration, seed, ...): (success, stdout, stderr).
+pub fn simulate_plate(out: &str, preset: &str, fs: &str, extra: &[&str]) -> (bool, String, String) {
+    let mut a = vec!["simulate", "--out", out, "--dyno", "plate", "--dyno-preset", preset, "--fs", fs];
+    a.extend(extra);
+    dynocomp(&a)
+}
+
+/// `dynocomp design` of the FRF file(s) `frf` with the idle record `idle`
+/// at `fs` (Hz) into the image `out`, with `extra` options: (success,
+/// stdout, stderr).
+pub fn design(frf: &str, idle: &str, fs: &str, out: &str, extra: &[&str]) -> (bool, String, String) {
+    let mut a = vec!["design", "--frf", frf, "--fs", fs, "--idle", idle, "--out", out];
+    a.extend(extra);
+    dynocomp(&a)
+}
+
 /// Run `dynocomp` with `args` and `input` on its stdin (fed from a thread,
 /// so a large input cannot deadlock against the output): (success, stderr,
 /// whether all of `input` was taken; the binary may stop reading at an
