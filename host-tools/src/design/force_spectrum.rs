@@ -142,6 +142,30 @@ fn welch_cells<const C: usize>(
     r: [f64; C],
     cells: &[(f64, f64)],
 ) -> Result<[CellSpectrum; C]> {
+    check_records(&y)?;
+    let seg = segment_length(y[0].len(), fs_hz, cells)?;
+    let df = fs_hz / seg as f64;
+    let bins = cell_bins(seg, df, cells, inverse)?;
+    let (periodogram, sw2) = inverse_periodogram(&y, seg, &bins);
+    let scale = 2.0 / (seg as f64 * sw2);
+    let mut power = vec![vec![0.0; cells.len()]; C];
+    let mut noise = vec![vec![0.0; cells.len()]; C];
+    for (p, (_, cell, m)) in periodogram.iter().zip(&bins) {
+        for j in 0..C {
+            power[j][*cell] += scale * p[j];
+            noise[j][*cell] += scale * sw2 * m[j].iter().zip(&r).map(|(v, rc)| v.norm_sqr() * rc).sum::<f64>();
+        }
+    }
+    let mut out = Vec::with_capacity(C);
+    for (j, (power, noise)) in power.into_iter().zip(noise).enumerate() {
+        let which = if C == 1 { String::new() } else { format!("force f{}: ", axis_name(j)) };
+        out.push(force_above_noise(power, noise, df).map_err(|e| anyhow::anyhow!("{which}{e}"))?);
+    }
+    out.try_into().map_err(|_| anyhow::anyhow!("one force spectrum per record expected"))
+}
+
+/// The records must be equally long and finite.
+fn check_records<const C: usize>(y: &[&[f64]; C]) -> Result<()> {
     let n = y[0].len();
     for (c, ch) in y.iter().enumerate() {
         if ch.len() != n {
@@ -159,6 +183,12 @@ fn welch_cells<const C: usize>(
             }
         }
     }
+    Ok(())
+}
+
+/// The Welch segment for `n` samples: at most [`WELCH_SEGMENT`], and
+/// resolving at least half the narrowest cell.
+fn segment_length(n: usize, fs_hz: f64, cells: &[(f64, f64)]) -> Result<usize> {
     let Some(narrowest) = cells.iter().map(|c| c.1 - c.0).reduce(f64::min) else {
         bail!("no frequency cells to estimate the force spectrum on");
     };
@@ -170,8 +200,20 @@ fn welch_cells<const C: usize>(
             2.0 / narrowest
         );
     }
-    // Each bin b·df below Nyquist goes to the cell [lo, hi) holding it,
-    // with the inverse there.
+    Ok(seg)
+}
+
+/// A bin of the segment's spectrum, the cell holding it, and the inverse there.
+type CellBin<const C: usize> = (usize, usize, [[Complex64; C]; C]);
+
+/// Each bin b·df below Nyquist that lies in a cell [lo, hi), with its cell
+/// and the inverse at its frequency.
+fn cell_bins<const C: usize>(
+    seg: usize,
+    df: f64,
+    cells: &[(f64, f64)],
+    inverse: &dyn Fn(f64) -> Result<[[Complex64; C]; C]>,
+) -> Result<Vec<CellBin<C>>> {
     let mut bins = Vec::new();
     let mut c = 0;
     for b in 1..seg / 2 {
@@ -186,6 +228,14 @@ fn welch_cells<const C: usize>(
             bins.push((b, c, inverse(f)?));
         }
     }
+    Ok(bins)
+}
+
+/// The Welch average of |inverse·Y|² per bin of `bins` and force
+/// direction (Hann segments of `seg` samples, half overlapping, each less
+/// its mean), and the window's Σw².
+fn inverse_periodogram<const C: usize>(y: &[&[f64]; C], seg: usize, bins: &[CellBin<C>]) -> (Vec<[f64; C]>, f64) {
+    let n = y[0].len();
     let starts: Vec<usize> = (0..).map(|i| i * (seg / 2)).take_while(|s| s + seg <= n).collect();
     let w: Vec<f64> = (0..seg).map(|i| 0.5 - 0.5 * (2.0 * PI * i as f64 / seg as f64).cos()).collect();
     let sw2: f64 = w.iter().map(|v| v * v).sum();
@@ -193,7 +243,7 @@ fn welch_cells<const C: usize>(
     let mut periodogram = vec![[0.0; C]; bins.len()];
     let mut spectra = vec![vec![Complex64::new(0.0, 0.0); seg]; C];
     for &s0 in &starts {
-        for (buf, ch) in spectra.iter_mut().zip(&y) {
+        for (buf, ch) in spectra.iter_mut().zip(y) {
             let part = &ch[s0..s0 + seg];
             let mean = part.iter().sum::<f64>() / seg as f64;
             for ((b, v), w) in buf.iter_mut().zip(part).zip(&w) {
@@ -201,37 +251,29 @@ fn welch_cells<const C: usize>(
             }
             fft.process(buf);
         }
-        for (p, (b, _, m)) in periodogram.iter_mut().zip(&bins) {
+        for (p, (b, _, m)) in periodogram.iter_mut().zip(bins) {
             for (pj, mj) in p.iter_mut().zip(m) {
                 let x: Complex64 = mj.iter().zip(&spectra).map(|(mjc, s)| mjc * s[*b]).sum();
                 *pj += x.norm_sqr() / starts.len() as f64;
             }
         }
     }
-    let scale = 2.0 / (seg as f64 * sw2);
-    let mut power = vec![vec![0.0; cells.len()]; C];
-    let mut noise = vec![vec![0.0; cells.len()]; C];
-    for (p, (_, cell, m)) in periodogram.iter().zip(&bins) {
-        for j in 0..C {
-            power[j][*cell] += scale * p[j];
-            noise[j][*cell] += scale * sw2 * m[j].iter().zip(&r).map(|(v, rc)| v.norm_sqr() * rc).sum::<f64>();
-        }
+    (periodogram, sw2)
+}
+
+/// One direction's spectrum: its cells' power less their noise (≥ 0),
+/// refused unless the force stands above the noise in the band.
+fn force_above_noise(power: Vec<f64>, noise: Vec<f64>, df: f64) -> Result<CellSpectrum> {
+    let force: Vec<f64> = power.iter().zip(&noise).map(|(p, nz)| (p - nz).max(0.0)).collect();
+    let (p_f, p_n): (f64, f64) = (force.iter().sum(), noise.iter().sum());
+    if !(p_f > MIN_SIGNAL_TO_NOISE * p_n) {
+        bail!(
+            "its force in the band ({:.3} N RMS, noise removed) does not stand above the noise the inverse carries there ({:.3} N RMS): an idle or very light record says nothing about the cut's spectrum; give a record of the cut, or drop --force-prior spectrum",
+            p_f.sqrt(),
+            p_n.sqrt()
+        );
     }
-    let mut out = Vec::with_capacity(C);
-    for (j, (power, noise)) in power.into_iter().zip(noise).enumerate() {
-        let force: Vec<f64> = power.iter().zip(&noise).map(|(p, nz)| (p - nz).max(0.0)).collect();
-        let (p_f, p_n): (f64, f64) = (force.iter().sum(), noise.iter().sum());
-        if !(p_f > MIN_SIGNAL_TO_NOISE * p_n) {
-            let which = if C == 1 { String::new() } else { format!("force f{}: ", axis_name(j)) };
-            bail!(
-                "{which}its force in the band ({:.3} N RMS, noise removed) does not stand above the noise the inverse carries there ({:.3} N RMS): an idle or very light record says nothing about the cut's spectrum; give a record of the cut, or drop --force-prior spectrum",
-                p_f.sqrt(),
-                p_n.sqrt()
-            );
-        }
-        out.push(CellSpectrum { power_n2: force, noise_n2: noise, resolution_hz: df });
-    }
-    out.try_into().map_err(|_| anyhow::anyhow!("one force spectrum per record expected"))
+    Ok(CellSpectrum { power_n2: force, noise_n2: noise, resolution_hz: df })
 }
 
 /// What `design` reports of an axis designed on a record's force spectrum.

@@ -317,9 +317,42 @@ pub fn design_matrix_with_model(
 fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixModel>) -> Result<MatrixDesign> {
     let d = &opts.design;
     check_options(frf, r, opts)?;
-    let fs = d.fs_hz;
-    let f_cap = MATCH_BAND_FRACTION * fs;
     let mut notes = Vec::new();
+    let bands = compensated_bands(frf, d)?;
+    check_invertible(frf, &bands, d.coherence_threshold)?;
+    let crosstalk = crosstalk_of(frf, &bands, d.coherence_threshold);
+    let prepared: Vec<Result<PreparedAxis>> =
+        (0..3).map(|i| prepare_axis(&frf.freq_hz, frf.axis(i).expect("complete"), r[i], d)).collect();
+    for (i, p) in prepared.iter().enumerate() {
+        if let Err(e) = p {
+            notes.push(format!("axis {}: no per-axis design: {e:#}", axis_name(i)));
+        }
+    }
+    let prep = fit_stage(frf, &bands, opts, given, &mut notes);
+    let (criterion, flat) = criteria(frf, &prepared, prep.as_ref(), bands, r, opts, &mut notes)?;
+    let rounds = latency_rounds(&prepared, prep.as_ref(), &criterion, r, opts);
+    opts.say("realizing the compensator and verifying it in f32…");
+    let (chosen, latency_rounds) = pick_round(rounds);
+    if flat {
+        notes.extend(moderate_crosstalk_caveat(&chosen.axes, &crosstalk));
+    }
+    refuse_unless_better_than_raw(&chosen)?;
+    finish(frf, chosen, prep, crosstalk, latency_rounds, notes, d.fs_hz, &bands)
+}
+
+impl MatrixOptions {
+    /// Report a stage line, if anyone listens.
+    fn say(&self, line: &str) {
+        if let Some(p) = &self.progress {
+            p.say(line);
+        }
+    }
+}
+
+/// Each output axis's compensated band: its direct FRF's coherent band,
+/// below [`MATCH_BAND_FRACTION`]·fs.
+fn compensated_bands(frf: &Frf, d: &DesignOptions) -> Result<[(f64, f64); 3]> {
+    let f_cap = MATCH_BAND_FRACTION * d.fs_hz;
     let bands: [(f64, f64); 3] = std::array::from_fn(|i| {
         let a = frf.axis(i).expect("checked complete");
         let b = coherent_band(&frf.freq_hz, a.coherence.as_deref(), d.coherence_threshold);
@@ -334,67 +367,80 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
             );
         }
     }
-    check_invertible(frf, &bands, d.coherence_threshold)?;
-    let crosstalk = crosstalk_of(frf, &bands, d.coherence_threshold);
-    let prepared: Vec<Result<PreparedAxis>> =
-        (0..3).map(|i| prepare_axis(&frf.freq_hz, frf.axis(i).expect("complete"), r[i], d)).collect();
-    for (i, p) in prepared.iter().enumerate() {
-        if let Err(e) = p {
-            notes.push(format!("axis {}: no per-axis design: {e:#}", axis_name(i)));
-        }
-    }
+    Ok(bands)
+}
+
+/// The common-pole fit of the matrix (or the `given` model), its discrete
+/// model and plant; `None`, with a note, where it fails (every axis is then
+/// designed per axis).
+fn fit_stage(
+    frf: &Frf,
+    bands: &[(f64, f64); 3],
+    opts: &MatrixOptions,
+    given: Option<MatrixModel>,
+    notes: &mut Vec<String>,
+) -> Option<MatrixPrep> {
+    let d = &opts.design;
     let vf = opts.matrix_vf.clone().unwrap_or(VfOptions {
         max_order: MATRIX_MAX_ORDER,
         iterations: d.vf.iterations.max(MATRIX_ITERATIONS),
         ..d.vf.clone()
     });
-    let say = |line: &str| {
-        if let Some(p) = &opts.progress {
-            p.say(line);
-        }
-    };
     if given.is_none() {
-        say(&format!(
+        opts.say(&format!(
             "fitting the nine FRFs with common poles (order up to {}, {} iterations per order)…",
             vf.max_order, vf.iterations
         ));
     }
     let t = std::time::Instant::now();
     let prepared_model = match given {
-        Some(m) => prepare_model(frf, &bands, fs, d.coherence_threshold, m, f64::NAN, Vec::new()),
-        None => prepare_matrix(frf, &bands, fs, &vf, d.coherence_threshold),
+        Some(m) => prepare_model(frf, bands, d.fs_hz, d.coherence_threshold, m, f64::NAN, Vec::new()),
+        None => prepare_matrix(frf, bands, d.fs_hz, &vf, d.coherence_threshold),
     };
-    let prep = match prepared_model {
-        Ok(p) => Some(p),
+    match prepared_model {
+        Ok(p) => {
+            opts.say(&format!("  fit: order {}, {:.1} s", p.fit.order, t.elapsed().as_secs_f64()));
+            Some(p)
+        }
         Err(e) => {
             notes.push(format!("no 3x3 design: {e:#}; every axis is designed per axis, crosstalk not compensated"));
             None
         }
-    };
-    if let Some(p) = &prep {
-        say(&format!("  fit: order {}, {:.1} s", p.fit.order, t.elapsed().as_secs_f64()));
     }
-    let force = opts.force_rms_axes.unwrap_or([d.force_rms; 3]);
-    let model_g = |f: f64| match &prep {
+}
+
+/// The criterion on the model and the judge ([`Criteria`]) for flat forces
+/// or the record's (`--force-prior spectrum|level`, with a note), and
+/// whether the forces are flat.
+fn criteria(
+    frf: &Frf,
+    prepared: &[Result<PreparedAxis>],
+    prep: Option<&MatrixPrep>,
+    bands: [(f64, f64); 3],
+    r: [f64; 3],
+    opts: &MatrixOptions,
+    notes: &mut Vec<String>,
+) -> Result<(Criteria, bool)> {
+    let d = &opts.design;
+    let model_g = |f: f64| match prep {
         Some(p) => p.model.frf(f),
         None => measured_matrix_model(frf, f),
     };
     let forces = match &d.force_record {
-        None => ForceWeights::Flat(force),
+        None => ForceWeights::Flat(opts.force_rms_axes.unwrap_or([d.force_rms; 3])),
         Some(rec) => {
-            let w = ForceWeights::from_record(rec, &model_g, bands, fs, r, d.force_record_level_only)?;
+            let w = ForceWeights::from_record(rec, &model_g, bands, d.fs_hz, r, d.force_record_level_only)?;
+            let what = if d.force_record_level_only { "level" } else { "spectrum" };
             notes.push(format!(
-                "q and the choice of rows are for the force {} of {} (--force-prior {}), not a flat spectrum",
-                if d.force_record_level_only { "level" } else { "spectrum" },
-                rec.source,
-                if d.force_record_level_only { "level" } else { "spectrum" },
+                "q and the choice of rows are for the force {what} of {} (--force-prior {what}), not a flat spectrum",
+                rec.source
             ));
             w
         }
     };
     // The judge: each direct entry from its own per-axis fit (independent of
     // the common-pole fit, and closer to its entry), the cross entries from
-    // the common-pole fit (Criteria).
+    // the common-pole fit.
     let judge_g = |f: f64| {
         let mut g = model_g(f);
         for (i, p) in prepared.iter().enumerate() {
@@ -404,22 +450,31 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
         }
         g
     };
-    let criterion = Criteria {
-        judge: MatrixCriterion::new(judge_g, bands, fs, &forces, r),
-        model: MatrixCriterion::new(model_g, bands, fs, &forces, r),
+    let criteria = Criteria {
+        judge: MatrixCriterion::new(judge_g, bands, d.fs_hz, &forces, r),
+        model: MatrixCriterion::new(model_g, bands, d.fs_hz, &forces, r),
     };
-    let latencies: Vec<usize> = match opts.latency {
-        Some(l) => vec![l],
-        None => vec![DEFAULT_LATENCY],
-    };
+    Ok((criteria, matches!(forces, ForceWeights::Flat(_))))
+}
+
+/// The rounds at [`DEFAULT_LATENCY`] (or the asked-for latency), and at
+/// [`LONGER_LATENCIES`] where an axis's best row predicts more than
+/// [`PREDICTED_SHORT`] of distortion (module doc).
+fn latency_rounds(
+    prepared: &[Result<PreparedAxis>],
+    prep: Option<&MatrixPrep>,
+    criterion: &Criteria,
+    r: [f64; 3],
+    opts: &MatrixOptions,
+) -> Vec<Round> {
     let timed_round = |l: usize| {
-        say(&format!("3x3 Kalman smoother and per-axis designs at latency {l}: choosing q…"));
+        opts.say(&format!("3x3 Kalman smoother and per-axis designs at latency {l}: choosing q…"));
         let t = std::time::Instant::now();
-        let rd = round(l, &prepared, prep.as_ref(), &criterion, r, d);
-        say(&format!("  latency {l}: {:.1} s", t.elapsed().as_secs_f64()));
+        let rd = round(l, prepared, prep, criterion, r, &opts.design);
+        opts.say(&format!("  latency {l}: {:.1} s", t.elapsed().as_secs_f64()));
         rd
     };
-    let mut rounds: Vec<Round> = latencies.iter().map(|l| timed_round(*l)).collect();
+    let mut rounds = vec![timed_round(opts.latency.unwrap_or(DEFAULT_LATENCY))];
     if opts.latency.is_none() && rounds[0].axes.iter().any(|a| a.chosen.distortion > PREDICTED_SHORT) {
         // The longer latencies are independent: one thread each (the host
         // has at least two cores).
@@ -429,7 +484,12 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
         });
         rounds.extend(longer);
     }
-    say("realizing the compensator and verifying it in f32…");
+    rounds
+}
+
+/// The shortest latency within [`GAIN_NOT_WORTH`] of each axis's best, and
+/// every round's predictions.
+fn pick_round(mut rounds: Vec<Round>) -> (Round, Vec<LatencyRound>) {
     let latency_rounds: Vec<LatencyRound> = rounds
         .iter()
         .map(|rd| LatencyRound { latency: rd.lag, predicted: std::array::from_fn(|i| Some(rd.axes[i].chosen.error)) })
@@ -438,10 +498,12 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
         std::array::from_fn(|i| rounds.iter().map(|rd| rd.axes[i].chosen.error).fold(f64::INFINITY, f64::min));
     let pick =
         rounds.iter().position(|rd| (0..3).all(|i| rd.axes[i].chosen.error <= GAIN_NOT_WORTH * best[i])).unwrap_or(0);
-    let chosen = rounds.swap_remove(pick);
-    if matches!(forces, ForceWeights::Flat(_)) {
-        notes.extend(moderate_crosstalk_caveat(&chosen.axes, &crosstalk));
-    }
+    (rounds.swap_remove(pick), latency_rounds)
+}
+
+/// Never worse than no compensation: refuse the design where an axis's
+/// chosen row does not beat it (or is over [`MAX_PREDICTED_ERROR`]).
+fn refuse_unless_better_than_raw(chosen: &Round) -> Result<()> {
     for a in &chosen.axes {
         if !(a.chosen.error < a.raw.error) || !(a.chosen.error < MAX_PREDICTED_ERROR) {
             bail!(
@@ -455,7 +517,7 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
             );
         }
     }
-    finish(frf, chosen, prep, crosstalk, latency_rounds, notes, fs, &bands)
+    Ok(())
 }
 
 /// The note for 3x3 rows chosen for flat forces where the crosstalk is
