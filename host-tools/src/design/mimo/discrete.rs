@@ -222,51 +222,94 @@ pub fn discretize_matrix(
     fs_hz: f64,
     band_hz: (f64, f64),
 ) -> Result<(DiscreteMatrixModel, DiscreteMatch)> {
-    let t = 1.0 / fs_hz;
-    let nyq = PI * fs_hz;
-    let kept: Vec<(Complex64, bool, usize)> = (0..model.terms())
-        .filter_map(|k| {
-            let (p, pair) = model.pole(k);
-            // A pair above Nyquist, or a real pole whose corner |p|/2π is,
-            // is left to the taps (its tail in the band), as per axis.
-            let below = if pair { p.im < nyq } else { p.re.abs() < nyq };
-            below.then_some(((p * t).exp(), pair, k))
-        })
-        .collect();
-    let above = model.terms() - kept.len();
-    let poles: Vec<(Complex64, bool)> = kept.iter().map(|(z, pair, _)| (*z, *pair)).collect();
+    let (poles, above) = discrete_poles(model, fs_hz);
     let base = poles.iter().map(|(_, pair)| if *pair { 2 } else { 1 }).sum::<usize>() + 1;
     let grid = fit_grid(&model.entries[0], fs_hz, band_hz, MATCH_BAND_FRACTION);
     let truth: Vec<CMatrix3> = grid.iter().map(|f| model.frf(*f)).collect();
     if let Some(k) = truth.iter().position(|g| g.try_inverse().is_none() || !g.iter().all(|v| v.is_finite())) {
         bail!("discrete 3x3 model: the fitted model is singular or not finite at {:.1} Hz; refit the FRF", grid[k]);
     }
+    let rows = row_problems(model, &poles, &grid, &truth, fs_hz, band_hz);
+    let band: Vec<(f64, CMatrix3)> =
+        grid.iter().zip(&truth).filter(|(f, _)| **f >= band_hz.0 && **f <= band_hz.1).map(|(f, g)| (*f, *g)).collect();
+    let tried = fit_every_layout(&rows, &poles, base, fs_hz, &band)?;
+    let (dm, err, condition) = least_complex_good_fit(tried)?;
+    let m = DiscreteMatch {
+        matrix: err,
+        condition,
+        fir_taps: dm.fir.len(),
+        advance: dm.advance,
+        modes_above_nyquist: above,
+        ..Default::default()
+    };
+    let m = entry_match(m, &dm, &band);
+    Ok((dm, m))
+}
+
+/// The poles mapped exactly, ζ = e^{pT}, of those below Nyquist (a pair
+/// above it, or a real pole whose corner |p|/2π is, is left to the taps:
+/// its tail in the band, as per axis), with whether each is a pair; and how
+/// many were left.
+fn discrete_poles(model: &MatrixModel, fs_hz: f64) -> (Vec<(Complex64, bool)>, usize) {
+    let t = 1.0 / fs_hz;
+    let nyq = PI * fs_hz;
+    let poles: Vec<(Complex64, bool)> = (0..model.terms())
+        .filter_map(|k| {
+            let (p, pair) = model.pole(k);
+            let below = if pair { p.im < nyq } else { p.re.abs() < nyq };
+            below.then_some(((p * t).exp(), pair))
+        })
+        .collect();
+    let above = model.terms() - poles.len();
+    (poles, above)
+}
+
+/// Each output row's least-squares problem on the unit circle over `grid`,
+/// its lines weighted by 1/‖Ĝ_i·‖ (one fifth outside the band; module doc),
+/// under the exact static gain.
+fn row_problems(
+    model: &MatrixModel,
+    poles: &[(Complex64, bool)],
+    grid: &[f64],
+    truth: &[CMatrix3],
+    fs_hz: f64,
+    band_hz: (f64, f64),
+) -> Vec<RowProblem> {
     let zs: Vec<Complex64> = grid.iter().map(|f| Complex64::from_polar(1.0, 2.0 * PI * f / fs_hz)).collect();
-    let cols: Vec<Vec<Complex64>> = zs.iter().map(|z| columns_at(&poles, *z)).collect();
-    let at_one = columns_at(&poles, Complex64::new(1.0, 0.0));
+    let cols: Vec<Vec<Complex64>> = zs.iter().map(|z| columns_at(poles, *z)).collect();
+    let at_one = columns_at(poles, Complex64::new(1.0, 0.0));
     let g0 = model.frf(0.0).map(|v| v.re);
-    let rows: Vec<RowProblem> = (0..3)
+    (0..3)
         .map(|i| {
             let w: Vec<f64> = grid
                 .iter()
-                .zip(&truth)
+                .zip(truth)
                 .map(|(f, g)| {
                     let inside = *f >= band_hz.0 && *f <= band_hz.1;
                     let norm = g.row(i).iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
                     (if inside { 1.0 } else { OUT_OF_BAND_WEIGHT }) / norm
                 })
                 .collect();
-            RowProblem::new(&cols, &zs, &truth, &w, &at_one, [g0[(i, 0)], g0[(i, 1)], g0[(i, 2)]], i)
+            RowProblem::new(&cols, &zs, truth, &w, &at_one, [g0[(i, 0)], g0[(i, 1)], g0[(i, 2)]], i)
         })
-        .collect();
-    let band: Vec<(f64, CMatrix3)> =
-        grid.iter().zip(&truth).filter(|(f, _)| **f >= band_hz.0 && **f <= band_hz.1).map(|(f, g)| (*f, *g)).collect();
-    let mut tried: Vec<(DiscreteMatrixModel, f64, f64)> = Vec::new();
+        .collect()
+}
+
+/// Every layout (advance D, taps M) whose three rows solve well enough:
+/// the model, its matrix mismatch over `band` and the worst condition.
+fn fit_every_layout(
+    rows: &[RowProblem],
+    poles: &[(Complex64, bool)],
+    base: usize,
+    fs_hz: f64,
+    band: &[(f64, CMatrix3)],
+) -> Result<Vec<(DiscreteMatrixModel, f64, f64)>> {
+    let mut tried = Vec::new();
     for advance in 0..=MAX_ADVANCE {
         for taps in advance.saturating_sub(1)..=MAX_FIR_TAPS {
             let mut coef: Vec<[Vec<f64>; 3]> = Vec::with_capacity(3);
             let mut condition = 0.0f64;
-            for row in &rows {
+            for row in rows {
                 match row.solve(base, taps, advance)? {
                     Some((c, k)) => {
                         coef.push(c);
@@ -278,31 +321,34 @@ pub fn discretize_matrix(
             if coef.len() < 3 {
                 continue;
             }
-            let dm = assemble(fs_hz, &poles, &coef, taps, advance);
-            let Some(err) = matrix_mismatch(&band, |f| dm.frf(f)) else { continue };
+            let dm = assemble(fs_hz, poles, &coef, taps, advance);
+            let Some(err) = matrix_mismatch(band, |f| dm.frf(f)) else { continue };
             tried.push((dm, err, condition));
         }
     }
+    Ok(tried)
+}
+
+/// The least complex layout (D + M) whose mismatch is below
+/// [`MATCH_TARGET`] or within [`MATCH_SLACK`] of the best.
+fn least_complex_good_fit(tried: Vec<(DiscreteMatrixModel, f64, f64)>) -> Result<(DiscreteMatrixModel, f64, f64)> {
     let best_err = tried.iter().map(|t| t.1).fold(f64::INFINITY, f64::min);
     if !best_err.is_finite() {
         bail!("discrete 3x3 model: every unit-circle fit was ill-conditioned (condition > {MAX_CONDITION:.0e}); two fitted modes may coincide: lower --max-order");
     }
     let good_enough = MATCH_TARGET.max(MATCH_SLACK * best_err);
     let cost = |t: &(DiscreteMatrixModel, f64, f64)| t.0.advance + t.0.fir.len();
-    let Some((dm, err, condition)) =
-        tried.into_iter().filter(|t| t.1 <= good_enough).min_by(|a, b| cost(a).cmp(&cost(b)).then(a.1.total_cmp(&b.1)))
-    else {
-        bail!("discrete 3x3 model: no fit within reach of the best");
-    };
-    let mut m = DiscreteMatch {
-        matrix: err,
-        condition,
-        fir_taps: dm.fir.len(),
-        advance: dm.advance,
-        modes_above_nyquist: above,
-        ..Default::default()
-    };
-    for (f, g) in &band {
+    tried
+        .into_iter()
+        .filter(|t| t.1 <= good_enough)
+        .min_by(|a, b| cost(a).cmp(&cost(b)).then(a.1.total_cmp(&b.1)))
+        .ok_or_else(|| anyhow::anyhow!("discrete 3x3 model: no fit within reach of the best"))
+}
+
+/// `m` with each entry's largest relative error over `band`, and its error
+/// relative to its channel's row norm.
+fn entry_match(mut m: DiscreteMatch, dm: &DiscreteMatrixModel, band: &[(f64, CMatrix3)]) -> DiscreteMatch {
+    for (f, g) in band {
         let gd = dm.frf(*f);
         for i in 0..3 {
             let norm = g.row(i).iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
@@ -312,7 +358,7 @@ pub fn discretize_matrix(
             }
         }
     }
-    Ok((dm, m))
+    m
 }
 
 /// The discrete model from the rows' coefficients (per pole its residue's

@@ -728,7 +728,6 @@ fn round(
     let h_matrix = matrix.as_ref().map(|(k, _, _)| k.compensator.freq_responses(&all, d.fs_hz));
     let axes: Vec<AxisPrediction> = (0..3)
         .map(|i| {
-            let raw = crit.raw(i);
             let per = per_axis[i].as_ref().map(|a| {
                 let h = a.kalman.compensator.freq_responses(&crit.rows[i].freqs, d.fs_hz);
                 (crit.per_axis(i, lag, &h), a.predicted_error, a.noise_gain, judge.per_axis(i, lag, &h))
@@ -737,54 +736,67 @@ fn round(
                 .as_ref()
                 .zip(h_matrix.as_ref())
                 .map(|((_, _, ng), h)| (crit.row_error(i, lag, h), ng[i], judge.row_error(i, lag, h)));
-            let (source, chosen, noise_gain, reason) = match (per, mat) {
-                (Some((_, _, _, pj)), Some((m, mng, mj))) if mj.error < pj.error => (
-                    RowSource::Matrix,
-                    m,
-                    mng,
-                    format!(
-                        "3x3 row: {:.3} % against {:.3} % per axis (judged on the per-axis fits)",
-                        100.0 * mj.error,
-                        100.0 * pj.error
-                    ),
-                ),
-                (Some((p, _, png, pj)), Some((_, _, mj))) => (
-                    RowSource::PerAxis,
-                    p,
-                    png,
-                    format!(
-                        "per-axis row: {:.3} % against {:.3} % for the 3x3 row (judged on the per-axis fits)",
-                        100.0 * pj.error,
-                        100.0 * mj.error
-                    ),
-                ),
-                (Some((p, _, png, _)), None) => (RowSource::PerAxis, p, png, "per-axis row: no 3x3 design".to_string()),
-                (None, Some((m, mng, _))) => (RowSource::Matrix, m, mng, "3x3 row: no per-axis design".to_string()),
-                (None, None) => (
-                    RowSource::PerAxis,
-                    RowError { error: f64::INFINITY, distortion: f64::INFINITY },
-                    f64::NAN,
-                    "no design".to_string(),
-                ),
-            };
-            AxisPrediction {
-                axis: axis_name(i),
-                band_hz: crit.rows[i].band_hz,
-                raw,
-                per_axis: per.map(|p| p.0),
-                per_axis_direct_only: per.map(|p| p.1),
-                matrix: mat.map(|m| m.0),
-                per_axis_judged: per.map(|p| p.3),
-                matrix_judged: mat.map(|m| m.2),
-                source,
-                chosen,
-                reason,
-                noise_gain,
-            }
+            axis_prediction(i, crit, per, mat)
         })
         .collect();
     let rows = std::array::from_fn(|i| axes[i].source);
     Round { lag, per_axis, matrix, matrix_error, axes, rows }
+}
+
+/// Output axis i's predictions and its row: the one the judge gives less
+/// error ([`Criteria`]). `per`: the per-axis row's (model error, its own
+/// prediction, noise gain, judged error); `mat`: the 3x3 row's (model
+/// error, noise gain, judged error).
+fn axis_prediction(
+    i: usize,
+    crit: &MatrixCriterion,
+    per: Option<(RowError, f64, f64, RowError)>,
+    mat: Option<(RowError, f64, RowError)>,
+) -> AxisPrediction {
+    let (source, chosen, noise_gain, reason) = match (per, mat) {
+        (Some((_, _, _, pj)), Some((m, mng, mj))) if mj.error < pj.error => (
+            RowSource::Matrix,
+            m,
+            mng,
+            format!(
+                "3x3 row: {:.3} % against {:.3} % per axis (judged on the per-axis fits)",
+                100.0 * mj.error,
+                100.0 * pj.error
+            ),
+        ),
+        (Some((p, _, png, pj)), Some((_, _, mj))) => (
+            RowSource::PerAxis,
+            p,
+            png,
+            format!(
+                "per-axis row: {:.3} % against {:.3} % for the 3x3 row (judged on the per-axis fits)",
+                100.0 * pj.error,
+                100.0 * mj.error
+            ),
+        ),
+        (Some((p, _, png, _)), None) => (RowSource::PerAxis, p, png, "per-axis row: no 3x3 design".to_string()),
+        (None, Some((m, mng, _))) => (RowSource::Matrix, m, mng, "3x3 row: no per-axis design".to_string()),
+        (None, None) => (
+            RowSource::PerAxis,
+            RowError { error: f64::INFINITY, distortion: f64::INFINITY },
+            f64::NAN,
+            "no design".to_string(),
+        ),
+    };
+    AxisPrediction {
+        axis: axis_name(i),
+        band_hz: crit.rows[i].band_hz,
+        raw: crit.raw(i),
+        per_axis: per.map(|p| p.0),
+        per_axis_direct_only: per.map(|p| p.1),
+        matrix: mat.map(|m| m.0),
+        per_axis_judged: per.map(|p| p.3),
+        matrix_judged: mat.map(|m| m.2),
+        source,
+        chosen,
+        reason,
+        noise_gain,
+    }
 }
 
 /// The 3x3 Kalman design at latency `lag` with q chosen by the criterion
@@ -822,6 +834,40 @@ fn design_3x3(
     Ok((k, search, ng))
 }
 
+/// The round's combined compensator, realized and verified in f32 up to
+/// `f_band`. A 3x3 row that cannot be realized is not used: every axis
+/// then takes its per-axis row, with a note (never silently worse, never
+/// unverified).
+#[allow(clippy::type_complexity)]
+fn realize_or_per_axis(
+    rd: &mut Round,
+    notes: &mut Vec<String>,
+    fs: f64,
+    f_band: f64,
+) -> Result<(MimoStateSpace, (MimoRealization, MimoFilter, MimoVerification))> {
+    let per_axis_ss: [Option<&crate::numeric::lti::StateSpace>; 3] =
+        std::array::from_fn(|i| rd.per_axis[i].as_ref().map(|a| &a.kalman.compensator));
+    let (blocks, compensator) = combine(rd.rows, rd.matrix.as_ref().map(|m| &m.0.compensator), per_axis_ss)?;
+    match realize_blocks(&blocks, fs, f_band) {
+        Ok(r) => Ok((compensator, r)),
+        Err(e) if rd.rows.contains(&RowSource::Matrix) && rd.per_axis.iter().all(Option::is_some) => {
+            notes.push(format!("the 3x3 rows were not used: {e:#}; every axis is designed per axis"));
+            for (a, d) in rd.axes.iter_mut().zip(&rd.per_axis) {
+                if a.source == RowSource::Matrix {
+                    a.noise_gain = d.as_ref().map_or(f64::NAN, |d| d.noise_gain);
+                    a.source = RowSource::PerAxis;
+                    a.chosen = a.per_axis.expect("per-axis design present");
+                    a.reason = "per-axis row: the 3x3 compensator does not verify in f32".to_string();
+                }
+            }
+            rd.rows = [RowSource::PerAxis; 3];
+            let (blocks, compensator) = combine(rd.rows, None, per_axis_ss)?;
+            Ok((compensator, realize_blocks(&blocks, fs, f_band)?))
+        }
+        Err(e) => Err(e),
+    }
+}
+
 /// The combined compensator of the chosen round, realized and verified.
 #[allow(clippy::too_many_arguments)]
 fn finish(
@@ -835,30 +881,8 @@ fn finish(
     bands: &[(f64, f64); 3],
 ) -> Result<MatrixDesign> {
     let _ = frf;
-    let per_axis_ss: [Option<&crate::numeric::lti::StateSpace>; 3] =
-        std::array::from_fn(|i| rd.per_axis[i].as_ref().map(|a| &a.kalman.compensator));
     let f_band = bands.iter().map(|b| b.1).fold(0.0, f64::max);
-    let (blocks, compensator) = combine(rd.rows, rd.matrix.as_ref().map(|m| &m.0.compensator), per_axis_ss)?;
-    let (compensator, (realization, filter, verification)) = match realize_blocks(&blocks, fs, f_band) {
-        Ok(r) => (compensator, r),
-        // A 3x3 row that cannot be realized in f32 is not used: the
-        // per-axis rows are (never silently worse, never unverified).
-        Err(e) if rd.rows.contains(&RowSource::Matrix) && rd.per_axis.iter().all(Option::is_some) => {
-            notes.push(format!("the 3x3 rows were not used: {e:#}; every axis is designed per axis"));
-            for (a, d) in rd.axes.iter_mut().zip(&rd.per_axis) {
-                if a.source == RowSource::Matrix {
-                    a.noise_gain = d.as_ref().map_or(f64::NAN, |d| d.noise_gain);
-                    a.source = RowSource::PerAxis;
-                    a.chosen = a.per_axis.expect("per-axis design present");
-                    a.reason = "per-axis row: the 3x3 compensator does not verify in f32".to_string();
-                }
-            }
-            rd.rows = [RowSource::PerAxis; 3];
-            let (blocks, compensator) = combine(rd.rows, None, per_axis_ss)?;
-            (compensator, realize_blocks(&blocks, fs, f_band)?)
-        }
-        Err(e) => return Err(e),
-    };
+    let (compensator, (realization, filter, verification)) = realize_or_per_axis(&mut rd, &mut notes, fs, f_band)?;
     notes.extend(rd.matrix_error.iter().cloned());
     let kalman_fig = rd.matrix.as_ref().map(|(k, s, ng)| KalmanFigures {
         q: k.q,
