@@ -103,6 +103,7 @@ pub struct MatrixKalman {
 /// Design the compensator of `plant` for process noise `q` and measurement
 /// noise `r` on the plant's steps 1-2 ([`MatrixAugmentedPlant`]); `lag` is
 /// the declared latency L.
+///
 /// 3. Filter DARE P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + Γ Q Γᵀ by
 ///    structured doubling with G = Cᵀ R⁻¹ C ([`structured_doubling`]).
 ///    Its residual, judged against the size of the equation's terms, must
