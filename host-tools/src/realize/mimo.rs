@@ -538,7 +538,7 @@ fn block_candidates(ss: &MimoStateSpace) -> Result<Vec<MimoRealization>> {
 /// are realized one by one, so poles of different blocks never meet in one
 /// eigenvector matrix, and their sections, taps and direct terms are
 /// concatenated and summed. Each block takes, among its fast/slow splits
-/// ([`crate::realize::modal::thresholds`]), the one whose f32 rounding
+/// (`crate::realize::modal::thresholds`), the one whose f32 rounding
 /// verifies best against the block; the whole filter is then verified
 /// against the whole f64 compensator: every f32 section stable with margin
 /// ([`POLE_MARGIN`]), pole displacement ([`MAX_POLE_SHIFT`] of |1 − λ|),

@@ -207,7 +207,7 @@ impl RowProblem {
 /// cross entry is fitted to the precision of its channel, not to its own
 /// size (which would chase its near-zeros). (D, M) is the least complex pair
 /// whose matrix match max_f ‖Ĝ⁻¹(Ĝ_d − Ĝ)‖_F is below
-/// [`MATCH_TARGET`], or within [`MATCH_SLACK`] of the best: the error of
+/// [`MATCH_TARGET`], or within `MATCH_SLACK` of the best: the error of
 /// the compensated force the model's mismatch alone causes.
 pub fn discretize_matrix(
     model: &MatrixModel,
@@ -394,7 +394,7 @@ fn residue_svd(r: &CMatrix3, real: bool) -> Result<Vec<RankOne>> {
 /// The poles' part of M is realized with real states whose
 /// residues are factored by rank: R = Σ_k σ_k u_k v_kᴴ (SVD); a physical
 /// mode's residue is rank 1 (G = Σ_r c_r b_rᵀ·f_r(s)), two states per pair.
-/// Each kept triplet of a pair is one complex state x[k+1] = ζ x[k] + β F_k
+/// Each kept triplet of a pair is one complex state x\[k+1\] = ζ x\[k\] + β F_k
 /// with β = s·v_kᴴ and output 2 Re(γ x), γ = σ_k u_k/s, s = |1 − ζ| (so that
 /// a state is about the size of a force, as in [`crate::design::kalman`]),
 /// held as (Re x, Im x); a real pole's triplet is one real state. A

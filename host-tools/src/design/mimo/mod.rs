@@ -291,7 +291,7 @@ struct Round {
 ///    crosstalk it leaves;
 /// 5. per output axis the row with less error on the measured matrix (never
 ///    silently worse: the 3x3 row only where it beats the per-axis one
-///    there, [`Criteria`]), as one block-diagonal compensator ([`combine`]);
+///    there, `Criteria`), as one block-diagonal compensator (`combine`);
 /// 6. realized and verified in f32 for the one 3x3 kernel
 ///    ([`crate::realize::mimo`]).
 ///
