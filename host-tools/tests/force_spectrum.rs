@@ -188,7 +188,7 @@ fn the_records_spectrum_brings_the_worst_axis_at_25_6_khz_under_two_percent() {
         let (f, s) = (flat.axes[a].comp_nrmse.as_ref().unwrap(), spec.axes[a].comp_nrmse.as_ref().unwrap());
         assert!(s / f < 1.05, "axis {a}: {:.3} % against {:.3} %", 100.0 * s, 100.0 * f);
     }
-    // The cost, stated in the README: a cut that chatters where the steady
+    // The cost, stated in docs/design.md: a cut that chatters where the steady
     // record had little force meets a filter tuned for less (measured
     // 4.58 % against 2.26 % with the flat criterion).
     let mut chat = case.sim_params(fs);

@@ -1,26 +1,7 @@
 //! The FRF matrix fitted with common poles (DESIGN.md, "Signal chain": the
 //! dynamometer as one 3x3 system): matrix vector fitting.
-//!
-//! A mode of the dynamometer is one pole pair seen in every entry with its
-//! own residue, so all nine entries share the poles:
-//!
-//! G_ij(s) = d_ij + Σ_real r_ij/(s − p) + Σ_pairs [r_ij/(s − p) + r̄_ij/(s − p̄)],
-//!
-//! s in rad/s, G in N/N. The poles are relocated by relaxed vector fitting
-//! (Gustavsen & Semlyen 1999; Gustavsen 2006) with one weighting function
-//! σ(s) for all entries, solved in the fast form of Deschrijver et al.
-//! ("Macromodeling of multiport systems using a fast implementation of the
-//! vector fitting method", IEEE MWCL 18(6), 2008): entry e's rows
-//! √w·(Φ x_e − H_e·Φ x̃) = 0 are reduced by a QR factorization to the rows
-//! R22,e x̃ = 0 that involve only σ's coefficients x̃; the reduced rows of
-//! the nine entries and the relaxation row Re Σ_k σ(s_k) = K are stacked and
-//! solved once. The new poles are the zeros of σ, unstable ones flipped.
-//! Weights are each entry's coherence weights
-//! ([`super::vf::coherence_weights`]), so each line counts by the inverse
-//! variance of its H1 estimate. The order is chosen as in
-//! [`super::vf::vector_fit`], the residues of each entry are the weighted
-//! least-squares fit at the final poles, and a term is dropped only where
-//! it is spurious or negligible in every entry.
+//! [`matrix_vector_fit`] on a [`MatrixData`] gives a [`MatrixModel`]. A leaf of
+//! the chain, beside the per-axis fit [`super::vf`].
 
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector, Matrix3};
@@ -37,7 +18,14 @@ use super::{PoleResidueModel, Term};
 pub const ENTRIES: usize = 9;
 
 /// A 3x3 model with common poles: nine pole-residue models whose terms
-/// have the same poles in the same order (module doc).
+/// have the same poles in the same order.
+///
+/// A mode of the dynamometer is one pole pair seen in every entry with its
+/// own residue, so all nine entries share the poles:
+///
+/// G_ij(s) = d_ij + Σ_real r_ij/(s − p) + Σ_pairs [r_ij/(s − p) + r̄_ij/(s − p̄)],
+///
+/// s in rad/s, G in N/N.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MatrixModel {
     /// G_ij as `entries[3i + j]` (channel i, force direction j).
@@ -111,6 +99,10 @@ pub struct MatrixFit {
 
 /// The measured matrix a fit reads: lines, and per entry (row by row) the
 /// values and the weights.
+///
+/// Weights are each entry's coherence weights
+/// ([`super::vf::coherence_weights`]), so each line counts by the inverse
+/// variance of its H1 estimate.
 pub struct MatrixData<'a> {
     /// Frequency lines (Hz).
     pub freq_hz: &'a [f64],
@@ -140,7 +132,17 @@ impl MatrixData<'_> {
     }
 }
 
-/// One relocation of the common poles (module doc): the zeros of σ.
+/// One relocation of the common poles: the zeros of σ.
+///
+/// The poles are relocated by relaxed vector fitting
+/// (Gustavsen & Semlyen 1999; Gustavsen 2006) with one weighting function
+/// σ(s) for all entries, solved in the fast form of Deschrijver et al.
+/// ("Macromodeling of multiport systems using a fast implementation of the
+/// vector fitting method", IEEE MWCL 18(6), 2008): entry e's rows
+/// √w·(Φ x_e − H_e·Φ x̃) = 0 are reduced by a QR factorization to the rows
+/// R22,e x̃ = 0 that involve only σ's coefficients x̃; the reduced rows of
+/// the nine entries and the relaxation row Re Σ_k σ(s_k) = K are stacked and
+/// solved once. The new poles are the zeros of σ, unstable ones flipped.
 fn relocate(s: &[Complex64], h: &[Vec<Complex64>], sw: &[Vec<f64>], poles: &[Pole]) -> Result<Vec<Pole>> {
     let n = n_cols(poles);
     let k = s.len();
@@ -190,7 +192,8 @@ fn relocate(s: &[Complex64], h: &[Vec<Complex64>], sw: &[Vec<f64>], poles: &[Pol
 }
 
 /// Residues and direct terms of every entry at the poles `poles`
-/// (normalized by `w_scale`), each entry's own weighted least squares.
+/// (normalized by `w_scale`), each entry's own weighted least squares: at
+/// the final poles these are the model's residues.
 fn fit_residues(data: &MatrixData, poles: &[Pole], w_scale: f64) -> Result<MatrixModel> {
     let s: Vec<Complex64> = data.freq_hz.iter().map(|f| Complex64::new(0.0, 2.0 * PI * f / w_scale)).collect();
     let entries = (0..ENTRIES)

@@ -1,24 +1,6 @@
 //! The seed paper's fit (§3, eq. (1)): a rational fraction polynomial
-//!
-//! `G(s) = B(s)/A(s) = (b_0 + b_1 s' + … + b_nb s'^nb) / (a_0 + a_1 s' + … + s'^na)`,
-//! `s' = s/ω_0` (frequency rescaling, ω_0 in rad/s),
-//!
-//! estimated in two steps, as MATLAB `invfreqs` does:
-//!
-//! 1. **Initial estimate** (rational fraction polynomial, Richardson &
-//!    Formenti 1982; the linearized "equation error" of Levy 1959): minimize
-//!    `Σ w_k |B(s'_k) − G_k A(s'_k)|²`, linear in the coefficients. Richardson
-//!    and Formenti solve it through orthogonal (Forsythe) polynomials to
-//!    avoid the normal equations; here the same least-squares problem is
-//!    solved by SVD of the power-basis matrix, whose condition number is
-//!    reported: it is the paper's "poorly conditioned" diagnostic (§3.1).
-//!    Unstable roots of A are reflected into the left half-plane.
-//! 2. **Damped Gauss–Newton** refinement of the weighted output error
-//!    `Σ w_k |B(s'_k)/A(s'_k) − G_k|²` (Dennis & Schnabel), halving the step
-//!    until the error decreases and A stays stable.
-//!
-//! The weights are the coherence γ² of each line (paper §3: "the coherence
-//! functions has been taken as weight"), zero outside the fitting bands.
+//! ([`RationalTf`]) estimated in two steps, as MATLAB `invfreqs` does
+//! ([`rfp_fit`]). A leaf of the chain.
 
 // `!(x < limit)` on purpose: a NaN residual or condition number must fail
 // the check, as in kalman.rs and quantize.rs.
@@ -35,7 +17,10 @@ use super::{PoleResidueModel, Term};
 /// numerically singular (≈ 1/(√ε·…)): a solution then carries no digits.
 pub const MAX_CONDITION: f64 = 1e12;
 
-/// A rational transfer function in rescaled frequency `s' = s/ω_0` (eq. (1)).
+/// A rational transfer function in rescaled frequency `s' = s/ω_0` (eq. (1)):
+///
+/// `G(s) = B(s)/A(s) = (b_0 + b_1 s' + … + b_nb s'^nb) / (a_0 + a_1 s' + … + s'^na)`,
+/// `s' = s/ω_0` (frequency rescaling, ω_0 in rad/s).
 #[derive(Clone, Debug, PartialEq)]
 pub struct RationalTf {
     /// Numerator coefficients b_0..b_nb, ascending powers of s' (N/N).
@@ -252,8 +237,23 @@ fn output_error(tf_b: &[f64], tf_a: &[f64], xs: &[Complex64], h: &[Complex64], w
 }
 
 /// Fit eq. (1) to the lines `freq_hz`/`h` with weights `w` (zero = unused),
-/// frequencies rescaled by ω_0 = 2π·(highest weighted line) (module doc):
+/// frequencies rescaled by ω_0 = 2π·(highest weighted line) ([`RationalTf`]):
 /// the RFP initial estimate (step 1), then damped Gauss–Newton (step 2).
+///
+/// 1. **Initial estimate** (rational fraction polynomial, Richardson &
+///    Formenti 1982; the linearized "equation error" of Levy 1959): minimize
+///    `Σ w_k |B(s'_k) − G_k A(s'_k)|²`, linear in the coefficients. Richardson
+///    and Formenti solve it through orthogonal (Forsythe) polynomials to
+///    avoid the normal equations; here the same least-squares problem is
+///    solved by SVD of the power-basis matrix, whose condition number is
+///    reported: it is the paper's "poorly conditioned" diagnostic (§3.1).
+///    Unstable roots of A are reflected into the left half-plane.
+/// 2. **Damped Gauss–Newton** refinement of the weighted output error
+///    `Σ w_k |B(s'_k)/A(s'_k) − G_k|²` (Dennis & Schnabel), halving the step
+///    until the error decreases and A stays stable.
+///
+/// The weights are the coherence γ² of each line (paper §3: "the coherence
+/// functions has been taken as weight"), zero outside the fitting bands.
 pub fn rfp_fit(freq_hz: &[f64], h: &[Complex64], w: &[f64], opts: &RfpOptions) -> Result<RfpFit> {
     let (nb, na) = (opts.nb, opts.na);
     if na == 0 || nb > na {

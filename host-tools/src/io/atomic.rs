@@ -1,33 +1,7 @@
 //! Atomic output files (DESIGN.md, CLI contract: "no output file left behind").
-//!
 //! Everything the tool writes goes through [`write_atomic`] (or
-//! [`write_pair_atomic`] for two files that must change together): the
-//! content is written to a temporary file in the destination's directory
-//! and renamed over the destination only after it was written and flushed
-//! completely. On any error the temporary file is removed and the
-//! destination is untouched.
-//!
-//! * **`-`** is standard output: the content goes straight to it, with no
-//!   temporary file (what reached a pipe cannot be taken back).
-//! * **Symlinks** are followed: the final target is replaced, the link
-//!   stays, and the temporary file goes in the target's directory.
-//! * **Special files** (devices, FIFOs, sockets, directories) are refused
-//!   as outputs: renaming a regular file over `/dev/stdout` would replace
-//!   the device node and send nothing down the pipe.
-//! * **Modes**: a replaced file keeps its permission bits (0o777; no
-//!   set-id or sticky bit); a new file gets 0o666 less the umask, as any
-//!   program's new file.
-//! * **Interruptions**: temporary files are named
-//!   `.dynocomp-<tag>-<pid>-<start>-<random>.tmp` and listed while they
-//!   exist; [`install_signal_cleanup`] removes them on SIGINT and SIGTERM,
-//!   and every write first removes stale ones in its directory
-//!   ([`sweep_stale`] says when a file is stale).
-//!
-//! While the content is produced, a second thread flushes what was written
-//! so far to the disk every [`WRITEBACK_PERIOD`], so that the final `fsync`
-//! has only the tail left: the disk writes overlap the computation instead
-//! of following it (74 MB take 0.10 s of `fsync` on this project's
-//! benchmark disk, as long as a whole TDMS → TDMS compensation).
+//! [`write_pair_atomic`] for two files that must change together): on any
+//! error the destination is untouched. A leaf of the chain.
 
 use anyhow::{anyhow, bail, Context, Result};
 use std::fs::File;
@@ -40,6 +14,12 @@ use tempfile::NamedTempFile;
 
 /// How often the write-back thread of [`write_atomic`] flushes the
 /// temporary file while it is being written.
+///
+/// While the content is produced, this second thread flushes what was written
+/// so far to the disk, so that the final `fsync` has only the tail left: the
+/// disk writes overlap the computation instead of following it (74 MB take
+/// 0.10 s of `fsync` on this project's benchmark disk, as long as a whole
+/// TDMS → TDMS compensation).
 pub const WRITEBACK_PERIOD: Duration = Duration::from_millis(10);
 
 /// The output name that means standard output.
@@ -190,6 +170,27 @@ fn same_inode(a: &Path, b: &Path) -> bool {
 
 /// Write `path` atomically with the bytes produced by `write`; `-` writes
 /// to standard output.
+///
+/// The content is written to a temporary file in the destination's directory
+/// and renamed over the destination only after it was written and flushed
+/// completely. On any error the temporary file is removed and the destination
+/// is untouched.
+///
+/// * **`-`** is standard output: the content goes straight to it, with no
+///   temporary file (what reached a pipe cannot be taken back).
+/// * **Symlinks** are followed: the final target is replaced, the link
+///   stays, and the temporary file goes in the target's directory.
+/// * **Special files** (devices, FIFOs, sockets, directories) are refused
+///   as outputs: renaming a regular file over `/dev/stdout` would replace
+///   the device node and send nothing down the pipe.
+/// * **Modes**: a replaced file keeps its permission bits (0o777; no
+///   set-id or sticky bit); a new file gets 0o666 less the umask, as any
+///   program's new file.
+/// * **Interruptions**: temporary files are named
+///   `.dynocomp-<tag>-<pid>-<start>-<random>.tmp` and listed while they
+///   exist; [`install_signal_cleanup`] removes them on SIGINT and SIGTERM,
+///   and every write first removes stale ones in its directory
+///   ([`sweep_stale`] says when a file is stale).
 pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
     write_atomic_output(path, |w, _| write(w))
 }

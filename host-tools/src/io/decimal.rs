@@ -1,16 +1,5 @@
-//! Decimal numbers of text files, parsed from bytes (issue #14, "CSV at disk
-//! speed").
-//!
-//! Most values in a DAQ's CSV export are short plain decimals (`-12.345678`,
-//! `1.953125e-5`). For those, [`parse_f64`] takes Clinger's fast path
-//! (W. D. Clinger, "How to read floating point numbers accurately", PLDI
-//! 1990): with at most 19 digits, a significand w ≤ 2^53 and a decimal
-//! exponent |e| ≤ 22, both w and 10^|e| are exact f64 values, so the single
-//! IEEE multiplication or division w·10^e is the correctly rounded value,
-//! the same bits as the standard library's parser. Everything else (more
-//! digits, larger exponents, `inf`, `nan`, non-ASCII text) goes to
-//! `str::parse::<f64>`, so the accepted language and every value are exactly
-//! the standard library's (checked against it in this module's tests).
+//! Decimal numbers of text files, parsed from bytes at disk speed
+//! ([`parse_f64`]), with exactly the standard library's values.
 
 /// 10^0 … 10^22, all exact in f64.
 const POW10: [f64; 23] = [
@@ -20,6 +9,13 @@ const POW10: [f64; 23] = [
 
 /// The f64 of a field, as `str::parse::<f64>` reads it after `str::trim`,
 /// or None where that fails (not a number, or not UTF-8).
+///
+/// Most values in a DAQ's CSV export are short plain decimals (`-12.345678`,
+/// `1.953125e-5`). For those it takes Clinger's fast path
+/// (`clinger_fast_path`). Everything else (more digits, larger exponents,
+/// `inf`, `nan`, non-ASCII text) goes to `str::parse::<f64>`, so the accepted
+/// language and every value are exactly the standard library's (checked
+/// against it in this module's tests).
 pub fn parse_f64(field: &[u8]) -> Option<f64> {
     match clinger_fast_path(field.trim_ascii()) {
         Some(v) => Some(v),
@@ -28,8 +24,14 @@ pub fn parse_f64(field: &[u8]) -> Option<f64> {
 }
 
 /// `[+-]? (d+ | d+ '.' d* | d* '.' d+) ([eE] [+-]? d+)?`, exactly rounded,
-/// when Clinger's fast path applies (module doc); None otherwise (the
-/// caller then asks the standard library, which decides).
+/// when Clinger's fast path applies; None otherwise (the caller then asks
+/// the standard library, which decides).
+///
+/// The fast path (W. D. Clinger, "How to read floating point numbers
+/// accurately", PLDI 1990): with at most 19 digits, a significand w ≤ 2^53
+/// and a decimal exponent |e| ≤ 22, both w and 10^|e| are exact f64 values,
+/// so the single IEEE multiplication or division w·10^e is the correctly
+/// rounded value, the same bits as the standard library's parser.
 fn clinger_fast_path(s: &[u8]) -> Option<f64> {
     let (neg, s) = match s.first()? {
         b'-' => (true, &s[1..]),

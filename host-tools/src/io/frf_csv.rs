@@ -1,25 +1,6 @@
-//! FRF CSV import/export (DESIGN.md, "CLI contract").
-//!
-//! Format: one header row, then one row per frequency line:
-//!
-//! ```text
-//! freq_hz,x_re,x_im,x_coh,y_re,y_im,z_re,z_im,z_coh
-//! 0.0,1.0,0.0,0.0,...
-//! ```
-//!
-//! `freq_hz` (Hz, strictly ascending, uniform or not), then for each axis
-//! present (x, y, z) `<a>_re`, `<a>_im` (the direct FRF G_aa, N/N) and
-//! optionally `<a>_coh` (coherence γ², 0..=1). The 3x3 matrix adds
-//! `<i><j>_re`, `<i><j>_im`, `<i><j>_coh` for channel i and force (hammer)
-//! direction j (`xy` = channel x, hammer y); `x_re` means `xx_re`, and one
-//! entry is spelled one way in a file. Column names are case-insensitive and
-//! may be quoted; the delimiter is `,` (`;` or a tab are accepted when the
-//! header uses them); blank lines are ignored. Every error names the file,
-//! the line and, for a value, the column.
-//!
-//! The writer spells direct-only sets as `x_re`, … (the files read before the
-//! matrix existed) and sets with cross entries as `xx_re`, `xy_re`, …, row by
-//! row.
+//! FRF CSV import/export (DESIGN.md, "CLI contract"): the format is
+//! [`parse_frf_csv`]'s, written by [`write_frf_csv`]. A leaf of the chain.
+//! Every error names the file, the line and, for a value, the column.
 
 use std::io::Write;
 use std::path::Path;
@@ -59,6 +40,22 @@ enum Kind {
 }
 
 /// Parse FRF CSV text; `source` names the input (file name) in error messages.
+///
+/// Format: one header row, then one row per frequency line:
+///
+/// ```text
+/// freq_hz,x_re,x_im,x_coh,y_re,y_im,z_re,z_im,z_coh
+/// 0.0,1.0,0.0,0.0,...
+/// ```
+///
+/// `freq_hz` (Hz, strictly ascending, uniform or not), then for each axis
+/// present (x, y, z) `<a>_re`, `<a>_im` (the direct FRF G_aa, N/N) and
+/// optionally `<a>_coh` (coherence γ², 0..=1). The 3x3 matrix adds
+/// `<i><j>_re`, `<i><j>_im`, `<i><j>_coh` for channel i and force (hammer)
+/// direction j (`xy` = channel x, hammer y); `x_re` means `xx_re`, and one
+/// entry is spelled one way in a file. Column names are case-insensitive and
+/// may be quoted; the delimiter is `,` (`;` or a tab are accepted when the
+/// header uses them); blank lines are ignored.
 pub fn parse_frf_csv(text: &str, source: &str) -> Result<Frf> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l)).filter(|(_, l)| !l.trim().is_empty());
@@ -311,6 +308,10 @@ fn unquote(s: &str) -> &str {
 /// Write an FRF CSV file atomically (nothing is left behind on error).
 /// Values are written in Rust's shortest round-trip form: reading the file
 /// back gives bit-identical values.
+///
+/// Direct-only sets are spelled `x_re`, … (the files read before the
+/// matrix existed) and sets with cross entries as `xx_re`, `xy_re`, …, row by
+/// row.
 pub fn write_frf_csv(path: &Path, frf: &Frf) -> Result<()> {
     let text = frf_csv_to_string(frf).with_context(|| format!("{}: not written", path.display()))?;
     super::atomic::write_atomic(path, |w: &mut dyn Write| {

@@ -1,18 +1,7 @@
 //! One state's FRF matrix from one file or from several (one per hammer
 //! direction, say): the files are read and their entries merged into one
-//! [`Frf`] (DESIGN.md, "Signal chain and mathematics").
-//!
-//! On the command line the files of one matrix are one `--frf` value, the
-//! names separated by commas (`--frf hx.uff,hy.uff,hz.uff`), so the two-state
-//! `--frf BEFORE --frf AFTER` keeps its meaning; [`split_frf_list`] splits such
-//! a value. A file name cannot contain a comma there.
-//!
-//! The merge refuses, with a message naming both files:
-//! - an entry G_ij given by two files (or twice in one list);
-//! - frequency lines that differ (number, or any line by more than 1e-6 of
-//!   the span): the files of one matrix come from one analyser set-up;
-//! - FRFs labelled with different force units (UFF records 9/10; FRF CSV is
-//!   N/N by its definition). Unlabelled FRFs are compared with nothing.
+//! [`Frf`] (DESIGN.md, "Signal chain and mathematics") by [`read_frf_arg`],
+//! [`read_frf_set`] and [`merge_frf_files`]. A leaf of the chain.
 
 use std::path::{Path, PathBuf};
 
@@ -93,6 +82,11 @@ pub fn read_frf_arg(value: &Path) -> Result<(Frf, [u8; 32])> {
 /// Split one `--frf` value into the files of one matrix: `a.uff,b.uff` →
 /// `[a.uff, b.uff]`. An empty name (`a.uff,,b.uff`, a trailing comma) or a
 /// file named twice is refused.
+///
+/// On the command line the files of one matrix are one `--frf` value, the
+/// names separated by commas (`--frf hx.uff,hy.uff,hz.uff`), so the two-state
+/// `--frf BEFORE --frf AFTER` keeps its meaning. A file name cannot contain a
+/// comma there.
 pub fn split_frf_list(value: &str) -> Result<Vec<PathBuf>> {
     let parts: Vec<&str> = value.split(',').collect();
     let mut out: Vec<PathBuf> = Vec::with_capacity(parts.len());
@@ -118,6 +112,13 @@ pub fn split_frf_list(value: &str) -> Result<Vec<PathBuf>> {
 /// first file's frequency lines. Refuses an empty list, an entry given twice,
 /// different frequency lines and different units, naming both files and
 /// what to do.
+///
+/// The merge refuses, with a message naming both files:
+/// - an entry G_ij given by two files (or twice in one list);
+/// - frequency lines that differ (number, or any line by more than 1e-6 of
+///   the span): the files of one matrix come from one analyser set-up;
+/// - FRFs labelled with different force units (UFF records 9/10; FRF CSV is
+///   N/N by its definition). Unlabelled FRFs are compared with nothing.
 pub fn merge_frf_files(files: &[FrfFile]) -> Result<Frf> {
     let Some(first) = files.first() else {
         bail!("no FRF file given");

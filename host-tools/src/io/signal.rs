@@ -1,4 +1,4 @@
-//! Streaming force records (issue #14): a [`SignalReader`] yields a record in
+//! Streaming force records: a [`SignalReader`] yields a record in
 //! blocks of samples, a [`SignalWriter`] takes them, so `compensate` holds a
 //! block, never the record. CSV ([`crate::io::signal_csv`]) and UFF 58 time
 //! histories ([`crate::io::uff_signal`]) implement both.

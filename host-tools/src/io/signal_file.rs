@@ -1,5 +1,5 @@
 //! Force-record files by format: opening a reader by extension or content,
-//! and a writer for an output format (issue #14).
+//! and a writer for an output format.
 
 use anyhow::{bail, Context, Result};
 use std::io::Write;

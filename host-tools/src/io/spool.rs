@@ -1,17 +1,7 @@
 //! A record read once (from a pipe) kept on disk so that it can be read a
 //! second time: `compensate --offline` runs its forward pass over the
-//! input, then reads the input again to write the output beside its times.
-//!
-//! [`Spooling`] wraps any [`SignalReader`]: every block it hands out is also
-//! appended, as little-endian f64 (the time, if any, then one value per
-//! channel, sample by sample), to an unnamed temporary file. After the last
-//! block [`Spooling::replay`] returns a [`SignalReader`] over that file that
-//! delivers the same samples, bit for bit. Cost: 8 bytes per sample and
-//! column on disk (freed when the replay is dropped), a few blocks of memory.
-//!
-//! The input's parsing and its errors (which name the input and the place)
-//! happen once, in the first reading; the replay only reads back numbers
-//! this process wrote.
+//! input, then reads the input again to write the output beside its times
+//! ([`TwoReadings`], [`Spooling`], [`Replay`]).
 
 use anyhow::{bail, Context, Result};
 use std::fs::File;
@@ -21,6 +11,13 @@ use std::path::Path;
 use super::signal::{Block, SignalReader};
 
 /// The first reading of a record, copied to disk as it goes.
+///
+/// Wraps any [`SignalReader`]: every block it hands out is also appended, as
+/// little-endian f64 (the time, if any, then one value per channel, sample by
+/// sample), to an unnamed temporary file. After the last block
+/// [`Spooling::replay`] returns a [`SignalReader`] over that file that
+/// delivers the same samples, bit for bit. Cost: 8 bytes per sample and
+/// column on disk (freed when the replay is dropped), a few blocks of memory.
 pub struct Spooling {
     inner: Box<dyn SignalReader>,
     axes: Vec<usize>,
@@ -93,6 +90,10 @@ impl SignalReader for Spooling {
 }
 
 /// The second reading of a [`Spooling`] record.
+///
+/// The input's parsing and its errors (which name the input and the place)
+/// happen once, in the first reading; the replay only reads back numbers
+/// this process wrote.
 pub struct Replay {
     file: BufReader<File>,
     axes: Vec<usize>,

@@ -1,35 +1,9 @@
-//! Force records as NI TDMS files (issue #14), read and written in a
-//! stream: memory does not grow with the record.
-//!
-//! The subset that DAQ software (NI-DAQmx logging, LabVIEW's TDMS Write,
-//! npTDMS, DIAdem exports) writes for analog channels: segments of a
-//! 28-byte lead-in (`TDSm`, ToC mask, version 4712/4713, next-segment and
-//! raw-data offsets), metadata (objects by path, raw-data indices, typed
-//! properties) and raw data; contiguous or interleaved; little- or
-//! big-endian; incremental metadata (an object list carried over from the
-//! previous segment, a raw-data index "same as before", properties added in
-//! later segments); raw data repeated in several chunks per segment. The
-//! channels read must be real numbers (i8…i64, u8…u64, f32, f64, with or
-//! without unit), unscaled by DAQmx: DAQmx raw data (the `NI_Scaling`
-//! properties, ADC codes to be scaled) is refused with a message saying so.
-//! Other channels of the file (strings, timestamps, DAQmx) are skipped.
+//! Force records as NI TDMS files, read ([`TdmsReader`]) and written
+//! ([`TdmsWriter`]) in a stream: memory does not grow with the record. A leaf
+//! of the chain, behind the `io` signal traits.
 //!
 //! Format: NI's "TDMS File Format Internal Structure" (public); no NI or
-//! third-party code. Why not a crate (checked 2026-11): `tdms` 0.3 reads
-//! raw data only as bytes and cannot write; `tedium` 0.2 (early stage, by
-//! its README) re-plans a read over every data block of the file on each
-//! offset read (quadratic when streaming a long record in blocks), must be
-//! told each channel's storage type, and reports errors without a place;
-//! `tdms-rs` 2.0 ends silently at a truncated segment and reads raw data in
-//! the machine's byte order only.
-//!
-//! Axis by channel name (`Fx`, `Force X`, `force_y`, … case-insensitive,
-//! or `--channels fx=NAME` / `fx=GROUP/NAME`); sample rate from the
-//! channel's `wf_increment`; `unit_string` N, kN or mN (scaled to N).
-//!
-//! The writer writes one interleaved little-endian f64 segment per block:
-//! full metadata in the first segment and whenever the block length
-//! changes (the last block), a bare lead-in otherwise.
+//! third-party code.
 
 use anyhow::{anyhow, bail, Context, Result};
 use std::collections::HashMap;
@@ -216,6 +190,15 @@ impl Src {
 }
 
 /// Walks the segments of a file, applying their metadata.
+///
+/// The subset that DAQ software (NI-DAQmx logging, LabVIEW's TDMS Write,
+/// npTDMS, DIAdem exports) writes for analog channels: segments of a
+/// 28-byte lead-in (`TDSm`, ToC mask, version 4712/4713, next-segment and
+/// raw-data offsets), metadata (objects by path, raw-data indices, typed
+/// properties) and raw data; contiguous or interleaved; little- or
+/// big-endian; incremental metadata (an object list carried over from the
+/// previous segment, a raw-data index "same as before", properties added in
+/// later segments); raw data repeated in several chunks per segment.
 struct Walker {
     src: Src,
     next: u64,
@@ -854,6 +837,11 @@ fn check_channels(w: &Walker, source: &str, picked: &[(usize, usize)]) -> Result
 
 /// A channel's data must be scaled real numbers; returns N per unit of its
 /// `unit_string` (N, kN, mN; 1 without one). `here` names the channel.
+///
+/// The channels read must be real numbers (i8…i64, u8…u64, f32, f64, with or
+/// without unit), unscaled by DAQmx: DAQmx raw data (the `NI_Scaling`
+/// properties, ADC codes to be scaled) is refused with a message saying so.
+/// Other channels of the file (strings, timestamps, DAQmx) are skipped.
 fn channel_scale(o: &Object, here: &str) -> Result<f64> {
     if o.daqmx {
         bail!(
@@ -908,6 +896,17 @@ fn check_rate(o: &Object, here: &str, name: &str, dt: &mut Option<(f64, String)>
 }
 
 /// A reader of the force channels of a TDMS file.
+///
+/// Axis by channel name (`Fx`, `Force X`, `force_y`, … case-insensitive,
+/// or `--channels fx=NAME` / `fx=GROUP/NAME`); sample rate from the
+/// channel's `wf_increment`; `unit_string` N, kN or mN (scaled to N).
+///
+/// Why not a crate (checked 2026-11): `tdms` 0.3 reads raw data only as bytes
+/// and cannot write; `tedium` 0.2 (early stage, by its README) re-plans a read
+/// over every data block of the file on each offset read (quadratic when
+/// streaming a long record in blocks), must be told each channel's storage
+/// type, and reports errors without a place; `tdms-rs` 2.0 ends silently at a
+/// truncated segment and reads raw data in the machine's byte order only.
 pub struct TdmsReader {
     source: String,
     axes: Vec<usize>,
@@ -1053,6 +1052,9 @@ impl SignalReader for TdmsReader {
 /// named `Fx`/`Fy`/`Fz`, with `wf_increment` = 1/fs, `wf_start_offset`
 /// (the first sample's time if the blocks carry times, else `t0_s`),
 /// `wf_samples` and `unit_string` N; interleaved segments, one per block.
+///
+/// Little-endian; full metadata in the first segment and whenever the block length changes
+/// (the last block), a bare lead-in otherwise.
 pub struct TdmsWriter<'w> {
     w: &'w mut dyn Write,
     axes: Vec<usize>,

@@ -1,38 +1,7 @@
 //! Universal File Format dataset 58 ("function at nodal DOF") FRF import/export,
 //! ASCII (58) and binary (58b), as exported by LMS Testlab / Simcenter, m+p,
-//! B&K and pyuff (DESIGN.md, "CLI contract").
-//!
-//! A UFF file is a sequence of blocks, each between two `    -1` lines; the
-//! line after the opening `-1` holds the dataset number (`58`, or `58b ...` for
-//! binary). Datasets other than 58 (151 header, 164 units, geometry, ...) are
-//! skipped. In a dataset 58:
-//!
-//! * function type 4 (FRF) and 6 (coherence) are used, others are skipped;
-//! * entry G_ij of the FRF matrix: the channel i comes from the response
-//!   direction, the force (hammer) direction j from the reference direction
-//!   (record 6), 1/2/3 = +X/+Y/+Z; a reference direction 0 (unknown) means the
-//!   direct FRF G_ii. A negative direction (-1/-2/-3) flips the sign of the FRF
-//!   (not of the coherence), so the FRF returned is always the +i response over
-//!   the +j force. Equal directions give [`Frf::axes`], different ones
-//!   [`Frf::cross`]; rotational directions (±4/±5/±6) are skipped;
-//! * FRFs of one file labelled with different force units (records 9/10) are
-//!   refused;
-//! * ordinate data types 2/4 (real single/double) and 5/6 (complex
-//!   single/double); even abscissa (min + i·increment, record 7) or uneven
-//!   (abscissa stored with every value);
-//! * the abscissa must be frequency (record 8 specific data type 18, or
-//!   unknown/general, units Hz if labelled), and FRF numerator and denominator
-//!   forces (records 9/10: reaction or excitation force, or unknown/general):
-//!   anything else (e.g. an accelerance) is refused with a message saying so.
-//!
-//! Binary 58b: the header line `58b byte_order fp_format n_ascii_lines n_bytes
-//! 0 0 0 0` is followed by the 11 ASCII records and then the raw values (byte
-//! order 1 = little, 2 = big endian; IEEE 754 only). The data size is computed
-//! from record 7 (some writers, pyuff among them, put a wrong `n_bytes`), and
-//! the closing `-1` may follow directly or after a line break. With an uneven
-//! abscissa the abscissa values have the precision of the ordinate (pyuff's
-//! convention). ASCII numbers are read split at blanks, falling back to the
-//! fixed Fortran field widths (E13.5 / E20.12) when fields touch.
+//! B&K and pyuff (DESIGN.md, "CLI contract"). A leaf of the chain: it reads and
+//! writes [`Frf`] and imports only `frf` and its `io` siblings.
 //!
 //! Every error is one line naming the file, the line, the dataset and record,
 //! and the problem. Parsers never panic, whatever the input.
@@ -503,6 +472,10 @@ impl DataForm {
 
 /// Read and check record 7, Format(3I10,3E13.5): a supported ordinate data
 /// type and spacing, and no more values than the file can hold.
+///
+/// Ordinate data types 2/4 (real single/double) and 5/6 (complex
+/// single/double); even abscissa (min + i·increment) or uneven (abscissa stored
+/// with every value).
 fn data_form(ctx: &Ctx, (off7, r7): (usize, &[u8])) -> Result<DataForm> {
     let Some((ord_type, num_pts, spacing, x_min, x_inc)) = record7(r7) else {
         bail!(
@@ -551,6 +524,12 @@ enum Target {
 
 /// The entry of an FRF or coherence with translational directions; an
 /// unknown reference direction (0) is taken as the direct FRF.
+///
+/// Function type 4 (FRF) and 6 (coherence) are used, others are skipped. Entry
+/// G_ij of the FRF matrix: the channel i comes from the response direction, the
+/// force (hammer) direction j from the reference direction (record 6),
+/// 1/2/3 = +X/+Y/+Z. Equal directions give [`Frf::axes`], different ones
+/// [`Frf::cross`]; rotational directions (±4/±5/±6) are skipped.
 fn target(ctx: &Ctx, dof: &DofId) -> Target {
     let DofId { func_type, rsp_dir, ref_dir } = *dof;
     let axis = match rsp_dir.abs() {
@@ -596,6 +575,14 @@ impl Values {
 
 /// Record 12 of a 58b dataset: the raw values of record 7's size, then the
 /// closing `-1`; the values are decoded only if `keep`.
+///
+/// The 58b header line `58b byte_order fp_format n_ascii_lines n_bytes 0 0 0 0`
+/// is followed by the 11 ASCII records and then the raw values (byte order
+/// 1 = little, 2 = big endian; IEEE 754 only). The data size is computed from
+/// record 7 (some writers, pyuff among them, put a wrong `n_bytes`), and the
+/// closing `-1` may follow directly or after a line break. With an uneven
+/// abscissa the abscissa values have the precision of the ordinate (pyuff's
+/// convention).
 fn binary_values(cur: &mut Cursor, ctx: &Ctx, form: &DataForm, h: BinHeader, keep: bool) -> Result<Values> {
     let data = cur.data;
     let (num_pts, total, double) = (form.num_pts, form.total, form.double);
@@ -702,6 +689,9 @@ fn check_abscissa(ctx: &Ctx, (off8, r8): (usize, &[u8])) -> Result<()> {
 /// Records 9 and 10 of an FRF: numerator and denominator must be forces
 /// (force over force, N/N). Returns the units as labelled, e.g. "N/N";
 /// None when either is unlabelled.
+///
+/// Reaction or excitation force, or unknown/general, are accepted; anything else
+/// (e.g. an accelerance) is refused with a message saying so.
 fn frf_units(ctx: &Ctx, recs: &Records) -> Result<Option<String>> {
     let mut labels = Vec::new();
     for (r, part) in [(8usize, "numerator"), (9, "denominator")] {
@@ -781,6 +771,9 @@ fn frequencies(ctx: &Ctx, form: &DataForm, v: &Values) -> Result<Vec<f64>> {
 
 /// An FRF dataset: H = (s_rsp · response) / (s_ref · force), the direction
 /// signs undone.
+///
+/// A negative direction (-1/-2/-3) flips the sign of the FRF (not of the
+/// coherence), so the FRF returned is always the +i response over the +j force.
 fn frf_found(form: &DataForm, dof: &DofId, v: &Values, entry: usize, freq: Vec<f64>, units: Option<String>) -> Found58 {
     let sign = dof.rsp_dir.signum() * if dof.ref_dir < 0 { -1 } else { 1 };
     let s = sign as f64;
@@ -819,6 +812,8 @@ fn coherence_found(ctx: &Ctx, form: &DataForm, v: &Values, entry: usize, freq: V
 /// Numbers of one ASCII data line: split at blanks; if a token does not
 /// parse (fields touching), the line is cut at the fixed Fortran widths.
 /// On failure returns the offending token.
+///
+/// The Fortran widths are those of the ASCII records (E13.5 / E20.12).
 pub(super) fn read_numbers(line: &[u8], widths: &[usize], out: &mut Vec<f64>) -> std::result::Result<(), String> {
     let Ok(text) = std::str::from_utf8(line) else {
         return Err(String::from_utf8_lossy(line).into_owned());
@@ -932,6 +927,11 @@ struct DatasetId<'a> {
 }
 
 /// Read the next block's `-1` and dataset number; None at the end of the file.
+///
+/// A UFF file is a sequence of blocks, each between two `    -1` lines; the
+/// line after the opening `-1` holds the dataset number (`58`, or `58b ...` for
+/// binary). Datasets other than 58 (151 header, 164 units, geometry, ...) are
+/// skipped.
 fn next_dataset<'a>(cur: &mut Cursor<'a>, source: &str) -> Result<Option<DatasetId<'a>>> {
     let bytes = cur.data;
     let (off, t) = loop {

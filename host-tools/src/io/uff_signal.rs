@@ -1,17 +1,7 @@
-//! Force records as UFF dataset 58/58b time histories (issue #14): one
-//! dataset per channel, function type 1 (time response), real ordinate
-//! (data types 2/4), even abscissa in seconds (record 8 specific data type
-//! 17 "time", or unknown/general). The axis comes from the response
-//! direction as for FRFs (±1/±2/±3, a negative direction flips the sign), or
-//! from `--channels` (by the dataset's ID line 1 or response node number).
-//! Datasets of other function types (and other dataset numbers) are skipped.
-//!
-//! Streaming: a first pass indexes the datasets (binary data is skipped by
-//! its length, ASCII data line by line, nothing kept); then every channel is
-//! read through its own file handle from its own data offset, block by block,
-//! so memory does not grow with the record. The writer spills each channel
-//! to a temporary file and writes the datasets one after the other at the
-//! end (the header needs the number of points).
+//! Force records as UFF dataset 58/58b time histories, one dataset per
+//! channel: read by [`UffReader`] and written by [`UffWriter`] in a stream, so
+//! memory does not grow with the record. A leaf of the chain, behind the `io`
+//! signal traits; the dataset records are those of [`super::uff`].
 
 use anyhow::{anyhow, bail, Context, Result};
 use std::collections::VecDeque;
@@ -437,6 +427,17 @@ fn one_record(
 }
 
 /// A reader of the time histories of a UFF file.
+///
+/// Function type 1 (time response), real ordinate (data types 2/4), even
+/// abscissa in seconds (record 8 specific data type 17 "time", or
+/// unknown/general). The axis comes from the response direction as for FRFs
+/// (±1/±2/±3, a negative direction flips the sign), or from `--channels` (by
+/// the dataset's ID line 1 or response node number). Datasets of other
+/// function types (and other dataset numbers) are skipped.
+///
+/// Streaming: a first pass indexes the datasets (binary data is skipped by
+/// its length, ASCII data line by line, nothing kept); then every channel is
+/// read through its own file handle from its own data offset, block by block.
 pub struct UffReader {
     source: String,
     chans: Vec<Channel>,

@@ -2,39 +2,8 @@
 //! modal 2x2 sections whose modes the three estimates share, each with a
 //! 2x3 input row and a 3x2 output column, plus 3x3 FIR taps for the fast
 //! poles; rounded to f32 and verified (DESIGN.md steps 6-7 for the matrix).
-//!
-//! Realization of one block (a 3-in, 3-out state space), all f64, the steps
-//! of [`crate::realize::modal`] with matrices for the input column and the
-//! output row:
-//! 1. complex Schur form A = Q T Qᴴ (iteration-limited);
-//! 2. the slow eigenvalues (|λ| ≥ ρ) moved to the front by adjacent swaps;
-//! 3. the clusters decoupled by T11 X − X T22 = −T12, and
-//!    B̃ = S⁻¹QᴴB, C̃ = CQS with S = [[I, X], [0, I]];
-//! 4. the fast cluster as taps H_m = C̃₂ T22^{m−1} B̃₂ (3x3, real), as many
-//!    as its tail needs (the delay chain's poles at z = 0 and any pole of
-//!    |z| ≲ 0.5);
-//! 5. the slow cluster diagonalized by the eigenvectors W of T11 (back
-//!    substitution; cond(W) checked): each eigenvalue λ gets an input row
-//!    β = (W⁻¹B̃₁)_λ (1x3) and an output column γ = (C̃₁W)_λ (3x1), its term
-//!    γβ/(z − λ). A conjugate pair (Im λ > 0) becomes a normal-form section
-//!    Δ = [[σ, ω], [−ω, σ]] (λ = 1 + σ + jω) with states (Re x, −Im x):
-//!    input rows (Re β, −Im β), output columns (2 Re γ, 2 Im γ); a real
-//!    pole has a real rank-1 term γβ (its phase removed), and real poles go
-//!    two to a diagonal section. β and γ are scaled to equal norms: f32
-//!    rounding is relative, so the scale only keeps the states O(input).
-//!
-//! Blocks (the rows of a combined compensator, [`crate::design::mimo`])
-//! are realized one by one, so poles of different blocks never meet in one
-//! eigenvector matrix, and their sections, taps and direct terms are
-//! concatenated and summed. Each block takes, among its fast/slow splits
-//! ([`crate::realize::modal::thresholds`]), the one whose f32 rounding
-//! verifies best against the block; the whole filter is then verified
-//! against the whole f64 compensator: every f32 section stable with margin
-//! ([`POLE_MARGIN`]), pole displacement ([`MAX_POLE_SHIFT`] of |1 − λ|),
-//! frequency response per entry against the f64 design relative to its
-//! row's peak ([`MAX_FREQ_ERROR`]), and a time-domain run of the real f32
-//! kernel ([`MimoFilter::step`]) against the f64 simulation relative to
-//! each output's RMS ([`MAX_TIME_ERROR`]). An image that fails is refused.
+//! Part of the realize stage: [`realize_blocks`] takes the design's state
+//! spaces and reuses the per-axis steps of [`crate::realize::modal`].
 
 use anyhow::{bail, Context, Result};
 use dynocomp_core::mimo::{Matrix3, MimoFilter, MimoSection, MimoState, MAX_MIMO_FIR, MAX_MIMO_SECTIONS};
@@ -159,7 +128,7 @@ impl MimoRealization {
     }
 }
 
-/// Verification figures of the f32 3x3 filter (module doc).
+/// Verification figures of the f32 3x3 filter (the checks of [`realize_blocks`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct MimoVerification {
     /// Largest pole radius of the f32 sections.
@@ -237,8 +206,8 @@ fn decouple(t: &DMatrix<Complex64>, m: usize) -> DMatrix<Complex64> {
     x
 }
 
-/// The fast cluster's taps H_m = C₂ T22^{m−1} B₂ (module doc, step 4), the
-/// shortest length whose tail is below [`FIR_TAIL_TOL`] of Σ‖H_m‖ (or
+/// The fast cluster's taps H_m = C₂ T22^{m−1} B₂ ([`realize_split`], step 4),
+/// the shortest length whose tail is below [`FIR_TAIL_TOL`] of Σ‖H_m‖ (or
 /// [`FIR_TAIL_TOL_FULL`] at [`MAX_MIMO_FIR`]), and the tail's relative size.
 fn fast_taps(
     t22: &DMatrix<Complex64>,
@@ -277,7 +246,20 @@ fn fast_taps(
     Ok((out, tail(len) / total))
 }
 
-/// Realize one block with the fast/slow threshold `rho` (module doc).
+/// Realize one block (a 3-in, 3-out state space) with the fast/slow
+/// threshold `rho`, all f64: the steps of [`crate::realize::modal`] with
+/// matrices for the input column and the output row:
+/// 1. complex Schur form A = Q T Qᴴ (iteration-limited);
+/// 2. the slow eigenvalues (|λ| ≥ ρ) moved to the front by adjacent swaps;
+/// 3. the clusters decoupled by T11 X − X T22 = −T12, and
+///    B̃ = S⁻¹QᴴB, C̃ = CQS with S = [[I, X], [0, I]];
+/// 4. the fast cluster as taps H_m = C̃₂ T22^{m−1} B̃₂ (3x3, real), as many
+///    as its tail needs (the delay chain's poles at z = 0 and any pole of
+///    |z| ≲ 0.5);
+/// 5. the slow cluster diagonalized by the eigenvectors W of T11 (back
+///    substitution; cond(W) checked): each eigenvalue λ gets an input row
+///    β = (W⁻¹B̃₁)_λ (1x3) and an output column γ = (C̃₁W)_λ (3x1), its term
+///    γβ/(z − λ), realized by [`sections_of`].
 fn realize_split(ss: &MimoStateSpace, rho: f64) -> Result<MimoRealization> {
     let c64 = |m: &DMatrix<f64>| m.map(|v| Complex64::new(v, 0.0));
     let (q, t, m) = ordered_schur(&ss.a, rho)?;
@@ -315,7 +297,15 @@ fn balance(beta: &DVector<Complex64>, gamma: &DVector<Complex64>) -> (DVector<Co
     (beta * Complex64::new(s, 0.0), gamma / Complex64::new(s, 0.0))
 }
 
-/// The kernel's sections of the modes (λ, β, γ) (module doc, step 5).
+/// The kernel's sections of the modes (λ, β, γ) ([`realize_split`], step 5).
+///
+/// A conjugate pair (Im λ > 0) becomes a normal-form section
+/// Δ = [[σ, ω], [−ω, σ]] (λ = 1 + σ + jω) with states (Re x, −Im x):
+/// input rows (Re β, −Im β), output columns (2 Re γ, 2 Im γ); a real
+/// pole has a real rank-1 term γβ (its phase removed), and real poles go
+/// two to a diagonal section. β and γ are scaled to equal norms
+/// ([`balance`]): f32 rounding is relative, so the scale only keeps the
+/// states O(input).
 fn sections_of(
     modes: &[(Complex64, DVector<Complex64>, DVector<Complex64>)],
 ) -> Result<(Vec<MimoSection64>, Vec<Complex64>)> {
@@ -408,7 +398,7 @@ impl MimoReference {
     }
 }
 
-/// Round `real` to f32 and verify it against `reference` (module doc).
+/// Round `real` to f32 and verify it against `reference` (the checks of [`realize_blocks`]).
 pub fn quantize(real: &MimoRealization, reference: &MimoReference) -> Result<(MimoFilter, MimoVerification)> {
     let sections: Vec<MimoSection> = real.sections.iter().map(MimoSection64::round).collect();
     let d: Matrix3 = real.d.map(|r| r.map(|v| v as f32));
@@ -491,7 +481,7 @@ pub fn quantize(real: &MimoRealization, reference: &MimoReference) -> Result<(Mi
 }
 
 /// Verify an f32 filter against the f64 compensator `ss` it realizes, over
-/// 0..`f_band_hz` at `fs_hz` (module doc: stability margin, frequency
+/// 0..`f_band_hz` at `fs_hz` ([`realize_blocks`]: stability margin, frequency
 /// response per entry, time-domain run of the kernel): an error where it
 /// deviates beyond the limits.
 pub fn verify_filter(filter: &MimoFilter, ss: &MimoStateSpace, fs_hz: f64, f_band_hz: f64) -> Result<MimoVerification> {
@@ -541,8 +531,21 @@ fn block_candidates(ss: &MimoStateSpace) -> Result<Vec<MimoRealization>> {
 }
 
 /// Realize the compensator given as `blocks` (their sum, block diagonal)
-/// and round it to f32, verified over 0..`f_band_hz` at `fs_hz` (module
-/// doc). Per block the split that verifies best in f32 is kept.
+/// and round it to f32, verified over 0..`f_band_hz` at `fs_hz`. Per block
+/// the split that verifies best in f32 is kept.
+///
+/// Blocks (the rows of a combined compensator, [`crate::design::mimo`])
+/// are realized one by one, so poles of different blocks never meet in one
+/// eigenvector matrix, and their sections, taps and direct terms are
+/// concatenated and summed. Each block takes, among its fast/slow splits
+/// (`crate::realize::modal::thresholds`), the one whose f32 rounding
+/// verifies best against the block; the whole filter is then verified
+/// against the whole f64 compensator: every f32 section stable with margin
+/// ([`POLE_MARGIN`]), pole displacement ([`MAX_POLE_SHIFT`] of |1 − λ|),
+/// frequency response per entry against the f64 design relative to its
+/// row's peak ([`MAX_FREQ_ERROR`]), and a time-domain run of the real f32
+/// kernel ([`MimoFilter::step`]) against the f64 simulation relative to
+/// each output's RMS ([`MAX_TIME_ERROR`]). An image that fails is refused.
 pub fn realize_blocks(
     blocks: &[MimoStateSpace],
     fs_hz: f64,

@@ -3,19 +3,6 @@
 //! DAQ's sigma-delta decimation filter, modelled as an ideal zero-phase brick
 //! wall at [`BRICK_WALL_FRACTION`]·fs, then sampling at fs (noise and ADC
 //! quantization come after, see [`super::measurement`]).
-//!
-//! The continuous applied force is the piecewise-linear interpolant of its
-//! fine samples (rate fs·oversample), which is also what the dynamometer model
-//! integrates exactly ([`super::Dynamometer::measure`]). Its spectrum below
-//! the brick wall is the fine samples' spectrum × sinc²(πf/f_fine), so the
-//! band-limited truth carries that factor: then, below 0.45 fs, the sampled
-//! truth and the sampled measurement are related exactly by G(j2πf)·B(j2πf)
-//! (B the analog front end), as they are in a real chain.
-//!
-//! The brick wall is applied by FFT to the whole fine record, with a lead-in
-//! of zeros (the force is zero before the cut starts) and a lead-out whose
-//! second half is tapered to zero, so that the circular FFT joins zero to
-//! zero; both are dropped afterwards.
 
 use anyhow::{bail, Context, Result};
 use num_complex::Complex64;
@@ -184,6 +171,14 @@ impl AntiAlias {
     /// `force_fine` (rate fs·oversample, including any analog front end)
     /// already computed, e.g. by a drifting model
     /// ([`super::drift::measure_drifting`]).
+    ///
+    /// The continuous applied force is the piecewise-linear interpolant of its
+    /// fine samples (rate fs·oversample), which is also what the dynamometer model
+    /// integrates exactly ([`super::Dynamometer::measure`]). Its spectrum below
+    /// the brick wall is the fine samples' spectrum × sinc²(πf/f_fine), so the
+    /// band-limited truth carries that factor: then, below 0.45 fs, the sampled
+    /// truth and the sampled measurement are related exactly by G(j2πf)·B(j2πf)
+    /// (B the analog front end), as they are in a real chain.
     pub fn acquire_response(
         &self,
         force_fine: &[f64],
@@ -216,6 +211,10 @@ impl AntiAlias {
 /// Zero-phase filter `gain(|f|)` applied by FFT to `x` (rate `f_fine`) with
 /// EDGE_SAMPLES·os zeros in front and the last EDGE_SAMPLES/2·os samples
 /// tapered to zero (raised cosine); returns the filtered samples of `x`.
+///
+/// The lead-in is zeros because the force is zero before the cut starts; the
+/// taper makes the circular FFT join zero to zero; both are dropped
+/// afterwards.
 fn band_limit(x: &[f64], f_fine: f64, os: usize, gain: impl Fn(f64) -> f64) -> Vec<f64> {
     let lead = EDGE_SAMPLES * os;
     let taper = (EDGE_SAMPLES / 2 * os).min(x.len());

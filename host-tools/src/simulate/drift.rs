@@ -1,24 +1,6 @@
-//! Set-ups whose sensor modes move (issue #15): the workpiece loses mass
-//! while it is machined, so the dynamometer's modes drift during the cut.
-//!
-//! **Sensor modes of a simulated axis** (the same rule as the design's,
-//! [`crate::design::sensitivity`], applied to the true modes): the main mode is the
-//! one with the largest residue, the sensor modes are those whose natural
-//! frequency is at least [`crate::fit::modes::SENSOR_FRACTION`] × the main
-//! mode's; machine-structure modes stay put. A shift by the relative δ
-//! multiplies their natural frequencies by (1 + δ) and keeps their damping
-//! ratio and residue (static share): a change of mass at constant stiffness.
-//!
-//! **Drifting record** ([`measure_drifting`]): the shift goes from 0 at
-//! `start_s` to δ at `end_s` with the modal mass linear in time (constant
-//! material removal rate: 1/f² linear in t, [`Drift::shift_at`]) and is
-//! constant outside. Each mode is
-//! integrated as its own 2x2 system `ẍ + 2ζωẋ + ω²x = rω²u` (the simulator's
-//! exact first-order-hold step, [`ModeStep`]), its ω and ζ updated per block
-//! of [`DRIFT_BLOCK`] fine samples (ω taken at the block's middle); across a
-//! block boundary the state (x, ẋ) is kept, so displacement and velocity are
-//! continuous, and only the step matrices are derived again. A constant
-//! model (no drift) reproduces [`Dynamometer::measure`] bit for bit.
+//! Set-ups whose sensor modes move: the workpiece loses mass while it is
+//! machined, so the dynamometer's modes drift during the cut
+//! ([`simulate_drifting`], [`measure_drifting`]).
 
 use anyhow::{bail, Result};
 
@@ -30,14 +12,24 @@ use crate::frf::Frf;
 /// Fine samples per block of constant modal parameters in a drifting record.
 pub const DRIFT_BLOCK: usize = 64;
 
-/// Indices of the sensor modes of `dyn_` (module doc).
+/// Indices of the sensor modes of `dyn_`.
+///
+/// The same rule as the design's ([`crate::design::sensitivity`]), applied
+/// to the true modes: the main mode is the one with the largest residue, the
+/// sensor modes are those whose natural frequency is at least
+/// [`crate::fit::modes::SENSOR_FRACTION`] × the main mode's;
+/// machine-structure modes stay put.
 pub fn sensor_modes(dyn_: &Dynamometer) -> Vec<usize> {
     let main = dyn_.main_mode();
     dyn_.modes.iter().enumerate().filter(|(_, m)| m.fn_hz >= SENSOR_FRACTION * main.fn_hz).map(|(i, _)| i).collect()
 }
 
-/// `dyn_` with its sensor modes moved by the relative shift `delta`
-/// (module doc); the modes stay sorted by frequency.
+/// `dyn_` with its sensor modes ([`sensor_modes`]) moved by the relative
+/// shift `delta`; the modes stay sorted by frequency.
+///
+/// A shift by the relative δ multiplies their natural frequencies by
+/// (1 + δ) and keeps their damping ratio and residue (static share): a
+/// change of mass at constant stiffness.
 pub fn shift_sensor_modes(dyn_: &Dynamometer, delta: f64) -> Dynamometer {
     let idx = sensor_modes(dyn_);
     let mut modes = dyn_.modes.clone();
@@ -88,9 +80,19 @@ impl Drift {
 }
 
 /// Response of `dyn_` to `force` (rate `fs_hz`, linear between samples, from
-/// rest) while its sensor modes drift by `drift` (module doc). Mode k's
-/// parameters on the step from sample j to j + 1 are those of the block
-/// containing j, at the time of the block's middle.
+/// rest) while its sensor modes drift by `drift` ([`shift_sensor_modes`]).
+/// Mode k's parameters on the step from sample j to j + 1 are those of the
+/// block containing j, at the time of the block's middle.
+///
+/// The shift goes from 0 at `start_s` to δ at `end_s` with the modal mass
+/// linear in time (constant material removal rate: 1/f² linear in t,
+/// [`Drift::shift_at`]) and is constant outside. Each mode is integrated as
+/// its own 2x2 system `ẍ + 2ζωẋ + ω²x = rω²u` (the simulator's exact
+/// first-order-hold step, [`ModeStep`]), its ω and ζ updated per block of
+/// [`DRIFT_BLOCK`] fine samples; across a block boundary the state (x, ẋ)
+/// is kept, so displacement and velocity are continuous, and only the step
+/// matrices are derived again. A constant model (no drift) reproduces
+/// [`Dynamometer::measure`] bit for bit.
 pub fn measure_drifting(dyn_: &Dynamometer, drift: &Drift, force: &[f64], fs_hz: f64) -> Vec<f64> {
     let sensor = sensor_modes(dyn_);
     let h = 1.0 / fs_hz;
@@ -141,7 +143,7 @@ pub struct DriftOutput {
 }
 
 /// Simulate `seed` with `params` on `dyno` (the set-up before the drift)
-/// while its sensor modes drift by `drift` (module doc). Refused with an
+/// while its sensor modes drift by `drift` ([`measure_drifting`]). Refused with an
 /// analog front end in the chain (only the DAQ's brick wall or none).
 pub fn simulate_drifting(
     seed: u64,

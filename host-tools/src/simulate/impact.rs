@@ -1,18 +1,6 @@
 //! Simulated impact-hammer tests: H1 FRF estimate and coherence from averaged
-//! auto- and cross-spectra, line by line.
-//!
-//! Per impact i and line f the analyser sees the hammer force
-//! `X_i(f) = a_i·S_i(f) + n_x` and the dynamometer output
-//! `Y_i(f) = G(f)·a_i·S_i(f) + n_y`, with a_i the impact strength (random spread),
-//! `|S_i(f)| = 1/sqrt(1 + (f/fc_i)^(2·order))` the hammer tip's spectrum (flat to
-//! the cutoff fc_i, which jitters per impact, then falling), and n_x, n_y
-//! circular complex Gaussian noise. The output noise is white in the flat band
-//! (`output_noise_rel`, relative to the flat hammer level) and grows towards
-//! 0 Hz (charge-amplifier drift/AC coupling), reaching `dc_noise_factor` times
-//! that at line 0. Then `Gxx = Σ|X|²`, `Gyy = Σ|Y|²`, `Gxy = Σ X̄·Y`,
-//! `H1 = Gxy/Gxx`, `γ² = |Gxy|²/(Gxx·Gyy)`. Coherence therefore falls where the
-//! hammer spectrum rolls off, at anti-resonances (|G| small) and at low
-//! frequency, as in a real test; it is never invented.
+//! auto- and cross-spectra, line by line ([`impact_test_channels`] and its
+//! single-channel and three-axis forms).
 
 use num_complex::Complex64;
 use rand::SeedableRng;
@@ -127,6 +115,19 @@ pub fn impact_test_fn(
 /// noise; `g(f_hz, out)` writes the channels' true responses at `f_hz` into
 /// `out`. Returns (H1, coherence) per channel. With one channel this is
 /// [`impact_test_fn`], draw for draw.
+///
+/// Per impact i and line f the analyser sees the hammer force
+/// `X_i(f) = a_i·S_i(f) + n_x` and the dynamometer output
+/// `Y_i(f) = G(f)·a_i·S_i(f) + n_y`, with a_i the impact strength (random spread),
+/// `|S_i(f)| = 1/sqrt(1 + (f/fc_i)^(2·order))` the hammer tip's spectrum (flat to
+/// the cutoff fc_i, which jitters per impact, then falling), and n_x, n_y
+/// circular complex Gaussian noise. The output noise is white in the flat band
+/// (`output_noise_rel`, relative to the flat hammer level) and grows towards
+/// 0 Hz (charge-amplifier drift/AC coupling), reaching `dc_noise_factor` times
+/// that at line 0. Then `Gxx = Σ|X|²`, `Gyy = Σ|Y|²`, `Gxy = Σ X̄·Y`,
+/// `H1 = Gxy/Gxx`, `γ² = |Gxy|²/(Gxx·Gyy)`. Coherence therefore falls where the
+/// hammer spectrum rolls off, at anti-resonances (|G| small) and at low
+/// frequency, as in a real test; it is never invented.
 pub fn impact_test_channels(
     g: &dyn Fn(f64, &mut [Complex64]),
     n_channels: usize,

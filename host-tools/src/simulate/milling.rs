@@ -1,23 +1,6 @@
 //! Mechanistic milling forces (Altintas, *Manufacturing Automation*, ch. 2):
-//! linear edge-force model integrated along the axial depth in slices.
-//!
-//! Conventions (Altintas): feed along +x, the tool turns clockwise seen from
-//! the spindle, the immersion angle φ is measured clockwise from +y. Tooth j at
-//! height z has φ_j(z,t) = Ω·t + j·2π/Z − k_β·z with k_β = 2·tan β / D. In the
-//! engagement window φ_st ≤ φ ≤ φ_ex, with chip thickness h > 0:
-//! ```text
-//! dFt = (Kt·h + Kte)·dz   dFr = (Kr·h + Kre)·dz   dFa = (Ka·h + Kae)·dz
-//! dFx = −dFt·cos φ − dFr·sin φ
-//! dFy = +dFt·sin φ − dFr·cos φ
-//! dFz = +dFa
-//! ```
-//! Chip thickness `h = c·sin φ + (ρ_j − ρ_{j+1}) + Δh_chatter`: ρ_j is tooth j's
-//! radial offset from runout, ρ_j = ρ·cos(λ − j·2π/Z) (tooth j+1 is the one that
-//! cut the surface before tooth j), and chatter adds the regenerative term
-//! `[x(t−T) − x(t)]·sin φ + [y(t−T) − y(t)]·cos φ` of a tool vibration at the
-//! chatter frequency with a logistic growing amplitude (T = tooth period).
-//! A tooth with h ≤ 0 is out of the cut (no force, no edge force). Ramp-in
-//! scales the whole force by a smoothstep over the first revolutions.
+//! linear edge-force model integrated along the axial depth in slices
+//! ([`milling_force`]).
 
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -197,6 +180,24 @@ impl MillingParams {
 
 /// Cutting forces (Fx, Fy, Fz) in N at `n` samples `t_k = k/fs_hz` from t = 0
 /// (tooth 0 at φ = 0 at t = 0).
+///
+/// Conventions (Altintas): feed along +x, the tool turns clockwise seen from
+/// the spindle, the immersion angle φ is measured clockwise from +y. Tooth j at
+/// height z has φ_j(z,t) = Ω·t + j·2π/Z − k_β·z with k_β = 2·tan β / D. In the
+/// engagement window φ_st ≤ φ ≤ φ_ex, with chip thickness h > 0:
+/// ```text
+/// dFt = (Kt·h + Kte)·dz   dFr = (Kr·h + Kre)·dz   dFa = (Ka·h + Kae)·dz
+/// dFx = −dFt·cos φ − dFr·sin φ
+/// dFy = +dFt·sin φ − dFr·cos φ
+/// dFz = +dFa
+/// ```
+/// Chip thickness `h = c·sin φ + (ρ_j − ρ_{j+1}) + Δh_chatter`: ρ_j is tooth j's
+/// radial offset from runout, ρ_j = ρ·cos(λ − j·2π/Z) (tooth j+1 is the one that
+/// cut the surface before tooth j), and chatter adds the regenerative term
+/// `[x(t−T) − x(t)]·sin φ + [y(t−T) − y(t)]·cos φ` of a tool vibration at the
+/// chatter frequency with a logistic growing amplitude (T = tooth period).
+/// A tooth with h ≤ 0 is out of the cut (no force, no edge force). Ramp-in
+/// scales the whole force by a smoothstep over the first revolutions.
 pub fn milling_force(p: &MillingParams, fs_hz: f64, n: usize) -> [Vec<f64>; 3] {
     let z_teeth = p.teeth.max(1);
     let pitch = 2.0 * PI / z_teeth as f64;

@@ -1,31 +1,10 @@
-//! Synthetic dynamometers, impact tests and milling forces with known truth.
-//!
-//! The simulator is the project's ground truth: it is computed in f64 and is
-//! independent of the compensator (it never calls `dynocomp_core`'s kernel).
-//!
-//! - [`dynamometer`]: modal models G(s) with unit DC gain per axis, random or
-//!   explicit, their FRF and exact (first-order-hold) time response;
-//! - [`plate`]: the physical 3x3 dynamometer (a rigid plate and workpiece on
-//!   four 3-component sensors, a base on the table) with crosstalk, the
-//!   impact tests of all nine FRFs, and the exact 3x3 inverse's noise floor;
-//! - [`impact`]: simulated impact-hammer tests (H1 and coherence from averaged
-//!   spectra);
-//! - [`milling`]: mechanistic milling forces (Altintas) with helix, runout,
-//!   ramp-in and chatter;
-//! - [`measurement`]: measurement noise (variance R) and ADC quantization;
-//! - [`simulate`]: all of it from one seed; [`run`] writes the files of
-//!   `dynocomp simulate`.
-//!
-//! - [`chain`]: the acquisition chain (analog front end, the DAQ's brick wall).
-//!
-//! Time records: the true force is generated at `fs·oversample`, passed through
-//! each axis's model at that rate (exact for a force linear between the fine
-//! samples) and the analog front end if any, then both the force and the
-//! dynamometer output go through the DAQ's zero-phase brick wall at 0.45 fs and
-//! are taken every `oversample`-th sample: `measured[k]` is the band-limited
-//! response at `t_k = k/fs` and `true[k]` the applied force through the same
-//! band limit at the same instant (DESIGN.md, "Accuracy, stated one way
-//! everywhere"). Noise and quantization are added after the filter.
+//! Synthetic dynamometers, impact tests and milling forces with known truth:
+//! the project's ground truth, computed in f64 and independent of the
+//! compensator (it never calls `dynocomp_core`'s kernel, and imports only the
+//! leaves of the chain). [`dynamometer`] and [`plate`] give the plants,
+//! [`impact`] the hammer tests, [`milling`] the forces, [`chain`] and
+//! [`measurement`] the acquisition; [`simulate`] runs all of it from one seed
+//! and [`run`] writes the files of `dynocomp simulate`.
 
 pub mod chain;
 pub mod drift;
@@ -265,6 +244,15 @@ pub fn simulate(seed: u64, params: &SimParams) -> Result<SimOutput> {
 }
 
 /// As [`simulate`], with a given dynamometer.
+///
+/// Time records: the true force is generated at `fs·oversample`, passed through
+/// each axis's model at that rate (exact for a force linear between the fine
+/// samples) and the analog front end if any, then both the force and the
+/// dynamometer output go through the DAQ's zero-phase brick wall at 0.45 fs and
+/// are taken every `oversample`-th sample: `measured[k]` is the band-limited
+/// response at `t_k = k/fs` and `true[k]` the applied force through the same
+/// band limit at the same instant (DESIGN.md, "Accuracy, stated one way
+/// everywhere"). Noise and quantization are added after the filter.
 pub fn simulate_with(seed: u64, params: &SimParams, dyno: MultiAxisDynamometer) -> Result<SimOutput> {
     params.validate()?;
     let ip = &params.impact;

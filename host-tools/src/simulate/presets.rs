@@ -1,24 +1,5 @@
-//! The seed paper's experiments as simulator presets (`simulate --preset`).
-//!
-//! One 9257A-like set-up for all of them (paper §2, Table 1, Fig. 3): the
-//! dynamometer's own modes near 2.5 kHz (x, y) and 3.5 kHz (z), a few
-//! machine-tool modes between 280 and 650 Hz, measurement noise
-//! R = 0.0519 N² (§4) and an impact test averaged over 7 impacts with lines
-//! to 4096 Hz. The mode table is ours, chosen to resemble Fig. 3 (the paper
-//! prints no modal parameters): in particular its machine modes make |G − 1|
-//! reach 5 % near 200 Hz, the paper's "only forces below 200 Hz measurable".
-//!
-//! The experiments:
-//! - `sine-1185`: the shaker's pure 1185 Hz sine (Fig. 8);
-//! - `chirp-650`, `chirp-1300`: linear sweeps 10-650 Hz and 10-1300 Hz (Fig. 9);
-//! - `cut-1`, `cut-2`, `cut-3`: the cutting tests of Table 2.
-//!
-//! Table 2 gives tool, ap, ae, feed (mm/min) and speed. The feed per tooth is
-//! feed/(rpm·Z). The G2CS2/G2CS4 end mills have 2 and 4 teeth and a 30° helix.
-//! The paper does not say which way the tool cut; we take test 2 ("flank
-//! milling") as down milling and test 3 ("side milling") as up milling, so
-//! the two tests differ as in the paper only by how the tooth engages.
-//! Cutting coefficients are those of steel ([`MillingParams::default`]).
+//! The seed paper's experiments as simulator presets (`simulate --preset`):
+//! [`preset`] by name ([`NAMES`]), all on one set-up ([`dynamometer_9257a`]).
 
 use anyhow::{bail, Result};
 
@@ -44,16 +25,27 @@ pub struct Preset {
     pub design_flags: Vec<String>,
 }
 
-/// Names of every preset, in the paper's order.
+/// Names of every preset, in the paper's order:
+/// - `sine-1185`: the shaker's pure 1185 Hz sine (Fig. 8);
+/// - `chirp-650`, `chirp-1300`: linear sweeps 10-650 Hz and 10-1300 Hz (Fig. 9);
+/// - `cut-1`, `cut-2`, `cut-3`: the cutting tests of Table 2.
 pub const NAMES: [&str; 6] = ["sine-1185", "chirp-650", "chirp-1300", "cut-1", "cut-2", "cut-3"];
 
 fn mode(fn_hz: f64, zeta: f64, residue: f64) -> Mode {
     Mode { fn_hz, zeta, residue }
 }
 
-/// The 9257A-like table dynamometer on the machine (module doc): per axis,
+/// The 9257A-like table dynamometer on the machine: per axis,
 /// machine-tool modes with small residues and the transducer's main mode
 /// carrying the rest of the unit static gain.
+///
+/// One 9257A-like set-up for all presets (paper §2, Table 1, Fig. 3): the
+/// dynamometer's own modes near 2.5 kHz (x, y) and 3.5 kHz (z), a few
+/// machine-tool modes between 280 and 650 Hz, measurement noise
+/// R = 0.0519 N² (§4) and an impact test averaged over 7 impacts with lines
+/// to 4096 Hz. The mode table is ours, chosen to resemble Fig. 3 (the paper
+/// prints no modal parameters): in particular its machine modes make |G − 1|
+/// reach 5 % near 200 Hz, the paper's "only forces below 200 Hz measurable".
 pub fn dynamometer_9257a() -> MultiAxisDynamometer {
     let axis = |mut modes: Vec<Mode>, main_hz: f64, main_zeta: f64| {
         let others: f64 = modes.iter().map(|m| m.residue).sum();
@@ -100,6 +92,13 @@ fn base(duration_s: f64) -> SimParams {
 }
 
 /// A Table 2 cutting test: D (mm), teeth, ap, ae (mm), feed (mm/min), rpm.
+///
+/// Table 2 gives tool, ap, ae, feed (mm/min) and speed. The feed per tooth is
+/// feed/(rpm·Z). The G2CS2/G2CS4 end mills have 2 and 4 teeth and a 30° helix.
+/// The paper does not say which way the tool cut; we take test 2 ("flank
+/// milling") as down milling and test 3 ("side milling") as up milling, so
+/// the two tests differ as in the paper only by how the tooth engages.
+/// Cutting coefficients are those of steel ([`MillingParams::default`]).
 fn cutting(
     diameter_mm: f64,
     teeth: usize,

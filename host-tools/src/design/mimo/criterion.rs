@@ -1,26 +1,6 @@
 //! The predicted in-band error of each output axis of a 3x3 compensator
 //! ([`crate::design::criterion`] with the crosstalk counted), and the choice
 //! of q = (q_x, q_y, q_z) by it.
-//!
-//! For output axis i, a compensator H (3x3, or a per-axis one whose row i is
-//! H_ii·e_iᵀ) on the plant Ĝ with declared latency L predicts
-//!
-//! J_i = Σ_f Σ_j (P_j(f)/P_i)·|(H(e^{jω})·Ĝ(jω)·e^{jωL} − I)_ij|²
-//!     + (2/fs)·(W_i/P_i)·Σ_j R_j·mean_f |H_ij(e^{jω})|²,
-//!
-//! ω = 2πf over the lines f of the row's compensated band of width W_i,
-//! for uncorrelated forces with power P_j(f) (N²) in line f's cell, P_i the
-//! in-band power of force i, and white measurement noise of variance R_j
-//! on channel j: the distortion of force i, the crosstalk of the other
-//! forces into it, and the amplified noise, relative to force i's variance.
-//! By default the forces are flat, P_j(f) = F_j²/n on n lines for an RMS
-//! F_j; with F_x = F_y = F_z this is DESIGN.md's criterion with every entry
-//! of the row counted. With a representative record of the cut
-//! ([`ForceWeights::Record`]) P_j(f) is the record's force spectrum
-//! ([`crate::design::force_spectrum::estimate_matrix`]), with the
-//! broadband share of [`MIN_BROADBAND_SHARE`]. A per-axis compensator's
-//! crosstalk terms are H_ii·Ĝ_ij, which the per-axis prediction leaves out.
-//! √J_i is the predicted in-band error.
 
 use anyhow::{bail, Result};
 use nalgebra::DMatrix;
@@ -43,13 +23,20 @@ pub struct RowGrid {
     pub freqs: Vec<f64>,
     /// Ĝ(j2πf) on the lines.
     pub g: Vec<CMatrix3>,
-    /// Per force direction j and line, P_j(f)/P_i (module doc).
+    /// Per force direction j and line, P_j(f)/P_i ([`MatrixCriterion`]).
     pub weight: [Vec<f64>; 3],
     /// The in-band power of force i, P_i (N²).
     pub force_power_n2: f64,
 }
 
-/// The force spectra the criterion assumes (module doc).
+/// The force spectra P_j(f) the criterion ([`MatrixCriterion`]) assumes.
+///
+/// By default the forces are flat, P_j(f) = F_j²/n on n lines for an RMS
+/// F_j; with F_x = F_y = F_z this is DESIGN.md's criterion with every entry
+/// of the row counted. With a representative record of the cut
+/// ([`ForceWeights::Record`]) P_j(f) is the record's force spectrum
+/// ([`crate::design::force_spectrum::estimate_matrix`]), with the
+/// broadband share of [`MIN_BROADBAND_SHARE`].
 #[derive(Clone, Debug)]
 pub enum ForceWeights {
     /// Flat spectra of RMS F_j (N) in every row's band.
@@ -115,7 +102,21 @@ impl ForceWeights {
     }
 }
 
-/// What J of every row needs (module doc).
+/// What J of every row needs.
+///
+/// For output axis i, a compensator H (3x3, or a per-axis one whose row i is
+/// H_ii·e_iᵀ) on the plant Ĝ with declared latency L predicts
+///
+/// J_i = Σ_f Σ_j (P_j(f)/P_i)·|(H(e^{jω})·Ĝ(jω)·e^{jωL} − I)_ij|²
+///     + (2/fs)·(W_i/P_i)·Σ_j R_j·mean_f |H_ij(e^{jω})|²,
+///
+/// ω = 2πf over the lines f of the row's compensated band of width W_i,
+/// for uncorrelated forces with power P_j(f) (N²) in line f's cell, P_i the
+/// in-band power of force i, and white measurement noise of variance R_j
+/// on channel j: the distortion of force i, the crosstalk of the other
+/// forces into it, and the amplified noise, relative to force i's variance.
+/// A per-axis compensator's crosstalk terms are H_ii·Ĝ_ij, which the
+/// per-axis prediction leaves out. √J_i is the predicted in-band error.
 #[derive(Clone, Debug)]
 pub struct MatrixCriterion {
     /// Sample rate (Hz).
@@ -169,7 +170,7 @@ impl MatrixCriterion {
         2.0 / self.fs_hz * (hi - lo) / self.rows[i].force_power_n2
     }
 
-    /// J_i (module doc) for the response `h(k, j)` = H_ij on line k of row
+    /// J_i ([`MatrixCriterion`]) for the response `h(k, j)` = H_ij on line k of row
     /// i's grid and latency `lag`.
     fn j(&self, i: usize, lag: usize, h: impl Fn(usize, usize) -> Complex64) -> RowError {
         let row = &self.rows[i];
@@ -216,7 +217,7 @@ impl MatrixCriterion {
     }
 }
 
-/// The q search's outcome (module doc of [`choose_q`]).
+/// The q search's outcome (see [`choose_q`]).
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct QSearch {
     /// Chosen q per force axis (N²/sample).

@@ -1,35 +1,6 @@
-//! The sampled-data relation of the 3x3 model ([`crate::design::discretize`]
-//! for the matrix), and its realization as the plant of the Kalman design.
-//!
-//! **The discrete model.** With the common poles mapped exactly, ζ = e^{pT}
-//! (those below Nyquist), every entry has the form of the per-axis model,
-//!
-//! Ĝ_d(z) = z^D·M(z),  M(z) = d + Σ_real R/(z − ζ) + Σ_pairs [R/(z − ζ) + R̄/(z − ζ̄)] + Σ_{m=1..M} h_m z^{−m},
-//!
-//! with 3x3 residues R, direct term d and taps h_m, and one advance D and
-//! one tap count M for all nine entries (one state layout). Each entry is
-//! the least-squares fit of Ĝ_ij(j2πf) on the unit circle over the grid of
-//! the per-axis fit ([`crate::design::discretize`]), under the constraint
-//! Ĝ_d,ij(1) = Ĝ_ij(0) (the static gain exact). The lines of row i are
-//! weighted by 1/‖Ĝ_i·(j2πf)‖ (one fifth outside the compensated band): an
-//! entry's error counts relative to the channel it appears in, so a small
-//! cross entry is fitted to the precision of its channel, not to its own
-//! size (which would chase its near-zeros). (D, M) is the least complex pair
-//! whose matrix match max_f ‖Ĝ⁻¹(Ĝ_d − Ĝ)‖_F is below
-//! [`MATCH_TARGET`], or within [`MATCH_SLACK`] of the best: the error of
-//! the compensated force the model's mismatch alone causes.
-//!
-//! **The plant.** The poles' part of M is realized with real states whose
-//! residues are factored by rank: R = Σ_k σ_k u_k v_kᴴ (SVD); a physical
-//! mode's residue is rank 1 (G = Σ_r c_r b_rᵀ·f_r(s)), two states per pair.
-//! Each kept triplet of a pair is one complex state x[k+1] = ζ x[k] + β F_k
-//! with β = s·v_kᴴ and output 2 Re(γ x), γ = σ_k u_k/s, s = |1 − ζ| (so that
-//! a state is about the size of a force, as in [`crate::design::kalman`]),
-//! held as (Re x, Im x); a real pole's triplet is one real state. A
-//! triplet is dropped when it is negligible: the dropped triplets' bound
-//! Σ max_f ‖Ĝ⁻¹‖_F·σ_k·(|z − ζ|⁻¹ + |z − ζ̄|⁻¹) on the force error they
-//! cause stays below [`RANK_TOL`]. The realization is checked against the
-//! pole-residue form over the band.
+//! The sampled-data relation of the 3x3 model ([`discretize_matrix`]; the
+//! per-axis relation is [`crate::design::discretize`]), and its realization
+//! as the plant of the Kalman design ([`plant_states`]).
 
 use anyhow::{bail, Result};
 use nalgebra::{Cholesky, DMatrix, DVector, Matrix3, SVD};
@@ -47,7 +18,7 @@ use crate::fit::matrix::MatrixModel;
 /// A 3x3 complex matrix (an FRF matrix or a residue).
 pub type CMatrix3 = Matrix3<Complex64>;
 
-/// Largest force-error bound of the residues' dropped rank (module doc):
+/// Largest force-error bound of the residues' dropped rank ([`plant_states`]):
 /// a tenth of the discrete model's [`MATCH_TARGET`].
 pub const RANK_TOL: f64 = 1e-4;
 
@@ -55,7 +26,16 @@ pub const RANK_TOL: f64 = 1e-4;
 /// form (max_f ‖Ĝ⁻¹ΔM‖_F): the rank bound plus rounding.
 pub const MAX_REALIZATION_ERROR: f64 = 2.0 * RANK_TOL;
 
-/// The discrete 3x3 model (module doc): input F_k (N, x/y/z), output y_k (N).
+/// The discrete 3x3 model: input F_k (N, x/y/z), output y_k (N).
+///
+/// With the common poles mapped exactly, ζ = e^{pT} (those below Nyquist),
+/// every entry has the form of the per-axis model,
+///
+/// Ĝ_d(z) = z^D·M(z),  M(z) = d + Σ_real R/(z − ζ) + Σ_pairs [R/(z − ζ) + R̄/(z − ζ̄)] + Σ_{m=1..M} h_m z^{−m},
+///
+/// with 3x3 residues R, direct term d and taps h_m, and one advance D and
+/// one tap count M for all nine entries (one state layout), fitted by
+/// [`discretize_matrix`].
 #[derive(Clone, Debug)]
 pub struct DiscreteMatrixModel {
     /// Sample rate (Hz).
@@ -127,7 +107,7 @@ pub fn matrix_mismatch(lines: &[(f64, CMatrix3)], other: impl Fn(f64) -> CMatrix
     Some(worst)
 }
 
-/// The least squares of one row (module doc), for every advance and tap count.
+/// The least squares of one row ([`discretize_matrix`]), for every advance and tap count.
 struct RowProblem {
     /// Column scales.
     scale: Vec<f64>,
@@ -215,8 +195,20 @@ impl RowProblem {
     }
 }
 
-/// The discrete model of `model` at `fs_hz` matched over `band_hz` (module
-/// doc), with its match over the band.
+/// The discrete model of `model` at `fs_hz` matched over `band_hz`, with its
+/// match over the band.
+///
+/// Each entry is
+/// the least-squares fit of Ĝ_ij(j2πf) on the unit circle over the grid of
+/// the per-axis fit ([`crate::design::discretize`]), under the constraint
+/// Ĝ_d,ij(1) = Ĝ_ij(0) (the static gain exact). The lines of row i are
+/// weighted by 1/‖Ĝ_i·(j2πf)‖ (one fifth outside the compensated band): an
+/// entry's error counts relative to the channel it appears in, so a small
+/// cross entry is fitted to the precision of its channel, not to its own
+/// size (which would chase its near-zeros). (D, M) is the least complex pair
+/// whose matrix match max_f ‖Ĝ⁻¹(Ĝ_d − Ĝ)‖_F is below
+/// [`MATCH_TARGET`], or within `MATCH_SLACK` of the best: the error of
+/// the compensated force the model's mismatch alone causes.
 pub fn discretize_matrix(
     model: &MatrixModel,
     fs_hz: f64,
@@ -388,7 +380,7 @@ fn assemble(
     DiscreteMatrixModel { fs_hz, poles: poles.to_vec(), residues, d, fir, advance }
 }
 
-/// The poles' part of a discrete 3x3 model as real states (module doc):
+/// The poles' part of a discrete 3x3 model as real states ([`plant_states`]):
 /// x[k+1] = A x[k] + B F_k, M(z) = C (zI − A)⁻¹ B + d + Σ h_m z^{−m}.
 #[derive(Clone, Debug)]
 pub struct PlantStates {
@@ -400,7 +392,7 @@ pub struct PlantStates {
     pub c: DMatrix<f64>,
     /// Rank kept of each pole's residue.
     pub ranks: Vec<usize>,
-    /// The dropped triplets' force-error bound (module doc).
+    /// The dropped triplets' force-error bound ([`plant_states`]).
     pub dropped_bound: f64,
     /// max_f ‖Ĝ⁻¹(M_ss − M)‖_F over the band: the realization against the
     /// pole-residue form.
@@ -413,7 +405,7 @@ struct Triplet {
     sigma: f64,
     u: [Complex64; 3],
     v: [Complex64; 3],
-    /// Its force-error bound over the band (module doc).
+    /// Its force-error bound over the band ([`plant_states`]).
     bound: f64,
 }
 
@@ -442,8 +434,20 @@ fn residue_svd(r: &CMatrix3, real: bool) -> Result<Vec<RankOne>> {
     }
 }
 
-/// Realize the poles' part of `dm` (module doc), checked over `band`
-/// ((f, Ĝ(j2πf)) lines of the compensated band).
+/// Realize the poles' part of `dm`, checked over `band` ((f, Ĝ(j2πf)) lines
+/// of the compensated band).
+///
+/// The poles' part of M is realized with real states whose
+/// residues are factored by rank: R = Σ_k σ_k u_k v_kᴴ (SVD); a physical
+/// mode's residue is rank 1 (G = Σ_r c_r b_rᵀ·f_r(s)), two states per pair.
+/// Each kept triplet of a pair is one complex state x\[k+1\] = ζ x\[k\] + β F_k
+/// with β = s·v_kᴴ and output 2 Re(γ x), γ = σ_k u_k/s, s = |1 − ζ| (so that
+/// a state is about the size of a force, as in [`crate::design::kalman`]),
+/// held as (Re x, Im x); a real pole's triplet is one real state. A
+/// triplet is dropped when it is negligible: the dropped triplets' bound
+/// Σ max_f ‖Ĝ⁻¹‖_F·σ_k·(|z − ζ|⁻¹ + |z − ζ̄|⁻¹) on the force error they
+/// cause stays below [`RANK_TOL`]. The realization is checked against the
+/// pole-residue form over the band.
 pub fn plant_states(dm: &DiscreteMatrixModel, band: &[(f64, CMatrix3)]) -> Result<PlantStates> {
     let inv_norm: Vec<(Complex64, f64)> = band
         .iter()

@@ -1,25 +1,7 @@
 //! The disturbance Kalman filter and fixed-lag smoother of the 3x3 model
 //! ([`crate::design::kalman`] with a 3-component force state).
-//!
-//! 1. Augmented state x = [x_p; F_k; F_{k−1}; …; F_{k−N}] (each F a 3-vector,
-//!    N = max(L + D, M)), with the plant states x_p of
-//!    [`super::discrete::plant_states`] driven by F_k and the force a random
-//!    walk F_{k+1} = F_k + w_k, E[w wᵀ] = Q = diag(q_x, q_y, q_z) (N²/sample).
-//! 2. Measurement ỹ_k = y_{k−D} = C_p x_p + d F_k + Σ h_m F_{k−m} + v_k,
-//!    E[v vᵀ] = R = diag(R_x, R_y, R_z) (N²).
-//! 3. Filter DARE P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + Γ Q Γᵀ by
-//!    structured doubling with G = Cᵀ R⁻¹ C ([`structured_doubling`]).
-//!    Its residual is judged against the size of the equation's terms,
-//!    ‖P − Ric(P)‖_F / (‖A P Aᵀ‖_F + ‖A P Cᵀ S⁻¹ C P Aᵀ‖_F + ‖Γ Q Γᵀ‖_F),
-//!    which a backward-stable solution keeps near machine precision however
-//!    ill-conditioned the equation (a residual relative to ‖P‖ alone reads
-//!    the cancellation between the terms as error); the closed loop
-//!    A(I − K C) must be stable.
-//! 4. Compensator from ỹ to F̂[k−L−D] (3 in, 3 out), K = P Cᵀ S⁻¹, S = C P Cᵀ + R:
-//!    x̂⁻[k+1] = A(I − K C) x̂⁻[k] + A K ỹ[k],
-//!    F̂[k−L−D] = E (I − K C) x̂⁻[k] + E K ỹ[k],
-//!    E selecting F_{k−L−D}. Fed with y (D samples earlier than ỹ), it
-//!    outputs F̂[k−L]: the declared latency is L.
+//! [`augmented_plant`] builds the estimator's model, [`design`] the
+//! compensator.
 
 use anyhow::{bail, Result};
 use nalgebra::DMatrix;
@@ -29,10 +11,20 @@ use crate::design::kalman::structured_doubling;
 use crate::fit::linalg::eigenvalues;
 use crate::numeric::lti::MimoStateSpace;
 
-/// Largest accepted DARE residual relative to its terms (module doc).
+/// Largest accepted DARE residual relative to its terms ([`design`], step 3):
+/// ‖P − Ric(P)‖_F / (‖A P Aᵀ‖_F + ‖A P Cᵀ S⁻¹ C P Aᵀ‖_F + ‖Γ Q Γᵀ‖_F),
+/// which a backward-stable solution keeps near machine precision however
+/// ill-conditioned the equation (a residual relative to ‖P‖ alone reads
+/// the cancellation between the terms as error).
 pub const MAX_DARE_RESIDUAL: f64 = 1e-9;
 
-/// The augmented plant of the 3x3 estimator (module doc, steps 1-2).
+/// The augmented plant of the 3x3 estimator:
+/// 1. Augmented state x = [x_p; F_k; F_{k−1}; …; F_{k−N}] (each F a 3-vector,
+///    N = max(L + D, M)), with the plant states x_p of
+///    [`super::discrete::plant_states`] driven by F_k and the force a random
+///    walk F_{k+1} = F_k + w_k, E[w wᵀ] = Q = diag(q_x, q_y, q_z) (N²/sample).
+/// 2. Measurement ỹ_k = y_{k−D} = C_p x_p + d F_k + Σ h_m F_{k−m} + v_k,
+///    E[v vᵀ] = R = diag(R_x, R_y, R_z) (N²).
 #[derive(Clone, Debug)]
 pub struct MatrixAugmentedPlant {
     /// State transition (n × n).
@@ -92,7 +84,7 @@ pub fn augmented_plant(dm: &DiscreteMatrixModel, plant: &PlantStates, lag: usize
 pub struct MatrixKalman {
     /// Compensator y → F̂[k−L] (3 in, 3 out, f64).
     pub compensator: MimoStateSpace,
-    /// DARE residual relative to its terms (module doc).
+    /// DARE residual relative to its terms ([`MAX_DARE_RESIDUAL`]).
     pub dare_residual: f64,
     /// Doubling steps.
     pub dare_iterations: usize,
@@ -109,7 +101,19 @@ pub struct MatrixKalman {
 }
 
 /// Design the compensator of `plant` for process noise `q` and measurement
-/// noise `r` (module doc, steps 3-4); `lag` is the declared latency L.
+/// noise `r` on the plant's steps 1-2 ([`MatrixAugmentedPlant`]); `lag` is
+/// the declared latency L.
+///
+/// 3. Filter DARE P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + Γ Q Γᵀ by
+///    structured doubling with G = Cᵀ R⁻¹ C (`structured_doubling`).
+///    Its residual, judged against the size of the equation's terms, must
+///    stay below [`MAX_DARE_RESIDUAL`], and the closed loop
+///    A(I − K C) must be stable.
+/// 4. Compensator from ỹ to F̂[k−L−D] (3 in, 3 out), K = P Cᵀ S⁻¹, S = C P Cᵀ + R:
+///    x̂⁻\[k+1\] = A(I − K C) x̂⁻\[k\] + A K ỹ\[k\],
+///    F̂\[k−L−D\] = E (I − K C) x̂⁻\[k\] + E K ỹ\[k\],
+///    E selecting F_{k−L−D}. Fed with y (D samples earlier than ỹ), it
+///    outputs F̂[k−L]: the declared latency is L.
 pub fn design(plant: &MatrixAugmentedPlant, q: [f64; 3], r: [f64; 3], lag: usize) -> Result<MatrixKalman> {
     for (k, (qk, rk)) in q.iter().zip(&r).enumerate() {
         if !(*rk > 0.0 && rk.is_finite()) {

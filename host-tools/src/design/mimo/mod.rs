@@ -1,27 +1,8 @@
 //! The 3x3 design: from the full FRF matrix to one verified 3-in, 3-out
 //! compensator that counts the crosstalk (DESIGN.md, "Signal chain": the
-//! dynamometer as one 3x3 system).
-//!
-//! [`design_matrix`] runs the chain of the per-axis design on the matrix:
-//! 1. fit all nine FRFs with common poles ([`crate::fit::matrix`]);
-//! 2. the discrete model of the sampled-data relation and its plant states
-//!    ([`discrete`]);
-//! 3. the disturbance Kalman filter and fixed-lag smoother with a
-//!    3-component force state ([`kalman`]), q per output axis by the
-//!    predicted in-band error counting the crosstalk ([`criterion`]);
-//! 4. beside it the per-axis design of each direct FRF
-//!    ([`crate::design::axis`], unchanged), its prediction now with the
-//!    crosstalk it leaves;
-//! 5. per output axis the row with less error on the measured matrix (never
-//!    silently worse: the 3x3 row only where it beats the per-axis one
-//!    there, [`Criteria`]), as one block-diagonal compensator ([`combine`]);
-//! 6. realized and verified in f32 for the one 3x3 kernel
-//!    ([`crate::realize::mimo`]).
-//!
-//! The latency follows the per-axis rule ([`crate::design::latency`]):
-//! [`DEFAULT_LATENCY`], and [`LONGER_LATENCIES`] only where an axis's best
-//! row predicts more than [`PREDICTED_SHORT`] of distortion, keeping the
-//! shortest within [`GAIN_NOT_WORTH`] of each axis's best.
+//! dynamometer as one 3x3 system). [`design_matrix`] runs the per-axis chain
+//! on the matrix with [`discrete`], [`kalman`] and [`criterion`], and hands
+//! the result to [`crate::realize::mimo`] for the f32 kernel.
 
 #![allow(clippy::needless_range_loop)] // axis indices index several per-axis arrays at once
 
@@ -68,7 +49,7 @@ pub struct MatrixOptions {
     /// supported by the 3x3 design yet (refused).
     pub design: DesignOptions,
     /// Declared latency L (samples); `None`: chosen by the latency rule
-    /// (module doc).
+    /// ([`design_matrix`]).
     pub latency: Option<usize>,
     /// In-band force RMS per axis F_j (N) of the criterion; `None`:
     /// `design.force_rms` on every axis.
@@ -296,7 +277,28 @@ struct Round {
 }
 
 /// Design the 3x3 compensator of the complete FRF matrix `frf` for the
-/// measurement noise variances `r` (N², per channel) (module doc).
+/// measurement noise variances `r` (N², per channel).
+///
+/// The chain of the per-axis design on the matrix:
+/// 1. fit all nine FRFs with common poles ([`crate::fit::matrix`]);
+/// 2. the discrete model of the sampled-data relation and its plant states
+///    ([`discrete`]);
+/// 3. the disturbance Kalman filter and fixed-lag smoother with a
+///    3-component force state ([`kalman`]), q per output axis by the
+///    predicted in-band error counting the crosstalk ([`criterion`]);
+/// 4. beside it the per-axis design of each direct FRF
+///    ([`crate::design::axis`], unchanged), its prediction now with the
+///    crosstalk it leaves;
+/// 5. per output axis the row with less error on the measured matrix (never
+///    silently worse: the 3x3 row only where it beats the per-axis one
+///    there, `Criteria`), as one block-diagonal compensator (`combine`);
+/// 6. realized and verified in f32 for the one 3x3 kernel
+///    ([`crate::realize::mimo`]).
+///
+/// The latency follows the per-axis rule ([`crate::design::latency`]):
+/// [`DEFAULT_LATENCY`], and [`LONGER_LATENCIES`] only where an axis's best
+/// row predicts more than [`PREDICTED_SHORT`] of distortion, keeping the
+/// shortest within [`GAIN_NOT_WORTH`] of each axis's best.
 pub fn design_matrix(frf: &Frf, r: [f64; 3], opts: &MatrixOptions) -> Result<MatrixDesign> {
     design(frf, r, opts, None)
 }
@@ -459,7 +461,7 @@ fn criteria(
 
 /// The rounds at [`DEFAULT_LATENCY`] (or the asked-for latency), and at
 /// [`LONGER_LATENCIES`] where an axis's best row predicts more than
-/// [`PREDICTED_SHORT`] of distortion (module doc).
+/// [`PREDICTED_SHORT`] of distortion ([`design_matrix`]).
 fn latency_rounds(
     prepared: &[Result<PreparedAxis>],
     prep: Option<&MatrixPrep>,

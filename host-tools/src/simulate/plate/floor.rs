@@ -1,14 +1,6 @@
 //! The noise floor of the exact inverse (DESIGN.md, "Accuracy"): white
-//! measurement noise of variance R_j (N²) on channel j, through G⁻¹, in the
-//! band, relative to the truth's standard deviation. Per output axis i:
-//!
-//! floor_i = sqrt((2/fs)·∫_band Σ_j R_j |(G⁻¹)_ij(j2πf)|² df) / std(truth_i),
-//!
-//! the floor of any unbiased 3x3 compensator; and the per-axis floor with
-//! 1/G_ii, what inverting each direct FRF alone reaches on its noise (its
-//! error from the crosstalk comes on top). The integral is the trapezoid rule
-//! on a grid of at most 0.25 Hz, as for the single-axis floor of the
-//! benchmarks.
+//! measurement noise through G⁻¹, in the band, relative to the truth's
+//! standard deviation ([`inverse_noise_floor`]), and the per-axis floor.
 
 use anyhow::{bail, Result};
 use nalgebra::Matrix3;
@@ -70,9 +62,20 @@ impl FloorSpec {
     }
 }
 
-/// The exact 3x3 inverse's noise floor per output axis (module doc), for
-/// the FRF matrix `g(f_hz)`. Refuses a G that is singular or worse
-/// conditioned than [`MAX_CONDITION`] anywhere in the band.
+/// The exact 3x3 inverse's noise floor per output axis, for the FRF matrix
+/// `g(f_hz)`. Refuses a G that is singular or worse conditioned than
+/// [`MAX_CONDITION`] anywhere in the band.
+///
+/// White measurement noise of variance R_j (N²) on channel j, through G⁻¹,
+/// in the band, relative to the truth's standard deviation. Per output axis i:
+///
+/// floor_i = sqrt((2/fs)·∫_band Σ_j R_j |(G⁻¹)_ij(j2πf)|² df) / std(truth_i),
+///
+/// the floor of any unbiased 3x3 compensator; and the per-axis floor with
+/// 1/G_ii, what inverting each direct FRF alone reaches on its noise (its
+/// error from the crosstalk comes on top). The integral is the trapezoid rule
+/// on a grid of at most [`FLOOR_STEP_HZ`], as for the single-axis floor of
+/// the benchmarks.
 pub fn inverse_noise_floor(g: &dyn Fn(f64) -> Matrix3<Complex64>, spec: &FloorSpec) -> Result<[f64; 3]> {
     spec.check()?;
     spec.integrate(|f| {

@@ -4,16 +4,9 @@
 //! the centre of the sensor plane. Every channel responds to every force
 //! direction; G(0) = I plus a small static crosstalk.
 //!
-//! - [`body`]: rigid-body mass properties and point kinematics;
-//! - [`setup`]: the set-up's parameters, their physical bounds and the
-//!   12-DOF matrices M, K, B(p) and the sensor-force output Cd;
-//! - [`modal`]: modes (per-mode damping), the exact FRF matrix G(j2πf) and the
-//!   exact time response to a force linear between samples;
-//! - [`random`]: set-ups from a seed and the presets `flat`, `offcentre`, `tall`;
-//! - [`impact`]: impact tests in x, y, z recording all three channels;
-//! - [`floor`]: the exact 3x3 inverse's noise floor and the per-axis one;
-//! - [`run`]: a whole simulation (impact test, cut at another point, records);
-//! - [`output`]: the files of `dynocomp simulate --dyno plate`.
+//! The set-up ([`body`], [`setup`], [`random`]), its modes and exact response
+//! ([`modal`]), the impact tests ([`impact`]), the noise floors ([`floor`]), a
+//! whole simulation ([`run`]) and its files ([`output`]).
 
 pub mod body;
 pub mod floor;

@@ -1,26 +1,6 @@
 //! The modal form of the plate dynamometer, its exact FRF matrix and its
 //! exact time response.
-//!
-//! Undamped modes: K φ = ω² M φ, mass-normalised (φᵀMφ = 1), from the
-//! symmetric eigenproblem of L⁻¹KL⁻ᵀ with M = LLᵀ (Cholesky; nalgebra's
-//! symmetric eigensolver). In modal coordinates q = Σ φ_r η_r:
-//!
-//! η̈_r + 2ζ_r ω_r η̇_r + ω_r² η_r = b_r·F,   b_r = φ_rᵀB(p)  (the input row),
-//!
-//! **Damping, per mode.** Each mode r has its own damping ratio ζ_r
-//! ([`super::PlateSetup::zeta`]): in mode r every element (sensor or table
-//! mount) dissipates a force 2ζ_r/ω_r times its elastic force, i.e. the
-//! damping matrix is C = Σ_r (2ζ_r/ω_r)·K φ_r φ_rᵀ M = M Φ diag(2ζω) Φᵀ M
-//! (Caughey's modal damping), which leaves the modes uncoupled. The sensors'
-//! own damping force is therefore measured with their elastic force, and the
-//! channels are
-//!
-//! y = Σ_r c_r (η_r + (2ζ_r/ω_r) η̇_r),   c_r = S·Cd·φ_r  (the output column),
-//!
-//! so G(s) = Σ_r c_r b_rᵀ (1 + 2ζ_r s/ω_r) / (s² + 2ζ_r ω_r s + ω_r²), and
-//! G(0) = S·Cd·K⁻¹·B = S (the sensors carry the whole static load).
-//! Each mode's static share R_r = c_r b_rᵀ/ω_r² is its residue in all nine
-//! entries.
+//! ([`PlateModal`]), from the set-up's matrices ([`undamped_modes`]).
 
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector, Matrix3, SymmetricEigen};
@@ -87,6 +67,25 @@ impl PlateMode {
 
 /// The modal form of a plate dynamometer for a force at one point: modes
 /// ascending by frequency.
+///
+/// In modal coordinates q = Σ φ_r η_r ([`undamped_modes`]):
+///
+/// η̈_r + 2ζ_r ω_r η̇_r + ω_r² η_r = b_r·F,   b_r = φ_rᵀB(p)  (the input row),
+///
+/// Damping is per mode: each mode r has its own damping ratio ζ_r
+/// ([`super::PlateSetup::zeta`]): in mode r every element (sensor or table
+/// mount) dissipates a force 2ζ_r/ω_r times its elastic force, i.e. the
+/// damping matrix is C = Σ_r (2ζ_r/ω_r)·K φ_r φ_rᵀ M = M Φ diag(2ζω) Φᵀ M
+/// (Caughey's modal damping), which leaves the modes uncoupled. The sensors'
+/// own damping force is therefore measured with their elastic force, and the
+/// channels are
+///
+/// y = Σ_r c_r (η_r + (2ζ_r/ω_r) η̇_r),   c_r = S·Cd·φ_r  (the output column),
+///
+/// so G(s) = Σ_r c_r b_rᵀ (1 + 2ζ_r s/ω_r) / (s² + 2ζ_r ω_r s + ω_r²), and
+/// G(0) = S·Cd·K⁻¹·B = S (the sensors carry the whole static load).
+/// Each mode's static share ([`PlateMode::residue`]) is its residue in all
+/// nine entries.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PlateModal {
     /// Where the force acts (m).
@@ -97,6 +96,10 @@ pub struct PlateModal {
 
 /// Undamped modes of `mats`: (ω² ascending, mass-normalised shapes as the
 /// columns of Φ), checked for residual, orthogonality and spread.
+///
+/// K φ = ω² M φ, mass-normalised (φᵀMφ = 1), from the symmetric
+/// eigenproblem of L⁻¹KL⁻ᵀ with M = LLᵀ (Cholesky; nalgebra's symmetric
+/// eigensolver).
 pub fn undamped_modes(mats: &PlateMatrices) -> Result<(Vec<f64>, DMatrix<f64>)> {
     let Some(chol) = mats.m.clone().cholesky() else {
         bail!("plate dynamometer: the mass matrix is not positive definite (a mass or inertia is zero)");

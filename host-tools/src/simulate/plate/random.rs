@@ -1,15 +1,5 @@
 //! Plate dynamometers from a seed, within physical ranges, and three named
 //! set-ups (`simulate --dyno plate --dyno-preset NAME`).
-//!
-//! The ranges describe a Kistler 9257-class table dynamometer: a steel or
-//! aluminium top plate of 120-200 x 80-160 mm on four 3-component sensors of
-//! 2-6·10⁸ N/m in shear (x, y) and 1.5-2.5 times that in z, a workpiece of
-//! aluminium or steel up to 90 mm tall anywhere on the plate, and a base of
-//! 20-120 kg (housing plus the table's effective mass) on the table through
-//! mounts of 5·10⁶-2·10⁸ N/m. A draw is kept only when its six lowest modes
-//! (the whole dynamometer on the table: machine modes) lie in 100-900 Hz and
-//! its six highest (the plate on the sensors: translations and rocking) in
-//! 2-6 kHz, so a seed always gives a set-up of that kind.
 
 use anyhow::{bail, Result};
 use rand::{RngExt, SeedableRng};
@@ -46,7 +36,7 @@ fn uni(rng: &mut ChaCha8Rng, (lo, hi): (f64, f64)) -> f64 {
     }
 }
 
-/// One draw of the ranges of the module doc (not yet checked).
+/// One draw of the ranges of [`PlateSetup::random`] (not yet checked).
 fn draw(rng: &mut ChaCha8Rng) -> PlateSetup {
     const AL_STEEL: (f64, f64) = (2700.0, 7850.0);
     let plate = [uni(rng, (0.12, 0.2)), uni(rng, (0.08, 0.16)), uni(rng, (0.02, 0.035))];
@@ -103,8 +93,18 @@ fn draw(rng: &mut ChaCha8Rng) -> PlateSetup {
 }
 
 impl PlateSetup {
-    /// A random set-up from `seed` (module doc): draws are repeated, on the
-    /// seed's own stream, until the modes lie in their bands.
+    /// A random set-up from `seed`: draws are repeated, on the seed's own
+    /// stream, until the modes lie in their bands.
+    ///
+    /// The ranges describe a Kistler 9257-class table dynamometer: a steel or
+    /// aluminium top plate of 120-200 x 80-160 mm on four 3-component sensors of
+    /// 2-6·10⁸ N/m in shear (x, y) and 1.5-2.5 times that in z, a workpiece of
+    /// aluminium or steel up to 90 mm tall anywhere on the plate, and a base of
+    /// 20-120 kg (housing plus the table's effective mass) on the table through
+    /// mounts of 5·10⁶-2·10⁸ N/m. A draw is kept only when its six lowest modes
+    /// (the whole dynamometer on the table: machine modes) lie in 100-900 Hz and
+    /// its six highest (the plate on the sensors: translations and rocking) in
+    /// 2-6 kHz, so a seed always gives a set-up of that kind.
     pub fn random(seed: u64) -> Result<Self> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut last = String::new();

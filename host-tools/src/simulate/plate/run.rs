@@ -1,9 +1,8 @@
 //! A whole simulation on the plate dynamometer: the impact tests of all nine
 //! FRFs at the impact point, the cutting (or shaker) force acting at the cut
 //! point, the acquisition chain, noise and the idle record, exactly as
-//! [`crate::simulate::simulate_with`] does for the per-axis model (module doc
-//! of [`crate::simulate`]): the true force goes through the same
-//! anti-aliasing filter as the measurement.
+//! [`crate::simulate::simulate_with`] does for the per-axis model: the true
+//! force goes through the same anti-aliasing filter as the measurement.
 
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};

@@ -1,24 +1,6 @@
 //! The physical set-up of a plate dynamometer on the machine table and its
 //! 12-DOF model M q̈ + C q̇ + K q = B(p)·F.
-//!
-//! Coordinates as in [`super::body`]: origin at the centre of the sensor
-//! plane, z up. Bodies:
-//! - the top plate (a cuboid whose underside lies on the sensor plane, centred
-//!   over the sensors) with the workpiece (a cuboid standing on the plate)
-//!   clamped to it: one rigid body, q_p = [u_p; θ_p] about its centre of mass;
-//! - the base (a cuboid under the sensor plane, centred): the dynamometer's
-//!   housing together with the effective (modal) mass of the machine table
-//!   under it, q_b = [u_b; θ_b] about its centre of mass.
-//!
-//! Four 3-component sensors at (±a, ±b, 0) join the plate to the base, each
-//! a spring diag(kx, ky, kz) (N/m) on the relative displacement
-//! δ = u_p(s) − u_b(s) of the two bodies at the sensor. Four mounts at the
-//! base's bottom corners hold it on the (rigid) table, each diag(kx, ky, kz).
-//! The measured channels are the sums of the four sensors' forces Σ K_s δ_k
-//! (what a multi-component dynamometer outputs), through a static crosstalk
-//! matrix S = I + E: y = S·Cd·q plus the sensors' damping force
-//! ([`super::modal`]). A force F at p acts on the plate only, so statically
-//! the sensors carry all of it and G(0) = S.
+//! ([`PlateSetup`], its bounds, and the matrices [`PlateMatrices`]).
 
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, Matrix3, SMatrix, Vector3};
@@ -30,6 +12,25 @@ use super::body::RigidBody;
 pub const DOF: usize = 12;
 
 /// A plate dynamometer with its workpiece on the machine table.
+///
+/// Coordinates as in [`super::body`]: origin at the centre of the sensor
+/// plane, z up. Bodies:
+/// - the top plate (a cuboid whose underside lies on the sensor plane, centred
+///   over the sensors) with the workpiece (a cuboid standing on the plate)
+///   clamped to it: one rigid body, q_p = [u_p; θ_p] about its centre of mass;
+/// - the base (a cuboid under the sensor plane, centred): the dynamometer's
+///   housing together with the effective (modal) mass of the machine table
+///   under it, q_b = [u_b; θ_b] about its centre of mass.
+///
+/// Four 3-component sensors at (±a, ±b, 0) join the plate to the base, each
+/// a spring diag(kx, ky, kz) (N/m) on the relative displacement
+/// δ = u_p(s) − u_b(s) of the two bodies at the sensor. Four mounts at the
+/// base's bottom corners hold it on the (rigid) table, each diag(kx, ky, kz).
+/// The measured channels are the sums of the four sensors' forces Σ K_s δ_k
+/// (what a multi-component dynamometer outputs), through a static crosstalk
+/// matrix S = I + E: y = S·Cd·q plus the sensors' damping force
+/// ([`super::modal`]). A force F at p acts on the plate only, so statically
+/// the sensors carry all of it and G(0) = S.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PlateSetup {
     /// Mass of the top plate (kg).
