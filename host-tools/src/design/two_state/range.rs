@@ -228,6 +228,7 @@ pub fn design_over_range(
     let measured_freqs: Vec<f64> = in_band.iter().map(|&k| freq_hz[k]).collect();
     let measured_plants: [Vec<(f64, Complex64)>; 2] =
         [first, second].map(|a| in_band.iter().map(|&k| (freq_hz[k], a.frf[k])).collect());
+    let interpolated_fit_error = measured_states_fit_error(&d0, freq_hz, second, &ts, opts.coherence_threshold);
     let mut cands = Vec::new();
     let mut skipped = Vec::new();
     let mut states = vec![0.0];
@@ -245,7 +246,11 @@ pub fn design_over_range(
                 coherence: first.coherence.clone(),
             };
             design_axis(freq_hz, &synthetic, r, opts)
-                .map(|d| with_measured_fit_error(d, &d0, freq_hz, second, &ts, opts.coherence_threshold))
+                .map(|d| AxisDesign {
+                    fit_nrmse: interpolated_fit_error,
+                    fit_nrmse_out_of_band: d0.fit_nrmse_out_of_band,
+                    ..d
+                })
                 .with_context(|| format!("model state s = {s}"))
         };
         // A state that cannot be designed is not a candidate; the first
@@ -275,20 +280,19 @@ pub fn design_over_range(
     Ok(RangeDesign { states: ts, machine, above_band, candidates: cands, best, skipped })
 }
 
-/// A design at an interpolated state s (0 < s < 1) was fitted to its own
-/// model's response, so its fit error is zero by construction. It is
-/// given instead the worse of the two measured states' model errors: the
-/// first FRF's fit (`d0`), and the paired second state's model against the
-/// second FRF (relative RMS on its coherent lines in the first design's
-/// band). That is the error the interpolation between them carries.
-fn with_measured_fit_error(
-    mut d: AxisDesign,
+/// The fit error a design at an interpolated state s (0 < s < 1) carries.
+/// Such a design is fitted to its own model's response, so its own fit
+/// error is zero by construction; it is given instead the worse of the two
+/// measured states' model errors: the first FRF's fit (`d0`), and the
+/// paired second state's model against the second FRF (relative RMS on its
+/// coherent lines in the first design's band).
+fn measured_states_fit_error(
     d0: &AxisDesign,
     freq_hz: &[f64],
     second: &AxisFrf,
     ts: &TwoState,
     coherence_threshold: f64,
-) -> AxisDesign {
+) -> f64 {
     let band = d0.compensated_band_hz;
     let mask: Vec<bool> = (0..freq_hz.len())
         .map(|k| {
@@ -298,9 +302,7 @@ fn with_measured_fit_error(
         .collect();
     let m1 = ts.at(1.0);
     let e1 = crate::fit::relative_rms_error(|f| m1.frf(f), freq_hz, &second.frf, &mask);
-    d.fit_nrmse = d0.fit_nrmse.max(e1);
-    d.fit_nrmse_out_of_band = d0.fit_nrmse_out_of_band;
-    d
+    d0.fit_nrmse.max(e1)
 }
 
 /// [`design_over_range`] for every axis of the FRFs `before` and `after`
