@@ -10,7 +10,7 @@ use std::f64::consts::PI;
 
 use super::discrete::CMatrix3;
 use crate::design::criterion::{criterion_cells, criterion_grid};
-use crate::design::force_spectrum::{estimate_matrix, CellSpectrum, ForceRecord, MIN_BROADBAND_SHARE};
+use crate::design::force_spectrum::{estimate_matrix, CellSpectrum, ForceRecord};
 use crate::frf::axis_name;
 use crate::numeric::search::golden_section;
 
@@ -36,7 +36,7 @@ pub struct RowGrid {
 /// of the row counted. With a representative record of the cut
 /// ([`ForceWeights::Record`]) P_j(f) is the record's force spectrum
 /// ([`crate::design::force_spectrum::estimate_matrix`]), with the
-/// broadband share of [`MIN_BROADBAND_SHARE`].
+/// broadband share of [`crate::design::force_spectrum::MIN_BROADBAND_SHARE`].
 #[derive(Clone, Debug)]
 pub enum ForceWeights {
     /// Flat spectra of RMS F_j (N) in every row's band.
@@ -88,12 +88,13 @@ impl ForceWeights {
             ForceWeights::Record { spectra, level_only } => {
                 let s = &spectra[i];
                 let p: [f64; 3] = std::array::from_fn(|j| s[j].total_n2());
+                // Force j's share of its own power per line, with the
+                // broadband share (CellSpectrum::weights), scaled to force i's.
                 let weight = std::array::from_fn(|j| {
                     if *level_only {
                         vec![p[j] / p[i] / nf; n]
                     } else {
-                        let b = MIN_BROADBAND_SHARE;
-                        s[j].power_n2.iter().map(|pk| ((1.0 - b) * pk + b * p[j] / nf) / p[i]).collect()
+                        s[j].weights().iter().map(|w| w * p[j] / p[i]).collect()
                     }
                 });
                 (weight, p[i])
@@ -147,12 +148,11 @@ impl MatrixCriterion {
         forces: &ForceWeights,
         r: [f64; 3],
     ) -> Self {
-        let mut i = 0;
-        let rows = bands_hz.map(|band_hz| {
+        let rows = std::array::from_fn(|i| {
+            let band_hz = bands_hz[i];
             let freqs = criterion_grid(&[band_hz]);
             let g = freqs.iter().map(|f| g(*f)).collect();
             let (weight, force_power_n2) = forces.row(i, freqs.len());
-            i += 1;
             RowGrid { band_hz, freqs, g, weight, force_power_n2 }
         });
         MatrixCriterion { fs_hz, rows, r }
