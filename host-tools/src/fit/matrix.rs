@@ -253,6 +253,31 @@ fn relocate_from(data: &MatrixData, mut poles: Vec<Pole>, opts: &VfOptions) -> R
     fit_residues(data, &poles, w_scale)
 }
 
+/// `f` of every item in order, on as many threads as the machine has
+/// (each takes the next item not yet taken): the fits of the orders are
+/// independent, and the slowest take longest.
+fn on_threads<I: Sync, T: Send>(items: &[I], f: impl Fn(&I) -> T + Sync) -> Vec<T> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(items.len());
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let mut out: Vec<(usize, T)> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..threads)
+            .map(|_| {
+                scope.spawn(|| {
+                    let mut done = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(item) = items.get(i) else { break done };
+                        done.push((i, f(item)));
+                    }
+                })
+            })
+            .collect();
+        handles.into_iter().flat_map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p))).collect()
+    });
+    out.sort_by_key(|(i, _)| *i);
+    out.into_iter().map(|(_, t)| t).collect()
+}
+
 /// Orders without a better [`MatrixData::bic`] after the best one that end
 /// the order search.
 pub const BIC_PATIENCE: usize = 30;
@@ -261,9 +286,9 @@ pub const BIC_PATIENCE: usize = 30;
 /// drop the terms that are spurious ([`super::vf::spurious`]) or below
 /// 10⁻³ of |G| in every entry, and refit the residues.
 ///
-/// The order: 2, 4, … up to `opts.max_order`, until [`BIC_PATIENCE`]
-/// orders in a row have not lowered the BIC of the best one; the order of
-/// least BIC is kept ([`MatrixData::bic`]). The per-axis fit's rule (stop
+/// The order: 2, 4, … up to `opts.max_order` (fitted in parallel), until
+/// [`BIC_PATIENCE`] orders in a row have not lowered the BIC of the best
+/// one; the order of least BIC is kept ([`MatrixData::bic`]). The per-axis fit's rule (stop
 /// when the weighted error improves by less than a fraction) does not suit
 /// the matrix: its weighted error is the measurement noise of nine FRFs,
 /// and a mode that only some entries show lowers it by a fraction of a
@@ -278,11 +303,12 @@ pub fn matrix_vector_fit(data: &MatrixData, opts: &VfOptions) -> Result<MatrixFi
     if data.h.iter().any(|h| h.len() != lines) || data.w.iter().any(|w| w.len() != lines) {
         bail!("matrix vector fitting: every entry needs one value and one weight per line ({lines})");
     }
+    let orders: Vec<usize> = (2..=opts.max_order.min(max_order_for(lines))).step_by(2).collect();
+    let fits = on_threads(&orders, |order| fit_matrix_order(data, *order, opts));
     let mut trace = Vec::new();
     let mut models: Vec<(usize, MatrixModel, f64)> = Vec::new();
-    let mut order = 2;
-    while order <= opts.max_order.min(max_order_for(lines)) {
-        let m = match fit_matrix_order(data, order, opts) {
+    for (order, fit) in orders.into_iter().zip(fits) {
+        let m = match fit {
             Ok(m) => m,
             Err(e) if models.is_empty() => return Err(e),
             Err(_) => break,
@@ -293,7 +319,6 @@ pub fn matrix_vector_fit(data: &MatrixData, opts: &VfOptions) -> Result<MatrixFi
         if models.len() - 1 - best >= BIC_PATIENCE {
             break;
         }
-        order += 2;
     }
     if !models.iter().any(|m| m.2.is_finite()) {
         bail!("matrix vector fitting failed at every order");

@@ -23,11 +23,12 @@ pub fn resolvent_response(a: &DMatrix<f64>, b: &DVector<f64>, c: &DVector<f64>, 
     }
 }
 
-/// Solve M x = rhs in place for an upper Hessenberg M (n×n, row-major):
-/// Gaussian elimination with partial pivoting, where only the subdiagonal
-/// needs eliminating, so each column's pivot is between two rows. `false`
-/// if a pivot is zero or not finite (M singular).
-fn solve_hessenberg(m: &mut [Complex64], x: &mut [Complex64], n: usize) -> bool {
+/// Solve M X = RHS in place for an upper Hessenberg M (n×n, row-major) and
+/// `r` right-hand sides (X: n×r, row-major): Gaussian elimination with
+/// partial pivoting, where only the subdiagonal needs eliminating, so each
+/// column's pivot is between two rows. `false` if a pivot is zero or not
+/// finite (M singular).
+fn solve_hessenberg(m: &mut [Complex64], x: &mut [Complex64], n: usize, r: usize) -> bool {
     for k in 0..n.saturating_sub(1) {
         let (top, below) = (k * n, (k + 1) * n);
         // |re| + |im|: no hypot per comparison, and no underflow to 0.
@@ -35,7 +36,9 @@ fn solve_hessenberg(m: &mut [Complex64], x: &mut [Complex64], n: usize) -> bool 
             for j in k..n {
                 m.swap(top + j, below + j);
             }
-            x.swap(k, k + 1);
+            for c in 0..r {
+                x.swap(k * r + c, (k + 1) * r + c);
+            }
         }
         let pivot = m[top + k];
         if !(pivot.l1_norm() > 0.0) {
@@ -47,22 +50,71 @@ fn solve_hessenberg(m: &mut [Complex64], x: &mut [Complex64], n: usize) -> bool 
                 let v = m[top + j];
                 m[below + j] -= l * v;
             }
-            let v = x[k];
-            x[k + 1] -= l * v;
+            for c in 0..r {
+                let v = x[k * r + c];
+                x[(k + 1) * r + c] -= l * v;
+            }
         }
     }
     for i in (0..n).rev() {
-        let mut s = x[i];
-        for j in i + 1..n {
-            s -= m[i * n + j] * x[j];
-        }
         let p = m[i * n + i];
         if !(p.l1_norm() > 0.0 && p.is_finite()) {
             return false;
         }
-        x[i] = s / p;
+        for c in 0..r {
+            let mut s = x[i * r + c];
+            for j in i + 1..n {
+                s -= m[i * n + j] * x[j * r + c];
+            }
+            x[i * r + c] = s / p;
+        }
     }
     true
+}
+
+/// zI − H (row-major, n×n) for an upper Hessenberg H, into `m`.
+fn shifted_hessenberg(h: &DMatrix<f64>, z: Complex64, m: &mut [Complex64]) {
+    let n = h.nrows();
+    for i in 0..n {
+        // Below the subdiagonal H is zero (left so by `unpack`).
+        for j in i.saturating_sub(1)..n {
+            m[i * n + j] = Complex64::new(-h[(i, j)], 0.0);
+        }
+        for j in 0..i.saturating_sub(1) {
+            m[i * n + j] = Complex64::new(0.0, 0.0);
+        }
+        m[i * n + i] += z;
+    }
+}
+
+/// The left resolvent R (zI − A)⁻¹ (r×n) of the rows R (r×n) at
+/// z = e^{j·2π·f/fs} for every frequency of `f_hz` (Hz): with Aᵀ = Q H Qᵀ
+/// reduced once to Hessenberg form, (zI − A)⁻ᵀ Rᵀ = Q (zI − H)⁻¹ Qᵀ Rᵀ, one
+/// O(n²) elimination per point for all r rows (as
+/// [`StateSpace::freq_responses`]). NaN where zI − A is singular.
+pub fn left_resolvent(a: &DMatrix<f64>, rows: &DMatrix<f64>, f_hz: &[f64], fs_hz: f64) -> Vec<DMatrix<Complex64>> {
+    let (n, r) = (a.nrows(), rows.nrows());
+    let (q, h) = a.transpose().hessenberg().unpack();
+    // Qᵀ Rᵀ (n×r), the right-hand sides.
+    let qr = q.transpose() * rows.transpose();
+    let mut m = vec![Complex64::new(0.0, 0.0); n * n];
+    let mut x = vec![Complex64::new(0.0, 0.0); n * r];
+    f_hz.iter()
+        .map(|f| {
+            let z = Complex64::from_polar(1.0, 2.0 * std::f64::consts::PI * f / fs_hz);
+            shifted_hessenberg(&h, z, &mut m);
+            for i in 0..n {
+                for c in 0..r {
+                    x[i * r + c] = Complex64::new(qr[(i, c)], 0.0);
+                }
+            }
+            if !solve_hessenberg(&mut m, &mut x, n, r) {
+                return DMatrix::from_element(r, n, Complex64::new(f64::NAN, f64::NAN));
+            }
+            // Row c of the result is (Q x_c)ᵀ.
+            DMatrix::from_fn(r, n, |c, i| (0..n).map(|k| x[k * r + c] * q[(i, k)]).sum())
+        })
+        .collect()
 }
 
 /// A discrete SISO state-space system (f64).
@@ -105,15 +157,11 @@ impl StateSpace {
         f_hz.iter()
             .map(|f| {
                 let z = Complex64::from_polar(1.0, 2.0 * std::f64::consts::PI * f / fs_hz);
+                shifted_hessenberg(&h, z, &mut m);
                 for i in 0..n {
-                    for j in 0..n {
-                        // Below the subdiagonal H is zero (left so by `unpack`).
-                        m[i * n + j] = Complex64::new(-h[(i, j)], 0.0);
-                    }
-                    m[i * n + i] += z;
                     x[i] = Complex64::new(bt[i], 0.0);
                 }
-                match solve_hessenberg(&mut m, &mut x, n) {
+                match solve_hessenberg(&mut m, &mut x, n, 1) {
                     true => x.iter().zip(ct.iter()).map(|(x, c)| x * c).sum::<Complex64>() + self.d,
                     false => Complex64::new(f64::NAN, f64::NAN),
                 }
@@ -190,7 +238,8 @@ pub struct MimoStateSpace {
 impl MimoStateSpace {
     /// H(z) = C (zI − A)⁻¹ B + D (outputs × inputs) at z = e^{j·2π·f/fs}
     /// for every frequency of `f_hz` (Hz): A reduced once to Hessenberg
-    /// form, as [`StateSpace::freq_responses`], one solve per input column.
+    /// form, as [`StateSpace::freq_responses`], one elimination per point
+    /// for all input columns.
     /// NaN where zI − A is singular.
     pub fn freq_responses(&self, f_hz: &[f64], fs_hz: f64) -> Vec<DMatrix<Complex64>> {
         let (n, p, m) = (self.a.nrows(), self.c.nrows(), self.b.ncols());
@@ -202,24 +251,23 @@ impl MimoStateSpace {
         let bt = q.transpose() * &self.b;
         let ct = &self.c * &q;
         let mut mat = vec![Complex64::new(0.0, 0.0); n * n];
-        let mut x = vec![Complex64::new(0.0, 0.0); n];
+        let mut x = vec![Complex64::new(0.0, 0.0); n * m];
         f_hz.iter()
             .map(|f| {
                 let z = Complex64::from_polar(1.0, 2.0 * std::f64::consts::PI * f / fs_hz);
+                shifted_hessenberg(&h, z, &mut mat);
+                for r in 0..n {
+                    for j in 0..m {
+                        x[r * m + j] = Complex64::new(bt[(r, j)], 0.0);
+                    }
+                }
+                if !solve_hessenberg(&mut mat, &mut x, n, m) {
+                    return DMatrix::from_element(p, m, Complex64::new(f64::NAN, f64::NAN));
+                }
                 let mut out = dc.clone();
                 for j in 0..m {
-                    for r in 0..n {
-                        for col in 0..n {
-                            mat[r * n + col] = Complex64::new(-h[(r, col)], 0.0);
-                        }
-                        mat[r * n + r] += z;
-                        x[r] = Complex64::new(bt[(r, j)], 0.0);
-                    }
-                    if !solve_hessenberg(&mut mat, &mut x, n) {
-                        return DMatrix::from_element(p, m, Complex64::new(f64::NAN, f64::NAN));
-                    }
                     for i in 0..p {
-                        out[(i, j)] += (0..n).map(|r| x[r] * ct[(i, r)]).sum::<Complex64>();
+                        out[(i, j)] += (0..n).map(|r| x[r * m + j] * ct[(i, r)]).sum::<Complex64>();
                     }
                 }
                 out

@@ -84,6 +84,8 @@ pub fn augmented_plant(dm: &DiscreteMatrixModel, plant: &PlantStates, lag: usize
 pub struct MatrixKalman {
     /// Compensator y → F̂[k−L] (3 in, 3 out, f64).
     pub compensator: MimoStateSpace,
+    /// Kalman gain K = P Cᵀ S⁻¹ (n × 3).
+    pub gain: DMatrix<f64>,
     /// DARE residual relative to its terms ([`MAX_DARE_RESIDUAL`]).
     pub dare_residual: f64,
     /// Doubling steps.
@@ -161,6 +163,7 @@ pub fn design(plant: &MatrixAugmentedPlant, q: [f64; 3], r: [f64; 3], lag: usize
     }
     Ok(MatrixKalman {
         compensator: comp,
+        gain: k,
         dare_residual,
         dare_iterations: iterations,
         innovation_condition,

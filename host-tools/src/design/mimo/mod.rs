@@ -11,6 +11,7 @@ pub mod criterion;
 pub mod discrete;
 pub mod image;
 pub mod kalman;
+pub mod response;
 
 use anyhow::{bail, Context, Result};
 use dynocomp_core::mimo::MimoFilter;
@@ -22,6 +23,7 @@ pub use self::combine::RowSource;
 use self::criterion::{choose_q, ForceWeights, MatrixCriterion, QSearch, RowError};
 use self::discrete::{discretize_matrix, plant_states, CMatrix3, DiscreteMatch, DiscreteMatrixModel, PlantStates};
 use self::kalman::{augmented_plant, MatrixAugmentedPlant, MatrixKalman};
+use self::response::PlantResolvent;
 use crate::design::axis::{
     coherent_band, design_prepared, prepare_axis, AxisDesign, DesignOptions, FitMethod, PreparedAxis, MAX_FIT_ERROR,
     MAX_PREDICTED_ERROR,
@@ -811,11 +813,11 @@ fn design_3x3(
     d: &DesignOptions,
 ) -> Result<(MatrixKalman, QSearch, [f64; 3])> {
     let aug = augmented_plant(&p.dm, &p.plant, lag);
-    let all = crit.all_freqs();
+    let resolvent = PlantResolvent::new(&aug, &crit.all_freqs(), d.fs_hz);
     let evaluate = |q: [f64; 3]| -> Option<(MatrixKalman, [f64; 3], [f64; 3])> {
         let k = kalman::design(&aug, q, r, lag).ok()?;
         let ng = k.compensator.white_noise_gains()?;
-        let h = k.compensator.freq_responses(&all, d.fs_hz);
+        let h = resolvent.responses(&k);
         let j = std::array::from_fn(|i| {
             if ng[i] > d.max_noise_gain {
                 f64::INFINITY
