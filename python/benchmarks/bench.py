@@ -12,6 +12,7 @@ timed tests. Run from the repository's root after scripts/python_test.sh:
 """
 
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -64,17 +65,31 @@ def main():
             "py": lambda: dynocomp.design(frf, fs=51200, idle=EX / "idle.csv", report=False),
             "cli": lambda: subprocess.run(argv, check=True, capture_output=True),
         }
-        # Interleaved, so that a change in the machine's load reaches both.
+        # Interleaved, so that a change in the machine's load reaches both;
+        # wall time, and CPU time (user + sys of every thread: this process's
+        # for Python, the child's for the CLI), which a loaded machine
+        # disturbs far less.
         t = {k: [] for k in timed}
+        cpu = {k: [] for k in timed}
+        who = {"py": resource.RUSAGE_SELF, "cli": resource.RUSAGE_CHILDREN}
         for _ in range(RD):
             for k, f in timed.items():
+                c0 = cpu_seconds(who[k])
                 t[k].append(best(f, runs=1))
+                cpu[k].append(cpu_seconds(who[k]) - c0)
         t_dpy, t_dcli = min(t["py"]), min(t["cli"])
+        c_py, c_cli = min(cpu["py"]), min(cpu["cli"])
         print(f"design (bundled example, no report), best of {RD}, interleaved:")
-        print(f"  from Python: {t_dpy:.3f} s   CLI: {t_dcli:.3f} s   ratio {t_dpy / t_dcli:.2f}")
+        print(f"  wall: from Python: {t_dpy:.3f} s   CLI: {t_dcli:.3f} s   ratio {t_dpy / t_dcli:.2f}")
+        print(f"  CPU:  from Python: {c_py:.3f} s   CLI: {c_cli:.3f} s   ratio {c_py / c_cli:.2f}")
         t_layer = python_layer_seconds(frf, img_path)
         print(f"  the Python layer alone (temporary directory, image and sidecar written and read back, "
               f"JSON parsed; the design call stubbed), best of 20: {t_layer * 1e3:.2f} ms")
+
+
+def cpu_seconds(who):
+    r = resource.getrusage(who)
+    return r.ru_utime + r.ru_stime
 
 
 def python_layer_seconds(frf, img_path):
