@@ -26,9 +26,14 @@ fi
 export PATH="$PWD/$venv/bin:$PATH"
 
 # One release build of the extension, in its own cargo target directory
-# (python/ is outside the root workspace: its own Cargo.lock).
+# (python/ is outside the root workspace: its own Cargo.lock). The tests
+# need the same bits, not the speed: the package's fat-LTO profile
+# (python/Cargo.toml) is overridden here for build time (pip and maturin
+# pass the environment on to cargo). PYTHON_EXT_PROFILE=package keeps it.
 t0=$(date +%s)
-CARGO_TARGET_DIR="$tgt/python-ext" "$venv/bin/python" -m pip install -q --disable-pip-version-check \
+fast=(CARGO_PROFILE_RELEASE_LTO=false CARGO_PROFILE_RELEASE_CODEGEN_UNITS=16)
+[ "${PYTHON_EXT_PROFILE:-fast}" = package ] && fast=()
+env ${fast[@]+"${fast[@]}"} CARGO_TARGET_DIR="$tgt/python-ext" "$venv/bin/python" -m pip install -q --disable-pip-version-check \
     --no-build-isolation --force-reinstall --no-deps ./python
 echo "python: built and installed the extension in $(( $(date +%s) - t0 )) s"
 
