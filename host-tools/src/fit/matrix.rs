@@ -3,6 +3,7 @@
 //! [`matrix_vector_fit`] on a [`MatrixData`] gives a [`MatrixModel`]. A leaf of
 //! the chain, beside the per-axis fit [`super::vf`].
 
+use crate::numeric::parallel::map_on_threads;
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector, Matrix3};
 use num_complex::Complex64;
@@ -253,31 +254,6 @@ fn relocate_from(data: &MatrixData, mut poles: Vec<Pole>, opts: &VfOptions) -> R
     fit_residues(data, &poles, w_scale)
 }
 
-/// `f` of every item in order, on as many threads as the machine has
-/// (each takes the next item not yet taken): the fits of the orders are
-/// independent, and the slowest take longest.
-fn on_threads<I: Sync, T: Send>(items: &[I], f: impl Fn(&I) -> T + Sync) -> Vec<T> {
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(items.len());
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let mut out: Vec<(usize, T)> = std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..threads)
-            .map(|_| {
-                scope.spawn(|| {
-                    let mut done = Vec::new();
-                    loop {
-                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        let Some(item) = items.get(i) else { break done };
-                        done.push((i, f(item)));
-                    }
-                })
-            })
-            .collect();
-        handles.into_iter().flat_map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p))).collect()
-    });
-    out.sort_by_key(|(i, _)| *i);
-    out.into_iter().map(|(_, t)| t).collect()
-}
-
 /// Orders without a better [`MatrixData::bic`] after the best one that end
 /// the order search.
 pub const BIC_PATIENCE: usize = 30;
@@ -304,7 +280,7 @@ pub fn matrix_vector_fit(data: &MatrixData, opts: &VfOptions) -> Result<MatrixFi
         bail!("matrix vector fitting: every entry needs one value and one weight per line ({lines})");
     }
     let orders: Vec<usize> = (2..=opts.max_order.min(max_order_for(lines))).step_by(2).collect();
-    let fits = on_threads(&orders, |order| fit_matrix_order(data, *order, opts));
+    let fits = map_on_threads(&orders, |order| fit_matrix_order(data, *order, opts));
     let mut trace = Vec::new();
     let mut models: Vec<(usize, MatrixModel, f64)> = Vec::new();
     for (order, fit) in orders.into_iter().zip(fits) {

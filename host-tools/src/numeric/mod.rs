@@ -1,10 +1,12 @@
 //! Numeric helpers every stage may use: discrete LTI systems ([`lti`]),
-//! one-dimensional searches ([`search`]) and linear prediction ([`predict`]). Leaves: they import nothing of the crate.
+//! one-dimensional searches ([`search`]), linear prediction ([`predict`])
+//! and independent work on threads ([`parallel`]).
 
 // `!(x < limit)` on purpose throughout: a NaN residual, condition number or
 // error must fail the check, which `x >= limit` would let pass.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod lti;
+pub mod parallel;
 pub mod predict;
 pub mod search;

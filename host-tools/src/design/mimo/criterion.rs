@@ -12,6 +12,7 @@ use super::discrete::CMatrix3;
 use crate::design::criterion::{criterion_cells, criterion_grid};
 use crate::design::force_spectrum::{estimate_matrix, CellSpectrum, ForceRecord};
 use crate::frf::axis_name;
+use crate::numeric::parallel::map_on_threads;
 use crate::numeric::search::golden_section;
 
 /// The lines of one output axis's criterion.
@@ -245,8 +246,8 @@ const GOLDEN_ITERS: usize = 10;
 /// per axis (∞ where the design fails or output i's noise gain is over the
 /// limit).
 ///
-/// First a joint scan q = R·10^k (k = −2..14, the per-axis scan's decades)
-/// gives each axis its best decade; then coordinate descent: each log10 q_i
+/// First a joint scan q = R·10^k (k = −2..14, the per-axis scan's decades,
+/// on threads) gives each axis its best decade; then coordinate descent: each log10 q_i
 /// in turn is refined by golden section on ±1 decade (±0.5, ±0.25 in later
 /// passes) for its own J_i with the others fixed, kept only where J_i
 /// falls. q_i mainly sets the bandwidth of force i's estimate; q_j (j ≠ i)
@@ -258,17 +259,17 @@ const GOLDEN_ITERS: usize = 10;
 /// (the `mimo_design` test measures it), and the search stops after a pass
 /// that moves no q_i by more than [`STEP_TOL_DECADES`], or after
 /// [`MAX_PASSES`].
-pub fn choose_q(eval: &dyn Fn([f64; 3]) -> [f64; 3], r: [f64; 3]) -> Result<QSearch> {
-    let mut evaluations = 0;
+pub fn choose_q(eval: &(dyn Fn([f64; 3]) -> [f64; 3] + Sync), r: [f64; 3]) -> Result<QSearch> {
+    let base = r.map(|v| v.log10());
+    let scan: Vec<[f64; 3]> = (-2..=14).map(|k| base.map(|b| b + k as f64)).collect();
+    let scanned = map_on_threads(&scan, |lq| eval(lq.map(|v| 10f64.powf(v))));
+    let mut evaluations = scan.len();
     let mut run = |lq: [f64; 3]| {
         evaluations += 1;
         eval(lq.map(|v| 10f64.powf(v)))
     };
-    let base = r.map(|v| v.log10());
     let mut best: [Option<(f64, f64)>; 3] = [None; 3];
-    for k in -2..=14 {
-        let lq = base.map(|b| b + k as f64);
-        let j = run(lq);
+    for (lq, j) in scan.into_iter().zip(scanned) {
         for i in 0..3 {
             if j[i].is_finite() && best[i].is_none_or(|b| j[i] < b.1) {
                 best[i] = Some((lq[i], j[i]));
