@@ -821,8 +821,15 @@ fn plot_poles(d: &AxisDesign, fs: f64) -> Result<(String, String)> {
             // outside the zoom.
             draw_mode_labels(&mut c, d, fs, &|z| inr(&z) && (!full || !in_zoom(z)))?;
             // Off the markers first (each weighs as a hundred pixels of
-            // line), then off the unit circle.
-            let markers: Vec<Vec<(f64, f64)>> = modelz.iter().chain(comp).map(|z| vec![(z.re, z.im); 100]).collect();
+            // line) and the mode labels left of them (~120 px), then off
+            // the unit circle.
+            let px = if full { px_full } else { px_zoom };
+            let left = 120.0 * (xr.1 - xr.0) / f64::from(px.0.max(1));
+            let markers: Vec<Vec<(f64, f64)>> = modelz
+                .iter()
+                .chain(comp)
+                .map(|z| std::iter::once((z.re - left, z.im)).chain(vec![(z.re, z.im); 100]).collect())
+                .collect();
             let circle: Vec<(f64, f64)> =
                 (0..=720).map(|k| (k as f64 * PI / 360.0).sin_cos()).map(|(s, c)| (c, s)).collect();
             let mut data: Vec<&[(f64, f64)]> = markers.iter().map(Vec::as_slice).collect();

@@ -269,6 +269,10 @@ const LEGEND_SPOTS: [SeriesLabelPosition; 8] = [
     SeriesLabelPosition::MiddleLeft,
 ];
 
+/// Steps of the grid of further legend positions [`legend_spot`] tries
+/// across the plot area's width and height.
+const GRID_STEPS: i32 = 10;
+
 /// The frame (x0, y0, x1, y1, px from the plot area's top left) plotters
 /// gives a legend of size `(w, h)` at `pos` in a plot area of `dim` px.
 fn legend_frame(pos: &SeriesLabelPosition, (w, h): (i32, i32), dim: (u32, u32)) -> (i32, i32, i32, i32) {
@@ -326,8 +330,8 @@ fn covered(data: &[&[(f64, f64)]], to_px: &dyn Fn(&(f64, f64)) -> (i32, i32), fr
 }
 
 /// The legend position that covers the fewest pixels of `data` (chart
-/// coordinates): [`LEGEND_SPOTS`] in order, `preferred` first, the first
-/// with the least cover wins. Returns it with the pixels it covers.
+/// coordinates): `preferred`, then [`LEGEND_SPOTS`], then a grid over the
+/// plot area, in that order; the first with the least cover wins. Returns it with the pixels it covers.
 pub fn legend_spot(
     chart: &Chart<'_>,
     preferred: SeriesLabelPosition,
@@ -342,8 +346,17 @@ pub fn legend_spot(
         (x - base.0, y - base.1)
     };
     let size = legend_size(labels);
+    // After the named spots, a grid of frames over the whole plot area.
+    let (aw, ah) = (dim.0 as i32, dim.1 as i32);
+    let grid = (0..=GRID_STEPS).flat_map(move |i| {
+        (0..=GRID_STEPS).map(move |j| {
+            let x = 5 + (aw - size.0 - 10).max(0) * i / GRID_STEPS;
+            let y = 5 + (ah - size.1 - 10).max(0) * j / GRID_STEPS;
+            SeriesLabelPosition::Coordinate(x, y)
+        })
+    });
     let mut best = (preferred.clone(), usize::MAX);
-    for pos in std::iter::once(preferred).chain(LEGEND_SPOTS) {
+    for pos in std::iter::once(preferred).chain(LEGEND_SPOTS).chain(grid) {
         let n = covered(data, &to_px, legend_frame(&pos, size, dim));
         if n < best.1 {
             best = (pos, n);
