@@ -249,7 +249,7 @@ fn summary_text_lists_its_parts_in_order() {
     designs[0].bands = vec![Band { lo_hz: 100.0, hi_hz: 250.0, label: "--band".into() }];
     designs[1].notes.push("a note of axis y".into());
     let sens: Vec<_> = designs.iter().map(|d| predict(d, &opts)).collect();
-    let text = render_summary(&designs, &sens, 51_200.0, 4, "out.dcimg", 0x2a, "vf");
+    let text = render_summary(&designs, &sens, 51_200.0, 4, "out.dcimg", 0x2a, "vf", None);
     let lines: Vec<&str> = text.lines().collect();
 
     let mut want: Vec<String> = vec![

@@ -256,7 +256,7 @@ fn summary_text(
     let designs = &d.designs;
     let out = args.out.display().to_string();
     let mut summary =
-        render_summary(designs, sensitivities, args.input.fs, d.latency, &out, image.id(), args.method.name());
+        render_summary(designs, sensitivities, args.input.fs, d.latency, &out, image.id(), args.method.name(), None);
     if let Some(c) = &d.latency_choice {
         let names: Vec<&str> = designs.iter().map(|d| axis_name(d.axis)).collect();
         summary.push_str(&crate::design::latency::describe(c, &names));

@@ -80,7 +80,16 @@ pub fn run(args: &DesignArgs, setup: &DesignSetup) -> Result<String> {
         out.push_str(&format!("band {k}: {:.0}-{:.0} Hz ({})\n", b.lo_hz, b.hi_hz, b.label));
         let sensitivities = crate::design::sensitivity::predict_all(ds, opts);
         let fs = args.input.fs;
-        out.push_str(&crate::report::summary::render_summary(ds, &sensitivities, fs, latency, &shown, id, method));
+        out.push_str(&crate::report::summary::render_summary(
+            ds,
+            &sensitivities,
+            fs,
+            latency,
+            &shown,
+            id,
+            method,
+            None,
+        ));
     }
     eprintln!("designed in {:.0} ms", t0.elapsed().as_secs_f64() * 1e3);
     Ok(out)

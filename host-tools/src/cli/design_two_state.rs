@@ -18,7 +18,7 @@ use crate::design::two_state::range::{design_axes_over_range, RangeDesign, RANGE
 use crate::frf::{axis_name, Frf};
 use crate::io;
 use crate::offline::sidecar::TwoStateJson;
-use crate::report::summary::render_summary;
+use crate::report::summary::{render_summary, RangeFigures};
 use crate::report::two_state::{RangeAxisJson, RangeJson};
 
 /// Run `design` with two FRFs; returns the summary (text or JSON) for stdout.
@@ -33,7 +33,7 @@ pub fn run(args: &DesignArgs) -> Result<String> {
     write_image_and_sidecar(args, &image, &designs, &axes)?;
     let mut sensitivities = crate::design::sensitivity::predict_all(&designs, &opts);
     crate::design::sensitivity::set_line_spacing(&mut sensitivities, &frfs.before.freq_hz);
-    render(args, &frfs.before, &axes, &designs, &sensitivities, &image, latency)
+    render(args, &frfs, &axes, &designs, &sensitivities, &image, latency)
 }
 
 /// The options two FRFs allow; the declared latency (samples).
@@ -149,7 +149,7 @@ fn write_image_and_sidecar(
 /// The summary (text or JSON) and the report, with each axis's range plot.
 fn render(
     args: &DesignArgs,
-    frf: &Frf,
+    frfs: &TwoFrfs,
     axes: &[RangeAxis],
     designs: &[AxisDesign],
     sensitivities: &[Option<Sensitivity>],
@@ -157,7 +157,15 @@ fn render(
     latency: usize,
 ) -> Result<String> {
     let shown = args.out.display().to_string();
-    let mut summary = render_summary(designs, sensitivities, args.input.fs, latency, &shown, image.id(), "vf");
+    let range: Vec<RangeFigures> = axes
+        .iter()
+        .map(|a| {
+            let c = &a.range.candidates[a.range.best];
+            RangeFigures { worst: c.worst, s: c.s }
+        })
+        .collect();
+    let mut summary =
+        render_summary(designs, sensitivities, args.input.fs, latency, &shown, image.id(), "vf", Some(&range));
     for a in axes {
         summary.push_str(&crate::report::two_state::describe(axis_name(a.axis), &a.range));
     }
@@ -169,15 +177,36 @@ fn render(
         let extra = |axis: usize| -> Result<Vec<crate::report::design::Plot>> {
             let Some(rd) = axes.iter().find(|a| a.axis == axis).map(|a| &a.range) else { return Ok(Vec::new()) };
             let name = axis_name(axis);
-            Ok(vec![(
-                format!("{name}_range.svg"),
-                format!("Axis {name}: the box image over the range between the two states"),
-                crate::report::two_state::range_caption(rd),
-                crate::report::two_state::plot_range(name, rd)
-                    .with_context(|| format!("report: axis {name}: range plot"))?,
-            )])
+            let (Some(first), Some(second)) = (frfs.before.axis(axis), frfs.after.axis(axis)) else {
+                bail!("report: axis {name}: missing from one of the two FRFs")
+            };
+            let fits = crate::report::two_state::plot_frf_fits(&frfs.before.freq_hz, first, second, rd)
+                .with_context(|| format!("report: axis {name}: FRF plot"))?;
+            Ok(vec![
+                (
+                    format!("{name}_frf_fit.svg"),
+                    format!("Axis {name}: both measured FRFs and the model at each state"),
+                    crate::report::two_state::frf_fits_caption(rd),
+                    fits,
+                ),
+                (
+                    format!("{name}_range.svg"),
+                    format!("Axis {name}: the box image over the range between the two states"),
+                    crate::report::two_state::range_caption(rd),
+                    crate::report::two_state::plot_range(name, rd)
+                        .with_context(|| format!("report: axis {name}: range plot"))?,
+                ),
+            ])
         };
-        crate::report::design::write_report_with(dir, frf, designs, sensitivities, args.input.fs, &summary, &extra)?;
+        crate::report::design::write_report_with(
+            dir,
+            &frfs.before,
+            designs,
+            sensitivities,
+            args.input.fs,
+            &summary,
+            &extra,
+        )?;
     }
     if !args.json {
         return Ok(summary);

@@ -13,7 +13,7 @@ use std::sync::Arc;
 
 use crate::frf::axis_name;
 use crate::report::page::{write_pages, Page};
-use crate::report::plot::{build_chart, draw_line, legend, mesh, perr};
+use crate::report::plot::{build_chart, draw_line, legend_headroom, legend_off_data, mesh, perr, plot_px_height};
 
 /// Pixel columns of the overview; the envelopes keep between this many and
 /// twice this many (min, max) buckets.
@@ -626,7 +626,10 @@ fn plot_overview(a: &AxisAcc, fs: f64, band_hz: f64) -> Result<String> {
         let root = SVGBackend::with_string(&mut svg, (1100, h)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
         let (top, bottom) = if errors.is_some() { root.split_vertically(440) } else { (root.clone(), root.clone()) };
+        let labels: &[&str] =
+            if errors.is_some() { &["measured", "compensated", "true"] } else { &["measured", "compensated"] };
         let yr = range_of([m.as_slice(), c.as_slice(), t.as_slice()].into_iter());
+        let yr = legend_headroom(yr, labels.len(), plot_px_height(&top));
         let mut ch = build_chart(&top, &format!("f{name}: measured and compensated force, whole record"), xr, yr)?;
         mesh(&mut ch, "time (s)", "force (N)", &fmt_s, &fmt_n, 8)?;
         draw_envelope(&mut ch, &m, fs, C_MEAS, 0.35, "measured")?;
@@ -634,7 +637,9 @@ fn plot_overview(a: &AxisAcc, fs: f64, band_hz: f64) -> Result<String> {
         if errors.is_some() {
             draw_envelope(&mut ch, &t, fs, C_TRUE, 0.0, "true")?;
         }
-        legend(&mut ch, SeriesLabelPosition::UpperRight)?;
+        let (pm, pc, pt) = (envelope_line(&m, fs), envelope_line(&c, fs), envelope_line(&t, fs));
+        let shown: &[&[(f64, f64)]] = if errors.is_some() { &[&pm, &pc, &pt] } else { &[&pm, &pc] };
+        legend_off_data(&mut ch, SeriesLabelPosition::UpperRight, labels, shown)?;
         if let Some([low, high]) = errors {
             let (band_area, above_area) = bottom.split_vertically(230);
             let panels = [
@@ -649,6 +654,8 @@ fn plot_overview(a: &AxisAcc, fs: f64, band_hz: f64) -> Result<String> {
             for (area, env, color, title) in panels {
                 let scored: Vec<_> = env.iter().copied().filter(|b| b.0 >= s0 && b.1 < s1).collect();
                 let yr = range_of(std::iter::once(if scored.is_empty() { env.as_slice() } else { scored.as_slice() }));
+                let labels = ["not scored (ends)", "compensated − true"];
+                let yr = legend_headroom(yr, labels.len(), plot_px_height(&area));
                 let mut ch = build_chart(&area, &title, xr, yr)?;
                 mesh(&mut ch, "time (s)", "error (N)", &fmt_s, &fmt_n, 5)?;
                 for (k, e) in edges.iter().enumerate() {
@@ -656,13 +663,19 @@ fn plot_overview(a: &AxisAcc, fs: f64, band_hz: f64) -> Result<String> {
                     crate::report::plot::shade(&mut ch, *e, xr, yr, C_MEAS, 0.15, label)?;
                 }
                 let clipped: Vec<_> = env.iter().map(|&(a, b, lo, hi)| (a, b, lo.max(yr.0), hi.min(yr.1))).collect();
-                draw_envelope(&mut ch, &clipped, fs, color, 0.35, "compensated − true")?;
-                legend(&mut ch, SeriesLabelPosition::UpperRight)?;
+                draw_envelope(&mut ch, &clipped, fs, color, 0.35, labels[1])?;
+                legend_off_data(&mut ch, SeriesLabelPosition::UpperRight, &labels, &[&envelope_line(&clipped, fs)])?;
             }
         }
         root.present().map_err(perr)?;
     }
     Ok(svg)
+}
+
+/// An envelope as one polyline (s, N) through each bucket's minimum and
+/// maximum: the pixels it covers, for placing a legend off it.
+fn envelope_line(env: &[(u64, u64, f64, f64)], fs: f64) -> Vec<(f64, f64)> {
+    env.iter().flat_map(|&(a, b, lo, hi)| [(a as f64 / fs, lo), (b as f64 / fs, hi)]).collect()
 }
 
 /// The min/max envelope of a whole record.
@@ -684,19 +697,23 @@ fn plot_zoom(w: &[Vec<f64>; 3], start: u64, fs: f64, has_truth: bool, name: &str
     let all = w[0].iter().chain(&w[1]).chain(if has_truth { &w[2][..] } else { &[][..] }).copied();
     let yr =
         crate::report::plot::finite_range(all).map_or((-1.0, 1.0), |r| crate::report::plot::pad_range(r, 0.05, 1e-9));
+    let labels: &[&str] = if has_truth { &["measured", "compensated", "true"] } else { &["measured", "compensated"] };
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (1100, 440)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
+        let yr = legend_headroom(yr, labels.len(), plot_px_height(&root));
         let mut ch = build_chart(&root, &format!("f{name}: steady cut, every sample"), xr, yr)?;
         mesh(&mut ch, "time (ms)", "force (N)", &fmt_n, &fmt_n, 8)?;
         let big = (yr.1 - yr.0) * 10.0;
-        draw_line(&mut ch, &pts(&w[0]), yr, big, C_MEAS, 2, false, "measured")?;
-        draw_line(&mut ch, &pts(&w[1]), yr, big, C_COMP, 2, false, "compensated")?;
+        let lines: Vec<Vec<(f64, f64)>> = w.iter().take(labels.len()).map(|x| pts(x)).collect();
+        draw_line(&mut ch, &lines[0], yr, big, C_MEAS, 2, false, labels[0])?;
+        draw_line(&mut ch, &lines[1], yr, big, C_COMP, 2, false, labels[1])?;
         if has_truth {
-            draw_line(&mut ch, &pts(&w[2]), yr, big, C_TRUE, 2, true, "true")?;
+            draw_line(&mut ch, &lines[2], yr, big, C_TRUE, 2, true, labels[2])?;
         }
-        legend(&mut ch, SeriesLabelPosition::UpperRight)?;
+        let shown: Vec<&[(f64, f64)]> = lines.iter().map(|l| l.as_slice()).collect();
+        legend_off_data(&mut ch, SeriesLabelPosition::UpperRight, labels, &shown)?;
         root.present().map_err(perr)?;
     }
     Ok(svg)
@@ -735,28 +752,35 @@ fn plot_spectrum(
         ];
         for (i, (area, hi, title)) in panels.into_iter().enumerate() {
             let xr = (0.0, hi);
+            let tpf_label = tpf.filter(|t| *t > 0.0 && i == 0).map(|t| format!("TPF {t:.1} Hz and harmonics"));
+            let mut labels = vec!["compensated band"];
+            labels.extend(tpf_label.as_deref());
+            labels.extend(["measured", "compensated", "true"].iter().take(if at.is_some() { 3 } else { 2 }));
+            let yr = legend_headroom(yr, labels.len(), plot_px_height(&area));
             let mut ch = build_chart(&area, &title, xr, yr)?;
             mesh(&mut ch, "frequency (Hz)", "amplitude (dB re 1 N)", &crate::report::plot::hz, &fmt_n, 10)?;
             crate::report::plot::shade(&mut ch, (0.0, band_hz), xr, yr, C_BAND, 0.12, "compensated band")?;
-            if let Some(t) = tpf.filter(|t| *t > 0.0 && i == 0) {
+            if let (Some(t), Some(tpf_label)) = (tpf.filter(|t| *t > 0.0 && i == 0), &tpf_label) {
                 let style = ShapeStyle::from(&C_TPF.mix(0.7)).stroke_width(1);
                 let harmonics = (1..=40).map(|k| k as f64 * t).take_while(|x| *x <= band_hz.min(hi));
                 for (k, x) in harmonics.enumerate() {
                     let ann =
                         ch.draw_series(DashedLineSeries::new(vec![(x, yr.0), (x, yr.1)], 2, 5, style)).map_err(perr)?;
                     if k == 0 {
-                        ann.label(format!("TPF {t:.1} Hz and harmonics"))
+                        ann.label(tpf_label.clone())
                             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
                     }
                 }
             }
             let big = 1e9;
-            draw_line(&mut ch, &pts(am, hi), yr, big, C_MEAS, 2, false, "measured")?;
-            draw_line(&mut ch, &pts(ac, hi), yr, big, C_COMP, 1, false, "compensated")?;
-            if let Some(at) = at {
-                draw_line(&mut ch, &pts(at, hi), yr, big, C_TRUE, 2, true, "true")?;
+            let (lm, lc) = (pts(am, hi), pts(ac, hi));
+            let lt = at.map(|at| pts(at, hi)).unwrap_or_default();
+            draw_line(&mut ch, &lm, yr, big, C_MEAS, 2, false, "measured")?;
+            draw_line(&mut ch, &lc, yr, big, C_COMP, 1, false, "compensated")?;
+            if at.is_some() {
+                draw_line(&mut ch, &lt, yr, big, C_TRUE, 2, true, "true")?;
             }
-            legend(&mut ch, SeriesLabelPosition::LowerRight)?;
+            legend_off_data(&mut ch, SeriesLabelPosition::LowerRight, &labels, &[&lm, &lc, &lt])?;
         }
         root.present().map_err(perr)?;
     }

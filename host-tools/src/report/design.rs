@@ -31,6 +31,8 @@ const C_COH: RGBColor = RGBColor(44, 140, 44);
 const C_TOL: RGBColor = RGBColor(230, 120, 0);
 const C_COH_BAND: RGBColor = RGBColor(150, 150, 150);
 const C_FLAT_BAND: RGBColor = RGBColor(44, 160, 44);
+/// A further model drawn for reference (dashed), e.g. an interpolated state.
+const C_REFERENCE: RGBColor = RGBColor(40, 40, 40);
 /// Returns the paths written, `index.html` last.
 pub fn write_report(
     dir: &Path,
@@ -46,8 +48,9 @@ pub fn write_report(
 /// A plot of a report: (file name, title, caption, SVG).
 pub type Plot = (String, String, String, String);
 
-/// [`write_report`] with `extra(axis)`'s plots appended to each axis's
-/// section (e.g. the two-state design's range).
+/// [`write_report`] with `extra(axis)`'s plots in each axis's section
+/// (e.g. the two-state design's range): one with the file name of a
+/// standard plot takes its place, the others are appended.
 pub fn write_report_with(
     dir: &Path,
     frf: &Frf,
@@ -73,7 +76,12 @@ pub fn write_report_with(
             bail!("report: axis {name}: {} FRF values for {} frequency lines", meas.frf.len(), frf.freq_hz.len());
         }
         let mut plots = axis_plots(&frf.freq_hz, meas, d, sensitivities.get(i).and_then(Option::as_ref), fs_hz)?;
-        plots.extend(extra(d.axis)?);
+        for plot in extra(d.axis)? {
+            match plots.iter_mut().find(|p| p.0 == plot.0) {
+                Some(same) => *same = plot,
+                None => plots.push(plot),
+            }
+        }
         let mut entries = Vec::new();
         for (file, title, caption, svg) in plots {
             entries.push((file.clone(), title, caption));
@@ -193,48 +201,88 @@ fn further_plots(d: &AxisDesign, sens: Option<&Sensitivity>, fs_hz: f64) -> Resu
 /// model overlaid, the fit's residual, and the coherence γ²; the coherent
 /// band is shaded.
 fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> {
-    let s = fit_series(freq, meas, d);
+    let title = format!(
+        "Axis {} — measured FRF and fitted model (order {}, fit error {:.2} % in the {})",
+        axis_name(d.axis),
+        d.model.order(),
+        100.0 * d.fit_nrmse,
+        if d.bands.is_empty() { "coherent band" } else { "fitting bands" }
+    );
+    let model = freq.iter().map(|f| d.fitted_frf(*f)).collect();
+    let fit = FitPair {
+        meas,
+        model,
+        measured: "measured G (on top)".into(),
+        fitted: "fitted model Ĝ".into(),
+        colors: (C_MEASURED, C_MODEL),
+    };
+    plot_frf_fits(freq, &[fit], None, d, &title)
+}
+
+/// A measured FRF and the model it is judged against, with their legend
+/// entries and colours (measured, model).
+pub struct FitPair<'a> {
+    pub meas: &'a AxisFrf,
+    /// The model on the FRF's lines.
+    pub model: Vec<Complex64>,
+    pub measured: String,
+    pub fitted: String,
+    pub colors: (RGBColor, RGBColor),
+}
+
+/// The FRF-fit figure of one or more measured FRFs, each against its own
+/// model (`fits`), with an optional further model drawn dashed (`reference`:
+/// values on the lines and its legend entry): magnitude, phase, each fit's
+/// residual and each FRF's coherence; `d`'s coherent and fitting bands shaded.
+pub fn plot_frf_fits(
+    freq: &[f64],
+    fits: &[FitPair<'_>],
+    reference: Option<(&[Complex64], &str)>,
+    d: &AxisDesign,
+    title: &str,
+) -> Result<String> {
+    let s: Vec<FitSeries> = fits.iter().map(|f| fit_series(freq, f)).collect();
+    let r = reference.map(|(z, label)| (each_line(freq, z, db), each_line(freq, z, wrap_deg), label));
+    let xr = x_range(freq);
+    let mags = s.iter().flat_map(|x| x.mag_m.iter().chain(&x.mag_f)).chain(r.iter().flat_map(|r| &r.0));
+    let (lo, hi) = finite_range(mags.map(|p| p.1)).unwrap_or((-20.0, 20.0));
+    // keep the plot readable when a line has (almost) zero magnitude
+    let yr_mag = pad_range((lo.max(hi - 80.0), hi), 0.06, 6.0);
     let mut buf = String::new();
     {
         let root = SVGBackend::with_string(&mut buf, (1100, 1240)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
-        let title = format!(
-            "Axis {} — measured FRF and fitted model (order {}, fit error {:.2} % in the {})",
-            axis_name(d.axis),
-            d.model.order(),
-            100.0 * d.fit_nrmse,
-            if d.bands.is_empty() { "coherent band" } else { "fitting bands" }
-        );
-        let root = root.titled(&title, (FONT, 20)).map_err(perr)?;
+        let root = root.titled(title, (FONT, 20)).map_err(perr)?;
         let (top, rest) = root.split_vertically(380);
         let (midp, rest) = rest.split_vertically(300);
         let (resp, bot) = rest.split_vertically(260);
         let band = d.coherent_band_hz;
         let band_txt = format!("coherent band {:.0}–{:.0} Hz", band.0, band.1);
         let caption = format!("Magnitude |G| ({band_txt})");
-        let magnitude = Panel::new(&caption, "|G| (dB re 1 N/N)", s.yr_mag, true);
-        let mut c = magnitude.chart(&top, s.xr, d, &|v| format!("{v:.0}"), 7)?;
-        fitted_and_measured(&mut c, &s.mag_f, &s.mag_m, s.yr_mag, f64::INFINITY, SeriesLabelPosition::UpperLeft)?;
+        let magnitude = Panel::new(&caption, "|G| (dB re 1 N/N)", yr_mag, true);
+        let mut c = magnitude.chart(&top, xr, d, &|v| format!("{v:.0}"), 7)?;
+        let mag: Vec<_> = s.iter().map(|x| (&x.mag_f, &x.mag_m)).collect();
+        let refm = r.as_ref().map(|r| (r.0.as_slice(), r.2));
+        fitted_and_measured(&mut c, fits, &mag, refm, yr_mag, f64::INFINITY, SeriesLabelPosition::UpperLeft, d, true)?;
         let yr_ph = (-190.0, 190.0);
         let phase = Panel::new("Phase ∠G (wrapped)", "Phase (°)", yr_ph, false);
-        let mut c = phase.chart(&midp, s.xr, d, &|v| format!("{v:.0}"), 9)?;
-        fitted_and_measured(&mut c, &s.ph_f, &s.ph_m, yr_ph, 180.0, SeriesLabelPosition::LowerLeft)?;
-        fit_residual(&resp, &s, d)?;
-        coherence(&bot, freq, meas, d, s.xr, &band_txt)?;
+        let mut c = phase.chart(&midp, xr, d, &|v| format!("{v:.0}"), 9)?;
+        let ph: Vec<_> = s.iter().map(|x| (&x.ph_f, &x.ph_m)).collect();
+        let refp = r.as_ref().map(|r| (r.1.as_slice(), r.2));
+        fitted_and_measured(&mut c, fits, &ph, refp, yr_ph, 180.0, SeriesLabelPosition::LowerLeft, d, false)?;
+        fit_residual(&resp, fits, &s, xr, d)?;
+        coherence(&bot, freq, fits, d, xr, &band_txt)?;
         root.present().map_err(perr)?;
     }
     Ok(buf)
 }
 
-/// What [`plot_frf_fit`] draws, as (Hz, value) per line of the FRF.
+/// What [`plot_frf_fits`] draws of one [`FitPair`], as (Hz, value) per line
+/// of the FRF.
 struct FitSeries {
-    /// Frequency range shown (Hz).
-    xr: (f64, f64),
     /// Measured and fitted magnitude (dB).
     mag_m: Vec<(f64, f64)>,
     mag_f: Vec<(f64, f64)>,
-    /// Magnitude range shown (dB).
-    yr_mag: (f64, f64),
     /// Measured and fitted phase (°, wrapped).
     ph_m: Vec<(f64, f64)>,
     ph_f: Vec<(f64, f64)>,
@@ -242,24 +290,27 @@ struct FitSeries {
     resid: Vec<(f64, f64)>,
 }
 
-/// The series of [`plot_frf_fit`]: the measured FRF and the fitted model on
-/// every line.
-fn fit_series(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> FitSeries {
-    let model: Vec<Complex64> = freq.iter().map(|f| d.fitted_frf(*f)).collect();
-    let mag_m: Vec<(f64, f64)> = freq.iter().zip(&meas.frf).map(|(f, g)| (*f, db(*g))).collect();
-    let mag_f: Vec<(f64, f64)> = freq.iter().zip(&model).map(|(f, g)| (*f, db(*g))).collect();
-    let ph_m: Vec<(f64, f64)> = freq.iter().zip(&meas.frf).map(|(f, g)| (*f, wrap_deg(*g))).collect();
-    let ph_f: Vec<(f64, f64)> = freq.iter().zip(&model).map(|(f, g)| (*f, wrap_deg(*g))).collect();
-    let (lo, hi) = finite_range(mag_m.iter().chain(&mag_f).map(|p| p.1)).unwrap_or((-20.0, 20.0));
-    // keep the plot readable when a line has (almost) zero magnitude
-    let yr_mag = pad_range((lo.max(hi - 80.0), hi), 0.06, 6.0);
+/// `f` of each value `z` on the lines `freq`, as (Hz, value).
+fn each_line(freq: &[f64], z: &[Complex64], f: fn(Complex64) -> f64) -> Vec<(f64, f64)> {
+    freq.iter().zip(z).map(|(x, z)| (*x, f(*z))).collect()
+}
+
+/// The series of one fit of [`plot_frf_fits`].
+fn fit_series(freq: &[f64], fit: &FitPair<'_>) -> FitSeries {
+    let (g, model) = (&fit.meas.frf, &fit.model);
     let resid: Vec<(f64, f64)> = freq
         .iter()
-        .zip(&meas.frf)
-        .zip(&model)
+        .zip(g)
+        .zip(model)
         .map(|((f, g), m)| (*f, (100.0 * (m - g).norm() / g.norm()).clamp(1e-4, 1e3).log10()))
         .collect();
-    FitSeries { xr: x_range(freq), mag_m, mag_f, yr_mag, ph_m, ph_f, resid }
+    FitSeries {
+        mag_m: each_line(freq, g, db),
+        mag_f: each_line(freq, model, db),
+        ph_m: each_line(freq, g, wrap_deg),
+        ph_f: each_line(freq, model, wrap_deg),
+        resid,
+    }
 }
 
 /// The frequency range of a plot (Hz): the FRF's lines, at least 1 Hz wide.
@@ -306,35 +357,72 @@ impl<'s> Panel<'s> {
     }
 }
 
-/// The fitted model's line under the measurement's, and the legend at `pos`.
+/// The legend entries [`Panel::chart`] adds for `d`'s bands when labelled.
+fn band_labels(d: &AxisDesign, labelled: bool) -> Vec<&'static str> {
+    match (labelled, d.bands.is_empty()) {
+        (false, _) => Vec::new(),
+        (true, true) => vec!["coherent band"],
+        (true, false) => vec!["coherent band", "fitting bands"],
+    }
+}
+
+/// Each fit's model line under its measurement's (`lines`: (fitted,
+/// measured) per fit), then the `reference` model dashed, and the legend
+/// off the lines (`pos` preferred; `banded`: the panel's bands are in it).
+#[allow(clippy::too_many_arguments)]
 fn fitted_and_measured(
     c: &mut Chart<'_>,
-    fitted: &[(f64, f64)],
-    measured: &[(f64, f64)],
+    fits: &[FitPair<'_>],
+    lines: &[(&Vec<(f64, f64)>, &Vec<(f64, f64)>)],
+    reference: Option<(&[(f64, f64)], &str)>,
     yr: (f64, f64),
     max_jump: f64,
     pos: SeriesLabelPosition,
+    d: &AxisDesign,
+    banded: bool,
 ) -> Result<()> {
-    draw_line(c, fitted, yr, max_jump, C_MODEL, 3, false, "fitted model Ĝ")?;
-    draw_line(c, measured, yr, max_jump, C_MEASURED, 1, false, "measured G (on top)")?;
-    legend(c, pos)
+    let mut labels = band_labels(d, banded);
+    let mut data: Vec<&[(f64, f64)]> = Vec::new();
+    for (fit, (fitted, _)) in fits.iter().zip(lines) {
+        draw_line(c, fitted, yr, max_jump, fit.colors.1, 3, false, &fit.fitted)?;
+        labels.push(&fit.fitted);
+        data.push(fitted);
+    }
+    for (fit, (_, measured)) in fits.iter().zip(lines) {
+        draw_line(c, measured, yr, max_jump, fit.colors.0, 1, false, &fit.measured)?;
+        labels.push(&fit.measured);
+        data.push(measured);
+    }
+    if let Some((pts, label)) = reference {
+        draw_line(c, pts, yr, max_jump, C_REFERENCE, 1, true, label)?;
+        labels.push(label);
+        data.push(pts);
+    }
+    legend_off_data(c, pos, &labels, &data)
 }
 
-/// The residual |Ĝ − G|/|G| per line: where the fit departs from the
+/// Each fit's residual |Ĝ − G|/|G| per line: where the fit departs from the
 /// measurement, on a log scale (1e-4 % to 100 %).
-fn fit_residual(area: &Area<'_>, s: &FitSeries, d: &AxisDesign) -> Result<()> {
+fn fit_residual(area: &Area<'_>, fits: &[FitPair<'_>], s: &[FitSeries], xr: (f64, f64), d: &AxisDesign) -> Result<()> {
     let yr_r = (-4.0, 2.0);
     let panel = Panel::new("Residual |Ĝ − G| / |G| of the fit (%, log scale)", "residual (%)", yr_r, false);
-    let mut c = panel.chart(area, s.xr, d, &|v| format!("{}", 10f64.powf(*v)), 7)?;
-    draw_line(&mut c, &s.resid, yr_r, f64::INFINITY, C_MEASURED, 1, false, "residual")?;
-    legend(&mut c, SeriesLabelPosition::UpperLeft)
+    let mut c = panel.chart(area, xr, d, &|v| format!("{}", 10f64.powf(*v)), 7)?;
+    let one = fits.len() == 1;
+    let labels: Vec<String> =
+        fits.iter().map(|f| if one { "residual".to_string() } else { format!("residual: {}", f.measured) }).collect();
+    for ((fit, x), label) in fits.iter().zip(s).zip(&labels) {
+        draw_line(&mut c, &x.resid, yr_r, f64::INFINITY, fit.colors.0, 1, false, label)?;
+    }
+    let labels: Vec<&str> = labels.iter().map(String::as_str).collect();
+    let data: Vec<&[(f64, f64)]> = s.iter().map(|x| x.resid.as_slice()).collect();
+    legend_off_data(&mut c, SeriesLabelPosition::UpperLeft, &labels, &data)
 }
 
-/// The measured coherence γ², or a note that the FRF file has none.
+/// Each measured FRF's coherence γ², or a note that the FRF file has none.
 fn coherence(
     area: &Area<'_>,
     freq: &[f64],
-    meas: &AxisFrf,
+    fits: &[FitPair<'_>],
     d: &AxisDesign,
     xr: (f64, f64),
     band_txt: &str,
@@ -343,21 +431,30 @@ fn coherence(
     let caption = format!("Coherence γ² ({band_txt})");
     let panel = Panel::new(&caption, "γ²", yr_c, true);
     let mut c = panel.chart(area, xr, d, &|v| format!("{v:.1}"), 6)?;
-    match &meas.coherence {
-        Some(coh) => {
-            let pts: Vec<(f64, f64)> = freq.iter().zip(coh).map(|(f, c)| (*f, *c)).collect();
-            draw_line(&mut c, &pts, yr_c, f64::INFINITY, C_COH, 2, false, "coherence γ²")?;
-        }
-        None => {
-            c.draw_series(std::iter::once(Text::new(
-                "no coherence in the FRF file: the whole band counts as coherent",
-                (xr.0 + 0.05 * (xr.1 - xr.0), 0.5),
-                (FONT, 16),
-            )))
-            .map_err(perr)?;
+    let mut labels = band_labels(d, true);
+    let mut names = Vec::new();
+    let mut lines = Vec::new();
+    for fit in fits {
+        if let Some(coh) = &fit.meas.coherence {
+            lines.push((freq.iter().zip(coh).map(|(f, c)| (*f, *c)).collect::<Vec<_>>(), fit.colors.0));
+            names.push(if fits.len() == 1 { "coherence γ²".to_string() } else { format!("γ²: {}", fit.measured) });
         }
     }
-    legend(&mut c, SeriesLabelPosition::LowerLeft)
+    if lines.is_empty() {
+        c.draw_series(std::iter::once(Text::new(
+            "no coherence in the FRF file: the whole band counts as coherent",
+            (xr.0 + 0.05 * (xr.1 - xr.0), 0.5),
+            (FONT, 16),
+        )))
+        .map_err(perr)?;
+    }
+    for ((pts, color), name) in lines.iter().zip(&names) {
+        let color = if fits.len() == 1 { C_COH } else { *color };
+        draw_line(&mut c, pts, yr_c, f64::INFINITY, color, 2, false, name)?;
+    }
+    labels.extend(names.iter().map(String::as_str));
+    let data: Vec<&[(f64, f64)]> = lines.iter().map(|l| l.0.as_slice()).collect();
+    legend_off_data(&mut c, SeriesLabelPosition::LowerLeft, &labels, &data)
 }
 
 // ------------------------------------------------------------ plot 2: compensated
@@ -490,9 +587,7 @@ fn compensated_series(freq: &[f64], meas: &AxisFrf, d: &AxisDesign, fs: f64) -> 
     let model: Vec<Complex64> = freq.iter().map(|f| d.fitted_frf(*f)).collect();
     let hg_model = compensated(freq, &model, d, fs);
     let g = &meas.frf;
-    let each = |z: &[Complex64], f: fn(Complex64) -> f64| -> Vec<(f64, f64)> {
-        freq.iter().zip(z).map(|(x, z)| (*x, f(*z))).collect()
-    };
+    let each = |z: &[Complex64], f: fn(Complex64) -> f64| each_line(freq, z, f);
     let (mag_g_db, mag_hg_db) = (each(g, db), each(&hg, db));
     let (lo, hi) = finite_range(mag_g_db.iter().chain(&mag_hg_db).map(|p| p.1)).unwrap_or((-20.0, 20.0));
     let band = d.coherent_band_hz;
@@ -539,7 +634,10 @@ fn compensated_overview(area: &Area<'_>, s: &CompensatedSeries, d: &AxisDesign) 
     flat_band_marks(&mut c, s, s.yr_db, true)?;
     draw_line(&mut c, &s.mag_g_db, s.yr_db, f64::INFINITY, C_RAW, 2, false, "uncompensated |G|")?;
     draw_line(&mut c, &s.mag_hg_db, s.yr_db, f64::INFINITY, C_MEASURED, 1, false, "compensated |H·G|")?;
-    legend(&mut c, SeriesLabelPosition::UpperLeft)
+    let mut labels = band_labels(d, true);
+    labels.extend(["flat band, measured G (±5 %, ±5°)", "coherent lines off the tolerances (measured)"]);
+    labels.extend(["uncompensated |G|", "compensated |H·G|"]);
+    legend_off_data(&mut c, SeriesLabelPosition::UpperLeft, &labels, &[&s.mag_g_db, &s.mag_hg_db])
 }
 
 /// A zoom of [`plot_compensated`] on the tolerances: the uncompensated,
@@ -567,7 +665,10 @@ impl Zoom<'_> {
         for ((pts, label), (color, width)) in self.lines.iter().zip([(C_RAW, 2), (C_MEASURED, 1), (C_MODEL, 2)]) {
             draw_line(&mut c, pts, yr, self.max_jump, color, width, false, label)?;
         }
-        legend(&mut c, SeriesLabelPosition::UpperMiddle)
+        let mut labels = vec![label];
+        labels.extend(self.lines.iter().map(|l| l.1));
+        let data: Vec<&[(f64, f64)]> = self.lines.iter().map(|l| l.0.as_slice()).collect();
+        legend_off_data(&mut c, SeriesLabelPosition::UpperMiddle, &labels, &data)
     }
 }
 
@@ -719,7 +820,23 @@ fn plot_poles(d: &AxisDesign, fs: f64) -> Result<(String, String)> {
             // In the zoom the modes inside it, in the whole plane those
             // outside the zoom.
             draw_mode_labels(&mut c, d, fs, &|z| inr(&z) && (!full || !in_zoom(z)))?;
-            legend(&mut c, if full { SeriesLabelPosition::LowerLeft } else { SeriesLabelPosition::UpperLeft })?;
+            // Off the markers first (each weighs as a hundred pixels of
+            // line) and the mode labels left of them (~120 px), then off
+            // the unit circle.
+            let px = if full { px_full } else { px_zoom };
+            let left = 120.0 * (xr.1 - xr.0) / f64::from(px.0.max(1));
+            let markers: Vec<Vec<(f64, f64)>> = modelz
+                .iter()
+                .chain(comp)
+                .map(|z| std::iter::once((z.re - left, z.im)).chain(vec![(z.re, z.im); 100]).collect())
+                .collect();
+            let circle: Vec<(f64, f64)> =
+                (0..=720).map(|k| (k as f64 * PI / 360.0).sin_cos()).map(|(s, c)| (c, s)).collect();
+            let mut data: Vec<&[(f64, f64)]> = markers.iter().map(Vec::as_slice).collect();
+            data.push(&circle);
+            let labels = ["unit circle", "fitted model, exp(p/fs)", "compensator sections"];
+            let preferred = if full { SeriesLabelPosition::LowerLeft } else { SeriesLabelPosition::UpperLeft };
+            legend_off_data(&mut c, preferred, &labels, &data)?;
         }
         root.present().map_err(perr)?;
     }
@@ -828,7 +945,10 @@ fn plot_model_match(d: &AxisDesign, dm: &crate::design::discretize::DiscreteMode
         for (pts, col, w, label) in &lines {
             draw_line(&mut c, pts, yr, f64::INFINITY, *col, *w, false, label)?;
         }
-        legend(&mut c, SeriesLabelPosition::UpperLeft)?;
+        let mut labels = vec!["compensated band"];
+        labels.extend(lines.iter().map(|l| l.3.as_str()));
+        let data: Vec<&[(f64, f64)]> = lines.iter().map(|l| l.0.as_slice()).collect();
+        legend_off_data(&mut c, SeriesLabelPosition::UpperLeft, &labels, &data)?;
         root.present().map_err(perr)?;
     }
     Ok(buf)

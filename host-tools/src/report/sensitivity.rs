@@ -3,7 +3,7 @@
 
 use crate::design::sensitivity::{Sensitivity, SHIFTS_PCT};
 use crate::fit::modes::SENSOR_FRACTION;
-use crate::report::plot::{build_chart, draw_line, legend, mesh, perr, FONT};
+use crate::report::plot::{build_chart, draw_line, legend_off_data, mesh, perr, FONT};
 
 /// Caption of the report's sensitivity plot.
 pub fn plot_caption(s: &Sensitivity) -> String {
@@ -55,12 +55,16 @@ pub fn plot(axis: &str, s: &Sensitivity) -> anyhow::Result<String> {
         draw_line(&mut c, &pts, yr, f64::INFINITY, RGBColor(214, 39, 40), 2, false, "predicted error, this filter")?;
         let twice = [(xr.0, lg(2.0 * nominal)), (xr.1, lg(2.0 * nominal))];
         draw_line(&mut c, &twice, yr, f64::INFINITY, RGBColor(127, 127, 127), 1, true, "twice the nominal error")?;
-        let doubling = [s.doubles_below_pct, s.doubles_above_pct];
-        for (k, x) in doubling.into_iter().flatten().enumerate() {
+        let doubling: Vec<[(f64, f64); 2]> =
+            [s.doubles_below_pct, s.doubles_above_pct].into_iter().flatten().map(|x| [(x, yr.0), (x, yr.1)]).collect();
+        for (k, line) in doubling.iter().enumerate() {
             let label = if k == 0 { "where the error doubles" } else { "" };
-            draw_line(&mut c, &[(x, yr.0), (x, yr.1)], yr, f64::INFINITY, RGBColor(31, 119, 180), 1, true, label)?;
+            draw_line(&mut c, line, yr, f64::INFINITY, RGBColor(31, 119, 180), 1, true, label)?;
         }
-        legend(&mut c, SeriesLabelPosition::UpperMiddle)?;
+        let labels = ["predicted error, this filter", "twice the nominal error", "where the error doubles"];
+        let mut data: Vec<&[(f64, f64)]> = vec![&pts, &twice];
+        data.extend(doubling.iter().map(|l| l.as_slice()));
+        legend_off_data(&mut c, SeriesLabelPosition::UpperMiddle, &labels[..2 + doubling.len().min(1)], &data)?;
         root.present().map_err(perr)?;
     }
     Ok(buf)

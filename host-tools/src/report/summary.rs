@@ -195,9 +195,23 @@ pub struct VersusDefaultJson {
     pub replaced_by_default: bool,
 }
 
+/// What a design for the range between two states predicts for one axis:
+/// the worst case over the range and the image's own state s.
+#[derive(Clone, Copy, Debug)]
+pub struct RangeFigures {
+    /// Worst-case predicted in-band error over the range (fraction).
+    pub worst: f64,
+    /// The state the image was designed for.
+    pub s: f64,
+}
+
 /// One-screen text summary: the image line and the fitting bands, a table
 /// of one row per axis, then per axis its discrete model and notes, the
-/// sensitivity and paper lines, and a legend of the table's columns.
+/// sensitivity and paper lines, and a legend of the table's columns. With
+/// `range` (a design for the range between two states, one entry per axis
+/// in order), the table leads with each axis's worst case over the range,
+/// the error at the image's own state beside it.
+#[allow(clippy::too_many_arguments)]
 pub fn render_summary(
     designs: &[AxisDesign],
     sensitivities: &[Option<Sensitivity>],
@@ -206,6 +220,7 @@ pub fn render_summary(
     image: &str,
     id: u32,
     method: &str,
+    range: Option<&[RangeFigures]>,
 ) -> String {
     let mut s = String::new();
     let _ = writeln!(
@@ -216,7 +231,7 @@ pub fn render_summary(
     if let Some(d) = designs.first().filter(|d| !d.bands.is_empty()) {
         let _ = writeln!(s, "fitting bands: {}", bands::describe(&d.bands));
     }
-    s.push_str(&table(designs));
+    s.push_str(&table(designs, range));
     for d in designs {
         if let Some(line) = discrete_line(d) {
             s.push_str(&line);
@@ -235,14 +250,19 @@ pub fn render_summary(
             let _ = writeln!(s, "{}", paper_line(d.axis, tf.nb(), tf.na(), p));
         }
     }
-    s.push_str(&legend(designs, latency));
+    s.push_str(&legend(designs, latency, range.is_some()));
     s
 }
 
 /// The summary's table: a header and one row per axis (the columns are
-/// explained by [`legend`]).
-fn table(designs: &[AxisDesign]) -> String {
+/// explained by [`legend`]); with `range`, the worst case over the range
+/// and the error at the image's state s in place of `pred.`.
+fn table(designs: &[AxisDesign], range: Option<&[RangeFigures]>) -> String {
     let mut s = String::new();
+    let pred = |d: &AxisDesign, i: usize| match range.and_then(|r| r.get(i)) {
+        Some(r) => format!("{:>6.2}% {:>5.2}%@{:.2}", 100.0 * r.worst, 100.0 * d.predicted_error, r.s),
+        None => format!("{:>6.2}%", d.predicted_error * 100.0),
+    };
     let _ = writeln!(
         s,
         "{:<4} {:>5} {:>7} {:>13} {:>10} {:>9} {:>15} {:>6} {:>7} {:>7} {:>8} {:>7}",
@@ -254,15 +274,15 @@ fn table(designs: &[AxisDesign]) -> String {
         "R (N²)",
         "flat band (Hz)",
         "noise",
-        "pred.",
+        if range.is_some() { format!("{:>7} {:>11}", "worst*", "pred.@s") } else { "pred.".to_string() },
         "raw",
         "match",
         "sec+fir"
     );
-    for d in designs {
+    for (i, d) in designs.iter().enumerate() {
         let _ = writeln!(
             s,
-            "{:<4} {:>5} {:>6.2}% {:>6.0}-{:<6.0} {:>10.3e} {:>9.4} {:>7.0}-{:<7.0} {:>6.2} {:>6.2}% {:>6.2}% {:>8} \
+            "{:<4} {:>5} {:>6.2}% {:>6.0}-{:<6.0} {:>10.3e} {:>9.4} {:>7.0}-{:<7.0} {:>6.2} {:>7} {:>6.2}% {:>8} \
              {:>4}+{}",
             axis_name(d.axis),
             d.model.order(),
@@ -274,7 +294,7 @@ fn table(designs: &[AxisDesign]) -> String {
             d.flat_band_hz.0,
             d.flat_band_hz.1,
             d.noise_gain,
-            d.predicted_error * 100.0,
+            pred(d, i),
             d.raw_predicted_error * 100.0,
             if d.model_match.is_finite() { format!("{:.3}%", d.model_match * 100.0) } else { "tustin".to_string() },
             d.filter.sections().len(),
@@ -307,16 +327,26 @@ fn discrete_line(d: &AxisDesign) -> Option<String> {
 
 /// What the table's columns mean, with the force spectrum the predictions
 /// are for.
-fn legend(designs: &[AxisDesign], latency: usize) -> String {
+fn legend(designs: &[AxisDesign], latency: usize, range: bool) -> String {
     let spectrum = match designs.iter().find_map(|d| d.force_spectrum.as_ref()) {
         Some(s) if !s.level_only => "the force spectrum of --force-record",
         Some(_) => "a flat force spectrum at the level of --force-record",
         None => "a flat force spectrum",
     };
+    let pred = if range {
+        format!(
+            "worst*: predicted in-band RMS error for {spectrum}, worst case over the range s ∈ [0, 1] between the two \
+             states and both measured FRFs: the error to expect; pred.@s: the same at the image's own state s only \
+             (a best case, not a promise)"
+        )
+    } else {
+        format!("pred.: predicted in-band RMS error for {spectrum}")
+    };
+    let raw = if range { "pred.@s" } else { "the same" };
     format!(
         "flat band: |H·Ĝ| within ±5 % and ±5° of the pure {latency}-sample delay (fitted model Ĝ); noise: white-noise \
-         gain; pred.: predicted in-band RMS error for {spectrum}; raw: the same for no compensation; match: max \
-         |Ĝ_d/Ĝ − 1| of the discrete model over the compensated band\n"
+         gain; {pred}; raw: {raw} for no compensation; match: max |Ĝ_d/Ĝ − 1| of the discrete model over the \
+         compensated band\n"
     )
 }
 

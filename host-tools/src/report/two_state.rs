@@ -7,6 +7,7 @@ use std::fmt::Write as _;
 
 use crate::design::sensitivity::Sensitivity;
 use crate::design::two_state::range::{RangeDesign, RANGE_STATES};
+use crate::frf::{axis_name, AxisFrf};
 
 /// The summary lines of one axis designed for the range: the paired modes
 /// and the chosen state, the machine modes shared or kept apart, and the
@@ -131,8 +132,11 @@ pub struct RangeAxisJson {
     measured_frf_errors: Vec<(f64, f64)>,
     /// Candidate states that could not be designed, with why.
     skipped_states: Vec<(f64, String)>,
-    /// The image's predicted error at its own state.
+    /// The image's predicted error at its own state only (a best case).
     predicted_error: f64,
+    /// The error to expect from the image: its worst case over the range
+    /// (`worst_case_error`), the figure the summary table leads with.
+    expected_error: f64,
     /// Its sensitivity to shifted sensor modes.
     sensitivity: Option<Sensitivity>,
 }
@@ -156,6 +160,7 @@ impl RangeAxisJson {
             measured_frf_errors: cands.iter().map(|c| c.measured).collect(),
             skipped_states: rd.skipped.clone(),
             predicted_error: c.design.predicted_error,
+            expected_error: c.worst,
             sensitivity,
         }
     }
@@ -185,7 +190,7 @@ pub fn range_caption(rd: &RangeDesign) -> String {
 
 /// The report's SVG: each candidate's predicted error (%) against the state s.
 pub fn plot_range(axis: &str, rd: &RangeDesign) -> Result<String> {
-    use crate::report::plot::{build_chart, draw_line, legend, mesh, perr, FONT};
+    use crate::report::plot::{build_chart, draw_line, legend_off_data, mesh, perr, FONT};
     use plotters::prelude::*;
     let top = rd.candidates.iter().flat_map(|c| c.errors.iter()).fold(0.0f64, |a, e| a.max(100.0 * e));
     let yr = (0.0, if top.is_finite() && top > 0.0 { 1.1 * top } else { 1.0 });
@@ -219,17 +224,88 @@ pub fn plot_range(axis: &str, rd: &RangeDesign) -> Result<String> {
             RGBColor(140, 86, 75),
             RGBColor(255, 127, 14),
         ];
+        let mut lines = Vec::new();
+        let mut labels = Vec::new();
         for (i, cand) in rd.candidates.iter().enumerate() {
             let pts: Vec<(f64, f64)> = RANGE_STATES.iter().zip(&cand.errors).map(|(s, e)| (*s, 100.0 * e)).collect();
             let (color, width) =
                 if i == rd.best { (RGBColor(214, 39, 40), 3) } else { (PALETTE[i % PALETTE.len()], 1) };
             let label = format!("designed at s = {:.2}{}", cand.s, if i == rd.best { " (the image)" } else { "" });
             draw_line(&mut c, &pts, yr, f64::INFINITY, color, width, i != rd.best, &label)?;
+            lines.push(pts);
+            labels.push(label);
         }
-        legend(&mut c, SeriesLabelPosition::UpperMiddle)?;
+        let labels: Vec<&str> = labels.iter().map(String::as_str).collect();
+        let data: Vec<&[(f64, f64)]> = lines.iter().map(Vec::as_slice).collect();
+        legend_off_data(&mut c, SeriesLabelPosition::UpperMiddle, &labels, &data)?;
         root.present().map_err(perr)?;
     }
     Ok(buf)
+}
+
+/// Colours of the second FRF and of the model at its state in
+/// [`plot_frf_fits`] (the first FRF keeps the single-state plot's).
+const C_SECOND: (plotters::style::RGBColor, plotters::style::RGBColor) =
+    (plotters::style::RGBColor(148, 103, 189), plotters::style::RGBColor(255, 127, 14));
+
+/// Relative RMS misfit |Ĝ − G| / |G| of `model` against the measured
+/// `meas` on the lines of `band` (Hz).
+fn misfit(freq: &[f64], model: &crate::fit::PoleResidueModel, meas: &AxisFrf, band: (f64, f64)) -> f64 {
+    let mask: Vec<bool> = freq.iter().map(|f| *f >= band.0 && *f <= band.1).collect();
+    crate::fit::relative_rms_error(|f| model.frf(f), freq, &meas.frf, &mask)
+}
+
+/// The report's FRF-fit figure of an axis designed for the range: the
+/// first FRF against the model at s = 0, the second against the model at
+/// s = 1, each with its residual and coherence, and the model at the
+/// image's state dashed; the misfits over the coherent band in the title.
+pub fn plot_frf_fits(freq: &[f64], first: &AxisFrf, second: &AxisFrf, rd: &RangeDesign) -> Result<String> {
+    use crate::report::design::FitPair;
+    let chosen = &rd.candidates[rd.best];
+    let d = &chosen.design;
+    let band = d.coherent_band_hz;
+    let (m0, m1, ms) = (rd.states.at(0.0), rd.states.at(1.0), rd.states.at(chosen.s));
+    let on_lines = |m: &crate::fit::PoleResidueModel| freq.iter().map(|f| m.frf(*f)).collect::<Vec<_>>();
+    let (e0, e1) = (misfit(freq, &m0, first, band), misfit(freq, &m1, second, band));
+    let fits = [
+        FitPair {
+            meas: first,
+            model: on_lines(&m0),
+            measured: "measured G, first FRF".into(),
+            fitted: "model at s = 0 (first state)".into(),
+            colors: (plotters::style::RGBColor(31, 119, 180), plotters::style::RGBColor(214, 39, 40)),
+        },
+        FitPair {
+            meas: second,
+            model: on_lines(&m1),
+            measured: "measured G, second FRF".into(),
+            fitted: "model at s = 1 (second state)".into(),
+            colors: C_SECOND,
+        },
+    ];
+    let title = format!(
+        "Axis {} — both measured FRFs, each against the model at its own state \
+         (misfit {:.2} % / {:.2} % in the coherent band)",
+        axis_name(first.axis),
+        100.0 * e0,
+        100.0 * e1
+    );
+    let reference = on_lines(&ms);
+    let label = format!("model at s = {:.2} (the image's state)", chosen.s);
+    crate::report::design::plot_frf_fits(freq, &fits, Some((&reference, &label)), d, &title)
+}
+
+/// Caption of [`plot_frf_fits`].
+pub fn frf_fits_caption(rd: &RangeDesign) -> String {
+    let s = rd.candidates[rd.best].s;
+    format!(
+        "Magnitude and phase of both measured FRFs (impact tests), each against the paired model at its own state: \
+         the first FRF (blue) against the model at s = 0 (red), the second (violet) against the model at s = 1 \
+         (orange). Dashed: the model at s = {s:.2}, the state the box image was designed for; it lies between the \
+         two measurements and is judged against neither. Below: each FRF's residual against its own state's model \
+         and both coherences. Shaded: the coherent band used for the design. Title: relative RMS misfit of each FRF \
+         against its own state's model over the coherent band."
+    )
 }
 
 /// The paired physical modes ("f0→f1") and the background terms of one
