@@ -23,54 +23,7 @@ pub fn run(args: &DesignArgs, setup: &DesignSetup) -> Result<String> {
     let method = args.method.name();
     let shown = args.out.display().to_string();
     if args.json {
-        #[derive(serde::Serialize)]
-        struct AxisJson {
-            axis: &'static str,
-            model_order: usize,
-            fit_nrmse: f64,
-            q: f64,
-            flat_band_hz: (f64, f64),
-            noise_gain: f64,
-        }
-        #[derive(serde::Serialize)]
-        struct BandJson<'a> {
-            band: &'a Band,
-            design_region_hz: (f64, f64),
-            axes: Vec<AxisJson>,
-        }
-        let n = frf.freq_hz.len();
-        let regions = design_regions(bands, frf.freq_hz[0], frf.freq_hz[n - 1])?;
-        let j: Vec<BandJson> = bands
-            .iter()
-            .zip(&regions)
-            .zip(&per_band)
-            .map(|((b, reg), ds)| BandJson {
-                band: b,
-                design_region_hz: (reg.lo_hz, reg.hi_hz),
-                axes: ds
-                    .iter()
-                    .map(|d| AxisJson {
-                        axis: axis_name(d.axis),
-                        model_order: d.model.order(),
-                        fit_nrmse: d.fit_nrmse,
-                        q: d.kalman.q,
-                        flat_band_hz: d.flat_band_hz,
-                        noise_gain: d.noise_gain,
-                    })
-                    .collect(),
-            })
-            .collect();
-        let doc = serde_json::json!({
-            "image": shown,
-            "image_id": format!("{id:08x}"),
-            "offline_only": true,
-            "parallel_bands": j,
-            "fs_hz": args.input.fs,
-            "latency_samples": latency,
-            "method": method,
-            "design_time_s": t0.elapsed().as_secs_f64(),
-        });
-        return Ok(format!("{}\n", serde_json::to_string_pretty(&doc)?));
+        return parallel_json(args, setup, &per_band, id, t0.elapsed().as_secs_f64());
     }
     let mut out = format!(
         "parallel-elaboration image {shown} (id {id:08x}), OFFLINE ONLY (the box never runs it), {} bands:\n",
@@ -93,4 +46,65 @@ pub fn run(args: &DesignArgs, setup: &DesignSetup) -> Result<String> {
     }
     eprintln!("designed in {:.0} ms", t0.elapsed().as_secs_f64() * 1e3);
     Ok(out)
+}
+
+/// The `--json` summary of a parallel design: per band its region and each
+/// axis's figures; `seconds`: the design time.
+fn parallel_json(
+    args: &DesignArgs,
+    setup: &DesignSetup,
+    per_band: &[Vec<crate::design::axis::AxisDesign>],
+    id: u32,
+    seconds: f64,
+) -> Result<String> {
+    let DesignSetup { frf, bands, latency, .. } = setup;
+    let (method, shown) = (args.method.name(), args.out.display().to_string());
+    #[derive(serde::Serialize)]
+    struct AxisJson {
+        axis: &'static str,
+        model_order: usize,
+        fit_nrmse: f64,
+        q: f64,
+        flat_band_hz: (f64, f64),
+        noise_gain: f64,
+    }
+    #[derive(serde::Serialize)]
+    struct BandJson<'a> {
+        band: &'a Band,
+        design_region_hz: (f64, f64),
+        axes: Vec<AxisJson>,
+    }
+    let n = frf.freq_hz.len();
+    let regions = design_regions(bands, frf.freq_hz[0], frf.freq_hz[n - 1])?;
+    let j: Vec<BandJson> = bands
+        .iter()
+        .zip(&regions)
+        .zip(per_band)
+        .map(|((b, reg), ds)| BandJson {
+            band: b,
+            design_region_hz: (reg.lo_hz, reg.hi_hz),
+            axes: ds
+                .iter()
+                .map(|d| AxisJson {
+                    axis: axis_name(d.axis),
+                    model_order: d.model.order(),
+                    fit_nrmse: d.fit_nrmse,
+                    q: d.kalman.q,
+                    flat_band_hz: d.flat_band_hz,
+                    noise_gain: d.noise_gain,
+                })
+                .collect(),
+        })
+        .collect();
+    let doc = serde_json::json!({
+        "image": shown,
+        "image_id": format!("{id:08x}"),
+        "offline_only": true,
+        "parallel_bands": j,
+        "fs_hz": args.input.fs,
+        "latency_samples": latency,
+        "method": method,
+        "design_time_s": seconds,
+    });
+    Ok(format!("{}\n", serde_json::to_string_pretty(&doc)?))
 }

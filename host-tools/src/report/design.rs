@@ -366,6 +366,9 @@ fn band_labels(d: &AxisDesign, labelled: bool) -> Vec<&'static str> {
     }
 }
 
+/// One fit's (fitted, measured) line, (Hz, value) points.
+type FittedMeasured<'a> = (&'a Vec<(f64, f64)>, &'a Vec<(f64, f64)>);
+
 /// Each fit's model line under its measurement's (`lines`: (fitted,
 /// measured) per fit), then the `reference` model dashed, and the legend
 /// off the lines (`pos` preferred; `banded`: the panel's bands are in it).
@@ -373,7 +376,7 @@ fn band_labels(d: &AxisDesign, labelled: bool) -> Vec<&'static str> {
 fn fitted_and_measured(
     c: &mut Chart<'_>,
     fits: &[FitPair<'_>],
-    lines: &[(&Vec<(f64, f64)>, &Vec<(f64, f64)>)],
+    lines: &[FittedMeasured<'_>],
     reference: Option<(&[(f64, f64)], &str)>,
     yr: (f64, f64),
     max_jump: f64,

@@ -293,11 +293,14 @@ fn legend_frame(pos: &SeriesLabelPosition, (w, h): (i32, i32), dim: (u32, u32)) 
     (x, y, x + w, y + h)
 }
 
+/// A data point's pixel position (x, y) in the drawing area.
+type ToPixel<'a> = dyn Fn(&(f64, f64)) -> (i32, i32) + 'a;
+
 /// How many pixels of the polylines `data` (chart coordinates, pixel
 /// positions `to_px`) fall inside `frame`: every vertex, and points every
 /// 3 px along each segment, so that a line crossing the frame between two
 /// distant vertices counts too. Non-finite points break a line.
-fn covered(data: &[&[(f64, f64)]], to_px: &dyn Fn(&(f64, f64)) -> (i32, i32), frame: (i32, i32, i32, i32)) -> usize {
+fn covered(data: &[&[(f64, f64)]], to_px: &ToPixel<'_>, frame: (i32, i32, i32, i32)) -> usize {
     let inside = |(x, y): (f64, f64)| {
         x >= f64::from(frame.0) && x <= f64::from(frame.2) && y >= f64::from(frame.1) && y <= f64::from(frame.3)
     };
