@@ -72,7 +72,7 @@ pub fn run(args: &DesignArgs, s: &DesignSetup, t0: Instant) -> Result<MatrixOutc
     let progress = Progress::stderr();
     let opts =
         MatrixOptions { design: s.opts.clone(), latency: args.latency, progress: Some(progress), ..Default::default() };
-    eprintln!("designing the 3x3 compensator ({} lines, nine FRFs; about a minute)…", s.frf.freq_hz.len());
+    eprintln!("designing the 3x3 compensator ({} lines, nine FRFs; up to half a minute)…", s.frf.freq_hz.len());
     let md = match design_matrix(&s.frf, r, &opts) {
         Ok(md) => md,
         Err(e) if e.downcast_ref::<NotVerified>().is_some() => {
