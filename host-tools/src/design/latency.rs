@@ -17,6 +17,7 @@ use crate::design::discretize::{Discretization, NYQUIST_FIT_FRACTION};
 use crate::design::paper_orders::design_axis;
 use crate::design::progress::Progress;
 use crate::frf::{axis_name, AxisFrf};
+use crate::numeric::parallel::map_on_threads;
 
 /// Latency designed first, and kept unless a longer one buys accuracy (samples).
 pub const DEFAULT_LATENCY: usize = 4;
@@ -116,20 +117,14 @@ fn axis_done(axis: &str, stage: &str, d: &Result<AxisDesign>, seconds: f64) -> S
     format!("{axis} at {stage}: {what}, {:.0} ms", seconds * 1e3)
 }
 
-/// `f` of every item, one thread each, with each one's wall time (s).
-fn on_threads<I: Send, T: Send>(items: impl Iterator<Item = I>, f: impl Fn(I) -> T + Sync) -> Vec<(T, f64)> {
-    let f = &f;
-    std::thread::scope(|scope| {
-        let handles: Vec<_> = items
-            .map(|i| {
-                scope.spawn(move || {
-                    let t = Instant::now();
-                    let d = f(i);
-                    (d, t.elapsed().as_secs_f64())
-                })
-            })
-            .collect();
-        handles.into_iter().map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p))).collect()
+/// `f` of every item on the machine's cores ([`map_on_threads`]), with each
+/// one's wall time (s).
+fn on_threads<I: Copy + Sync, T: Send>(items: impl Iterator<Item = I>, f: impl Fn(I) -> T + Sync) -> Vec<(T, f64)> {
+    let items: Vec<I> = items.collect();
+    map_on_threads(&items, |i| {
+        let t = Instant::now();
+        let d = f(*i);
+        (d, t.elapsed().as_secs_f64())
     })
 }
 

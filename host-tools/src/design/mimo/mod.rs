@@ -35,6 +35,7 @@ use crate::fit::relative_rms_error;
 use crate::fit::vf::{coherence_weights, VfOptions};
 use crate::frf::{axis_name, entry_name, Frf};
 use crate::numeric::lti::MimoStateSpace;
+use crate::numeric::parallel::map_on_threads;
 use crate::realize::mimo::{realize_blocks, MimoRealization, MimoVerification};
 
 /// Where the 3x3 design reports its stages (it takes up to a minute).
@@ -480,13 +481,8 @@ fn latency_rounds(
     };
     let mut rounds = vec![timed_round(opts.latency.unwrap_or(DEFAULT_LATENCY))];
     if opts.latency.is_none() && rounds[0].axes.iter().any(|a| a.chosen.distortion > PREDICTED_SHORT) {
-        // The longer latencies are independent: one thread each (the host
-        // has at least two cores).
-        let longer: Vec<Round> = std::thread::scope(|scope| {
-            let handles: Vec<_> = LONGER_LATENCIES.iter().map(|l| scope.spawn(|| timed_round(*l))).collect();
-            handles.into_iter().map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))).collect()
-        });
-        rounds.extend(longer);
+        // The longer latencies are independent: on the machine's cores.
+        rounds.extend(map_on_threads(&LONGER_LATENCIES, |l| timed_round(*l)));
     }
     rounds
 }

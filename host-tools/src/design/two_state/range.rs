@@ -14,6 +14,7 @@ use crate::fit::modes::{fn_hz, modal_share, residue_of_share, sensor_mode_indice
 use crate::fit::vf::{coherence_weights, fit_order, VfOptions};
 use crate::fit::{PoleResidueModel, Term};
 use crate::frf::{axis_name, AxisFrf};
+use crate::numeric::parallel::map_on_threads;
 
 /// States s at which a box image designed for the range is evaluated.
 pub const RANGE_STATES: [f64; 5] = [0.0, 0.25, 0.5, 0.75, 1.0];
@@ -306,7 +307,7 @@ fn measured_states_fit_error(
 }
 
 /// [`design_over_range`] for every axis of the FRFs `before` and `after`
-/// (the same axes on the same lines `freq_hz`), on a thread per axis, with
+/// (the same axes on the same lines `freq_hz`), on the machine's cores, with
 /// the candidates [`RANGE_STATES`]; `r[axis]`: the measurement noise
 /// variance R of each axis (N²). The results in axis order.
 pub fn design_axes_over_range(
@@ -316,15 +317,9 @@ pub fn design_axes_over_range(
     r: &[Option<f64>; 3],
     opts: &DesignOptions,
 ) -> Vec<Result<RangeDesign>> {
-    std::thread::scope(|scope| {
-        let handles: Vec<_> = before
-            .iter()
-            .zip(after)
-            .map(|(a0, a1)| {
-                let rv = r[a0.axis].expect("R set for every FRF axis");
-                scope.spawn(move || design_over_range(freq_hz, a0, a1, rv, opts, &RANGE_STATES))
-            })
-            .collect();
-        handles.into_iter().map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p))).collect()
+    let pairs: Vec<(&AxisFrf, &AxisFrf)> = before.iter().zip(after).collect();
+    map_on_threads(&pairs, |(a0, a1)| {
+        let rv = r[a0.axis].expect("R set for every FRF axis");
+        design_over_range(freq_hz, a0, a1, rv, opts, &RANGE_STATES)
     })
 }
