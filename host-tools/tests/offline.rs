@@ -154,7 +154,9 @@ fn offline_smoother_on_simulated_milling_records() {
                 c4 * 100.0,
                 o * 100.0
             );
-            assert!(o < c0 / 5.0, "axis {a}: offline {:.4} % not far below causal L=0 {:.4} %", o * 100.0, c0 * 100.0);
+            // The default design, quiet above the band, makes the L = 0 filter
+            // better than it was (measured 2.46-5.60 %, the smoother 3.7-63x below).
+            assert!(o < c0 / 3.0, "axis {a}: offline {:.4} % not far below causal L=0 {:.4} %", o * 100.0, c0 * 100.0);
             assert!(
                 o < 1.2 * c4,
                 "axis {a}: offline {:.4} % not within 20 % of causal L=4 {:.4} %",

@@ -24,8 +24,12 @@ const MAX_TERM_GROWTH: f64 = 2.0;
 /// coefficient rounding (1-4e-6 of the peak response,
 /// `Verification::freq_error`). The FIR's declared truncation (tail of the
 /// impulse response beyond the last tap) is allowed on top, at its bound
-/// tail·max|u| (see [`allowed`]). The badly scaled axis y had 1.6e-4.
-const MAX_REL_ERROR: f64 = 5e-6;
+/// tail·max|u| (see [`allowed`]). The badly scaled axis y had 1.6e-4. The
+/// default design, quiet above the band, realizes axis x as 7 sections (its
+/// band-limited force model adds two fast pole pairs) and measures 9.9e-6
+/// (the design's own f32 verification: 1.1e-5; the in-band-only design's y
+/// had 1.2e-5 there); 1.5e-5 keeps the check 10x below the defect it guards.
+const MAX_REL_ERROR: f64 = 1.5e-5;
 
 /// [`MAX_REL_ERROR`] plus the FIR truncation bound Σ_{j>m}|h_j|·max|u| /
 /// peak-to-peak(y64), from the realization's `fir_truncation` (tail / Σ|h|).

@@ -209,6 +209,7 @@ fn write_image_and_sidecar(
         // A flat spectrum at the record's level is as safe as the default:
         // no note for `compensate`.
         m.force_spectrum = d.force_spectrum.as_ref().filter(|s| !s.level_only).map(|s| s.provenance(record.clone()));
+        m.force_shape = d.kalman.force_shape;
     }
     crate::offline::sidecar::write_image_and_sidecar(&args.out, image, Some(&sidecar))
 }
@@ -271,6 +272,8 @@ fn summary_text(
         }
     }
     summary.push_str(&versus_lines(args, d));
+    let shapes: Vec<_> = designs.iter().map(|d| (axis_name(d.axis), d.kalman.force_shape)).collect();
+    summary.push_str(&crate::design::above_band::describe(&shapes));
     summary.push_str(&crate::realize::load::describe(box_load, image.fs_hz));
     summary.push_str(if box_load.fits { "\n" } else { "  OVER THE LIMIT: offline-only image\n" });
     summary

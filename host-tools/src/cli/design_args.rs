@@ -324,6 +324,34 @@ pub struct DesignArgs {
     /// complete matrix gets the 3x3 design (README "Crosstalk").
     #[arg(long)]
     pub per_axis: bool,
+    /// What the compensator writes above its band: `quiet` (default: the
+    /// force modelled as band-limited and q chosen with the noise above
+    /// the band counted, so the output as written carries little more noise
+    /// there than the raw signal), or `inverse` (the exact inverse goes on
+    /// above the band with its amplified noise: low-pass the output to the
+    /// band before reading it). Band-fitted and paper designs, designs
+    /// with --force-prior, and the 3x3 crosstalk design are `inverse`.
+    #[arg(long, value_enum, default_value_t = AboveBandArg::Quiet)]
+    pub above_band: AboveBandArg,
+}
+
+/// What the compensator outputs above its band (`--above-band`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum AboveBandArg {
+    /// Band-limited force model; the noise above the band counted in q's choice
+    #[default]
+    Quiet,
+    /// The exact inverse continued above the band
+    Inverse,
+}
+
+impl From<AboveBandArg> for crate::design::above_band::AboveBand {
+    fn from(a: AboveBandArg) -> Self {
+        match a {
+            AboveBandArg::Quiet => Self::Quiet,
+            AboveBandArg::Inverse => Self::Inverse,
+        }
+    }
 }
 
 impl DesignArgs {
@@ -337,6 +365,7 @@ impl DesignArgs {
             max_noise_gain: self.input.max_noise_gain,
             vf: crate::fit::vf::VfOptions { max_order: self.max_order, ..Default::default() },
             discretization: self.input.discretization.into(),
+            above_band: self.above_band.into(),
             ..Default::default()
         }
     }

@@ -48,10 +48,55 @@ impl AugmentedPlant {
 /// that both the taps and the output lag are states. The measurement is
 /// ỹ_k = y_{k−D} = M(z)F_k + v_k (causal in F).
 pub fn augmented_plant(dm: &DiscreteModel, lag: usize) -> AugmentedPlant {
+    augmented_plant_shaped(dm, lag, None)
+}
+
+/// The band-limited force prior: the force is a random walk u
+/// (u_{k+1} = u_k + w_k, E\[w²\] = q) through an all-pole Butterworth
+/// low-pass S(z) of even order with S(1) = 1, so that in the band the force
+/// is the random walk the q criterion assumes, and above the corner its
+/// prior power falls by 20·order dB/decade more. The smoother then takes
+/// what it measures above the corner for noise instead of inverting Ĝ there.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ForceShape {
+    /// −3 dB corner of S (Hz).
+    pub corner_hz: f64,
+    /// Order of S: 2 or 4 (one or two all-pole sections).
+    pub order: usize,
+}
+
+impl ForceShape {
+    /// The sections of S at the sample rate `fs_hz`: for each analog
+    /// Butterworth pole pair p, p* (|p| = 2π f_c), the matched discrete pair
+    /// ζ = e^{p/fs}: (2 Re ζ, |ζ|², gain 1 − 2 Re ζ + |ζ|²), the section
+    /// y_{k+1} = 2 Re ζ·y_k − |ζ|²·y_{k−1} + gain·x_k with unit gain at DC.
+    pub fn sections(&self, fs_hz: f64) -> Vec<(f64, f64, f64)> {
+        let n = self.order as f64;
+        (0..self.order / 2)
+            .map(|k| {
+                let theta = std::f64::consts::PI * (2.0 * k as f64 + n + 1.0) / (2.0 * n);
+                let p = Complex64::from_polar(2.0 * std::f64::consts::PI * self.corner_hz, theta);
+                let z = (p / fs_hz).exp();
+                let (a1, a2) = (2.0 * z.re, z.norm_sqr());
+                (a1, a2, 1.0 - a1 + a2)
+            })
+            .collect()
+    }
+}
+
+/// [`augmented_plant`] with the force shaped by `shape` ([`ForceShape`]):
+/// the random walk u and the first sections' two states each follow the
+/// unshaped layout's states, and the last section's output is F_k itself,
+/// its second state F_{k−1} of the delay line (which then has at least one
+/// stage). Without a shape, exactly [`augmented_plant`].
+pub fn augmented_plant_shaped(dm: &DiscreteModel, lag: usize, shape: Option<ForceShape>) -> AugmentedPlant {
     let n_plant = dm.order();
     let model_lag = lag + dm.advance;
-    let n_delay = model_lag.max(dm.fir.len());
-    let n = n_plant + 1 + n_delay;
+    let sections = shape.map(|s| s.sections(dm.fs_hz)).unwrap_or_default();
+    let min_delay = usize::from(!sections.is_empty());
+    let n_delay = model_lag.max(dm.fir.len()).max(min_delay);
+    let n_shape = if sections.is_empty() { 0 } else { 1 + 2 * (sections.len() - 1) };
+    let n = n_plant + 1 + n_delay + n_shape;
     let f = n_plant; // index of F_k
     let mut a = DMatrix::<f64>::zeros(n, n);
     let mut g = DVector::<f64>::zeros(n);
@@ -82,14 +127,29 @@ pub fn augmented_plant(dm: &DiscreteModel, lag: usize) -> AugmentedPlant {
             }
         }
     }
-    a[(f, f)] = 1.0;
-    g[f] = 1.0;
     c[f] = dm.d;
     for j in 1..=n_delay {
         a[(f + j, f + j - 1)] = 1.0;
     }
     for (m, h) in dm.fir.iter().enumerate() {
         c[f + m + 1] = *h;
+    }
+    if sections.is_empty() {
+        a[(f, f)] = 1.0;
+        g[f] = 1.0;
+    } else {
+        let u = f + 1 + n_delay;
+        a[(u, u)] = 1.0;
+        g[u] = 1.0;
+        let mut input = u;
+        for (k, &(a1, a2, gain)) in sections.iter().enumerate() {
+            let (y, y1) = if k + 1 == sections.len() { (f, f + 1) } else { (u + 1 + 2 * k, u + 2 + 2 * k) };
+            a[(y, y)] = a1;
+            a[(y, y1)] = -a2;
+            a[(y, input)] = gain;
+            a[(y1, y)] = 1.0;
+            input = y;
+        }
     }
     AugmentedPlant { a, g, c, n_plant, lag: model_lag }
 }
@@ -229,6 +289,8 @@ pub struct KalmanDesign {
     pub q: f64,
     /// Measurement-noise variance R (N²).
     pub r: f64,
+    /// The band-limited force model, or `None` for the random walk.
+    pub force_shape: Option<ForceShape>,
 }
 
 /// Design the compensator for the discrete model, q, R and declared
@@ -249,13 +311,24 @@ pub struct KalmanDesign {
 /// Fed with y instead of ỹ (D samples earlier), the same filter outputs
 /// F̂[k−L]: the declared latency stays L.
 pub fn design(dm: &DiscreteModel, q: f64, r: f64, lag: usize) -> Result<KalmanDesign> {
+    design_shaped(dm, q, r, lag, None)
+}
+
+/// [`design`] on the force model shaped by `shape` ([`augmented_plant_shaped`]).
+pub fn design_shaped(
+    dm: &DiscreteModel,
+    q: f64,
+    r: f64,
+    lag: usize,
+    shape: Option<ForceShape>,
+) -> Result<KalmanDesign> {
     if !(r > 0.0) || !r.is_finite() {
         bail!("measurement noise variance R must be positive and finite, got {r}");
     }
     if !(q > 0.0) || !q.is_finite() {
         bail!("process noise intensity q must be positive and finite, got {q}");
     }
-    let plant = augmented_plant(dm, lag);
+    let plant = augmented_plant_shaped(dm, lag, shape);
     let qm = &plant.g * plant.g.transpose() * q;
     let sol = solve_filter_dare(&plant.a, &plant.c, &qm, r)?;
     let s = (plant.c.transpose() * &sol.p * &plant.c)[(0, 0)] + r;
@@ -276,5 +349,6 @@ pub fn design(dm: &DiscreteModel, q: f64, r: f64, lag: usize) -> Result<KalmanDe
         lag,
         q,
         r,
+        force_shape: shape,
     })
 }

@@ -3,7 +3,8 @@
 //! The paper's steps: fit Ĝ ([`axis`] calls `fit`), a discrete model of the
 //! sampled-data relation ([`discretize`]), the disturbance Kalman filter and
 //! fixed-lag smoother ([`kalman`], or the paper's own method in [`paper`]),
-//! q chosen by the declared criterion ([`criterion`]), the latency rule
+//! q chosen by the declared criterion ([`criterion`]), the output above the
+//! band ([`above_band`]), the latency rule
 //! ([`latency`]), band-fitting ([`bands`], [`parallel`]), and analyses of a
 //! design ([`sensitivity`], [`force_spectrum`], [`two_state`]).
 //! May import the leaves and `realize`; nothing above.
@@ -12,6 +13,7 @@
 // error must fail the check, which `x >= limit` would let pass.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod above_band;
 pub mod axis;
 pub mod bands;
 pub mod criterion;

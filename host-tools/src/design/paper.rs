@@ -387,6 +387,7 @@ pub fn design(
         lag: 0,
         q,
         r,
+        force_shape: None,
     })
 }
 

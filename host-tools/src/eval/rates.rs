@@ -218,6 +218,8 @@ pub struct RunOptions {
     /// The discrete model's static gain
     /// ([`DesignOptions::discrete_static_gain`]).
     pub static_gain: crate::design::discretize::StaticGain,
+    /// The output above the band ([`DesignOptions::above_band`]).
+    pub above_band: crate::design::above_band::AboveBand,
 }
 
 impl Default for RunOptions {
@@ -229,6 +231,7 @@ impl Default for RunOptions {
             force_spectrum: false,
             force_level_only: false,
             static_gain: crate::design::discretize::StaticGain::Exact,
+            above_band: crate::design::above_band::AboveBand::Quiet,
         }
     }
 }
@@ -243,6 +246,7 @@ pub fn design_options(fs_hz: f64, run: &RunOptions) -> DesignOptions {
         lag: run.lag.unwrap_or(crate::design::latency::DEFAULT_LATENCY),
         discretization: run.discretization,
         discrete_static_gain: run.static_gain,
+        above_band: run.above_band,
         ..Default::default()
     }
 }

@@ -68,6 +68,11 @@ pub struct AxisModelJson {
     /// spectrum`; absent otherwise and in older sidecars).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub force_spectrum: Option<crate::design::force_spectrum::SpectrumProvenance>,
+    /// The band-limited force model of the design (`design --above-band
+    /// quiet`, the default; absent for the random walk and in older
+    /// sidecars): the offline smoother uses it too.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub force_shape: Option<crate::design::kalman::ForceShape>,
 }
 
 /// The sidecar's terms of a pole-residue model.
@@ -150,6 +155,7 @@ impl ModelSidecar {
                 two_state: None,
                 force_prior: None,
                 force_spectrum: None,
+                force_shape: None,
             })
             .collect();
         ModelSidecar {
@@ -192,6 +198,19 @@ impl ModelSidecar {
             bail!("{source}: axis {name}: the discrete model is not valid (non-finite, unstable, another rate, or too long); re-run `dynocomp design`");
         }
         Ok(dm)
+    }
+
+    /// The band-limited force model of `axis`, validated (a finite corner
+    /// below fs/2, order 2 or 4); `None` where the design used the random walk.
+    pub fn force_shape(&self, axis: usize, source: &str) -> Result<Option<crate::design::kalman::ForceShape>> {
+        let name = axis_name(axis);
+        let shape = self.axes.iter().find(|a| a.axis == name).and_then(|a| a.force_shape);
+        if let Some(s) = shape {
+            if !(s.corner_hz > 0.0 && s.corner_hz < self.fs_hz / 2.0 && matches!(s.order, 2 | 4)) {
+                bail!("{source}: axis {name}: the force shape (corner {} Hz, order {}) is not valid at {} Hz; re-run `dynocomp design`", s.corner_hz, s.order, self.fs_hz);
+            }
+        }
+        Ok(shape)
     }
 }
 

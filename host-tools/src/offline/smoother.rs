@@ -23,7 +23,8 @@ use dynocomp_core::image::CoeffImage;
 /// **Model.** The same augmented plant as the box's compensator
 /// ([`crate::design::kalman`], DESIGN.md steps 2-3): the discrete model
 /// Ĝ_d(z) = z^D·M(z) of the design ([`crate::design::discretize`]), the
-/// applied force a random walk F_{k+1} = F_k + w_k, E\[w²\] = q, measurement
+/// applied force a random walk F_{k+1} = F_k + w_k, E\[w²\] = q (through the
+/// design's band-limiting low-pass where it has one, [`kalman::ForceShape`]), measurement
 /// ỹ_k = y_{k−D} = c·x_k + v_k, E\[v²\] = R, with q and R the values the design
 /// chose and stored in the image (`inspect` shows them). The record is run
 /// as ỹ (D samples of y_0 in front), so the estimate of F_k uses every sample
@@ -68,10 +69,16 @@ impl Smoother {
     /// Build the smoother for the discrete model `dm`, process noise q
     /// (N²/sample) and measurement noise R (N²).
     pub fn new(dm: &DiscreteModel, q: f64, r: f64) -> Result<Self> {
+        Self::shaped(dm, q, r, None)
+    }
+
+    /// [`Smoother::new`] with the design's band-limited force model
+    /// ([`kalman::ForceShape`]; `None`: the random walk).
+    pub fn shaped(dm: &DiscreteModel, q: f64, r: f64, shape: Option<kalman::ForceShape>) -> Result<Self> {
         if !(q > 0.0 && q.is_finite() && r > 0.0 && r.is_finite()) {
             bail!("smoother needs q > 0 and R > 0 (got q = {q}, R = {r}); the image's design summary holds them");
         }
-        let plant = kalman::augmented_plant(dm, 0);
+        let plant = kalman::augmented_plant_shaped(dm, 0, shape);
         let qm = &plant.g * plant.g.transpose() * q;
         let mut force_row = DVector::<f64>::zeros(plant.a.nrows());
         force_row[plant.n_plant] = 1.0;
@@ -381,12 +388,14 @@ fn image_axis(image: &CoeffImage, axis: usize, source: &str) -> Result<dynocomp_
     })
 }
 
-/// The smoother of `axis` (0 = x): the sidecar's discrete model, q and R
-/// from the image.
+/// The smoother of `axis` (0 = x): the sidecar's discrete model and force
+/// shape, q and R from the image.
 pub fn axis_smoother(image: &CoeffImage, sidecar: &ModelSidecar, axis: usize, source: &str) -> Result<Smoother> {
     let a = image_axis(image, axis, source)?;
     let dm = sidecar.discrete_model(axis, source)?;
-    Smoother::new(&dm, a.summary.q, a.summary.r).with_context(|| format!("{source}: axis {}", axis_name(axis)))
+    let shape = sidecar.force_shape(axis, source)?;
+    Smoother::shaped(&dm, a.summary.q, a.summary.r, shape)
+        .with_context(|| format!("{source}: axis {}", axis_name(axis)))
 }
 
 /// `compensate --offline`: smooth every force column of `rec` with the

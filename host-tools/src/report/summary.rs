@@ -83,6 +83,10 @@ pub struct AxisJson {
     /// The record's force spectrum q was chosen for (null without
     /// `--force-prior spectrum`).
     pub force_spectrum: Option<crate::design::force_spectrum::AxisForceSpectrum>,
+    /// The band-limited force model (`--above-band quiet`, the default;
+    /// null for the random walk: `--above-band inverse`, bands, the paper's
+    /// method).
+    pub force_shape: Option<crate::design::kalman::ForceShape>,
 }
 
 impl AxisJson {
@@ -133,6 +137,7 @@ impl AxisJson {
                 record_spindle_rpm: 60.0 * p.record.best_spindle_hz,
             }),
             force_spectrum: d.force_spectrum.clone(),
+            force_shape: d.kalman.force_shape,
         }
     }
 }
