@@ -177,7 +177,9 @@ pub struct AxisDesign {
     /// Its distortion part alone, √J with the noise term left out
     /// (fraction): what a longer look-ahead can lower ([`crate::design::latency`]).
     pub predicted_distortion: f64,
-    /// Evaluations of J during the q search: (q, J).
+    /// Evaluations of the q criterion during the search: (q, J), J plus
+    /// the noise written above the band for a quiet design
+    /// ([`crate::design::above_band`]).
     pub q_trace: Vec<(f64, f64)>,
     /// Fitting bands used (empty = whole coherent band).
     pub bands: Vec<Band>,
