@@ -31,14 +31,6 @@ pub enum AboveBand {
 }
 
 impl AboveBand {
-    /// The name on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            AboveBand::Quiet => "quiet",
-            AboveBand::Inverse => "inverse",
-        }
-    }
-
     /// The force shape for a band whose top is `f_top_hz` at `fs_hz`:
     /// `None` for [`AboveBand::Inverse`], or where the corner would lie
     /// above 0.45 fs (the anti-aliasing filters' pass band: nothing to

@@ -287,8 +287,7 @@ impl Objective<'_> {
     /// The noise factor of J: (2R/fs)·W relative to the force power, flat
     /// `force_rms`² or the record's P_F (N²).
     fn noise(&self) -> f64 {
-        let power = self.force.as_ref().map_or(self.opts.force_rms * self.opts.force_rms, |f| f.1);
-        2.0 * self.r / self.opts.fs_hz * self.band_width / power
+        2.0 * self.r / self.opts.fs_hz * self.band_width / self.force_power()
     }
 
     /// The distortion part of J for the response `h` on the grid (the
@@ -305,6 +304,12 @@ impl Objective<'_> {
         criterion_j_weighted(self.grid, h, weights, self.lag, self.opts.fs_hz, self.noise())
     }
 
+    /// The in-band force power the criterion assumes (N²): flat
+    /// `force_rms`², or the record's P_F.
+    fn force_power(&self) -> f64 {
+        self.force.as_ref().map_or(self.opts.force_rms * self.opts.force_rms, |f| f.1)
+    }
+
     /// The weighted out-of-band noise of the q criterion
     /// ([`crate::design::above_band`]): 0 unless the design is quiet above
     /// its band.
@@ -312,8 +317,7 @@ impl Objective<'_> {
         if self.out_of_band_weight == 0.0 {
             return 0.0;
         }
-        let power = self.force.as_ref().map_or(self.opts.force_rms * self.opts.force_rms, |f| f.1);
-        self.out_of_band_weight * out_of_band_j(h, self.f_top, self.opts.fs_hz, self.r, power)
+        self.out_of_band_weight * out_of_band_j(h, self.f_top, self.opts.fs_hz, self.r, self.force_power())
     }
 
     /// (criterion, noise gain, design) for one q: the in-band J plus the
@@ -327,8 +331,7 @@ impl Objective<'_> {
         let ss = &d.compensator;
         let ng = ss.white_noise_gain().unwrap_or(f64::INFINITY);
         let h = ss.freq_responses(self.grid_hz, fs);
-        let in_band = self.j_of(&h, false);
-        let j = in_band + self.out_of_band(ss);
+        let j = self.j_of(&h, false) + self.out_of_band(ss);
         if ng > self.opts.max_noise_gain {
             return (f64::INFINITY, ng, Some(d));
         }
@@ -858,7 +861,6 @@ impl PreparedAxis {
                 true => opts.above_band.out_of_band_weight(),
                 false => 0.0,
             },
-
             force: self.spectrum.as_ref().map(|s| {
                 let w = s.weights();
                 match opts.force_record_level_only {
