@@ -208,11 +208,14 @@ fn decouple(t: &DMatrix<Complex64>, m: usize) -> DMatrix<Complex64> {
 
 /// The fast cluster's taps H_m = C₂ T22^{m−1} B₂ ([`realize_split`], step 4),
 /// the shortest length whose tail is below [`FIR_TAIL_TOL`] of Σ‖H_m‖ (or
-/// [`FIR_TAIL_TOL_FULL`] at [`MAX_MIMO_FIR`]), and the tail's relative size.
+/// [`FIR_TAIL_TOL_FULL`] at [`MAX_MIMO_FIR`]), and the tail's relative size;
+/// imaginary parts judged against Σ‖H_m‖ + `scale` as in
+/// [`super::modal`]'s `fast_fir`.
 fn fast_taps(
     t22: &DMatrix<Complex64>,
     b2: &DMatrix<Complex64>,
     c2: &DMatrix<Complex64>,
+    scale: f64,
 ) -> Result<(Vec<[[f64; 3]; 3]>, f64)> {
     if t22.nrows() == 0 {
         return Ok((Vec::new(), 0.0));
@@ -237,7 +240,7 @@ fn fast_taps(
         );
     }
     let imag = taps[..len].iter().flat_map(|h| h.iter().map(|v| v.im.abs())).fold(0.0, f64::max);
-    if imag > 1e-9 * total {
+    if imag > super::modal::MAX_IMAGINARY_TAP * (total + scale) {
         bail!(
             "realization: FIR taps are not real (imaginary part {imag:.1e}); the fast cluster is not conjugate-closed"
         );
@@ -276,7 +279,8 @@ fn realize_split(ss: &MimoStateSpace, rho: f64) -> Result<MimoRealization> {
     let b_slow = bq.rows(0, m) - &x * &b_fast;
     let c_slow = cq.columns(0, m).into_owned();
     let c_fast = cq.columns(m, nf) + &c_slow * &x;
-    let (fir, fir_truncation) = fast_taps(&t.view((m, m), (nf, nf)).into_owned(), &b_fast, &c_fast)?;
+    let scale = ss.d.norm() + ss.b.norm() * ss.c.norm();
+    let (fir, fir_truncation) = fast_taps(&t.view((m, m), (nf, nf)).into_owned(), &b_fast, &c_fast, scale)?;
     let (w, w_inv, modal_condition) = triangular_eigenvectors(&t.view((0, 0), (m, m)).into_owned())?;
     let bh = w_inv * b_slow;
     let ch = c_slow * w;
