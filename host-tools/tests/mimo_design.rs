@@ -25,11 +25,12 @@
 
 #![allow(clippy::needless_range_loop)] // axis indices index several arrays at once
 
+use dynocomp::design::above_band::AboveBand;
 use dynocomp::design::axis::DesignOptions;
 use dynocomp::design::force_spectrum::ForceRecord;
 use dynocomp::design::mimo::{design_matrix, MatrixDesign, MatrixOptions, RowSource};
 use dynocomp::frf::Frf;
-use dynocomp::metrics::{accuracy, lowpass, sample_variance, scoring_band_hz};
+use dynocomp::metrics::{accuracy, accuracy_as_written, lowpass, sample_variance, scoring_band_hz, AsWritten};
 use dynocomp::realize::mimo::verify_filter;
 use dynocomp::simulate::plate::{inverse_noise_floor, simulate_plate, FloorSpec, PlateSetup, PlateSim, PlateSimOutput};
 use dynocomp::simulate::SimParams;
@@ -55,6 +56,10 @@ struct Figures {
     rows: [RowSource; 3],
     predicted: [f64; 3],
     peak_crosstalk: f64,
+    /// The filter used, as written, against the anti-aliased truth, and a
+    /// perfect band-limited estimate against the same truth (DESIGN.md).
+    as_written: [f64; 3],
+    perfect: [f64; 3],
 }
 
 impl Figures {
@@ -65,7 +70,8 @@ impl Figures {
     fn line(&self, name: &str, fs: f64) -> String {
         let p = |v: [f64; 3]| format!("{:.3}/{:.3}/{:.3}", 100.0 * v[0], 100.0 * v[1], 100.0 * v[2]);
         format!(
-            "{name:>10} {:>6.2} kHz  xtalk {:>5.2}  raw {}  per-axis {}  3x3 {}  floor {}  pred {}  rows {:?}",
+            "{name:>10} {:>6.2} kHz  xtalk {:>5.2}  raw {}  per-axis {}  3x3 {}  floor {}  pred {}  rows {:?}  \
+             as written {}  perfect {}",
             fs / 1e3,
             self.peak_crosstalk,
             p(self.raw),
@@ -73,7 +79,9 @@ impl Figures {
             p(self.used),
             p(self.floor),
             p(self.predicted),
-            self.rows
+            self.rows,
+            p(self.as_written),
+            p(self.perfect)
         )
     }
 }
@@ -96,9 +104,12 @@ fn noise(out: &PlateSimOutput) -> [f64; 3] {
 }
 
 fn design(frf: &Frf, out: &PlateSimOutput) -> anyhow::Result<MatrixDesign> {
-    let opts =
-        MatrixOptions { design: DesignOptions { fs_hz: out.params.fs_hz, ..Default::default() }, ..Default::default() };
-    design_matrix(frf, noise(out), &opts)
+    design_above(frf, out, AboveBand::default())
+}
+
+fn design_above(frf: &Frf, out: &PlateSimOutput, above_band: AboveBand) -> anyhow::Result<MatrixDesign> {
+    let design = DesignOptions { fs_hz: out.params.fs_hz, above_band, ..Default::default() };
+    design_matrix(frf, noise(out), &MatrixOptions { design, ..Default::default() })
 }
 
 /// NRMSE of `est` (delayed by `lag`) against axis i's truth.
@@ -117,7 +128,12 @@ fn evaluate(md: &MatrixDesign, out: &PlateSimOutput) -> Figures {
     let mut st = MimoState::default();
     let est: Vec<[f32; 3]> =
         (0..n).map(|k| md.filter.step(&mut st, [0, 1, 2].map(|i| out.measured[i][k] as f32))).collect();
-    let used = std::array::from_fn(|i| score(&est.iter().map(|y| f64::from(y[i])).collect::<Vec<_>>(), out, i, lag));
+    let est_axis = |i: usize| est.iter().map(|y| f64::from(y[i])).collect::<Vec<_>>();
+    let used = std::array::from_fn(|i| score(&est_axis(i), out, i, lag));
+    let written: [AsWritten; 3] = std::array::from_fn(|i| {
+        let e = est_axis(i);
+        accuracy_as_written(&e[lag..], &out.truth[i][..n - lag], fs, md.summary.axes[i].band_hz.1)
+    });
     let per_axis = std::array::from_fn(|i| {
         md.per_axis[i].as_ref().map_or(f64::INFINITY, |a| {
             let mut st = AxisState::default();
@@ -132,6 +148,9 @@ fn evaluate(md: &MatrixDesign, out: &PlateSimOutput) -> Figures {
         let m = s.iter().sum::<f64>() / s.len() as f64;
         (s.iter().map(|v| (v - m).powi(2)).sum::<f64>() / s.len() as f64).sqrt()
     });
+    if std::env::var_os("MIMO_STUDY_NOTES").is_some() {
+        diagnose(md, out, &est);
+    }
     let spec = FloorSpec { r_n2: noise(out), fs_hz: fs, band_hz: (0.0, band), std_truth_n: std_truth };
     let floor = inverse_noise_floor(&|f| out.cut_modal.frf(f), &spec).unwrap();
     let x = &md.summary.crosstalk.peak;
@@ -144,6 +163,52 @@ fn evaluate(md: &MatrixDesign, out: &PlateSimOutput) -> Figures {
         rows: md.rows,
         predicted: std::array::from_fn(|i| md.summary.axes[i].chosen.error),
         peak_crosstalk,
+        as_written: written.map(|w| w.output.nrmse),
+        perfect: written.map(|w| w.perfect.nrmse),
+    }
+}
+
+/// `seed_study`'s diagnostics (with `MIMO_STUDY_NOTES`): per axis the error
+/// of the output `est` and of the raw measurement against the truth by
+/// frequency band, and the filter's output on the idle record (noise alone),
+/// in band and above it, all relative to the truth's std.
+fn diagnose(md: &MatrixDesign, out: &PlateSimOutput, est: &[[f32; 3]]) {
+    let fs = out.params.fs_hz;
+    let (n, lag) = (est.len(), md.summary.latency);
+    let mut st = MimoState::default();
+    let idle: Vec<[f32; 3]> =
+        (0..out.idle[0].len()).map(|k| md.filter.step(&mut st, [0, 1, 2].map(|i| out.idle[i][k] as f32))).collect();
+    for i in 0..3 {
+        let y: Vec<f64> = idle.iter().map(|v| f64::from(v[i])).collect();
+        let top = md.summary.axes[i].band_hz.1;
+        let below = lowpass(&y, fs, top);
+        let rms =
+            |v: &[f64]| (v[v.len() / 10..].iter().map(|x| x * x).sum::<f64>() / (v.len() - v.len() / 10) as f64).sqrt();
+        let above: Vec<f64> = y.iter().zip(&below).map(|(a, b)| a - b).collect();
+        let std_t: f64 = {
+            let t = &out.truth[i];
+            let m = t.iter().sum::<f64>() / t.len() as f64;
+            (t.iter().map(|v| (v - m).powi(2)).sum::<f64>() / t.len() as f64).sqrt()
+        };
+        let e: Vec<f64> = (0..n - lag).map(|k| f64::from(est[k + lag][i]) - out.truth[i][k]).collect();
+        let r: Vec<f64> = (0..n).map(|k| out.measured[i][k] - out.truth[i][k]).collect();
+        let edges = [0.0, 0.5 * top, top, 1.25 * top, 1.6 * top, 2.0 * top, 3.0 * top, fs / 2.0];
+        let cells: Vec<String> = edges
+            .windows(2)
+            .map(|w| {
+                let b = [(w[0], w[1])];
+                let (eb, rb) = (dynocomp::metrics::bandpass(&e, fs, &b), dynocomp::metrics::bandpass(&r, fs, &b));
+                format!("{:.0}-{:.0}: {:.2}/{:.2}", w[0], w[1], 100.0 * rms(&eb) / std_t, 100.0 * rms(&rb) / std_t)
+            })
+            .collect();
+        eprintln!("    error by band (output/raw, %): {}", cells.join("  "));
+        eprintln!(
+            "    idle axis {i}: output noise {:.3} % in band, {:.3} % above {:.0} Hz; raw {:.3} %",
+            100.0 * rms(&below) / std_t,
+            100.0 * rms(&above) / std_t,
+            top,
+            100.0 * rms(&out.idle[i]) / std_t
+        );
     }
 }
 
@@ -204,6 +269,58 @@ fn large_crosstalk(name: &str, fs: f64) {
 #[ignore = "a minute of designs in release, by hand (CI runs the CLI offcentre test): --release -- --ignored"]
 fn offcentre_10k() {
     large_crosstalk("offcentre", 10_240.0);
+}
+
+/// Largest ratio, on any axis, of the 3x3 image's output as written to a
+/// perfect band-limited estimate's figure (both against the truth through
+/// the anti-aliasing filter alone) that the quiet design must meet on the
+/// off-centre plate at 25.6 kHz. Fixed from the design before the quiet
+/// rows (inverse above the band: 6.2 / 2.6 / 6.4x) and what they reach
+/// (4.5 / 0.8 / 3.0x); the issue's target, 1.1x, is not met (BENCHMARKS.md).
+const AS_WRITTEN_FACTOR: f64 = 5.0;
+
+/// The 3x3 rows are quiet above the band (`--above-band quiet`, the
+/// default): on the off-centre plate at 25.6 kHz the output as written is
+/// within [`AS_WRITTEN_FACTOR`] of a perfect band-limited estimate on every
+/// axis, and the band-limited error is no worse than 1.05 times the
+/// inverse design's. Negative control: the inverse design (the exact
+/// inverse continued above the band) fails the as-written bound.
+#[test]
+#[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
+fn quiet_3x3_rows_above_the_band() {
+    let out = record("offcentre", 25_600.0);
+    let figures = |above| {
+        let md = design_above(&out.frf, &out, above).unwrap();
+        assert!(md.rows.iter().all(|r| *r == RowSource::Matrix), "{:?}", md.rows);
+        let k = md.summary.kalman.as_ref().unwrap();
+        let fig = evaluate(&md, &out);
+        eprintln!("{}  {above:?}, shapes {:?}", fig.line("offcentre", 25_600.0), k.force_shape);
+        (fig, k.force_shape)
+    };
+    let worst_ratio = |f: &Figures| (0..3).map(|i| f.as_written[i] / f.perfect[i]).fold(0.0, f64::max);
+    let (quiet, shapes) = figures(AboveBand::Quiet);
+    let (inverse, no_shapes) = figures(AboveBand::Inverse);
+    assert!(shapes.iter().all(Option::is_some) && no_shapes.iter().all(Option::is_none));
+    assert!(
+        worst_ratio(&quiet) <= AS_WRITTEN_FACTOR,
+        "quiet: as written {:?} against perfect {:?}",
+        quiet.as_written,
+        quiet.perfect
+    );
+    assert!(
+        !(worst_ratio(&inverse) <= AS_WRITTEN_FACTOR),
+        "negative control: the inverse design passed: as written {:?} against perfect {:?}",
+        inverse.as_written,
+        inverse.perfect
+    );
+    for i in 0..3 {
+        assert!(
+            quiet.used[i] <= 1.05 * inverse.used[i],
+            "axis {i}: band-limited {:.3} % quiet against {:.3} % inverse",
+            100.0 * quiet.used[i],
+            100.0 * inverse.used[i]
+        );
+    }
 }
 
 /// The f32 filter of a 3x3 design verifies against its f64 compensator, a
@@ -354,7 +471,19 @@ fn seed_study() {
         match design(&out.frf, &out) {
             Ok(md) => {
                 let fig = evaluate(&md, &out);
-                eprintln!("{}", fig.line(&name, fs));
+                eprintln!("{}  latency {}", fig.line(&name, fs), md.summary.latency);
+                if std::env::var_os("MIMO_STUDY_NOTES").is_some() {
+                    md.summary.notes.iter().for_each(|n| eprintln!("    note: {n}"));
+                    for a in &md.summary.axes {
+                        eprintln!(
+                            "    axis {}: band {:.0}-{:.0} Hz, per axis {:?} (own {:?}), 3x3 {:?}; {}",
+                            a.axis, a.band_hz.0, a.band_hz.1, a.per_axis, a.per_axis_direct_only, a.matrix, a.reason
+                        );
+                    }
+                    for l in &md.summary.latency_rounds {
+                        eprintln!("    latency {}: {:?}", l.latency, l.predicted);
+                    }
+                }
                 let ok = (0..3)
                     .all(|i| fig.used[i] <= NO_WORSE * fig.per_axis[i] && fig.used[i] <= FLOOR_FACTOR * fig.floor[i]);
                 if !ok {

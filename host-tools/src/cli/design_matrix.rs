@@ -180,6 +180,9 @@ fn summary_text(args: &DesignArgs, md: &MatrixDesign, id: u32, load: &LoadReport
             "3x3 Kalman: {} states, q = {:.3e} / {:.3e} / {:.3e} N²/sample, DARE residual {:.1e}, spectral radius {:.4}",
             k.order, k.q[0], k.q[1], k.q[2], k.dare_residual, k.closed_loop_radius
         );
+        let shapes: Vec<(&str, _)> = (0..3).map(|j| (axis_name(j), k.force_shape[j])).collect();
+        t.push_str("3x3 rows: ");
+        t.push_str(&crate::design::above_band::describe(&shapes));
     }
     let rz = &s.realization;
     let _ = writeln!(

@@ -81,15 +81,31 @@ const OUT_OF_BAND_LINES: usize = 64;
 /// the variance the compensator writes above the band (the in-band noise
 /// term of [`crate::design::criterion::criterion_j`] continued above it).
 pub fn out_of_band_j(h: &StateSpace, f_top_hz: f64, fs_hz: f64, r: f64, force_power_n2: f64) -> f64 {
-    let nyquist = fs_hz / 2.0;
-    if !(f_top_hz < nyquist) {
+    let lines = out_of_band_lines(f_top_hz, fs_hz);
+    if lines.is_empty() {
         return 0.0;
     }
-    let lines: Vec<f64> = (0..OUT_OF_BAND_LINES)
-        .map(|i| f_top_hz + (nyquist - f_top_hz) * (i as f64 + 0.5) / OUT_OF_BAND_LINES as f64)
-        .collect();
     let mean = h.freq_responses(&lines, fs_hz).iter().map(|h| h.norm_sqr()).sum::<f64>() / lines.len() as f64;
-    2.0 * r / fs_hz * (nyquist - f_top_hz) * mean / force_power_n2
+    out_of_band_noise_factor(f_top_hz, fs_hz, force_power_n2) * r * mean
+}
+
+/// The lines of [`out_of_band_j`] (Hz): [`OUT_OF_BAND_LINES`] evenly spread
+/// over (f_top, fs/2); none where the band reaches fs/2.
+pub fn out_of_band_lines(f_top_hz: f64, fs_hz: f64) -> Vec<f64> {
+    let nyquist = fs_hz / 2.0;
+    if !(f_top_hz < nyquist) {
+        return Vec::new();
+    }
+    (0..OUT_OF_BAND_LINES)
+        .map(|i| f_top_hz + (nyquist - f_top_hz) * (i as f64 + 0.5) / OUT_OF_BAND_LINES as f64)
+        .collect()
+}
+
+/// (2/fs)·(fs/2 − f_top)/P_F: the out-of-band noise variance per unit of
+/// R·mean|H|², relative to the in-band force power P_F (N²)
+/// ([`crate::design::criterion::noise_term`] over the band above f_top).
+pub fn out_of_band_noise_factor(f_top_hz: f64, fs_hz: f64, force_power_n2: f64) -> f64 {
+    crate::design::criterion::noise_term(1.0, fs_hz, (fs_hz / 2.0 - f_top_hz).max(0.0), force_power_n2.sqrt())
 }
 
 /// The summary's line on the output above the band, for the axes' force

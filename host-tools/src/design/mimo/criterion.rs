@@ -9,6 +9,7 @@ use serde::Serialize;
 use std::f64::consts::PI;
 
 use super::discrete::CMatrix3;
+use crate::design::above_band::{out_of_band_lines, out_of_band_noise_factor};
 use crate::design::criterion::{criterion_cells, criterion_grid};
 use crate::design::force_spectrum::{estimate_matrix, CellSpectrum, ForceRecord};
 use crate::frf::axis_name;
@@ -127,6 +128,13 @@ pub struct MatrixCriterion {
     pub rows: [RowGrid; 3],
     /// Measurement noise variance per channel R_j (N²).
     pub r: [f64; 3],
+    /// Per output axis the lines above its band, from the band's top to
+    /// fs/2 ([`out_of_band_lines`]); empty unless the design is quiet above
+    /// its band ([`Self::quiet_above_band`]).
+    pub above: [Vec<f64>; 3],
+    /// Weight of the noise written above the band in the q criterion
+    /// ([`Self::above_j`]).
+    pub above_weight: f64,
 }
 
 /// A row's predicted error: √J and its distortion part alone (the noise
@@ -156,7 +164,47 @@ impl MatrixCriterion {
             let (weight, force_power_n2) = forces.row(i, freqs.len());
             RowGrid { band_hz, freqs, g, weight, force_power_n2 }
         });
-        MatrixCriterion { fs_hz, rows, r }
+        MatrixCriterion { fs_hz, rows, r, above: Default::default(), above_weight: 0.0 }
+    }
+
+    /// The criterion with the noise written above each row's band counted
+    /// in the q search with `weight` ([`Self::above_j`]; 0: in-band alone,
+    /// no lines).
+    pub fn quiet_above_band(mut self, weight: f64) -> Self {
+        self.above_weight = weight;
+        self.above = std::array::from_fn(|i| match weight > 0.0 {
+            true => out_of_band_lines(self.rows[i].band_hz.1, self.fs_hz),
+            false => Vec::new(),
+        });
+        self
+    }
+
+    /// Every row's lines above its band, row 0's first: where
+    /// [`Self::above_j`] needs the compensator's response.
+    pub fn above_freqs(&self) -> Vec<f64> {
+        self.above.iter().flatten().copied().collect()
+    }
+
+    /// The weighted noise row i writes above its band, relative to force
+    /// i's in-band power, for a 3x3 response `h` on [`Self::above_freqs`]:
+    ///
+    /// w·(2/fs)·(fs/2 − f_top,i)/P_i · Σ_j R_j·mean_f |H_ij(e^{jω})|²
+    ///
+    /// ([`crate::design::above_band::out_of_band_j`] with every channel's
+    /// noise); 0 without lines.
+    pub fn above_j(&self, i: usize, h: &[DMatrix<Complex64>]) -> f64 {
+        let lines = &self.above[i];
+        if lines.is_empty() {
+            return 0.0;
+        }
+        let offset: usize = self.above[..i].iter().map(Vec::len).sum();
+        let amp: f64 = h[offset..offset + lines.len()]
+            .iter()
+            .map(|h| (0..3).map(|j| self.r[j] * h[(i, j)].norm_sqr()).sum::<f64>())
+            .sum();
+        let row = &self.rows[i];
+        let factor = out_of_band_noise_factor(row.band_hz.1, self.fs_hz, row.force_power_n2);
+        self.above_weight * factor * amp / lines.len() as f64
     }
 
     /// Every row's lines, row 0's first: where a compensator's response is

@@ -22,13 +22,15 @@ use self::combine::combine;
 pub use self::combine::RowSource;
 use self::criterion::{choose_q, ForceWeights, MatrixCriterion, QSearch, RowError};
 use self::discrete::{discretize_matrix, plant_states, CMatrix3, DiscreteMatch, DiscreteMatrixModel, PlantStates};
-use self::kalman::{augmented_plant, MatrixAugmentedPlant, MatrixKalman};
+use self::kalman::{augmented_plant, augmented_plant_shaped, MatrixAugmentedPlant, MatrixKalman};
 use self::response::PlantResolvent;
+use crate::design::above_band::AboveBand;
 use crate::design::axis::{
     coherent_band, design_prepared, prepare_axis, AxisDesign, DesignOptions, FitMethod, PreparedAxis, MAX_FIT_ERROR,
     MAX_PREDICTED_ERROR,
 };
 use crate::design::discretize::{Discretization, MATCH_BAND_FRACTION};
+use crate::design::kalman::ForceShape;
 use crate::design::latency::{DEFAULT_LATENCY, GAIN_NOT_WORTH, LONGER_LATENCIES, PREDICTED_SHORT};
 use crate::fit::matrix::{matrix_vector_fit, MatrixData, MatrixModel};
 use crate::fit::relative_rms_error;
@@ -155,6 +157,10 @@ pub struct KalmanFigures {
     pub noise_gains: [f64; 3],
     /// The q search.
     pub q_search: QSearch,
+    /// The band-limited force model per force direction
+    /// ([`crate::design::above_band`]); `None`: the random walk (the exact
+    /// inverse continues above the band).
+    pub force_shape: [Option<ForceShape>; 3],
 }
 
 /// The plant realization's figures.
@@ -342,7 +348,8 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
         notes.extend(moderate_crosstalk_caveat(&chosen.axes, &crosstalk));
     }
     refuse_unless_better_than_raw(&chosen)?;
-    finish(frf, chosen, prep, crosstalk, latency_rounds, notes, d.fs_hz, &bands)
+    let shapes = force_shapes(&criterion.model, d);
+    finish(shapes, chosen, prep, crosstalk, latency_rounds, notes, d.fs_hz, &bands)
 }
 
 impl MatrixOptions {
@@ -457,7 +464,11 @@ fn criteria(
     };
     let criteria = Criteria {
         judge: MatrixCriterion::new(judge_g, bands, d.fs_hz, &forces, r),
-        model: MatrixCriterion::new(model_g, bands, d.fs_hz, &forces, r),
+        model: MatrixCriterion::new(model_g, bands, d.fs_hz, &forces, r).quiet_above_band(if quiet_above_band(d) {
+            d.above_band.out_of_band_weight()
+        } else {
+            0.0
+        }),
     };
     Ok((criteria, matches!(forces, ForceWeights::Flat(_))))
 }
@@ -487,8 +498,10 @@ fn latency_rounds(
     rounds
 }
 
-/// The shortest latency within [`GAIN_NOT_WORTH`] of each axis's best, and
-/// every round's predictions.
+/// The shortest latency within [`GAIN_NOT_WORTH`] of each axis's best (as
+/// the per-axis rule, [`crate::design::latency`]); where the axes' bests lie
+/// at different latencies and none is within it on every axis, the one of
+/// least worst ratio to them. With every round's predictions.
 fn pick_round(mut rounds: Vec<Round>) -> (Round, Vec<LatencyRound>) {
     let latency_rounds: Vec<LatencyRound> = rounds
         .iter()
@@ -496,8 +509,10 @@ fn pick_round(mut rounds: Vec<Round>) -> (Round, Vec<LatencyRound>) {
         .collect();
     let best: [f64; 3] =
         std::array::from_fn(|i| rounds.iter().map(|rd| rd.axes[i].chosen.error).fold(f64::INFINITY, f64::min));
-    let pick =
-        rounds.iter().position(|rd| (0..3).all(|i| rd.axes[i].chosen.error <= GAIN_NOT_WORTH * best[i])).unwrap_or(0);
+    let worst_ratio = |rd: &Round| (0..3).map(|i| rd.axes[i].chosen.error / best[i]).fold(0.0, f64::max);
+    let pick = rounds.iter().position(|rd| worst_ratio(rd) <= GAIN_NOT_WORTH).unwrap_or_else(|| {
+        (0..rounds.len()).min_by(|&a, &b| worst_ratio(&rounds[a]).total_cmp(&worst_ratio(&rounds[b]))).unwrap_or(0)
+    });
     (rounds.swap_remove(pick), latency_rounds)
 }
 
@@ -800,7 +815,11 @@ fn axis_prediction(
 }
 
 /// The 3x3 Kalman design at latency `lag` with q chosen by the criterion
-/// (or `d.q_override` on every axis), and its noise gains.
+/// (or `d.q_override` on every axis), and its noise gains. Quiet above the
+/// band by default ([`quiet_above_band`]): each force band-limited
+/// ([`force_shapes`]) and q for the in-band error plus the noise written
+/// above the band ([`MatrixCriterion::above_j`]); the predictions in the
+/// [`QSearch`] are the in-band error alone.
 fn design_3x3(
     p: &MatrixPrep,
     crit: &MatrixCriterion,
@@ -808,30 +827,61 @@ fn design_3x3(
     lag: usize,
     d: &DesignOptions,
 ) -> Result<(MatrixKalman, QSearch, [f64; 3])> {
-    let aug = augmented_plant(&p.dm, &p.plant, lag);
-    let resolvent = PlantResolvent::new(&aug, &crit.all_freqs(), d.fs_hz);
-    let evaluate = |q: [f64; 3]| -> Option<(MatrixKalman, [f64; 3], [f64; 3])> {
+    let aug = augmented_plant_shaped(&p.dm, &p.plant, lag, force_shapes(crit, d));
+    let in_band = crit.all_freqs();
+    let lines = [in_band.clone(), crit.above_freqs()].concat();
+    let resolvent = PlantResolvent::new(&aug, &lines, d.fs_hz);
+    let evaluate = |q: [f64; 3]| -> Option<Candidate> {
         let k = kalman::design(&aug, q, r, lag).ok()?;
         let ng = k.compensator.white_noise_gains()?;
         let h = resolvent.responses(&k);
+        let (h_in, h_above) = h.split_at(in_band.len());
+        let mut in_band_error = [f64::INFINITY; 3];
         let j = std::array::from_fn(|i| {
             if ng[i] > d.max_noise_gain {
-                f64::INFINITY
-            } else {
-                crit.row_error(i, lag, &h).error
+                return f64::INFINITY;
             }
+            in_band_error[i] = crit.row_error(i, lag, h_in).error;
+            (in_band_error[i].powi(2) + crit.above_j(i, h_above)).sqrt()
         });
-        Some((k, j, [ng[0], ng[1], ng[2]]))
+        Some(Candidate { kalman: k, criterion: j, noise_gains: [ng[0], ng[1], ng[2]], in_band_error })
     };
     let search = match d.q_override {
         Some(q) => QSearch { q: [q; 3], ..Default::default() },
-        None => choose_q(&|q| evaluate(q).map_or([f64::INFINITY; 3], |e| e.1), r)?,
+        None => choose_q(&|q| evaluate(q).map_or([f64::INFINITY; 3], |c| c.criterion), r)?,
     };
-    let Some((k, j, ng)) = evaluate(search.q) else {
+    let Some(c) = evaluate(search.q) else {
         bail!("the 3x3 Kalman design failed at the chosen q = {:?}", search.q);
     };
-    let search = QSearch { predicted: j, ..search };
-    Ok((k, search, ng))
+    let search = QSearch { predicted: c.in_band_error, ..search };
+    Ok((c.kalman, search, c.noise_gains))
+}
+
+/// One candidate q's 3x3 design ([`design_3x3`]).
+struct Candidate {
+    kalman: MatrixKalman,
+    /// The q criterion per row: √(in-band J + weighted noise above the band).
+    criterion: [f64; 3],
+    /// White-noise gain per output.
+    noise_gains: [f64; 3],
+    /// √J per row, in band alone (∞ over the noise-gain limit).
+    in_band_error: [f64; 3],
+}
+
+/// Whether the 3x3 design is quiet above its band
+/// ([`crate::design::above_band`]): by default, except for a force record's
+/// criterion, which stays in-band (as the per-axis design's).
+fn quiet_above_band(d: &DesignOptions) -> bool {
+    d.above_band == AboveBand::Quiet && d.force_record.is_none()
+}
+
+/// The band-limited force model of each force direction j, its corner above
+/// row j's band ([`AboveBand::force_shape`]), where the design is quiet.
+fn force_shapes(crit: &MatrixCriterion, d: &DesignOptions) -> [Option<ForceShape>; 3] {
+    std::array::from_fn(|j| match quiet_above_band(d) {
+        true => d.above_band.force_shape(crit.rows[j].band_hz.1, d.fs_hz),
+        false => None,
+    })
 }
 
 /// The round's combined compensator, realized and verified in f32 up to
@@ -871,7 +921,7 @@ fn realize_or_per_axis(
 /// The combined compensator of the chosen round, realized and verified.
 #[allow(clippy::too_many_arguments)]
 fn finish(
-    frf: &Frf,
+    force_shape: [Option<ForceShape>; 3],
     mut rd: Round,
     prep: Option<MatrixPrep>,
     crosstalk: Crosstalk,
@@ -880,7 +930,6 @@ fn finish(
     fs: f64,
     bands: &[(f64, f64); 3],
 ) -> Result<MatrixDesign> {
-    let _ = frf;
     let f_band = bands.iter().map(|b| b.1).fold(0.0, f64::max);
     let (compensator, (realization, filter, verification)) = realize_or_per_axis(&mut rd, &mut notes, fs, f_band)?;
     notes.extend(rd.matrix_error.iter().cloned());
@@ -894,6 +943,7 @@ fn finish(
         closed_loop_radius: k.closed_loop_radius,
         noise_gains: *ng,
         q_search: s.clone(),
+        force_shape,
     });
     let summary = MatrixSummary {
         fs_hz: fs,
