@@ -323,6 +323,27 @@ fn quiet_3x3_rows_above_the_band() {
     }
 }
 
+/// Where the latency rule's choice does not verify in f32, the next latency
+/// by the rule whose 3x3 rows do is used, with a note, rather than giving up
+/// the crosstalk compensation: on the off-centre plate at 51.2 kHz latency 8's
+/// 3x3 block deviates by 2.3e-4 of its RMS in f32 (limit 1e-4), and the image
+/// used to fall back to per-axis rows (worst axis 12.8 %). The note carries
+/// the failed verification (the control that the first choice did fail); the
+/// image beats per-axis compensation and stays within the floor factor.
+#[test]
+#[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
+fn a_latency_that_does_not_verify_gives_way_to_the_next() {
+    let out = record("offcentre", 51_200.0);
+    let md = design(&out.frf, &out).unwrap();
+    let fig = evaluate(&md, &out);
+    eprintln!("{}  latency {}", fig.line("offcentre", 51_200.0), md.summary.latency);
+    let note = md.summary.notes.iter().find(|n| n.contains("is used instead"));
+    assert!(note.is_some_and(|n| n.contains("verif")), "{:?}", md.summary.notes);
+    assert!(md.rows.iter().all(|r| *r == RowSource::Matrix), "{:?}", md.rows);
+    assert!(crosstalk_compensated(&fig), "{fig:?}");
+    check_no_worse_and_floor(&fig, "offcentre 51.2 kHz");
+}
+
 /// The f32 filter of a 3x3 design verifies against its f64 compensator, a
 /// perturbed one does not (negative control).
 #[test]

@@ -343,13 +343,15 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
     let (criterion, flat) = criteria(frf, &prepared, prep.as_ref(), bands, r, opts, &mut notes)?;
     let rounds = latency_rounds(&prepared, prep.as_ref(), &criterion, r, opts);
     opts.say("realizing the compensator and verifying it in f32…");
-    let (chosen, latency_rounds) = pick_round(rounds);
+    let (ranked, latency_rounds) = rank_rounds(rounds);
+    refuse_unless_better_than_raw(&ranked[0])?;
+    let f_band = bands.iter().map(|b| b.1).fold(0.0, f64::max);
+    let (chosen, realized) = realize_chosen(ranked, &mut notes, d.fs_hz, f_band)?;
     if flat {
         notes.extend(moderate_crosstalk_caveat(&chosen.axes, &crosstalk));
     }
-    refuse_unless_better_than_raw(&chosen)?;
     let shapes = force_shapes(&criterion.model, d);
-    finish(shapes, chosen, prep, crosstalk, latency_rounds, notes, d.fs_hz, &bands)
+    finish(shapes, chosen, realized, prep, crosstalk, latency_rounds, notes, d.fs_hz, f_band)
 }
 
 impl MatrixOptions {
@@ -498,11 +500,13 @@ fn latency_rounds(
     rounds
 }
 
-/// The shortest latency within [`GAIN_NOT_WORTH`] of each axis's best (as
-/// the per-axis rule, [`crate::design::latency`]); where the axes' bests lie
-/// at different latencies and none is within it on every axis, the one of
-/// least worst ratio to them. With every round's predictions.
-fn pick_round(mut rounds: Vec<Round>) -> (Round, Vec<LatencyRound>) {
+/// The rounds in the latency rule's order of preference, with every round's
+/// predictions. First the shortest latency within [`GAIN_NOT_WORTH`] of each
+/// axis's best (as the per-axis rule, [`crate::design::latency`]), or, where
+/// the axes' bests lie at different latencies and none is within it on every
+/// axis, the one of least worst ratio to them; then the others by that
+/// ratio (what [`realize_chosen`] falls back on).
+fn rank_rounds(mut rounds: Vec<Round>) -> (Vec<Round>, Vec<LatencyRound>) {
     let latency_rounds: Vec<LatencyRound> = rounds
         .iter()
         .map(|rd| LatencyRound { latency: rd.lag, predicted: std::array::from_fn(|i| Some(rd.axes[i].chosen.error)) })
@@ -510,10 +514,14 @@ fn pick_round(mut rounds: Vec<Round>) -> (Round, Vec<LatencyRound>) {
     let best: [f64; 3] =
         std::array::from_fn(|i| rounds.iter().map(|rd| rd.axes[i].chosen.error).fold(f64::INFINITY, f64::min));
     let worst_ratio = |rd: &Round| (0..3).map(|i| rd.axes[i].chosen.error / best[i]).fold(0.0, f64::max);
-    let pick = rounds.iter().position(|rd| worst_ratio(rd) <= GAIN_NOT_WORTH).unwrap_or_else(|| {
-        (0..rounds.len()).min_by(|&a, &b| worst_ratio(&rounds[a]).total_cmp(&worst_ratio(&rounds[b]))).unwrap_or(0)
-    });
-    (rounds.swap_remove(pick), latency_rounds)
+    let first = rounds.iter().position(|rd| worst_ratio(rd) <= GAIN_NOT_WORTH);
+    let mut ranked = Vec::with_capacity(rounds.len());
+    if let Some(k) = first {
+        ranked.push(rounds.remove(k));
+    }
+    rounds.sort_by(|a, b| worst_ratio(a).total_cmp(&worst_ratio(b)));
+    ranked.extend(rounds);
+    (ranked, latency_rounds)
 }
 
 /// Never worse than no compensation: refuse the design where an axis's
@@ -884,54 +892,72 @@ fn force_shapes(crit: &MatrixCriterion, d: &DesignOptions) -> [Option<ForceShape
     })
 }
 
-/// The round's combined compensator, realized and verified in f32 up to
-/// `f_band`. A 3x3 row that cannot be realized is not used: every axis
-/// then takes its per-axis row, with a note (never silently worse, never
-/// unverified).
-#[allow(clippy::type_complexity)]
-fn realize_or_per_axis(
-    rd: &mut Round,
-    notes: &mut Vec<String>,
-    fs: f64,
-    f_band: f64,
-) -> Result<(MimoStateSpace, (MimoRealization, MimoFilter, MimoVerification))> {
+/// A round's combined compensator and its realization, verified in f32.
+type Realized = (MimoStateSpace, (MimoRealization, MimoFilter, MimoVerification));
+
+/// The combined compensator of `rd`, realized and verified in f32 up to
+/// `f_band` (Hz).
+fn realize_round(rd: &Round, fs: f64, f_band: f64) -> Result<Realized> {
     let per_axis_ss: [Option<&crate::numeric::lti::StateSpace>; 3] =
         std::array::from_fn(|i| rd.per_axis[i].as_ref().map(|a| &a.kalman.compensator));
     let (blocks, compensator) = combine(rd.rows, rd.matrix.as_ref().map(|m| &m.0.compensator), per_axis_ss)?;
-    match realize_blocks(&blocks, fs, f_band) {
-        Ok(r) => Ok((compensator, r)),
-        Err(e) if rd.rows.contains(&RowSource::Matrix) && rd.per_axis.iter().all(Option::is_some) => {
-            notes.push(format!("the 3x3 rows were not used: {e:#}; every axis is designed per axis"));
-            for (a, d) in rd.axes.iter_mut().zip(&rd.per_axis) {
-                if a.source == RowSource::Matrix {
-                    a.noise_gain = d.as_ref().map_or(f64::NAN, |d| d.noise_gain);
-                    a.source = RowSource::PerAxis;
-                    a.chosen = a.per_axis.expect("per-axis design present");
-                    a.reason = "per-axis row: the 3x3 compensator does not verify in f32".to_string();
-                }
-            }
-            rd.rows = [RowSource::PerAxis; 3];
-            let (blocks, compensator) = combine(rd.rows, None, per_axis_ss)?;
-            Ok((compensator, realize_blocks(&blocks, fs, f_band)?))
+    Ok((compensator, realize_blocks(&blocks, fs, f_band)?))
+}
+
+/// The first of the `ranked` rounds ([`rank_rounds`]) whose compensator is
+/// realized and verified in f32 up to `f_band`, never an unverified one:
+/// 1. the rule's choice;
+/// 2. where its 3x3 rows do not verify, the next round (latency) by the
+///    rule whose 3x3 rows do and that beats no compensation, with a note;
+/// 3. else the choice with every axis on its per-axis row, with a note.
+fn realize_chosen(ranked: Vec<Round>, notes: &mut Vec<String>, fs: f64, f_band: f64) -> Result<(Round, Realized)> {
+    let mut ranked = ranked.into_iter();
+    let mut rd = ranked.next().context("no latency round")?;
+    let err = match realize_round(&rd, fs, f_band) {
+        Ok(r) => return Ok((rd, r)),
+        Err(e) if rd.rows.contains(&RowSource::Matrix) => e,
+        Err(e) => return Err(e),
+    };
+    for alt in ranked.filter(|a| a.rows.contains(&RowSource::Matrix) && refuse_unless_better_than_raw(a).is_ok()) {
+        if let Ok(r) = realize_round(&alt, fs, f_band) {
+            notes.push(format!(
+                "latency {}: {err:#}; latency {} is used instead, the next by the latency rule whose 3x3 rows verify",
+                rd.lag, alt.lag
+            ));
+            return Ok((alt, r));
         }
-        Err(e) => Err(e),
     }
+    if !rd.per_axis.iter().all(Option::is_some) {
+        return Err(err);
+    }
+    notes.push(format!("the 3x3 rows were not used: {err:#}; every axis is designed per axis"));
+    for (a, d) in rd.axes.iter_mut().zip(&rd.per_axis) {
+        if a.source == RowSource::Matrix {
+            a.noise_gain = d.as_ref().map_or(f64::NAN, |d| d.noise_gain);
+            a.source = RowSource::PerAxis;
+            a.chosen = a.per_axis.expect("per-axis design present");
+            a.reason = "per-axis row: the 3x3 compensator does not verify in f32".to_string();
+        }
+    }
+    rd.rows = [RowSource::PerAxis; 3];
+    let r = realize_round(&rd, fs, f_band)?;
+    Ok((rd, r))
 }
 
 /// The combined compensator of the chosen round, realized and verified.
 #[allow(clippy::too_many_arguments)]
 fn finish(
     force_shape: [Option<ForceShape>; 3],
-    mut rd: Round,
+    rd: Round,
+    realized: Realized,
     prep: Option<MatrixPrep>,
     crosstalk: Crosstalk,
     latency_rounds: Vec<LatencyRound>,
     mut notes: Vec<String>,
     fs: f64,
-    bands: &[(f64, f64); 3],
+    f_band: f64,
 ) -> Result<MatrixDesign> {
-    let f_band = bands.iter().map(|b| b.1).fold(0.0, f64::max);
-    let (compensator, (realization, filter, verification)) = realize_or_per_axis(&mut rd, &mut notes, fs, f_band)?;
+    let (compensator, (realization, filter, verification)) = realized;
     notes.extend(rd.matrix_error.iter().cloned());
     let kalman_fig = rd.matrix.as_ref().map(|(k, s, ng)| KalmanFigures {
         q: k.q,
