@@ -93,6 +93,34 @@ fn few_lines(lines: usize) -> (Vec<f64>, Vec<Complex64>) {
     (freq, h)
 }
 
+/// `vector_fit_accepting` takes the order `accept` takes among those within
+/// the error limit, the plain fit's choice where it takes none, and never an
+/// order whose error is over `MAX_ACCEPTED_ERROR_RATIO` times the best.
+#[test]
+fn an_order_the_caller_refuses_gives_way_to_one_it_takes() {
+    use dynocomp::fit::vf::{vector_fit_accepting, MAX_ACCEPTED_ERROR_RATIO};
+    // Two modes and a little noise, so that several orders fit about as well.
+    let (freq, mut h) = few_lines(400);
+    for (k, v) in h.iter_mut().enumerate() {
+        *v += Complex64::new(1e-4 * ((k * 7919) % 13) as f64 / 13.0, 0.0);
+    }
+    let w = coherence_weights(&h, None);
+    let opts = VfOptions::default();
+    let plain = vector_fit(&freq, &h, &w, &opts).unwrap();
+    let best = plain.order_trace.iter().map(|t| t.1).fold(f64::INFINITY, f64::min);
+    let other = vector_fit_accepting(&freq, &h, &w, &opts, &|m| m.terms != plain.model.terms).unwrap();
+    assert!(other.model.terms != plain.model.terms, "trace {:?}", plain.order_trace);
+    assert!(other.weighted_rms <= MAX_ACCEPTED_ERROR_RATIO * best * 1.01, "{} against best {best}", other.weighted_rms);
+    // Control: an order far worse than the best (order 2: one mode) is not
+    // taken even where it is the only one accepted; the plain choice is.
+    let two = vector_fit_accepting(&freq, &h, &w, &opts, &|m| m.order() <= 2).unwrap();
+    assert!(plain.order_trace[0].1 > 10.0 * best, "{:?}", plain.order_trace);
+    assert_eq!((two.model.terms.len(), two.weighted_rms), (plain.model.terms.len(), plain.weighted_rms));
+    // Accepting every model is the plain fit.
+    let all = vector_fit_accepting(&freq, &h, &w, &opts, &|_| true).unwrap();
+    assert!(all.model.terms == plain.model.terms && all.weighted_rms == plain.weighted_rms);
+}
+
 #[test]
 fn vector_fitting_with_few_lines_fits_fewer_poles_or_says_how_many_lines_it_needs() {
     // 8 to 64 lines, where the relocation's least squares had fewer

@@ -17,7 +17,7 @@ use crate::design::discretize::{discretize_to, DiscreteModel, Discretization, Fi
 use crate::design::kalman::{self, KalmanDesign};
 use crate::design::paper::{self, PaperDiagnostics};
 use crate::fit::rfp::{paper_weights, rfp_fit, RationalTf, RfpOptions};
-use crate::fit::vf::{coherence_weights, vector_fit, VfOptions};
+use crate::fit::vf::{coherence_weights, vector_fit_accepting, VfOptions};
 use crate::fit::{relative_rms_error, PoleResidueModel};
 use crate::frf::{axis_name, AxisFrf};
 use crate::numeric::search::golden_section;
@@ -482,7 +482,15 @@ fn fit_axis(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions, lines: &AxisLi
                     }
                 }
             }
-            let vf = vector_fit(freq_hz, &frf.frf, &weights, &opts.vf).with_context(|| format!("axis {name}: fit"))?;
+            // Among the orders the lines cannot tell apart, one flat below
+            // the first coherent line where there is one (`check_static`).
+            let f_coherent = lines.band.0;
+            let flat = |m: &PoleResidueModel| {
+                !static_checked(opts, f_coherent)
+                    || static_deviation(|f| m.frf(f), freq_hz, f_coherent).0 <= MAX_STATIC_ERROR
+            };
+            let vf = vector_fit_accepting(freq_hz, &frf.frf, &weights, &opts.vf, &flat)
+                .with_context(|| format!("axis {name}: fit"))?;
             if !vf.model.is_stable() {
                 bail!("axis {name}: fitted model is unstable");
             }
@@ -561,19 +569,15 @@ pub fn probe_paper_fit(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> 
 /// `f_coherent` (a band-pass segment of parallel elaboration does not); the
 /// static gain |Ĝ(0)| must also be plausible for a force/force FRF.
 fn check_static(name: &str, freq_hz: &[f64], f_coherent: f64, opts: &DesignOptions, fitted: &Fitted) -> Result<()> {
-    if !(opts.bands.is_empty() || opts.bands.iter().any(|b| b.contains(f_coherent))) {
+    if !static_checked(opts, f_coherent) {
         return Ok(());
     }
     let dc = fitted.frf(0.0).norm();
     if !(0.2..5.0).contains(&dc) {
         bail!("axis {name}: fitted static gain |G(0)| = {dc:.3} N/N; the FRF must be force/force (N/N), check units and calibration (with fitting bands: include the static band)");
     }
-    let f_first = freq_hz.iter().copied().find(|f| *f >= f_coherent).unwrap_or(f_coherent).max(1e-3);
-    let g_first = fitted.frf(f_first);
-    let worst = std::iter::once(0.0)
-        .chain((0..=40).map(|i| 0.01 * (f_first / 8.0 / 0.01).powf(i as f64 / 40.0)))
-        .map(|f| ((fitted.frf(f) - g_first).norm() / g_first.norm(), f))
-        .fold((0.0, 0.0), |a, b| if b.0 > a.0 || b.0.is_nan() { b } else { a });
+    let (worst_dev, worst_hz, f_first) = static_deviation(|f| fitted.frf(f), freq_hz, f_coherent);
+    let worst = (worst_dev, worst_hz);
     if !(worst.0 <= MAX_STATIC_ERROR) {
         let next = match &fitted.paper {
             Some(_) => {
@@ -589,6 +593,25 @@ fn check_static(name: &str, freq_hz: &[f64], f_coherent: f64, opts: &DesignOptio
         );
     }
     Ok(())
+}
+
+/// Whether [`check_static`] applies: the fit covers the start of the
+/// coherent band `f_coherent` (Hz).
+fn static_checked(opts: &DesignOptions, f_coherent: f64) -> bool {
+    opts.bands.is_empty() || opts.bands.iter().any(|b| b.contains(f_coherent))
+}
+
+/// How far `g` = Ĝ(j2πf) moves below the first line at or above
+/// `f_coherent`, f_first: the largest |Ĝ(f) − Ĝ(f_first)|/|Ĝ(f_first)| from
+/// f_first/8 down to 0 Hz ([`check_static`]), where it is (Hz), and f_first.
+fn static_deviation(g: impl Fn(f64) -> Complex64, freq_hz: &[f64], f_coherent: f64) -> (f64, f64, f64) {
+    let f_first = freq_hz.iter().copied().find(|f| *f >= f_coherent).unwrap_or(f_coherent).max(1e-3);
+    let g_first = g(f_first);
+    let (worst, at) = std::iter::once(0.0)
+        .chain((0..=40).map(|i| 0.01 * (f_first / 8.0 / 0.01).powf(i as f64 / 40.0)))
+        .map(|f| ((g(f) - g_first).norm() / g_first.norm(), f))
+        .fold((0.0, 0.0), |a, b| if b.0 > a.0 || b.0.is_nan() { b } else { a });
+    (worst, at, f_first)
 }
 
 /// Design one axis from its FRF and measurement noise variance R (N²).

@@ -351,6 +351,28 @@ pub fn fit_order(
 /// best. Negligible pairs (peak contribution < 10⁻³ of |G| in band) are
 /// skimmed and the residues refitted.
 pub fn vector_fit(freq_hz: &[f64], h: &[Complex64], weights: &[f64], opts: &VfOptions) -> Result<VfResult> {
+    vector_fit_accepting(freq_hz, h, weights, opts, &|_| true)
+}
+
+/// Largest weighted error, relative to the best order's, of a model
+/// [`vector_fit_accepting`] takes in place of the best orders.
+pub const MAX_ACCEPTED_ERROR_RATIO: f64 = 2.0;
+
+/// [`vector_fit`] choosing among the orders tried only models `accept`
+/// takes (after [`skim`]), where any is: the lowest order within
+/// `improvement_tol` of the best error that it accepts, else the accepted
+/// model of least error up to [`MAX_ACCEPTED_ERROR_RATIO`] times the best's.
+/// Where it accepts none, [`vector_fit`]'s choice, for
+/// the caller's check to refuse with its reason. For what the lines cannot
+/// decide between orders, e.g. the model's course below the first coherent
+/// line ([`crate::design::axis`]'s static check).
+pub fn vector_fit_accepting(
+    freq_hz: &[f64],
+    h: &[Complex64],
+    weights: &[f64],
+    opts: &VfOptions,
+    accept: &dyn Fn(&PoleResidueModel) -> bool,
+) -> Result<VfResult> {
     if freq_hz.len() < 8 {
         bail!("vector fitting needs at least 8 frequency lines, got {}", freq_hz.len());
     }
@@ -386,11 +408,24 @@ pub fn vector_fit(freq_hz: &[f64], h: &[Complex64], weights: &[f64], opts: &VfOp
     if !best.is_finite() {
         bail!("vector fitting failed at every order");
     }
-    let chosen = models
-        .into_iter()
-        .find(|x| x.2 <= best * (1.0 + opts.improvement_tol))
-        .expect("the best model is within tolerance of itself");
-    let model = skim(freq_hz, h, weights, chosen.1)?;
+    let within = |e: f64| e <= best * (1.0 + opts.improvement_tol);
+    let first = models.iter().position(|x| within(x.2)).expect("the best model is within tolerance of itself");
+    // As vector_fit: the lowest order within tolerance first; then the other
+    // orders within tolerance, lowest first; then the rest by error.
+    let key = |i: usize| if within(models[i].2) { (0, models[i].0 as f64) } else { (1, models[i].2) };
+    let mut order_of_trial: Vec<usize> = (0..models.len()).collect();
+    order_of_trial.sort_by(|&a, &b| key(a).partial_cmp(&key(b)).unwrap_or(std::cmp::Ordering::Equal));
+    debug_assert_eq!(order_of_trial[0], first);
+    let mut fallback = None;
+    for i in order_of_trial.into_iter().filter(|&i| models[i].2 <= MAX_ACCEPTED_ERROR_RATIO * best) {
+        let model = skim(freq_hz, h, weights, models[i].1.clone())?;
+        if accept(&model) {
+            let e = weighted_rms(&model, freq_hz, h, weights);
+            return Ok(VfResult { model, weighted_rms: e, order_trace: trace });
+        }
+        fallback.get_or_insert(model);
+    }
+    let model = fallback.expect("the best model is finite");
     let e = weighted_rms(&model, freq_hz, h, weights);
     Ok(VfResult { model, weighted_rms: e, order_trace: trace })
 }
