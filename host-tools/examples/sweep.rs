@@ -12,58 +12,9 @@
 //!
 //! usage: cargo run --release -p dynocomp --example sweep -- [N]   (default 100)
 use anyhow::Result;
-use dynocomp::eval::rates::{run_case, DynoSpec, RateCase, RunOptions, RATES_HZ};
+use dynocomp::eval::rates::{run_case, RunOptions};
+use dynocomp::eval::sweep::draw;
 use dynocomp::frf::axis_name;
-use dynocomp::simulate::dynamometer::ModeRanges;
-use rand::{RngExt, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-
-/// The case of seed `seed`: rate, FRF resolution, kind and cut drawn from it.
-fn draw(seed: u64) -> (RateCase, f64, &'static str) {
-    let mut rng = ChaCha8Rng::seed_from_u64(0x5eed_0000 + seed);
-    let fs = RATES_HZ[rng.random_range(0..4)];
-    let df = [0.5, 1.0, 2.0, 4.0][rng.random_range(0..4)];
-    let d = ModeRanges::default();
-    let (kind, dyno, frf_max_hz) = match rng.random_range(0..4) {
-        0 => ("default", DynoSpec::Random(d), 4096.0),
-        1 => (
-            "machine-cluster",
-            DynoSpec::Random(ModeRanges {
-                machine_count: (3, 5),
-                machine_hz: (300.0, 900.0),
-                machine_residue: (0.05, 0.15),
-                ..d
-            }),
-            4096.0,
-        ),
-        2 => (
-            "close-pair",
-            DynoSpec::ClosePair { ranges: d, spacing: rng.random_range(0.03..0.08), share: rng.random_range(0.2..0.5) },
-            4096.0,
-        ),
-        _ => (
-            "above-band",
-            DynoSpec::Random(ModeRanges {
-                main_xy_hz: (3800.0, 5000.0),
-                main_z_hz: (4500.0, 6000.0),
-                secondary_hz: (4500.0, 6000.0),
-                ..d
-            }),
-            8192.0,
-        ),
-    };
-    let case = RateCase {
-        name: Box::leak(format!("seed{seed}").into_boxed_str()),
-        seed: 1000 + seed,
-        dyno,
-        frf_df_hz: df,
-        frf_max_hz,
-        spindle_rpm: rng.random_range(2000.0..20000.0),
-        teeth: rng.random_range(2..5),
-        chatter_hz: None,
-    };
-    (case, fs, kind)
-}
 
 fn main() -> Result<()> {
     let n: u64 = std::env::args().nth(1).map(|a| a.parse()).transpose()?.unwrap_or(100);
