@@ -3,7 +3,7 @@
 //! Two FRFs go to [`crate::cli::design_two_state`], `--parallel` to
 //! [`crate::cli::design_parallel`].
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use std::time::Instant;
 
 use dynocomp_core::image::CoeffImage;
@@ -102,9 +102,34 @@ fn design_axes(args: &DesignArgs, s: &DesignSetup) -> Result<Designed> {
     let latency = latency_choice.as_ref().map_or(s.latency, |c| c.chosen);
     let mut designs = Vec::new();
     let mut times = Vec::new();
-    for (a, (d, dt)) in frf.axes.iter().zip(results) {
-        let d = d.with_context(|| format!("{}", args.input.frf().display()))?;
-        eprintln!("  axis {}: order {}, q {:.3e}, {:.0} ms", axis_name(a.axis), d.model.order(), d.kalman.q, dt * 1e3);
+    let compensated = results.iter().filter(|r| r.0.is_ok()).count();
+    for ((a, (d, dt)), r) in frf.axes.iter().zip(results).zip(&rv) {
+        let d = match d {
+            Ok(d) => d,
+            // No axis compensated: nothing worth an image.
+            Err(e) if args.strict || compensated == 0 => {
+                return Err(e.context(format!("{}", args.input.frf().display())));
+            }
+            Err(e) => {
+                let reason = format!("{e:#}").replace("; no image written", "");
+                eprintln!(
+                    "WARNING: axis {} is NOT COMPENSATED: passed through raw (delayed by {latency} samples): {reason} \
+                     (--strict refuses the image instead)",
+                    axis_name(a.axis)
+                );
+                let opts = crate::design::axis::DesignOptions { lag: latency, ..s.opts.clone() };
+                crate::design::pass_through::pass_through(a, *r, &opts, reason)?
+            }
+        };
+        if d.pass_through.is_none() {
+            eprintln!(
+                "  axis {}: order {}, q {:.3e}, {:.0} ms",
+                axis_name(a.axis),
+                d.model.order(),
+                d.kalman.q,
+                dt * 1e3
+            );
+        }
         times.push(dt);
         designs.push(d);
     }
@@ -210,6 +235,7 @@ fn write_image_and_sidecar(
         // no note for `compensate`.
         m.force_spectrum = d.force_spectrum.as_ref().filter(|s| !s.level_only).map(|s| s.provenance(record.clone()));
         m.force_shape = d.kalman.force_shape;
+        m.passed_through_raw = d.pass_through.clone();
     }
     crate::offline::sidecar::write_image_and_sidecar(&args.out, image, Some(&sidecar))
 }

@@ -329,10 +329,16 @@ pub struct DesignArgs {
     /// the band counted, so the output as written carries little more noise
     /// there than the raw signal), or `inverse` (the exact inverse goes on
     /// above the band with its amplified noise: low-pass the output to the
-    /// band before reading it). Band-fitted and paper designs, designs
-    /// with --force-prior, and the 3x3 crosstalk design are `inverse`.
+    /// band before reading it). Band-fitted and paper designs, and designs
+    /// with --force-prior, are `inverse`.
     #[arg(long, value_enum, default_value_t = AboveBandArg::Quiet)]
     pub above_band: AboveBandArg,
+    /// Refuse the image when an axis cannot be compensated. Without it such
+    /// an axis is passed through raw (its measured force, delayed by the
+    /// latency), with a warning that gives the reason, and the other axes
+    /// are compensated (per-axis designs).
+    #[arg(long)]
+    pub strict: bool,
 }
 
 /// What the compensator outputs above its band (`--above-band`).

@@ -204,6 +204,9 @@ pub struct AxisDesign {
     /// The record's force spectrum q was chosen for (`None`: the flat
     /// spectrum of `force_rms`, the default).
     pub force_spectrum: Option<crate::design::force_spectrum::AxisForceSpectrum>,
+    /// Why the axis is passed through raw (`Some`: it could not be
+    /// compensated, [`crate::design::pass_through`]).
+    pub pass_through: Option<String>,
 }
 
 impl AxisDesign {
@@ -792,6 +795,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
         compensated_band_hz: p.lines.comp_band,
         notes: p.lines.notes.clone(),
         force_spectrum,
+        pass_through: None,
     })
 }
 

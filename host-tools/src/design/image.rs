@@ -17,7 +17,8 @@ impl AxisDesign {
             filter: self.filter,
             summary: AxisSummary {
                 model_order: self.model.order() as u16,
-                fit_nrmse: self.fit_nrmse as f32,
+                // A pass-through axis has no fit: 0 in the image.
+                fit_nrmse: if self.fit_nrmse.is_finite() { self.fit_nrmse as f32 } else { 0.0 },
                 flat_lo_hz: self.flat_band_hz.0 as f32,
                 flat_hi_hz: self.flat_band_hz.1 as f32,
                 noise_gain: self.noise_gain as f32,

@@ -27,6 +27,7 @@ pub mod noise;
 pub mod paper;
 pub mod paper_orders;
 pub mod parallel;
+pub mod pass_through;
 pub mod progress;
 pub mod sensitivity;
 pub mod two_state;

@@ -73,6 +73,11 @@ pub struct AxisModelJson {
     /// sidecars): the offline smoother uses it too.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub force_shape: Option<crate::design::kalman::ForceShape>,
+    /// Why the axis is passed through raw (`design` could not compensate
+    /// it; absent otherwise and in older sidecars): `compensate --offline`
+    /// outputs its measured force unchanged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub passed_through_raw: Option<String>,
 }
 
 /// The sidecar's terms of a pole-residue model.
@@ -156,6 +161,7 @@ impl ModelSidecar {
                 force_prior: None,
                 force_spectrum: None,
                 force_shape: None,
+                passed_through_raw: None,
             })
             .collect();
         ModelSidecar {

@@ -393,10 +393,21 @@ fn image_axis(image: &CoeffImage, axis: usize, source: &str) -> Result<dynocomp_
 pub fn axis_smoother(image: &CoeffImage, sidecar: &ModelSidecar, axis: usize, source: &str) -> Result<Smoother> {
     let a = image_axis(image, axis, source)?;
     let dm = sidecar.discrete_model(axis, source)?;
+    let name = axis_name(axis);
+    if sidecar.axes.iter().any(|m| m.axis == name && m.passed_through_raw.is_some()) {
+        // An axis `design` passed through raw: its model is Ĝ = 1 and its
+        // force free to move each sample (q = PASS_THROUGH_Q_RATIO·R), so
+        // the estimate is the measurement, to R/q.
+        let r = a.summary.r;
+        return Smoother::new(&dm, PASS_THROUGH_Q_RATIO * r, r).with_context(|| format!("{source}: axis {name}"));
+    }
     let shape = sidecar.force_shape(axis, source)?;
     Smoother::shaped(&dm, a.summary.q, a.summary.r, shape)
         .with_context(|| format!("{source}: axis {}", axis_name(axis)))
 }
+
+/// q/R of the smoother of an axis passed through raw ([`axis_smoother`]).
+pub const PASS_THROUGH_Q_RATIO: f64 = 1e12;
 
 /// `compensate --offline`: smooth every force column of `rec` with the
 /// model of its axis from the sidecar and q, R from the image.
@@ -409,7 +420,13 @@ pub fn smooth_record(
     let mut channels = Vec::with_capacity(rec.channels.len());
     for (axis, y) in &rec.channels {
         let name = axis_name(*axis);
-        let sm = match sidecar.axes.iter().find(|m| m.axis == name).and_then(|m| m.force_prior.as_ref()) {
+        let stored = sidecar.axes.iter().find(|m| m.axis == name);
+        if let Some(why) = stored.and_then(|m| m.passed_through_raw.as_ref()) {
+            eprintln!("WARNING: axis {name} is NOT COMPENSATED (passed through raw): {why}");
+            channels.push((*axis, y.clone()));
+            continue;
+        }
+        let sm = match stored.and_then(|m| m.force_prior.as_ref()) {
             None => axis_smoother(image, sidecar, *axis, source)?,
             Some(p) => {
                 let a = image_axis(image, *axis, source)?;
@@ -447,6 +464,10 @@ pub fn build_priors(
 ) -> Result<Vec<Option<AxisPrior>>> {
     let mut out = Vec::new();
     for d in designs {
+        if d.pass_through.is_some() {
+            out.push(None);
+            continue;
+        }
         let name = axis_name(d.axis);
         let y = rec.channel(d.axis).ok_or_else(|| {
             anyhow::anyhow!("{shown}: no column f{name} for axis {name}; the force record needs every designed axis")

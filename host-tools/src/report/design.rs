@@ -104,6 +104,18 @@ fn axis_plots(
     fs_hz: f64,
 ) -> Result<Vec<Plot>> {
     let name = axis_name(d.axis);
+    if let Some(why) = &d.pass_through {
+        return Ok(vec![(
+            format!("{name}_frf_fit.svg"),
+            format!("Axis {name}: NOT COMPENSATED, passed through raw"),
+            format!(
+                "The measured FRF G and its coherence γ². The design could not compensate this axis ({}); \
+                 the image outputs its measured force delayed by the latency (the flat line, Ĝ = 1).",
+                why
+            ),
+            plot_frf_fit(freq, meas, d).with_context(|| format!("report: axis {name}: FRF plot"))?,
+        )]);
+    }
     let mut plots = vec![
         (
             format!("{name}_frf_fit.svg"),

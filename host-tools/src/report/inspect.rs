@@ -364,5 +364,10 @@ fn render_axes(s: &mut String, axes: &[AxisReport]) {
             a.r,
             a.max_pole_radius
         );
+        // `design` writes an axis it could not compensate as a pure delay
+        // with no model and q = 0 (crate::design::pass_through).
+        if a.model_order == 0 && a.q == 0.0 && a.sections == 0 {
+            let _ = writeln!(s, "     axis {}: NOT COMPENSATED, passed through raw (delayed by the latency)", a.axis);
+        }
     }
 }

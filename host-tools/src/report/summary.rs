@@ -87,6 +87,9 @@ pub struct AxisJson {
     /// null for the random walk: `--above-band inverse`, bands, the paper's
     /// method).
     pub force_shape: Option<crate::design::kalman::ForceShape>,
+    /// Why the axis is passed through raw, delayed by the latency (null
+    /// where it is compensated; `design --strict` refuses such an image).
+    pub passed_through_raw: Option<String>,
 }
 
 impl AxisJson {
@@ -138,6 +141,7 @@ impl AxisJson {
             }),
             force_spectrum: d.force_spectrum.clone(),
             force_shape: d.kalman.force_shape,
+            passed_through_raw: d.pass_through.clone(),
         }
     }
 }
@@ -238,6 +242,13 @@ pub fn render_summary(
     }
     s.push_str(&table(designs, range));
     for d in designs {
+        if let Some(why) = &d.pass_through {
+            let _ = writeln!(
+                s,
+                "WARNING: axis {} is NOT COMPENSATED: passed through raw (delayed by {latency} samples): {why}",
+                axis_name(d.axis)
+            );
+        }
         if let Some(line) = discrete_line(d) {
             s.push_str(&line);
         }
@@ -285,6 +296,10 @@ fn table(designs: &[AxisDesign], range: Option<&[RangeFigures]>) -> String {
         "sec+fir"
     );
     for (i, d) in designs.iter().enumerate() {
+        if d.pass_through.is_some() {
+            let _ = writeln!(s, "{:<4} NOT COMPENSATED: passed through raw (WARNING below)", axis_name(d.axis));
+            continue;
+        }
         let _ = writeln!(
             s,
             "{:<4} {:>5} {:>6.2}% {:>6.0}-{:<6.0} {:>10.3e} {:>9.4} {:>7.0}-{:<7.0} {:>6.2} {:>7} {:>6.2}% {:>8} \
