@@ -106,8 +106,10 @@ fn design_axes(args: &DesignArgs, s: &DesignSetup) -> Result<Designed> {
     for ((a, (d, dt)), r) in frf.axes.iter().zip(results).zip(&rv) {
         let d = match d {
             Ok(d) => d,
-            // No axis compensated: nothing worth an image.
-            Err(e) if args.strict || compensated == 0 => {
+            // No axis compensated: nothing worth an image. The explicit
+            // methods and priors keep their refusals (their messages say what
+            // to drop), and so does `--strict`.
+            Err(e) if args.strict || compensated == 0 || !default_design(args, s) => {
                 return Err(e.context(format!("{}", args.input.frf().display())));
             }
             Err(e) => {
@@ -135,6 +137,13 @@ fn design_axes(args: &DesignArgs, s: &DesignSetup) -> Result<Designed> {
     }
     let versus = against_default(args, s, &mut designs, latency, &rv);
     Ok(Designed { designs, times, latency_choice, latency, versus })
+}
+
+/// Whether this is the default design (vector fitting on the whole band,
+/// no force prior): the only one whose failed axes are passed through raw
+/// ([`crate::design::pass_through`]).
+fn default_design(args: &DesignArgs, s: &DesignSetup) -> bool {
+    args.method == Method::Vf && s.bands.is_empty() && args.prior.force_prior == ForcePrior::Default
 }
 
 /// A band-fitted or paper-method design beside the default design of the

@@ -334,9 +334,10 @@ pub struct DesignArgs {
     #[arg(long, value_enum, default_value_t = AboveBandArg::Quiet)]
     pub above_band: AboveBandArg,
     /// Refuse the image when an axis cannot be compensated. Without it such
-    /// an axis is passed through raw (its measured force, delayed by the
-    /// latency), with a warning that gives the reason, and the other axes
-    /// are compensated (per-axis designs).
+    /// an axis of the default design is passed through raw (its measured
+    /// force, delayed by the latency), with a warning that gives the reason,
+    /// and the other axes are compensated. Designs with --method paper,
+    /// fitting bands or --force-prior refuse in any case.
     #[arg(long)]
     pub strict: bool,
 }
