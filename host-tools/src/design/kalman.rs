@@ -84,6 +84,35 @@ impl ForceShape {
     }
 }
 
+/// States the force shape of `sections` ([`ForceShape::sections`]) adds to
+/// an augmented plant: the random walk u and two per section before the
+/// last (the last one's are F_k and F_{k−1} of the delay line); 0 unshaped.
+pub(crate) fn shape_states(sections: &[(f64, f64, f64)]) -> usize {
+    if sections.is_empty() {
+        0
+    } else {
+        1 + 2 * (sections.len() - 1)
+    }
+}
+
+/// Write the shaped force model into the state transition `a`: the random
+/// walk at state `u` (its process noise is the caller's), driving the
+/// all-pole `sections` in turn; the sections before the last take the
+/// states after u, the last one outputs state `out` (F_k) with its second
+/// state `out_prev` (F_{k−1}).
+pub(crate) fn wire_shape(a: &mut DMatrix<f64>, sections: &[(f64, f64, f64)], u: usize, out: usize, out_prev: usize) {
+    a[(u, u)] = 1.0;
+    let mut input = u;
+    for (k, &(a1, a2, gain)) in sections.iter().enumerate() {
+        let (y, y1) = if k + 1 == sections.len() { (out, out_prev) } else { (u + 1 + 2 * k, u + 2 + 2 * k) };
+        a[(y, y)] = a1;
+        a[(y, y1)] = -a2;
+        a[(y, input)] = gain;
+        a[(y1, y)] = 1.0;
+        input = y;
+    }
+}
+
 /// [`augmented_plant`] with the force shaped by `shape` ([`ForceShape`]):
 /// the random walk u and the first sections' two states each follow the
 /// unshaped layout's states, and the last section's output is F_k itself,
@@ -95,8 +124,7 @@ pub fn augmented_plant_shaped(dm: &DiscreteModel, lag: usize, shape: Option<Forc
     let sections = shape.map(|s| s.sections(dm.fs_hz)).unwrap_or_default();
     let min_delay = usize::from(!sections.is_empty());
     let n_delay = model_lag.max(dm.fir.len()).max(min_delay);
-    let n_shape = if sections.is_empty() { 0 } else { 1 + 2 * (sections.len() - 1) };
-    let n = n_plant + 1 + n_delay + n_shape;
+    let n = n_plant + 1 + n_delay + shape_states(&sections);
     let f = n_plant; // index of F_k
     let mut a = DMatrix::<f64>::zeros(n, n);
     let mut g = DVector::<f64>::zeros(n);
@@ -139,17 +167,8 @@ pub fn augmented_plant_shaped(dm: &DiscreteModel, lag: usize, shape: Option<Forc
         g[f] = 1.0;
     } else {
         let u = f + 1 + n_delay;
-        a[(u, u)] = 1.0;
         g[u] = 1.0;
-        let mut input = u;
-        for (k, &(a1, a2, gain)) in sections.iter().enumerate() {
-            let (y, y1) = if k + 1 == sections.len() { (f, f + 1) } else { (u + 1 + 2 * k, u + 2 + 2 * k) };
-            a[(y, y)] = a1;
-            a[(y, y1)] = -a2;
-            a[(y, input)] = gain;
-            a[(y1, y)] = 1.0;
-            input = y;
-        }
+        wire_shape(&mut a, &sections, u, f, f + 1);
     }
     AugmentedPlant { a, g, c, n_plant, lag: model_lag }
 }

@@ -7,7 +7,7 @@ use anyhow::{bail, Result};
 use nalgebra::DMatrix;
 
 use super::discrete::{DiscreteMatrixModel, PlantStates};
-use crate::design::kalman::{structured_doubling, ForceShape};
+use crate::design::kalman::{shape_states, structured_doubling, wire_shape, ForceShape};
 use crate::fit::linalg::eigenvalues;
 use crate::numeric::lti::MimoStateSpace;
 
@@ -71,7 +71,7 @@ pub fn augmented_plant_shaped(
     let sections: [Vec<(f64, f64, f64)>; 3] = shapes.map(|s| s.map(|s| s.sections(dm.fs_hz)).unwrap_or_default());
     let shaped = sections.iter().any(|s| !s.is_empty());
     let n_delay = model_lag.max(dm.fir.len()).max(usize::from(shaped));
-    let n_shape: usize = sections.iter().map(|s| if s.is_empty() { 0 } else { 1 + 2 * (s.len() - 1) }).sum();
+    let n_shape: usize = sections.iter().map(|s| shape_states(s)).sum();
     let n = n_plant + 3 * (1 + n_delay) + n_shape;
     let f = n_plant;
     let mut a = DMatrix::<f64>::zeros(n, n);
@@ -92,18 +92,9 @@ pub fn augmented_plant_shaped(
             continue;
         }
         let u = next;
-        next += 1 + 2 * (secs.len() - 1);
-        a[(u, u)] = 1.0;
+        next += shape_states(secs);
         g[(u, k)] = 1.0;
-        let mut input = u;
-        for (s, &(a1, a2, gain)) in secs.iter().enumerate() {
-            let (y, y1) = if s + 1 == secs.len() { (f + k, f + 3 + k) } else { (u + 1 + 2 * s, u + 2 + 2 * s) };
-            a[(y, y)] = a1;
-            a[(y, y1)] = -a2;
-            a[(y, input)] = gain;
-            a[(y1, y)] = 1.0;
-            input = y;
-        }
+        wire_shape(&mut a, secs, u, f + k, f + 3 + k);
     }
     for i in 0..3 {
         for k in 0..3 {
@@ -241,10 +232,10 @@ mod tests {
     }
 
     /// On uncoupled axes the shaped 3x3 compensator is the three shaped
-    /// per-axis compensators (an independent construction of the same
-    /// force model, [`crate::design::kalman::augmented_plant_shaped`]): each
-    /// force's shape on its own axis, a mix of shapes and none, and nothing
-    /// off the diagonal. Negative control: the per-axis design without the
+    /// per-axis compensators ([`crate::design::kalman::augmented_plant_shaped`],
+    /// whose shape wiring it shares; what this checks is the 3x3 layout):
+    /// each force's shape on its own axis, a mix of shapes and none, and
+    /// nothing off the diagonal. Negative control: the per-axis design without the
     /// shape differs from the shaped 3x3 row above the band.
     #[test]
     fn the_shaped_plant_of_uncoupled_axes_is_the_per_axis_shaped_plant() {
