@@ -206,6 +206,13 @@ impl ModelSidecar {
         Ok(dm)
     }
 
+    /// Why `axis` is passed through raw (`design` could not compensate it);
+    /// `None` where it is compensated.
+    pub fn passed_through_raw(&self, axis: usize) -> Option<&str> {
+        let name = axis_name(axis);
+        self.axes.iter().find(|a| a.axis == name).and_then(|a| a.passed_through_raw.as_deref())
+    }
+
     /// The band-limited force model of `axis`, validated (a finite corner
     /// below fs/2, order 2 or 4); `None` where the design used the random walk.
     pub fn force_shape(&self, axis: usize, source: &str) -> Result<Option<crate::design::kalman::ForceShape>> {

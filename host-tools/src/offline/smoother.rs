@@ -394,10 +394,11 @@ pub fn axis_smoother(image: &CoeffImage, sidecar: &ModelSidecar, axis: usize, so
     let a = image_axis(image, axis, source)?;
     let dm = sidecar.discrete_model(axis, source)?;
     let name = axis_name(axis);
-    if sidecar.axes.iter().any(|m| m.axis == name && m.passed_through_raw.is_some()) {
+    if let Some(why) = sidecar.passed_through_raw(axis) {
         // An axis `design` passed through raw: its model is Ĝ = 1 and its
         // force free to move each sample (q = PASS_THROUGH_Q_RATIO·R), so
         // the estimate is the measurement, to R/q.
+        eprintln!("WARNING: axis {name} is NOT COMPENSATED (passed through raw): {why}");
         let r = a.summary.r;
         return Smoother::new(&dm, PASS_THROUGH_Q_RATIO * r, r).with_context(|| format!("{source}: axis {name}"));
     }
@@ -420,13 +421,7 @@ pub fn smooth_record(
     let mut channels = Vec::with_capacity(rec.channels.len());
     for (axis, y) in &rec.channels {
         let name = axis_name(*axis);
-        let stored = sidecar.axes.iter().find(|m| m.axis == name);
-        if let Some(why) = stored.and_then(|m| m.passed_through_raw.as_ref()) {
-            eprintln!("WARNING: axis {name} is NOT COMPENSATED (passed through raw): {why}");
-            channels.push((*axis, y.clone()));
-            continue;
-        }
-        let sm = match stored.and_then(|m| m.force_prior.as_ref()) {
+        let sm = match sidecar.axes.iter().find(|m| m.axis == name).and_then(|m| m.force_prior.as_ref()) {
             None => axis_smoother(image, sidecar, *axis, source)?,
             Some(p) => {
                 let a = image_axis(image, *axis, source)?;
