@@ -409,13 +409,11 @@ pub fn vector_fit_accepting(
         bail!("vector fitting failed at every order");
     }
     let within = |e: f64| e <= best * (1.0 + opts.improvement_tol);
-    let first = models.iter().position(|x| within(x.2)).expect("the best model is within tolerance of itself");
     // As vector_fit: the lowest order within tolerance first; then the other
     // orders within tolerance, lowest first; then the rest by error.
     let key = |i: usize| if within(models[i].2) { (0, models[i].0 as f64) } else { (1, models[i].2) };
     let mut order_of_trial: Vec<usize> = (0..models.len()).collect();
     order_of_trial.sort_by(|&a, &b| key(a).partial_cmp(&key(b)).unwrap_or(std::cmp::Ordering::Equal));
-    debug_assert_eq!(order_of_trial[0], first);
     let mut fallback = None;
     for i in order_of_trial.into_iter().filter(|&i| models[i].2 <= MAX_ACCEPTED_ERROR_RATIO * best) {
         let model = skim(freq_hz, h, weights, models[i].1.clone())?;
