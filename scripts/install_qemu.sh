@@ -28,7 +28,7 @@ if [ ! -x "$dest/bin/qemu-system-arm" ]; then
     # The packages an install would add (nothing is installed: -s simulates).
     pkgs=$(apt-get install -s --no-install-recommends qemu-system-arm 2>/dev/null | awk '/^Inst /{print $2}')
     [ -n "$pkgs" ] || { echo "install_qemu.sh: apt-get cannot resolve qemu-system-arm" >&2; exit 1; }
-    (cd "$work" && apt-get download -q=2 $pkgs 2>&1 | grep -v "^W: Download is performed unsandboxed" >&2) || { echo "install_qemu.sh: apt-get download failed for: $(echo $pkgs)" >&2; exit 1; }
+    (cd "$work" && apt-get download -q=2 $pkgs 2>&1 | { grep -v "^W: Download is performed unsandboxed" >&2 || true; }) || { echo "install_qemu.sh: apt-get download failed for: $(echo $pkgs)" >&2; exit 1; }
     rm -rf "$dest.partial" && mkdir -p "$dest.partial/root" "$dest.partial/bin"
     for d in "$work"/*.deb; do dpkg-deb -x "$d" "$dest.partial/root"; done
     libs=$(find "$dest.partial/root" -name '*.so*' -printf '%h\n' | sort -u | sed "s#^$dest.partial#$dest#" | tr '\n' ':')
