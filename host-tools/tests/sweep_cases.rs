@@ -44,3 +44,38 @@ fn seed_32_x_gets_a_model_flat_below_its_first_coherent_line() {
     assert!(e < 0.1 * a.raw_nrmse, "x: {e} against raw {}", a.raw_nrmse);
     assert!(e <= 4.0 * a.noise_floor, "x: {e} against the floor {}", a.noise_floor);
 }
+
+/// Drift sweep seed 38 (`examples/drift_sweep.rs`, `dynocomp::eval::drift_sweep`):
+/// a close sensor-mode pair at 51.2 kHz, 4 Hz lines, the sensor modes moving
+/// +2.2 % during the cut. The first FRF's fit of z holds a mode at 5.3 kHz,
+/// above the compensated band, that the second's does not; pairing every
+/// physical mode in order refused the axis, and with it the whole two-state
+/// image. A mode without a partner above the band now fades between the
+/// states (`two_state::model::pair_fading`).
+///
+/// Judged against the truth: every axis is designed for the range and
+/// followed by `compensate --offline --drift` within 1.5x of the same cut
+/// without drift (the target), while the first FRF's smoother held
+/// over the drift misses it on every axis (the control: the score sees the
+/// drift).
+#[test]
+fn drift_seed_38_fades_a_mode_above_the_band_and_follows_the_drift() {
+    use dynocomp::eval::drift_sweep::{draw_drift, run_drift_case};
+    let c = draw_drift(38);
+    assert_eq!((c.kind, c.fs_hz, c.case.frf_df_hz), ("close-pair", 51_200.0, 4.0), "the drift sweep's seed 38 changed");
+    let scores = run_drift_case(&c).unwrap();
+    for a in &scores {
+        let d = a.design.as_ref().unwrap_or_else(|why| panic!("axis {} refused: {why}", a.axis));
+        eprintln!(
+            "axis {}: drift {:.3} %, held {:.3} %, no drift {:.3} %; box two-state {:.3} %, single {:.3} %",
+            a.axis,
+            100.0 * d.offline_drift,
+            100.0 * d.offline_held,
+            100.0 * d.offline_no_drift,
+            100.0 * d.box_two_state,
+            100.0 * d.box_single
+        );
+        assert!(d.offline_drift <= 1.5 * d.offline_no_drift, "axis {}: {d:?}", a.axis);
+        assert!(d.offline_held > 1.5 * d.offline_no_drift, "control, axis {}: {d:?}", a.axis);
+    }
+}

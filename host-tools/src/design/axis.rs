@@ -607,7 +607,7 @@ fn static_checked(opts: &DesignOptions, f_coherent: f64) -> bool {
 /// How far `g` = Ĝ(j2πf) moves below the first line at or above
 /// `f_coherent`, f_first: the largest |Ĝ(f) − Ĝ(f_first)|/|Ĝ(f_first)| from
 /// f_first/8 down to 0 Hz ([`check_static`]), where it is (Hz), and f_first.
-fn static_deviation(g: impl Fn(f64) -> Complex64, freq_hz: &[f64], f_coherent: f64) -> (f64, f64, f64) {
+pub fn static_deviation(g: impl Fn(f64) -> Complex64, freq_hz: &[f64], f_coherent: f64) -> (f64, f64, f64) {
     let f_first = freq_hz.iter().copied().find(|f| *f >= f_coherent).unwrap_or(f_coherent).max(1e-3);
     let g_first = g(f_first);
     let (worst, at) = std::iter::once(0.0)

@@ -40,18 +40,24 @@ fn share(pole: Complex64, residue: Complex64) -> f64 {
     2.0 * residue.norm() / pole.norm()
 }
 
-/// Indices into `model.terms` of the sensor modes ([`SENSOR_FRACTION`]);
-/// empty without pairs.
-pub fn sensor_mode_indices(model: &PoleResidueModel) -> Vec<usize> {
-    let main = model
+/// Natural frequency of the main mode (the pair of the largest modal
+/// share) as an angular frequency (rad/s); None without pairs.
+fn main_mode_rad_s(model: &PoleResidueModel) -> Option<f64> {
+    model
         .terms
         .iter()
         .filter_map(|t| match *t {
             Term::Pair { pole, residue } => Some((pole.norm(), share(pole, residue))),
             Term::Real { .. } => None,
         })
-        .max_by(|a, b| a.1.total_cmp(&b.1));
-    let Some((w_main, _)) = main else { return Vec::new() };
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|m| m.0)
+}
+
+/// Indices into `model.terms` of the sensor modes ([`SENSOR_FRACTION`]);
+/// empty without pairs.
+pub fn sensor_mode_indices(model: &PoleResidueModel) -> Vec<usize> {
+    let Some(w_main) = main_mode_rad_s(model) else { return Vec::new() };
     model
         .terms
         .iter()

@@ -490,9 +490,21 @@ fn skim(freq_hz: &[f64], h: &[Complex64], weights: &[f64], model: PoleResidueMod
     if keep.iter().all(|k| *k) {
         return Ok(model);
     }
+    refit_kept(freq_hz, h, weights, &model, &keep)
+}
+
+/// `model` without the terms `keep` leaves out, its residues and direct term
+/// fitted again to `h` (weights `weights`) with the remaining poles fixed.
+pub fn refit_kept(
+    freq_hz: &[f64],
+    h: &[Complex64],
+    weights: &[f64],
+    model: &PoleResidueModel,
+    keep: &[bool],
+) -> Result<PoleResidueModel> {
     let f_max = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
     let w_scale = 2.0 * PI * f_max;
-    let poles = kept_poles(&model.terms, &keep, w_scale);
+    let poles = kept_poles(&model.terms, keep, w_scale);
     let s: Vec<Complex64> = freq_hz.iter().map(|f| Complex64::new(0.0, 2.0 * PI * f / w_scale)).collect();
     let sw: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
     let (c, d) = residues(&s, h, &sw, &poles)?;

@@ -62,25 +62,42 @@ fn silenced(t: Term) -> Term {
     }
 }
 
-/// Pair the modes of `before` and `after`; `axis` names the
-/// axis in errors.
+/// Pair the modes of `before` and `after`; `axis` names the axis in
+/// errors. Every physical mode must find a partner: [`pair_fading`] with no
+/// mode allowed to fade.
+pub fn pair(axis: &str, before: &PoleResidueModel, after: &PoleResidueModel) -> Result<TwoState> {
+    pair_fading(axis, before, after, &|_| false)
+}
+
+/// Pair the modes of `before` and `after`; `axis` names the axis in errors;
+/// `may_fade(f_hz)`: whether a physical mode at natural frequency `f_hz`
+/// that has no partner in the other state may fade between the states.
 ///
 /// **Pairing (stated rule).** Only physical modes are paired
 /// ([`is_physical`]): those of each model are sorted by natural frequency
-/// and matched in that order; the two models must have as many, and each
-/// matched pair's natural frequencies may differ by at most
-/// [`PAIR_TOLERANCE`] (relative). Otherwise pairing fails with a message
-/// naming the axis and both models' physical modes. The background terms
-/// (real poles, heavily damped or negligible pairs) are not modes of the
-/// set-up that a change of mass moves, and the two fits place them where
-/// each fit's noise led it: each state keeps its own, and the other state
-/// carries them with a zero residue, so that in between ([`TwoState::at`])
-/// the first state's background fades out as the second's fades in.
-/// Machine-structure modes that both FRFs measured alike are then shared
+/// and matched in that order, the most partners whose natural frequencies
+/// differ by at most [`PAIR_TOLERANCE`] (relative), and among those the
+/// least Σ |ln(f₁/f₀)|. A mode left without a partner is one the two fits
+/// resolved differently: a machine mode one fit split and the other did
+/// not, or a mode beyond the FRF that no line constrains. Where `may_fade`
+/// allows it, it joins its state's background; otherwise pairing fails with
+/// a message naming the axis, the modes without a partner and both models'
+/// physical modes. The background terms (real poles, heavily damped or
+/// negligible pairs) are not modes of the set-up that a change of mass
+/// moves, and the two fits place them where each fit's noise led it: each
+/// state keeps its own, and the other state carries them with a zero
+/// residue, so that in between ([`TwoState::at`]) the first state's
+/// background fades out as the second's fades in. Machine-structure modes
+/// that both FRFs measured alike are then shared
 /// ([`crate::design::two_state::range::share_machine_modes`]), and sensor
 /// modes above the compensated band fitted to both FRFs at once
 /// ([`crate::design::two_state::joint`]).
-pub fn pair(axis: &str, before: &PoleResidueModel, after: &PoleResidueModel) -> Result<TwoState> {
+pub fn pair_fading(
+    axis: &str,
+    before: &PoleResidueModel,
+    after: &PoleResidueModel,
+    may_fade: &dyn Fn(f64) -> bool,
+) -> Result<TwoState> {
     let split = |m: &PoleResidueModel| -> (Vec<Term>, Vec<Term>) {
         let (mut modes, mut background) = (Vec::new(), Vec::new());
         for (i, t) in m.terms.iter().enumerate() {
@@ -93,39 +110,95 @@ pub fn pair(axis: &str, before: &PoleResidueModel, after: &PoleResidueModel) -> 
         modes.sort_by(|a, b| term_fn_hz(a).total_cmp(&term_fn_hz(b)));
         (modes, background)
     };
-    let (m0, b0) = split(before);
-    let (m1, b1) = split(after);
+    let (m0, mut b0) = split(before);
+    let (m1, mut b1) = split(after);
     let f0: Vec<f64> = m0.iter().map(term_fn_hz).collect();
     let f1: Vec<f64> = m1.iter().map(term_fn_hz).collect();
-    if m0.len() != m1.len() {
+    let matched = match_in_order(&f0, &f1);
+    let lone = |f: &[f64], side: usize| -> Vec<usize> {
+        (0..f.len()).filter(|i| !matched.iter().any(|m| if side == 0 { m.0 == *i } else { m.1 == *i })).collect()
+    };
+    let (lone0, lone1) = (lone(&f0, 0), lone(&f1, 1));
+    let stuck0: Vec<f64> = lone0.iter().map(|&i| f0[i]).filter(|f| !may_fade(*f)).collect();
+    let stuck1: Vec<f64> = lone1.iter().map(|&i| f1[i]).filter(|f| !may_fade(*f)).collect();
+    if !stuck0.is_empty() || !stuck1.is_empty() {
+        let side = |which: &str, other: &str, f: &[f64]| match f.len() {
+            0 => String::new(),
+            _ => format!(
+                " {which} FRF's {} Hz has no partner within ±{:.0} % in the {other};",
+                list(f),
+                100.0 * PAIR_TOLERANCE
+            ),
+        };
         bail!(
-            "axis {axis}: cannot pair the modes of the two FRFs: the first has {} modes ({} Hz), the second {} ({} Hz) (pairs with ζ ≤ {PHYSICAL_MAX_ZETA} and a modal share ≥ {PHYSICAL_MIN_SHARE:e} of the largest); measure both states over the same band or fix --max-order",
-            m0.len(),
+            "axis {axis}: cannot pair the modes of the two FRFs:{}{} modes {} Hz / {} Hz (pairs with ζ ≤ {PHYSICAL_MAX_ZETA} and a modal share ≥ {PHYSICAL_MIN_SHARE:e} of the largest); a mode in the compensated band must be seen in both states: measure both states over the same band with the same resolution, or fix --max-order",
+            side("the first", "second", &stuck0),
+            side("the second", "first", &stuck1),
             list(&f0),
-            m1.len(),
             list(&f1)
         );
     }
-    for (a, b) in f0.iter().zip(&f1) {
-        if ((b - a) / a).abs() > PAIR_TOLERANCE {
-            bail!(
-                "axis {axis}: cannot pair mode {a:.0} Hz (first FRF) with {b:.0} Hz (second FRF): {:+.1} % apart, more than ±{:.0} % (modes: {} Hz / {} Hz)",
-                100.0 * (b / a - 1.0),
-                100.0 * PAIR_TOLERANCE,
-                list(&f0),
-                list(&f1)
-            );
-        }
-    }
-    let before_terms = m0.iter().chain(&b0).copied().chain(b1.iter().map(|t| silenced(*t))).collect();
-    let after_terms = m1.iter().copied().chain(b0.iter().map(|t| silenced(*t))).chain(b1.iter().copied()).collect();
+    b0.extend(lone0.iter().map(|&i| m0[i]));
+    b1.extend(lone1.iter().map(|&i| m1[i]));
+    let before_terms =
+        matched.iter().map(|m| m0[m.0]).chain(b0.iter().copied()).chain(b1.iter().map(|t| silenced(*t))).collect();
+    let after_terms =
+        matched.iter().map(|m| m1[m.1]).chain(b0.iter().map(|t| silenced(*t))).chain(b1.iter().copied()).collect();
     Ok(TwoState {
         before: PoleResidueModel { terms: before_terms, d: before.d },
         after: PoleResidueModel { terms: after_terms, d: after.d },
     })
 }
 
-fn term_fn_hz(t: &Term) -> f64 {
+/// The order-preserving matching of the sorted frequencies `f0` and `f1`
+/// with the most pairs within [`PAIR_TOLERANCE`] and, among those, the
+/// least Σ |ln(f₁/f₀)| (dynamic programming over both lists); the matched
+/// index pairs in order.
+fn match_in_order(f0: &[f64], f1: &[f64]) -> Vec<(usize, usize)> {
+    let (n, m) = (f0.len(), f1.len());
+    // best[i][j]: (pairs, −cost) of the best matching of f0[i..] and f1[j..].
+    let mut best = vec![vec![(0usize, 0.0f64); m + 1]; n + 1];
+    let better = |a: (usize, f64), b: (usize, f64)| a.0 > b.0 || (a.0 == b.0 && a.1 > b.1);
+    let close = |i: usize, j: usize| ((f1[j] - f0[i]) / f0[i]).abs() <= PAIR_TOLERANCE;
+    for i in (0..n).rev() {
+        for j in (0..m).rev() {
+            let mut b = best[i + 1][j];
+            if better(best[i][j + 1], b) {
+                b = best[i][j + 1];
+            }
+            if close(i, j) {
+                let t = best[i + 1][j + 1];
+                let with = (t.0 + 1, t.1 - (f1[j] / f0[i]).ln().abs());
+                if better(with, b) {
+                    b = with;
+                }
+            }
+            best[i][j] = b;
+        }
+    }
+    let mut out = Vec::new();
+    let (mut i, mut j) = (0, 0);
+    while i < n && j < m {
+        if close(i, j) {
+            let t = best[i + 1][j + 1];
+            if best[i][j] == (t.0 + 1, t.1 - (f1[j] / f0[i]).ln().abs()) {
+                out.push((i, j));
+                i += 1;
+                j += 1;
+                continue;
+            }
+        }
+        if best[i][j] == best[i + 1][j] {
+            i += 1;
+        } else {
+            j += 1;
+        }
+    }
+    out
+}
+
+/// Natural frequency of a term (Hz): |p|/2π.
+pub fn term_fn_hz(t: &Term) -> f64 {
     match *t {
         Term::Pair { pole, .. } => fn_hz(pole),
         Term::Real { pole, .. } => pole.abs() / (2.0 * std::f64::consts::PI),

@@ -3,15 +3,15 @@
 //! both measured them alike, and the design whose worst predicted error over
 //! the range is least.
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use num_complex::Complex64;
 
-use crate::design::axis::{design_axis, AxisDesign, DesignOptions};
+use crate::design::axis::{design_axis, static_deviation, AxisDesign, DesignOptions, MAX_STATIC_ERROR};
 use crate::design::criterion::{criterion_grid, criterion_j, criterion_ranges, noise_term};
 use crate::design::two_state::joint::{fit_above_band_jointly, AboveBandMode, Lines};
-use crate::design::two_state::model::{pair, TwoState};
+use crate::design::two_state::model::{pair_fading, term_fn_hz, TwoState};
 use crate::fit::modes::{fn_hz, modal_share, residue_of_share, sensor_mode_indices};
-use crate::fit::vf::{coherence_weights, fit_order, VfOptions};
+use crate::fit::vf::{coherence_weights, fit_order, refit_kept, vector_fit_accepting, VfOptions};
 use crate::fit::{PoleResidueModel, Term};
 use crate::frf::{axis_name, AxisFrf};
 use crate::numeric::parallel::map_on_threads;
@@ -65,9 +65,56 @@ pub fn pair_second_state(
 ) -> Result<Paired> {
     let name = axis_name(second.axis);
     let w = coherence_weights(&second.frf, second.coherence.as_deref());
-    let after = fit_order(freq_hz, &second.frf, &w, d0.model.order(), vf)
-        .with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?;
-    let ts = pair(name, &d0.model, &after)?;
+    // The mass change keeps the static gain, and below the first coherent
+    // line no line constrains either fit. The second state's fit is to be
+    // flat there as the single-state design's static check asks
+    // (`design::axis`), without poles below that line where the first
+    // state's fit has none: a pole there is a state the record cannot
+    // settle, and takes up part of the mean force. In order of preference:
+    // the fit at the first state's order with such terms left out and the
+    // residues fitted again, if flat; the order the fit chooses among those
+    // flat without such poles; among those flat once they are left out.
+    let f_coherent = d0.compensated_band_hz.0;
+    let slow_poles_allowed = d0.model.terms.iter().any(|t| term_fn_hz(t) < f_coherent);
+    let slow = |m: &PoleResidueModel| !slow_poles_allowed && m.terms.iter().any(|t| term_fn_hz(t) < f_coherent);
+    let unslowed = |m: PoleResidueModel| -> PoleResidueModel {
+        if !slow(&m) {
+            return m;
+        }
+        let keep: Vec<bool> = m.terms.iter().map(|t| term_fn_hz(t) >= f_coherent).collect();
+        refit_kept(freq_hz, &second.frf, &w, &m, &keep).unwrap_or(m)
+    };
+    let flat = |m: &PoleResidueModel| static_deviation(|f| m.frf(f), freq_hz, f_coherent).0 <= MAX_STATIC_ERROR;
+    let calm = |m: &PoleResidueModel| flat(m) && !slow(m);
+    let flat_once_calmed = |m: &PoleResidueModel| calm(&unslowed(m.clone()));
+    let at_order = unslowed(
+        fit_order(freq_hz, &second.frf, &w, d0.model.order(), vf)
+            .with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?,
+    );
+    let mut after = Some(at_order.clone()).filter(calm);
+    for accept in [&calm as &dyn Fn(&PoleResidueModel) -> bool, &flat_once_calmed] {
+        if after.is_some() {
+            break;
+        }
+        let fit = vector_fit_accepting(freq_hz, &second.frf, &w, vf, accept)
+            .with_context(|| format!("axis {name}: second FRF, fit"))?;
+        after = Some(unslowed(fit.model)).filter(calm);
+    }
+    let Some(after) = after else {
+        let (dev, at, f_first) = static_deviation(|f| at_order.frf(f), freq_hz, f_coherent);
+        bail!(
+            "axis {name}: second FRF: no fitted model is flat below the first coherent line ({f_first:.1} Hz): at the first state's order it moves {:.1} % from its value there by {at:.2} Hz (limit {:.0} %); no line constrains it there, and the interpolated model's mean force would drift; check the second FRF's first lines (coherence near 0 Hz) or raise --max-order",
+            100.0 * dev,
+            100.0 * MAX_STATIC_ERROR
+        );
+    };
+    // A mode without a partner may fade between the states where no line
+    // constrains it: above the compensated band. In the band it is refused,
+    // sensor and machine modes alike: a machine mode one fit resolved and
+    // the other did not, faded, left the drift smoother 2-7x off its
+    // no-drift error on 7 of 8 such axes of the drift sweep (BENCHMARKS.md).
+    let band_top = d0.compensated_band_hz.1;
+    let ts = pair_fading(name, &d0.model, &after, &|f| f > band_top)?;
     let w0 = coherence_weights(&first.frf, first.coherence.as_deref());
     let frfs = [(&first.frf[..], &w0[..]), (&second.frf[..], &w[..])];
     let (ts, machine) = share_machine_modes(&ts, freq_hz, frfs);
