@@ -674,7 +674,7 @@ fn modes_without_a_partner_fade_where_allowed_and_are_refused_elsewhere() {
     use dynocomp::design::two_state::model::pair_fading;
     let before = PoleResidueModel::from_modes(&[(190.0, 0.03, 0.05), (269.0, 0.03, 0.04), (2503.0, 0.02, 0.8)]);
     let after = PoleResidueModel::from_modes(&[(118.0, 0.04, 0.03), (190.0, 0.03, 0.05), (2569.0, 0.02, 0.8)]);
-    let ts = pair_fading("x", &before, &after, &|f| f < 1000.0).unwrap();
+    let ts = pair_fading("x", &before, &after, &|f| f < 1000.0, f64::INFINITY).unwrap();
     for (s, m) in [(0.0, &before), (1.0, &after)] {
         for f in [10.0, 118.0, 190.0, 269.0, 2503.0, 2569.0, 4000.0] {
             assert!((ts.at(s).frf(f) - m.frf(f)).norm() < 1e-9 * m.frf(f).norm(), "s {s} f {f}");
@@ -695,6 +695,21 @@ fn modes_without_a_partner_fade_where_allowed_and_are_refused_elsewhere() {
     TwoState::checked("x", ts.before.clone(), ts.after.clone()).unwrap();
     let e = pair("x", &before, &after).unwrap_err().to_string();
     assert!(e.contains("axis x") && e.contains("269 Hz has no partner") && e.contains("118 Hz has no partner"), "{e}");
-    let e = pair_fading("x", &before, &after, &|f| f < 200.0).unwrap_err().to_string();
+    let e = pair_fading("x", &before, &after, &|f| f < 200.0, f64::INFINITY).unwrap_err().to_string();
     assert!(e.contains("269 Hz has no partner") && !e.contains("118 Hz has no partner"), "{e}");
+    // A mode that crosses fs/2 between the states (5000 → 5200 Hz at 10.24
+    // kHz, drift sweep seed 19) is no pair: the discrete models would hold
+    // it as a state in one state and in the FIR taps in the other. Both
+    // fade where allowed (above the band); without the Nyquist rule they
+    // pair (the control).
+    let before = PoleResidueModel::from_modes(&[(2503.0, 0.02, 0.8), (5000.0, 0.02, 0.1)]);
+    let after = PoleResidueModel::from_modes(&[(2569.0, 0.02, 0.8), (5200.0, 0.02, 0.1)]);
+    let ts = pair_fading("z", &before, &after, &|f| f > 4000.0, 5120.0).unwrap();
+    let lone = (0..ts.before.terms.len()).filter(|&i| ts.is_background(i)).count();
+    assert_eq!(lone, 2, "{ts:?}");
+    for (s, m) in [(0.0, &before), (1.0, &after)] {
+        assert!((ts.at(s).frf(3000.0) - m.frf(3000.0)).norm() < 1e-9 * m.frf(3000.0).norm(), "s {s}");
+    }
+    let paired = pair_fading("z", &before, &after, &|f| f > 4000.0, f64::INFINITY).unwrap();
+    assert_eq!((0..paired.before.terms.len()).filter(|&i| paired.is_background(i)).count(), 0, "{paired:?}");
 }

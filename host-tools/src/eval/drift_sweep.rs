@@ -88,6 +88,9 @@ pub struct DriftDesigned {
     /// `compensate --offline` with the first FRF, on the same cut (force and
     /// noise) without drift: the error the drift smoother should come back to.
     pub offline_no_drift: f64,
+    /// Static gain Re Ĝ(0) of the paired model at the first and the second
+    /// state (N/N); the simulated drift, a mass change, keeps the true one.
+    pub static_gains: (f64, f64),
 }
 
 /// Simulate `c`, design the range for every axis and score it.
@@ -152,6 +155,7 @@ pub fn run_drift_case(c: &DriftCase) -> Result<Vec<DriftAxisScore>> {
                     offline_drift: score(&drift_est, a),
                     offline_held: score(&held.smooth(&s.measured[a]), a),
                     offline_no_drift: accuracy(&held.smooth(&still.measured[a]), &still.truth[a], fs, band).nrmse,
+                    static_gains: (rd.states.at(0.0).frf(0.0).re, rd.states.at(1.0).frf(0.0).re),
                 })
             }
         };

@@ -66,18 +66,23 @@ fn silenced(t: Term) -> Term {
 /// errors. Every physical mode must find a partner: [`pair_fading`] with no
 /// mode allowed to fade.
 pub fn pair(axis: &str, before: &PoleResidueModel, after: &PoleResidueModel) -> Result<TwoState> {
-    pair_fading(axis, before, after, &|_| false)
+    pair_fading(axis, before, after, &|_| false, f64::INFINITY)
 }
 
 /// Pair the modes of `before` and `after`; `axis` names the axis in errors;
 /// `may_fade(f_hz)`: whether a physical mode at natural frequency `f_hz`
-/// that has no partner in the other state may fade between the states.
+/// that has no partner in the other state may fade between the states;
+/// `nyquist_hz`: fs/2 of the discrete models made of the states (infinite
+/// for none).
 ///
 /// **Pairing (stated rule).** Only physical modes are paired
 /// ([`is_physical`]): those of each model are sorted by natural frequency
 /// and matched in that order, the most partners whose natural frequencies
-/// differ by at most [`PAIR_TOLERANCE`] (relative), and among those the
-/// least Σ |ln(f₁/f₀)|. A mode left without a partner is one the two fits
+/// differ by at most [`PAIR_TOLERANCE`] (relative) and whose damped
+/// frequencies lie on the same side of `nyquist_hz` (a discrete model holds
+/// a mode below Nyquist as a state and one above in its FIR taps, so a pair
+/// across it would change the state layout between the states), and among
+/// those the least Σ |ln(f₁/f₀)|. A mode left without a partner is one the two fits
 /// resolved differently: a machine mode one fit split and the other did
 /// not, or a mode beyond the FRF that no line constrains. Where `may_fade`
 /// allows it, it joins its state's background; otherwise pairing fails with
@@ -97,6 +102,7 @@ pub fn pair_fading(
     before: &PoleResidueModel,
     after: &PoleResidueModel,
     may_fade: &dyn Fn(f64) -> bool,
+    nyquist_hz: f64,
 ) -> Result<TwoState> {
     let split = |m: &PoleResidueModel| -> (Vec<Term>, Vec<Term>) {
         let (mut modes, mut background) = (Vec::new(), Vec::new());
@@ -114,7 +120,8 @@ pub fn pair_fading(
     let (m1, mut b1) = split(after);
     let f0: Vec<f64> = m0.iter().map(term_fn_hz).collect();
     let f1: Vec<f64> = m1.iter().map(term_fn_hz).collect();
-    let matched = match_in_order(&f0, &f1);
+    let below = |m: &[Term]| -> Vec<bool> { m.iter().map(|t| damped_hz(t) < nyquist_hz).collect() };
+    let matched = match_in_order(&f0, &f1, &below(&m0), &below(&m1));
     let lone = |f: &[f64], side: usize| -> Vec<usize> {
         (0..f.len()).filter(|i| !matched.iter().any(|m| if side == 0 { m.0 == *i } else { m.1 == *i })).collect()
     };
@@ -151,15 +158,15 @@ pub fn pair_fading(
 }
 
 /// The order-preserving matching of the sorted frequencies `f0` and `f1`
-/// with the most pairs within [`PAIR_TOLERANCE`] and, among those, the
-/// least Σ |ln(f₁/f₀)| (dynamic programming over both lists); the matched
-/// index pairs in order.
-fn match_in_order(f0: &[f64], f1: &[f64]) -> Vec<(usize, usize)> {
+/// with the most pairs within [`PAIR_TOLERANCE`] on the same side of
+/// Nyquist (`below0`, `below1`) and, among those, the least Σ |ln(f₁/f₀)|
+/// (dynamic programming over both lists); the matched index pairs in order.
+fn match_in_order(f0: &[f64], f1: &[f64], below0: &[bool], below1: &[bool]) -> Vec<(usize, usize)> {
     let (n, m) = (f0.len(), f1.len());
     // best[i][j]: (pairs, −cost) of the best matching of f0[i..] and f1[j..].
     let mut best = vec![vec![(0usize, 0.0f64); m + 1]; n + 1];
     let better = |a: (usize, f64), b: (usize, f64)| a.0 > b.0 || (a.0 == b.0 && a.1 > b.1);
-    let close = |i: usize, j: usize| ((f1[j] - f0[i]) / f0[i]).abs() <= PAIR_TOLERANCE;
+    let close = |i: usize, j: usize| ((f1[j] - f0[i]) / f0[i]).abs() <= PAIR_TOLERANCE && below0[i] == below1[j];
     for i in (0..n).rev() {
         for j in (0..m).rev() {
             let mut b = best[i + 1][j];
@@ -195,6 +202,16 @@ fn match_in_order(f0: &[f64], f1: &[f64]) -> Vec<(usize, usize)> {
         }
     }
     out
+}
+
+/// Damped frequency of a pair, Im p/2π, and |p|/2π of a real pole (Hz):
+/// where the discrete model's fit ([`crate::design::discretize`]) compares
+/// it with Nyquist.
+fn damped_hz(t: &Term) -> f64 {
+    match *t {
+        Term::Pair { pole, .. } => pole.im / (2.0 * std::f64::consts::PI),
+        Term::Real { pole, .. } => pole.abs() / (2.0 * std::f64::consts::PI),
+    }
 }
 
 /// Natural frequency of a term (Hz): |p|/2π.

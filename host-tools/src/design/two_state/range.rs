@@ -86,19 +86,25 @@ pub fn pair_second_state(
     };
     let flat = |m: &PoleResidueModel| static_deviation(|f| m.frf(f), freq_hz, f_coherent).0 <= MAX_STATIC_ERROR;
     let calm = |m: &PoleResidueModel| flat(m) && !slow(m);
+    let unbiased = |m: &PoleResidueModel| calm(m) && low_lines_unbiased(m, freq_hz, second, f_coherent);
     let flat_once_calmed = |m: &PoleResidueModel| calm(&unslowed(m.clone()));
     let at_order = unslowed(
         fit_order(freq_hz, &second.frf, &w, d0.model.order(), vf)
             .with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?,
     );
-    let mut after = Some(at_order.clone()).filter(calm);
-    for accept in [&calm as &dyn Fn(&PoleResidueModel) -> bool, &flat_once_calmed] {
-        if after.is_some() {
+    let mut after = None;
+    for accept in [&unbiased as &dyn Fn(&PoleResidueModel) -> bool, &calm, &flat_once_calmed] {
+        if accept(&at_order) {
+            after = Some(at_order.clone());
             break;
         }
         let fit = vector_fit_accepting(freq_hz, &second.frf, &w, vf, accept)
             .with_context(|| format!("axis {name}: second FRF, fit"))?;
-        after = Some(unslowed(fit.model)).filter(calm);
+        let fit = unslowed(fit.model);
+        if accept(&fit) {
+            after = Some(fit);
+            break;
+        }
     }
     let Some(after) = after else {
         let (dev, at, f_first) = static_deviation(|f| at_order.frf(f), freq_hz, f_coherent);
@@ -113,13 +119,36 @@ pub fn pair_second_state(
     // sensor and machine modes alike: a machine mode one fit resolved and
     // the other did not, faded, left the drift smoother 2-7x off its
     // no-drift error on 7 of 8 such axes of the drift sweep (BENCHMARKS.md).
+    // Partners lie on the same side of the discrete models' Nyquist.
     let band_top = d0.compensated_band_hz.1;
-    let ts = pair_fading(name, &d0.model, &after, &|f| f > band_top)?;
+    let nyquist_hz = d0.discrete.as_ref().map_or(f64::INFINITY, |(dm, _)| 0.5 * dm.fs_hz);
+    let ts = pair_fading(name, &d0.model, &after, &|f| f > band_top, nyquist_hz)?;
     let w0 = coherence_weights(&first.frf, first.coherence.as_deref());
     let frfs = [(&first.frf[..], &w0[..]), (&second.frf[..], &w[..])];
     let (ts, machine) = share_machine_modes(&ts, freq_hz, frfs);
     let (states, above_band) = fit_above_band_jointly(&ts, &Lines::new(freq_hz, frfs), d0.compensated_band_hz);
     Ok(Paired { states, machine, above_band })
+}
+
+/// Whether `m` stays within its FRF's noise where the mean force lives: on
+/// the coherent lines from the first at or above `f_coherent` up to 8x that
+/// (Hz), the mean of Re((Ĝ − H)/H) within 3 standard errors of 0, plus 0.2 %.
+/// A fit whose static gain sits off its own low lines carries the mean
+/// force off by as much (the drift sweep's seed 1 z: 1.3 %).
+fn low_lines_unbiased(m: &PoleResidueModel, freq_hz: &[f64], frf: &AxisFrf, f_coherent: f64) -> bool {
+    let f_first = freq_hz.iter().copied().find(|f| *f >= f_coherent).unwrap_or(f_coherent);
+    let r: Vec<f64> = (0..freq_hz.len())
+        .filter(|&k| freq_hz[k] >= f_first && freq_hz[k] <= 8.0 * f_first)
+        .filter(|&k| frf.coherence.as_ref().is_none_or(|c| c[k] >= 0.9) && frf.frf[k].norm() > 0.0)
+        .map(|k| ((m.frf(freq_hz[k]) - frf.frf[k]) / frf.frf[k]).re)
+        .collect();
+    if r.len() < 4 {
+        return true;
+    }
+    let n = r.len() as f64;
+    let mean = r.iter().sum::<f64>() / n;
+    let se = (r.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    mean.abs() <= 3.0 * se + 0.002
 }
 
 /// Largest growth of a machine mode's weighted misfit (either FRF, over
