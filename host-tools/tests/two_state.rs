@@ -32,9 +32,9 @@ use dynocomp::design::two_state::joint::JOINT_TOLERANCE;
 use dynocomp::simulate::impact::impact_test_axis;
 use sim_common::FS;
 /// Issue target: two-state within 1.5x of the exact model. Met on all 9
-/// axes below (worst 1.28x): seed 4 x was 1.66x before the machine modes
-/// were shared (now 1.08x), seed 4 y 1.64x before its above-band sensor
-/// mode was fitted to both FRFs at once (now 0.96x); see BENCHMARKS.md.
+/// axes below (worst 1.32x, seed 4 y; figures in BENCHMARKS.md): seed 4 x
+/// was 1.66x before the machine modes were shared, seed 4 y 1.64x before
+/// its above-band sensor mode was fitted to both FRFs at once.
 const TARGET: f64 = 1.5;
 
 #[test]
