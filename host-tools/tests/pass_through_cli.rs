@@ -65,6 +65,20 @@ fn an_axis_that_cannot_be_compensated_is_passed_through_raw() {
     assert!(ok && inspect.contains("axis z: NOT COMPENSATED") && !inspect.contains("axis x: NOT"), "{inspect}{err}");
     let index = std::fs::read_to_string(report.join("index.html")).unwrap();
     assert!(index.contains("NOT COMPENSATED, passed through raw"), "report");
+    // The FRF figure of z says so in its title, and no figure shows a fit
+    // error or band of the model z does not have.
+    let svgs: Vec<String> = std::fs::read_dir(&report)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "svg"))
+        .map(|p| std::fs::read_to_string(p).unwrap())
+        .collect();
+    assert!(svgs.iter().any(|s| s.contains("Axis z — NOT COMPENSATED")), "no FRF figure of z says it");
+    assert!(
+        svgs.iter().all(|s| !s.contains("NaN") && !s.contains("coherent band 0–0 Hz")),
+        "a figure shows NaN or 0–0 Hz"
+    );
+    assert!(svgs.iter().any(|s| s.contains("Axis x — measured FRF and fitted model")), "control: x's title");
     let ((ok, json, err), _) = design("j.dcimg", &["--json"]);
     assert!(ok, "{err}");
     let j: serde_json::Value = serde_json::from_str(&json).unwrap();

@@ -213,19 +213,28 @@ fn further_plots(d: &AxisDesign, sens: Option<&Sensitivity>, fs_hz: f64) -> Resu
 /// model overlaid, the fit's residual, and the coherence γ²; the coherent
 /// band is shaded.
 fn plot_frf_fit(freq: &[f64], meas: &AxisFrf, d: &AxisDesign) -> Result<String> {
-    let title = format!(
-        "Axis {} — measured FRF and fitted model (order {}, fit error {:.2} % in the {})",
-        axis_name(d.axis),
-        d.model.order(),
-        100.0 * d.fit_nrmse,
-        if d.bands.is_empty() { "coherent band" } else { "fitting bands" }
-    );
+    let (title, fitted) = match d.pass_through {
+        Some(_) => (
+            format!("Axis {} — NOT COMPENSATED: passed through raw; the measured FRF", axis_name(d.axis)),
+            "no model: the output is the measurement (Ĝ = 1)",
+        ),
+        None => (
+            format!(
+                "Axis {} — measured FRF and fitted model (order {}, fit error {:.2} % in the {})",
+                axis_name(d.axis),
+                d.model.order(),
+                100.0 * d.fit_nrmse,
+                if d.bands.is_empty() { "coherent band" } else { "fitting bands" }
+            ),
+            "fitted model Ĝ",
+        ),
+    };
     let model = freq.iter().map(|f| d.fitted_frf(*f)).collect();
     let fit = FitPair {
         meas,
         model,
         measured: "measured G (on top)".into(),
-        fitted: "fitted model Ĝ".into(),
+        fitted: fitted.into(),
         colors: (C_MEASURED, C_MODEL),
     };
     plot_frf_fits(freq, &[fit], None, d, &title)
@@ -269,7 +278,10 @@ pub fn plot_frf_fits(
         let (midp, rest) = rest.split_vertically(300);
         let (resp, bot) = rest.split_vertically(260);
         let band = d.coherent_band_hz;
-        let band_txt = format!("coherent band {:.0}–{:.0} Hz", band.0, band.1);
+        let band_txt = match band.1 > band.0 {
+            true => format!("coherent band {:.0}–{:.0} Hz", band.0, band.1),
+            false => "no band compensated".to_string(),
+        };
         let caption = format!("Magnitude |G| ({band_txt})");
         let magnitude = Panel::new(&caption, "|G| (dB re 1 N/N)", yr_mag, true);
         let mut c = magnitude.chart(&top, xr, d, &|v| format!("{v:.0}"), 7)?;
