@@ -54,6 +54,12 @@ fn main_mode_rad_s(model: &PoleResidueModel) -> Option<f64> {
         .map(|m| m.0)
 }
 
+/// Lowest natural frequency of a sensor mode (Hz): [`SENSOR_FRACTION`] × the
+/// main mode's; None without pairs.
+pub fn sensor_modes_from_hz(model: &PoleResidueModel) -> Option<f64> {
+    main_mode_rad_s(model).map(|w| SENSOR_FRACTION * w / std::f64::consts::TAU)
+}
+
 /// Indices into `model.terms` of the sensor modes ([`SENSOR_FRACTION`]);
 /// empty without pairs.
 pub fn sensor_mode_indices(model: &PoleResidueModel) -> Vec<usize> {

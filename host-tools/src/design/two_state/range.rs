@@ -9,8 +9,8 @@ use num_complex::Complex64;
 use crate::design::axis::{design_axis, static_deviation, AxisDesign, DesignOptions, MAX_STATIC_ERROR};
 use crate::design::criterion::{criterion_grid, criterion_j, criterion_ranges, noise_term};
 use crate::design::two_state::joint::{fit_above_band_jointly, AboveBandMode, Lines};
-use crate::design::two_state::model::{pair_fading, term_fn_hz, TwoState};
-use crate::fit::modes::{fn_hz, modal_share, residue_of_share, sensor_mode_indices};
+use crate::design::two_state::model::{is_physical, pair_fading, term_fn_hz, TwoState};
+use crate::fit::modes::{fn_hz, modal_share, residue_of_share, sensor_mode_indices, sensor_modes_from_hz};
 use crate::fit::vf::{coherence_weights, fit_order, refit_kept, vector_fit_accepting, VfOptions};
 use crate::fit::{PoleResidueModel, Term};
 use crate::frf::{axis_name, AxisFrf};
@@ -122,12 +122,48 @@ pub fn pair_second_state(
     // Partners lie on the same side of the discrete models' Nyquist.
     let band_top = d0.compensated_band_hz.1;
     let nyquist_hz = d0.discrete.as_ref().map_or(f64::INFINITY, |(dm, _)| 0.5 * dm.fs_hz);
-    let ts = pair_fading(name, &d0.model, &after, &|f| f > band_top, nyquist_hz)?;
+    let fade = |f: f64| f > band_top;
+    let ts = match pair_fading(name, &d0.model, &after, &fade, nyquist_hz) {
+        Ok(ts) => ts,
+        // The fits resolved the machine structure differently (one split a
+        // mode the other did not). A mass change on the table leaves the
+        // machine's modes where they are: the second state is fitted again
+        // with the first state's machine poles in place of its own, and
+        // paired if that pairs.
+        Err(e) => match with_first_machine_poles(&d0.model, &after, freq_hz, second, &w) {
+            Some(m) => pair_fading(name, &d0.model, &m, &fade, nyquist_hz).map_err(|_| e)?,
+            None => return Err(e),
+        },
+    };
     let w0 = coherence_weights(&first.frf, first.coherence.as_deref());
     let frfs = [(&first.frf[..], &w0[..]), (&second.frf[..], &w[..])];
     let (ts, machine) = share_machine_modes(&ts, freq_hz, frfs);
     let (states, above_band) = fit_above_band_jointly(&ts, &Lines::new(freq_hz, frfs), d0.compensated_band_hz);
     Ok(Paired { states, machine, above_band })
+}
+
+/// `after` with its machine-structure poles (physical pairs below the first
+/// state's sensor modes, [`crate::fit::modes::sensor_modes_from_hz`])
+/// replaced by those of `first`, its residues and direct term fitted again
+/// to `second` (weights `w`); None where `first` has no sensor modes or the
+/// refit fails.
+fn with_first_machine_poles(
+    first: &PoleResidueModel,
+    after: &PoleResidueModel,
+    freq_hz: &[f64],
+    second: &AxisFrf,
+    w: &[f64],
+) -> Option<PoleResidueModel> {
+    let from = sensor_modes_from_hz(first)?;
+    let machine = |m: &PoleResidueModel, i: usize| is_physical(m, i) && term_fn_hz(&m.terms[i]) < from;
+    let terms: Vec<Term> = (0..first.terms.len())
+        .filter(|&i| machine(first, i))
+        .map(|i| first.terms[i])
+        .chain((0..after.terms.len()).filter(|&i| !machine(after, i)).map(|i| after.terms[i]))
+        .collect();
+    let m = PoleResidueModel { terms, d: after.d };
+    let keep = vec![true; m.terms.len()];
+    refit_kept(freq_hz, &second.frf, w, &m, &keep).ok().filter(|m| m.is_stable())
 }
 
 /// Whether `m` stays within its FRF's noise where the mean force lives: on
