@@ -373,59 +373,93 @@ pub fn vector_fit_accepting(
     opts: &VfOptions,
     accept: &dyn Fn(&PoleResidueModel) -> bool,
 ) -> Result<VfResult> {
-    if freq_hz.len() < 8 {
-        bail!("vector fitting needs at least 8 frequency lines, got {}", freq_hz.len());
+    OrderFits::new(freq_hz, h, weights, opts)?.choose(accept)
+}
+
+/// The orders of [`vector_fit`] fitted once, to choose among for one
+/// criterion or several in turn ([`OrderFits::choose`]).
+pub struct OrderFits<'a> {
+    freq_hz: &'a [f64],
+    h: &'a [Complex64],
+    weights: &'a [f64],
+    /// `(order, weighted_rms)` of every order tried.
+    trace: Vec<(usize, f64)>,
+    /// The unskimmed models of the orders a choice may take, in the order
+    /// of preference of [`vector_fit_accepting`], each skimmed when first
+    /// looked at.
+    candidates: Vec<(PoleResidueModel, Option<PoleResidueModel>)>,
+}
+
+impl<'a> OrderFits<'a> {
+    /// Fit orders 2, 4, … as [`vector_fit`] does.
+    pub fn new(freq_hz: &'a [f64], h: &'a [Complex64], weights: &'a [f64], opts: &VfOptions) -> Result<Self> {
+        if freq_hz.len() < 8 {
+            bail!("vector fitting needs at least 8 frequency lines, got {}", freq_hz.len());
+        }
+        let mut trace = Vec::new();
+        let mut models: Vec<(usize, PoleResidueModel, f64)> = Vec::new();
+        let mut stall = 0;
+        let mut order = 2;
+        // Orders beyond what the lines carry are not tried (fewer poles than
+        // asked for, never an underdetermined fit).
+        while order <= opts.max_order.min(max_order_for(freq_hz.len())) {
+            // An order above what the data support makes the relocation
+            // least-squares rank deficient (clean data): that ends the search.
+            let m = match fit_order(freq_hz, h, weights, order, opts) {
+                Ok(m) => m,
+                Err(e) if models.is_empty() => return Err(e),
+                Err(_) => break,
+            };
+            let e = weighted_rms(&m, freq_hz, h, weights);
+            trace.push((order, e));
+            let best_before = models.iter().map(|x| x.2).fold(f64::INFINITY, f64::min);
+            models.push((order, m, e));
+            if e.is_finite() && e > best_before * (1.0 - opts.improvement_tol) {
+                stall += 1;
+                if stall >= 2 {
+                    break;
+                }
+            } else {
+                stall = 0;
+            }
+            order += 2;
+        }
+        let best = models.iter().map(|x| x.2).filter(|e| e.is_finite()).fold(f64::INFINITY, f64::min);
+        if !best.is_finite() {
+            bail!("vector fitting failed at every order");
+        }
+        let within = |e: f64| e <= best * (1.0 + opts.improvement_tol);
+        // As vector_fit: the lowest order within tolerance first; then the other
+        // orders within tolerance, lowest first; then the rest by error.
+        let key = |m: &(usize, PoleResidueModel, f64)| if within(m.2) { (0, m.0 as f64) } else { (1, m.2) };
+        models.sort_by(|a, b| key(a).partial_cmp(&key(b)).unwrap_or(std::cmp::Ordering::Equal));
+        let candidates =
+            models.into_iter().filter(|m| m.2 <= MAX_ACCEPTED_ERROR_RATIO * best).map(|m| (m.1, None)).collect();
+        Ok(OrderFits { freq_hz, h, weights, trace, candidates })
     }
-    let mut trace = Vec::new();
-    let mut models: Vec<(usize, PoleResidueModel, f64)> = Vec::new();
-    let mut stall = 0;
-    let mut order = 2;
-    // Orders beyond what the lines carry are not tried (fewer poles than
-    // asked for, never an underdetermined fit).
-    while order <= opts.max_order.min(max_order_for(freq_hz.len())) {
-        // An order above what the data support makes the relocation
-        // least-squares rank deficient (clean data): that ends the search.
-        let m = match fit_order(freq_hz, h, weights, order, opts) {
-            Ok(m) => m,
-            Err(e) if models.is_empty() => return Err(e),
-            Err(_) => break,
-        };
-        let e = weighted_rms(&m, freq_hz, h, weights);
-        trace.push((order, e));
-        let best_before = models.iter().map(|x| x.2).fold(f64::INFINITY, f64::min);
-        models.push((order, m, e));
-        if e.is_finite() && e > best_before * (1.0 - opts.improvement_tol) {
-            stall += 1;
-            if stall >= 2 {
+
+    /// The choice of [`vector_fit_accepting`] for `accept`: the first
+    /// candidate it takes, else [`vector_fit`]'s choice.
+    pub fn choose(&mut self, accept: &dyn Fn(&PoleResidueModel) -> bool) -> Result<VfResult> {
+        let (freq_hz, h, weights) = (self.freq_hz, self.h, self.weights);
+        let mut taken = None;
+        for (raw, skimmed) in &mut self.candidates {
+            if skimmed.is_none() {
+                *skimmed = Some(skim(freq_hz, h, weights, raw.clone())?);
+            }
+            if skimmed.as_ref().is_some_and(accept) {
+                taken = skimmed.clone();
                 break;
             }
-        } else {
-            stall = 0;
         }
-        order += 2;
+        // The best model is within tolerance of itself: there is a candidate.
+        let model = match taken {
+            Some(m) => m,
+            None => self.candidates[0].1.clone().expect("skimmed above"),
+        };
+        let e = weighted_rms(&model, freq_hz, h, weights);
+        Ok(VfResult { model, weighted_rms: e, order_trace: self.trace.clone() })
     }
-    let best = models.iter().map(|x| x.2).filter(|e| e.is_finite()).fold(f64::INFINITY, f64::min);
-    if !best.is_finite() {
-        bail!("vector fitting failed at every order");
-    }
-    let within = |e: f64| e <= best * (1.0 + opts.improvement_tol);
-    // As vector_fit: the lowest order within tolerance first; then the other
-    // orders within tolerance, lowest first; then the rest by error.
-    let key = |i: usize| if within(models[i].2) { (0, models[i].0 as f64) } else { (1, models[i].2) };
-    let mut order_of_trial: Vec<usize> = (0..models.len()).collect();
-    order_of_trial.sort_by(|&a, &b| key(a).partial_cmp(&key(b)).unwrap_or(std::cmp::Ordering::Equal));
-    let mut fallback = None;
-    for i in order_of_trial.into_iter().filter(|&i| models[i].2 <= MAX_ACCEPTED_ERROR_RATIO * best) {
-        let model = skim(freq_hz, h, weights, models[i].1.clone())?;
-        if accept(&model) {
-            let e = weighted_rms(&model, freq_hz, h, weights);
-            return Ok(VfResult { model, weighted_rms: e, order_trace: trace });
-        }
-        fallback.get_or_insert(model);
-    }
-    let model = fallback.expect("the best model is finite");
-    let e = weighted_rms(&model, freq_hz, h, weights);
-    Ok(VfResult { model, weighted_rms: e, order_trace: trace })
 }
 
 /// Damping below which a fitted pair is taken as spurious: no mounted

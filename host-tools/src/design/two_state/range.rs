@@ -11,7 +11,7 @@ use crate::design::criterion::{criterion_grid, criterion_j, criterion_ranges, no
 use crate::design::two_state::joint::{fit_above_band_jointly, AboveBandMode, Lines};
 use crate::design::two_state::model::{is_physical, pair_fading, term_fn_hz, TwoState};
 use crate::fit::modes::{fn_hz, modal_share, residue_of_share, sensor_mode_indices, sensor_modes_from_hz};
-use crate::fit::vf::{coherence_weights, fit_order, refit_kept, vector_fit_accepting, VfOptions};
+use crate::fit::vf::{coherence_weights, fit_order, refit_kept, OrderFits, VfOptions};
 use crate::fit::{PoleResidueModel, Term};
 use crate::frf::{axis_name, AxisFrf};
 use crate::numeric::parallel::map_on_threads;
@@ -93,13 +93,20 @@ pub fn pair_second_state(
             .with_context(|| format!("axis {name}: second FRF, fit at order {}", d0.model.order()))?,
     );
     let mut after = None;
+    // The orders fitted once, where the fit at the first state's order fails the first criterion.
+    let mut orders = None;
     for accept in [&unbiased as &dyn Fn(&PoleResidueModel) -> bool, &calm, &flat_once_calmed] {
         if accept(&at_order) {
             after = Some(at_order.clone());
             break;
         }
-        let fit = vector_fit_accepting(freq_hz, &second.frf, &w, vf, accept)
-            .with_context(|| format!("axis {name}: second FRF, fit"))?;
+        if orders.is_none() {
+            orders = Some(
+                OrderFits::new(freq_hz, &second.frf, &w, vf)
+                    .with_context(|| format!("axis {name}: second FRF, fit"))?,
+            );
+        }
+        let fit = orders.as_mut().expect("fitted above").choose(accept)?;
         let fit = unslowed(fit.model);
         if accept(&fit) {
             after = Some(fit);
@@ -115,11 +122,12 @@ pub fn pair_second_state(
         );
     };
     // A mode without a partner may fade between the states where no line
-    // constrains it: above the compensated band. In the band it is refused,
-    // sensor and machine modes alike: a machine mode one fit resolved and
-    // the other did not, faded, left the drift smoother 2-7x off its
-    // no-drift error on 7 of 8 such axes of the drift sweep (BENCHMARKS.md).
-    // Partners lie on the same side of the discrete models' Nyquist.
+    // constrains it: above the compensated band. In the band it does not
+    // fade: a machine mode one fit resolved and the other did not, faded,
+    // left the drift smoother 2-7x off its no-drift error on 7 of 8 such
+    // axes of the drift sweep (BENCHMARKS.md); such a mode is met below by
+    // refitting the second state with the first's machine poles. Partners
+    // lie on the same side of the discrete models' Nyquist.
     let band_top = d0.compensated_band_hz.1;
     let nyquist_hz = d0.discrete.as_ref().map_or(f64::INFINITY, |(dm, _)| 0.5 * dm.fs_hz);
     let fade = |f: f64| f > band_top;
