@@ -122,10 +122,12 @@ pub fn pair_fading(
     let f1: Vec<f64> = m1.iter().map(term_fn_hz).collect();
     let below = |m: &[Term]| -> Vec<bool> { m.iter().map(|t| damped_hz(t) < nyquist_hz).collect() };
     let matched = match_in_order(&f0, &f1, &below(&m0), &below(&m1));
-    let lone = |f: &[f64], side: usize| -> Vec<usize> {
-        (0..f.len()).filter(|i| !matched.iter().any(|m| if side == 0 { m.0 == *i } else { m.1 == *i })).collect()
-    };
-    let (lone0, lone1) = (lone(&f0, 0), lone(&f1, 1));
+    let (mut paired0, mut paired1) = (vec![false; f0.len()], vec![false; f1.len()]);
+    for &(i, j) in &matched {
+        (paired0[i], paired1[j]) = (true, true);
+    }
+    let lone = |paired: &[bool]| -> Vec<usize> { (0..paired.len()).filter(|&i| !paired[i]).collect() };
+    let (lone0, lone1) = (lone(&paired0), lone(&paired1));
     let stuck0: Vec<f64> = lone0.iter().map(|&i| f0[i]).filter(|f| !may_fade(*f)).collect();
     let stuck1: Vec<f64> = lone1.iter().map(|&i| f1[i]).filter(|f| !may_fade(*f)).collect();
     if !stuck0.is_empty() || !stuck1.is_empty() {
