@@ -72,7 +72,7 @@ fn clustered_machine_modes_the_box_design_compensates_x() {
 /// sees a model that does not follow the drift).
 #[test]
 fn two_state_z_pairs_physical_modes_and_follows_the_drift() {
-    use dynocomp::design::two_state::range::design_axes_over_range;
+    use dynocomp::design::two_state::range::{design_axes_over_range, RangeOutcome};
     use dynocomp::offline::drift::{smooth_drifting, DriftSmoothing};
     let fs = 25_600.0;
     let before = dynocomp::io::read_frf(&case("two-state-z", "before.csv")).unwrap();
@@ -82,7 +82,10 @@ fn two_state_z_pairs_physical_modes_and_follows_the_drift() {
     let opts = DesignOptions { fs_hz: fs, ..Default::default() };
     let ranges: Vec<_> = design_axes_over_range(&before.freq_hz, &before.axes, &after.axes, &r, &opts)
         .into_iter()
-        .map(|x| x.unwrap())
+        .map(|x| match x.unwrap() {
+            RangeOutcome::Range(rd) => *rd,
+            RangeOutcome::Held(h) => panic!("axis {}: states not paired: {}", h.design.axis, h.why),
+        })
         .collect();
     let z = &ranges[2];
     // The paired physical modes of z: the machine mode and the sensor mode.

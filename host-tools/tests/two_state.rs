@@ -15,7 +15,7 @@ use dynocomp::design::discretize::{discretize, Discretization};
 use dynocomp::design::kalman::{augmented_plant, solve_filter_dare};
 use dynocomp::design::two_state::model::{pair, TwoState};
 use dynocomp::design::two_state::range::{
-    design_over_range, pair_second_state, RangeCandidate, RangeDesign, RANGE_STATES,
+    design_or_hold, pair_second_state, RangeCandidate, RangeDesign, RANGE_STATES,
 };
 use dynocomp::fit::vf::VfOptions;
 use dynocomp::fit::PoleResidueModel;
@@ -388,7 +388,7 @@ fn box_image_for_the_range_beats_either_single_state_design() {
     let f_fine = FS * p.oversample as f64;
     for a in [0, 1] {
         let r = sample_variance(&s.idle[a]);
-        let RangeDesign { candidates: cands, best, .. } = design_over_range(
+        let outcome = design_or_hold(
             &s.frf.freq_hz,
             s.frf.axis(a).unwrap(),
             out.frf_after.axis(a).unwrap(),
@@ -397,6 +397,8 @@ fn box_image_for_the_range_beats_either_single_state_design() {
             &[0.0, 0.25, 0.5, 0.75, 1.0],
         )
         .unwrap();
+        let RangeDesign { candidates: cands, best, .. } = outcome.range().expect("states paired");
+        let best = *best;
         let single = [&cands[0], &cands[cands.len() - 1]];
         let chosen = &cands[best];
         // A design at an interpolated state reports the measured states'

@@ -277,3 +277,87 @@ fn design_reports_the_joint_fit_of_modes_above_the_band() {
     assert!(m["joint"] == true && m["misfit_growth"].as_f64().unwrap() < 1.01, "{y}");
     assert!(m["joint_fn_hz"][1].as_f64().unwrap() > m["joint_fn_hz"][0].as_f64().unwrap(), "{m}");
 }
+
+/// An axis whose two states cannot be paired holds the first FRF's design
+/// (#34: every set-up gets an image, and a two-state image is refused only
+/// with `--strict`). The bundled example measured twice, the second time
+/// with z's whole FRF moved 25 % up in frequency (its modes have no partner
+/// within ±15 %): `design --frf A --frf B` writes the image with x and y
+/// designed for the range and z holding the first FRF's design, and says so
+/// on stderr, in the summary, `--json` and the sidecar.
+/// `compensate --offline --drift` smooths z with the first FRF's model
+/// alone: its column equals `compensate --offline`'s exactly, while x's,
+/// smoothed over both states, does not (the control that the comparison
+/// can fail). `--strict` refuses, naming the lone mode, and writes nothing.
+#[test]
+fn an_axis_whose_states_cannot_be_paired_holds_the_first_state() {
+    let dir = cli_common::tmp("two-state-cli", "held");
+    std::fs::create_dir_all(&dir).unwrap();
+    let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let before = dynocomp::io::read_frf(std::path::Path::new(&cli_common::example("frf.csv"))).unwrap();
+    let mut after = before.clone();
+    // z after = z before at f / 1.25, linearly interpolated between lines.
+    let (f, z) = (&before.freq_hz, &before.axes[2]);
+    let at = |g: f64| {
+        let k = f.partition_point(|&x| x <= g).clamp(1, f.len() - 1);
+        let u = (g - f[k - 1]) / (f[k] - f[k - 1]);
+        let coh = z.coherence.as_ref().map(|c| c[k - 1] + (c[k] - c[k - 1]) * u);
+        (z.frf[k - 1] + (z.frf[k] - z.frf[k - 1]) * u, coh)
+    };
+    for (k, fk) in f.iter().enumerate() {
+        let (g, coh) = at(fk / 1.25);
+        after.axes[2].frf[k] = g;
+        if let (Some(c), Some(v)) = (after.axes[2].coherence.as_mut(), coh) {
+            c[k] = v;
+        }
+    }
+    dynocomp::io::frf_csv::write_frf_csv(std::path::Path::new(&d("after.csv")), &after).unwrap();
+    let (frf, idle) = (cli_common::example("frf.csv"), cli_common::example("idle.csv"));
+    let design = |out: &str, extra: &[&str]| {
+        let o = d(out);
+        let mut a = vec!["design", "--fs", "51200", "--idle", &idle, "--frf", &frf, "--frf"];
+        let after = d("after.csv");
+        a.push(&after);
+        a.extend(["--out", &o]);
+        a.extend(extra);
+        dynocomp(&a)
+    };
+    let (ok, _, err) = design("strict.dcimg", &["--strict"]);
+    assert!(!ok && err.contains("axis z") && err.contains("no partner"), "{err}");
+    assert!(!dir.join("strict.dcimg").exists(), "--strict left an image");
+    let (ok, out, err) = design("held.dcimg", &[]);
+    assert!(ok, "{err}");
+    assert!(err.contains("WARNING: axis z does NOT FOLLOW") && err.contains("no partner"), "{err}");
+    assert!(!err.contains("axis x does NOT") && !err.contains("axis y does NOT"), "{err}");
+    assert!(out.contains("z two states: NOT FOLLOWED") && out.contains("x two states: modes paired"), "{out}");
+    let side = std::fs::read_to_string(d("held.dcimg.model.json")).unwrap();
+    let side: serde_json::Value = serde_json::from_str(&side).unwrap();
+    let axes = side["axes"].as_array().unwrap();
+    assert!(axes[2]["holds_first_state"].as_str().is_some_and(|w| w.contains("no partner")), "{side}");
+    assert!(axes[2].get("two_state").is_none() && axes[0].get("two_state").is_some(), "{side}");
+    assert!(axes[0].get("holds_first_state").is_none(), "{side}");
+    let (ok, out, err) = design("held_json.dcimg", &["--json"]);
+    assert!(ok, "{err}");
+    let j: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let ranges: Vec<&str> = j["axes"].as_array().unwrap().iter().map(|a| a["range"].as_str().unwrap()).collect();
+    assert_eq!(ranges, ["designed", "designed", "held"], "{out}");
+    let held = &j["axes"][2];
+    let (m0, m1) = (held["measured_frf_errors"][0].as_f64().unwrap(), held["measured_frf_errors"][1].as_f64().unwrap());
+    assert!(held["expected_error"].as_f64().unwrap() >= m0.max(m1), "{held}");
+
+    let comp = |out: &str, drift: bool| {
+        let (img, input, o) = (d("held.dcimg"), cli_common::example("measured.csv"), d(out));
+        let mut a = vec!["compensate", "--coeffs", &img, "--input", &input, "--output", &o, "--offline"];
+        if drift {
+            a.extend(["--drift", "0.05:0.2"]);
+        }
+        let (ok, _, err) = dynocomp(&a);
+        assert!(ok, "{err}");
+        (read_signal_csv(std::path::Path::new(&o)).unwrap(), err)
+    };
+    let (drifting, err) = comp("drift.csv", true);
+    assert!(err.contains("axis z does NOT FOLLOW the drift"), "{err}");
+    let (still, _) = comp("still.csv", false);
+    assert_eq!(drifting.channel(2), still.channel(2), "z: not the first state's smoother");
+    assert_ne!(drifting.channel(0), still.channel(0), "control: x follows both states");
+}

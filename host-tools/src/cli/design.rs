@@ -235,16 +235,13 @@ fn write_image_and_sidecar(
     if args.method == Method::Paper {
         return crate::offline::sidecar::write_image_and_sidecar(&args.out, image, None);
     }
-    let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
-    let mut sidecar = crate::offline::sidecar::ModelSidecar::new(image, &models);
+    let mut sidecar = crate::offline::sidecar::ModelSidecar::of_designs(image, designs);
     let record = args.prior.force_record.as_ref().map(|p| p.display().to_string()).unwrap_or_default();
     for ((m, p), d) in sidecar.axes.iter_mut().zip(priors).zip(designs) {
         m.force_prior = p.as_ref().map(|p| p.prior.clone());
         // A flat spectrum at the record's level is as safe as the default:
         // no note for `compensate`.
         m.force_spectrum = d.force_spectrum.as_ref().filter(|s| !s.level_only).map(|s| s.provenance(record.clone()));
-        m.force_shape = d.kalman.force_shape;
-        m.passed_through_raw = d.pass_through.clone();
     }
     crate::offline::sidecar::write_image_and_sidecar(&args.out, image, Some(&sidecar))
 }

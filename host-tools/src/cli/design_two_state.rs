@@ -14,12 +14,12 @@ use crate::cli::design_args::{DesignArgs, Method};
 use crate::design::axis::{AxisDesign, DesignOptions};
 use crate::design::image::build_image;
 use crate::design::sensitivity::Sensitivity;
-use crate::design::two_state::range::{design_axes_over_range, RangeDesign, RANGE_STATES};
+use crate::design::two_state::range::{design_axes_over_range, RangeDesign, RangeOutcome, RANGE_STATES};
 use crate::frf::{axis_name, Frf};
 use crate::io;
 use crate::offline::sidecar::TwoStateJson;
 use crate::report::summary::{render_summary, RangeFigures};
-use crate::report::two_state::{RangeAxisJson, RangeJson};
+use crate::report::two_state::{describe, describe_held, HeldAxisJson, RangeAxisEntry, RangeAxisJson, RangeJson};
 
 /// Run `design` with two FRFs; returns the summary (text or JSON) for stdout.
 pub fn run(args: &DesignArgs) -> Result<String> {
@@ -28,9 +28,9 @@ pub fn run(args: &DesignArgs) -> Result<String> {
     let r = args.input.noise_variances(&frfs.before)?;
     let opts = args.base_options(latency);
     let axes = design_ranges(args, &frfs, &r, &opts)?;
-    let designs: Vec<AxisDesign> = axes.iter().map(|a| a.range.candidates[a.range.best].design.clone()).collect();
+    let designs: Vec<AxisDesign> = axes.iter().map(|a| a.design.clone()).collect();
     let image = build_image(&designs, args.input.fs as u32, latency, args.full_scale, frfs.sha)?;
-    write_image_and_sidecar(args, &image, &designs, &axes)?;
+    write_image_and_sidecar(args, &image, &axes)?;
     let mut sensitivities = crate::design::sensitivity::predict_all(&designs, &opts);
     crate::design::sensitivity::set_line_spacing(&mut sensitivities, &frfs.before.freq_hz);
     render(args, &frfs, &axes, &designs, &sensitivities, &image, latency)
@@ -91,14 +91,30 @@ impl TwoFrfs {
     }
 }
 
-/// One axis designed for the range, with what the sidecar keeps of it.
+/// One axis of a design from two FRFs, with what the sidecar keeps of it.
 struct RangeAxis {
     axis: usize,
-    range: RangeDesign,
-    sidecar: TwoStateJson,
+    /// The range design or the first FRF's design held over it; `None`
+    /// for an axis passed through raw (its first FRF cannot be designed).
+    outcome: Option<RangeOutcome>,
+    /// The design the image carries.
+    design: AxisDesign,
+    /// Both states, for `compensate --offline --drift` (designed axes only).
+    sidecar: Option<TwoStateJson>,
 }
 
-/// Every axis designed for the range between the two states.
+impl RangeAxis {
+    /// The range design, if the axis has one.
+    fn range(&self) -> Option<&RangeDesign> {
+        self.outcome.as_ref().and_then(RangeOutcome::range)
+    }
+}
+
+/// Every axis designed for the range between the two states. An axis whose
+/// two states cannot be paired holds the first FRF's design, and one whose
+/// first FRF cannot be designed is passed through raw, each with a loud
+/// warning; `--strict` refuses the image instead, and so does a set-up
+/// where no axis can be compensated.
 fn design_ranges(
     args: &DesignArgs,
     frfs: &TwoFrfs,
@@ -113,34 +129,65 @@ fn design_ranges(
     );
     let results = design_axes_over_range(&f0.freq_hz, &f0.axes, &f1.axes, r, opts);
     let (p0, p1) = (args.input.frf[0].display(), args.input.frf[1].display());
+    let compensated = results.iter().filter(|x| x.is_ok()).count();
     let mut axes = Vec::new();
     for (a, res) in f0.axes.iter().zip(results) {
         let name = axis_name(a.axis);
-        let range = res.with_context(|| format!("{p0} / {p1}: axis {name}"))?;
-        let first = &range.candidates[0].design;
-        let dm0 = first
-            .discrete
-            .as_ref()
-            .map(|x| x.0.clone())
-            .ok_or_else(|| anyhow::anyhow!("axis {name}: no discrete model"))?;
-        let sidecar = TwoStateJson::new(&range.states, first.compensated_band_hz, &dm0);
-        axes.push(RangeAxis { axis: a.axis, range, sidecar });
+        let outcome = match res {
+            Ok(o) => o,
+            Err(e) if args.strict || compensated == 0 => return Err(e.context(format!("{p0}: axis {name}"))),
+            Err(e) => {
+                let reason = format!("first FRF {p0}: {e:#}").replace("; no image written", "");
+                eprintln!(
+                    "WARNING: axis {name} is NOT COMPENSATED: passed through raw (delayed by {} samples): {reason} \
+                     (--strict refuses the image instead)",
+                    opts.lag
+                );
+                let rv = r[a.axis].expect("R set for every FRF axis");
+                let design = crate::design::pass_through::pass_through(a, rv, opts, reason)?;
+                axes.push(RangeAxis { axis: a.axis, outcome: None, design, sidecar: None });
+                continue;
+            }
+        };
+        if let RangeOutcome::Held(h) = &outcome {
+            if args.strict {
+                bail!("{p0} / {p1}: axis {name}: {}", h.why);
+            }
+            eprintln!(
+                "WARNING: axis {name} does NOT FOLLOW the change between the two FRFs: {}; the image and \
+                 `compensate --offline --drift` hold the first FRF's design for it (--strict refuses the image instead)",
+                h.why
+            );
+        }
+        let design = outcome.chosen().clone();
+        let sidecar = match outcome.range() {
+            Some(range) => {
+                let first = &range.candidates[0].design;
+                let dm0 = first
+                    .discrete
+                    .as_ref()
+                    .map(|x| x.0.clone())
+                    .ok_or_else(|| anyhow::anyhow!("axis {name}: no discrete model"))?;
+                Some(TwoStateJson::new(&range.states, first.compensated_band_hz, &dm0))
+            }
+            None => None,
+        };
+        axes.push(RangeAxis { axis: a.axis, outcome: Some(outcome), design, sidecar });
     }
     Ok(axes)
 }
 
-/// Write the image and its model sidecar, with both states of every axis.
-fn write_image_and_sidecar(
-    args: &DesignArgs,
-    image: &CoeffImage,
-    designs: &[AxisDesign],
-    axes: &[RangeAxis],
-) -> Result<()> {
-    let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
-    let mut sidecar = crate::offline::sidecar::ModelSidecar::new(image, &models);
+/// Write the image and its model sidecar, with both states of every axis
+/// designed for the range, and why any other axis holds the first state.
+fn write_image_and_sidecar(args: &DesignArgs, image: &CoeffImage, axes: &[RangeAxis]) -> Result<()> {
+    let designs: Vec<AxisDesign> = axes.iter().map(|a| a.design.clone()).collect();
+    let mut sidecar = crate::offline::sidecar::ModelSidecar::of_designs(image, &designs);
     for a in axes {
         if let Some(m) = sidecar.axes.iter_mut().find(|m| m.axis == axis_name(a.axis)) {
-            m.two_state = Some(a.sidecar.clone());
+            m.two_state = a.sidecar.clone();
+            if let Some(RangeOutcome::Held(h)) = &a.outcome {
+                m.holds_first_state = Some(h.why.clone());
+            }
         }
     }
     crate::offline::sidecar::write_image_and_sidecar(&args.out, image, Some(&sidecar))
@@ -159,15 +206,23 @@ fn render(
     let shown = args.out.display().to_string();
     let range: Vec<RangeFigures> = axes
         .iter()
-        .map(|a| {
-            let c = &a.range.candidates[a.range.best];
-            RangeFigures { worst: c.worst, s: c.s }
+        .map(|a| match &a.outcome {
+            Some(RangeOutcome::Range(rd)) => {
+                let c = &rd.candidates[rd.best];
+                RangeFigures { worst: c.worst, s: c.s }
+            }
+            Some(RangeOutcome::Held(h)) => RangeFigures { worst: h.worst(), s: 0.0 },
+            None => RangeFigures { worst: f64::NAN, s: 0.0 },
         })
         .collect();
     let mut summary =
         render_summary(designs, sensitivities, args.input.fs, latency, &shown, image.id(), "vf", Some(&range));
     for a in axes {
-        summary.push_str(&crate::report::two_state::describe(axis_name(a.axis), &a.range));
+        match &a.outcome {
+            Some(RangeOutcome::Range(rd)) => summary.push_str(&describe(axis_name(a.axis), rd)),
+            Some(RangeOutcome::Held(h)) => summary.push_str(&describe_held(axis_name(a.axis), h)),
+            None => {}
+        }
     }
     let _ = writeln!(
         summary,
@@ -175,7 +230,9 @@ fn render(
     );
     if let Some(dir) = &args.report {
         let extra = |axis: usize| -> Result<Vec<crate::report::design::Plot>> {
-            let Some(rd) = axes.iter().find(|a| a.axis == axis).map(|a| &a.range) else { return Ok(Vec::new()) };
+            let Some(rd) = axes.iter().find(|a| a.axis == axis).and_then(RangeAxis::range) else {
+                return Ok(Vec::new());
+            };
             let name = axis_name(axis);
             let (Some(first), Some(second)) = (frfs.before.axis(axis), frfs.after.axis(axis)) else {
                 bail!("report: axis {name}: missing from one of the two FRFs")
@@ -221,7 +278,17 @@ fn render(
         axes: axes
             .iter()
             .zip(sensitivities)
-            .map(|(a, s)| RangeAxisJson::new(axis_name(a.axis), &a.range, s.clone()))
+            .map(|(a, s)| {
+                let name = axis_name(a.axis);
+                match &a.outcome {
+                    Some(RangeOutcome::Range(rd)) => RangeAxisEntry::Designed(RangeAxisJson::new(name, rd, s.clone())),
+                    Some(RangeOutcome::Held(h)) => RangeAxisEntry::Held(HeldAxisJson::new(name, h, s.clone())),
+                    None => RangeAxisEntry::PassedThrough {
+                        axis: name,
+                        reason: a.design.pass_through.clone().unwrap_or_default(),
+                    },
+                }
+            })
             .collect(),
     };
     Ok(format!("{}\n", serde_json::to_string_pretty(&j)?))

@@ -13,7 +13,8 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::design::axis::AxisDesign;
 use crate::design::image::build_image;
-use crate::design::two_state::range::design_axes_over_range;
+use crate::design::pass_through::pass_through;
+use crate::design::two_state::range::{design_axes_over_range, RangeOutcome};
 use crate::eval::rates::{design_options, scoring_band_hz, RateCase, RunOptions};
 use crate::io::signal_csv::SignalRecord;
 use crate::metrics::{accuracy, sample_variance};
@@ -65,13 +66,17 @@ pub struct DriftAxisScore {
     /// The exact inverse's noise floor on the set-up before the drift
     /// ([`crate::eval::rates::noise_floor`]).
     pub noise_floor: f64,
-    /// The range design, or why it was refused (`design` then writes nothing).
+    /// The axis's design, or why its first FRF cannot be designed (`design`
+    /// then passes it through raw).
     pub design: std::result::Result<DriftDesigned, String>,
 }
 
-/// Figures of an axis whose range design was made.
+/// Figures of an axis whose first FRF was designed.
 #[derive(Clone, Debug)]
 pub struct DriftDesigned {
+    /// Why the two states could not be paired, where the axis holds the
+    /// first FRF's design (`None`: designed for the range).
+    pub held: Option<String>,
     /// Model state of the chosen box design (0: the first FRF's own design kept).
     pub chosen_s: f64,
     /// Its predicted worst in-band error over the range.
@@ -89,7 +94,8 @@ pub struct DriftDesigned {
     /// noise) without drift: the error the drift smoother should come back to.
     pub offline_no_drift: f64,
     /// Static gain Re Ĝ(0) of the paired model at the first and the second
-    /// state (N/N); the simulated drift, a mass change, keeps the true one.
+    /// state (N/N; NaN where held); the simulated drift, a mass change,
+    /// keeps the true one.
     pub static_gains: (f64, f64),
 }
 
@@ -105,12 +111,25 @@ pub fn run_drift_case(c: &DriftCase) -> Result<Vec<DriftAxisScore>> {
     let opts =
         design_options(fs, &RunOptions { lag: Some(crate::design::latency::DEFAULT_LATENCY), ..Default::default() });
     let r: [Option<f64>; 3] = [0, 1, 2].map(|a| Some(sample_variance(&s.idle[a])));
-    let ranges = design_axes_over_range(&s.frf.freq_hz, &s.frf.axes, &out.frf_after.axes, &r, &opts);
-    // The box images as `design` writes them: every axis or nothing.
-    let chosen: Option<Vec<AxisDesign>> =
-        ranges.iter().map(|x| x.as_ref().ok().map(|rd| rd.candidates[rd.best].design.clone())).collect();
-    let first: Option<Vec<AxisDesign>> =
-        ranges.iter().map(|x| x.as_ref().ok().map(|rd| rd.candidates[0].design.clone())).collect();
+    let outcomes = design_axes_over_range(&s.frf.freq_hz, &s.frf.axes, &out.frf_after.axes, &r, &opts);
+    // The box images as `design` writes them: an axis whose first FRF
+    // cannot be designed passed through raw; none where no axis can be.
+    let image_of = |pick: &dyn Fn(&RangeOutcome) -> AxisDesign| -> Result<Option<Vec<AxisDesign>>> {
+        if outcomes.iter().all(|o| o.is_err()) {
+            return Ok(None);
+        }
+        let designs = outcomes
+            .iter()
+            .zip(&s.frf.axes)
+            .map(|(o, a)| match o {
+                Ok(o) => Ok(pick(o)),
+                Err(e) => pass_through(a, r[a.axis].unwrap_or_default(), &opts, format!("{e:#}")),
+            })
+            .collect::<Result<_>>()?;
+        Ok(Some(designs))
+    };
+    let chosen = image_of(&|o| o.chosen().clone())?;
+    let first = image_of(&|o| o.first().clone())?;
     let record = SignalRecord { t_s: None, channels: (0..3).map(|a| (a, s.measured[a].clone())).collect() };
     let on_box = |designs: &Option<Vec<AxisDesign>>| -> Result<Option<SignalRecord>> {
         let Some(d) = designs else { return Ok(None) };
@@ -120,42 +139,53 @@ pub fn run_drift_case(c: &DriftCase) -> Result<Vec<DriftAxisScore>> {
     let (box_two, box_one) = (on_box(&chosen)?, on_box(&first)?);
     let score = |x: &[f64], a: usize| accuracy(x, &s.truth[a], fs, band).nrmse;
     let mut axes = Vec::new();
-    for (a, range) in ranges.into_iter().enumerate() {
+    for (a, outcome) in outcomes.into_iter().enumerate() {
         let raw = accuracy(&s.measured[a], &s.truth[a], fs, band);
         let std_truth = raw.rms_error_n / raw.nrmse;
         let r_true = params.measurement.expected_idle_variance();
         let noise_floor = crate::eval::rates::noise_floor(|f| s.dyno.axis(a).frf(f), r_true, fs, band, std_truth);
-        let design = match range {
+        let design = match outcome {
             Err(e) => Err(format!("{e:#}")),
-            Ok(rd) => {
-                let best = &rd.candidates[rd.best];
-                let d0 = &rd.candidates[0].design;
+            Ok(o) => {
+                let (best, d0) = (o.chosen(), o.first());
                 let (dm0, _) = d0.discrete.as_ref().ok_or_else(|| anyhow::anyhow!("axis {a}: no discrete model"))?;
+                let held = Smoother::new(dm0, d0.kalman.q, d0.kalman.r)?;
                 // The smoother settings of `compensate --offline --drift`
                 // (offline::drift::axis_drift): the first state's band and
-                // structure, the image's q and R.
-                let settings = DriftSmoothing {
-                    fs_hz: fs,
-                    interval_s: (c.drift.start_s, c.drift.end_s),
-                    band_hz: d0.compensated_band_hz,
-                    structure: (dm0.fir.len(), dm0.advance),
-                    q: best.design.kalman.q,
-                    r: best.design.kalman.r,
+                // structure, the image's q and R; an axis holding the first
+                // state is smoothed with its model alone.
+                let (drift_est, static_gains) = match o.range() {
+                    Some(rd) => {
+                        let settings = DriftSmoothing {
+                            fs_hz: fs,
+                            interval_s: (c.drift.start_s, c.drift.end_s),
+                            band_hz: d0.compensated_band_hz,
+                            structure: (dm0.fir.len(), dm0.advance),
+                            q: best.kalman.q,
+                            r: best.kalman.r,
+                        };
+                        let est = smooth_drifting(&s.measured[a], &|x| rd.states.at(x), &settings)?;
+                        (est, (rd.states.at(0.0).frf(0.0).re, rd.states.at(1.0).frf(0.0).re))
+                    }
+                    None => (held.smooth(&s.measured[a]), (f64::NAN, f64::NAN)),
                 };
-                let drift_est = smooth_drifting(&s.measured[a], &|x| rd.states.at(x), &settings)?;
-                let held = Smoother::new(dm0, d0.kalman.q, d0.kalman.r)?;
                 let column = |rec: &Option<SignalRecord>| {
                     rec.as_ref().and_then(|r| r.channel(a)).map_or(f64::NAN, |x| score(x, a))
                 };
+                let (chosen_s, predicted_worst, held_why) = match &o {
+                    RangeOutcome::Range(rd) => (rd.candidates[rd.best].s, rd.candidates[rd.best].worst, None),
+                    RangeOutcome::Held(h) => (0.0, h.worst(), Some(h.why.clone())),
+                };
                 Ok(DriftDesigned {
-                    chosen_s: best.s,
-                    predicted_worst: best.worst,
+                    held: held_why,
+                    chosen_s,
+                    predicted_worst,
                     box_two_state: column(&box_two),
                     box_single: column(&box_one),
                     offline_drift: score(&drift_est, a),
                     offline_held: score(&held.smooth(&s.measured[a]), a),
                     offline_no_drift: accuracy(&held.smooth(&still.measured[a]), &still.truth[a], fs, band).nrmse,
-                    static_gains: (rd.states.at(0.0).frf(0.0).re, rd.states.at(1.0).frf(0.0).re),
+                    static_gains,
                 })
             }
         };

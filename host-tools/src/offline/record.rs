@@ -548,21 +548,24 @@ fn smooth_spilled(
                     priors.join(", ")
                 ));
             }
-            let drifting = target
+            let columns = target
                 .axes
                 .iter()
-                .map(|&ax| crate::offline::drift::axis_drift(image, sidecar, ax, source, (s0, s1)))
+                .map(|&ax| drift_column(image, sidecar, ax, source, (s0, s1), target.monitor))
                 .collect::<Result<Vec<_>>>()?;
-            let models: Vec<Box<dyn Fn(f64) -> crate::fit::PoleResidueModel + '_>> =
-                drifting.iter().map(|(ts, _)| Box::new(move |s: f64| ts.at(s)) as Box<dyn Fn(f64) -> _>).collect();
-            let passes = models
+            let passes = columns
                 .iter()
-                .zip(&drifting)
                 .zip(target.axes)
-                .map(|((m, (_, opts)), &ax)| {
-                    crate::offline::drift::SpilledDriftForward::new(&**m, opts, dir)
-                        .map(|p| Box::new(p) as Box<dyn SpilledPass>)
-                        .with_context(|| format!("{source}: axis {}", axis_name(ax)))
+                .map(|(c, &ax)| {
+                    match c {
+                        DriftColumn::Follows(model_at, opts) => {
+                            crate::offline::drift::SpilledDriftForward::new(&**model_at, opts, dir)
+                                .map(|p| Box::new(p) as Box<dyn SpilledPass>)
+                        }
+                        DriftColumn::Holds(sm) => crate::offline::smoother::SpilledForward::new(sm, dir)
+                            .map(|p| Box::new(p) as Box<dyn SpilledPass>),
+                    }
+                    .with_context(|| format!("{source}: axis {}", axis_name(ax)))
                 })
                 .collect::<Result<_>>()?;
             Ok(Compensated { samples: spill.run(input, passes, target, observed)?, how })
@@ -583,6 +586,43 @@ fn smooth_spilled(
             Ok(Compensated { samples: spill.run(input, passes, target, observed)?, how })
         }
     }
+}
+
+/// How `compensate --offline --drift` smooths one column.
+enum DriftColumn {
+    /// Following the drift between the sidecar's two states: the model at
+    /// state s, and the smoother's settings.
+    Follows(ModelAt, crate::offline::drift::DriftSmoothing),
+    /// With the first state's model alone: the design from two FRFs could
+    /// not pair the axis's states, or passed it through raw.
+    Holds(crate::offline::smoother::Smoother),
+}
+
+/// The model Ĝ at state s ∈ [0, 1] of a set-up moving between two states.
+type ModelAt = Box<dyn Fn(f64) -> crate::fit::PoleResidueModel>;
+
+/// The drift smoothing of column `axis`: both states where the sidecar has
+/// them; the stationary smoother, with a warning on `monitor`, where the
+/// two-state design held the first state or passed the axis through raw;
+/// else why the column cannot follow a drift.
+fn drift_column(
+    image: &CoeffImage,
+    sidecar: &ModelSidecar,
+    axis: usize,
+    source: &str,
+    interval_s: (f64, f64),
+    monitor: &dyn Monitor,
+) -> Result<DriftColumn> {
+    if let Some(why) = sidecar.holds_first_state(axis) {
+        monitor.note(&format!(
+            "warning: axis {} does NOT FOLLOW the drift: smoothed with the first FRF's model alone ({why})",
+            axis_name(axis)
+        ));
+    } else if sidecar.passed_through_raw(axis).is_none() {
+        let (ts, opts) = crate::offline::drift::axis_drift(image, sidecar, axis, source, interval_s)?;
+        return Ok(DriftColumn::Follows(Box::new(move |s| ts.at(s)), opts));
+    }
+    Ok(DriftColumn::Holds(crate::offline::smoother::axis_smoother(image, sidecar, axis, source)?))
 }
 
 /// Where the passes of [`smooth_spilled`] spill (`dir`), and how the input

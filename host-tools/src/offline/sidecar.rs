@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 
 use dynocomp_core::image::{CoeffImage, DesignMethod};
 
+use crate::design::axis::AxisDesign;
 use crate::design::discretize::{discretize, DiscreteModel, Discretization};
 use crate::design::two_state::model::TwoState;
 use crate::fit::{PoleResidueModel, Term};
@@ -78,6 +79,12 @@ pub struct AxisModelJson {
     /// outputs its measured force unchanged.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub passed_through_raw: Option<String>,
+    /// Why the axis holds the first FRF's state in a design from two FRFs
+    /// (`design --frf A --frf B` could not pair its two states; absent
+    /// otherwise and in older sidecars): `compensate --offline --drift`
+    /// smooths it with the first state's model, not following the drift.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holds_first_state: Option<String>,
 }
 
 /// The sidecar's terms of a pole-residue model.
@@ -162,6 +169,7 @@ impl ModelSidecar {
                 force_spectrum: None,
                 force_shape: None,
                 passed_through_raw: None,
+                holds_first_state: None,
             })
             .collect();
         ModelSidecar {
@@ -171,6 +179,18 @@ impl ModelSidecar {
             fs_hz: f64::from(image.fs_hz),
             axes,
         }
+    }
+
+    /// Sidecar for `image` with the models of `designs`, each with its
+    /// force shape and, for an axis passed through raw, why.
+    pub fn of_designs(image: &CoeffImage, designs: &[AxisDesign]) -> Self {
+        let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
+        let mut sidecar = ModelSidecar::new(image, &models);
+        for (m, d) in sidecar.axes.iter_mut().zip(designs) {
+            m.force_shape = d.kalman.force_shape;
+            m.passed_through_raw = d.pass_through.clone();
+        }
+        sidecar
     }
 
     /// The model of `axis`, validated (finite, stable poles with Im ≥ 0).
@@ -204,6 +224,13 @@ impl ModelSidecar {
             bail!("{source}: axis {name}: the discrete model is not valid (non-finite, unstable, another rate, or too long); re-run `dynocomp design`");
         }
         Ok(dm)
+    }
+
+    /// Why `axis` holds the first FRF's state in a design from two FRFs;
+    /// `None` where it follows both states or the design had one FRF.
+    pub fn holds_first_state(&self, axis: usize) -> Option<&str> {
+        let name = axis_name(axis);
+        self.axes.iter().find(|a| a.axis == name).and_then(|a| a.holds_first_state.as_deref())
     }
 
     /// Why `axis` is passed through raw (`design` could not compensate it);

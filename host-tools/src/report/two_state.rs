@@ -6,7 +6,7 @@ use anyhow::Result;
 use std::fmt::Write as _;
 
 use crate::design::sensitivity::Sensitivity;
-use crate::design::two_state::range::{RangeDesign, RANGE_STATES};
+use crate::design::two_state::range::{HeldDesign, RangeDesign, RANGE_STATES};
 use crate::frf::{axis_name, AxisFrf};
 
 /// The summary lines of one axis designed for the range: the paired modes
@@ -54,8 +54,8 @@ pub fn describe(name: &str, rd: &RangeDesign) -> String {
     if !rd.machine.is_empty() {
         let _ = writeln!(
             lines,
-            "{name} machine modes measured alike in both FRFs, averaged: {} Hz; kept apart: {}",
-            if shared.is_empty() { "none".to_string() } else { shared.join(", ") },
+            "{name} machine modes measured alike in both FRFs, averaged: {}; kept apart: {}",
+            if shared.is_empty() { "none".to_string() } else { format!("{} Hz", shared.join(", ")) },
             if apart.is_empty() { "none".to_string() } else { apart.join(", ") }
         );
     }
@@ -86,6 +86,18 @@ pub fn describe(name: &str, rd: &RangeDesign) -> String {
     lines
 }
 
+/// The summary line of an axis whose two states could not be paired: the
+/// first FRF's design held over the range, and what that predicts at both
+/// ends as measured.
+pub fn describe_held(name: &str, h: &HeldDesign) -> String {
+    format!(
+        "{name} two states: NOT FOLLOWED, the first FRF's design held over the range ({}); predicted error {:.2} % on the first FRF, {:.2} % on the second as measured\n",
+        h.why,
+        100.0 * h.measured.0,
+        100.0 * h.measured.1
+    )
+}
+
 /// `--json` of a two-state design.
 #[derive(serde::Serialize)]
 pub struct RangeJson {
@@ -102,7 +114,55 @@ pub struct RangeJson {
     /// The states the candidates are evaluated at.
     pub range_states: [f64; 5],
     /// Per axis.
-    pub axes: Vec<RangeAxisJson>,
+    pub axes: Vec<RangeAxisEntry>,
+}
+
+/// One axis of [`RangeJson`], tagged `"range"`: designed for the range,
+/// the first FRF's design held over it, or passed through raw.
+#[derive(serde::Serialize)]
+#[serde(tag = "range", rename_all = "snake_case")]
+pub enum RangeAxisEntry {
+    /// Designed for the range.
+    Designed(RangeAxisJson),
+    /// The two states could not be paired.
+    Held(HeldAxisJson),
+    /// The first FRF cannot be designed: the axis outputs its measurement.
+    PassedThrough {
+        /// Axis letter.
+        axis: &'static str,
+        /// Why.
+        reason: String,
+    },
+}
+
+/// An axis holding the first FRF's design over the range ([`HeldDesign`]).
+#[derive(serde::Serialize)]
+pub struct HeldAxisJson {
+    axis: &'static str,
+    /// Why the two states could not be paired.
+    why: String,
+    /// The design's own predicted in-band error on the first FRF's model.
+    predicted_error: f64,
+    /// Its predicted error on the first / second FRF as measured.
+    measured_frf_errors: (f64, f64),
+    /// The error to expect from the image over the range: the largest of these.
+    expected_error: f64,
+    /// Its sensitivity to shifted sensor modes.
+    sensitivity: Option<Sensitivity>,
+}
+
+impl HeldAxisJson {
+    /// Axis `axis` holding `h`, `sensitivity` that of its image.
+    pub fn new(axis: &'static str, h: &HeldDesign, sensitivity: Option<Sensitivity>) -> Self {
+        HeldAxisJson {
+            axis,
+            why: h.why.clone(),
+            predicted_error: h.design.predicted_error,
+            measured_frf_errors: h.measured,
+            expected_error: h.worst(),
+            sensitivity,
+        }
+    }
 }
 
 /// One axis of [`RangeJson`].
@@ -174,9 +234,9 @@ pub fn range_caption(rd: &RangeDesign) -> String {
          of the range (joined by straight lines; 0 = the first FRF, 1 = the second, in between the model interpolated with 1/f² \
          linear). The image is the candidate \
          with the least worst case (thick); the first and second FRF's own designs are the candidates at s = 0 and 1. \
-         Machine modes shared by both states: {} Hz.{} A fixed image cannot follow a drift of a few %: \
+         Machine modes shared by both states: {}.{} A fixed image cannot follow a drift of a few %: \
          `compensate --offline --drift START:END` follows it with both states.",
-        if shared.is_empty() { "none".to_string() } else { shared.join(", ") },
+        if shared.is_empty() { "none".to_string() } else { format!("{} Hz", shared.join(", ")) },
         match rd.above_band.first() {
             Some(m) if m.joint => format!(
                 " Sensor modes above the compensated band, fitted to both FRFs at once: {} Hz.",

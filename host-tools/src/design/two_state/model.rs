@@ -133,9 +133,10 @@ pub fn pair_fading(
     if !stuck0.is_empty() || !stuck1.is_empty() {
         let side = |which: &str, other: &str, f: &[f64]| match f.len() {
             0 => String::new(),
-            _ => format!(
-                " {which} FRF's {} Hz has no partner within ±{:.0} % in the {other};",
+            n => format!(
+                " {which} FRF's {} Hz {} no partner within ±{:.0} % in the {other};",
                 list(f),
+                if n == 1 { "has" } else { "have" },
                 100.0 * PAIR_TOLERANCE
             ),
         };

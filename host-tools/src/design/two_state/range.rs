@@ -309,6 +309,34 @@ impl RangeDesign {
     }
 }
 
+/// The two measured FRFs of an axis on the lines of a design's criterion
+/// band, to judge a filter on them as measured rather than on a fitted model.
+struct MeasuredPlants {
+    freqs: Vec<f64>,
+    plants: [Vec<(f64, Complex64)>; 2],
+}
+
+impl MeasuredPlants {
+    /// The lines of `first` and `second` within the criterion ranges `ranges` (Hz).
+    fn new(freq_hz: &[f64], first: &AxisFrf, second: &AxisFrf, ranges: &[(f64, f64)]) -> Self {
+        let in_band: Vec<usize> =
+            (0..freq_hz.len()).filter(|&k| ranges.iter().any(|b| freq_hz[k] >= b.0 && freq_hz[k] <= b.1)).collect();
+        let freqs = in_band.iter().map(|&k| freq_hz[k]).collect();
+        let plants = [first, second].map(|a| in_band.iter().map(|&k| (freq_hz[k], a.frf[k])).collect());
+        MeasuredPlants { freqs, plants }
+    }
+
+    /// The predicted in-band error ([`criterion_j`], √) of `design`'s filter
+    /// on the first and the second FRF as measured; `width` the criterion
+    /// band's width (Hz).
+    fn errors(&self, design: &AxisDesign, width: f64, opts: &DesignOptions) -> (f64, f64) {
+        let noise = noise_term(design.kalman.r, opts.fs_hz, width, opts.force_rms);
+        let h = design.kalman.compensator.freq_responses(&self.freqs, opts.fs_hz);
+        let j = |g: &[(f64, Complex64)]| criterion_j(g, &h, design.kalman.lag, opts.fs_hz, noise).sqrt();
+        (j(&self.plants[0]), j(&self.plants[1]))
+    }
+}
+
 /// The box image for a set-up that moves between two measured states.
 /// **Criterion (stated):** the least worst-case
 /// predicted in-band error over s ∈ [`RANGE_STATES`] and over both FRFs as
@@ -323,16 +351,17 @@ impl RangeDesign {
 /// first FRF's own design is always a candidate, and it wins ties, so the
 /// image never predicts more error over the range than the single-state
 /// design ([`RangeDesign::kept_single_state`]).
-pub fn design_over_range(
+/// `d0` is the first FRF's own design.
+fn design_over_range(
     freq_hz: &[f64],
     first: &AxisFrf,
+    d0: AxisDesign,
     second: &AxisFrf,
     r: f64,
     opts: &DesignOptions,
     candidate_states: &[f64],
 ) -> Result<RangeDesign> {
     let name = axis_name(first.axis);
-    let d0 = design_axis(freq_hz, first, r, opts).context("first FRF")?;
     let Paired { states: ts, machine, above_band } = pair_second_state(freq_hz, first, &d0, second, &opts.vf)?;
     let ranges = criterion_ranges(&d0.bands, d0.compensated_band_hz);
     let width: f64 = ranges.iter().map(|b| b.1 - b.0).sum();
@@ -344,11 +373,7 @@ pub fn design_over_range(
             freqs.iter().map(|f| (*f, m.frf(*f))).collect()
         })
         .collect();
-    let in_band: Vec<usize> =
-        (0..freq_hz.len()).filter(|&k| ranges.iter().any(|b| freq_hz[k] >= b.0 && freq_hz[k] <= b.1)).collect();
-    let measured_freqs: Vec<f64> = in_band.iter().map(|&k| freq_hz[k]).collect();
-    let measured_plants: [Vec<(f64, Complex64)>; 2] =
-        [first, second].map(|a| in_band.iter().map(|&k| (freq_hz[k], a.frf[k])).collect());
+    let measured_plants = MeasuredPlants::new(freq_hz, first, second, &ranges);
     let interpolated_fit_error = measured_states_fit_error(&d0, freq_hz, second, &ts, opts.coherence_threshold);
     let mut cands = Vec::new();
     let mut skipped = Vec::new();
@@ -388,8 +413,7 @@ pub fn design_over_range(
         let j =
             |g: &[(f64, Complex64)], h: &[Complex64]| criterion_j(g, h, design.kalman.lag, opts.fs_hz, noise).sqrt();
         let errors: Vec<f64> = plants.iter().map(|g| j(g, &h)).collect();
-        let hm = design.kalman.compensator.freq_responses(&measured_freqs, opts.fs_hz);
-        let measured = (j(&measured_plants[0], &hm), j(&measured_plants[1], &hm));
+        let measured = measured_plants.errors(&design, width, opts);
         let worst = errors.iter().copied().fold(measured.0.max(measured.1), f64::max);
         cands.push(RangeCandidate { s, design, errors, measured, worst });
     }
@@ -426,7 +450,89 @@ fn measured_states_fit_error(
     d0.fit_nrmse.max(e1)
 }
 
-/// [`design_over_range`] for every axis of the FRFs `before` and `after`
+/// What the range design makes of one axis whose first FRF can be designed.
+#[derive(Clone, Debug)]
+pub enum RangeOutcome {
+    /// Designed for the range between the two states.
+    Range(Box<RangeDesign>),
+    /// The two FRFs could not be made one model of two states (the second
+    /// fit, or the pairing of its modes, failed): the first FRF's own design
+    /// is held over the range.
+    Held(Box<HeldDesign>),
+}
+
+/// The first FRF's own design of an axis whose two states could not be
+/// paired ([`RangeOutcome::Held`]).
+#[derive(Clone, Debug)]
+pub struct HeldDesign {
+    /// The first FRF's single-state design.
+    pub design: AxisDesign,
+    /// Why the range could not be designed.
+    pub why: String,
+    /// Predicted in-band error of its filter on the first and the second FRF
+    /// as measured (their lines in the criterion's band): what holding the
+    /// first state costs at the far end of the range.
+    pub measured: (f64, f64),
+}
+
+impl HeldDesign {
+    /// The largest of the design's own predicted error and `measured`.
+    pub fn worst(&self) -> f64 {
+        self.design.predicted_error.max(self.measured.0).max(self.measured.1)
+    }
+}
+
+impl RangeOutcome {
+    /// The design the box image carries for the axis.
+    pub fn chosen(&self) -> &AxisDesign {
+        match self {
+            RangeOutcome::Range(rd) => &rd.candidates[rd.best].design,
+            RangeOutcome::Held(h) => &h.design,
+        }
+    }
+
+    /// The first FRF's own (single-state) design.
+    pub fn first(&self) -> &AxisDesign {
+        match self {
+            RangeOutcome::Range(rd) => &rd.candidates[0].design,
+            RangeOutcome::Held(h) => &h.design,
+        }
+    }
+
+    /// The range design, if the axis has one.
+    pub fn range(&self) -> Option<&RangeDesign> {
+        match self {
+            RangeOutcome::Range(rd) => Some(rd),
+            RangeOutcome::Held(_) => None,
+        }
+    }
+}
+
+/// One axis for the range: [`design_over_range`], or where the first FRF
+/// can be designed and the two states cannot be paired, the first FRF's own
+/// design held over the range ([`RangeOutcome::Held`]). An error only where
+/// the first FRF itself cannot be designed.
+pub fn design_or_hold(
+    freq_hz: &[f64],
+    first: &AxisFrf,
+    second: &AxisFrf,
+    r: f64,
+    opts: &DesignOptions,
+    candidate_states: &[f64],
+) -> Result<RangeOutcome> {
+    let d0 = design_axis(freq_hz, first, r, opts).context("first FRF")?;
+    match design_over_range(freq_hz, first, d0.clone(), second, r, opts, candidate_states) {
+        Ok(rd) => Ok(RangeOutcome::Range(Box::new(rd))),
+        Err(e) => {
+            let ranges = criterion_ranges(&d0.bands, d0.compensated_band_hz);
+            let width: f64 = ranges.iter().map(|b| b.1 - b.0).sum();
+            let measured = MeasuredPlants::new(freq_hz, first, second, &ranges).errors(&d0, width, opts);
+            Ok(RangeOutcome::Held(Box::new(HeldDesign { design: d0, why: format!("{e:#}"), measured })))
+        }
+    }
+}
+
+/// [`design_or_hold`] for every axis of the FRFs `before` and `after`
 /// (the same axes on the same lines `freq_hz`), on the machine's cores, with
 /// the candidates [`RANGE_STATES`]; `r[axis]`: the measurement noise
 /// variance R of each axis (N²). The results in axis order.
@@ -436,10 +542,10 @@ pub fn design_axes_over_range(
     after: &[AxisFrf],
     r: &[Option<f64>; 3],
     opts: &DesignOptions,
-) -> Vec<Result<RangeDesign>> {
+) -> Vec<Result<RangeOutcome>> {
     let pairs: Vec<(&AxisFrf, &AxisFrf)> = before.iter().zip(after).collect();
     map_on_threads(&pairs, |(a0, a1)| {
         let rv = r[a0.axis].expect("R set for every FRF axis");
-        design_over_range(freq_hz, a0, a1, rv, opts, &RANGE_STATES)
+        design_or_hold(freq_hz, a0, a1, rv, opts, &RANGE_STATES)
     })
 }
