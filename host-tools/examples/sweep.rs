@@ -23,6 +23,12 @@ use dynocomp::frf::axis_name;
 fn main() -> Result<()> {
     let n: u64 = std::env::args().nth(1).map(|a| a.parse()).transpose()?.unwrap_or(100);
     let (mut with_image, mut axes, mut within_13, mut within_2, mut written) = (0, 0, 0, 0, 0);
+    // Axes warned of a non-minimum-phase zero (design::phase_limit), and
+    // axes whose box output is worse than raw: [warned][worse].
+    let mut phase = [[0usize; 2]; 2];
+    // Independent check of the warning: the simulator's true model's zeros
+    // (the numerator of its modes): [warned][true zero in band].
+    let mut truth_check = [[0usize; 2]; 2];
     let mut rows: Vec<(f64, String)> = Vec::new();
     for seed in 0..n {
         let (case, fs, kind) = draw(seed);
@@ -47,8 +53,16 @@ fn main() -> Result<()> {
             }
             written += 1;
         }
+        let dyno = case.dynamometer(&case.sim_params(fs))?;
         for a in &res.axes {
             axes += 1;
+            let true_axis = dyno.axis(a.axis);
+            let modes: Vec<(f64, f64, f64)> = true_axis.modes.iter().map(|m| (m.fn_hz, m.zeta, m.residue)).collect();
+            let band = dynocomp::eval::rates::scoring_band_hz(fs);
+            let true_nmp = dynocomp::design::phase_limit::zeros(&dynocomp::fit::PoleResidueModel::from_modes(&modes))
+                .iter()
+                .any(|z| z.re > 0.0 && z.im > 0.0 && z.im / std::f64::consts::TAU <= band);
+            truth_check[usize::from(!a.phase_limits.is_empty())][usize::from(true_nmp)] += 1;
             let (ratio, what) = match &a.comp_nrmse {
                 Ok(e) => (e / a.noise_floor, format!("{:.3} % (floor {:.3} %)", 100.0 * e, 100.0 * a.noise_floor)),
                 Err(why) => (f64::INFINITY, format!("no design: {why}")),
@@ -59,10 +73,16 @@ fn main() -> Result<()> {
             let written = a.as_written.map_or(String::new(), |w| {
                 format!("; as written {:.2} % (perfect {:.2} %)", 100.0 * w.output.nrmse, 100.0 * w.perfect.nrmse)
             });
+            let worse = a.comp_nrmse.as_ref().is_ok_and(|e| *e > a.raw_nrmse);
+            phase[usize::from(!a.phase_limits.is_empty())][usize::from(worse)] += 1;
+            let zeros: Vec<String> = a.phase_limits.iter().map(|p| format!("{:.0} Hz", p.zero_hz.0)).collect();
+            let warned =
+                if zeros.is_empty() { String::new() } else { format!("; non-minimum-phase zero {}", zeros.join(", ")) };
             let row = format!(
-                "seed {seed} {} ({kind}, {fs} Hz, {} Hz lines): {what}, {ratio:.2}x{written}",
+                "seed {seed} {} ({kind}, {fs} Hz, {} Hz lines): {what}, {ratio:.2}x{written}; raw {:.2} %{warned}",
                 axis_name(a.axis),
-                case.frf_df_hz
+                case.frf_df_hz,
+                100.0 * a.raw_nrmse
             );
             println!("{row}");
             rows.push((ratio, row));
@@ -78,6 +98,16 @@ fn main() -> Result<()> {
         "{axes} axes: {:.0} % within 1.3x of the exact inverse's noise floor, {:.0} % within 2x or at most 0.3 %",
         pct(within_13, axes),
         pct(within_2, axes)
+    );
+    println!(
+        "non-minimum-phase zero warned: {} axes, {} of them worse than raw on the box; not warned and worse than raw: {}",
+        phase[1][0] + phase[1][1],
+        phase[1][1],
+        phase[0][1]
+    );
+    println!(
+        "the true model has a non-minimum-phase zero in the scoring band: on {} of the warned axes; on {} axes not warned",
+        truth_check[1][1], truth_check[0][1]
     );
     rows.sort_by(|a, b| b.0.total_cmp(&a.0));
     println!("worst axes:");

@@ -207,6 +207,10 @@ pub struct AxisDesign {
     /// Why the axis is passed through raw (`Some`: it could not be
     /// compensated, [`crate::design::pass_through`]).
     pub pass_through: Option<String>,
+    /// Non-minimum-phase zeros of the model in the compensated band where
+    /// the box output is further from the force than the raw measurement
+    /// ([`crate::design::phase_limit`]).
+    pub phase_limits: Vec<crate::design::phase_limit::PhaseLimit>,
 }
 
 impl AxisDesign {
@@ -771,6 +775,10 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
     let flat = p.flat_band(&filter, lag, fs);
     let predicted_distortion = obj.distortion_of(&h).sqrt();
     let force_spectrum = p.force_spectrum(&obj, &h, j, opts);
+    let phase_limits = match p.fitted.paper {
+        Some(_) => Vec::new(),
+        None => crate::design::phase_limit::phase_limit(&p.fitted.model, &kal.compensator, lag, fs, p.lines.comp_band),
+    };
     Ok(AxisDesign {
         axis: p.axis,
         model: p.fitted.model.clone(),
@@ -796,6 +804,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
         notes: p.lines.notes.clone(),
         force_spectrum,
         pass_through: None,
+        phase_limits,
     })
 }
 

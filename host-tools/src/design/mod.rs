@@ -28,6 +28,7 @@ pub mod paper;
 pub mod paper_orders;
 pub mod parallel;
 pub mod pass_through;
+pub mod phase_limit;
 pub mod progress;
 pub mod sensitivity;
 pub mod two_state;

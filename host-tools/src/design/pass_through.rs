@@ -92,6 +92,7 @@ pub fn pass_through(frf: &AxisFrf, r: f64, opts: &DesignOptions, reason: String)
         notes: Vec::new(),
         force_spectrum: None,
         pass_through: Some(reason),
+        phase_limits: Vec::new(),
     })
 }
 

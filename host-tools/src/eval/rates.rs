@@ -275,6 +275,9 @@ pub struct AxisScore {
     pub as_written: Option<AsWritten>,
     /// Shape of the axis's filter on the box (None if the design failed).
     pub shape: Option<dynocomp_core::budget::AxisShape>,
+    /// The design's non-minimum-phase zeros where the box is worse than raw
+    /// ([`crate::design::phase_limit`]; empty if the design failed).
+    pub phase_limits: Vec<crate::design::phase_limit::PhaseLimit>,
 }
 
 /// Results of one case at one rate.
@@ -394,6 +397,7 @@ fn score_sim_with(
         };
         let shape = designed.as_ref().ok().map(|d| dynocomp_core::budget::AxisShape::of(&d.filter));
         let mut as_written = None;
+        let phase_limits = designed.as_ref().map(|d| d.phase_limits.clone()).unwrap_or_default();
         let (comp_nrmse, predicted_error, flat_band_hz) = match designed {
             Err(e) => (Err(format!("{e:#}")), f64::NAN, (f64::NAN, f64::NAN)),
             Ok(d) => {
@@ -421,6 +425,7 @@ fn score_sim_with(
             design_s,
             shape,
             as_written,
+            phase_limits,
         });
     }
     CaseResult { case: name, fs_hz: fs, band_hz: band, axes, latency }

@@ -52,6 +52,9 @@ pub struct AxisJson {
     pub discrete_condition: Option<f64>,
     /// Notes (e.g. FRF lines beyond 0.45 fs).
     pub notes: Vec<String>,
+    /// Non-minimum-phase zeros in the compensated band where the box output
+    /// is worse than raw ([`crate::design::phase_limit`]).
+    pub phase_limits: Vec<crate::design::phase_limit::PhaseLimit>,
     /// Sections / FIR taps in the image.
     pub sections: usize,
     /// FIR taps.
@@ -120,6 +123,7 @@ impl AxisJson {
             discrete_taps: d.discrete.as_ref().map(|x| x.0.fir.len()),
             discrete_condition: d.discrete.as_ref().map(|x| x.1.condition),
             notes: d.notes.clone(),
+            phase_limits: d.phase_limits.clone(),
             sections: d.filter.sections().len(),
             fir_taps: d.filter.fir().len(),
             dare_residual: d.kalman.dare_residual,
@@ -254,6 +258,9 @@ pub fn render_summary(
         }
         for n in &d.notes {
             let _ = writeln!(s, "note: {n}");
+        }
+        for p in &d.phase_limits {
+            let _ = writeln!(s, "{}", crate::design::phase_limit::note(axis_name(d.axis), p, latency, fs));
         }
     }
     for (d, sens) in designs.iter().zip(sensitivities) {

@@ -1,0 +1,138 @@
+//! A non-minimum-phase zero in the compensated band (#34: never silently
+//! worse than no compensation). Two machine modes of opposite residue,
+//! 371 Hz (+0.116) and 422 Hz (−0.148), as the random drift sweep's seed 3 z
+//! drew them, put a zero pair at 392 Hz with real part +12.3 Hz (the
+//! roots of the model's numerator). No causal compensator inverts it: the
+//! design warns, naming the zero, and the warning is checked against an
+//! independent computation, the image's f32 filter run on a 392 Hz sine
+//! through the exact model, which is further from the delayed sine than the
+//! raw sine is. Control: the residues swapped (zeros at 355 and 447 Hz with
+//! negative real parts) give no warning, and the filter beats raw at 392 Hz.
+
+mod cli_common;
+
+use dynocomp::design::axis::{design_axis, AxisDesign, DesignOptions};
+use dynocomp::fit::PoleResidueModel;
+use dynocomp::frf::AxisFrf;
+use std::f64::consts::TAU;
+
+const FS: f64 = 25_600.0;
+
+/// The exact FRF of `modes` as axis z, on 2 Hz lines to 10 kHz.
+fn frf_of(modes: &[(f64, f64, f64)]) -> dynocomp::frf::Frf {
+    let g = PoleResidueModel::from_modes(modes);
+    let freq_hz: Vec<f64> = (0..=5000).map(|k| 2.0 * k as f64).collect();
+    let frf = AxisFrf { axis: 2, frf: freq_hz.iter().map(|f| g.frf(*f)).collect(), coherence: None };
+    dynocomp::frf::Frf { freq_hz, axes: vec![frf], cross: Vec::new() }
+}
+
+const NMP: [(f64, f64, f64); 4] =
+    [(370.78, 0.0558, 0.1157), (422.37, 0.01657, -0.1484), (3386.4, 0.0554, 0.9494), (4706.4, 0.0131, 0.0833)];
+const MP: [(f64, f64, f64); 4] =
+    [(370.78, 0.0558, -0.1157), (422.37, 0.01657, 0.1484), (3386.4, 0.0554, 0.8840), (4706.4, 0.0131, 0.0833)];
+
+fn design(modes: &[(f64, f64, f64)]) -> (PoleResidueModel, AxisDesign) {
+    let g = PoleResidueModel::from_modes(modes);
+    let f = frf_of(modes);
+    let (freq_hz, frf) = (&f.freq_hz, &f.axes[0]);
+    let opts = DesignOptions { fs_hz: FS, lag: 4, ..Default::default() };
+    let d = design_axis(freq_hz, frf, 0.01, &opts).unwrap();
+    (g, d)
+}
+
+/// RMS of (box output − the sine delayed by the latency) and of (raw − sine)
+/// over the last second of two seconds of a unit sine at `f` through `g`.
+fn errors_at(g: &PoleResidueModel, d: &AxisDesign, f: f64) -> (f64, f64) {
+    let gf = g.frf(f);
+    let n = 2 * FS as usize;
+    let mut st = dynocomp_core::kernel::AxisState::default();
+    let (mut comp, mut raw, mut count) = (0.0, 0.0, 0.0);
+    for k in 0..n {
+        let t = k as f64 / FS;
+        let force = (TAU * f * t).sin();
+        let measured = gf.norm() * (TAU * f * t + gf.arg()).sin();
+        let out = f64::from(d.filter.step(&mut st, measured as f32));
+        if k >= n / 2 {
+            let delayed = (TAU * f * (t - d.kalman.lag as f64 / FS)).sin();
+            comp += (out - delayed).powi(2);
+            raw += (measured - force).powi(2);
+            count += 1.0;
+        }
+    }
+    ((comp / count).sqrt(), (raw / count).sqrt())
+}
+
+#[test]
+fn a_non_minimum_phase_zero_is_warned_and_the_box_is_worse_than_raw_there() {
+    let (g, d) = design(&[
+        (370.78, 0.0558, 0.1157),
+        (422.37, 0.01657, -0.1484),
+        (3386.4, 0.0554, 0.9494),
+        (4706.4, 0.0131, 0.0833),
+    ]);
+    let z: Vec<_> = dynocomp::design::phase_limit::zeros(&d.model).iter().map(|z| (z.re / TAU, z.im / TAU)).collect();
+    eprintln!("d {} order {} band {:?} zeros {z:?}", d.model.d, d.model.order(), d.compensated_band_hz);
+    assert_eq!(d.phase_limits.len(), 1, "{:?}", d.phase_limits);
+    let p = &d.phase_limits[0];
+    assert!((p.zero_hz.0 - 392.0).abs() < 3.0 && (p.zero_hz.1 - 12.3).abs() < 1.5, "{p:?}");
+    assert!(p.worse_hz.0 < 392.0 && p.worse_hz.1 > 392.0 && p.errors.0 > p.errors.1, "{p:?}");
+    let (comp, raw) = errors_at(&g, &d, 392.0);
+    eprintln!("392 Hz: box error {comp:.3}, raw {raw:.3} (RMS of a unit sine's 0.707)");
+    assert!(comp > raw, "the box is not worse than raw at the zero: {comp} vs {raw}");
+    let note = dynocomp::design::phase_limit::note("z", p, 4, FS);
+    assert!(note.contains("non-minimum-phase zero at 392 Hz") && note.contains("compensate --offline"), "{note}");
+
+    // Control: the machine modes' residues swapped, zeros minimum phase.
+    let (g, d) = design(&[
+        (370.78, 0.0558, -0.1157),
+        (422.37, 0.01657, 0.1484),
+        (3386.4, 0.0554, 0.8840),
+        (4706.4, 0.0131, 0.0833),
+    ]);
+    assert!(d.phase_limits.is_empty(), "{:?}", d.phase_limits);
+    let (comp, raw) = errors_at(&g, &d, 392.0);
+    eprintln!("control, 392 Hz: box error {comp:.3}, raw {raw:.3}");
+    assert!(comp < raw, "control: the box does not beat raw at 392 Hz: {comp} vs {raw}");
+}
+
+/// Through the binary: `design` prints the warning in its summary and
+/// `--json` carries the zero; control: the minimum-phase set-up has neither.
+#[test]
+fn design_warns_of_the_zero_in_its_summary_and_json() {
+    let dir = cli_common::tmp("phase-limit", "cli");
+    std::fs::create_dir_all(&dir).unwrap();
+    for (name, modes, warned) in [("nmp", &NMP, true), ("mp", &MP, false)] {
+        let frf = dir.join(format!("{name}.csv"));
+        dynocomp::io::frf_csv::write_frf_csv(&frf, &frf_of(modes)).unwrap();
+        let img = dir.join(format!("{name}.dcimg"));
+        let run = |json: bool| {
+            let mut a = vec![
+                "design",
+                "--frf",
+                frf.to_str().unwrap(),
+                "--fs",
+                "25600",
+                "--noise-variance",
+                "0.01",
+                "--latency",
+                "4",
+            ];
+            a.extend(["--out", img.to_str().unwrap()]);
+            if json {
+                a.push("--json");
+            }
+            let (ok, out, err) = cli_common::dynocomp(&a);
+            assert!(ok, "{name}: {err}");
+            out
+        };
+        let out = run(false);
+        assert_eq!(
+            out.contains("WARNING: axis z: the model has a non-minimum-phase zero at 392 Hz"),
+            warned,
+            "{name}: {out}"
+        );
+        let j: serde_json::Value = serde_json::from_str(&run(true)).unwrap();
+        let limits = j["axes"][0]["phase_limits"].as_array().unwrap_or_else(|| panic!("{name}: {j}"));
+        assert_eq!(limits.len(), usize::from(warned), "{name}: {limits:?}");
+    }
+}
