@@ -144,8 +144,10 @@ pub fn note(name: &str, p: &PhaseLimit, lag: usize, fs_hz: f64) -> String {
         "WARNING: axis {name}: the model has a non-minimum-phase zero at {:.0} Hz (real part +{:.1} Hz), which no causal \
          compensator inverts: from {:.0} to {:.0} Hz the box output is further from the force than the raw measurement \
          (|H·Ĝ·e^(jωL) − 1| up to {:.2} where |Ĝ − 1| is {:.2}); a cut with its force there is compensated worse than not at \
-         all. A latency of the order of 1/(2π·{:.1} Hz) = {tau_ms:.1} ms ({:.0} samples, not {lag}) would be needed; \
-         `compensate --offline` inverts it.",
+         all, and the predicted errors, for a flat force spectrum, do not show it. A latency of the order of \
+         1/(2π·{:.1} Hz) = {tau_ms:.1} ms ({:.0} samples, not {lag}) would be needed. `--force-prior spectrum \
+         --force-record REC` (a representative cut) predicts for the cut's own spectrum, and refuses where compensation \
+         does not pay; `compensate --offline` inverts the zero.",
         p.zero_hz.0,
         p.zero_hz.1,
         p.worse_hz.0,
