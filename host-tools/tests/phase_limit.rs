@@ -131,6 +131,33 @@ fn design_warns_of_the_zero_in_its_summary_and_json() {
             warned,
             "{name}: {out}"
         );
+        // The report's compensated-response figure shades the lines and says why.
+        let rep = dir.join(format!("{name}_report"));
+        let (f, o, r) = (frf.to_str().unwrap(), img.to_str().unwrap(), rep.to_str().unwrap());
+        let (ok, _, err) = cli_common::dynocomp(&[
+            "design",
+            "--frf",
+            f,
+            "--fs",
+            "25600",
+            "--noise-variance",
+            "0.01",
+            "--latency",
+            "4",
+            "--out",
+            o,
+            "--report",
+            r,
+        ]);
+        assert!(ok, "{name}: {err}");
+        let svg = std::fs::read_to_string(rep.join("z_compensated.svg")).unwrap();
+        let index = std::fs::read_to_string(rep.join("index.html")).unwrap();
+        assert_eq!(svg.contains("box worse than raw: non-minimum-phase zero at 392 Hz"), warned, "{name}: figure");
+        assert_eq!(
+            index.contains("where the box output is further from the force than the raw"),
+            warned,
+            "{name}: caption"
+        );
         let j: serde_json::Value = serde_json::from_str(&run(true)).unwrap();
         let limits = j["axes"][0]["phase_limits"].as_array().unwrap_or_else(|| panic!("{name}: {j}"));
         assert_eq!(limits.len(), usize::from(warned), "{name}: {limits:?}");

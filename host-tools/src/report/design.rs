@@ -31,6 +31,8 @@ const C_COH: RGBColor = RGBColor(44, 140, 44);
 const C_TOL: RGBColor = RGBColor(230, 120, 0);
 const C_COH_BAND: RGBColor = RGBColor(150, 150, 150);
 const C_FLAT_BAND: RGBColor = RGBColor(44, 160, 44);
+/// Lines where the box output is worse than raw (a non-minimum-phase zero).
+const C_WORSE: RGBColor = RGBColor(214, 39, 40);
 /// A further model drawn for reference (dashed), e.g. an interpolated state.
 const C_REFERENCE: RGBColor = RGBColor(40, 40, 40);
 /// Returns the paths written, `index.html` last.
@@ -525,11 +527,20 @@ fn compensated_caption(d: &AxisDesign, flat: Option<(f64, f64)>) -> String {
          the bottom) and dashed green edges: the flat band of the measured G, the longest run of coherent lines on \
          which the measured |H·G| stays within ±5 % and its phase within ±5° ({}); orange ticks beside the bar: the \
          coherent lines on which it does not. The summary's flat band, where \
-         |H·Ĝ| with the fitted model Ĝ stays within them from the band's bottom up, is {}.{differ}",
+         |H·Ĝ| with the fitted model Ĝ stays within them from the band's bottom up, is {}.{differ}{}",
         d.kalman.lag,
         describe_band(Some(d.coherent_band_hz)),
         describe_band(flat),
-        describe_band(model_flat)
+        describe_band(model_flat),
+        d.phase_limits
+            .iter()
+            .map(|p| format!(
+                " Red: {:.0}–{:.0} Hz, where the box output is further from the force than the raw measurement: the model \
+                 has a non-minimum-phase zero at {:.0} Hz (real part +{:.1} Hz), whose phase no causal compensator corrects \
+                 (the summary's WARNING).",
+                p.worse_hz.0, p.worse_hz.1, p.zero_hz.0, p.zero_hz.1
+            ))
+            .collect::<String>()
     )
 }
 
@@ -654,14 +665,36 @@ fn flat_band_marks(c: &mut Chart<'_>, s: &CompensatedSeries, yr: (f64, f64), lab
     bottom_ticks(c, &s.off, yr, C_TOL, ticks)
 }
 
+/// Shade, over the chart's height, the lines around each non-minimum-phase
+/// zero of `d`'s model where the box output is further from the force than
+/// the raw measurement ([`crate::design::phase_limit`]); the legend entries
+/// (one per zero) with `labels`. Returns them.
+fn phase_limit_marks(
+    c: &mut Chart<'_>,
+    d: &AxisDesign,
+    xr: (f64, f64),
+    yr: (f64, f64),
+    labels: bool,
+) -> Result<Vec<String>> {
+    let mut out = Vec::new();
+    for p in &d.phase_limits {
+        let label = format!("box worse than raw: non-minimum-phase zero at {:.0} Hz", p.zero_hz.0);
+        shade(c, p.worse_hz, xr, yr, C_WORSE, 0.3, if labels { &label } else { "" })?;
+        out.push(label);
+    }
+    Ok(out)
+}
+
 /// The overview of [`plot_compensated`]: |G| and |H·G| in dB.
 fn compensated_overview(area: &Area<'_>, s: &CompensatedSeries, d: &AxisDesign) -> Result<()> {
     let panel = Panel::new("Magnitude, overview", "Magnitude (dB)", s.yr_db, true);
     let mut c = panel.chart(area, s.xr, d, &|v| format!("{v:.0}"), 7)?;
+    let worse = phase_limit_marks(&mut c, d, s.xr, s.yr_db, true)?;
     flat_band_marks(&mut c, s, s.yr_db, true)?;
     draw_line(&mut c, &s.mag_g_db, s.yr_db, f64::INFINITY, C_RAW, 2, false, "uncompensated |G|")?;
     draw_line(&mut c, &s.mag_hg_db, s.yr_db, f64::INFINITY, C_MEASURED, 1, false, "compensated |H·G|")?;
     let mut labels = band_labels(d, true);
+    labels.extend(worse.iter().map(|l| l.as_str()));
     labels.extend(["flat band, measured G (±5 %, ±5°)", "coherent lines off the tolerances (measured)"]);
     labels.extend(["uncompensated |G|", "compensated |H·G|"]);
     legend_off_data(&mut c, SeriesLabelPosition::UpperLeft, &labels, &[&s.mag_g_db, &s.mag_hg_db])
@@ -684,6 +717,7 @@ impl Zoom<'_> {
     fn draw(&self, area: &Area<'_>, s: &CompensatedSeries, d: &AxisDesign) -> Result<()> {
         let yr = self.panel.yr;
         let mut c = self.panel.chart(area, s.xr, d, self.yfmt, 9)?;
+        phase_limit_marks(&mut c, d, s.xr, yr, false)?;
         flat_band_marks(&mut c, s, yr, false)?;
         let ((hi, lo), label) = self.tolerance;
         let tol = |y: f64| vec![(s.xr.0, y), (s.xr.1, y)];
