@@ -105,51 +105,24 @@ fn design_warns_of_the_zero_in_its_summary_and_json() {
         let frf = dir.join(format!("{name}.csv"));
         dynocomp::io::frf_csv::write_frf_csv(&frf, &frf_of(modes)).unwrap();
         let img = dir.join(format!("{name}.dcimg"));
-        let run = |json: bool| {
-            let mut a = vec![
-                "design",
-                "--frf",
-                frf.to_str().unwrap(),
-                "--fs",
-                "25600",
-                "--noise-variance",
-                "0.01",
-                "--latency",
-                "4",
-            ];
-            a.extend(["--out", img.to_str().unwrap()]);
-            if json {
-                a.push("--json");
-            }
+        let rep = dir.join(format!("{name}_report"));
+        let run = |extra: &[&str]| {
+            let (f, o) = (frf.to_str().unwrap(), img.to_str().unwrap());
+            let mut a = vec!["design", "--frf", f, "--fs", "25600", "--noise-variance", "0.01", "--latency", "4"];
+            a.extend(["--out", o]);
+            a.extend(extra);
             let (ok, out, err) = cli_common::dynocomp(&a);
             assert!(ok, "{name}: {err}");
             out
         };
-        let out = run(false);
+        // The summary, and the report's compensated-response figure, which
+        // shades the lines and says why.
+        let out = run(&["--report", rep.to_str().unwrap()]);
         assert_eq!(
             out.contains("WARNING: axis z: the model has a non-minimum-phase zero at 392 Hz"),
             warned,
             "{name}: {out}"
         );
-        // The report's compensated-response figure shades the lines and says why.
-        let rep = dir.join(format!("{name}_report"));
-        let (f, o, r) = (frf.to_str().unwrap(), img.to_str().unwrap(), rep.to_str().unwrap());
-        let (ok, _, err) = cli_common::dynocomp(&[
-            "design",
-            "--frf",
-            f,
-            "--fs",
-            "25600",
-            "--noise-variance",
-            "0.01",
-            "--latency",
-            "4",
-            "--out",
-            o,
-            "--report",
-            r,
-        ]);
-        assert!(ok, "{name}: {err}");
         let svg = std::fs::read_to_string(rep.join("z_compensated.svg")).unwrap();
         let index = std::fs::read_to_string(rep.join("index.html")).unwrap();
         assert_eq!(svg.contains("box worse than raw: non-minimum-phase zero at 392 Hz"), warned, "{name}: figure");
@@ -158,7 +131,7 @@ fn design_warns_of_the_zero_in_its_summary_and_json() {
             warned,
             "{name}: caption"
         );
-        let j: serde_json::Value = serde_json::from_str(&run(true)).unwrap();
+        let j: serde_json::Value = serde_json::from_str(&run(&["--json"])).unwrap();
         let limits = j["axes"][0]["phase_limits"].as_array().unwrap_or_else(|| panic!("{name}: {j}"));
         assert_eq!(limits.len(), usize::from(warned), "{name}: {limits:?}");
     }
