@@ -110,10 +110,10 @@ fn design_axes(args: &DesignArgs, s: &DesignSetup) -> Result<Designed> {
             // methods and priors keep their refusals (their messages say what
             // to drop), and so does `--strict`.
             Err(e) if args.strict || compensated == 0 || !default_design(args, s) => {
-                return Err(e.context(format!("{}", args.input.frf().display())));
+                return Err(e.context(format!("{}: no image written", args.input.frf().display())));
             }
             Err(e) => {
-                let reason = format!("{e:#}").replace("; no image written", "");
+                let reason = format!("{e:#}");
                 eprintln!(
                     "WARNING: axis {} is NOT COMPENSATED: passed through raw (delayed by {latency} samples): {reason} \
                      (--strict refuses the image instead)",

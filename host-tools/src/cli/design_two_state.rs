@@ -135,9 +135,11 @@ fn design_ranges(
         let name = axis_name(a.axis);
         let outcome = match res {
             Ok(o) => o,
-            Err(e) if args.strict || compensated == 0 => return Err(e.context(format!("{p0}: axis {name}"))),
+            Err(e) if args.strict || compensated == 0 => {
+                return Err(e.context(format!("{p0}: axis {name}: no image written")))
+            }
             Err(e) => {
-                let reason = format!("first FRF {p0}: {e:#}").replace("; no image written", "");
+                let reason = format!("first FRF {p0}: {e:#}");
                 eprintln!(
                     "WARNING: axis {name} is NOT COMPENSATED: passed through raw (delayed by {} samples): {reason} \
                      (--strict refuses the image instead)",
@@ -151,7 +153,7 @@ fn design_ranges(
         };
         if let RangeOutcome::Held(h) = &outcome {
             if args.strict {
-                bail!("{p0} / {p1}: axis {name}: {}", h.why);
+                bail!("{p0} / {p1}: axis {name}: no image written: {}", h.why);
             }
             eprintln!(
                 "WARNING: axis {name} does NOT FOLLOW the change between the two FRFs: {}; the image and \

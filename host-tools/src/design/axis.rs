@@ -593,7 +593,7 @@ fn check_static(name: &str, freq_hz: &[f64], f_coherent: f64, opts: &DesignOptio
             None => "check the FRF's first lines (coherence near 0 Hz, units N/N) or raise --max-order",
         };
         bail!(
-            "axis {name}: the fitted model is not flat below the FRF's first coherent line ({f_first:.1} Hz): from an eighth of that down to 0 Hz it moves {:.1} % from its value there by {:.2} Hz (limit {:.0} %); no line constrains it there, and the compensated mean force would drift; no image written; {next}",
+            "axis {name}: the fitted model is not flat below the FRF's first coherent line ({f_first:.1} Hz): from an eighth of that down to 0 Hz it moves {:.1} % from its value there by {:.2} Hz (limit {:.0} %); no line constrains it there, and the compensated mean force would drift; {next}",
             100.0 * worst.0,
             worst.1,
             100.0 * MAX_STATIC_ERROR
@@ -682,7 +682,7 @@ pub fn prepare_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions
             None => "check the FRF (coherence, resolution, units N/N), raise --max-order, or narrow the compensated band with --band",
         };
         bail!(
-            "axis {name}: the fitted model is {:.1} % (relative RMS) from the measured FRF on its coherent lines in the band, above the limit of {:.0} %; no image written; {next}",
+            "axis {name}: the fitted model is {:.1} % (relative RMS) from the measured FRF on its coherent lines in the band, above the limit of {:.0} %; {next}",
             100.0 * fit_nrmse,
             100.0 * MAX_FIT_ERROR
         );
@@ -964,7 +964,7 @@ impl PreparedAxis {
             )
         };
         bail!(
-            "axis {name}: the compensator {why}: predicted in-band error {:.2} % against {:.2} % uncompensated (fit error {:.2} %); no image written; {next}",
+            "axis {name}: the compensator {why}: predicted in-band error {:.2} % against {:.2} % uncompensated (fit error {:.2} %); {next}",
             100.0 * j.sqrt(),
             100.0 * raw_j.sqrt(),
             100.0 * self.fit_nrmse
