@@ -142,3 +142,48 @@ fn drift_seed_23_fits_the_second_state_with_the_first_states_machine_poles() {
     let d = drift_case(23, ("machine-cluster", 10_240.0, 0.5));
     followed(&d, &[0, 1]);
 }
+
+/// The sweep's seed 92 (clustered machine modes, 25.6 kHz, 1 Hz lines):
+/// axis x's machine modes put a zero pair of Ĝ at 725 Hz in the right
+/// half-plane. No causal compensator inverts it, and the box output on the
+/// simulated cut is further from the true force than the raw measurement
+/// (163 % against 118 % when this was written). The design says so
+/// (`design::phase_limit`). `compensate --offline`, the zero-phase smoother
+/// on the same design, is not bound by causality: measured against the
+/// truth it is under a quarter of raw and of the box (16 % when this was
+/// written; the floor is 0.29 %, which it does not reach either). Control: y and z of the same set-up have no such
+/// zero, are not warned, and their box output is far better than raw.
+#[test]
+fn seed_92_x_has_a_non_minimum_phase_zero_that_is_named_and_inverted_offline() {
+    use dynocomp::design::axis::design_axis;
+    use dynocomp::metrics::{accuracy, sample_variance};
+    use dynocomp::offline::smoother::Smoother;
+    let (case, fs, kind) = draw(92);
+    assert_eq!((kind, fs, case.frf_df_hz), ("machine-cluster", 25_600.0, 1.0), "the sweep's seed 92 changed");
+    let params = case.sim_params(fs);
+    let s = simulate_with(case.seed, &params, case.dynamometer(&params).unwrap()).unwrap();
+    let res = score_sim(case.name, &s, &RunOptions::default());
+    for a in &res.axes {
+        let e = a.comp_nrmse.clone().unwrap_or_else(|why| panic!("axis {} refused: {why}", a.axis));
+        eprintln!("axis {}: box {:.3} %, raw {:.3} %, {:?}", a.axis, 100.0 * e, 100.0 * a.raw_nrmse, a.phase_limits);
+        if a.axis == 0 {
+            assert_eq!(a.phase_limits.len(), 1, "{:?}", a.phase_limits);
+            let z = &a.phase_limits[0];
+            assert!((z.zero_hz.0 - 725.0).abs() < 15.0 && z.zero_hz.1 > 0.0, "{z:?}");
+            assert!(e > a.raw_nrmse, "x: the warned limit is not seen on the record: {e} against {}", a.raw_nrmse);
+        } else {
+            assert!(a.phase_limits.is_empty() && e < 0.1 * a.raw_nrmse, "control axis {}: {e}", a.axis);
+        }
+    }
+    // The zero-phase smoother of `compensate --offline` on x's design at
+    // the image's latency, scored against the truth.
+    let x = s.frf.axis(0).unwrap();
+    let opts = dynocomp::eval::rates::design_options(fs, &RunOptions { lag: Some(res.latency), ..Default::default() });
+    let d = design_axis(&s.frf.freq_hz, x, sample_variance(&s.idle[0]), &opts).unwrap();
+    let (dm, _) = d.discrete.as_ref().unwrap();
+    let smoothed = Smoother::shaped(dm, d.kalman.q, d.kalman.r, d.kalman.force_shape).unwrap().smooth(&s.measured[0]);
+    let offline = accuracy(&smoothed, &s.truth[0], fs, res.band_hz).nrmse;
+    eprintln!("x: compensate --offline {:.3} % (raw {:.3} %)", 100.0 * offline, 100.0 * res.axes[0].raw_nrmse);
+    let (raw, on_box) = (res.axes[0].raw_nrmse, res.axes[0].comp_nrmse.clone().unwrap());
+    assert!(offline < 0.25 * raw && offline < 0.25 * on_box, "x offline: {offline}");
+}

@@ -5,7 +5,7 @@
 //! reflects the zero to −σ + jω), and within a latency much shorter than
 //! 1/σ the compensated system H·Ĝ is off the delay e^{−jωL/fs} by up to 2
 //! near ω, where the raw measurement is off 1 by |Ĝ − 1|. The zero-phase
-//! smoother of `compensate --offline` has no such limit.
+//! smoother of `compensate --offline` is not bound by causality.
 
 use num_complex::Complex64;
 use std::f64::consts::TAU;
@@ -147,7 +147,7 @@ pub fn note(name: &str, p: &PhaseLimit, lag: usize, fs_hz: f64) -> String {
          all, and the predicted errors, for a flat force spectrum, do not show it. A latency of the order of \
          1/(2π·{:.1} Hz) = {tau_ms:.1} ms ({:.0} samples, not {lag}) would be needed. `--force-prior spectrum \
          --force-record REC` (a representative cut) predicts for the cut's own spectrum, and refuses where compensation \
-         does not pay; `compensate --offline` inverts the zero.",
+         does not pay; `compensate --offline`, not bound by causality, does much better there.",
         p.zero_hz.0,
         p.zero_hz.1,
         p.worse_hz.0,
