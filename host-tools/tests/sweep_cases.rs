@@ -12,7 +12,7 @@ use dynocomp::eval::drift_sweep::{draw_drift, run_drift_case, DriftDesigned};
 use dynocomp::eval::rates::{score_sim, RunOptions};
 use dynocomp::eval::sweep::draw;
 use dynocomp::fit::vf::{coherence_weights, vector_fit};
-use dynocomp::simulate::simulate_with;
+use dynocomp::simulate::{simulate_with, SimOutput};
 use num_complex::Complex64;
 
 /// Largest relative move of `g` from its value at `f_first` between
@@ -22,12 +22,18 @@ fn move_below(g: impl Fn(f64) -> Complex64, f_first: f64) -> f64 {
     (0..=200).map(|i| f_first / 8.0 * i as f64 / 200.0).map(|f| (g(f) - g0).norm() / g0.norm()).fold(0.0, f64::max)
 }
 
+/// The sweep's set-up `seed` simulated, checked to be the one drawn when
+/// the test was written (kind, rate, line spacing).
+fn simulated(seed: u64, drawn: (&str, f64, f64)) -> (&'static str, f64, SimOutput) {
+    let (case, fs, kind) = draw(seed);
+    assert_eq!((kind, fs, case.frf_df_hz), drawn, "the sweep's seed {seed} changed");
+    let params = case.sim_params(fs);
+    (case.name, fs, simulate_with(case.seed, &params, case.dynamometer(&params).unwrap()).unwrap())
+}
+
 #[test]
 fn seed_32_x_gets_a_model_flat_below_its_first_coherent_line() {
-    let (case, fs, kind) = draw(32);
-    assert_eq!((kind, fs, case.frf_df_hz), ("default", 25_600.0, 0.5), "the sweep's seed 32 changed");
-    let params = case.sim_params(fs);
-    let s = simulate_with(case.seed, &params, case.dynamometer(&params).unwrap()).unwrap();
+    let (name, _, s) = simulated(32, ("default", 25_600.0, 0.5));
     let x = s.frf.axis(0).unwrap();
     // Control: the fit's own choice of order bends below the first coherent line.
     let coh = x.coherence.as_deref();
@@ -38,7 +44,7 @@ fn seed_32_x_gets_a_model_flat_below_its_first_coherent_line() {
     eprintln!("first coherent line {first} Hz; the fit's own order moves {:.1} % below it", 100.0 * bend);
     assert!(bend > 0.05, "control: the unconstrained choice should bend below {first} Hz, moved {bend}");
     // The design: compensated, better than raw, within 4x of the exact inverse's floor.
-    let res = score_sim(case.name, &s, &RunOptions::default());
+    let res = score_sim(name, &s, &RunOptions::default());
     let a = &res.axes[0];
     let e = a.comp_nrmse.clone().unwrap_or_else(|why| panic!("axis x refused: {why}"));
     eprintln!("x: {:.3} % (raw {:.3} %, floor {:.3} %)", 100.0 * e, 100.0 * a.raw_nrmse, 100.0 * a.noise_floor);
@@ -158,11 +164,8 @@ fn seed_92_x_has_a_non_minimum_phase_zero_that_is_named_and_inverted_offline() {
     use dynocomp::design::axis::design_axis;
     use dynocomp::metrics::{accuracy, sample_variance};
     use dynocomp::offline::smoother::Smoother;
-    let (case, fs, kind) = draw(92);
-    assert_eq!((kind, fs, case.frf_df_hz), ("machine-cluster", 25_600.0, 1.0), "the sweep's seed 92 changed");
-    let params = case.sim_params(fs);
-    let s = simulate_with(case.seed, &params, case.dynamometer(&params).unwrap()).unwrap();
-    let res = score_sim(case.name, &s, &RunOptions::default());
+    let (name, fs, s) = simulated(92, ("machine-cluster", 25_600.0, 1.0));
+    let res = score_sim(name, &s, &RunOptions::default());
     for a in &res.axes {
         let e = a.comp_nrmse.clone().unwrap_or_else(|why| panic!("axis {} refused: {why}", a.axis));
         eprintln!("axis {}: box {:.3} %, raw {:.3} %, {:?}", a.axis, 100.0 * e, 100.0 * a.raw_nrmse, a.phase_limits);
