@@ -325,8 +325,14 @@ fn an_axis_whose_states_cannot_be_paired_holds_the_first_state() {
     let (ok, _, err) = design("strict.dcimg", &["--strict"]);
     assert!(!ok && err.contains("axis z") && err.contains("no partner"), "{err}");
     assert!(!dir.join("strict.dcimg").exists(), "--strict left an image");
-    let (ok, out, err) = design("held.dcimg", &[]);
+    let rep = d("held_report");
+    let (ok, out, err) = design("held.dcimg", &["--report", &rep]);
     assert!(ok, "{err}");
+    // The report draws both FRFs against the held model for z, the range for x.
+    let held = std::fs::read_to_string(dir.join("held_report/z_held.svg")).unwrap();
+    assert!(held.contains("NOT FOLLOWED"), "z_held.svg");
+    assert!(dir.join("held_report/x_range.svg").exists() && !dir.join("held_report/x_held.svg").exists());
+    assert!(!dir.join("held_report/z_range.svg").exists(), "z has no range design to draw");
     assert!(err.contains("WARNING: axis z does NOT FOLLOW") && err.contains("no partner"), "{err}");
     assert!(!err.contains("axis x does NOT") && !err.contains("axis y does NOT"), "{err}");
     assert!(out.contains("z two states: NOT FOLLOWED") && out.contains("x two states: modes paired"), "{out}");

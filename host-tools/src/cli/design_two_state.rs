@@ -14,7 +14,7 @@ use crate::cli::design_args::{DesignArgs, Method};
 use crate::design::axis::{AxisDesign, DesignOptions};
 use crate::design::image::build_image;
 use crate::design::sensitivity::Sensitivity;
-use crate::design::two_state::range::{design_axes_over_range, RangeDesign, RangeOutcome, RANGE_STATES};
+use crate::design::two_state::range::{design_axes_over_range, RangeOutcome, RANGE_STATES};
 use crate::frf::{axis_name, Frf};
 use crate::io;
 use crate::offline::sidecar::TwoStateJson;
@@ -101,13 +101,6 @@ struct RangeAxis {
     design: AxisDesign,
     /// Both states, for `compensate --offline --drift` (designed axes only).
     sidecar: Option<TwoStateJson>,
-}
-
-impl RangeAxis {
-    /// The range design, if the axis has one.
-    fn range(&self) -> Option<&RangeDesign> {
-        self.outcome.as_ref().and_then(RangeOutcome::range)
-    }
 }
 
 /// Every axis designed for the range between the two states. An axis whose
@@ -232,12 +225,22 @@ fn render(
     );
     if let Some(dir) = &args.report {
         let extra = |axis: usize| -> Result<Vec<crate::report::design::Plot>> {
-            let Some(rd) = axes.iter().find(|a| a.axis == axis).and_then(RangeAxis::range) else {
-                return Ok(Vec::new());
-            };
             let name = axis_name(axis);
             let (Some(first), Some(second)) = (frfs.before.axis(axis), frfs.after.axis(axis)) else {
                 bail!("report: axis {name}: missing from one of the two FRFs")
+            };
+            let rd = match axes.iter().find(|a| a.axis == axis).and_then(|a| a.outcome.as_ref()) {
+                Some(RangeOutcome::Range(rd)) => rd,
+                Some(RangeOutcome::Held(h)) => {
+                    return Ok(vec![(
+                        format!("{name}_held.svg"),
+                        format!("Axis {name}: NOT FOLLOWED, both measured FRFs against the first FRF's model"),
+                        crate::report::two_state::held_frfs_caption(h),
+                        crate::report::two_state::plot_held_frfs(&frfs.before.freq_hz, first, second, h)
+                            .with_context(|| format!("report: axis {name}: held FRF plot"))?,
+                    )])
+                }
+                None => return Ok(Vec::new()),
             };
             let fits = crate::report::two_state::plot_frf_fits(&frfs.before.freq_hz, first, second, rd)
                 .with_context(|| format!("report: axis {name}: FRF plot"))?;

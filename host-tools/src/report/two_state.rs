@@ -355,6 +355,55 @@ pub fn plot_frf_fits(freq: &[f64], first: &AxisFrf, second: &AxisFrf, rd: &Range
     crate::report::design::plot_frf_fits(freq, &fits, Some((&reference, &label)), d, &title)
 }
 
+/// An axis holding the first FRF's design over the range ([`HeldDesign`]):
+/// both measured FRFs against the first FRF's model, the one the image and
+/// `compensate --offline --drift` use at every state.
+pub fn plot_held_frfs(freq: &[f64], first: &AxisFrf, second: &AxisFrf, h: &HeldDesign) -> Result<String> {
+    use crate::report::design::FitPair;
+    let d = &h.design;
+    let band = d.coherent_band_hz;
+    let model: Vec<_> = freq.iter().map(|f| d.model.frf(*f)).collect();
+    let (e0, e1) = (misfit(freq, &d.model, first, band), misfit(freq, &d.model, second, band));
+    let fits = [
+        FitPair {
+            meas: first,
+            model: model.clone(),
+            measured: "measured G, first FRF".into(),
+            fitted: "the first FRF's model (held)".into(),
+            colors: (plotters::style::RGBColor(31, 119, 180), plotters::style::RGBColor(214, 39, 40)),
+        },
+        FitPair {
+            meas: second,
+            model,
+            measured: "measured G, second FRF".into(),
+            fitted: "the same model".into(),
+            colors: C_SECOND,
+        },
+    ];
+    let title = format!(
+        "Axis {} — NOT FOLLOWED: both measured FRFs against the first FRF's model, held over the range \
+         (misfit {:.2} % / {:.2} % in the coherent band)",
+        axis_name(first.axis),
+        100.0 * e0,
+        100.0 * e1
+    );
+    crate::report::design::plot_frf_fits(freq, &fits, None, d, &title)
+}
+
+/// Caption of [`plot_held_frfs`].
+pub fn held_frfs_caption(h: &HeldDesign) -> String {
+    format!(
+        "Magnitude and phase of both measured FRFs (impact tests) against the first FRF's fitted model, which the box \
+         image and `compensate --offline --drift` hold at every state: the two states could not be paired ({}). \
+         Where the second FRF (violet) leaves the model, a cut in the second state is compensated with the first \
+         state's model: predicted error {:.2} % on the first FRF, {:.2} % on the second. Below: each FRF's residual \
+         against the model and both coherences. Shaded: the coherent band used for the design.",
+        h.why,
+        100.0 * h.measured.0,
+        100.0 * h.measured.1
+    )
+}
+
 /// Caption of [`plot_frf_fits`].
 pub fn frf_fits_caption(rd: &RangeDesign) -> String {
     let s = rd.candidates[rd.best].s;
