@@ -113,6 +113,12 @@ fn design_warns_of_the_zero_in_its_summary_and_json() {
             a.extend(extra);
             let (ok, out, err) = cli_common::dynocomp(&a);
             assert!(ok, "{name}: {err}");
+            // On stderr too, where a user of --json looks.
+            assert_eq!(
+                err.contains("WARNING: axis z: the model has a non-minimum-phase zero"),
+                warned,
+                "{name}: {err}"
+            );
             out
         };
         // The summary, and the report's compensated-response figure, which

@@ -132,6 +132,9 @@ fn design_axes(args: &DesignArgs, s: &DesignSetup) -> Result<Designed> {
                 dt * 1e3
             );
         }
+        for p in &d.phase_limits {
+            eprintln!("{}", crate::design::phase_limit::note(axis_name(a.axis), p, latency, s.opts.fs_hz));
+        }
         times.push(dt);
         designs.push(d);
     }

@@ -155,6 +155,9 @@ fn design_ranges(
             );
         }
         let design = outcome.chosen().clone();
+        for p in &design.phase_limits {
+            eprintln!("{}", crate::design::phase_limit::note(name, p, opts.lag, opts.fs_hz));
+        }
         let sidecar = match outcome.range() {
             Some(range) => {
                 let first = &range.candidates[0].design;
