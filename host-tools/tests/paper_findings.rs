@@ -74,7 +74,7 @@ fn design(s: &SimOutput, axis: usize, method: FitMethod, bands: Vec<Band>) -> an
 }
 
 fn coherent(s: &SimOutput, axis: usize) -> (f64, f64) {
-    coherent_band(&s.frf.freq_hz, s.frf.axis(axis).unwrap().coherence.as_deref(), 0.9)
+    coherent_band(&s.frf.freq_hz, s.frf.axis(axis).unwrap(), 0.9)
 }
 
 #[test]

@@ -223,42 +223,78 @@ impl AxisDesign {
     }
 }
 
-/// The coherent band: from the first to the last line of the longest run of
-/// lines whose coherence (median over ±5 lines) is at least `threshold`.
-/// Without coherence, the whole measured band.
-pub fn coherent_band(freq_hz: &[f64], coherence: Option<&[f64]>, threshold: f64) -> (f64, f64) {
+/// The coherent band of `frf`: from the first to the last line of the
+/// longest run of lines whose coherence (median over ±5 lines) is at least
+/// `threshold`, two runs counted as one across an anti-resonance: a gap no
+/// wider than [`ANTI_RESONANCE_GAP`] of the frequency where it starts, over
+/// which the median |G| is under [`ANTI_RESONANCE_DIP`] of the median over
+/// the lines within the same relative width on either side. There the coherence dips because |G|
+/// does, and the fit weighs those lines by their coherence; a gap where |G|
+/// does not dip (the hammer's spectrum running out, a noisy patch) still
+/// ends the band. Without coherence, the whole measured band.
+pub fn coherent_band(freq_hz: &[f64], frf: &AxisFrf, threshold: f64) -> (f64, f64) {
     let n = freq_hz.len();
-    let Some(c) = coherence else {
+    let Some(c) = frf.coherence.as_deref() else {
         return (freq_hz[0], freq_hz[n - 1]);
     };
-    let ok: Vec<bool> = (0..n)
-        .map(|i| {
-            let lo = i.saturating_sub(5);
-            let hi = (i + 6).min(n);
-            let mut w: Vec<f64> = c[lo..hi].to_vec();
-            w.sort_by(f64::total_cmp);
-            w[w.len() / 2] >= threshold
-        })
-        .collect();
-    let (mut best, mut start) = ((0, 0), None);
+    let median = |mut w: Vec<f64>| {
+        w.sort_by(f64::total_cmp);
+        w.get(w.len() / 2).copied().unwrap_or(f64::NAN)
+    };
+    let ok: Vec<bool> = (0..n).map(|i| median(c[i.saturating_sub(5)..(i + 6).min(n)].to_vec()) >= threshold).collect();
+    let level = |lo: usize, hi: usize| median(frf.frf[lo..hi].iter().map(|g| g.norm()).collect());
+    // An anti-resonance between the run ending at line `e` (exclusive) and
+    // the one starting at line `s`: narrow, and |G| over the gap well under
+    // its level within the same relative width on either side.
+    let anti_resonance = |e: usize, s: usize| {
+        let (fe, fs) = (freq_hz[e - 1], freq_hz[s]);
+        let narrow = fs - fe <= ANTI_RESONANCE_GAP * fe;
+        let below = freq_hz.partition_point(|f| *f < fe * (1.0 - ANTI_RESONANCE_GAP));
+        let above = freq_hz.partition_point(|f| *f <= fs * (1.0 + ANTI_RESONANCE_GAP));
+        let edges = level(below, e).min(level(s, above));
+        narrow && level(e, s) < ANTI_RESONANCE_DIP * edges
+    };
+    // Runs of coherent lines [s, e), merged across anti-resonances; runs
+    // narrower than ISLAND_WIDTH of their frequency inside a dip are part
+    // of the gap (kept apart, as candidates of their own).
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    let mut islands: Vec<(usize, usize)> = Vec::new();
+    let mut start = None;
     for i in 0..=n {
-        let good = ok.get(i).copied().unwrap_or(false);
-        match (good, start) {
+        match (ok.get(i).copied().unwrap_or(false), start) {
             (true, None) => start = Some(i),
             (false, Some(s)) => {
-                if i - s > best.1 - best.0 {
-                    best = (s, i);
+                let island = freq_hz[i - 1] - freq_hz[s] < ISLAND_WIDTH * freq_hz[s];
+                match runs.last_mut() {
+                    Some(last) if anti_resonance(last.1, s) => last.1 = i,
+                    Some(_) if island => islands.push((s, i)),
+                    _ => runs.push((s, i)),
                 }
                 start = None;
             }
             _ => {}
         }
     }
-    if best.1 == best.0 {
+    let longest = |r: &&(usize, usize)| (r.1 - r.0, std::cmp::Reverse(r.0));
+    let Some(&best) = runs.iter().chain(&islands).max_by_key(longest) else {
         return (freq_hz[0], freq_hz[0]);
-    }
+    };
     (freq_hz[best.0], freq_hz[best.1 - 1])
 }
+
+/// Runs of coherent lines narrower than this fraction of their frequency,
+/// after a longer run, are islands in a gap ([`coherent_band`]).
+pub const ISLAND_WIDTH: f64 = 0.01;
+
+/// Median |G| over the gap, relative to the lower of the medians over the
+/// lines within [`ANTI_RESONANCE_GAP`] of its edges on either side, under
+/// which [`coherent_band`] takes a gap for an anti-resonance.
+pub const ANTI_RESONANCE_DIP: f64 = 0.5;
+
+/// Widest gap between two runs of coherent lines that [`coherent_band`]
+/// bridges, relative to the frequency where the gap starts: an
+/// anti-resonance of 5 % damping dips over about ±2ζ.
+pub const ANTI_RESONANCE_GAP: f64 = 0.1;
 
 struct Objective<'a> {
     design: &'a dyn Fn(f64) -> Result<KalmanDesign>,
@@ -431,7 +467,7 @@ struct AxisLines {
 fn axis_lines(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> Result<AxisLines> {
     let name = axis_name(frf.axis);
     let coh = frf.coherence.as_deref();
-    let band = coherent_band(freq_hz, coh, opts.coherence_threshold);
+    let band = coherent_band(freq_hz, frf, opts.coherence_threshold);
     if band.1 <= band.0 {
         bail!(
             "axis {name}: no coherent band (coherence ≥ {} nowhere); repeat the impact test",

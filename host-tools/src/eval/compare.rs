@@ -116,7 +116,7 @@ fn failed(method: &str, e: anyhow::Error, t: f64) -> CompareRow {
 
 /// Masks (coherent ∧ in band, coherent ∧ out of band) of an axis.
 fn masks(setup: &CompareSetup, a: &AxisFrf) -> (Vec<bool>, Vec<bool>, (f64, f64)) {
-    let band = coherent_band(setup.freq_hz, a.coherence.as_deref(), setup.base.coherence_threshold);
+    let band = coherent_band(setup.freq_hz, a, setup.base.coherence_threshold);
     let coherent: Vec<bool> = setup
         .freq_hz
         .iter()

@@ -369,7 +369,7 @@ fn compensated_bands(frf: &Frf, d: &DesignOptions) -> Result<[(f64, f64); 3]> {
     let f_cap = MATCH_BAND_FRACTION * d.fs_hz;
     let bands: [(f64, f64); 3] = std::array::from_fn(|i| {
         let a = frf.axis(i).expect("checked complete");
-        let b = coherent_band(&frf.freq_hz, a.coherence.as_deref(), d.coherence_threshold);
+        let b = coherent_band(&frf.freq_hz, a, d.coherence_threshold);
         (b.0, b.1.min(f_cap))
     });
     for (i, b) in bands.iter().enumerate() {
