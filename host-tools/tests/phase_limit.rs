@@ -140,5 +140,14 @@ fn design_warns_of_the_zero_in_its_summary_and_json() {
         let j: serde_json::Value = serde_json::from_str(&run(&["--json"])).unwrap();
         let limits = j["axes"][0]["phase_limits"].as_array().unwrap_or_else(|| panic!("{name}: {j}"));
         assert_eq!(limits.len(), usize::from(warned), "{name}: {limits:?}");
+        // `compensate` with the box filter says so too (the sidecar keeps it).
+        let rec = dir.join("rec.csv");
+        let rows: String = (0..2048).map(|k| format!("{}\n", (TAU * 392.0 * k as f64 / FS).sin())).collect();
+        std::fs::write(&rec, format!("fz\n{rows}")).unwrap();
+        let out = dir.join(format!("{name}_out.csv"));
+        let (c, i, o) = (img.to_str().unwrap(), rec.to_str().unwrap(), out.to_str().unwrap());
+        let (ok, _, err) = cli_common::dynocomp(&["compensate", "--coeffs", c, "--input", i, "--output", o]);
+        assert!(ok, "{name}: {err}");
+        assert_eq!(err.contains("warning: axis z: from"), warned, "{name}: {err}");
     }
 }

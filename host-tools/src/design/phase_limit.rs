@@ -79,7 +79,7 @@ pub fn zeros(model: &PoleResidueModel) -> Vec<Complex64> {
 /// A non-minimum-phase zero of the model in the compensated band, and the
 /// lines around it where the box output is further from the force than the
 /// raw measurement ([`phase_limit`]).
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PhaseLimit {
     /// The zero: frequency |Im z|/2π and real part Re z/2π (Hz, > 0).
     pub zero_hz: (f64, f64),
@@ -134,6 +134,17 @@ pub fn phase_limit(
     }
     out.sort_by(|a, b| a.zero_hz.0.total_cmp(&b.zero_hz.0));
     out
+}
+
+/// What `compensate` with the box filter says of one [`PhaseLimit`] of
+/// axis `name` (the image's sidecar keeps them).
+pub fn compensate_note(name: &str, p: &PhaseLimit) -> String {
+    format!(
+        "warning: axis {name}: from {:.0} to {:.0} Hz this image's output is further from the force than the raw \
+         measurement (a non-minimum-phase zero of the model at {:.0} Hz, which no causal filter inverts); \
+         `compensate --offline` does much better there",
+        p.worse_hz.0, p.worse_hz.1, p.zero_hz.0
+    )
 }
 
 /// The design's note on one [`PhaseLimit`] of axis `name` at latency `lag`

@@ -423,6 +423,11 @@ fn compensate_box(
     if sidecar_path(image_path).exists() {
         if let Ok(sc) = read_sidecar(image_path, image) {
             note_spectra(&sc, target.monitor);
+            for m in sc.axes.iter().filter(|m| target.axes.iter().any(|&a| axis_name(a) == m.axis)) {
+                for p in &m.phase_limits {
+                    target.monitor.note(&crate::design::phase_limit::compensate_note(&m.axis, p));
+                }
+            }
         }
     }
     let mut comp = StreamCompensator::new(image, target.axes, raw_timing, target.source)?;

@@ -85,6 +85,11 @@ pub struct AxisModelJson {
     /// smooths it with the first state's model, not following the drift.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holds_first_state: Option<String>,
+    /// Non-minimum-phase zeros of the model where the box output is worse
+    /// than raw ([`crate::design::phase_limit`]; absent where there are none
+    /// and in older sidecars): `compensate` with the box filter says so.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub phase_limits: Vec<crate::design::phase_limit::PhaseLimit>,
 }
 
 /// The sidecar's terms of a pole-residue model.
@@ -170,6 +175,7 @@ impl ModelSidecar {
                 force_shape: None,
                 passed_through_raw: None,
                 holds_first_state: None,
+                phase_limits: Vec::new(),
             })
             .collect();
         ModelSidecar {
@@ -189,6 +195,7 @@ impl ModelSidecar {
         for (m, d) in sidecar.axes.iter_mut().zip(designs) {
             m.force_shape = d.kalman.force_shape;
             m.passed_through_raw = d.pass_through.clone();
+            m.phase_limits = d.phase_limits.clone();
         }
         sidecar
     }
