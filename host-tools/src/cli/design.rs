@@ -113,14 +113,8 @@ fn design_axes(args: &DesignArgs, s: &DesignSetup) -> Result<Designed> {
                 return Err(e.context(format!("{}: no image written", args.input.frf().display())));
             }
             Err(e) => {
-                let reason = format!("{e:#}");
-                eprintln!(
-                    "WARNING: axis {} is NOT COMPENSATED: passed through raw (delayed by {latency} samples): {reason} \
-                     (--strict refuses the image instead)",
-                    axis_name(a.axis)
-                );
                 let opts = crate::design::axis::DesignOptions { lag: latency, ..s.opts.clone() };
-                crate::design::pass_through::pass_through(a, *r, &opts, reason)?
+                crate::design::pass_through::pass_through_warned(a, *r, &opts, format!("{e:#}"))?
             }
         };
         if d.pass_through.is_none() {

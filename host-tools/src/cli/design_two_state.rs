@@ -99,8 +99,6 @@ struct RangeAxis {
     outcome: Option<RangeOutcome>,
     /// The design the image carries.
     design: AxisDesign,
-    /// Both states, for `compensate --offline --drift` (designed axes only).
-    sidecar: Option<TwoStateJson>,
 }
 
 /// Every axis designed for the range between the two states. An axis whose
@@ -132,15 +130,10 @@ fn design_ranges(
                 return Err(e.context(format!("{p0}: axis {name}: no image written")))
             }
             Err(e) => {
-                let reason = format!("first FRF {p0}: {e:#}");
-                eprintln!(
-                    "WARNING: axis {name} is NOT COMPENSATED: passed through raw (delayed by {} samples): {reason} \
-                     (--strict refuses the image instead)",
-                    opts.lag
-                );
                 let rv = r[a.axis].expect("R set for every FRF axis");
-                let design = crate::design::pass_through::pass_through(a, rv, opts, reason)?;
-                axes.push(RangeAxis { axis: a.axis, outcome: None, design, sidecar: None });
+                let reason = format!("first FRF {p0}: {e:#}");
+                let design = crate::design::pass_through::pass_through_warned(a, rv, opts, reason)?;
+                axes.push(RangeAxis { axis: a.axis, outcome: None, design });
                 continue;
             }
         };
@@ -158,34 +151,29 @@ fn design_ranges(
         for p in &design.phase_limits {
             eprintln!("{}", crate::design::phase_limit::note(name, p, opts.lag, opts.fs_hz));
         }
-        let sidecar = match outcome.range() {
-            Some(range) => {
-                let first = &range.candidates[0].design;
-                let dm0 = first
-                    .discrete
-                    .as_ref()
-                    .map(|x| x.0.clone())
-                    .ok_or_else(|| anyhow::anyhow!("axis {name}: no discrete model"))?;
-                Some(TwoStateJson::new(&range.states, first.compensated_band_hz, &dm0))
-            }
-            None => None,
-        };
-        axes.push(RangeAxis { axis: a.axis, outcome: Some(outcome), design, sidecar });
+        axes.push(RangeAxis { axis: a.axis, outcome: Some(outcome), design });
     }
     Ok(axes)
 }
 
 /// Write the image and its model sidecar, with both states of every axis
-/// designed for the range, and why any other axis holds the first state.
+/// designed for the range (for `compensate --offline --drift`), and why any
+/// other axis holds the first state.
 fn write_image_and_sidecar(args: &DesignArgs, image: &CoeffImage, axes: &[RangeAxis]) -> Result<()> {
     let designs: Vec<AxisDesign> = axes.iter().map(|a| a.design.clone()).collect();
     let mut sidecar = crate::offline::sidecar::ModelSidecar::of_designs(image, &designs);
     for a in axes {
-        if let Some(m) = sidecar.axes.iter_mut().find(|m| m.axis == axis_name(a.axis)) {
-            m.two_state = a.sidecar.clone();
-            if let Some(RangeOutcome::Held(h)) = &a.outcome {
-                m.holds_first_state = Some(h.why.clone());
+        let name = axis_name(a.axis);
+        let Some(m) = sidecar.axes.iter_mut().find(|m| m.axis == name) else { continue };
+        match &a.outcome {
+            Some(RangeOutcome::Range(rd)) => {
+                let first = &rd.candidates[0].design;
+                let (dm0, _) =
+                    first.discrete.as_ref().ok_or_else(|| anyhow::anyhow!("axis {name}: no discrete model"))?;
+                m.two_state = Some(TwoStateJson::new(&rd.states, first.compensated_band_hz, dm0));
             }
+            Some(RangeOutcome::Held(h)) => m.holds_first_state = Some(h.why.clone()),
+            None => {}
         }
     }
     crate::offline::sidecar::write_image_and_sidecar(&args.out, image, Some(&sidecar))

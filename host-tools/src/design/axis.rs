@@ -228,10 +228,11 @@ impl AxisDesign {
 /// `threshold`, two runs counted as one across an anti-resonance: a gap no
 /// wider than [`ANTI_RESONANCE_GAP`] of the frequency where it starts, over
 /// which the median |G| is under [`ANTI_RESONANCE_DIP`] of the median over
-/// the lines within the same relative width on either side. There the coherence dips because |G|
-/// does, and the fit weighs those lines by their coherence; a gap where |G|
-/// does not dip (the hammer's spectrum running out, a noisy patch) still
-/// ends the band. Without coherence, the whole measured band.
+/// the lines within the same relative width on either side. There the
+/// coherence dips because |G| does, and the fit weighs those lines by their
+/// coherence; a gap where |G| does not dip (the hammer's spectrum running
+/// out, a noisy patch) still ends the band. Without coherence, the whole
+/// measured band.
 pub fn coherent_band(freq_hz: &[f64], frf: &AxisFrf, threshold: f64) -> (f64, f64) {
     let n = freq_hz.len();
     let Some(c) = frf.coherence.as_deref() else {
@@ -254,9 +255,11 @@ pub fn coherent_band(freq_hz: &[f64], frf: &AxisFrf, threshold: f64) -> (f64, f6
         let edges = level(below, e).min(level(s, above));
         narrow && level(e, s) < ANTI_RESONANCE_DIP * edges
     };
-    // Runs of coherent lines [s, e), merged across anti-resonances; runs
-    // narrower than ISLAND_WIDTH of their frequency inside a dip are part
-    // of the gap (kept apart, as candidates of their own).
+    // Runs of coherent lines [s, e), merged across anti-resonances. A run
+    // narrower than ISLAND_WIDTH of its frequency that does not join the
+    // run before it is set aside (a candidate of its own): the next run is
+    // judged against the run before it, so an island inside a dip is part
+    // of the gap.
     let mut runs: Vec<(usize, usize)> = Vec::new();
     let mut islands: Vec<(usize, usize)> = Vec::new();
     let mut start = None;

@@ -96,6 +96,19 @@ pub fn pass_through(frf: &AxisFrf, r: f64, opts: &DesignOptions, reason: String)
     })
 }
 
+/// [`pass_through`], saying so loudly on stderr first: the axis, the
+/// latency its measured force is delayed by, the reason, and that
+/// `--strict` refuses the image instead.
+pub fn pass_through_warned(frf: &AxisFrf, r: f64, opts: &DesignOptions, reason: String) -> Result<AxisDesign> {
+    eprintln!(
+        "WARNING: axis {} is NOT COMPENSATED: passed through raw (delayed by {} samples): {reason} \
+         (--strict refuses the image instead)",
+        crate::frf::axis_name(frf.axis),
+        opts.lag
+    );
+    pass_through(frf, r, opts, reason)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

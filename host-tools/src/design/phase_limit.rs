@@ -83,8 +83,8 @@ pub fn zeros(model: &PoleResidueModel) -> Vec<Complex64> {
 pub struct PhaseLimit {
     /// The zero: frequency |Im z|/2π and real part Re z/2π (Hz, > 0).
     pub zero_hz: (f64, f64),
-    /// The lines around the zero where |H·Ĝ·e^{jωL/fs} − 1| > |Ĝ − 1|
-    /// (Hz); empty (0, 0) where the box output is nowhere worse.
+    /// The first and last line around the zero where |H·Ĝ·e^{jωL/fs} − 1|
+    /// > |Ĝ − 1| (Hz).
     pub worse_hz: (f64, f64),
     /// At the line of the largest excess there: |H·Ĝ·e^{jωL/fs} − 1| and |Ĝ − 1|.
     pub errors: (f64, f64),

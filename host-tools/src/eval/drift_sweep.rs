@@ -150,6 +150,7 @@ pub fn run_drift_case(c: &DriftCase) -> Result<Vec<DriftAxisScore>> {
                 let (best, d0) = (o.chosen(), o.first());
                 let (dm0, _) = d0.discrete.as_ref().ok_or_else(|| anyhow::anyhow!("axis {a}: no discrete model"))?;
                 let held = Smoother::new(dm0, d0.kalman.q, d0.kalman.r)?;
+                let held_est = held.smooth(&s.measured[a]);
                 // The smoother settings of `compensate --offline --drift`
                 // (offline::drift::axis_drift): the first state's band and
                 // structure, the image's q and R; an axis holding the first
@@ -167,7 +168,7 @@ pub fn run_drift_case(c: &DriftCase) -> Result<Vec<DriftAxisScore>> {
                         let est = smooth_drifting(&s.measured[a], &|x| rd.states.at(x), &settings)?;
                         (est, (rd.states.at(0.0).frf(0.0).re, rd.states.at(1.0).frf(0.0).re))
                     }
-                    None => (held.smooth(&s.measured[a]), (f64::NAN, f64::NAN)),
+                    None => (held_est.clone(), (f64::NAN, f64::NAN)),
                 };
                 let column = |rec: &Option<SignalRecord>| {
                     rec.as_ref().and_then(|r| r.channel(a)).map_or(f64::NAN, |x| score(x, a))
@@ -183,7 +184,7 @@ pub fn run_drift_case(c: &DriftCase) -> Result<Vec<DriftAxisScore>> {
                     box_two_state: column(&box_two),
                     box_single: column(&box_one),
                     offline_drift: score(&drift_est, a),
-                    offline_held: score(&held.smooth(&s.measured[a]), a),
+                    offline_held: score(&held_est, a),
                     offline_no_drift: accuracy(&held.smooth(&still.measured[a]), &still.truth[a], fs, band).nrmse,
                     static_gains,
                 })

@@ -314,6 +314,8 @@ impl RangeDesign {
 struct MeasuredPlants {
     freqs: Vec<f64>,
     plants: [Vec<(f64, Complex64)>; 2],
+    /// Total width of the criterion ranges (Hz).
+    width: f64,
 }
 
 impl MeasuredPlants {
@@ -323,14 +325,14 @@ impl MeasuredPlants {
             (0..freq_hz.len()).filter(|&k| ranges.iter().any(|b| freq_hz[k] >= b.0 && freq_hz[k] <= b.1)).collect();
         let freqs = in_band.iter().map(|&k| freq_hz[k]).collect();
         let plants = [first, second].map(|a| in_band.iter().map(|&k| (freq_hz[k], a.frf[k])).collect());
-        MeasuredPlants { freqs, plants }
+        let width = ranges.iter().map(|b| b.1 - b.0).sum();
+        MeasuredPlants { freqs, plants, width }
     }
 
     /// The predicted in-band error ([`criterion_j`], √) of `design`'s filter
-    /// on the first and the second FRF as measured; `width` the criterion
-    /// band's width (Hz).
-    fn errors(&self, design: &AxisDesign, width: f64, opts: &DesignOptions) -> (f64, f64) {
-        let noise = noise_term(design.kalman.r, opts.fs_hz, width, opts.force_rms);
+    /// on the first and the second FRF as measured.
+    fn errors(&self, design: &AxisDesign, opts: &DesignOptions) -> (f64, f64) {
+        let noise = noise_term(design.kalman.r, opts.fs_hz, self.width, opts.force_rms);
         let h = design.kalman.compensator.freq_responses(&self.freqs, opts.fs_hz);
         let j = |g: &[(f64, Complex64)]| criterion_j(g, &h, design.kalman.lag, opts.fs_hz, noise).sqrt();
         (j(&self.plants[0]), j(&self.plants[1]))
@@ -364,7 +366,6 @@ fn design_over_range(
     let name = axis_name(first.axis);
     let Paired { states: ts, machine, above_band } = pair_second_state(freq_hz, first, &d0, second, &opts.vf)?;
     let ranges = criterion_ranges(&d0.bands, d0.compensated_band_hz);
-    let width: f64 = ranges.iter().map(|b| b.1 - b.0).sum();
     let freqs = criterion_grid(&ranges);
     let plants: Vec<Vec<(f64, Complex64)>> = RANGE_STATES
         .iter()
@@ -409,11 +410,11 @@ fn design_over_range(
             }
         };
         let h = design.kalman.compensator.freq_responses(&freqs, opts.fs_hz);
-        let noise = noise_term(design.kalman.r, opts.fs_hz, width, opts.force_rms);
+        let noise = noise_term(design.kalman.r, opts.fs_hz, measured_plants.width, opts.force_rms);
         let j =
             |g: &[(f64, Complex64)], h: &[Complex64]| criterion_j(g, h, design.kalman.lag, opts.fs_hz, noise).sqrt();
         let errors: Vec<f64> = plants.iter().map(|g| j(g, &h)).collect();
-        let measured = measured_plants.errors(&design, width, opts);
+        let measured = measured_plants.errors(&design, opts);
         let worst = errors.iter().copied().fold(measured.0.max(measured.1), f64::max);
         cands.push(RangeCandidate { s, design, errors, measured, worst });
     }
@@ -525,8 +526,7 @@ pub fn design_or_hold(
         Ok(rd) => Ok(RangeOutcome::Range(Box::new(rd))),
         Err(e) => {
             let ranges = criterion_ranges(&d0.bands, d0.compensated_band_hz);
-            let width: f64 = ranges.iter().map(|b| b.1 - b.0).sum();
-            let measured = MeasuredPlants::new(freq_hz, first, second, &ranges).errors(&d0, width, opts);
+            let measured = MeasuredPlants::new(freq_hz, first, second, &ranges).errors(&d0, opts);
             Ok(RangeOutcome::Held(Box::new(HeldDesign { design: d0, why: format!("{e:#}"), measured })))
         }
     }
