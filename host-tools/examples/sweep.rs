@@ -26,8 +26,9 @@ fn main() -> Result<()> {
     // Axes warned of a non-minimum-phase zero (design::phase_limit), and
     // axes whose box output is worse than raw: [warned][worse].
     let mut phase = [[0usize; 2]; 2];
-    // Independent check of the warning: the simulator's true model's zeros
-    // (the numerator of its modes): [warned][true zero in band].
+    // Check of the warning against the simulator's true model (not the
+    // fit), its zeros by the same `phase_limit::zeros`: [warned][true zero
+    // in band].
     let mut truth_check = [[0usize; 2]; 2];
     let mut rows: Vec<(f64, String)> = Vec::new();
     for seed in 0..n {
