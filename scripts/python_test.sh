@@ -8,6 +8,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 tgt="${CARGO_TARGET_DIR:-target}"
+# Absolute, so that PATH below holds for a CARGO_TARGET_DIR given either way.
+case "$tgt" in /*) ;; *) tgt="$PWD/$tgt" ;; esac
 venv="$tgt/python-venv"
 py="${PYTHON:-python3}"
 if [ ! -x "$venv/bin/python" ]; then
@@ -23,7 +25,7 @@ fi
     nbclient==0.11.0 nbformat==5.11.1 ipykernel==7.4.0
 
 # The build backend runs the venv's `maturin`.
-export PATH="$PWD/$venv/bin:$PATH"
+export PATH="$venv/bin:$PATH"
 
 # One release build of the extension, in its own cargo target directory
 # (python/ is outside the root workspace: its own Cargo.lock). The tests
@@ -41,7 +43,7 @@ echo "python: built and installed the extension in $(( $(date +%s) - t0 )) s"
 # the demo builds (or DYNOCOMP_BIN, a `dynocomp` built already).
 if [ -z "${DYNOCOMP_BIN:-}" ]; then
     cargo build --release -q -p dynocomp --bin dynocomp
-    export DYNOCOMP_BIN="$PWD/$tgt/release/dynocomp"
+    export DYNOCOMP_BIN="$tgt/release/dynocomp"
 fi
 "$venv/bin/python" -m pytest -q python/tests
 "$venv/bin/python" python/examples/run_notebook.py python/examples/quickstart.ipynb
