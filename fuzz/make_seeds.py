@@ -177,6 +177,22 @@ put("protocol", "garbage.wire", b"\x00\x01\x02\x00\xff\xff\x00")
 # Model sidecar: the example image's own sidecar, and a foreign one.
 put("sidecar", "example.model.json", read("fuzz/images/example.dcimg.model.json"))
 put("sidecar", "foreign.model.json", read("fuzz/images/lat0.dcimg.model.json"))
+# The example's sidecar with a small 3x3 model (the part a 3x3 image's
+# sidecar adds; host-tools/src/offline/matrix_smoother.rs).
+import json
+_with_matrix = json.loads(read("fuzz/images/example.dcimg.model.json"))
+_with_matrix["matrix"] = {
+    "advance": 1,
+    "plant_a": [[0.5, 0.0, 0.0], [0.0, 0.3, 0.1], [0.0, -0.1, 0.3]],
+    "plant_b": [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+    "plant_c": [[0.2, 0.05, 0.0], [0.0, 0.3, 0.02], [0.01, 0.0, 0.4]],
+    "d": [[1.0, 0.1, 0.0], [0.05, 1.0, 0.1], [0.0, 0.2, 1.0]],
+    "fir": [[[0.01, 0.0, 0.0], [0.0, 0.02, 0.0], [0.0, 0.0, 0.03]]],
+    "q": [100.0, 50.0, 200.0],
+    "r": [0.05, 0.05, 0.1],
+    "force_shape": [{"corner_hz": 4800.0, "order": 4}, None, {"corner_hz": 6000.0, "order": 2}],
+}
+put("sidecar", "with-matrix.model.json", json.dumps(_with_matrix, indent=1))
 
 # UFF 58 / 58b time histories (function type 1): heads of the example's
 # measured record, written in the layout of the project's writer

@@ -2,7 +2,8 @@
 //! pure part of `read_sidecar`) checked against the project's example image.
 //!
 //! Checks: never panics, neither the parse nor the per-axis model check nor
-//! building the smoother from an accepted model; an accepted sidecar
+//! building the smoother from an accepted model, nor the 3x3 model's check
+//! and its smoother (a sidecar of a 3x3 image); an accepted sidecar
 //! re-serialised reads back equal (write → read); a rejected one's error
 //! names the file and the place (JSON line/column, or the field: format,
 //! image id / source / rate).
@@ -11,6 +12,7 @@
 use std::path::Path;
 
 use dynocomp::offline::sidecar::parse_sidecar;
+use dynocomp::offline::matrix_smoother::MatrixSmoother;
 use dynocomp::offline::smoother::Smoother;
 use dynocomp_fuzz::{assert_names_place_or, example_image};
 use libfuzzer_sys::fuzz_target;
@@ -40,6 +42,14 @@ fuzz_target!(|data: &[u8]| {
                     },
                     Ok(_) => {}
                     Err(e) => assert_names_place_or(&format!("{e:#}"), SOURCE, &["axis "]),
+                }
+            }
+            if let Some(m) = s.matrix.as_ref().filter(|m| m.plant_a.len() <= 16) {
+                match m.plant(s.fs_hz, SOURCE) {
+                    Ok(plant) => {
+                        let _ = MatrixSmoother::new(&plant, m.q, m.r, m.advance);
+                    }
+                    Err(e) => assert_names_place_or(&format!("{e:#}"), SOURCE, &["3x3 model"]),
                 }
             }
         }

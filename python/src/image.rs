@@ -18,7 +18,7 @@ use dynocomp::io::signal_csv::SignalRecord;
 use dynocomp::offline::compensate::{
     compensate_f32, compensate_f32_into, compensate_matrix, compensate_parallel, StreamCompensator,
 };
-use dynocomp::offline::sidecar::{parse_sidecar, read_sidecar, ModelSidecar};
+use dynocomp::offline::sidecar::{parse_sidecar, read_sidecar, ModelSidecar, SidecarOwner};
 use dynocomp_core::image::CoeffImage;
 
 use crate::arrays::{channels_to_array, Samples};
@@ -118,7 +118,7 @@ impl Image {
     }
 
     /// The model sidecar of the zero-lag smoother.
-    fn model_sidecar(&self, image: &CoeffImage) -> anyhow::Result<ModelSidecar> {
+    fn model_sidecar(&self, image: &impl SidecarOwner) -> anyhow::Result<ModelSidecar> {
         match (&self.sidecar, &self.path) {
             (Some(text), _) => {
                 let shown = format!("{} (model sidecar)", self.source);
@@ -280,10 +280,13 @@ impl Image {
                         SignalRecord { t_s: None, channels: axes.iter().copied().zip(view.columns_f64()).collect() };
                     Ok(compensate_matrix(m, &rec, raw_timing, source)?.channels.into_iter().map(|c| c.1).collect())
                 }
-                (AnyImage::Matrix(_), true) => bail!(
-                    "{source}: a 3x3 image (format 3): the zero-lag smoother (offline=True) does not take the 3x3 \
-                     model yet; run without offline=True (the box's 3x3 filter, its latency removed)"
-                ),
+                (AnyImage::Matrix(m), true) => {
+                    let sidecar = self.model_sidecar(&**m)?;
+                    let rec =
+                        SignalRecord { t_s: None, channels: axes.iter().copied().zip(view.columns_f64()).collect() };
+                    let out = dynocomp::offline::matrix_smoother::smooth_matrix_record(m, &sidecar, &rec, source)?;
+                    Ok(out.channels.into_iter().map(|c| c.1).collect())
+                }
             })
         })?;
         Ok(channels_to_array(py, &out, n, one_d))

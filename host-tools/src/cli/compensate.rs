@@ -181,11 +181,12 @@ impl Options {
                 image,
             },
             (AnyImage::Matrix(m), false) => Compensation::Matrix(m),
-            (AnyImage::Matrix(_), true) => bail!(
-                "{}: a 3x3 image (format 3): the zero-lag smoother (--offline) does not take the 3x3 model yet; \
-                 run without --offline (the box's 3x3 filter, its latency removed)",
+            (AnyImage::Matrix(_), true) if a.drift.is_some() => bail!(
+                "{}: --drift needs an image designed from two FRFs (`design --frf BEFORE --frf AFTER`); \
+                 this 3x3 image has one state: drop --drift for its zero-lag 3x3 smoother",
                 a.coeffs.display()
             ),
+            (AnyImage::Matrix(m), true) => Compensation::MatrixSmoother(m),
             (AnyImage::Parallel(_), true) => bail!(
                 "{}: --offline needs a box image (format 1) and its model sidecar; this is a parallel-elaboration image",
                 a.coeffs.display()

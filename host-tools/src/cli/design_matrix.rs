@@ -101,7 +101,8 @@ pub fn run(args: &DesignArgs, s: &DesignSetup, t0: Instant) -> Result<MatrixOutc
         image.flags |= dynocomp_core::image::FLAG_OFFLINE_ONLY;
         eprintln!("{}", crate::realize::load::offline_only_warning(&load, image.fs_hz));
     }
-    crate::io::image_file::write_matrix_image(&args.out, &image)?;
+    let sidecar = crate::offline::matrix_smoother::matrix_sidecar(&image, &md);
+    crate::offline::sidecar::write_matrix_image_and_sidecar(&args.out, &image, &sidecar)?;
     let id = image.id();
     let text = summary_text(args, &md, id, &load, image.fs_hz);
     if let Some(dir) = &args.report {

@@ -369,15 +369,7 @@ pub fn compensate_matrix(
     raw_timing: bool,
     source: &str,
 ) -> Result<SignalRecord> {
-    let axes: Vec<usize> = rec.channels.iter().map(|c| c.0).collect();
-    if axes != [0, 1, 2] {
-        let have: Vec<&str> = axes.iter().map(|a| axis_name(*a)).collect();
-        bail!(
-            "{source}: a 3x3 image compensates fx, fy and fz together, and the record has {}; \
-             record all three force channels",
-            if have.is_empty() { "none".to_string() } else { have.join(", ") }
-        );
-    }
+    check_three_channels(rec, source)?;
     let n = rec.len();
     let lag = if raw_timing { 0 } else { usize::from(image.latency_samples) };
     let columns: Vec<Vec<f32>> = rec
@@ -400,6 +392,21 @@ pub fn compensate_matrix(
     let channels =
         (0..3).map(|c| (c, output[lag.min(output.len())..].iter().map(|y| f64::from(y[c])).collect())).collect();
     Ok(SignalRecord { t_s: rec.t_s.clone(), channels })
+}
+
+/// A 3x3 image takes fx, fy and fz together, in that order: refuse a
+/// record with other channels, naming what it has.
+pub fn check_three_channels(rec: &SignalRecord, source: &str) -> Result<()> {
+    let axes: Vec<usize> = rec.channels.iter().map(|c| c.0).collect();
+    if axes != [0, 1, 2] {
+        let have: Vec<&str> = axes.iter().map(|a| axis_name(*a)).collect();
+        bail!(
+            "{source}: a 3x3 image compensates fx, fy and fz together, and the record has {}; \
+             record all three force channels",
+            if have.is_empty() { "none".to_string() } else { have.join(", ") }
+        );
+    }
+    Ok(())
 }
 
 /// Check a record's `t_s` column (if any) against a sample rate (Hz)

@@ -26,6 +26,10 @@ pub enum Compensation {
     /// A 3x3 image's filter (format 3) on fx, fy and fz together, bit-exact
     /// with the box.
     Matrix(Box<MatrixImage>),
+    /// The zero-lag fixed-interval smoother of a 3x3 image's model (its
+    /// sidecar), on fx, fy and fz together
+    /// ([`crate::offline::matrix_smoother`]).
+    MatrixSmoother(Box<MatrixImage>),
     /// The zero-lag fixed-interval smoother on the box image's model
     /// sidecar: stationary, or time-varying between the sidecar's two states
     /// from `drift.0` to `drift.1` (s); with the sidecar's harmonic force
@@ -46,7 +50,7 @@ impl Compensation {
         match self {
             Compensation::Box(i) | Compensation::Smoother { image: i, .. } => i.fs_hz,
             Compensation::Parallel(p) => p.fs_hz,
-            Compensation::Matrix(m) => m.fs_hz,
+            Compensation::Matrix(m) | Compensation::MatrixSmoother(m) => m.fs_hz,
         }
     }
 }
@@ -180,6 +184,19 @@ pub fn compensate_file(
         Compensation::Matrix(image) => {
             let how = matrix_how(image.latency_samples, raw_timing);
             compensate_whole(input, &target, obs, how, |rec| compensate_matrix(&image, rec, raw_timing, target.source))
+        }
+        Compensation::MatrixSmoother(image) => {
+            let sidecar = read_sidecar(&image_path, &*image)?;
+            let per_axis: Vec<&str> =
+                (0..3).filter(|i| image.rows[*i] == dynocomp_core::image::RowDesign::PerAxis).map(axis_name).collect();
+            let mut how = "3x3 fixed-interval smoother, zero lag, crosstalk compensated".to_string();
+            if !per_axis.is_empty() {
+                how += &format!(" (axis {} smoothed per axis, as the image designs it)", per_axis.join(", "));
+            }
+            how += " (offline only, whole record in memory)";
+            compensate_whole(input, &target, obs, how, |rec| {
+                crate::offline::matrix_smoother::smooth_matrix_record(&image, &sidecar, rec, target.source)
+            })
         }
         Compensation::Smoother { image, drift, force_prior } => {
             let reading = Reading { input, path: &input_path, channels: channels.as_ref(), full_scale_n };

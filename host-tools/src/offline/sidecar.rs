@@ -2,7 +2,8 @@
 //! next to the image: the fitted Ĝ(s) and the discrete model of the design
 //! (a sidecar without the discrete model, from an older version, gets the
 //! first-order hold of Ĝ(s), which that version used), the two states of a
-//! two-state design and the force priors, tied to the image by its id
+//! two-state design, the force priors and the 3x3 model of a 3x3 image
+//! ([`crate::offline::matrix_smoother`]), tied to the image by its id
 //! (CRC-32) and the source FRF's SHA-256; `compensate --offline` refuses a
 //! missing or foreign sidecar. Only the default method (vf) writes one;
 //! `--method paper` images (continuous Q, Tustin) are refused by `--offline`
@@ -13,7 +14,7 @@ use num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-use dynocomp_core::image::{CoeffImage, DesignMethod};
+use dynocomp_core::image::{CoeffImage, DesignMethod, MatrixImage};
 
 use crate::design::axis::AxisDesign;
 use crate::design::discretize::{discretize, DiscreteModel, Discretization};
@@ -144,9 +145,48 @@ pub struct ModelSidecar {
     pub source_sha256: String,
     /// Sample rate of the image (Hz).
     pub fs_hz: f64,
-    /// Models per axis.
+    /// Models per axis: every axis of a box image (format 1); the rows
+    /// designed per axis of a 3x3 image (format 3).
     pub axes: Vec<AxisModelJson>,
+    /// The 3x3 model of a 3x3 image (format 3; absent otherwise and in
+    /// older sidecars): `compensate --offline` smooths its 3x3 rows with it
+    /// ([`crate::offline::matrix_smoother`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub matrix: Option<crate::offline::matrix_smoother::MatrixModelJson>,
 }
+
+/// An image a sidecar can belong to: what ties the two together.
+pub trait SidecarOwner {
+    /// The image's id (CRC-32).
+    fn image_id(&self) -> u32;
+    /// SHA-256 of the FRF file it was designed from.
+    fn source_sha256(&self) -> &[u8; 32];
+    /// Its sample rate (Hz).
+    fn fs_hz(&self) -> u32;
+    /// Its design method.
+    fn method(&self) -> DesignMethod;
+}
+
+/// Both box image formats that `design` writes a sidecar for.
+macro_rules! sidecar_owner {
+    ($($image:ty),*) => {$(
+        impl SidecarOwner for $image {
+            fn image_id(&self) -> u32 {
+                self.id()
+            }
+            fn source_sha256(&self) -> &[u8; 32] {
+                &self.source_sha256
+            }
+            fn fs_hz(&self) -> u32 {
+                self.fs_hz
+            }
+            fn method(&self) -> DesignMethod {
+                self.method
+            }
+        }
+    )*};
+}
+sidecar_owner!(CoeffImage, MatrixImage);
 
 /// Path of the model sidecar of an image: `<image>.model.json`.
 pub fn sidecar_path(image: &Path) -> PathBuf {
@@ -161,7 +201,7 @@ fn hex(bytes: &[u8]) -> String {
 
 impl ModelSidecar {
     /// Sidecar for `image` with the given per-axis models `(axis, model)`.
-    pub fn new(image: &CoeffImage, models: &[(usize, &PoleResidueModel, Option<&DiscreteModel>)]) -> Self {
+    pub fn new(image: &impl SidecarOwner, models: &[(usize, &PoleResidueModel, Option<&DiscreteModel>)]) -> Self {
         let axes = models
             .iter()
             .map(|(axis, m, dm)| AxisModelJson {
@@ -180,16 +220,17 @@ impl ModelSidecar {
             .collect();
         ModelSidecar {
             format: SIDECAR_FORMAT.into(),
-            image_id: format!("{:08x}", image.id()),
-            source_sha256: hex(&image.source_sha256),
-            fs_hz: f64::from(image.fs_hz),
+            image_id: format!("{:08x}", image.image_id()),
+            source_sha256: hex(image.source_sha256()),
+            fs_hz: f64::from(image.fs_hz()),
             axes,
+            matrix: None,
         }
     }
 
     /// Sidecar for `image` with the models of `designs`, each with its
     /// force shape and, for an axis passed through raw, why.
-    pub fn of_designs(image: &CoeffImage, designs: &[AxisDesign]) -> Self {
+    pub fn of_designs(image: &impl SidecarOwner, designs: &[AxisDesign]) -> Self {
         let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
         let mut sidecar = ModelSidecar::new(image, &models);
         for (m, d) in sidecar.axes.iter_mut().zip(designs) {
@@ -274,14 +315,25 @@ pub fn write_sidecar(image_path: &Path, sidecar: &ModelSidecar) -> Result<()> {
 /// is removed after the image is written: it belongs to the old image.
 pub fn write_image_and_sidecar(image_path: &Path, image: &CoeffImage, sidecar: Option<&ModelSidecar>) -> Result<()> {
     let bytes = crate::io::image_file::encode_image_checked(image_path, image)?;
+    write_pair(image_path, &bytes, sidecar)
+}
+
+/// [`write_image_and_sidecar`] for a 3x3 image (format 3), whose sidecar
+/// holds the 3x3 model.
+pub fn write_matrix_image_and_sidecar(image_path: &Path, image: &MatrixImage, sidecar: &ModelSidecar) -> Result<()> {
+    let bytes = crate::io::image_file::encode_matrix_image_checked(image_path, image)?;
+    write_pair(image_path, &bytes, Some(sidecar))
+}
+
+fn write_pair(image_path: &Path, bytes: &[u8], sidecar: Option<&ModelSidecar>) -> Result<()> {
     let path = sidecar_path(image_path);
     match sidecar {
         Some(s) => {
             let text = serde_json::to_string_pretty(s)?;
-            crate::io::atomic::write_bytes_pair_atomic(image_path, &bytes, &path, text.as_bytes())
+            crate::io::atomic::write_bytes_pair_atomic(image_path, bytes, &path, text.as_bytes())
         }
         None => {
-            crate::io::atomic::write_bytes_atomic(image_path, &bytes)?;
+            crate::io::atomic::write_bytes_atomic(image_path, bytes)?;
             remove_stale_sidecar(image_path)
         }
     }
@@ -304,8 +356,8 @@ pub fn remove_stale_sidecar(image_path: &Path) -> Result<()> {
 
 /// Read the sidecar of the image at `image_path` and check that it belongs
 /// to `image` (id, source hash, rate).
-pub fn read_sidecar(image_path: &Path, image: &CoeffImage) -> Result<ModelSidecar> {
-    if image.method != DesignMethod::VectorFitting {
+pub fn read_sidecar(image_path: &Path, image: &impl SidecarOwner) -> Result<ModelSidecar> {
+    if image.method() != DesignMethod::VectorFitting {
         bail!(
             "{}: --offline needs an image designed with the default method (vf): the smoother uses its discrete-time q and R and fitted model",
             image_path.display()
@@ -322,7 +374,7 @@ pub fn read_sidecar(image_path: &Path, image: &CoeffImage) -> Result<ModelSideca
 /// Parse the text of a model sidecar (shown as `shown` in errors) and check
 /// that it belongs to `image`, stored at `image_path`: the pure part of
 /// [`read_sidecar`].
-pub fn parse_sidecar(text: &str, shown: &str, image: &CoeffImage, image_path: &Path) -> Result<ModelSidecar> {
+pub fn parse_sidecar(text: &str, shown: &str, image: &impl SidecarOwner, image_path: &Path) -> Result<ModelSidecar> {
     // serde_json's message quotes the offending value (an unknown `kind`),
     // which may hold newlines and be long: escaped and capped, so the error
     // stays one line, with the place first so the cap cannot cut it off.
@@ -340,8 +392,8 @@ pub fn parse_sidecar(text: &str, shown: &str, image: &CoeffImage, image_path: &P
     if s.format != SIDECAR_FORMAT {
         bail!("{shown}: format `{}`, expected `{SIDECAR_FORMAT}`", one_line(&s.format));
     }
-    let id = format!("{:08x}", image.id());
-    if s.image_id != id || s.source_sha256 != hex(&image.source_sha256) || s.fs_hz != f64::from(image.fs_hz) {
+    let id = format!("{:08x}", image.image_id());
+    if s.image_id != id || s.source_sha256 != hex(image.source_sha256()) || s.fs_hz != f64::from(image.fs_hz()) {
         bail!(
             "{shown}: belongs to image {} (source {}), not to {} (image {id}); re-run `dynocomp design` to write both together",
             one_line(&s.image_id),

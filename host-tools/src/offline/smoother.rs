@@ -392,6 +392,13 @@ fn image_axis(image: &CoeffImage, axis: usize, source: &str) -> Result<dynocomp_
 /// shape, q and R from the image.
 pub fn axis_smoother(image: &CoeffImage, sidecar: &ModelSidecar, axis: usize, source: &str) -> Result<Smoother> {
     let a = image_axis(image, axis, source)?;
+    smoother_for(sidecar, axis, a.summary.q, a.summary.r, source)
+}
+
+/// The smoother of `axis` (0 = x): the sidecar's discrete model and force
+/// shape, with process noise `q` (N²/sample) and measurement noise `r` (N²)
+/// (an image's figures for that axis).
+pub fn smoother_for(sidecar: &ModelSidecar, axis: usize, q: f64, r: f64, source: &str) -> Result<Smoother> {
     let dm = sidecar.discrete_model(axis, source)?;
     let name = axis_name(axis);
     if let Some(why) = sidecar.passed_through_raw(axis) {
@@ -399,12 +406,10 @@ pub fn axis_smoother(image: &CoeffImage, sidecar: &ModelSidecar, axis: usize, so
         // force free to move each sample (q = PASS_THROUGH_Q_RATIO·R), so
         // the estimate is the measurement, to R/q.
         eprintln!("WARNING: axis {name} is NOT COMPENSATED (passed through raw): {why}");
-        let r = a.summary.r;
         return Smoother::new(&dm, PASS_THROUGH_Q_RATIO * r, r).with_context(|| format!("{source}: axis {name}"));
     }
     let shape = sidecar.force_shape(axis, source)?;
-    Smoother::shaped(&dm, a.summary.q, a.summary.r, shape)
-        .with_context(|| format!("{source}: axis {}", axis_name(axis)))
+    Smoother::shaped(&dm, q, r, shape).with_context(|| format!("{source}: axis {name}"))
 }
 
 /// q/R of the smoother of an axis passed through raw ([`axis_smoother`]).

@@ -107,6 +107,65 @@ pub fn augmented_plant_shaped(
     MatrixAugmentedPlant { a, g, c, n_plant, lag: model_lag }
 }
 
+/// The filter DARE of a 3x3 augmented plant, solved and checked
+/// ([`design`], step 3): the prior covariance P, the innovation covariance
+/// S = C P Cᵀ + R and its inverse, the residual relative to the equation's
+/// terms and the doubling steps.
+#[derive(Clone, Debug)]
+pub struct MatrixDare {
+    /// Prior state covariance P (n × n).
+    pub p: DMatrix<f64>,
+    /// Innovation covariance S = C P Cᵀ + R (3 × 3), symmetrized.
+    pub s: DMatrix<f64>,
+    /// S⁻¹ (by Cholesky).
+    pub s_inv: DMatrix<f64>,
+    /// Residual relative to the equation's terms ([`MAX_DARE_RESIDUAL`]).
+    pub residual: f64,
+    /// Doubling steps.
+    pub iterations: usize,
+}
+
+/// Solve the filter DARE P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + Γ Q Γᵀ
+/// of `plant` for Q = diag(`q`) (N²/sample) and R = diag(`r`) (N²) by
+/// structured doubling with G = Cᵀ R⁻¹ C, and check it: S positive
+/// definite and the residual, judged against the size of the equation's
+/// terms, at most [`MAX_DARE_RESIDUAL`]. Shared by the box's compensator
+/// ([`design`]) and the offline smoother
+/// ([`crate::offline::matrix_smoother`]).
+pub fn solve_dare(plant: &MatrixAugmentedPlant, q: [f64; 3], r: [f64; 3]) -> Result<MatrixDare> {
+    for (k, (qk, rk)) in q.iter().zip(&r).enumerate() {
+        if !(*rk > 0.0 && rk.is_finite()) {
+            bail!("measurement noise variance R of channel {k} must be positive and finite, got {rk}");
+        }
+        if !(*qk > 0.0 && qk.is_finite()) {
+            bail!("process noise intensity q of force {k} must be positive and finite, got {qk}");
+        }
+    }
+    let (a, c, g) = (&plant.a, &plant.c, &plant.g);
+    let q_m = g * DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&q)) * g.transpose();
+    let r_inv = DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(3, r.iter().map(|v| 1.0 / v)));
+    let (p, iterations) = structured_doubling(a.transpose(), c.transpose() * r_inv * c, q_m.clone())?;
+    let s = c * &p * c.transpose() + DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&r));
+    let s = (&s + s.transpose()) * 0.5;
+    let Some(chol) = s.clone().cholesky() else {
+        bail!("3x3 Kalman filter: the innovation covariance C P Cᵀ + R is not positive definite");
+    };
+    let s_inv = chol.inverse();
+    let apa = a * &p * a.transpose();
+    let apc = a * &p * c.transpose();
+    let gain_term = &apc * &s_inv * apc.transpose();
+    let ric = &apa - &gain_term + &q_m;
+    let scale = apa.norm() + gain_term.norm() + q_m.norm();
+    let residual = (&p - ric).norm() / scale.max(f64::MIN_POSITIVE);
+    if !(residual <= MAX_DARE_RESIDUAL) {
+        bail!(
+            "3x3 Riccati solution rejected: residual {residual:.2e} of its terms after {iterations} doubling steps \
+             (needs ≤ {MAX_DARE_RESIDUAL:.0e})"
+        );
+    }
+    Ok(MatrixDare { p, s, s_inv, residual, iterations })
+}
+
 /// The 3x3 compensator with its diagnostics.
 #[derive(Clone, Debug)]
 pub struct MatrixKalman {
@@ -145,37 +204,9 @@ pub struct MatrixKalman {
 ///    E selecting F_{k−L−D}. Fed with y (D samples earlier than ỹ), it
 ///    outputs F̂[k−L]: the declared latency is L.
 pub fn design(plant: &MatrixAugmentedPlant, q: [f64; 3], r: [f64; 3], lag: usize) -> Result<MatrixKalman> {
-    for (k, (qk, rk)) in q.iter().zip(&r).enumerate() {
-        if !(*rk > 0.0 && rk.is_finite()) {
-            bail!("measurement noise variance R of channel {k} must be positive and finite, got {rk}");
-        }
-        if !(*qk > 0.0 && qk.is_finite()) {
-            bail!("process noise intensity q of force {k} must be positive and finite, got {qk}");
-        }
-    }
-    let (a, c, g) = (&plant.a, &plant.c, &plant.g);
+    let (a, c) = (&plant.a, &plant.c);
     let n = a.nrows();
-    let q_m = g * DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&q)) * g.transpose();
-    let r_inv = DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(3, r.iter().map(|v| 1.0 / v)));
-    let (p, iterations) = structured_doubling(a.transpose(), c.transpose() * r_inv * c, q_m.clone())?;
-    let s = c * &p * c.transpose() + DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&r));
-    let s = (&s + s.transpose()) * 0.5;
-    let Some(chol) = s.clone().cholesky() else {
-        bail!("3x3 Kalman filter: the innovation covariance C P Cᵀ + R is not positive definite");
-    };
-    let s_inv = chol.inverse();
-    let apa = a * &p * a.transpose();
-    let apc = a * &p * c.transpose();
-    let gain_term = &apc * &s_inv * apc.transpose();
-    let ric = &apa - &gain_term + &q_m;
-    let scale = apa.norm() + gain_term.norm() + q_m.norm();
-    let dare_residual = (&p - ric).norm() / scale.max(f64::MIN_POSITIVE);
-    if !(dare_residual <= MAX_DARE_RESIDUAL) {
-        bail!(
-            "3x3 Riccati solution rejected: residual {dare_residual:.2e} of its terms after {iterations} doubling steps \
-             (needs ≤ {MAX_DARE_RESIDUAL:.0e})"
-        );
-    }
+    let MatrixDare { p, s, s_inv, residual: dare_residual, iterations } = solve_dare(plant, q, r)?;
     let s_eig = crate::fit::linalg::symmetric_eigenvalues(&s, "the innovation covariance")?;
     let innovation_condition = s_eig.max() / s_eig.min();
     let k = &p * c.transpose() * &s_inv;
