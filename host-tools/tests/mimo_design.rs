@@ -30,6 +30,9 @@ use dynocomp::design::axis::DesignOptions;
 use dynocomp::design::force_spectrum::ForceRecord;
 use dynocomp::design::mimo::image::build_matrix_image;
 use dynocomp::design::mimo::{design_matrix, MatrixDesign, MatrixOptions, RowSource};
+use dynocomp::design::mimo::{MATRIX_ITERATIONS, MATRIX_MAX_ORDER};
+use dynocomp::fit::matrix::{matrix_vector_fit, MatrixData};
+use dynocomp::fit::vf::{coherence_weights, VfOptions};
 use dynocomp::frf::Frf;
 use dynocomp::io::signal_csv::SignalRecord;
 use dynocomp::metrics::{accuracy, accuracy_as_written, lowpass, sample_variance, scoring_band_hz, AsWritten};
@@ -642,4 +645,53 @@ fn cli_offcentre_3x3_image_beats_per_axis() {
     let (ok, _, err) = design("q.dcimg", &[&harmonics[..], &[&p("measured.csv")]].concat());
     assert!(!ok && err.contains("--force-prior harmonics") && err.contains("--per-axis"), "{err}");
     assert!(!dir.join("q.dcimg").exists());
+}
+
+/// Seed 9 at 51.2 kHz, a random set-up drawn after the seed study's six:
+/// its impact test has a few lines of low coherence below the first
+/// coherent line (7 Hz), where the matrix fit used to keep a real pole
+/// (3.8 Hz). That pole bent every entry between 7 and 0 Hz, G_zx(0) to
+/// 0.024 against a true 0.0064, and through the cut's mean forces (37 N on x,
+/// 120 N on y) it biased z by 1.3 N: 11.1 % against a floor of 0.68 %.
+/// The fit now drops a real pole below the first coherent line
+/// ([`MatrixData::f_identified_hz`]). Checked against the simulator's true
+/// G(0) and true force; negative control: the same fit with the lowest
+/// line as its limit keeps the pole and misses G_zx(0) by more than half.
+#[test]
+#[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
+fn a_pole_below_the_first_coherent_line_does_not_bias_the_mean_force() {
+    let fs = 51_200.0;
+    let out = record("9", fs);
+    let md = design(&out.frf, &out).unwrap();
+    let fig = evaluate(&md, &out);
+    eprintln!("{}", fig.line("9", fs));
+    assert!(
+        fig.used[2] <= 2.0 * fig.floor[2],
+        "z: {:.3} % against a floor of {:.3} %",
+        100.0 * fig.used[2],
+        100.0 * fig.floor[2]
+    );
+    let first_coherent = md.summary.axes.iter().map(|a| a.band_hz.0).fold(f64::INFINITY, f64::min);
+    let entries: Vec<_> = (0..9).map(|e| out.frf.entry(e / 3, e % 3).unwrap()).collect();
+    let weights: Vec<Vec<f64>> = entries.iter().map(|e| coherence_weights(e.frf, e.coherence)).collect();
+    let opts = VfOptions { max_order: MATRIX_MAX_ORDER, iterations: MATRIX_ITERATIONS, ..VfOptions::default() };
+    let truth = out.cut_modal.frf(0.0)[(2, 0)];
+    let dc_error = |f_identified_hz: f64| {
+        let data = MatrixData {
+            freq_hz: &out.frf.freq_hz,
+            h: std::array::from_fn(|e| entries[e].frf),
+            w: std::array::from_fn(|e| weights[e].as_slice()),
+            f_identified_hz,
+        };
+        let fit = matrix_vector_fit(&data, &opts).unwrap();
+        (fit.model.frf(0.0)[(2, 0)] - truth).norm() / truth.norm()
+    };
+    let (kept, dropped) = (dc_error(0.0), dc_error(first_coherent));
+    eprintln!(
+        "G_zx(0) off by {:.1} % with the pole, {:.1} % without (first coherent line {first_coherent} Hz)",
+        100.0 * kept,
+        100.0 * dropped
+    );
+    assert!(dropped < 0.1, "G_zx(0) off by {:.1} %", 100.0 * dropped);
+    assert!(kept > 0.5, "negative control: with the pole G_zx(0) is off by only {:.1} %", 100.0 * kept);
 }
