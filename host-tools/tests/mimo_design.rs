@@ -654,7 +654,7 @@ fn cli_offcentre_3x3_image_beats_per_axis() {
 /// 0.024 against a true 0.0064, and through the cut's mean forces (37 N on x,
 /// 120 N on y) it biased z by 1.3 N: 11.1 % against a floor of 0.68 %.
 /// The fit now drops a real pole below the first coherent line
-/// ([`MatrixData::f_identified_hz`]). Checked against the simulator's true
+/// (`VfOptions::f_identified_hz`). Checked against the simulator's true
 /// G(0) and true force; negative control: the same fit with the lowest
 /// line as its limit keeps the pole and misses G_zx(0) by more than half.
 #[test]
@@ -674,14 +674,18 @@ fn a_pole_below_the_first_coherent_line_does_not_bias_the_mean_force() {
     let first_coherent = md.summary.axes.iter().map(|a| a.band_hz.0).fold(f64::INFINITY, f64::min);
     let entries: Vec<_> = (0..9).map(|e| out.frf.entry(e / 3, e % 3).unwrap()).collect();
     let weights: Vec<Vec<f64>> = entries.iter().map(|e| coherence_weights(e.frf, e.coherence)).collect();
-    let opts = VfOptions { max_order: MATRIX_MAX_ORDER, iterations: MATRIX_ITERATIONS, ..VfOptions::default() };
     let truth = out.cut_modal.frf(0.0)[(2, 0)];
     let dc_error = |f_identified_hz: f64| {
         let data = MatrixData {
             freq_hz: &out.frf.freq_hz,
             h: std::array::from_fn(|e| entries[e].frf),
             w: std::array::from_fn(|e| weights[e].as_slice()),
+        };
+        let opts = VfOptions {
+            max_order: MATRIX_MAX_ORDER,
+            iterations: MATRIX_ITERATIONS,
             f_identified_hz,
+            ..VfOptions::default()
         };
         let fit = matrix_vector_fit(&data, &opts).unwrap();
         (fit.model.frf(0.0)[(2, 0)] - truth).norm() / truth.norm()

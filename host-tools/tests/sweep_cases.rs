@@ -7,13 +7,18 @@
 //! the axis was refused ("not flat below the FRF's first coherent line").
 //! Among the orders the lines cannot tell apart the fit now takes one that
 //! is flat there (`vf::vector_fit_accepting`), and the axis is compensated.
+//! That order still held a real pole below the first coherent line, fitted
+//! to the noise of the lines there: 1.27 % (3.0x the floor). Such a pole is
+//! now dropped (`VfOptions::f_identified_hz`): 0.86 % (2.05x).
 
 use dynocomp::eval::drift_sweep::{draw_drift, run_drift_case, DriftDesigned};
 use dynocomp::eval::rates::{score_sim, RunOptions};
 use dynocomp::eval::sweep::draw;
-use dynocomp::fit::vf::{coherence_weights, vector_fit};
+use dynocomp::fit::vf::{coherence_weights, vector_fit, VfOptions};
+use dynocomp::fit::Term;
 use dynocomp::simulate::{simulate_with, SimOutput};
 use num_complex::Complex64;
+use std::f64::consts::PI;
 
 /// Largest relative move of `g` from its value at `f_first` between
 /// f_first/8 and 0 Hz (the design's static check, computed here anew).
@@ -43,13 +48,23 @@ fn seed_32_x_gets_a_model_flat_below_its_first_coherent_line() {
     let bend = move_below(|f| plain.model.frf(f), first);
     eprintln!("first coherent line {first} Hz; the fit's own order moves {:.1} % below it", 100.0 * bend);
     assert!(bend > 0.05, "control: the unconstrained choice should bend below {first} Hz, moved {bend}");
-    // The design: compensated, better than raw, within 4x of the exact inverse's floor.
+    // Control: a real pole below the first coherent line, which the fit
+    // that knows where the lines identify the model drops.
+    let below = |m: &dynocomp::fit::PoleResidueModel| {
+        m.terms.iter().any(|t| matches!(t, Term::Real { pole, .. } if pole.abs() / (2.0 * PI) < first))
+    };
+    assert!(below(&plain.model), "control: the plain fit has no real pole below {first} Hz");
+    let opts = VfOptions { f_identified_hz: first, ..Default::default() };
+    let limited = vector_fit(&s.frf.freq_hz, &x.frf, &weights, &opts).unwrap();
+    assert!(!below(&limited.model), "a real pole below {first} Hz was kept");
+    // The design: compensated, better than raw, within 2.5x of the exact
+    // inverse's floor (the pole kept: 3.0x).
     let res = score_sim(name, &s, &RunOptions::default());
     let a = &res.axes[0];
     let e = a.comp_nrmse.clone().unwrap_or_else(|why| panic!("axis x refused: {why}"));
     eprintln!("x: {:.3} % (raw {:.3} %, floor {:.3} %)", 100.0 * e, 100.0 * a.raw_nrmse, 100.0 * a.noise_floor);
     assert!(e < 0.1 * a.raw_nrmse, "x: {e} against raw {}", a.raw_nrmse);
-    assert!(e <= 4.0 * a.noise_floor, "x: {e} against the floor {}", a.noise_floor);
+    assert!(e <= 2.5 * a.noise_floor, "x: {e} against the floor {}", a.noise_floor);
 }
 
 /// The drift sweep's case `seed`, checked to be the one drawn when the
@@ -221,4 +236,18 @@ fn seed_48_x_keeps_its_low_lines_across_an_anti_resonance() {
         100.0 * a.raw_nrmse
     );
     assert!(e <= 1.3 * a.noise_floor, "x: {e} against the floor {}", a.noise_floor);
+}
+
+/// Drift sweep seed 32: a close sensor-mode pair at 25.6 kHz, 0.5 Hz lines,
+/// the sensor modes moving +4.8 % during the cut. The first FRF's fit of z
+/// bent 23 % below its first coherent line (7 Hz) through a real pole under
+/// it, and the axis was passed through raw ("not flat below the FRF's first
+/// coherent line"). That pole is now dropped (`VfOptions::f_identified_hz`):
+/// every axis is designed for the range and followed within 1.5x of the
+/// same cut without drift; the held smoother misses it on every axis (the
+/// control).
+#[test]
+fn drift_seed_32_z_is_designed_without_a_pole_below_its_first_coherent_line() {
+    let d = drift_case(32, ("close-pair", 25_600.0, 0.5));
+    followed(&d, &[0, 1, 2]);
 }

@@ -535,7 +535,13 @@ fn fit_axis(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions, lines: &AxisLi
                 !static_checked(opts, f_coherent)
                     || static_deviation(|f| m.frf(f), freq_hz, f_coherent).0 <= MAX_STATIC_ERROR
             };
-            let vf = vector_fit_accepting(freq_hz, &frf.frf, &weights, &opts.vf, &flat)
+            // A real pole below the first coherent line is not kept: no line
+            // there identifies it, and it would bend Ĝ where the mean force is.
+            let vf_opts = match static_checked(opts, f_coherent) {
+                true => VfOptions { f_identified_hz: f_coherent, ..opts.vf.clone() },
+                false => opts.vf.clone(),
+            };
+            let vf = vector_fit_accepting(freq_hz, &frf.frf, &weights, &vf_opts, &flat)
                 .with_context(|| format!("axis {name}: fit"))?;
             if !vf.model.is_stable() {
                 bail!("axis {name}: fitted model is unstable");

@@ -111,13 +111,6 @@ pub struct MatrixData<'a> {
     pub h: [&'a [Complex64]; ENTRIES],
     /// Weight of each line per entry (inverse variance, e.g. coherence weights).
     pub w: [&'a [f64]; ENTRIES],
-    /// The lowest frequency the data identifies (Hz; 0: its lowest line): a
-    /// real pole below it is dropped ([`skim`]). Below the impact test's
-    /// first coherent line the lines carry next to no weight, and a real
-    /// pole fitted to their noise bends every entry between there and 0 Hz,
-    /// where the mean cutting force is: through the crosstalk of a large
-    /// mean force, a bias on another axis.
-    pub f_identified_hz: f64,
 }
 
 impl MatrixData<'_> {
@@ -307,7 +300,7 @@ pub fn matrix_vector_fit(data: &MatrixData, opts: &VfOptions) -> Result<MatrixFi
         bail!("matrix vector fitting failed at every order");
     }
     let best = data.best_bic(&models);
-    let model = skim(data, models.swap_remove(best).1)?;
+    let model = skim(data, opts.f_identified_hz, models.swap_remove(best).1)?;
     if !model.is_stable() {
         bail!("matrix vector fitting: the fitted model is unstable");
     }
@@ -358,12 +351,17 @@ impl MatrixData<'_> {
     }
 }
 
-/// Drop the terms that are spurious (below [`MatrixData::f_identified_hz`]
-/// for a real pole) or negligible in every entry, and refit the residues of
-/// the rest.
-fn skim(data: &MatrixData, model: MatrixModel) -> Result<MatrixModel> {
+/// Drop the terms that are spurious (a real pole below `f_identified_hz`,
+/// [`VfOptions::f_identified_hz`], among others) or negligible in every
+/// entry, and refit the residues of the rest.
+///
+/// Below the impact test's first coherent line the lines carry next to no
+/// weight, and a real pole fitted to their noise bends every entry between
+/// there and 0 Hz, where the mean cutting force is: through the crosstalk
+/// of a large mean force, a bias on another axis.
+fn skim(data: &MatrixData, f_identified_hz: f64, model: MatrixModel) -> Result<MatrixModel> {
     let f_top = data.f_max();
-    let f_low = data.freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0).max(data.f_identified_hz);
+    let f_low = data.freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0).max(f_identified_hz);
     let keep: Vec<bool> = (0..model.terms())
         .map(|k| {
             let t = model.entries[0].terms[k];

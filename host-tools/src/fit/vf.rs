@@ -25,11 +25,15 @@ pub struct VfOptions {
     /// Lines used for pole relocation: every `decimate`-th line (the final
     /// residue fit uses all lines).
     pub decimate: usize,
+    /// The lowest frequency the data identifies (Hz; 0: the lowest line),
+    /// e.g. the impact test's first coherent line: a real pole below it is
+    /// dropped as spurious ([`spurious`]).
+    pub f_identified_hz: f64,
 }
 
 impl Default for VfOptions {
     fn default() -> Self {
-        VfOptions { max_order: 24, iterations: 8, improvement_tol: 0.03, decimate: 4 }
+        VfOptions { max_order: 24, iterations: 8, improvement_tol: 0.03, decimate: 4, f_identified_hz: 0.0 }
     }
 }
 
@@ -382,6 +386,8 @@ pub struct OrderFits<'a> {
     freq_hz: &'a [f64],
     h: &'a [Complex64],
     weights: &'a [f64],
+    /// [`VfOptions::f_identified_hz`].
+    f_identified_hz: f64,
     /// `(order, weighted_rms)` of every order tried.
     trace: Vec<(usize, f64)>,
     /// The unskimmed models of the orders a choice may take, in the order
@@ -435,7 +441,7 @@ impl<'a> OrderFits<'a> {
         models.sort_by(|a, b| key(a).partial_cmp(&key(b)).unwrap_or(std::cmp::Ordering::Equal));
         let candidates =
             models.into_iter().filter(|m| m.2 <= MAX_ACCEPTED_ERROR_RATIO * best).map(|m| (m.1, None)).collect();
-        Ok(OrderFits { freq_hz, h, weights, trace, candidates })
+        Ok(OrderFits { freq_hz, h, weights, f_identified_hz: opts.f_identified_hz, trace, candidates })
     }
 
     /// The choice of [`vector_fit_accepting`] for `accept`: the first
@@ -445,7 +451,7 @@ impl<'a> OrderFits<'a> {
         let mut taken = None;
         for (raw, skimmed) in &mut self.candidates {
             if skimmed.is_none() {
-                *skimmed = Some(skim(freq_hz, h, weights, raw.clone())?);
+                *skimmed = Some(skim(freq_hz, h, weights, self.f_identified_hz, raw.clone())?);
             }
             if skimmed.as_ref().is_some_and(accept) {
                 taken = skimmed.clone();
@@ -516,9 +522,15 @@ pub(crate) fn kept_poles(terms: &[Term], keep: &[bool], w_scale: f64) -> Vec<Pol
 /// spurious lightly damped pairs (ζ < [`MIN_MODE_DAMPING`], or ζ < 0.5 % at
 /// the band edge), and real poles below the lowest measured line, then refit
 /// the residues of the rest.
-fn skim(freq_hz: &[f64], h: &[Complex64], weights: &[f64], model: PoleResidueModel) -> Result<PoleResidueModel> {
+fn skim(
+    freq_hz: &[f64],
+    h: &[Complex64],
+    weights: &[f64],
+    f_identified_hz: f64,
+    model: PoleResidueModel,
+) -> Result<PoleResidueModel> {
     let f_top = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
-    let f_low = freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0);
+    let f_low = freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0).max(f_identified_hz);
     let keep: Vec<bool> =
         model.terms.iter().map(|t| !spurious(t, f_low, f_top) && contributes(t, freq_hz, h)).collect();
     if keep.iter().all(|k| *k) {

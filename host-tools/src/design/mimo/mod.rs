@@ -658,9 +658,10 @@ fn prepare_matrix(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, vf: &VfOptions, t
         freq_hz: &frf.freq_hz,
         h: std::array::from_fn(|e| entries[e].frf),
         w: std::array::from_fn(|e| weights[e].as_slice()),
-        f_identified_hz: bands.iter().map(|b| b.0).fold(f64::INFINITY, f64::min),
     };
-    let fit = matrix_vector_fit(&data, vf).context("fit of the 3x3 matrix")?;
+    // A real pole below the first coherent line of the bands is not kept.
+    let vf = VfOptions { f_identified_hz: bands.iter().map(|b| b.0).fold(f64::INFINITY, f64::min), ..vf.clone() };
+    let fit = matrix_vector_fit(&data, &vf).context("fit of the 3x3 matrix")?;
     prepare_model(frf, bands, fs, threshold, fit.model, fit.weighted_rms, fit.order_trace)
 }
 
