@@ -3,7 +3,7 @@
 //! output behind.
 
 use dynocomp::io::signal_csv::{read_signal_csv, SignalRecord};
-use dynocomp::offline::compensate::{compensate_record, StreamCompensator};
+use dynocomp::offline::compensate::{compensate_matrix, compensate_record, StreamCompensator};
 use dynocomp_core::image::CoeffImage;
 use dynocomp_core::kernel::{AxisFilter, Section};
 
@@ -84,6 +84,47 @@ fn streaming_is_bit_exact_with_the_whole_record() {
     let aligned = streamed(&img, &rec, false, 4096);
     let raw = compensate_record(&img, &rec, true, "test").unwrap();
     assert!(!same_bits(&aligned[0], raw.channel(0).unwrap()));
+}
+
+/// The 3x3 image's filter streams the same way: any block cutting, latency
+/// removed or kept, the outputs of the whole-record path
+/// (`compensate_matrix`) bit for bit. Negative control: feeding the
+/// channels in another order (the filter mixes them) gives other bits. A
+/// record without all three channels is refused.
+#[test]
+fn a_3x3_image_streams_bit_exact_with_the_whole_record() {
+    let bytes = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/../fuzz/images/matrix.dcimg")).unwrap();
+    let img = dynocomp_core::image::MatrixImage::parse(&bytes).unwrap();
+    assert!(img.latency_samples > 0);
+    let rec = record(20_011);
+    let run = |rec: &SignalRecord, raw: bool, block: usize| {
+        let mut c = StreamCompensator::matrix(&img, &[0, 1, 2], raw, "test").unwrap();
+        let mut out = vec![Vec::new(); 3];
+        for s in (0..rec.len()).step_by(block) {
+            let e = (s + block).min(rec.len());
+            let blk: Vec<Vec<f64>> = rec.channels.iter().map(|ch| ch.1[s..e].to_vec()).collect();
+            c.push(&blk, &mut out).unwrap();
+        }
+        c.finish(&mut out).unwrap();
+        out
+    };
+    for raw in [false, true] {
+        let want = compensate_matrix(&img, &rec, raw, "test").unwrap();
+        for block in [1, 5, 4096, 8192, 50_000] {
+            let got = run(&rec, raw, block);
+            for (a, g) in got.iter().enumerate() {
+                assert!(same_bits(g, want.channel(a).unwrap()), "raw {raw}, block {block}, axis {a}");
+            }
+        }
+    }
+    let mut swapped = rec.clone();
+    let (x, y) = (swapped.channels[0].1.clone(), swapped.channels[1].1.clone());
+    swapped.channels[0].1 = y;
+    swapped.channels[1].1 = x;
+    let want = compensate_matrix(&img, &rec, false, "test").unwrap();
+    assert!(!same_bits(&run(&swapped, false, 4096)[2], want.channel(2).unwrap()), "control: order made no difference");
+    let e = StreamCompensator::matrix(&img, &[0, 1], false, "rec.csv").err().unwrap().to_string();
+    assert!(e.contains("rec.csv") && e.contains("fx, fy and fz together"), "{e}");
 }
 
 /// `compensate` of the example's measured force with image(4), `--report`

@@ -9,6 +9,7 @@
 use anyhow::{bail, Context, Result};
 use dynocomp_core::image::{CoeffImage, MatrixImage, ParallelImage};
 use dynocomp_core::kernel::{process_blocks, AxisFilter, AxisState, BlockJob, LOCKSTEP_AXES};
+use dynocomp_core::mimo::{MimoFilter, MimoState};
 
 use crate::frf::axis_name;
 use crate::io::signal_csv::SignalRecord;
@@ -200,10 +201,9 @@ fn drop_latency(y: &[f32], latency: usize) -> Result<Vec<f64>, usize> {
 /// dropped and, at [`StreamCompensator::finish`], the input's predicted
 /// continuation ([`look_ahead`]) fed to produce the last `latency` outputs.
 pub struct StreamCompensator {
-    /// The image's compensators of the record's channels (copies: a
-    /// compensator outlives the image it came from).
-    filters: Vec<AxisFilter>,
-    states: Vec<AxisState>,
+    /// The image's compensators (copies: a compensator outlives the image
+    /// it came from) and their states.
+    kernel: Kernel,
     axes: Vec<usize>,
     /// Outputs still to drop (the declared latency, at the start).
     to_drop: usize,
@@ -217,15 +217,42 @@ pub struct StreamCompensator {
     output: Vec<Vec<f32>>,
 }
 
+/// The compensators a [`StreamCompensator`] runs.
+enum Kernel {
+    /// A box image's per-axis compensators, in lockstep.
+    PerAxis { filters: Vec<AxisFilter>, states: Vec<AxisState> },
+    /// A 3x3 image's filter on fx, fy and fz together, with its frames
+    /// (one input and one output per sample) as scratch.
+    Matrix { filter: Box<MimoFilter>, state: Box<MimoState>, frames: Vec<[f32; 3]>, outs: Vec<[f32; 3]> },
+}
+
 impl StreamCompensator {
     /// Compensators for the channels `axes` of a record from `source`.
     pub fn new(image: &CoeffImage, axes: &[usize], raw_timing: bool, source: &str) -> Result<Self> {
         let filters = axes.iter().map(|&axis| axis_filter(image, axis, source).cloned()).collect::<Result<Vec<_>>>()?;
-        let latency = if raw_timing { 0 } else { usize::from(image.latency_samples) };
+        let states = vec![AxisState::default(); axes.len()];
+        Ok(Self::with_kernel(Kernel::PerAxis { filters, states }, axes, image.latency_samples, raw_timing))
+    }
+
+    /// The 3x3 image's filter for a record from `source`, whose channels
+    /// `axes` must be fx, fy and fz: the outputs of [`compensate_matrix`]
+    /// bit for bit, in blocks.
+    pub fn matrix(image: &MatrixImage, axes: &[usize], raw_timing: bool, source: &str) -> Result<Self> {
+        check_three(axes, source)?;
+        let kernel = Kernel::Matrix {
+            filter: Box::new(image.filter),
+            state: Box::default(),
+            frames: Vec::new(),
+            outs: Vec::new(),
+        };
+        Ok(Self::with_kernel(kernel, axes, image.latency_samples, raw_timing))
+    }
+
+    fn with_kernel(kernel: Kernel, axes: &[usize], latency: u16, raw_timing: bool) -> Self {
+        let latency = if raw_timing { 0 } else { usize::from(latency) };
         let n = axes.len();
-        Ok(StreamCompensator {
-            filters,
-            states: vec![AxisState::default(); n],
+        StreamCompensator {
+            kernel,
             axes: axes.to_vec(),
             to_drop: latency,
             latency,
@@ -233,7 +260,7 @@ impl StreamCompensator {
             history: vec![Vec::new(); n],
             input: vec![Vec::new(); n],
             output: vec![Vec::new(); n],
-        })
+        }
     }
 
     /// The latency this compensator removes (samples).
@@ -272,21 +299,34 @@ impl StreamCompensator {
             o.clear();
             o.resize(n, 0.0);
         }
-        for (((filters, states), inputs), outputs) in self
-            .filters
-            .chunks(LOCKSTEP_AXES)
-            .zip(self.states.chunks_mut(LOCKSTEP_AXES))
-            .zip(self.input.chunks(LOCKSTEP_AXES))
-            .zip(self.output.chunks_mut(LOCKSTEP_AXES))
-        {
-            let mut jobs: Vec<BlockJob<'_>> = filters
-                .iter()
-                .zip(states.iter_mut())
-                .zip(inputs)
-                .zip(outputs.iter_mut())
-                .map(|(((filter, state), input), output)| BlockJob { filter, state, input, output })
-                .collect();
-            process_blocks(&mut jobs);
+        match &mut self.kernel {
+            Kernel::PerAxis { filters, states } => {
+                for (((filters, states), inputs), outputs) in filters
+                    .chunks(LOCKSTEP_AXES)
+                    .zip(states.chunks_mut(LOCKSTEP_AXES))
+                    .zip(self.input.chunks(LOCKSTEP_AXES))
+                    .zip(self.output.chunks_mut(LOCKSTEP_AXES))
+                {
+                    let mut jobs: Vec<BlockJob<'_>> = filters
+                        .iter()
+                        .zip(states.iter_mut())
+                        .zip(inputs)
+                        .zip(outputs.iter_mut())
+                        .map(|(((filter, state), input), output)| BlockJob { filter, state, input, output })
+                        .collect();
+                    process_blocks(&mut jobs);
+                }
+            }
+            Kernel::Matrix { filter, state, frames, outs } => {
+                frames.clear();
+                frames.extend((0..n).map(|k| std::array::from_fn(|c| self.input[c][k])));
+                outs.clear();
+                outs.resize(n, [0.0; 3]);
+                filter.process(state, frames, outs);
+                for (c, o) in self.output.iter_mut().enumerate() {
+                    o.iter_mut().zip(outs.iter()).for_each(|(v, y)| *v = y[c]);
+                }
+            }
         }
         for (axis, y) in self.axes.iter().zip(&self.output) {
             if let Some(k) = y.iter().position(|v| !v.is_finite()) {
@@ -398,6 +438,11 @@ pub fn compensate_matrix(
 /// record with other channels, naming what it has.
 pub fn check_three_channels(rec: &SignalRecord, source: &str) -> Result<()> {
     let axes: Vec<usize> = rec.channels.iter().map(|c| c.0).collect();
+    check_three(&axes, source)
+}
+
+/// [`check_three_channels`] of a record's channels `axes`.
+pub fn check_three(axes: &[usize], source: &str) -> Result<()> {
     if axes != [0, 1, 2] {
         let have: Vec<&str> = axes.iter().map(|a| axis_name(*a)).collect();
         bail!(

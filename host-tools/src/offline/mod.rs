@@ -15,6 +15,7 @@ pub mod bandsplit;
 pub mod compensate;
 pub mod drift;
 pub mod force_prior;
+pub mod matrix_model;
 pub mod matrix_smoother;
 pub mod record;
 pub mod sidecar;

@@ -13,7 +13,7 @@ use crate::io::signal::ChannelMap;
 use crate::io::signal::{check_rate_value, read_all, Block, RateTracker, SignalReader, SignalWriter, BLOCK};
 use crate::io::signal_csv::SignalRecord;
 use crate::io::signal_file::{open_signal_checked, writer_for, SignalFormat};
-use crate::offline::compensate::{compensate_matrix, compensate_parallel, StreamCompensator};
+use crate::offline::compensate::{compensate_parallel, StreamCompensator};
 use crate::offline::sidecar::{read_sidecar, sidecar_path, ModelSidecar};
 use crate::offline::smoother::{SpilledEstimate, SpilledPass};
 
@@ -118,10 +118,12 @@ pub trait Monitor {
 /// `observer`. Returns the samples written and how.
 ///
 /// Memory per sample of the record (f64 on the host):
-/// * [`Compensation::Box`]: none. The record streams through in blocks of
+/// * [`Compensation::Box`] and [`Compensation::Matrix`]: none. The record streams through in blocks of
 ///   [`BLOCK`] samples ([`StreamCompensator`]); what the observer keeps is
 ///   its own affair (a report with a true force keeps the whole record);
-/// * [`Compensation::Smoother`], stationary or drifting: none. The forward
+/// * [`Compensation::Smoother`], stationary or drifting, and
+///   [`Compensation::MatrixSmoother`] (48 bytes per sample spilled, all three
+///   axes together): none. The forward
 ///   pass runs over blocks and spills 16 bytes per sample and axis to a
 ///   temporary file beside the output (the time-varying smoother adds its
 ///   covariance every 4096 samples, about 1.2 bytes per sample), the
@@ -182,21 +184,12 @@ pub fn compensate_file(
             })
         }
         Compensation::Matrix(image) => {
-            let how = matrix_how(image.latency_samples, raw_timing);
-            compensate_whole(input, &target, obs, how, |rec| compensate_matrix(&image, rec, raw_timing, target.source))
+            let comp = StreamCompensator::matrix(&image, target.axes, raw_timing, target.source)?;
+            stream_compensated(input, comp, matrix_how(image.latency_samples, raw_timing), &target, obs)
         }
         Compensation::MatrixSmoother(image) => {
-            let sidecar = read_sidecar(&image_path, &*image)?;
-            let per_axis: Vec<&str> =
-                (0..3).filter(|i| image.rows[*i] == dynocomp_core::image::RowDesign::PerAxis).map(axis_name).collect();
-            let mut how = "3x3 fixed-interval smoother, zero lag, crosstalk compensated".to_string();
-            if !per_axis.is_empty() {
-                how += &format!(" (axis {} smoothed per axis, as the image designs it)", per_axis.join(", "));
-            }
-            how += " (offline only, whole record in memory)";
-            compensate_whole(input, &target, obs, how, |rec| {
-                crate::offline::matrix_smoother::smooth_matrix_record(&image, &sidecar, rec, target.source)
-            })
+            let reading = Reading { input, path: &input_path, channels: channels.as_ref(), full_scale_n };
+            smooth_matrix_spilled(&image, &image_path, reading, &target, obs)
         }
         Compensation::Smoother { image, drift, force_prior } => {
             let reading = Reading { input, path: &input_path, channels: channels.as_ref(), full_scale_n };
@@ -222,11 +215,11 @@ fn compensate_whole(
 /// How a 3x3 image of latency `l` (samples) compensates.
 fn matrix_how(l: u16, raw_timing: bool) -> String {
     if raw_timing {
-        format!("3x3 filter of the box, crosstalk compensated, latency {l} samples kept (whole record in memory)")
+        format!("3x3 filter of the box, crosstalk compensated, latency {l} samples kept, streamed in blocks of {BLOCK}")
     } else {
         format!(
             "3x3 filter of the box, crosstalk compensated, latency {l} samples removed; the last {l} samples \
-             use a predicted look-ahead (whole record in memory)"
+             use a predicted look-ahead; streamed in blocks of {BLOCK}"
         )
     }
 }
@@ -432,7 +425,7 @@ fn whole_record(reader: &mut dyn SignalReader, fs: u32, source: &str) -> Result<
 fn compensate_box(
     image: &CoeffImage,
     image_path: &Path,
-    mut reader: Box<dyn SignalReader>,
+    reader: Box<dyn SignalReader>,
     raw_timing: bool,
     target: &Target<'_>,
     observed: &mut Observed<'_>,
@@ -447,7 +440,7 @@ fn compensate_box(
             }
         }
     }
-    let mut comp = StreamCompensator::new(image, target.axes, raw_timing, target.source)?;
+    let comp = StreamCompensator::new(image, target.axes, raw_timing, target.source)?;
     let l = image.latency_samples;
     let removed = match (raw_timing, l) {
         (true, _) => ", not removed".to_string(),
@@ -457,6 +450,18 @@ fn compensate_box(
         (false, l) => format!(", removed; the last {l} samples use a predicted look-ahead"),
     };
     let how = format!("box filter, latency {l} samples{removed}, streamed in blocks of {BLOCK}");
+    stream_compensated(reader, comp, how, target, observed)
+}
+
+/// Stream the record of `reader` through `comp` into the target
+/// ([`stream_box`]); `how` says what compensated it.
+fn stream_compensated(
+    mut reader: Box<dyn SignalReader>,
+    mut comp: StreamCompensator,
+    how: String,
+    target: &Target<'_>,
+    observed: &mut Observed<'_>,
+) -> Result<Compensated> {
     let len = reader.len_hint();
     let samples = target.write(target.has_time, len, |w| stream_box(&mut *reader, &mut comp, w, target, observed))?;
     Ok(Compensated { samples, how })
@@ -590,7 +595,7 @@ fn smooth_spilled(
                     .with_context(|| format!("{source}: axis {}", axis_name(ax)))
                 })
                 .collect::<Result<_>>()?;
-            Ok(Compensated { samples: spill.run(input, passes, target, observed)?, how })
+            Ok(Compensated { samples: spill.run(input, Box::new(PerChannel(passes)), target, observed)?, how })
         }
         None => {
             let how = format!("fixed-interval smoother, zero lag (offline only; forward pass {spilled})");
@@ -605,9 +610,47 @@ fn smooth_spilled(
                     crate::offline::smoother::SpilledForward::new(sm, dir).map(|p| Box::new(p) as Box<dyn SpilledPass>)
                 })
                 .collect::<Result<_>>()?;
-            Ok(Compensated { samples: spill.run(input, passes, target, observed)?, how })
+            Ok(Compensated { samples: spill.run(input, Box::new(PerChannel(passes)), target, observed)?, how })
         }
     }
+}
+
+/// `compensate --offline` on a 3x3 image: the 3x3 smoother's passes
+/// spilled to temporary files beside the output, in memory independent of
+/// the record's length; the input read twice as [`smooth_spilled`] does.
+fn smooth_matrix_spilled(
+    image: &MatrixImage,
+    image_path: &Path,
+    reading: Reading<'_>,
+    target: &Target<'_>,
+    observed: &mut Observed<'_>,
+) -> Result<Compensated> {
+    let sidecar = read_sidecar(image_path, image)?;
+    let sm = crate::offline::matrix_smoother::MatrixSmoothers::new(image, &sidecar, target.axes, target.source)?;
+    let dir = crate::io::atomic::output_dir(target.output);
+    let input = crate::io::spool::TwoReadings::new(reading.input, reading.path, dir)?;
+    let per_axis: Vec<&str> = (0..3).filter(|i| sm.per_axis[*i].is_some()).map(axis_name).collect();
+    let how = format!(
+        "3x3 fixed-interval smoother, zero lag, crosstalk compensated{} (offline only; forward pass spilled to \
+         temporary files beside the output{}, memory independent of the record's length)",
+        if per_axis.is_empty() {
+            String::new()
+        } else {
+            format!("; axis {} smoothed per axis, as the image designs it", per_axis.join(", "))
+        },
+        if input.spooled() { ", with the input (a pipe) for its second reading" } else { "" }
+    );
+    let (path, channels, full_scale) = (reading.path, reading.channels, reading.full_scale_n);
+    let spill = Spill { dir, reopen: &|| Ok(open_signal_checked(path, channels, full_scale)?.0) };
+    let per_axis = std::array::from_fn(|i| {
+        sm.per_axis[i].as_ref().map(|p| crate::offline::smoother::SpilledForward::new(p, dir)).transpose()
+    });
+    let [x, y, z] = per_axis;
+    let pass = Matrix {
+        matrix: crate::offline::matrix_smoother::SpilledMatrixForward::new(&sm.matrix, dir)?,
+        per_axis: [x?, y?, z?],
+    };
+    Ok(Compensated { samples: spill.run(input, Box::new(pass), target, observed)?, how })
 }
 
 /// How `compensate --offline --drift` smooths one column.
@@ -662,46 +705,117 @@ impl Spill<'_> {
     fn run(
         &self,
         mut input: crate::io::spool::TwoReadings,
-        passes: Vec<Box<dyn SpilledPass + '_>>,
+        pass: Box<dyn RecordPass + '_>,
         target: &Target<'_>,
         observed: &mut Observed<'_>,
     ) -> Result<u64> {
         let len_hint = input.first().len_hint();
         target.monitor.set_length(len_hint.unwrap_or(0) * 2);
-        let est = self.smooth(input.first(), passes, target)?;
+        let est = self.smooth(input.first(), pass, target)?;
         // The input is read a second time, for its times and the observer.
         let mut again = input.second(|| (self.reopen)())?;
         let len = len_hint.or(again.len_hint());
         target.write(target.has_time, len, |w| write_spilled(&mut *again, est, w, target, observed))
     }
 
-    /// The forward pass of each axis's smoother over the blocks of
-    /// `reader`, spilled, then its backward pass
-    /// ([`crate::offline::smoother::SpilledForward`]). Checks the record's
-    /// rate.
+    /// The forward pass over the blocks of `reader`, spilled, then its
+    /// backward pass ([`RecordPass`]). Checks the record's rate.
     fn smooth(
         &self,
         reader: &mut dyn SignalReader,
-        mut fwd: Vec<Box<dyn SpilledPass + '_>>,
+        mut pass: Box<dyn RecordPass + '_>,
         target: &Target<'_>,
     ) -> Result<Vec<SpilledEstimate>> {
-        let (axes, source) = (target.axes, target.source);
-        let mut blk = Block::new(axes.len());
+        let source = target.source;
+        let mut blk = Block::new(target.axes.len());
         let mut rate = RateTracker::default();
         while reader.read_block(&mut blk, BLOCK)? > 0 {
             rate.push(&blk.t_s);
-            for (f, y) in fwd.iter_mut().zip(&blk.channels) {
-                f.push(y)?;
-            }
+            pass.push(&blk.channels)?;
             target.monitor.advance(blk.len() as u64);
         }
         if let Some(found) = rate.rate() {
             check_rate_value(target.fs, found, source, "column t_s")?;
         }
-        let per_axis = |n: u64| target.monitor.advance(n / axes.len().max(1) as u64);
-        fwd.into_iter()
+        pass.backward(self.dir, target.axes, source, &|n| target.monitor.advance(n))
+    }
+}
+
+/// A smoother's passes over a record's channels, spilled to temporary
+/// files: forward block by block, then backward to one estimate per
+/// channel ([`Spill::smooth`]).
+trait RecordPass {
+    /// Take the next block (one slice per channel, equal lengths).
+    fn push(&mut self, channels: &[Vec<f64>]) -> Result<()>;
+    /// The backward passes, in `dir`: the estimates of the channels `axes`;
+    /// `on_chunk` is told the samples done, over all channels.
+    fn backward(
+        self: Box<Self>,
+        dir: &Path,
+        axes: &[usize],
+        source: &str,
+        on_chunk: &dyn Fn(u64),
+    ) -> Result<Vec<SpilledEstimate>>;
+}
+
+/// One smoother per channel ([`SpilledPass`]).
+struct PerChannel<'a>(Vec<Box<dyn SpilledPass + 'a>>);
+
+impl RecordPass for PerChannel<'_> {
+    fn push(&mut self, channels: &[Vec<f64>]) -> Result<()> {
+        self.0.iter_mut().zip(channels).try_for_each(|(f, y)| f.push(y))
+    }
+
+    fn backward(
+        self: Box<Self>,
+        dir: &Path,
+        axes: &[usize],
+        source: &str,
+        on_chunk: &dyn Fn(u64),
+    ) -> Result<Vec<SpilledEstimate>> {
+        let per_axis = |n: u64| on_chunk(n / axes.len().max(1) as u64);
+        self.0
+            .into_iter()
             .zip(axes)
-            .map(|(f, &ax)| f.backward(self.dir, &format!("f{}", axis_name(ax)), source, &per_axis))
+            .map(|(f, &ax)| f.backward(dir, &format!("f{}", axis_name(ax)), source, &per_axis))
+            .collect()
+    }
+}
+
+/// The 3x3 smoother on fx, fy and fz together, and the per-axis smoother
+/// of each row the image runs per axis, whose estimate takes that row's
+/// place ([`crate::offline::matrix_smoother::MatrixSmoothers`]).
+struct Matrix<'a> {
+    matrix: crate::offline::matrix_smoother::SpilledMatrixForward<'a>,
+    per_axis: [Option<crate::offline::smoother::SpilledForward<'a>>; 3],
+}
+
+impl RecordPass for Matrix<'_> {
+    fn push(&mut self, channels: &[Vec<f64>]) -> Result<()> {
+        self.matrix.push(std::array::from_fn(|i| channels[i].as_slice()))?;
+        for (p, y) in self.per_axis.iter_mut().zip(channels) {
+            if let Some(p) = p {
+                p.push(y)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn backward(
+        self: Box<Self>,
+        dir: &Path,
+        _axes: &[usize],
+        source: &str,
+        on_chunk: &dyn Fn(u64),
+    ) -> Result<Vec<SpilledEstimate>> {
+        let est = self.matrix.backward(dir, source, on_chunk)?;
+        est.into_iter()
+            .zip(self.per_axis)
+            .enumerate()
+            .map(|(i, (m, p))| match p {
+                Some(p) => p.backward(dir, &format!("f{}", axis_name(i)), source, &|_| ()),
+                None => Ok(m),
+            })
             .collect()
     }
 }

@@ -3,7 +3,7 @@
 //! (a sidecar without the discrete model, from an older version, gets the
 //! first-order hold of Ĝ(s), which that version used), the two states of a
 //! two-state design, the force priors and the 3x3 model of a 3x3 image
-//! ([`crate::offline::matrix_smoother`]), tied to the image by its id
+//! ([`crate::offline::matrix_model`]), tied to the image by its id
 //! (CRC-32) and the source FRF's SHA-256; `compensate --offline` refuses a
 //! missing or foreign sidecar. Only the default method (vf) writes one;
 //! `--method paper` images (continuous Q, Tustin) are refused by `--offline`
@@ -152,7 +152,7 @@ pub struct ModelSidecar {
     /// older sidecars): `compensate --offline` smooths its 3x3 rows with it
     /// ([`crate::offline::matrix_smoother`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub matrix: Option<crate::offline::matrix_smoother::MatrixModelJson>,
+    pub matrix: Option<crate::offline::matrix_model::MatrixModelJson>,
 }
 
 /// An image a sidecar can belong to: what ties the two together.
