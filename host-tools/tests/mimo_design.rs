@@ -517,6 +517,9 @@ fn seed_study() {
             Ok(md) => {
                 let fig = evaluate(&md, &out);
                 eprintln!("{}  latency {}", fig.line(&name, fs), md.summary.latency);
+                for w in &md.summary.worse_than_raw {
+                    eprintln!("    worse than raw: {w:?}");
+                }
                 if std::env::var_os("MIMO_STUDY_NOTES").is_some() {
                     md.summary.notes.iter().for_each(|n| eprintln!("    note: {n}"));
                     for a in &md.summary.axes {

@@ -51,8 +51,9 @@ pub struct CompensateArgs {
     #[arg(long)]
     pub raw_timing: bool,
     /// Offline only: zero-lag fixed-interval (Rauch-Tung-Striebel
-    /// equivalent) smoother in f64 instead of the box's causal filter.
-    /// Needs the model sidecar `<image>.model.json` that `design` writes.
+    /// equivalent) smoother in f64 instead of the box's causal filter; with a
+    /// 3x3 image, the 3x3 model's smoother (crosstalk compensated). Needs
+    /// the model sidecar `<image>.model.json` that `design` writes.
     #[arg(long, conflicts_with = "raw_timing")]
     pub offline: bool,
     /// With --offline: the set-up drifts from the first FRF's state at START

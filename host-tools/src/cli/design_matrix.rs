@@ -105,6 +105,9 @@ pub fn run(args: &DesignArgs, s: &DesignSetup, t0: Instant) -> Result<MatrixOutc
     crate::offline::sidecar::write_matrix_image_and_sidecar(&args.out, &image, &sidecar)?;
     let id = image.id();
     let text = summary_text(args, &md, id, &load, image.fs_hz);
+    for w in &md.summary.worse_than_raw {
+        eprintln!("{}", crate::design::mimo::worse_than_raw::warning(w));
+    }
     if let Some(dir) = &args.report {
         let files = crate::report::matrix::write_matrix_report(dir, &md, &s.frf, args.input.fs, &text)?;
         eprintln!("report: {} files in {} (open index.html)", files.len(), dir.display());
@@ -199,6 +202,9 @@ fn summary_text(args: &DesignArgs, md: &MatrixDesign, id: u32, load: &LoadReport
     t.push_str(if load.fits { "\n" } else { "  OVER THE LIMIT: offline-only image\n" });
     for n in &s.notes {
         let _ = writeln!(t, "note: {n}");
+    }
+    for w in &s.worse_than_raw {
+        let _ = writeln!(t, "{}", crate::design::mimo::worse_than_raw::warning(w));
     }
     t
 }

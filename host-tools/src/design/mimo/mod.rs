@@ -12,6 +12,7 @@ pub mod discrete;
 pub mod image;
 pub mod kalman;
 pub mod response;
+pub mod worse_than_raw;
 
 use anyhow::{bail, Context, Result};
 use dynocomp_core::mimo::MimoFilter;
@@ -230,6 +231,9 @@ pub struct MatrixSummary {
     pub crosstalk: Crosstalk,
     /// The realization the box runs.
     pub realization: RealizationFigures,
+    /// Output rows whose lines the image's filter leaves further from the
+    /// force than raw ([`worse_than_raw`]).
+    pub worse_than_raw: Vec<worse_than_raw::RowWorse>,
     /// Notes for the user.
     pub notes: Vec<String>,
 }
@@ -351,7 +355,9 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
         notes.extend(moderate_crosstalk_caveat(&chosen.axes, &crosstalk));
     }
     let shapes = force_shapes(&criterion.model, d);
-    finish(shapes, chosen, realized, prep, crosstalk, latency_rounds, notes, d.fs_hz, f_band)
+    let mut md = finish(shapes, chosen, realized, prep, crosstalk, latency_rounds, notes, d.fs_hz, f_band)?;
+    md.summary.worse_than_raw = worse_than_raw::rows_worse_than_raw(&md, &frf.freq_hz);
+    Ok(md)
 }
 
 impl MatrixOptions {
@@ -998,6 +1004,7 @@ fn finish(
             fir_truncation: realization.fir_truncation,
             verification,
         },
+        worse_than_raw: Vec::new(),
         notes,
     };
     let (model, discrete) = match prep {
