@@ -100,6 +100,7 @@ pub fn run(args: &DesignArgs, s: &DesignSetup, t0: Instant) -> Result<MatrixOutc
     if !load.fits {
         image.flags |= dynocomp_core::image::FLAG_OFFLINE_ONLY;
         eprintln!("{}", crate::realize::load::offline_only_warning(&load, image.fs_hz));
+        eprintln!("{}", for_the_box(&md.summary, load.max_fs_hz));
     }
     let sidecar = crate::offline::matrix_smoother::matrix_sidecar(&image, &md);
     crate::offline::sidecar::write_matrix_image_and_sidecar(&args.out, &image, &sidecar)?;
@@ -128,6 +129,23 @@ pub fn run(args: &DesignArgs, s: &DesignSetup, t0: Instant) -> Result<MatrixOutc
         design: &md.summary,
     };
     Ok(MatrixOutcome::Written(serde_json::to_string_pretty(&j)? + "\n"))
+}
+
+/// What to do for an image the box can run when the 3x3 image is over its
+/// load limit: `--per-axis`, with what each axis loses by it (the
+/// predictions that count the crosstalk).
+fn for_the_box(s: &MatrixSummary, max_fs_hz: u32) -> String {
+    let cells: Vec<String> = s
+        .axes
+        .iter()
+        .map(|a| format!("{} {} against {}", a.axis, pct(a.per_axis.map(|p| p.error)), pct(Some(a.chosen.error))))
+        .collect();
+    format!(
+        "for an image the box can run, design with --per-axis (crosstalk not compensated; predicted in-band error, \
+         crosstalk counted, per axis against this image: {}), or record at up to {max_fs_hz} Hz, where the box runs a \
+         3x3 filter of this size",
+        cells.join(", ")
+    )
 }
 
 /// `design --json` of a 3x3 design.
@@ -200,6 +218,9 @@ fn summary_text(args: &DesignArgs, md: &MatrixDesign, id: u32, load: &LoadReport
     );
     t.push_str(&crate::realize::load::describe(load, fs_hz));
     t.push_str(if load.fits { "\n" } else { "  OVER THE LIMIT: offline-only image\n" });
+    if !load.fits {
+        let _ = writeln!(t, "{}", for_the_box(s, load.max_fs_hz));
+    }
     for n in &s.notes {
         let _ = writeln!(t, "note: {n}");
     }
