@@ -11,6 +11,7 @@ use nalgebra::{DMatrix, DVector};
 
 use dynocomp_core::image::{MatrixImage, RowDesign};
 
+use crate::design::axis::AxisDesign;
 use crate::design::mimo::kalman::{solve_dare, MatrixAugmentedPlant};
 use crate::design::mimo::MatrixDesign;
 use crate::fit::linalg::eigenvalues;
@@ -18,15 +19,15 @@ use crate::frf::axis_name;
 use crate::io::signal_csv::SignalRecord;
 pub use crate::offline::matrix_model::MatrixModelJson;
 use crate::offline::sidecar::ModelSidecar;
-use crate::offline::smoother::{smoother_for, Smoother, SpilledEstimate};
+use crate::offline::smoother::{smoother_for, Smoother, SpilledEstimate, SpilledRun};
 use std::path::Path;
 
 /// The model sidecar of the 3x3 image `image` of `md`: the per-axis
 /// models of the rows the image runs per axis, and the 3x3 model.
 pub fn matrix_sidecar(image: &MatrixImage, md: &MatrixDesign) -> ModelSidecar {
-    let per_axis: Vec<_> = (0..3)
+    let per_axis: Vec<&AxisDesign> = (0..3)
         .filter(|i| image.rows[*i] == RowDesign::PerAxis)
-        .filter_map(|i| md.per_axis.get(i).cloned().flatten())
+        .filter_map(|i| md.per_axis.get(i).and_then(Option::as_ref))
         .collect();
     let mut sidecar = ModelSidecar::of_designs(image, &per_axis);
     sidecar.matrix = MatrixModelJson::of_design(md);
@@ -175,9 +176,6 @@ impl Scratch {
     }
 }
 
-/// Samples per chunk of the spilled backward pass (48 bytes each: 3 MiB).
-const SPILL_CHUNK: usize = 1 << 16;
-
 /// The [`MatrixSmoother`] over a record of any length: the forward pass
 /// takes the record block by block and writes each sample's prior force
 /// and innovation (48 bytes) to an unnamed temporary file; the backward pass
@@ -231,50 +229,12 @@ impl<'s> SpilledMatrixForward<'s> {
     /// the samples done. Refuses a non-finite estimate, naming the force
     /// and the sample.
     pub fn backward(self, dir: &Path, source: &str, on_chunk: &dyn Fn(u64)) -> Result<[SpilledEstimate; 3]> {
-        use std::io::{Read, Seek, SeekFrom, Write};
-        let io_err = |e: std::io::Error| anyhow::anyhow!("{}: temporary file of the 3x3 smoother: {e}", dir.display());
-        let mut spill = self.spill.into_inner().map_err(|e| io_err(e.into_error()))?;
-        let mut outs = Vec::with_capacity(3);
-        for _ in 0..3 {
-            outs.push(tempfile::tempfile_in(dir).map_err(io_err)?);
-        }
-        let n_run = usize::try_from(self.n_run).map_err(|_| anyhow::anyhow!("{source}: record too long"))?;
-        let n_y = self.n_y as usize;
+        let spill = self.spill.into_inner().map_err(|e| e.into_error());
         let mut sc = Scratch::new(self.sm.a.nrows());
-        let mut bytes = vec![0u8; 48 * SPILL_CHUNK];
-        let mut est: Vec<[f64; 3]> = Vec::with_capacity(SPILL_CHUNK);
-        let mut hi = n_run;
-        while hi > 0 {
-            let lo = hi.saturating_sub(SPILL_CHUNK);
-            let buf = &mut bytes[..48 * (hi - lo)];
-            spill.seek(SeekFrom::Start(48 * lo as u64)).map_err(io_err)?;
-            spill.read_exact(buf).map_err(io_err)?;
-            est.clear();
-            for k in (lo..hi).rev() {
-                let rec = &buf[48 * (k - lo)..48 * (k - lo + 1)];
-                let kept: [f64; 6] =
-                    std::array::from_fn(|j| f64::from_le_bytes(rec[8 * j..8 * j + 8].try_into().unwrap_or_default()));
-                let f = self.sm.backward_step(&mut sc, kept);
-                if let (true, Some(i)) = (k < n_y, f.iter().position(|v| !v.is_finite())) {
-                    bail!("{source}: smoothed f{} became non-finite at sample {k}", axis_name(i));
-                }
-                est.push(f);
-            }
-            // est holds F̂_{hi−1} … F̂_lo; keep k < n_y, in order.
-            let keep_hi = hi.min(n_y);
-            if lo < keep_hi {
-                for (i, out) in outs.iter_mut().enumerate() {
-                    let chunk: Vec<u8> = est[hi - keep_hi..].iter().rev().flat_map(|f| f[i].to_le_bytes()).collect();
-                    out.seek(SeekFrom::Start(8 * lo as u64)).map_err(io_err)?;
-                    out.write_all(&chunk).map_err(io_err)?;
-                }
-                on_chunk((keep_hi - lo) as u64);
-            }
-            hi = lo;
-        }
-        let mut read = outs.into_iter().map(|f| SpilledEstimate::new(f, self.n_y).map_err(io_err));
-        let mut next = || read.next().expect("three estimate files");
-        Ok([next()?, next()?, next()?])
+        let run = SpilledRun { n_run: self.n_run, n_y: self.n_y, dir, what: "the 3x3 smoother", source };
+        run.backward(spill, &|i| format!("f{}", axis_name(i)), on_chunk, |kept: [f64; 6]| {
+            self.sm.backward_step(&mut sc, kept)
+        })
     }
 }
 

@@ -557,15 +557,8 @@ fn smooth_spilled(
     target: &Target<'_>,
     observed: &mut Observed<'_>,
 ) -> Result<Compensated> {
-    let dir = crate::io::atomic::output_dir(target.output);
-    let input = crate::io::spool::TwoReadings::new(reading.input, reading.path, dir)?;
-    let spilled = format!(
-        "spilled to temporary files beside the output{}, memory independent of the record's length",
-        if input.spooled() { ", with the input (a pipe) for its second reading" } else { "" }
-    );
-    let source = target.source;
-    let (path, channels, full_scale) = (reading.path, reading.channels, reading.full_scale_n);
-    let spill = Spill { dir, reopen: &|| Ok(open_signal_checked(path, channels, full_scale)?.0) };
+    let (spill, input, spilled) = Spill::open(reading, target)?;
+    let (dir, source) = (spill.dir, target.source);
     match drift {
         Some((s0, s1)) => {
             let how = format!("time-varying fixed-interval smoother, two FRF states, drift {s0}-{s1} s, zero lag (offline only; forward pass and covariance checkpoints {spilled})");
@@ -627,29 +620,25 @@ fn smooth_matrix_spilled(
 ) -> Result<Compensated> {
     let sidecar = read_sidecar(image_path, image)?;
     let sm = crate::offline::matrix_smoother::MatrixSmoothers::new(image, &sidecar, target.axes, target.source)?;
-    let dir = crate::io::atomic::output_dir(target.output);
-    let input = crate::io::spool::TwoReadings::new(reading.input, reading.path, dir)?;
+    let (spill, input, spilled) = Spill::open(reading, target)?;
     let per_axis: Vec<&str> = (0..3).filter(|i| sm.per_axis[*i].is_some()).map(axis_name).collect();
     let how = format!(
-        "3x3 fixed-interval smoother, zero lag, crosstalk compensated{} (offline only; forward pass spilled to \
-         temporary files beside the output{}, memory independent of the record's length)",
+        "3x3 fixed-interval smoother, zero lag, crosstalk compensated{} (offline only; forward pass {spilled})",
         if per_axis.is_empty() {
             String::new()
         } else {
             format!("; axis {} smoothed per axis, as the image designs it", per_axis.join(", "))
-        },
-        if input.spooled() { ", with the input (a pipe) for its second reading" } else { "" }
+        }
     );
-    let (path, channels, full_scale) = (reading.path, reading.channels, reading.full_scale_n);
-    let spill = Spill { dir, reopen: &|| Ok(open_signal_checked(path, channels, full_scale)?.0) };
-    let per_axis = std::array::from_fn(|i| {
-        sm.per_axis[i].as_ref().map(|p| crate::offline::smoother::SpilledForward::new(p, dir)).transpose()
-    });
-    let [x, y, z] = per_axis;
-    let pass = Matrix {
-        matrix: crate::offline::matrix_smoother::SpilledMatrixForward::new(&sm.matrix, dir)?,
-        per_axis: [x?, y?, z?],
+    let mut pass = Matrix {
+        matrix: crate::offline::matrix_smoother::SpilledMatrixForward::new(&sm.matrix, spill.dir)?,
+        per_axis: [None, None, None],
     };
+    for (slot, p) in pass.per_axis.iter_mut().zip(&sm.per_axis) {
+        if let Some(p) = p {
+            *slot = Some(crate::offline::smoother::SpilledForward::new(p, spill.dir)?);
+        }
+    }
     Ok(Compensated { samples: spill.run(input, Box::new(pass), target, observed)?, how })
 }
 
@@ -690,14 +679,34 @@ fn drift_column(
     Ok(DriftColumn::Holds(crate::offline::smoother::axis_smoother(image, sidecar, axis, source)?))
 }
 
-/// Where the passes of [`smooth_spilled`] spill (`dir`), and how the input
-/// is opened again for its second reading.
+/// Where the passes of [`smooth_spilled`] and [`smooth_matrix_spilled`]
+/// spill (`dir`), and the input's file, opened again for its second reading.
 struct Spill<'a> {
     dir: &'a Path,
-    reopen: &'a dyn Fn() -> Result<Box<dyn SignalReader>>,
+    path: &'a Path,
+    channels: Option<&'a ChannelMap>,
+    full_scale_n: f64,
 }
 
-impl Spill<'_> {
+impl<'a> Spill<'a> {
+    /// The input of `reading` for two readings, spilling beside the
+    /// target's output, and the words that say so for `how`.
+    fn open(reading: Reading<'a>, target: &Target<'a>) -> Result<(Self, crate::io::spool::TwoReadings, String)> {
+        let dir = crate::io::atomic::output_dir(target.output);
+        let input = crate::io::spool::TwoReadings::new(reading.input, reading.path, dir)?;
+        let words = format!(
+            "spilled to temporary files beside the output{}, memory independent of the record's length",
+            if input.spooled() { ", with the input (a pipe) for its second reading" } else { "" }
+        );
+        let spill = Spill { dir, path: reading.path, channels: reading.channels, full_scale_n: reading.full_scale_n };
+        Ok((spill, input, words))
+    }
+
+    /// The input's file opened again, with the first reading's checks.
+    fn reopen(&self) -> Result<Box<dyn SignalReader>> {
+        Ok(open_signal_checked(self.path, self.channels, self.full_scale_n)?.0)
+    }
+
     /// The passes over the input's first reading, spilled, then their
     /// backward passes ([`Spill::smooth`]); then the output written with
     /// the input's second reading ([`Spill::write`]). Returns the samples
@@ -713,7 +722,7 @@ impl Spill<'_> {
         target.monitor.set_length(len_hint.unwrap_or(0) * 2);
         let est = self.smooth(input.first(), pass, target)?;
         // The input is read a second time, for its times and the observer.
-        let mut again = input.second(|| (self.reopen)())?;
+        let mut again = input.second(|| self.reopen())?;
         let len = len_hint.or(again.len_hint());
         target.write(target.has_time, len, |w| write_spilled(&mut *again, est, w, target, observed))
     }

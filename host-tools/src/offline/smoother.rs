@@ -187,7 +187,8 @@ impl Smoother {
     }
 }
 
-/// Pairs (x⁻_k[F], e_k) per chunk of the spilled backward pass: 1 MiB.
+/// Records per chunk of a spilled backward pass ([`SpilledRun`]): 1 MiB of
+/// the per-axis smoother's pairs (x⁻_k[F], e_k), 3 MiB of the 3x3 smoother's.
 const SPILL_CHUNK: usize = 1 << 16;
 
 /// The smoother of one axis over a record of any length: the forward pass takes the record block by block and writes each sample's
@@ -298,47 +299,95 @@ impl<'s> SpilledForward<'s> {
     /// is told the samples done (for a progress bar). Refuses a
     /// non-finite estimate, naming the sample.
     pub fn backward(self, dir: &Path, name: &str, source: &str, on_chunk: &dyn Fn(u64)) -> Result<SpilledEstimate> {
-        use std::io::{Read, Seek, SeekFrom, Write};
-        let io_err = |e: std::io::Error| anyhow::anyhow!("{}: temporary file of the smoother: {e}", dir.display());
-        let mut spill = self.spill.into_inner().map_err(|e| io_err(e.into_error()))?;
-        let mut out = tempfile::tempfile_in(dir).map_err(io_err)?;
-        let n_pairs = usize::try_from(self.n_pairs).map_err(|_| anyhow::anyhow!("{source}: record too long"))?;
-        let n_y = self.n_y as usize;
+        let spill = self.spill.into_inner().map_err(|e| e.into_error());
         let p_row = self.sm.p_row();
         let mut lambda_hat = DVector::<f64>::zeros(self.sm.a.nrows());
-        let mut bytes = vec![0u8; 16 * SPILL_CHUNK];
-        let mut est = Vec::with_capacity(SPILL_CHUNK);
-        let mut hi = n_pairs;
+        let run = SpilledRun { n_run: self.n_pairs, n_y: self.n_y, dir, what: "the smoother", source };
+        let [est] = run.backward(spill, &|_| name.to_string(), on_chunk, |[f, e]: [f64; 2]| {
+            [self.sm.backward_step(&mut lambda_hat, &p_row, f, e)]
+        })?;
+        Ok(est)
+    }
+}
+
+/// A forward pass spilled to a temporary file: `n_run` records of IN f64
+/// (little-endian) each, of which the first `n_y` are the record's samples
+/// (the rest the advance D in front); temporary files go to `dir`, and
+/// errors name `what` and `source`.
+pub(crate) struct SpilledRun<'a> {
+    /// Records written by the forward pass.
+    pub n_run: u64,
+    /// Samples of the record among them.
+    pub n_y: u64,
+    /// Where the estimates' temporary files go.
+    pub dir: &'a Path,
+    /// The smoother, for I/O errors ("the smoother").
+    pub what: &'a str,
+    /// The record, for the other errors.
+    pub source: &'a str,
+}
+
+impl SpilledRun<'_> {
+    /// The backward pass over the records of `spill` ([`SpilledForward`],
+    /// [`crate::offline::matrix_smoother::SpilledMatrixForward`]): read from
+    /// the end in chunks of [`SPILL_CHUNK`], each record through `step`
+    /// (which carries the backward state), its OUT estimates of the first
+    /// `n_y` samples written in their places to one temporary file each,
+    /// read forward by the [`SpilledEstimate`]s returned. `on_chunk` is told
+    /// the samples done. Refuses a non-finite estimate, naming the estimate
+    /// (`name` of its index) and the sample.
+    pub fn backward<const IN: usize, const OUT: usize>(
+        &self,
+        spill: std::io::Result<std::fs::File>,
+        name: &dyn Fn(usize) -> String,
+        on_chunk: &dyn Fn(u64),
+        mut step: impl FnMut([f64; IN]) -> [f64; OUT],
+    ) -> Result<[SpilledEstimate; OUT]> {
+        use std::io::{Read, Seek, SeekFrom, Write};
+        let (dir, source) = (self.dir, self.source);
+        let io_err = |e: std::io::Error| anyhow::anyhow!("{}: temporary file of {}: {e}", dir.display(), self.what);
+        let mut spill = spill.map_err(io_err)?;
+        let mut outs = Vec::with_capacity(OUT);
+        for _ in 0..OUT {
+            outs.push(tempfile::tempfile_in(dir).map_err(io_err)?);
+        }
+        let n_run = usize::try_from(self.n_run).map_err(|_| anyhow::anyhow!("{source}: record too long"))?;
+        let n_y = self.n_y as usize;
+        let width = 8 * IN;
+        let mut bytes = vec![0u8; width * SPILL_CHUNK];
+        let mut est: Vec<[f64; OUT]> = Vec::with_capacity(SPILL_CHUNK);
+        let mut hi = n_run;
         while hi > 0 {
             let lo = hi.saturating_sub(SPILL_CHUNK);
-            let buf = &mut bytes[..16 * (hi - lo)];
-            spill.seek(SeekFrom::Start(16 * lo as u64)).map_err(io_err)?;
+            let buf = &mut bytes[..width * (hi - lo)];
+            spill.seek(SeekFrom::Start((width * lo) as u64)).map_err(io_err)?;
             spill.read_exact(buf).map_err(io_err)?;
             est.clear();
             for k in (lo..hi).rev() {
-                let pair = &buf[16 * (k - lo)..16 * (k - lo + 1)];
-                let f = f64::from_le_bytes(pair[..8].try_into().unwrap_or_default());
-                let e = f64::from_le_bytes(pair[8..].try_into().unwrap_or_default());
-                let v = self.sm.backward_step(&mut lambda_hat, &p_row, f, e);
-                if k < n_y && !v.is_finite() {
-                    bail!("{source}: smoothed {name} became non-finite at sample {k}");
+                let rec = &buf[width * (k - lo)..width * (k - lo + 1)];
+                let v = step(std::array::from_fn(|j| {
+                    f64::from_le_bytes(rec[8 * j..8 * j + 8].try_into().unwrap_or_default())
+                }));
+                if let (true, Some(i)) = (k < n_y, v.iter().position(|x| !x.is_finite())) {
+                    bail!("{source}: smoothed {} became non-finite at sample {k}", name(i));
                 }
                 est.push(v);
             }
             // est holds F̂_{hi−1} … F̂_lo; keep k < n_y, in order.
             let keep_hi = hi.min(n_y);
             if lo < keep_hi {
-                let mut chunk: Vec<u8> = Vec::with_capacity(8 * (keep_hi - lo));
-                for v in est[hi - keep_hi..].iter().rev() {
-                    chunk.extend_from_slice(&v.to_le_bytes());
+                for (i, out) in outs.iter_mut().enumerate() {
+                    let chunk: Vec<u8> = est[hi - keep_hi..].iter().rev().flat_map(|v| v[i].to_le_bytes()).collect();
+                    out.seek(SeekFrom::Start(8 * lo as u64)).map_err(io_err)?;
+                    out.write_all(&chunk).map_err(io_err)?;
                 }
-                out.seek(SeekFrom::Start(8 * lo as u64)).map_err(io_err)?;
-                out.write_all(&chunk).map_err(io_err)?;
                 on_chunk((keep_hi - lo) as u64);
             }
             hi = lo;
         }
-        SpilledEstimate::new(out, self.n_y).map_err(io_err)
+        let est: Vec<SpilledEstimate> =
+            outs.into_iter().map(|f| SpilledEstimate::new(f, self.n_y).map_err(io_err)).collect::<Result<_>>()?;
+        Ok(est.try_into().unwrap_or_else(|_| unreachable!("one estimate file per output")))
     }
 }
 
