@@ -531,16 +531,14 @@ fn fit_axis(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions, lines: &AxisLi
             // Among the orders the lines cannot tell apart, one flat below
             // the first coherent line where there is one (`check_static`).
             let f_coherent = lines.band.0;
+            let checked = static_checked(opts, f_coherent);
             let flat = |m: &PoleResidueModel| {
-                !static_checked(opts, f_coherent)
-                    || static_deviation(|f| m.frf(f), freq_hz, f_coherent).0 <= MAX_STATIC_ERROR
+                !checked || static_deviation(|f| m.frf(f), freq_hz, f_coherent).0 <= MAX_STATIC_ERROR
             };
             // A real pole below the first coherent line is not kept: no line
             // there identifies it, and it would bend Ĝ where the mean force is.
-            let vf_opts = match static_checked(opts, f_coherent) {
-                true => VfOptions { f_identified_hz: f_coherent, ..opts.vf.clone() },
-                false => opts.vf.clone(),
-            };
+            let f_identified_hz = if checked { f_coherent } else { opts.vf.f_identified_hz };
+            let vf_opts = VfOptions { f_identified_hz, ..opts.vf.clone() };
             let vf = vector_fit_accepting(freq_hz, &frf.frf, &weights, &vf_opts, &flat)
                 .with_context(|| format!("axis {name}: fit"))?;
             if !vf.model.is_stable() {

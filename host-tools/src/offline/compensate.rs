@@ -409,7 +409,7 @@ pub fn compensate_matrix(
     raw_timing: bool,
     source: &str,
 ) -> Result<SignalRecord> {
-    check_three_channels(rec, source)?;
+    check_three(&rec.channels.iter().map(|c| c.0).collect::<Vec<_>>(), source)?;
     let n = rec.len();
     let lag = if raw_timing { 0 } else { usize::from(image.latency_samples) };
     let columns: Vec<Vec<f32>> = rec
@@ -435,13 +435,7 @@ pub fn compensate_matrix(
 }
 
 /// A 3x3 image takes fx, fy and fz together, in that order: refuse a
-/// record with other channels, naming what it has.
-pub fn check_three_channels(rec: &SignalRecord, source: &str) -> Result<()> {
-    let axes: Vec<usize> = rec.channels.iter().map(|c| c.0).collect();
-    check_three(&axes, source)
-}
-
-/// [`check_three_channels`] of a record's channels `axes`.
+/// record whose channels `axes` are others, naming what it has.
 pub fn check_three(axes: &[usize], source: &str) -> Result<()> {
     if axes != [0, 1, 2] {
         let have: Vec<&str> = axes.iter().map(|a| axis_name(*a)).collect();

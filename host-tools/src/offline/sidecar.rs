@@ -230,7 +230,8 @@ impl ModelSidecar {
 
     /// Sidecar for `image` with the models of `designs`, each with its
     /// force shape and, for an axis passed through raw, why.
-    pub fn of_designs(image: &impl SidecarOwner, designs: &[AxisDesign]) -> Self {
+    pub fn of_designs<D: std::borrow::Borrow<AxisDesign>>(image: &impl SidecarOwner, designs: &[D]) -> Self {
+        let designs: Vec<&AxisDesign> = designs.iter().map(|d| d.borrow()).collect();
         let models: Vec<_> = designs.iter().map(|d| (d.axis, &d.model, d.discrete.as_ref().map(|x| &x.0))).collect();
         let mut sidecar = ModelSidecar::new(image, &models);
         for (m, d) in sidecar.axes.iter_mut().zip(designs) {

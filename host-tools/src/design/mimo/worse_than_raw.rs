@@ -42,14 +42,14 @@ pub fn rows_worse_than_raw(md: &MatrixDesign, freq_hz: &[f64]) -> Vec<RowWorse> 
     let Some(model) = &md.model else { return Vec::new() };
     let s = &md.summary;
     let (fs, lag) = (s.fs_hz, s.latency as f64);
-    let mut out = Vec::new();
-    for (i, a) in s.axes.iter().enumerate() {
-        let lines = freq_hz.iter().copied().filter(|f| *f > 0.0 && *f >= a.band_hz.0 && *f <= a.band_hz.1);
-        let mut worse: Vec<(f64, f64, f64)> = Vec::new();
-        for f in lines {
-            let h = md.realization.freq_response(f, fs);
-            let g = model.frf(f);
-            let delay = Complex64::from_polar(1.0, TAU * f * lag / fs);
+    let in_band = |i: usize, f: f64| f > 0.0 && f >= s.axes[i].band_hz.0 && f <= s.axes[i].band_hz.1;
+    // Per row, the lines (f, box error, raw error) worse by the margin.
+    let mut worse: [Vec<(f64, f64, f64)>; 3] = Default::default();
+    for &f in freq_hz.iter().filter(|f| (0..s.axes.len()).any(|i| in_band(i, **f))) {
+        let h = md.realization.freq_response(f, fs);
+        let g = model.frf(f);
+        let delay = Complex64::from_polar(1.0, TAU * f * lag / fs);
+        for (i, rows) in worse.iter_mut().enumerate().take(s.axes.len()).filter(|(i, _)| in_band(*i, f)) {
             let eye = |j: usize| if i == j { 1.0 } else { 0.0 };
             let boxed = (0..3)
                 .map(|j| ((0..3).map(|k| h[i][k] * g[(k, j)]).sum::<Complex64>() * delay - eye(j)).norm_sqr())
@@ -57,13 +57,16 @@ pub fn rows_worse_than_raw(md: &MatrixDesign, freq_hz: &[f64]) -> Vec<RowWorse> 
                 .sqrt();
             let raw = (0..3).map(|j| (g[(i, j)] - eye(j)).norm_sqr()).sum::<f64>().sqrt();
             if boxed - raw > WORSE_MARGIN {
-                worse.push((f, boxed, raw));
+                rows.push((f, boxed, raw));
             }
         }
-        let Some(peak) = worse.iter().max_by(|a, b| (a.1 - a.2).total_cmp(&(b.1 - b.2))) else { continue };
+    }
+    let mut out = Vec::new();
+    for (i, rows) in worse.iter().enumerate() {
+        let Some(peak) = rows.iter().max_by(|a, b| (a.1 - a.2).total_cmp(&(b.1 - b.2))) else { continue };
         out.push(RowWorse {
             axis: axis_name(i),
-            worse_hz: (worse[0].0, worse[worse.len() - 1].0),
+            worse_hz: (rows[0].0, rows[rows.len() - 1].0),
             at_hz: peak.0,
             errors: (peak.1, peak.2),
         });
