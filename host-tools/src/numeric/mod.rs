@@ -1,4 +1,5 @@
-//! Numeric helpers every stage may use: discrete LTI systems ([`lti`]),
+//! Numeric helpers every stage may use: discrete LTI systems ([`lti`]) and
+//! their balanced reduction ([`balanced`]),
 //! one-dimensional searches ([`search`]), linear prediction ([`predict`])
 //! and independent work on threads ([`parallel`]).
 
@@ -6,6 +7,7 @@
 // error must fail the check, which `x >= limit` would let pass.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod balanced;
 pub mod lti;
 pub mod parallel;
 pub mod predict;
