@@ -119,8 +119,11 @@ fn design(frf: &Frf, out: &PlateSimOutput) -> anyhow::Result<MatrixDesign> {
 
 fn design_above(frf: &Frf, out: &PlateSimOutput, above_band: AboveBand) -> anyhow::Result<MatrixDesign> {
     let design = DesignOptions { fs_hz: out.params.fs_hz, above_band, ..Default::default() };
-    design_matrix(frf, noise(out), &MatrixOptions { design, ..Default::default() })
+    design_matrix(frf, noise(out), &MatrixOptions { design, load_limit_permille: BOX_LIMIT, ..Default::default() })
 }
+
+/// The box's load limit, as `design` passes it: images over it are reduced.
+const BOX_LIMIT: Option<u32> = Some(dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE);
 
 /// NRMSE of `est` (delayed by `lag`) against axis i's truth.
 fn score(est: &[f64], out: &PlateSimOutput, i: usize, lag: usize) -> f64 {
@@ -430,7 +433,7 @@ fn force_record(name: &str, fs: f64) -> ForceRecord {
 fn design_for_record(frf: &Frf, out: &PlateSimOutput, rec: ForceRecord) -> anyhow::Result<MatrixDesign> {
     let d =
         DesignOptions { fs_hz: out.params.fs_hz, force_record: Some(std::sync::Arc::new(rec)), ..Default::default() };
-    design_matrix(frf, noise(out), &MatrixOptions { design: d, ..Default::default() })
+    design_matrix(frf, noise(out), &MatrixOptions { design: d, load_limit_permille: BOX_LIMIT, ..Default::default() })
 }
 
 /// Tall part at 25.6 kHz (crosstalk peaks near the sensor modes, where a
@@ -523,6 +526,19 @@ fn seed_study() {
                 let image = build_matrix_image(&md, &out.frf, 2000.0, [0; 32]).unwrap();
                 let load = dynocomp::realize::load::report(&image, dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE);
                 eprintln!("    box load {:.1}-{:.1} % (fits: {})", load.load_pct[0], load.load_pct[1], load.fits);
+                if let Some(r) = &md.summary.reduction {
+                    eprintln!(
+                        "    reduction: used {} {} -> {} states, load {} -> {} ‰, predicted {:?} -> {:?}: {}",
+                        r.used,
+                        r.full_states,
+                        r.states,
+                        r.full_load_permille,
+                        r.load_permille,
+                        r.full_predicted,
+                        r.predicted,
+                        r.reason
+                    );
+                }
                 if std::env::var_os("MIMO_STUDY_NOTES").is_some() {
                     md.summary.notes.iter().for_each(|n| eprintln!("    note: {n}"));
                     for a in &md.summary.axes {
@@ -728,6 +744,107 @@ fn cli_a_3x3_image_over_the_load_limit_says_how_to_get_one_the_box_runs() {
         assert!(text.contains("record at up to "), "{text}");
     }
     assert!(err.contains("WARNING: OFFLINE-ONLY IMAGE"), "{err}");
+    // The reduction that would fit was tried and said why it is not used.
+    assert!(out.contains("not reduced for the box: 3x3 block ") && out.contains("per axis"), "{out}");
     let (ok, inspect, err) = dynocomp(&["inspect", &p("c.dcimg")]);
     assert!(ok && inspect.contains("offline only"), "{inspect}{err}");
+}
+
+/// At 25.6 kHz the off-centre plate's full 3x3 filter is over the box's
+/// load limit (81 %): `design` writes the reduced filter, which the box
+/// runs, and says what the reduction costs; `--json` has the figures.
+/// Controls: `--max-load 20`, where no reduction that fits beats the
+/// per-axis rows, and `--full-order` write the full filter offline-only.
+#[test]
+#[ignore = "a 3x3 design takes seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
+fn cli_a_3x3_image_over_the_load_limit_is_reduced_to_one_the_box_runs() {
+    use cli_common::{dynocomp, tmp};
+    let dir = tmp("mimo", "reduced");
+    let p = |n: &str| dir.join(n).display().to_string();
+    let short = ["--duration", "0.1", "--idle-duration", "0.05", "--frf-lines", "513", "--frf-df", "8"];
+    let (ok, _, err) = cli_common::simulate_plate(&p(""), "offcentre", "25600", &short);
+    assert!(ok, "{err}");
+    let (ok, out, err) = cli_common::design(&p("frf.uff"), &p("idle.csv"), "25600", &p("c.dcimg"), &["--json"]);
+    assert!(ok, "{err}");
+    let j: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+    let r = &j["design"]["reduction"];
+    assert_eq!(r["used"], true, "{r}");
+    assert!(r["states"].as_u64().unwrap() < r["full_states"].as_u64().unwrap(), "{r}");
+    assert!(r["full_load_permille"].as_u64().unwrap() > 600 && r["load_permille"].as_u64().unwrap() <= 600, "{r}");
+    assert_eq!(j["offline_only"], false);
+    assert!(!err.contains("OFFLINE-ONLY"), "{err}");
+    let (ok, inspect, err) = dynocomp(&["inspect", &p("c.dcimg")]);
+    assert!(ok && !inspect.contains("offline only"), "{inspect}{err}");
+    let (ok, out, err) = cli_common::design(&p("frf.uff"), &p("idle.csv"), "25600", &p("c.dcimg"), &[]);
+    assert!(ok && out.contains("reduced for the box: 3x3 block "), "{out}{err}");
+
+    let (ok, out, err) =
+        cli_common::design(&p("frf.uff"), &p("idle.csv"), "25600", &p("low.dcimg"), &["--max-load", "20"]);
+    assert!(ok, "{err}");
+    assert!(out.contains("not reduced for the box") && err.contains("WARNING: OFFLINE-ONLY IMAGE"), "{out}{err}");
+    let (ok, out, err) =
+        cli_common::design(&p("frf.uff"), &p("idle.csv"), "25600", &p("full.dcimg"), &["--full-order"]);
+    assert!(ok && !out.contains("reduced for the box") && err.contains("WARNING: OFFLINE-ONLY IMAGE"), "{out}{err}");
+}
+
+/// The chosen compensator's 3x3 block reduced to `states` by `how`,
+/// realized and verified: the filter the design would write at that order.
+fn reduced_filter(md: &MatrixDesign, states: usize, how: dynocomp::numeric::balanced::Reduction) -> MimoFilter {
+    assert!(md.rows.iter().all(|r| *r == RowSource::Matrix), "one 3x3 block: {:?}", md.rows);
+    let bal = dynocomp::numeric::balanced::balance(&md.compensator).unwrap();
+    let f_band = md.summary.axes.iter().map(|a| a.band_hz.1).fold(0.0, f64::max);
+    let block = bal.reduce(states, how).unwrap();
+    dynocomp::realize::mimo::realize_blocks(&[block], md.summary.fs_hz, f_band).unwrap().1
+}
+
+/// A 3x3 filter over the box's load limit is reduced to fit where it stays
+/// accurate (#30 item 4), judged against the simulator's truth:
+/// * off-centre plate at 25.6 kHz: the full filter needs 81 % of the
+///   period; the design's reduction fits the 60 % limit, and on every axis
+///   its NRMSE is within 1.1 times the full filter's and below the per-axis
+///   filters';
+/// * at 51.2 kHz the order that fits predicts worse than per axis, so the
+///   full filter is kept (offline-only); against the truth that reduction
+///   is indeed worse than the per-axis filter on some axis.
+///
+/// Negative control: the 25.6 kHz block reduced to a third of the design's
+/// order misses the 1.1 bound on some axis.
+#[test]
+#[ignore = "a minute of designs in a debug build: scripts/test.sh runs it with --release --ignored"]
+fn a_3x3_filter_over_the_load_limit_is_reduced_to_fit_where_it_stays_accurate() {
+    use dynocomp::design::mimo::reduce::filter_load;
+    let limit = BOX_LIMIT.unwrap();
+    let out = record("offcentre", 25_600.0);
+    let d = DesignOptions { fs_hz: out.params.fs_hz, ..Default::default() };
+    let full = design_matrix(&out.frf, noise(&out), &MatrixOptions { design: d, ..Default::default() }).unwrap();
+    let reduced = design(&out.frf, &out).unwrap();
+    assert!(full.summary.reduction.is_none());
+    assert!(filter_load(&full.filter, 25_600.0) > limit, "the full filter must be over the limit for this test");
+    let r = reduced.summary.reduction.as_ref().expect("reduction figures");
+    assert!(r.used, "{r:?}");
+    assert!(filter_load(&reduced.filter, 25_600.0) <= limit && r.load_permille <= limit, "{r:?}");
+    let (f_full, f_red) = (evaluate(&full, &out), evaluate(&reduced, &out));
+    eprintln!("full    {}\nreduced {}", f_full.line("offcentre", 25_600.0), f_red.line("offcentre", 25_600.0));
+    for i in 0..3 {
+        assert!(f_red.used[i] <= 1.1 * f_full.used[i], "axis {i}: {:?} vs {:?}", f_red.used, f_full.used);
+        assert!(f_red.used[i] < f_red.per_axis[i], "axis {i}: {:?} vs per axis {:?}", f_red.used, f_red.per_axis);
+    }
+    // Negative control: a third of the order.
+    let mut third = full.clone();
+    third.filter = reduced_filter(&full, r.states / 3, r.method);
+    let f_third = evaluate(&third, &out);
+    eprintln!("third   {}", f_third.line("offcentre", 25_600.0));
+    assert!((0..3).any(|i| f_third.used[i] > 1.1 * f_full.used[i]), "{:?}", f_third.used);
+
+    let out = record("offcentre", 51_200.0);
+    let md = design(&out.frf, &out).unwrap();
+    let r = md.summary.reduction.as_ref().expect("reduction figures");
+    assert!(!r.used && r.states > 0, "{r:?}");
+    assert!(filter_load(&md.filter, 51_200.0) > limit);
+    let mut refused = md.clone();
+    refused.filter = reduced_filter(&md, r.states, r.method);
+    assert!(filter_load(&refused.filter, 51_200.0) <= limit);
+    let f = evaluate(&refused, &out);
+    eprintln!("refused {}", f.line("offcentre", 51_200.0));
+    assert!((0..3).any(|i| f.used[i] > f.per_axis[i]), "{:?} vs per axis {:?}", f.used, f.per_axis);
 }

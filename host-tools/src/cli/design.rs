@@ -44,7 +44,11 @@ pub fn design(args: &DesignArgs) -> Result<String> {
     let t0 = Instant::now();
     let setup = DesignSetup::new(args)?;
     let mut crosstalk = String::new();
-    if crate::cli::design_matrix::wanted(args, &setup.frf)? {
+    let matrix = crate::cli::design_matrix::wanted(args, &setup.frf)?;
+    if args.full_order && !matrix {
+        eprintln!("note: --full-order applies to the 3x3 design only; this design is per axis");
+    }
+    if matrix {
         match crate::cli::design_matrix::run(args, &setup, t0)? {
             MatrixOutcome::Written(summary) => return Ok(summary),
             MatrixOutcome::PerAxis(lines) => {

@@ -315,10 +315,16 @@ pub struct DesignArgs {
     pub json: bool,
     /// Largest predicted CPU load of the box's sample interrupt (% of the
     /// sample period at 170 MHz, pessimistic estimate), at most the box's
-    /// own 60 %. The realizations within it are preferred; an image above
-    /// it is still written, marked offline-only.
+    /// own 60 %. The realizations within it are preferred; a 3x3 filter
+    /// above it is reduced to fit where every axis still beats its per-axis
+    /// design. An image above it is still written, marked offline-only.
     #[arg(long, default_value_t = 60.0, value_name = "PCT")]
     pub max_load: f64,
+    /// 3x3 design: keep the full filter where it is over the load limit
+    /// (written offline-only) instead of reducing it to one the box runs.
+    /// `compensate --offline` uses the full model either way.
+    #[arg(long)]
+    pub full_order: bool,
     /// Design each axis from its direct FRF alone even when the FRF file
     /// holds all nine entries: crosstalk is not compensated. Without it a
     /// complete matrix gets the 3x3 design (README "Crosstalk").

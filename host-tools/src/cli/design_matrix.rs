@@ -10,8 +10,10 @@ use std::time::Instant;
 
 use crate::cli::design_args::{DesignArgs, DesignSetup, ForcePrior, Method};
 use crate::design::mimo::image::build_matrix_image;
+use crate::design::mimo::reduce::ReductionFigures;
 use crate::design::mimo::{design_matrix, MatrixDesign, MatrixOptions, MatrixSummary, Progress, RowSource};
 use crate::frf::{axis_name, Frf};
+use crate::numeric::balanced::Reduction;
 use crate::realize::load::LoadReport;
 use crate::realize::mimo::NotVerified;
 
@@ -70,8 +72,13 @@ pub enum MatrixOutcome {
 pub fn run(args: &DesignArgs, s: &DesignSetup, t0: Instant) -> Result<MatrixOutcome> {
     let r: [f64; 3] = std::array::from_fn(|i| s.r[i].expect("R set for every axis of a complete matrix"));
     let progress = Progress::stderr();
-    let opts =
-        MatrixOptions { design: s.opts.clone(), latency: args.latency, progress: Some(progress), ..Default::default() };
+    let opts = MatrixOptions {
+        design: s.opts.clone(),
+        latency: args.latency,
+        progress: Some(progress),
+        load_limit_permille: (!args.full_order).then_some(s.limit_permille),
+        ..Default::default()
+    };
     eprintln!("designing the 3x3 compensator ({} lines, nine FRFs; up to half a minute)…", s.frf.freq_hz.len());
     let md = match design_matrix(&s.frf, r, &opts) {
         Ok(md) => md,
@@ -148,6 +155,32 @@ fn for_the_box(s: &MatrixSummary, max_fs_hz: u32) -> String {
     )
 }
 
+/// What the reduction to the box's load limit did, with its cost.
+fn reduction_line(r: &ReductionFigures) -> String {
+    let three = |v: &[f64; 3]| v.map(|e| format!("{:.3}", 100.0 * e)).join(" / ");
+    let method = match r.method {
+        Reduction::SingularPerturbation => "balanced singular perturbation, exact at DC",
+        Reduction::Truncation => "balanced truncation",
+    };
+    if r.states == 0 {
+        return format!("not reduced for the box: {}", r.reason);
+    }
+    let what = format!(
+        "3x3 block {} -> {} states ({method}; load {:.1} -> {:.1} %); predicted in-band error x / y / z {} % full -> {} % \
+         reduced",
+        r.full_states,
+        r.states,
+        f64::from(r.full_load_permille) / 10.0,
+        f64::from(r.load_permille) / 10.0,
+        three(&r.full_predicted),
+        three(&r.predicted)
+    );
+    match r.used {
+        true => format!("reduced for the box: {what}; compensate --offline keeps the full model"),
+        false => format!("not reduced for the box: {what}: {}", r.reason),
+    }
+}
+
 /// `design --json` of a 3x3 design.
 #[derive(Serialize)]
 struct MatrixJson<'a> {
@@ -216,6 +249,9 @@ fn summary_text(args: &DesignArgs, md: &MatrixDesign, id: u32, load: &LoadReport
         rz.verified_to_hz,
         rz.verification.score()
     );
+    if let Some(r) = &s.reduction {
+        let _ = writeln!(t, "{}", reduction_line(r));
+    }
     t.push_str(&crate::realize::load::describe(load, fs_hz));
     t.push_str(if load.fits { "\n" } else { "  OVER THE LIMIT: offline-only image\n" });
     if !load.fits {

@@ -11,6 +11,7 @@ pub mod criterion;
 pub mod discrete;
 pub mod image;
 pub mod kalman;
+pub mod reduce;
 pub mod response;
 pub mod worse_than_raw;
 
@@ -63,6 +64,9 @@ pub struct MatrixOptions {
     /// Options of the matrix fit; `None`: `design.vf` (the per-axis fits')
     /// with the highest order [`MATRIX_MAX_ORDER`].
     pub matrix_vf: Option<VfOptions>,
+    /// The box's load limit (‰ of the sample period) the filter is reduced
+    /// to where it is over it ([`reduce`]); `None`: never reduced.
+    pub load_limit_permille: Option<u32>,
 }
 
 /// Highest order of the matrix fit by default: every mode of the set-up is
@@ -234,6 +238,9 @@ pub struct MatrixSummary {
     /// Output rows whose lines the image's filter leaves further from the
     /// force than raw ([`worse_than_raw`]).
     pub worse_than_raw: Vec<worse_than_raw::RowWorse>,
+    /// The reduction to the box's load limit, where the full filter is over
+    /// it ([`reduce`]).
+    pub reduction: Option<reduce::ReductionFigures>,
     /// Notes for the user.
     pub notes: Vec<String>,
 }
@@ -350,12 +357,21 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
     let (ranked, latency_rounds) = rank_rounds(rounds);
     refuse_unless_better_than_raw(&ranked[0])?;
     let f_band = bands.iter().map(|b| b.1).fold(0.0, f64::max);
-    let (chosen, realized) = realize_chosen(ranked, &mut notes, d.fs_hz, f_band)?;
+    let (mut chosen, realized) = realize_chosen(ranked, &mut notes, d.fs_hz, f_band)?;
+    let (realized, reduction) = match opts.load_limit_permille {
+        Some(limit) => {
+            opts.say("reducing the 3x3 filter to the box's load limit where it is over it…");
+            let at = reduce::LoadAt { fs: d.fs_hz, limit, f_band };
+            reduce::reduce_to_load(realized, &mut chosen, &criterion, at)?
+        }
+        None => (realized, None),
+    };
     if flat {
         notes.extend(moderate_crosstalk_caveat(&chosen.axes, &crosstalk));
     }
     let shapes = force_shapes(&criterion.model, d);
     let mut md = finish(shapes, chosen, realized, prep, crosstalk, latency_rounds, notes, d.fs_hz, f_band)?;
+    md.summary.reduction = reduction;
     md.summary.worse_than_raw = worse_than_raw::rows_worse_than_raw(&md, &frf.freq_hz);
     Ok(md)
 }
@@ -906,10 +922,16 @@ type Realized = (MimoStateSpace, (MimoRealization, MimoFilter, MimoVerification)
 /// The combined compensator of `rd`, realized and verified in f32 up to
 /// `f_band` (Hz).
 fn realize_round(rd: &Round, fs: f64, f_band: f64) -> Result<Realized> {
+    let (blocks, compensator) = blocks_of(rd)?;
+    Ok((compensator, realize_blocks(&blocks, fs, f_band)?))
+}
+
+/// The blocks of `rd`'s combined compensator (the 3x3 rows' block first)
+/// and their sum ([`combine`]).
+fn blocks_of(rd: &Round) -> Result<(Vec<MimoStateSpace>, MimoStateSpace)> {
     let per_axis_ss: [Option<&crate::numeric::lti::StateSpace>; 3] =
         std::array::from_fn(|i| rd.per_axis[i].as_ref().map(|a| &a.kalman.compensator));
-    let (blocks, compensator) = combine(rd.rows, rd.matrix.as_ref().map(|m| &m.0.compensator), per_axis_ss)?;
-    Ok((compensator, realize_blocks(&blocks, fs, f_band)?))
+    combine(rd.rows, rd.matrix.as_ref().map(|m| &m.0.compensator), per_axis_ss)
 }
 
 /// The first of the `ranked` rounds ([`rank_rounds`]) whose compensator is
@@ -1005,6 +1027,7 @@ fn finish(
             verification,
         },
         worse_than_raw: Vec::new(),
+        reduction: None,
         notes,
     };
     let (model, discrete) = match prep {

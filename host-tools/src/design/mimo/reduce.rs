@@ -1,0 +1,231 @@
+//! A 3x3 compensator reduced to what the box runs in time (#30 item 4):
+//! where the chosen compensator's f32 filter is over the load limit at the
+//! design's rate, its balanced reduction ([`crate::numeric::balanced`]) of
+//! the highest order whose filter fits, with its predicted error on the same
+//! criterion as the full one. It is used only where every row still beats
+//! the per-axis row and no compensation (never silently worse); the offline
+//! smoother keeps the full model either way (it runs the plant model, not
+//! this filter).
+
+use anyhow::Result;
+use dynocomp_core::budget::{load_permille, MimoCostModel, MimoShape};
+use dynocomp_core::mimo::MimoFilter;
+use serde::Serialize;
+
+use super::criterion::RowError;
+use super::{blocks_of, Criteria, Realized, Round, RowSource};
+use crate::numeric::balanced::{balance, Balanced, Reduction};
+use crate::numeric::lti::MimoStateSpace;
+use crate::realize::mimo::{block_sum, realize_blocks};
+
+/// What the reduction did, for the summary and `--json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReductionFigures {
+    /// Whether the reduced filter is the one in the image.
+    pub used: bool,
+    /// Why (or why not).
+    pub reason: String,
+    /// States of the full compensator.
+    pub full_states: usize,
+    /// States of the reduced one.
+    pub states: usize,
+    /// Truncation or singular perturbation (exact at DC).
+    pub method: Reduction,
+    /// Bound 2 Σσ on the largest error of the transfer matrix (N/N).
+    pub hankel_bound: f64,
+    /// Predicted box load of the full filter (‰ of the sample period, high
+    /// estimate).
+    pub full_load_permille: u32,
+    /// Predicted box load of the reduced filter (‰).
+    pub load_permille: u32,
+    /// Predicted in-band error per output axis of the full filter (√J,
+    /// fraction of the force's RMS, crosstalk counted).
+    pub full_predicted: [f64; 3],
+    /// The same for the reduced filter.
+    pub predicted: [f64; 3],
+}
+
+/// Predicted load (‰, high estimate) of `filter` at `fs_hz`.
+pub fn filter_load(filter: &MimoFilter, fs_hz: f64) -> u32 {
+    load_permille(MimoCostModel::CORTEX_M4.sample_cost(MimoShape::of(filter)).high, fs_hz.round() as u32)
+}
+
+/// One reduced candidate that fits.
+struct Candidate {
+    realized: Realized,
+    states: usize,
+    method: Reduction,
+    load: u32,
+    errors: Vec<RowError>,
+    judged: Vec<RowError>,
+}
+
+/// The reductions of the 3x3 block `bal` of the highest order whose
+/// filter, with the `other` blocks unchanged, is realized, verified and
+/// within the load limit. The load grows with the order, but not strictly
+/// (a realization may take FIR taps for its fast poles), so: bisection on
+/// the singular perturbation's order for the highest that fits, then at
+/// that order and the next [`ABOVE`] above it both reductions, the highest
+/// order that fits kept.
+fn fitting(bal: &Balanced, other: &[MimoStateSpace], lag: usize, crits: &Criteria, at: LoadAt) -> Vec<Candidate> {
+    let freqs = crits.model.all_freqs();
+    let try_one = |states: usize, method: Reduction| -> Option<Candidate> {
+        let block = bal.reduce(states, method).ok()?;
+        let blocks: Vec<MimoStateSpace> = std::iter::once(block).chain(other.iter().cloned()).collect();
+        let realized = realize_blocks(&blocks, at.fs, at.f_band).ok()?;
+        let load = filter_load(&realized.1, at.fs);
+        if load > at.limit {
+            return None;
+        }
+        let system = block_sum(&blocks);
+        let h = system.freq_responses(&freqs, at.fs);
+        let errors = (0..3).map(|i| crits.model.row_error(i, lag, &h)).collect();
+        let judged = (0..3).map(|i| crits.judge.row_error(i, lag, &h)).collect();
+        Some(Candidate { realized: (system, realized), states, method, load, errors, judged })
+    };
+    // Invariant: `lo` fits (0: nothing found yet), `hi` does not.
+    let (mut lo, mut hi) = (0, bal.hankel.len().min(2 * max_sections(at) + 1));
+    while hi - lo > 1 {
+        let mid = (lo + hi) / 2;
+        match try_one(mid, Reduction::SingularPerturbation) {
+            Some(_) => lo = mid,
+            None => hi = mid,
+        }
+    }
+    if lo == 0 {
+        return Vec::new();
+    }
+    for states in (lo..=(lo + ABOVE).min(bal.hankel.len() - 1)).rev() {
+        let out: Vec<Candidate> = [Reduction::SingularPerturbation, Reduction::Truncation]
+            .into_iter()
+            .filter_map(|m| try_one(states, m))
+            .collect();
+        if !out.is_empty() {
+            return out;
+        }
+    }
+    Vec::new()
+}
+
+/// Most sections (of the cheapest kind, diagonal: two states each) a 3x3
+/// filter without taps may have within the load limit: a bound on the
+/// order that can fit.
+fn max_sections(at: LoadAt) -> usize {
+    let fits = |k: u32| {
+        let s = MimoShape { pairs: 0, diagonals: k, taps: 0 };
+        load_permille(MimoCostModel::CORTEX_M4.sample_cost(s).high, at.fs.round() as u32) <= at.limit
+    };
+    (0..=dynocomp_core::mimo::MAX_MIMO_SECTIONS as u32).take_while(|k| fits(*k)).last().map_or(0, |k| k as usize)
+}
+
+/// Orders above the bisection's result also tried ([`fitting`]).
+const ABOVE: usize = 2;
+
+/// Where the filter must fit: rate (Hz), load limit (‰) and the band the
+/// f32 filter is verified over (Hz).
+#[derive(Clone, Copy)]
+pub(super) struct LoadAt {
+    pub fs: f64,
+    pub limit: u32,
+    pub f_band: f64,
+}
+
+/// The chosen round `rd`'s compensator `realized` reduced to the load limit
+/// where its filter is over it (`None` where it fits already): its 3x3
+/// rows' block by balancing, the per-axis rows' blocks unchanged. The
+/// reduction is used (the returned realization replaces the full one, and
+/// `rd.axes` take its predictions) only where every 3x3 row still beats
+/// the per-axis row and every row beats no compensation, as the judge sees
+/// them; otherwise the figures say why and `realized` is returned unchanged.
+pub(super) fn reduce_to_load(
+    realized: Realized,
+    rd: &mut Round,
+    crits: &Criteria,
+    at: LoadAt,
+) -> Result<(Realized, Option<ReductionFigures>)> {
+    let full_load = filter_load(&realized.1 .1, at.fs);
+    if full_load <= at.limit || !rd.rows.contains(&RowSource::Matrix) {
+        return Ok((realized, None));
+    }
+    let (blocks, _) = blocks_of(rd)?;
+    let Some((matrix_block, other)) = blocks.split_first() else { return Ok((realized, None)) };
+    let full_predicted: [f64; 3] = std::array::from_fn(|i| rd.axes[i].chosen.error);
+    let mut fig = ReductionFigures {
+        used: false,
+        reason: String::new(),
+        full_states: matrix_block.a.nrows(),
+        states: 0,
+        method: Reduction::SingularPerturbation,
+        hankel_bound: f64::NAN,
+        full_load_permille: full_load,
+        load_permille: 0,
+        full_predicted,
+        predicted: [f64::NAN; 3],
+    };
+    let bal = match balance(matrix_block) {
+        Ok(b) => b,
+        Err(e) => {
+            fig.reason = format!("{e:#}");
+            return Ok((realized, Some(fig)));
+        }
+    };
+    let worst = |c: &Candidate| (0..3).map(|i| c.errors[i].error / full_predicted[i]).fold(0.0, f64::max);
+    let best = fitting(&bal, other, rd.lag, crits, at).into_iter().min_by(|a, b| worst(a).total_cmp(&worst(b)));
+    let Some(c) = best else {
+        fig.reason = format!(
+            "no balanced reduction of the {}-state 3x3 block is realized within the load limit",
+            matrix_block.a.nrows()
+        );
+        return Ok((realized, Some(fig)));
+    };
+    (fig.states, fig.method, fig.load_permille) = (c.states, c.method, c.load);
+    fig.hankel_bound = bal.error_bound(c.states);
+    fig.predicted = std::array::from_fn(|i| c.errors[i].error);
+    let worse: Vec<String> = rd
+        .axes
+        .iter()
+        .enumerate()
+        .filter_map(|(i, a)| {
+            let j = c.judged[i].error;
+            let per_axis = a.per_axis_judged.map_or(f64::INFINITY, |p| p.error);
+            if !(j < a.raw.error) {
+                Some(format!("{} {:.3} % against {:.3} % uncompensated", a.axis, 100.0 * j, 100.0 * a.raw.error))
+            } else if a.source == RowSource::Matrix && !(j < per_axis) {
+                Some(format!("{} {:.3} % against {:.3} % per axis", a.axis, 100.0 * j, 100.0 * per_axis))
+            } else {
+                None
+            }
+        })
+        .collect();
+    if !worse.is_empty() {
+        fig.reason = format!(
+            "the {}-state reduction that fits the box is worse than the alternatives on {} (judged on the per-axis \
+             fits); the full filter is kept",
+            c.states,
+            worse.join(", ")
+        );
+        return Ok((realized, Some(fig)));
+    }
+    fig.used = true;
+    fig.reason = format!(
+        "the 3x3 block is reduced from {} to {} states to fit the box; every 3x3 row still beats its per-axis row",
+        fig.full_states, c.states
+    );
+    let noise_gains = c.realized.0.white_noise_gains();
+    for (i, a) in rd.axes.iter_mut().enumerate() {
+        if a.source != RowSource::Matrix {
+            continue;
+        }
+        a.chosen = c.errors[i];
+        if let Some(ng) = &noise_gains {
+            a.noise_gain = ng[i];
+        }
+        a.reason.push_str(&format!(
+            "; reduced to {} states for the box: {:.3} % (full filter {:.3} %)",
+            c.states,
+            100.0 * c.errors[i].error,
+            100.0 * full_predicted[i]
+        ));
+    }
+    Ok((c.realized, Some(fig)))
+}
