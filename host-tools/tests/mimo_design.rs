@@ -794,7 +794,14 @@ fn reduced_filter(md: &MatrixDesign, states: usize, how: dynocomp::numeric::bala
     let bal = dynocomp::numeric::balanced::balance(&md.compensator).unwrap();
     let f_band = md.summary.axes.iter().map(|a| a.band_hz.1).fold(0.0, f64::max);
     let block = bal.reduce(states, how).unwrap();
-    dynocomp::realize::mimo::realize_blocks(&[block], md.summary.fs_hz, f_band).unwrap().1
+    dynocomp::realize::mimo::realize_blocks_by(
+        &[block],
+        md.summary.fs_hz,
+        f_band,
+        dynocomp::realize::mimo::Prefer::Load,
+    )
+    .unwrap()
+    .1
 }
 
 /// A 3x3 filter over the box's load limit is reduced to fit where it stays

@@ -555,6 +555,35 @@ pub fn realize_blocks(
     fs_hz: f64,
     f_band_hz: f64,
 ) -> Result<(MimoRealization, MimoFilter, MimoVerification)> {
+    realize_blocks_by(blocks, fs_hz, f_band_hz, Prefer::Accuracy)
+}
+
+/// Which of a block's verified realizations [`realize_blocks_by`] keeps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Prefer {
+    /// The one that verifies best in f32 (fewer sections and taps only
+    /// within 2x of the best score): [`realize_blocks`].
+    Accuracy,
+    /// The one the box runs in the fewest cycles (Cortex-M4 model, high
+    /// estimate), among those that verify: for a filter that must fit a
+    /// load limit.
+    Load,
+}
+
+/// Cycles per sample of a realization's sections and taps (Cortex-M4 model,
+/// high estimate, hundredths).
+fn kernel_cost(r: &MimoRealization) -> u64 {
+    let m = dynocomp_core::budget::MimoCostModel::CORTEX_M4;
+    u64::from(m.pair.high) * r.sections.len() as u64 + u64::from(m.tap.high) * r.fir.len() as u64
+}
+
+/// [`realize_blocks`] keeping, per block, the realization `prefer` says.
+pub fn realize_blocks_by(
+    blocks: &[MimoStateSpace],
+    fs_hz: f64,
+    f_band_hz: f64,
+    prefer: Prefer,
+) -> Result<(MimoRealization, MimoFilter, MimoVerification)> {
     let mut total = MimoRealization { modal_condition: 1.0, decoupling_norm: 1.0, ..Default::default() };
     for (k, blk) in blocks.iter().enumerate() {
         let candidates = block_candidates(blk).with_context(|| format!("3x3 compensator, block {k}"))?;
@@ -565,8 +594,11 @@ pub fn realize_blocks(
             match quantize(&c, &reference) {
                 Ok((_, v)) => {
                     let cost = c.sections.len() + c.fir.len();
-                    let better = best.as_ref().is_none_or(|(s, b)| {
-                        v.score() < 0.5 * s || (v.score() <= 2.0 * s && cost < b.sections.len() + b.fir.len())
+                    let better = best.as_ref().is_none_or(|(s, b)| match prefer {
+                        Prefer::Accuracy => {
+                            v.score() < 0.5 * s || (v.score() <= 2.0 * s && cost < b.sections.len() + b.fir.len())
+                        }
+                        Prefer::Load => kernel_cost(&c) < kernel_cost(b),
                     });
                     if better {
                         best = Some((v.score(), c));
