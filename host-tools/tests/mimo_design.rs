@@ -775,16 +775,27 @@ fn cli_a_3x3_image_over_the_load_limit_is_reduced_to_one_the_box_runs() {
     assert!(!err.contains("OFFLINE-ONLY"), "{err}");
     let (ok, inspect, err) = dynocomp(&["inspect", &p("c.dcimg")]);
     assert!(ok && !inspect.contains("offline only"), "{inspect}{err}");
-    let (ok, out, err) = cli_common::design(&p("frf.uff"), &p("idle.csv"), "25600", &p("c.dcimg"), &[]);
+    let (ok, out, err) =
+        cli_common::design(&p("frf.uff"), &p("idle.csv"), "25600", &p("c.dcimg"), &["--report", &p("report")]);
     assert!(ok && out.contains("reduced for the box: 3x3 block "), "{out}{err}");
+    // The report draws the full filter beside the reduced one.
+    let rows = std::fs::read_to_string(dir.join("report").join("matrix_rows.svg")).unwrap();
+    assert!(rows.contains("full filter (--full-order)"), "no full-filter trace in the report");
 
     let (ok, out, err) =
         cli_common::design(&p("frf.uff"), &p("idle.csv"), "25600", &p("low.dcimg"), &["--max-load", "20"]);
     assert!(ok, "{err}");
     assert!(out.contains("not reduced for the box") && err.contains("WARNING: OFFLINE-ONLY IMAGE"), "{out}{err}");
-    let (ok, out, err) =
-        cli_common::design(&p("frf.uff"), &p("idle.csv"), "25600", &p("full.dcimg"), &["--full-order"]);
+    let (ok, out, err) = cli_common::design(
+        &p("frf.uff"),
+        &p("idle.csv"),
+        "25600",
+        &p("full.dcimg"),
+        &["--full-order", "--report", &p("full-report")],
+    );
     assert!(ok && !out.contains("reduced for the box") && err.contains("WARNING: OFFLINE-ONLY IMAGE"), "{out}{err}");
+    let rows = std::fs::read_to_string(dir.join("full-report").join("matrix_rows.svg")).unwrap();
+    assert!(!rows.contains("full filter (--full-order)"), "a full-filter trace without a reduction");
 }
 
 /// The chosen compensator's 3x3 block reduced to `states` by `how`,

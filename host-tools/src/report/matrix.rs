@@ -48,7 +48,7 @@ pub fn write_matrix_report(
             format!(
                 "Panel (i, j): |(H·G·e^(j2πfL/fs))_ij − δ_ij| in dB, on the measured G at L = {} samples: the share of \
                  force j that reaches estimate i wrongly (on the diagonal, the distortion of force i itself). Red: \
-                 the filter the image holds (row {}); grey dashed: the per-axis filter alone. −40 dB is 1 %.",
+                 the filter the image holds (row {}); grey dashed: the per-axis filter alone.{} −40 dB is 1 %.",
                 md.summary.latency,
                 (0..3)
                     .map(|i| format!(
@@ -57,7 +57,15 @@ pub fn write_matrix_report(
                         if md.rows[i] == RowSource::Matrix { "3x3" } else { "per axis" }
                     ))
                     .collect::<Vec<_>>()
-                    .join(", ")
+                    .join(", "),
+                match &md.summary.reduction {
+                    Some(r) if r.used => format!(
+                        " Blue: the full {}-state 3x3 filter, which the image holds reduced to {} states to fit the \
+                         box's load limit (the summary gives the predicted cost).",
+                        r.full_states, r.states
+                    ),
+                    _ => String::new(),
+                }
             ),
         ),
     ];
@@ -150,6 +158,7 @@ fn plot_rows(md: &MatrixDesign, g: &[MeasuredLine], fs_hz: f64, bands: &[(f64, f
     let used: Vec<[[Complex64; 3]; 3]> = freqs.iter().map(|f| md.realization.freq_response(*f, fs_hz)).collect();
     let per_axis: Vec<Option<Vec<Complex64>>> =
         md.per_axis.iter().map(|a| a.as_ref().map(|a| a.kalman.compensator.freq_responses(&freqs, fs_hz))).collect();
+    let full = md.full_compensator.as_ref().map(|c| c.freq_responses(&freqs, fs_hz));
     let delay = |f: f64| Complex64::from_polar(1.0, 2.0 * PI * f * lag / fs_hz);
     let delta = |i: usize, j: usize| if i == j { 1.0 } else { 0.0 };
     let panels = (0..9)
@@ -172,6 +181,17 @@ fn plot_rows(md: &MatrixDesign, g: &[MeasuredLine], fs_hz: f64, bands: &[(f64, f
                     .map(|((f, m), h)| (*f, db((h * m[(i, j)] * delay(*f) - delta(i, j)).norm())))
                     .collect();
                 s.push((grey, C_MEASURED, true, "per-axis filter alone"));
+            }
+            if let Some(h) = &full {
+                let blue = g
+                    .iter()
+                    .zip(h)
+                    .map(|((f, m), h)| {
+                        let hg = (0..3).map(|k| h[(i, k)] * m[(k, j)]).sum::<Complex64>() * delay(*f);
+                        (*f, db((hg - delta(i, j)).norm()))
+                    })
+                    .collect();
+                s.push((blue, C_FIT, false, "full filter (--full-order)"));
             }
             s.push((red, C_USED, false, "the image's filter"));
             s

@@ -266,6 +266,9 @@ pub struct MatrixDesign {
     pub realization: MimoRealization,
     /// The f32 filter the box runs.
     pub filter: MimoFilter,
+    /// The full compensator where the image holds its reduction to the
+    /// box's load limit ([`reduce`]; `None`: not reduced).
+    pub full_compensator: Option<MimoStateSpace>,
 }
 
 impl MatrixDesign {
@@ -358,6 +361,7 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
     refuse_unless_better_than_raw(&ranked[0])?;
     let f_band = bands.iter().map(|b| b.1).fold(0.0, f64::max);
     let (mut chosen, realized) = realize_chosen(ranked, &mut notes, d.fs_hz, f_band)?;
+    let full = realized.0.clone();
     let (realized, reduction) = match opts.load_limit_permille {
         Some(limit) => {
             opts.say("reducing the 3x3 filter to the box's load limit where it is over it…");
@@ -366,12 +370,14 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
         }
         None => (realized, None),
     };
+    let full_compensator = reduction.as_ref().filter(|r| r.used).map(|_| full.clone());
     if flat {
         notes.extend(moderate_crosstalk_caveat(&chosen.axes, &crosstalk));
     }
     let shapes = force_shapes(&criterion.model, d);
     let mut md = finish(shapes, chosen, realized, prep, crosstalk, latency_rounds, notes, d.fs_hz, f_band)?;
     md.summary.reduction = reduction;
+    md.full_compensator = full_compensator;
     md.summary.worse_than_raw = worse_than_raw::rows_worse_than_raw(&md, &frf.freq_hz);
     Ok(md)
 }
@@ -1044,5 +1050,6 @@ fn finish(
         compensator,
         realization,
         filter,
+        full_compensator: None,
     })
 }
