@@ -220,6 +220,15 @@ fn the_3x3_design_warns_where_its_output_is_worse_than_raw() {
         }
         let (comp, raw) = ((comp / count).sqrt(), (raw / count).sqrt());
         eprintln!("392 Hz on z: box error {comp:.3}, raw {raw:.3}");
+        // The report shades the span in orange and says so under the plot.
+        let dir = std::env::temp_dir().join(format!("dynocomp-wtr-report-{}-{nmp}", std::process::id()));
+        dynocomp::report::matrix::write_matrix_report(&dir, &md, &frf, FS, "summary").unwrap();
+        let svg = std::fs::read_to_string(dir.join("matrix_rows.svg")).unwrap();
+        let html = std::fs::read_to_string(dir.join("index.html")).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        let shaded = svg.contains("#FF7F0E");
+        assert_eq!(shaded, nmp, "orange span in the report: {shaded}");
+        assert_eq!(html.contains("Orange: where the image"), nmp);
         if nmp {
             assert_eq!(warned.len(), 1, "{:?}", md.summary.worse_than_raw);
             let w = warned[0];

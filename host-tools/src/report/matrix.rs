@@ -21,6 +21,8 @@ const C_MEASURED: RGBColor = RGBColor(110, 110, 110);
 const C_FIT: RGBColor = RGBColor(31, 119, 180);
 const C_USED: RGBColor = RGBColor(214, 39, 40);
 const C_BAND: RGBColor = RGBColor(44, 160, 44);
+/// Where the image's filter is worse than raw (the design's WARNING).
+const C_WORSE: RGBColor = RGBColor(255, 127, 14);
 
 /// Write the report (index.html and its two plots) into `dir`; `summary`
 /// is the design's text summary. Returns the written files.
@@ -48,7 +50,7 @@ pub fn write_matrix_report(
             format!(
                 "Panel (i, j): |(H·G·e^(j2πfL/fs))_ij − δ_ij| in dB, on the measured G at L = {} samples: the share of \
                  force j that reaches estimate i wrongly (on the diagonal, the distortion of force i itself). Red: \
-                 the filter the image holds (row {}); grey dashed: the per-axis filter alone.{} −40 dB is 1 %.",
+                 the filter the image holds (row {}); grey dashed: the per-axis filter alone.{}{} −40 dB is 1 %.",
                 md.summary.latency,
                 (0..3)
                     .map(|i| format!(
@@ -58,6 +60,7 @@ pub fn write_matrix_report(
                     ))
                     .collect::<Vec<_>>()
                     .join(", "),
+                worse_note(md),
                 match &md.summary.reduction {
                     Some(r) if r.used => format!(
                         " Blue: the full {}-state 3x3 filter, which the image holds reduced to {} states to fit the \
@@ -80,6 +83,25 @@ pub fn write_matrix_report(
     write_pages(dir, &pages)
 }
 
+/// The caption's sentence on the orange spans: the rows whose image filter
+/// is worse than raw there (empty where none is).
+fn worse_note(md: &MatrixDesign) -> String {
+    let rows: Vec<String> = md
+        .summary
+        .worse_than_raw
+        .iter()
+        .map(|w| format!("{} {:.0}-{:.0} Hz", w.axis, w.worse_hz.0, w.worse_hz.1))
+        .collect();
+    match rows.is_empty() {
+        true => String::new(),
+        false => format!(
+            " Orange: where the image's filter leaves the estimate further from the force than no compensation \
+             ({}; the WARNING of the summary).",
+            rows.join(", ")
+        ),
+    }
+}
+
 /// dB of a magnitude, floored at −120 dB.
 fn db(v: f64) -> f64 {
     20.0 * v.max(1e-6).log10()
@@ -91,6 +113,18 @@ type Series<'a> = (Vec<(f64, f64)>, RGBColor, bool, &'a str);
 /// A 3x3 grid of panels of (x, y) lines (one list of series per panel:
 /// points, colour, dashed, label), shaded over each row's band.
 fn grid(title: &str, x_max: f64, bands: &[(f64, f64); 3], panels: &[Vec<Series<'_>>]) -> Result<String> {
+    grid_marked(title, x_max, bands, &[None; 3], panels)
+}
+
+/// [`grid`] with, per row i, the span `worse[i]` (Hz) shaded in orange on
+/// every panel of the row.
+fn grid_marked(
+    title: &str,
+    x_max: f64,
+    bands: &[(f64, f64); 3],
+    worse: &[Option<(f64, f64)>; 3],
+    panels: &[Vec<Series<'_>>],
+) -> Result<String> {
     let mut buf = String::new();
     {
         let root = SVGBackend::with_string(&mut buf, (1100, 900)).into_drawing_area();
@@ -107,6 +141,9 @@ fn grid(title: &str, x_max: f64, bands: &[(f64, f64); 3], panels: &[Vec<Series<'
             let mut c = build_chart(area, &caption, xr, yr)?;
             mesh(&mut c, "Hz", "dB", &crate::report::plot::hz, &|v| format!("{v:.0}"), 6)?;
             shade(&mut c, bands[i], xr, yr, C_BAND, 0.06, "")?;
+            if let Some(span) = worse[i] {
+                shade(&mut c, span, xr, yr, C_WORSE, 0.2, "")?;
+            }
             for (pts, color, dashed, label) in &panels[k] {
                 let label = if k == 0 { label } else { "" };
                 draw_line(&mut c, pts, yr, f64::INFINITY, *color, 1, *dashed, label)?;
@@ -198,5 +235,15 @@ fn plot_rows(md: &MatrixDesign, g: &[MeasuredLine], fs_hz: f64, bands: &[(f64, f
         })
         .collect::<Vec<_>>();
     let x_max = freqs.last().copied().unwrap_or(1.0);
-    grid("|(H·G·e^(jωL))_ij − δ_ij| on the measured matrix", x_max, bands, &panels)
+    let worse = std::array::from_fn(|i| {
+        md.summary.worse_than_raw.iter().find(|w| w.axis == axis_name(i)).map(|w| widen(w.worse_hz, &freqs))
+    });
+    grid_marked("|(H·G·e^(jωL))_ij − δ_ij| on the measured matrix", x_max, bands, &worse, &panels)
+}
+
+/// A span of FRF lines widened by half a line spacing on each side, so
+/// that a single line shows.
+fn widen((lo, hi): (f64, f64), freqs: &[f64]) -> (f64, f64) {
+    let df = freqs.windows(2).map(|w| w[1] - w[0]).find(|d| *d > 0.0).unwrap_or(1.0);
+    (lo - 0.5 * df, hi + 0.5 * df)
 }
