@@ -49,13 +49,15 @@ class FRF:
     direct FRFs G_xx, G_yy, G_zz in columns x, y, z (NaN for an axis not
     measured); ``coherence`` (n, 3) γ² (NaN where absent); ``axes`` the
     measured axes (0 = x); ``matrix`` (n, 3, 3) complex, G[k, i, j] for
-    channel i and force direction j, when cross FRFs were measured.
+    channel i and force direction j, when cross FRFs were measured, and
+    ``matrix_coherence`` (n, 3, 3) their γ² (None where the file has none).
 
-    Build one from arrays with ``FRF(freq_hz, frf, coherence=None)``;
-    ``read_frf`` reads a file (UFF58 or CSV).
+    Build one from arrays with ``FRF(freq_hz, frf, coherence=None)`` (and
+    ``matrix=`` for the 3x3 design); ``read_frf`` reads a file (UFF58 or
+    CSV).
     """
 
-    def __init__(self, freq_hz, frf, coherence=None, axes=None, matrix=None, path=None):
+    def __init__(self, freq_hz, frf, coherence=None, axes=None, matrix=None, path=None, matrix_coherence=None):
         self.freq_hz = np.ascontiguousarray(freq_hz, dtype=np.float64)
         frf = np.asarray(frf, dtype=np.complex128)
         if frf.ndim == 1:
@@ -79,7 +81,8 @@ class FRF:
             c[:, : coh.shape[1]] = coh
             coherence = c
         self.coherence = coherence
-        self.matrix = matrix
+        self.matrix = None if matrix is None else np.asarray(matrix, dtype=np.complex128)
+        self.matrix_coherence = None if matrix_coherence is None else np.asarray(matrix_coherence, dtype=np.float64)
         self.path = path
 
     def __repr__(self):
@@ -89,17 +92,24 @@ class FRF:
         return f"FRF(axes={names!r}, {len(f)} lines, {span}{', 3x3' if self.matrix is not None else ''})"
 
     def to_csv(self, path):
-        """Write the direct FRFs as the project's FRF CSV (``freq_hz,x_re,...``)."""
+        """Write the FRFs as the project's FRF CSV (``freq_hz,x_re,...``), with
+        the cross entries (``xy_re,...``, docs/frf-matrix.md) where ``matrix``
+        holds them."""
         coh = None
         if self.coherence is not None:
             coh = np.ascontiguousarray(np.nan_to_num(self.coherence, nan=0.0))
-        _rs.write_frf_csv(os.fspath(path), self.freq_hz, np.ascontiguousarray(self.frf), list(self.axes), coh)
+        m = None if self.matrix is None else np.ascontiguousarray(self.matrix)
+        mc = None if self.matrix_coherence is None else np.ascontiguousarray(self.matrix_coherence)
+        _rs.write_frf_csv(os.fspath(path), self.freq_hz, np.ascontiguousarray(self.frf), list(self.axes), coh, m, mc)
 
 
 def read_frf(path) -> FRF:
     """Read an FRF file (UFF58 ``.uff``/``.unv`` or CSV), as ``dynocomp design`` reads it."""
     d = _rs.read_frf(os.fspath(path))
-    return FRF(d["freq_hz"], d["frf"], d["coherence"], d["axes"], d.get("matrix"), path=Path(path))
+    return FRF(
+        d["freq_hz"], d["frf"], d["coherence"], d["axes"], d.get("matrix"), path=Path(path),
+        matrix_coherence=d.get("matrix_coherence"),
+    )
 
 
 class Record:
@@ -203,6 +213,8 @@ class Design:
 
     def _repr_html_(self):
         s = self.summary
+        if s.get("kind") == "3x3":
+            return _matrix_html(s, self.report)
         rows = "".join(
             "<tr>" + "".join(f"<td>{html.escape(str(a.get(k, '')))}</td>" for k in _SUMMARY_KEYS) + "</tr>"
             for a in s.get("axes", [])
@@ -226,6 +238,55 @@ class Design:
 
 
 _SUMMARY_KEYS = ("axis", "model_order", "q", "flat_band_hz", "noise_gain")
+
+
+def _pct(e):
+    """A predicted error (fraction, or a {"error": …} dict) in percent."""
+    if isinstance(e, dict):
+        e = e.get("error")
+    return "-" if e is None else f"{100.0 * e:.3f} %"
+
+
+def _matrix_html(s, report):
+    """The notebook view of a 3x3 design: per output axis the row used and
+    the predicted errors (crosstalk counted), the box load, the reduction to
+    the box's limit where there is one, and the residual plot."""
+    d = s.get("design", {})
+    head = "".join(f"<th>{k}</th>" for k in ("axis", "row used", "predicted", "per axis", "raw", "why"))
+    rows = "".join(
+        "<tr>"
+        + "".join(
+            f"<td>{html.escape(str(v))}</td>"
+            for v in (a.get("axis"), a.get("source"), _pct(a.get("chosen")), _pct(a.get("per_axis")),
+                      _pct(a.get("raw")), a.get("reason", ""))
+        )
+        + "</tr>"
+        for a in d.get("axes", [])
+    )
+    load = s.get("box_load", {})
+    lines = [
+        f"box load {load.get('load_pct', ['?', '?'])[1]} % of the sample period (limit {load.get('limit_pct')} %)"
+        + ("; <b>offline-only image</b>" if s.get("offline_only") else "")
+    ]
+    red = d.get("reduction")
+    if red and red.get("states"):
+        full, now = (" / ".join(_pct(e) for e in red[k]) for k in ("full_predicted", "predicted"))
+        verb = "reduced" if red.get("used") else "not reduced"
+        lines.append(
+            f"{verb} for the box: {red['full_states']} → {red['states']} states, predicted {full} → {now}; "
+            + html.escape(red.get("reason", ""))
+        )
+    plots = "".join(
+        f"<figure style='display:inline-block;margin:4px'>{svg}<figcaption>{html.escape(name)}</figcaption></figure>"
+        for name, svg in report.items()
+        if name == "matrix_rows.svg"
+    )
+    return (
+        f"<div><b>dynocomp 3x3 design</b>: image {s.get('image_id')}, fs {s.get('fs_hz')} Hz, "
+        f"latency {s.get('latency_samples')} samples<table><tr>{head}</tr>{rows}</table>"
+        + "".join(f"<p>{line}</p>" for line in lines)
+        + f"{plots}</div>"
+    )
 
 
 def _write_atomic(path, data):

@@ -138,6 +138,22 @@ fn read_frf<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDict>>
             }
         }
         d.set_item("matrix", PyArray3::from_owned_array(py, m))?;
+        let mut mc = ndarray::Array3::from_elem((n, 3, 3), f64::NAN);
+        let mut any = false;
+        for a in &frf.axes {
+            for (k, v) in a.coherence.iter().flatten().enumerate() {
+                mc[(k, a.axis, a.axis)] = *v;
+            }
+        }
+        for c in &frf.cross {
+            for (k, v) in c.coherence.iter().flatten().enumerate() {
+                mc[(k, c.channel, c.direction)] = *v;
+                any = true;
+            }
+        }
+        if any {
+            d.set_item("matrix_coherence", PyArray3::from_owned_array(py, mc))?;
+        }
     }
     Ok(d)
 }
@@ -171,9 +187,13 @@ fn read_record<'py>(py: Python<'py>, path: PathBuf, channels: Option<String>) ->
 
 /// Write an FRF (direct entries of `axes`) as the library's FRF CSV, for
 /// `design` from arrays: `frf` (n, 3) complex N/N, `coherence` (n, 3) or
-/// None; columns of axes not in `axes` are ignored.
+/// None; columns of axes not in `axes` are ignored. `matrix` (n, 3, 3)
+/// adds the cross entries G_ij (channel i, force direction j) that hold a
+/// finite value, with `matrix_coherence` (n, 3, 3) where given
+/// (docs/frf-matrix.md).
 #[pyfunction]
-#[pyo3(signature = (path, freq_hz, frf, axes, coherence=None))]
+#[pyo3(signature = (path, freq_hz, frf, axes, coherence=None, matrix=None, matrix_coherence=None))]
+#[allow(clippy::too_many_arguments)]
 fn write_frf_csv(
     py: Python<'_>,
     path: PathBuf,
@@ -181,6 +201,8 @@ fn write_frf_csv(
     frf: numpy::PyReadonlyArray2<'_, Complex64>,
     axes: Vec<usize>,
     coherence: Option<numpy::PyReadonlyArray2<'_, f64>>,
+    matrix: Option<numpy::PyReadonlyArray3<'_, Complex64>>,
+    matrix_coherence: Option<numpy::PyReadonlyArray3<'_, f64>>,
 ) -> PyResult<()> {
     let (f, g) = (freq_hz.as_array(), frf.as_array());
     let coh = coherence.as_ref().map(|c| c.as_array());
@@ -197,6 +219,32 @@ fn write_frf_csv(
             "axes {axes:?}: give the 0-based axes (0 = x, 1 = y, 2 = z) the FRF has"
         )));
     }
+    let m = matrix.as_ref().map(|m| m.as_array());
+    let mc = matrix_coherence.as_ref().map(|c| c.as_array());
+    if m.as_ref().is_some_and(|m| m.shape() != [n, 3, 3]) || mc.as_ref().is_some_and(|c| c.shape() != [n, 3, 3]) {
+        return Err(PyValueError::new_err(format!(
+            "matrix: shape {:?}, matrix_coherence: {:?}; pass ({n}, 3, 3) for the {n} lines of freq_hz \
+             (G[k, i, j]: channel i, force direction j)",
+            m.as_ref().map(|m| m.shape().to_vec()),
+            mc.as_ref().map(|c| c.shape().to_vec())
+        )));
+    }
+    let mut cross = Vec::new();
+    if let Some(m) = &m {
+        for (i, j) in (0..3).flat_map(|i| (0..3).map(move |j| (i, j))).filter(|(i, j)| i != j) {
+            let entry: Vec<Complex64> = (0..n).map(|k| m[(k, i, j)]).collect();
+            if !entry.iter().any(|v| v.re.is_finite() && v.im.is_finite()) {
+                continue; // not measured
+            }
+            let coherence = mc.as_ref().map(|c| (0..n).map(|k| c[(k, i, j)]).collect::<Vec<f64>>());
+            cross.push(dynocomp::frf::CrossFrf {
+                channel: i,
+                direction: j,
+                frf: entry,
+                coherence: coherence.filter(|c| c.iter().all(|v| v.is_finite())),
+            });
+        }
+    }
     let frf = dynocomp::frf::Frf {
         freq_hz: f.to_vec(),
         axes: axes
@@ -207,7 +255,7 @@ fn write_frf_csv(
                 coherence: coh.as_ref().map(|c| c.column(a).to_vec()),
             })
             .collect(),
-        cross: Vec::new(),
+        cross,
     };
     py.detach(|| guarded(|| dynocomp::io::frf_csv::write_frf_csv(&path, &frf)))
 }

@@ -292,6 +292,44 @@ def test_a_3x3_image_runs_bit_exact_with_the_cli(measured, tmp_path):
         img.compensate(measured.forces[:, :2], axes="xy")
 
 
+def test_an_frf_matrix_from_arrays_reaches_the_design_whole(tmp_path):
+    """An FRF with cross entries, written for ``design`` (as an FRF built from
+    arrays or by ``simulate`` is), keeps all nine entries and their
+    coherence, to the bit. Negative control: without ``matrix`` only the
+    direct entries are written."""
+    sim = dynocomp.simulate(dyno="plate", dyno_preset="offcentre", fs=10240, duration=0.05,
+                            idle_duration=0.02, frf_lines=257, frf_df=8)
+    frf = sim.frf
+    assert frf.matrix is not None and frf.matrix_coherence is not None
+    frf.to_csv(tmp_path / "m.csv")
+    back = dynocomp.read_frf(tmp_path / "m.csv")
+    assert back.matrix is not None
+    assert np.array_equal(back.matrix, frf.matrix) and np.array_equal(back.matrix_coherence, frf.matrix_coherence)
+    direct = dynocomp.FRF(frf.freq_hz, frf.frf, frf.coherence)
+    direct.to_csv(tmp_path / "d.csv")
+    assert dynocomp.read_frf(tmp_path / "d.csv").matrix is None
+
+
+def test_a_3x3_design_shows_its_rows_load_and_reduction_in_a_notebook():
+    """A 3x3 design (off-centre plate at 25.6 kHz, whose full filter is over
+    the box's load limit) reduced to fit: the notebook view names each
+    axis's row and prediction, the box load, the reduction and its cost,
+    and draws the residual plot."""
+    sim = dynocomp.simulate(dyno="plate", dyno_preset="offcentre", fs=25600, duration=0.1,
+                            idle_duration=0.05, frf_lines=513, frf_df=8)
+    d = dynocomp.design(sim.frf, fs=25600, idle=sim.idle)
+    assert d.summary["kind"] == "3x3" and not d.summary["offline_only"]
+    red = d.summary["design"]["reduction"]
+    assert red["used"] and red["states"] < red["full_states"]
+    html = d._repr_html_()
+    assert "3x3 design" in html and "matrix" in html and "<svg" in html
+    assert f"{red['full_states']} → {red['states']} states" in html and "reduced for the box" in html
+    # Negative control: without a reduction the view does not claim one.
+    s = json.loads(json.dumps(d.summary))
+    s["design"]["reduction"] = None
+    assert "reduced for the box" not in dynocomp._matrix_html(s, d.report)
+
+
 # --- the GIL -------------------------------------------------------------------
 
 
