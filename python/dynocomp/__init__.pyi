@@ -38,6 +38,8 @@ class FRF:
     """The measured axes."""
     matrix: npt.NDArray[np.complex128] | None
     """(n, 3, 3) G[k, i, j]: channel i, force direction j (N/N), when cross FRFs were measured."""
+    matrix_coherence: npt.NDArray[np.float64] | None
+    """(n, 3, 3) γ² of the entries of `matrix` (NaN where absent); None without cross coherence."""
     path: os.PathLike[str] | None
     """The file it was read from (design() then reads that file, as the CLI does)."""
 
@@ -49,6 +51,7 @@ class FRF:
         axes: Sequence[int] | None = None,
         matrix: npt.ArrayLike | None = None,
         path: os.PathLike[str] | None = None,
+        matrix_coherence: npt.ArrayLike | None = None,
     ) -> None: ...
     def to_csv(self, path: PathLike) -> None:
         """Write the direct FRFs as the project's FRF CSV."""
