@@ -1,4 +1,4 @@
-//! A 3x3 compensator reduced to what the box runs in time (#30 item 4):
+//! A 3x3 compensator reduced to what the box runs in time:
 //! where the chosen compensator's f32 filter is over the load limit at the
 //! design's rate, its balanced reduction ([`crate::numeric::balanced`]) of
 //! the highest order whose filter fits, with its predicted error on the same
@@ -104,8 +104,9 @@ fn fitting(bal: &Balanced, other: &[MimoStateSpace], lag: usize, crits: &Criteri
 }
 
 /// Most sections (of the cheapest kind, diagonal: two states each) a 3x3
-/// filter without taps may have within the load limit: a bound on the
-/// order that can fit.
+/// filter without taps may have within the load limit: twice this, plus
+/// one, is the top of the bisection (a higher order could fit only with
+/// many of its poles as FIR taps; the bisection does not look there).
 fn max_sections(at: LoadAt) -> usize {
     let fits = |k: u32| {
         let s = MimoShape { pairs: 0, diagonals: k, taps: 0 };
