@@ -119,7 +119,13 @@ fn design(frf: &Frf, out: &PlateSimOutput) -> anyhow::Result<MatrixDesign> {
 
 fn design_above(frf: &Frf, out: &PlateSimOutput, above_band: AboveBand) -> anyhow::Result<MatrixDesign> {
     let design = DesignOptions { fs_hz: out.params.fs_hz, above_band, ..Default::default() };
-    design_matrix(frf, noise(out), &MatrixOptions { design, load_limit_permille: BOX_LIMIT, ..Default::default() })
+    design_matrix(frf, noise(out), &MatrixOptions { design, load_limit_permille: box_limit(), ..Default::default() })
+}
+
+/// [`BOX_LIMIT`], or none (the full filter, as `design --full-order`) with
+/// `MIMO_FULL_ORDER` set, for the studies' before-and-after figures.
+fn box_limit() -> Option<u32> {
+    BOX_LIMIT.filter(|_| std::env::var_os("MIMO_FULL_ORDER").is_none())
 }
 
 /// The box's load limit, as `design` passes it: images over it are reduced.
