@@ -1,7 +1,8 @@
 //! `dynocomp design` on a complete FRF matrix: the 3x3 design
-//! ([`crate::design::mimo`]) → a 3x3 image (format 3), marked offline-only
-//! over the box's load limit → summary (text or JSON) with the crosstalk and
-//! each axis's choice of row (README "Crosstalk").
+//! ([`crate::design::mimo`], its filter reduced to the box's load limit
+//! unless `--full-order`) → a 3x3 image (format 3), marked offline-only
+//! over the load limit → summary (text or JSON) with the crosstalk, each
+//! axis's choice of row and the reduction (README "Crosstalk").
 
 use anyhow::{bail, Result};
 use serde::Serialize;
