@@ -316,7 +316,10 @@ struct Round {
 ///    silently worse: the 3x3 row only where it beats the per-axis one
 ///    there, `Criteria`), as one block-diagonal compensator (`combine`);
 /// 6. realized and verified in f32 for the one 3x3 kernel
-///    ([`crate::realize::mimo`]).
+///    ([`crate::realize::mimo`]);
+/// 7. where its filter is over `opts.load_limit_permille`, its 3x3 block
+///    reduced by balancing to one that fits, if every 3x3 row still beats
+///    its per-axis row ([`reduce`]).
 ///
 /// The latency follows the per-axis rule ([`crate::design::latency`]):
 /// [`DEFAULT_LATENCY`], and [`LONGER_LATENCIES`] only where an axis's best
