@@ -367,7 +367,14 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
     let full = realized.0.clone();
     let (realized, reduction) = match opts.load_limit_permille {
         Some(limit) => {
-            opts.say("reducing the 3x3 filter to the box's load limit where it is over it…");
+            let load = reduce::filter_load(&realized.1 .1, d.fs_hz);
+            if load > limit {
+                opts.say(&format!(
+                    "the filter needs {:.1} % of the box's sample period (limit {:.1} %): reducing it…",
+                    f64::from(load) / 10.0,
+                    f64::from(limit) / 10.0
+                ));
+            }
             let at = reduce::LoadAt { fs: d.fs_hz, limit, f_band };
             reduce::reduce_to_load(realized, &mut chosen, &criterion, at)?
         }
