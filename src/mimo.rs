@@ -62,7 +62,7 @@ impl MimoSection {
     }
 
     /// A normal-form pair (`Δ11 = Δ22`, `Δ21 = −Δ12 ≠ 0`).
-    fn is_pair(&self) -> bool {
+    pub fn is_pair(&self) -> bool {
         let [d11, d12, d21, d22] = self.delta;
         d11 == d22 && d21 == -d12 && d12 != 0.0
     }

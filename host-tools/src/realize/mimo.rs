@@ -6,6 +6,7 @@
 //! spaces and reuses the per-axis steps of [`crate::realize::modal`].
 
 use anyhow::{bail, Context, Result};
+use dynocomp_core::budget::{MimoCostModel, MimoShape};
 use dynocomp_core::mimo::{Matrix3, MimoFilter, MimoSection, MimoState, MAX_MIMO_FIR, MAX_MIMO_SECTIONS};
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
@@ -570,11 +571,13 @@ pub enum Prefer {
     Load,
 }
 
-/// Cycles per sample of a realization's sections and taps (Cortex-M4 model,
-/// high estimate, hundredths).
-fn kernel_cost(r: &MimoRealization) -> u64 {
-    let m = dynocomp_core::budget::MimoCostModel::CORTEX_M4;
-    u64::from(m.pair.high) * r.sections.len() as u64 + u64::from(m.tap.high) * r.fir.len() as u64
+/// Cycles per sample of a realization on the box (Cortex-M4 model, high
+/// estimate): its pairs as the kernel tells them ([`MimoSection::is_pair`]
+/// of the rounded section), diagonal sections and taps.
+fn kernel_cost(r: &MimoRealization) -> u32 {
+    let pairs = r.sections.iter().filter(|s| s.round().is_pair()).count() as u32;
+    let shape = MimoShape { pairs, diagonals: r.sections.len() as u32 - pairs, taps: r.fir.len() as u32 };
+    MimoCostModel::CORTEX_M4.sample_cost(shape).high
 }
 
 /// [`realize_blocks`] keeping, per block, the realization `prefer` says.

@@ -364,23 +364,19 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
     refuse_unless_better_than_raw(&ranked[0])?;
     let f_band = bands.iter().map(|b| b.1).fold(0.0, f64::max);
     let (mut chosen, realized) = realize_chosen(ranked, &mut notes, d.fs_hz, f_band)?;
-    let full = realized.0.clone();
-    let (realized, reduction) = match opts.load_limit_permille {
-        Some(limit) => {
-            let load = reduce::filter_load(&realized.1 .1, d.fs_hz);
-            if load > limit {
-                opts.say(&format!(
-                    "the filter needs {:.1} % of the box's sample period (limit {:.1} %): reducing it…",
-                    f64::from(load) / 10.0,
-                    f64::from(limit) / 10.0
-                ));
-            }
+    let full_load = reduce::filter_load(&realized.1 .1, d.fs_hz);
+    let (realized, reduction, full_compensator) = match opts.load_limit_permille {
+        Some(limit) if full_load > limit && chosen.rows.contains(&RowSource::Matrix) => {
+            opts.say(&format!(
+                "the filter needs {:.1} % of the box's sample period (limit {:.1} %): reducing it…",
+                f64::from(full_load) / 10.0,
+                f64::from(limit) / 10.0
+            ));
             let at = reduce::LoadAt { fs: d.fs_hz, limit, f_band };
-            reduce::reduce_to_load(realized, &mut chosen, &criterion, at)?
+            reduce::reduce_to_load(realized, full_load, &mut chosen, &criterion, at)?
         }
-        None => (realized, None),
+        _ => (realized, None, None),
     };
-    let full_compensator = reduction.as_ref().filter(|r| r.used).map(|_| full.clone());
     if flat {
         notes.extend(moderate_crosstalk_caveat(&chosen.axes, &crosstalk));
     }

@@ -48,7 +48,12 @@ pub struct ReductionFigures {
 
 /// Predicted load (‰, high estimate) of `filter` at `fs_hz`.
 pub fn filter_load(filter: &MimoFilter, fs_hz: f64) -> u32 {
-    load_permille(MimoCostModel::CORTEX_M4.sample_cost(MimoShape::of(filter)).high, fs_hz.round() as u32)
+    shape_load(MimoShape::of(filter), fs_hz)
+}
+
+/// Predicted load (‰, high estimate) of a 3x3 filter of shape `s` at `fs_hz`.
+fn shape_load(s: MimoShape, fs_hz: f64) -> u32 {
+    load_permille(MimoCostModel::CORTEX_M4.sample_cost(s).high, fs_hz.round() as u32)
 }
 
 /// One reduced candidate that fits.
@@ -108,10 +113,7 @@ fn fitting(bal: &Balanced, other: &[MimoStateSpace], lag: usize, crits: &Criteri
 /// one, is the top of the bisection (a higher order could fit only with
 /// many of its poles as FIR taps; the bisection does not look there).
 fn max_sections(at: LoadAt) -> usize {
-    let fits = |k: u32| {
-        let s = MimoShape { pairs: 0, diagonals: k, taps: 0 };
-        load_permille(MimoCostModel::CORTEX_M4.sample_cost(s).high, at.fs.round() as u32) <= at.limit
-    };
+    let fits = |k: u32| shape_load(MimoShape { pairs: 0, diagonals: k, taps: 0 }, at.fs) <= at.limit;
     (0..=dynocomp_core::mimo::MAX_MIMO_SECTIONS as u32).take_while(|k| fits(*k)).last().map_or(0, |k| k as usize)
 }
 
@@ -129,25 +131,23 @@ pub(super) struct LoadAt {
     pub f_band: f64,
 }
 
-/// The chosen round `rd`'s compensator `realized` reduced to the load limit
-/// where its filter is over it (`None` where it fits already): its 3x3
-/// rows' block by balancing, the per-axis rows' blocks unchanged. The
-/// reduction is used (the returned realization replaces the full one, and
-/// `rd.axes` take its predictions) only where every 3x3 row still beats
-/// the per-axis row and every row beats no compensation, as the judge sees
-/// them; otherwise the figures say why and `realized` is returned unchanged.
+/// The chosen round `rd`'s compensator `realized`, whose filter needs
+/// `full_load` ‰, over the load limit, reduced to it: its 3x3 rows' block
+/// (`rd` has one) by balancing, the per-axis rows' blocks unchanged. The
+/// reduction is used (the returned realization replaces the full one, which
+/// is returned beside it, and `rd.axes` take its predictions) only where
+/// every 3x3 row still beats the per-axis row and every row beats no
+/// compensation, as the judge sees them; otherwise the figures say why and
+/// `realized` is returned unchanged.
 pub(super) fn reduce_to_load(
     realized: Realized,
+    full_load: u32,
     rd: &mut Round,
     crits: &Criteria,
     at: LoadAt,
-) -> Result<(Realized, Option<ReductionFigures>)> {
-    let full_load = filter_load(&realized.1 .1, at.fs);
-    if full_load <= at.limit || !rd.rows.contains(&RowSource::Matrix) {
-        return Ok((realized, None));
-    }
+) -> Result<(Realized, Option<ReductionFigures>, Option<MimoStateSpace>)> {
     let (blocks, _) = blocks_of(rd)?;
-    let Some((matrix_block, other)) = blocks.split_first() else { return Ok((realized, None)) };
+    let Some((matrix_block, other)) = blocks.split_first() else { return Ok((realized, None, None)) };
     let full_predicted: [f64; 3] = std::array::from_fn(|i| rd.axes[i].chosen.error);
     let mut fig = ReductionFigures {
         used: false,
@@ -165,7 +165,7 @@ pub(super) fn reduce_to_load(
         Ok(b) => b,
         Err(e) => {
             fig.reason = format!("{e:#}");
-            return Ok((realized, Some(fig)));
+            return Ok((realized, Some(fig), None));
         }
     };
     let worst = |c: &Candidate| (0..3).map(|i| c.errors[i].error / full_predicted[i]).fold(0.0, f64::max);
@@ -175,7 +175,7 @@ pub(super) fn reduce_to_load(
             "no balanced reduction of the {}-state 3x3 block is realized within the load limit",
             matrix_block.a.nrows()
         );
-        return Ok((realized, Some(fig)));
+        return Ok((realized, Some(fig), None));
     };
     (fig.states, fig.method, fig.load_permille) = (c.states, c.method, c.load);
     fig.hankel_bound = bal.error_bound(c.states);
@@ -203,7 +203,7 @@ pub(super) fn reduce_to_load(
             c.states,
             worse.join(", ")
         );
-        return Ok((realized, Some(fig)));
+        return Ok((realized, Some(fig), None));
     }
     fig.used = true;
     fig.reason = format!(
@@ -226,5 +226,5 @@ pub(super) fn reduce_to_load(
             100.0 * full_predicted[i]
         ));
     }
-    Ok((c.realized, Some(fig)))
+    Ok((c.realized, Some(fig), Some(realized.0)))
 }
