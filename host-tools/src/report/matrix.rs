@@ -111,14 +111,9 @@ fn db(v: f64) -> f64 {
 type Series<'a> = (Vec<(f64, f64)>, RGBColor, bool, &'a str);
 
 /// A 3x3 grid of panels of (x, y) lines (one list of series per panel:
-/// points, colour, dashed, label), shaded over each row's band.
-fn grid(title: &str, x_max: f64, bands: &[(f64, f64); 3], panels: &[Vec<Series<'_>>]) -> Result<String> {
-    grid_marked(title, x_max, bands, &[None; 3], panels)
-}
-
-/// [`grid`] with, per row i, the span `worse[i]` (Hz) shaded in orange on
-/// every panel of the row.
-fn grid_marked(
+/// points, colour, dashed, label), shaded over each row's band, and in
+/// orange over the span `worse[i]` (Hz) of row i where there is one.
+fn grid(
     title: &str,
     x_max: f64,
     bands: &[(f64, f64); 3],
@@ -186,7 +181,7 @@ fn plot_frf(md: &MatrixDesign, g: &[MeasuredLine], bands: &[(f64, f64); 3]) -> R
         })
         .collect::<Vec<_>>();
     let x_max = g.last().map_or(1.0, |p| p.0);
-    grid("|G_ij|: the measured matrix and its fit", x_max, bands, &panels)
+    grid("|G_ij|: the measured matrix and its fit", x_max, bands, &[None; 3], &panels)
 }
 
 fn plot_rows(md: &MatrixDesign, g: &[MeasuredLine], fs_hz: f64, bands: &[(f64, f64); 3]) -> Result<String> {
@@ -195,20 +190,26 @@ fn plot_rows(md: &MatrixDesign, g: &[MeasuredLine], fs_hz: f64, bands: &[(f64, f
     let used: Vec<[[Complex64; 3]; 3]> = freqs.iter().map(|f| md.realization.freq_response(*f, fs_hz)).collect();
     let per_axis: Vec<Option<Vec<Complex64>>> =
         md.per_axis.iter().map(|a| a.as_ref().map(|a| a.kalman.compensator.freq_responses(&freqs, fs_hz))).collect();
-    let full = md.full_compensator.as_ref().map(|c| c.freq_responses(&freqs, fs_hz));
+    let full: Option<Vec<[[Complex64; 3]; 3]>> = md.full_compensator.as_ref().map(|c| {
+        let h = c.freq_responses(&freqs, fs_hz);
+        h.iter().map(|h| std::array::from_fn(|i| std::array::from_fn(|j| h[(i, j)]))).collect()
+    });
     let delay = |f: f64| Complex64::from_polar(1.0, 2.0 * PI * f * lag / fs_hz);
     let delta = |i: usize, j: usize| if i == j { 1.0 } else { 0.0 };
+    // Panel (i, j) of a 3x3 filter's responses `hs` on the lines of `g`.
+    let residual = |hs: &[[[Complex64; 3]; 3]], i: usize, j: usize| -> Vec<(f64, f64)> {
+        g.iter()
+            .zip(hs)
+            .map(|((f, m), h)| {
+                let hg = (0..3).map(|k| h[i][k] * m[(k, j)]).sum::<Complex64>() * delay(*f);
+                (*f, db((hg - delta(i, j)).norm()))
+            })
+            .collect()
+    };
     let panels = (0..9)
         .map(|e| {
             let (i, j) = (e / 3, e % 3);
-            let red = g
-                .iter()
-                .zip(&used)
-                .map(|((f, m), h)| {
-                    let hg = (0..3).map(|k| h[i][k] * m[(k, j)]).sum::<Complex64>() * delay(*f);
-                    (*f, db((hg - delta(i, j)).norm()))
-                })
-                .collect();
+            let red = residual(&used, i, j);
             // The per-axis line first, so that the image's filter is drawn on top.
             let mut s = Vec::new();
             if let Some(h) = &per_axis[i] {
@@ -220,15 +221,7 @@ fn plot_rows(md: &MatrixDesign, g: &[MeasuredLine], fs_hz: f64, bands: &[(f64, f
                 s.push((grey, C_MEASURED, true, "per-axis filter alone"));
             }
             if let Some(h) = &full {
-                let blue = g
-                    .iter()
-                    .zip(h)
-                    .map(|((f, m), h)| {
-                        let hg = (0..3).map(|k| h[(i, k)] * m[(k, j)]).sum::<Complex64>() * delay(*f);
-                        (*f, db((hg - delta(i, j)).norm()))
-                    })
-                    .collect();
-                s.push((blue, C_FIT, false, "full filter (--full-order)"));
+                s.push((residual(h, i, j), C_FIT, false, "full filter (--full-order)"));
             }
             s.push((red, C_USED, false, "the image's filter"));
             s
@@ -238,7 +231,7 @@ fn plot_rows(md: &MatrixDesign, g: &[MeasuredLine], fs_hz: f64, bands: &[(f64, f
     let worse = std::array::from_fn(|i| {
         md.summary.worse_than_raw.iter().find(|w| w.axis == axis_name(i)).map(|w| widen(w.worse_hz, &freqs))
     });
-    grid_marked("|(H·G·e^(jωL))_ij − δ_ij| on the measured matrix", x_max, bands, &worse, &panels)
+    grid("|(H·G·e^(jωL))_ij − δ_ij| on the measured matrix", x_max, bands, &worse, &panels)
 }
 
 /// A span of FRF lines widened by half a line spacing on each side, so
