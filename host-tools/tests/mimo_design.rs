@@ -729,6 +729,17 @@ fn a_pole_below_the_first_coherent_line_does_not_bias_the_mean_force() {
     assert!(kept > 0.5, "negative control: with the pole G_zx(0) is off by only {:.1} %", 100.0 * kept);
 }
 
+/// A short simulation of the off-centre plate at `fs` (Hz) by the CLI, in a
+/// fresh folder `name`: the folder, and the path of a file in it.
+fn short_offcentre(name: &str, fs: &str) -> (std::path::PathBuf, impl Fn(&str) -> String) {
+    let dir = cli_common::tmp("mimo", name);
+    let short = ["--duration", "0.1", "--idle-duration", "0.05", "--frf-lines", "513", "--frf-df", "8"];
+    let (ok, _, err) = cli_common::simulate_plate(&dir.display().to_string(), "offcentre", fs, &short);
+    assert!(ok, "{err}");
+    let d = dir.clone();
+    (dir, move |n: &str| d.join(n).display().to_string())
+}
+
 /// At 51.2 kHz a 3x3 image of the off-centre plate is over the box's load
 /// limit: `design` writes it offline-only and says how to get an image the
 /// box runs (`--per-axis`, with what each axis loses), and the highest rate
@@ -737,12 +748,8 @@ fn a_pole_below_the_first_coherent_line_does_not_bias_the_mean_force() {
 #[test]
 #[ignore = "a 3x3 design takes seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
 fn cli_a_3x3_image_over_the_load_limit_says_how_to_get_one_the_box_runs() {
-    use cli_common::{dynocomp, tmp};
-    let dir = tmp("mimo", "over-limit");
-    let p = |n: &str| dir.join(n).display().to_string();
-    let short = ["--duration", "0.1", "--idle-duration", "0.05", "--frf-lines", "513", "--frf-df", "8"];
-    let (ok, _, err) = cli_common::simulate_plate(&p(""), "offcentre", "51200", &short);
-    assert!(ok, "{err}");
+    use cli_common::dynocomp;
+    let (_, p) = short_offcentre("over-limit", "51200");
     let (ok, out, err) = cli_common::design(&p("frf.uff"), &p("idle.csv"), "51200", &p("c.dcimg"), &["--latency", "4"]);
     assert!(ok, "{err}");
     for text in [&out, &err] {
@@ -764,12 +771,8 @@ fn cli_a_3x3_image_over_the_load_limit_says_how_to_get_one_the_box_runs() {
 #[test]
 #[ignore = "a 3x3 design takes seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
 fn cli_a_3x3_image_over_the_load_limit_is_reduced_to_one_the_box_runs() {
-    use cli_common::{dynocomp, tmp};
-    let dir = tmp("mimo", "reduced");
-    let p = |n: &str| dir.join(n).display().to_string();
-    let short = ["--duration", "0.1", "--idle-duration", "0.05", "--frf-lines", "513", "--frf-df", "8"];
-    let (ok, _, err) = cli_common::simulate_plate(&p(""), "offcentre", "25600", &short);
-    assert!(ok, "{err}");
+    use cli_common::dynocomp;
+    let (dir, p) = short_offcentre("reduced", "25600");
     let (ok, out, err) = cli_common::design(&p("frf.uff"), &p("idle.csv"), "25600", &p("c.dcimg"), &["--json"]);
     assert!(ok, "{err}");
     let j: serde_json::Value = serde_json::from_str(&out).expect("JSON");

@@ -44,18 +44,26 @@ fn design(modes: &[(f64, f64, f64)]) -> (PoleResidueModel, AxisDesign) {
 /// over the last second of two seconds of a unit sine at `f` through `g`.
 fn errors_at(g: &PoleResidueModel, d: &AxisDesign, f: f64) -> (f64, f64) {
     let gf = g.frf(f);
-    let n = 2 * FS as usize;
     let mut st = dynocomp_core::kernel::AxisState::default();
+    sine_errors(f, d.kalman.lag, |t| {
+        let measured = gf.norm() * (TAU * f * t + gf.arg()).sin();
+        (f64::from(d.filter.step(&mut st, measured as f32)), measured)
+    })
+}
+
+/// RMS of (output − a unit sine force at `f` delayed by `lag` samples) and
+/// of (measured − force) over the last second of two seconds, where
+/// `step(t)` gives the output and the measured signal at time t (s).
+fn sine_errors(f: f64, lag: usize, mut step: impl FnMut(f64) -> (f64, f64)) -> (f64, f64) {
+    let n = 2 * FS as usize;
     let (mut comp, mut raw, mut count) = (0.0, 0.0, 0.0);
     for k in 0..n {
         let t = k as f64 / FS;
-        let force = (TAU * f * t).sin();
-        let measured = gf.norm() * (TAU * f * t + gf.arg()).sin();
-        let out = f64::from(d.filter.step(&mut st, measured as f32));
+        let (out, measured) = step(t);
         if k >= n / 2 {
-            let delayed = (TAU * f * (t - d.kalman.lag as f64 / FS)).sin();
+            let delayed = (TAU * f * (t - lag as f64 / FS)).sin();
             comp += (out - delayed).powi(2);
-            raw += (measured - force).powi(2);
+            raw += (measured - (TAU * f * t).sin()).powi(2);
             count += 1.0;
         }
     }
@@ -203,22 +211,11 @@ fn the_3x3_design_warns_where_its_output_is_worse_than_raw() {
         // A unit sine force on z at 392 Hz through the exact matrix.
         let f = 392.0;
         let g: Vec<_> = (0..3).map(|i| entry(i, 2).frf(f)).collect();
-        let n = 2 * FS as usize;
         let mut st = dynocomp_core::mimo::MimoState::default();
-        let (mut comp, mut raw, mut count) = (0.0, 0.0, 0.0);
-        for k in 0..n {
-            let t = k as f64 / FS;
-            let force = (TAU * f * t).sin();
+        let (comp, raw) = sine_errors(f, md.summary.latency, |t| {
             let measured: [f32; 3] = std::array::from_fn(|i| (g[i].norm() * (TAU * f * t + g[i].arg()).sin()) as f32);
-            let out = f64::from(md.filter.step(&mut st, measured)[2]);
-            if k >= n / 2 {
-                let delayed = (TAU * f * (t - md.summary.latency as f64 / FS)).sin();
-                comp += (out - delayed).powi(2);
-                raw += (f64::from(measured[2]) - force).powi(2);
-                count += 1.0;
-            }
-        }
-        let (comp, raw) = ((comp / count).sqrt(), (raw / count).sqrt());
+            (f64::from(md.filter.step(&mut st, measured)[2]), f64::from(measured[2]))
+        });
         eprintln!("392 Hz on z: box error {comp:.3}, raw {raw:.3}");
         // The report shades the span in orange and says so under the plot.
         let dir = std::env::temp_dir().join(format!("dynocomp-wtr-report-{}-{nmp}", std::process::id()));

@@ -220,9 +220,8 @@ class Design:
             for a in s.get("axes", [])
         )
         head = "".join(f"<th>{k}</th>" for k in _SUMMARY_KEYS)
-        fig = "<figure style='display:inline-block;margin:4px'>{}<figcaption>{}</figcaption></figure>"
         plots = "".join(
-            fig.format(svg, html.escape(name))
+            _FIGURE.format(svg, html.escape(name))
             for name, svg in self.report.items()
             if name.endswith(("_frf_fit.svg", "_compensated.svg"))
         )
@@ -238,6 +237,9 @@ class Design:
 
 
 _SUMMARY_KEYS = ("axis", "model_order", "q", "flat_band_hz", "noise_gain")
+
+# One plot of the notebook view: the SVG and its file name.
+_FIGURE = "<figure style='display:inline-block;margin:4px'>{}<figcaption>{}</figcaption></figure>"
 
 
 def _pct(e):
@@ -276,11 +278,7 @@ def _matrix_html(s, report):
             f"{verb} for the box: {red['full_states']} → {red['states']} states, predicted {full} → {now}; "
             + html.escape(red.get("reason", ""))
         )
-    plots = "".join(
-        f"<figure style='display:inline-block;margin:4px'>{svg}<figcaption>{html.escape(name)}</figcaption></figure>"
-        for name, svg in report.items()
-        if name == "matrix_rows.svg"
-    )
+    plots = "".join(_FIGURE.format(svg, html.escape(name)) for name, svg in report.items() if name == "matrix_rows.svg")
     return (
         f"<div><b>dynocomp 3x3 design</b>: image {s.get('image_id')}, fs {s.get('fs_hz')} Hz, "
         f"latency {s.get('latency_samples')} samples<table><tr>{head}</tr>{rows}</table>"
