@@ -13,7 +13,10 @@
 //! refused axis passed through raw ([`dynocomp::design::pass_through`]),
 //! compensated through the image and scored.
 //!
-//! usage: cargo run --release -p dynocomp --example sweep -- [N]   (default 100)
+//! With `--exact-frf` every impact test is noise-free (the FRF is the
+//! chain's G), which separates the design's misses from the impact test's.
+//!
+//! usage: cargo run --release -p dynocomp --example sweep -- [N] [--exact-frf]   (default 100)
 use anyhow::Result;
 use dynocomp::design::image::build_image;
 use dynocomp::eval::rates::{design_options, run_case, scoring_band_hz, CaseResult, RateCase, RunOptions};
@@ -21,7 +24,10 @@ use dynocomp::eval::sweep::draw;
 use dynocomp::frf::axis_name;
 
 fn main() -> Result<()> {
-    let n: u64 = std::env::args().nth(1).map(|a| a.parse()).transpose()?.unwrap_or(100);
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let exact_frf = args.iter().any(|a| a == "--exact-frf");
+    let n: u64 = args.iter().find(|a| !a.starts_with("--")).map(|a| a.parse()).transpose()?.unwrap_or(100);
+    let run = RunOptions { exact_frf, ..RunOptions::default() };
     let (mut with_image, mut axes, mut within_13, mut within_2, mut written) = (0, 0, 0, 0, 0);
     // Axes warned of a non-minimum-phase zero (design::phase_limit), and
     // axes whose box output is worse than raw: [warned][worse].
@@ -33,7 +39,7 @@ fn main() -> Result<()> {
     let mut rows: Vec<(f64, String)> = Vec::new();
     for seed in 0..n {
         let (case, fs, kind) = draw(seed);
-        let res = match run_case(&case, fs, &RunOptions::default()) {
+        let res = match run_case(&case, fs, &run) {
             Ok(r) => r,
             Err(e) => {
                 println!("seed {seed} ({kind}, {fs} Hz, {} Hz lines): simulation failed: {e:#}", case.frf_df_hz);
@@ -44,7 +50,7 @@ fn main() -> Result<()> {
             with_image += 1;
             written += 1;
         } else if res.axes.iter().any(|a| a.comp_nrmse.is_ok()) {
-            for (axis, raw, through) in passed_through(&case, fs, &res)? {
+            for (axis, raw, through) in passed_through(&case, fs, &res, &run)? {
                 println!(
                     "seed {seed} {} ({kind}, {fs} Hz): passed through raw in the image `design` writes: {:.3} % (raw {:.3} %)",
                     axis_name(axis),
@@ -120,10 +126,13 @@ fn main() -> Result<()> {
 
 /// The refused axes of `res` passed through raw as `design` does: (axis, raw
 /// NRMSE, NRMSE of the image's output), on the case simulated again.
-fn passed_through(case: &RateCase, fs: f64, res: &CaseResult) -> Result<Vec<(usize, f64, f64)>> {
-    let params = case.sim_params(fs);
+fn passed_through(case: &RateCase, fs: f64, res: &CaseResult, run: &RunOptions) -> Result<Vec<(usize, f64, f64)>> {
+    let mut params = case.sim_params(fs);
+    if run.exact_frf {
+        dynocomp::eval::rates::noise_free_impact(&mut params);
+    }
     let s = dynocomp::simulate::simulate_with(case.seed, &params, case.dynamometer(&params)?)?;
-    let opts = dynocomp::design::axis::DesignOptions { lag: res.latency, ..design_options(fs, &RunOptions::default()) };
+    let opts = dynocomp::design::axis::DesignOptions { lag: res.latency, ..design_options(fs, run) };
     let mut out = Vec::new();
     for a in res.axes.iter().filter(|a| a.comp_nrmse.is_err()) {
         let frf = s.frf.axis(a.axis).ok_or_else(|| anyhow::anyhow!("no FRF for axis {}", a.axis))?;

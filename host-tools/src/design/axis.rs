@@ -570,6 +570,13 @@ pub fn fitted_response(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> 
     Ok(move |f: f64| fitted.frf(f))
 }
 
+/// The fitted model of `frf` by `opts.method`, before any of the design's
+/// checks (for studies of the fit itself).
+pub fn fitted_model(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> Result<PoleResidueModel> {
+    let lines = axis_lines(freq_hz, frf, opts)?;
+    Ok(fit_axis(freq_hz, frf, opts, &lines)?.model)
+}
+
 /// The cheap part of a paper-method design at the orders of `opts.method`,
 /// without the Q search: the fit, its stability and static gain, and the
 /// observability of the augmented system (eq. (4)) in floating point.

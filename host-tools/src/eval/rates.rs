@@ -306,6 +306,13 @@ pub fn noise_floor(g: impl Fn(f64) -> Complex64, r: f64, fs_hz: f64, band_hz: f6
     (r * 2.0 / fs_hz * integral).sqrt() / std_truth
 }
 
+/// Make the impact test of `params` noise-free ([`RunOptions::exact_frf`]).
+pub fn noise_free_impact(params: &mut SimParams) {
+    params.impact.output_noise_rel = 0.0;
+    params.impact.input_noise_rel = 0.0;
+    params.impact.dc_noise_factor = 1.0;
+}
+
 /// Simulate `case` at `fs_hz`, design each axis, compensate through a
 /// coefficient image (declared latency removed) and score it. A failed
 /// design is recorded in its axis, not returned as an error.
@@ -321,11 +328,8 @@ pub fn run_case_on(case: &RateCase, params: &SimParams, run: &RunOptions) -> Res
     let mut params = params.clone();
     let mut steady = case.sim_params(fs_hz);
     if run.exact_frf {
-        for p in [&mut params, &mut steady] {
-            p.impact.output_noise_rel = 0.0;
-            p.impact.input_noise_rel = 0.0;
-            p.impact.dc_noise_factor = 1.0;
-        }
+        noise_free_impact(&mut params);
+        noise_free_impact(&mut steady);
     }
     let dyno = case.dynamometer(&params)?;
     let record = match run.force_spectrum {

@@ -265,7 +265,8 @@ pub(crate) fn to_model(poles: &[Pole], c: &[f64], d: f64, w_scale: f64) -> PoleR
     PoleResidueModel { terms, d }
 }
 
-fn weighted_rms(model: &PoleResidueModel, freq_hz: &[f64], h: &[Complex64], w: &[f64]) -> f64 {
+/// Weighted RMS residual of `model` on the lines, sqrt(Σw|Ĝ−H|²/Σw|H|²).
+pub fn weighted_rms(model: &PoleResidueModel, freq_hz: &[f64], h: &[Complex64], w: &[f64]) -> f64 {
     let (mut num, mut den) = (0.0, 0.0);
     for ((f, h), w) in freq_hz.iter().zip(h).zip(w) {
         num += w * (model.frf(*f) - h).norm_sqr();
@@ -477,9 +478,10 @@ pub const MIN_MODE_DAMPING: f64 = 1e-3;
 const EDGE_FRACTION: f64 = 0.97;
 const EDGE_MODE_DAMPING: f64 = 5e-3;
 
-/// A term the data cannot identify (skimmed by [`skim`]): a real pole below
-/// the lowest measured line `f_low` (it would become a near-integrator), a
-/// pair damped less than [`MIN_MODE_DAMPING`], or less than
+/// A term the data cannot identify (skimmed by [`skim`]): a real pole or a
+/// pair below the lowest identified line `f_low` (a near-integrator, or a
+/// resonance no line saw, bending Ĝ where the mean force is), a pair damped
+/// less than [`MIN_MODE_DAMPING`], or less than
 /// [`EDGE_MODE_DAMPING`] above [`EDGE_FRACTION`] of `f_top` (Hz).
 pub(crate) fn spurious(t: &Term, f_low: f64, f_top: f64) -> bool {
     match *t {
@@ -488,7 +490,7 @@ pub(crate) fn spurious(t: &Term, f_low: f64, f_top: f64) -> bool {
             let wn = pole.norm();
             let zeta = -pole.re / wn;
             let f_n = wn / (2.0 * PI);
-            zeta < MIN_MODE_DAMPING || (f_n > EDGE_FRACTION * f_top && zeta < EDGE_MODE_DAMPING)
+            f_n < f_low || zeta < MIN_MODE_DAMPING || (f_n > EDGE_FRACTION * f_top && zeta < EDGE_MODE_DAMPING)
         }
     }
 }
@@ -521,7 +523,9 @@ pub(crate) fn kept_poles(terms: &[Term], keep: &[bool], w_scale: f64) -> Vec<Pol
 /// Remove pairs whose contribution is negligible everywhere in the band, and
 /// spurious lightly damped pairs (ζ < [`MIN_MODE_DAMPING`], or ζ < 0.5 % at
 /// the band edge), and real poles below the lowest measured line, then refit
-/// the residues of the rest.
+/// the residues of the rest. A spurious pair at the band edge that the lines
+/// need ([`contributes`]) stands for modes above the band: a pair with a
+/// plausible damping at or above it takes its place ([`edge_surrogates`]).
 fn skim(
     freq_hz: &[f64],
     h: &[Complex64],
@@ -531,12 +535,77 @@ fn skim(
 ) -> Result<PoleResidueModel> {
     let f_top = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
     let f_low = freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0).max(f_identified_hz);
-    let keep: Vec<bool> =
-        model.terms.iter().map(|t| !spurious(t, f_low, f_top) && contributes(t, freq_hz, h)).collect();
+    let needed: Vec<bool> = model.terms.iter().map(|t| contributes(t, freq_hz, h)).collect();
+    let keep: Vec<bool> = model.terms.iter().zip(&needed).map(|(t, n)| *n && !spurious(t, f_low, f_top)).collect();
     if keep.iter().all(|k| *k) {
         return Ok(model);
     }
-    refit_kept(freq_hz, h, weights, &model, &keep)
+    let edge: Vec<Term> = model
+        .terms
+        .iter()
+        .zip(needed.iter().zip(&keep))
+        .filter(|(t, (n, k))| **n && !**k && at_edge(t, f_top))
+        .map(|(t, _)| *t)
+        .collect();
+    if edge.is_empty() {
+        return refit_kept(freq_hz, h, weights, &model, &keep);
+    }
+    edge_surrogates(freq_hz, h, weights, &model, &keep, &edge)
+}
+
+/// Whether `t` is a pair above [`EDGE_FRACTION`] of `f_top` (Hz).
+fn at_edge(t: &Term, f_top: f64) -> bool {
+    matches!(*t, Term::Pair { pole, .. } if pole.norm() / (2.0 * PI) > EDGE_FRACTION * f_top)
+}
+
+/// Dampings tried for an edge surrogate ([`edge_surrogates`]): from
+/// [`EDGE_MODE_DAMPING`] to 8 %, the range of real sensor modes.
+const EDGE_SURROGATE_DAMPING: [f64; 5] = [EDGE_MODE_DAMPING, 0.01, 0.02, 0.04, 0.08];
+
+/// Natural frequencies tried for an edge surrogate, as multiples of the
+/// edge pair's: the modes it stands for lie at or above it.
+const EDGE_SURROGATE_FREQUENCY: [f64; 5] = [1.0, 1.1, 1.25, 1.5, 2.0];
+
+/// `model`'s terms marked in `keep`, plus each pair of `edge` with one
+/// damping of [`EDGE_SURROGATE_DAMPING`] at one multiple of its natural
+/// frequency of [`EDGE_SURROGATE_FREQUENCY`] (the same for all, the pair
+/// that fits the lines best), all residues and the direct term fitted
+/// again. Without the surrogate, the modes above the band that the
+/// edge pair stood for bend the fit across the band and at 0 Hz.
+fn edge_surrogates(
+    freq_hz: &[f64],
+    h: &[Complex64],
+    weights: &[f64],
+    model: &PoleResidueModel,
+    keep: &[bool],
+    edge: &[Term],
+) -> Result<PoleResidueModel> {
+    let f_max = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
+    let w_scale = 2.0 * PI * f_max;
+    let s: Vec<Complex64> = freq_hz.iter().map(|f| Complex64::new(0.0, 2.0 * PI * f / w_scale)).collect();
+    let sw: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
+    let kept = kept_poles(&model.terms, keep, w_scale);
+    let mut best: Option<(f64, PoleResidueModel)> = None;
+    let tries = EDGE_SURROGATE_DAMPING.iter().flat_map(|z| EDGE_SURROGATE_FREQUENCY.iter().map(move |f| (*z, *f)));
+    for (zeta, raise) in tries {
+        let mut poles = kept.clone();
+        for t in edge {
+            if let Term::Pair { pole, .. } = *t {
+                let wn = raise * pole.norm() / w_scale;
+                poles.push(Pole { p: Complex64::new(-zeta * wn, wn * (1.0 - zeta * zeta).sqrt()), pair: true });
+            }
+        }
+        let Ok((c, d)) = residues(&s, h, &sw, &poles) else { continue };
+        let m = to_model(&poles, &c, d, w_scale);
+        let e = weighted_rms(&m, freq_hz, h, weights);
+        if e.is_finite() && best.as_ref().is_none_or(|(b, _)| e < *b) {
+            best = Some((e, m));
+        }
+    }
+    match best {
+        Some((_, m)) => Ok(m),
+        None => refit_kept(freq_hz, h, weights, model, keep),
+    }
 }
 
 /// `model` without the terms `keep` leaves out, its residues and direct term
@@ -555,4 +624,66 @@ pub fn refit_kept(
     let sw: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
     let (c, d) = residues(&s, h, &sw, &poles)?;
     Ok(to_model(&poles, &c, d, w_scale))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Lines every 4 Hz from `f_first` to 4096 Hz, exact data of `truth`,
+    /// relative weights.
+    fn exact(truth: &PoleResidueModel, f_first: f64) -> (Vec<f64>, Vec<Complex64>, Vec<f64>) {
+        let freq: Vec<f64> = (0..=1024).map(|k| 4.0 * k as f64).filter(|f| *f >= f_first).collect();
+        let h: Vec<Complex64> = freq.iter().map(|f| truth.frf(*f)).collect();
+        let w = coherence_weights(&h, None);
+        (freq, h, w)
+    }
+
+    fn static_error(m: &PoleResidueModel, truth: &PoleResidueModel) -> f64 {
+        (m.frf(0.0) / truth.frf(0.0) - 1.0).norm()
+    }
+
+    #[test]
+    fn an_edge_pair_standing_for_a_mode_above_the_band_is_kept_damped_not_dropped() {
+        // A sensor mode at 2 kHz, a machine mode at 300 Hz, and a mode at
+        // 4.9 kHz above the lines (to 4096 Hz).
+        let truth = PoleResidueModel::from_modes(&[(300.0, 0.03, 0.05), (2000.0, 0.04, 0.92), (4900.0, 0.02, 0.03)]);
+        let (freq, h, w) = exact(&truth, 4.0);
+        // What the fit parks for it: a pair just above the lines, far too
+        // lightly damped to be a mode.
+        let parked = PoleResidueModel::from_modes(&[(300.0, 0.03, 0.05), (2000.0, 0.04, 0.92), (4300.0, 4e-4, 0.03)]);
+        assert!(spurious(&parked.terms[2], 4.0, 4096.0) && contributes(&parked.terms[2], &freq, &h));
+        let skimmed = skim(&freq, &h, &w, 0.0, parked.clone()).unwrap();
+        let kept: Vec<(f64, f64)> = skimmed.modes();
+        let surrogate = kept.iter().find(|(f, _)| *f > 4200.0);
+        let (_, zeta) = surrogate.unwrap_or_else(|| panic!("no pair kept above the lines: {kept:?}"));
+        assert!(*zeta >= EDGE_MODE_DAMPING, "surrogate damping {zeta}");
+        // Control: the pair dropped, as before, leaves the static gain and
+        // the lines further off.
+        let dropped = refit_kept(&freq, &h, &w, &parked, &[true, true, false]).unwrap();
+        let (e_kept, e_dropped) = (static_error(&skimmed, &truth), static_error(&dropped, &truth));
+        let (r_kept, r_dropped) = (weighted_rms(&skimmed, &freq, &h, &w), weighted_rms(&dropped, &freq, &h, &w));
+        eprintln!("static gain off {e_kept:.2e} kept, {e_dropped:.2e} dropped; lines {r_kept:.2e} / {r_dropped:.2e}");
+        assert!(
+            e_kept < 0.2 * e_dropped && e_dropped > 1e-3,
+            "static gain off {e_kept:.2e} kept, {e_dropped:.2e} dropped"
+        );
+        assert!(r_kept < 0.2 * r_dropped, "lines {r_kept:.2e} kept, {r_dropped:.2e} dropped");
+    }
+
+    #[test]
+    fn a_pair_below_the_first_identified_line_is_dropped() {
+        let truth = PoleResidueModel::from_modes(&[(120.0, 0.02, 0.06), (2000.0, 0.04, 0.94)]);
+        let (freq, h, w) = exact(&truth, 8.0);
+        // A resonance at 1.6 Hz that no line (from 8 Hz) saw.
+        let mut bent = truth.clone();
+        bent.terms.extend(PoleResidueModel::from_modes(&[(1.6, 0.04, 0.01)]).terms);
+        assert!(spurious(&bent.terms[2], 8.0, 4096.0));
+        // Control: a real mode above the first line is not.
+        assert!(!spurious(&bent.terms[0], 8.0, 4096.0));
+        let skimmed = skim(&freq, &h, &w, 8.0, bent.clone()).unwrap();
+        assert_eq!(skimmed.terms.len(), 2, "{:?}", skimmed.modes());
+        let (e_skimmed, e_bent) = (static_error(&skimmed, &truth), static_error(&bent, &truth));
+        assert!(e_skimmed < 1e-6 && e_bent > 5e-3, "static gain off {e_skimmed:.2e} skimmed, {e_bent:.2e} bent");
+    }
 }

@@ -1,0 +1,122 @@
+//! Study (not in CI): how much of an axis's error comes from the fitted model
+//! rather than the noise. For set-ups of the random sweep
+//! ([`dynocomp::eval::sweep::draw`]), the model part of the compensated
+//! error, F·(G/Ĝ − 1) over the scoring band (F the band-limited truth's
+//! spectrum, G the simulator's true response), relative to the truth's
+//! std and split into the mean (0 Hz) and the rest, for Ĝ = the design's
+//! fit and for Ĝ = the true poles with residues fitted to the same impact
+//! test (what the lines allow when the poles are right).
+//!
+//! With `--orders`, also each order of the plain fit ([`fit_order`]):
+//! weighted RMS against the lines, static gain and model error; with
+//! `--bend`, only how far the plain fit and the design's fit move below the
+//! first coherent line (the design's static check).
+//!
+//! usage: cargo run --release -p dynocomp --example fit_error_study -- [--orders|--bend] SEED{x|y|z} ...
+use anyhow::{Context, Result};
+use dynocomp::eval::rates::{design_options, scoring_band_hz, RunOptions};
+use dynocomp::eval::sweep::draw;
+use dynocomp::fit::vf::{coherence_weights, fit_order, refit_kept, vector_fit, weighted_rms, VfOptions};
+use dynocomp::fit::PoleResidueModel;
+use num_complex::Complex64;
+use rustfft::FftPlanner;
+
+/// (mean part, rest) of the model error F·(ratio − 1) relative to the std
+/// of `truth`, over 0 < f ≤ `band` Hz.
+fn model_error(truth: &[f64], fs: f64, band: f64, ratio: &dyn Fn(f64) -> Complex64) -> (f64, f64) {
+    let n = truth.len();
+    let mean = truth.iter().sum::<f64>() / n as f64;
+    let mut buf: Vec<Complex64> = truth.iter().map(|v| Complex64::new(v - mean, 0.0)).collect();
+    FftPlanner::new().plan_fft_forward(n).process(&mut buf);
+    let (mut var, mut err) = (0.0, 0.0);
+    for (k, c) in buf.iter().enumerate().take(n / 2 + 1).skip(1) {
+        let f = k as f64 * fs / n as f64;
+        let p = 2.0 * c.norm_sqr() / (n as f64 * n as f64);
+        var += p;
+        if f <= band {
+            err += p * (ratio(f) - 1.0).norm_sqr();
+        }
+    }
+    let std = var.sqrt();
+    (mean.abs() * (ratio(0.0) - 1.0).norm() / std, err.sqrt() / std)
+}
+
+/// Largest relative move of `g` from its value at `first` between first/8
+/// and 0 Hz.
+fn move_below(g: &dyn Fn(f64) -> Complex64, first: f64) -> f64 {
+    let g0 = g(first);
+    (0..=200).map(|i| first / 8.0 * i as f64 / 200.0).map(|f| (g(f) - g0).norm() / g0.norm()).fold(0.0, f64::max)
+}
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let orders = args.iter().any(|a| a == "--orders");
+    let bend = args.iter().any(|a| a == "--bend");
+    for arg in args.iter().filter(|a| !a.starts_with("--")) {
+        let (seed, ax) = arg.split_at(arg.len() - 1);
+        let seed: u64 = seed.parse().with_context(|| format!("{arg}: SEED{{x|y|z}}"))?;
+        let a = "xyz".find(ax).with_context(|| format!("{arg}: axis x, y or z"))?;
+        let (case, fs, kind) = draw(seed);
+        let params = case.sim_params(fs);
+        let s = dynocomp::simulate::simulate_with(case.seed, &params, case.dynamometer(&params)?)?;
+        let band = scoring_band_hz(fs);
+        let frf = s.frf.axis(a).context("no FRF")?;
+        let (freq, h) = (&s.frf.freq_hz, &frf.frf);
+        let truth_g = |f: f64| s.dyno.axis(a).frf(f);
+        let opts = design_options(fs, &RunOptions::default());
+        let fitted = dynocomp::design::axis::fitted_model(freq, frf, &opts)?;
+        let w = coherence_weights(h, frf.coherence.as_deref());
+        if bend {
+            let coh = frf.coherence.as_deref().unwrap_or(&[]);
+            let first = freq.iter().zip(coh).find(|(_, c)| **c >= 0.9).map_or(0.0, |(f, _)| *f);
+            let plain = vector_fit(freq, h, &w, &VfOptions::default())?.model;
+            println!(
+                "seed {seed} {ax}: first coherent line {first} Hz; plain fit order {} moves {:.4} below it, the design's order {} {:.4}",
+                plain.order(),
+                move_below(&|f| plain.frf(f), first),
+                fitted.order(),
+                move_below(&|f| fitted.frf(f), first)
+            );
+            continue;
+        }
+        let modes: Vec<(f64, f64, f64)> = s.dyno.axis(a).modes.iter().map(|m| (m.fn_hz, m.zeta, m.residue)).collect();
+        let true_model = PoleResidueModel::from_modes(&modes);
+        let oracle = refit_kept(freq, h, &w, &true_model, &vec![true; true_model.terms.len()])?;
+        let off = |m: &PoleResidueModel| (truth_g(0.0) / m.frf(0.0) - 1.0).norm();
+        let (dc_fit, ac_fit) = model_error(&s.truth[a], fs, band, &|f| truth_g(f) / fitted.frf(f));
+        let (dc_or, ac_or) = model_error(&s.truth[a], fs, band, &|f| truth_g(f) / oracle.frf(f));
+        println!(
+            "seed {seed} {ax} ({kind}, {fs} Hz, {} Hz lines, {} true modes): fit order {} mean {:.3} % rest {:.3} % (G(0) off {:.2e}); true poles mean {:.3} % rest {:.3} % (G(0) off {:.2e})",
+            case.frf_df_hz,
+            modes.len(),
+            fitted.order(),
+            100.0 * dc_fit,
+            100.0 * ac_fit,
+            off(&fitted),
+            100.0 * dc_or,
+            100.0 * ac_or,
+            off(&oracle),
+        );
+        if orders {
+            println!("  true modes (Hz, ζ, share): {modes:?}");
+            println!("  fitted modes (Hz, ζ): {:?}", fitted.modes());
+            for order in (2..=20).step_by(2) {
+                match fit_order(freq, h, &w, order, &VfOptions::default()) {
+                    Err(e) => println!("  order {order}: {e:#}"),
+                    Ok(m) => {
+                        let (dc, ac) = model_error(&s.truth[a], fs, band, &|f| truth_g(f) / m.frf(f));
+                        println!(
+                            "  order {order}: weighted rms {:.5}, G(0) off {:.2e}, model error mean {:.3} % rest {:.3} %",
+                            weighted_rms(&m, freq, h, &w),
+                            off(&m),
+                            100.0 * dc,
+                            100.0 * ac
+                        );
+                    }
+                }
+            }
+            println!("  true poles, residues fitted: weighted rms {:.5}", weighted_rms(&oracle, freq, h, &w));
+        }
+    }
+    Ok(())
+}
