@@ -31,8 +31,9 @@ use dynocomp::design::force_spectrum::ForceRecord;
 use dynocomp::design::mimo::image::build_matrix_image;
 use dynocomp::design::mimo::{design_matrix, MatrixDesign, MatrixOptions, RowSource};
 use dynocomp::design::mimo::{MATRIX_ITERATIONS, MATRIX_MAX_ORDER};
-use dynocomp::fit::matrix::{matrix_vector_fit, MatrixData};
+use dynocomp::fit::matrix::{matrix_vector_fit, refit_kept, MatrixData, MatrixModel};
 use dynocomp::fit::vf::{coherence_weights, VfOptions};
+use dynocomp::fit::Term;
 use dynocomp::frf::Frf;
 use dynocomp::io::signal_csv::SignalRecord;
 use dynocomp::metrics::{accuracy, accuracy_as_written, lowpass, sample_variance, scoring_band_hz, AsWritten};
@@ -43,6 +44,7 @@ use dynocomp::simulate::SimParams;
 use dynocomp_core::kernel::AxisState;
 use dynocomp_core::mimo::{MimoFilter, MimoState};
 use num_complex::Complex64;
+use std::f64::consts::PI;
 
 /// Largest accepted ratio of the compensated NRMSE to the exact 3x3
 /// inverse's noise floor, per axis.
@@ -727,6 +729,58 @@ fn a_pole_below_the_first_coherent_line_does_not_bias_the_mean_force() {
     );
     assert!(dropped < 0.1, "G_zx(0) off by {:.1} %", 100.0 * dropped);
     assert!(kept > 0.5, "negative control: with the pole G_zx(0) is off by only {:.1} %", 100.0 * kept);
+}
+
+/// Random plate seed 1 at 25.6 kHz has modes above the impact test's last
+/// line (4096 Hz). The common-pole fit parks a nearly undamped pair just
+/// above the lines for them (4464 Hz, ζ = 2.4e-3), which the skim dropped as
+/// spurious: x, y and z were 2.4x, 5.7x and 3.9x the exact inverse's floor.
+/// A damped pair now takes its place (`vf::surrogate_pole_sets`): every axis
+/// within 2x (1.8x, 1.5x, 1.4x). Checked against
+/// the simulator's truth; negative control: the same model refitted without
+/// that pair is further from the true static gains, where the cut's mean
+/// force is.
+#[test]
+#[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
+fn a_mode_above_the_lines_keeps_a_surrogate_in_the_3x3_fit() {
+    let fs = 25_600.0;
+    let out = record("1", fs);
+    let md = design(&out.frf, &out).unwrap();
+    let fig = evaluate(&md, &out);
+    eprintln!("{}", fig.line("1", fs));
+    for i in 0..3 {
+        assert!(
+            fig.used[i] <= 2.0 * fig.floor[i],
+            "axis {i}: {:.3} % against a floor of {:.3} %",
+            100.0 * fig.used[i],
+            100.0 * fig.floor[i]
+        );
+    }
+    let model = md.model.as_ref().expect("a 3x3 model");
+    let f_top = *out.frf.freq_hz.last().unwrap();
+    let edge: Vec<bool> = model.entries[0]
+        .terms
+        .iter()
+        .map(|t| matches!(t, Term::Pair { pole, .. } if pole.norm() / (2.0 * PI) > 0.97 * f_top))
+        .collect();
+    assert!(edge.iter().any(|e| *e), "no pair above the lines: {:?}", model.modes());
+    let entries: Vec<_> = (0..9).map(|e| out.frf.entry(e / 3, e % 3).unwrap()).collect();
+    let weights: Vec<Vec<f64>> = entries.iter().map(|e| coherence_weights(e.frf, e.coherence)).collect();
+    let data = MatrixData {
+        freq_hz: &out.frf.freq_hz,
+        h: std::array::from_fn(|e| entries[e].frf),
+        w: std::array::from_fn(|e| weights[e].as_slice()),
+    };
+    let keep: Vec<bool> = edge.iter().map(|e| !e).collect();
+    let dropped = refit_kept(&data, model, &keep).unwrap();
+    let truth = out.cut_modal.frf(0.0);
+    let static_error = |m: &MatrixModel| {
+        let g = m.frf(0.0);
+        (0..3).map(|i| (g[(i, i)] / truth[(i, i)] - 1.0).norm()).fold(0.0, f64::max)
+    };
+    let (kept, without) = (static_error(model), static_error(&dropped));
+    eprintln!("direct static gains off by {kept:.2e} at most, {without:.2e} without the surrogate");
+    assert!(kept < 2e-3 && without > 2.0 * kept, "static gains off {kept:.2e}, without the surrogate {without:.2e}");
 }
 
 /// A short simulation of the off-centre plate at `fs` (Hz) by the CLI, in a

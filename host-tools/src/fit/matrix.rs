@@ -10,8 +10,8 @@ use num_complex::Complex64;
 use std::f64::consts::PI;
 
 use super::vf::{
-    basis_row, contributes, kept_poles, lstsq, max_order_for, min_lines, n_cols, relocation_step, residues,
-    sigma_zeros, spurious, starting_poles, to_model, Pole, VfOptions,
+    basis_row, contributes, edge_pairs, kept_poles, lstsq, max_order_for, min_lines, n_cols, relocation_step, residues,
+    sigma_zeros, spurious, starting_poles, surrogate_pole_sets, to_model, Pole, VfOptions,
 };
 use super::{PoleResidueModel, Term};
 
@@ -351,9 +351,19 @@ impl MatrixData<'_> {
     }
 }
 
+/// `model` without the terms `keep` leaves out, its residues and direct
+/// terms fitted again to `data` with the remaining poles fixed (the matrix
+/// form of [`super::vf::refit_kept`]).
+pub fn refit_kept(data: &MatrixData, model: &MatrixModel, keep: &[bool]) -> Result<MatrixModel> {
+    let w_scale = 2.0 * PI * data.f_max();
+    fit_residues(data, &kept_poles(&model.entries[0].terms, keep, w_scale), w_scale)
+}
+
 /// Drop the terms that are spurious (a real pole below `f_identified_hz`,
 /// [`VfOptions::f_identified_hz`], among others) or negligible in every
-/// entry, and refit the residues of the rest.
+/// entry, and refit the residues of the rest; a spurious pair at the band
+/// edge that the lines need gives way to a damped surrogate, as in the
+/// per-axis fit ([`super::vf::surrogate_pole_sets`]).
 ///
 /// Below the impact test's first coherent line the lines carry next to no
 /// weight, and a real pole fitted to their noise bends every entry between
@@ -362,16 +372,30 @@ impl MatrixData<'_> {
 fn skim(data: &MatrixData, f_identified_hz: f64, model: MatrixModel) -> Result<MatrixModel> {
     let f_top = data.f_max();
     let f_low = data.freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0).max(f_identified_hz);
-    let keep: Vec<bool> = (0..model.terms())
-        .map(|k| {
-            let t = model.entries[0].terms[k];
-            !spurious(&t, f_low, f_top)
-                && (0..ENTRIES).any(|e| contributes(&model.entries[e].terms[k], data.freq_hz, data.h[e]))
-        })
+    let terms = &model.entries[0].terms;
+    let needed: Vec<bool> = (0..model.terms())
+        .map(|k| (0..ENTRIES).any(|e| contributes(&model.entries[e].terms[k], data.freq_hz, data.h[e])))
         .collect();
+    let keep: Vec<bool> = terms.iter().zip(&needed).map(|(t, n)| *n && !spurious(t, f_low, f_top)).collect();
     if keep.iter().all(|k| *k) {
         return Ok(model);
     }
     let w_scale = 2.0 * PI * f_top;
-    fit_residues(data, &kept_poles(&model.entries[0].terms, &keep, w_scale), w_scale)
+    let kept = kept_poles(terms, &keep, w_scale);
+    let edge = edge_pairs(terms, &needed, &keep, f_top);
+    if edge.is_empty() {
+        return fit_residues(data, &kept, w_scale);
+    }
+    let mut best: Option<(f64, MatrixModel)> = None;
+    for poles in surrogate_pole_sets(&kept, &edge, w_scale) {
+        let Ok(m) = fit_residues(data, &poles, w_scale) else { continue };
+        let e = data.weighted_rms(&m);
+        if e.is_finite() && best.as_ref().is_none_or(|(b, _)| e < *b) {
+            best = Some((e, m));
+        }
+    }
+    match best {
+        Some((_, m)) => Ok(m),
+        None => fit_residues(data, &kept, w_scale),
+    }
 }

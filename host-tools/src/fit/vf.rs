@@ -540,13 +540,7 @@ fn skim(
     if keep.iter().all(|k| *k) {
         return Ok(model);
     }
-    let edge: Vec<Term> = model
-        .terms
-        .iter()
-        .zip(needed.iter().zip(&keep))
-        .filter(|(t, (n, k))| **n && !**k && at_edge(t, f_top))
-        .map(|(t, _)| *t)
-        .collect();
+    let edge = edge_pairs(&model.terms, &needed, &keep, f_top);
     if edge.is_empty() {
         return refit_kept(freq_hz, h, weights, &model, &keep);
     }
@@ -566,12 +560,45 @@ const EDGE_SURROGATE_DAMPING: [f64; 5] = [EDGE_MODE_DAMPING, 0.01, 0.02, 0.04, 0
 /// edge pair's: the modes it stands for lie at or above it.
 const EDGE_SURROGATE_FREQUENCY: [f64; 5] = [1.0, 1.1, 1.25, 1.5, 2.0];
 
-/// `model`'s terms marked in `keep`, plus each pair of `edge` with one
-/// damping of [`EDGE_SURROGATE_DAMPING`] at one multiple of its natural
-/// frequency of [`EDGE_SURROGATE_FREQUENCY`] (the same for all, the pair
-/// that fits the lines best), all residues and the direct term fitted
-/// again. Without the surrogate, the modes above the band that the
-/// edge pair stood for bend the fit across the band and at 0 Hz.
+/// The pole sets an edge surrogate tries: `kept`, plus each pair of `edge`
+/// with one damping of [`EDGE_SURROGATE_DAMPING`] at one multiple of its
+/// natural frequency of [`EDGE_SURROGATE_FREQUENCY`] (the same for all),
+/// normalized by `w_scale` (rad/s). The caller fits the residues of each
+/// and keeps the set that fits the lines best: without a surrogate, the
+/// modes above the band that the edge pair stood for bend the fit across
+/// the band and at 0 Hz.
+pub(crate) fn surrogate_pole_sets<'a>(
+    kept: &'a [Pole],
+    edge: &'a [Term],
+    w_scale: f64,
+) -> impl Iterator<Item = Vec<Pole>> + 'a {
+    let tries = EDGE_SURROGATE_DAMPING.iter().flat_map(|z| EDGE_SURROGATE_FREQUENCY.iter().map(move |f| (*z, *f)));
+    tries.map(move |(zeta, raise)| {
+        let mut poles = kept.to_vec();
+        for t in edge {
+            if let Term::Pair { pole, .. } = *t {
+                let wn = raise * pole.norm() / w_scale;
+                poles.push(Pole { p: Complex64::new(-zeta * wn, wn * (1.0 - zeta * zeta).sqrt()), pair: true });
+            }
+        }
+        poles
+    })
+}
+
+/// The spurious pairs at the band edge among `terms` that the lines need
+/// (`needed`; dropped where `keep` is false), for [`surrogate_pole_sets`].
+pub(crate) fn edge_pairs(terms: &[Term], needed: &[bool], keep: &[bool], f_top: f64) -> Vec<Term> {
+    terms
+        .iter()
+        .zip(needed.iter().zip(keep))
+        .filter(|(t, (n, k))| **n && !**k && at_edge(t, f_top))
+        .map(|(t, _)| *t)
+        .collect()
+}
+
+/// `model`'s terms marked in `keep` with the best of the edge surrogates
+/// for `edge` ([`surrogate_pole_sets`]), all residues and the direct term
+/// fitted again.
 fn edge_surrogates(
     freq_hz: &[f64],
     h: &[Complex64],
@@ -586,15 +613,7 @@ fn edge_surrogates(
     let sw: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
     let kept = kept_poles(&model.terms, keep, w_scale);
     let mut best: Option<(f64, PoleResidueModel)> = None;
-    let tries = EDGE_SURROGATE_DAMPING.iter().flat_map(|z| EDGE_SURROGATE_FREQUENCY.iter().map(move |f| (*z, *f)));
-    for (zeta, raise) in tries {
-        let mut poles = kept.clone();
-        for t in edge {
-            if let Term::Pair { pole, .. } = *t {
-                let wn = raise * pole.norm() / w_scale;
-                poles.push(Pole { p: Complex64::new(-zeta * wn, wn * (1.0 - zeta * zeta).sqrt()), pair: true });
-            }
-        }
+    for poles in surrogate_pole_sets(&kept, edge, w_scale) {
         let Ok((c, d)) = residues(&s, h, &sw, &poles) else { continue };
         let m = to_model(&poles, &c, d, w_scale);
         let e = weighted_rms(&m, freq_hz, h, weights);
