@@ -257,3 +257,56 @@ fn a_real_pole_beyond_nyquist_is_fitted_by_its_tail() {
     let (_, fd) = discretize(&below, fs, Discretization::Fit, (0.0, 4096.0)).unwrap();
     assert_eq!(fd.modes_above_nyquist, 0, "a real pole at 9 kHz (below fs/2) must be mapped");
 }
+
+/// The fitted model of random-sweep seed 19 z (51.2 kHz) when the fit
+/// relocated its poles on every line: the modes above the impact test's
+/// lines stand as a real pole at 22 kHz with a large residue against the
+/// direct term.
+fn seed_19_z() -> PoleResidueModel {
+    use dynocomp::fit::Term;
+    let pair =
+        |p: (f64, f64), r: (f64, f64)| Term::Pair { pole: Complex64::new(p.0, p.1), residue: Complex64::new(r.0, r.1) };
+    PoleResidueModel {
+        terms: vec![
+            Term::Real { pole: -139_566.109_789_993_26, residue: 45_831.766_475_935_17 },
+            Term::Real { pole: -1_448.431_167_237_472_2, residue: -24.912_512_143_362_985 },
+            pair((-45.013_812_806_956_13, 1_128.544_351_192_085_7), (0.348_042_763_953_333_17, -58.072_568_808_788_88)),
+            pair((-116.129_389_907_710_5, 2_285.989_899_054_894_5), (-0.560_364_832_336_786_7, -157.548_107_139_798_5)),
+            pair((-67.889_155_994_333_05, 3_906.987_467_932_04), (-0.637_981_014_016_003, -91.171_179_823_641_08)),
+            pair((-1_124.927_221_590_14, 21_560.018_435_050_766), (280.017_879_313_559_66, -5_082.940_186_584_368)),
+            pair((-998.783_042_387_474_3, 23_261.046_056_966_406), (57.223_120_485_367_275, -2_225.707_770_315_656_5)),
+        ],
+        d: -0.265_551_508_155_637,
+    }
+}
+
+#[test]
+fn a_fit_that_cancels_huge_terms_gives_way_to_one_the_kalman_design_can_solve() {
+    use dynocomp::design::discretize::{fit_with_structure, MAX_TERM_GAIN_RATIO};
+    use dynocomp::design::kalman::{design_shaped, ForceShape};
+    let (model, fs, band) = (seed_19_z(), 51_200.0, (7.0, 4096.0));
+    let shape = Some(ForceShape { corner_hz: 4915.2, order: 4 });
+    let r = 5.05e-2;
+    let grid: Vec<f64> = (0..=400).map(|i| band.1 * i as f64 / 400.0).collect();
+    let ratio = |dm: &DiscreteModel| dm.term_gain_sum() / grid.iter().map(|f| dm.frf(*f).norm()).fold(0.0, f64::max);
+    let qs = [5e-2, 5.0, 5e3];
+    // The fit chosen: its terms do not cancel, and the Kalman design
+    // solves its Riccati equation at every q.
+    let (dm, _) = discretize(&model, fs, Discretization::Fit, band).unwrap();
+    eprintln!("chosen: {} taps, advance {}, term gains {:.1}x the peak", dm.fir.len(), dm.advance, ratio(&dm));
+    assert!(ratio(&dm) <= MAX_TERM_GAIN_RATIO);
+    assert!(dm.match_error(&grid, |f| model.frf(f)) < 1e-2);
+    for q in qs {
+        design_shaped(&dm, q, r, 4, shape).unwrap_or_else(|e| panic!("q {q}: {e:#}"));
+    }
+    // Control: the structure the fit chose before (6 taps, advance 3)
+    // matches too, but with a residue of 1e5 on its pole near z = 0 against
+    // the taps; no q designs.
+    let cancelling = fit_with_structure(&model, fs, band, 6, 3).unwrap();
+    eprintln!("6 taps, advance 3: term gains {:.1e}x the peak", ratio(&cancelling));
+    assert!(ratio(&cancelling) > MAX_TERM_GAIN_RATIO);
+    for q in qs {
+        let e = design_shaped(&cancelling, q, r, 4, shape).map(|_| ()).unwrap_err();
+        assert!(format!("{e:#}").contains("Riccati"), "q {q}: {e:#}");
+    }
+}

@@ -152,6 +152,24 @@ impl DiscreteModel {
         self.terms.iter().map(|t| if matches!(t, DTerm::Real { .. }) { 1 } else { 2 }).sum()
     }
 
+    /// The sum of the gains its terms reach on the unit circle, each alone:
+    /// |ρ|/(1 − |ζ|) per real pole, 2|ρ|/(1 − |ζ|) per pair, |d| and |h_m|.
+    /// Where it is many times the largest |Ĝ_d|, the terms cancel each other
+    /// ([`MAX_TERM_GAIN_RATIO`]).
+    pub fn term_gain_sum(&self) -> f64 {
+        let poles: f64 = self
+            .terms
+            .iter()
+            .map(|t| match *t {
+                DTerm::Real { pole, residue } => residue.abs() / (1.0 - pole.abs()).max(f64::MIN_POSITIVE),
+                DTerm::Pair { pole, residue } => {
+                    2.0 * c(residue).norm() / (1.0 - c(pole).norm()).max(f64::MIN_POSITIVE)
+                }
+            })
+            .sum();
+        poles + self.d.abs() + self.fir.iter().map(|h| h.abs()).sum::<f64>()
+    }
+
     /// Largest pole modulus (0 without poles).
     pub fn pole_radius(&self) -> f64 {
         self.terms
@@ -301,6 +319,16 @@ pub const MATCH_TARGET: f64 = 1e-3;
 pub(crate) const MATCH_SLACK: f64 = 1.5;
 /// Largest condition number of the scaled least-squares matrix accepted.
 pub(crate) const MAX_CONDITION: f64 = 1e12;
+/// Largest ratio of a fit's [`DiscreteModel::term_gain_sum`] to its largest
+/// |Ĝ_d| on the band's grid. Beyond it the least squares cancels huge terms
+/// against each other: a fast real pole (ζ near 0) is nearly a FIR tap, and
+/// the two columns can take residues of 10⁵ of opposite sign. The response
+/// is right, but the Kalman design's augmented plant then measures a small
+/// difference of huge states, and its Riccati equation has no usable
+/// solution for any q. Random-sweep seed 19 z, fitted with its poles
+/// relocated on every line: 1.3e5 times its peak, a residue of −1.0e5 on a
+/// pole at z = 0.065; the fit chosen in its place, 270 times.
+pub const MAX_TERM_GAIN_RATIO: f64 = 1e3;
 
 /// The dense frequency grid of the fit: uniform over 0..`top_fraction`·fs
 /// (0.45 fs by default), plus fine points around every mapped mode below
@@ -394,14 +422,23 @@ fn fit_unit_circle(
     // match error is within reach of the best: below MATCH_TARGET, or within
     // MATCH_SLACK of the best error when that is above the target.
     let mut tried: Vec<(DiscreteModel, FitDiagnostics, f64)> = Vec::new();
+    let mut cancelling = 0;
     for advance in 0..=MAX_ADVANCE {
         for taps in advance.saturating_sub(1)..=MAX_FIR_TAPS {
             let Some((dm, diag)) = ls.solve(taps, advance) else { continue };
+            let peak = band_grid.iter().map(|f| dm.frf(*f).norm()).fold(0.0, f64::max);
+            if !(dm.term_gain_sum() <= MAX_TERM_GAIN_RATIO * peak) {
+                cancelling += 1;
+                continue;
+            }
             let err = dm.match_error(&band_grid, |f| model.frf(f));
             tried.push((dm, FitDiagnostics { modes_above_nyquist: above, ..diag }, err));
         }
     }
     let best_err = tried.iter().map(|t| t.2).fold(f64::INFINITY, f64::min);
+    if !best_err.is_finite() && cancelling > 0 {
+        bail!("discrete model: every well-conditioned unit-circle fit cancels terms of more than {MAX_TERM_GAIN_RATIO:.0e} times its response against each other (a fast pole against the FIR taps); lower --max-order or use --discretization foh");
+    }
     if !best_err.is_finite() {
         bail!("discrete model: every unit-circle fit was ill-conditioned (condition > {MAX_CONDITION:.0e}); two fitted modes may coincide: lower --max-order or use --discretization foh");
     }
