@@ -735,7 +735,7 @@ fn a_pole_below_the_first_coherent_line_does_not_bias_the_mean_force() {
 /// line (4096 Hz). The common-pole fit parks a nearly undamped pair just
 /// above the lines for them (4464 Hz, ζ = 2.4e-3), which the skim dropped as
 /// spurious: x, y and z were 2.4x, 5.7x and 3.9x the exact inverse's floor.
-/// A damped pair now takes its place (`vf::surrogate_pole_sets`): every axis
+/// A damped pair now takes its place (`vf::best_surrogate`): every axis
 /// within 2x (1.8x, 1.5x, 1.4x). Checked against
 /// the simulator's truth; negative control: the same model refitted without
 /// that pair is further from the true static gains, where the cut's mean

@@ -10,8 +10,8 @@ use num_complex::Complex64;
 use std::f64::consts::PI;
 
 use super::vf::{
-    basis_row, contributes, edge_pairs, kept_poles, lstsq, max_order_for, min_lines, n_cols, relocation_step, residues,
-    sigma_zeros, spurious, starting_poles, surrogate_pole_sets, to_model, Pole, VfOptions,
+    basis_row, best_surrogate, contributes, edge_pairs, kept_poles, lstsq, max_order_for, min_lines, n_cols,
+    relocation_step, residues, sigma_zeros, spurious, starting_poles, to_model, Pole, VfOptions,
 };
 use super::{PoleResidueModel, Term};
 
@@ -363,7 +363,7 @@ pub fn refit_kept(data: &MatrixData, model: &MatrixModel, keep: &[bool]) -> Resu
 /// [`VfOptions::f_identified_hz`], among others) or negligible in every
 /// entry, and refit the residues of the rest; a spurious pair at the band
 /// edge that the lines need gives way to a damped surrogate, as in the
-/// per-axis fit ([`super::vf::surrogate_pole_sets`]).
+/// per-axis fit ([`super::vf::best_surrogate`]).
 ///
 /// Below the impact test's first coherent line the lines carry next to no
 /// weight, and a real pole fitted to their noise bends every entry between
@@ -386,16 +386,9 @@ fn skim(data: &MatrixData, f_identified_hz: f64, model: MatrixModel) -> Result<M
     if edge.is_empty() {
         return fit_residues(data, &kept, w_scale);
     }
-    let mut best: Option<(f64, MatrixModel)> = None;
-    for poles in surrogate_pole_sets(&kept, &edge, w_scale) {
-        let Ok(m) = fit_residues(data, &poles, w_scale) else { continue };
-        let e = data.weighted_rms(&m);
-        if e.is_finite() && best.as_ref().is_none_or(|(b, _)| e < *b) {
-            best = Some((e, m));
-        }
-    }
-    match best {
-        Some((_, m)) => Ok(m),
+    let fit = |poles: &[Pole]| fit_residues(data, poles, w_scale);
+    match best_surrogate(&kept, &edge, w_scale, fit, |m| data.weighted_rms(m)) {
+        Some(m) => Ok(m),
         None => fit_residues(data, &kept, w_scale),
     }
 }

@@ -521,9 +521,8 @@ pub(crate) fn kept_poles(terms: &[Term], keep: &[bool], w_scale: f64) -> Vec<Pol
 }
 
 /// Remove pairs whose contribution is negligible everywhere in the band, and
-/// spurious lightly damped pairs (ζ < [`MIN_MODE_DAMPING`], or ζ < 0.5 % at
-/// the band edge), and real poles below the lowest measured line, then refit
-/// the residues of the rest. A spurious pair at the band edge that the lines
+/// the terms the lines cannot identify ([`spurious`]), then refit the
+/// residues of the rest. A spurious pair at the band edge that the lines
 /// need ([`contributes`]) stands for modes above the band: a pair with a
 /// plausible damping at or above it takes its place ([`edge_surrogates`]).
 fn skim(
@@ -560,20 +559,23 @@ const EDGE_SURROGATE_DAMPING: [f64; 5] = [EDGE_MODE_DAMPING, 0.01, 0.02, 0.04, 0
 /// edge pair's: the modes it stands for lie at or above it.
 const EDGE_SURROGATE_FREQUENCY: [f64; 5] = [1.0, 1.1, 1.25, 1.5, 2.0];
 
-/// The pole sets an edge surrogate tries: `kept`, plus each pair of `edge`
-/// with one damping of [`EDGE_SURROGATE_DAMPING`] at one multiple of its
-/// natural frequency of [`EDGE_SURROGATE_FREQUENCY`] (the same for all),
-/// normalized by `w_scale` (rad/s). The caller fits the residues of each
-/// and keeps the set that fits the lines best: without a surrogate, the
-/// modes above the band that the edge pair stood for bend the fit across
-/// the band and at 0 Hz.
-pub(crate) fn surrogate_pole_sets<'a>(
-    kept: &'a [Pole],
-    edge: &'a [Term],
+/// The best edge surrogate: `kept`, plus each pair of `edge` with one
+/// damping of [`EDGE_SURROGATE_DAMPING`] at one multiple of its natural
+/// frequency of [`EDGE_SURROGATE_FREQUENCY`] (the same for all; poles
+/// normalized by `w_scale`, rad/s), its residues fitted by `fit`, the model
+/// of least `error` on the lines; `None` if no fit succeeds. Without a
+/// surrogate, the modes above the band that the edge pair stood for bend
+/// the fit across the band and at 0 Hz. For the per-axis and the 3x3 fit.
+pub(crate) fn best_surrogate<M>(
+    kept: &[Pole],
+    edge: &[Term],
     w_scale: f64,
-) -> impl Iterator<Item = Vec<Pole>> + 'a {
+    fit: impl Fn(&[Pole]) -> Result<M>,
+    error: impl Fn(&M) -> f64,
+) -> Option<M> {
     let tries = EDGE_SURROGATE_DAMPING.iter().flat_map(|z| EDGE_SURROGATE_FREQUENCY.iter().map(move |f| (*z, *f)));
-    tries.map(move |(zeta, raise)| {
+    let mut best: Option<(f64, M)> = None;
+    for (zeta, raise) in tries {
         let mut poles = kept.to_vec();
         for t in edge {
             if let Term::Pair { pole, .. } = *t {
@@ -581,12 +583,17 @@ pub(crate) fn surrogate_pole_sets<'a>(
                 poles.push(Pole { p: Complex64::new(-zeta * wn, wn * (1.0 - zeta * zeta).sqrt()), pair: true });
             }
         }
-        poles
-    })
+        let Ok(m) = fit(&poles) else { continue };
+        let e = error(&m);
+        if e.is_finite() && best.as_ref().is_none_or(|(b, _)| e < *b) {
+            best = Some((e, m));
+        }
+    }
+    best.map(|(_, m)| m)
 }
 
 /// The spurious pairs at the band edge among `terms` that the lines need
-/// (`needed`; dropped where `keep` is false), for [`surrogate_pole_sets`].
+/// (`needed`; dropped where `keep` is false), for [`best_surrogate`].
 pub(crate) fn edge_pairs(terms: &[Term], needed: &[bool], keep: &[bool], f_top: f64) -> Vec<Term> {
     terms
         .iter()
@@ -597,8 +604,8 @@ pub(crate) fn edge_pairs(terms: &[Term], needed: &[bool], keep: &[bool], f_top: 
 }
 
 /// `model`'s terms marked in `keep` with the best of the edge surrogates
-/// for `edge` ([`surrogate_pole_sets`]), all residues and the direct term
-/// fitted again.
+/// for `edge` ([`best_surrogate`]), all residues and the direct term fitted
+/// again.
 fn edge_surrogates(
     freq_hz: &[f64],
     h: &[Complex64],
@@ -612,17 +619,9 @@ fn edge_surrogates(
     let s: Vec<Complex64> = freq_hz.iter().map(|f| Complex64::new(0.0, 2.0 * PI * f / w_scale)).collect();
     let sw: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
     let kept = kept_poles(&model.terms, keep, w_scale);
-    let mut best: Option<(f64, PoleResidueModel)> = None;
-    for poles in surrogate_pole_sets(&kept, edge, w_scale) {
-        let Ok((c, d)) = residues(&s, h, &sw, &poles) else { continue };
-        let m = to_model(&poles, &c, d, w_scale);
-        let e = weighted_rms(&m, freq_hz, h, weights);
-        if e.is_finite() && best.as_ref().is_none_or(|(b, _)| e < *b) {
-            best = Some((e, m));
-        }
-    }
-    match best {
-        Some((_, m)) => Ok(m),
+    let fit = |poles: &[Pole]| residues(&s, h, &sw, poles).map(|(c, d)| to_model(poles, &c, d, w_scale));
+    match best_surrogate(&kept, edge, w_scale, fit, |m| weighted_rms(m, freq_hz, h, weights)) {
+        Some(m) => Ok(m),
         None => refit_kept(freq_hz, h, weights, model, keep),
     }
 }
