@@ -10,10 +10,11 @@
 //! With `--orders`, also each order of the plain fit ([`fit_order`]):
 //! weighted RMS against the lines, static gain and model error; with
 //! `--bend`, only how far the plain fit and the design's fit move below the
-//! first coherent line (the design's static check).
+//! first coherent line (the design's static check, [`static_deviation`]).
 //!
 //! usage: cargo run --release -p dynocomp --example fit_error_study -- [--orders|--bend] SEED{x|y|z} ...
 use anyhow::{Context, Result};
+use dynocomp::design::axis::static_deviation;
 use dynocomp::eval::rates::{design_options, scoring_band_hz, RunOptions};
 use dynocomp::eval::sweep::draw;
 use dynocomp::fit::vf::{coherence_weights, fit_order, refit_kept, vector_fit, weighted_rms, VfOptions};
@@ -41,13 +42,6 @@ fn model_error(truth: &[f64], fs: f64, band: f64, ratio: &dyn Fn(f64) -> Complex
     (mean.abs() * (ratio(0.0) - 1.0).norm() / std, err.sqrt() / std)
 }
 
-/// Largest relative move of `g` from its value at `first` between first/8
-/// and 0 Hz.
-fn move_below(g: &dyn Fn(f64) -> Complex64, first: f64) -> f64 {
-    let g0 = g(first);
-    (0..=200).map(|i| first / 8.0 * i as f64 / 200.0).map(|f| (g(f) - g0).norm() / g0.norm()).fold(0.0, f64::max)
-}
-
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let orders = args.iter().any(|a| a == "--orders");
@@ -73,9 +67,9 @@ fn main() -> Result<()> {
             println!(
                 "seed {seed} {ax}: first coherent line {first} Hz; plain fit order {} moves {:.4} below it, the design's order {} {:.4}",
                 plain.order(),
-                move_below(&|f| plain.frf(f), first),
+                static_deviation(|f| plain.frf(f), freq, first).0,
                 fitted.order(),
-                move_below(&|f| fitted.frf(f), first)
+                static_deviation(|f| fitted.frf(f), freq, first).0
             );
             continue;
         }

@@ -30,9 +30,9 @@ use dynocomp::design::axis::DesignOptions;
 use dynocomp::design::force_spectrum::ForceRecord;
 use dynocomp::design::mimo::image::build_matrix_image;
 use dynocomp::design::mimo::{design_matrix, MatrixDesign, MatrixOptions, RowSource};
-use dynocomp::design::mimo::{MATRIX_ITERATIONS, MATRIX_MAX_ORDER};
+use dynocomp::design::mimo::{with_weighted_matrix, MATRIX_ITERATIONS, MATRIX_MAX_ORDER};
 use dynocomp::fit::matrix::{matrix_vector_fit, refit_kept, MatrixData, MatrixModel};
-use dynocomp::fit::vf::{coherence_weights, VfOptions};
+use dynocomp::fit::vf::VfOptions;
 use dynocomp::fit::Term;
 use dynocomp::frf::Frf;
 use dynocomp::io::signal_csv::SignalRecord;
@@ -703,25 +703,19 @@ fn a_pole_below_the_first_coherent_line_does_not_bias_the_mean_force() {
         100.0 * fig.floor[2]
     );
     let first_coherent = md.summary.axes.iter().map(|a| a.band_hz.0).fold(f64::INFINITY, f64::min);
-    let entries: Vec<_> = (0..9).map(|e| out.frf.entry(e / 3, e % 3).unwrap()).collect();
-    let weights: Vec<Vec<f64>> = entries.iter().map(|e| coherence_weights(e.frf, e.coherence)).collect();
     let truth = out.cut_modal.frf(0.0)[(2, 0)];
-    let dc_error = |f_identified_hz: f64| {
-        let data = MatrixData {
-            freq_hz: &out.frf.freq_hz,
-            h: std::array::from_fn(|e| entries[e].frf),
-            w: std::array::from_fn(|e| weights[e].as_slice()),
-        };
+    let dc_error = |data: &MatrixData, f_identified_hz: f64| {
         let opts = VfOptions {
             max_order: MATRIX_MAX_ORDER,
             iterations: MATRIX_ITERATIONS,
             f_identified_hz,
             ..VfOptions::default()
         };
-        let fit = matrix_vector_fit(&data, &opts).unwrap();
+        let fit = matrix_vector_fit(data, &opts).unwrap();
         (fit.model.frf(0.0)[(2, 0)] - truth).norm() / truth.norm()
     };
-    let (kept, dropped) = (dc_error(0.0), dc_error(first_coherent));
+    let (kept, dropped) =
+        with_weighted_matrix(&out.frf, |data| (dc_error(data, 0.0), dc_error(data, first_coherent))).unwrap();
     eprintln!(
         "G_zx(0) off by {:.1} % with the pole, {:.1} % without (first coherent line {first_coherent} Hz)",
         100.0 * kept,
@@ -764,15 +758,8 @@ fn a_mode_above_the_lines_keeps_a_surrogate_in_the_3x3_fit() {
         .map(|t| matches!(t, Term::Pair { pole, .. } if pole.norm() / (2.0 * PI) > 0.97 * f_top))
         .collect();
     assert!(edge.iter().any(|e| *e), "no pair above the lines: {:?}", model.modes());
-    let entries: Vec<_> = (0..9).map(|e| out.frf.entry(e / 3, e % 3).unwrap()).collect();
-    let weights: Vec<Vec<f64>> = entries.iter().map(|e| coherence_weights(e.frf, e.coherence)).collect();
-    let data = MatrixData {
-        freq_hz: &out.frf.freq_hz,
-        h: std::array::from_fn(|e| entries[e].frf),
-        w: std::array::from_fn(|e| weights[e].as_slice()),
-    };
     let keep: Vec<bool> = edge.iter().map(|e| !e).collect();
-    let dropped = refit_kept(&data, model, &keep).unwrap();
+    let dropped = with_weighted_matrix(&out.frf, |data| refit_kept(data, model, &keep)).unwrap().unwrap();
     let truth = out.cut_modal.frf(0.0);
     let static_error = |m: &MatrixModel| {
         let g = m.frf(0.0);

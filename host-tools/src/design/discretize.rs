@@ -116,6 +116,11 @@ pub struct DiscreteModel {
     pub advance: usize,
 }
 
+/// max |g/t − 1| over the pairs (g, t): a model's match to its truth.
+fn largest_relative_error(pairs: impl Iterator<Item = (Complex64, Complex64)>) -> f64 {
+    pairs.map(|(g, t)| (g / t - 1.0).norm()).fold(0.0, f64::max)
+}
+
 fn c(v: (f64, f64)) -> Complex64 {
     Complex64::new(v.0, v.1)
 }
@@ -183,7 +188,7 @@ impl DiscreteModel {
 
     /// Model match: max over `freqs_hz` of |Ĝ_d/Ĝ − 1| against `truth`.
     pub fn match_error(&self, freqs_hz: &[f64], truth: impl Fn(f64) -> Complex64) -> f64 {
-        freqs_hz.iter().map(|f| (self.frf(*f) / truth(*f) - 1.0).norm()).fold(0.0, f64::max)
+        largest_relative_error(freqs_hz.iter().map(|f| (self.frf(*f), truth(*f))))
     }
 }
 
@@ -423,15 +428,17 @@ fn fit_unit_circle(
     // MATCH_SLACK of the best error when that is above the target.
     let mut tried: Vec<(DiscreteModel, FitDiagnostics, f64)> = Vec::new();
     let mut cancelling = 0;
+    let truth: Vec<Complex64> = band_grid.iter().map(|f| model.frf(*f)).collect();
     for advance in 0..=MAX_ADVANCE {
         for taps in advance.saturating_sub(1)..=MAX_FIR_TAPS {
             let Some((dm, diag)) = ls.solve(taps, advance) else { continue };
-            let peak = band_grid.iter().map(|f| dm.frf(*f).norm()).fold(0.0, f64::max);
+            let response: Vec<Complex64> = band_grid.iter().map(|f| dm.frf(*f)).collect();
+            let peak = response.iter().map(|g| g.norm()).fold(0.0, f64::max);
             if !(dm.term_gain_sum() <= MAX_TERM_GAIN_RATIO * peak) {
                 cancelling += 1;
                 continue;
             }
-            let err = dm.match_error(&band_grid, |f| model.frf(f));
+            let err = largest_relative_error(response.into_iter().zip(truth.iter().copied()));
             tried.push((dm, FitDiagnostics { modes_above_nyquist: above, ..diag }, err));
         }
     }

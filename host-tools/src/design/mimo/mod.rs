@@ -682,20 +682,32 @@ fn crosstalk_of(frf: &Frf, bands: &[(f64, f64); 3], threshold: f64) -> Crosstalk
     x
 }
 
-/// Fit, discrete model and plant of the matrix (the latency-independent
-/// part), the fit with `vf`, its error scored on the lines of coherence ≥
-/// `threshold`.
-fn prepare_matrix(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, vf: &VfOptions, threshold: f64) -> Result<MatrixPrep> {
-    let entries: Vec<_> = (0..9).map(|e| frf.entry(e / 3, e % 3).expect("complete")).collect();
+/// `use_data` on the nine entries of the matrix `frf` with their coherence
+/// weights ([`coherence_weights`]), as the common-pole fit takes them; an
+/// error naming the first entry missing.
+pub fn with_weighted_matrix<R>(frf: &Frf, use_data: impl FnOnce(&MatrixData) -> R) -> Result<R> {
+    let entries = (0..9)
+        .map(|e| {
+            let (i, j) = (e / 3, e % 3);
+            frf.entry(i, j).ok_or_else(|| anyhow::anyhow!("the FRF matrix has no G_{}", entry_name(i, j)))
+        })
+        .collect::<Result<Vec<_>>>()?;
     let weights: Vec<Vec<f64>> = entries.iter().map(|e| coherence_weights(e.frf, e.coherence)).collect();
     let data = MatrixData {
         freq_hz: &frf.freq_hz,
         h: std::array::from_fn(|e| entries[e].frf),
         w: std::array::from_fn(|e| weights[e].as_slice()),
     };
+    Ok(use_data(&data))
+}
+
+/// Fit, discrete model and plant of the matrix (the latency-independent
+/// part), the fit with `vf`, its error scored on the lines of coherence ≥
+/// `threshold`.
+fn prepare_matrix(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, vf: &VfOptions, threshold: f64) -> Result<MatrixPrep> {
     // A real pole below the first coherent line of the bands is not kept.
     let vf = VfOptions { f_identified_hz: bands.iter().map(|b| b.0).fold(f64::INFINITY, f64::min), ..vf.clone() };
-    let fit = matrix_vector_fit(&data, &vf).context("fit of the 3x3 matrix")?;
+    let fit = with_weighted_matrix(frf, |data| matrix_vector_fit(data, &vf))?.context("fit of the 3x3 matrix")?;
     prepare_model(frf, bands, fs, threshold, fit.model, fit.weighted_rms, fit.order_trace)
 }
 
