@@ -7,6 +7,7 @@
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
 
+use crate::numeric::dense::Lu;
 use crate::numeric::lti::StateSpace;
 use num_complex::Complex64;
 
@@ -237,9 +238,8 @@ pub(crate) fn structured_doubling(
     for it in 1..=200 {
         iterations = it;
         let w = &id + &gk * &hk;
-        let lu = w.lu();
-        let w_inv_a = lu.solve(&ak).ok_or_else(|| anyhow::anyhow!("Riccati doubling: I + G·H is singular"))?;
-        let w_inv_g = lu.solve(&gk).ok_or_else(|| anyhow::anyhow!("Riccati doubling: I + G·H is singular"))?;
+        let lu = Lu::new(&w).ok_or_else(|| anyhow::anyhow!("Riccati doubling: I + G·H is singular"))?;
+        let (w_inv_a, w_inv_g) = (lu.solve(&ak), lu.solve(&gk));
         let a_next = &ak * &w_inv_a;
         let g_next = &gk + &ak * &w_inv_g * ak.transpose();
         let h_next = &hk + ak.transpose() * &hk * &w_inv_a;
@@ -247,7 +247,7 @@ pub(crate) fn structured_doubling(
         ak = a_next;
         gk = (&g_next + g_next.transpose()) * 0.5;
         hk = (&h_next + h_next.transpose()) * 0.5;
-        if !hk.iter().all(|v| v.is_finite()) {
+        if !hk.as_slice().iter().all(|v| v.is_finite()) {
             bail!("Riccati doubling diverged (non-finite iterate); the model may be unobservable");
         }
         if change < 1e-14 {

@@ -157,26 +157,35 @@ fn relocate(s: &[Complex64], h: &[Vec<Complex64>], sw: &[Vec<f64>], poles: &[Pol
             r
         })
         .collect();
+    // Φ column by column: A is column-major, so each column is written
+    // contiguously.
+    let columns: Vec<Vec<Complex64>> = (0..m).map(|j| rows.iter().map(|r| r[j]).collect()).collect();
     let mut stacked = DMatrix::<f64>::zeros(ENTRIES * m + 1, m);
     let mut data_norm2 = 0.0;
+    // One buffer for every entry's rows: each is written whole, then
+    // factored in place.
+    let mut a = DMatrix::<f64>::zeros(2 * k, 2 * m);
     for e in 0..ENTRIES {
-        let mut a = DMatrix::<f64>::zeros(2 * k, 2 * m);
-        for (i, row) in rows.iter().enumerate() {
-            let (w, hw) = (sw[e][i], h[e][i] * sw[e][i]);
-            data_norm2 += hw.norm_sqr();
-            for (j, phi) in row.iter().enumerate() {
-                let v = phi * w;
-                a[(2 * i, j)] = v.re;
-                a[(2 * i + 1, j)] = v.im;
-                let u = -phi * hw;
-                a[(2 * i, m + j)] = u.re;
-                a[(2 * i + 1, m + j)] = u.im;
+        let hw: Vec<Complex64> = (0..k).map(|i| h[e][i] * sw[e][i]).collect();
+        for v in &hw {
+            data_norm2 += v.norm_sqr();
+        }
+        let (left, right) = a.as_mut_slice().split_at_mut(2 * k * m);
+        let mut finite = true;
+        for (j, phi) in columns.iter().enumerate() {
+            let (cv, cu) = (&mut left[2 * k * j..2 * k * (j + 1)], &mut right[2 * k * j..2 * k * (j + 1)]);
+            for (i, phi) in phi.iter().enumerate() {
+                let v = phi * sw[e][i];
+                (cv[2 * i], cv[2 * i + 1]) = (v.re, v.im);
+                let u = -phi * hw[i];
+                (cu[2 * i], cu[2 * i + 1]) = (u.re, u.im);
+                finite &= v.re.is_finite() & v.im.is_finite() & u.re.is_finite() & u.im.is_finite();
             }
         }
-        if a.iter().any(|v| !v.is_finite()) {
+        if !finite {
             bail!("matrix vector fitting: entry {e}'s least-squares rows are not finite (a pole on a measured line?)");
         }
-        let r = a.qr().r();
+        let r = crate::numeric::dense::qr_r_in_place(&mut a);
         // R22: the rows of σ's coefficients after eliminating entry e's own.
         stacked.view_mut((e * m, 0), (m, m)).copy_from(&r.view((m, m), (m, m)));
     }
@@ -280,7 +289,11 @@ pub fn matrix_vector_fit(data: &MatrixData, opts: &VfOptions) -> Result<MatrixFi
         bail!("matrix vector fitting: every entry needs one value and one weight per line ({lines})");
     }
     let orders: Vec<usize> = (2..=opts.max_order.min(max_order_for(lines))).step_by(2).collect();
-    let fits = map_on_threads(&orders, |order| fit_matrix_order(data, *order, opts));
+    // Highest order first: the cost grows with the order, so the threads
+    // end together.
+    let descending: Vec<usize> = orders.iter().rev().copied().collect();
+    let mut fits = map_on_threads(&descending, |order| fit_matrix_order(data, *order, opts));
+    fits.reverse();
     let mut trace = Vec::new();
     let mut models: Vec<(usize, MatrixModel, f64)> = Vec::new();
     for (order, fit) in orders.into_iter().zip(fits) {

@@ -110,7 +110,7 @@ pub(crate) fn lstsq(mut a: DMatrix<f64>, b: DVector<f64>) -> Result<DVector<f64>
             a.nrows()
         );
     }
-    if a.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+    if a.as_slice().iter().chain(b.as_slice()).any(|v| !v.is_finite()) {
         bail!("vector fitting: the least-squares system has a non-finite entry (a pole on a measured line?)");
     }
     let mut scale = vec![1.0; ncols];

@@ -200,7 +200,7 @@ impl StateSpace {
             }
             let done = step.norm() <= 1e-15 * scale;
             w += step;
-            if !w.iter().all(|v| v.is_finite()) {
+            if !w.as_slice().iter().all(|v| v.is_finite()) {
                 return None;
             }
             if done {
@@ -312,7 +312,7 @@ pub fn stein_smith(a: &DMatrix<f64>, w: DMatrix<f64>) -> Option<DMatrix<f64>> {
         // diverging sum before its entries do.
         let done = step.amax() <= 1e-15 * x.amax().max(f64::MIN_POSITIVE);
         x += step;
-        if !x.iter().all(|v| v.is_finite()) {
+        if !x.as_slice().iter().all(|v| v.is_finite()) {
             return None;
         }
         if done {

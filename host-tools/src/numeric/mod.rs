@@ -1,5 +1,6 @@
 //! Numeric helpers every stage may use: discrete LTI systems ([`lti`]) and
-//! their balanced reduction ([`balanced`]),
+//! their balanced reduction ([`balanced`]), blocked dense factorizations
+//! ([`dense`]),
 //! one-dimensional searches ([`search`]), linear prediction ([`predict`])
 //! and independent work on threads ([`parallel`]).
 
@@ -8,6 +9,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod balanced;
+pub mod dense;
 pub mod lti;
 pub mod parallel;
 pub mod predict;
