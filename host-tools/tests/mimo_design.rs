@@ -851,18 +851,21 @@ fn cli_a_3x3_image_over_the_load_limit_is_reduced_to_one_the_box_runs() {
 /// The chosen compensator's 3x3 block reduced to `states` by `how`,
 /// realized and verified: the filter the design would write at that order.
 fn reduced_filter(md: &MatrixDesign, states: usize, how: dynocomp::numeric::balanced::Reduction) -> MimoFilter {
+    reduced_filter_by(md, states, how, dynocomp::realize::mimo::Prefer::Load).unwrap()
+}
+
+/// [`reduced_filter`] realized as `prefer` says.
+fn reduced_filter_by(
+    md: &MatrixDesign,
+    states: usize,
+    how: dynocomp::numeric::balanced::Reduction,
+    prefer: dynocomp::realize::mimo::Prefer,
+) -> anyhow::Result<MimoFilter> {
     assert!(md.rows.iter().all(|r| *r == RowSource::Matrix), "one 3x3 block: {:?}", md.rows);
     let bal = dynocomp::numeric::balanced::balance(&md.compensator).unwrap();
     let f_band = md.summary.axes.iter().map(|a| a.band_hz.1).fold(0.0, f64::max);
     let block = bal.reduce(states, how).unwrap();
-    dynocomp::realize::mimo::realize_blocks_by(
-        &[block],
-        md.summary.fs_hz,
-        f_band,
-        dynocomp::realize::mimo::Prefer::Load,
-    )
-    .unwrap()
-    .1
+    Ok(dynocomp::realize::mimo::realize_blocks_by(&[block], md.summary.fs_hz, f_band, prefer)?.1)
 }
 
 /// A 3x3 filter over the box's load limit is reduced to fit where it stays
@@ -903,6 +906,17 @@ fn a_3x3_filter_over_the_load_limit_is_reduced_to_fit_where_it_stays_accurate() 
     let f_third = evaluate(&third, &out);
     eprintln!("third   {}", f_third.line("offcentre", 25_600.0));
     assert!((0..3).any(|i| f_third.used[i] > 1.1 * f_full.used[i]), "{:?}", f_third.used);
+    // A load limit only spares the verification of realizations over it:
+    // within it, the cheapest that verifies is the same filter. Control: a
+    // limit just below that filter's load refuses the block.
+    use dynocomp::realize::mimo::Prefer;
+    let coefficients = |f: &MimoFilter| format!("{:?} {:?} {:?}", f.sections(), f.d(), f.fir());
+    let cheapest = reduced_filter(&full, r.states, r.method);
+    let within = reduced_filter_by(&full, r.states, r.method, Prefer::LoadWithin(limit)).unwrap();
+    assert_eq!(coefficients(&cheapest), coefficients(&within));
+    let load = filter_load(&cheapest, 25_600.0);
+    let below = reduced_filter_by(&full, r.states, r.method, Prefer::LoadWithin(load - 1));
+    assert!(below.is_err_and(|e| format!("{e:#}").contains("over the limit")), "load {load}");
 
     let out = record("offcentre", 51_200.0);
     let md = design(&out.frf, &out).unwrap();

@@ -6,7 +6,7 @@
 //! spaces and reuses the per-axis steps of [`crate::realize::modal`].
 
 use anyhow::{bail, Context, Result};
-use dynocomp_core::budget::{MimoCostModel, MimoShape};
+use dynocomp_core::budget::{load_permille, MimoCostModel, MimoShape};
 use dynocomp_core::mimo::{Matrix3, MimoFilter, MimoSection, MimoState, MAX_MIMO_FIR, MAX_MIMO_SECTIONS};
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
@@ -569,6 +569,16 @@ pub enum Prefer {
     /// estimate), among those that verify: for a filter that must fit a
     /// load limit.
     Load,
+    /// [`Prefer::Load`] within a load limit (‰ of the sample period, high
+    /// estimate): a single block's realizations over it are not verified,
+    /// and an error says so when none is within it.
+    LoadWithin(u32),
+}
+
+impl Prefer {
+    fn by_load(self) -> bool {
+        matches!(self, Prefer::Load | Prefer::LoadWithin(_))
+    }
 }
 
 /// Cycles per sample of a realization on the box (Cortex-M4 model, high
@@ -588,37 +598,75 @@ pub fn realize_blocks_by(
     prefer: Prefer,
 ) -> Result<(MimoRealization, MimoFilter, MimoVerification)> {
     let mut total = MimoRealization { modal_condition: 1.0, decoupling_norm: 1.0, ..Default::default() };
+    let mut only = None;
     for (k, blk) in blocks.iter().enumerate() {
-        let candidates = block_candidates(blk).with_context(|| format!("3x3 compensator, block {k}"))?;
+        let mut candidates = block_candidates(blk).with_context(|| format!("3x3 compensator, block {k}"))?;
+        if prefer.by_load() {
+            // The cheapest that verifies: in order of cost (stable, so the
+            // first of equal cost), the first that verifies.
+            candidates.sort_by_key(kernel_cost);
+        }
         let reference = MimoReference::of(blk, fs_hz, f_band_hz);
-        let mut best: Option<(f64, MimoRealization)> = None;
+        let mut best: Option<(f64, MimoRealization, MimoFilter, MimoVerification)> = None;
         let mut last_err = None;
         for c in candidates {
+            if let (Prefer::LoadWithin(limit), 1) = (prefer, blocks.len()) {
+                let load = load_permille(kernel_cost(&c), fs_hz.round() as u32);
+                if load > limit {
+                    // This and every later candidate cost more than the limit.
+                    last_err = Some(anyhow::anyhow!(
+                        "{}.{} % of the sample period is over the limit of {}.{} %",
+                        load / 10,
+                        load % 10,
+                        limit / 10,
+                        limit % 10
+                    ));
+                    break;
+                }
+            }
             match quantize(&c, &reference) {
-                Ok((_, v)) => {
+                Ok((filter, v)) => {
                     let cost = c.sections.len() + c.fir.len();
-                    let better = best.as_ref().is_none_or(|(s, b)| match prefer {
+                    let better = best.as_ref().is_none_or(|(s, b, ..)| match prefer {
                         Prefer::Accuracy => {
                             v.score() < 0.5 * s || (v.score() <= 2.0 * s && cost < b.sections.len() + b.fir.len())
                         }
-                        Prefer::Load => kernel_cost(&c) < kernel_cost(b),
+                        Prefer::Load | Prefer::LoadWithin(_) => kernel_cost(&c) < kernel_cost(b),
                     });
                     if better {
-                        best = Some((v.score(), c));
+                        best = Some((v.score(), c, filter, v));
+                    }
+                    if prefer.by_load() {
+                        break;
                     }
                 }
                 Err(e) => last_err = Some(e),
             }
         }
-        let Some((_, r)) = best else {
+        let Some((_, r, filter, v)) = best else {
             let e = last_err.unwrap_or_else(|| anyhow::anyhow!("no realization"));
             return Err(e.context(NotVerified { block: k }));
         };
-        total = total.plus(&r);
+        if blocks.len() == 1 {
+            // The whole filter is this block's, already verified against
+            // the same reference (the sum of one block is the block).
+            only = Some((filter, v));
+            total = MimoRealization {
+                modal_condition: r.modal_condition.max(total.modal_condition),
+                decoupling_norm: r.decoupling_norm.max(total.decoupling_norm),
+                ..r
+            };
+        } else {
+            total = total.plus(&r);
+        }
     }
-    let whole = block_sum(blocks);
-    let reference = MimoReference::of(&whole, fs_hz, f_band_hz);
-    let (filter, v) = quantize(&total, &reference).context("3x3 compensator: the f32 image is refused")?;
+    let (filter, v) = match only {
+        Some(fv) => fv,
+        None => {
+            let reference = MimoReference::of(&block_sum(blocks), fs_hz, f_band_hz);
+            quantize(&total, &reference).context("3x3 compensator: the f32 image is refused")?
+        }
+    };
     Ok((total, filter, v))
 }
 

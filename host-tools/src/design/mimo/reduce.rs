@@ -78,7 +78,7 @@ fn fitting(bal: &Balanced, other: &[MimoStateSpace], lag: usize, crits: &Criteri
     let try_one = |states: usize, method: Reduction| -> Option<Candidate> {
         let block = bal.reduce(states, method).ok()?;
         let blocks: Vec<MimoStateSpace> = std::iter::once(block).chain(other.iter().cloned()).collect();
-        let realized = realize_blocks_by(&blocks, at.fs, at.f_band, Prefer::Load).ok()?;
+        let realized = realize_blocks_by(&blocks, at.fs, at.f_band, Prefer::LoadWithin(at.limit)).ok()?;
         let load = filter_load(&realized.1, at.fs);
         if load > at.limit {
             return None;
