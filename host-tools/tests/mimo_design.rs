@@ -806,9 +806,11 @@ fn cli_a_3x3_image_over_the_load_limit_says_how_to_get_one_the_box_runs() {
 
 /// At 25.6 kHz the off-centre plate's full 3x3 filter is over the box's
 /// load limit (81 %): `design` writes the reduced filter, which the box
-/// runs, and says what the reduction costs; `--json` has the figures.
+/// runs, and says what the reduction costs; `--json` has the figures, and
+/// `inspect` tells the reduced image from the full one by its sidecar.
 /// Controls: `--max-load 20`, where no reduction that fits beats the
-/// per-axis rows, and `--full-order` write the full filter offline-only.
+/// per-axis rows, and `--full-order` write the full filter offline-only;
+/// an image copied without its sidecar is "not known".
 #[test]
 #[ignore = "a 3x3 design takes seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
 fn cli_a_3x3_image_over_the_load_limit_is_reduced_to_one_the_box_runs() {
@@ -825,6 +827,24 @@ fn cli_a_3x3_image_over_the_load_limit_is_reduced_to_one_the_box_runs() {
     assert!(!err.contains("OFFLINE-ONLY"), "{err}");
     let (ok, inspect, err) = dynocomp(&["inspect", &p("c.dcimg")]);
     assert!(ok && !inspect.contains("offline only"), "{inspect}{err}");
+    // `inspect` tells a reduced image by its model sidecar, with the same
+    // figures as the design; an image without its sidecar cannot tell.
+    let states = format!("3x3 block {} -> {} states", r["full_states"], r["states"]);
+    assert!(inspect.contains(&format!("reduced for the box: {states}")), "{inspect}");
+    let (ok, json, _) = dynocomp(&["inspect", &p("c.dcimg"), "--json"]);
+    let j: serde_json::Value = serde_json::from_str(&json).expect("inspect JSON");
+    assert!(ok && j["box_reduction"]["reduction"]["states"] == r["states"], "{json}");
+    std::fs::copy(p("c.dcimg"), p("alone.dcimg")).unwrap();
+    let (ok, alone, _) = dynocomp(&["inspect", &p("alone.dcimg")]);
+    assert!(ok && alone.contains("reduced for the box is not known") && !alone.contains(&states), "{alone}");
+    // A sidecar written before reductions were recorded cannot tell either.
+    let mut side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(p("c.dcimg.model.json")).unwrap()).unwrap();
+    assert!(side["matrix"].as_object_mut().unwrap().remove("box_reduction").is_some());
+    std::fs::copy(p("c.dcimg"), p("old.dcimg")).unwrap();
+    std::fs::write(p("old.dcimg.model.json"), side.to_string()).unwrap();
+    let (ok, old, _) = dynocomp(&["inspect", &p("old.dcimg")]);
+    assert!(ok && old.contains("predates the record of reductions"), "{old}");
     let (ok, out, err) =
         cli_common::design(&p("frf.uff"), &p("idle.csv"), "25600", &p("c.dcimg"), &["--report", &p("report")]);
     assert!(ok && out.contains("reduced for the box: 3x3 block "), "{out}{err}");
@@ -844,6 +864,8 @@ fn cli_a_3x3_image_over_the_load_limit_is_reduced_to_one_the_box_runs() {
         &["--full-order", "--report", &p("full-report")],
     );
     assert!(ok && !out.contains("reduced for the box") && err.contains("WARNING: OFFLINE-ONLY IMAGE"), "{out}{err}");
+    let (ok, inspect, _) = dynocomp(&["inspect", &p("full.dcimg")]);
+    assert!(ok && inspect.contains("the full 3x3 filter: not reduced for the box"), "{inspect}");
     let rows = std::fs::read_to_string(dir.join("full-report").join("matrix_rows.svg")).unwrap();
     assert!(!rows.contains("full filter (--full-order)"), "a full-filter trace without a reduction");
 }

@@ -11,10 +11,8 @@ use std::time::Instant;
 
 use crate::cli::design_args::{DesignArgs, DesignSetup, ForcePrior, Method};
 use crate::design::mimo::image::build_matrix_image;
-use crate::design::mimo::reduce::ReductionFigures;
 use crate::design::mimo::{design_matrix, MatrixDesign, MatrixOptions, MatrixSummary, Progress, RowSource};
 use crate::frf::{axis_name, Frf};
-use crate::numeric::balanced::Reduction;
 use crate::realize::load::LoadReport;
 use crate::realize::mimo::NotVerified;
 
@@ -156,32 +154,6 @@ fn for_the_box(s: &MatrixSummary, max_fs_hz: u32) -> String {
     )
 }
 
-/// What the reduction to the box's load limit did, with its cost.
-fn reduction_line(r: &ReductionFigures) -> String {
-    let three = |v: &[f64; 3]| v.map(|e| format!("{:.3}", 100.0 * e)).join(" / ");
-    let method = match r.method {
-        Reduction::SingularPerturbation => "balanced singular perturbation, exact at DC",
-        Reduction::Truncation => "balanced truncation",
-    };
-    if r.states == 0 {
-        return format!("not reduced for the box: {}", r.reason);
-    }
-    let what = format!(
-        "3x3 block {} -> {} states ({method}; load {:.1} -> {:.1} %); predicted in-band error x / y / z {} % full -> {} % \
-         reduced",
-        r.full_states,
-        r.states,
-        f64::from(r.full_load_permille) / 10.0,
-        f64::from(r.load_permille) / 10.0,
-        three(&r.full_predicted),
-        three(&r.predicted)
-    );
-    match r.used {
-        true => format!("reduced for the box: {what}; compensate --offline keeps the full model"),
-        false => format!("not reduced for the box: {what}: {}", r.reason),
-    }
-}
-
 /// `design --json` of a 3x3 design.
 #[derive(Serialize)]
 struct MatrixJson<'a> {
@@ -251,7 +223,7 @@ fn summary_text(args: &DesignArgs, md: &MatrixDesign, id: u32, load: &LoadReport
         rz.verification.score()
     );
     if let Some(r) = &s.reduction {
-        let _ = writeln!(t, "{}", reduction_line(r));
+        let _ = writeln!(t, "{}", r.line());
     }
     t.push_str(&crate::realize::load::describe(load, fs_hz));
     t.push_str(if load.fits { "\n" } else { "  OVER THE LIMIT: offline-only image\n" });

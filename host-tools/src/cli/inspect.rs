@@ -21,7 +21,11 @@ pub fn run(args: &InspectArgs) -> Result<()> {
     let report = match read_any_image(&args.image)? {
         AnyImage::Inline(img) => inspect::report(&img),
         AnyImage::Parallel(p) => inspect::report_parallel(&p)?,
-        AnyImage::Matrix(m) => inspect::report_matrix(&m),
+        AnyImage::Matrix(m) => {
+            let mut report = inspect::report_matrix(&m);
+            report.box_reduction = Some(inspect::reduction_report(&args.image, &m));
+            report
+        }
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);

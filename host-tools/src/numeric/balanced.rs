@@ -112,7 +112,7 @@ pub fn balance(ss: &MimoStateSpace) -> Result<Balanced> {
 }
 
 /// How the removed states are removed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Reduction {
     /// Balanced truncation: exact at high frequency.

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use crate::design::kalman::ForceShape;
 use crate::design::mimo::discrete::{DiscreteMatrixModel, PlantStates};
 use crate::design::mimo::kalman::{augmented_plant_shaped, MatrixAugmentedPlant};
+use crate::design::mimo::reduce::ReductionFigures;
 use crate::design::mimo::MatrixDesign;
 use crate::fit::linalg::eigenvalues;
 
@@ -42,6 +43,22 @@ pub struct MatrixModelJson {
     pub r: [f64; 3],
     /// The band-limited force model per force axis (`None`: random walk).
     pub force_shape: [Option<ForceShape>; 3],
+    /// Whether the image holds the 3x3 block reduced to fit the box's load
+    /// limit: `Some(Some(_))` what the reduction did, `Some(None)` (`null`)
+    /// the full filter, `None` (the key absent) a sidecar written before
+    /// reductions were recorded, which cannot tell.
+    #[serde(default, deserialize_with = "present")]
+    pub box_reduction: Option<Option<ReductionFigures>>,
+}
+
+/// A key that is present, even as `null`, is `Some` (serde's `Option`
+/// alone reads `null` and an absent key alike).
+fn present<'de, D, T>(d: D) -> std::result::Result<Option<T>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    T::deserialize(d).map(Some)
 }
 
 fn rows_of(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
@@ -68,6 +85,7 @@ impl MatrixModelJson {
             q: k.q,
             r: k.r,
             force_shape,
+            box_reduction: Some(md.summary.reduction.clone().filter(|r| r.used)),
         })
     }
 

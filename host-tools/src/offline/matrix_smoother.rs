@@ -339,6 +339,7 @@ mod tests {
             q: [1e2, 3e1, 1e3],
             r: [0.05, 0.02, 0.1],
             force_shape: [None; 3],
+            box_reduction: Some(None),
         }
     }
 

@@ -106,6 +106,47 @@ pub struct InspectReport {
     /// The shared 3x3 filter of a 3x3 image (absent otherwise).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub matrix: Option<MatrixReport>,
+    /// Whether a 3x3 image's filter was reduced to fit the box, by its model
+    /// sidecar (absent for other images).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub box_reduction: Option<ReductionReport>,
+}
+
+/// What a 3x3 image's model sidecar says of its filter's reduction for the
+/// box ([`crate::design::mimo::reduce`]).
+#[derive(Debug, Serialize)]
+pub struct ReductionReport {
+    /// The sidecar read.
+    pub sidecar: String,
+    /// The reduction, where the image holds a reduced filter; `null` where
+    /// it holds the full one or the sidecar cannot tell.
+    pub reduction: Option<crate::design::mimo::reduce::ReductionFigures>,
+    /// The same in words.
+    pub line: String,
+}
+
+/// [`ReductionReport`] of the 3x3 image `image`, stored at `image_path`,
+/// from the model sidecar beside it: reduced (with the figures), full, or
+/// not known (no sidecar, or one that does not belong to the image).
+pub fn reduction_report(image_path: &std::path::Path, image: &MatrixImage) -> ReductionReport {
+    let sidecar = crate::offline::sidecar::sidecar_path(image_path).display().to_string();
+    let (reduction, line) = match crate::offline::sidecar::read_sidecar(image_path, image) {
+        Ok(s) => match s.matrix.and_then(|m| m.box_reduction) {
+            Some(Some(r)) => {
+                let line = r.line();
+                (Some(r), line)
+            }
+            Some(None) => (None, "the full 3x3 filter: not reduced for the box".to_string()),
+            None => (
+                None,
+                "whether the 3x3 filter was reduced for the box is not known: its model sidecar predates the record \
+                 of reductions (re-run `dynocomp design` to write both)"
+                    .to_string(),
+            ),
+        },
+        Err(e) => (None, format!("whether the 3x3 filter was reduced for the box is not known: {e:#}")),
+    };
+    ReductionReport { sidecar, reduction, line }
 }
 
 /// One band of a parallel-elaboration image.
@@ -197,6 +238,7 @@ fn box_report(image: BoxImage, axes: Vec<AxisReport>, matrix: Option<MatrixRepor
         bands: Vec::new(),
         box_load: Some(crate::realize::load::report(&image, dynocomp_core::budget::BOX_LOAD_LIMIT_PERMILLE)),
         matrix,
+        box_reduction: None,
     }
 }
 
@@ -271,6 +313,7 @@ pub fn report_parallel(image: &ParallelImage) -> Result<InspectReport> {
         bands,
         box_load: None,
         matrix: None,
+        box_reduction: None,
     })
 }
 
@@ -303,6 +346,9 @@ pub fn render(r: &InspectReport) -> String {
     let _ = writeln!(s, "source sha256 {}", r.source_sha256);
     if let Some(m) = &r.matrix {
         render_matrix(&mut s, m, &r.axes);
+    }
+    if let Some(b) = &r.box_reduction {
+        let _ = writeln!(s, "{}", b.line);
     }
     if r.bands.is_empty() {
         render_axes(&mut s, &r.axes);

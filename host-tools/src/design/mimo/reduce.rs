@@ -10,7 +10,7 @@
 use anyhow::Result;
 use dynocomp_core::budget::{load_permille, MimoCostModel, MimoShape};
 use dynocomp_core::mimo::MimoFilter;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::criterion::RowError;
 use super::{blocks_of, Criteria, Realized, Round, RowSource};
@@ -19,8 +19,9 @@ use crate::numeric::lti::MimoStateSpace;
 use crate::numeric::parallel::map_on_threads;
 use crate::realize::mimo::{block_sum, realize_blocks_by, Prefer};
 
-/// What the reduction did, for the summary and `--json`.
-#[derive(Clone, Debug, Serialize)]
+/// What the reduction did, for the summary, `--json`, and the model
+/// sidecar of an image that holds the reduced filter (read by `inspect`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ReductionFigures {
     /// Whether the reduced filter is the one in the image.
     pub used: bool,
@@ -54,6 +55,35 @@ pub fn filter_load(filter: &MimoFilter, fs_hz: f64) -> u32 {
 /// Predicted load (‰, high estimate) of a 3x3 filter of shape `s` at `fs_hz`.
 fn shape_load(s: MimoShape, fs_hz: f64) -> u32 {
     load_permille(MimoCostModel::CORTEX_M4.sample_cost(s).high, fs_hz.round() as u32)
+}
+
+impl ReductionFigures {
+    /// One line of what the reduction to the box's load limit did, with its
+    /// cost in predicted in-band error.
+    pub fn line(&self) -> String {
+        let three = |v: &[f64; 3]| v.map(|e| format!("{:.3}", 100.0 * e)).join(" / ");
+        let method = match self.method {
+            Reduction::SingularPerturbation => "balanced singular perturbation, exact at DC",
+            Reduction::Truncation => "balanced truncation",
+        };
+        if self.states == 0 {
+            return format!("not reduced for the box: {}", self.reason);
+        }
+        let what = format!(
+            "3x3 block {} -> {} states ({method}; load {:.1} -> {:.1} %); predicted in-band error x / y / z {} % full -> \
+             {} % reduced",
+            self.full_states,
+            self.states,
+            f64::from(self.full_load_permille) / 10.0,
+            f64::from(self.load_permille) / 10.0,
+            three(&self.full_predicted),
+            three(&self.predicted)
+        );
+        match self.used {
+            true => format!("reduced for the box: {what}; compensate --offline keeps the full model"),
+            false => format!("not reduced for the box: {what}: {}", self.reason),
+        }
+    }
 }
 
 /// One reduced candidate that fits.
