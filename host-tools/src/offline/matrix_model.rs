@@ -47,8 +47,23 @@ pub struct MatrixModelJson {
     /// limit: `Some(Some(_))` what the reduction did, `Some(None)` (`null`)
     /// the full filter, `None` (the key absent) a sidecar written before
     /// reductions were recorded, which cannot tell.
-    #[serde(default, deserialize_with = "present")]
+    #[serde(default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
     pub box_reduction: Option<Option<ReductionFigures>>,
+}
+
+/// The sidecar's record of `md`'s reduction: the figures where the image
+/// holds the reduced filter, `Some(None)` where it holds the full one, and
+/// nothing where a figure is not finite (JSON would write it as `null`,
+/// which would not read back).
+fn recorded_reduction(md: &MatrixDesign) -> Option<Option<ReductionFigures>> {
+    match md.summary.reduction.as_ref().filter(|r| r.used) {
+        None => Some(None),
+        Some(r) => {
+            let finite =
+                r.full_predicted.iter().chain(&r.predicted).all(|v| v.is_finite()) && r.hankel_bound.is_finite();
+            finite.then(|| Some(r.clone()))
+        }
+    }
 }
 
 /// A key that is present, even as `null`, is `Some` (serde's `Option`
@@ -85,7 +100,7 @@ impl MatrixModelJson {
             q: k.q,
             r: k.r,
             force_shape,
-            box_reduction: Some(md.summary.reduction.clone().filter(|r| r.used)),
+            box_reduction: recorded_reduction(md),
         })
     }
 
@@ -150,5 +165,57 @@ impl MatrixModelJson {
         };
         let plant = PlantStates { a, b, c, ranks: Vec::new(), dropped_bound: 0.0, error: 0.0 };
         Ok(augmented_plant_shaped(&dm, &plant, 0, self.force_shape))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::numeric::balanced::Reduction;
+
+    fn model(box_reduction: Option<Option<ReductionFigures>>) -> MatrixModelJson {
+        MatrixModelJson {
+            advance: 0,
+            plant_a: vec![vec![0.5]],
+            plant_b: vec![vec![1.0, 0.0, 0.0]],
+            plant_c: vec![vec![1.0], vec![0.0], vec![0.0]],
+            d: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            fir: Vec::new(),
+            q: [1.0; 3],
+            r: [0.05; 3],
+            force_shape: [None; 3],
+            box_reduction,
+        }
+    }
+
+    /// The three states of `box_reduction` (reduced, full, not recorded)
+    /// survive write → read, as the sidecar fuzz target requires; the key
+    /// is absent for "not recorded", as in sidecars older than the key.
+    /// Control: `null` and an absent key read differently.
+    #[test]
+    fn the_reduction_record_reads_back_in_each_of_its_three_states() {
+        let figures = ReductionFigures {
+            used: true,
+            reason: "fits".into(),
+            full_states: 112,
+            states: 55,
+            method: Reduction::Truncation,
+            hankel_bound: 0.02,
+            full_load_permille: 810,
+            load_permille: 591,
+            full_predicted: [0.0022, 0.0029, 0.0015],
+            predicted: [0.0039, 0.0038, 0.0024],
+        };
+        for state in [Some(Some(figures)), Some(None), None] {
+            let m = model(state);
+            let text = serde_json::to_string(&m).unwrap();
+            assert_eq!(text.contains("box_reduction"), m.box_reduction.is_some(), "{text}");
+            let back: MatrixModelJson = serde_json::from_str(&text).unwrap();
+            assert_eq!(back, m, "{text}");
+        }
+        let null = serde_json::to_string(&model(Some(None))).unwrap();
+        let absent = serde_json::to_string(&model(None)).unwrap();
+        let read = |t: &str| serde_json::from_str::<MatrixModelJson>(t).unwrap().box_reduction;
+        assert_ne!(read(&null), read(&absent));
     }
 }
