@@ -581,13 +581,24 @@ impl Prefer {
     }
 }
 
-/// Cycles per sample of a realization on the box (Cortex-M4 model, high
-/// estimate): its pairs as the kernel tells them ([`MimoSection::is_pair`]
-/// of the rounded section), diagonal sections and taps.
-fn kernel_cost(r: &MimoRealization) -> u32 {
+/// The kernel's shape of a realization: its pairs as the kernel tells them
+/// ([`MimoSection::is_pair`] of the rounded section), diagonal sections and
+/// taps.
+fn realization_shape(r: &MimoRealization) -> MimoShape {
     let pairs = r.sections.iter().filter(|s| s.round().is_pair()).count() as u32;
-    let shape = MimoShape { pairs, diagonals: r.sections.len() as u32 - pairs, taps: r.fir.len() as u32 };
-    MimoCostModel::CORTEX_M4.sample_cost(shape).high
+    MimoShape { pairs, diagonals: r.sections.len() as u32 - pairs, taps: r.fir.len() as u32 }
+}
+
+/// Cycles per sample of a realization on the box (Cortex-M4 model, high
+/// estimate).
+fn kernel_cost(r: &MimoRealization) -> u32 {
+    MimoCostModel::CORTEX_M4.sample_cost(realization_shape(r)).high
+}
+
+/// Predicted load (‰ of the sample period, high estimate) of a 3x3 filter
+/// of shape `s` at `fs_hz`.
+pub fn shape_load(s: MimoShape, fs_hz: f64) -> u32 {
+    load_permille(MimoCostModel::CORTEX_M4.sample_cost(s).high, fs_hz.round() as u32)
 }
 
 /// [`realize_blocks`] keeping, per block, the realization `prefer` says.
@@ -611,7 +622,7 @@ pub fn realize_blocks_by(
         let mut last_err = None;
         for c in candidates {
             if let (Prefer::LoadWithin(limit), 1) = (prefer, blocks.len()) {
-                let load = load_permille(kernel_cost(&c), fs_hz.round() as u32);
+                let load = shape_load(realization_shape(&c), fs_hz);
                 if load > limit {
                     // This and every later candidate cost more than the limit.
                     last_err = Some(anyhow::anyhow!(
@@ -651,14 +662,8 @@ pub fn realize_blocks_by(
             // The whole filter is this block's, already verified against
             // the same reference (the sum of one block is the block).
             only = Some((filter, v));
-            total = MimoRealization {
-                modal_condition: r.modal_condition.max(total.modal_condition),
-                decoupling_norm: r.decoupling_norm.max(total.decoupling_norm),
-                ..r
-            };
-        } else {
-            total = total.plus(&r);
         }
+        total = total.plus(&r);
     }
     let (filter, v) = match only {
         Some(fv) => fv,

@@ -8,7 +8,7 @@
 //! this filter).
 
 use anyhow::Result;
-use dynocomp_core::budget::{load_permille, MimoCostModel, MimoShape};
+use dynocomp_core::budget::MimoShape;
 use dynocomp_core::mimo::MimoFilter;
 use serde::{Deserialize, Serialize};
 
@@ -17,7 +17,7 @@ use super::{blocks_of, Criteria, Realized, Round, RowSource};
 use crate::numeric::balanced::{balance, Balanced, Reduction};
 use crate::numeric::lti::MimoStateSpace;
 use crate::numeric::parallel::map_on_threads;
-use crate::realize::mimo::{block_sum, realize_blocks_by, Prefer};
+use crate::realize::mimo::{block_sum, realize_blocks_by, shape_load, Prefer};
 
 /// What the reduction did, for the summary, `--json`, and the model
 /// sidecar of an image that holds the reduced filter (read by `inspect`).
@@ -50,11 +50,6 @@ pub struct ReductionFigures {
 /// Predicted load (‰, high estimate) of `filter` at `fs_hz`.
 pub fn filter_load(filter: &MimoFilter, fs_hz: f64) -> u32 {
     shape_load(MimoShape::of(filter), fs_hz)
-}
-
-/// Predicted load (‰, high estimate) of a 3x3 filter of shape `s` at `fs_hz`.
-fn shape_load(s: MimoShape, fs_hz: f64) -> u32 {
-    load_permille(MimoCostModel::CORTEX_M4.sample_cost(s).high, fs_hz.round() as u32)
 }
 
 impl ReductionFigures {
