@@ -837,6 +837,7 @@ fn cli_a_3x3_image_over_the_load_limit_is_reduced_to_one_the_box_runs() {
     std::fs::copy(p("c.dcimg"), p("alone.dcimg")).unwrap();
     let (ok, alone, _) = dynocomp(&["inspect", &p("alone.dcimg")]);
     assert!(ok && alone.contains("reduced for the box is not known") && !alone.contains(&states), "{alone}");
+    assert!(alone.contains("no model sidecar beside the image") && !alone.contains("--offline"), "{alone}");
     // A sidecar written before reductions were recorded cannot tell either.
     let mut side: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(p("c.dcimg.model.json")).unwrap()).unwrap();

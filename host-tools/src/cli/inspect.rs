@@ -1,10 +1,12 @@
 //! `dynocomp inspect`: what a coefficient image holds.
 
 use anyhow::Result;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use crate::io::image_file::{read_any_image, AnyImage};
+use crate::offline::sidecar::{parse_sidecar, sidecar_path};
 use crate::report::inspect;
+use dynocomp_core::image::MatrixImage;
 
 /// `dynocomp inspect IMAGE [--json]`.
 #[derive(clap::Args, Debug, Clone)]
@@ -23,7 +25,7 @@ pub fn run(args: &InspectArgs) -> Result<()> {
         AnyImage::Parallel(p) => inspect::report_parallel(&p)?,
         AnyImage::Matrix(m) => {
             let mut report = inspect::report_matrix(&m);
-            report.box_reduction = Some(inspect::reduction_report(&args.image, &m));
+            report.box_reduction = Some(reduction(&args.image, &m));
             report
         }
     };
@@ -33,4 +35,19 @@ pub fn run(args: &InspectArgs) -> Result<()> {
         print!("{}", inspect::render(&report));
     }
     Ok(())
+}
+
+/// Whether the 3x3 image at `image_path` was reduced for the box, as the
+/// model sidecar beside it records.
+fn reduction(image_path: &Path, image: &MatrixImage) -> inspect::ReductionReport {
+    let path = sidecar_path(image_path);
+    let shown = path.display().to_string();
+    let read = match std::fs::read_to_string(&path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            Err(format!("no model sidecar beside the image ({shown}; `dynocomp design` writes it)"))
+        }
+        Err(e) => Err(format!("{shown}: cannot read the model sidecar: {e}")),
+        Ok(text) => parse_sidecar(&text, &shown, image, image_path).map_err(|e| format!("{e:#}")),
+    };
+    inspect::reduction_report(shown, read)
 }

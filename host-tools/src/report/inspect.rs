@@ -11,6 +11,7 @@ use std::fmt::Write;
 use dynocomp_core::kernel::Section;
 
 use crate::frf::axis_name;
+use crate::offline::sidecar::ModelSidecar;
 
 /// Per-axis part of the inspection report.
 #[derive(Debug, Serialize)]
@@ -125,12 +126,12 @@ pub struct ReductionReport {
     pub line: String,
 }
 
-/// [`ReductionReport`] of the 3x3 image `image`, stored at `image_path`,
-/// from the model sidecar beside it: reduced (with the figures), full, or
-/// not known (no sidecar, or one that does not belong to the image).
-pub fn reduction_report(image_path: &std::path::Path, image: &MatrixImage) -> ReductionReport {
-    let sidecar = crate::offline::sidecar::sidecar_path(image_path).display().to_string();
-    let (reduction, line) = match crate::offline::sidecar::read_sidecar(image_path, image) {
+/// [`ReductionReport`] of a 3x3 image from what its model sidecar
+/// (`sidecar`, as shown) gave: the sidecar that belongs to the image, or why
+/// there is none. Reduced (with the figures), full, or not known.
+pub fn reduction_report(sidecar: String, read: Result<ModelSidecar, String>) -> ReductionReport {
+    const UNKNOWN: &str = "whether the 3x3 filter was reduced for the box is not known";
+    let (reduction, line) = match read {
         Ok(s) => match s.matrix.and_then(|m| m.box_reduction) {
             Some(Some(r)) => {
                 let line = r.line();
@@ -139,12 +140,13 @@ pub fn reduction_report(image_path: &std::path::Path, image: &MatrixImage) -> Re
             Some(None) => (None, "the full 3x3 filter: not reduced for the box".to_string()),
             None => (
                 None,
-                "whether the 3x3 filter was reduced for the box is not known: its model sidecar predates the record \
-                 of reductions (re-run `dynocomp design` to write both)"
-                    .to_string(),
+                format!(
+                    "{UNKNOWN}: its model sidecar predates the record of reductions (re-run `dynocomp design` to \
+                     write both)"
+                ),
             ),
         },
-        Err(e) => (None, format!("whether the 3x3 filter was reduced for the box is not known: {e:#}")),
+        Err(why) => (None, format!("{UNKNOWN}: {why}")),
     };
     ReductionReport { sidecar, reduction, line }
 }
