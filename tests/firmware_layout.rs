@@ -30,13 +30,21 @@ fn firmware_elf() -> PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     // The `cargo firmware` alias (.cargo/config.toml), spelled out.
-    let out = Command::new(cargo)
+    // The layout checked is that of the repository's release profile (LTO):
+    // a developer's CARGO_PROFILE_* overrides (a fast local build without
+    // LTO) would check a different firmware.
+    let mut build = Command::new(cargo);
+    build
         .current_dir(root)
         .args(["build", "--release", "--target", "thumbv7em-none-eabihf", "-p", "dynocomp-core"])
         .args(["--features", "firmware", "--bin", "dynocomp-box"])
-        .env_remove("CARGO_ENCODED_RUSTFLAGS")
-        .output()
-        .expect("run cargo to build the firmware");
+        .env_remove("CARGO_ENCODED_RUSTFLAGS");
+    for (k, _) in std::env::vars_os() {
+        if k.to_str().is_some_and(|k| k.starts_with("CARGO_PROFILE_")) {
+            build.env_remove(k);
+        }
+    }
+    let out = build.output().expect("run cargo to build the firmware");
     assert!(
         out.status.success(),
         "building the firmware failed (is the target installed? `rustup target add thumbv7em-none-eabihf`):\n{}",
