@@ -10,7 +10,7 @@ use std::f64::consts::PI;
 
 use crate::design::discretize::{
     columns_at, fit_grid, MATCH_BAND_FRACTION, MATCH_SLACK, MATCH_TARGET, MAX_ADVANCE, MAX_CONDITION, MAX_FIR_TAPS,
-    OUT_OF_BAND_WEIGHT,
+    MAX_TERM_GAIN_RATIO, OUT_OF_BAND_WEIGHT,
 };
 use crate::fit::linalg::{sweeps, symmetric_eigenvalues};
 use crate::fit::matrix::MatrixModel;
@@ -75,6 +75,43 @@ impl DiscreteMatrixModel {
     pub fn frf(&self, f_hz: f64) -> CMatrix3 {
         let z = Complex64::from_polar(1.0, 2.0 * PI * f_hz / self.fs_hz);
         self.causal_z(z) * z.powi(self.advance as i32)
+    }
+
+    /// Per channel i, the sum of the gains its terms reach on the unit
+    /// circle, each alone (row 2-norms ‖·_i·‖): ‖R_i·‖/(1 − |ζ|) per real
+    /// pole, 2‖R_i·‖/(1 − |ζ|) per pair, ‖d_i·‖ and ‖h_m,i·‖. The 3x3 form of
+    /// [`crate::design::discretize::DiscreteModel::term_gain_sum`].
+    pub fn term_gain_sums(&self) -> [f64; 3] {
+        std::array::from_fn(|i| {
+            let poles: f64 = self
+                .poles
+                .iter()
+                .zip(&self.residues)
+                .map(|((zeta, pair), r)| {
+                    let k = if *pair { 2.0 } else { 1.0 };
+                    k * r.row(i).norm() / (1.0 - zeta.norm()).max(f64::MIN_POSITIVE)
+                })
+                .sum();
+            poles + self.d.row(i).norm() + self.fir.iter().map(|h| h.row(i).norm()).sum::<f64>()
+        })
+    }
+
+    /// Whether some channel's terms cancel each other: its
+    /// [`Self::term_gain_sums`] over [`MAX_TERM_GAIN_RATIO`] times its largest
+    /// row norm ‖Ĝ_d,i·‖ over `band`. The least squares then balances huge
+    /// residues of opposite sign (a fast pole against the taps), and the
+    /// Kalman design's augmented plant measures a small difference of huge
+    /// states.
+    pub fn cancels_terms(&self, band: &[(f64, CMatrix3)]) -> bool {
+        let mut peak = [0.0f64; 3];
+        for (f, _) in band {
+            let g = self.frf(*f);
+            for (i, p) in peak.iter_mut().enumerate() {
+                *p = p.max(g.row(i).norm());
+            }
+        }
+        let sums = self.term_gain_sums();
+        (0..3).any(|i| !(sums[i] <= MAX_TERM_GAIN_RATIO * peak[i]))
     }
 }
 
@@ -224,7 +261,10 @@ pub fn discretize_matrix(
     let rows = row_problems(model, &poles, &grid, &truth, fs_hz, band_hz);
     let band: Vec<(f64, CMatrix3)> =
         grid.iter().zip(&truth).filter(|(f, _)| **f >= band_hz.0 && **f <= band_hz.1).map(|(f, g)| (*f, *g)).collect();
-    let tried = fit_every_layout(&rows, &poles, base, fs_hz, &band)?;
+    let (tried, cancelling) = fit_every_layout(&rows, &poles, base, fs_hz, &band)?;
+    if tried.is_empty() && cancelling > 0 {
+        bail!("discrete 3x3 model: every well-conditioned unit-circle fit cancels terms of more than {MAX_TERM_GAIN_RATIO:.0e} times its response against each other (a fast pole against the FIR taps); lower --max-order");
+    }
     let (dm, err, condition) = least_complex_good_fit(tried)?;
     let m = DiscreteMatch {
         matrix: err,
@@ -287,16 +327,23 @@ fn row_problems(
         .collect()
 }
 
-/// Every layout (advance D, taps M) whose three rows solve well enough:
-/// the model, its matrix mismatch over `band` and the worst condition.
+/// A fitted layout: the model, its matrix mismatch and the worst condition
+/// of its rows.
+type Layout = (DiscreteMatrixModel, f64, f64);
+
+/// Every layout (advance D, taps M) whose three rows solve well enough and
+/// do not cancel terms ([`DiscreteMatrixModel::cancels_terms`]): the model,
+/// its matrix mismatch over `band` and the worst condition; and how many
+/// layouts cancelled terms.
 fn fit_every_layout(
     rows: &[RowProblem],
     poles: &[(Complex64, bool)],
     base: usize,
     fs_hz: f64,
     band: &[(f64, CMatrix3)],
-) -> Result<Vec<(DiscreteMatrixModel, f64, f64)>> {
+) -> Result<(Vec<Layout>, usize)> {
     let mut tried = Vec::new();
+    let mut cancelling = 0;
     for advance in 0..=MAX_ADVANCE {
         for taps in advance.saturating_sub(1)..=MAX_FIR_TAPS {
             let mut coef: Vec<[Vec<f64>; 3]> = Vec::with_capacity(3);
@@ -314,22 +361,26 @@ fn fit_every_layout(
                 continue;
             }
             let dm = assemble(fs_hz, poles, &coef, taps, advance);
+            if dm.cancels_terms(band) {
+                cancelling += 1;
+                continue;
+            }
             let Some(err) = matrix_mismatch(band, |f| dm.frf(f)) else { continue };
             tried.push((dm, err, condition));
         }
     }
-    Ok(tried)
+    Ok((tried, cancelling))
 }
 
 /// The least complex layout (D + M) whose mismatch is below
 /// [`MATCH_TARGET`] or within [`MATCH_SLACK`] of the best.
-fn least_complex_good_fit(tried: Vec<(DiscreteMatrixModel, f64, f64)>) -> Result<(DiscreteMatrixModel, f64, f64)> {
+fn least_complex_good_fit(tried: Vec<Layout>) -> Result<Layout> {
     let best_err = tried.iter().map(|t| t.1).fold(f64::INFINITY, f64::min);
     if !best_err.is_finite() {
         bail!("discrete 3x3 model: every unit-circle fit was ill-conditioned (condition > {MAX_CONDITION:.0e}); two fitted modes may coincide: lower --max-order");
     }
     let good_enough = MATCH_TARGET.max(MATCH_SLACK * best_err);
-    let cost = |t: &(DiscreteMatrixModel, f64, f64)| t.0.advance + t.0.fir.len();
+    let cost = |t: &Layout| t.0.advance + t.0.fir.len();
     tried
         .into_iter()
         .filter(|t| t.1 <= good_enough)
@@ -543,4 +594,55 @@ fn realization_error(p: &PlantStates, dm: &DiscreteMatrixModel, band: &[(f64, CM
         worst = worst.max(if e.is_nan() { f64::INFINITY } else { e });
     }
     worst
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A model with one slow pair (ζ = 0.99 e^{±j0.3}) in row 0 and an
+    /// identity direct term; with `fast` ≠ 0 also a fast real pole at
+    /// ζ = 0.065 of residue `fast` in entry (0, 1), nearly cancelled by taps.
+    fn model(fast: f64) -> DiscreteMatrixModel {
+        let zeta = Complex64::from_polar(0.99, 0.3);
+        let mut r = CMatrix3::zeros();
+        r[(0, 0)] = Complex64::new(0.0, -0.005);
+        let mut poles = vec![(zeta, true)];
+        let mut residues = vec![r];
+        let mut fir = Vec::new();
+        if fast != 0.0 {
+            let mut rf = CMatrix3::zeros();
+            rf[(0, 1)] = Complex64::new(fast, 0.0);
+            poles.push((Complex64::new(0.065, 0.0), false));
+            residues.push(rf);
+            // ρ/(z − ζ) = ρ(z⁻¹ + ζ z⁻² + ζ² z⁻³ + …): four taps cancel
+            // its first four terms, which leaves ρζ⁴ z⁻⁵/(1 − ζ z⁻¹).
+            for m in 0..4 {
+                let mut h = Matrix3::zeros();
+                h[(0, 1)] = -fast * 0.065f64.powi(m);
+                fir.push(h);
+            }
+        }
+        DiscreteMatrixModel { fs_hz: 25_600.0, poles, residues, d: Matrix3::identity(), fir, advance: 0 }
+    }
+
+    /// Lines 100-4000 Hz (the values are not read).
+    fn band() -> Vec<(f64, CMatrix3)> {
+        (1..=40).map(|k| (100.0 * f64::from(k), CMatrix3::identity())).collect()
+    }
+
+    /// A fast pole whose residue of 1e5 is cancelled by a tap is refused;
+    /// control: the same layout with a residue of 10 (term gains under
+    /// the limit) is kept, and so is the model without it.
+    #[test]
+    fn cancelling_terms_are_told_from_a_plain_fit() {
+        let huge = model(1e5);
+        assert!(huge.cancels_terms(&band()), "{:?}", huge.term_gain_sums());
+        let small = model(10.0);
+        assert!(!small.cancels_terms(&band()), "{:?}", small.term_gain_sums());
+        let plain = model(0.0);
+        assert!(!plain.cancels_terms(&band()), "{:?}", plain.term_gain_sums());
+        // Rows 1 and 2 hold only the direct term: their sum is its norm.
+        assert_eq!(plain.term_gain_sums()[1], 1.0);
+    }
 }
