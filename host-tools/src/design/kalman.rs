@@ -189,7 +189,7 @@ pub struct DareSolution {
 pub const DARE_TOLERANCE: f64 = 1e-8;
 
 /// Newton (defect-correction) steps at most after the doubling.
-const NEWTON_STEPS: usize = 4;
+pub(crate) const NEWTON_STEPS: usize = 4;
 
 /// Ric(P) = A P Aᵀ − A P c (cᵀ P c + R)⁻¹ cᵀ P Aᵀ + Q, and the predictor
 /// gain K̄ = A P c / (cᵀ P c + R) with s = cᵀ P c + R.

@@ -12,7 +12,7 @@ use nalgebra::{DMatrix, DVector};
 use dynocomp_core::image::{MatrixImage, RowDesign};
 
 use crate::design::axis::AxisDesign;
-use crate::design::mimo::kalman::{solve_dare, MatrixAugmentedPlant};
+use crate::design::mimo::kalman::{solve_dare_refined, MatrixAugmentedPlant};
 use crate::design::mimo::MatrixDesign;
 use crate::fit::linalg::eigenvalues;
 use crate::frf::axis_name;
@@ -46,7 +46,7 @@ pub fn matrix_sidecar(image: &MatrixImage, md: &MatrixDesign) -> ModelSidecar {
 /// **Smoother.** [`crate::offline::smoother::Smoother`] with a vector
 /// measurement: steady-state Kalman filter forward, modified
 /// Bryson–Frazier backward (Bierman 1977). With P the prior covariance of
-/// the filter DARE ([`solve_dare`], residual-checked), S = C P Cᵀ + R,
+/// the filter DARE ([`solve_dare_refined`], residual-checked), S = C P Cᵀ + R,
 /// K = P Cᵀ S⁻¹:
 ///
 /// ```text
@@ -81,7 +81,7 @@ impl MatrixSmoother {
     /// and measurement noise `r` (N²), the discrete model advanced by
     /// `advance` samples.
     pub fn new(plant: &MatrixAugmentedPlant, q: [f64; 3], r: [f64; 3], advance: usize) -> Result<Self> {
-        let dare = solve_dare(plant, q, r)?;
+        let dare = solve_dare_refined(plant, q, r)?;
         let (a, c) = (&plant.a, &plant.c);
         let n = a.nrows();
         let k = &dare.p * c.transpose() * &dare.s_inv;
