@@ -286,6 +286,17 @@ struct MatrixPrep {
     dm: DiscreteMatrixModel,
     matching: DiscreteMatch,
     plant: PlantStates,
+    /// Where `model` has close modes split ([`crate::fit::matrix::MatrixFit::splits`]),
+    /// the order search's own model, for a design its 3x3 rows cannot use.
+    unsplit: Option<GivenModel>,
+}
+
+/// A 3x3 model the design takes instead of fitting one: with the figures of
+/// its fit (NaN and none for a model from elsewhere).
+struct GivenModel {
+    model: MatrixModel,
+    weighted_rms: f64,
+    order_trace: Vec<(usize, f64)>,
 }
 
 /// One latency's designs.
@@ -326,7 +337,7 @@ struct Round {
 /// row predicts more than [`PREDICTED_SHORT`] of distortion, keeping the
 /// shortest within [`GAIN_NOT_WORTH`] of each axis's best.
 pub fn design_matrix(frf: &Frf, r: [f64; 3], opts: &MatrixOptions) -> Result<MatrixDesign> {
-    design(frf, r, opts, None)
+    design(frf, r, opts, None, Vec::new())
 }
 
 /// [`design_matrix`] on a given 3x3 model instead of the fit of `frf` (the
@@ -339,13 +350,20 @@ pub fn design_matrix_with_model(
     r: [f64; 3],
     opts: &MatrixOptions,
 ) -> Result<MatrixDesign> {
-    design(frf, r, opts, Some(model))
+    design(frf, r, opts, Some(GivenModel { model, weighted_rms: f64::NAN, order_trace: Vec::new() }), Vec::new())
 }
 
-fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixModel>) -> Result<MatrixDesign> {
+/// The design on the fit of `frf`, or on the `given` model, after the
+/// `notes` of an earlier try.
+fn design(
+    frf: &Frf,
+    r: [f64; 3],
+    opts: &MatrixOptions,
+    given: Option<GivenModel>,
+    mut notes: Vec<String>,
+) -> Result<MatrixDesign> {
     let d = &opts.design;
     check_options(frf, r, opts)?;
-    let mut notes = Vec::new();
     let bands = compensated_bands(frf, d)?;
     check_invertible(frf, &bands, d.coherence_threshold)?;
     let crosstalk = crosstalk_of(frf, &bands, d.coherence_threshold);
@@ -356,14 +374,24 @@ fn design(frf: &Frf, r: [f64; 3], opts: &MatrixOptions, given: Option<MatrixMode
             notes.push(format!("axis {}: no per-axis design: {e:#}", axis_name(i)));
         }
     }
-    let prep = fit_stage(frf, &bands, opts, given, &mut notes);
+    let mut prep = fit_stage(frf, &bands, opts, given, &prepared, &mut notes);
     let (criterion, flat) = criteria(frf, &prepared, prep.as_ref(), bands, r, opts, &mut notes)?;
     let rounds = latency_rounds(&prepared, prep.as_ref(), &criterion, r, opts);
     opts.say("realizing the compensator and verifying it in f32…");
     let (ranked, latency_rounds) = rank_rounds(rounds);
     refuse_unless_better_than_raw(&ranked[0])?;
     let f_band = bands.iter().map(|b| b.1).fold(0.0, f64::max);
-    let (mut chosen, realized) = realize_chosen(ranked, &mut notes, d.fs_hz, f_band)?;
+    let (mut chosen, realized, dropped) = realize_chosen(ranked, &mut notes, d.fs_hz, f_band)?;
+    if let (Some(err), Some(unsplit)) = (dropped, prep.as_mut().and_then(|p| p.unsplit.take())) {
+        // The 3x3 rows of the model with close modes split do not verify
+        // (or do not fit the kernel): the order search's model, once.
+        opts.say("the 3x3 compensator of the split model does not verify: designing on the unsplit model…");
+        let note = format!(
+            "the 3x3 model with close modes fitted as two pairs each gave a compensator that does not verify ({err}); \
+             the order search's model (close modes as one pair) is used"
+        );
+        return design(frf, r, opts, Some(unsplit), vec![note]);
+    }
     let full_load = reduce::filter_load(&realized.1 .1, d.fs_hz);
     let (realized, reduction, full_compensator) = match opts.load_limit_permille {
         Some(limit) if full_load > limit && chosen.rows.contains(&RowSource::Matrix) => {
@@ -425,7 +453,8 @@ fn fit_stage(
     frf: &Frf,
     bands: &[(f64, f64); 3],
     opts: &MatrixOptions,
-    given: Option<MatrixModel>,
+    given: Option<GivenModel>,
+    prepared: &[Result<PreparedAxis>],
     notes: &mut Vec<String>,
 ) -> Option<MatrixPrep> {
     let d = &opts.design;
@@ -442,8 +471,8 @@ fn fit_stage(
     }
     let t = std::time::Instant::now();
     let prepared_model = match given {
-        Some(m) => prepare_model(frf, bands, d.fs_hz, d.coherence_threshold, m, f64::NAN, Vec::new()),
-        None => prepare_matrix(frf, bands, d.fs_hz, &vf, d.coherence_threshold),
+        Some(g) => prepare_model(frf, bands, d.fs_hz, d.coherence_threshold, g),
+        None => prepare_matrix(frf, bands, d.fs_hz, &vf, d.coherence_threshold, prepared),
     };
     match prepared_model {
         Ok(p) => {
@@ -704,24 +733,63 @@ pub fn with_weighted_matrix<R>(frf: &Frf, use_data: impl FnOnce(&MatrixData) -> 
 /// Fit, discrete model and plant of the matrix (the latency-independent
 /// part), the fit with `vf`, its error scored on the lines of coherence ≥
 /// `threshold`.
-fn prepare_matrix(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, vf: &VfOptions, threshold: f64) -> Result<MatrixPrep> {
+fn prepare_matrix(
+    frf: &Frf,
+    bands: &[(f64, f64); 3],
+    fs: f64,
+    vf: &VfOptions,
+    threshold: f64,
+    prepared: &[Result<PreparedAxis>],
+) -> Result<MatrixPrep> {
     // A real pole below the first coherent line of the bands is not kept.
     let vf = VfOptions { f_identified_hz: bands.iter().map(|b| b.0).fold(f64::INFINITY, f64::min), ..vf.clone() };
     let fit = with_weighted_matrix(frf, |data| matrix_vector_fit(data, &vf))?.context("fit of the 3x3 matrix")?;
-    prepare_model(frf, bands, fs, threshold, fit.model, fit.weighted_rms, fit.order_trace)
+    let split = GivenModel { model: fit.model, weighted_rms: fit.weighted_rms, order_trace: fit.order_trace };
+    let Some(unsplit) = fit.unsplit else {
+        return prepare_model(frf, bands, fs, threshold, split);
+    };
+    let rms = with_weighted_matrix(frf, |data| data.weighted_rms(&unsplit))?;
+    let unsplit = GivenModel { model: unsplit, weighted_rms: rms, order_trace: split.order_trace.clone() };
+    // The split model only where its direct entries are nearer the
+    // independent per-axis fits than the unsplit model's, and the chain
+    // takes it (a discrete model or realization it refuses falls back).
+    let distance = |m: &MatrixModel| direct_distance(m, prepared, bands, &frf.freq_hz);
+    if distance(&split.model) < distance(&unsplit.model) {
+        let order_trace = split.order_trace.clone();
+        if let Ok(mut prep) = prepare_model(frf, bands, fs, threshold, split) {
+            prep.unsplit = Some(unsplit);
+            return Ok(prep);
+        }
+        return prepare_model(frf, bands, fs, threshold, GivenModel { order_trace, ..unsplit });
+    }
+    prepare_model(frf, bands, fs, threshold, unsplit)
+}
+
+/// Σ_i Σ_f |Ĝ_ii(j2πf) − P_i(j2πf)|²/|P_i(j2πf)|² over the lines `freq_hz`
+/// in axis i's band, with P_i axis i's own per-axis fit (where it has one):
+/// how far the model's direct entries are from fits that are independent of
+/// the common poles.
+fn direct_distance(
+    model: &MatrixModel,
+    prepared: &[Result<PreparedAxis>],
+    bands: &[(f64, f64); 3],
+    freq_hz: &[f64],
+) -> f64 {
+    let mut sum = 0.0;
+    for (i, p) in prepared.iter().enumerate() {
+        let Ok(p) = p else { continue };
+        for f in freq_hz.iter().filter(|f| **f >= bands[i].0 && **f <= bands[i].1) {
+            let reference = p.model_frf(*f);
+            sum += (model.entry(i, i).frf(*f) - reference).norm_sqr() / reference.norm_sqr().max(f64::MIN_POSITIVE);
+        }
+    }
+    sum
 }
 
 /// [`prepare_matrix`] from the model: its error against the measurement,
 /// the discrete model and the plant.
-fn prepare_model(
-    frf: &Frf,
-    bands: &[(f64, f64); 3],
-    fs: f64,
-    threshold: f64,
-    model: MatrixModel,
-    weighted_rms: f64,
-    order_trace: Vec<(usize, f64)>,
-) -> Result<MatrixPrep> {
+fn prepare_model(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, threshold: f64, given: GivenModel) -> Result<MatrixPrep> {
+    let GivenModel { model, weighted_rms, order_trace } = given;
     let entries: Vec<_> = (0..9).map(|e| frf.entry(e / 3, e % 3).expect("complete")).collect();
     let mut entry_error = [[f64::NAN; 3]; 3];
     for (e, ent) in entries.iter().enumerate() {
@@ -751,7 +819,7 @@ fn prepare_model(
     let plant = plant_states(&dm, &lines).context("plant of the 3x3 model")?;
     let figures =
         MatrixFitFigures { order: model.order(), weighted_rms, order_trace, entry_error, modes: model.modes() };
-    Ok(MatrixPrep { fit: figures, model, dm, matching, plant })
+    Ok(MatrixPrep { fit: figures, model, dm, matching, plant, unsplit: None })
 }
 
 /// The criterion on the 3x3 model Ĝ (the predictions, and the q search),
@@ -963,12 +1031,18 @@ fn blocks_of(rd: &Round) -> Result<(Vec<MimoStateSpace>, MimoStateSpace)> {
 /// 1. the rule's choice;
 /// 2. where its 3x3 rows do not verify, the next round (latency) by the
 ///    rule whose 3x3 rows do and that beats no compensation, with a note;
-/// 3. else the choice with every axis on its per-axis row, with a note.
-fn realize_chosen(ranked: Vec<Round>, notes: &mut Vec<String>, fs: f64, f_band: f64) -> Result<(Round, Realized)> {
+/// 3. else the choice with every axis on its per-axis row, with a note,
+///    and why the 3x3 rows were dropped (returned).
+fn realize_chosen(
+    ranked: Vec<Round>,
+    notes: &mut Vec<String>,
+    fs: f64,
+    f_band: f64,
+) -> Result<(Round, Realized, Option<String>)> {
     let mut ranked = ranked.into_iter();
     let mut rd = ranked.next().context("no latency round")?;
     let err = match realize_round(&rd, fs, f_band) {
-        Ok(r) => return Ok((rd, r)),
+        Ok(r) => return Ok((rd, r, None)),
         Err(e) if rd.rows.contains(&RowSource::Matrix) => e,
         Err(e) => return Err(e),
     };
@@ -978,7 +1052,7 @@ fn realize_chosen(ranked: Vec<Round>, notes: &mut Vec<String>, fs: f64, f_band: 
                 "latency {}: {err:#}; latency {} is used instead, the next by the latency rule whose 3x3 rows verify",
                 rd.lag, alt.lag
             ));
-            return Ok((alt, r));
+            return Ok((alt, r, None));
         }
     }
     if !rd.per_axis.iter().all(Option::is_some) {
@@ -995,7 +1069,7 @@ fn realize_chosen(ranked: Vec<Round>, notes: &mut Vec<String>, fs: f64, f_band: 
     }
     rd.rows = [RowSource::PerAxis; 3];
     let r = realize_round(&rd, fs, f_band)?;
-    Ok((rd, r))
+    Ok((rd, r, Some(format!("{err:#}"))))
 }
 
 /// The combined compensator of the chosen round, realized and verified.
