@@ -439,10 +439,17 @@ fn split_close_modes(
     let mut splits = 0;
     let f_top = data.f_max();
     let w_scale = 2.0 * PI * f_top;
+    // After the first round, only the pairs whose split lowered the BIC in
+    // the round before: a split keeps every other pole, so a pair whose own
+    // split did not help has the same fit around it as before.
+    let mut promising: Option<Vec<Complex64>> = None;
     for _ in 0..MAX_SPLITS {
         let poles: Vec<(Complex64, bool)> = (0..model.terms()).map(|k| model.pole(k)).collect();
         let pairs: Vec<usize> = (0..poles.len())
             .filter(|&k| poles[k].1 && poles[k].0.im / (2.0 * PI) < f_top)
+            .filter(|&k| {
+                promising.as_ref().is_none_or(|ps| ps.iter().any(|q| (q - poles[k].0).norm() <= 1e-9 * q.norm()))
+            })
             .filter(|&k| data.local_excess(&model, poles[k].0, sigma2) > SPLIT_EXCESS)
             .collect();
         let trials = map_on_threads(&pairs, |&k| {
@@ -470,14 +477,16 @@ fn split_close_modes(
             split.extend(near[..2].iter().map(|q| Pole { p: q / w_scale, pair: true }));
             let m = fit_residues(data, &split, w_scale).ok().filter(|m| m.is_stable())?;
             let r = data.rss(&m);
-            r.is_finite().then_some((m, r))
+            r.is_finite().then_some((m, r, p))
         });
         let current = data.bic(rss, order, sigma2);
-        let best = trials
-            .into_iter()
-            .flatten()
-            .map(|(m, r)| (data.bic(r, order + 2, sigma2), m, r))
-            .min_by(|a, b| a.0.total_cmp(&b.0));
+        let scored: Vec<(f64, MatrixModel, f64, Complex64)> =
+            trials.into_iter().flatten().map(|(m, r, p)| (data.bic(r, order + 2, sigma2), m, r, p)).collect();
+        let best = scored.iter().enumerate().min_by(|a, b| a.1 .0.total_cmp(&b.1 .0)).map(|(i, _)| i);
+        let others: Vec<Complex64> =
+            scored.iter().enumerate().filter(|(i, t)| Some(*i) != best && t.0 < current).map(|(_, t)| t.3).collect();
+        let best = best.map(|i| scored.into_iter().nth(i).expect("index of a trial")).map(|(b, m, r, _)| (b, m, r));
+        promising = Some(others);
         match best {
             Some((bic, m, r)) if bic < current => {
                 (order, model, rss) = (order + 2, m, r);
