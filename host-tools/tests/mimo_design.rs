@@ -124,6 +124,13 @@ fn design_above(frf: &Frf, out: &PlateSimOutput, above_band: AboveBand) -> anyho
     design_matrix(frf, noise(out), &MatrixOptions { design, load_limit_permille: box_limit(), ..Default::default() })
 }
 
+/// [`design`] on the given 3x3 `model` instead of the fit of the record's FRF.
+fn design_on_model(out: &PlateSimOutput, model: MatrixModel) -> MatrixDesign {
+    let design = DesignOptions { fs_hz: out.params.fs_hz, ..Default::default() };
+    let opts = MatrixOptions { design, load_limit_permille: box_limit(), ..Default::default() };
+    dynocomp::design::mimo::design_matrix_with_model(&out.frf, model, noise(out), &opts).unwrap()
+}
+
 /// [`BOX_LIMIT`], or none (the full filter, as `design --full-order`) with
 /// `MIMO_FULL_ORDER` set, for the studies' before-and-after figures.
 fn box_limit() -> Option<u32> {
@@ -513,13 +520,8 @@ fn tall_rows_judged_for_the_cut() {
     let band_low = md.summary.axes.iter().map(|a| a.band_hz.0).fold(f64::INFINITY, f64::min);
     let vf = VfOptions { f_identified_hz: band_low, ..opts_vf() };
     let fit = with_weighted_matrix(&out.frf, |data| matrix_vector_fit(data, &vf)).unwrap().unwrap();
-    let opts = MatrixOptions {
-        design: DesignOptions { fs_hz: fs, ..Default::default() },
-        load_limit_permille: box_limit(),
-        ..Default::default()
-    };
     let unsplit = fit.unsplit.expect("the tall part's fit splits its close base modes");
-    let one_pair = dynocomp::design::mimo::design_matrix_with_model(&out.frf, unsplit, noise(&out), &opts).unwrap();
+    let one_pair = design_on_model(&out, unsplit);
     let flat = evaluate(&one_pair, &out);
     eprintln!("{}", flat.line("tall-flat", fs));
     let no_worse = (0..3).all(|i| flat.used[i] <= NO_WORSE * flat.per_axis[i]);
@@ -843,12 +845,7 @@ fn close_base_modes_are_fitted_as_two() {
     }
     let md = design(&out.frf, &out).unwrap();
     let fig = evaluate(&md, &out);
-    let opts = MatrixOptions {
-        design: DesignOptions { fs_hz: fs, ..Default::default() },
-        load_limit_permille: box_limit(),
-        ..Default::default()
-    };
-    let whole = dynocomp::design::mimo::design_matrix_with_model(&out.frf, unsplit, noise(&out), &opts).unwrap();
+    let whole = design_on_model(&out, unsplit);
     let control = evaluate(&whole, &out);
     eprintln!("{}\n{}", fig.line("tall", fs), control.line("unsplit", fs));
     for i in 0..2 {

@@ -480,15 +480,13 @@ fn split_close_modes(
             r.is_finite().then_some((m, r, p))
         });
         let current = data.bic(rss, order, sigma2);
-        let scored: Vec<(f64, MatrixModel, f64, Complex64)> =
+        let mut scored: Vec<(f64, MatrixModel, f64, Complex64)> =
             trials.into_iter().flatten().map(|(m, r, p)| (data.bic(r, order + 2, sigma2), m, r, p)).collect();
-        let best = scored.iter().enumerate().min_by(|a, b| a.1 .0.total_cmp(&b.1 .0)).map(|(i, _)| i);
-        let others: Vec<Complex64> =
-            scored.iter().enumerate().filter(|(i, t)| Some(*i) != best && t.0 < current).map(|(_, t)| t.3).collect();
-        let best = best.map(|i| scored.into_iter().nth(i).expect("index of a trial")).map(|(b, m, r, _)| (b, m, r));
-        promising = Some(others);
+        let best =
+            (0..scored.len()).min_by(|&a, &b| scored[a].0.total_cmp(&scored[b].0)).map(|i| scored.swap_remove(i));
+        promising = Some(scored.iter().filter(|t| t.0 < current).map(|t| t.3).collect());
         match best {
-            Some((bic, m, r)) if bic < current => {
+            Some((bic, m, r, _)) if bic < current => {
                 (order, model, rss) = (order + 2, m, r);
                 splits += 1;
             }
