@@ -239,6 +239,16 @@ fn summary_text(args: &DesignArgs, md: &MatrixDesign, id: u32, load: &LoadReport
     t
 }
 
+/// One cell of the crosstalk table: the peak |G_ij|/|G_ii| and where it
+/// lies, or that no line of the band has both entries coherent (the peak is
+/// NaN there, `null` in `--json`).
+fn crosstalk_cell(peak: f64, at_hz: f64) -> String {
+    match peak.is_finite() && at_hz.is_finite() {
+        true => format!("{:.1} % at {:.0} Hz", 100.0 * peak, at_hz),
+        false => "no coherent lines".into(),
+    }
+}
+
 /// The crosstalk table and each axis's predictions (raw, per axis with the
 /// crosstalk counted and as it claims without, 3x3) and choice of row.
 fn crosstalk_and_predictions(s: &MatrixSummary) -> String {
@@ -251,8 +261,7 @@ fn crosstalk_and_predictions(s: &MatrixSummary) -> String {
                 if i == j {
                     format!("{:<18}", "-")
                 } else {
-                    let (p, f) = (s.crosstalk.peak[i][j], s.crosstalk.at_hz[i][j]);
-                    format!("{:<18}", format!("{:.1} % at {:.0} Hz", 100.0 * p, f))
+                    format!("{:<18}", crosstalk_cell(s.crosstalk.peak[i][j], s.crosstalk.at_hz[i][j]))
                 }
             })
             .collect();
@@ -282,4 +291,20 @@ fn crosstalk_and_predictions(s: &MatrixSummary) -> String {
         let _ = writeln!(t, "  {}: {}", a.axis, a.reason);
     }
     t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::crosstalk_cell;
+
+    /// An entry without coherent lines in the band reads as such, not as
+    /// "NaN % at NaN Hz" (seen on the flat plate, seed 11, 25.6 kHz: G_xz
+    /// and G_yz).
+    #[test]
+    fn a_crosstalk_entry_without_coherent_lines_says_so() {
+        assert_eq!(crosstalk_cell(f64::NAN, f64::NAN), "no coherent lines");
+        assert!(!crosstalk_cell(f64::NAN, f64::NAN).contains("NaN"));
+        // Control: a measured peak prints its value and frequency.
+        assert_eq!(crosstalk_cell(0.109, 2760.0), "10.9 % at 2760 Hz");
+    }
 }
