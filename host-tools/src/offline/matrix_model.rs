@@ -205,6 +205,7 @@ mod tests {
             load_permille: 591,
             full_predicted: [0.0022, 0.0029, 0.0015],
             predicted: [0.0039, 0.0038, 0.0024],
+            full_not_realized: None,
         };
         for state in [Some(Some(figures)), Some(None), None] {
             let m = model(state);

@@ -381,7 +381,8 @@ fn design(
     let (ranked, latency_rounds) = rank_rounds(rounds);
     refuse_unless_better_than_raw(&ranked[0])?;
     let f_band = bands.iter().map(|b| b.1).fold(0.0, f64::max);
-    let (mut chosen, realized, dropped) = realize_chosen(ranked, &mut notes, d.fs_hz, f_band)?;
+    let at = reduce::LoadAt { fs: d.fs_hz, limit: opts.load_limit_permille.unwrap_or(u32::MAX), f_band };
+    let Chosen { round: mut chosen, realized, dropped, reduced } = realize_chosen(ranked, &mut notes, &criterion, at)?;
     if let (Some(err), Some(unsplit)) = (dropped, prep.as_mut().and_then(|p| p.unsplit.take())) {
         // The 3x3 rows of the model with close modes split do not verify
         // (or do not fit the kernel): the order search's model, once.
@@ -394,13 +395,18 @@ fn design(
     }
     let full_load = reduce::filter_load(&realized.1 .1, d.fs_hz);
     let (realized, reduction, full_compensator) = match opts.load_limit_permille {
+        // Reduced already, within the load limit, because the full filter
+        // does not go into an image.
+        _ if reduced.is_some() => {
+            let (fig, full) = reduced.expect("checked");
+            (realized, Some(fig), Some(full))
+        }
         Some(limit) if full_load > limit && chosen.rows.contains(&RowSource::Matrix) => {
             opts.say(&format!(
                 "the filter needs {:.1} % of the box's sample period (limit {:.1} %): reducing it…",
                 f64::from(full_load) / 10.0,
                 f64::from(limit) / 10.0
             ));
-            let at = reduce::LoadAt { fs: d.fs_hz, limit, f_band };
             reduce::reduce_to_load(realized, full_load, &mut chosen, &criterion, at)?
         }
         _ => (realized, None, None),
@@ -1026,33 +1032,51 @@ fn blocks_of(rd: &Round) -> Result<(Vec<MimoStateSpace>, MimoStateSpace)> {
     combine(rd.rows, rd.matrix.as_ref().map(|m| &m.0.compensator), per_axis_ss)
 }
 
+/// The round chosen and its realization ([`realize_chosen`]).
+struct Chosen {
+    round: Round,
+    realized: Realized,
+    /// Why the 3x3 rows were dropped, where they were.
+    dropped: Option<String>,
+    /// Where the full compensator of the rule's choice cannot go into an
+    /// image but a reduction of its 3x3 block can: the reduction's figures
+    /// and the full compensator (`realized` is the reduced one).
+    reduced: Option<(reduce::ReductionFigures, MimoStateSpace)>,
+}
+
 /// The first of the `ranked` rounds ([`rank_rounds`]) whose compensator is
-/// realized and verified in f32 up to `f_band`, never an unverified one:
+/// realized and verified in f32 up to `at.f_band`, never an unverified one:
 /// 1. the rule's choice;
-/// 2. where its 3x3 rows do not verify, the next round (latency) by the
-///    rule whose 3x3 rows do and that beats no compensation, with a note;
-/// 3. else the choice with every axis on its per-axis row, with a note,
-///    and why the 3x3 rows were dropped (returned).
-fn realize_chosen(
-    ranked: Vec<Round>,
-    notes: &mut Vec<String>,
-    fs: f64,
-    f_band: f64,
-) -> Result<(Round, Realized, Option<String>)> {
+/// 2. where its 3x3 rows do not verify (or need more sections than the
+///    kernel holds), the rule's choice with its 3x3 block reduced by
+///    balancing ([`reduce::reduce_to_realize`]), where every 3x3 row still
+///    beats its per-axis row;
+/// 3. else the next round (latency) by the rule whose 3x3 rows verify and
+///    that beats no compensation, with a note;
+/// 4. else the choice with every axis on its per-axis row, with a note,
+///    and why the 3x3 rows were dropped.
+fn realize_chosen(ranked: Vec<Round>, notes: &mut Vec<String>, crits: &Criteria, at: reduce::LoadAt) -> Result<Chosen> {
+    let (fs, f_band) = (at.fs, at.f_band);
     let mut ranked = ranked.into_iter();
     let mut rd = ranked.next().context("no latency round")?;
     let err = match realize_round(&rd, fs, f_band) {
-        Ok(r) => return Ok((rd, r, None)),
+        Ok(realized) => return Ok(Chosen { round: rd, realized, dropped: None, reduced: None }),
         Err(e) if rd.rows.contains(&RowSource::Matrix) => e,
         Err(e) => return Err(e),
     };
+    match reduce::reduce_to_realize(&mut rd, crits, at, format!("{err:#}"))? {
+        Ok((realized, fig, full)) => {
+            return Ok(Chosen { round: rd, realized, dropped: None, reduced: Some((fig, full)) });
+        }
+        Err(fig) => notes.push(fig.line()),
+    }
     for alt in ranked.filter(|a| a.rows.contains(&RowSource::Matrix) && refuse_unless_better_than_raw(a).is_ok()) {
         if let Ok(r) = realize_round(&alt, fs, f_band) {
             notes.push(format!(
                 "latency {}: {err:#}; latency {} is used instead, the next by the latency rule whose 3x3 rows verify",
                 rd.lag, alt.lag
             ));
-            return Ok((alt, r, None));
+            return Ok(Chosen { round: alt, realized: r, dropped: None, reduced: None });
         }
     }
     if !rd.per_axis.iter().all(Option::is_some) {
@@ -1068,8 +1092,8 @@ fn realize_chosen(
         }
     }
     rd.rows = [RowSource::PerAxis; 3];
-    let r = realize_round(&rd, fs, f_band)?;
-    Ok((rd, r, Some(format!("{err:#}"))))
+    let realized = realize_round(&rd, fs, f_band)?;
+    Ok(Chosen { round: rd, realized, dropped: Some(format!("{err:#}")), reduced: None })
 }
 
 /// The combined compensator of the chosen round, realized and verified.

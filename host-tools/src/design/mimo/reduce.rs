@@ -45,6 +45,12 @@ pub struct ReductionFigures {
     pub full_predicted: [f64; 3],
     /// The same for the reduced filter.
     pub predicted: [f64; 3],
+    /// Why the full filter cannot go into an image at all (it needs more
+    /// sections or taps than the kernel holds, or does not verify in f32),
+    /// where that, not the load, is what the reduction is for; its load
+    /// is then unknown (`full_load_permille` 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub full_not_realized: Option<String>,
 }
 
 /// Predicted load (‰, high estimate) of `filter` at `fs_hz`.
@@ -61,22 +67,31 @@ impl ReductionFigures {
             Reduction::SingularPerturbation => "balanced singular perturbation, exact at DC",
             Reduction::Truncation => "balanced truncation",
         };
+        let purpose = match &self.full_not_realized {
+            None => "for the box".to_string(),
+            Some(why) => format!("for the image (the full filter: {why})"),
+        };
         if self.states == 0 {
-            return format!("not reduced for the box: {}", self.reason);
+            return format!("not reduced {purpose}: {}", self.reason);
         }
+        let load = match &self.full_not_realized {
+            None => format!(
+                "load {:.1} -> {:.1} %",
+                f64::from(self.full_load_permille) / 10.0,
+                f64::from(self.load_permille) / 10.0
+            ),
+            Some(_) => format!("load {:.1} %", f64::from(self.load_permille) / 10.0),
+        };
         let what = format!(
-            "3x3 block {} -> {} states ({method}; load {:.1} -> {:.1} %); predicted in-band error x / y / z {} % full -> \
-             {} % reduced",
+            "3x3 block {} -> {} states ({method}; {load}); predicted in-band error x / y / z {} % full -> {} % reduced",
             self.full_states,
             self.states,
-            f64::from(self.full_load_permille) / 10.0,
-            f64::from(self.load_permille) / 10.0,
             three(&self.full_predicted),
             three(&self.predicted)
         );
         match self.used {
-            true => format!("reduced for the box: {what}; compensate --offline keeps the full model"),
-            false => format!("not reduced for the box: {what}: {}", self.reason),
+            true => format!("reduced {purpose}: {what}; compensate --offline keeps the full model"),
+            false => format!("not reduced {purpose}: {what}: {}", self.reason),
         }
     }
 }
@@ -158,12 +173,10 @@ pub(super) struct LoadAt {
 
 /// The chosen round `rd`'s compensator `realized`, whose filter needs
 /// `full_load` ‰, over the load limit, reduced to it: its 3x3 rows' block
-/// (`rd` has one) by balancing, the per-axis rows' blocks unchanged. The
-/// reduction is used (the returned realization replaces the full one, which
-/// is returned beside it, and `rd.axes` take its predictions) only where
-/// every 3x3 row still beats the per-axis row and every row beats no
-/// compensation, as the judge sees them; otherwise the figures say why and
-/// `realized` is returned unchanged.
+/// (`rd` has one) by balancing, the per-axis rows' blocks unchanged
+/// ([`reduce_block`]). Where the reduction is used, the returned
+/// realization replaces the full one, which is returned beside it;
+/// otherwise the figures say why and `realized` is returned unchanged.
 pub(super) fn reduce_to_load(
     realized: Realized,
     full_load: u32,
@@ -171,8 +184,60 @@ pub(super) fn reduce_to_load(
     crits: &Criteria,
     at: LoadAt,
 ) -> Result<(Realized, Option<ReductionFigures>, Option<MimoStateSpace>)> {
+    Ok(match reduce_block(rd, crits, at, full_load, None)? {
+        None => (realized, None, None),
+        Some((Some(reduced), fig)) => (reduced, Some(fig), Some(realized.0)),
+        Some((None, fig)) => (realized, Some(fig), None),
+    })
+}
+
+/// The chosen round `rd`, whose full compensator cannot go into an image
+/// (`why`: it needs more sections or taps than the kernel holds, or does
+/// not verify), reduced by balancing its 3x3 rows' block to the highest
+/// order that is realized, verified and within the load limit, on the same
+/// terms as [`reduce_to_load`]. `Ok(Err(figures))` where no reduction is
+/// used (the figures say why); otherwise the reduced realization, the
+/// figures and the full compensator.
+pub(super) fn reduce_to_realize(
+    rd: &mut Round,
+    crits: &Criteria,
+    at: LoadAt,
+    why: String,
+) -> Result<std::result::Result<(Realized, ReductionFigures, MimoStateSpace), ReductionFigures>> {
+    let full = blocks_of(rd)?.1;
+    Ok(match reduce_block(rd, crits, at, 0, Some(why.clone()))? {
+        Some((Some(reduced), fig)) => Ok((reduced, fig, full)),
+        Some((None, fig)) => Err(fig),
+        None => Err(ReductionFigures {
+            used: false,
+            reason: "no 3x3 rows to reduce".into(),
+            full_states: 0,
+            states: 0,
+            method: Reduction::SingularPerturbation,
+            hankel_bound: f64::NAN,
+            full_load_permille: 0,
+            load_permille: 0,
+            full_predicted: [f64::NAN; 3],
+            predicted: [f64::NAN; 3],
+            full_not_realized: Some(why),
+        }),
+    })
+}
+
+/// The balanced reduction of `rd`'s 3x3 rows' block that fits `at`, and
+/// its figures (`None` where `rd` has no 3x3 block). The reduction is used
+/// (returned, and `rd.axes` take its predictions) only where every 3x3 row
+/// still beats the per-axis row and every row beats no compensation, as
+/// the judge sees them; otherwise only the figures, saying why.
+fn reduce_block(
+    rd: &mut Round,
+    crits: &Criteria,
+    at: LoadAt,
+    full_load: u32,
+    full_not_realized: Option<String>,
+) -> Result<Option<(Option<Realized>, ReductionFigures)>> {
     let (blocks, _) = blocks_of(rd)?;
-    let Some((matrix_block, other)) = blocks.split_first() else { return Ok((realized, None, None)) };
+    let Some((matrix_block, other)) = blocks.split_first() else { return Ok(None) };
     let full_predicted: [f64; 3] = std::array::from_fn(|i| rd.axes[i].chosen.error);
     let mut fig = ReductionFigures {
         used: false,
@@ -185,12 +250,13 @@ pub(super) fn reduce_to_load(
         load_permille: 0,
         full_predicted,
         predicted: [f64::NAN; 3],
+        full_not_realized,
     };
     let bal = match balance(matrix_block) {
         Ok(b) => b,
         Err(e) => {
             fig.reason = format!("{e:#}");
-            return Ok((realized, Some(fig), None));
+            return Ok(Some((None, fig)));
         }
     };
     let worst = |c: &Candidate| (0..3).map(|i| c.errors[i].error / full_predicted[i]).fold(0.0, f64::max);
@@ -200,7 +266,7 @@ pub(super) fn reduce_to_load(
             "no balanced reduction of the {}-state 3x3 block is realized within the load limit",
             matrix_block.a.nrows()
         );
-        return Ok((realized, Some(fig), None));
+        return Ok(Some((None, fig)));
     };
     (fig.states, fig.method, fig.load_permille) = (c.states, c.method, c.load);
     fig.hankel_bound = bal.error_bound(c.states);
@@ -224,15 +290,23 @@ pub(super) fn reduce_to_load(
     if !worse.is_empty() {
         fig.reason = format!(
             "the {}-state reduction that fits the box is worse than the alternatives on {} (judged on the per-axis \
-             fits); the full filter is kept",
+             fits); {}",
             c.states,
-            worse.join(", ")
+            worse.join(", "),
+            match fig.full_not_realized {
+                None => "the full filter is kept",
+                Some(_) => "the 3x3 rows are not used",
+            }
         );
-        return Ok((realized, Some(fig), None));
+        return Ok(Some((None, fig)));
     }
     fig.used = true;
+    let purpose = match fig.full_not_realized {
+        None => "to fit the box",
+        Some(_) => "to go into an image",
+    };
     fig.reason = format!(
-        "the 3x3 block is reduced from {} to {} states to fit the box; every 3x3 row still beats its per-axis row",
+        "the 3x3 block is reduced from {} to {} states {purpose}; every 3x3 row still beats its per-axis row",
         fig.full_states, c.states
     );
     let noise_gains = c.realized.0.white_noise_gains();
@@ -245,11 +319,55 @@ pub(super) fn reduce_to_load(
             a.noise_gain = ng[i];
         }
         a.reason.push_str(&format!(
-            "; reduced to {} states for the box: {:.3} % (full filter {:.3} %)",
+            "; reduced to {} states {}: {:.3} % (full filter {:.3} %)",
             c.states,
+            match fig.full_not_realized {
+                None => "for the box",
+                Some(_) => "for the image",
+            },
             100.0 * c.errors[i].error,
             100.0 * full_predicted[i]
         ));
     }
-    Ok((c.realized, Some(fig), Some(realized.0)))
+    Ok(Some((Some(c.realized), fig)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn figures(full_not_realized: Option<String>) -> ReductionFigures {
+        ReductionFigures {
+            used: true,
+            reason: "fits".into(),
+            full_states: 108,
+            states: 30,
+            method: Reduction::SingularPerturbation,
+            hankel_bound: 0.01,
+            full_load_permille: if full_not_realized.is_some() { 0 } else { 1023 },
+            load_permille: 595,
+            full_predicted: [0.0968, 0.0978, 0.0284],
+            predicted: [0.0968, 0.0978, 0.0284],
+            full_not_realized,
+        }
+    }
+
+    /// A reduction made because the full filter does not go into an image
+    /// says so and why, without a load the full filter never had; and it
+    /// reads back from a sidecar. Control: the load reduction's line.
+    #[test]
+    fn a_reduction_for_the_kernel_says_why_the_full_filter_does_not_go_into_an_image() {
+        let why = "the 3x3 compensator needs 53 sections and 24 FIR taps, the kernel holds 48 and 24".to_string();
+        let line = figures(Some(why.clone())).line();
+        assert!(line.starts_with("reduced for the image (the full filter: "), "{line}");
+        assert!(line.contains(&why) && line.contains("load 59.5 %") && !line.contains("0.0 ->"), "{line}");
+        let text = serde_json::to_string(&figures(Some(why.clone()))).unwrap();
+        assert_eq!(serde_json::from_str::<ReductionFigures>(&text).unwrap(), figures(Some(why)));
+        let control = figures(None).line();
+        assert!(control.starts_with("reduced for the box: ") && control.contains("load 102.3 -> 59.5 %"), "{control}");
+        // A sidecar written before the key existed reads as a load reduction.
+        let old = serde_json::to_string(&figures(None)).unwrap();
+        assert!(!old.contains("full_not_realized"), "{old}");
+        assert_eq!(serde_json::from_str::<ReductionFigures>(&old).unwrap(), figures(None));
+    }
 }
