@@ -394,14 +394,11 @@ fn design(
         return design(frf, r, opts, Some(unsplit), vec![note]);
     }
     let full_load = reduce::filter_load(&realized.1 .1, d.fs_hz);
-    let (realized, reduction, full_compensator) = match opts.load_limit_permille {
+    let (realized, reduction, full_compensator) = match (reduced, opts.load_limit_permille) {
         // Reduced already, within the load limit, because the full filter
         // does not go into an image.
-        _ if reduced.is_some() => {
-            let (fig, full) = reduced.expect("checked");
-            (realized, Some(fig), Some(full))
-        }
-        Some(limit) if full_load > limit && chosen.rows.contains(&RowSource::Matrix) => {
+        (Some((fig, full)), _) => (realized, Some(fig), Some(full)),
+        (None, Some(limit)) if full_load > limit && chosen.rows.contains(&RowSource::Matrix) => {
             opts.say(&format!(
                 "the filter needs {:.1} % of the box's sample period (limit {:.1} %): reducing it…",
                 f64::from(full_load) / 10.0,
@@ -1068,7 +1065,7 @@ fn realize_chosen(ranked: Vec<Round>, notes: &mut Vec<String>, crits: &Criteria,
         Ok((realized, fig, full)) => {
             return Ok(Chosen { round: rd, realized, dropped: None, reduced: Some((fig, full)) });
         }
-        Err(fig) => notes.push(fig.line()),
+        Err(fig) => notes.extend(fig.map(|f| f.line())),
     }
     for alt in ranked.filter(|a| a.rows.contains(&RowSource::Matrix) && refuse_unless_better_than_raw(a).is_ok()) {
         if let Ok(r) = realize_round(&alt, fs, f_band) {

@@ -186,8 +186,8 @@ pub(super) fn reduce_to_load(
 ) -> Result<(Realized, Option<ReductionFigures>, Option<MimoStateSpace>)> {
     Ok(match reduce_block(rd, crits, at, full_load, None)? {
         None => (realized, None, None),
-        Some((Some(reduced), fig)) => (reduced, Some(fig), Some(realized.0)),
-        Some((None, fig)) => (realized, Some(fig), None),
+        Some((fig, Some(reduced), _)) => (reduced, Some(fig), Some(realized.0)),
+        Some((fig, None, _)) => (realized, Some(fig), None),
     })
 }
 
@@ -196,48 +196,37 @@ pub(super) fn reduce_to_load(
 /// not verify), reduced by balancing its 3x3 rows' block to the highest
 /// order that is realized, verified and within the load limit, on the same
 /// terms as [`reduce_to_load`]. `Ok(Err(figures))` where no reduction is
-/// used (the figures say why); otherwise the reduced realization, the
-/// figures and the full compensator.
+/// used (the figures say why; `None` without a 3x3 block); otherwise the
+/// reduced realization, the figures and the full compensator.
 pub(super) fn reduce_to_realize(
     rd: &mut Round,
     crits: &Criteria,
     at: LoadAt,
     why: String,
-) -> Result<std::result::Result<(Realized, ReductionFigures, MimoStateSpace), ReductionFigures>> {
-    let full = blocks_of(rd)?.1;
-    Ok(match reduce_block(rd, crits, at, 0, Some(why.clone()))? {
-        Some((Some(reduced), fig)) => Ok((reduced, fig, full)),
-        Some((None, fig)) => Err(fig),
-        None => Err(ReductionFigures {
-            used: false,
-            reason: "no 3x3 rows to reduce".into(),
-            full_states: 0,
-            states: 0,
-            method: Reduction::SingularPerturbation,
-            hankel_bound: f64::NAN,
-            full_load_permille: 0,
-            load_permille: 0,
-            full_predicted: [f64::NAN; 3],
-            predicted: [f64::NAN; 3],
-            full_not_realized: Some(why),
-        }),
+) -> Result<std::result::Result<(Realized, ReductionFigures, MimoStateSpace), Option<ReductionFigures>>> {
+    Ok(match reduce_block(rd, crits, at, 0, Some(why))? {
+        Some((fig, Some(reduced), full)) => Ok((reduced, fig, full)),
+        Some((fig, None, _)) => Err(Some(fig)),
+        None => Err(None),
     })
 }
 
-/// The balanced reduction of `rd`'s 3x3 rows' block that fits `at`, and
-/// its figures (`None` where `rd` has no 3x3 block). The reduction is used
-/// (returned, and `rd.axes` take its predictions) only where every 3x3 row
-/// still beats the per-axis row and every row beats no compensation, as
-/// the judge sees them; otherwise only the figures, saying why.
+/// The figures of the balanced reduction of `rd`'s 3x3 rows' block that
+/// fits `at`, the reduction where it is used, and `rd`'s full compensator
+/// (`None` where `rd` has no 3x3 block). The reduction is used (and
+/// `rd.axes` take its predictions) only where every 3x3 row still beats
+/// the per-axis row and every row beats no compensation, as the judge sees
+/// them; otherwise the figures say why.
 fn reduce_block(
     rd: &mut Round,
     crits: &Criteria,
     at: LoadAt,
     full_load: u32,
     full_not_realized: Option<String>,
-) -> Result<Option<(Option<Realized>, ReductionFigures)>> {
-    let (blocks, _) = blocks_of(rd)?;
+) -> Result<Option<(ReductionFigures, Option<Realized>, MimoStateSpace)>> {
+    let (blocks, full) = blocks_of(rd)?;
     let Some((matrix_block, other)) = blocks.split_first() else { return Ok(None) };
+    let for_image = full_not_realized.is_some();
     let full_predicted: [f64; 3] = std::array::from_fn(|i| rd.axes[i].chosen.error);
     let mut fig = ReductionFigures {
         used: false,
@@ -256,7 +245,7 @@ fn reduce_block(
         Ok(b) => b,
         Err(e) => {
             fig.reason = format!("{e:#}");
-            return Ok(Some((None, fig)));
+            return Ok(Some((fig, None, full)));
         }
     };
     let worst = |c: &Candidate| (0..3).map(|i| c.errors[i].error / full_predicted[i]).fold(0.0, f64::max);
@@ -266,7 +255,7 @@ fn reduce_block(
             "no balanced reduction of the {}-state 3x3 block is realized within the load limit",
             matrix_block.a.nrows()
         );
-        return Ok(Some((None, fig)));
+        return Ok(Some((fig, None, full)));
     };
     (fig.states, fig.method, fig.load_permille) = (c.states, c.method, c.load);
     fig.hankel_bound = bal.error_bound(c.states);
@@ -293,18 +282,12 @@ fn reduce_block(
              fits); {}",
             c.states,
             worse.join(", "),
-            match fig.full_not_realized {
-                None => "the full filter is kept",
-                Some(_) => "the 3x3 rows are not used",
-            }
+            if for_image { "the 3x3 rows are not used" } else { "the full filter is kept" }
         );
-        return Ok(Some((None, fig)));
+        return Ok(Some((fig, None, full)));
     }
     fig.used = true;
-    let purpose = match fig.full_not_realized {
-        None => "to fit the box",
-        Some(_) => "to go into an image",
-    };
+    let purpose = if for_image { "to go into an image" } else { "to fit the box" };
     fig.reason = format!(
         "the 3x3 block is reduced from {} to {} states {purpose}; every 3x3 row still beats its per-axis row",
         fig.full_states, c.states
@@ -321,15 +304,12 @@ fn reduce_block(
         a.reason.push_str(&format!(
             "; reduced to {} states {}: {:.3} % (full filter {:.3} %)",
             c.states,
-            match fig.full_not_realized {
-                None => "for the box",
-                Some(_) => "for the image",
-            },
+            if for_image { "for the image" } else { "for the box" },
             100.0 * c.errors[i].error,
             100.0 * full_predicted[i]
         ));
     }
-    Ok(Some((Some(c.realized), fig)))
+    Ok(Some((fig, Some(c.realized), full)))
 }
 
 #[cfg(test)]
