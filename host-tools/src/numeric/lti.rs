@@ -299,6 +299,31 @@ impl MimoStateSpace {
     }
 }
 
+/// [`stein_smith`] with iterative refinement: the residual
+/// R = A X Aᵀ + W − X is solved for again (X ← X + E, E = A E Aᵀ + R) while
+/// it shrinks, at most three times.
+///
+/// The doubling's rounding grows with ‖A‖²: for a non-normal A (a Kalman
+/// filter's modal realization, ‖A‖ in the hundreds) X can be off by 10⁻⁸
+/// of ‖X‖, where the residual itself is computed to ε·‖A‖²·‖X‖.
+pub fn stein_refined(a: &DMatrix<f64>, w: DMatrix<f64>) -> Option<DMatrix<f64>> {
+    let residual = |x: &DMatrix<f64>| a * x * a.transpose() + &w - x;
+    let mut x = stein_smith(a, w.clone())?;
+    let mut r = residual(&x);
+    for _ in 0..3 {
+        if r.amax() <= 1e-15 * x.amax() {
+            break;
+        }
+        let refined = &x + stein_smith(a, r.clone())?;
+        let r_new = residual(&refined);
+        if !(r_new.amax() < r.amax()) {
+            break;
+        }
+        (x, r) = (refined, r_new);
+    }
+    Some(x)
+}
+
 /// The solution X of the Stein (discrete Lyapunov) equation X = A X Aᵀ + W
 /// by Smith doubling (X ← X + A_k X A_kᵀ, A_k ← A_k²; X = Σ_k Aᵏ W Aᵏᵀ).
 /// `None` when A is not stable (the sum diverges) or the doubling does not
@@ -321,4 +346,51 @@ pub fn stein_smith(a: &DMatrix<f64>, w: DMatrix<f64>) -> Option<DMatrix<f64>> {
         ak = &ak * &ak;
     }
     None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A stable, strongly non-normal A: 20 lightly damped pairs (radius
+    /// 0.996-0.998) in coordinates x = V x', V = Q₁ diag(10^{0..4}) Q₂ᵀ with
+    /// random orthogonal Q₁, Q₂ (‖A‖ in the hundreds, as a Kalman filter's
+    /// modal realization has), and W = b bᵀ.
+    fn non_normal() -> (DMatrix<f64>, DMatrix<f64>) {
+        use rand::{RngExt, SeedableRng};
+        let n = 40;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let mut random = |r: usize, c: usize| DMatrix::from_fn(r, c, |_, _| rng.random_range(-0.5..0.5));
+        let mut modal = DMatrix::zeros(n, n);
+        for k in 0..n / 2 {
+            let (th, r) = (0.05 + 2.5 * k as f64 / 20.0, 0.998 - 0.002 * k as f64 / 20.0);
+            let i = 2 * k;
+            (modal[(i, i)], modal[(i, i + 1)]) = (r * th.cos(), r * th.sin());
+            (modal[(i + 1, i)], modal[(i + 1, i + 1)]) = (-r * th.sin(), r * th.cos());
+        }
+        let (q1, q2) = (random(n, n).qr().q(), random(n, n).qr().q());
+        let s = DMatrix::from_diagonal(&DVector::from_fn(n, |i, _| 10f64.powf(4.0 * i as f64 / (n - 1) as f64)));
+        let v = &q1 * s * q2.transpose();
+        let v_inv = v.clone().try_inverse().unwrap();
+        let b = random(n, 1);
+        (&v * modal * v_inv, &b * b.transpose())
+    }
+
+    fn residual(a: &DMatrix<f64>, w: &DMatrix<f64>, x: &DMatrix<f64>) -> f64 {
+        (a * x * a.transpose() + w - x).amax() / x.amax()
+    }
+
+    /// The refined solution's residual is at the rounding level of the
+    /// residual's own computation (ε·‖A‖²); negative control: the doubling
+    /// alone leaves one at least a hundred times larger.
+    #[test]
+    fn refinement_brings_the_stein_residual_down_for_a_non_normal_a() {
+        let (a, w) = non_normal();
+        let plain = stein_smith(&a, w.clone()).unwrap();
+        let refined = stein_refined(&a, w.clone()).unwrap();
+        let (rp, rr) = (residual(&a, &w, &plain), residual(&a, &w, &refined));
+        eprintln!("relative residual: doubling {rp:.1e}, refined {rr:.1e}");
+        assert!(rr < 1e-9, "refined {rr:.1e}");
+        assert!(rp > 100.0 * rr, "control: the doubling alone {rp:.1e} against {rr:.1e}");
+    }
 }

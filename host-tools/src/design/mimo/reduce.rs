@@ -130,7 +130,7 @@ fn fitting(bal: &Balanced, other: &[MimoStateSpace], lag: usize, crits: &Criteri
         Some(Candidate { realized: (system, realized), states, method, load, errors, judged })
     };
     // Invariant: `lo` fits (0: nothing found yet), `hi` does not.
-    let (mut lo, mut hi) = (0, bal.hankel.len().min(2 * max_sections(at) + 1));
+    let (mut lo, mut hi) = (0, bal.hankel.len().min(2 * max_sections(at) + 1).min(bal.trusted + 1));
     while hi - lo > 1 {
         let mid = (lo + hi) / 2;
         match try_one(mid, Reduction::SingularPerturbation) {
@@ -141,7 +141,7 @@ fn fitting(bal: &Balanced, other: &[MimoStateSpace], lag: usize, crits: &Criteri
     if lo == 0 {
         return Vec::new();
     }
-    let top = (lo + ABOVE).min(bal.hankel.len() - 1);
+    let top = (lo + ABOVE).min(bal.hankel.len() - 1).min(bal.trusted);
     let tries: Vec<(usize, Reduction)> = (lo..=top)
         .flat_map(|states| [Reduction::SingularPerturbation, Reduction::Truncation].map(|m| (states, m)))
         .collect();
