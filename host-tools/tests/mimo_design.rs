@@ -37,12 +37,14 @@ use dynocomp::fit::Term;
 use dynocomp::frf::Frf;
 use dynocomp::io::signal_csv::SignalRecord;
 use dynocomp::metrics::{accuracy, accuracy_as_written, lowpass, sample_variance, scoring_band_hz, AsWritten};
+use dynocomp::numeric::lti::MimoStateSpace;
 use dynocomp::offline::matrix_smoother::{matrix_sidecar, smooth_matrix_record};
 use dynocomp::realize::mimo::verify_filter;
 use dynocomp::simulate::plate::{inverse_noise_floor, simulate_plate, FloorSpec, PlateSetup, PlateSim, PlateSimOutput};
 use dynocomp::simulate::SimParams;
 use dynocomp_core::kernel::AxisState;
 use dynocomp_core::mimo::{MimoFilter, MimoState};
+use nalgebra::DVector;
 use num_complex::Complex64;
 use std::f64::consts::PI;
 
@@ -474,16 +476,16 @@ fn design_with_prior(
 }
 
 /// `compensate --offline` runs on every 3x3 image `design` writes. The flat
-/// plate at 25.6 kHz designed for the record's force level (`--force-prior
+/// plate at 10.24 kHz designed for the record's force level (`--force-prior
 /// level`) has a zero-lag smoother whose Riccati doubling stops at a
-/// residual of 1.75e-9, over the limit of 1e-9: the smoother's Newton steps
+/// residual of 3.8e-9, over the limit of 1e-9: the smoother's Newton steps
 /// bring it under, and it estimates the force as well as the box's filter
 /// does (within 1.1 times on every axis, against the simulator's truth).
 /// Negative control: the doubling alone refuses the same equation.
 #[test]
 #[ignore = "a 3x3 design takes seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
 fn the_offline_smoother_refines_a_riccati_solution_the_doubling_leaves_over_the_limit() {
-    let fs = 25_600.0;
+    let fs = 10_240.0;
     let out = record("flat", fs);
     let md = design_with_prior(&out.frf, &out, force_record("flat", fs), true).unwrap();
     let image = build_matrix_image(&md, &out.frf, 2000.0, [0; 32]).unwrap();
@@ -510,11 +512,8 @@ fn the_offline_smoother_refines_a_riccati_solution_the_doubling_leaves_over_the_
 /// search's, before the split), the rows judged for flat forces take the
 /// 3x3 row on y, which the truth puts at over 1.25 times the per-axis row.
 ///
-/// With the split, the record's full 3x3 filter needs more sections than the
-/// kernel holds: its 3x3 block is reduced by balancing until it goes into
-/// an image, and the summary says so. Before, the design fell back to the
-/// unsplit model, which left x at 1.31 % against the truth (per axis 1.98 %,
-/// the reduced split model's filter 0.60 %): here x must beat 1.0 %.
+/// On the split model x must beat 1.0 % against the truth (per axis
+/// 1.98 %); the record's design on the unsplit model, the control, does not.
 #[test]
 #[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
 fn tall_rows_judged_for_the_cut() {
@@ -525,20 +524,16 @@ fn tall_rows_judged_for_the_cut() {
     eprintln!("{}", fig.line("tall-rec", fs));
     check_no_worse_and_floor(&fig, "tall, rows judged for the record");
     assert!(md.summary.notes.iter().any(|n| n.contains("tall-seed-8")), "{:?}", md.summary.notes);
-    let reduction = md.summary.reduction.as_ref().expect("the full filter does not fit the kernel: reduced");
-    assert!(reduction.used && reduction.full_not_realized.as_deref().is_some_and(|w| w.contains("kernel holds")));
-    eprintln!("{}", reduction.line());
-    assert!(reduction.line().starts_with("reduced for the image"), "{}", reduction.line());
     assert!(!md.summary.notes.iter().any(|n| n.contains("order search's model")), "{:?}", md.summary.notes);
-    assert!(fig.used[0] < 0.010, "x {:.3} % with the reduced split model", 100.0 * fig.used[0]);
+    assert!(fig.used[0] < 0.010, "x {:.3} % with the split model", 100.0 * fig.used[0]);
     // The control needs the model of the close base modes as one pair (the
     // fit's `unsplit`): the split model's 3x3 rows are good on every axis.
     let band_low = md.summary.axes.iter().map(|a| a.band_hz.0).fold(f64::INFINITY, f64::min);
     let vf = VfOptions { f_identified_hz: band_low, ..opts_vf() };
     let fit = with_weighted_matrix(&out.frf, |data| matrix_vector_fit(data, &vf)).unwrap().unwrap();
     let unsplit = fit.unsplit.expect("the tall part's fit splits its close base modes");
-    // Negative control of the reduction: the record's design on that model
-    // (what the design fell back to before) leaves x over 1.0 %.
+    // Negative control: the record's design on that model leaves x over
+    // 1.0 %.
     let fallback = evaluate(&design_on_model_for(&out, unsplit.clone(), Some(force_record("tall", fs))), &out);
     eprintln!("{}", fallback.line("tall-rec-unsplit", fs));
     assert!(fallback.used[0] >= 0.010, "negative control: x {:.3} % on the unsplit model", 100.0 * fallback.used[0]);
@@ -552,6 +547,55 @@ fn tall_rows_judged_for_the_cut() {
     // the CLI offcentre test checks the note is absent where it is large.
     let caveat = flat_md.summary.notes.iter().any(|n| n.contains("moderate") && n.contains("--force-record"));
     assert!(caveat, "no note on the flat choice: {:?}", flat_md.summary.notes);
+}
+
+/// A 3x3 filter the kernel cannot hold is reduced for the image: seed 6 at
+/// 25.6 kHz, designed for its record, needs 53 sections (the kernel holds
+/// 48). Its 3x3 block is reduced by balancing until it goes into an image,
+/// the summary says so, and against the simulator's truth every 3x3 row is
+/// within 1.2 times the full filter (run in f64 offline; measured: x 1.10,
+/// z 0.97) and no worse than per axis. Negative control: the filter reduced
+/// to a third of that order misses the bound (x 2.6 times).
+#[test]
+#[ignore = "a 3x3 design takes seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
+fn a_3x3_filter_the_kernel_cannot_hold_is_reduced_for_the_image() {
+    let fs = 25_600.0;
+    let out = record("6", fs);
+    let md = design_for_record(&out.frf, &out, force_record("6", fs)).unwrap();
+    let reduction = md.summary.reduction.as_ref().expect("the full filter does not fit the kernel: reduced");
+    eprintln!("{}", reduction.line());
+    assert!(reduction.used && reduction.full_not_realized.as_deref().is_some_and(|w| w.contains("kernel holds")));
+    assert!(reduction.line().starts_with("reduced for the image"), "{}", reduction.line());
+    let fig = evaluate(&md, &out);
+    eprintln!("{}", fig.line("6-rec", fs));
+    check_no_worse_and_floor(&fig, "seed 6, reduced for the image");
+    // The full filter, in f64 (offline: the kernel cannot hold it).
+    let lag = md.summary.latency;
+    let full_nrmse = |c: &MimoStateSpace| -> [f64; 3] {
+        let n = out.measured[0].len();
+        let input: Vec<DVector<f64>> = (0..n).map(|k| DVector::from_fn(3, |i, _| out.measured[i][k])).collect();
+        let y = c.simulate(&input);
+        std::array::from_fn(|i| score(&y.iter().map(|v| v[i]).collect::<Vec<_>>(), &out, i, lag))
+    };
+    let full_compensator = md.full_compensator.as_ref().expect("the full filter beside the reduced one");
+    let full = full_nrmse(full_compensator);
+    eprintln!(
+        "full filter (f64) x / y / z: {:.3} / {:.3} / {:.3} %",
+        100.0 * full[0],
+        100.0 * full[1],
+        100.0 * full[2]
+    );
+    for i in 0..3 {
+        if md.rows[i] == RowSource::Matrix {
+            assert!(fig.used[i] <= 1.2 * full[i], "axis {i}: {:?} against the full filter {full:?}", fig.used);
+        }
+    }
+    // Negative control: the whole filter reduced to a third of the 3x3
+    // block's order.
+    let bal = dynocomp::numeric::balanced::balance(full_compensator).unwrap();
+    let third = full_nrmse(&bal.reduce(reduction.states / 3, reduction.method).unwrap());
+    eprintln!("a third of the order (f64): {third:?}");
+    assert!((0..3).any(|i| md.rows[i] == RowSource::Matrix && third[i] > 1.2 * full[i]), "{third:?} against {full:?}");
 }
 
 /// The rows judged under flat forces and under a record's force spectrum,

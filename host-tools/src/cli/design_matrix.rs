@@ -200,6 +200,14 @@ fn summary_text(args: &DesignArgs, md: &MatrixDesign, id: u32, load: &LoadReport
             f.modes.len(),
             rows.join(", ")
         );
+        if !f.dropped_hz.is_empty() {
+            let hz: Vec<String> = f.dropped_hz.iter().map(|f| format!("{f:.0}")).collect();
+            let _ = writeln!(
+                t,
+                "  pole pairs at {} Hz dropped from the fit: the nine FRFs' lines do not support them (BIC)",
+                hz.join(", ")
+            );
+        }
     }
     t.push_str(&crosstalk_and_predictions(s));
     if let Some(k) = &s.kalman {

@@ -97,6 +97,9 @@ pub struct MatrixFitFigures {
     pub entry_error: [[f64; 3]; 3],
     /// Natural frequencies (Hz) and damping ratios of the pairs.
     pub modes: Vec<(f64, f64)>,
+    /// Natural frequencies (Hz) of the pairs the fit dropped because the
+    /// lines do not support them ([`crate::fit::matrix::drop_unsupported_pairs`]).
+    pub dropped_hz: Vec<f64>,
 }
 
 /// The peak crosstalk |G_ij|/|G_ii| over the compensated band (coherent
@@ -297,6 +300,7 @@ struct GivenModel {
     model: MatrixModel,
     weighted_rms: f64,
     order_trace: Vec<(usize, f64)>,
+    dropped_hz: Vec<f64>,
 }
 
 /// One latency's designs.
@@ -350,7 +354,13 @@ pub fn design_matrix_with_model(
     r: [f64; 3],
     opts: &MatrixOptions,
 ) -> Result<MatrixDesign> {
-    design(frf, r, opts, Some(GivenModel { model, weighted_rms: f64::NAN, order_trace: Vec::new() }), Vec::new())
+    design(
+        frf,
+        r,
+        opts,
+        Some(GivenModel { model, weighted_rms: f64::NAN, order_trace: Vec::new(), dropped_hz: Vec::new() }),
+        Vec::new(),
+    )
 }
 
 /// The design on the fit of `frf`, or on the `given` model, after the
@@ -747,12 +757,22 @@ fn prepare_matrix(
     // A real pole below the first coherent line of the bands is not kept.
     let vf = VfOptions { f_identified_hz: bands.iter().map(|b| b.0).fold(f64::INFINITY, f64::min), ..vf.clone() };
     let fit = with_weighted_matrix(frf, |data| matrix_vector_fit(data, &vf))?.context("fit of the 3x3 matrix")?;
-    let split = GivenModel { model: fit.model, weighted_rms: fit.weighted_rms, order_trace: fit.order_trace };
+    let split = GivenModel {
+        model: fit.model,
+        weighted_rms: fit.weighted_rms,
+        order_trace: fit.order_trace,
+        dropped_hz: fit.dropped_hz,
+    };
     let Some(unsplit) = fit.unsplit else {
         return prepare_model(frf, bands, fs, threshold, split);
     };
     let rms = with_weighted_matrix(frf, |data| data.weighted_rms(&unsplit))?;
-    let unsplit = GivenModel { model: unsplit, weighted_rms: rms, order_trace: split.order_trace.clone() };
+    let unsplit = GivenModel {
+        model: unsplit,
+        weighted_rms: rms,
+        order_trace: split.order_trace.clone(),
+        dropped_hz: fit.unsplit_dropped_hz,
+    };
     // The split model only where its direct entries are nearer the
     // independent per-axis fits than the unsplit model's, and the chain
     // takes it (a discrete model or realization it refuses falls back).
@@ -792,7 +812,7 @@ fn direct_distance(
 /// [`prepare_matrix`] from the model: its error against the measurement,
 /// the discrete model and the plant.
 fn prepare_model(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, threshold: f64, given: GivenModel) -> Result<MatrixPrep> {
-    let GivenModel { model, weighted_rms, order_trace } = given;
+    let GivenModel { model, weighted_rms, order_trace, dropped_hz } = given;
     let entries: Vec<_> = (0..9).map(|e| frf.entry(e / 3, e % 3).expect("complete")).collect();
     let mut entry_error = [[f64::NAN; 3]; 3];
     for (e, ent) in entries.iter().enumerate() {
@@ -820,8 +840,8 @@ fn prepare_model(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, threshold: f64, gi
     let grid = crate::design::criterion::criterion_grid(&[band]);
     let lines: Vec<(f64, CMatrix3)> = grid.iter().map(|f| (*f, model.frf(*f))).collect();
     let plant = plant_states(&dm, &lines).context("plant of the 3x3 model")?;
-    let figures =
-        MatrixFitFigures { order: model.order(), weighted_rms, order_trace, entry_error, modes: model.modes() };
+    let modes = model.modes();
+    let figures = MatrixFitFigures { order: model.order(), weighted_rms, order_trace, entry_error, modes, dropped_hz };
     Ok(MatrixPrep { fit: figures, model, dm, matching, plant, unsplit: None })
 }
 
