@@ -7,6 +7,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/../qemu"
 target_dir="${CARGO_TARGET_DIR:-$PWD/../target}/qemu"
+# The firmware's code generation (qemu/'s release profile, fat LTO): a fast
+# host build's CARGO_PROFILE_* overrides (CI sets them) would count another.
+while read -r v; do unset "$v"; done < <(env | sed -n 's/^\(CARGO_PROFILE_[A-Z0-9_]*\)=.*/\1/p')
 # RUSTFLAGS replaces the repository's firmware link flags (.cargo/config.toml
 # adds defmt.x, which these programs do not use): only cortex-m-rt's link.x.
 CARGO_TARGET_DIR="$target_dir" RUSTFLAGS="-C link-arg=-Tlink.x" \

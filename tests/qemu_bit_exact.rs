@@ -191,15 +191,22 @@ fn build_target_program() -> PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let target_dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("qemu-target");
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let out = Command::new(cargo)
+    let mut build = Command::new(cargo);
+    build
         .current_dir(root.join("qemu"))
         .args(["build", "--release", "--target", "thumbv7em-none-eabihf", "--bin", "kernel_io"])
         .env("CARGO_TARGET_DIR", &target_dir)
         // Replaces the repository's firmware link flags (defmt.x), see scripts/qemu_icount.sh.
         .env("RUSTFLAGS", "-C link-arg=-Tlink.x")
-        .env_remove("CARGO_ENCODED_RUSTFLAGS")
-        .output()
-        .expect("run cargo to build qemu/");
+        .env_remove("CARGO_ENCODED_RUSTFLAGS");
+    // The firmware's code generation (qemu/'s release profile, fat LTO), not
+    // a fast host build's CARGO_PROFILE_* overrides (CI sets them).
+    for (k, _) in std::env::vars_os() {
+        if k.to_str().is_some_and(|k| k.starts_with("CARGO_PROFILE_")) {
+            build.env_remove(k);
+        }
+    }
+    let out = build.output().expect("run cargo to build qemu/");
     assert!(
         out.status.success(),
         "building qemu/ for thumbv7em-none-eabihf failed (is the target installed? `rustup target add thumbv7em-none-eabihf`):\n{}",
