@@ -61,7 +61,9 @@ fn factor(m: &DMatrix<f64>) -> DMatrix<f64> {
 /// The balanced realization of the stable system `ss` (square-root method):
 /// Gramians by Smith doubling, P = Z_c Z_cᵀ, Q = Z_o Z_oᵀ, the SVD
 /// Z_oᵀ Z_c = U Σ Vᵀ, and T = Z_c V Σ^{−1/2}, T⁻¹ = Σ^{−1/2} Uᵀ Z_oᵀ over the
-/// σ above [`HANKEL_FLOOR`]·σ_1, after [`scale_states`]. The Gramians are
+/// σ above [`HANKEL_FLOOR`]·σ_1; where not every state balances in the
+/// given coordinates, also after [`scale_states`], and the one with more
+/// trusted states is kept. The Gramians are
 /// solved with iterative refinement ([`stein_refined`]). The balanced
 /// system's Gramians are checked against diag(σ) state by state: the
 /// leading states within [`BALANCED_TOL`] are [`Balanced::trusted`] (the
@@ -69,7 +71,16 @@ fn factor(m: &DMatrix<f64>) -> DMatrix<f64> {
 /// Gramians, amplified by σ^{−1/2}). An error when A is not stable, the
 /// Gramians do not converge, or not even the first state is balanced.
 pub fn balance(ss: &MimoStateSpace) -> Result<Balanced> {
-    balance_as_given(scale_states(ss).as_ref().unwrap_or(ss))
+    let given = balance_as_given(ss);
+    if given.as_ref().is_ok_and(|b| b.trusted == b.hankel.len()) {
+        return given;
+    }
+    let Some(scaled) = scale_states(ss).map(|s| balance_as_given(&s)) else { return given };
+    match (given, scaled) {
+        (Ok(g), Ok(s)) => Ok(if s.trusted > g.trusted { s } else { g }),
+        (Ok(g), Err(_)) => Ok(g),
+        (Err(_), scaled) => scaled,
+    }
 }
 
 /// [`balance`] in the coordinates of `ss`, without [`scale_states`].
