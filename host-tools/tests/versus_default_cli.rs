@@ -8,11 +8,17 @@
 mod cli_common;
 use cli_common::{dynocomp, example};
 use dynocomp::io::signal_csv::read_signal_csv;
-use dynocomp::metrics::accuracy;
+use dynocomp::metrics::{accuracy, accuracy_as_written};
 
 /// NRMSE of each axis of image `img` on the example's record against its
 /// true force (band-limited, latency removed).
 fn delivered(img: &str, tag: &str) -> Vec<f64> {
+    delivered_both(img, tag).0
+}
+
+/// [`delivered`], and the output as written against the truth through the
+/// anti-aliasing filter alone (no band limit).
+fn delivered_both(img: &str, tag: &str) -> (Vec<f64>, Vec<f64>) {
     let out = cli_common::tmp("versus-default", &format!("{tag}.csv"));
     let (ok, _, err) = dynocomp(&[
         "compensate",
@@ -27,7 +33,22 @@ fn delivered(img: &str, tag: &str) -> Vec<f64> {
     let (comp, truth) =
         (read_signal_csv(&out).unwrap(), read_signal_csv(std::path::Path::new(&example("true_force.csv"))).unwrap());
     let band = dynocomp::metrics::scoring_band_hz(51_200.0);
-    (0..3).map(|a| accuracy(comp.channel(a).unwrap(), truth.channel(a).unwrap(), 51_200.0, band).nrmse).collect()
+    let (c, t) = (|a| comp.channel(a).unwrap(), |a| truth.channel(a).unwrap());
+    let limited = (0..3).map(|a| accuracy(c(a), t(a), 51_200.0, band).nrmse).collect();
+    let written = (0..3).map(|a| accuracy_as_written(c(a), t(a), 51_200.0, band).output.nrmse).collect();
+    (limited, written)
+}
+
+/// Every axis of `asked` within 1.5x of the default image's figure `default`.
+fn within_1_5x(asked: &[f64], default: &[f64], what: &str) {
+    for a in 0..3 {
+        assert!(
+            asked[a] <= 1.5 * default[a],
+            "axis {a}: {what} {:.3} % vs default {:.3} %",
+            100.0 * asked[a],
+            100.0 * default[a]
+        );
+    }
 }
 
 #[test]
@@ -66,16 +87,21 @@ fn band_fitting_is_never_silently_worse_than_the_default() {
         let replaced = ax["replaced_by_default"].as_bool().unwrap();
         assert_eq!(replaced, default * dynocomp::design::versus_default::MARGIN < asked, "{ax}");
     }
-    let (d_def, d_band) = (delivered(&def, "def"), delivered(&band, "band"));
+    let ((d_def, w_def), d_band) = (delivered_both(&def, "def"), delivered(&band, "band"));
     eprintln!("on the true force: default {d_def:?}, with --spindle-rpm 16500 --teeth 4 {d_band:?}");
-    for a in 0..3 {
-        assert!(
-            d_band[a] <= 1.5 * d_def[a],
-            "axis {a}: band-fitted image {:.3} % vs default {:.3} %",
-            100.0 * d_band[a],
-            100.0 * d_def[a]
-        );
-    }
+    within_1_5x(&d_band, &d_def, "band-fitted image");
+    // The judge counts what each design writes above the band (the default
+    // is quiet there): one harmonic band, whose z design matched the
+    // default in band (0.609 against 0.607 % on the true force) with
+    // q = 1.3e13, was kept by an in-band judge and wrote 57 % as written
+    // against the default's 5.0 %. Now no axis is much worse as written.
+    let harmonic = img("harmonic.dcimg");
+    let mut a = base(&harmonic);
+    a.extend(["--spindle-rpm", "16500", "--teeth", "4", "--harmonics", "1"].map(String::from));
+    run(a);
+    let (_, w_harm) = delivered_both(&harmonic, "harmonic");
+    eprintln!("as written: default {w_def:?}, one harmonic band {w_harm:?}");
+    within_1_5x(&w_harm, &w_def, "one harmonic band's image as written");
     // The paper's method is kept, with a warning where the default is better;
     // the warning is right where the true force says the paper is worse.
     let mut a = base(&paper);

@@ -187,7 +187,8 @@ fn against_default(
             // No default design to prefer: the asked-for one stands.
             continue;
         };
-        let v = crate::design::versus_default::compare(d, &def, s.opts.force_rms, args.input.fs);
+        let oob = s.opts.above_band.out_of_band_weight();
+        let v = crate::design::versus_default::compare(d, &def, s.opts.force_rms, args.input.fs, oob);
         let replace = v.default_better && !paper;
         if replace {
             *d = def;
