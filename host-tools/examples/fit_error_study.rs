@@ -4,8 +4,10 @@
 //! error, F·(G/Ĝ − 1) over the scoring band (F the band-limited truth's
 //! spectrum, G the simulator's true response), relative to the truth's
 //! std and split into the mean (0 Hz) and the rest, for Ĝ = the design's
-//! fit and for Ĝ = the true poles with residues fitted to the same impact
-//! test (what the lines allow when the poles are right).
+//! fit, for the same fit without its maximum-likelihood refinement
+//! (vector fitting's poles, [`dynocomp::fit::refine`]) and for Ĝ = the true
+//! poles with residues fitted to the same impact test (what the lines allow
+//! when the poles are right).
 //!
 //! With `--orders`, also each order of the plain fit ([`fit_order`]):
 //! weighted RMS against the lines, static gain and model error; with
@@ -76,17 +78,24 @@ fn main() -> Result<()> {
         let modes: Vec<(f64, f64, f64)> = s.dyno.axis(a).modes.iter().map(|m| (m.fn_hz, m.zeta, m.residue)).collect();
         let true_model = PoleResidueModel::from_modes(&modes);
         let oracle = refit_kept(freq, h, &w, &true_model, &vec![true; true_model.terms.len()])?;
+        let mut plain_opts = opts.clone();
+        plain_opts.vf.refine = false;
+        let unrefined = dynocomp::design::axis::fitted_model(freq, frf, &plain_opts)?;
         let off = |m: &PoleResidueModel| (truth_g(0.0) / m.frf(0.0) - 1.0).norm();
         let (dc_fit, ac_fit) = model_error(&s.truth[a], fs, band, &|f| truth_g(f) / fitted.frf(f));
+        let (dc_un, ac_un) = model_error(&s.truth[a], fs, band, &|f| truth_g(f) / unrefined.frf(f));
         let (dc_or, ac_or) = model_error(&s.truth[a], fs, band, &|f| truth_g(f) / oracle.frf(f));
         println!(
-            "seed {seed} {ax} ({kind}, {fs} Hz, {} Hz lines, {} true modes): fit order {} mean {:.3} % rest {:.3} % (G(0) off {:.2e}); true poles mean {:.3} % rest {:.3} % (G(0) off {:.2e})",
+            "seed {seed} {ax} ({kind}, {fs} Hz, {} Hz lines, {} true modes): fit order {} mean {:.3} % rest {:.3} % (G(0) off {:.2e}); unrefined mean {:.3} % rest {:.3} % (G(0) off {:.2e}); true poles mean {:.3} % rest {:.3} % (G(0) off {:.2e})",
             case.frf_df_hz,
             modes.len(),
             fitted.order(),
             100.0 * dc_fit,
             100.0 * ac_fit,
             off(&fitted),
+            100.0 * dc_un,
+            100.0 * ac_un,
+            off(&unrefined),
             100.0 * dc_or,
             100.0 * ac_or,
             off(&oracle),

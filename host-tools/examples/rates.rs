@@ -35,6 +35,7 @@ fn main() -> Result<()> {
         match a.as_str() {
             "--quick" => quick = true,
             "--exact-frf" => run.exact_frf = true,
+            "--no-refine" => run.refine_fit = false,
             "--force-spectrum" => run.force_spectrum = true,
             "--force-level" => (run.force_spectrum, run.force_level_only) = (true, true),
             "--chatter" => chatter_hz = Some(args.next().context("--chatter needs Hz")?.parse().context("--chatter: not a number")?),
@@ -45,7 +46,7 @@ fn main() -> Result<()> {
                 run.discretization = dynocomp::design::discretize::Discretization::from_name(&v)
                     .ok_or_else(|| anyhow::anyhow!("--discretization {v}: expected fit, foh or zoh"))?;
             }
-            _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum | --force-level] [--chatter HZ] [--fitted-static-gain])"),
+            _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum | --force-level] [--chatter HZ] [--fitted-static-gain] [--no-refine])"),
         }
     }
     let list = if quick { quick_cases() } else { cases() };

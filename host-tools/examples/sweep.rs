@@ -16,7 +16,11 @@
 //! With `--exact-frf` every impact test is noise-free (the FRF is the
 //! chain's G), which separates the design's misses from the impact test's.
 //!
-//! usage: cargo run --release -p dynocomp --example sweep -- [N] [--exact-frf]   (default 100)
+//! With `--no-refine` the fits stop at vector fitting's model (no
+//! maximum-likelihood refinement, [`dynocomp::fit::refine`]), for the
+//! before/after figures in one run.
+//!
+//! usage: cargo run --release -p dynocomp --example sweep -- [N] [--exact-frf] [--no-refine]   (default 100)
 use anyhow::Result;
 use dynocomp::design::image::build_image;
 use dynocomp::eval::rates::{design_options, run_case, scoring_band_hz, CaseResult, RateCase, RunOptions};
@@ -26,8 +30,9 @@ use dynocomp::frf::axis_name;
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let exact_frf = args.iter().any(|a| a == "--exact-frf");
+    let refine_fit = !args.iter().any(|a| a == "--no-refine");
     let n: u64 = args.iter().find(|a| !a.starts_with("--")).map(|a| a.parse()).transpose()?.unwrap_or(100);
-    let run = RunOptions { exact_frf, ..RunOptions::default() };
+    let run = RunOptions { exact_frf, refine_fit, ..RunOptions::default() };
     let (mut with_image, mut axes, mut within_13, mut within_2, mut written) = (0, 0, 0, 0, 0);
     // Axes warned of a non-minimum-phase zero (design::phase_limit), and
     // axes whose box output is worse than raw: [warned][worse].

@@ -220,6 +220,9 @@ pub struct RunOptions {
     pub static_gain: crate::design::discretize::StaticGain,
     /// The output above the band ([`DesignOptions::above_band`]).
     pub above_band: crate::design::above_band::AboveBand,
+    /// The fit refined to the maximum-likelihood model of its order
+    /// ([`crate::fit::vf::VfOptions::refine`]; off for before/after studies).
+    pub refine_fit: bool,
 }
 
 impl Default for RunOptions {
@@ -232,6 +235,7 @@ impl Default for RunOptions {
             force_level_only: false,
             static_gain: crate::design::discretize::StaticGain::Exact,
             above_band: crate::design::above_band::AboveBand::Quiet,
+            refine_fit: true,
         }
     }
 }
@@ -247,6 +251,7 @@ pub fn design_options(fs_hz: f64, run: &RunOptions) -> DesignOptions {
         discretization: run.discretization,
         discrete_static_gain: run.static_gain,
         above_band: run.above_band,
+        vf: crate::fit::vf::VfOptions { refine: run.refine_fit, ..Default::default() },
         ..Default::default()
     }
 }

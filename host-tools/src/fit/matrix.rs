@@ -11,9 +11,9 @@ use std::f64::consts::PI;
 
 use super::vf::{
     basis_row, best_surrogate, contributes, edge_pairs, kept_poles, lstsq, max_order_for, min_lines, n_cols,
-    relocation_step, residues, sigma_zeros, spurious, starting_poles, to_model, Pole, VfOptions,
+    relocation_step, residues, sigma_zeros, starting_poles, to_model, Pole, VfOptions,
 };
-use super::{PoleResidueModel, Term};
+use super::{spurious, PoleResidueModel, Term};
 
 /// Entries of the 3x3 matrix, row by row: entry `e` is G_ij with i = e / 3, j = e % 3.
 pub const ENTRIES: usize = 9;
@@ -278,7 +278,7 @@ fn relocate_from(data: &MatrixData, mut poles: Vec<Pole>, opts: &VfOptions) -> R
 pub const BIC_PATIENCE: usize = 30;
 
 /// Fit with the order chosen by the Bayesian information criterion, then
-/// drop the terms that are spurious ([`super::vf::spurious`]) or below
+/// drop the terms that are spurious ([`super::spurious`]) or below
 /// 10⁻³ of |G| in every entry, and refit the residues.
 ///
 /// The order: 2, 4, … up to `opts.max_order` (fitted in parallel), until

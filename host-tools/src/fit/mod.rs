@@ -7,6 +7,7 @@
 pub mod linalg;
 pub mod matrix;
 pub mod modes;
+pub mod refine;
 pub mod rfp;
 pub mod vf;
 
@@ -105,6 +106,36 @@ impl PoleResidueModel {
             .collect();
         m.sort_by(|a, b| a.0.total_cmp(&b.0));
         m
+    }
+}
+
+/// Damping below which a fitted pair is taken as spurious: no mounted
+/// dynamometer or machine mode is that lightly damped (real ones: 1-6 %).
+pub const MIN_MODE_DAMPING: f64 = 1e-3;
+/// Largest damping ratio of a physical mode: a fitted pair more heavily
+/// damped is a background term of the fit (the course of Ĝ below or above
+/// the lines), not a mode.
+pub const MAX_MODE_DAMPING: f64 = 0.2;
+/// Near the band edge (above this fraction of f_max) a pair must be damped
+/// at least [`EDGE_MODE_DAMPING`]: VF parks poles there to absorb the
+/// truncation of out-of-band modes.
+pub(crate) const EDGE_FRACTION: f64 = 0.97;
+pub(crate) const EDGE_MODE_DAMPING: f64 = 5e-3;
+
+/// A term the data cannot identify (dropped by the fits' skim): a real pole or a
+/// pair below the lowest identified line `f_low` (a near-integrator, or a
+/// resonance no line saw, bending Ĝ where the mean force is), a pair damped
+/// less than [`MIN_MODE_DAMPING`], or less than
+/// [`EDGE_MODE_DAMPING`] above [`EDGE_FRACTION`] of `f_top` (Hz).
+pub(crate) fn spurious(t: &Term, f_low: f64, f_top: f64) -> bool {
+    match *t {
+        Term::Real { pole, .. } => pole.abs() / (2.0 * PI) < f_low,
+        Term::Pair { pole, .. } => {
+            let wn = pole.norm();
+            let zeta = -pole.re / wn;
+            let f_n = wn / (2.0 * PI);
+            f_n < f_low || zeta < MIN_MODE_DAMPING || (f_n > EDGE_FRACTION * f_top && zeta < EDGE_MODE_DAMPING)
+        }
     }
 }
 

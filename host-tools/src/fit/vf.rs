@@ -10,7 +10,7 @@ use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
 use std::f64::consts::PI;
 
-use super::{PoleResidueModel, Term};
+use super::{spurious, PoleResidueModel, Term, EDGE_FRACTION, EDGE_MODE_DAMPING};
 
 /// Options of the fit.
 #[derive(Clone, Debug)]
@@ -29,11 +29,21 @@ pub struct VfOptions {
     /// e.g. the impact test's first coherent line: a real pole below it is
     /// dropped as spurious ([`spurious`]).
     pub f_identified_hz: f64,
+    /// Refine the chosen model to the maximum-likelihood one of its order
+    /// ([`super::refine::refine`]). Off only for studies and controls.
+    pub refine: bool,
 }
 
 impl Default for VfOptions {
     fn default() -> Self {
-        VfOptions { max_order: 24, iterations: 8, improvement_tol: 0.03, decimate: 4, f_identified_hz: 0.0 }
+        VfOptions {
+            max_order: 24,
+            iterations: 8,
+            improvement_tol: 0.03,
+            decimate: 4,
+            f_identified_hz: 0.0,
+            refine: true,
+        }
     }
 }
 
@@ -389,6 +399,8 @@ pub struct OrderFits<'a> {
     weights: &'a [f64],
     /// [`VfOptions::f_identified_hz`].
     f_identified_hz: f64,
+    /// [`VfOptions::refine`].
+    refine: bool,
     /// `(order, weighted_rms)` of every order tried.
     trace: Vec<(usize, f64)>,
     /// The unskimmed models of the orders a choice may take, in the order
@@ -442,7 +454,15 @@ impl<'a> OrderFits<'a> {
         models.sort_by(|a, b| key(a).partial_cmp(&key(b)).unwrap_or(std::cmp::Ordering::Equal));
         let candidates =
             models.into_iter().filter(|m| m.2 <= MAX_ACCEPTED_ERROR_RATIO * best).map(|m| (m.1, None)).collect();
-        Ok(OrderFits { freq_hz, h, weights, f_identified_hz: opts.f_identified_hz, trace, candidates })
+        Ok(OrderFits {
+            freq_hz,
+            h,
+            weights,
+            f_identified_hz: opts.f_identified_hz,
+            refine: opts.refine,
+            trace,
+            candidates,
+        })
     }
 
     /// The choice of [`vector_fit_accepting`] for `accept`: the first
@@ -452,7 +472,12 @@ impl<'a> OrderFits<'a> {
         let mut taken = None;
         for (raw, skimmed) in &mut self.candidates {
             if skimmed.is_none() {
-                *skimmed = Some(skim(freq_hz, h, weights, self.f_identified_hz, raw.clone())?);
+                let mut m = skim(freq_hz, h, weights, self.f_identified_hz, raw.clone())?;
+                if self.refine {
+                    let f_low = freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0).max(self.f_identified_hz);
+                    m = super::refine::refine(freq_hz, h, weights, &m, f_low)?;
+                }
+                *skimmed = Some(m);
             }
             if skimmed.as_ref().is_some_and(accept) {
                 taken = skimmed.clone();
@@ -466,32 +491,6 @@ impl<'a> OrderFits<'a> {
         };
         let e = weighted_rms(&model, freq_hz, h, weights);
         Ok(VfResult { model, weighted_rms: e, order_trace: self.trace.clone() })
-    }
-}
-
-/// Damping below which a fitted pair is taken as spurious: no mounted
-/// dynamometer or machine mode is that lightly damped (real ones: 1-6 %).
-pub const MIN_MODE_DAMPING: f64 = 1e-3;
-/// Near the band edge (above this fraction of f_max) a pair must be damped
-/// at least [`EDGE_MODE_DAMPING`]: VF parks poles there to absorb the
-/// truncation of out-of-band modes.
-const EDGE_FRACTION: f64 = 0.97;
-const EDGE_MODE_DAMPING: f64 = 5e-3;
-
-/// A term the data cannot identify (skimmed by [`skim`]): a real pole or a
-/// pair below the lowest identified line `f_low` (a near-integrator, or a
-/// resonance no line saw, bending Ĝ where the mean force is), a pair damped
-/// less than [`MIN_MODE_DAMPING`], or less than
-/// [`EDGE_MODE_DAMPING`] above [`EDGE_FRACTION`] of `f_top` (Hz).
-pub(crate) fn spurious(t: &Term, f_low: f64, f_top: f64) -> bool {
-    match *t {
-        Term::Real { pole, .. } => pole.abs() / (2.0 * PI) < f_low,
-        Term::Pair { pole, .. } => {
-            let wn = pole.norm();
-            let zeta = -pole.re / wn;
-            let f_n = wn / (2.0 * PI);
-            f_n < f_low || zeta < MIN_MODE_DAMPING || (f_n > EDGE_FRACTION * f_top && zeta < EDGE_MODE_DAMPING)
-        }
     }
 }
 

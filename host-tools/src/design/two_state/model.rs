@@ -23,9 +23,9 @@ fn list(f: &[f64]) -> String {
     f.iter().map(|v| format!("{v:.0}")).collect::<Vec<_>>().join(", ")
 }
 
-/// Largest damping ratio of a physical mode ([`pair`]); a fitted pair more
-/// heavily damped is a background term of the fit.
-pub const PHYSICAL_MAX_ZETA: f64 = 0.2;
+/// Largest damping ratio of a physical mode ([`pair`]):
+/// [`crate::fit::MAX_MODE_DAMPING`].
+pub const PHYSICAL_MAX_ZETA: f64 = crate::fit::MAX_MODE_DAMPING;
 
 /// Smallest |modal share| of a physical mode relative to the model's
 /// largest ([`pair`]); a pair with less is a background term of the fit.
