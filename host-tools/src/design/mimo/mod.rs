@@ -878,8 +878,21 @@ fn round(
     let crit = &crits.model;
     let judge = &crits.judge;
     let opts = DesignOptions { lag, ..d.clone() };
-    let per_axis: Vec<Option<AxisDesign>> =
-        prepared.iter().map(|p| p.as_ref().ok().and_then(|p| design_prepared(p, &opts).ok())).collect();
+    // Why an axis has no per-axis design at this latency (its fit's error
+    // is a note of its own).
+    let mut per_axis_missing: [Option<String>; 3] = Default::default();
+    let per_axis: Vec<Option<AxisDesign>> = prepared
+        .iter()
+        .zip(&mut per_axis_missing)
+        .map(|(p, why)| match p.as_ref().map(|p| design_prepared(p, &opts)) {
+            Ok(Ok(a)) => Some(a),
+            Ok(Err(e)) => {
+                *why = Some(format!("{e:#}"));
+                None
+            }
+            Err(_) => None,
+        })
+        .collect();
     let (matrix, matrix_error) = match prep.map(|p| design_3x3(p, crit, r, lag, d)) {
         Some(Ok(m)) => (Some(m), None),
         Some(Err(e)) => (None, Some(format!("no 3x3 Kalman design at latency {lag}: {e:#}"))),
@@ -898,7 +911,7 @@ fn round(
                 .as_ref()
                 .zip(h_matrix.as_ref())
                 .map(|((_, _, ng), h)| (crit.row_error(i, lag, h), ng[i], judge.row_error(i, lag, h)));
-            axis_prediction(i, crit, per, mat)
+            axis_prediction(i, crit, per, mat, per_axis_missing[i].as_deref())
         })
         .collect();
     let rows = std::array::from_fn(|i| axes[i].source);
@@ -908,13 +921,19 @@ fn round(
 /// Output axis i's predictions and its row: the one the judge gives less
 /// error ([`Criteria`]). `per`: the per-axis row's (model error, its own
 /// prediction, noise gain, judged error); `mat`: the 3x3 row's (model
-/// error, noise gain, judged error).
+/// error, noise gain, judged error); `per_axis_missing`: why the per-axis
+/// design failed at this latency.
 fn axis_prediction(
     i: usize,
     crit: &MatrixCriterion,
     per: Option<(RowError, f64, f64, RowError)>,
     mat: Option<(RowError, f64, RowError)>,
+    per_axis_missing: Option<&str>,
 ) -> AxisPrediction {
+    let no_per_axis = match per_axis_missing {
+        Some(why) => format!("3x3 row: no per-axis design at this latency ({why})"),
+        None => "3x3 row: no per-axis design".to_string(),
+    };
     let (source, chosen, noise_gain, reason) = match (per, mat) {
         (Some((_, _, _, pj)), Some((m, mng, mj))) if mj.error < pj.error => (
             RowSource::Matrix,
@@ -937,7 +956,7 @@ fn axis_prediction(
             ),
         ),
         (Some((p, _, png, _)), None) => (RowSource::PerAxis, p, png, "per-axis row: no 3x3 design".to_string()),
-        (None, Some((m, mng, _))) => (RowSource::Matrix, m, mng, "3x3 row: no per-axis design".to_string()),
+        (None, Some((m, mng, _))) => (RowSource::Matrix, m, mng, no_per_axis),
         (None, None) => (
             RowSource::PerAxis,
             RowError { error: f64::INFINITY, distortion: f64::INFINITY },
