@@ -123,7 +123,11 @@ fn design(frf: &Frf, out: &PlateSimOutput) -> anyhow::Result<MatrixDesign> {
 
 fn design_above(frf: &Frf, out: &PlateSimOutput, above_band: AboveBand) -> anyhow::Result<MatrixDesign> {
     let design = DesignOptions { fs_hz: out.params.fs_hz, above_band, ..Default::default() };
-    design_matrix(frf, noise(out), &MatrixOptions { design, load_limit_permille: box_limit(), ..Default::default() })
+    // MIMO_NO_REFINE: the 3x3 fit without its maximum-likelihood refinement
+    // (the per-axis fits keep theirs), for the studies' before-and-after.
+    let matrix_vf = std::env::var_os("MIMO_NO_REFINE").map(|_| opts_vf());
+    let opts = MatrixOptions { design, load_limit_permille: box_limit(), matrix_vf, ..Default::default() };
+    design_matrix(frf, noise(out), &opts)
 }
 
 /// [`design`] on the given 3x3 `model` instead of the fit of the record's FRF.
@@ -550,25 +554,48 @@ fn tall_rows_judged_for_the_cut() {
 }
 
 /// A 3x3 filter the kernel cannot hold is reduced for the image: seed 6 at
-/// 25.6 kHz, designed for its record, needs 53 sections (the kernel holds
-/// 48). Its 3x3 block is reduced by balancing until it goes into an image,
-/// the summary says so, and against the simulator's truth every 3x3 row is
-/// within 1.2 times the full filter (run in f64 offline; measured: x 1.10,
-/// z 0.97) and no worse than per axis. Negative control: the filter reduced
-/// to a third of that order misses the bound (x 2.6 times).
+/// 25.6 kHz, designed for its record on a fit of higher order than the
+/// BIC chooses (its poles and six well-damped pairs more, every residue
+/// fitted again to the nine entries), has a 3x3 block that goes into no
+/// image: it needs more sections than the kernel holds (48), or (as
+/// measured: 129 states) no realization of it verifies in f32. The block is reduced by balancing until it goes into an
+/// image, the summary says so, and against the simulator's truth every 3x3
+/// row is within 1.2 times the full filter (run in f64 offline) and no
+/// worse than per axis. Negative control: the filter reduced to a third of
+/// that order misses the bound.
 #[test]
 #[ignore = "a 3x3 design takes seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
 fn a_3x3_filter_the_kernel_cannot_hold_is_reduced_for_the_image() {
     let fs = 25_600.0;
     let out = record("6", fs);
-    let md = design_for_record(&out.frf, &out, force_record("6", fs)).unwrap();
+    let band_low = 8.0;
+    let vf = VfOptions { f_identified_hz: band_low, ..opts_vf() };
+    let fit = with_weighted_matrix(&out.frf, |data| matrix_vector_fit(data, &vf)).unwrap().unwrap();
+    let mut higher = fit.model.clone();
+    for f_hz in [600.0, 1100.0, 1700.0, 2400.0, 3100.0, 3700.0] {
+        let w = 2.0 * PI * f_hz;
+        let zeta: f64 = 0.15;
+        let pole = Complex64::new(-zeta * w, w * (1.0 - zeta * zeta).sqrt());
+        for e in &mut higher.entries {
+            e.terms.push(Term::Pair { pole, residue: Complex64::new(0.0, 0.0) });
+        }
+    }
+    let keep = vec![true; higher.entries[0].terms.len()];
+    let higher = with_weighted_matrix(&out.frf, |data| refit_kept(data, &higher, &keep)).unwrap().unwrap();
+    let md = design_on_model_for(&out, higher, Some(force_record("6", fs)));
     let reduction = md.summary.reduction.as_ref().expect("the full filter does not fit the kernel: reduced");
     eprintln!("{}", reduction.line());
-    assert!(reduction.used && reduction.full_not_realized.as_deref().is_some_and(|w| w.contains("kernel holds")));
+    let why = reduction.full_not_realized.as_deref().unwrap_or_default();
+    assert!(reduction.used && (why.contains("kernel holds") || why.contains("verifies in f32")), "{why}");
     assert!(reduction.line().starts_with("reduced for the image"), "{}", reduction.line());
     let fig = evaluate(&md, &out);
     eprintln!("{}", fig.line("6-rec", fs));
     check_no_worse_and_floor(&fig, "seed 6, reduced for the image");
+    // An axis without a per-axis design at the chosen latency says why (y
+    // here, as measured: its f32 filter does not verify at latency 8).
+    for (a, p) in md.summary.axes.iter().zip(&md.per_axis) {
+        assert!(p.is_some() || a.reason.contains("no per-axis design at this latency (axis"), "{}", a.reason);
+    }
     // The full filter, in f64 (offline: the kernel cannot hold it).
     let lag = md.summary.latency;
     let full_nrmse = |c: &MimoStateSpace| -> [f64; 3] {
@@ -682,6 +709,9 @@ fn seed_study() {
                         r.predicted,
                         r.reason
                     );
+                    if let Some(w) = &r.full_not_realized {
+                        eprintln!("    full filter not realized: {w}");
+                    }
                 }
                 if std::env::var_os("MIMO_STUDY_NOTES").is_some() {
                     md.summary.notes.iter().for_each(|n| eprintln!("    note: {n}"));
@@ -867,7 +897,9 @@ fn a_pole_below_the_first_coherent_line_does_not_bias_the_mean_force() {
 /// search fits them as one pair at every order, off by 5-6 % of the
 /// channel's force at the peak, where the cut's tooth-passing harmonics
 /// lie. The split (`fit::matrix::split_close_modes`) fits them as two: each
-/// within 0.3 Hz of the truth, the model's force error at the modes under
+/// pole within 0.5 Hz of the true one (|p̂ − p|/2π; measured 0.10 and
+/// 0.33 Hz, 0.31 and 0.18 Hz without the refinement; the half-power
+/// bandwidths are 8 Hz), the model's force error at the modes under
 /// 1.5 %, and against the simulator's true force x and y of the design at
 /// 25.6 kHz under 0.6 %. Negative controls: the order search's own model
 /// (the fit's `unsplit`) is over 4 % off at the modes and its design over
@@ -880,14 +912,27 @@ fn close_base_modes_are_fitted_as_two() {
     let fit = with_weighted_matrix(&out.frf, |data| matrix_vector_fit(data, &opts_vf())).unwrap().unwrap();
     assert!(fit.splits >= 1, "no split");
     let unsplit = fit.unsplit.clone().expect("the order search's model");
-    let pairs_near = |m: &MatrixModel, f: f64| {
-        (0..m.terms()).filter(|&k| m.pole(k).1 && (m.pole(k).0.im / (2.0 * PI) - f).abs() < 0.3).count()
+    // The simulator's base modes near 212 Hz: their poles (rad/s, Im > 0).
+    let truth: Vec<Complex64> =
+        out.cut_modal.modes.iter().filter(|m| (m.fn_hz - 212.5).abs() < 5.0).map(|m| m.pole()).collect();
+    assert_eq!(truth.len(), 2, "the tall part's two base modes: {:?}", out.cut_modal.modes);
+    let pairs_near = |m: &MatrixModel, p: Complex64| {
+        (0..m.terms()).filter(|&k| m.pole(k).1 && (m.pole(k).0 - p).norm() / (2.0 * PI) < 0.5).count()
     };
-    for f in [211.6, 213.4] {
-        assert_eq!(pairs_near(&fit.model, f), 1, "no pair within 0.3 Hz of the true mode at {f} Hz");
+    for m in [&fit.model, &unsplit] {
+        let near: Vec<String> = (0..m.terms())
+            .map(|k| m.pole(k))
+            .filter(|(p, pair)| *pair && (p.im / (2.0 * PI) - 212.5).abs() < 10.0)
+            .map(|(p, _)| format!("{:.2} Hz ζ {:.2e}", p.norm() / (2.0 * PI), -p.re / p.norm()))
+            .collect();
+        eprintln!("pairs near the base modes: {near:?}");
+    }
+    for p in &truth {
+        let f = p.norm() / (2.0 * PI);
+        assert_eq!(pairs_near(&fit.model, *p), 1, "no pole within 0.5 Hz of the true mode's at {f:.1} Hz");
     }
     assert_eq!(
-        pairs_near(&unsplit, 211.6) + pairs_near(&unsplit, 213.4),
+        truth.iter().map(|p| pairs_near(&unsplit, *p)).sum::<usize>(),
         0,
         "control: the unsplit model resolves them"
     );
@@ -923,7 +968,8 @@ fn close_base_modes_are_fitted_as_two() {
 }
 
 fn opts_vf() -> VfOptions {
-    VfOptions { max_order: MATRIX_MAX_ORDER, iterations: MATRIX_ITERATIONS, ..VfOptions::default() }
+    let refine = std::env::var_os("MIMO_NO_REFINE").is_none();
+    VfOptions { max_order: MATRIX_MAX_ORDER, iterations: MATRIX_ITERATIONS, refine, ..VfOptions::default() }
 }
 
 /// Random plate seed 1 at 25.6 kHz has modes above the impact test's last

@@ -13,7 +13,7 @@ use super::vf::{
     basis_row, best_surrogate, contributes, edge_pairs, kept_poles, lstsq, max_order_for, min_lines, n_cols,
     relocation_step, residues, sigma_zeros, starting_poles, to_model, Pole, VfOptions,
 };
-use super::{spurious, PoleResidueModel, Term};
+use super::{spurious, within_bandwidth, PoleResidueModel, Term};
 
 /// Entries of the 3x3 matrix, row by row: entry `e` is G_ij with i = e / 3, j = e % 3.
 pub const ENTRIES: usize = 9;
@@ -330,7 +330,7 @@ pub fn matrix_vector_fit(data: &MatrixData, opts: &VfOptions) -> Result<MatrixFi
         0 => (None, Vec::new()),
         _ => {
             let (m, dropped) = drop_unsupported_pairs(data, skim(data, opts.f_identified_hz, model)?, sigma2)?;
-            (Some(m), dropped)
+            (Some(refined(data, m, opts)?), dropped)
         }
     };
     let (model, dropped_hz) = drop_unsupported_pairs(data, skim(data, opts.f_identified_hz, split)?, sigma2)?;
@@ -338,11 +338,26 @@ pub fn matrix_vector_fit(data: &MatrixData, opts: &VfOptions) -> Result<MatrixFi
         0 => model,
         _ => prune_close_pairs(data, model, sigma2)?,
     };
+    let model = refined(data, model, opts)?;
     if !model.is_stable() {
         bail!("matrix vector fitting: the fitted model is unstable");
     }
     let weighted_rms = data.weighted_rms(&model);
     Ok(MatrixFit { weighted_rms, model, order_trace: trace, unsplit, splits, dropped_hz, unsplit_dropped_hz })
+}
+
+/// `model` refined to the maximum-likelihood model with its poles
+/// ([`super::refine::refine_common`]: the common poles and every entry's
+/// residues and direct term, terms an entry does without left out), where
+/// `opts.refine`.
+fn refined(data: &MatrixData, model: MatrixModel, opts: &VfOptions) -> Result<MatrixModel> {
+    if !opts.refine {
+        return Ok(model);
+    }
+    let f_low = data.freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0).max(opts.f_identified_hz);
+    let entries: Vec<(&[Complex64], &[f64])> = (0..ENTRIES).map(|e| (data.h[e], data.w[e])).collect();
+    let entries = super::refine::refine_common(data.freq_hz, &entries, &model.entries, f_low)?;
+    Ok(MatrixModel { entries })
 }
 
 impl MatrixData<'_> {
@@ -527,7 +542,7 @@ fn prune_close_pairs(data: &MatrixData, model: MatrixModel, sigma2: f64) -> Resu
     let poles: Vec<(Complex64, bool)> = (0..terms).map(|k| model.pole(k)).collect();
     let close = |a: usize, b: usize| {
         let (pa, pb) = (poles[a].0, poles[b].0);
-        poles[a].1 && poles[b].1 && (pa.im - pb.im).abs() < (-pa.re).max(-pb.re)
+        poles[a].1 && poles[b].1 && within_bandwidth(pa, pb)
     };
     // Clusters: connected components of `close`.
     let mut cluster: Vec<usize> = (0..terms).collect();

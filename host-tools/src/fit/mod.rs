@@ -139,6 +139,13 @@ pub(crate) fn spurious(t: &Term, f_low: f64, f_top: f64) -> bool {
     }
 }
 
+/// Whether two pairs' poles (rad/s, Im > 0) are close modes: the damped
+/// frequency of one lies within the other's half-power bandwidth,
+/// |Im a − Im b| < max(−Re a, −Re b).
+pub(crate) fn within_bandwidth(a: Complex64, b: Complex64) -> bool {
+    (a.im - b.im).abs() < (-a.re).max(-b.re)
+}
+
 /// Relative RMS error of a model Ĝ(f) (f in Hz) against measured lines,
 /// over the lines selected by `mask`: sqrt(mean(|Ĝ − G|² / |G|²)); NaN when
 /// no line is selected.
