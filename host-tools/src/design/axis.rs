@@ -538,7 +538,8 @@ fn fit_axis(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions, lines: &AxisLi
             // A real pole below the first coherent line is not kept: no line
             // there identifies it, and it would bend Ĝ where the mean force is.
             let f_identified_hz = if checked { f_coherent } else { opts.vf.f_identified_hz };
-            let vf_opts = VfOptions { f_identified_hz, ..opts.vf.clone() };
+            let f_ceiling_hz = crate::fit::refine::ceiling_hz(opts.fs_hz);
+            let vf_opts = VfOptions { f_identified_hz, f_ceiling_hz, ..opts.vf.clone() };
             let vf = vector_fit_accepting(freq_hz, &frf.frf, &weights, &vf_opts, &flat)
                 .with_context(|| format!("axis {name}: fit"))?;
             if !vf.model.is_stable() {

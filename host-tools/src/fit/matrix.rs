@@ -356,7 +356,7 @@ fn refined(data: &MatrixData, model: MatrixModel, opts: &VfOptions) -> Result<Ma
     }
     let f_low = data.freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0).max(opts.f_identified_hz);
     let entries: Vec<(&[Complex64], &[f64])> = (0..ENTRIES).map(|e| (data.h[e], data.w[e])).collect();
-    let entries = super::refine::refine_common(data.freq_hz, &entries, &model.entries, f_low)?;
+    let entries = super::refine::refine_common(data.freq_hz, &entries, &model.entries, f_low, opts.f_ceiling_hz)?;
     Ok(MatrixModel { entries })
 }
 

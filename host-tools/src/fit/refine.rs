@@ -31,6 +31,12 @@ use std::f64::consts::PI;
 
 use super::{spurious, within_bandwidth, PoleResidueModel, Term, MAX_MODE_DAMPING};
 
+/// The ceiling (Hz) for a design at `fs_hz`: 0.9 of Nyquist. A pair moved
+/// nearer Nyquist is one the sampled-data discrete model cannot hold.
+pub fn ceiling_hz(fs_hz: f64) -> f64 {
+    0.45 * fs_hz
+}
+
 /// Most Levenberg–Marquardt iterations.
 const MAX_ITERATIONS: usize = 40;
 /// Relative decrease of E below which the iteration has converged.
@@ -153,8 +159,9 @@ pub fn refine(
     weights: &[f64],
     model: &PoleResidueModel,
     f_low: f64,
+    f_ceiling: f64,
 ) -> Result<PoleResidueModel> {
-    Ok(refine_common(freq_hz, &[(h, weights)], std::slice::from_ref(model), f_low)?.swap_remove(0))
+    Ok(refine_common(freq_hz, &[(h, weights)], std::slice::from_ref(model), f_low, f_ceiling)?.swap_remove(0))
 }
 
 /// The maximum-likelihood models near `models`, entries of one common-pole
@@ -166,7 +173,8 @@ pub fn refine(
 ///
 /// A step is taken only if it lowers E and leaves every term identifiable
 /// on lines from `f_low` to the last (no term [`spurious`] that was not so
-/// before, no pair collapsing to a real pole, every pole stable). A residue
+/// before, no pair collapsing to a real pole, no pair moved up past
+/// `f_ceiling` (Hz; 0: none), every pole stable). A residue
 /// that is exactly zero in an entry (a term that entry does without) stays
 /// zero. The normal equations are solved through the Schur complement of
 /// the entries' blocks (each entry's residues couple only to the poles),
@@ -178,6 +186,7 @@ pub fn refine_common(
     entries: &[(&[Complex64], &[f64])],
     models: &[PoleResidueModel],
     f_low: f64,
+    f_ceiling: f64,
 ) -> Result<Vec<PoleResidueModel>> {
     if entries.len() != models.len() || entries.is_empty() {
         bail!("refinement: {} entries for {} models", entries.len(), models.len());
@@ -210,7 +219,10 @@ pub fn refine_common(
     // The terms of a trial that left the identifiable set: spurious where
     // they were not before, a pair collapsing to the real axis, a pair
     // moved across the lines' top (where a line stops holding it, or starts
-    // to), or two pairs coalescing.
+    // to), a pair moved up past `f_ceiling` (a surrogate above the lines
+    // on the flat plate went from 4305 to 5009 Hz, 111 Hz short of Nyquist
+    // at 10.24 kHz, where the discrete model could not hold it: y 0.52 →
+    // 0.79 %), or two pairs coalescing.
     let leaving = |p: &[Params]| -> Vec<usize> {
         let m = p[0].to_model(w_scale);
         (0..m.terms.len())
@@ -220,6 +232,7 @@ pub fn refine_common(
                     && (spurious(t, f_low, f_top)
                         || matches!(t, Term::Pair { pole, .. } if pole.im <= 0.0 || pole.re >= 0.0)
                         || ((pair_hz(t0) <= f_top) != (pair_hz(t) <= f_top))
+                        || (f_ceiling > 0.0 && pair_hz(t) > f_ceiling.max(pair_hz(t0)))
                         || coalescing(terms, &m.terms, k))
             })
             .collect()
@@ -496,7 +509,7 @@ mod tests {
         let keep = vec![true; start.terms.len()];
         let control = crate::fit::vf::refit_kept(&freq, &h, &w, &start, &keep).unwrap();
         assert!(pole_error(&control, &t) > 5e-3, "control keeps the displaced poles");
-        let refined = refine(&freq, &h, &w, &control, 1.0).unwrap();
+        let refined = refine(&freq, &h, &w, &control, 1.0, 0.0).unwrap();
         assert!(pole_error(&refined, &t) < 1e-7, "exact lines: poles {:.1e} off", pole_error(&refined, &t));
         assert!(weighted_rms(&refined, &freq, &h, &w) < 1e-7);
         assert!(weighted_rms(&control, &freq, &h, &w) > 1e-3, "control misfits the lines");
@@ -504,7 +517,7 @@ mod tests {
         let (freq, h) = lines(&t, 1.0, 0.01, 7);
         let w = coherence_weights(&h, None);
         let control = crate::fit::vf::refit_kept(&freq, &h, &w, &start, &keep).unwrap();
-        let refined = refine(&freq, &h, &w, &control, 1.0).unwrap();
+        let refined = refine(&freq, &h, &w, &control, 1.0, 0.0).unwrap();
         assert!(weighted_rms(&refined, &freq, &h, &w) < weighted_rms(&control, &freq, &h, &w));
         assert!(pole_error(&refined, &t) < 2e-3, "noisy lines: poles {:.1e} off", pole_error(&refined, &t));
     }
@@ -523,7 +536,7 @@ mod tests {
             residue: Complex64::new(0.0, -1.0),
         });
         let w = coherence_weights(&h, None);
-        let refined = refine(&freq, &h, &w, &m, 1.0).unwrap();
+        let refined = refine(&freq, &h, &w, &m, 1.0, 0.0).unwrap();
         assert!(refined.terms.iter().all(|term| !spurious(term, 1.0, 4096.0)), "{:?}", refined.modes());
         assert!(weighted_rms(&refined, &freq, &h, &w) <= weighted_rms(&m, &freq, &h, &w));
     }
@@ -550,7 +563,7 @@ mod tests {
         });
         let keep = vec![true; start.terms.len()];
         let start = crate::fit::vf::refit_kept(&freq, &h, &w, &start, &keep).unwrap();
-        let refined = refine(&freq, &h, &w, &start, 1.0).unwrap();
+        let refined = refine(&freq, &h, &w, &start, 1.0, 0.0).unwrap();
         let pole = |t: &Term| match *t {
             Term::Real { pole, .. } => Complex64::new(pole, 0.0),
             Term::Pair { pole, .. } => pole,
@@ -565,6 +578,45 @@ mod tests {
             }
         }
         assert!(weighted_rms(&refined, &freq, &h, &w) < weighted_rms(&start, &freq, &h, &w));
+    }
+
+    /// A pair above the lines' top (a surrogate for a mode at 4700 Hz, the
+    /// lines ending at 4096 Hz) is not moved up past the ceiling; the modes
+    /// below refine as before. Control: without a ceiling the lines pull it
+    /// past.
+    #[test]
+    fn no_pair_moves_up_past_the_ceiling() {
+        let mut t = PoleResidueModel::from_modes(&[(520.0, 0.04, -0.1), (2600.0, 0.02, 0.9), (4700.0, 0.03, 0.6)]);
+        t.d = 1.0 - t.frf(0.0).re;
+        let (freq, h) = lines(&t, 1.0, 0.002, 5);
+        let w = coherence_weights(&h, None);
+        let mut start = t.clone();
+        for term in start.terms.iter_mut() {
+            if let Term::Pair { pole, .. } = term {
+                let f = pole.norm() / (2.0 * PI);
+                *pole *= Complex64::new(if f > 4096.0 { 4400.0 / 4700.0 } else { 1.005 }, 0.0);
+            }
+        }
+        let keep = vec![true; start.terms.len()];
+        let start = crate::fit::vf::refit_kept(&freq, &h, &w, &start, &keep).unwrap();
+        let top_hz = |m: &PoleResidueModel| m.terms.iter().map(pair_hz).fold(0.0, f64::max);
+        let free = refine(&freq, &h, &w, &start, 1.0, 0.0).unwrap();
+        assert!(top_hz(&free) > 4500.0, "control: without a ceiling the pair stays at {:.0} Hz", top_hz(&free));
+        let held = refine(&freq, &h, &w, &start, 1.0, 4500.0).unwrap();
+        assert!(top_hz(&held) <= 4500.0, "the pair went to {:.0} Hz", top_hz(&held));
+        // The mode at 2600 Hz still moves back to the truth.
+        let near_2600 = |m: &PoleResidueModel| {
+            m.terms
+                .iter()
+                .filter_map(|t| if let Term::Pair { pole, .. } = t { Some(*pole) } else { None })
+                .min_by(|a, b| {
+                    (a.norm() / (2.0 * PI) - 2600.0).abs().total_cmp(&(b.norm() / (2.0 * PI) - 2600.0).abs())
+                })
+                .unwrap()
+        };
+        let truth_2600 = near_2600(&t);
+        let off = |m: &PoleResidueModel| (near_2600(m) - truth_2600).norm() / truth_2600.norm();
+        assert!(off(&held) < 0.2 * off(&start), "2600 Hz: {:.1e} against {:.1e} at the start", off(&held), off(&start));
     }
 
     /// Two entries sharing their poles (a mode seen in one entry only: its
@@ -594,7 +646,7 @@ mod tests {
         };
         let start = [displace(&t), displace(&other)];
         assert!(pole_error(&start[0], &t) > 5e-3, "control: the start is displaced");
-        let refined = refine_common(&freq, &[(&h0, &w0), (&h1, &w1)], &start, 1.0).unwrap();
+        let refined = refine_common(&freq, &[(&h0, &w0), (&h1, &w1)], &start, 1.0, 0.0).unwrap();
         assert!(pole_error(&refined[0], &t) < 1e-3, "poles {:.1e} off", pole_error(&refined[0], &t));
         let poles = |m: &PoleResidueModel| {
             m.terms

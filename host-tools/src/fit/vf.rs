@@ -32,6 +32,10 @@ pub struct VfOptions {
     /// Refine the chosen model to the maximum-likelihood one of its order
     /// ([`super::refine::refine`]). Off only for studies and controls.
     pub refine: bool,
+    /// The refinement holds a pair it would move up past this frequency
+    /// (Hz; 0: no ceiling), where the discrete model at the design's rate
+    /// cannot follow it ([`super::refine::refine_common`]).
+    pub f_ceiling_hz: f64,
 }
 
 impl Default for VfOptions {
@@ -43,6 +47,7 @@ impl Default for VfOptions {
             decimate: 4,
             f_identified_hz: 0.0,
             refine: true,
+            f_ceiling_hz: 0.0,
         }
     }
 }
@@ -401,6 +406,8 @@ pub struct OrderFits<'a> {
     f_identified_hz: f64,
     /// [`VfOptions::refine`].
     refine: bool,
+    /// [`VfOptions::f_ceiling_hz`].
+    f_ceiling_hz: f64,
     /// `(order, weighted_rms)` of every order tried.
     trace: Vec<(usize, f64)>,
     /// The unskimmed models of the orders a choice may take, in the order
@@ -460,6 +467,7 @@ impl<'a> OrderFits<'a> {
             weights,
             f_identified_hz: opts.f_identified_hz,
             refine: opts.refine,
+            f_ceiling_hz: opts.f_ceiling_hz,
             trace,
             candidates,
         })
@@ -475,7 +483,7 @@ impl<'a> OrderFits<'a> {
                 let mut m = skim(freq_hz, h, weights, self.f_identified_hz, raw.clone())?;
                 if self.refine {
                     let f_low = freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0).max(self.f_identified_hz);
-                    m = super::refine::refine(freq_hz, h, weights, &m, f_low)?;
+                    m = super::refine::refine(freq_hz, h, weights, &m, f_low, self.f_ceiling_hz)?;
                 }
                 *skimmed = Some(m);
             }

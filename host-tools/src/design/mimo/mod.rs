@@ -471,11 +471,14 @@ fn fit_stage(
     notes: &mut Vec<String>,
 ) -> Option<MatrixPrep> {
     let d = &opts.design;
-    let vf = opts.matrix_vf.clone().unwrap_or(VfOptions {
-        max_order: MATRIX_MAX_ORDER,
-        iterations: d.vf.iterations.max(MATRIX_ITERATIONS),
-        ..d.vf.clone()
-    });
+    let vf = VfOptions {
+        f_ceiling_hz: crate::fit::refine::ceiling_hz(d.fs_hz),
+        ..opts.matrix_vf.clone().unwrap_or(VfOptions {
+            max_order: MATRIX_MAX_ORDER,
+            iterations: d.vf.iterations.max(MATRIX_ITERATIONS),
+            ..d.vf.clone()
+        })
+    };
     if given.is_none() {
         opts.say(&format!(
             "fitting the nine FRFs with common poles (order up to {}, {} iterations per order)…",
