@@ -13,7 +13,7 @@ use super::vf::{
     basis_row, best_surrogate, contributes, edge_pairs, kept_poles, lstsq, max_order_for, min_lines, n_cols,
     relocation_step, residues, sigma_zeros, starting_poles, to_model, Pole, VfOptions,
 };
-use super::{spurious, within_bandwidth, PoleResidueModel, Term};
+use super::{lowest_identified_hz, spurious, within_bandwidth, PoleResidueModel, Term};
 
 /// Entries of the 3x3 matrix, row by row: entry `e` is G_ij with i = e / 3, j = e % 3.
 pub const ENTRIES: usize = 9;
@@ -354,7 +354,7 @@ fn refined(data: &MatrixData, model: MatrixModel, opts: &VfOptions) -> Result<Ma
     if !opts.refine {
         return Ok(model);
     }
-    let f_low = data.freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0).max(opts.f_identified_hz);
+    let f_low = lowest_identified_hz(data.freq_hz, opts.f_identified_hz);
     let entries: Vec<(&[Complex64], &[f64])> = (0..ENTRIES).map(|e| (data.h[e], data.w[e])).collect();
     let entries = super::refine::refine_common(data.freq_hz, &entries, &model.entries, f_low, opts.f_ceiling_hz)?;
     Ok(MatrixModel { entries })
@@ -771,7 +771,7 @@ pub fn refit_kept(data: &MatrixData, model: &MatrixModel, keep: &[bool]) -> Resu
 /// of a large mean force, a bias on another axis.
 fn skim(data: &MatrixData, f_identified_hz: f64, model: MatrixModel) -> Result<MatrixModel> {
     let f_top = data.f_max();
-    let f_low = data.freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0).max(f_identified_hz);
+    let f_low = lowest_identified_hz(data.freq_hz, f_identified_hz);
     let terms = &model.entries[0].terms;
     let needed: Vec<bool> = (0..model.terms())
         .map(|k| (0..ENTRIES).any(|e| contributes(&model.entries[e].terms[k], data.freq_hz, data.h[e])))

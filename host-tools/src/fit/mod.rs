@@ -122,6 +122,13 @@ pub const MAX_MODE_DAMPING: f64 = 0.2;
 pub(crate) const EDGE_FRACTION: f64 = 0.97;
 pub(crate) const EDGE_MODE_DAMPING: f64 = 5e-3;
 
+/// The lowest identified line (Hz), the `f_low` of [`spurious`]: the first
+/// line above 0 Hz, or `f_identified_hz` where that is higher (the impact
+/// test's first coherent line).
+pub(crate) fn lowest_identified_hz(freq_hz: &[f64], f_identified_hz: f64) -> f64 {
+    freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0).max(f_identified_hz)
+}
+
 /// A term the data cannot identify (dropped by the fits' skim): a real pole or a
 /// pair below the lowest identified line `f_low` (a near-integrator, or a
 /// resonance no line saw, bending Ĝ where the mean force is), a pair damped

@@ -10,7 +10,7 @@ use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
 use std::f64::consts::PI;
 
-use super::{spurious, PoleResidueModel, Term, EDGE_FRACTION, EDGE_MODE_DAMPING};
+use super::{lowest_identified_hz, spurious, PoleResidueModel, Term, EDGE_FRACTION, EDGE_MODE_DAMPING};
 
 /// Options of the fit.
 #[derive(Clone, Debug)]
@@ -482,7 +482,7 @@ impl<'a> OrderFits<'a> {
             if skimmed.is_none() {
                 let mut m = skim(freq_hz, h, weights, self.f_identified_hz, raw.clone())?;
                 if self.refine {
-                    let f_low = freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0).max(self.f_identified_hz);
+                    let f_low = lowest_identified_hz(freq_hz, self.f_identified_hz);
                     m = super::refine::refine(freq_hz, h, weights, &m, f_low, self.f_ceiling_hz)?;
                 }
                 *skimmed = Some(m);
@@ -540,7 +540,7 @@ fn skim(
     model: PoleResidueModel,
 ) -> Result<PoleResidueModel> {
     let f_top = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
-    let f_low = freq_hz.iter().copied().find(|f| *f > 0.0).unwrap_or(0.0).max(f_identified_hz);
+    let f_low = lowest_identified_hz(freq_hz, f_identified_hz);
     let needed: Vec<bool> = model.terms.iter().map(|t| contributes(t, freq_hz, h)).collect();
     let keep: Vec<bool> = model.terms.iter().zip(&needed).map(|(t, n)| *n && !spurious(t, f_low, f_top)).collect();
     if keep.iter().all(|k| *k) {
