@@ -29,9 +29,9 @@ export PATH="$venv/bin:$PATH"
 
 # One release build of the extension, in the root's cargo target directory
 # although python/ is outside the root workspace (its own Cargo.lock): the
-# dependencies both locks pin alike are built once (in CI, after the 3x3
-# tests' release build, the extension took 110 s instead of 228 s in a
-# directory of its own). The tests need the same bits, not the speed: the
+# dependencies both locks pin alike are built once (in a clean CI run,
+# after the 3x3 tests' release build, the extension took 140 s instead of
+# 228 s in a directory of its own). The tests need the same bits, not the speed: the
 # package's fat-LTO profile (python/Cargo.toml) is overridden here for
 # build time (pip and maturin pass the environment on to cargo).
 # PYTHON_EXT_PROFILE=package keeps it.

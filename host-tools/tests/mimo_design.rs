@@ -560,10 +560,10 @@ fn tall_rows_judged_for_the_cut() {
 /// BIC chooses (its poles and six well-damped pairs more, every residue
 /// fitted again to the nine entries), has a 3x3 block that goes into no
 /// image: it needs more sections than the kernel holds (48), or (as
-/// measured: 129 states) no realization of it verifies in f32. The block is reduced by balancing until it goes into an
-/// image, the summary says so, and against the simulator's truth every 3x3
-/// row is within 1.2 times the full filter (run in f64 offline) and no
-/// worse than per axis. Negative control: the filter reduced to a third of
+/// measured: 129 states) no realization of it verifies in f32. The block
+/// is reduced by balancing until it goes into an image, the summary says
+/// so, and against the simulator's truth every 3x3 row is within 1.2 times
+/// the full filter (run in f64 offline) and no worse than per axis. Negative control: the filter reduced to a third of
 /// that order misses the bound.
 #[test]
 #[ignore = "a 3x3 design takes seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
