@@ -151,6 +151,143 @@ fn residuals(
     e
 }
 
+/// The variance E|Ĝ(j2πf) − G(j2πf)|² of the fitted model `model` at each
+/// frequency of `at_hz` (Hz), from the lines (`freq_hz`, `h`) with weights
+/// `weights` it was fitted to: [`frf_variance_common`] of one entry.
+pub fn frf_variance(
+    freq_hz: &[f64],
+    h: &[Complex64],
+    weights: &[f64],
+    model: &PoleResidueModel,
+    at_hz: &[f64],
+) -> Option<Vec<f64>> {
+    Some(frf_variance_common(freq_hz, &[(h, weights)], std::slice::from_ref(model), at_hz)?.swap_remove(0))
+}
+
+/// Per entry of a common-pole fit (`models`, on the lines `entries[e]` =
+/// (values, weights) over `freq_hz`), the variance E|Ĝ_e(j2πf) − G_e(j2πf)|²
+/// at each frequency of `at_hz` (Hz): the first-order propagation of the
+/// parameters' covariance σ̂²(JᵀJ)⁻¹, J the weighted Jacobian of every
+/// entry's residuals ([`residuals`]) over the common poles and each entry's
+/// residues and direct term (a residue that is exactly zero, a term the
+/// entry does without, is not a parameter), σ̂² = E/(N − p) with N the real
+/// data points of positive weight and p the parameters. That is
+/// g(f)ᵀ C g(f) summed over Re and Im, g(f) = ∂Ĝ_e(f)/∂θ, through the Schur
+/// complement of the entries' blocks as in [`refine_common`]. The
+/// uncertainty the lines' noise leaves in the fit, which no design on the
+/// model can see; each entry's variance alone (the entries' errors are
+/// correlated through the common poles). `None` where the normal matrix is
+/// singular or there are no more data points than parameters.
+pub fn frf_variance_common(
+    freq_hz: &[f64],
+    entries: &[(&[Complex64], &[f64])],
+    models: &[PoleResidueModel],
+    at_hz: &[f64],
+) -> Option<Vec<Vec<f64>>> {
+    let f_top = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
+    let sizes_ok = entries.iter().all(|(h, w)| h.len() == freq_hz.len() && w.len() == freq_hz.len());
+    if !(f_top > 0.0) || !sizes_ok || entries.len() != models.len() || models.is_empty() {
+        return None;
+    }
+    let w_scale = 2.0 * PI * f_top;
+    let params: Vec<Params> = models.iter().map(|m| Params::from_model(m, w_scale)).collect();
+    let np = params[0].n_poles();
+    if params.iter().any(|p| p.n_poles() != np || p.pairs != params[0].pairs) {
+        return None;
+    }
+    let nc = np + 1;
+    let s: Vec<Complex64> = freq_hz.iter().map(|f| Complex64::new(0.0, 2.0 * PI * f / w_scale)).collect();
+    let s_at: Vec<Complex64> = at_hz.iter().map(|f| Complex64::new(0.0, 2.0 * PI * f / w_scale)).collect();
+    // Per entry: the Jacobian on the lines and the model's derivatives at
+    // `at_hz`, the columns of residues it does without zeroed.
+    let (mut rss, mut points, mut free) = (0.0, 0usize, np);
+    let mut jacs = Vec::with_capacity(entries.len());
+    let mut grads = Vec::with_capacity(entries.len());
+    let mut kept_cols = Vec::with_capacity(entries.len());
+    for (p, (h, w)) in params.iter().zip(entries) {
+        let sw: Vec<f64> = w.iter().map(|w| w.max(0.0).sqrt()).collect();
+        let mut jac = DMatrix::<f64>::zeros(2 * s.len(), np + nc);
+        rss += residuals(p, &s, h, &sw, Some(&mut jac)).norm_squared();
+        points += 2 * w.iter().filter(|w| **w > 0.0).count();
+        let mut g = DMatrix::<f64>::zeros(2 * s_at.len(), np + nc);
+        let zeros = vec![Complex64::new(0.0, 0.0); s_at.len()];
+        residuals(p, &s_at, &zeros, &vec![1.0; s_at.len()], Some(&mut g));
+        let mut kept = vec![true; nc];
+        let mut k = 0;
+        for &pair in &p.pairs {
+            let width = if pair { 2 } else { 1 };
+            let zero = p.x[np + k..np + k + width].iter().all(|v| *v == 0.0);
+            kept[k..k + width].fill(!zero);
+            k += width;
+        }
+        for (c, keep) in kept.iter().enumerate() {
+            if !keep {
+                jac.column_mut(np + c).fill(0.0);
+                g.column_mut(np + c).fill(0.0);
+            }
+        }
+        free += kept.iter().filter(|k| **k).count();
+        jacs.push(jac);
+        grads.push(g);
+        kept_cols.push(kept);
+    }
+    if points <= free {
+        return None;
+    }
+    let sigma2 = rss / (points - free) as f64;
+    // Columns equilibrated: the poles' over every entry, each entry's own.
+    let inv = |v: f64| if v > 0.0 { 1.0 / v.sqrt() } else { 0.0 };
+    let d_p: Vec<f64> = (0..np).map(|j| inv(jacs.iter().map(|jac| jac.column(j).norm_squared()).sum())).collect();
+    let mut a_pp = DMatrix::<f64>::zeros(np, np);
+    let mut blocks = Vec::with_capacity(entries.len());
+    for ((jac, g), kept) in jacs.iter_mut().zip(grads.iter_mut()).zip(&kept_cols) {
+        let d_c: Vec<f64> = (0..nc).map(|c| inv(jac.column(np + c).norm_squared())).collect();
+        for (j, d) in d_p.iter().chain(&d_c).enumerate() {
+            jac.column_mut(j).scale_mut(*d);
+            g.column_mut(j).scale_mut(*d);
+        }
+        let m = jac.tr_mul(jac);
+        a_pp += m.view((0, 0), (np, np));
+        let b = m.view((0, np), (np, nc)).into_owned();
+        let mut d = m.view((np, np), (nc, nc)).into_owned();
+        // A residue the entry does without: a unit diagonal, no coupling.
+        for (c, keep) in kept.iter().enumerate() {
+            if !keep {
+                d[(c, c)] = 1.0;
+            }
+        }
+        let d = d.cholesky()?;
+        blocks.push((b, d));
+    }
+    let mut schur = a_pp;
+    for (b, d) in &blocks {
+        schur -= b * d.solve(&b.transpose());
+    }
+    let schur = schur.cholesky()?;
+    let mut out = Vec::with_capacity(entries.len());
+    for (g, (b, d)) in grads.iter().zip(&blocks) {
+        // var = g_lᵀ D⁻¹ g_l + uᵀ S⁻¹ u, u = g_p − B D⁻¹ g_l, per row of g.
+        let g_p = g.columns(0, np).transpose();
+        let g_l = g.columns(np, nc).transpose();
+        let v = d.solve(&g_l);
+        let u = g_p - b * &v;
+        let su = schur.solve(&u);
+        let var: Vec<f64> = (0..s_at.len())
+            .map(|k| {
+                sigma2
+                    * (2 * k..2 * k + 2)
+                        .map(|c| g_l.column(c).dot(&v.column(c)) + u.column(c).dot(&su.column(c)))
+                        .sum::<f64>()
+            })
+            .collect();
+        if !var.iter().all(|v| v.is_finite() && *v >= 0.0) {
+            return None;
+        }
+        out.push(var);
+    }
+    Some(out)
+}
+
 /// The maximum-likelihood model near `model` on the lines (`freq_hz`, `h`)
 /// with weights `weights` (module doc): [`refine_common`] of one entry.
 pub fn refine(
@@ -473,6 +610,64 @@ mod tests {
         m
     }
 
+    /// The variance the fit's uncertainty predicts against the spread of
+    /// the maximum-likelihood fit over independent impact tests of one
+    /// dynamometer: at a resonance, an anti-resonance and between modes,
+    /// E|Ĝ − G|² over 120 noisy realizations (the true G the reference)
+    /// against [`frf_variance_common`]'s mean, for one entry and for two
+    /// entries with common poles (the second without the 520 Hz mode).
+    /// Control: the line noise itself, E|H − G|², is far from the fit's
+    /// spread (the fit averages over its lines), so the 0.7-1.4 window
+    /// tells the two apart.
+    #[test]
+    fn the_fit_variance_predicts_the_spread_of_the_fit_over_impact_tests() {
+        let (t, other) = (truth(), second_entry());
+        let at = [310.0, 450.0, 1500.0, 2600.0];
+        let noise = 0.01;
+        let runs = 120;
+        for truths in [vec![t.clone()], vec![t, other]] {
+            let n = truths.len();
+            let mut spread = vec![[0.0; 4]; n];
+            let mut predicted = vec![[0.0; 4]; n];
+            for seed in 0..runs {
+                let data: Vec<(Vec<f64>, Vec<Complex64>)> =
+                    truths.iter().enumerate().map(|(e, m)| lines(m, 4.0, noise, 1000 + 10 * seed + e as u64)).collect();
+                let freq = &data[0].0;
+                let w = vec![1.0; freq.len()];
+                let entries: Vec<(&[Complex64], &[f64])> =
+                    data.iter().map(|d| (d.1.as_slice(), w.as_slice())).collect();
+                let fit = refine_common(freq, &entries, &truths, freq[0], 0.0).unwrap();
+                let var = frf_variance_common(freq, &entries, &fit, &at).unwrap();
+                for e in 0..n {
+                    for k in 0..at.len() {
+                        spread[e][k] += (fit[e].frf(at[k]) - truths[e].frf(at[k])).norm_sqr() / runs as f64;
+                        predicted[e][k] += var[e][k] / runs as f64;
+                    }
+                }
+            }
+            let line_noise = 2.0 * noise * noise;
+            for e in 0..n {
+                for k in 0..at.len() {
+                    let (p, sp) = (predicted[e][k], spread[e][k]);
+                    let what = format!("{n} entries, entry {e}, {} Hz: predicted {p:.3e}, spread {sp:.3e}", at[k]);
+                    assert!((0.7..1.4).contains(&(p / sp)), "{what}");
+                    assert!(line_noise > 3.0 * sp, "{what}: the control does not differ ({line_noise:.3e})");
+                }
+            }
+        }
+    }
+
+    /// A second entry with [`truth`]'s poles: without its 520 Hz mode
+    /// (a zero residue) and another direct term.
+    fn second_entry() -> PoleResidueModel {
+        let mut other = truth();
+        if let Term::Pair { residue, .. } = &mut other.terms[1] {
+            *residue = Complex64::new(0.0, 0.0);
+        }
+        other.d = 0.3;
+        other
+    }
+
     /// Largest relative error of the poles of `m` against `truth`'s, pair by
     /// pair in frequency order.
     fn pole_error(m: &PoleResidueModel, truth: &PoleResidueModel) -> f64 {
@@ -626,12 +821,7 @@ mod tests {
     /// off by the displacement.
     #[test]
     fn common_poles_are_refined_from_every_entry() {
-        let t = truth();
-        let mut other = t.clone();
-        if let Term::Pair { residue, .. } = &mut other.terms[1] {
-            *residue = Complex64::new(0.0, 0.0);
-        }
-        other.d = 0.3;
+        let (t, other) = (truth(), second_entry());
         let (freq, h0) = lines(&t, 1.0, 0.005, 11);
         let (_, h1) = lines(&other, 1.0, 0.005, 12);
         let (w0, w1) = (coherence_weights(&h0, None), coherence_weights(&h1, None));
