@@ -278,6 +278,17 @@ fn summary_text_lists_its_parts_in_order() {
         ];
         want.push(columns.join(" "));
     }
+    let fit: Vec<String> = designs
+        .iter()
+        .map(|d| {
+            let (fit, with) = (100.0 * d.fit_uncertainty, 100.0 * d.predicted_error_with_fit());
+            format!("{} {fit:.2} % (pred. with it {with:.2} %)", ["x", "y"][d.axis])
+        })
+        .collect();
+    want.push(format!(
+        "fit uncertainty (the impact test's noise left in Ĝ, which pred. cannot see; more impacts lower it): {}",
+        fit.join(", ")
+    ));
     for d in &designs {
         let (dm, fd) = d.discrete.as_ref().expect("the default design has a discrete model");
         let above = fd.modes_above_nyquist;

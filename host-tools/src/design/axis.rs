@@ -174,6 +174,13 @@ pub struct AxisDesign {
     pub noise_gain: f64,
     /// Predicted in-band relative RMS error √J (fraction).
     pub predicted_error: f64,
+    /// The fitted model's own uncertainty in the same terms, √J_fit with
+    /// J_fit = Σ_f w_f |H(f)|² E|Ĝ(f) − G(f)|² over the criterion's lines
+    /// (w_f the force's share of line f; flat: 1/lines): the error the
+    /// FRF's noise leaves in Ĝ, which `predicted_error` (computed on Ĝ)
+    /// cannot see ([`crate::fit::refine::frf_variance`]). NaN where it is
+    /// not known (the paper's method, an axis passed through).
+    pub fit_uncertainty: f64,
     /// Its distortion part alone, √J with the noise term left out
     /// (fraction): what a longer look-ahead can lower ([`crate::design::latency`]).
     pub predicted_distortion: f64,
@@ -214,6 +221,16 @@ pub struct AxisDesign {
 }
 
 impl AxisDesign {
+    /// The predicted in-band error with the fit's uncertainty counted,
+    /// √(J + J_fit) ([`AxisDesign::fit_uncertainty`]); `predicted_error`
+    /// where that is not known.
+    pub fn predicted_error_with_fit(&self) -> f64 {
+        match self.fit_uncertainty.is_finite() {
+            true => self.predicted_error.hypot(self.fit_uncertainty),
+            false => self.predicted_error,
+        }
+    }
+
     /// Fitted response Ĝ(j2πf): the paper's B/A itself, else the pole-residue model.
     pub fn fitted_frf(&self, f_hz: f64) -> Complex64 {
         match &self.paper {
@@ -340,6 +357,17 @@ impl Objective<'_> {
     /// noise term left out), for the record's spectrum when there is one.
     fn distortion_of(&self, h: &[Complex64]) -> f64 {
         criterion_j_weighted(self.grid, h, self.weights(), self.lag, self.opts.fs_hz, 0.0)
+    }
+
+    /// J_fit of the response `h` on the grid ([`AxisDesign::fit_uncertainty`])
+    /// from the fitted model's variance `var` on the grid: for the record's
+    /// spectrum when there is one.
+    fn fit_part(&self, h: &[Complex64], var: &[f64]) -> f64 {
+        let terms = h.iter().zip(var).map(|(h, v)| h.norm_sqr() * v);
+        match self.weights() {
+            Some(w) => terms.zip(w).map(|(t, w)| t * w).sum(),
+            None => terms.sum::<f64>() / h.len() as f64,
+        }
     }
 
     /// J of the response `h` on the grid: for the record's spectrum when
@@ -515,19 +543,27 @@ fn axis_lines(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> Result<Ax
 }
 
 /// Fit the axis's model by `opts.method` on `lines`.
+/// The weights of the default method's fit: the coherence weights (the
+/// H1 estimate's inverse variances up to a factor), lowered outside the
+/// fitting bands where there are bands.
+fn vf_weights(frf: &AxisFrf, opts: &DesignOptions, lines: &AxisLines) -> Vec<f64> {
+    let mut weights = coherence_weights(&frf.frf, frf.coherence.as_deref());
+    if !opts.bands.is_empty() {
+        for (w, b) in weights.iter_mut().zip(&lines.eval_band) {
+            if !*b {
+                *w *= VF_OUT_OF_BAND_WEIGHT;
+            }
+        }
+    }
+    weights
+}
+
 fn fit_axis(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions, lines: &AxisLines) -> Result<Fitted> {
     let name = axis_name(frf.axis);
     let coh = frf.coherence.as_deref();
     Ok(match &opts.method {
         FitMethod::Vf => {
-            let mut weights = coherence_weights(&frf.frf, coh);
-            if !opts.bands.is_empty() {
-                for (w, b) in weights.iter_mut().zip(&lines.eval_band) {
-                    if !*b {
-                        *w *= VF_OUT_OF_BAND_WEIGHT;
-                    }
-                }
-            }
+            let weights = vf_weights(frf, opts, lines);
             // Among the orders the lines cannot tell apart, one flat below
             // the first coherent line where there is one (`check_static`).
             let f_coherent = lines.band.0;
@@ -703,6 +739,10 @@ pub struct PreparedAxis {
     ranges: Vec<(f64, f64)>,
     f_top: f64,
     grid: Vec<(f64, Complex64)>,
+    /// E|Ĝ − G|² of the fitted model on the grid, from its lines' noise
+    /// ([`crate::fit::refine::frf_variance`]; `None` for the paper's
+    /// method, or where it cannot be computed).
+    fit_variance: Option<Vec<f64>>,
     spectrum: Option<crate::design::force_spectrum::CellSpectrum>,
     /// The discrete model at `discrete_fit_top` (`None` for the paper's
     /// method, or if it failed: `design_prepared` then says why).
@@ -742,6 +782,14 @@ pub fn prepare_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions
     let ranges = criterion_ranges(&opts.bands, comp_band);
     let f_top = ranges.iter().map(|b| b.1).fold(0.0, f64::max);
     let grid: Vec<(f64, Complex64)> = criterion_grid(&ranges).into_iter().map(|f| (f, fitted.frf(f))).collect();
+    let fit_variance = match fitted.paper {
+        Some(_) => None,
+        None => {
+            let grid_hz: Vec<f64> = grid.iter().map(|g| g.0).collect();
+            let weights = vf_weights(frf, opts, &lines);
+            crate::fit::refine::frf_variance(freq_hz, &frf.frf, &weights, &fitted.model, &grid_hz)
+        }
+    };
     // The record's force spectrum on the grid's cells (--force-prior spectrum).
     let spectrum = match &opts.force_record {
         None => None,
@@ -774,6 +822,7 @@ pub fn prepare_axis(freq_hz: &[f64], frf: &AxisFrf, r: f64, opts: &DesignOptions
         ranges,
         f_top,
         grid,
+        fit_variance,
         spectrum,
         discrete,
     })
@@ -825,6 +874,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
             .with_context(|| format!("axis {}", p.name))?;
     let flat = p.flat_band(&filter, lag, fs);
     let predicted_distortion = obj.distortion_of(&h).sqrt();
+    let fit_uncertainty = p.fit_variance.as_ref().map_or(f64::NAN, |v| obj.fit_part(&h, v).sqrt());
     let force_spectrum = p.force_spectrum(&obj, &h, j, opts);
     let phase_limits = match p.fitted.paper {
         Some(_) => Vec::new(),
@@ -843,6 +893,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
         flat_band_hz: flat,
         noise_gain: ng,
         predicted_error: j.sqrt(),
+        fit_uncertainty,
         predicted_distortion,
         q_trace,
         bands: opts.bands.clone(),

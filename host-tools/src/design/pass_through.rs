@@ -80,6 +80,7 @@ pub fn pass_through(frf: &AxisFrf, r: f64, opts: &DesignOptions, reason: String)
         flat_band_hz: (0.0, 0.0),
         noise_gain: 1.0,
         predicted_error: f64::NAN,
+        fit_uncertainty: f64::NAN,
         predicted_distortion: f64::NAN,
         q_trace: Vec::new(),
         bands: Vec::new(),

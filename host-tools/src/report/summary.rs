@@ -34,6 +34,13 @@ pub struct AxisJson {
     pub noise_gain: f64,
     /// Predicted in-band relative error √J.
     pub predicted_error: f64,
+    /// The fitted model's own uncertainty in the terms of
+    /// `predicted_error` (`AxisDesign::fit_uncertainty`; null where not
+    /// known).
+    pub fit_uncertainty: Option<f64>,
+    /// √(predicted_error² + fit_uncertainty²): the error to expect with
+    /// what the FRF's noise leaves unknown in the model counted.
+    pub predicted_error_with_fit: f64,
     /// Predicted in-band relative error of the uncompensated force; the
     /// design is refused unless `predicted_error` is below it.
     pub raw_predicted_error: f64,
@@ -115,6 +122,8 @@ impl AxisJson {
             flat_band_hz: d.flat_band_hz,
             noise_gain: d.noise_gain,
             predicted_error: d.predicted_error,
+            fit_uncertainty: d.fit_uncertainty.is_finite().then_some(d.fit_uncertainty),
+            predicted_error_with_fit: d.predicted_error_with_fit(),
             raw_predicted_error: d.raw_predicted_error,
             compensated_band_hz: d.compensated_band_hz,
             discretization: d.discrete.as_ref().map(|x| x.0.method.name()),
@@ -245,6 +254,9 @@ pub fn render_summary(
         let _ = writeln!(s, "fitting bands: {}", bands::describe(&d.bands));
     }
     s.push_str(&table(designs, range));
+    if let Some(line) = fit_uncertainty_line(designs) {
+        s.push_str(&line);
+    }
     for d in designs {
         if let Some(why) = &d.pass_through {
             let _ = writeln!(
@@ -329,6 +341,29 @@ fn table(designs: &[AxisDesign], range: Option<&[RangeFigures]>) -> String {
         );
     }
     s
+}
+
+/// The predicted errors with the fitted model's own uncertainty counted
+/// (`AxisDesign::predicted_error_with_fit`), where any axis has it.
+fn fit_uncertainty_line(designs: &[AxisDesign]) -> Option<String> {
+    let parts: Vec<String> = designs
+        .iter()
+        .filter(|d| d.pass_through.is_none() && d.fit_uncertainty.is_finite())
+        .map(|d| {
+            format!(
+                "{} {:.2} % (pred. with it {:.2} %)",
+                axis_name(d.axis),
+                100.0 * d.fit_uncertainty,
+                100.0 * d.predicted_error_with_fit()
+            )
+        })
+        .collect();
+    (!parts.is_empty()).then(|| {
+        format!(
+            "fit uncertainty (the impact test's noise left in Ĝ, which pred. cannot see; more impacts lower it): {}\n",
+            parts.join(", ")
+        )
+    })
 }
 
 /// The line of an axis's discrete model (none for the paper's Tustin).

@@ -396,6 +396,9 @@ fn design_over_range(
                 .map(|d| AxisDesign {
                     fit_nrmse: interpolated_fit_error,
                     fit_nrmse_out_of_band: d0.fit_nrmse_out_of_band,
+                    // The model is interpolated between the two fits, not
+                    // fitted to lines of its own.
+                    fit_uncertainty: f64::NAN,
                     ..d
                 })
                 .with_context(|| format!("model state s = {s}"))
