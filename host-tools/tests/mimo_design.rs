@@ -65,6 +65,8 @@ struct Figures {
     floor: [f64; 3],
     rows: [RowSource; 3],
     predicted: [f64; 3],
+    /// The same with the fit's uncertainty counted (`RowError::with_fit`).
+    predicted_with_fit: [f64; 3],
     peak_crosstalk: f64,
     /// The filter used, as written, against the anti-aliased truth, and a
     /// perfect band-limited estimate against the same truth (DESIGN.md).
@@ -203,6 +205,7 @@ fn evaluate(md: &MatrixDesign, out: &PlateSimOutput) -> Figures {
         floor,
         rows: md.rows,
         predicted: std::array::from_fn(|i| md.summary.axes[i].chosen.error),
+        predicted_with_fit: std::array::from_fn(|i| md.summary.axes[i].chosen.with_fit()),
         peak_crosstalk,
         as_written: written.map(|w| w.output.nrmse),
         perfect: written.map(|w| w.perfect.nrmse),
@@ -693,6 +696,9 @@ fn seed_study() {
                 eprintln!("{}  latency {}", fig.line(&name, fs), md.summary.latency);
                 let ratio = (0..3).map(|i| format!("{:.2}", fig.predicted[i] / fig.used[i])).collect::<Vec<_>>();
                 eprintln!("    predicted / measured {}", ratio.join(" / "));
+                let ratio =
+                    (0..3).map(|i| format!("{:.2}", fig.predicted_with_fit[i] / fig.used[i])).collect::<Vec<_>>();
+                eprintln!("    predicted with the fit's uncertainty / measured {}", ratio.join(" / "));
                 for w in &md.summary.worse_than_raw {
                     eprintln!("    worse than raw: {w:?}");
                 }
@@ -797,6 +803,13 @@ fn cli_offcentre_3x3_image_beats_per_axis() {
     // (the tall library test checks it is there where the crosstalk is moderate).
     let notes = j["design"]["notes"].as_array().unwrap();
     assert!(notes.iter().all(|n| !n.as_str().unwrap().contains("moderate")), "{notes:?}");
+    // Every row states the fit's own uncertainty (`RowError::fit`; its
+    // accuracy is the Monte Carlo unit test of `frf_variance_common`): a
+    // fraction of a percent on this preset, not nothing.
+    for a in j["design"]["axes"].as_array().unwrap() {
+        let fit = a["chosen"]["fit"].as_f64();
+        assert!(fit.is_some_and(|f| f > 1e-4 && f < 1e-2), "{a}");
+    }
     let (ok, inspect, err) = dynocomp(&["inspect", &p("c.dcimg")]);
     assert!(ok && inspect.contains("format v3"), "{inspect}{err}");
     let (ok, _, err) = design("p.dcimg", &["--per-axis"]);

@@ -295,6 +295,21 @@ fn crosstalk_and_predictions(s: &MatrixSummary) -> String {
             pct(a.matrix.map(|m| m.error)),
         );
     }
+    let fit: Vec<String> = s
+        .axes
+        .iter()
+        .filter(|a| a.chosen.fit.is_finite())
+        .map(|a| {
+            format!("{} {} (used row with it {})", a.axis, pct(Some(a.chosen.fit)), pct(Some(a.chosen.with_fit())))
+        })
+        .collect();
+    if !fit.is_empty() {
+        let _ = writeln!(
+            t,
+            "  fit uncertainty (the impact tests' noise left in Ĝ, which these predictions cannot see; more impacts lower it): {}",
+            fit.join(", ")
+        );
+    }
     for a in &s.axes {
         let _ = writeln!(t, "  {}: {}", a.axis, a.reason);
     }

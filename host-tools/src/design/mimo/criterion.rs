@@ -3,7 +3,7 @@
 //! of q = (q_x, q_y, q_z) by it.
 
 use anyhow::{bail, Result};
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, Matrix3};
 use num_complex::Complex64;
 use serde::Serialize;
 use std::f64::consts::PI;
@@ -29,6 +29,10 @@ pub struct RowGrid {
     pub weight: [Vec<f64>; 3],
     /// The in-band power of force i, P_i (N²).
     pub force_power_n2: f64,
+    /// E|Ĝ_mj − G_mj|² on the lines (`[(m, j)]`), the fitted model's own
+    /// uncertainty ([`MatrixCriterion::with_fit_variance`]); empty where
+    /// not known.
+    pub var: Vec<Matrix3<f64>>,
 }
 
 /// The force spectra P_j(f) the criterion ([`MatrixCriterion`]) assumes.
@@ -138,13 +142,30 @@ pub struct MatrixCriterion {
 }
 
 /// A row's predicted error: √J and its distortion part alone (the noise
-/// term left out), both fractions of force i's RMS.
+/// term left out), both fractions of force i's RMS, and the fitted model's
+/// own uncertainty in the same terms.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct RowError {
     /// √J_i.
     pub error: f64,
     /// √(J_i without the noise term).
     pub distortion: f64,
+    /// √J_fit,i, J_fit,i = Σ_f Σ_j (P_j(f)/P_i)·Σ_m |H_im|²·E|Ĝ_mj − G_mj|²:
+    /// the error the impact tests' noise leaves in Ĝ, which `error`
+    /// (computed on Ĝ) cannot see, for independent entries
+    /// ([`MatrixCriterion::with_fit_variance`]); NaN where not known.
+    pub fit: f64,
+}
+
+impl RowError {
+    /// √(J + J_fit): the predicted error with the fit's uncertainty
+    /// counted; `error` where that is not known.
+    pub fn with_fit(&self) -> f64 {
+        match self.fit.is_finite() {
+            true => self.error.hypot(self.fit),
+            false => self.error,
+        }
+    }
 }
 
 impl MatrixCriterion {
@@ -162,9 +183,22 @@ impl MatrixCriterion {
             let freqs = criterion_grid(&[band_hz]);
             let g = freqs.iter().map(|f| g(*f)).collect();
             let (weight, force_power_n2) = forces.row(i, freqs.len());
-            RowGrid { band_hz, freqs, g, weight, force_power_n2 }
+            RowGrid { band_hz, freqs, g, weight, force_power_n2, var: Vec::new() }
         });
         MatrixCriterion { fs_hz, rows, r, above: Default::default(), above_weight: 0.0 }
+    }
+
+    /// The criterion with the fitted model's variance on each row's lines:
+    /// `var(freqs)` is, per entry e = 3m + j, E|Ĝ_mj − G_mj|² at `freqs`
+    /// ([`crate::fit::refine::frf_variance_common`]); rows where it is
+    /// `None` stay without.
+    pub fn with_fit_variance(mut self, var: impl Fn(&[f64]) -> Option<Vec<Vec<f64>>>) -> Self {
+        for row in &mut self.rows {
+            if let Some(v) = var(&row.freqs).filter(|v| v.len() == 9) {
+                row.var = (0..row.freqs.len()).map(|k| Matrix3::from_fn(|m, j| v[3 * m + j][k])).collect();
+            }
+        }
+        self
     }
 
     /// The criterion with the noise written above each row's band counted
@@ -224,7 +258,7 @@ impl MatrixCriterion {
     fn j(&self, i: usize, lag: usize, h: impl Fn(usize, usize) -> Complex64) -> RowError {
         let row = &self.rows[i];
         let n = row.freqs.len() as f64;
-        let (mut dist, mut amp) = (0.0, 0.0);
+        let (mut dist, mut amp, mut fit) = (0.0, 0.0, 0.0);
         for (k, (f, g)) in row.freqs.iter().zip(&row.g).enumerate() {
             let delay = Complex64::from_polar(1.0, 2.0 * PI * f * lag as f64 / self.fs_hz);
             let hr = [h(k, 0), h(k, 1), h(k, 2)];
@@ -233,9 +267,13 @@ impl MatrixCriterion {
                     - if i == j { 1.0 } else { 0.0 };
                 dist += row.weight[j][k] * e.norm_sqr();
                 amp += self.r[j] * hr[j].norm_sqr();
+                if let Some(var) = row.var.get(k) {
+                    fit += row.weight[j][k] * (0..3).map(|m| hr[m].norm_sqr() * var[(m, j)]).sum::<f64>();
+                }
             }
         }
-        RowError { error: (dist + self.noise(i) * amp / n).sqrt(), distortion: dist.sqrt() }
+        let fit = if row.var.is_empty() { f64::NAN } else { fit.sqrt() };
+        RowError { error: (dist + self.noise(i) * amp / n).sqrt(), distortion: dist.sqrt(), fit }
     }
 
     /// Row i's error for a 3x3 response `h` on [`Self::all_freqs`].
@@ -361,4 +399,39 @@ pub fn choose_q(eval: &(dyn Fn([f64; 3]) -> [f64; 3] + Sync), r: [f64; 3]) -> Re
     out.predicted = j;
     out.evaluations = evaluations;
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// J_fit against its closed form: on a diagonal plant Ĝ = 2I with flat,
+    /// equal forces, a per-axis row H = h·e_i gives J_fit,i = |h|²·Σ_j v_ij
+    /// and no compensation (H = I) gives Σ_j v_ij, for entry variances v_mj
+    /// that differ per entry (so a wrong entry or row shows). Control:
+    /// without the variance the term is unknown (NaN) and the prediction
+    /// with it is the prediction alone.
+    #[test]
+    fn the_fit_term_counts_the_variance_of_every_entry_of_the_row() {
+        let g = |_: f64| CMatrix3::from_fn(|a, b| Complex64::new(if a == b { 2.0 } else { 0.0 }, 0.0));
+        let bands = [(100.0, 1000.0); 3];
+        let forces = ForceWeights::Flat([100.0; 3]);
+        let v = |m: usize, j: usize| 1e-6 * (1 + 3 * m + j) as f64;
+        let plain = MatrixCriterion::new(g, bands, 25600.0, &forces, [0.05; 3]);
+        let crit =
+            plain.clone().with_fit_variance(|freqs| Some((0..9).map(|e| vec![v(e / 3, e % 3); freqs.len()]).collect()));
+        let h = Complex64::new(0.3, 0.4);
+        for i in 0..3 {
+            let n = crit.rows[i].freqs.len();
+            let row: f64 = (0..3).map(|j| v(i, j)).sum();
+            let per = crit.per_axis(i, 0, &vec![h; n]);
+            assert!((per.fit - (h.norm_sqr() * row).sqrt()).abs() < 1e-12 * per.fit, "{per:?}");
+            assert!((per.with_fit() - per.error.hypot(per.fit)).abs() < 1e-15);
+            let raw = crit.raw(i);
+            assert!((raw.fit - row.sqrt()).abs() < 1e-12 * raw.fit, "{raw:?}");
+            let without = plain.per_axis(i, 0, &vec![h; n]);
+            assert!(without.fit.is_nan() && without.with_fit() == without.error);
+            assert_eq!(without.error, per.error, "the prediction itself does not change");
+        }
+    }
 }

@@ -561,11 +561,9 @@ fn criteria(
     };
     let criteria = Criteria {
         judge: MatrixCriterion::new(judge_g, bands, d.fs_hz, &forces, r),
-        model: MatrixCriterion::new(model_g, bands, d.fs_hz, &forces, r).quiet_above_band(if quiet_above_band(d) {
-            d.above_band.out_of_band_weight()
-        } else {
-            0.0
-        }),
+        model: MatrixCriterion::new(model_g, bands, d.fs_hz, &forces, r)
+            .quiet_above_band(if quiet_above_band(d) { d.above_band.out_of_band_weight() } else { 0.0 })
+            .with_fit_variance(|freqs| fit_variance(frf, prep, freqs)),
     };
     Ok((criteria, matches!(forces, ForceWeights::Flat(_))))
 }
@@ -760,6 +758,20 @@ pub fn with_weighted_matrix<R>(frf: &Frf, use_data: impl FnOnce(&MatrixData) -> 
         w: std::array::from_fn(|e| weights[e].as_slice()),
     };
     Ok(use_data(&data))
+}
+
+/// Per entry e = 3i + j, the variance of the common-pole fit's Ĝ_ij at
+/// `freqs` from the lines it was fitted to
+/// ([`crate::fit::refine::frf_variance_common`]); `None` without a fit of
+/// these lines (no model, or a model from elsewhere).
+fn fit_variance(frf: &Frf, prep: Option<&MatrixPrep>, freqs: &[f64]) -> Option<Vec<Vec<f64>>> {
+    let p = prep.filter(|p| p.fit.weighted_rms.is_finite())?;
+    with_weighted_matrix(frf, |data| {
+        let entries: Vec<(&[Complex64], &[f64])> = (0..9).map(|e| (data.h[e], data.w[e])).collect();
+        crate::fit::refine::frf_variance_common(data.freq_hz, &entries, &p.model.entries, freqs)
+    })
+    .ok()
+    .flatten()
 }
 
 /// Fit, discrete model and plant of the matrix (the latency-independent
@@ -978,7 +990,7 @@ fn axis_prediction(
         (None, Some((m, mng, _))) => (RowSource::Matrix, m, mng, no_per_axis),
         (None, None) => (
             RowSource::PerAxis,
-            RowError { error: f64::INFINITY, distortion: f64::INFINITY },
+            RowError { error: f64::INFINITY, distortion: f64::INFINITY, fit: f64::NAN },
             f64::NAN,
             "no design".to_string(),
         ),
