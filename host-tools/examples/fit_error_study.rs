@@ -7,7 +7,8 @@
 //! fit, for the same fit without its maximum-likelihood refinement
 //! (vector fitting's poles, [`dynocomp::fit::refine`]) and for Ĝ = the true
 //! poles with residues fitted to the same impact test (what the lines allow
-//! when the poles are right).
+//! when the poles are right). Before each such line, the rest as the fit's
+//! own covariance predicts it ([`dynocomp::fit::refine::frf_variance`]).
 //!
 //! With `--orders`, also each order of the plain fit ([`fit_order`]):
 //! weighted RMS against the lines, static gain and model error; with
@@ -42,6 +43,33 @@ fn model_error(truth: &[f64], fs: f64, band: f64, ratio: &dyn Fn(f64) -> Complex
     }
     let std = var.sqrt();
     (mean.abs() * (ratio(0.0) - 1.0).norm() / std, err.sqrt() / std)
+}
+
+/// The model error F·ΔĜ/Ĝ that the fit's own uncertainty predicts
+/// ([`dynocomp::fit::refine::frf_variance`]), relative to the std of
+/// `truth`, over 0 < f ≤ `band` Hz (the rest, as [`model_error`]).
+fn predicted_model_error(
+    truth: &[f64],
+    fs: f64,
+    band: f64,
+    var_rel: &dyn Fn(&[f64]) -> Option<Vec<f64>>,
+) -> Option<f64> {
+    let n = truth.len();
+    let mean = truth.iter().sum::<f64>() / n as f64;
+    let mut buf: Vec<Complex64> = truth.iter().map(|v| Complex64::new(v - mean, 0.0)).collect();
+    FftPlanner::new().plan_fft_forward(n).process(&mut buf);
+    let (mut var, mut freqs, mut powers) = (0.0, Vec::new(), Vec::new());
+    for (k, c) in buf.iter().enumerate().take(n / 2 + 1).skip(1) {
+        let f = k as f64 * fs / n as f64;
+        let p = 2.0 * c.norm_sqr() / (n as f64 * n as f64);
+        var += p;
+        if f <= band {
+            freqs.push(f);
+            powers.push(p);
+        }
+    }
+    let v = var_rel(&freqs)?;
+    Some(powers.iter().zip(&v).map(|(p, v)| p * v).sum::<f64>().sqrt() / var.sqrt())
 }
 
 fn main() -> Result<()> {
@@ -85,6 +113,16 @@ fn main() -> Result<()> {
         let (dc_fit, ac_fit) = model_error(&s.truth[a], fs, band, &|f| truth_g(f) / fitted.frf(f));
         let (dc_un, ac_un) = model_error(&s.truth[a], fs, band, &|f| truth_g(f) / unrefined.frf(f));
         let (dc_or, ac_or) = model_error(&s.truth[a], fs, band, &|f| truth_g(f) / oracle.frf(f));
+        let predicted = predicted_model_error(&s.truth[a], fs, band, &|fr| {
+            let v = dynocomp::fit::refine::frf_variance(freq, h, &w, &fitted, fr)?;
+            Some(fr.iter().zip(v).map(|(f, v)| v / fitted.frf(*f).norm_sqr()).collect())
+        });
+        println!(
+            "fit uncertainty, seed {seed} {ax}: model error (rest) {:.4} %, predicted by the fit's covariance {:.4} %, actual / predicted {:.2}",
+            100.0 * ac_fit,
+            100.0 * predicted.unwrap_or(f64::NAN),
+            ac_fit / predicted.unwrap_or(f64::NAN)
+        );
         println!(
             "seed {seed} {ax} ({kind}, {fs} Hz, {} Hz lines, {} true modes): fit order {} mean {:.3} % rest {:.3} % (G(0) off {:.2e}); unrefined mean {:.3} % rest {:.3} % (G(0) off {:.2e}); true poles mean {:.3} % rest {:.3} % (G(0) off {:.2e})",
             case.frf_df_hz,

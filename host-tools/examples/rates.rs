@@ -64,7 +64,7 @@ fn main() -> Result<()> {
     println!("floor = exact-inverse noise floor sqrt(R·(2/fs)·∫|1/G|² df)/std(truth) with the true G");
     println!("written = the unfiltered output against the anti-aliased truth; perfect = the truth band-limited, the same way");
     println!(
-        "{:>7} {:<15} {:>5} {:>4} {:>4} {:>9} {:>9} {:>8} {:>9} {:>8} {:>15} {:>8} {:>9} {:>9}",
+        "{:>7} {:<15} {:>5} {:>4} {:>4} {:>9} {:>9} {:>8} {:>9} {:>8} {:>7} {:>15} {:>8} {:>9} {:>9}",
         "fs",
         "case",
         "TPF",
@@ -75,6 +75,7 @@ fn main() -> Result<()> {
         "floor %",
         "comp/flr",
         "pred %",
+        "+fit %",
         "flat band Hz",
         "design s",
         "written %",
@@ -100,12 +101,13 @@ fn main() -> Result<()> {
                         );
                         match &a.comp_nrmse {
                             Ok(c) => println!(
-                                "{head} {:>9.3} {:>9.3} {:>8.3} {:>9.2} {:>8.2} {:>6.0}-{:<8.0} {:>8.3} {:>9.2} {:>9.2}{}",
+                                "{head} {:>9.3} {:>9.3} {:>8.3} {:>9.2} {:>8.2} {:>7.2} {:>6.0}-{:<8.0} {:>8.3} {:>9.2} {:>9.2}{}",
                                 a.raw_nrmse * 100.0,
                                 c * 100.0,
                                 a.noise_floor * 100.0,
                                 c / a.noise_floor,
                                 a.predicted_error * 100.0,
+                                a.predicted_with_fit * 100.0,
                                 a.flat_band_hz.0,
                                 a.flat_band_hz.1,
                                 a.design_s,
@@ -153,6 +155,28 @@ fn main() -> Result<()> {
             s.worst * 100.0,
             if s.worse_than_raw.is_empty() { "none".to_string() } else { s.worse_than_raw.join(", ") },
             if s.failed.is_empty() { "none".to_string() } else { s.failed.join(", ") }
+        );
+    }
+    println!();
+    // Predicted against measured in-band error, with and without the fit's
+    // uncertainty (AxisDesign::predicted_error_with_fit).
+    let ratios = |with_fit: bool| -> Vec<f64> {
+        results
+            .iter()
+            .flat_map(|r| &r.axes)
+            .filter_map(|a| {
+                let c = a.comp_nrmse.as_ref().ok()?;
+                let p = if with_fit { a.predicted_with_fit } else { a.predicted_error };
+                (p.is_finite() && *c > 0.0).then_some(p / c)
+            })
+            .collect()
+    };
+    for (what, r) in [("model alone", ratios(false)), ("with the fit's uncertainty", ratios(true))] {
+        let within = r.iter().filter(|x| (1.0 / 1.5..=1.5).contains(*x)).count();
+        let (lo, hi) = r.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), x| (lo.min(*x), hi.max(*x)));
+        println!(
+            "predicted / measured, {what}: {within} of {} axes within 0.67-1.5x (range {lo:.2}-{hi:.2}x)",
+            r.len()
         );
     }
     println!();

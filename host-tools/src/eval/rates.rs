@@ -271,6 +271,9 @@ pub struct AxisScore {
     pub noise_floor: f64,
     /// The design's predicted in-band error (NaN if the design failed).
     pub predicted_error: f64,
+    /// The same with the fit's uncertainty counted
+    /// (`AxisDesign::predicted_error_with_fit`; NaN if the design failed).
+    pub predicted_with_fit: f64,
     /// The design's flat band (Hz) (NaN if the design failed).
     pub flat_band_hz: (f64, f64),
     /// Wall time of the axis's design (s).
@@ -407,6 +410,7 @@ fn score_sim_with(
         let shape = designed.as_ref().ok().map(|d| dynocomp_core::budget::AxisShape::of(&d.filter));
         let mut as_written = None;
         let phase_limits = designed.as_ref().map(|d| d.phase_limits.clone()).unwrap_or_default();
+        let predicted_with_fit = designed.as_ref().map_or(f64::NAN, |d| d.predicted_error_with_fit());
         let (comp_nrmse, predicted_error, flat_band_hz) = match designed {
             Err(e) => (Err(format!("{e:#}")), f64::NAN, (f64::NAN, f64::NAN)),
             Ok(d) => {
@@ -430,6 +434,7 @@ fn score_sim_with(
             comp_nrmse,
             noise_floor,
             predicted_error,
+            predicted_with_fit,
             flat_band_hz,
             design_s,
             shape,
