@@ -804,7 +804,7 @@ fn cli_offcentre_3x3_image_beats_per_axis() {
     let notes = j["design"]["notes"].as_array().unwrap();
     assert!(notes.iter().all(|n| !n.as_str().unwrap().contains("moderate")), "{notes:?}");
     // Every row states the fit's own uncertainty (`RowError::fit`; its
-    // accuracy is the Monte Carlo unit test of `frf_variance_common`): a
+    // accuracy is the Monte Carlo unit test of `fit_covariance`): a
     // fraction of a percent on this preset, not nothing.
     for a in j["design"]["axes"].as_array().unwrap() {
         let fit = a["chosen"]["fit"].as_f64();

@@ -153,7 +153,7 @@ fn residuals(
 
 /// The variance E|Ĝ(j2πf) − G(j2πf)|² of the fitted model `model` at each
 /// frequency of `at_hz` (Hz), from the lines (`freq_hz`, `h`) with weights
-/// `weights` it was fitted to: [`frf_variance_common`] of one entry.
+/// `weights` it was fitted to: [`fit_covariance`] of one entry.
 pub fn frf_variance(
     freq_hz: &[f64],
     h: &[Complex64],
@@ -161,29 +161,65 @@ pub fn frf_variance(
     model: &PoleResidueModel,
     at_hz: &[f64],
 ) -> Option<Vec<f64>> {
-    Some(frf_variance_common(freq_hz, &[(h, weights)], std::slice::from_ref(model), at_hz)?.swap_remove(0))
+    let cov = fit_covariance(freq_hz, &[(h, weights)], std::slice::from_ref(model), at_hz)?;
+    Some((0..at_hz.len()).map(|k| cov.variance(0, k)).collect())
 }
 
-/// Per entry of a common-pole fit (`models`, on the lines `entries[e]` =
-/// (values, weights) over `freq_hz`), the variance E|Ĝ_e(j2πf) − G_e(j2πf)|²
-/// at each frequency of `at_hz` (Hz): the first-order propagation of the
-/// parameters' covariance σ̂²(JᵀJ)⁻¹, J the weighted Jacobian of every
-/// entry's residuals ([`residuals`]) over the common poles and each entry's
-/// residues and direct term (a residue that is exactly zero, a term the
-/// entry does without, is not a parameter), σ̂² = E/(N − p) with N the real
-/// data points of positive weight and p the parameters. That is
-/// g(f)ᵀ C g(f) summed over Re and Im, g(f) = ∂Ĝ_e(f)/∂θ, through the Schur
-/// complement of the entries' blocks as in [`refine_common`]. The
-/// uncertainty the lines' noise leaves in the fit, which no design on the
-/// model can see; each entry's variance alone (the entries' errors are
-/// correlated through the common poles). `None` where the normal matrix is
-/// singular or there are no more data points than parameters.
-pub fn frf_variance_common(
+/// The covariance of a common-pole fit's entries at some frequencies f_k
+/// ([`fit_covariance`]), in factors: for distinct entries e and complex
+/// coefficients c_e,
+///
+///   E|Σ_e c_e (Ĝ_e − G_e)(f_k)|² = Σ_e |c_e|²·own[e][k] + ‖Σ_e c_e·shared[e][k]‖²,
+///
+/// `own` the part of each entry's own residues and direct term, `shared`
+/// the whitened part of the common poles (the entries' errors are
+/// correlated only through it).
+#[derive(Clone, Debug)]
+pub struct FitCovariance {
+    /// Per entry and frequency (N²/N² of |G|²).
+    pub own: Vec<Vec<f64>>,
+    /// Per entry and frequency, a vector of the poles' dimension.
+    pub shared: Vec<Vec<Vec<Complex64>>>,
+}
+
+impl FitCovariance {
+    /// E|Ĝ_e − G_e|² at frequency k.
+    pub fn variance(&self, e: usize, k: usize) -> f64 {
+        self.own[e][k] + self.shared[e][k].iter().map(|v| v.norm_sqr()).sum::<f64>()
+    }
+
+    /// E|Σ c_e (Ĝ_e − G_e)|² at frequency k for the distinct entries and
+    /// coefficients `terms` ((e, c_e)).
+    pub fn combination_variance(&self, k: usize, terms: &[(usize, Complex64)]) -> f64 {
+        let own: f64 = terms.iter().map(|(e, c)| c.norm_sqr() * self.own[*e][k]).sum();
+        let n = terms.first().map_or(0, |(e, _)| self.shared[*e][k].len());
+        let shared: f64 =
+            (0..n).map(|i| terms.iter().map(|(e, c)| c * self.shared[*e][k][i]).sum::<Complex64>().norm_sqr()).sum();
+        own + shared
+    }
+}
+
+/// The covariance ([`FitCovariance`]) of a common-pole fit's entries
+/// (`models`, on the lines `entries[e]` = (values, weights) over
+/// `freq_hz`) at each frequency of `at_hz` (Hz): the first-order
+/// propagation of the parameters' covariance σ̂²(JᵀJ)⁻¹, J the weighted
+/// Jacobian of every entry's residuals ([`residuals`]) over the common
+/// poles and each entry's residues and direct term (a residue that is
+/// exactly zero, a term the entry does without, is not a parameter), σ̂² =
+/// E/(N − p) with N the real data points of positive weight and p the
+/// parameters. For a real vector x over the parameters, xᵀ(JᵀJ)⁻¹x =
+/// Σ_e x_eᵀD_e⁻¹x_e + uᵀS⁻¹u with u = x_p − Σ_e B_e D_e⁻¹ x_e, through the
+/// Schur complement S of the entries' blocks D_e as in [`refine_common`];
+/// x = ∂Ĝ_e(f)/∂θ (Re and Im) gives `own` and, with S = LLᵀ, `shared` =
+/// L⁻¹u. The uncertainty the lines' noise leaves in the fit, which no
+/// design on the model can see. `None` where the normal matrix is singular
+/// or there are no more data points than parameters.
+pub fn fit_covariance(
     freq_hz: &[f64],
     entries: &[(&[Complex64], &[f64])],
     models: &[PoleResidueModel],
     at_hz: &[f64],
-) -> Option<Vec<Vec<f64>>> {
+) -> Option<FitCovariance> {
     let f_top = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
     let sizes_ok = entries.iter().all(|(h, w)| h.len() == freq_hz.len() && w.len() == freq_hz.len());
     if !(f_top > 0.0) || !sizes_ok || entries.len() != models.len() || models.is_empty() {
@@ -263,29 +299,30 @@ pub fn frf_variance_common(
     for (b, d) in &blocks {
         schur -= b * d.solve(&b.transpose());
     }
-    let schur = schur.cholesky()?;
-    let mut out = Vec::with_capacity(entries.len());
+    let l = schur.cholesky()?.l();
+    let sigma = sigma2.sqrt();
+    let (mut own, mut shared) = (Vec::with_capacity(entries.len()), Vec::with_capacity(entries.len()));
     for (g, (b, d)) in grads.iter().zip(&blocks) {
-        // var = g_lᵀ D⁻¹ g_l + uᵀ S⁻¹ u, u = g_p − B D⁻¹ g_l, per row of g.
+        // Per column of g (Re, Im of each frequency): g_lᵀ D⁻¹ g_l, and
+        // L⁻¹u with u = g_p − B D⁻¹ g_l.
         let g_p = g.columns(0, np).transpose();
         let g_l = g.columns(np, nc).transpose();
         let v = d.solve(&g_l);
-        let u = g_p - b * &v;
-        let su = schur.solve(&u);
-        let var: Vec<f64> = (0..s_at.len())
-            .map(|k| {
-                sigma2
-                    * (2 * k..2 * k + 2)
-                        .map(|c| g_l.column(c).dot(&v.column(c)) + u.column(c).dot(&su.column(c)))
-                        .sum::<f64>()
-            })
+        let w = l.solve_lower_triangular(&(g_p - b * &v))?;
+        let o: Vec<f64> = (0..s_at.len())
+            .map(|k| sigma2 * (2 * k..2 * k + 2).map(|c| g_l.column(c).dot(&v.column(c))).sum::<f64>())
             .collect();
-        if !var.iter().all(|v| v.is_finite() && *v >= 0.0) {
+        let sh: Vec<Vec<Complex64>> = (0..s_at.len())
+            .map(|k| (0..np).map(|i| Complex64::new(w[(i, 2 * k)], w[(i, 2 * k + 1)]) * sigma).collect())
+            .collect();
+        let finite = o.iter().all(|v| v.is_finite() && *v >= 0.0) && sh.iter().flatten().all(|v| v.is_finite());
+        if !finite {
             return None;
         }
-        out.push(var);
+        own.push(o);
+        shared.push(sh);
     }
-    Some(out)
+    Some(FitCovariance { own, shared })
 }
 
 /// The maximum-likelihood model near `model` on the lines (`freq_hz`, `h`)
@@ -614,21 +651,28 @@ mod tests {
     /// the maximum-likelihood fit over independent impact tests of one
     /// dynamometer: at a resonance, an anti-resonance and between modes,
     /// E|Ĝ − G|² over 120 noisy realizations (the true G the reference)
-    /// against [`frf_variance_common`]'s mean, for one entry and for two
-    /// entries with common poles (the second without the 520 Hz mode).
-    /// Control: the line noise itself, E|H − G|², is far from the fit's
-    /// spread (the fit averages over its lines), so the 0.7-1.4 window
-    /// tells the two apart.
+    /// against [`fit_covariance`]'s mean, for one entry, for each of two
+    /// entries with common poles (the second without the 520 Hz mode), and
+    /// for their difference Ĝ_0 − Ĝ_1, whose pole errors cancel where the
+    /// entries share a mode. Controls: the line noise itself, E|H − G|², is
+    /// far from the fit's spread (the fit averages over its lines), and at
+    /// the shared resonance the prediction with the poles' part combined
+    /// with the wrong sign (the sum's) is far from the difference's spread;
+    /// the 0.7-1.4 window tells them apart.
     #[test]
     fn the_fit_variance_predicts_the_spread_of_the_fit_over_impact_tests() {
         let (t, other) = (truth(), second_entry());
         let at = [310.0, 450.0, 1500.0, 2600.0];
         let noise = 0.01;
         let runs = 120;
+        let diff = [(0, Complex64::new(1.0, 0.0)), (1, Complex64::new(-1.0, 0.0))];
+        let sum = [(0, Complex64::new(1.0, 0.0)), (1, Complex64::new(1.0, 0.0))];
         for truths in [vec![t.clone()], vec![t, other]] {
             let n = truths.len();
-            let mut spread = vec![[0.0; 4]; n];
-            let mut predicted = vec![[0.0; 4]; n];
+            // Per entry, then the difference (two entries): spread,
+            // prediction, and the prediction of the sum (the shared parts
+            // combined with the wrong sign).
+            let mut stats = vec![[[0.0; 3]; 4]; n + 1];
             for seed in 0..runs {
                 let data: Vec<(Vec<f64>, Vec<Complex64>)> =
                     truths.iter().enumerate().map(|(e, m)| lines(m, 4.0, noise, 1000 + 10 * seed + e as u64)).collect();
@@ -637,22 +681,45 @@ mod tests {
                 let entries: Vec<(&[Complex64], &[f64])> =
                     data.iter().map(|d| (d.1.as_slice(), w.as_slice())).collect();
                 let fit = refine_common(freq, &entries, &truths, freq[0], 0.0).unwrap();
-                let var = frf_variance_common(freq, &entries, &fit, &at).unwrap();
-                for e in 0..n {
-                    for k in 0..at.len() {
-                        spread[e][k] += (fit[e].frf(at[k]) - truths[e].frf(at[k])).norm_sqr() / runs as f64;
-                        predicted[e][k] += var[e][k] / runs as f64;
+                let cov = fit_covariance(freq, &entries, &fit, &at).unwrap();
+                let err = |e: usize, f: f64| fit[e].frf(f) - truths[e].frf(f);
+                for k in 0..at.len() {
+                    for e in 0..n {
+                        let v = cov.variance(e, k);
+                        let sample = [err(e, at[k]).norm_sqr(), v, v];
+                        (0..3).for_each(|c| stats[e][k][c] += sample[c] / runs as f64);
+                    }
+                    if n == 2 {
+                        let sample = [
+                            (err(0, at[k]) - err(1, at[k])).norm_sqr(),
+                            cov.combination_variance(k, &diff),
+                            cov.combination_variance(k, &sum),
+                        ];
+                        (0..3).for_each(|c| stats[n][k][c] += sample[c] / runs as f64);
                     }
                 }
             }
             let line_noise = 2.0 * noise * noise;
-            for e in 0..n {
+            for (e, st) in stats.iter().enumerate().take(if n == 2 { 3 } else { 1 }) {
                 for k in 0..at.len() {
-                    let (p, sp) = (predicted[e][k], spread[e][k]);
-                    let what = format!("{n} entries, entry {e}, {} Hz: predicted {p:.3e}, spread {sp:.3e}", at[k]);
+                    let [sp, p, _] = st[k];
+                    let what = format!(
+                        "{n} entries, {}, {} Hz: predicted {p:.3e}, spread {sp:.3e}",
+                        ["entry 0", "entry 1", "difference"][e],
+                        at[k]
+                    );
                     assert!((0.7..1.4).contains(&(p / sp)), "{what}");
-                    assert!(line_noise > 3.0 * sp, "{what}: the control does not differ ({line_noise:.3e})");
+                    // The difference carries both entries' line noise.
+                    let raw = if e == 2 { 2.0 * line_noise } else { line_noise };
+                    assert!(raw > 3.0 * sp, "{what}: the control does not differ ({raw:.3e})");
                 }
+            }
+            if n == 2 {
+                let [sp, _, flipped] = stats[2][0];
+                assert!(
+                    flipped > 1.4 * sp,
+                    "control: the sum's prediction {flipped:.3e}, the difference's spread {sp:.3e}"
+                );
             }
         }
     }

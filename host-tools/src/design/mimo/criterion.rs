@@ -3,7 +3,7 @@
 //! of q = (q_x, q_y, q_z) by it.
 
 use anyhow::{bail, Result};
-use nalgebra::{DMatrix, Matrix3};
+use nalgebra::DMatrix;
 use num_complex::Complex64;
 use serde::Serialize;
 use std::f64::consts::PI;
@@ -12,6 +12,7 @@ use super::discrete::CMatrix3;
 use crate::design::above_band::{out_of_band_lines, out_of_band_noise_factor};
 use crate::design::criterion::{criterion_cells, criterion_grid};
 use crate::design::force_spectrum::{estimate_matrix, CellSpectrum, ForceRecord};
+use crate::fit::refine::FitCovariance;
 use crate::frf::axis_name;
 use crate::numeric::parallel::map_on_threads;
 use crate::numeric::search::golden_section;
@@ -29,10 +30,10 @@ pub struct RowGrid {
     pub weight: [Vec<f64>; 3],
     /// The in-band power of force i, P_i (N²).
     pub force_power_n2: f64,
-    /// E|Ĝ_mj − G_mj|² on the lines (`[(m, j)]`), the fitted model's own
-    /// uncertainty ([`MatrixCriterion::with_fit_variance`]); empty where
-    /// not known.
-    pub var: Vec<Matrix3<f64>>,
+    /// The covariance of the fitted model's entries on the lines (entry
+    /// e = 3m + j for Ĝ_mj), its own uncertainty
+    /// ([`MatrixCriterion::with_fit_covariance`]); `None` where not known.
+    pub fit_cov: Option<FitCovariance>,
 }
 
 /// The force spectra P_j(f) the criterion ([`MatrixCriterion`]) assumes.
@@ -150,10 +151,11 @@ pub struct RowError {
     pub error: f64,
     /// √(J_i without the noise term).
     pub distortion: f64,
-    /// √J_fit,i, J_fit,i = Σ_f Σ_j (P_j(f)/P_i)·Σ_m |H_im|²·E|Ĝ_mj − G_mj|²:
+    /// √J_fit,i, J_fit,i = Σ_f Σ_j (P_j(f)/P_i)·E|Σ_m H_im (Ĝ_mj − G_mj)|²:
     /// the error the impact tests' noise leaves in Ĝ, which `error`
-    /// (computed on Ĝ) cannot see, for independent entries
-    /// ([`MatrixCriterion::with_fit_variance`]); NaN where not known.
+    /// (computed on Ĝ) cannot see, the entries' errors correlated through
+    /// the common poles ([`MatrixCriterion::with_fit_covariance`]); NaN
+    /// where not known.
     pub fit: f64,
 }
 
@@ -183,20 +185,18 @@ impl MatrixCriterion {
             let freqs = criterion_grid(&[band_hz]);
             let g = freqs.iter().map(|f| g(*f)).collect();
             let (weight, force_power_n2) = forces.row(i, freqs.len());
-            RowGrid { band_hz, freqs, g, weight, force_power_n2, var: Vec::new() }
+            RowGrid { band_hz, freqs, g, weight, force_power_n2, fit_cov: None }
         });
         MatrixCriterion { fs_hz, rows, r, above: Default::default(), above_weight: 0.0 }
     }
 
-    /// The criterion with the fitted model's variance on each row's lines:
-    /// `var(freqs)` is, per entry e = 3m + j, E|Ĝ_mj − G_mj|² at `freqs`
-    /// ([`crate::fit::refine::frf_variance_common`]); rows where it is
-    /// `None` stay without.
-    pub fn with_fit_variance(mut self, var: impl Fn(&[f64]) -> Option<Vec<Vec<f64>>>) -> Self {
+    /// The criterion with the fitted model's covariance on each row's
+    /// lines: `cov(freqs)` is that of the nine entries (e = 3m + j for
+    /// Ĝ_mj) at `freqs` ([`crate::fit::refine::fit_covariance`]); rows
+    /// where it is `None` stay without.
+    pub fn with_fit_covariance(mut self, cov: impl Fn(&[f64]) -> Option<FitCovariance>) -> Self {
         for row in &mut self.rows {
-            if let Some(v) = var(&row.freqs).filter(|v| v.len() == 9) {
-                row.var = (0..row.freqs.len()).map(|k| Matrix3::from_fn(|m, j| v[3 * m + j][k])).collect();
-            }
+            row.fit_cov = cov(&row.freqs).filter(|c| c.own.len() == 9);
         }
         self
     }
@@ -267,12 +267,13 @@ impl MatrixCriterion {
                     - if i == j { 1.0 } else { 0.0 };
                 dist += row.weight[j][k] * e.norm_sqr();
                 amp += self.r[j] * hr[j].norm_sqr();
-                if let Some(var) = row.var.get(k) {
-                    fit += row.weight[j][k] * (0..3).map(|m| hr[m].norm_sqr() * var[(m, j)]).sum::<f64>();
+                if let Some(cov) = &row.fit_cov {
+                    let terms = [(j, hr[0]), (3 + j, hr[1]), (6 + j, hr[2])];
+                    fit += row.weight[j][k] * cov.combination_variance(k, &terms);
                 }
             }
         }
-        let fit = if row.var.is_empty() { f64::NAN } else { fit.sqrt() };
+        let fit = if row.fit_cov.is_some() { fit.sqrt() } else { f64::NAN };
         RowError { error: (dist + self.noise(i) * amp / n).sqrt(), distortion: dist.sqrt(), fit }
     }
 
@@ -406,20 +407,36 @@ mod tests {
     use super::*;
 
     /// J_fit against its closed form: on a diagonal plant Ĝ = 2I with flat,
-    /// equal forces, a per-axis row H = h·e_i gives J_fit,i = |h|²·Σ_j v_ij
-    /// and no compensation (H = I) gives Σ_j v_ij, for entry variances v_mj
-    /// that differ per entry (so a wrong entry or row shows). Control:
-    /// without the variance the term is unknown (NaN) and the prediction
-    /// with it is the prediction alone.
+    /// equal forces and entry errors that are independent (no shared part),
+    /// a per-axis row H = h·e_i gives J_fit,i = |h|²·Σ_j v_ij and no
+    /// compensation (H = I) gives Σ_j v_ij, for entry variances v_mj that
+    /// differ per entry (so a wrong entry or row shows). With a shared part
+    /// s_mj (a pole common to the entries), row i of H = [a, b, c] gives
+    /// Σ_j |a s_0j + b s_1j + c s_2j|² on top. Control: without the
+    /// covariance the term is unknown (NaN) and the prediction with it is
+    /// the prediction alone.
     #[test]
     fn the_fit_term_counts_the_variance_of_every_entry_of_the_row() {
         let g = |_: f64| CMatrix3::from_fn(|a, b| Complex64::new(if a == b { 2.0 } else { 0.0 }, 0.0));
         let bands = [(100.0, 1000.0); 3];
         let forces = ForceWeights::Flat([100.0; 3]);
         let v = |m: usize, j: usize| 1e-6 * (1 + 3 * m + j) as f64;
+        let sh = |m: usize, j: usize| Complex64::new(1e-3 * (m + 1) as f64, -1e-3 * j as f64);
         let plain = MatrixCriterion::new(g, bands, 25600.0, &forces, [0.05; 3]);
-        let crit =
-            plain.clone().with_fit_variance(|freqs| Some((0..9).map(|e| vec![v(e / 3, e % 3); freqs.len()]).collect()));
+        let cov = |shared: bool| {
+            move |freqs: &[f64]| {
+                Some(FitCovariance {
+                    own: (0..9).map(|e| vec![v(e / 3, e % 3); freqs.len()]).collect(),
+                    shared: (0..9)
+                        .map(|e| {
+                            let s = if shared { sh(e / 3, e % 3) } else { Complex64::new(0.0, 0.0) };
+                            vec![vec![s]; freqs.len()]
+                        })
+                        .collect(),
+                })
+            }
+        };
+        let crit = plain.clone().with_fit_covariance(cov(false));
         let h = Complex64::new(0.3, 0.4);
         for i in 0..3 {
             let n = crit.rows[i].freqs.len();
@@ -432,6 +449,20 @@ mod tests {
             let without = plain.per_axis(i, 0, &vec![h; n]);
             assert!(without.fit.is_nan() && without.with_fit() == without.error);
             assert_eq!(without.error, per.error, "the prediction itself does not change");
+        }
+        let shared = plain.with_fit_covariance(cov(true));
+        let hr = [Complex64::new(0.5, 0.1), Complex64::new(-0.2, 0.3), Complex64::new(0.1, -0.4)];
+        let freqs = shared.all_freqs();
+        let hs: Vec<DMatrix<Complex64>> = freqs.iter().map(|_| DMatrix::from_fn(3, 3, |_, m| hr[m])).collect();
+        for i in 0..3 {
+            let want: f64 = (0..3)
+                .map(|j| {
+                    let own: f64 = (0..3).map(|m| hr[m].norm_sqr() * v(m, j)).sum();
+                    own + (0..3).map(|m| hr[m] * sh(m, j)).sum::<Complex64>().norm_sqr()
+                })
+                .sum();
+            let got = shared.row_error(i, 0, &hs).fit;
+            assert!((got - want.sqrt()).abs() < 1e-12 * got, "row {i}: {got} against {}", want.sqrt());
         }
     }
 }

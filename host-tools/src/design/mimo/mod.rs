@@ -35,6 +35,7 @@ use crate::design::discretize::{Discretization, MATCH_BAND_FRACTION};
 use crate::design::kalman::ForceShape;
 use crate::design::latency::{DEFAULT_LATENCY, GAIN_NOT_WORTH, LONGER_LATENCIES, PREDICTED_SHORT};
 use crate::fit::matrix::{matrix_vector_fit, MatrixData, MatrixModel};
+use crate::fit::refine::FitCovariance;
 use crate::fit::relative_rms_error;
 use crate::fit::vf::{coherence_weights, VfOptions};
 use crate::frf::{axis_name, entry_name, Frf};
@@ -563,7 +564,7 @@ fn criteria(
         judge: MatrixCriterion::new(judge_g, bands, d.fs_hz, &forces, r),
         model: MatrixCriterion::new(model_g, bands, d.fs_hz, &forces, r)
             .quiet_above_band(if quiet_above_band(d) { d.above_band.out_of_band_weight() } else { 0.0 })
-            .with_fit_variance(|freqs| fit_variance(frf, prep, freqs)),
+            .with_fit_covariance(|freqs| fit_covariance(frf, prep, freqs)),
     };
     Ok((criteria, matches!(forces, ForceWeights::Flat(_))))
 }
@@ -760,15 +761,15 @@ pub fn with_weighted_matrix<R>(frf: &Frf, use_data: impl FnOnce(&MatrixData) -> 
     Ok(use_data(&data))
 }
 
-/// Per entry e = 3i + j, the variance of the common-pole fit's Ĝ_ij at
-/// `freqs` from the lines it was fitted to
-/// ([`crate::fit::refine::frf_variance_common`]); `None` without a fit of
-/// these lines (no model, or a model from elsewhere).
-fn fit_variance(frf: &Frf, prep: Option<&MatrixPrep>, freqs: &[f64]) -> Option<Vec<Vec<f64>>> {
+/// The covariance of the common-pole fit's entries (e = 3i + j for
+/// Ĝ_ij) at `freqs` from the lines it was fitted to
+/// ([`crate::fit::refine::fit_covariance`]); `None` without a fit of these
+/// lines (no model, or a model from elsewhere).
+fn fit_covariance(frf: &Frf, prep: Option<&MatrixPrep>, freqs: &[f64]) -> Option<FitCovariance> {
     let p = prep.filter(|p| p.fit.weighted_rms.is_finite())?;
     with_weighted_matrix(frf, |data| {
         let entries: Vec<(&[Complex64], &[f64])> = (0..9).map(|e| (data.h[e], data.w[e])).collect();
-        crate::fit::refine::frf_variance_common(data.freq_hz, &entries, &p.model.entries, freqs)
+        crate::fit::refine::fit_covariance(data.freq_hz, &entries, &p.model.entries, freqs)
     })
     .ok()
     .flatten()
