@@ -542,7 +542,6 @@ fn axis_lines(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions) -> Result<Ax
     Ok(AxisLines { band, comp_band, notes, in_band, eval_band, target, out_of_band })
 }
 
-/// Fit the axis's model by `opts.method` on `lines`.
 /// The weights of the default method's fit: the coherence weights (the
 /// H1 estimate's inverse variances up to a factor), lowered outside the
 /// fitting bands where there are bands.
@@ -558,6 +557,7 @@ fn vf_weights(frf: &AxisFrf, opts: &DesignOptions, lines: &AxisLines) -> Vec<f64
     weights
 }
 
+/// Fit the axis's model by `opts.method` on `lines`.
 fn fit_axis(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions, lines: &AxisLines) -> Result<Fitted> {
     let name = axis_name(frf.axis);
     let coh = frf.coherence.as_deref();

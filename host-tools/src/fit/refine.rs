@@ -82,6 +82,22 @@ impl Params {
         self.pairs.iter().map(|p| if *p { 2 } else { 1 }).sum()
     }
 
+    /// Per linear parameter (the residues, then d), whether it belongs to
+    /// a term whose residue is exactly zero: a term this entry does
+    /// without, which is not a parameter of it.
+    fn zero_residues(&self) -> Vec<bool> {
+        let np = self.n_poles();
+        let mut zero = vec![false; np + 1];
+        let mut k = 0;
+        for &pair in &self.pairs {
+            let width = if pair { 2 } else { 1 };
+            let z = self.x[np + k..np + k + width].iter().all(|v| *v == 0.0);
+            zero[k..k + width].fill(z);
+            k += width;
+        }
+        zero
+    }
+
     fn to_model(&self, w_scale: f64) -> PoleResidueModel {
         let np = self.n_poles();
         let (mut i, mut terms) = (0, Vec::with_capacity(self.pairs.len()));
@@ -248,14 +264,7 @@ pub fn fit_covariance(
         let mut g = DMatrix::<f64>::zeros(2 * s_at.len(), np + nc);
         let zeros = vec![Complex64::new(0.0, 0.0); s_at.len()];
         residuals(p, &s_at, &zeros, &vec![1.0; s_at.len()], Some(&mut g));
-        let mut kept = vec![true; nc];
-        let mut k = 0;
-        for &pair in &p.pairs {
-            let width = if pair { 2 } else { 1 };
-            let zero = p.x[np + k..np + k + width].iter().all(|v| *v == 0.0);
-            kept[k..k + width].fill(!zero);
-            k += width;
-        }
+        let kept: Vec<bool> = p.zero_residues().iter().map(|z| !z).collect();
         for (c, keep) in kept.iter().enumerate() {
             if !keep {
                 jac.column_mut(np + c).fill(0.0);
@@ -441,20 +450,7 @@ pub fn refine_common(
         return Ok(models.to_vec());
     }
     // An entry's residue that is exactly zero stays zero.
-    let fixed_lin: Vec<Vec<bool>> = p
-        .iter()
-        .map(|q| {
-            let mut fixed = vec![false; nc];
-            let mut k = 0;
-            for &pair in &q.pairs {
-                let width = if pair { 2 } else { 1 };
-                let zero = q.x[np + k..np + k + width].iter().all(|v| *v == 0.0);
-                fixed[k..k + width].fill(zero);
-                k += width;
-            }
-            fixed
-        })
-        .collect();
+    let fixed_lin: Vec<Vec<bool>> = p.iter().map(Params::zero_residues).collect();
     let mut cost = cost_of(&p);
     if !cost.is_finite() {
         return Ok(models.to_vec());
