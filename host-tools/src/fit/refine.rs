@@ -199,6 +199,14 @@ pub struct FitCovariance {
 }
 
 impl FitCovariance {
+    /// The covariance at the frequencies `k` of `range` alone.
+    pub fn at(&self, range: std::ops::Range<usize>) -> FitCovariance {
+        FitCovariance {
+            own: self.own.iter().map(|o| o[range.clone()].to_vec()).collect(),
+            shared: self.shared.iter().map(|s| s[range.clone()].to_vec()).collect(),
+        }
+    }
+
     /// E|Ĝ_e − G_e|² at frequency k.
     pub fn variance(&self, e: usize, k: usize) -> f64 {
         self.own[e][k] + self.shared[e][k].iter().map(|v| v.norm_sqr()).sum::<f64>()

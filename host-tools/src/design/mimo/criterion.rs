@@ -192,11 +192,18 @@ impl MatrixCriterion {
 
     /// The criterion with the fitted model's covariance on each row's
     /// lines: `cov(freqs)` is that of the nine entries (e = 3m + j for
-    /// Ĝ_mj) at `freqs` ([`crate::fit::refine::fit_covariance`]); rows
-    /// where it is `None` stay without.
-    pub fn with_fit_covariance(mut self, cov: impl Fn(&[f64]) -> Option<FitCovariance>) -> Self {
+    /// Ĝ_mj) at `freqs` ([`crate::fit::refine::fit_covariance`]), asked
+    /// once for every row's lines ([`Self::all_freqs`]); where it is `None`
+    /// the rows stay without.
+    pub fn with_fit_covariance(mut self, cov: impl FnOnce(&[f64]) -> Option<FitCovariance>) -> Self {
+        let Some(all) = cov(&self.all_freqs()).filter(|c| c.own.len() == 9) else {
+            return self;
+        };
+        let mut offset = 0;
         for row in &mut self.rows {
-            row.fit_cov = cov(&row.freqs).filter(|c| c.own.len() == 9);
+            let n = row.freqs.len();
+            row.fit_cov = Some(all.at(offset..offset + n));
+            offset += n;
         }
         self
     }
@@ -254,9 +261,11 @@ impl MatrixCriterion {
     }
 
     /// J_i ([`MatrixCriterion`]) for the response `h(k, j)` = H_ij on line k of row
-    /// i's grid and latency `lag`.
-    fn j(&self, i: usize, lag: usize, h: impl Fn(usize, usize) -> Complex64) -> RowError {
+    /// i's grid and latency `lag`; the fit's part only `with_fit` (NaN
+    /// otherwise).
+    fn j(&self, i: usize, lag: usize, with_fit: bool, h: impl Fn(usize, usize) -> Complex64) -> RowError {
         let row = &self.rows[i];
+        let fit_cov = row.fit_cov.as_ref().filter(|_| with_fit);
         let n = row.freqs.len() as f64;
         let (mut dist, mut amp, mut fit) = (0.0, 0.0, 0.0);
         for (k, (f, g)) in row.freqs.iter().zip(&row.g).enumerate() {
@@ -267,31 +276,41 @@ impl MatrixCriterion {
                     - if i == j { 1.0 } else { 0.0 };
                 dist += row.weight[j][k] * e.norm_sqr();
                 amp += self.r[j] * hr[j].norm_sqr();
-                if let Some(cov) = &row.fit_cov {
+                if let Some(cov) = fit_cov {
                     let terms = [(j, hr[0]), (3 + j, hr[1]), (6 + j, hr[2])];
                     fit += row.weight[j][k] * cov.combination_variance(k, &terms);
                 }
             }
         }
-        let fit = if row.fit_cov.is_some() { fit.sqrt() } else { f64::NAN };
+        let fit = if fit_cov.is_some() { fit.sqrt() } else { f64::NAN };
         RowError { error: (dist + self.noise(i) * amp / n).sqrt(), distortion: dist.sqrt(), fit }
     }
 
     /// Row i's error for a 3x3 response `h` on [`Self::all_freqs`].
     pub fn row_error(&self, i: usize, lag: usize, h: &[DMatrix<Complex64>]) -> RowError {
+        self.row(i, lag, true, h)
+    }
+
+    /// √J_i alone for a 3x3 response `h` on [`Self::all_freqs`], without
+    /// the fit's part: what the q search compares, candidate by candidate.
+    pub fn row_prediction(&self, i: usize, lag: usize, h: &[DMatrix<Complex64>]) -> f64 {
+        self.row(i, lag, false, h).error
+    }
+
+    fn row(&self, i: usize, lag: usize, with_fit: bool, h: &[DMatrix<Complex64>]) -> RowError {
         let offset: usize = self.rows[..i].iter().map(|r| r.freqs.len()).sum();
-        self.j(i, lag, |k, j| h[offset + k][(i, j)])
+        self.j(i, lag, with_fit, |k, j| h[offset + k][(i, j)])
     }
 
     /// Row i's error without compensation (H = I, no latency).
     pub fn raw(&self, i: usize) -> RowError {
-        self.j(i, 0, |_, j| Complex64::new(if i == j { 1.0 } else { 0.0 }, 0.0))
+        self.j(i, 0, true, |_, j| Complex64::new(if i == j { 1.0 } else { 0.0 }, 0.0))
     }
 
     /// Row i's error for a per-axis compensator with response `h_ii` on
     /// row i's lines (it reads channel i only).
     pub fn per_axis(&self, i: usize, lag: usize, h_ii: &[Complex64]) -> RowError {
-        self.j(i, lag, |k, j| if i == j { h_ii[k] } else { Complex64::new(0.0, 0.0) })
+        self.j(i, lag, true, |k, j| if i == j { h_ii[k] } else { Complex64::new(0.0, 0.0) })
     }
 
     /// Row i's error counting only the direct entry: the per-axis design's

@@ -1039,7 +1039,7 @@ fn design_3x3(
             if ng[i] > d.max_noise_gain {
                 return f64::INFINITY;
             }
-            in_band_error[i] = crit.row_error(i, lag, h_in).error;
+            in_band_error[i] = crit.row_prediction(i, lag, h_in);
             (in_band_error[i].powi(2) + crit.above_j(i, h_above)).sqrt()
         });
         Some(Candidate { kalman: k, criterion: j, noise_gains: [ng[0], ng[1], ng[2]], in_band_error })
