@@ -94,7 +94,7 @@ pub struct CompensateArgs {
 
 /// Run `dynocomp compensate`.
 pub fn run(a: &CompensateArgs) -> Result<()> {
-    let Options { job, axes, fs, tpf } = Options::new(a)?;
+    let Options { job, axes, fs, tpf, extremes } = Options::new(a)?;
     let has_truth = job.truth.is_some();
     let keep = a.report.is_some() || has_truth;
     let mut acc = keep.then(|| ReportAccumulator::new(&axes, f64::from(fs), tpf, has_truth));
@@ -103,6 +103,14 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
     progress.finish_and_clear();
     let Compensated { samples: n_samples, how } = done;
     eprintln!("compensated {n_samples} samples x {} axes at {fs} Hz ({how}) -> {}", axes.len(), a.output.display());
+    let clipped: Vec<String> = extremes
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .clipped()
+        .iter()
+        .map(|c| c.warning(&a.input.display().to_string()))
+        .collect();
+    clipped.iter().for_each(|w| eprintln!("{w}"));
     // The project's one scoring band (the same as `examples/score.rs` and
     // the rates harness), not the image's flat band.
     let band = |_axis: usize| -> f64 { a.band_hz.unwrap_or_else(|| crate::metrics::scoring_band_hz(f64::from(fs))) };
@@ -112,7 +120,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
         }
     }
     if let (Some(acc), Some(dir)) = (acc, &a.report) {
-        let summary = format!(
+        let mut summary = format!(
             "input:  {}\nimage:  {}\noutput: {}\n{n_samples} samples x {} axes at {fs} Hz ({:.3} s); {how}",
             a.input.display(),
             a.coeffs.display(),
@@ -120,6 +128,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
             axes.len(),
             n_samples as f64 / f64::from(fs),
         );
+        clipped.iter().for_each(|w| summary.push_str(&format!("\n{w}")));
         write_report(acc, dir, &summary, &band)?;
     }
     Ok(())
@@ -137,6 +146,8 @@ struct Options {
     fs: u32,
     /// The tooth-passing frequency for the report (Hz).
     tpf: Option<f64>,
+    /// The input's extremes, followed as it is read ([`crate::io::clipping`]).
+    extremes: std::sync::Arc<std::sync::Mutex<crate::io::clipping::Extremes>>,
 }
 
 impl Options {
@@ -154,6 +165,7 @@ impl Options {
         let map = a.channels.as_deref().map(ChannelMap::parse).transpose().context("--channels")?;
         let max_force = check_max_force(a.max_force)?;
         let (input, in_fmt) = open_signal_checked(&a.input, map.as_ref(), max_force)?;
+        let (input, extremes) = crate::io::clipping::clip_watch(input);
         let fs = img.fs_hz();
         if let Some(f) = input.declared_fs_hz() {
             check_rate_value(fs, (f, 0.0), &source, "the file's sampling interval")?;
@@ -205,7 +217,7 @@ impl Options {
             raw_timing: a.raw_timing,
             truth,
         };
-        Ok(Options { job, axes, fs, tpf })
+        Ok(Options { job, axes, fs, tpf, extremes })
     }
 }
 

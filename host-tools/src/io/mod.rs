@@ -3,6 +3,7 @@
 pub use frf_set::{read_frf_arg, read_frf_set, split_frf_list};
 
 pub mod atomic;
+pub mod clipping;
 pub mod decimal;
 pub mod frf_csv;
 pub mod frf_set;

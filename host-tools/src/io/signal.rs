@@ -179,28 +179,21 @@ pub fn implausible(source: &str, place: &str, v: f64, full_scale_n: f64) -> anyh
     }
 }
 
-/// A reader whose force values are checked against a full scale
-/// ([`plausible`]): an implausible value is an error naming the source,
-/// the sample (1-based) and the channel. For readers that do not check
-/// themselves (the CSV reader checks each row as it parses it, with its
-/// line number).
-pub struct Bounded {
+/// A reader that shows every block it reads to `on_block` (the block and
+/// its number of samples), which may refuse it with an error.
+pub struct Tap<F> {
     inner: Box<dyn SignalReader>,
-    source: String,
-    full_scale_n: f64,
-    /// Samples delivered so far.
-    n: u64,
+    on_block: F,
 }
 
-impl Bounded {
-    /// Check the forces of `inner` (named `source` in errors) against
-    /// `full_scale_n` (N).
-    pub fn new(inner: Box<dyn SignalReader>, source: &str, full_scale_n: f64) -> Bounded {
-        Bounded { inner, source: source.to_string(), full_scale_n, n: 0 }
+impl<F: FnMut(&Block, usize, &[usize]) -> Result<()> + Send> Tap<F> {
+    /// Read `inner`, showing each block to `on_block(block, samples, axes)`.
+    pub fn new(inner: Box<dyn SignalReader>, on_block: F) -> Self {
+        Tap { inner, on_block }
     }
 }
 
-impl SignalReader for Bounded {
+impl<F: FnMut(&Block, usize, &[usize]) -> Result<()> + Send> SignalReader for Tap<F> {
     fn axes(&self) -> &[usize] {
         self.inner.axes()
     }
@@ -215,15 +208,30 @@ impl SignalReader for Bounded {
     }
     fn read_block(&mut self, blk: &mut Block, max: usize) -> Result<usize> {
         let m = self.inner.read_block(blk, max)?;
-        for (c, axis) in blk.channels.iter().zip(self.inner.axes()) {
-            if let Some(k) = c.iter().position(|v| !plausible(*v, self.full_scale_n)) {
-                let place = format!("sample {} of f{}", self.n + k as u64 + 1, crate::frf::axis_name(*axis));
-                return Err(implausible(&self.source, &place, c[k], self.full_scale_n));
-            }
-        }
-        self.n += m as u64;
+        (self.on_block)(blk, m, self.inner.axes())?;
         Ok(m)
     }
+}
+
+/// A reader whose force values are checked against a full scale
+/// ([`plausible`]): an implausible value is an error naming the source,
+/// the sample (1-based) and the channel. For readers that do not check
+/// themselves (the CSV reader checks each row as it parses it, with its
+/// line number).
+pub fn bounded(inner: Box<dyn SignalReader>, source: &str, full_scale_n: f64) -> Box<dyn SignalReader> {
+    let source = source.to_string();
+    // Samples delivered so far.
+    let mut n = 0u64;
+    Box::new(Tap::new(inner, move |blk: &Block, m: usize, axes: &[usize]| {
+        for (c, axis) in blk.channels.iter().zip(axes) {
+            if let Some(k) = c[..m].iter().position(|v| !plausible(*v, full_scale_n)) {
+                let place = format!("sample {} of f{}", n + k as u64 + 1, crate::frf::axis_name(*axis));
+                return Err(implausible(&source, &place, c[k], full_scale_n));
+            }
+        }
+        n += m as u64;
+        Ok(())
+    }))
 }
 
 /// Relative tolerance between a file's sample rate and the image's.

@@ -5,7 +5,7 @@ use anyhow::{bail, Context, Result};
 use std::io::Write;
 use std::path::Path;
 
-use crate::io::signal::{Bounded, ChannelMap, SignalReader, SignalWriter, DEFAULT_FULL_SCALE_N};
+use crate::io::signal::{bounded, ChannelMap, SignalReader, SignalWriter, DEFAULT_FULL_SCALE_N};
 use crate::io::signal_csv::{CsvReader, CsvWriter};
 use crate::io::tdms::{looks_like_tdms, TdmsReader, TdmsWriter};
 use crate::io::uff_signal::{UffReader, UffWriter};
@@ -58,7 +58,7 @@ pub fn open_signal_checked(
     let (reader, fmt) = open_by_format(path, map, full_scale_n)?;
     let reader: Box<dyn SignalReader> = match fmt {
         SignalFormat::Csv => reader,
-        _ => Box::new(Bounded::new(reader, &path.display().to_string(), full_scale_n)),
+        _ => bounded(reader, &path.display().to_string(), full_scale_n),
     };
     Ok((reader, fmt))
 }

@@ -1,0 +1,46 @@
+//! `compensate` warns when the record was clipped (plateaus at its extremes,
+//! [`dynocomp::io::clipping`]) and still writes its output; the bundled
+//! example's record, within its rails, gets no such warning (the negative
+//! control).
+
+mod cli_common;
+use cli_common::{design, dynocomp, example, tmp};
+
+#[test]
+fn a_clipped_record_is_compensated_with_a_warning_naming_channel_and_sample() {
+    let dir = tmp("clipping", "cli");
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = |n: &str| dir.join(n).display().to_string();
+    let (ok, _, err) = design(&example("frf.uff"), &example("idle.csv"), "51200", &p("c.dcimg"), &[]);
+    assert!(ok, "{err}");
+    // fx of the example clipped at 80 % of its largest value, as an ADC
+    // with that range would hold it.
+    let text = std::fs::read_to_string(example("measured.csv")).unwrap();
+    let rows: Vec<Vec<f64>> =
+        text.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+    let rail = 0.8 * rows.iter().map(|r| r[1]).fold(f64::NEG_INFINITY, f64::max);
+    let first = rows.iter().position(|r| r[1] >= rail).unwrap() + 1;
+    let mut clipped = String::from("t_s,fx,fy,fz\n");
+    for r in &rows {
+        clipped.push_str(&format!("{},{},{},{}\n", r[0], r[1].min(rail), r[2], r[3]));
+    }
+    std::fs::write(p("clipped.csv"), clipped).unwrap();
+    let run = |input: &str, out: &str| {
+        dynocomp(&["compensate", "--coeffs", &p("c.dcimg"), "--input", input, "--output", out])
+    };
+    let (ok, _, err) = run(&p("clipped.csv"), &p("out.csv"));
+    assert!(ok, "{err}");
+    let warning = err.lines().find(|l| l.contains("clipped")).unwrap_or_else(|| panic!("no warning: {err}"));
+    assert!(
+        warning.starts_with("warning: ")
+            && warning.contains("clipped.csv")
+            && warning.contains("fx holds its maximum")
+            && warning.contains(&format!("the first at sample {first})")),
+        "{warning}"
+    );
+    assert_eq!(err.matches("clipped there").count(), 1, "only fx, only its maximum: {err}");
+    assert!(std::path::Path::new(&p("out.csv")).exists(), "the output is written all the same");
+    // The record as measured: no warning.
+    let (ok, _, err) = run(&example("measured.csv"), &p("out2.csv"));
+    assert!(ok && !err.contains("clipped"), "{err}");
+}
