@@ -21,7 +21,11 @@
 //! or a repeated row is refused with a message saying what to do.
 //!
 //! `seed_study` (ignored: run it in release) reports the figures of the
-//! presets at the four user rates and of random set-ups from seeds 1..=6.
+//! presets at the four user rates and of random set-ups from seeds 1..=6;
+//! with `MIMO_STUDY_FORCE=flat` under the force the default prediction
+//! assumes ([`flat_force`]) instead of a milling cut, and with
+//! `MIMO_STUDY_NOTES` the model's error by source and by band
+//! ([`model_error`]).
 
 #![allow(clippy::needless_range_loop)] // axis indices index several arrays at once
 
@@ -110,9 +114,38 @@ fn setup(name: &str) -> PlateSetup {
 }
 
 /// A 0.4 s milling record (0.3 s idle) of `name` (a preset or a seed) at `fs`.
+/// With `MIMO_STUDY_FORCE=flat`, the force is instead [`flat_force`].
 fn record(name: &str, fs: f64) -> PlateSimOutput {
-    let params = SimParams { fs_hz: fs, duration_s: 0.4, idle_duration_s: 0.3, ..Default::default() };
+    record_with(name, fs, std::env::var("MIMO_STUDY_FORCE").as_deref() == Ok("flat"))
+}
+
+/// [`record`], of [`flat_force`] where `flat`, else of the milling cut.
+fn record_with(name: &str, fs: f64, flat: bool) -> PlateSimOutput {
+    let mut params = SimParams { fs_hz: fs, duration_s: 0.4, idle_duration_s: 0.3, ..Default::default() };
+    if flat {
+        params.excitation = Some(flat_force(fs));
+        // Its response reaches 6 times the force at the sensor modes, past
+        // the default ±2000 N rails: a range that holds it, at the same
+        // resolution in N (the clipping would be an error no prediction has).
+        params.measurement.adc_range_n = 32_000.0;
+        params.measurement.adc_bits = 20;
+    }
     simulate_plate(7, &params, &PlateSim { setup: setup(name), cut_offset_m: [0.0; 3] }).unwrap()
+}
+
+/// The force the default design's prediction assumes: a flat spectrum over
+/// the scoring band at the default `force_rms` (100 N) on each axis, the axes
+/// independent. Against it the prediction is tested alone; against a cut
+/// it is tested together with the cut's likeness to a flat spectrum.
+fn flat_force(fs: f64) -> dynocomp::simulate::shaker::Excitation {
+    let rms_n = DesignOptions::default().force_rms;
+    dynocomp::simulate::shaker::Excitation::Noise {
+        lo_hz: 10.0,
+        hi_hz: scoring_band_hz(fs),
+        rms_n,
+        seed: 11,
+        taper_s: 0.01,
+    }
 }
 
 fn noise(out: &PlateSimOutput) -> [f64; 3] {
@@ -193,6 +226,7 @@ fn evaluate(md: &MatrixDesign, out: &PlateSimOutput) -> Figures {
     });
     if std::env::var_os("MIMO_STUDY_NOTES").is_some() {
         diagnose(md, out, &est);
+        model_error(md, out);
     }
     let spec = FloorSpec { r_n2: noise(out), fs_hz: fs, band_hz: (0.0, band), std_truth_n: std_truth };
     let floor = inverse_noise_floor(&|f| out.cut_modal.frf(f), &spec).unwrap();
@@ -267,6 +301,153 @@ fn diagnose(md: &MatrixDesign, out: &PlateSimOutput, est: &[[f32; 3]]) {
             top,
             100.0 * rms(&out.idle[i]) / std_t
         );
+    }
+}
+
+/// `seed_study`'s diagnostics (with `MIMO_STUDY_NOTES`): per row i the
+/// distortion an exact inverse of A leaves on B, √(mean_f Σ_j
+/// |[A⁻¹(B − A)]_ij|²), over the FRF's lines in the row's band and in the
+/// scoring band, for (Ĝ, G) the fitted model against the true G at the cut,
+/// (Gm, G) the measured matrix against it, and (Ĝ, Gm) the fit's residual.
+/// For a flat force of equal level on each axis it is what the fit's error
+/// adds to the row's in-band error.
+fn model_error(md: &MatrixDesign, out: &PlateSimOutput) {
+    use nalgebra::Matrix3;
+    let Some(model) = &md.model else { return };
+    let frf = &out.frf;
+    let measured = |k: usize| Matrix3::from_fn(|i, j| frf.entry(i, j).map_or(Complex64::new(0.0, 0.0), |e| e.frf[k]));
+    let top = scoring_band_hz(out.params.fs_hz);
+    let modes =
+        |m: Vec<(f64, f64)>| m.iter().map(|(f, z)| format!("{f:.0} Hz ζ {z:.3}")).collect::<Vec<_>>().join(", ");
+    eprintln!("    modes, true: {}", modes(out.cut_modal.modes.iter().map(|m| (m.fn_hz, m.zeta)).collect()));
+    eprintln!("    modes, fitted: {}", modes(model.modes()));
+    eprintln!("    FRF lines {:.1}-{:.1} Hz", frf.freq_hz[0], frf.freq_hz[frf.freq_hz.len() - 1]);
+    for i in 0..3 {
+        let band = md.summary.axes[i].band_hz;
+        let mut cells = Vec::new();
+        for (name, hi) in [("row band", band.1), ("scoring band", top)] {
+            let mut acc = [0.0f64; 3];
+            let mut n = 0usize;
+            for (k, &f) in frf.freq_hz.iter().enumerate() {
+                if f < band.0 || f > hi {
+                    continue;
+                }
+                let (g, gm, gh) = (out.cut_modal.frf(f), measured(k), model.frf(f));
+                let pairs = [(gh, g), (gm, g), (gh, gm)];
+                for (a, (x, y)) in acc.iter_mut().zip(pairs) {
+                    let Some(inv) = x.try_inverse() else { continue };
+                    let d = inv * (y - x);
+                    *a += (0..3).map(|j| d[(i, j)].norm_sqr()).sum::<f64>();
+                }
+                n += 1;
+            }
+            let r = acc.map(|a| 100.0 * (a / n.max(1) as f64).sqrt());
+            cells.push(format!(
+                "{name} to {hi:.0} Hz: fit/true {:.3}, measured/true {:.3}, fit/measured {:.3}",
+                r[0], r[1], r[2]
+            ));
+        }
+        // The fit against the truth between the lines too: 16 points per line.
+        let (mut acc, mut n) = (0.0, 0usize);
+        let f0 = frf.freq_hz[0];
+        let df = (frf.freq_hz[frf.freq_hz.len() - 1] - f0) / (frf.freq_hz.len() - 1) as f64 / 16.0;
+        let mut f = f0;
+        while f <= top {
+            if f >= band.0 {
+                if let Some(inv) = model.frf(f).try_inverse() {
+                    let d = inv * (out.cut_modal.frf(f) - model.frf(f));
+                    acc += (0..3).map(|j| d[(i, j)].norm_sqr()).sum::<f64>();
+                    n += 1;
+                }
+            }
+            f += df;
+        }
+        cells.push(format!("fit/true on a grid of {df:.3} Hz {:.3}", 100.0 * (acc / n.max(1) as f64).sqrt()));
+        // The full compensator's distortion for a flat force, on the
+        // criterion's 200 lines and on a grid 50 times finer, against the
+        // model and against the truth.
+        if let Some(k) = &md.kalman {
+            let (fs, lag) = (out.params.fs_hz, md.summary.latency as f64);
+            for (name, lines) in [("200", 200usize), ("10000", 10_000)] {
+                let freqs: Vec<f64> =
+                    (0..lines).map(|m| band.0 + (band.1 - band.0) * (m as f64 + 0.5) / lines as f64).collect();
+                let h = k.compensator.freq_responses(&freqs, fs);
+                let (mut dm, mut dt) = (0.0, 0.0);
+                for (f, h) in freqs.iter().zip(&h) {
+                    let delay = Complex64::from_polar(1.0, 2.0 * PI * f * lag / fs);
+                    let row = |g: Matrix3<Complex64>| {
+                        (0..3)
+                            .map(|j| {
+                                let e = (0..3).map(|m| h[(i, m)] * g[(m, j)]).sum::<Complex64>() * delay;
+                                (e - if i == j { 1.0 } else { 0.0 }).norm_sqr()
+                            })
+                            .sum::<f64>()
+                    };
+                    dm += row(model.frf(*f));
+                    dt += row(out.cut_modal.frf(*f));
+                }
+                let r = |a: f64| 100.0 * (a / lines as f64).sqrt();
+                cells.push(format!("distortion on {name} lines: model {:.3}, true {:.3}", r(dm), r(dt)));
+            }
+        }
+        if let Some(k) = &md.kalman {
+            let lag = md.summary.latency;
+            let n = out.measured[0].len();
+            let input: Vec<DVector<f64>> = (0..n).map(|t| DVector::from_fn(3, |a, _| out.measured[a][t])).collect();
+            let y: Vec<f64> = k.compensator.simulate(&input).iter().map(|v| v[i]).collect();
+            let fs = out.params.fs_hz;
+            let e = lowpass(&y[lag..], fs, top);
+            let t = lowpass(&out.truth[i][..n - lag], fs, top);
+            let mid = |a: usize, b: usize| {
+                let m = (b - a) as f64;
+                let mean = t[a..b].iter().sum::<f64>() / m;
+                let sd = (t[a..b].iter().map(|v| (v - mean).powi(2)).sum::<f64>() / m).sqrt();
+                100.0 * (e[a..b].iter().zip(&t[a..b]).map(|(p, q)| (p - q).powi(2)).sum::<f64>() / m).sqrt() / sd
+            };
+            let m = e.len();
+            let edges = [0.0, 10.0, 100.0, 300.0, 1000.0, 2000.0, 3000.0, top];
+            let err: Vec<f64> = e.iter().zip(&t).map(|(p, q)| p - q).collect();
+            let sd_t = {
+                let mean = t.iter().sum::<f64>() / m as f64;
+                (t.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / m as f64).sqrt()
+            };
+            let by_band: Vec<String> = edges
+                .windows(2)
+                .map(|w| {
+                    let b = dynocomp::metrics::bandpass(&err, fs, &[(w[0], w[1])]);
+                    let r = (b[m / 4..3 * m / 4].iter().map(|v| v * v).sum::<f64>() / (m / 2) as f64).sqrt();
+                    // The frequency-domain figure with the true G on the same cell.
+                    let lines = 2000usize;
+                    let freqs: Vec<f64> = (0..lines)
+                        .map(|q| band.0 + (band.1 - band.0) * (q as f64 + 0.5) / lines as f64)
+                        .filter(|f| *f >= w[0] && *f < w[1])
+                        .collect();
+                    let h = k.compensator.freq_responses(&freqs, fs);
+                    let d: f64 = freqs
+                        .iter()
+                        .zip(&h)
+                        .map(|(f, h)| {
+                            let delay = Complex64::from_polar(1.0, 2.0 * PI * f * lag as f64 / fs);
+                            let g = out.cut_modal.frf(*f);
+                            (0..3)
+                                .map(|j| {
+                                    let x = (0..3).map(|q| h[(i, q)] * g[(q, j)]).sum::<Complex64>() * delay;
+                                    (x - if i == j { 1.0 } else { 0.0 }).norm_sqr()
+                                })
+                                .sum::<f64>()
+                        })
+                        .sum();
+                    format!("{:.0}-{:.0}: {:.3}/{:.3}", w[0], w[1], 100.0 * r / sd_t, 100.0 * (d / lines as f64).sqrt())
+                })
+                .collect();
+            eprintln!("    row {i} error by band, time / frequency domain (%): {}", by_band.join("  "));
+            cells.push(format!(
+                "full f64 filter in time: {:.3} (5 % cut), {:.3} (middle half)",
+                100.0 * score(&y, out, i, lag),
+                mid(m / 4, 3 * m / 4)
+            ));
+        }
+        eprintln!("    model error row {i} (%): {}", cells.join("; "));
     }
 }
 
@@ -655,6 +836,31 @@ fn judge_study() {
     }
 }
 
+/// The 3x3 prediction (with the fit's uncertainty) is what the image
+/// delivers for the force it assumes: a flat spectrum of 100 N per axis
+/// over the band ([`flat_force`]), on the flat plate at 10.24 kHz, within
+/// 0.67-1.5x of the measured in-band error on every axis. The negative
+/// control is the same design on a milling cut: its force sits far below
+/// the band's top, where the compensator's distortion lies, and y's
+/// prediction is more than 1.5 times what the cut measures.
+#[test]
+#[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
+fn the_prediction_holds_for_the_force_it_assumes() {
+    let fs = 10_240.0;
+    let flat = record_with("flat", fs, true);
+    let md = design(&flat.frf, &flat).unwrap();
+    let ratio = |out: &PlateSimOutput| {
+        let fig = evaluate(&md, out);
+        std::array::from_fn::<f64, 3, _>(|i| fig.predicted_with_fit[i] / fig.used[i])
+    };
+    let on_flat = ratio(&flat);
+    eprintln!("predicted with the fit / measured, flat force: {on_flat:.2?}");
+    assert!(on_flat.iter().all(|r| (0.67..=1.5).contains(r)), "{on_flat:?}");
+    let on_cut = ratio(&record_with("flat", fs, false));
+    eprintln!("the same design on a milling cut: {on_cut:.2?}");
+    assert!(on_cut[1] > 1.5, "{on_cut:?}");
+}
+
 /// Figures of random set-ups from seeds 1..=6 (chosen before the results)
 /// at 25.6 kHz and of the presets at the four user rates; asserts the
 /// no-worse and floor thresholds on every one.
@@ -681,6 +887,7 @@ fn seed_study() {
             })
             .collect();
     }
+    // MIMO_STUDY_FORCE=flat: the force a flat spectrum ([`flat_force`]).
     // MIMO_STUDY_PRIOR=level|spectrum designs with `--force-prior` of that
     // name and another run of the cut as the record ([`force_record`]).
     let prior = std::env::var("MIMO_STUDY_PRIOR").ok();
