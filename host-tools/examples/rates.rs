@@ -3,7 +3,13 @@
 //! simulated with the ideal anti-aliasing chain, designed, compensated and
 //! scored against the band-limited truth.
 //!
-//! usage: cargo run --release -p dynocomp --example rates -- [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum | --force-level] [--chatter HZ] [--fitted-static-gain]
+//! usage: cargo run --release -p dynocomp --example rates -- [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum | --force-level] [--chatter HZ] [--fitted-static-gain] [--flat-force]
+//!
+//! `--flat-force`: the scored record's force is the one the default
+//! prediction assumes instead of the cut: Gaussian noise, flat from 10 Hz to
+//! the scoring band's top, `force_rms` (100 N) per axis, the axes
+//! independent; the ADC's range raised to ±32 000 N at 20 bits (the same
+//! LSB) so that the resonant response does not clip.
 //!
 //! `--fitted-static-gain`: the discrete model's static gain fitted like any
 //! other line (the fit before), not held exact (`discretize::StaticGain`).
@@ -29,6 +35,7 @@ use std::time::Instant;
 fn main() -> Result<()> {
     let mut quick = false;
     let mut chatter_hz: Option<f64> = None;
+    let mut flat_force = false;
     let mut run = RunOptions::default();
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -36,6 +43,7 @@ fn main() -> Result<()> {
             "--quick" => quick = true,
             "--exact-frf" => run.exact_frf = true,
             "--no-refine" => run.refine_fit = false,
+            "--flat-force" => flat_force = true,
             "--force-spectrum" => run.force_spectrum = true,
             "--force-level" => (run.force_spectrum, run.force_level_only) = (true, true),
             "--chatter" => chatter_hz = Some(args.next().context("--chatter needs Hz")?.parse().context("--chatter: not a number")?),
@@ -46,7 +54,7 @@ fn main() -> Result<()> {
                 run.discretization = dynocomp::design::discretize::Discretization::from_name(&v)
                     .ok_or_else(|| anyhow::anyhow!("--discretization {v}: expected fit, foh or zoh"))?;
             }
-            _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum | --force-level] [--chatter HZ] [--fitted-static-gain] [--no-refine])"),
+            _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum | --force-level] [--chatter HZ] [--fitted-static-gain] [--no-refine] [--flat-force])"),
         }
     }
     let list = if quick { quick_cases() } else { cases() };
@@ -57,6 +65,9 @@ fn main() -> Result<()> {
             true => println!("q chosen for a flat force spectrum at the level of a representative record (the steady cut, seed + 1000), as design --force-prior level"),
             false => println!("q chosen for the force spectrum of a representative record (the steady cut, seed + 1000), as design --force-prior spectrum"),
         }
+    }
+    if flat_force {
+        println!("scored force: flat noise from 10 Hz to the scoring band's top, 100 N RMS per axis (the default prediction's force); ADC ±32000 N, 20 bits");
     }
     if let Some(f) = chatter_hz {
         println!("scored cut chatters at {f} Hz (0.02 mm from 0.2 s); any representative record is the steady cut");
@@ -87,6 +98,17 @@ fn main() -> Result<()> {
             let mut params = case.sim_params(fs);
             if let Some(f) = chatter_hz {
                 params.milling.chatter = Some(Chatter { freq_hz: f, amplitude_mm: 0.02, onset_s: 0.2, growth_s: 0.02 });
+            }
+            if flat_force {
+                params.excitation = Some(dynocomp::simulate::shaker::Excitation::Noise {
+                    lo_hz: 10.0,
+                    hi_hz: dynocomp::metrics::scoring_band_hz(fs),
+                    rms_n: dynocomp::design::axis::DesignOptions::default().force_rms,
+                    seed: 11,
+                    taper_s: 0.01,
+                });
+                params.measurement.adc_range_n = 32_000.0;
+                params.measurement.adc_bits = 20;
             }
             match run_case_on(case, &params, &run) {
                 Err(e) => println!("{fs:>7} {:<15} simulation failed: {e:#}", case.name),
