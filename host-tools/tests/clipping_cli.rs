@@ -1,7 +1,7 @@
 //! `compensate` warns when the record was clipped (plateaus at its extremes,
-//! [`dynocomp::io::clipping`]) and still writes its output; the bundled
-//! example's record, within its rails, gets no such warning (the negative
-//! control).
+//! [`dynocomp::io::clipping`]) and still writes its output; so does `design`
+//! of a clipped `--force-record`. The bundled example's record, within its
+//! rails, gets no such warning (the negative control).
 
 mod cli_common;
 use cli_common::{design, dynocomp, example, tmp};
@@ -42,5 +42,15 @@ fn a_clipped_record_is_compensated_with_a_warning_naming_channel_and_sample() {
     assert!(std::path::Path::new(&p("out.csv")).exists(), "the output is written all the same");
     // The record as measured: no warning.
     let (ok, _, err) = run(&example("measured.csv"), &p("out2.csv"));
+    assert!(ok && !err.contains("clipped"), "{err}");
+    // A clipped representative record for a force prior.
+    let prior = |rec: &str, out: &str| {
+        let extra = ["--force-prior", "level", "--force-record", rec];
+        design(&example("frf.uff"), &example("idle.csv"), "51200", &p(out), &extra)
+    };
+    let (ok, _, err) = prior(&p("clipped.csv"), "l.dcimg");
+    assert!(ok, "{err}");
+    assert!(err.contains("fx holds its maximum") && err.contains("the force spectrum taken from it"), "{err}");
+    let (ok, _, err) = prior(&example("measured.csv"), "l2.dcimg");
     assert!(ok && !err.contains("clipped"), "{err}");
 }

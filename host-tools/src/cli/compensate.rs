@@ -108,7 +108,7 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
         .unwrap_or_else(|p| p.into_inner())
         .clipped()
         .iter()
-        .map(|c| c.warning(&a.input.display().to_string()))
+        .map(|c| c.warning(&a.input.display().to_string(), "the compensated force is wrong around them"))
         .collect();
     clipped.iter().for_each(|w| eprintln!("{w}"));
     // The project's one scoring band (the same as `examples/score.rs` and

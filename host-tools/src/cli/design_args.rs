@@ -552,5 +552,9 @@ pub fn read_force_record(
         let why = "record the cut at the box's rate";
         crate::io::signal::check_rate_against_fs(found, fs_hz, &path.display().to_string(), why)?;
     }
+    // A clipped record's spectrum is not the cut's: say so, design anyway.
+    for c in crate::io::clipping::Extremes::of_channels(&rec.channels).clipped() {
+        eprintln!("{}", c.warning(&path.display().to_string(), "the force spectrum taken from it is not the cut's"));
+    }
     Ok(rec)
 }

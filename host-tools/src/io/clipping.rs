@@ -79,13 +79,13 @@ pub struct Clipped {
 }
 
 impl Clipped {
-    /// The warning for the user.
-    pub fn warning(&self, source: &str) -> String {
+    /// The warning for the user: the record `source` and what the clip
+    /// spoils (`spoils`, e.g. "the compensated force is wrong around them").
+    pub fn warning(&self, source: &str, spoils: &str) -> String {
         let e = &self.extreme;
         format!(
             "warning: {source}: f{} holds its {} {} N on {} samples, in {} plateaus (the first at sample {}): \
-             the amplifier or the ADC clipped there, and the compensated force is wrong around them. \
-             Measure again with a larger range",
+             the amplifier or the ADC clipped there, and {spoils}. Measure again with a larger range",
             crate::frf::axis_name(self.axis),
             if self.at_max { "maximum" } else { "minimum" },
             e.value,
@@ -110,6 +110,14 @@ impl Extremes {
             }
         }
         self.n += m as u64;
+    }
+
+    /// The extremes of a whole record's channels `(axis, samples)`.
+    pub fn of_channels(channels: &[(usize, Vec<f64>)]) -> Extremes {
+        let mut e = Extremes { axes: channels.iter().map(|c| c.0).collect(), ..Default::default() };
+        let n = channels.iter().map(|c| c.1.len()).min().unwrap_or(0);
+        e.push(&Block { t_s: Vec::new(), channels: channels.iter().map(|c| c.1[..n].to_vec()).collect() }, n);
+        e
     }
 
     /// The extremes held on [`MIN_PLATEAUS`] plateaus or more. A constant
@@ -183,7 +191,7 @@ mod tests {
         assert_eq!(c.len(), 2, "{c:?}");
         assert!(c.iter().all(|c| c.axis == 2 && c.extreme.plateaus >= 80), "{c:?}");
         assert!((c[0].extreme.value - 2_000.0).abs() < 0.1 && c[0].at_max);
-        assert!(c[0].warning("rec.csv").contains("fz holds its maximum"), "{}", c[0].warning("rec.csv"));
+        assert!(c[0].warning("rec.csv", "x").contains("fz holds its maximum"), "{}", c[0].warning("rec.csv", "x"));
         for seed in 0..20 {
             for amp in [100.0, 1_000.0, 1_980.0] {
                 for f in [20.0, 230.0] {
