@@ -957,19 +957,6 @@ fn seed_study() {
 
 mod cli_common;
 
-/// NRMSE (fractions) per axis of `compensate --truth`'s "compensated" lines.
-fn compensated_nrmse(stderr: &str) -> [f64; 3] {
-    let v: Vec<f64> = ["fx", "fy", "fz"]
-        .iter()
-        .map(|a| {
-            let line = stderr.lines().find(|l| l.starts_with(&format!("{a}: NRMSE"))).expect("an NRMSE line per axis");
-            let rest = line.split("compensated ").nth(1).expect("compensated figure");
-            rest.split(' ').next().unwrap().parse::<f64>().unwrap() / 100.0
-        })
-        .collect();
-    [v[0], v[1], v[2]]
-}
-
 /// The command line on a record with large crosstalk: `design` of the nine
 /// FRFs writes a 3x3 image (format 3) whose JSON shows the crosstalk,
 /// `compensate` runs it, and against the simulator's true force its worst
@@ -1025,7 +1012,7 @@ fn cli_offcentre_3x3_image_beats_per_axis() {
         let args = ["compensate", "--coeffs", &p(img), "--input", &p("measured.csv"), "--output", &p("out.csv")];
         let (ok, _, err) = dynocomp(&[&args[..], &["--truth", &p("true_force.csv")], extra].concat());
         assert!(ok, "{err}");
-        compensated_nrmse(&err)
+        cli_common::compensated_nrmse(&err)
     };
     let (m, a) = (score("c.dcimg", &[]), score("p.dcimg", &[]));
     eprintln!("3x3 {m:?}  per axis {a:?}");

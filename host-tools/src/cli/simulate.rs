@@ -86,6 +86,14 @@ pub struct SimulateArgs {
     /// Time at which chatter reaches half its amplitude (s) [default: duration/2].
     #[arg(long)]
     pub chatter_onset: Option<f64>,
+    /// Instead of a milling cut, a force with a flat spectrum from 10 Hz to
+    /// the scoring band's top, min(4 kHz, 0.4 fs), of this RMS (N) on each
+    /// axis, the axes independent: the force `design`'s predicted error is
+    /// for (with `--force-rms` the same). Its response at the sensor modes
+    /// is several times the force: where it reaches --adc-range, raise that
+    /// (`compensate` warns of a clipped record).
+    #[arg(long, value_name = "N", conflicts_with_all = ["drift_percent", "chatter_hz"])]
+    pub flat_force: Option<f64>,
     /// Measurement noise variance R (N²) [default: 0.05].
     #[arg(long)]
     pub noise_variance: Option<f64>,
@@ -224,6 +232,15 @@ impl SimulateArgs {
             p.impact.n_impacts = v;
         }
         set(&mut p.impact.hammer_cutoff_hz, self.hammer_cutoff);
+        if let Some(rms_n) = self.flat_force {
+            p.excitation = Some(crate::simulate::shaker::Excitation::Noise {
+                lo_hz: 10.0,
+                hi_hz: crate::metrics::scoring_band_hz(p.fs_hz),
+                rms_n,
+                seed: crate::simulate::sub_seed(self.seed, crate::simulate::TAG_FLAT_FORCE),
+                taper_s: 0.01,
+            });
+        }
         p
     }
 }
@@ -382,6 +399,12 @@ fn summary(out: &SimOutput, preset: Option<&Preset>, dir: &std::path::Path) -> V
 
 /// The force: the shaker's, or the milling cut's.
 fn excitation_line(p: &SimParams) -> String {
+    if let Some(crate::simulate::shaker::Excitation::Noise { lo_hz, hi_hz, rms_n, .. }) = &p.excitation {
+        return format!(
+            "  flat force: {rms_n} N RMS per axis, flat spectrum {lo_hz}-{hi_hz} Hz, the axes independent \
+             (what design's predicted error assumes with --force-rms {rms_n})"
+        );
+    }
     if let Some(e) = &p.excitation {
         return format!("  shaker: {e:?} (the same force on x, y and z)");
     }
@@ -437,6 +460,9 @@ fn run_plate(args: &SimulateArgs) -> Result<()> {
     );
     for line in output::summary(&out) {
         eprintln!("{line}");
+    }
+    if p.excitation.is_some() {
+        eprintln!("{}", excitation_line(p));
     }
     eprintln!(
         "  noise R {} N², ADC {} bits ±{} N; impact tests in x, y, z: {} lines × {} Hz, {} impacts, all nine FRFs",

@@ -218,6 +218,8 @@ pub(crate) const TAG_DYNO: u64 = 1;
 pub(crate) const TAG_IMPACT: u64 = 2;
 pub(crate) const TAG_NOISE: u64 = 10; // + axis
 pub(crate) const TAG_IDLE: u64 = 20; // + axis
+/// The seed of `simulate --flat-force`'s noise (+ axis inside it).
+pub(crate) const TAG_FLAT_FORCE: u64 = 50;
 
 /// Measure `force_fine` (defined at `fs·oversample`, at least
 /// `chain.fine_len(n, oversample)` samples) with `dyn_` through the

@@ -85,3 +85,16 @@ fn sweep_ended_runs() {
         }
     }
 }
+
+/// NRMSE (fractions) per axis of `compensate --truth`'s "compensated" lines.
+pub fn compensated_nrmse(stderr: &str) -> [f64; 3] {
+    let v: Vec<f64> = ["fx", "fy", "fz"]
+        .iter()
+        .map(|a| {
+            let line = stderr.lines().find(|l| l.starts_with(&format!("{a}: NRMSE"))).expect("an NRMSE line per axis");
+            let rest = line.split("compensated ").nth(1).expect("compensated figure");
+            rest.split(' ').next().unwrap().parse::<f64>().unwrap() / 100.0
+        })
+        .collect();
+    [v[0], v[1], v[2]]
+}
