@@ -3,7 +3,9 @@
 //! simulated with the ideal anti-aliasing chain, designed, compensated and
 //! scored against the band-limited truth.
 //!
-//! usage: cargo run --release -p dynocomp --example rates -- [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum | --force-level] [--chatter HZ] [--fitted-static-gain] [--flat-force]
+//! usage: cargo run --release -p dynocomp --example rates -- [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum | --force-level] [--chatter HZ] [--fitted-static-gain] [--flat-force] [--above-band-inverse]
+//!
+//! `--above-band-inverse`: the design of `design --above-band inverse`.
 //!
 //! `--flat-force`: the scored record's force is the one the default
 //! prediction assumes instead of the cut: Gaussian noise, flat from 10 Hz to
@@ -44,6 +46,7 @@ fn main() -> Result<()> {
             "--exact-frf" => run.exact_frf = true,
             "--no-refine" => run.refine_fit = false,
             "--flat-force" => flat_force = true,
+            "--above-band-inverse" => run.above_band = dynocomp::design::above_band::AboveBand::Inverse,
             "--force-spectrum" => run.force_spectrum = true,
             "--force-level" => (run.force_spectrum, run.force_level_only) = (true, true),
             "--chatter" => chatter_hz = Some(args.next().context("--chatter needs Hz")?.parse().context("--chatter: not a number")?),
@@ -54,7 +57,7 @@ fn main() -> Result<()> {
                 run.discretization = dynocomp::design::discretize::Discretization::from_name(&v)
                     .ok_or_else(|| anyhow::anyhow!("--discretization {v}: expected fit, foh or zoh"))?;
             }
-            _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum | --force-level] [--chatter HZ] [--fitted-static-gain] [--no-refine] [--flat-force])"),
+            _ => bail!("rates: unknown argument {a:?} (usage: rates [--quick] [--lag L] [--discretization fit|foh|zoh] [--exact-frf] [--force-spectrum | --force-level] [--chatter HZ] [--fitted-static-gain] [--no-refine] [--flat-force] [--above-band-inverse])"),
         }
     }
     let list = if quick { quick_cases() } else { cases() };
