@@ -102,11 +102,26 @@ impl Extremes {
         if self.channels.len() < blk.channels.len() {
             self.channels.resize(blk.channels.len(), Default::default());
         }
+        let first = self.n;
         for (c, (hi, lo)) in blk.channels.iter().zip(&mut self.channels) {
-            for (k, v) in c[..m].iter().enumerate() {
-                let at = self.n + k as u64;
-                hi.push(at, *v, |a, b| a > b);
-                lo.push(at, *v, |a, b| a < b);
+            let c = &c[..m];
+            if c.is_empty() {
+                continue;
+            }
+            // Most blocks neither reach nor pass the extremes so far: their
+            // own range, found first, lets them through without the
+            // sample-by-sample scan (which a run across blocks needs only
+            // where a block touches the extreme).
+            let (top, bottom) = range(c);
+            if first == 0 || top >= hi.value {
+                c.iter().enumerate().for_each(|(k, v)| hi.push(first + k as u64, *v, |a, b| a > b));
+            } else {
+                hi.in_run = false;
+            }
+            if first == 0 || bottom <= lo.value {
+                c.iter().enumerate().for_each(|(k, v)| lo.push(first + k as u64, *v, |a, b| a < b));
+            } else {
+                lo.in_run = false;
             }
         }
         self.n += m as u64;
@@ -137,6 +152,22 @@ impl Extremes {
         }
         out
     }
+}
+
+/// The largest and the smallest value of `c` (not empty), in eight lanes
+/// that the compiler turns into vector compares.
+fn range(c: &[f64]) -> (f64, f64) {
+    let (mut top, mut bottom) = ([c[0]; 8], [c[0]; 8]);
+    let chunks = c.chunks_exact(8);
+    let rest = chunks.remainder();
+    for ch in chunks {
+        for i in 0..8 {
+            top[i] = if ch[i] > top[i] { ch[i] } else { top[i] };
+            bottom[i] = if ch[i] < bottom[i] { ch[i] } else { bottom[i] };
+        }
+    }
+    let fold = |lanes: [f64; 8], pick: fn(f64, f64) -> f64| rest.iter().copied().chain(lanes).fold(c[0], pick);
+    (fold(top, f64::max), fold(bottom, f64::min))
 }
 
 /// `inner` with its channels' [`Extremes`] followed into the handle
@@ -173,12 +204,20 @@ mod tests {
     }
 
     fn judge(x: &[f64]) -> Vec<Clipped> {
-        let mut e = Extremes { axes: vec![2], ..Default::default() };
-        // Blocks of 1000: the runs carry across block boundaries.
-        for c in x.chunks(1000) {
-            e.push(&Block { t_s: Vec::new(), channels: vec![c.to_vec()] }, c.len());
-        }
-        e.clipped()
+        // The runs carry across block boundaries: blocks of 1000, 13, 7 and
+        // 1 samples judge alike.
+        let by = |size: usize| {
+            let mut e = Extremes { axes: vec![2], ..Default::default() };
+            for c in x.chunks(size) {
+                e.push(&Block { t_s: Vec::new(), channels: vec![c.to_vec()] }, c.len());
+            }
+            e.clipped()
+        };
+        let c = by(1000);
+        assert_eq!(c, by(13));
+        assert_eq!(c, by(7));
+        assert_eq!(c, by(1));
+        c
     }
 
     /// A sine 10 % past the rails is found clipped at both extremes, with
@@ -199,6 +238,11 @@ mod tests {
                 }
             }
         }
+        // The block's range, in lanes and in the rest.
+        let v: Vec<f64> = (0..21).map(|k| ((k * 7) % 11) as f64 - 5.0).collect();
+        assert_eq!(range(&v), (5.0, -5.0));
+        assert_eq!(range(&v[..3]), (2.0, -5.0));
+        assert_eq!(range(&v[16..]), (4.0, -4.0));
         // A constant channel is not clipped, nor one plateau alone.
         assert!(judge(&[3.0; 50]).is_empty());
         assert!(judge(&[0.0, 1.0, 5.0, 5.0, 5.0, 1.0, 0.0, 2.0]).is_empty());
