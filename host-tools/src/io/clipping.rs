@@ -31,9 +31,8 @@ pub struct Extreme {
     pub plateaus: u64,
     /// First sample at it.
     pub first: u64,
-    /// Whether the previous sample was at it (a run is open).
-    in_run: bool,
-    /// Length of the open run.
+    /// Length of the run at it that the last sample belongs to (0: the
+    /// last sample was not at it).
     run: u64,
 }
 
@@ -42,16 +41,15 @@ impl Extreme {
     /// is beyond the extreme so far.
     fn push(&mut self, k: u64, v: f64, better: impl Fn(f64, f64) -> bool) {
         if k == 0 || better(v, self.value) {
-            *self = Extreme { value: v, samples: 1, plateaus: 0, first: k, in_run: true, run: 1 };
+            *self = Extreme { value: v, samples: 1, plateaus: 0, first: k, run: 1 };
         } else if v == self.value {
             self.samples += 1;
-            self.run = if self.in_run { self.run + 1 } else { 1 };
-            self.in_run = true;
+            self.run += 1;
             if self.run == 2 {
                 self.plateaus += 1;
             }
         } else {
-            self.in_run = false;
+            self.run = 0;
         }
     }
 }
@@ -99,12 +97,17 @@ impl Clipped {
 impl Extremes {
     /// Follow `m` samples of each channel of `blk`.
     pub fn push(&mut self, blk: &Block, m: usize) {
-        if self.channels.len() < blk.channels.len() {
-            self.channels.resize(blk.channels.len(), Default::default());
+        self.push_channels(blk.channels.iter().map(|c| &c[..m]), m);
+    }
+
+    /// Follow the next `m` samples of each channel, given as `channels`
+    /// (each `m` long).
+    fn push_channels<'a>(&mut self, channels: impl ExactSizeIterator<Item = &'a [f64]>, m: usize) {
+        if self.channels.len() < channels.len() {
+            self.channels.resize(channels.len(), Default::default());
         }
         let first = self.n;
-        for (c, (hi, lo)) in blk.channels.iter().zip(&mut self.channels) {
-            let c = &c[..m];
+        for (c, (hi, lo)) in channels.zip(&mut self.channels) {
             if c.is_empty() {
                 continue;
             }
@@ -116,12 +119,12 @@ impl Extremes {
             if first == 0 || top >= hi.value {
                 c.iter().enumerate().for_each(|(k, v)| hi.push(first + k as u64, *v, |a, b| a > b));
             } else {
-                hi.in_run = false;
+                hi.run = 0;
             }
             if first == 0 || bottom <= lo.value {
                 c.iter().enumerate().for_each(|(k, v)| lo.push(first + k as u64, *v, |a, b| a < b));
             } else {
-                lo.in_run = false;
+                lo.run = 0;
             }
         }
         self.n += m as u64;
@@ -131,7 +134,7 @@ impl Extremes {
     pub fn of_channels(channels: &[(usize, Vec<f64>)]) -> Extremes {
         let mut e = Extremes { axes: channels.iter().map(|c| c.0).collect(), ..Default::default() };
         let n = channels.iter().map(|c| c.1.len()).min().unwrap_or(0);
-        e.push(&Block { t_s: Vec::new(), channels: channels.iter().map(|c| c.1[..n].to_vec()).collect() }, n);
+        e.push_channels(channels.iter().map(|c| &c.1[..n]), n);
         e
     }
 

@@ -179,8 +179,9 @@ pub fn implausible(source: &str, place: &str, v: f64, full_scale_n: f64) -> anyh
     }
 }
 
-/// A reader that shows every block it reads to `on_block` (the block and
-/// its number of samples), which may refuse it with an error.
+/// A reader that shows every block it reads to `on_block` (the block, its
+/// number of samples and the channels' axes), which may refuse it with an
+/// error.
 pub struct Tap<F> {
     inner: Box<dyn SignalReader>,
     on_block: F,
