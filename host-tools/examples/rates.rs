@@ -103,13 +103,8 @@ fn main() -> Result<()> {
                 params.milling.chatter = Some(Chatter { freq_hz: f, amplitude_mm: 0.02, onset_s: 0.2, growth_s: 0.02 });
             }
             if flat_force {
-                params.excitation = Some(dynocomp::simulate::shaker::Excitation::Noise {
-                    lo_hz: 10.0,
-                    hi_hz: dynocomp::metrics::scoring_band_hz(fs),
-                    rms_n: dynocomp::design::axis::DesignOptions::default().force_rms,
-                    seed: 11,
-                    taper_s: 0.01,
-                });
+                let rms_n = dynocomp::design::axis::DesignOptions::default().force_rms;
+                params.excitation = Some(dynocomp::simulate::shaker::Excitation::flat_force(fs, rms_n, 11));
                 params.measurement.adc_range_n = 32_000.0;
                 params.measurement.adc_bits = 20;
             }

@@ -139,13 +139,7 @@ fn record_with(name: &str, fs: f64, flat: bool) -> PlateSimOutput {
 /// it is tested together with the cut's likeness to a flat spectrum.
 fn flat_force(fs: f64) -> dynocomp::simulate::shaker::Excitation {
     let rms_n = DesignOptions::default().force_rms;
-    dynocomp::simulate::shaker::Excitation::Noise {
-        lo_hz: 10.0,
-        hi_hz: scoring_band_hz(fs),
-        rms_n,
-        seed: 11,
-        taper_s: 0.01,
-    }
+    dynocomp::simulate::shaker::Excitation::flat_force(fs, rms_n, 11)
 }
 
 fn noise(out: &PlateSimOutput) -> [f64; 3] {
@@ -315,13 +309,38 @@ fn model_error(md: &MatrixDesign, out: &PlateSimOutput) {
     use nalgebra::Matrix3;
     let Some(model) = &md.model else { return };
     let frf = &out.frf;
+    let (fs, lag) = (out.params.fs_hz, md.summary.latency);
     let measured = |k: usize| Matrix3::from_fn(|i, j| frf.entry(i, j).map_or(Complex64::new(0.0, 0.0), |e| e.frf[k]));
-    let top = scoring_band_hz(out.params.fs_hz);
+    let top = scoring_band_hz(fs);
+    // Row i of A⁻¹(B − A): Σ_j |·|².
+    let inverse_error = |a: Matrix3<Complex64>, b: Matrix3<Complex64>, i: usize| {
+        a.try_inverse().map(|inv| {
+            let d = inv * (b - a);
+            (0..3).map(|j| d[(i, j)].norm_sqr()).sum::<f64>()
+        })
+    };
+    // Row i of the compensator `h` on `g` against the delayed identity at
+    // `f`: Σ_j |(H·G)_ij·e^{j2πfL/fs} − δ_ij|².
+    let distortion = |h: &nalgebra::DMatrix<Complex64>, g: Matrix3<Complex64>, i: usize, f: f64| {
+        let delay = Complex64::from_polar(1.0, 2.0 * PI * f * lag as f64 / fs);
+        (0..3)
+            .map(|j| {
+                let e = (0..3).map(|m| h[(i, m)] * g[(m, j)]).sum::<Complex64>() * delay;
+                (e - if i == j { 1.0 } else { 0.0 }).norm_sqr()
+            })
+            .sum::<f64>()
+    };
     let modes =
         |m: Vec<(f64, f64)>| m.iter().map(|(f, z)| format!("{f:.0} Hz ζ {z:.3}")).collect::<Vec<_>>().join(", ");
     eprintln!("    modes, true: {}", modes(out.cut_modal.modes.iter().map(|m| (m.fn_hz, m.zeta)).collect()));
     eprintln!("    modes, fitted: {}", modes(model.modes()));
     eprintln!("    FRF lines {:.1}-{:.1} Hz", frf.freq_hz[0], frf.freq_hz[frf.freq_hz.len() - 1]);
+    // The full f64 compensator on the record, once for every row.
+    let simulated = md.kalman.as_ref().map(|k| {
+        let n = out.measured[0].len();
+        let input: Vec<DVector<f64>> = (0..n).map(|t| DVector::from_fn(3, |a, _| out.measured[a][t])).collect();
+        k.compensator.simulate(&input)
+    });
     for i in 0..3 {
         let band = md.summary.axes[i].band_hz;
         let mut cells = Vec::new();
@@ -333,11 +352,8 @@ fn model_error(md: &MatrixDesign, out: &PlateSimOutput) {
                     continue;
                 }
                 let (g, gm, gh) = (out.cut_modal.frf(f), measured(k), model.frf(f));
-                let pairs = [(gh, g), (gm, g), (gh, gm)];
-                for (a, (x, y)) in acc.iter_mut().zip(pairs) {
-                    let Some(inv) = x.try_inverse() else { continue };
-                    let d = inv * (y - x);
-                    *a += (0..3).map(|j| d[(i, j)].norm_sqr()).sum::<f64>();
+                for (a, (x, y)) in acc.iter_mut().zip([(gh, g), (gm, g), (gh, gm)]) {
+                    *a += inverse_error(x, y, i).unwrap_or(0.0);
                 }
                 n += 1;
             }
@@ -354,99 +370,64 @@ fn model_error(md: &MatrixDesign, out: &PlateSimOutput) {
         let mut f = f0;
         while f <= top {
             if f >= band.0 {
-                if let Some(inv) = model.frf(f).try_inverse() {
-                    let d = inv * (out.cut_modal.frf(f) - model.frf(f));
-                    acc += (0..3).map(|j| d[(i, j)].norm_sqr()).sum::<f64>();
+                if let Some(e) = inverse_error(model.frf(f), out.cut_modal.frf(f), i) {
+                    acc += e;
                     n += 1;
                 }
             }
             f += df;
         }
         cells.push(format!("fit/true on a grid of {df:.3} Hz {:.3}", 100.0 * (acc / n.max(1) as f64).sqrt()));
-        // The full compensator's distortion for a flat force, on the
-        // criterion's 200 lines and on a grid 50 times finer, against the
-        // model and against the truth.
-        if let Some(k) = &md.kalman {
-            let (fs, lag) = (out.params.fs_hz, md.summary.latency as f64);
-            for (name, lines) in [("200", 200usize), ("10000", 10_000)] {
-                let freqs: Vec<f64> =
-                    (0..lines).map(|m| band.0 + (band.1 - band.0) * (m as f64 + 0.5) / lines as f64).collect();
-                let h = k.compensator.freq_responses(&freqs, fs);
-                let (mut dm, mut dt) = (0.0, 0.0);
-                for (f, h) in freqs.iter().zip(&h) {
-                    let delay = Complex64::from_polar(1.0, 2.0 * PI * f * lag / fs);
-                    let row = |g: Matrix3<Complex64>| {
-                        (0..3)
-                            .map(|j| {
-                                let e = (0..3).map(|m| h[(i, m)] * g[(m, j)]).sum::<Complex64>() * delay;
-                                (e - if i == j { 1.0 } else { 0.0 }).norm_sqr()
-                            })
-                            .sum::<f64>()
-                    };
-                    dm += row(model.frf(*f));
-                    dt += row(out.cut_modal.frf(*f));
-                }
-                let r = |a: f64| 100.0 * (a / lines as f64).sqrt();
-                cells.push(format!("distortion on {name} lines: model {:.3}, true {:.3}", r(dm), r(dt)));
-            }
-        }
-        if let Some(k) = &md.kalman {
-            let lag = md.summary.latency;
-            let n = out.measured[0].len();
-            let input: Vec<DVector<f64>> = (0..n).map(|t| DVector::from_fn(3, |a, _| out.measured[a][t])).collect();
-            let y: Vec<f64> = k.compensator.simulate(&input).iter().map(|v| v[i]).collect();
-            let fs = out.params.fs_hz;
-            let e = lowpass(&y[lag..], fs, top);
-            let t = lowpass(&out.truth[i][..n - lag], fs, top);
-            let mid = |a: usize, b: usize| {
-                let m = (b - a) as f64;
-                let mean = t[a..b].iter().sum::<f64>() / m;
-                let sd = (t[a..b].iter().map(|v| (v - mean).powi(2)).sum::<f64>() / m).sqrt();
-                100.0 * (e[a..b].iter().zip(&t[a..b]).map(|(p, q)| (p - q).powi(2)).sum::<f64>() / m).sqrt() / sd
-            };
-            let m = e.len();
-            let edges = [0.0, 10.0, 100.0, 300.0, 1000.0, 2000.0, 3000.0, top];
-            let err: Vec<f64> = e.iter().zip(&t).map(|(p, q)| p - q).collect();
-            let sd_t = {
-                let mean = t.iter().sum::<f64>() / m as f64;
-                (t.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / m as f64).sqrt()
-            };
-            let by_band: Vec<String> = edges
-                .windows(2)
-                .map(|w| {
-                    let b = dynocomp::metrics::bandpass(&err, fs, &[(w[0], w[1])]);
-                    let r = (b[m / 4..3 * m / 4].iter().map(|v| v * v).sum::<f64>() / (m / 2) as f64).sqrt();
-                    // The frequency-domain figure with the true G on the same cell.
-                    let lines = 2000usize;
-                    let freqs: Vec<f64> = (0..lines)
-                        .map(|q| band.0 + (band.1 - band.0) * (q as f64 + 0.5) / lines as f64)
-                        .filter(|f| *f >= w[0] && *f < w[1])
-                        .collect();
-                    let h = k.compensator.freq_responses(&freqs, fs);
-                    let d: f64 = freqs
-                        .iter()
-                        .zip(&h)
-                        .map(|(f, h)| {
-                            let delay = Complex64::from_polar(1.0, 2.0 * PI * f * lag as f64 / fs);
-                            let g = out.cut_modal.frf(*f);
-                            (0..3)
-                                .map(|j| {
-                                    let x = (0..3).map(|q| h[(i, q)] * g[(q, j)]).sum::<Complex64>() * delay;
-                                    (x - if i == j { 1.0 } else { 0.0 }).norm_sqr()
-                                })
-                                .sum::<f64>()
-                        })
-                        .sum();
-                    format!("{:.0}-{:.0}: {:.3}/{:.3}", w[0], w[1], 100.0 * r / sd_t, 100.0 * (d / lines as f64).sqrt())
-                })
+        let (Some(k), Some(y)) = (&md.kalman, &simulated) else {
+            eprintln!("    model error row {i} (%): {}", cells.join("; "));
+            continue;
+        };
+        // `lines` evenly over the row's band, those in [lo, hi) (Hz), and
+        // the mean over all `lines` of the full compensator's distortion on
+        // them against the model and against the truth (a flat force).
+        let flat_distortion = |lines: usize, lo: f64, hi: f64| {
+            let freqs: Vec<f64> = (0..lines)
+                .map(|m| band.0 + (band.1 - band.0) * (m as f64 + 0.5) / lines as f64)
+                .filter(|f| *f >= lo && *f < hi)
                 .collect();
-            eprintln!("    row {i} error by band, time / frequency domain (%): {}", by_band.join("  "));
-            cells.push(format!(
-                "full f64 filter in time: {:.3} (5 % cut), {:.3} (middle half)",
-                100.0 * score(&y, out, i, lag),
-                mid(m / 4, 3 * m / 4)
-            ));
+            let h = k.compensator.freq_responses(&freqs, fs);
+            let (mut dm, mut dt) = (0.0, 0.0);
+            for (f, h) in freqs.iter().zip(&h) {
+                dm += distortion(h, model.frf(*f), i, *f);
+                dt += distortion(h, out.cut_modal.frf(*f), i, *f);
+            }
+            [dm, dt].map(|d| 100.0 * (d / lines as f64).sqrt())
+        };
+        // On the criterion's 200 lines and on a grid 50 times finer.
+        for lines in [200usize, 10_000] {
+            let [m, t] = flat_distortion(lines, f64::NEG_INFINITY, f64::INFINITY);
+            cells.push(format!("distortion on {lines} lines: model {m:.3}, true {t:.3}"));
         }
+        let y: Vec<f64> = y.iter().map(|v| v[i]).collect();
+        let n = out.measured[0].len();
+        let e = lowpass(&y[lag..], fs, top);
+        let t = lowpass(&out.truth[i][..n - lag], fs, top);
+        let m = e.len();
+        let mid = m / 4..3 * m / 4;
+        let err: Vec<f64> = e.iter().zip(&t).map(|(p, q)| p - q).collect();
+        let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+        // Every figure over the middle half, against the truth's std there.
+        let sd_t = sample_variance(&t[mid.clone()]).sqrt();
+        let edges = [0.0, 10.0, 100.0, 300.0, 1000.0, 2000.0, 3000.0, top];
+        let by_band: Vec<String> = edges
+            .windows(2)
+            .map(|w| {
+                let b = dynocomp::metrics::bandpass(&err, fs, &[(w[0], w[1])]);
+                let [_, fd] = flat_distortion(2000, w[0], w[1]);
+                format!("{:.0}-{:.0}: {:.3}/{fd:.3}", w[0], w[1], 100.0 * rms(&b[mid.clone()]) / sd_t)
+            })
+            .collect();
+        eprintln!("    row {i} error by band, time / frequency domain (%): {}", by_band.join("  "));
+        cells.push(format!(
+            "full f64 filter in time: {:.3} (5 % cut), {:.3} (middle half)",
+            100.0 * score(&y, out, i, lag),
+            100.0 * rms(&err[mid]) / sd_t
+        ));
         eprintln!("    model error row {i} (%): {}", cells.join("; "));
     }
 }

@@ -233,13 +233,8 @@ impl SimulateArgs {
         }
         set(&mut p.impact.hammer_cutoff_hz, self.hammer_cutoff);
         if let Some(rms_n) = self.flat_force {
-            p.excitation = Some(crate::simulate::shaker::Excitation::Noise {
-                lo_hz: 10.0,
-                hi_hz: crate::metrics::scoring_band_hz(p.fs_hz),
-                rms_n,
-                seed: crate::simulate::sub_seed(self.seed, crate::simulate::TAG_FLAT_FORCE),
-                taper_s: 0.01,
-            });
+            let seed = crate::simulate::sub_seed(self.seed, crate::simulate::TAG_FLAT_FORCE);
+            p.excitation = Some(crate::simulate::shaker::Excitation::flat_force(p.fs_hz, rms_n, seed));
         }
         p
     }

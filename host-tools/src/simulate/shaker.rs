@@ -53,6 +53,14 @@ pub enum Excitation {
 }
 
 impl Excitation {
+    /// The force a design's predicted error assumes (DESIGN.md, "Accuracy"):
+    /// [`Excitation::Noise`] flat from 10 Hz to the scoring band's top at
+    /// `fs_hz` ([`crate::metrics::scoring_band_hz`]), `rms_n` (N) per axis,
+    /// fading in and out over 10 ms.
+    pub fn flat_force(fs_hz: f64, rms_n: f64, seed: u64) -> Excitation {
+        Excitation::Noise { lo_hz: 10.0, hi_hz: crate::metrics::scoring_band_hz(fs_hz), rms_n, seed, taper_s: 0.01 }
+    }
+
     /// The highest frequency the excitation carries (Hz).
     pub fn max_hz(&self) -> f64 {
         match self {
