@@ -21,6 +21,12 @@ fn the_prediction_holds_on_the_flat_force_it_is_for() {
         assert!(ok, "{err}");
         err
     };
+    // An RMS that is not a force is refused by name, and nothing is written.
+    for bad in ["-5", "nan", "0"] {
+        let (ok, _, err) = dynocomp(&["simulate", "--out", &p("bad"), "--flat-force", bad]);
+        assert!(!ok && err.contains("--flat-force") && err.contains("must be finite and > 0"), "{bad}: {err}");
+        assert!(!dir.join("bad").exists(), "{bad}: wrote output");
+    }
     let err = sim(&p("flat"), &["--flat-force", "100", "--adc-range", "32000", "--adc-bits", "20"]);
     assert!(err.contains("flat force: 100 N RMS per axis, flat spectrum 10-4000 Hz"), "{err}");
     sim(&p("cut"), &[]);

@@ -91,6 +91,9 @@ impl Excitation {
             );
         }
         if !(a.is_finite() && a > 0.0) {
+            if matches!(self, Excitation::Noise { .. }) {
+                anyhow::bail!("flat force (--flat-force): the RMS {a} N must be finite and > 0");
+            }
             anyhow::bail!("shaker excitation: amplitude {a} N must be finite and > 0");
         }
         if !(taper.is_finite() && taper >= 0.0) {
