@@ -30,6 +30,15 @@ fn the_prediction_holds_on_the_flat_force_it_is_for() {
     let err = sim(&p("flat"), &["--flat-force", "100", "--adc-range", "32000", "--adc-bits", "20"]);
     assert!(err.contains("flat force: 100 N RMS per axis, flat spectrum 10-4000 Hz"), "{err}");
     sim(&p("cut"), &[]);
+    // truth.json names the force, and gives a cut's frequencies only to a cut.
+    let truth = |rec: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join(rec).join("truth.json")).unwrap()).unwrap()
+    };
+    let (flat, cut) = (truth("flat"), truth("cut"));
+    assert_eq!(flat["force"], "flat noise");
+    assert!(flat.get("tooth_passing_hz").is_none() && flat.get("spindle_hz").is_none(), "{flat}");
+    assert_eq!(cut["force"], "milling");
+    assert!(cut["tooth_passing_hz"].as_f64().is_some_and(|f| f > 0.0), "{cut}");
     let (ok, json, err) = dynocomp(&[
         "design",
         "--frf",

@@ -35,8 +35,10 @@ struct Truth<'a> {
     fs_hz: f64,
     n_samples: usize,
     n_idle_samples: usize,
-    tooth_passing_hz: f64,
-    spindle_hz: f64,
+    /// The force and, for a milling cut, its tooth-passing and spindle
+    /// frequencies (Hz).
+    #[serde(flatten)]
+    force: super::ForceLines,
     /// How the model sees the force between fine samples.
     hold: &'static str,
     /// Acquisition chain: `ideal`, `none` or `butterworth:ORDER:FC_HZ`.
@@ -62,8 +64,7 @@ fn truth_json(out: &SimOutput, preset: Option<&super::presets::Preset>) -> Resul
         fs_hz: p.fs_hz,
         n_samples: out.t_s.len(),
         n_idle_samples: out.idle[0].len(),
-        tooth_passing_hz: p.milling.tooth_passing_hz(),
-        spindle_hz: p.milling.spindle_hz(),
+        force: p.force_lines(),
         hold: "foh",
         anti_alias: p.anti_alias.to_string(),
         brick_wall_hz: p.anti_alias.brick_wall_hz(p.fs_hz),

@@ -97,7 +97,31 @@ pub const MAX_FRF_LINES: usize = 1 << 20;
 /// Most averaged impacts.
 pub const MAX_IMPACTS: usize = 1000;
 
+/// The force of a simulation as truth.json states it: what it is, and the
+/// cut's tooth-passing and spindle frequencies (Hz) when it is a milling cut
+/// (absent for a shaker or flat force, which have none).
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct ForceLines {
+    pub force: &'static str,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tooth_passing_hz: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub spindle_hz: Option<f64>,
+}
+
 impl SimParams {
+    /// What drives the simulated dynamometer, for truth.json.
+    pub fn force_lines(&self) -> ForceLines {
+        match &self.excitation {
+            Some(e) => ForceLines { force: e.name(), tooth_passing_hz: None, spindle_hz: None },
+            None => ForceLines {
+                force: "milling",
+                tooth_passing_hz: Some(self.milling.tooth_passing_hz()),
+                spindle_hz: Some(self.milling.spindle_hz()),
+            },
+        }
+    }
+
     /// Check the parameters against their physical ranges (and the memory
     /// of [`MAX_FINE_SAMPLES`]); the error names the offending one.
     pub fn validate(&self) -> Result<()> {

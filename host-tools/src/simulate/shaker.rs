@@ -61,6 +61,16 @@ impl Excitation {
         Excitation::Noise { lo_hz: 10.0, hi_hz: crate::metrics::scoring_band_hz(fs_hz), rms_n, seed, taper_s: 0.01 }
     }
 
+    /// What truth.json calls this force: `shaker sine`, `shaker chirp` or
+    /// `flat noise`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Excitation::Sine { .. } => "shaker sine",
+            Excitation::Chirp { .. } => "shaker chirp",
+            Excitation::Noise { .. } => "flat noise",
+        }
+    }
+
     /// The highest frequency the excitation carries (Hz).
     pub fn max_hz(&self) -> f64 {
         match self {
