@@ -25,7 +25,9 @@
 //! with `MIMO_STUDY_FORCE=flat` under the force the default prediction
 //! assumes ([`flat_force`]) instead of a milling cut, and with
 //! `MIMO_STUDY_NOTES` the model's error by source and by band
-//! ([`model_error`]).
+//! ([`model_error`]). Further knobs: `MIMO_STUDY_IMPACTS=N` impacts per
+//! direction, `MIMO_STUDY_ABOVE=inverse`, `MIMO_ABOVE_BAND_SWAP`
+//! (`VfOptions::above_band_swap`), `MIMO_NO_REFINE`, `MIMO_FULL_ORDER`.
 
 #![allow(clippy::needless_range_loop)] // axis indices index several arrays at once
 
@@ -130,6 +132,11 @@ fn record_with(name: &str, fs: f64, flat: bool) -> PlateSimOutput {
         params.measurement.adc_range_n = 32_000.0;
         params.measurement.adc_bits = 20;
     }
+    // MIMO_STUDY_IMPACTS=N: N impacts per direction (averaged), for the
+    // fit's bias against its variance.
+    if let Some(n) = std::env::var("MIMO_STUDY_IMPACTS").ok().and_then(|v| v.parse().ok()) {
+        params.impact.n_impacts = n;
+    }
     simulate_plate(7, &params, &PlateSim { setup: setup(name), cut_offset_m: [0.0; 3] }).unwrap()
 }
 
@@ -147,14 +154,23 @@ fn noise(out: &PlateSimOutput) -> [f64; 3] {
 }
 
 fn design(frf: &Frf, out: &PlateSimOutput) -> anyhow::Result<MatrixDesign> {
-    design_above(frf, out, AboveBand::default())
+    // MIMO_STUDY_ABOVE=inverse: the exact inverse continued above the band.
+    let above = match std::env::var("MIMO_STUDY_ABOVE").as_deref() {
+        Ok("inverse") => AboveBand::Inverse,
+        _ => AboveBand::default(),
+    };
+    design_above(frf, out, above)
 }
 
 fn design_above(frf: &Frf, out: &PlateSimOutput, above_band: AboveBand) -> anyhow::Result<MatrixDesign> {
     let design = DesignOptions { fs_hz: out.params.fs_hz, above_band, ..Default::default() };
     // MIMO_NO_REFINE: the 3x3 fit without its maximum-likelihood refinement
     // (the per-axis fits keep theirs), for the studies' before-and-after.
-    let matrix_vf = std::env::var_os("MIMO_NO_REFINE").map(|_| opts_vf());
+    // MIMO_ABOVE_BAND_SWAP: the 3x3 fit with `VfOptions::above_band_swap`.
+    let matrix_vf = match std::env::var_os("MIMO_ABOVE_BAND_SWAP") {
+        Some(_) => Some(VfOptions { above_band_swap: true, ..opts_vf() }),
+        None => std::env::var_os("MIMO_NO_REFINE").map(|_| opts_vf()),
+    };
     let opts = MatrixOptions { design, load_limit_permille: box_limit(), matrix_vf, ..Default::default() };
     design_matrix(frf, noise(out), &opts)
 }
@@ -378,6 +394,9 @@ fn model_error(md: &MatrixDesign, out: &PlateSimOutput) {
             f += df;
         }
         cells.push(format!("fit/true on a grid of {df:.3} Hz {:.3}", 100.0 * (acc / n.max(1) as f64).sqrt()));
+        // At 0 Hz, where a cut's mean force is.
+        let at0 = inverse_error(model.frf(0.0), out.cut_modal.frf(0.0), i).map_or(f64::NAN, |e| 100.0 * e.sqrt());
+        cells.push(format!("fit/true at 0 Hz {at0:.3}"));
         let (Some(k), Some(y)) = (&md.kalman, &simulated) else {
             eprintln!("    model error row {i} (%): {}", cells.join("; "));
             continue;

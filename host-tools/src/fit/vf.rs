@@ -36,6 +36,12 @@ pub struct VfOptions {
     /// (Hz; 0: no ceiling), where the discrete model at the design's rate
     /// cannot follow it ([`super::refine::refine_common`]).
     pub f_ceiling_hz: f64,
+    /// The 3x3 fit tries a pair above the lines in place of each pair in the
+    /// band's top part, and keeps the likelier model
+    /// ([`super::matrix::above_band_swap`]). Off: a model closer to the true
+    /// G this way gave worse compensators on milling cuts (BENCHMARKS.md,
+    /// "A pair above the lines"); for studies.
+    pub above_band_swap: bool,
 }
 
 impl Default for VfOptions {
@@ -48,6 +54,7 @@ impl Default for VfOptions {
             f_identified_hz: 0.0,
             refine: true,
             f_ceiling_hz: 0.0,
+            above_band_swap: false,
         }
     }
 }
