@@ -159,7 +159,7 @@ fn doc_example_sizes_and_crc() {
     assert_eq!(crc::CRC_32_ISO_HDLC.poly, 0x04C1_1DB7);
     assert_eq!(crc::CRC_32_ISO_HDLC.init, 0xFFFF_FFFF);
     assert_eq!(crc::CRC_32_ISO_HDLC.xorout, 0xFFFF_FFFF);
-    assert!(crc::CRC_32_ISO_HDLC.refin && crc::CRC_32_ISO_HDLC.refout);
+    const { assert!(crc::CRC_32_ISO_HDLC.refin && crc::CRC_32_ISO_HDLC.refout) };
     // CRC over the whole image, CRC included, gives the fixed residue.
     assert_eq!(CRC32.checksum(&bytes), 0x2144_DF1C);
     assert_eq!(MIN_IMAGE_LEN, 128);

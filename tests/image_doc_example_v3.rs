@@ -112,7 +112,7 @@ fn annotated_dump(bytes: &[u8]) -> String {
             let hex: Vec<String> = chunk.iter().map(|b| format!("{b:02x}")).collect();
             let at = pos + 16 * k;
             let text = if k == 0 { label.as_str() } else { "" };
-            out.push_str(&format!("{at:04x} | {:<47} | {text}", hex.join(" ")).trim_end().to_string());
+            out.push_str(format!("{at:04x} | {:<47} | {text}", hex.join(" ")).trim_end());
             out.push('\n');
         }
         pos += len;

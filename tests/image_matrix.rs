@@ -76,9 +76,9 @@ fn the_bytes_are_at_the_documented_offsets() {
     }
     let taps = SECTIONS + 64 * ns;
     for (m, h) in f.fir().iter().enumerate() {
-        for i in 0..3 {
-            for j in 0..3 {
-                assert_eq!(f32_at(&b, taps + 36 * m + 4 * (3 * i + j)), h[i][j]);
+        for (i, row) in h.iter().enumerate() {
+            for (j, x) in row.iter().enumerate() {
+                assert_eq!(f32_at(&b, taps + 36 * m + 4 * (3 * i + j)), *x);
             }
         }
     }
@@ -102,7 +102,7 @@ fn a_3x3_image_round_trips_exactly_and_from_a_flash_slot() {
     // The per-axis reader names it; the largest image fits a slot.
     assert_eq!(CoeffImage::parse(&b), Err(ImageError::NotPerAxisImage));
     assert_eq!(CoeffImage::parse_prefix(&slot), Err(ImageError::NotPerAxisImage));
-    assert!(MAX_MATRIX_IMAGE_LEN + 32 <= 8192 && MAX_MATRIX_IMAGE_LEN == 4216);
+    const { assert!(MAX_MATRIX_IMAGE_LEN + 32 <= 8192 && MAX_MATRIX_IMAGE_LEN == 4216) };
     // A truncated image in a slot reports the missing bytes.
     assert_eq!(
         BoxImage::parse_prefix(&b[..b.len() - 1]),

@@ -7,9 +7,12 @@
 use dynocomp::design::discretize::{discretize, Discretization};
 use dynocomp::fit::PoleResidueModel;
 
+/// Modes of a model: (f_n Hz, ζ, share of the static gain) each.
+type Modes = Vec<(f64, f64, f64)>;
+
 fn main() -> anyhow::Result<()> {
     // (label, fs, modes (f_n Hz, ζ, share of the static gain))
-    let cases: Vec<(&str, f64, Vec<(f64, f64, f64)>)> = vec![
+    let cases: Vec<(&str, f64, Modes)> = vec![
         ("2.5 kHz sensor, 300 Hz machine", 25_600.0, vec![(300.0, 0.03, 0.1), (2500.0, 0.02, 0.9)]),
         ("2.5 kHz sensor", 10_240.0, vec![(300.0, 0.03, 0.1), (2500.0, 0.02, 0.9)]),
         ("4.8 kHz sensor (near Nyquist)", 10_240.0, vec![(200.0, 0.03, 0.1), (4800.0, 0.03, 0.9)]),

@@ -117,6 +117,9 @@ fn main() -> Result<()> {
                 })
                 .collect()
         };
+        // `a` picks the axis in the FRFs, idle record, milling force and
+        // dynamometer alike, not just in `milling`.
+        #[allow(clippy::needless_range_loop)]
         for a in 0..3 {
             let before_frf = s.frf.axis(a).ok_or_else(|| anyhow::anyhow!("no FRF of axis {a}"))?;
             let d = design_axis(&s.frf.freq_hz, before_frf, sample_variance(&s.idle[a]), &opts)?;

@@ -87,7 +87,7 @@ fn main() -> anyhow::Result<()> {
     println!("RMS of |H(f)·G(f) − 1| over 250-350 Hz with the simulator's true G: one band-fitted design over 10-1300 Hz against parallel elaboration over 10-430, 470-880, 920-1300 Hz:\n");
     println!("| axis | single band-fitted | parallel |\n|---|---|---|");
     let t = Instant::now();
-    for a in 0..3 {
+    for (a, axis) in AXES.iter().enumerate() {
         let (single, parallel) = local_error_single_vs_parallel(
             &s,
             a,
@@ -98,7 +98,7 @@ fn main() -> anyhow::Result<()> {
         let show = |r: Result<f64, String>| {
             r.map(pct).unwrap_or_else(|e| format!("refused: {}", e.chars().take(120).collect::<String>()))
         };
-        println!("| {} | {} | {} |", AXES[a], show(single), show(parallel));
+        println!("| {} | {} | {} |", axis, show(single), show(parallel));
     }
     eprintln!("parallel: {:.1} s", t.elapsed().as_secs_f64());
     println!("\n(run time {:.0} s)", t0.elapsed().as_secs_f64());

@@ -76,9 +76,12 @@ fn rel_rms(a: &[f64], b: &[f64]) -> f64 {
     (e / s).sqrt()
 }
 
+/// Modes of a model: (f_n Hz, ζ, share of the static gain) each.
+type Modes = Vec<(f64, f64, f64)>;
+
 /// (fs, modes, band top) of 9257-class cases, including a sensor mode near
 /// and one above Nyquist at the lowest DAQ rate.
-fn cases() -> Vec<(f64, Vec<(f64, f64, f64)>, f64)> {
+fn cases() -> Vec<(f64, Modes, f64)> {
     vec![
         (25_600.0, vec![(300.0, 0.03, 0.1), (2500.0, 0.02, 0.9)], 4000.0),
         (51_200.0, vec![(276.0, 0.03, 0.05), (600.0, 0.02, 0.05), (3300.0, 0.02, 0.9)], 4000.0),

@@ -8,7 +8,6 @@ use dynocomp::simulate::drift::{measure_drifting, sensor_modes, shift_sensor_mod
 use dynocomp::simulate::{Dynamometer, Mode, MultiAxisDynamometer, SimParams};
 use std::f64::consts::PI;
 
-#[allow(dead_code)]
 mod cli_common;
 
 const F_FINE: f64 = 409_600.0;

@@ -8,6 +8,8 @@
 //! no flags beyond the preset's band flags, and the compensated error in the
 //! bands is below the raw error there.
 
+use std::cmp::Ordering;
+
 use dynocomp::eval::reproduce::{evaluate, preset_bands, simulate_preset, Method};
 use dynocomp::metrics::accuracy_in_bands;
 use dynocomp::simulate::presets::{preset, NAMES};
@@ -42,7 +44,7 @@ fn every_preset_paper_method_with_band_fitting_beats_raw_in_the_bands_on_every_a
                         100.0 * sc.raw_full,
                         100.0 * sc.comp_full
                     );
-                    if !(sc.comp_in_bands < sc.raw_in_bands) {
+                    if sc.comp_in_bands.partial_cmp(&sc.raw_in_bands) != Some(Ordering::Less) {
                         failures.push(format!(
                             "{name} axis {}: compensated {:.2} % ≥ raw {:.2} % in the bands",
                             o.axis,
@@ -74,7 +76,7 @@ fn the_in_band_check_fails_on_a_wrong_estimate_and_the_presets_need_compensation
         late.extend_from_slice(&s.measured[a][..s.measured[a].len() - 10]);
         let wrong = accuracy_in_bands(&late, &s.truth[a], fs, &ranges).nrmse;
         assert!(
-            !(wrong < raw),
+            wrong.partial_cmp(&raw) != Some(Ordering::Less),
             "axis {a}: a delayed raw force ({:.2} %) passed as better than raw ({:.2} %)",
             100.0 * wrong,
             100.0 * raw

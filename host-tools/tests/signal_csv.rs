@@ -6,14 +6,14 @@
 
 use std::io::BufReader;
 
-use dynocomp::io::signal::{read_all, SignalReader};
+use dynocomp::io::signal::{read_all, SignalReader, WholeRecord};
 use dynocomp::io::signal_csv::CsvReader;
 use proptest::prelude::*;
 
 /// Buffer sizes: one that holds the whole text, and ones that cut lines.
 const CAPACITIES: [usize; 4] = [1 << 20, 64, 7, 1];
 
-fn read(text: &[u8], cap: usize) -> anyhow::Result<(Option<Vec<f64>>, Vec<Vec<f64>>)> {
+fn read(text: &[u8], cap: usize) -> anyhow::Result<WholeRecord> {
     // Any finite value: these tests are about the parser, not plausibility.
     let mut r = CsvReader::new(BufReader::with_capacity(cap, text), "rec.csv")?.with_full_scale(f64::INFINITY);
     read_all(&mut r as &mut dyn SignalReader)

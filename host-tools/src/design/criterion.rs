@@ -199,6 +199,6 @@ mod tests {
         e[1] = Complex64::new(1.049, 0.0);
         e[7] = Complex64::from_polar(0.951, 4.9f64.to_radians());
         assert_eq!(longest_flat_run(&f, &e, (0.0, 900.0)), Some((0.0, 900.0)));
-        assert_eq!(longest_flat_run(&f, &vec![2.0 * one; 10], (0.0, 900.0)), None);
+        assert_eq!(longest_flat_run(&f, &[2.0 * one; 10], (0.0, 900.0)), None);
     }
 }

@@ -688,10 +688,10 @@ mod tests {
                 let cov = fit_covariance(freq, &entries, &fit, &at).unwrap();
                 let err = |e: usize, f: f64| fit[e].frf(f) - truths[e].frf(f);
                 for k in 0..at.len() {
-                    for e in 0..n {
+                    for (e, st) in stats[..n].iter_mut().enumerate() {
                         let v = cov.variance(e, k);
                         let sample = [err(e, at[k]).norm_sqr(), v, v];
-                        (0..3).for_each(|c| stats[e][k][c] += sample[c] / runs as f64);
+                        (0..3).for_each(|c| st[k][c] += sample[c] / runs as f64);
                     }
                     if n == 2 {
                         let sample = [

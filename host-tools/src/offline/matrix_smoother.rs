@@ -505,13 +505,16 @@ mod tests {
         }
     }
 
+    /// Spoils a valid sidecar model in place.
+    type Spoil = Box<dyn Fn(&mut MatrixModelJson)>;
+
     /// A sidecar's 3x3 model that is malformed is refused with a message
     /// that names it; a valid one is taken.
     #[test]
     fn malformed_models_are_refused() {
         let good = model([0.3, 0.5, 0.1], diag([0.2; 3]), diag([1.0; 3]), diag([0.0; 3]), 1);
         assert!(good.plant(FS, "s.json").is_ok());
-        let cases: Vec<(Box<dyn Fn(&mut MatrixModelJson)>, &str)> = vec![
+        let cases: Vec<(Spoil, &str)> = vec![
             (Box::new(|m| m.plant_b.pop().map(|_| ()).unwrap()), "matrix B is not 3 × 3"),
             (Box::new(|m| m.plant_a[0][0] = 1.5), "not stable"),
             (Box::new(|m| m.plant_c[1][2] = f64::INFINITY), "non-finite"),
