@@ -854,11 +854,15 @@ fn skim(data: &MatrixData, f_identified_hz: f64, model: MatrixModel) -> Result<M
 mod tests {
     use super::*;
 
+    /// Lines (Hz), the nine measured entries, the weights, the two poles
+    /// and the true model of [`close_modes`].
+    type CloseModes = (Vec<f64>, Vec<Vec<Complex64>>, Vec<f64>, [Complex64; 2], MatrixModel);
+
     /// Two modes 0.8 % apart (211.6 and 213.4 Hz, 4 % damping), the first
     /// seen only in G_xx, the second only in G_yy; every other entry holds
     /// a direct term alone. Measured on 1 Hz lines to 1 kHz with complex
     /// noise of RMS `noise` (deterministic), weights 1/noise².
-    fn close_modes(noise: f64) -> (Vec<f64>, Vec<Vec<Complex64>>, Vec<f64>, [Complex64; 2], MatrixModel) {
+    fn close_modes(noise: f64) -> CloseModes {
         let pole = |f: f64, zeta: f64| {
             let w = 2.0 * PI * f;
             Complex64::new(-zeta * w, w * (1.0 - zeta * zeta).sqrt())
