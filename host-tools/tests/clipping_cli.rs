@@ -25,8 +25,16 @@ fn a_clipped_record_is_compensated_with_a_warning_naming_channel_and_sample() {
         clipped.push_str(&format!("{},{},{},{}\n", r[0], r[1].min(rail), r[2], r[3]));
     }
     std::fs::write(p("clipped.csv"), clipped).unwrap();
+    // With a report beside the output: the overview of the clipped axis
+    // marks the rail, and its caption says where and what to do.
     let run = |input: &str, out: &str| {
-        dynocomp(&["compensate", "--coeffs", &p("c.dcimg"), "--input", input, "--output", out])
+        let report = format!("{out}.report");
+        dynocomp(&["compensate", "--coeffs", &p("c.dcimg"), "--input", input, "--output", out, "--report", &report])
+    };
+    let marked = |out: &str, axis: &str| {
+        let svg = std::fs::read_to_string(format!("{out}.report/{axis}_overview.svg")).unwrap();
+        let index = std::fs::read_to_string(format!("{out}.report/index.html")).unwrap();
+        (svg.contains("clipped (measured)"), index.contains("Clipped: the measured force holds"))
     };
     let (ok, _, err) = run(&p("clipped.csv"), &p("out.csv"));
     assert!(ok, "{err}");
@@ -40,9 +48,14 @@ fn a_clipped_record_is_compensated_with_a_warning_naming_channel_and_sample() {
     );
     assert_eq!(err.matches("clipped there").count(), 1, "only fx, only its maximum: {err}");
     assert!(std::path::Path::new(&p("out.csv")).exists(), "the output is written all the same");
-    // The record as measured: no warning.
+    assert_eq!(marked(&p("out.csv"), "x"), (true, true));
+    let index = std::fs::read_to_string(p("out.csv.report/index.html")).unwrap();
+    assert!(index.contains(&format!("its maximum {rail} N")), "the caption names the rail");
+    assert_eq!(marked(&p("out.csv"), "y"), (false, true), "fy is not clipped: only fx's overview is marked");
+    // The record as measured: no warning, no mark.
     let (ok, _, err) = run(&example("measured.csv"), &p("out2.csv"));
     assert!(ok && !err.contains("clipped"), "{err}");
+    assert_eq!(marked(&p("out2.csv"), "x"), (false, false));
     // A clipped representative record for a force prior.
     let prior = |rec: &str, out: &str| {
         let extra = ["--force-prior", "level", "--force-record", rec];

@@ -103,13 +103,14 @@ pub fn run(a: &CompensateArgs) -> Result<()> {
     progress.finish_and_clear();
     let Compensated { samples: n_samples, how } = done;
     eprintln!("compensated {n_samples} samples x {} axes at {fs} Hz ({how}) -> {}", axes.len(), a.output.display());
-    let clipped: Vec<String> = extremes
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .clipped()
+    let clips = extremes.lock().unwrap_or_else(|p| p.into_inner()).clipped();
+    let clipped: Vec<String> = clips
         .iter()
         .map(|c| c.warning(&a.input.display().to_string(), "the compensated force is wrong around them"))
         .collect();
+    if let Some(acc) = acc.as_mut() {
+        acc.mark_clipped(&clips);
+    }
     clipped.iter().for_each(|w| eprintln!("{w}"));
     // The project's one scoring band (the same as `examples/score.rs` and
     // the rates harness), not the image's flat band.

@@ -29,6 +29,8 @@ const C_TRUE: RGBColor = RGBColor(44, 160, 44);
 const C_ERR: RGBColor = RGBColor(214, 39, 40);
 const C_TPF: RGBColor = RGBColor(230, 120, 0);
 /// Error above the band.
+/// The measured channel's clipped extremes ([`crate::io::clipping`]).
+const C_CLIP: RGBColor = RGBColor(148, 0, 211);
 const C_ABOVE: RGBColor = RGBColor(255, 127, 14);
 /// The compensated band's shading.
 const C_BAND: RGBColor = RGBColor(31, 119, 180);
@@ -240,6 +242,8 @@ pub struct ReportAccumulator {
     max_std: f64,
     n: u64,
     tpf_given: Option<f64>,
+    /// The input's clipped extremes, marked on the overviews.
+    clipped: Vec<crate::io::clipping::Clipped>,
 }
 
 impl ReportAccumulator {
@@ -273,6 +277,7 @@ impl ReportAccumulator {
             cur_start: 0,
             recent: Vec::new(),
             best: None,
+            clipped: Vec::new(),
             max_std: 0.0,
             n: 0,
             tpf_given: tpf_hz,
@@ -369,6 +374,11 @@ impl ReportAccumulator {
     /// Render the report into `dir`: three SVGs per axis and `index.html`
     /// with `summary` on top. `band_hz`: the NRMSE's band limit per axis.
     /// Returns the files written, `index.html` last, and the NRMSE lines.
+    /// Mark the input's clipped extremes `clipped` on the overviews.
+    pub fn mark_clipped(&mut self, clipped: &[crate::io::clipping::Clipped]) {
+        self.clipped = clipped.to_vec();
+    }
+
     pub fn write(
         mut self,
         dir: &Path,
@@ -383,7 +393,13 @@ impl ReportAccumulator {
             Some((s, _, w)) => (s, w),
             None => (self.cur_start, self.cur.clone()),
         };
-        let how = Rendering { fs: self.fs_hz, has_truth: self.has_truth, tpf_given: self.tpf_given, zoom_start };
+        let how = Rendering {
+            fs: self.fs_hz,
+            has_truth: self.has_truth,
+            tpf_given: self.tpf_given,
+            zoom_start,
+            clipped: std::mem::take(&mut self.clipped),
+        };
         for (i, a) in self.axes.iter_mut().enumerate() {
             let name = axis_name(a.axis);
             let score = a.keep.as_ref().map(|k| Score::of(k, self.fs_hz, band_hz(a.axis)));
@@ -462,6 +478,8 @@ struct Rendering {
     tpf_given: Option<f64>,
     /// The first sample of the zoom window.
     zoom_start: u64,
+    /// The input's clipped extremes.
+    clipped: Vec<crate::io::clipping::Clipped>,
 }
 
 impl Rendering {
@@ -493,7 +511,9 @@ impl Rendering {
             let keep = ((ZOOM_TOOTH_PERIODS * fs / t).round() as usize).max(16);
             zw.iter_mut().for_each(|v| v.truncate(keep));
         }
-        let overview = plot_overview(a, fs, band_hz).with_context(|| format!("report: axis {name}: overview"))?;
+        let clips: Vec<&crate::io::clipping::Clipped> = self.clipped.iter().filter(|c| c.axis == a.axis).collect();
+        let overview =
+            plot_overview(a, fs, band_hz, &clips).with_context(|| format!("report: axis {name}: overview"))?;
         let zoom_svg = plot_zoom(&zw, self.zoom_start, fs, has_truth, name)
             .with_context(|| format!("report: axis {name}: zoom"))?;
         let spec = plot_spectrum(&f, [&am, &ac], at.as_deref(), tpf, band_hz, name)
@@ -515,7 +535,7 @@ impl Rendering {
                         ""
                     },
                     if score.is_empty() { String::new() } else { format!(" {score}") }
-                ),
+                ) + &clip_caption(&clips, fs),
             ),
             (
                 format!("{name}_zoom.svg"),
@@ -610,7 +630,7 @@ fn range_of<'a>(envs: impl Iterator<Item = &'a [(u64, u64, f64, f64)]>) -> (f64,
 /// sample. With the truth, the error is split at `band_hz` (the kept
 /// records, zero-phase FFT split as [`crate::metrics::lowpass`]): in the
 /// band, what the NRMSE scores, and above it, each on its own scale.
-fn plot_overview(a: &AxisAcc, fs: f64, band_hz: f64) -> Result<String> {
+fn plot_overview(a: &AxisAcc, fs: f64, band_hz: f64, clips: &[&crate::io::clipping::Clipped]) -> Result<String> {
     let name = axis_name(a.axis);
     let (m, c, t) = (a.meas.buckets(), a.comp.buckets(), a.truth.buckets());
     let errors = a.keep.as_ref().map(|k| {
@@ -626,8 +646,11 @@ fn plot_overview(a: &AxisAcc, fs: f64, band_hz: f64) -> Result<String> {
         let root = SVGBackend::with_string(&mut svg, (1100, h)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
         let (top, bottom) = if errors.is_some() { root.split_vertically(440) } else { (root.clone(), root.clone()) };
-        let labels: &[&str] =
-            if errors.is_some() { &["measured", "compensated", "true"] } else { &["measured", "compensated"] };
+        let mut labels: Vec<&str> =
+            if errors.is_some() { vec!["measured", "compensated", "true"] } else { vec!["measured", "compensated"] };
+        if !clips.is_empty() {
+            labels.push(CLIP_LABEL);
+        }
         let yr = range_of([m.as_slice(), c.as_slice(), t.as_slice()].into_iter());
         let yr = legend_headroom(yr, labels.len(), plot_px_height(&top));
         let mut ch = build_chart(&top, &format!("f{name}: measured and compensated force, whole record"), xr, yr)?;
@@ -638,8 +661,14 @@ fn plot_overview(a: &AxisAcc, fs: f64, band_hz: f64) -> Result<String> {
             draw_envelope(&mut ch, &t, fs, C_TRUE, 0.0, "true")?;
         }
         let (pm, pc, pt) = (envelope_line(&m, fs), envelope_line(&c, fs), envelope_line(&t, fs));
-        let shown: &[&[(f64, f64)]] = if errors.is_some() { &[&pm, &pc, &pt] } else { &[&pm, &pc] };
-        legend_off_data(&mut ch, SeriesLabelPosition::UpperRight, labels, shown)?;
+        let mut shown: Vec<&[(f64, f64)]> = if errors.is_some() { vec![&pm, &pc, &pt] } else { vec![&pm, &pc] };
+        let rails: Vec<Vec<(f64, f64)>> =
+            clips.iter().map(|c| vec![(xr.0, c.extreme.value), (xr.1, c.extreme.value)]).collect();
+        for (k, rail) in rails.iter().enumerate() {
+            draw_line(&mut ch, rail, yr, f64::INFINITY, C_CLIP, 2, true, if k == 0 { CLIP_LABEL } else { "" })?;
+            shown.push(rail);
+        }
+        legend_off_data(&mut ch, SeriesLabelPosition::UpperRight, &labels, &shown)?;
         if let Some([low, high]) = errors {
             let (band_area, above_area) = bottom.split_vertically(230);
             let panels = [
@@ -670,6 +699,35 @@ fn plot_overview(a: &AxisAcc, fs: f64, band_hz: f64) -> Result<String> {
         root.present().map_err(perr)?;
     }
     Ok(svg)
+}
+
+/// The overview's legend entry for the clipped extremes.
+const CLIP_LABEL: &str = "clipped (measured)";
+
+/// The overview caption's sentence on `clips` (empty without any).
+fn clip_caption(clips: &[&crate::io::clipping::Clipped], fs: f64) -> String {
+    if clips.is_empty() {
+        return String::new();
+    }
+    let each: Vec<String> = clips
+        .iter()
+        .map(|c| {
+            let e = &c.extreme;
+            format!(
+                "its {} {} N on {} samples in {} plateaus, the first at t = {:.4} s",
+                if c.at_max { "maximum" } else { "minimum" },
+                e.value,
+                e.samples,
+                e.plateaus,
+                e.first as f64 / fs
+            )
+        })
+        .collect();
+    format!(
+        " Clipped: the measured force holds {}. Dashed violet: where it was clipped; the compensated force is wrong \
+         around those samples. Measure again with a larger range.",
+        each.join("; and ")
+    )
 }
 
 /// An envelope as one polyline (s, N) through each bucket's minimum and
