@@ -51,7 +51,7 @@ use dynocomp::simulate::plate::{inverse_noise_floor, simulate_plate, FloorSpec, 
 use dynocomp::simulate::SimParams;
 use dynocomp_core::kernel::AxisState;
 use dynocomp_core::mimo::{MimoFilter, MimoState};
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
 use std::f64::consts::PI;
 
@@ -174,6 +174,35 @@ fn design_above(frf: &Frf, out: &PlateSimOutput, above_band: AboveBand) -> anyho
     };
     let opts = MatrixOptions { design, load_limit_permille: box_limit(), matrix_vf, ..Default::default() };
     design_matrix(frf, noise(out), &opts)
+}
+
+/// The transmission zeros of `m` (rad/s): the eigenvalues of A − B D⁻¹ C
+/// of a real realization with two states per pair and input (none where
+/// the direct term D is singular), for the diagnostics of [`model_error`].
+fn transmission_zeros(m: &MatrixModel) -> Vec<Complex64> {
+    let pairs: Vec<usize> = (0..m.terms()).filter(|&k| m.pole(k).1).collect();
+    let n = 6 * pairs.len();
+    let (mut a, mut b, mut c) = (DMatrix::<f64>::zeros(n, n), DMatrix::<f64>::zeros(n, 3), DMatrix::<f64>::zeros(3, n));
+    for (q, &k) in pairs.iter().enumerate() {
+        let p = m.pole(k).0;
+        for j in 0..3 {
+            let s0 = 6 * q + 2 * j;
+            // x1' = x2, x2' = −|p|² x1 + 2 Re p x2 + u_j: 1/((s − p)(s − p̄)).
+            a[(s0, s0 + 1)] = 1.0;
+            a[(s0 + 1, s0)] = -p.norm_sqr();
+            a[(s0 + 1, s0 + 1)] = 2.0 * p.re;
+            b[(s0 + 1, j)] = 1.0;
+            for i in 0..3 {
+                let Term::Pair { residue: r, .. } = m.entry(i, j).terms[k] else { continue };
+                // R/(s − p) + c.c. = (2 Re R s − 2 Re(R p̄))/((s − p)(s − p̄)).
+                c[(i, s0)] = -2.0 * (r * p.conj()).re;
+                c[(i, s0 + 1)] = 2.0 * r.re;
+            }
+        }
+    }
+    let d = DMatrix::from_fn(3, 3, |i, j| m.entry(i, j).d);
+    let Some(d_inv) = d.try_inverse() else { return Vec::new() };
+    (a - &b * d_inv * &c).complex_eigenvalues().iter().copied().collect()
 }
 
 /// The simulator's exact G at the cut point as a pole-residue model: each
@@ -383,6 +412,16 @@ fn model_error(md: &MatrixDesign, out: &PlateSimOutput) {
         |m: Vec<(f64, f64)>| m.iter().map(|(f, z)| format!("{f:.0} Hz ζ {z:.3}")).collect::<Vec<_>>().join(", ");
     eprintln!("    modes, true: {}", modes(out.cut_modal.modes.iter().map(|m| (m.fn_hz, m.zeta)).collect()));
     eprintln!("    modes, fitted: {}", modes(model.modes()));
+    let rhp = |m: &MatrixModel| {
+        let z = transmission_zeros(m);
+        let right: Vec<String> = z
+            .iter()
+            .filter(|z| z.re > 0.0)
+            .map(|z| format!("{:.0}{:+.0}j Hz", z.re / 2.0 / PI, z.im / 2.0 / PI))
+            .collect();
+        format!("{} of {} zeros in the right half-plane {right:?}", right.len(), z.len())
+    };
+    eprintln!("    transmission zeros, fitted: {}", rhp(model));
     eprintln!("    FRF lines {:.1}-{:.1} Hz", frf.freq_hz[0], frf.freq_hz[frf.freq_hz.len() - 1]);
     // The full f64 compensator on the record, once for every row.
     let simulated = md.kalman.as_ref().map(|k| {
