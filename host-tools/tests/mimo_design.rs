@@ -1021,6 +1021,12 @@ fn seed_study() {
                     for l in &md.summary.latency_rounds {
                         eprintln!("    latency {}: {:?}", l.latency, l.predicted);
                     }
+                    if let Some(k) = &md.summary.kalman {
+                        eprintln!(
+                            "    3x3 Kalman: q {:?}, noise gains {:.2?}, radius {:.4}, order {}, search {:?}, force shape {:?}",
+                            k.q, k.noise_gains, k.closed_loop_radius, k.order, k.q_search, k.force_shape
+                        );
+                    }
                 }
                 let ok = (0..3)
                     .all(|i| fig.used[i] <= NO_WORSE * fig.per_axis[i] && fig.used[i] <= FLOOR_FACTOR * fig.floor[i]);
