@@ -9,6 +9,7 @@ use nalgebra::{DMatrix, DVector, Matrix3};
 use num_complex::Complex64;
 use std::f64::consts::PI;
 
+use super::modes::{fn_hz, pole_at};
 use super::vf::{
     basis_row, best_surrogate, contributes, edge_pairs, kept_poles, lstsq, max_order_for, min_lines, n_cols,
     relocation_step, residues, sigma_zeros, starting_poles, to_model, Pole, VfOptions,
@@ -752,13 +753,11 @@ fn pair_rises(data: &MatrixData, model: &MatrixModel) -> Result<Vec<Option<f64>>
     Ok(total)
 }
 
-/// `model` without the terms `keep` leaves out, its residues and direct
-/// terms fitted again to `data` with the remaining poles fixed (the matrix
-/// form of [`super::vf::refit_kept`]).
-/// Multiples of the last line's frequency, and dampings, of the pair tried
+/// Natural frequencies, as multiples of the last line's, of the pair tried
 /// above the lines in place of a pair in the band's top part
 /// ([`above_band_swap`]).
 const ABOVE_BAND_FREQUENCY: [f64; 7] = [1.05, 1.15, 1.3, 1.5, 1.75, 2.0, 2.5];
+/// Damping ratios of that pair.
 const ABOVE_BAND_DAMPING: [f64; 3] = [0.01, 0.025, 0.05];
 
 /// Lowest fraction of the last line's frequency at which a pair may give
@@ -777,26 +776,24 @@ const SWAP_FROM_FRACTION: f64 = 0.6;
 /// well within their noise, but it bends Ĝ against the true G near the
 /// band's top, where every compensator distorts most, and the fit's
 /// variance cannot show it.
-pub(crate) fn above_band_swap(data: &MatrixData, model: MatrixModel, opts: &VfOptions) -> Result<MatrixModel> {
+fn above_band_swap(data: &MatrixData, model: MatrixModel, opts: &VfOptions) -> Result<MatrixModel> {
     let f_top = data.f_max();
     let w_scale = 2.0 * PI * f_top;
     let terms = &model.entries[0].terms;
-    let all = vec![true; terms.len()];
     let mut best: Option<(f64, MatrixModel)> = None;
     for k in 0..terms.len() {
         let (p, pair) = model.pole(k);
-        let fn_hz = p.norm() / (2.0 * PI);
-        if !pair || fn_hz < SWAP_FROM_FRACTION * f_top || fn_hz > f_top {
+        let f_n = fn_hz(p);
+        if !pair || f_n < SWAP_FROM_FRACTION * f_top || f_n > f_top {
             continue;
         }
-        let mut keep = all.clone();
-        keep[k] = false;
+        let keep: Vec<bool> = (0..terms.len()).map(|t| t != k).collect();
         let kept = kept_poles(terms, &keep, w_scale);
+        // Normalized by w_scale, the last line is at 1.
         for m in ABOVE_BAND_FREQUENCY {
             for zeta in ABOVE_BAND_DAMPING {
-                let wn = m;
                 let mut poles = kept.clone();
-                poles.push(Pole { p: Complex64::new(-zeta * wn, wn * (1.0 - zeta * zeta).sqrt()), pair: true });
+                poles.push(Pole { p: pole_at(m, zeta), pair: true });
                 let Ok(c) = fit_residues(data, &poles, w_scale) else { continue };
                 let r = data.rss(&c);
                 if r.is_finite() && best.as_ref().is_none_or(|(b, _)| r < *b) {
@@ -811,6 +808,9 @@ pub(crate) fn above_band_swap(data: &MatrixData, model: MatrixModel, opts: &VfOp
     Ok(if after < before && candidate.is_stable() { candidate } else { model })
 }
 
+/// `model` without the terms `keep` leaves out, its residues and direct
+/// terms fitted again to `data` with the remaining poles fixed (the matrix
+/// form of [`super::vf::refit_kept`]).
 pub fn refit_kept(data: &MatrixData, model: &MatrixModel, keep: &[bool]) -> Result<MatrixModel> {
     let w_scale = 2.0 * PI * data.f_max();
     fit_residues(data, &kept_poles(&model.entries[0].terms, keep, w_scale), w_scale)
@@ -863,10 +863,7 @@ mod tests {
     /// a direct term alone. Measured on 1 Hz lines to 1 kHz with complex
     /// noise of RMS `noise` (deterministic), weights 1/noise².
     fn close_modes(noise: f64) -> CloseModes {
-        let pole = |f: f64, zeta: f64| {
-            let w = 2.0 * PI * f;
-            Complex64::new(-zeta * w, w * (1.0 - zeta * zeta).sqrt())
-        };
+        let pole = |f: f64, zeta: f64| pole_at(2.0 * PI * f, zeta);
         let poles = [pole(211.6, 0.04), pole(213.4, 0.035)];
         let mut truth_terms = Vec::new();
         for e in 0..ENTRIES {
@@ -966,7 +963,7 @@ mod tests {
     /// A pair at (`f`, ζ) Hz with residue `c`·ω in the entries `seen`.
     fn pair_in(f: f64, zeta: f64, c: f64, seen: &[usize]) -> Vec<Term> {
         let w = 2.0 * PI * f;
-        let pole = Complex64::new(-zeta * w, w * (1.0 - zeta * zeta).sqrt());
+        let pole = pole_at(w, zeta);
         (0..ENTRIES)
             .map(|e| {
                 let r = if seen.contains(&e) { Complex64::new(0.0, -c * w) } else { Complex64::new(0.0, 0.0) };
@@ -1008,10 +1005,7 @@ mod tests {
                 w: std::array::from_fn(|_| w.as_slice()),
             };
             let w_scale = 2.0 * PI * data.f_max();
-            let pole = |f: f64, zeta: f64| {
-                let wn = 2.0 * PI * f / w_scale;
-                Pole { p: Complex64::new(-zeta * wn, wn * (1.0 - zeta * zeta).sqrt()), pair: true }
-            };
+            let pole = |f: f64, zeta: f64| Pole { p: pole_at(2.0 * PI * f / w_scale, zeta), pair: true };
             let true_poles = vec![pole(300.0, 0.03), pole(700.0, 0.025)];
             // With the mode above: the best stand-in inside the band, its
             // frequency and damping on a grid, its residues fitted.

@@ -38,7 +38,7 @@ pub struct VfOptions {
     pub f_ceiling_hz: f64,
     /// The 3x3 fit tries a pair above the lines in place of each pair in the
     /// band's top part, and keeps the likelier model
-    /// ([`super::matrix::above_band_swap`]). Off: a model closer to the true
+    /// (`above_band_swap` in [`super::matrix`]). Off: a model closer to the true
     /// G this way gave worse compensators on milling cuts (BENCHMARKS.md,
     /// "A pair above the lines"); for studies.
     pub above_band_swap: bool,
@@ -594,7 +594,7 @@ pub(crate) fn best_surrogate<M>(
         for t in edge {
             if let Term::Pair { pole, .. } = *t {
                 let wn = raise * pole.norm() / w_scale;
-                poles.push(Pole { p: Complex64::new(-zeta * wn, wn * (1.0 - zeta * zeta).sqrt()), pair: true });
+                poles.push(Pole { p: super::modes::pole_at(wn, zeta), pair: true });
             }
         }
         let Ok(m) = fit(&poles) else { continue };

@@ -28,9 +28,9 @@ const C_COMP: RGBColor = RGBColor(31, 119, 180);
 const C_TRUE: RGBColor = RGBColor(44, 160, 44);
 const C_ERR: RGBColor = RGBColor(214, 39, 40);
 const C_TPF: RGBColor = RGBColor(230, 120, 0);
-/// Error above the band.
 /// The measured channel's clipped extremes ([`crate::io::clipping`]).
 const C_CLIP: RGBColor = RGBColor(148, 0, 211);
+/// Error above the band.
 const C_ABOVE: RGBColor = RGBColor(255, 127, 14);
 /// The compensated band's shading.
 const C_BAND: RGBColor = RGBColor(31, 119, 180);
@@ -371,14 +371,14 @@ impl ReportAccumulator {
         scored.map(|(axis, k)| Score::of(k, fs, band_hz(axis)).line(axis_name(axis))).collect()
     }
 
-    /// Render the report into `dir`: three SVGs per axis and `index.html`
-    /// with `summary` on top. `band_hz`: the NRMSE's band limit per axis.
-    /// Returns the files written, `index.html` last, and the NRMSE lines.
     /// Mark the input's clipped extremes `clipped` on the overviews.
     pub fn mark_clipped(&mut self, clipped: &[crate::io::clipping::Clipped]) {
         self.clipped = clipped.to_vec();
     }
 
+    /// Render the report into `dir`: three SVGs per axis and `index.html`
+    /// with `summary` on top. `band_hz`: the NRMSE's band limit per axis.
+    /// Returns the files written, `index.html` last, and the NRMSE lines.
     pub fn write(
         mut self,
         dir: &Path,

@@ -102,9 +102,12 @@ pub const MAX_IMPACTS: usize = 1000;
 /// (absent for a shaker or flat force, which have none).
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct ForceLines {
+    /// `milling`, or the excitation's name ([`shaker::Excitation::name`]).
     pub force: &'static str,
+    /// The cut's tooth-passing frequency (Hz).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tooth_passing_hz: Option<f64>,
+    /// The cut's spindle frequency (Hz).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub spindle_hz: Option<f64>,
 }
