@@ -347,78 +347,129 @@ pub const MAX_PASSES: usize = 4;
 pub const STEP_TOL_DECADES: f64 = 0.02;
 /// Golden-section reductions per coordinate and pass.
 const GOLDEN_ITERS: usize = 10;
+/// The predicted error (√J, relative) an axis without a finite one counts
+/// as in [`search_merit`]: far above any compensator worth having (raw
+/// errors are 0.2-2).
+const J_CAP: f64 = 1e3;
+
+/// The q search's figure of merit for one candidate: Σ_i ln min(√J_i,
+/// [`J_CAP`]), an axis with no finite √J (the design fails, or output i's
+/// noise gain is over the limit) counted at the cap. The sum of logs weighs
+/// the same relative gain equally on every axis, so an axis with a small
+/// error is not sacrificed for a large one; each axis later takes its 3x3
+/// row only where that row predicts less than its per-axis row.
+pub fn search_merit(j: &[f64; 3]) -> f64 {
+    j.iter().map(|&v| if v.is_finite() && v > 0.0 { v.min(J_CAP) } else { J_CAP }.ln()).sum()
+}
 
 /// Choose q by the predicted error of each output axis: `eval(q)` is √J_i
 /// per axis (∞ where the design fails or output i's noise gain is over the
 /// limit).
 ///
-/// First a joint scan q = R·10^k (k = −2..14, the per-axis scan's decades,
-/// on threads) gives each axis its best decade; then coordinate descent: each log10 q_i
-/// in turn is refined by golden section on ±1 decade (±0.5, ±0.25 in later
-/// passes) for its own J_i with the others fixed, kept only where J_i
-/// falls. q_i mainly sets the bandwidth of force i's estimate; q_j (j ≠ i)
-/// moves J_i only through how the filter shares the channels between the
-/// forces, a second-order effect where the crosstalk is a fraction of the
-/// direct response, so the passes settle quickly: on the plate
-/// dynamometer's presets and random set-ups at 25.6 and 51.2 kHz the second
-/// pass moves log10 q by less than 0.05 decades and √J by less than 1 %
-/// (the `mimo_design` test measures it), and the search stops after a pass
-/// that moves no q_i by more than [`STEP_TOL_DECADES`], or after
-/// [`MAX_PASSES`].
+/// 1. A joint scan q = R·10^k (k = −2..14, the per-axis scan's decades, on
+///    threads), and the combination of each axis's best decade in it.
+/// 2. From the best of these by [`search_merit`], coordinate descent: each
+///    log10 q_i in turn, with the others fixed, is refined by golden section
+///    of the merit on ±1 decade (±0.5, ±0.25 in later passes). Where the
+///    best is a point of the joint scan, an axis's own best may lie many
+///    decades away, so the first pass scans each log10 q_i over the same
+///    decades (on threads) before its golden section.
+/// 3. The search keeps the best candidate it has evaluated, so it never
+///    ends on a point worse than its start: the combination of per-axis
+///    decades is itself only a candidate, since q_j (j ≠ i) moves J_i
+///    through how the filter shares the channels between the forces, and
+///    a combination can put an axis over the noise-gain limit.
+///
+/// q_i mainly sets the bandwidth of force i's estimate, so the passes
+/// settle quickly: the search stops after a pass that moves no q_i by more
+/// than [`STEP_TOL_DECADES`], or after [`MAX_PASSES`].
 pub fn choose_q(eval: &(dyn Fn([f64; 3]) -> [f64; 3] + Sync), r: [f64; 3]) -> Result<QSearch> {
     let base = r.map(|v| v.log10());
     let scan: Vec<[f64; 3]> = (-2..=14).map(|k| base.map(|b| b + k as f64)).collect();
     let scanned = map_on_threads(&scan, |lq| eval(lq.map(|v| 10f64.powf(v))));
-    let mut evaluations = scan.len();
-    let mut run = |lq: [f64; 3]| {
-        evaluations += 1;
-        eval(lq.map(|v| 10f64.powf(v)))
-    };
-    let mut best: [Option<(f64, f64)>; 3] = [None; 3];
-    for (lq, j) in scan.into_iter().zip(scanned) {
+    let mut per_axis: [Option<(f64, f64)>; 3] = [None; 3];
+    for (lq, j) in scan.iter().zip(&scanned) {
         for i in 0..3 {
-            if j[i].is_finite() && best[i].is_none_or(|b| j[i] < b.1) {
-                best[i] = Some((lq[i], j[i]));
+            if j[i].is_finite() && per_axis[i].is_none_or(|b| j[i] < b.1) {
+                per_axis[i] = Some((lq[i], j[i]));
             }
         }
     }
-    let mut lq = [0.0; 3];
+    let mut combined = [0.0; 3];
     for i in 0..3 {
-        let Some((l, _)) = best[i] else {
+        let Some((l, _)) = per_axis[i] else {
             bail!("no q gives the 3x3 compensator a finite predicted error on axis {i} within the noise-gain limit");
         };
-        lq[i] = l;
+        combined[i] = l;
     }
-    let mut j = run(lq);
+    let mut best = BestCandidate { lq: combined, j: [f64::INFINITY; 3], merit: f64::INFINITY, evaluated: 0 };
+    for (lq, j) in scan.into_iter().zip(scanned) {
+        best.offer(lq, j);
+    }
+    let run = |lq: [f64; 3], best: &mut BestCandidate| {
+        let j = eval(lq.map(|v| 10f64.powf(v)));
+        best.offer(lq, j);
+        search_merit(&j)
+    };
+    run(combined, &mut best);
+    let from_combination = best.lq == combined;
     let mut out = QSearch::default();
     let mut width = 1.0;
     for pass in 1..=MAX_PASSES {
-        let (start_lq, start_j) = (lq, j);
+        let (start_lq, start_j) = (best.lq, best.j);
         for i in 0..3 {
-            let mut f = |x: f64| {
-                let mut t = lq;
-                t[i] = x;
-                run(t)[i]
-            };
-            let [(x1, f1), (x2, f2)] = golden_section(&mut f, lq[i] - width, lq[i] + width, GOLDEN_ITERS);
-            let (x, fx) = if f1 <= f2 { (x1, f1) } else { (x2, f2) };
-            if fx.is_finite() && fx < j[i] {
-                lq[i] = x;
-                j = run(lq);
+            if pass == 1 && !from_combination {
+                let line: Vec<[f64; 3]> = (-2..=14)
+                    .map(|k| {
+                        let mut t = best.lq;
+                        t[i] = base[i] + k as f64;
+                        t
+                    })
+                    .collect();
+                let js = map_on_threads(&line, |lq| eval(lq.map(|v| 10f64.powf(v))));
+                for (lq, j) in line.into_iter().zip(js) {
+                    best.offer(lq, j);
+                }
             }
+            let centre = best.lq;
+            let mut f = |x: f64| {
+                let mut t = centre;
+                t[i] = x;
+                run(t, &mut best)
+            };
+            golden_section(&mut f, centre[i] - width, centre[i] + width, GOLDEN_ITERS);
         }
         width *= 0.5;
         out.passes = pass;
-        out.last_step_decades = (0..3).map(|i| (lq[i] - start_lq[i]).abs()).fold(0.0, f64::max);
-        out.last_change = (0..3).map(|i| (j[i] / start_j[i] - 1.0).abs()).fold(0.0, f64::max);
+        out.last_step_decades = (0..3).map(|i| (best.lq[i] - start_lq[i]).abs()).fold(0.0, f64::max);
+        out.last_change = (0..3).map(|i| (best.j[i] / start_j[i] - 1.0).abs()).fold(0.0, f64::max);
         if out.last_step_decades < STEP_TOL_DECADES {
             break;
         }
     }
-    out.q = lq.map(|v| 10f64.powf(v));
-    out.predicted = j;
-    out.evaluations = evaluations;
+    out.q = best.lq.map(|v| 10f64.powf(v));
+    out.predicted = best.j;
+    out.evaluations = best.evaluated;
     Ok(out)
+}
+
+/// The best candidate (log10 q, √J) a search has evaluated, by
+/// [`search_merit`], and how many it has evaluated.
+struct BestCandidate {
+    lq: [f64; 3],
+    j: [f64; 3],
+    merit: f64,
+    evaluated: usize,
+}
+
+impl BestCandidate {
+    fn offer(&mut self, lq: [f64; 3], j: [f64; 3]) {
+        self.evaluated += 1;
+        let merit = search_merit(&j);
+        if merit < self.merit {
+            (self.lq, self.j, self.merit) = (lq, j, merit);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -483,5 +534,37 @@ mod tests {
             let got = shared.row_error(i, 0, &hs).fit;
             assert!((got - want.sqrt()).abs() < 1e-12 * got, "row {i}: {got} against {}", want.sqrt());
         }
+    }
+
+    /// A q landscape where each axis's best decade alone is known, but
+    /// their combination is not a compensator: √J_i = 10⁻³(1 + (log10 q_i
+    /// − o_i)²) with o = (2, 9, 2) decades, and output y over its noise-gain
+    /// limit (∞) wherever q_y is more than 3 decades above q_x or q_z, as
+    /// where the plate's y row needs the other forces' estimates to take
+    /// part of its channel. The search ends on a valid q no worse, by its
+    /// merit, than any point of its joint scan, with each axis near the best
+    /// it can have under the limit: x and z at their optima, y at the limit's
+    /// edge. Control: the combination of per-axis best decades, where the
+    /// search used to start and end, is refused on y.
+    #[test]
+    fn the_q_search_keeps_a_valid_candidate_where_the_per_axis_decades_combine_to_none() {
+        let optimum = [2.0, 9.0, 2.0];
+        let eval = |q: [f64; 3]| {
+            let lq = q.map(f64::log10);
+            if lq[1] - lq[0].min(lq[2]) > 3.0 {
+                return [1e-3 * (1.0 + (lq[0] - 2.0).powi(2)), f64::INFINITY, 1e-3 * (1.0 + (lq[2] - 2.0).powi(2))];
+            }
+            [0, 1, 2].map(|i| 1e-3 * (1.0 + (lq[i] - optimum[i]).powi(2)))
+        };
+        let combined = eval([1e2, 1e9, 1e2]);
+        assert!(combined[1].is_infinite(), "control: the per-axis decades combine to a refused y ({combined:?})");
+        let found = choose_q(&eval, [1.0; 3]).unwrap();
+        assert!(found.predicted.iter().all(|j| j.is_finite()), "{found:?}");
+        assert_eq!(eval(found.q), found.predicted, "the reported error is the chosen q's");
+        let best_scan = (-2..=14).map(|k| search_merit(&eval([10f64.powi(k); 3]))).fold(f64::INFINITY, f64::min);
+        assert!(search_merit(&found.predicted) <= best_scan, "{found:?} against the scan's best merit {best_scan}");
+        let lq = found.q.map(f64::log10);
+        assert!((lq[0] - 2.0).abs() < 0.6 && (lq[2] - 2.0).abs() < 0.6, "x and z near their optima: {lq:?}");
+        assert!(lq[1] - lq[0].min(lq[2]) > 2.5, "y near the limit's edge: {lq:?}");
     }
 }

@@ -129,20 +129,18 @@ pub struct MatrixDare {
 /// of `plant` for Q = diag(`q`) (N²/sample) and R = diag(`r`) (N²) by
 /// structured doubling with G = Cᵀ R⁻¹ C, and check it: S positive
 /// definite and the residual, judged against the size of the equation's
-/// terms, at most [`MAX_DARE_RESIDUAL`]. The box's compensator ([`design`])
-/// and its q search take the doubling's solution as it is;
-/// [`solve_dare_refined`] polishes it.
+/// terms, at most [`MAX_DARE_RESIDUAL`]. The doubling alone: the designs
+/// use [`solve_dare_refined`].
 pub fn solve_dare(plant: &MatrixAugmentedPlant, q: [f64; 3], r: [f64; 3]) -> Result<MatrixDare> {
     solve_dare_with(plant, q, r, false)
 }
 
 /// [`solve_dare`] with Newton steps where the doubling's residual is over
-/// the limit ([`newton_polish`]): for the offline smoother
-/// ([`crate::offline::matrix_smoother`]), which takes the design's q as it
-/// is and must not refuse a record for the doubling's rounding. The q
-/// search does not polish: its candidates are judged by the model, and the
-/// ones the doubling cannot solve are left out (BENCHMARKS.md, "The 3x3
-/// design").
+/// the limit ([`newton_polish`]). The box's compensator ([`design`]), its q
+/// search and the offline smoother ([`crate::offline::matrix_smoother`])
+/// all solve with it: on the plate's set-ups the doubling's rounding leaves
+/// 4e-9 to 6e-8 of the terms at large q, and a q search that left those q
+/// out stopped decades short of its best (BENCHMARKS.md, "The q search").
 pub fn solve_dare_refined(plant: &MatrixAugmentedPlant, q: [f64; 3], r: [f64; 3]) -> Result<MatrixDare> {
     solve_dare_with(plant, q, r, true)
 }
@@ -270,8 +268,8 @@ pub struct MatrixKalman {
 /// the declared latency L.
 ///
 /// 3. Filter DARE P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + Γ Q Γᵀ by
-///    structured doubling with G = Cᵀ R⁻¹ C (`structured_doubling`).
-///    Its residual, judged against the size of the equation's terms, must
+///    structured doubling with G = Cᵀ R⁻¹ C (`structured_doubling`),
+///    polished by Newton steps ([`solve_dare_refined`]). Its residual, judged against the size of the equation's terms, must
 ///    stay below [`MAX_DARE_RESIDUAL`], and the closed loop
 ///    A(I − K C) must be stable.
 /// 4. Compensator from ỹ to F̂[k−L−D] (3 in, 3 out), K = P Cᵀ S⁻¹, S = C P Cᵀ + R:
@@ -282,7 +280,7 @@ pub struct MatrixKalman {
 pub fn design(plant: &MatrixAugmentedPlant, q: [f64; 3], r: [f64; 3], lag: usize) -> Result<MatrixKalman> {
     let (a, c) = (&plant.a, &plant.c);
     let n = a.nrows();
-    let MatrixDare { p, s, s_inv, residual: dare_residual, iterations } = solve_dare(plant, q, r)?;
+    let MatrixDare { p, s, s_inv, residual: dare_residual, iterations } = solve_dare_refined(plant, q, r)?;
     let s_eig = crate::fit::linalg::symmetric_eigenvalues(&s, "the innovation covariance")?;
     let innovation_condition = s_eig.max() / s_eig.min();
     let k = &p * c.transpose() * &s_inv;
