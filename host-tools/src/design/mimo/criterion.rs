@@ -339,6 +339,9 @@ pub struct QSearch {
     pub last_change: f64,
     /// Designs evaluated.
     pub evaluations: usize,
+    /// Candidates better than the best so far that were refused because the
+    /// offline smoother's Riccati equation cannot take their q.
+    pub refused: usize,
 }
 
 /// Most coordinate-descent passes.
@@ -379,11 +382,18 @@ pub fn search_merit(j: &[f64; 3]) -> f64 {
 ///    decades is itself only a candidate, since q_j (j ≠ i) moves J_i
 ///    through how the filter shares the channels between the forces, and
 ///    a combination can put an axis over the noise-gain limit.
+/// 4. A candidate becomes the best only if `accept(q)`: the design passes
+///    whether the rest of the chain can take that q (the offline smoother's
+///    Riccati equation, [`crate::design::mimo`]). Each refusal is counted.
 ///
 /// q_i mainly sets the bandwidth of force i's estimate, so the passes
 /// settle quickly: the search stops after a pass that moves no q_i by more
 /// than [`STEP_TOL_DECADES`], or after [`MAX_PASSES`].
-pub fn choose_q(eval: &(dyn Fn([f64; 3]) -> [f64; 3] + Sync), r: [f64; 3]) -> Result<QSearch> {
+pub fn choose_q(
+    eval: &(dyn Fn([f64; 3]) -> [f64; 3] + Sync),
+    accept: &dyn Fn([f64; 3]) -> bool,
+    r: [f64; 3],
+) -> Result<QSearch> {
     let base = r.map(|v| v.log10());
     let scan: Vec<[f64; 3]> = (-2..=14).map(|k| base.map(|b| b + k as f64)).collect();
     let scanned = map_on_threads(&scan, |lq| eval(lq.map(|v| 10f64.powf(v))));
@@ -402,14 +412,18 @@ pub fn choose_q(eval: &(dyn Fn([f64; 3]) -> [f64; 3] + Sync), r: [f64; 3]) -> Re
         };
         combined[i] = l;
     }
-    let mut best = BestCandidate { lq: combined, j: [f64::INFINITY; 3], merit: f64::INFINITY, evaluated: 0 };
+    let mut best =
+        BestCandidate { lq: combined, j: [f64::INFINITY; 3], merit: f64::INFINITY, evaluated: 0, refused: 0, accept };
     for (lq, j) in scan.into_iter().zip(scanned) {
         best.offer(lq, j);
     }
     let run = |lq: [f64; 3], best: &mut BestCandidate| {
         let j = eval(lq.map(|v| 10f64.powf(v)));
-        best.offer(lq, j);
-        search_merit(&j)
+        if best.offer(lq, j) {
+            search_merit(&j)
+        } else {
+            search_merit(&[f64::INFINITY; 3])
+        }
     };
     run(combined, &mut best);
     let from_combination = best.lq == combined;
@@ -447,28 +461,45 @@ pub fn choose_q(eval: &(dyn Fn([f64; 3]) -> [f64; 3] + Sync), r: [f64; 3]) -> Re
             break;
         }
     }
+    if !best.merit.is_finite() {
+        bail!(
+            "no q gives the 3x3 compensator a finite predicted error that the offline smoother's Riccati equation \
+             can also take ({} candidates refused); design per axis with --per-axis",
+            best.refused
+        );
+    }
     out.q = best.lq.map(|v| 10f64.powf(v));
     out.predicted = best.j;
     out.evaluations = best.evaluated;
+    out.refused = best.refused;
     Ok(out)
 }
 
-/// The best candidate (log10 q, √J) a search has evaluated, by
-/// [`search_merit`], and how many it has evaluated.
-struct BestCandidate {
+/// The best accepted candidate (log10 q, √J) a search has evaluated, by
+/// [`search_merit`]; how many it has evaluated, and how many better ones
+/// `accept` refused.
+struct BestCandidate<'a> {
     lq: [f64; 3],
     j: [f64; 3],
     merit: f64,
     evaluated: usize,
+    refused: usize,
+    accept: &'a dyn Fn([f64; 3]) -> bool,
 }
 
-impl BestCandidate {
-    fn offer(&mut self, lq: [f64; 3], j: [f64; 3]) {
+impl BestCandidate<'_> {
+    /// Offer a candidate; false if it was better and refused.
+    fn offer(&mut self, lq: [f64; 3], j: [f64; 3]) -> bool {
         self.evaluated += 1;
         let merit = search_merit(&j);
         if merit < self.merit {
+            if !(self.accept)(lq.map(|v| 10f64.powf(v))) {
+                self.refused += 1;
+                return false;
+            }
             (self.lq, self.j, self.merit) = (lq, j, merit);
         }
+        true
     }
 }
 
@@ -545,7 +576,8 @@ mod tests {
     /// merit, than any point of its joint scan, with each axis near the best
     /// it can have under the limit: x and z at their optima, y at the limit's
     /// edge. Control: the combination of per-axis best decades, where the
-    /// search used to start and end, is refused on y.
+    /// search used to start and end, is refused on y. Then with q_x refused
+    /// above 10^1.5 by `accept`, the search ends below it.
     #[test]
     fn the_q_search_keeps_a_valid_candidate_where_the_per_axis_decades_combine_to_none() {
         let optimum = [2.0, 9.0, 2.0];
@@ -558,7 +590,7 @@ mod tests {
         };
         let combined = eval([1e2, 1e9, 1e2]);
         assert!(combined[1].is_infinite(), "control: the per-axis decades combine to a refused y ({combined:?})");
-        let found = choose_q(&eval, [1.0; 3]).unwrap();
+        let found = choose_q(&eval, &|_| true, [1.0; 3]).unwrap();
         assert!(found.predicted.iter().all(|j| j.is_finite()), "{found:?}");
         assert_eq!(eval(found.q), found.predicted, "the reported error is the chosen q's");
         let best_scan = (-2..=14).map(|k| search_merit(&eval([10f64.powi(k); 3]))).fold(f64::INFINITY, f64::min);
@@ -566,5 +598,14 @@ mod tests {
         let lq = found.q.map(f64::log10);
         assert!((lq[0] - 2.0).abs() < 0.6 && (lq[2] - 2.0).abs() < 0.6, "x and z near their optima: {lq:?}");
         assert!(lq[1] - lq[0].min(lq[2]) > 2.5, "y near the limit's edge: {lq:?}");
+        assert_eq!(found.refused, 0);
+        // Where the rest of the chain cannot take q_x above 10^1.5 (as the
+        // offline smoother's Riccati equation may not), the search ends below
+        // it and counts what it refused; the search above is the control.
+        let accept = |q: [f64; 3]| q[0] <= 10f64.powf(1.5);
+        let held = choose_q(&eval, &accept, [1.0; 3]).unwrap();
+        assert!(accept(held.q) && held.refused > 0, "{held:?}");
+        assert!(held.predicted.iter().all(|j| j.is_finite()), "{held:?}");
+        assert!(!accept(found.q), "control: unrefused, q_x goes above 10^1.5 ({:?})", found.q);
     }
 }

@@ -1017,7 +1017,8 @@ fn axis_prediction(
 /// band by default ([`quiet_above_band`]): each force band-limited
 /// ([`force_shapes`]) and q for the in-band error plus the noise written
 /// above the band ([`MatrixCriterion::above_j`]); the predictions in the
-/// [`QSearch`] are the in-band error alone.
+/// [`QSearch`] are the in-band error alone. The chosen q is one the offline
+/// smoother's Riccati equation (the same plant at latency 0) also solves.
 fn design_3x3(
     p: &MatrixPrep,
     crit: &MatrixCriterion,
@@ -1025,7 +1026,12 @@ fn design_3x3(
     lag: usize,
     d: &DesignOptions,
 ) -> Result<(MatrixKalman, QSearch, [f64; 3])> {
-    let aug = augmented_plant_shaped(&p.dm, &p.plant, lag, force_shapes(crit, d));
+    let shapes = force_shapes(crit, d);
+    let aug = augmented_plant_shaped(&p.dm, &p.plant, lag, shapes);
+    // `compensate --offline` solves the same equation at latency 0
+    // (`offline::matrix_smoother`): a q it cannot take is not chosen.
+    let smoother = (lag > 0).then(|| augmented_plant_shaped(&p.dm, &p.plant, 0, shapes));
+    let offline_solves = |q: [f64; 3]| smoother.as_ref().is_none_or(|s| kalman::solve_dare_refined(s, q, r).is_ok());
     let in_band = crit.all_freqs();
     let lines = [in_band.clone(), crit.above_freqs()].concat();
     let resolvent = PlantResolvent::new(&aug, &lines, d.fs_hz);
@@ -1046,7 +1052,7 @@ fn design_3x3(
     };
     let search = match d.q_override {
         Some(q) => QSearch { q: [q; 3], ..Default::default() },
-        None => choose_q(&|q| evaluate(q).map_or([f64::INFINITY; 3], |c| c.criterion), r)?,
+        None => choose_q(&|q| evaluate(q).map_or([f64::INFINITY; 3], |c| c.criterion), &offline_solves, r)?,
     };
     let Some(c) = evaluate(search.q) else {
         bail!("the 3x3 Kalman design failed at the chosen q = {:?}", search.q);
