@@ -395,8 +395,9 @@ pub fn choose_q(
     r: [f64; 3],
 ) -> Result<QSearch> {
     let base = r.map(|v| v.log10());
+    let on_threads = |points: &[[f64; 3]]| map_on_threads(points, |lq| eval(q_of(*lq)));
     let scan: Vec<[f64; 3]> = (-2..=14).map(|k| base.map(|b| b + k as f64)).collect();
-    let scanned = map_on_threads(&scan, |lq| eval(lq.map(|v| 10f64.powf(v))));
+    let scanned = on_threads(&scan);
     let mut per_axis: [Option<(f64, f64)>; 3] = [None; 3];
     for (lq, j) in scan.iter().zip(&scanned) {
         for i in 0..3 {
@@ -418,7 +419,7 @@ pub fn choose_q(
         best.offer(lq, j);
     }
     let run = |lq: [f64; 3], best: &mut BestCandidate| {
-        let j = eval(lq.map(|v| 10f64.powf(v)));
+        let j = eval(q_of(lq));
         if best.offer(lq, j) {
             search_merit(&j)
         } else {
@@ -440,7 +441,7 @@ pub fn choose_q(
                         t
                     })
                     .collect();
-                let js = map_on_threads(&line, |lq| eval(lq.map(|v| 10f64.powf(v))));
+                let js = on_threads(&line);
                 for (lq, j) in line.into_iter().zip(js) {
                     best.offer(lq, j);
                 }
@@ -468,11 +469,16 @@ pub fn choose_q(
             best.refused
         );
     }
-    out.q = best.lq.map(|v| 10f64.powf(v));
+    out.q = q_of(best.lq);
     out.predicted = best.j;
     out.evaluations = best.evaluated;
     out.refused = best.refused;
     Ok(out)
+}
+
+/// q (N²/sample) from log10 q.
+fn q_of(lq: [f64; 3]) -> [f64; 3] {
+    lq.map(|v| 10f64.powf(v))
 }
 
 /// The best accepted candidate (log10 q, √J) a search has evaluated, by
@@ -493,7 +499,7 @@ impl BestCandidate<'_> {
         self.evaluated += 1;
         let merit = search_merit(&j);
         if merit < self.merit {
-            if !(self.accept)(lq.map(|v| 10f64.powf(v))) {
+            if !(self.accept)(q_of(lq)) {
                 self.refused += 1;
                 return false;
             }

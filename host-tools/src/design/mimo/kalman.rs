@@ -269,9 +269,9 @@ pub struct MatrixKalman {
 ///
 /// 3. Filter DARE P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + Γ Q Γᵀ by
 ///    structured doubling with G = Cᵀ R⁻¹ C (`structured_doubling`),
-///    polished by Newton steps ([`solve_dare_refined`]). Its residual, judged against the size of the equation's terms, must
-///    stay below [`MAX_DARE_RESIDUAL`], and the closed loop
-///    A(I − K C) must be stable.
+///    polished by Newton steps ([`solve_dare_refined`]). Its residual,
+///    judged against the size of the equation's terms, must stay below
+///    [`MAX_DARE_RESIDUAL`], and the closed loop A(I − K C) must be stable.
 /// 4. Compensator from ỹ to F̂[k−L−D] (3 in, 3 out), K = P Cᵀ S⁻¹, S = C P Cᵀ + R:
 ///    x̂⁻\[k+1\] = A(I − K C) x̂⁻\[k\] + A K ỹ\[k\],
 ///    F̂\[k−L−D\] = E (I − K C) x̂⁻\[k\] + E K ỹ\[k\],
