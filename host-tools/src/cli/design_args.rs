@@ -136,7 +136,9 @@ pub struct PriorArgs {
     /// the offline smoother chosen for the force spectrum of --force-record)
     /// or `level` (q for a flat spectrum at the record's in-band force level
     /// instead of --force-rms: honest predicted errors, as safe for chatter
-    /// as the default).
+    /// as the default). With all nine FRFs, `spectrum` and `level` also
+    /// count the record's mean force, which the static crosstalk carries
+    /// into the other axes.
     #[arg(long, value_enum, default_value_t = ForcePrior::Default)]
     pub force_prior: ForcePrior,
     /// A representative record of the cut (signal CSV, same rate, raw

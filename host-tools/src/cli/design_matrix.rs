@@ -277,7 +277,8 @@ fn crosstalk_and_predictions(s: &MatrixSummary) -> String {
     }
     let _ = writeln!(
         t,
-        "predicted in-band error (√J of a flat force, crosstalk counted; per axis: what it claims ignoring crosstalk):"
+        "predicted in-band error (√J of {}, crosstalk counted; per axis: what it claims ignoring crosstalk):",
+        s.forces
     );
     let _ = writeln!(t, "  axis  band (Hz)       raw        per axis (claims)      3x3        used");
     for a in &s.axes {

@@ -30,6 +30,11 @@ pub struct RowGrid {
     pub weight: [Vec<f64>; 3],
     /// The in-band power of force i, P_i (N²).
     pub force_power_n2: f64,
+    /// The forces' mean F̄_j/√P_i ([`ForceWeights::mean_share`]), where
+    /// the forces have one: then the first of `freqs` is a line at 0 Hz
+    /// that carries it (its `weight` 0), counted in the distortion and the
+    /// fit's part of J, not in the noise term.
+    pub mean: Option<[f64; 3]>,
     /// The covariance of the fitted model's entries on the lines (entry
     /// e = 3m + j for Ĝ_mj), its own uncertainty
     /// ([`MatrixCriterion::with_fit_covariance`]); `None` where not known.
@@ -50,8 +55,11 @@ pub enum ForceWeights {
     Flat([f64; 3]),
     /// Per output axis i, the record's spectrum of every force direction
     /// on row i's cells ([`criterion_cells`] of its band); `level_only`:
-    /// flat spectra of the record's in-band powers.
-    Record { spectra: Box<[[CellSpectrum; 3]; 3]>, level_only: bool },
+    /// flat spectra of the record's in-band powers. `mean_n`: the record's
+    /// mean force F̄ = Ĝ(0)⁻¹·ȳ (N), the cut's static force, which lies
+    /// below every band and reaches the other axes through the static
+    /// crosstalk.
+    Record { spectra: Box<[[CellSpectrum; 3]; 3]>, level_only: bool, mean_n: [f64; 3] },
 }
 
 impl ForceWeights {
@@ -84,7 +92,20 @@ impl ForceWeights {
             spectra.push(s);
         }
         let spectra: [[CellSpectrum; 3]; 3] = spectra.try_into().map_err(|_| anyhow::anyhow!("three rows expected"))?;
-        Ok(ForceWeights::Record { spectra: Box::new(spectra), level_only })
+        let mean_n = mean_force(channels, g).map_err(|e| anyhow::anyhow!("{}: {e:#}", record.source))?;
+        Ok(ForceWeights::Record { spectra: Box::new(spectra), level_only, mean_n })
+    }
+
+    /// Row i's share of the forces' mean, F̄_j/√P_i for the in-band power
+    /// P_i of force i; `None` for flat forces, which have no mean.
+    fn mean_share(&self, i: usize) -> Option<[f64; 3]> {
+        match self {
+            ForceWeights::Flat(_) => None,
+            ForceWeights::Record { spectra, mean_n, .. } => {
+                let p_i = spectra[i][i].total_n2();
+                Some(mean_n.map(|m| m / p_i.sqrt())).filter(|w| p_i > 0.0 && w.iter().all(|v| v.is_finite()))
+            }
+        }
     }
 
     /// Row i's weights P_j(f)/P_i and P_i on `n` lines.
@@ -92,7 +113,7 @@ impl ForceWeights {
         let nf = n as f64;
         match self {
             ForceWeights::Flat(f) => (std::array::from_fn(|j| vec![(f[j] / f[i]).powi(2) / nf; n]), f[i] * f[i]),
-            ForceWeights::Record { spectra, level_only } => {
+            ForceWeights::Record { spectra, level_only, .. } => {
                 let s = &spectra[i];
                 let p: [f64; 3] = std::array::from_fn(|j| s[j].total_n2());
                 // Force j's share of its own power per line, with the
@@ -108,6 +129,17 @@ impl ForceWeights {
             }
         }
     }
+}
+
+/// The mean force F̄ = Ĝ(0)⁻¹·ȳ (N) of the records `y` (fx, fy, fz as
+/// measured) through the static gain of the 3x3 model `g`.
+fn mean_force(y: [&[f64]; 3], g: &dyn Fn(f64) -> CMatrix3) -> Result<[f64; 3]> {
+    let Some(inverse) = g(0.0).try_inverse().filter(|m| m.iter().all(|v| v.re.is_finite() && v.im.is_finite())) else {
+        bail!("the 3x3 model is singular at 0 Hz: the record's mean force cannot be taken through it");
+    };
+    let mean = y.map(|c| c.iter().sum::<f64>() / c.len().max(1) as f64);
+    let force: [f64; 3] = std::array::from_fn(|j| (0..3).map(|c| inverse[(j, c)].re * mean[c]).sum());
+    Ok(force)
 }
 
 /// What J of every row needs.
@@ -182,10 +214,17 @@ impl MatrixCriterion {
     ) -> Self {
         let rows = std::array::from_fn(|i| {
             let band_hz = bands_hz[i];
-            let freqs = criterion_grid(&[band_hz]);
+            let mut freqs = criterion_grid(&[band_hz]);
+            let (mut weight, force_power_n2) = forces.row(i, freqs.len());
+            let mean = forces.mean_share(i);
+            if mean.is_some() {
+                freqs.insert(0, 0.0);
+                for weight in &mut weight {
+                    weight.insert(0, 0.0);
+                }
+            }
             let g = freqs.iter().map(|f| g(*f)).collect();
-            let (weight, force_power_n2) = forces.row(i, freqs.len());
-            RowGrid { band_hz, freqs, g, weight, force_power_n2, fit_cov: None }
+            RowGrid { band_hz, freqs, g, weight, force_power_n2, mean, fit_cov: None }
         });
         MatrixCriterion { fs_hz, rows, r, above: Default::default(), above_weight: 0.0 }
     }
@@ -266,11 +305,27 @@ impl MatrixCriterion {
     fn j(&self, i: usize, lag: usize, with_fit: bool, h: impl Fn(usize, usize) -> Complex64) -> RowError {
         let row = &self.rows[i];
         let fit_cov = row.fit_cov.as_ref().filter(|_| with_fit);
-        let n = row.freqs.len() as f64;
+        let mean_lines = usize::from(row.mean.is_some());
+        let n = (row.freqs.len() - mean_lines) as f64;
         let (mut dist, mut amp, mut fit) = (0.0, 0.0, 0.0);
         for (k, (f, g)) in row.freqs.iter().zip(&row.g).enumerate() {
             let delay = Complex64::from_polar(1.0, 2.0 * PI * f * lag as f64 / self.fs_hz);
             let hr = [h(k, 0), h(k, 1), h(k, 2)];
+            if let (Some(m), 0) = (row.mean, k) {
+                // The mean forces act together: |Σ_j (H·Ĝ − I)_ij·F̄_j|²/P_i.
+                let e: Complex64 = (0..3)
+                    .map(|j| {
+                        let gain = hr[0] * g[(0, j)] + hr[1] * g[(1, j)] + hr[2] * g[(2, j)];
+                        (gain - if i == j { 1.0 } else { 0.0 }) * m[j]
+                    })
+                    .sum();
+                dist += e.norm_sqr();
+                if let Some(cov) = fit_cov {
+                    let terms: Vec<(usize, Complex64)> = (0..9).map(|e| (e, hr[e / 3] * m[e % 3])).collect();
+                    fit += cov.combination_variance(k, &terms);
+                }
+                continue;
+            }
             for j in 0..3 {
                 let e = (hr[0] * g[(0, j)] + hr[1] * g[(1, j)] + hr[2] * g[(2, j)]) * delay
                     - if i == j { 1.0 } else { 0.0 };
@@ -512,6 +567,81 @@ impl BestCandidate<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A record of a cut with a mean force, through a static 3x3 plant with
+    /// crosstalk c_ij: the per-axis row H_ii = 1/G_ii leaves
+    /// e_i = Σ_{j≠i} (c_ij/G_ii)·F_j, the mean force's share included, and the
+    /// row's prediction √J_i must match that error in time, RMS error over
+    /// the standard deviation of F_i (the forces are tones inside the band,
+    /// so the band-limited truth is the force). Control: the criterion from
+    /// the same record with its mean removed is short of that truth by more
+    /// than half.
+    #[test]
+    fn the_record_s_mean_force_counts_through_the_static_crosstalk() {
+        let fs = 25_600.0;
+        let n = 1 << 16;
+        let c = [[1.0, 0.03, -0.02], [0.02, 1.0, 0.04], [0.01, 0.03, 1.0]];
+        let mean = [300.0, 100.0, 600.0];
+        // Tones on the record's bins inside the band, 40 per force.
+        let mut seed = 7u64;
+        let mut uniform = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let tones: Vec<Vec<(f64, f64, f64)>> = (0..3)
+            .map(|_| {
+                (0..40)
+                    .map(|_| {
+                        let bin = (20.0 + 3000.0 * uniform()) / fs * n as f64;
+                        (bin.round() * fs / n as f64, 10.0 + 20.0 * uniform(), 2.0 * PI * uniform())
+                    })
+                    .collect()
+            })
+            .collect();
+        let force: Vec<Vec<f64>> = (0..3)
+            .map(|j| {
+                (0..n)
+                    .map(|t| {
+                        let time = t as f64 / fs;
+                        mean[j] + tones[j].iter().map(|(f, a, ph)| a * (2.0 * PI * f * time + ph).sin()).sum::<f64>()
+                    })
+                    .collect()
+            })
+            .collect();
+        let measured = |with_mean: bool| -> [Vec<f64>; 3] {
+            std::array::from_fn(|i| {
+                (0..n)
+                    .map(|t| (0..3).map(|j| c[i][j] * (force[j][t] - if with_mean { 0.0 } else { mean[j] })).sum())
+                    .collect()
+            })
+        };
+        let g = |_: f64| CMatrix3::from_fn(|a, b| Complex64::new(c[a][b], 0.0));
+        let bands = [(10.0, 4000.0); 3];
+        let r = [1e-9; 3];
+        let criterion = |with_mean: bool| {
+            let record = ForceRecord { source: "test".into(), channels: measured(with_mean).map(Some) };
+            let forces = ForceWeights::from_record(&record, &g, bands, fs, r, false).unwrap();
+            MatrixCriterion::new(g, bands, fs, &forces, r)
+        };
+        let (with_mean, without) = (criterion(true), criterion(false));
+        for i in 0..3 {
+            let truth = {
+                let e: Vec<f64> =
+                    (0..n).map(|t| (0..3).filter(|j| *j != i).map(|j| c[i][j] / c[i][i] * force[j][t]).sum()).collect();
+                let rms = (e.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
+                let m = force[i].iter().sum::<f64>() / n as f64;
+                let sd = (force[i].iter().map(|v| (v - m).powi(2)).sum::<f64>() / n as f64).sqrt();
+                rms / sd
+            };
+            let h = vec![Complex64::new(1.0 / c[i][i], 0.0); with_mean.rows[i].freqs.len()];
+            let predicted = with_mean.per_axis(i, 0, &h).error;
+            assert!((predicted / truth - 1.0).abs() < 0.05, "axis {i}: predicted {predicted:.4} against {truth:.4}");
+            let h = vec![Complex64::new(1.0 / c[i][i], 0.0); without.rows[i].freqs.len()];
+            let blind = without.per_axis(i, 0, &h).error;
+            eprintln!("axis {i}: time {truth:.4}, predicted {predicted:.4}, without the mean {blind:.4}");
+            assert!(blind < 0.5 * truth, "control, axis {i}: without the mean {blind:.4} against {truth:.4}");
+        }
+    }
 
     /// J_fit against its closed form: on a diagonal plant Ĝ = 2I with flat,
     /// equal forces and entry errors that are independent (no shared part),
