@@ -779,9 +779,9 @@ fn design_with_prior_above(
 /// off-centre plate at 10.24 kHz designed for the record's force spectrum
 /// (`--force-prior spectrum --above-band inverse`, where q is high) has a
 /// zero-lag smoother whose Riccati doubling
-/// stops at a residual of 1.49e-9, over the limit of 1e-9 (the flat plate
-/// designed for its record's level was the case until the fits' ceiling
-/// moved it to 7.1e-10): the smoother's Newton steps
+/// stops at a residual of 8.4e-3 of its terms, over the limit of 1e-9
+/// (1.49e-9 before the q search kept its best candidate): the smoother's
+/// Newton steps
 /// bring it under, and it estimates the force as well as the box's filter
 /// does (within 1.1 times on every axis, against the simulator's truth).
 /// Negative control: the doubling alone refuses the same equation.
@@ -796,6 +796,7 @@ fn the_offline_smoother_refines_a_riccati_solution_the_doubling_leaves_over_the_
     let model = matrix_sidecar(&image, &md).matrix.expect("a 3x3 model in the sidecar");
     let plant = model.plant(fs, "offcentre").unwrap();
     let err = dynocomp::design::mimo::kalman::solve_dare(&plant, model.q, model.r).unwrap_err();
+    eprintln!("the doubling alone: {err:#}");
     assert!(format!("{err:#}").contains("Riccati solution rejected"), "control: {err:#}");
     let box_filter = evaluate(&md, &out);
     offline_within_the_box(&box_filter);
