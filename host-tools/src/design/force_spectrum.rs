@@ -122,13 +122,29 @@ pub fn estimate_matrix(
     cells: &[(f64, f64)],
 ) -> Result<[CellSpectrum; 3]> {
     let inverse = |f: f64| -> Result<[[Complex64; 3]; 3]> {
-        let m = g(f).try_inverse().filter(|m| m.iter().all(|v| v.re.is_finite() && v.im.is_finite()));
-        let Some(m) = m else {
-            bail!("the 3x3 model is singular or not finite at {f:.1} Hz");
-        };
+        let m = finite_inverse(g, f)?;
         Ok(std::array::from_fn(|j| std::array::from_fn(|c| m[(j, c)])))
     };
     welch_cells(y, fs_hz, &inverse, r, cells)
+}
+
+/// The mean force F̄ = Ĝ(0)⁻¹·ȳ (N) of the records `y` (fx, fy, fz as
+/// measured) through the static gain of the 3x3 model `g`: the cut's static
+/// force, which lies below every band of [`estimate_matrix`].
+pub fn mean_force_matrix(y: [&[f64]; 3], g: &dyn Fn(f64) -> Matrix3<Complex64>) -> Result<[f64; 3]> {
+    let inverse = finite_inverse(g, 0.0).map_err(|e| anyhow::anyhow!("the record's mean force: {e}"))?;
+    let mean = y.map(|c| c.iter().sum::<f64>() / c.len().max(1) as f64);
+    Ok(std::array::from_fn(|j| (0..3).map(|c| inverse[(j, c)].re * mean[c]).sum()))
+}
+
+/// Ĝ(j2πf)⁻¹ of the 3x3 model `g`, refused where it is singular or not
+/// finite.
+fn finite_inverse(g: &dyn Fn(f64) -> Matrix3<Complex64>, f: f64) -> Result<Matrix3<Complex64>> {
+    let m = g(f).try_inverse().filter(|m| m.iter().all(|v| v.re.is_finite() && v.im.is_finite()));
+    let Some(m) = m else {
+        bail!("the 3x3 model is singular or not finite at {f:.1} Hz");
+    };
+    Ok(m)
 }
 
 /// The Welch power per cell of the raw inverse `inverse(f)·Y(f)` of the `C`

@@ -11,7 +11,7 @@ use std::f64::consts::PI;
 use super::discrete::CMatrix3;
 use crate::design::above_band::{out_of_band_lines, out_of_band_noise_factor};
 use crate::design::criterion::{criterion_cells, criterion_grid};
-use crate::design::force_spectrum::{estimate_matrix, CellSpectrum, ForceRecord};
+use crate::design::force_spectrum::{estimate_matrix, mean_force_matrix, CellSpectrum, ForceRecord};
 use crate::fit::refine::FitCovariance;
 use crate::frf::axis_name;
 use crate::numeric::parallel::map_on_threads;
@@ -92,7 +92,7 @@ impl ForceWeights {
             spectra.push(s);
         }
         let spectra: [[CellSpectrum; 3]; 3] = spectra.try_into().map_err(|_| anyhow::anyhow!("three rows expected"))?;
-        let mean_n = mean_force(channels, g).map_err(|e| anyhow::anyhow!("{}: {e:#}", record.source))?;
+        let mean_n = mean_force_matrix(channels, g).map_err(|e| anyhow::anyhow!("{}: {e:#}", record.source))?;
         Ok(ForceWeights::Record { spectra: Box::new(spectra), level_only, mean_n })
     }
 
@@ -129,17 +129,6 @@ impl ForceWeights {
             }
         }
     }
-}
-
-/// The mean force F̄ = Ĝ(0)⁻¹·ȳ (N) of the records `y` (fx, fy, fz as
-/// measured) through the static gain of the 3x3 model `g`.
-fn mean_force(y: [&[f64]; 3], g: &dyn Fn(f64) -> CMatrix3) -> Result<[f64; 3]> {
-    let Some(inverse) = g(0.0).try_inverse().filter(|m| m.iter().all(|v| v.re.is_finite() && v.im.is_finite())) else {
-        bail!("the 3x3 model is singular at 0 Hz: the record's mean force cannot be taken through it");
-    };
-    let mean = y.map(|c| c.iter().sum::<f64>() / c.len().max(1) as f64);
-    let force: [f64; 3] = std::array::from_fn(|j| (0..3).map(|c| inverse[(j, c)].re * mean[c]).sum());
-    Ok(force)
 }
 
 /// What J of every row needs.
@@ -308,27 +297,25 @@ impl MatrixCriterion {
         let mean_lines = usize::from(row.mean.is_some());
         let n = (row.freqs.len() - mean_lines) as f64;
         let (mut dist, mut amp, mut fit) = (0.0, 0.0, 0.0);
-        for (k, (f, g)) in row.freqs.iter().zip(&row.g).enumerate() {
+        // (H·Ĝ)_ij on line k for H's row `hr`.
+        let gain =
+            |hr: &[Complex64; 3], k: usize, j: usize| (0..3).map(|m| hr[m] * row.g[k][(m, j)]).sum::<Complex64>();
+        let identity = |j: usize| if i == j { 1.0 } else { 0.0 };
+        if let Some(m) = row.mean {
+            // Line 0 carries the mean forces, which act together:
+            // |Σ_j (H·Ĝ − I)_ij·F̄_j|²/P_i at 0 Hz.
+            let hr = [h(0, 0), h(0, 1), h(0, 2)];
+            dist += (0..3).map(|j| (gain(&hr, 0, j) - identity(j)) * m[j]).sum::<Complex64>().norm_sqr();
+            if let Some(cov) = fit_cov {
+                let terms: Vec<(usize, Complex64)> = (0..9).map(|e| (e, hr[e / 3] * m[e % 3])).collect();
+                fit += cov.combination_variance(0, &terms);
+            }
+        }
+        for (k, f) in row.freqs.iter().enumerate().skip(mean_lines) {
             let delay = Complex64::from_polar(1.0, 2.0 * PI * f * lag as f64 / self.fs_hz);
             let hr = [h(k, 0), h(k, 1), h(k, 2)];
-            if let (Some(m), 0) = (row.mean, k) {
-                // The mean forces act together: |Σ_j (H·Ĝ − I)_ij·F̄_j|²/P_i.
-                let e: Complex64 = (0..3)
-                    .map(|j| {
-                        let gain = hr[0] * g[(0, j)] + hr[1] * g[(1, j)] + hr[2] * g[(2, j)];
-                        (gain - if i == j { 1.0 } else { 0.0 }) * m[j]
-                    })
-                    .sum();
-                dist += e.norm_sqr();
-                if let Some(cov) = fit_cov {
-                    let terms: Vec<(usize, Complex64)> = (0..9).map(|e| (e, hr[e / 3] * m[e % 3])).collect();
-                    fit += cov.combination_variance(k, &terms);
-                }
-                continue;
-            }
             for j in 0..3 {
-                let e = (hr[0] * g[(0, j)] + hr[1] * g[(1, j)] + hr[2] * g[(2, j)]) * delay
-                    - if i == j { 1.0 } else { 0.0 };
+                let e = gain(&hr, k, j) * delay - identity(j);
                 dist += row.weight[j][k] * e.norm_sqr();
                 amp += self.r[j] * hr[j].norm_sqr();
                 if let Some(cov) = fit_cov {
