@@ -7,7 +7,7 @@
 //! same smoother with the exact model at every instant; today's single-FRF
 //! smoother is shown beside it (and is the negative control).
 
-mod sim_common;
+use crate::sim_common;
 
 use dynocomp::design::axis::{design_axis, DesignOptions};
 use dynocomp::design::discretize::fit_with_structure;
@@ -111,16 +111,21 @@ fn with_a_constant_model_the_time_varying_smoother_is_the_stationary_one() {
 /// covariance, dense A).
 fn dense_reference(y: &[f64], ts: &TwoState, o: &DriftSmoothing) -> Vec<f64> {
     let (taps, adv) = o.structure;
-    let plant = |k: usize| {
+    // Step k's model: that of its drift level, fitted once per level (the
+    // fit is a function of the level alone).
+    let mut fitted = std::collections::HashMap::new();
+    let mut plant = |k: usize| {
         let level = (state_at(k as f64 / o.fs_hz, o.interval_s.0, o.interval_s.1) * S_LEVELS as f64).round();
-        augmented_plant(&fit_with_structure(&ts.at(level / S_LEVELS as f64), o.fs_hz, o.band_hz, taps, adv).unwrap(), 0)
+        let at = |l: f64| fit_with_structure(&ts.at(l / S_LEVELS as f64), o.fs_hz, o.band_hz, taps, adv).unwrap();
+        let key = level as i64;
+        fitted.entry(key).or_insert_with(|| augmented_plant(&at(level), 0)).clone()
     };
     let p0 = plant(0);
     let f = p0.n_plant;
     let qm = &p0.g * p0.g.transpose() * o.q;
     let mut p = solve_filter_dare(&p0.a, &p0.c, &qm, o.r).unwrap().p;
     let yt: Vec<f64> = std::iter::repeat_n(y[0], adv).chain(y.iter().copied()).collect();
-    let plants: Vec<_> = (0..yt.len()).map(plant).collect();
+    let plants: Vec<_> = (0..yt.len()).map(&mut plant).collect();
     let mut x = DVector::zeros(p.nrows());
     let mut steps = Vec::new();
     for (k, &yk) in yt.iter().enumerate() {
