@@ -9,7 +9,7 @@
 //! the quiet image with the force model taken out of its sidecar (the random
 //! walk, 1.51x and 2.46x), are more than 1.3x on x and z.
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::{design, dynocomp, example, tmp};
 
 /// (as written, perfect) NRMSE (%) per axis from `compensate --truth`'s

@@ -4,7 +4,7 @@
 //! marks it offline-only and says so loudly; `inspect` shows the load (text
 //! and JSON); `flash` refuses the offline-only image before touching a probe.
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::{dynocomp, example};
 
 fn tmp(name: &str) -> std::path::PathBuf {

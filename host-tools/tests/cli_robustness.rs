@@ -2,7 +2,7 @@
 //! runs, outputs that are inputs, image and sidecar written as a pair,
 //! implausible values, bad parameters. Each test runs the built binary.
 
-mod cli_common;
+use crate::cli_common;
 
 use cli_common::{dynocomp, example, tmp};
 use std::path::{Path, PathBuf};

@@ -3,7 +3,7 @@
 //! of a clipped `--force-record`. The bundled example's record, within its
 //! rails, gets no such warning (the negative control).
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::{design, dynocomp, example, tmp};
 
 #[test]

@@ -7,8 +7,8 @@ use dynocomp::offline::compensate::{compensate_matrix, compensate_record, Stream
 use dynocomp_core::image::CoeffImage;
 use dynocomp_core::kernel::{AxisFilter, Section};
 
-mod cli_common;
-mod common;
+use crate::cli_common;
+use crate::common;
 use cli_common::{dynocomp, example, tmp};
 
 /// A three-axis image with a resonant pair, a real pole and FIR taps per

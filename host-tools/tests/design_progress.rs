@@ -2,7 +2,7 @@
 //! (2/3): fitting …"), each candidate latency as its round starts, and each
 //! axis as it is designed in a round, with counts that match what was done.
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::{dynocomp, example, tmp};
 
 /// The lines of `err` that contain `needle`.

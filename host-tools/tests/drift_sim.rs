@@ -8,7 +8,7 @@ use dynocomp::simulate::drift::{measure_drifting, sensor_modes, shift_sensor_mod
 use dynocomp::simulate::{Dynamometer, Mode, MultiAxisDynamometer, SimParams};
 use std::f64::consts::PI;
 
-mod cli_common;
+use crate::cli_common;
 
 const F_FINE: f64 = 409_600.0;
 

@@ -15,7 +15,7 @@ use dynocomp::metrics::accuracy;
 use dynocomp::offline::compensate::compensate_record;
 use dynocomp::simulate::SimOutput;
 
-mod sim_common;
+use crate::sim_common;
 use sim_common::{design_all, sim, FS, F_MAX};
 
 /// Largest compensated NRMSE of any axis (issue #12 target).

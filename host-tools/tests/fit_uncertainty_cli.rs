@@ -4,7 +4,7 @@
 //! over impact tests in its unit test) and the predicted error with it, in
 //! the text summary and in `--json`.
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::{design, example};
 
 #[test]

@@ -3,8 +3,8 @@
 //! refusal of bad images before any probe is touched.
 #![cfg(feature = "probe")]
 
-mod cli_common;
-mod common;
+use crate::cli_common;
+use crate::common;
 
 use std::cell::Cell;
 use std::path::PathBuf;

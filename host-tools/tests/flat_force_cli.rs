@@ -6,7 +6,7 @@
 //! cut (the same seed, so the same impact test and image): its force is not
 //! the assumed one, and z measures more than 1.5 times its prediction.
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::{compensated_nrmse, dynocomp, tmp};
 
 #[test]

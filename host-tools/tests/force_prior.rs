@@ -29,7 +29,7 @@ use dynocomp::offline::smoother::Smoother;
 use dynocomp::simulate::{simulate_with, Chatter, SimOutput};
 use rustfft::{num_complex::Complex64, FftPlanner};
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::dynocomp;
 
 /// A one-mode discrete model (2 kHz at 10.24 kHz) with a FIR tap and an advance.

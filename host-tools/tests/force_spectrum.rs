@@ -24,7 +24,7 @@ use dynocomp::simulate::Chatter;
 use rustfft::num_complex::Complex64;
 use std::f64::consts::PI;
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::{dynocomp, example};
 
 /// White noise of variance `r` (a fixed LCG, Box–Muller).

@@ -2,7 +2,7 @@
 //! docs/, never the source (`crate::` paths, module docs), issue numbers or
 //! files outside the repository.
 
-mod cli_common;
+use crate::cli_common;
 
 use std::path::Path;
 

@@ -4,7 +4,7 @@
 //! latency where the flat band falls short, with its negative control) is
 //! tested end to end in `e2e_rates.rs`.
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::{dynocomp, example};
 
 #[test]

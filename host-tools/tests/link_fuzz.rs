@@ -4,7 +4,7 @@
 //! id 0, every request exactly one reply with its id, and the running image
 //! is always the one a fresh boot of the flash would run.
 
-mod common;
+use crate::common;
 
 use dynocomp::link::sim_flash::SimFlash;
 use dynocomp::link::virtual_box::VirtualBox;

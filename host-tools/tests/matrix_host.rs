@@ -5,8 +5,8 @@
 //! the box refuses one over its budget, and `compensate` says it cannot run
 //! them instead of silently doing something else.
 
-mod cli_common;
-mod common;
+use crate::cli_common;
+use crate::common;
 
 use cli_common::dynocomp;
 use dynocomp::link::sim_flash::SimFlash;

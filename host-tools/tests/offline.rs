@@ -2,7 +2,7 @@
 //! of `compensate --offline` (analytic noise-free case, simulated records
 //! against the causal L-lag box filter, sidecar checks).
 
-mod sim_common;
+use crate::sim_common;
 use dynocomp::design::discretize::{discretize, DiscreteModel, Discretization};
 use dynocomp::design::image::build_image;
 use dynocomp::fit::PoleResidueModel;

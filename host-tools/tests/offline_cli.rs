@@ -6,7 +6,7 @@
 
 use std::path::PathBuf;
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::{dynocomp, dynocomp_piped, example};
 
 fn tmp(name: &str) -> PathBuf {

@@ -5,7 +5,7 @@ use dynocomp::io::image_file::read_image;
 use dynocomp_core::image::DesignMethod;
 use std::path::PathBuf;
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::{dynocomp, example};
 
 fn tmp(name: &str) -> PathBuf {

@@ -3,7 +3,7 @@
 //! → zero-phase split, per-band kernel, sum (`compensate`) → error against the
 //! simulator's true force, overall and inside each band.
 
-mod sim_common;
+use crate::sim_common;
 use dynocomp::cli::design_args::BandArgs;
 use dynocomp::design::axis::{design_axis, DesignOptions};
 use dynocomp::design::bands::Band;

@@ -7,7 +7,7 @@
 //! unchanged. `--strict` refuses the image with the reason, and writes
 //! nothing. Control: the intact FRF passes no axis through.
 
-mod cli_common;
+use crate::cli_common;
 
 use cli_common::{dynocomp, example, tmp};
 use dynocomp::io::signal_csv::read_signal_csv;

@@ -9,7 +9,7 @@
 //! raw sine is. Control: the residues swapped (zeros at 355 and 447 Hz with
 //! negative real parts) give no warning, and the filter beats raw at 392 Hz.
 
-mod cli_common;
+use crate::cli_common;
 
 use dynocomp::design::axis::{design_axis, AxisDesign, DesignOptions};
 use dynocomp::fit::PoleResidueModel;

@@ -14,7 +14,7 @@
 //! Target (issue): predicted and measured agree within a factor 1.5 at
 //! ±1 % and ±3 %.
 
-mod sim_common;
+use crate::sim_common;
 
 use dynocomp::design::axis::{design_axis, DesignOptions};
 use dynocomp::metrics::sample_variance;

@@ -2,7 +2,7 @@
 //! states the sensitivity to moving sensor modes in the text summary
 //! (±1 %, ±3 % and the advice) and every point in `--json`.
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::{dynocomp, example};
 
 #[test]

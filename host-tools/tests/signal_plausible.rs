@@ -101,8 +101,10 @@ fn a_dash_reads_standard_input_as_csv() {
         println!("CHILD {fmt:?} {} {:?} {:?}", r.axes().len(), t, c);
         return;
     }
+    // This test's name in the harness: its module path without the crate's.
+    let name = format!("{}::a_dash_reads_standard_input_as_csv", module_path!().split_once("::").unwrap().1);
     let mut child = std::process::Command::new(std::env::current_exe().unwrap())
-        .args(["--exact", "a_dash_reads_standard_input_as_csv", "--nocapture", "--quiet"])
+        .args(["--exact", &name, "--nocapture", "--quiet"])
         .env("DYNOCOMP_STDIN_CHILD", "1")
         .stdin(std::process::Stdio::piped())
         .stdout(std::process::Stdio::piped())

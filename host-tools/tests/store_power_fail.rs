@@ -5,7 +5,7 @@
 //! never a mix. Also: consecutive uploads, sequence-number wrap, bit rot,
 //! rejected images, out-of-order chunks.
 
-mod common;
+use crate::common;
 
 use dynocomp::link::sim_flash::{CutMode, SimFlash};
 use dynocomp_core::image::{BoxImage, CRC32};

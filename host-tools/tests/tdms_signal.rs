@@ -13,8 +13,8 @@ use dynocomp::io::tdms::TdmsWriter;
 use dynocomp::offline::compensate::compensate_record;
 use std::path::{Path, PathBuf};
 
-mod cli_common;
-mod common;
+use crate::cli_common;
+use crate::common;
 use cli_common::{dynocomp, example, tmp};
 
 // ---- an independent builder of TDMS bytes (test side) ----

@@ -4,7 +4,7 @@
 //! --drift START:END` follows the change; scored against the simulator's
 //! true force, with today's single-FRF `--offline` as the negative control.
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::{dynocomp, dynocomp_piped};
 use dynocomp::io::signal_csv::read_signal_csv;
 use dynocomp::metrics::accuracy;

@@ -4,7 +4,7 @@
 //! judges each measured FRF against the model at its own state (misfits
 //! recomputed here from the sidecar's two states and the FRF files).
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::dynocomp;
 use dynocomp::offline::sidecar::ModelSidecar;
 

@@ -10,8 +10,8 @@ use dynocomp::io::uff_signal::UffWriter;
 use dynocomp::offline::compensate::compensate_record;
 use std::path::{Path, PathBuf};
 
-mod cli_common;
-mod common;
+use crate::cli_common;
+use crate::common;
 use cli_common::{dynocomp, example, tmp};
 
 /// Write `chans` (axes 0..n) as a UFF time-history file at `fs`.

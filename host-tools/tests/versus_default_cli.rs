@@ -5,7 +5,7 @@
 //! not worse than the default image on the true force; a paper-method axis
 //! is kept with a warning naming the better command.
 
-mod cli_common;
+use crate::cli_common;
 use cli_common::{dynocomp, example};
 use dynocomp::io::signal_csv::read_signal_csv;
 use dynocomp::metrics::{accuracy, accuracy_as_written};

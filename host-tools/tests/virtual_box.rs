@@ -4,7 +4,7 @@
 //! upload and switch, restart, rejection of bad images, power cut in the
 //! middle of an upload, malformed frames, stream with injected frame loss.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};

@@ -1,0 +1,66 @@
+//! The host-tools integration tests, one module per file of this folder, in
+//! one test binary: one link instead of one per file, and one pool of test
+//! threads for them all. `tests/mimo_design.rs` (release-only 3x3 designs)
+//! stays a binary of its own.
+
+mod cli_common;
+mod common;
+mod sim_common;
+
+mod above_band_cli;
+mod architecture;
+mod budget_cli;
+mod cli_robustness;
+mod clipping_cli;
+mod coherent_band;
+mod compensate_stream;
+mod design_progress;
+mod design_units;
+mod discretize;
+mod drift_sim;
+mod e2e_design;
+mod e2e_rates;
+mod fit_limits;
+mod fit_uncertainty_cli;
+mod flash_probe;
+mod flat_force_cli;
+mod force_prior;
+mod force_spectrum;
+mod freq_response;
+mod help_text;
+mod independent_cases;
+mod io_frf;
+mod io_frf_matrix;
+mod latency_cli;
+mod link_fuzz;
+mod matrix_host;
+mod metrics_as_written;
+mod offline;
+mod offline_cli;
+mod paper_cli;
+mod paper_findings;
+mod paper_presets;
+mod paper_units;
+mod parallel_elaboration;
+mod pass_through_cli;
+mod phase_limit;
+mod realize_scaling;
+mod report;
+mod riccati;
+mod sensitivity;
+mod sensitivity_cli;
+mod signal_csv;
+mod signal_plausible;
+mod sim_plate;
+mod sim_plate_cli;
+mod simulate;
+mod store_power_fail;
+mod sweep_cases;
+mod tail_lookahead;
+mod tdms_signal;
+mod two_state;
+mod two_state_cli;
+mod two_state_report;
+mod uff_signal;
+mod versus_default_cli;
+mod virtual_box;
