@@ -55,6 +55,7 @@ use dynocomp_core::mimo::{MimoFilter, MimoState};
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
 use std::f64::consts::PI;
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// Largest accepted ratio of the compensated NRMSE to the exact 3x3
 /// inverse's noise floor, per axis.
@@ -162,6 +163,33 @@ fn design(frf: &Frf, out: &PlateSimOutput) -> anyhow::Result<MatrixDesign> {
         _ => AboveBand::default(),
     };
     design_above(frf, out, above)
+}
+
+/// `record(name, fs)` and its [`design_above`], made once in this test
+/// binary for all the tests that judge the same design (they run in
+/// parallel: the first to ask designs, the others wait for it).
+fn shared_design(name: &str, fs: f64, above_band: AboveBand) -> Arc<(PlateSimOutput, MatrixDesign)> {
+    type Slot = Arc<OnceLock<Arc<(PlateSimOutput, MatrixDesign)>>>;
+    type Key = (String, u64, AboveBand);
+    static SHARED: Mutex<Vec<(Key, Slot)>> = Mutex::new(Vec::new());
+    let key = (name.to_string(), fs.to_bits(), above_band);
+    let slot = {
+        let mut shared = SHARED.lock().unwrap();
+        match shared.iter().find(|(k, _)| *k == key) {
+            Some((_, slot)) => slot.clone(),
+            None => {
+                let slot = Slot::default();
+                shared.push((key, slot.clone()));
+                slot
+            }
+        }
+    };
+    slot.get_or_init(|| {
+        let out = record(name, fs);
+        let md = design_above(&out.frf, &out, above_band).unwrap();
+        Arc::new((out, md))
+    })
+    .clone()
 }
 
 fn design_above(frf: &Frf, out: &PlateSimOutput, above_band: AboveBand) -> anyhow::Result<MatrixDesign> {
@@ -627,12 +655,12 @@ const AS_WRITTEN_FACTOR: f64 = 5.0;
 #[test]
 #[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
 fn quiet_3x3_rows_above_the_band() {
-    let out = record("offcentre", 25_600.0);
     let figures = |above| {
-        let md = design_above(&out.frf, &out, above).unwrap();
+        let shared = shared_design("offcentre", 25_600.0, above);
+        let (out, md) = (&shared.0, &shared.1);
         assert!(md.rows.iter().all(|r| *r == RowSource::Matrix), "{:?}", md.rows);
         let k = md.summary.kalman.as_ref().unwrap();
-        let fig = evaluate(&md, &out);
+        let fig = evaluate(md, out);
         eprintln!("{}  {above:?}, shapes {:?}", fig.line("offcentre", 25_600.0), k.force_shape);
         (fig, k.force_shape)
     };
@@ -672,9 +700,9 @@ fn quiet_3x3_rows_above_the_band() {
 #[test]
 #[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
 fn a_latency_that_does_not_verify_gives_way_to_the_next() {
-    let out = record("offcentre", 51_200.0);
-    let md = design(&out.frf, &out).unwrap();
-    let fig = evaluate(&md, &out);
+    let shared = shared_design("offcentre", 51_200.0, AboveBand::default());
+    let (out, md) = (&shared.0, &shared.1);
+    let fig = evaluate(md, out);
     eprintln!("{}  latency {}", fig.line("offcentre", 51_200.0), md.summary.latency);
     let note = md.summary.notes.iter().find(|n| n.contains("is used instead"));
     assert!(note.is_some_and(|n| n.contains("verif")), "{:?}", md.summary.notes);
@@ -1563,16 +1591,16 @@ fn reduced_filter_by(
 fn a_3x3_filter_over_the_load_limit_is_reduced_to_fit_where_it_stays_accurate() {
     use dynocomp::design::mimo::reduce::filter_load;
     let limit = BOX_LIMIT.unwrap();
-    let out = record("offcentre", 25_600.0);
+    let shared = shared_design("offcentre", 25_600.0, AboveBand::default());
+    let (out, reduced) = (&shared.0, &shared.1);
     let d = DesignOptions { fs_hz: out.params.fs_hz, ..Default::default() };
-    let full = design_matrix(&out.frf, noise(&out), &MatrixOptions { design: d, ..Default::default() }).unwrap();
-    let reduced = design(&out.frf, &out).unwrap();
+    let full = design_matrix(&out.frf, noise(out), &MatrixOptions { design: d, ..Default::default() }).unwrap();
     assert!(full.summary.reduction.is_none());
     assert!(filter_load(&full.filter, 25_600.0) > limit, "the full filter must be over the limit for this test");
     let r = reduced.summary.reduction.as_ref().expect("reduction figures");
     assert!(r.used, "{r:?}");
     assert!(filter_load(&reduced.filter, 25_600.0) <= limit && r.load_permille <= limit, "{r:?}");
-    let (f_full, f_red) = (evaluate(&full, &out), evaluate(&reduced, &out));
+    let (f_full, f_red) = (evaluate(&full, out), evaluate(reduced, out));
     eprintln!("full    {}\nreduced {}", f_full.line("offcentre", 25_600.0), f_red.line("offcentre", 25_600.0));
     for i in 0..3 {
         assert!(f_red.used[i] <= 1.1 * f_full.used[i], "axis {i}: {:?} vs {:?}", f_red.used, f_full.used);
@@ -1581,7 +1609,7 @@ fn a_3x3_filter_over_the_load_limit_is_reduced_to_fit_where_it_stays_accurate() 
     // Negative control: a third of the order.
     let mut third = full.clone();
     third.filter = reduced_filter(&full, r.states / 3, r.method);
-    let f_third = evaluate(&third, &out);
+    let f_third = evaluate(&third, out);
     eprintln!("third   {}", f_third.line("offcentre", 25_600.0));
     assert!((0..3).any(|i| f_third.used[i] > 1.1 * f_full.used[i]), "{:?}", f_third.used);
     // A load limit only spares the verification of realizations over it:
@@ -1596,15 +1624,15 @@ fn a_3x3_filter_over_the_load_limit_is_reduced_to_fit_where_it_stays_accurate() 
     let below = reduced_filter_by(&full, r.states, r.method, Prefer::LoadWithin(load - 1));
     assert!(below.is_err_and(|e| format!("{e:#}").contains("over the limit")), "load {load}");
 
-    let out = record("offcentre", 51_200.0);
-    let md = design(&out.frf, &out).unwrap();
+    let shared = shared_design("offcentre", 51_200.0, AboveBand::default());
+    let (out, md) = (&shared.0, &shared.1);
     let r = md.summary.reduction.as_ref().expect("reduction figures");
     assert!(!r.used && r.states > 0, "{r:?}");
     assert!(filter_load(&md.filter, 51_200.0) > limit);
     let mut refused = md.clone();
-    refused.filter = reduced_filter(&md, r.states, r.method);
+    refused.filter = reduced_filter(md, r.states, r.method);
     assert!(filter_load(&refused.filter, 51_200.0) <= limit);
-    let f = evaluate(&refused, &out);
+    let f = evaluate(&refused, out);
     eprintln!("refused {}", f.line("offcentre", 51_200.0));
     assert!((0..3).any(|i| f.used[i] > f.per_axis[i]), "{:?} vs per axis {:?}", f.used, f.per_axis);
 }
