@@ -425,6 +425,7 @@ fn design(
     if flat {
         notes.extend(moderate_crosstalk_caveat(&chosen.axes, &crosstalk));
     }
+    notes.extend(level_prior_caveat(d, flat));
     let shapes = force_shapes(&criterion.model, d);
     let mut md = finish(shapes, chosen, realized, prep, crosstalk, latency_rounds, notes, d.fs_hz, f_band)?;
     md.summary.reduction = reduction;
@@ -665,6 +666,20 @@ fn moderate_crosstalk_caveat(axes: &[AxisPrediction], crosstalk: &Crosstalk) -> 
             100.0 * peak,
             rows.join(", ")
         )
+    })
+}
+
+/// The note for a design judged for a record's force level (`--force-prior
+/// level`) and quiet above the band: its predictions assume that level
+/// flat up to each band's top, where the quiet rows roll off, so on a cut
+/// they tend to overstate the error (median 1.54 times the error delivered
+/// over the 54 axes of BENCHMARKS.md, "Quiet above the band for a record").
+fn level_prior_caveat(d: &DesignOptions, flat: bool) -> Option<String> {
+    (!flat && d.force_record_level_only && quiet_above_band(d)).then(|| {
+        "the predictions assume the record's force level spread flat up to each band's top, where this design is \
+         quiet; a cut has most of its force at lower harmonics, so they tend to overstate its error: \
+         --force-prior spectrum predicts for the record's own spectrum"
+            .to_string()
     })
 }
 
@@ -1258,4 +1273,23 @@ fn finish(
         filter,
         full_compensator: None,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The level prior's caveat: for `--force-prior level` quiet above the
+    /// band only; not for a record's spectrum, a flat force, or a design
+    /// that is the inverse above the band.
+    #[test]
+    fn the_level_prior_s_caveat_goes_with_quiet_rows_only() {
+        let level = DesignOptions { force_record_level_only: true, ..Default::default() };
+        assert!(quiet_above_band(&level));
+        assert!(level_prior_caveat(&level, false).is_some_and(|n| n.contains("--force-prior spectrum")));
+        assert_eq!(level_prior_caveat(&level, true), None, "a flat force");
+        assert_eq!(level_prior_caveat(&DesignOptions::default(), false), None, "the record's spectrum");
+        let inverse = DesignOptions { above_band: AboveBand::Inverse, ..level };
+        assert_eq!(level_prior_caveat(&inverse, false), None, "inverse above the band");
+    }
 }
