@@ -64,3 +64,29 @@ mod two_state_report;
 mod uff_signal;
 mod versus_default_cli;
 mod virtual_box;
+
+/// Every file of this folder is declared above (with autotests off, a file
+/// left out would build and run nowhere), and nothing is declared that is
+/// not a file here.
+#[test]
+fn every_test_file_is_a_module_of_this_binary() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests");
+    let declared: std::collections::BTreeSet<String> = include_str!("host.rs")
+        .lines()
+        .filter_map(|l| l.strip_prefix("mod ")?.strip_suffix(';').map(str::to_string))
+        .collect();
+    let files: std::collections::BTreeSet<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "rs") || p.join("mod.rs").is_file())
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .filter(|n| n != "host" && n != "mimo_design")
+        .collect();
+    // The parse found the list (a control that the comparison is not of
+    // two empty sets).
+    assert!(declared.contains("two_state") && declared.contains("common"), "{declared:?}");
+    let missing: Vec<_> = files.difference(&declared).collect();
+    let stray: Vec<_> = declared.difference(&files).collect();
+    assert!(missing.is_empty(), "test files not declared in tests/host.rs: {missing:?}");
+    assert!(stray.is_empty(), "modules of tests/host.rs without a file: {stray:?}");
+}
