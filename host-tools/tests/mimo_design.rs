@@ -157,12 +157,16 @@ fn noise(out: &PlateSimOutput) -> [f64; 3] {
 }
 
 fn design(frf: &Frf, out: &PlateSimOutput) -> anyhow::Result<MatrixDesign> {
-    // MIMO_STUDY_ABOVE=inverse: the exact inverse continued above the band.
-    let above = match std::env::var("MIMO_STUDY_ABOVE").as_deref() {
+    design_above(frf, out, study_above_band())
+}
+
+/// The default design's treatment above the band; with
+/// MIMO_STUDY_ABOVE=inverse, the exact inverse continued above the band.
+fn study_above_band() -> AboveBand {
+    match std::env::var("MIMO_STUDY_ABOVE").as_deref() {
         Ok("inverse") => AboveBand::Inverse,
         _ => AboveBand::default(),
-    };
-    design_above(frf, out, above)
+    }
 }
 
 /// `record(name, fs)` and its [`design_above`], made once in this test
@@ -700,7 +704,7 @@ fn quiet_3x3_rows_above_the_band() {
 #[test]
 #[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
 fn a_latency_that_does_not_verify_gives_way_to_the_next() {
-    let shared = shared_design("offcentre", 51_200.0, AboveBand::default());
+    let shared = shared_design("offcentre", 51_200.0, study_above_band());
     let (out, md) = (&shared.0, &shared.1);
     let fig = evaluate(md, out);
     eprintln!("{}  latency {}", fig.line("offcentre", 51_200.0), md.summary.latency);
@@ -1591,7 +1595,7 @@ fn reduced_filter_by(
 fn a_3x3_filter_over_the_load_limit_is_reduced_to_fit_where_it_stays_accurate() {
     use dynocomp::design::mimo::reduce::filter_load;
     let limit = BOX_LIMIT.unwrap();
-    let shared = shared_design("offcentre", 25_600.0, AboveBand::default());
+    let shared = shared_design("offcentre", 25_600.0, study_above_band());
     let (out, reduced) = (&shared.0, &shared.1);
     let d = DesignOptions { fs_hz: out.params.fs_hz, ..Default::default() };
     let full = design_matrix(&out.frf, noise(out), &MatrixOptions { design: d, ..Default::default() }).unwrap();
@@ -1624,7 +1628,7 @@ fn a_3x3_filter_over_the_load_limit_is_reduced_to_fit_where_it_stays_accurate() 
     let below = reduced_filter_by(&full, r.states, r.method, Prefer::LoadWithin(load - 1));
     assert!(below.is_err_and(|e| format!("{e:#}").contains("over the limit")), "load {load}");
 
-    let shared = shared_design("offcentre", 51_200.0, AboveBand::default());
+    let shared = shared_design("offcentre", 51_200.0, study_above_band());
     let (out, md) = (&shared.0, &shared.1);
     let r = md.summary.reduction.as_ref().expect("reduction figures");
     assert!(!r.used && r.states > 0, "{r:?}");

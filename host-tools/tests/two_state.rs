@@ -116,9 +116,8 @@ fn dense_reference(y: &[f64], ts: &TwoState, o: &DriftSmoothing) -> Vec<f64> {
     let mut fitted = std::collections::HashMap::new();
     let mut plant = |k: usize| {
         let level = (state_at(k as f64 / o.fs_hz, o.interval_s.0, o.interval_s.1) * S_LEVELS as f64).round();
-        let at = |l: f64| fit_with_structure(&ts.at(l / S_LEVELS as f64), o.fs_hz, o.band_hz, taps, adv).unwrap();
-        let key = level as i64;
-        fitted.entry(key).or_insert_with(|| augmented_plant(&at(level), 0)).clone()
+        let fit = || fit_with_structure(&ts.at(level / S_LEVELS as f64), o.fs_hz, o.band_hz, taps, adv).unwrap();
+        fitted.entry(level as i64).or_insert_with(|| augmented_plant(&fit(), 0)).clone()
     };
     let p0 = plant(0);
     let f = p0.n_plant;
