@@ -34,7 +34,7 @@ use crate::design::axis::{
 use crate::design::discretize::{Discretization, MATCH_BAND_FRACTION};
 use crate::design::kalman::ForceShape;
 use crate::design::latency::{DEFAULT_LATENCY, GAIN_NOT_WORTH, LONGER_LATENCIES, PREDICTED_SHORT};
-use crate::fit::matrix::{matrix_vector_fit, MatrixData, MatrixModel};
+use crate::fit::matrix::{matrix_fit_stages, MatrixData, MatrixFitStages, MatrixModel};
 use crate::fit::refine::FitCovariance;
 use crate::fit::relative_rms_error;
 use crate::fit::vf::{coherence_weights, VfOptions};
@@ -499,22 +499,24 @@ fn fit_stage(
     let t = std::time::Instant::now();
     let prepared_model = match given {
         Some(g) => prepare_model(frf, bands, d.fs_hz, d.coherence_threshold, g),
-        None => prepare_matrix(frf, bands, d.fs_hz, &vf, d.coherence_threshold, prepared).or_else(|e| {
-            // The refined model (`fit::refine`) can sit where the discrete
-            // model or its realization refuses it (the off-centre plate at
-            // 51.2 kHz on 8 Hz lines: realization 3.7e-4 from the
-            // pole-residue form, limit 2e-4); vector fitting's own model
-            // then, once, and the summary says so.
-            if !vf.refine {
-                return Err(e);
-            }
-            opts.say("the refined 3x3 model gives no plant: fitting again without the refinement…");
-            let plain = VfOptions { refine: false, ..vf.clone() };
-            let p = prepare_matrix(frf, bands, d.fs_hz, &plain, d.coherence_threshold, prepared)?;
-            notes.push(format!(
-                "the 3x3 fit refined to its maximum-likelihood model gave no plant ({e:#}); vector fitting's model is used"
-            ));
-            Ok(p)
+        None => matrix_stages(frf, bands, &vf).and_then(|(stages, vf)| {
+            prepare_matrix(frf, bands, d.fs_hz, &stages, &vf, d.coherence_threshold, prepared).or_else(|e| {
+                // The refined model (`fit::refine`) can sit where the discrete
+                // model or its realization refuses it (the off-centre plate at
+                // 51.2 kHz on 8 Hz lines: realization 3.7e-4 from the
+                // pole-residue form, limit 2e-4); vector fitting's own model
+                // then, once, and the summary says so.
+                if !vf.refine {
+                    return Err(e);
+                }
+                opts.say("the refined 3x3 model gives no plant: the same fit without the refinement…");
+                let plain = VfOptions { refine: false, ..vf.clone() };
+                let p = prepare_matrix(frf, bands, d.fs_hz, &stages, &plain, d.coherence_threshold, prepared)?;
+                notes.push(format!(
+                    "the 3x3 fit refined to its maximum-likelihood model gave no plant ({e:#}); vector fitting's model is used"
+                ));
+                Ok(p)
+            })
         }),
     };
     match prepared_model {
@@ -807,17 +809,26 @@ fn fit_covariance(frf: &Frf, prep: Option<&MatrixPrep>, freqs: &[f64]) -> Option
 /// Fit, discrete model and plant of the matrix (the latency-independent
 /// part), the fit with `vf`, its error scored on the lines of coherence ≥
 /// `threshold`.
+/// The common-pole fit of the matrix up to its refinement
+/// ([`crate::fit::matrix::matrix_fit_stages`]), and the options it was
+/// fitted with.
+fn matrix_stages(frf: &Frf, bands: &[(f64, f64); 3], vf: &VfOptions) -> Result<(MatrixFitStages, VfOptions)> {
+    // A real pole below the first coherent line of the bands is not kept.
+    let vf = VfOptions { f_identified_hz: bands.iter().map(|b| b.0).fold(f64::INFINITY, f64::min), ..vf.clone() };
+    let stages = with_weighted_matrix(frf, |data| matrix_fit_stages(data, &vf))?.context("fit of the 3x3 matrix")?;
+    Ok((stages, vf))
+}
+
 fn prepare_matrix(
     frf: &Frf,
     bands: &[(f64, f64); 3],
     fs: f64,
+    stages: &MatrixFitStages,
     vf: &VfOptions,
     threshold: f64,
     prepared: &[Result<PreparedAxis>],
 ) -> Result<MatrixPrep> {
-    // A real pole below the first coherent line of the bands is not kept.
-    let vf = VfOptions { f_identified_hz: bands.iter().map(|b| b.0).fold(f64::INFINITY, f64::min), ..vf.clone() };
-    let fit = with_weighted_matrix(frf, |data| matrix_vector_fit(data, &vf))?.context("fit of the 3x3 matrix")?;
+    let fit = with_weighted_matrix(frf, |data| stages.finish(data, vf))?.context("fit of the 3x3 matrix")?;
     let split = GivenModel {
         model: fit.model,
         weighted_rms: fit.weighted_rms,
