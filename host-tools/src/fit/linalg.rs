@@ -110,12 +110,24 @@ pub fn svd(m: DMatrix<f64>, what: &str) -> Result<SVD<f64, nalgebra::Dyn, nalgeb
     let Some(first) = SVD::try_new(m.clone(), true, true, SVD_EPS, limit) else {
         bail!("{what}: the singular value iteration (SVD) of the {rows}×{cols} matrix did not converge within {limit} sweeps")
     };
-    let miss = svd_miss(&first, &m);
-    if miss <= SVD_RECONSTRUCTION_TOL {
+    checked_svd(first, &m, what)
+}
+
+/// `first`, an SVD of `m`, where its factors rebuild `m` to
+/// [`SVD_RECONSTRUCTION_TOL`]; else faer's thin SVD of `m`, checked the
+/// same way. nalgebra's SVD loses accuracy with small nonzero singular
+/// values (dimforge/nalgebra#1172).
+pub fn checked_svd(
+    first: SVD<f64, nalgebra::Dyn, nalgebra::Dyn>,
+    m: &DMatrix<f64>,
+    what: &str,
+) -> Result<SVD<f64, nalgebra::Dyn, nalgebra::Dyn>> {
+    if svd_miss(&first, m) <= SVD_RECONSTRUCTION_TOL {
         return Ok(first);
     }
-    let second = faer_svd(&m).ok_or_else(|| anyhow::anyhow!("{what}: the SVD of the {rows}×{cols} matrix failed"))?;
-    let miss = svd_miss(&second, &m);
+    let (rows, cols) = m.shape();
+    let second = faer_svd(m).ok_or_else(|| anyhow::anyhow!("{what}: the SVD of the {rows}×{cols} matrix failed"))?;
+    let miss = svd_miss(&second, m);
     if !(miss <= SVD_RECONSTRUCTION_TOL) {
         bail!("{what}: the SVD of the {rows}×{cols} matrix misses it by {miss:.1e} of its norm (limit {SVD_RECONSTRUCTION_TOL:.0e})");
     }
@@ -218,5 +230,11 @@ mod tests {
         let (u, v_t) = (checked.u.unwrap(), checked.v_t.unwrap());
         assert!((u.transpose() * &u - DMatrix::identity(3, 3)).norm() < 1e-14);
         assert!((&v_t * v_t.transpose() - DMatrix::identity(3, 3)).norm() < 1e-14);
+        // Where nalgebra's SVD rebuilds its matrix, it is kept as it is.
+        let well = DMatrix::from_row_slice(3, 3, &[2.0, 0.3, -0.1, 0.3, 1.0, 0.2, -0.1, 0.2, 0.5]);
+        let own = well.clone().svd(true, true);
+        let kept = checked_svd(own.clone(), &well, "test").unwrap();
+        assert_eq!(kept.singular_values, own.singular_values);
+        assert_eq!(kept.u, own.u);
     }
 }

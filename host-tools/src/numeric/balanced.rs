@@ -97,7 +97,8 @@ fn balance_as_given(ss: &MimoStateSpace) -> Result<Balanced> {
         bail!("balanced reduction: the observability Gramian does not converge (is the {n}-state system stable?)")
     };
     let (zc, zo) = (factor(&p), factor(&q));
-    let svd = (zo.transpose() * &zc).svd(true, true);
+    let product = zo.transpose() * &zc;
+    let svd = crate::fit::linalg::checked_svd(product.clone().svd(true, true), &product, "balanced reduction: Zoᵀ·Zc")?;
     let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else { bail!("balanced reduction: the SVD failed") };
     let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
     order.sort_by(|a, b| svd.singular_values[*b].total_cmp(&svd.singular_values[*a]));
