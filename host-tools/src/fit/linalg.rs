@@ -134,8 +134,9 @@ pub fn checked_svd(
     Ok(second)
 }
 
-/// Largest accepted ‖U Σ Vᵀ − M‖_F / ‖M‖_F of [`svd`].
-const SVD_RECONSTRUCTION_TOL: f64 = 1e-12;
+/// Largest accepted ‖U Σ Vᴴ − M‖_F / ‖M‖_F of a checked SVD ([`svd`],
+/// [`checked_svd`], and the 3x3 residues of the plant).
+pub const SVD_RECONSTRUCTION_TOL: f64 = 1e-12;
 
 /// ‖U Σ Vᵀ − M‖_F / ‖M‖_F of an SVD of `m` (infinite without U or V).
 fn svd_miss(svd: &SVD<f64, nalgebra::Dyn, nalgebra::Dyn>, m: &DMatrix<f64>) -> f64 {

@@ -895,6 +895,11 @@ fn skim(data: &MatrixData, f_identified_hz: f64, model: MatrixModel) -> Result<M
 mod tests {
     use super::*;
 
+    /// The nine entries `h` on the lines `freq`, every entry weighted by `w`.
+    fn shared_weights<'a>(freq: &'a [f64], h: &'a [Vec<Complex64>], w: &'a [f64]) -> MatrixData<'a> {
+        MatrixData { freq_hz: freq, h: std::array::from_fn(|e| h[e].as_slice()), w: std::array::from_fn(|_| w) }
+    }
+
     /// Lines (Hz), the nine measured entries, the weights, the two poles
     /// and the true model of [`close_modes`].
     type CloseModes = (Vec<f64>, Vec<Vec<Complex64>>, Vec<f64>, [Complex64; 2], MatrixModel);
@@ -958,11 +963,7 @@ mod tests {
             entry.terms.push(Term::Pair { pole: p, residue: r });
         }
         let (freq, h, wt) = measured(&truth, 2e-3);
-        let data = MatrixData {
-            freq_hz: &freq,
-            h: std::array::from_fn(|e| h[e].as_slice()),
-            w: std::array::from_fn(|_| wt.as_slice()),
-        };
+        let data = shared_weights(&freq, &h, &wt);
         let fitted = refit_kept(&data, &truth, &[true; 3]).unwrap();
         (freq.clone(), h.clone(), wt.clone(), fitted)
     }
@@ -975,11 +976,7 @@ mod tests {
     fn pairs_the_lines_do_not_support_are_dropped() {
         for (c, drops) in [(0.0, true), (4e-4, false)] {
             let (freq, h, w, fitted) = third_pair(c);
-            let data = MatrixData {
-                freq_hz: &freq,
-                h: std::array::from_fn(|e| h[e].as_slice()),
-                w: std::array::from_fn(|_| w.as_slice()),
-            };
+            let data = shared_weights(&freq, &h, &w);
             let rises = pair_rises(&data, &fitted).unwrap();
             let full = data.rss(&fitted);
             for (k, rise) in rises.iter().enumerate() {
@@ -1040,11 +1037,7 @@ mod tests {
                 add(pair_in(1370.0, 0.03, 0.05, &[0, 6]));
             }
             let (freq, h, w) = measured(&truth, 2e-3);
-            let data = MatrixData {
-                freq_hz: &freq,
-                h: std::array::from_fn(|e| h[e].as_slice()),
-                w: std::array::from_fn(|_| w.as_slice()),
-            };
+            let data = shared_weights(&freq, &h, &w);
             let w_scale = 2.0 * PI * data.f_max();
             let pole = |f: f64, zeta: f64| Pole { p: pole_at(2.0 * PI * f / w_scale, zeta), pair: true };
             let true_poles = vec![pole(300.0, 0.03), pole(700.0, 0.025)];
@@ -1088,11 +1081,7 @@ mod tests {
     fn close_pairs_keep_per_entry_the_terms_its_lines_support() {
         let noise = 2e-3;
         let (freq, h, w, poles, truth) = close_modes(noise);
-        let data = MatrixData {
-            freq_hz: &freq,
-            h: std::array::from_fn(|e| h[e].as_slice()),
-            w: std::array::from_fn(|_| w.as_slice()),
-        };
+        let data = shared_weights(&freq, &h, &w);
         let w_scale = 2.0 * PI * data.f_max();
         let both: Vec<Pole> = poles.iter().map(|p| Pole { p: p / w_scale, pair: true }).collect();
         let full = fit_residues(&data, &both, w_scale).unwrap();
@@ -1120,11 +1109,7 @@ mod tests {
     #[test]
     fn the_order_search_stops_past_its_best_and_keeps_the_exhaustive_choice() {
         let (freq, h, w, _) = third_pair(0.05);
-        let data = MatrixData {
-            freq_hz: &freq,
-            h: std::array::from_fn(|e| h[e].as_slice()),
-            w: std::array::from_fn(|_| w.as_slice()),
-        };
+        let data = shared_weights(&freq, &h, &w);
         let opts = VfOptions { max_order: 40, iterations: 20, ..VfOptions::default() };
         let fit = matrix_vector_fit(&data, &opts).unwrap();
         let searched: Vec<usize> = fit.order_trace.iter().map(|t| t.0).collect();
@@ -1156,11 +1141,7 @@ mod tests {
     #[test]
     fn the_fit_finished_without_refinement_is_the_plain_fit() {
         let (freq, h, w, _) = third_pair(0.05);
-        let data = MatrixData {
-            freq_hz: &freq,
-            h: std::array::from_fn(|e| h[e].as_slice()),
-            w: std::array::from_fn(|_| w.as_slice()),
-        };
+        let data = shared_weights(&freq, &h, &w);
         let opts = VfOptions { max_order: 16, iterations: 20, ..VfOptions::default() };
         let plain = VfOptions { refine: false, ..opts.clone() };
         let stages = matrix_fit_stages(&data, &opts).unwrap();

@@ -12,7 +12,7 @@ use crate::design::discretize::{
     columns_at, fit_grid, MATCH_BAND_FRACTION, MATCH_SLACK, MATCH_TARGET, MAX_ADVANCE, MAX_CONDITION, MAX_FIR_TAPS,
     MAX_TERM_GAIN_RATIO, OUT_OF_BAND_WEIGHT,
 };
-use crate::fit::linalg::{sweeps, symmetric_eigenvalues};
+use crate::fit::linalg::{sweeps, symmetric_eigenvalues, SVD_RECONSTRUCTION_TOL};
 use crate::fit::matrix::MatrixModel;
 
 /// A 3x3 complex matrix (an FRF matrix or a residue).
@@ -463,9 +463,6 @@ struct Triplet {
 /// One rank-one term of a residue: singular value σ, output vector u and input vector v (R = Σ σ·u·vᴴ).
 type RankOne = (f64, [Complex64; 3], [Complex64; 3]);
 
-/// Largest accepted ‖R − Σ σ_k u_k v_kᴴ‖_F / ‖R‖_F of a residue's SVD.
-const SVD_RECONSTRUCTION_TOL: f64 = 1e-12;
-
 /// The SVD of a residue (R = Σ σ_k u_k v_kᴴ, σ descending), its
 /// factors checked against R. nalgebra's SVD loses accuracy where R has
 /// small nonzero singular values (dimforge/nalgebra#1172): a residue of
@@ -473,13 +470,7 @@ const SVD_RECONSTRUCTION_TOL: f64 = 1e-12;
 /// and its realization [`plant_states`] 1.9e-3 off the pole-residue form.
 /// There faer's SVD is taken, checked the same way.
 fn residue_svd(r: &CMatrix3, real: bool) -> Result<Vec<RankOne>> {
-    let miss = |t: &[RankOne]| {
-        let mut sum = CMatrix3::zeros();
-        for (sigma, u, v) in t {
-            sum += CMatrix3::from_fn(|i, j| u[i] * *sigma * v[j]);
-        }
-        (sum - r).norm() / r.norm().max(f64::MIN_POSITIVE)
-    };
+    let miss = |t: &[RankOne]| residue_miss(t, r);
     let first = nalgebra_svd(r, real)?;
     if miss(&first) <= SVD_RECONSTRUCTION_TOL {
         return Ok(first);
@@ -490,6 +481,15 @@ fn residue_svd(r: &CMatrix3, real: bool) -> Result<Vec<RankOne>> {
         bail!("the SVD of a 3x3 residue misses it by {off:.1e} of its norm (limit {SVD_RECONSTRUCTION_TOL:.0e})");
     }
     Ok(second)
+}
+
+/// ‖R − Σ σ_k u_k v_kᴴ‖_F / ‖R‖_F of the terms `t` of an SVD of `r`.
+fn residue_miss(t: &[RankOne], r: &CMatrix3) -> f64 {
+    let mut sum = CMatrix3::zeros();
+    for (sigma, u, v) in t {
+        sum += CMatrix3::from_fn(|i, j| u[i] * *sigma * v[j]);
+    }
+    (sum - r).norm() / r.norm().max(f64::MIN_POSITIVE)
 }
 
 /// faer's SVD of a residue, as [`nalgebra_svd`] returns it.
@@ -714,13 +714,7 @@ mod tests {
             c(0.04742431120634967, -0.07545246873816114),
             c(-0.24815461978109465, 0.39547022006387333),
         ]);
-        let rebuilt = |t: &[RankOne]| {
-            let mut sum = CMatrix3::zeros();
-            for (sigma, u, v) in t {
-                sum += CMatrix3::from_fn(|i, j| u[i] * *sigma * v[j]);
-            }
-            (sum - r).norm() / r.norm()
-        };
+        let rebuilt = |t: &[RankOne]| residue_miss(t, &r);
         let plain = nalgebra_svd(&r, false).unwrap();
         assert!(rebuilt(&plain) > 1e-8, "control: nalgebra's SVD rebuilt it to {:.1e}", rebuilt(&plain));
         let checked = residue_svd(&r, false).unwrap();

@@ -806,9 +806,6 @@ fn fit_covariance(frf: &Frf, prep: Option<&MatrixPrep>, freqs: &[f64]) -> Option
     .flatten()
 }
 
-/// Fit, discrete model and plant of the matrix (the latency-independent
-/// part), the fit with `vf`, its error scored on the lines of coherence ≥
-/// `threshold`.
 /// The common-pole fit of the matrix up to its refinement
 /// ([`crate::fit::matrix::matrix_fit_stages`]), and the options it was
 /// fitted with.
@@ -819,6 +816,9 @@ fn matrix_stages(frf: &Frf, bands: &[(f64, f64); 3], vf: &VfOptions) -> Result<(
     Ok((stages, vf))
 }
 
+/// Fit, discrete model and plant of the matrix (the latency-independent
+/// part): `stages` finished with `vf`, its error scored on the lines of
+/// coherence ≥ `threshold`.
 fn prepare_matrix(
     frf: &Frf,
     bands: &[(f64, f64); 3],
