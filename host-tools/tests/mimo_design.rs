@@ -1407,6 +1407,43 @@ fn close_base_modes_are_fitted_as_two() {
     assert_eq!(fit.splits, 0, "random set-up 2 split");
 }
 
+/// Random plate seed 24 at 25.6 kHz (one of twelve independent plates,
+/// seeds 20-31, taken in order): its refined 3x3 fit has a right-half-plane
+/// transmission zero at 152 ± 4751j Hz, just above the band, and its x row
+/// lost to the per-axis row (2.61 % against a floor of 0.257 %). The design
+/// on the fit without the refinement is taken where it judges better: x
+/// 0.59 %. The control is the same design on the refined fit alone.
+#[test]
+#[ignore = "3x3 designs take seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
+fn a_3x3_row_lost_on_the_refined_fit_is_designed_again_on_the_plain_one() {
+    let out = record("24", 25_600.0);
+    let opts = |refined_only| MatrixOptions {
+        design: DesignOptions { fs_hz: 25_600.0, ..Default::default() },
+        load_limit_permille: box_limit(),
+        refined_only,
+        ..Default::default()
+    };
+    let md = design_matrix(&out.frf, noise(&out), &opts(false)).unwrap();
+    let fig = evaluate(&md, &out);
+    eprintln!("{}", fig.line("24", 25_600.0));
+    let note = md.summary.notes.iter().find(|n| n.contains("without the refinement"));
+    assert!(note.is_some_and(|n| n.contains("is used")), "{:?}", md.summary.notes);
+    assert!(md.rows.iter().all(|r| *r == RowSource::Matrix), "{:?}", md.rows);
+    check_no_worse_and_floor(&fig, "seed 24");
+    // x within this factor of its floor (0.59 against 0.257 %); the control
+    // is 10x.
+    const X_WITHIN: f64 = 3.0;
+    assert!(fig.used[0] <= X_WITHIN * fig.floor[0], "{fig:?}");
+    let control = design_matrix(&out.frf, noise(&out), &opts(true)).unwrap();
+    let control_fig = evaluate(&control, &out);
+    eprintln!("{}", control_fig.line("24-refined", 25_600.0));
+    assert_eq!(control.rows[0], RowSource::PerAxis, "control: {:?}", control.rows);
+    assert!(
+        control_fig.used[0] > X_WITHIN * control_fig.floor[0],
+        "control: the refined fit's design passed: {control_fig:?}"
+    );
+}
+
 fn opts_vf() -> VfOptions {
     let refine = std::env::var_os("MIMO_NO_REFINE").is_none();
     VfOptions { max_order: MATRIX_MAX_ORDER, iterations: MATRIX_ITERATIONS, refine, ..VfOptions::default() }

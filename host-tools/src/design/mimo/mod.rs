@@ -68,6 +68,10 @@ pub struct MatrixOptions {
     /// The box's load limit (‰ of the sample period) the filter is reduced
     /// to where it is over it ([`reduce`]); `None`: never reduced.
     pub load_limit_permille: Option<u32>,
+    /// Design on the refined fit alone, without the retry on the fit
+    /// without the refinement where a 3x3 row loses to its per-axis row
+    /// ([`retry_unrefined`]); for controls.
+    pub refined_only: bool,
 }
 
 /// Highest order of the matrix fit by default: every mode of the set-up is
@@ -296,6 +300,10 @@ struct MatrixPrep {
     /// Where `model` has close modes split ([`crate::fit::matrix::MatrixFit::splits`]),
     /// the order search's own model, for a design its 3x3 rows cannot use.
     unsplit: Option<GivenModel>,
+    /// Where `model` is the refined fit, the same fit without the
+    /// refinement (vector fitting's own model), for a design whose 3x3 rows
+    /// lose to per-axis rows on the refined one ([`retry_unrefined`]).
+    plain: Option<GivenModel>,
 }
 
 /// A 3x3 model the design takes instead of fitting one: with the figures of
@@ -389,6 +397,7 @@ fn design(
         }
     }
     let mut prep = fit_stage(frf, &bands, opts, given, &prepared, &mut notes);
+    let plain = prep.as_mut().and_then(|p| p.plain.take());
     let (criterion, flat) = criteria(frf, &prepared, prep.as_ref(), bands, r, opts, &mut notes)?;
     let rounds = latency_rounds(&prepared, prep.as_ref(), &criterion, r, opts);
     opts.say("realizing the compensator and verifying it in f32…");
@@ -437,7 +446,80 @@ fn design(
     .to_string();
     md.full_compensator = full_compensator;
     md.summary.worse_than_raw = worse_than_raw::rows_worse_than_raw(&md, &frf.freq_hz);
+    match plain {
+        Some(plain) if !opts.refined_only && md.rows.contains(&RowSource::PerAxis) => {
+            retry_unrefined(frf, r, opts, md, plain)
+        }
+        _ => Ok(md),
+    }
+}
+
+/// Where a 3x3 row of the design `md` on the refined fit loses to its
+/// per-axis row, the design on the same fit without the refinement
+/// (`plain`), kept where its rows have less error judged on the per-axis
+/// fits ([`judged_errors`]); the summary says which and why.
+///
+/// The refinement moves the fit's poles and residues to the likeliest ones
+/// on the lines, where the lines say nothing above the band; a 3x3 model can
+/// then carry a right-half-plane transmission zero just above the band that
+/// no causal compensator inverts, and its rows near the band's top fail
+/// (BENCHMARKS.md, "Twelve independent plates").
+fn retry_unrefined(
+    frf: &Frf,
+    r: [f64; 3],
+    opts: &MatrixOptions,
+    mut md: MatrixDesign,
+    plain: GivenModel,
+) -> Result<MatrixDesign> {
+    let lost: Vec<&str> = md
+        .summary
+        .axes
+        .iter()
+        .filter(|a| a.source == RowSource::PerAxis && a.matrix.is_some())
+        .map(|a| a.axis)
+        .collect();
+    if lost.is_empty() {
+        return Ok(md);
+    }
+    opts.say("a 3x3 row loses to its per-axis row on the refined fit: designing on the fit without the refinement…");
+    let before = judged_errors(&md);
+    let why = format!("on the refined 3x3 fit the 3x3 row of {} lost to the per-axis row; ", lost.join(", "));
+    match design(frf, r, opts, Some(plain), Vec::new()) {
+        Ok(mut alt) => {
+            let after = judged_errors(&alt);
+            let sq = |e: &[f64; 3]| e.iter().map(|v| v * v).sum::<f64>();
+            let show = |e: &[f64; 3]| e.map(|v| format!("{:.3}", 100.0 * v)).join(" / ");
+            if sq(&after) < sq(&before) {
+                alt.summary.notes.push(format!(
+                    "{why}the fit without the refinement (vector fitting's own model) is used: judged on the per-axis fits, \
+                     x / y / z {} % against {} % on the refined fit",
+                    show(&after),
+                    show(&before)
+                ));
+                return Ok(alt);
+            }
+            md.summary.notes.push(format!(
+                "{why}the fit without the refinement does no better (judged on the per-axis fits, x / y / z {} % against {} %)",
+                show(&after),
+                show(&before)
+            ));
+        }
+        Err(e) => md.summary.notes.push(format!("{why}the fit without the refinement gives no design: {e:#}")),
+    }
     Ok(md)
+}
+
+/// Each output axis's error judged on the per-axis fits (the criterion that
+/// chose its row, [`Criteria`]), of the row it uses.
+fn judged_errors(md: &MatrixDesign) -> [f64; 3] {
+    std::array::from_fn(|i| {
+        let a = &md.summary.axes[i];
+        let judged = match a.source {
+            RowSource::Matrix => a.matrix_judged,
+            RowSource::PerAxis => a.per_axis_judged,
+        };
+        judged.map_or(a.chosen.error, |j| j.error)
+    })
 }
 
 impl MatrixOptions {
@@ -500,7 +582,14 @@ fn fit_stage(
     let prepared_model = match given {
         Some(g) => prepare_model(frf, bands, d.fs_hz, d.coherence_threshold, g),
         None => matrix_stages(frf, bands, &vf).and_then(|(stages, vf)| {
-            prepare_matrix(frf, bands, d.fs_hz, &stages, &vf, d.coherence_threshold, prepared).or_else(|e| {
+            prepare_matrix(frf, bands, d.fs_hz, &stages, &vf, d.coherence_threshold, prepared)
+                .map(|mut p| {
+                    if vf.refine {
+                        p.plain = plain_model(frf, &stages, &vf, p.unsplit.is_some());
+                    }
+                    p
+                })
+                .or_else(|e| {
                 // The refined model (`fit::refine`) can sit where the discrete
                 // model or its realization refuses it (the off-centre plate at
                 // 51.2 kHz on 8 Hz lines: realization 3.7e-4 from the
@@ -860,6 +949,19 @@ fn prepare_matrix(
     prepare_model(frf, bands, fs, threshold, unsplit)
 }
 
+/// The fit of `stages` without its refinement, as the refined model was
+/// taken (`split`: with close modes split).
+fn plain_model(frf: &Frf, stages: &MatrixFitStages, vf: &VfOptions, split: bool) -> Option<GivenModel> {
+    let plain = VfOptions { refine: false, ..vf.clone() };
+    let fit = with_weighted_matrix(frf, |data| stages.finish(data, &plain)).ok()?.ok()?;
+    let (model, dropped_hz) = match fit.unsplit {
+        Some(u) if !split => (u, fit.unsplit_dropped_hz),
+        _ => (fit.model, fit.dropped_hz),
+    };
+    let weighted_rms = with_weighted_matrix(frf, |data| data.weighted_rms(&model)).ok()?;
+    Some(GivenModel { model, weighted_rms, order_trace: fit.order_trace, dropped_hz })
+}
+
 /// Σ_i Σ_f |Ĝ_ii(j2πf) − P_i(j2πf)|²/|P_i(j2πf)|² over the lines `freq_hz`
 /// in axis i's band, with P_i axis i's own per-axis fit (where it has one):
 /// how far the model's direct entries are from fits that are independent of
@@ -914,7 +1016,7 @@ fn prepare_model(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, threshold: f64, gi
     let plant = plant_states(&dm, &lines).context("plant of the 3x3 model")?;
     let modes = model.modes();
     let figures = MatrixFitFigures { order: model.order(), weighted_rms, order_trace, entry_error, modes, dropped_hz };
-    Ok(MatrixPrep { fit: figures, model, dm, matching, plant, unsplit: None })
+    Ok(MatrixPrep { fit: figures, model, dm, matching, plant, unsplit: None, plain: None })
 }
 
 /// The criterion on the 3x3 model Ĝ (the predictions, and the q search),
