@@ -456,8 +456,9 @@ fn design(
 
 /// Where a 3x3 row of the design `md` on the refined fit loses to its
 /// per-axis row, the design on the same fit without the refinement
-/// (`plain`), kept where its rows have less error judged on the per-axis
-/// fits ([`judged_errors`]); the summary says which and why.
+/// (`plain`), kept where its rows have less error as the rows are judged
+/// ([`judged_errors`]: each model with its direct entries replaced by the
+/// per-axis fits, which both share); the summary says which and why.
 ///
 /// The refinement moves the fit's poles and residues to the likeliest ones
 /// on the lines, where the lines say nothing above the band; a 3x3 model can
