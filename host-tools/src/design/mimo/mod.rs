@@ -346,7 +346,10 @@ struct Round {
 ///    ([`crate::realize::mimo`]);
 /// 7. where its filter is over `opts.load_limit_permille`, its 3x3 block
 ///    reduced by balancing to one that fits, if every 3x3 row still beats
-///    its per-axis row ([`reduce`]).
+///    its per-axis row ([`reduce`]);
+/// 8. where a 3x3 row lost to its per-axis row, all of it again on the fit
+///    without its refinement, kept if its rows judge better
+///    ([`retry_unrefined`]).
 ///
 /// The latency follows the per-axis rule ([`crate::design::latency`]):
 /// [`DEFAULT_LATENCY`], and [`LONGER_LATENCIES`] only where an axis's best
