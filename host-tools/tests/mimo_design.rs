@@ -334,6 +334,7 @@ fn evaluate(md: &MatrixDesign, out: &PlateSimOutput) -> Figures {
     if std::env::var_os("MIMO_STUDY_NOTES").is_some() {
         diagnose(md, out, &est);
         model_error(md, out);
+        residual_excess(md, out);
     }
     let spec = FloorSpec { r_n2: noise(out), fs_hz: fs, band_hz: (0.0, band), std_truth_n: std_truth };
     let floor = inverse_noise_floor(&|f| out.cut_modal.frf(f), &spec).unwrap();
@@ -409,6 +410,44 @@ fn diagnose(md: &MatrixDesign, out: &PlateSimOutput, est: &[[f32; 3]]) {
             100.0 * rms(&out.idle[i]) / std_t
         );
     }
+}
+
+/// Where the fit leaves more than the impact test's noise: per window of
+/// [`EXCESS_WINDOW`] lines, z = (S − L·m)/(m·√(L/9)), with S the sum over the
+/// window's L lines of Σ_e w_e|Ĝ_e − H_e|² (w the fit's inverse-variance
+/// weights, nine entries) and m its mean per line over all lines. Nine
+/// independent complex Gaussian residuals per line give that standard
+/// deviation. A mode the fit left out shows as a window of large z. Prints
+/// the six largest windows (start of the window).
+fn residual_excess(md: &MatrixDesign, out: &PlateSimOutput) {
+    const EXCESS_WINDOW: usize = 30;
+    let Some(model) = &md.model else { return };
+    let top = with_weighted_matrix(&out.frf, |data| {
+        let v: Vec<f64> = data
+            .freq_hz
+            .iter()
+            .enumerate()
+            .map(|(k, f)| {
+                let g = model.frf(*f);
+                (0..9).map(|e| data.w[e][k] * (g[(e / 3, e % 3)] - data.h[e][k]).norm_sqr()).sum()
+            })
+            .collect();
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        let l = EXCESS_WINDOW as f64;
+        let mut z: Vec<(f64, f64)> = (0..v.len().saturating_sub(EXCESS_WINDOW))
+            .step_by(EXCESS_WINDOW / 3)
+            .map(|a| {
+                let sum: f64 = v[a..a + EXCESS_WINDOW].iter().sum();
+                ((sum - l * m) / (m * (l / 9.0).sqrt()), data.freq_hz[a])
+            })
+            .collect();
+        z.sort_by(|a, b| b.0.total_cmp(&a.0));
+        z.truncate(6);
+        z
+    })
+    .unwrap();
+    let shown: Vec<String> = top.iter().map(|(z, f)| format!("{f:.0} Hz: {z:.1}")).collect();
+    eprintln!("    residual excess over the noise, largest windows of {EXCESS_WINDOW} lines (z): {}", shown.join(", "));
 }
 
 /// `seed_study`'s diagnostics (with `MIMO_STUDY_NOTES`): per row i the
