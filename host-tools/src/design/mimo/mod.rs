@@ -300,10 +300,33 @@ struct MatrixPrep {
     /// Where `model` has close modes split ([`crate::fit::matrix::MatrixFit::splits`]),
     /// the order search's own model, for a design its 3x3 rows cannot use.
     unsplit: Option<GivenModel>,
-    /// Where `model` is the refined fit, the same fit without the
-    /// refinement (vector fitting's own model), for a design whose 3x3 rows
-    /// lose to per-axis rows on the refined one ([`retry_unrefined`]).
-    plain: Option<GivenModel>,
+    /// Where `model` is the refined fit, what finishes the same fit without
+    /// the refinement, for a design whose 3x3 rows lose to per-axis rows on
+    /// the refined one ([`retry_unrefined`]).
+    plain: Option<Unrefined>,
+}
+
+/// The order search of a refined 3x3 fit, kept to finish it without the
+/// refinement (vector fitting's own model) only where a design needs it.
+struct Unrefined {
+    stages: MatrixFitStages,
+    /// The refined fit's options.
+    vf: VfOptions,
+    /// Whether the refined design took the model with close modes split.
+    split: bool,
+}
+
+impl Unrefined {
+    /// The fit without its refinement, split or not as the refined model
+    /// was taken.
+    fn model(&self, frf: &Frf) -> Result<GivenModel> {
+        let plain = VfOptions { refine: false, ..self.vf.clone() };
+        let (split, unsplit) = finished_models(frf, &self.stages, &plain)?;
+        Ok(match unsplit {
+            Some(u) if !self.split => u,
+            _ => split,
+        })
+    }
 }
 
 /// A 3x3 model the design takes instead of fitting one: with the figures of
@@ -450,9 +473,7 @@ fn design(
     md.full_compensator = full_compensator;
     md.summary.worse_than_raw = worse_than_raw::rows_worse_than_raw(&md, &frf.freq_hz);
     match plain {
-        Some(plain) if !opts.refined_only && md.rows.contains(&RowSource::PerAxis) => {
-            retry_unrefined(frf, r, opts, md, plain)
-        }
+        Some(plain) if !opts.refined_only => retry_unrefined(frf, r, opts, md, &plain),
         _ => Ok(md),
     }
 }
@@ -473,7 +494,7 @@ fn retry_unrefined(
     r: [f64; 3],
     opts: &MatrixOptions,
     mut md: MatrixDesign,
-    plain: GivenModel,
+    plain: &Unrefined,
 ) -> Result<MatrixDesign> {
     let lost: Vec<&str> = md
         .summary
@@ -488,7 +509,7 @@ fn retry_unrefined(
     opts.say("a 3x3 row loses to its per-axis row on the refined fit: designing on the fit without the refinement…");
     let before = judged_errors(&md);
     let why = format!("on the refined 3x3 fit the 3x3 row of {} lost to the per-axis row; ", lost.join(", "));
-    match design(frf, r, opts, Some(plain), Vec::new()) {
+    match plain.model(frf).and_then(|m| design(frf, r, opts, Some(m), Vec::new())) {
         Ok(mut alt) => {
             let after = judged_errors(&alt);
             let sq = |e: &[f64; 3]| e.iter().map(|v| v * v).sum::<f64>();
@@ -586,30 +607,31 @@ fn fit_stage(
     let prepared_model = match given {
         Some(g) => prepare_model(frf, bands, d.fs_hz, d.coherence_threshold, g),
         None => matrix_stages(frf, bands, &vf).and_then(|(stages, vf)| {
-            prepare_matrix(frf, bands, d.fs_hz, &stages, &vf, d.coherence_threshold, prepared)
-                .map(|mut p| {
+            match prepare_matrix(frf, bands, d.fs_hz, &stages, &vf, d.coherence_threshold, prepared) {
+                Ok(mut p) => {
                     if vf.refine {
-                        p.plain = plain_model(frf, &stages, &vf, p.unsplit.is_some());
+                        p.plain = Some(Unrefined { stages, vf, split: p.unsplit.is_some() });
                     }
-                    p
-                })
-                .or_else(|e| {
-                // The refined model (`fit::refine`) can sit where the discrete
-                // model or its realization refuses it (the off-centre plate at
-                // 51.2 kHz on 8 Hz lines: realization 3.7e-4 from the
-                // pole-residue form, limit 2e-4); vector fitting's own model
-                // then, once, and the summary says so.
-                if !vf.refine {
-                    return Err(e);
+                    Ok(p)
                 }
-                opts.say("the refined 3x3 model gives no plant: the same fit without the refinement…");
-                let plain = VfOptions { refine: false, ..vf.clone() };
-                let p = prepare_matrix(frf, bands, d.fs_hz, &stages, &plain, d.coherence_threshold, prepared)?;
-                notes.push(format!(
-                    "the 3x3 fit refined to its maximum-likelihood model gave no plant ({e:#}); vector fitting's model is used"
-                ));
-                Ok(p)
-            })
+                Err(e) => {
+                    // The refined model (`fit::refine`) can sit where the discrete
+                    // model or its realization refuses it (the off-centre plate at
+                    // 51.2 kHz on 8 Hz lines: realization 3.7e-4 from the
+                    // pole-residue form, limit 2e-4); vector fitting's own model
+                    // then, once, and the summary says so.
+                    if !vf.refine {
+                        return Err(e);
+                    }
+                    opts.say("the refined 3x3 model gives no plant: the same fit without the refinement…");
+                    let plain = VfOptions { refine: false, ..vf.clone() };
+                    let p = prepare_matrix(frf, bands, d.fs_hz, &stages, &plain, d.coherence_threshold, prepared)?;
+                    notes.push(format!(
+                        "the 3x3 fit refined to its maximum-likelihood model gave no plant ({e:#}); vector fitting's model is used"
+                    ));
+                    Ok(p)
+                }
+            }
         }),
     };
     match prepared_model {
@@ -921,22 +943,9 @@ fn prepare_matrix(
     threshold: f64,
     prepared: &[Result<PreparedAxis>],
 ) -> Result<MatrixPrep> {
-    let fit = with_weighted_matrix(frf, |data| stages.finish(data, vf))?.context("fit of the 3x3 matrix")?;
-    let split = GivenModel {
-        model: fit.model,
-        weighted_rms: fit.weighted_rms,
-        order_trace: fit.order_trace,
-        dropped_hz: fit.dropped_hz,
-    };
-    let Some(unsplit) = fit.unsplit else {
+    let (split, unsplit) = finished_models(frf, stages, vf)?;
+    let Some(unsplit) = unsplit else {
         return prepare_model(frf, bands, fs, threshold, split);
-    };
-    let rms = with_weighted_matrix(frf, |data| data.weighted_rms(&unsplit))?;
-    let unsplit = GivenModel {
-        model: unsplit,
-        weighted_rms: rms,
-        order_trace: split.order_trace.clone(),
-        dropped_hz: fit.unsplit_dropped_hz,
     };
     // The split model only where its direct entries are nearer the
     // independent per-axis fits than the unsplit model's, and the chain
@@ -953,17 +962,27 @@ fn prepare_matrix(
     prepare_model(frf, bands, fs, threshold, unsplit)
 }
 
-/// The fit of `stages` without its refinement, as the refined model was
-/// taken (`split`: with close modes split).
-fn plain_model(frf: &Frf, stages: &MatrixFitStages, vf: &VfOptions, split: bool) -> Option<GivenModel> {
-    let plain = VfOptions { refine: false, ..vf.clone() };
-    let fit = with_weighted_matrix(frf, |data| stages.finish(data, &plain)).ok()?.ok()?;
-    let (model, dropped_hz) = match fit.unsplit {
-        Some(u) if !split => (u, fit.unsplit_dropped_hz),
-        _ => (fit.model, fit.dropped_hz),
+/// `stages` finished with `vf`: its model, and where close modes were split
+/// the order search's own model beside it, each with its weighted error.
+fn finished_models(frf: &Frf, stages: &MatrixFitStages, vf: &VfOptions) -> Result<(GivenModel, Option<GivenModel>)> {
+    let fit = with_weighted_matrix(frf, |data| stages.finish(data, vf))?.context("fit of the 3x3 matrix")?;
+    let split = GivenModel {
+        model: fit.model,
+        weighted_rms: fit.weighted_rms,
+        order_trace: fit.order_trace,
+        dropped_hz: fit.dropped_hz,
     };
-    let weighted_rms = with_weighted_matrix(frf, |data| data.weighted_rms(&model)).ok()?;
-    Some(GivenModel { model, weighted_rms, order_trace: fit.order_trace, dropped_hz })
+    let Some(unsplit) = fit.unsplit else {
+        return Ok((split, None));
+    };
+    let rms = with_weighted_matrix(frf, |data| data.weighted_rms(&unsplit))?;
+    let unsplit = GivenModel {
+        model: unsplit,
+        weighted_rms: rms,
+        order_trace: split.order_trace.clone(),
+        dropped_hz: fit.unsplit_dropped_hz,
+    };
+    Ok((split, Some(unsplit)))
 }
 
 /// Σ_i Σ_f |Ĝ_ii(j2πf) − P_i(j2πf)|²/|P_i(j2πf)|² over the lines `freq_hz`
