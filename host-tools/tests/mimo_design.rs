@@ -28,7 +28,8 @@
 //! ([`model_error`]). Further knobs: `MIMO_STUDY_IMPACTS=N` impacts per
 //! direction, `MIMO_STUDY_MODEL=exact|exact-below` (the design on the
 //! simulator's model), `MIMO_STUDY_ABOVE=inverse`, `MIMO_ABOVE_BAND_SWAP`
-//! (`VfOptions::above_band_swap`), `MIMO_NO_REFINE`, `MIMO_FULL_ORDER`.
+//! (`VfOptions::above_band_swap`), `MIMO_NO_REFINE`, `MIMO_NO_SEED`
+//! (`VfOptions::seed_unfitted` off), `MIMO_FULL_ORDER`.
 
 #![allow(clippy::needless_range_loop)] // axis indices index several arrays at once
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // a negative control asserts a bound is not met, NaN included
@@ -201,9 +202,12 @@ fn design_above(frf: &Frf, out: &PlateSimOutput, above_band: AboveBand) -> anyho
     // MIMO_NO_REFINE: the 3x3 fit without its maximum-likelihood refinement
     // (the per-axis fits keep theirs), for the studies' before-and-after.
     // MIMO_ABOVE_BAND_SWAP: the 3x3 fit with `VfOptions::above_band_swap`.
+    // MIMO_NO_SEED: the 3x3 fit without `VfOptions::seed_unfitted`.
     let matrix_vf = match std::env::var_os("MIMO_ABOVE_BAND_SWAP") {
         Some(_) => Some(VfOptions { above_band_swap: true, ..opts_vf() }),
-        None => std::env::var_os("MIMO_NO_REFINE").map(|_| opts_vf()),
+        None => {
+            (std::env::var_os("MIMO_NO_REFINE").is_some() || std::env::var_os("MIMO_NO_SEED").is_some()).then(opts_vf)
+        }
     };
     let opts = MatrixOptions { design, load_limit_permille: box_limit(), matrix_vf, ..Default::default() };
     design_matrix(frf, noise(out), &opts)
@@ -412,42 +416,23 @@ fn diagnose(md: &MatrixDesign, out: &PlateSimOutput, est: &[[f32; 3]]) {
     }
 }
 
-/// Where the fit leaves more than the impact test's noise: per window of
-/// [`EXCESS_WINDOW`] lines, z = (S − L·m)/(m·√(L/9)), with S the sum over the
-/// window's L lines of Σ_e w_e|Ĝ_e − H_e|² (w the fit's inverse-variance
-/// weights, nine entries) and m its mean per line over all lines. Nine
-/// independent complex Gaussian residuals per line give that standard
-/// deviation. A mode the fit left out shows as a window of large z. Prints
-/// the six largest windows (start of the window).
+/// Where the fit leaves more than the impact test's noise
+/// ([`dynocomp::fit::matrix::MatrixData::residual_excess`]), with the noise
+/// scale the mean weighted residual per real data point: the six largest
+/// windows, their excess in units of that scale. A mode the fit left out
+/// shows as a window of large excess.
 fn residual_excess(md: &MatrixDesign, out: &PlateSimOutput) {
-    const EXCESS_WINDOW: usize = 30;
     let Some(model) = &md.model else { return };
     let top = with_weighted_matrix(&out.frf, |data| {
-        let v: Vec<f64> = data
-            .freq_hz
-            .iter()
-            .enumerate()
-            .map(|(k, f)| {
-                let g = model.frf(*f);
-                (0..9).map(|e| data.w[e][k] * (g[(e / 3, e % 3)] - data.h[e][k]).norm_sqr()).sum()
-            })
-            .collect();
-        let m = v.iter().sum::<f64>() / v.len() as f64;
-        let l = EXCESS_WINDOW as f64;
-        let mut z: Vec<(f64, f64)> = (0..v.len().saturating_sub(EXCESS_WINDOW))
-            .step_by(EXCESS_WINDOW / 3)
-            .map(|a| {
-                let sum: f64 = v[a..a + EXCESS_WINDOW].iter().sum();
-                ((sum - l * m) / (m * (l / 9.0).sqrt()), data.freq_hz[a])
-            })
-            .collect();
-        z.sort_by(|a, b| b.0.total_cmp(&a.0));
-        z.truncate(6);
-        z
+        let v = data.line_residuals(model);
+        let sigma2 = v.iter().map(|l| l.0).sum::<f64>() / v.iter().map(|l| l.1).sum::<usize>() as f64;
+        let mut w = data.residual_excess(model, sigma2);
+        w.truncate(6);
+        w
     })
     .unwrap();
-    let shown: Vec<String> = top.iter().map(|(z, f)| format!("{f:.0} Hz: {z:.1}")).collect();
-    eprintln!("    residual excess over the noise, largest windows of {EXCESS_WINDOW} lines (z): {}", shown.join(", "));
+    let shown: Vec<String> = top.iter().map(|w| format!("{:.0} Hz: {:.0}", w.peak_hz, w.excess)).collect();
+    eprintln!("    residual excess over the noise, largest windows (χ² − N): {}", shown.join(", "));
 }
 
 /// `seed_study`'s diagnostics (with `MIMO_STUDY_NOTES`): per row i the
@@ -937,7 +922,18 @@ fn seed_1_for_its_record_spectrum() {
         fig.per_axis[1]
     );
 
-    let inverse = design_with_prior_above(&out.frf, &out, force_record("1", fs), false, AboveBand::Inverse).unwrap();
+    // The model this was found on: the fit without the seeded 474 Hz pair
+    // (`VfOptions::seed_unfitted`), on whose seeded model the search ends at
+    // q ≈ 9e11 with no candidate refused.
+    let d = DesignOptions {
+        fs_hz: fs,
+        force_record: Some(std::sync::Arc::new(force_record("1", fs))),
+        above_band: AboveBand::Inverse,
+        ..Default::default()
+    };
+    let unseeded = Some(VfOptions { seed_unfitted: false, ..opts_vf() });
+    let opts = MatrixOptions { design: d, load_limit_permille: box_limit(), matrix_vf: unseeded, ..Default::default() };
+    let inverse = design_matrix(&out.frf, noise(&out), &opts).unwrap();
     let search = &inverse.summary.kalman.as_ref().expect("a 3x3 Kalman design").q_search;
     assert!(search.refused > 0, "control: no candidate was refused ({search:?})");
     let fig = evaluate(&inverse, &out);
@@ -1194,6 +1190,9 @@ fn seed_study() {
                 }
                 if std::env::var_os("MIMO_STUDY_NOTES").is_some() {
                     md.summary.notes.iter().for_each(|n| eprintln!("    note: {n}"));
+                    if let Some(f) = &md.summary.fit {
+                        eprintln!("    fit: seeded {:?} Hz, dropped {:?} Hz", f.seeded_hz, f.dropped_hz);
+                    }
                     for a in &md.summary.axes {
                         eprintln!(
                             "    axis {}: band {:.0}-{:.0} Hz, per axis {:?} (own {:?}), 3x3 {:?}; {}",
@@ -1483,9 +1482,57 @@ fn a_3x3_row_lost_on_the_refined_fit_is_designed_again_on_the_plain_one() {
     );
 }
 
+/// Random plate seed 35 at 25.6 kHz has a machine mode at 291 Hz (ζ 0.036)
+/// that 7 impacts per direction barely support: the order search gave it no
+/// pole at any order, and x / y were 1.69 / 0.96 % against floors of 0.291 /
+/// 0.101 %. The fit's residual exceeds the noise there, and a pair seeded
+/// at its peak line is kept by the BIC (`fit::matrix::seed_unfitted_modes`):
+/// x / y 0.62 / 0.13 %. The control is the same design without the seeding.
+#[test]
+#[ignore = "3x3 designs take seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
+fn a_mode_the_impact_test_barely_supports_is_seeded_where_the_residual_exceeds_the_noise() {
+    let fs = 25_600.0;
+    let out = record("35", fs);
+    let opts = |seed_unfitted| MatrixOptions {
+        design: DesignOptions { fs_hz: fs, ..Default::default() },
+        load_limit_permille: box_limit(),
+        matrix_vf: Some(VfOptions { seed_unfitted, ..opts_vf() }),
+        ..Default::default()
+    };
+    // x and y within these factors of their floors (0.62 against 0.291 %,
+    // 0.13 against 0.101 %); the control is 5.8x and 9.5x.
+    const WITHIN: [f64; 2] = [3.0, 2.0];
+    let md = design_matrix(&out.frf, noise(&out), &opts(true)).unwrap();
+    let fig = evaluate(&md, &out);
+    eprintln!("{}", fig.line("35", fs));
+    let fit = md.summary.fit.as_ref().expect("the fit's figures");
+    assert!(fit.seeded_hz.iter().any(|f| (f - 291.0).abs() < 10.0), "seeded {:?}", fit.seeded_hz);
+    assert!(fit.modes.iter().any(|m| (m.0 - 291.0).abs() < 5.0), "{:?}", fit.modes);
+    for (i, within) in WITHIN.iter().enumerate() {
+        assert!(fig.used[i] <= within * fig.floor[i], "axis {i}: {fig:?}");
+    }
+    let control = design_matrix(&out.frf, noise(&out), &opts(false)).unwrap();
+    let control_fig = evaluate(&control, &out);
+    eprintln!("{}", control_fig.line("35-unseeded", fs));
+    assert!(control.summary.fit.as_ref().is_some_and(|f| f.seeded_hz.is_empty()));
+    for (i, within) in WITHIN.iter().enumerate() {
+        assert!(
+            control_fig.used[i] > within * control_fig.floor[i],
+            "control, axis {i}: the design without the seeding passed: {control_fig:?}"
+        );
+    }
+}
+
 fn opts_vf() -> VfOptions {
     let refine = std::env::var_os("MIMO_NO_REFINE").is_none();
-    VfOptions { max_order: MATRIX_MAX_ORDER, iterations: MATRIX_ITERATIONS, refine, ..VfOptions::default() }
+    let seed_unfitted = std::env::var_os("MIMO_NO_SEED").is_none();
+    VfOptions {
+        max_order: MATRIX_MAX_ORDER,
+        iterations: MATRIX_ITERATIONS,
+        refine,
+        seed_unfitted,
+        ..VfOptions::default()
+    }
 }
 
 /// Random plate seed 1 at 25.6 kHz has modes above the impact test's last

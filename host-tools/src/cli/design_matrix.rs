@@ -200,6 +200,15 @@ fn summary_text(args: &DesignArgs, md: &MatrixDesign, id: u32, load: &LoadReport
             f.modes.len(),
             rows.join(", ")
         );
+        if !f.seeded_hz.is_empty() {
+            let hz: Vec<String> = f.seeded_hz.iter().map(|f| format!("{f:.0}")).collect();
+            let _ = writeln!(
+                t,
+                "  pole pairs added near {} Hz, where the fit left more than the impact test's noise (BIC); \
+                 more impacts per direction would confirm a weak mode there",
+                hz.join(", ")
+            );
+        }
         if !f.dropped_hz.is_empty() {
             let hz: Vec<String> = f.dropped_hz.iter().map(|f| format!("{f:.0}")).collect();
             let _ = writeln!(

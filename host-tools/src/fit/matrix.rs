@@ -102,6 +102,9 @@ pub struct MatrixFit {
     pub unsplit: Option<MatrixModel>,
     /// Pairs the split added.
     pub splits: usize,
+    /// Lines (Hz) where [`seed_unfitted_modes`] added a pair to `model`,
+    /// before the refinement moved it (`unsplit` is without them).
+    pub seeded_hz: Vec<f64>,
     /// Natural frequencies (Hz) of the pairs [`drop_unsupported_pairs`]
     /// dropped from the chosen model, in the order dropped.
     pub dropped_hz: Vec<f64>,
@@ -310,6 +313,7 @@ pub struct MatrixFitStages {
     /// unsupported pairs dropped, and their frequencies (Hz).
     unsplit: Option<(MatrixModel, Vec<f64>)>,
     splits: usize,
+    seeded_hz: Vec<f64>,
     order_trace: Vec<(usize, f64)>,
 }
 
@@ -351,16 +355,32 @@ pub fn matrix_fit_stages(data: &MatrixData, opts: &VfOptions) -> Result<MatrixFi
     let sigma2 = data.noise_scale(&models);
     let (order, model, rss) = models.swap_remove(best);
     let (split, splits) = split_close_modes(data, opts, (order, model.clone(), rss), sigma2);
+    // Missing modes are seeded after the split, which fits close modes the
+    // order search took as one pair: the residual beside such a pair is
+    // theirs, not a missing mode's.
+    let (split, seeded) = if opts.seed_unfitted {
+        let split_rss = data.rss(&split);
+        let (_, split, seeded) = seed_unfitted_modes(data, (order + 2 * splits, split, split_rss), sigma2);
+        (split, seeded)
+    } else {
+        (split, Vec::new())
+    };
+    let seeded_poles: Vec<Complex64> = seeded.iter().map(|s| s.1).collect();
+    let finished = |m: MatrixModel| -> Result<(MatrixModel, Vec<f64>)> {
+        let (m, dropped) = drop_unsupported_pairs(data, skim(data, opts.f_identified_hz, m)?, sigma2)?;
+        Ok((prune_seeded(data, m, sigma2, &seeded_poles)?, dropped))
+    };
     let unsplit = match splits {
         0 => None,
-        _ => Some(drop_unsupported_pairs(data, skim(data, opts.f_identified_hz, model)?, sigma2)?),
+        _ => Some(finished(model)?),
     };
-    let (model, dropped_hz) = drop_unsupported_pairs(data, skim(data, opts.f_identified_hz, split)?, sigma2)?;
+    let (model, dropped_hz) = finished(split)?;
+    let seeded_hz = seeded.iter().map(|s| s.0).collect();
     let model = match splits {
         0 => model,
         _ => prune_close_pairs(data, model, sigma2)?,
     };
-    Ok(MatrixFitStages { model, dropped_hz, unsplit, splits, order_trace: trace })
+    Ok(MatrixFitStages { model, dropped_hz, unsplit, splits, seeded_hz, order_trace: trace })
 }
 
 impl MatrixFitStages {
@@ -383,6 +403,7 @@ impl MatrixFitStages {
             order_trace: self.order_trace.clone(),
             unsplit,
             splits: self.splits,
+            seeded_hz: self.seeded_hz.clone(),
             dropped_hz: self.dropped_hz.clone(),
             unsplit_dropped_hz,
         })
@@ -567,6 +588,152 @@ fn split_close_modes(
     (model, splits)
 }
 
+/// Most pole pairs [`seed_unfitted_modes`] adds.
+pub const MAX_SEEDS: usize = 3;
+
+/// Lines per window of [`MatrixData::residual_excess`].
+pub const EXCESS_WINDOW: usize = 30;
+
+/// Damping ratios a seeded pair is tried with.
+const SEED_ZETAS: [f64; 4] = [0.005, 0.01, 0.02, 0.04];
+
+/// Windows of the residual tried per round of [`seed_unfitted_modes`].
+const SEED_WINDOWS: usize = 3;
+
+/// A window of lines where a fit leaves more than the noise.
+#[derive(Clone, Copy, Debug)]
+pub struct ResidualWindow {
+    /// First and last line (Hz).
+    pub band_hz: (f64, f64),
+    /// The line of largest residual in the window (Hz).
+    pub peak_hz: f64,
+    /// Σ w|Ĝ − H|²/σ̂² − N_w over the window's N_w real data points: the
+    /// χ² the fit leaves above the noise's expectation, in units of σ̂².
+    pub excess: f64,
+}
+
+impl MatrixData<'_> {
+    /// Per line, Σ_e w_e|Ĝ_e − H_e|² over the nine entries, and the real
+    /// data points on it (two per entry of positive weight).
+    pub fn line_residuals(&self, model: &MatrixModel) -> Vec<(f64, usize)> {
+        self.freq_hz
+            .iter()
+            .enumerate()
+            .map(|(k, f)| {
+                let g = model.frf(*f);
+                (0..ENTRIES).filter(|&e| self.w[e][k] > 0.0).fold((0.0, 0), |(sum, n), e| {
+                    (sum + self.w[e][k] * (g[(e / 3, e % 3)] - self.h[e][k]).norm_sqr(), n + 2)
+                })
+            })
+            .collect()
+    }
+
+    /// Windows of [`EXCESS_WINDOW`] lines (starting every third of a
+    /// window) where `model` leaves more χ² than the noise scale `sigma2`
+    /// explains, the largest excess first, overlapping windows dropped.
+    ///
+    /// A mode the fit left out shows as a window of large excess: a pair
+    /// the BIC would take ([`MatrixData::bic`]) lowers the χ² by more than
+    /// its penalty, 20·ln N, and a window whose excess is below that cannot
+    /// hold one.
+    pub fn residual_excess(&self, model: &MatrixModel, sigma2: f64) -> Vec<ResidualWindow> {
+        let v = self.line_residuals(model);
+        if v.len() < EXCESS_WINDOW || !(sigma2 > 0.0) {
+            return Vec::new();
+        }
+        let mut windows: Vec<(usize, ResidualWindow)> = (0..=v.len() - EXCESS_WINDOW)
+            .step_by(EXCESS_WINDOW / 3)
+            .map(|a| {
+                let w = &v[a..a + EXCESS_WINDOW];
+                let chi2: f64 = w.iter().map(|l| l.0).sum::<f64>() / sigma2;
+                let points: usize = w.iter().map(|l| l.1).sum();
+                let peak = (0..EXCESS_WINDOW).max_by(|&i, &j| w[i].0.total_cmp(&w[j].0)).unwrap_or(0);
+                let window = ResidualWindow {
+                    band_hz: (self.freq_hz[a], self.freq_hz[a + EXCESS_WINDOW - 1]),
+                    peak_hz: self.freq_hz[a + peak],
+                    excess: chi2 - points as f64,
+                };
+                (a, window)
+            })
+            .collect();
+        windows.sort_by(|a, b| b.1.excess.total_cmp(&a.1.excess));
+        let mut kept: Vec<(usize, ResidualWindow)> = Vec::new();
+        for (a, w) in windows {
+            if kept.iter().all(|(b, _)| a.abs_diff(*b) >= EXCESS_WINDOW) {
+                kept.push((a, w));
+            }
+        }
+        kept.into_iter().map(|(_, w)| w).collect()
+    }
+}
+
+/// Modes the order search left out, each added as a pair where the fit's
+/// residual exceeds the noise.
+///
+/// Vector fitting relocates its poles from linearly spaced ones, on every
+/// few lines ([`relocation_step`]); a weak, lightly damped machine mode that
+/// a few impacts barely support can get no pole at any order, and its
+/// residual stays, a window of lines where the fit leaves far more than the
+/// impact test's noise ([`MatrixData::residual_excess`]). In each of the
+/// [`SEED_WINDOWS`] windows of largest excess above a pair's BIC penalty
+/// whose line of largest residual lies outside the half-power
+/// bandwidth of every fitted pair (close modes are the split's), a pair is
+/// tried at the line of largest residual with each damping ratio of
+/// [`SEED_ZETAS`], every other pole kept, the residues refitted
+/// ([`fit_residues`]); the trial of least [`MatrixData::bic`] is kept if it
+/// lowers the BIC, with the order search's noise scale `sigma2`, and the
+/// search repeats, up to [`MAX_SEEDS`] times. The refinement that follows
+/// ([`refined`]) moves the pair to the maximum-likelihood pole. `fit` is
+/// (order, model, RSS); returns the order, the model and, per pair seeded,
+/// the line (Hz) and the pole (rad/s).
+fn seed_unfitted_modes(
+    data: &MatrixData,
+    fit: (usize, MatrixModel, f64),
+    sigma2: f64,
+) -> (usize, MatrixModel, Vec<(f64, Complex64)>) {
+    let (mut order, mut model, mut rss) = fit;
+    let mut seeded = Vec::new();
+    let w_scale = 2.0 * PI * data.f_max();
+    let penalty = (2 + 2 * ENTRIES) as f64 * (data.points() as f64).ln();
+    for _ in 0..MAX_SEEDS {
+        let poles: Vec<Pole> =
+            (0..model.terms()).map(|k| model.pole(k)).map(|(p, pair)| Pole { p: p / w_scale, pair }).collect();
+        // A window at a fitted pair is the split's to try
+        // ([`split_close_modes`]): a second pair there is a close mode, not
+        // a missing one.
+        let at_pair = |f: f64| {
+            let w = 2.0 * PI * f / w_scale;
+            poles.iter().any(|q| q.pair && (q.p.im - w).abs() <= -q.p.re)
+        };
+        let windows: Vec<ResidualWindow> = data
+            .residual_excess(&model, sigma2)
+            .into_iter()
+            .filter(|w| w.excess > penalty && !at_pair(w.peak_hz))
+            .take(SEED_WINDOWS)
+            .collect();
+        let starts: Vec<(f64, f64)> =
+            windows.iter().flat_map(|w| SEED_ZETAS.iter().map(move |z| (w.peak_hz, *z))).collect();
+        let trials = map_on_threads(&starts, |&(f, zeta)| {
+            let mut with = poles.clone();
+            let w = 2.0 * PI * f;
+            let p = Complex64::new(-zeta * w, w * (1.0 - zeta * zeta).sqrt());
+            with.push(Pole { p: p / w_scale, pair: true });
+            let m = fit_residues(data, &with, w_scale).ok().filter(|m| m.is_stable())?;
+            let r = data.rss(&m);
+            r.is_finite().then_some((data.bic(r, order + 2, sigma2), m, r, (f, p)))
+        });
+        let current = data.bic(rss, order, sigma2);
+        match trials.into_iter().flatten().min_by(|a, b| a.0.total_cmp(&b.0)) {
+            Some((bic, m, r, seed)) if bic < current => {
+                (order, model, rss) = (order + 2, m, r);
+                seeded.push(seed);
+            }
+            _ => break,
+        }
+    }
+    (order, model, seeded)
+}
+
 /// Largest cluster of close pairs whose subsets are tried per entry.
 const MAX_CLUSTER: usize = 4;
 
@@ -581,6 +748,25 @@ const MAX_CLUSTER: usize = 4;
 /// residues of the others set to zero; the poles stay common). Terms left
 /// with no residue in any entry are dropped.
 fn prune_close_pairs(data: &MatrixData, model: MatrixModel, sigma2: f64) -> Result<MatrixModel> {
+    let groups = close_clusters(&model);
+    prune_per_entry(data, model, sigma2, &groups, 1)
+}
+
+/// Per entry, each pair [`seed_unfitted_modes`] added (`seeded`, its pole
+/// in rad/s) kept or left out by the BIC ([`prune_per_entry`]): a weak
+/// mode that a few impacts barely support is seen in some entries only,
+/// and in the others its residue would follow the noise.
+fn prune_seeded(data: &MatrixData, model: MatrixModel, sigma2: f64, seeded: &[Complex64]) -> Result<MatrixModel> {
+    let groups: Vec<Vec<usize>> = (0..model.terms())
+        .filter(|&k| seeded.iter().any(|p| (model.pole(k).0 - p).norm() <= 1e-9 * p.norm()))
+        .map(|k| vec![k])
+        .collect();
+    prune_per_entry(data, model, sigma2, &groups, 0)
+}
+
+/// Clusters of close pairs (connected components of "within another's
+/// half-power bandwidth"), of two to [`MAX_CLUSTER`] terms.
+fn close_clusters(model: &MatrixModel) -> Vec<Vec<usize>> {
     let terms = model.terms();
     let poles: Vec<(Complex64, bool)> = (0..terms).map(|k| model.pole(k)).collect();
     let close = |a: usize, b: usize| {
@@ -597,13 +783,26 @@ fn prune_close_pairs(data: &MatrixData, model: MatrixModel, sigma2: f64) -> Resu
             }
         }
     }
-    let groups: Vec<Vec<usize>> = (0..terms)
+    (0..terms)
         .map(|c| (0..terms).filter(|&k| cluster[k] == c).collect::<Vec<_>>())
         .filter(|g| g.len() > 1 && g.len() <= MAX_CLUSTER)
-        .collect();
+        .collect()
+}
+
+/// Per entry, the subset of each group of terms `groups` (of at least
+/// `least` terms) of least BIC, the residues of the others set to zero (the
+/// poles stay common); terms left with no residue in any entry are dropped.
+fn prune_per_entry(
+    data: &MatrixData,
+    model: MatrixModel,
+    sigma2: f64,
+    groups: &[Vec<usize>],
+    least: u32,
+) -> Result<MatrixModel> {
     if groups.is_empty() {
         return Ok(model);
     }
+    let terms = model.terms();
     let w_scale = 2.0 * PI * data.f_max();
     let s: Vec<Complex64> = data.freq_hz.iter().map(|f| Complex64::new(0.0, 2.0 * PI * f / w_scale)).collect();
     let ln_n = (data.points() as f64).ln();
@@ -623,9 +822,9 @@ fn prune_close_pairs(data: &MatrixData, model: MatrixModel, sigma2: f64) -> Resu
             Ok((m, rss))
         };
         let mut keep = vec![true; terms];
-        for g in &groups {
+        for g in groups {
             let mut best: Option<(f64, u32)> = None;
-            for subset in 1..(1u32 << g.len()) {
+            for subset in (0..(1u32 << g.len())).filter(|s| s.count_ones() >= least) {
                 for (bit, &k) in g.iter().enumerate() {
                     keep[k] = subset & (1 << bit) != 0;
                 }
@@ -1010,6 +1209,29 @@ mod tests {
             .collect()
     }
 
+    /// Modes at 300 (ζ 0.03) and 700 Hz (ζ 0.025) in the direct entries
+    /// (direct term 1), a direct term of 0.02 in the cross entries.
+    fn two_direct_modes() -> MatrixModel {
+        let diag = [0, 4, 8];
+        let mut truth = MatrixModel {
+            entries: (0..ENTRIES)
+                .map(|e| PoleResidueModel { terms: Vec::new(), d: if diag.contains(&e) { 1.0 } else { 0.02 } })
+                .collect(),
+        };
+        truth.add(pair_in(300.0, 0.03, 0.05, &diag));
+        truth.add(pair_in(700.0, 0.025, 0.04, &diag));
+        truth
+    }
+
+    impl MatrixModel {
+        /// One term per entry added, `terms` row by row.
+        fn add(&mut self, terms: Vec<Term>) {
+            for (entry, t) in self.entries.iter_mut().zip(terms) {
+                entry.terms.push(t);
+            }
+        }
+    }
+
     /// Modes at 300 and 700 Hz in the direct entries and, where `above`, a
     /// one at 1370 Hz (above the last line, 1 kHz) in G_xx and G_zx.
     /// Given the model with the best damped pair inside the band in its
@@ -1020,21 +1242,9 @@ mod tests {
     #[test]
     fn a_damped_pair_standing_in_for_a_mode_above_the_lines_moves_above_them() {
         for above in [true, false] {
-            let diag = [0, 4, 8];
-            let mut truth = MatrixModel {
-                entries: (0..ENTRIES)
-                    .map(|e| PoleResidueModel { terms: Vec::new(), d: if diag.contains(&e) { 1.0 } else { 0.02 } })
-                    .collect(),
-            };
-            let mut add = |terms: Vec<Term>| {
-                for (entry, t) in truth.entries.iter_mut().zip(terms) {
-                    entry.terms.push(t);
-                }
-            };
-            add(pair_in(300.0, 0.03, 0.05, &diag));
-            add(pair_in(700.0, 0.025, 0.04, &diag));
+            let mut truth = two_direct_modes();
             if above {
-                add(pair_in(1370.0, 0.03, 0.05, &[0, 6]));
+                truth.add(pair_in(1370.0, 0.03, 0.05, &[0, 6]));
             }
             let (freq, h, w) = measured(&truth, 2e-3);
             let data = shared_weights(&freq, &h, &w);
@@ -1152,5 +1362,47 @@ mod tests {
         assert_eq!(gap(&finished.model, &scratch.model), 0.0);
         assert_eq!(finished.weighted_rms, scratch.weighted_rms);
         assert!(gap(&refined.model, &scratch.model) > 1e-9, "control: the refinement changed nothing");
+    }
+
+    /// Modes at 300 and 700 Hz in the direct entries and, where `weak`, one
+    /// at 480 Hz (ζ 0.02) seen in G_xx and G_yx at ten times the noise at its
+    /// peak. Given the fit of the two strong poles alone, the window of
+    /// largest excess lies at the weak mode, and [`seed_unfitted_modes`]
+    /// adds one pair there that takes the residual down to the noise;
+    /// [`prune_seeded`] keeps it in G_xx and G_yx only. Negative control:
+    /// without the weak mode nothing is added.
+    #[test]
+    fn a_mode_the_fit_left_out_is_seeded_where_the_residual_exceeds_the_noise() {
+        for weak in [true, false] {
+            let mut truth = two_direct_modes();
+            truth.add(pair_in(480.0, 0.02, if weak { 4e-4 } else { 0.0 }, &[0, 3]));
+            let (freq, h, w) = measured(&truth, 2e-3);
+            let data = shared_weights(&freq, &h, &w);
+            let strong = refit_kept(&data, &truth, &[true, true, false]).unwrap();
+            let rss = data.rss(&strong);
+            // Unit weights per complex value of the noise: σ² 0.5 per real point.
+            let sigma2 = 0.5;
+            let top = data.residual_excess(&strong, sigma2)[0];
+            let before = rss / sigma2 / data.points() as f64;
+            let (order, seeded_model, seeded) = seed_unfitted_modes(&data, (4, strong, rss), sigma2);
+            let seeded_rss = data.rss(&seeded_model);
+            if !weak {
+                assert!(seeded.is_empty(), "control: a pair was seeded without a missing mode: {seeded:?}");
+                assert_eq!(order, 4);
+                continue;
+            }
+            assert!((top.peak_hz - 480.0).abs() <= 5.0, "largest excess at {:?}", top);
+            assert_eq!(seeded.len(), 1, "{seeded:?}");
+            assert!((seeded[0].0 - 480.0).abs() <= 5.0, "seeded at {} Hz", seeded[0].0);
+            assert_eq!((order, seeded_model.terms()), (6, 3));
+            let chi2 = seeded_rss / sigma2 / data.points() as f64;
+            assert!(chi2 < 1.05 && before > 1.05, "χ² per point {before} before the seed, {chi2} after");
+            let pruned = prune_seeded(&data, seeded_model, sigma2, &[seeded[0].1]).unwrap();
+            let k = (0..pruned.terms()).find(|&k| (pruned.pole(k).0 - seeded[0].1).norm() < 1e-6).unwrap();
+            let seen: Vec<usize> = (0..ENTRIES)
+                .filter(|&e| matches!(pruned.entries[e].terms[k], Term::Pair { residue, .. } if residue.norm() > 0.0))
+                .collect();
+            assert_eq!(seen, vec![0, 3]);
+        }
     }
 }

@@ -42,6 +42,10 @@ pub struct VfOptions {
     /// G this way gave worse compensators on milling cuts (BENCHMARKS.md,
     /// "A pair above the lines"); for studies.
     pub above_band_swap: bool,
+    /// The 3x3 fit tries a pair where its residual exceeds the noise and
+    /// keeps it where the BIC does (`seed_unfitted_modes` in
+    /// [`super::matrix`]). Off for controls.
+    pub seed_unfitted: bool,
 }
 
 impl Default for VfOptions {
@@ -55,6 +59,7 @@ impl Default for VfOptions {
             refine: true,
             f_ceiling_hz: 0.0,
             above_band_swap: false,
+            seed_unfitted: true,
         }
     }
 }

@@ -105,6 +105,9 @@ pub struct MatrixFitFigures {
     /// Natural frequencies (Hz) of the pairs the fit dropped because the
     /// lines do not support them ([`crate::fit::matrix::drop_unsupported_pairs`]).
     pub dropped_hz: Vec<f64>,
+    /// Frequencies (Hz) where the fit added a pair because its residual
+    /// exceeded the noise there ([`crate::fit::matrix::MatrixFit::seeded_hz`]).
+    pub seeded_hz: Vec<f64>,
 }
 
 /// The peak crosstalk |G_ij|/|G_ii| over the compensated band (coherent
@@ -336,6 +339,7 @@ struct GivenModel {
     weighted_rms: f64,
     order_trace: Vec<(usize, f64)>,
     dropped_hz: Vec<f64>,
+    seeded_hz: Vec<f64>,
 }
 
 /// One latency's designs.
@@ -396,7 +400,13 @@ pub fn design_matrix_with_model(
         frf,
         r,
         opts,
-        Some(GivenModel { model, weighted_rms: f64::NAN, order_trace: Vec::new(), dropped_hz: Vec::new() }),
+        Some(GivenModel {
+            model,
+            weighted_rms: f64::NAN,
+            order_trace: Vec::new(),
+            dropped_hz: Vec::new(),
+            seeded_hz: Vec::new(),
+        }),
         Vec::new(),
     )
 }
@@ -971,6 +981,7 @@ fn finished_models(frf: &Frf, stages: &MatrixFitStages, vf: &VfOptions) -> Resul
         weighted_rms: fit.weighted_rms,
         order_trace: fit.order_trace,
         dropped_hz: fit.dropped_hz,
+        seeded_hz: fit.seeded_hz,
     };
     let Some(unsplit) = fit.unsplit else {
         return Ok((split, None));
@@ -981,6 +992,7 @@ fn finished_models(frf: &Frf, stages: &MatrixFitStages, vf: &VfOptions) -> Resul
         weighted_rms: rms,
         order_trace: split.order_trace.clone(),
         dropped_hz: fit.unsplit_dropped_hz,
+        seeded_hz: Vec::new(),
     };
     Ok((split, Some(unsplit)))
 }
@@ -1009,7 +1021,7 @@ fn direct_distance(
 /// [`prepare_matrix`] from the model: its error against the measurement,
 /// the discrete model and the plant.
 fn prepare_model(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, threshold: f64, given: GivenModel) -> Result<MatrixPrep> {
-    let GivenModel { model, weighted_rms, order_trace, dropped_hz } = given;
+    let GivenModel { model, weighted_rms, order_trace, dropped_hz, seeded_hz } = given;
     let entries: Vec<_> = (0..9).map(|e| frf.entry(e / 3, e % 3).expect("complete")).collect();
     let mut entry_error = [[f64::NAN; 3]; 3];
     for (e, ent) in entries.iter().enumerate() {
@@ -1038,7 +1050,8 @@ fn prepare_model(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, threshold: f64, gi
     let lines: Vec<(f64, CMatrix3)> = grid.iter().map(|f| (*f, model.frf(*f))).collect();
     let plant = plant_states(&dm, &lines).context("plant of the 3x3 model")?;
     let modes = model.modes();
-    let figures = MatrixFitFigures { order: model.order(), weighted_rms, order_trace, entry_error, modes, dropped_hz };
+    let figures =
+        MatrixFitFigures { order: model.order(), weighted_rms, order_trace, entry_error, modes, dropped_hz, seeded_hz };
     Ok(MatrixPrep { fit: figures, model, dm, matching, plant, unsplit: None, plain: None })
 }
 
