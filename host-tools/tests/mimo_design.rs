@@ -1580,6 +1580,45 @@ fn a_mode_above_the_lines_keeps_a_surrogate_in_the_3x3_fit() {
     assert!(kept < 2e-3 && without > 2.0 * kept, "static gains off {kept:.2e}, without the surrogate {without:.2e}");
 }
 
+/// `simulate --dyno plate --seed 26` at 25.6 kHz has a machine mode at
+/// 349 Hz that its 7-impact test barely supports: the fit seeds a pair
+/// there (at the 343 Hz line, within 3 % of the simulator's mode), and
+/// `design` says so and advises more impacts. `compensate --truth` gives fx
+/// 0.76 % (1.58 % without the seed; BENCHMARKS.md, "Missing modes seeded
+/// where the residual exceeds the noise"). Control: seed 21, whose fit
+/// misses no mode below 1 kHz, gets no seeded pair and no advice.
+#[test]
+#[ignore = "a 3x3 design takes seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
+fn cli_design_names_the_weak_mode_it_seeded() {
+    const LINE: &str = "pole pairs added near ";
+    for (seed, weak) in [("26", true), ("21", false)] {
+        let dir = cli_common::tmp("mimo", &format!("seeded-{seed}"));
+        let p = |n: &str| dir.join(n).display().to_string();
+        let sim = ["simulate", "--out", &p(""), "--dyno", "plate", "--seed", seed, "--fs", "25600"];
+        let (ok, _, err) = cli_common::dynocomp(&sim);
+        assert!(ok, "{err}");
+        let (ok, out, err) = cli_common::design(&p("frf.uff"), &p("idle.csv"), "25600", &p("c.dcimg"), &[]);
+        assert!(ok, "{err}");
+        let advice = out.contains("more impacts per direction would confirm a weak mode there");
+        let seeded: Vec<f64> = out
+            .lines()
+            .filter_map(|l| l.split(LINE).nth(1))
+            .flat_map(|rest| rest.split(" Hz").next().unwrap_or("").split(", ").map(|f| f.parse::<f64>().unwrap()))
+            .collect();
+        if !weak {
+            assert!(seeded.is_empty() && !advice, "control, seed {seed}: seeded {seeded:?}\n{out}");
+            continue;
+        }
+        let truth: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(p("truth.json")).unwrap()).unwrap();
+        let true_hz: Vec<f64> =
+            truth["modes"].as_array().unwrap().iter().map(|m| m["fn_hz"].as_f64().unwrap()).collect();
+        let near_a_mode = |f: f64| true_hz.iter().any(|g| (f / g - 1.0).abs() <= 0.03);
+        assert!(advice, "{out}");
+        assert!(seeded.len() == 1 && near_a_mode(seeded[0]), "seeded {seeded:?}, true modes {true_hz:?}\n{out}");
+    }
+}
+
 /// A short simulation of the off-centre plate at `fs` (Hz) by the CLI, in a
 /// fresh folder `name`: the folder, and the path of a file in it.
 fn short_offcentre(name: &str, fs: &str) -> (std::path::PathBuf, impl Fn(&str) -> String) {
