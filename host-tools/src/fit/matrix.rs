@@ -102,8 +102,8 @@ pub struct MatrixFit {
     pub unsplit: Option<MatrixModel>,
     /// Pairs the split added.
     pub splits: usize,
-    /// Lines (Hz) where [`seed_unfitted_modes`] added a pair to `model`,
-    /// before the refinement moved it (`unsplit` is without them).
+    /// Lines (Hz) where [`seed_unfitted_modes`] added a pair that `model`
+    /// holds, before the refinement moved it (`unsplit` is without them).
     pub seeded_hz: Vec<f64>,
     /// Natural frequencies (Hz) of the pairs [`drop_unsupported_pairs`]
     /// dropped from the chosen model, in the order dropped.
@@ -375,11 +375,12 @@ pub fn matrix_fit_stages(data: &MatrixData, opts: &VfOptions) -> Result<MatrixFi
         _ => Some(finished(model)?),
     };
     let (model, dropped_hz) = finished(split)?;
-    let seeded_hz = seeded.iter().map(|s| s.0).collect();
     let model = match splits {
         0 => model,
         _ => prune_close_pairs(data, model, sigma2)?,
     };
+    // The seeded pairs the model still holds (a later drop may take one).
+    let seeded_hz = seeded.iter().filter(|s| term_of_pole(&model, s.1).is_some()).map(|s| s.0).collect();
     Ok(MatrixFitStages { model, dropped_hz, unsplit, splits, seeded_hz, order_trace: trace })
 }
 
@@ -757,11 +758,13 @@ fn prune_close_pairs(data: &MatrixData, model: MatrixModel, sigma2: f64) -> Resu
 /// mode that a few impacts barely support is seen in some entries only,
 /// and in the others its residue would follow the noise.
 fn prune_seeded(data: &MatrixData, model: MatrixModel, sigma2: f64, seeded: &[Complex64]) -> Result<MatrixModel> {
-    let groups: Vec<Vec<usize>> = (0..model.terms())
-        .filter(|&k| seeded.iter().any(|p| (model.pole(k).0 - p).norm() <= 1e-9 * p.norm()))
-        .map(|k| vec![k])
-        .collect();
+    let groups: Vec<Vec<usize>> = seeded.iter().filter_map(|p| term_of_pole(&model, *p)).map(|k| vec![k]).collect();
     prune_per_entry(data, model, sigma2, &groups, 0)
+}
+
+/// The term of `model` whose pole is `p` (rad/s; to rounding), if any.
+fn term_of_pole(model: &MatrixModel, p: Complex64) -> Option<usize> {
+    (0..model.terms()).find(|&k| (model.pole(k).0 - p).norm() <= 1e-9 * p.norm())
 }
 
 /// Clusters of close pairs (connected components of "within another's
