@@ -821,6 +821,19 @@ fn design_with_prior_above(
     level_only: bool,
     above_band: AboveBand,
 ) -> anyhow::Result<MatrixDesign> {
+    design_with_prior_fit(frf, out, rec, level_only, above_band, None)
+}
+
+/// [`design_with_prior_above`] with the 3x3 fit's options `matrix_vf`
+/// (`None`: the design's own).
+fn design_with_prior_fit(
+    frf: &Frf,
+    out: &PlateSimOutput,
+    rec: ForceRecord,
+    level_only: bool,
+    above_band: AboveBand,
+    matrix_vf: Option<VfOptions>,
+) -> anyhow::Result<MatrixDesign> {
     let d = DesignOptions {
         fs_hz: out.params.fs_hz,
         force_record: Some(std::sync::Arc::new(rec)),
@@ -828,7 +841,8 @@ fn design_with_prior_above(
         above_band,
         ..Default::default()
     };
-    design_matrix(frf, noise(out), &MatrixOptions { design: d, load_limit_permille: box_limit(), ..Default::default() })
+    let opts = MatrixOptions { design: d, load_limit_permille: box_limit(), matrix_vf, ..Default::default() };
+    design_matrix(frf, noise(out), &opts)
 }
 
 /// `compensate --offline` runs on every 3x3 image `design` writes. The
@@ -925,15 +939,9 @@ fn seed_1_for_its_record_spectrum() {
     // The model this was found on: the fit without the seeded 474 Hz pair
     // (`VfOptions::seed_unfitted`), on whose seeded model the search ends at
     // q ≈ 9e11 with no candidate refused.
-    let d = DesignOptions {
-        fs_hz: fs,
-        force_record: Some(std::sync::Arc::new(force_record("1", fs))),
-        above_band: AboveBand::Inverse,
-        ..Default::default()
-    };
     let unseeded = Some(VfOptions { seed_unfitted: false, ..opts_vf() });
-    let opts = MatrixOptions { design: d, load_limit_permille: box_limit(), matrix_vf: unseeded, ..Default::default() };
-    let inverse = design_matrix(&out.frf, noise(&out), &opts).unwrap();
+    let inverse =
+        design_with_prior_fit(&out.frf, &out, force_record("1", fs), false, AboveBand::Inverse, unseeded).unwrap();
     let search = &inverse.summary.kalman.as_ref().expect("a 3x3 Kalman design").q_search;
     assert!(search.refused > 0, "control: no candidate was refused ({search:?})");
     let fig = evaluate(&inverse, &out);

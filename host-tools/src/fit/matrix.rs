@@ -358,23 +358,16 @@ pub fn matrix_fit_stages(data: &MatrixData, opts: &VfOptions) -> Result<MatrixFi
     // Missing modes are seeded after the split, which fits close modes the
     // order search took as one pair: the residual beside such a pair is
     // theirs, not a missing mode's.
-    let (split, seeded) = if opts.seed_unfitted {
-        let split_rss = data.rss(&split);
-        let (_, split, seeded) = seed_unfitted_modes(data, (order + 2 * splits, split, split_rss), sigma2);
-        (split, seeded)
-    } else {
-        (split, Vec::new())
-    };
-    let seeded_poles: Vec<Complex64> = seeded.iter().map(|s| s.1).collect();
-    let finished = |m: MatrixModel| -> Result<(MatrixModel, Vec<f64>)> {
-        let (m, dropped) = drop_unsupported_pairs(data, skim(data, opts.f_identified_hz, m)?, sigma2)?;
-        Ok((prune_seeded(data, m, sigma2, &seeded_poles)?, dropped))
-    };
+    let (split, seeded) =
+        if opts.seed_unfitted { seed_unfitted_modes(data, split, sigma2) } else { (split.1, Vec::new()) };
+    let finished = |m: MatrixModel| drop_unsupported_pairs(data, skim(data, opts.f_identified_hz, m)?, sigma2);
     let unsplit = match splits {
         0 => None,
         _ => Some(finished(model)?),
     };
     let (model, dropped_hz) = finished(split)?;
+    let seeded_poles: Vec<Complex64> = seeded.iter().map(|s| s.1).collect();
+    let model = prune_seeded(data, model, sigma2, &seeded_poles)?;
     let model = match splits {
         0 => model,
         _ => prune_close_pairs(data, model, sigma2)?,
@@ -521,13 +514,14 @@ const SPLIT_SPACING: f64 = 0.005;
 /// relocated from there ([`fit_matrix_from`]); the split of least
 /// [`MatrixData::bic`] is kept if it lowers the BIC, with the order search's
 /// noise scale `sigma2`, and the search repeats, up to [`MAX_SPLITS`]
-/// times. `fit` is (order, model, RSS).
+/// times. `fit` is (order, model, RSS); returns the same after the splits,
+/// and the pairs added.
 fn split_close_modes(
     data: &MatrixData,
     opts: &VfOptions,
     fit: (usize, MatrixModel, f64),
     sigma2: f64,
-) -> (MatrixModel, usize) {
+) -> ((usize, MatrixModel, f64), usize) {
     let (mut order, mut model, mut rss) = fit;
     let mut splits = 0;
     let f_top = data.f_max();
@@ -586,7 +580,7 @@ fn split_close_modes(
             _ => break,
         }
     }
-    (model, splits)
+    ((order, model, rss), splits)
 }
 
 /// Most pole pairs [`seed_unfitted_modes`] adds.
@@ -685,13 +679,13 @@ impl MatrixData<'_> {
 /// lowers the BIC, with the order search's noise scale `sigma2`, and the
 /// search repeats, up to [`MAX_SEEDS`] times. The refinement that follows
 /// ([`refined`]) moves the pair to the maximum-likelihood pole. `fit` is
-/// (order, model, RSS); returns the order, the model and, per pair seeded,
-/// the line (Hz) and the pole (rad/s).
+/// (order, model, RSS); returns the model and, per pair seeded, the line
+/// (Hz) and the pole (rad/s).
 fn seed_unfitted_modes(
     data: &MatrixData,
     fit: (usize, MatrixModel, f64),
     sigma2: f64,
-) -> (usize, MatrixModel, Vec<(f64, Complex64)>) {
+) -> (MatrixModel, Vec<(f64, Complex64)>) {
     let (mut order, mut model, mut rss) = fit;
     let mut seeded = Vec::new();
     let w_scale = 2.0 * PI * data.f_max();
@@ -732,7 +726,7 @@ fn seed_unfitted_modes(
             _ => break,
         }
     }
-    (order, model, seeded)
+    (model, seeded)
 }
 
 /// Largest cluster of close pairs whose subsets are tried per entry.
@@ -1387,21 +1381,21 @@ mod tests {
             let sigma2 = 0.5;
             let top = data.residual_excess(&strong, sigma2)[0];
             let before = rss / sigma2 / data.points() as f64;
-            let (order, seeded_model, seeded) = seed_unfitted_modes(&data, (4, strong, rss), sigma2);
+            let (seeded_model, seeded) = seed_unfitted_modes(&data, (4, strong, rss), sigma2);
             let seeded_rss = data.rss(&seeded_model);
             if !weak {
                 assert!(seeded.is_empty(), "control: a pair was seeded without a missing mode: {seeded:?}");
-                assert_eq!(order, 4);
+                assert_eq!(seeded_model.terms(), 2);
                 continue;
             }
             assert!((top.peak_hz - 480.0).abs() <= 5.0, "largest excess at {:?}", top);
             assert_eq!(seeded.len(), 1, "{seeded:?}");
             assert!((seeded[0].0 - 480.0).abs() <= 5.0, "seeded at {} Hz", seeded[0].0);
-            assert_eq!((order, seeded_model.terms()), (6, 3));
+            assert_eq!(seeded_model.terms(), 3);
             let chi2 = seeded_rss / sigma2 / data.points() as f64;
             assert!(chi2 < 1.05 && before > 1.05, "χ² per point {before} before the seed, {chi2} after");
             let pruned = prune_seeded(&data, seeded_model, sigma2, &[seeded[0].1]).unwrap();
-            let k = (0..pruned.terms()).find(|&k| (pruned.pole(k).0 - seeded[0].1).norm() < 1e-6).unwrap();
+            let k = term_of_pole(&pruned, seeded[0].1).expect("the seeded term");
             let seen: Vec<usize> = (0..ENTRIES)
                 .filter(|&e| matches!(pruned.entries[e].terms[k], Term::Pair { residue, .. } if residue.norm() > 0.0))
                 .collect();
