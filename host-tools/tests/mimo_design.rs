@@ -876,6 +876,15 @@ fn the_offline_smoother_refines_a_riccati_solution_the_doubling_leaves_over_the_
 /// against the simulator's truth.
 fn offline_within_the_box(fig: &Figures) {
     for i in 0..3 {
+        eprintln!(
+            "axis {i}: offline {:.3} %, box {:.3} % ({:?} row), per-axis row {:.3} %",
+            100.0 * fig.offline[i],
+            100.0 * fig.used[i],
+            fig.rows[i],
+            100.0 * fig.per_axis[i]
+        );
+    }
+    for i in 0..3 {
         assert!(
             fig.offline[i] <= 1.1 * fig.used[i],
             "axis {i}: offline {:.3} % against the box's {:.3} %",

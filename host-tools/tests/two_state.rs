@@ -15,9 +15,8 @@ use dynocomp::design::discretize::{discretize, Discretization};
 use dynocomp::design::kalman::{augmented_plant, solve_filter_dare};
 use dynocomp::design::two_state::model::{pair, TwoState};
 use dynocomp::design::two_state::range::{
-    design_or_hold, pair_second_state, RangeCandidate, RangeDesign, RANGE_STATES,
+    design_or_hold, pair_second_state, two_state_options, RangeCandidate, RangeDesign, RANGE_STATES,
 };
-use dynocomp::fit::vf::VfOptions;
 use dynocomp::fit::PoleResidueModel;
 use dynocomp::metrics::{accuracy, sample_variance};
 use dynocomp::offline::drift::{
@@ -257,7 +256,7 @@ fn drift_case(seed: u64, rpm: f64, delta: f64) -> Vec<(f64, f64, f64)> {
     let drift = Drift { delta, start_s: 0.0, end_s: p.duration_s };
     let out = simulate_drifting(seed, &p, dyno, drift).unwrap();
     let s = &out.sim;
-    let opts = DesignOptions { fs_hz: FS, lag: 4, ..Default::default() };
+    let opts = two_state_options(&DesignOptions { fs_hz: FS, lag: 4, ..Default::default() });
     let mut rows = Vec::new();
     for a in 0..3 {
         let r = sample_variance(&s.idle[a]);
@@ -277,7 +276,7 @@ fn drift_case(seed: u64, rpm: f64, delta: f64) -> Vec<(f64, f64, f64)> {
             s.frf.axis(a).unwrap(),
             &d,
             out.frf_after.axis(a).unwrap(),
-            &VfOptions::default(),
+            &two_state_options(&DesignOptions::default()).vf,
         )
         .unwrap();
         let (ts, machine) = (paired.states, paired.machine);
@@ -521,7 +520,7 @@ fn impact_fixture(axis: usize) -> ImpactFixture {
     let ip = &p.impact;
     let freq = dynocomp::simulate::impact::impact_freqs(ip.n_lines, ip.df_hz);
     let frf0 = impact_test_axis(&before, axis, ip.n_lines, ip.df_hz, 41, ip);
-    let opts = DesignOptions { fs_hz: FS, lag: 4, ..Default::default() };
+    let opts = two_state_options(&DesignOptions { fs_hz: FS, lag: 4, ..Default::default() });
     let d0 = design_axis(&freq, &frf0, 0.05, &opts).unwrap();
     ImpactFixture { before, p, freq, d0: (d0, frf0) }
 }
@@ -548,7 +547,7 @@ fn machine_modes_are_shared_only_where_both_frfs_measured_them_alike() {
     let f_m = sensors_moved.modes[m].fn_hz;
     let run = |after: &dynocomp::simulate::Dynamometer| {
         let frf1 = impact_test_axis(after, 0, ip.n_lines, ip.df_hz, 42, ip);
-        let p = pair_second_state(&freq, frf0, d0, &frf1, &VfOptions::default()).unwrap();
+        let p = pair_second_state(&freq, frf0, d0, &frf1, &two_state_options(&DesignOptions::default()).vf).unwrap();
         (p.states, p.machine)
     };
     let (ts, machine) = run(&sensors_moved);
@@ -591,7 +590,7 @@ fn above_band_modes_are_fitted_jointly_only_where_the_frfs_agree_on_their_static
     assert!(top(&before) > d0.compensated_band_hz.1, "the fixture needs a sensor mode above the band");
     let run_seeded = |after: &dynocomp::simulate::Dynamometer, seed: u64| {
         let frf1 = impact_test_axis(after, 1, ip.n_lines, ip.df_hz, seed, ip);
-        pair_second_state(&freq, frf0, d0, &frf1, &VfOptions::default()).unwrap()
+        pair_second_state(&freq, frf0, d0, &frf1, &two_state_options(&DesignOptions::default()).vf).unwrap()
     };
     let run = |after: &dynocomp::simulate::Dynamometer| run_seeded(after, 42);
     let p = run(&after);

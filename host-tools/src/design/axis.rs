@@ -464,6 +464,8 @@ fn choose_q(obj: &Objective, trace: &mut Vec<(f64, f64)>) -> Result<(f64, Kalman
 struct Fitted {
     model: PoleResidueModel,
     order_trace: Vec<(usize, f64)>,
+    /// Lines (Hz) where the fit seeded a pair ([`crate::fit::vf::VfResult::seeded_hz`]).
+    seeded_hz: Vec<f64>,
     paper: Option<(RationalTf, PaperDiagnostics)>,
 }
 
@@ -581,7 +583,7 @@ fn fit_axis(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions, lines: &AxisLi
             if !vf.model.is_stable() {
                 bail!("axis {name}: fitted model is unstable");
             }
-            Fitted { model: vf.model, order_trace: vf.order_trace, paper: None }
+            Fitted { model: vf.model, order_trace: vf.order_trace, seeded_hz: vf.seeded_hz, paper: None }
         }
         FitMethod::Paper { rfp, .. } => {
             let fit_mask: &[bool] = if opts.bands.is_empty() { &lines.in_band } else { &lines.eval_band };
@@ -594,7 +596,12 @@ fn fit_axis(freq_hz: &[f64], frf: &AxisFrf, opts: &DesignOptions, lines: &AxisLi
                 ..Default::default()
             };
             let model = fit.tf.to_pole_residue().with_context(|| format!("axis {name}: paper fit"))?;
-            Fitted { model, order_trace: vec![(fit.tf.na(), fit.final_error)], paper: Some((fit.tf, diag)) }
+            Fitted {
+                model,
+                order_trace: vec![(fit.tf.na(), fit.final_error)],
+                seeded_hz: Vec::new(),
+                paper: Some((fit.tf, diag)),
+            }
         }
     })
 }
@@ -903,7 +910,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
         model_match,
         raw_predicted_error: raw_j.sqrt(),
         compensated_band_hz: p.lines.comp_band,
-        notes: p.lines.notes.clone(),
+        notes: p.lines.notes.iter().cloned().chain(p.seeded_note()).collect(),
         force_spectrum,
         pass_through: None,
         phase_limits,
@@ -937,6 +944,19 @@ impl PreparedAxis {
             && opts.bands.is_empty()
             && self.fitted.paper.is_none()
             && opts.force_record.is_none()
+    }
+
+    /// The summary's note on the pairs the fit seeded, if any.
+    fn seeded_note(&self) -> Option<String> {
+        if self.fitted.seeded_hz.is_empty() {
+            return None;
+        }
+        let hz: Vec<String> = self.fitted.seeded_hz.iter().map(|f| format!("{f:.0}")).collect();
+        Some(format!(
+            "axis {}: pole pairs added near {} Hz, where the fit left more than the impact test's noise (BIC); more impacts would confirm a weak mode there",
+            self.name,
+            hz.join(", ")
+        ))
     }
 
     /// The band-limited force model of a quiet design, where its corner

@@ -223,6 +223,10 @@ pub struct RunOptions {
     /// The fit refined to the maximum-likelihood model of its order
     /// ([`crate::fit::vf::VfOptions::refine`]; off for before/after studies).
     pub refine_fit: bool,
+    /// Pairs seeded where the fit leaves more than the noise
+    /// ([`crate::fit::vf::VfOptions::seed_unfitted`]; off for before/after
+    /// studies).
+    pub seed_fit: bool,
 }
 
 impl Default for RunOptions {
@@ -236,6 +240,7 @@ impl Default for RunOptions {
             static_gain: crate::design::discretize::StaticGain::Exact,
             above_band: crate::design::above_band::AboveBand::Quiet,
             refine_fit: true,
+            seed_fit: true,
         }
     }
 }
@@ -251,7 +256,7 @@ pub fn design_options(fs_hz: f64, run: &RunOptions) -> DesignOptions {
         discretization: run.discretization,
         discrete_static_gain: run.static_gain,
         above_band: run.above_band,
-        vf: crate::fit::vf::VfOptions { refine: run.refine_fit, ..Default::default() },
+        vf: crate::fit::vf::VfOptions { refine: run.refine_fit, seed_unfitted: run.seed_fit, ..Default::default() },
         ..Default::default()
     }
 }

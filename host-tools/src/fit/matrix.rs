@@ -583,29 +583,7 @@ fn split_close_modes(
     ((order, model, rss), splits)
 }
 
-/// Most pole pairs [`seed_unfitted_modes`] adds.
-pub const MAX_SEEDS: usize = 3;
-
-/// Lines per window of [`MatrixData::residual_excess`].
-pub const EXCESS_WINDOW: usize = 30;
-
-/// Damping ratios a seeded pair is tried with.
-const SEED_ZETAS: [f64; 4] = [0.005, 0.01, 0.02, 0.04];
-
-/// Windows of the residual tried per round of [`seed_unfitted_modes`].
-const SEED_WINDOWS: usize = 3;
-
-/// A window of lines where a fit leaves more than the noise.
-#[derive(Clone, Copy, Debug)]
-pub struct ResidualWindow {
-    /// First and last line (Hz).
-    pub band_hz: (f64, f64),
-    /// The line of largest residual in the window (Hz).
-    pub peak_hz: f64,
-    /// Σ w|Ĝ − H|²/σ̂² − N_w over the window's N_w real data points: the
-    /// χ² the fit leaves above the noise's expectation, in units of σ̂².
-    pub excess: f64,
-}
+pub use super::seed::{ResidualWindow, EXCESS_WINDOW, MAX_SEEDS};
 
 impl MatrixData<'_> {
     /// Per line, Σ_e w_e|Ĝ_e − H_e|² over the nine entries, and the real
@@ -623,110 +601,50 @@ impl MatrixData<'_> {
             .collect()
     }
 
-    /// Windows of [`EXCESS_WINDOW`] lines (starting every third of a
-    /// window) where `model` leaves more χ² than the noise scale `sigma2`
-    /// explains, the largest excess first, overlapping windows dropped.
-    ///
-    /// A mode the fit left out shows as a window of large excess: a pair
-    /// the BIC would take ([`MatrixData::bic`]) lowers the χ² by more than
-    /// its penalty, 20·ln N, and a window whose excess is below that cannot
-    /// hold one.
+    /// Windows where `model` leaves more χ² than the noise scale `sigma2`
+    /// explains ([`super::seed::excess_windows`] over the nine entries'
+    /// residuals per line), the largest excess first.
     pub fn residual_excess(&self, model: &MatrixModel, sigma2: f64) -> Vec<ResidualWindow> {
-        let v = self.line_residuals(model);
-        if v.len() < EXCESS_WINDOW || !(sigma2 > 0.0) {
-            return Vec::new();
-        }
-        let mut windows: Vec<(usize, ResidualWindow)> = (0..=v.len() - EXCESS_WINDOW)
-            .step_by(EXCESS_WINDOW / 3)
-            .map(|a| {
-                let w = &v[a..a + EXCESS_WINDOW];
-                let chi2: f64 = w.iter().map(|l| l.0).sum::<f64>() / sigma2;
-                let points: usize = w.iter().map(|l| l.1).sum();
-                let peak = (0..EXCESS_WINDOW).max_by(|&i, &j| w[i].0.total_cmp(&w[j].0)).unwrap_or(0);
-                let window = ResidualWindow {
-                    band_hz: (self.freq_hz[a], self.freq_hz[a + EXCESS_WINDOW - 1]),
-                    peak_hz: self.freq_hz[a + peak],
-                    excess: chi2 - points as f64,
-                };
-                (a, window)
-            })
-            .collect();
-        windows.sort_by(|a, b| b.1.excess.total_cmp(&a.1.excess));
-        let mut kept: Vec<(usize, ResidualWindow)> = Vec::new();
-        for (a, w) in windows {
-            if kept.iter().all(|(b, _)| a.abs_diff(*b) >= EXCESS_WINDOW) {
-                kept.push((a, w));
-            }
-        }
-        kept.into_iter().map(|(_, w)| w).collect()
+        super::seed::excess_windows(self.freq_hz, &self.line_residuals(model), sigma2)
     }
 }
 
 /// Modes the order search left out, each added as a pair where the fit's
-/// residual exceeds the noise.
-///
-/// Vector fitting relocates its poles from linearly spaced ones, on every
-/// few lines ([`relocation_step`]); a weak, lightly damped machine mode that
-/// a few impacts barely support can get no pole at any order, and its
-/// residual stays, a window of lines where the fit leaves far more than the
-/// impact test's noise ([`MatrixData::residual_excess`]). In each of the
-/// [`SEED_WINDOWS`] windows of largest excess above a pair's BIC penalty
-/// whose line of largest residual lies outside the half-power
-/// bandwidth of every fitted pair (close modes are the split's), a pair is
-/// tried at the line of largest residual with each damping ratio of
-/// [`SEED_ZETAS`], every other pole kept, the residues refitted
-/// ([`fit_residues`]); the trial of least [`MatrixData::bic`] is kept if it
-/// lowers the BIC, with the order search's noise scale `sigma2`, and the
-/// search repeats, up to [`MAX_SEEDS`] times. The refinement that follows
-/// ([`refined`]) moves the pair to the maximum-likelihood pole. `fit` is
-/// (order, model, RSS); returns the model and, per pair seeded, the line
-/// (Hz) and the pole (rad/s).
+/// residual over the nine entries exceeds the noise
+/// ([`super::seed::seed_pairs`]), after the split: a window at a fitted
+/// pair is the split's ([`split_close_modes`]), a second pair there is a
+/// close mode, not a missing one. The BIC's penalty of a pair counts its
+/// pole and nine complex residues. `fit` is (order, model, RSS); returns
+/// the model and, per pair seeded, the line (Hz) and the pole (rad/s).
 fn seed_unfitted_modes(
     data: &MatrixData,
     fit: (usize, MatrixModel, f64),
     sigma2: f64,
 ) -> (MatrixModel, Vec<(f64, Complex64)>) {
-    let (mut order, mut model, mut rss) = fit;
-    let mut seeded = Vec::new();
+    let (_, model, rss) = fit;
     let w_scale = 2.0 * PI * data.f_max();
-    let penalty = (2 + 2 * ENTRIES) as f64 * (data.points() as f64).ln();
-    for _ in 0..MAX_SEEDS {
-        let poles: Vec<Pole> =
-            (0..model.terms()).map(|k| model.pole(k)).map(|(p, pair)| Pole { p: p / w_scale, pair }).collect();
-        // A window at a fitted pair is the split's to try
-        // ([`split_close_modes`]): a second pair there is a close mode, not
-        // a missing one.
-        let at_pair = |f: f64| {
-            let w = 2.0 * PI * f / w_scale;
-            poles.iter().any(|q| q.pair && (q.p.im - w).abs() <= -q.p.re)
-        };
-        let windows: Vec<ResidualWindow> = data
-            .residual_excess(&model, sigma2)
-            .into_iter()
-            .filter(|w| w.excess > penalty && !at_pair(w.peak_hz))
-            .take(SEED_WINDOWS)
-            .collect();
-        let starts: Vec<(f64, f64)> =
-            windows.iter().flat_map(|w| SEED_ZETAS.iter().map(move |z| (w.peak_hz, *z))).collect();
-        let trials = map_on_threads(&starts, |&(f, zeta)| {
-            let mut with = poles.clone();
-            let w = 2.0 * PI * f;
-            let p = Complex64::new(-zeta * w, w * (1.0 - zeta * zeta).sqrt());
-            with.push(Pole { p: p / w_scale, pair: true });
-            let m = fit_residues(data, &with, w_scale).ok().filter(|m| m.is_stable())?;
-            let r = data.rss(&m);
-            r.is_finite().then_some((data.bic(r, order + 2, sigma2), m, r, (f, p)))
-        });
-        let current = data.bic(rss, order, sigma2);
-        match trials.into_iter().flatten().min_by(|a, b| a.0.total_cmp(&b.0)) {
-            Some((bic, m, r, seed)) if bic < current => {
-                (order, model, rss) = (order + 2, m, r);
-                seeded.push(seed);
-            }
-            _ => break,
-        }
-    }
-    (model, seeded)
+    let poles = |m: &MatrixModel| -> Vec<Pole> {
+        (0..m.terms()).map(|k| m.pole(k)).map(|(p, pair)| Pole { p: p / w_scale, pair }).collect()
+    };
+    let residuals = |m: &MatrixModel| data.line_residuals(m);
+    let refit = |with: &[Pole]| {
+        let m = fit_residues(data, with, w_scale).ok().filter(|m| m.is_stable())?;
+        let r = data.rss(&m);
+        Some((m, r))
+    };
+    let seeding = super::seed::Seeding {
+        freq_hz: data.freq_hz,
+        w_scale,
+        sigma2,
+        pair_penalty: (2 + 2 * ENTRIES) as f64 * (data.points() as f64).ln(),
+        skip_at_pairs: true,
+        lowest_window_hz: 0.0,
+        highest_peak_hz: f64::INFINITY,
+        poles: &poles,
+        residuals: &residuals,
+        refit: &refit,
+    };
+    super::seed::seed_pairs(&seeding, model, rss)
 }
 
 /// Largest cluster of close pairs whose subsets are tried per entry.

@@ -9,10 +9,19 @@ pub mod matrix;
 pub mod modes;
 pub mod refine;
 pub mod rfp;
+pub mod seed;
 pub mod vf;
 
 use num_complex::Complex64;
 use std::f64::consts::PI;
+
+/// A pole of a fit in normalized frequency (rad/s over the fit's scale): a
+/// real pole, or the representative (Im > 0) of a conjugate pair.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Pole {
+    pub(crate) p: Complex64,
+    pub(crate) pair: bool,
+}
 
 /// One term of a pole-residue model.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -42,8 +42,9 @@ pub struct VfOptions {
     /// G this way gave worse compensators on milling cuts (BENCHMARKS.md,
     /// "A pair above the lines"); for studies.
     pub above_band_swap: bool,
-    /// The 3x3 fit tries a pair where its residual exceeds the noise and
-    /// keeps it where the BIC does (`seed_unfitted_modes` in
+    /// The fit tries a pair where its residual exceeds the noise and keeps
+    /// it where the BIC does ([`super::seed`]; per axis
+    /// [`seed_unfitted_modes`], for the matrix `seed_unfitted_modes` in
     /// [`super::matrix`]). Off for controls.
     pub seed_unfitted: bool,
 }
@@ -73,6 +74,9 @@ pub struct VfResult {
     pub weighted_rms: f64,
     /// `(order, weighted_rms)` of every order tried.
     pub order_trace: Vec<(usize, f64)>,
+    /// Lines (Hz) where [`seed_unfitted_modes`] added a pair, before the
+    /// refinement moved it.
+    pub seeded_hz: Vec<f64>,
 }
 
 /// Coherence weights w = γ²/((1 − γ²)·|H|²) (DESIGN.md step 1): the inverse
@@ -98,13 +102,7 @@ pub fn coherence_weights(frf: &[Complex64], coherence: Option<&[f64]>) -> Vec<f6
         .collect()
 }
 
-/// A pole of the fit in normalized frequency: a real pole, or the
-/// representative (Im > 0) of a conjugate pair.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Pole {
-    pub(crate) p: Complex64,
-    pub(crate) pair: bool,
-}
+pub(crate) use super::Pole;
 
 pub(crate) fn n_cols(poles: &[Pole]) -> usize {
     poles.iter().map(|p| if p.pair { 2 } else { 1 }).sum()
@@ -408,6 +406,9 @@ pub fn vector_fit_accepting(
     OrderFits::new(freq_hz, h, weights, opts)?.choose(accept)
 }
 
+/// A fitted model and the lines (Hz) where a pair was seeded in it.
+type Seeded = (PoleResidueModel, Vec<f64>);
+
 /// The orders of [`vector_fit`] fitted once, to choose among for one
 /// criterion or several in turn ([`OrderFits::choose`]).
 pub struct OrderFits<'a> {
@@ -420,12 +421,15 @@ pub struct OrderFits<'a> {
     refine: bool,
     /// [`VfOptions::f_ceiling_hz`].
     f_ceiling_hz: f64,
+    /// [`VfOptions::seed_unfitted`]: the noise scale σ̂² of the orders
+    /// tried ([`noise_scale`]), where the fits are seeded.
+    seed_sigma2: Option<f64>,
     /// `(order, weighted_rms)` of every order tried.
     trace: Vec<(usize, f64)>,
     /// The unskimmed models of the orders a choice may take, in the order
-    /// of preference of [`vector_fit_accepting`], each skimmed when first
-    /// looked at.
-    candidates: Vec<(PoleResidueModel, Option<PoleResidueModel>)>,
+    /// of preference of [`vector_fit_accepting`], each skimmed (and
+    /// seeded) when first looked at, with the lines seeded (Hz).
+    candidates: Vec<(PoleResidueModel, Option<Seeded>)>,
 }
 
 impl<'a> OrderFits<'a> {
@@ -466,6 +470,7 @@ impl<'a> OrderFits<'a> {
         if !best.is_finite() {
             bail!("vector fitting failed at every order");
         }
+        let seed_sigma2 = opts.seed_unfitted.then(|| noise_scale(h, weights, &models)).filter(|v| *v > 0.0);
         let within = |e: f64| e <= best * (1.0 + opts.improvement_tol);
         // As vector_fit: the lowest order within tolerance first; then the other
         // orders within tolerance, lowest first; then the rest by error.
@@ -480,6 +485,7 @@ impl<'a> OrderFits<'a> {
             f_identified_hz: opts.f_identified_hz,
             refine: opts.refine,
             f_ceiling_hz: opts.f_ceiling_hz,
+            seed_sigma2,
             trace,
             candidates,
         })
@@ -492,26 +498,111 @@ impl<'a> OrderFits<'a> {
         let mut taken = None;
         for (raw, skimmed) in &mut self.candidates {
             if skimmed.is_none() {
-                let mut m = skim(freq_hz, h, weights, self.f_identified_hz, raw.clone())?;
+                let m = skim(freq_hz, h, weights, self.f_identified_hz, raw.clone())?;
+                let (mut m, seeded) = match self.seed_sigma2 {
+                    Some(sigma2) => seed_unfitted_modes(freq_hz, h, weights, m, sigma2, self.f_identified_hz),
+                    None => (m, Vec::new()),
+                };
                 if self.refine {
                     let f_low = lowest_identified_hz(freq_hz, self.f_identified_hz);
                     m = super::refine::refine(freq_hz, h, weights, &m, f_low, self.f_ceiling_hz)?;
                 }
-                *skimmed = Some(m);
+                *skimmed = Some((m, seeded));
             }
-            if skimmed.as_ref().is_some_and(accept) {
+            if skimmed.as_ref().is_some_and(|(m, _)| accept(m)) {
                 taken = skimmed.clone();
                 break;
             }
         }
         // The best model is within tolerance of itself: there is a candidate.
-        let model = match taken {
+        let (model, seeded_hz) = match taken {
             Some(m) => m,
             None => self.candidates[0].1.clone().expect("skimmed above"),
         };
         let e = weighted_rms(&model, freq_hz, h, weights);
-        Ok(VfResult { model, weighted_rms: e, order_trace: self.trace.clone() })
+        Ok(VfResult { model, weighted_rms: e, order_trace: self.trace.clone(), seeded_hz })
     }
+}
+
+/// The noise scale σ̂² of the orders tried `(order, model, weighted RMS)`:
+/// the least RSS/(N − p), RSS = Σ w|Ĝ − H|², N the real data points (two per
+/// line of positive weight), p = 2·order + 1 real parameters (the poles, the
+/// residues and the direct term). The coherence weights are the inverse
+/// variances up to a factor, which σ̂² carries.
+fn noise_scale(h: &[Complex64], weights: &[f64], models: &[(usize, PoleResidueModel, f64)]) -> f64 {
+    let norm: f64 = h.iter().zip(weights).map(|(h, w)| w * h.norm_sqr()).sum();
+    let n = 2.0 * weights.iter().filter(|w| **w > 0.0).count() as f64;
+    models
+        .iter()
+        .filter(|m| m.2.is_finite())
+        .map(|m| m.2 * m.2 * norm / (n - (2 * m.0 + 1) as f64).max(1.0))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Modes the order search left out, each added as a pair where the fit's
+/// residual exceeds the noise scale `sigma2` ([`super::seed::seed_pairs`];
+/// the BIC's penalty of a pair counts its pole and its complex residue).
+/// There is no split of close modes per axis, so a window beside a fitted
+/// pair is tried too. The first window of lines from the lowest identified
+/// one (`f_identified_hz`, [`VfOptions::f_identified_hz`]) is not: there the
+/// lines hold the model's static course, and a pair fitted to their
+/// residual bends Ĝ(0) (seed 0 z of the sweep: a pair seeded at 3 Hz, Ĝ(0)
+/// off by 1.9 %). Nor is a window whose largest residual lies above
+/// [`EDGE_FRACTION`] of the top line: there the residual is the lines'
+/// truncation of modes above them ([`skim`]'s edge pairs), and a pair seeded
+/// for it stood in the first of two states' FRFs and not the second (the
+/// independent case `two-state-z`). Returns the model and the lines (Hz)
+/// seeded.
+fn seed_unfitted_modes(
+    freq_hz: &[f64],
+    h: &[Complex64],
+    weights: &[f64],
+    model: PoleResidueModel,
+    sigma2: f64,
+    f_identified_hz: f64,
+) -> (PoleResidueModel, Vec<f64>) {
+    let f_max = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
+    let w_scale = 2.0 * PI * f_max;
+    let s_all: Vec<Complex64> = freq_hz.iter().map(|f| Complex64::new(0.0, 2.0 * PI * f / w_scale)).collect();
+    let sw: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
+    let rss = |m: &PoleResidueModel| -> f64 {
+        freq_hz.iter().zip(h).zip(weights).map(|((f, h), w)| w * (m.frf(*f) - h).norm_sqr()).sum()
+    };
+    let poles = |m: &PoleResidueModel| kept_poles(&m.terms, &vec![true; m.terms.len()], w_scale);
+    let residuals = |m: &PoleResidueModel| -> Vec<(f64, usize)> {
+        freq_hz
+            .iter()
+            .zip(h)
+            .zip(weights)
+            .map(|((f, h), w)| if *w > 0.0 { (w * (m.frf(*f) - h).norm_sqr(), 2) } else { (0.0, 0) })
+            .collect()
+    };
+    let refit = |with: &[Pole]| {
+        let (c, d) = residues(&s_all, h, &sw, with).ok()?;
+        let m = to_model(with, &c, d, w_scale);
+        let r = rss(&m);
+        Some((m, r))
+    };
+    let n = 2.0 * weights.iter().filter(|w| **w > 0.0).count() as f64;
+    let seeding = super::seed::Seeding {
+        freq_hz,
+        w_scale,
+        sigma2,
+        pair_penalty: 4.0 * n.ln(),
+        skip_at_pairs: false,
+        lowest_window_hz: {
+            let f_low = lowest_identified_hz(freq_hz, f_identified_hz);
+            let first = freq_hz.iter().position(|f| *f >= f_low).unwrap_or(0);
+            freq_hz.get(first + super::seed::EXCESS_WINDOW).copied().unwrap_or(f64::INFINITY)
+        },
+        highest_peak_hz: EDGE_FRACTION * f_max,
+        poles: &poles,
+        residuals: &residuals,
+        refit: &refit,
+    };
+    let start = rss(&model);
+    let (model, seeded) = super::seed::seed_pairs(&seeding, model, start);
+    (model, seeded.into_iter().map(|s| s.0).collect())
 }
 
 /// Whether term `t` reaches 10⁻³ of |G| on any line of (`freq_hz`, `h`).
@@ -674,6 +765,45 @@ mod tests {
         let h: Vec<Complex64> = freq.iter().map(|f| truth.frf(*f)).collect();
         let w = coherence_weights(&h, None);
         (freq, h, w)
+    }
+
+    /// A weak machine mode at 480 Hz (2 % damping, static share
+    /// `share`) beside a sensor mode at 3 kHz above the lines (1-1000 Hz),
+    /// measured with complex noise of variance 4·10⁻⁶ (σ² = 0.5 per real
+    /// point at unit weights ×1/noise²), and the sensor mode alone with its
+    /// residues refitted to those lines: a fit that left the weak mode out.
+    #[test]
+    fn a_mode_the_fit_left_out_is_seeded_where_the_residual_exceeds_the_noise() {
+        use rand::{RngExt, SeedableRng};
+        for share in [1e-3, 0.0] {
+            let truth = PoleResidueModel::from_modes(&[(480.0, 0.02, share), (3000.0, 0.03, 1.0 - share)]);
+            let noise = 2e-3;
+            let freq: Vec<f64> = (1..=1000).map(f64::from).collect();
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+            let mut uniform = move || rng.random_range(-0.5..0.5);
+            let h: Vec<Complex64> = freq
+                .iter()
+                .map(|f| truth.frf(*f) + Complex64::new(uniform(), uniform()) * (noise * 6f64.sqrt()))
+                .collect();
+            let w = vec![1.0 / (noise * noise); freq.len()];
+            let strong = PoleResidueModel::from_modes(&[(3000.0, 0.03, 1.0)]);
+            let start = refit_kept(&freq, &h, &w, &strong, &[true]).unwrap();
+            let rss = |m: &PoleResidueModel| -> f64 {
+                freq.iter().zip(&h).zip(&w).map(|((f, h), w)| w * (m.frf(*f) - h).norm_sqr()).sum()
+            };
+            let points = 2.0 * freq.len() as f64;
+            let before = rss(&start) / 0.5 / points;
+            let (seeded_model, seeded) = seed_unfitted_modes(&freq, &h, &w, start, 0.5, 0.0);
+            if share == 0.0 {
+                assert!(seeded.is_empty(), "control: a pair was seeded without a missing mode: {seeded:?}");
+                assert_eq!(seeded_model.terms.len(), 1);
+                continue;
+            }
+            assert_eq!(seeded.len(), 1, "{seeded:?}");
+            assert!((seeded[0] - 480.0).abs() <= 5.0, "seeded at {} Hz", seeded[0]);
+            let after = rss(&seeded_model) / 0.5 / points;
+            assert!(after < 1.05 && before > 1.05, "χ² per point {before} before the seed, {after} after");
+        }
     }
 
     fn static_error(m: &PoleResidueModel, truth: &PoleResidueModel) -> f64 {
