@@ -20,7 +20,13 @@
 //! maximum-likelihood refinement, [`dynocomp::fit::refine`]), for the
 //! before/after figures in one run.
 //!
-//! usage: cargo run --release -p dynocomp --example sweep -- [N] [--exact-frf] [--no-refine]   (default 100)
+//! With `--no-seed` the fits add no pair where their residual exceeds the
+//! noise ([`dynocomp::fit::seed`]); with `--above-band=inverse` the design
+//! is the exact inverse above the band (`design --above-band inverse`).
+//! `--from=K` runs seeds K..K+N (seeds 100-199 were first run to check the
+//! seeding, before any result on them was seen).
+//!
+//! usage: cargo run --release -p dynocomp --example sweep -- [N] [--from=K] [--exact-frf] [--no-refine] [--no-seed] [--above-band=inverse]   (default 100)
 use anyhow::Result;
 use dynocomp::design::image::build_image;
 use dynocomp::eval::rates::{design_options, run_case, scoring_band_hz, CaseResult, RateCase, RunOptions};
@@ -32,7 +38,14 @@ fn main() -> Result<()> {
     let exact_frf = args.iter().any(|a| a == "--exact-frf");
     let refine_fit = !args.iter().any(|a| a == "--no-refine");
     let n: u64 = args.iter().find(|a| !a.starts_with("--")).map(|a| a.parse()).transpose()?.unwrap_or(100);
-    let run = RunOptions { exact_frf, refine_fit, ..RunOptions::default() };
+    let above_band = if args.iter().any(|a| a == "--above-band=inverse") {
+        dynocomp::design::above_band::AboveBand::Inverse
+    } else {
+        dynocomp::design::above_band::AboveBand::Quiet
+    };
+    let seed_fit = !args.iter().any(|a| a == "--no-seed");
+    let from: u64 = args.iter().find_map(|a| a.strip_prefix("--from=")).map(|v| v.parse()).transpose()?.unwrap_or(0);
+    let run = RunOptions { exact_frf, refine_fit, seed_fit, above_band, ..RunOptions::default() };
     let (mut with_image, mut axes, mut within_13, mut within_2, mut written) = (0, 0, 0, 0, 0);
     // Axes warned of a non-minimum-phase zero (design::phase_limit), and
     // axes whose box output is worse than raw: [warned][worse].
@@ -42,7 +55,7 @@ fn main() -> Result<()> {
     // in band].
     let mut truth_check = [[0usize; 2]; 2];
     let mut rows: Vec<(f64, String)> = Vec::new();
-    for seed in 0..n {
+    for seed in from..from + n {
         let (case, fs, kind) = draw(seed);
         let res = match run_case(&case, fs, &run) {
             Ok(r) => r,
