@@ -379,6 +379,20 @@ fn seed_137_x_gets_a_pair_where_its_fit_left_a_mode_out() {
         held(&seeded),
         held(&unseeded)
     );
+    // The summary names the line seeded, within 5 % of the mode left out
+    // (388 Hz); control: none without seeding.
+    let idle = &s.idle[0];
+    let mean = idle.iter().sum::<f64>() / idle.len() as f64;
+    let r = idle.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / idle.len() as f64;
+    let note = |opts: &dynocomp::design::axis::DesignOptions| {
+        let d = dynocomp::design::axis::design_axis(&s.frf.freq_hz, x, r, opts).unwrap();
+        d.notes.into_iter().find(|n| n.contains("pole pairs added near"))
+    };
+    let named = note(&opts).expect("the summary names the seeded pair");
+    eprintln!("{named}");
+    let hz: f64 = named.split("added near ").nth(1).and_then(|t| t.split(' ').next()).unwrap().parse().unwrap();
+    assert!((hz / 388.0 - 1.0).abs() <= 0.05, "{named}");
+    assert!(note(&unseeded_opts).is_none(), "control: a seeded pair named without seeding");
     let scored = |run: &RunOptions| over_floor(name, &s, run, 0);
     let (with, without) =
         (scored(&RunOptions::default()), scored(&RunOptions { seed_fit: false, ..Default::default() }));
