@@ -359,7 +359,7 @@ pub fn matrix_fit_stages(data: &MatrixData, opts: &VfOptions) -> Result<MatrixFi
     // order search took as one pair: the residual beside such a pair is
     // theirs, not a missing mode's.
     let (split, seeded) =
-        if opts.seed_unfitted { seed_unfitted_modes(data, split, sigma2) } else { (split.1, Vec::new()) };
+        if opts.seed_unfitted { seed_unfitted_modes(data, split.1, split.2, sigma2) } else { (split.1, Vec::new()) };
     let finished = |m: MatrixModel| drop_unsupported_pairs(data, skim(data, opts.f_identified_hz, m)?, sigma2);
     let unsplit = match splits {
         0 => None,
@@ -614,14 +614,15 @@ impl MatrixData<'_> {
 /// ([`super::seed::seed_pairs`]), after the split: a window at a fitted
 /// pair is the split's ([`split_close_modes`]), a second pair there is a
 /// close mode, not a missing one. The BIC's penalty of a pair counts its
-/// pole and nine complex residues. `fit` is (order, model, RSS); returns
-/// the model and, per pair seeded, the line (Hz) and the pole (rad/s).
+/// pole and nine complex residues. `rss` is `model`'s weighted residual;
+/// returns the model and, per pair seeded, the line (Hz) and the pole
+/// (rad/s).
 fn seed_unfitted_modes(
     data: &MatrixData,
-    fit: (usize, MatrixModel, f64),
+    model: MatrixModel,
+    rss: f64,
     sigma2: f64,
 ) -> (MatrixModel, Vec<(f64, Complex64)>) {
-    let (_, model, rss) = fit;
     let w_scale = 2.0 * PI * data.f_max();
     let poles = |m: &MatrixModel| -> Vec<Pole> {
         (0..m.terms()).map(|k| m.pole(k)).map(|(p, pair)| Pole { p: p / w_scale, pair }).collect()
@@ -1299,7 +1300,7 @@ mod tests {
             let sigma2 = 0.5;
             let top = data.residual_excess(&strong, sigma2)[0];
             let before = rss / sigma2 / data.points() as f64;
-            let (seeded_model, seeded) = seed_unfitted_modes(&data, (4, strong, rss), sigma2);
+            let (seeded_model, seeded) = seed_unfitted_modes(&data, strong, rss, sigma2);
             let seeded_rss = data.rss(&seeded_model);
             if !weak {
                 assert!(seeded.is_empty(), "control: a pair was seeded without a missing mode: {seeded:?}");

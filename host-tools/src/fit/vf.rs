@@ -568,9 +568,6 @@ fn seed_unfitted_modes(
     let w_scale = 2.0 * PI * f_max;
     let s_all: Vec<Complex64> = freq_hz.iter().map(|f| Complex64::new(0.0, 2.0 * PI * f / w_scale)).collect();
     let sw: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
-    let rss = |m: &PoleResidueModel| -> f64 {
-        freq_hz.iter().zip(h).zip(weights).map(|((f, h), w)| w * (m.frf(*f) - h).norm_sqr()).sum()
-    };
     let poles = |m: &PoleResidueModel| kept_poles(&m.terms, &vec![true; m.terms.len()], w_scale);
     let residuals = |m: &PoleResidueModel| -> Vec<(f64, usize)> {
         freq_hz
@@ -580,6 +577,7 @@ fn seed_unfitted_modes(
             .map(|((f, h), w)| if *w > 0.0 { (w * (m.frf(*f) - h).norm_sqr(), 2) } else { (0.0, 0) })
             .collect()
     };
+    let rss = |m: &PoleResidueModel| -> f64 { residuals(m).iter().map(|l| l.0).sum() };
     let refit = |with: &[Pole]| {
         let (c, d) = residues(&s_all, h, &sw, with).ok()?;
         let m = to_model(with, &c, d, w_scale);
