@@ -141,6 +141,8 @@ fn main() -> Result<()> {
         if orders {
             println!("  true modes (Hz, ζ, share): {modes:?}");
             println!("  fitted modes (Hz, ζ): {:?}", fitted.modes());
+            println!("  fitted terms: {:?} d {:.4e}", fitted.terms, fitted.d);
+            println!("  oracle terms: {:?} d {:.4e}", oracle.terms, oracle.d);
             for order in (2..=20).step_by(2) {
                 match fit_order(freq, h, &w, order, &VfOptions::default()) {
                     Err(e) => println!("  order {order}: {e:#}"),

@@ -22,11 +22,13 @@
 //!
 //! With `--no-seed` the fits add no pair where their residual exceeds the
 //! noise ([`dynocomp::fit::seed`]); with `--above-band=inverse` the design
-//! is the exact inverse above the band (`design --above-band inverse`).
+//! is the exact inverse above the band (`design --above-band inverse`); with
+//! `--no-drop` the fits keep the pairs the lines do not support
+//! ([`dynocomp::fit::vf::VfOptions::drop_unsupported`]).
 //! `--from=K` runs seeds K..K+N (seeds 100-199 were first run to check the
 //! seeding, before any result on them was seen).
 //!
-//! usage: cargo run --release -p dynocomp --example sweep -- [N] [--from=K] [--exact-frf] [--no-refine] [--no-seed] [--above-band=inverse]   (default 100)
+//! usage: cargo run --release -p dynocomp --example sweep -- [N] [--from=K] [--exact-frf] [--no-refine] [--no-seed] [--no-drop] [--above-band=inverse]   (default 100)
 use anyhow::Result;
 use dynocomp::design::image::build_image;
 use dynocomp::eval::rates::{design_options, run_case, scoring_band_hz, CaseResult, RateCase, RunOptions};
@@ -44,8 +46,9 @@ fn main() -> Result<()> {
         dynocomp::design::above_band::AboveBand::Quiet
     };
     let seed_fit = !args.iter().any(|a| a == "--no-seed");
+    let drop_unsupported = !args.iter().any(|a| a == "--no-drop");
     let from: u64 = args.iter().find_map(|a| a.strip_prefix("--from=")).map(|v| v.parse()).transpose()?.unwrap_or(0);
-    let run = RunOptions { exact_frf, refine_fit, seed_fit, above_band, ..RunOptions::default() };
+    let run = RunOptions { exact_frf, refine_fit, seed_fit, drop_unsupported, above_band, ..RunOptions::default() };
     let (mut with_image, mut axes, mut within_13, mut within_2, mut written) = (0, 0, 0, 0, 0);
     // Axes warned of a non-minimum-phase zero (design::phase_limit), and
     // axes whose box output is worse than raw: [warned][worse].
@@ -103,8 +106,19 @@ fn main() -> Result<()> {
             let zeros: Vec<String> = a.phase_limits.iter().map(|p| format!("{:.0} Hz", p.zero_hz.0)).collect();
             let warned =
                 if zeros.is_empty() { String::new() } else { format!("; non-minimum-phase zero {}", zeros.join(", ")) };
+            // Each seeded line beside the nearest true mode (Hz, residue).
+            let nearest = |f: f64| modes.iter().min_by(|a, b| (a.0 - f).abs().total_cmp(&(b.0 - f).abs()));
+            let seeded: Vec<String> = a
+                .seeded_hz
+                .iter()
+                .map(|f| match nearest(*f) {
+                    Some(m) => format!("{f:.0} Hz (true mode nearest {:.0} Hz, residue {:.3})", m.0, m.2),
+                    None => format!("{f:.0} Hz"),
+                })
+                .collect();
+            let seeded = if seeded.is_empty() { String::new() } else { format!("; seeded {}", seeded.join(", ")) };
             let row = format!(
-                "seed {seed} {} ({kind}, {fs} Hz, {} Hz lines): {what}, {ratio:.2}x{written}; raw {:.2} %{warned}",
+                "seed {seed} {} ({kind}, {fs} Hz, {} Hz lines): {what}, {ratio:.2}x{written}; raw {:.2} %{warned}{seeded}",
                 axis_name(a.axis),
                 case.frf_df_hz,
                 100.0 * a.raw_nrmse

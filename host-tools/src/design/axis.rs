@@ -208,6 +208,9 @@ pub struct AxisDesign {
     pub compensated_band_hz: (f64, f64),
     /// Notes for the user (e.g. FRF lines beyond the box's band).
     pub notes: Vec<String>,
+    /// Lines (Hz) where the fit seeded a pair its order search left out
+    /// ([`crate::fit::vf::VfResult::seeded_hz`]); empty for the paper's method.
+    pub seeded_hz: Vec<f64>,
     /// The record's force spectrum q was chosen for (`None`: the flat
     /// spectrum of `force_rms`, the default).
     pub force_spectrum: Option<crate::design::force_spectrum::AxisForceSpectrum>,
@@ -911,6 +914,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
         raw_predicted_error: raw_j.sqrt(),
         compensated_band_hz: p.lines.comp_band,
         notes: p.lines.notes.iter().cloned().chain(p.seeded_note()).collect(),
+        seeded_hz: p.fitted.seeded_hz.clone(),
         force_spectrum,
         pass_through: None,
         phase_limits,

@@ -91,6 +91,7 @@ pub fn pass_through(frf: &AxisFrf, r: f64, opts: &DesignOptions, reason: String)
         raw_predicted_error: f64::NAN,
         compensated_band_hz: (0.0, 0.0),
         notes: Vec::new(),
+        seeded_hz: Vec::new(),
         force_spectrum: None,
         pass_through: Some(reason),
         phase_limits: Vec::new(),

@@ -227,6 +227,10 @@ pub struct RunOptions {
     /// ([`crate::fit::vf::VfOptions::seed_unfitted`]; off for before/after
     /// studies).
     pub seed_fit: bool,
+    /// Pairs the lines do not support dropped from the fit
+    /// ([`crate::fit::vf::VfOptions::drop_unsupported`]; off for
+    /// before/after studies).
+    pub drop_unsupported: bool,
 }
 
 impl Default for RunOptions {
@@ -241,6 +245,7 @@ impl Default for RunOptions {
             above_band: crate::design::above_band::AboveBand::Quiet,
             refine_fit: true,
             seed_fit: true,
+            drop_unsupported: true,
         }
     }
 }
@@ -256,7 +261,12 @@ pub fn design_options(fs_hz: f64, run: &RunOptions) -> DesignOptions {
         discretization: run.discretization,
         discrete_static_gain: run.static_gain,
         above_band: run.above_band,
-        vf: crate::fit::vf::VfOptions { refine: run.refine_fit, seed_unfitted: run.seed_fit, ..Default::default() },
+        vf: crate::fit::vf::VfOptions {
+            refine: run.refine_fit,
+            seed_unfitted: run.seed_fit,
+            drop_unsupported: run.drop_unsupported,
+            ..Default::default()
+        },
         ..Default::default()
     }
 }
@@ -288,6 +298,9 @@ pub struct AxisScore {
     pub as_written: Option<AsWritten>,
     /// Shape of the axis's filter on the box (None if the design failed).
     pub shape: Option<dynocomp_core::budget::AxisShape>,
+    /// Lines (Hz) where the axis's fit seeded a pair (empty if the design
+    /// failed; [`crate::design::axis::AxisDesign::seeded_hz`]).
+    pub seeded_hz: Vec<f64>,
     /// The design's non-minimum-phase zeros where the box is worse than raw
     /// ([`crate::design::phase_limit`]; empty if the design failed).
     pub phase_limits: Vec<crate::design::phase_limit::PhaseLimit>,
@@ -415,6 +428,7 @@ fn score_sim_with(
         let shape = designed.as_ref().ok().map(|d| dynocomp_core::budget::AxisShape::of(&d.filter));
         let mut as_written = None;
         let phase_limits = designed.as_ref().map(|d| d.phase_limits.clone()).unwrap_or_default();
+        let seeded_hz = designed.as_ref().map(|d| d.seeded_hz.clone()).unwrap_or_default();
         let predicted_with_fit = designed.as_ref().map_or(f64::NAN, |d| d.predicted_error_with_fit());
         let (comp_nrmse, predicted_error, flat_band_hz) = match designed {
             Err(e) => (Err(format!("{e:#}")), f64::NAN, (f64::NAN, f64::NAN)),
@@ -444,6 +458,7 @@ fn score_sim_with(
             design_s,
             shape,
             as_written,
+            seeded_hz,
             phase_limits,
         });
     }
