@@ -433,3 +433,28 @@ fn seed_99_y_drops_the_terms_its_lines_do_not_support() {
     assert!(with <= 1.5, "y at {with:.2}x the floor");
     assert!(without > 4.0, "control: y with every term kept at {without:.2}x the floor");
 }
+
+/// Seed 140 (default, 10.24 kHz, 2 Hz lines), from the sweep's seeds 100-199:
+/// axis y's fit was seeded with a pair at 252 Hz that ended 1 line wide
+/// (ζ = 0.2 %), 34 % below the nearest true mode (382 Hz); y went from
+/// 1.02x to 1.45x its floor. A seeded pair is now tried only as wide as
+/// three lines (`VfOptions::seed_resolved_lines`).
+#[test]
+fn seed_140_y_gets_no_pair_narrower_than_its_lines() {
+    let (name, fs, s) = simulated(140, ("default", 10_240.0, 2.0));
+    let any_width = RunOptions { seed_resolved_lines: 0.0, ..Default::default() };
+    let seeded = |run: &RunOptions| {
+        let opts = dynocomp::eval::rates::design_options(fs, run);
+        let idle = &s.idle[1];
+        let mean = idle.iter().sum::<f64>() / idle.len() as f64;
+        let r = idle.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / idle.len() as f64;
+        dynocomp::design::axis::design_axis(&s.frf.freq_hz, s.frf.axis(1).unwrap(), r, &opts).unwrap().seeded_hz
+    };
+    let (resolved, narrow) = (seeded(&RunOptions::default()), seeded(&any_width));
+    eprintln!("seeded {resolved:?} Hz; with any width {narrow:?} Hz");
+    assert!(resolved.is_empty(), "seeded at {resolved:?} Hz");
+    assert!(narrow.iter().any(|f| (f / 252.0 - 1.0).abs() < 0.02), "control: no seed near 252 Hz ({narrow:?})");
+    let (with, without) = (over_floor(name, &s, &RunOptions::default(), 1), over_floor(name, &s, &any_width, 1));
+    assert!(with <= 1.15, "y at {with:.2}x the floor");
+    assert!(without > 1.3, "control: y with any seed width at {without:.2}x the floor");
+}

@@ -231,6 +231,8 @@ pub struct RunOptions {
     /// ([`crate::fit::vf::VfOptions::drop_unsupported`]; off for
     /// before/after studies).
     pub drop_unsupported: bool,
+    /// Lines a seeded pair must span ([`crate::fit::vf::VfOptions::seed_resolved_lines`]).
+    pub seed_resolved_lines: f64,
 }
 
 impl Default for RunOptions {
@@ -246,6 +248,7 @@ impl Default for RunOptions {
             refine_fit: true,
             seed_fit: true,
             drop_unsupported: true,
+            seed_resolved_lines: crate::fit::vf::SEED_RESOLVED_LINES,
         }
     }
 }
@@ -265,6 +268,7 @@ pub fn design_options(fs_hz: f64, run: &RunOptions) -> DesignOptions {
             refine: run.refine_fit,
             seed_unfitted: run.seed_fit,
             drop_unsupported: run.drop_unsupported,
+            seed_resolved_lines: run.seed_resolved_lines,
             ..Default::default()
         },
         ..Default::default()

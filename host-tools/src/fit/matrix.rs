@@ -641,6 +641,7 @@ fn seed_unfitted_modes(
         skip_at_pairs: true,
         lowest_window_hz: 0.0,
         highest_peak_hz: f64::INFINITY,
+        resolved_lines: 0.0,
         poles: &poles,
         residuals: &residuals,
         refit: &refit,

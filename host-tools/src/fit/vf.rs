@@ -51,6 +51,9 @@ pub struct VfOptions {
     /// ([`drop_unsupported_pairs`]; the matrix fit always does). Off for
     /// controls.
     pub drop_unsupported: bool,
+    /// Lines a pair seeded per axis must span with its half-power bandwidth
+    /// 2ζ·f ([`super::seed::Seeding::resolved_lines`]; 0: any damping tried).
+    pub seed_resolved_lines: f64,
 }
 
 impl Default for VfOptions {
@@ -66,6 +69,7 @@ impl Default for VfOptions {
             above_band_swap: false,
             seed_unfitted: true,
             drop_unsupported: true,
+            seed_resolved_lines: SEED_RESOLVED_LINES,
         }
     }
 }
@@ -422,6 +426,8 @@ pub struct OrderFits<'a> {
     weights: &'a [f64],
     /// [`VfOptions::f_identified_hz`].
     f_identified_hz: f64,
+    /// [`VfOptions::seed_resolved_lines`].
+    seed_resolved_lines: f64,
     /// [`VfOptions::refine`].
     refine: bool,
     /// [`VfOptions::f_ceiling_hz`].
@@ -493,6 +499,7 @@ impl<'a> OrderFits<'a> {
             h,
             weights,
             f_identified_hz: opts.f_identified_hz,
+            seed_resolved_lines: opts.seed_resolved_lines,
             refine: opts.refine,
             f_ceiling_hz: opts.f_ceiling_hz,
             seed_sigma2,
@@ -515,7 +522,10 @@ impl<'a> OrderFits<'a> {
                     None => m,
                 };
                 let (mut m, seeded) = match self.seed_sigma2 {
-                    Some(sigma2) => seed_unfitted_modes(freq_hz, h, weights, m, sigma2, self.f_identified_hz),
+                    Some(sigma2) => {
+                        let window = (self.f_identified_hz, self.seed_resolved_lines);
+                        seed_unfitted_modes(freq_hz, h, weights, m, sigma2, window)
+                    }
                     None => (m, Vec::new()),
                 };
                 // The seeded pairs take residual another term held: drop
@@ -580,15 +590,16 @@ fn noise_scale(h: &[Complex64], weights: &[f64], models: &[(usize, PoleResidueMo
 /// stood in the first of two states' FRFs and not the second (the
 /// independent case `two-state-z`), and on the bundled example's y (sensor
 /// modes 2050 and 4688 Hz, coherent to 3634 Hz) three pairs at 3.5-3.8 kHz
-/// took fy from 0.253 to 0.274 %. Returns the model and, per pair seeded,
-/// the line (Hz) and the pole (rad/s).
+/// took fy from 0.253 to 0.274 %. A pair is tried only with a half-power
+/// bandwidth of at least `resolved_lines` lines ([`super::seed::Seeding::resolved_lines`]).
+/// Returns the model and, per pair seeded, the line (Hz) and the pole (rad/s).
 fn seed_unfitted_modes(
     freq_hz: &[f64],
     h: &[Complex64],
     weights: &[f64],
     model: PoleResidueModel,
     sigma2: f64,
-    f_identified_hz: f64,
+    (f_identified_hz, resolved_lines): (f64, f64),
 ) -> (PoleResidueModel, Vec<(f64, Complex64)>) {
     let f_max = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
     let w_scale = 2.0 * PI * f_max;
@@ -623,6 +634,7 @@ fn seed_unfitted_modes(
             freq_hz.get(first + super::seed::EXCESS_WINDOW).copied().unwrap_or(f64::INFINITY)
         },
         highest_peak_hz: (EDGE_FRACTION * f_max).min(main_mode_hz(&model)),
+        resolved_lines,
         poles: &poles,
         residuals: &residuals,
         refit: &refit,
@@ -691,6 +703,10 @@ fn drop_unsupported_pairs(
     }
     Ok(model)
 }
+
+/// Lines a pair seeded per axis must span with its half-power bandwidth
+/// ([`super::seed::Seeding::resolved_lines`]).
+pub const SEED_RESOLVED_LINES: f64 = 3.0;
 
 /// Natural frequency (Hz) of the pair of `model` with the largest modal
 /// share |r/p| (the main sensor mode); ∞ without pairs.
@@ -894,7 +910,7 @@ mod tests {
             };
             let points = 2.0 * freq.len() as f64;
             let before = rss(&start) / 0.5 / points;
-            let (seeded_model, seeded) = seed_unfitted_modes(&freq, &h, &w, start, 0.5, 0.0);
+            let (seeded_model, seeded) = seed_unfitted_modes(&freq, &h, &w, start, 0.5, (0.0, SEED_RESOLVED_LINES));
             if share == 0.0 {
                 assert!(seeded.is_empty(), "control: a pair was seeded without a missing mode: {seeded:?}");
                 assert_eq!(seeded_model.terms.len(), 1);
