@@ -47,9 +47,9 @@ pub struct VfOptions {
     /// [`seed_unfitted_modes`], for the matrix `seed_unfitted_modes` in
     /// [`super::matrix`]). Off for controls.
     pub seed_unfitted: bool,
-    /// The fit drops the pole pairs the lines do not support, by the BIC
-    /// ([`drop_unsupported_pairs`]; the matrix fit always does). Off for
-    /// controls.
+    /// The fit drops the terms (pole pairs and real poles) the lines do not
+    /// support, by the BIC ([`drop_unsupported_pairs`]; the matrix fit
+    /// always drops such pairs). Off for controls.
     pub drop_unsupported: bool,
     /// Lines a pair seeded per axis must span with its half-power bandwidth
     /// 2ζ·f ([`super::seed::Seeding::resolved_lines`]; 0: any damping tried).
@@ -648,20 +648,22 @@ fn holds_pole(model: &PoleResidueModel, p: Complex64) -> bool {
     model.terms.iter().any(|t| matches!(*t, Term::Pair { pole, .. } if (pole - p).norm() <= 1e-9 * p.norm()))
 }
 
-/// Pole pairs the lines do not support, dropped one at a time: backward
-/// elimination by the BIC, as the matrix fit does
-/// ([`super::matrix::drop_unsupported_pairs`]). The order search compares
-/// whole fits by their weighted error, and the order it takes can hold a
-/// lightly damped pair that follows only the impact test's noise: on sweep
-/// seed 99 y, pairs at 3096 and 3484 Hz (ζ = 0.5 % and 0.1 %) where the true
-/// axis has no mode, with Ĝ(0) off by 0.8 % against 0.04 % for the true
-/// poles with residues fitted to the same lines. A pair costs 4 real
-/// parameters (its pole and its complex residue); it goes where refitting
-/// the residues and the direct term without it raises Σ w|Ĝ − H|² by less
-/// than 4·ln N·σ̂² (N real data points, σ̂² the order search's noise scale).
-/// The pair of least rise goes first, and the rises are computed again after
-/// each drop. A pair above [`EDGE_FRACTION`] of the top line is not tried:
-/// there it stands for the modes above the lines ([`skim`]).
+/// Terms the lines do not support (pole pairs and real poles), dropped one
+/// at a time: backward elimination by the BIC, as the matrix fit does for
+/// pairs ([`super::matrix::drop_unsupported_pairs`]). The order search
+/// compares whole fits by their weighted error, and the order it takes can
+/// hold terms that follow only the impact test's noise: on sweep seed 99 y,
+/// a real pole at 17 Hz (the first coherent line is 8 Hz) and pairs at 3100
+/// and 3485 Hz (ζ = 0.5 % and 0.1 %) where the true axis has no mode, with
+/// Ĝ(0) off by 0.8 % against 0.04 % for the true poles with residues fitted
+/// to the same lines. A pair costs 4 real parameters (its pole and its
+/// complex residue), a real pole 2; a term goes where refitting the residues
+/// and the direct term without it raises Σ w|Ĝ − H|² by less than its
+/// parameters times ln N·σ̂² (N real data points, σ̂² the order search's
+/// noise scale). The term of least rise relative to that penalty goes
+/// first, and the rises are computed again after each drop. A term above
+/// [`EDGE_FRACTION`] of the top line is not tried: there it stands for the
+/// modes above the lines ([`skim`]).
 fn drop_unsupported_pairs(
     freq_hz: &[f64],
     h: &[Complex64],
