@@ -156,6 +156,7 @@ fn seed_zetas(f_hz: f64, spacing_hz: f64, resolved_lines: f64) -> Vec<f64> {
 pub(crate) fn seed_pairs<M: Send>(s: &Seeding<M>, model: M, rss: f64) -> (M, Vec<(f64, Complex64)>) {
     let (mut model, mut rss) = (model, rss);
     let mut seeded = Vec::new();
+    let spacing = line_spacing_hz(s.freq_hz);
     for _ in 0..MAX_SEEDS {
         let poles = (s.poles)(&model);
         let at_pair = |f: f64| {
@@ -170,7 +171,6 @@ pub(crate) fn seed_pairs<M: Send>(s: &Seeding<M>, model: M, rss: f64) -> (M, Vec
             .filter(|w| !(s.skip_at_pairs && at_pair(w.peak_hz)))
             .take(SEED_WINDOWS)
             .collect();
-        let spacing = line_spacing_hz(s.freq_hz);
         let starts: Vec<(f64, f64)> = windows
             .iter()
             .flat_map(|w| seed_zetas(w.peak_hz, spacing, s.resolved_lines).into_iter().map(move |z| (w.peak_hz, z)))

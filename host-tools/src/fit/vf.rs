@@ -301,12 +301,19 @@ pub(crate) fn to_model(poles: &[Pole], c: &[f64], d: f64, w_scale: f64) -> PoleR
 
 /// Weighted RMS residual of `model` on the lines, sqrt(Σw|Ĝ−H|²/Σw|H|²).
 pub fn weighted_rms(model: &PoleResidueModel, freq_hz: &[f64], h: &[Complex64], w: &[f64]) -> f64 {
-    let (mut num, mut den) = (0.0, 0.0);
-    for ((f, h), w) in freq_hz.iter().zip(h).zip(w) {
-        num += w * (model.frf(*f) - h).norm_sqr();
-        den += w * h.norm_sqr();
-    }
-    (num / den).sqrt()
+    let den: f64 = freq_hz.iter().zip(h).zip(w).map(|((_, h), w)| w * h.norm_sqr()).sum();
+    (weighted_rss(model, freq_hz, h, w) / den).sqrt()
+}
+
+/// Weighted residual Σ w|Ĝ − H|² of `model` on the lines.
+pub(crate) fn weighted_rss(model: &PoleResidueModel, freq_hz: &[f64], h: &[Complex64], w: &[f64]) -> f64 {
+    freq_hz.iter().zip(h).zip(w).map(|((f, h), w)| w * (model.frf(*f) - h).norm_sqr()).sum()
+}
+
+/// Real data points of the lines: two (real and imaginary part) per line of
+/// positive weight, the N of the BIC.
+fn data_points(weights: &[f64]) -> f64 {
+    2.0 * weights.iter().filter(|w| **w > 0.0).count() as f64
 }
 
 /// Fewest lines a fit of `order` poles can use: the relocation's least
@@ -567,7 +574,7 @@ impl<'a> OrderFits<'a> {
 /// variances up to a factor, which σ̂² carries.
 fn noise_scale(h: &[Complex64], weights: &[f64], models: &[(usize, PoleResidueModel, f64)]) -> f64 {
     let norm: f64 = h.iter().zip(weights).map(|(h, w)| w * h.norm_sqr()).sum();
-    let n = 2.0 * weights.iter().filter(|w| **w > 0.0).count() as f64;
+    let n = data_points(weights);
     models
         .iter()
         .filter(|m| m.2.is_finite())
@@ -621,7 +628,7 @@ fn seed_unfitted_modes(
         let r = rss(&m);
         Some((m, r))
     };
-    let n = 2.0 * weights.iter().filter(|w| **w > 0.0).count() as f64;
+    let n = data_points(weights);
     let seeding = super::seed::Seeding {
         freq_hz,
         w_scale,
@@ -672,7 +679,7 @@ fn drop_unsupported_pairs(
     sigma2: f64,
 ) -> Result<PoleResidueModel> {
     let f_top = freq_hz.iter().fold(0.0f64, |m, f| m.max(*f));
-    let n = 2.0 * weights.iter().filter(|w| **w > 0.0).count() as f64;
+    let n = data_points(weights);
     // Real parameters of a term: a pair's pole and complex residue, a real
     // pole and its residue.
     let penalty = |t: &Term| match t {
@@ -683,9 +690,7 @@ fn drop_unsupported_pairs(
         Term::Pair { .. } => at_edge(t, f_top),
         Term::Real { pole, .. } => pole.abs() / (2.0 * PI) > EDGE_FRACTION * f_top,
     };
-    let rss = |m: &PoleResidueModel| -> f64 {
-        freq_hz.iter().zip(h).zip(weights).map(|((f, h), w)| w * (m.frf(*f) - h).norm_sqr()).sum()
-    };
+    let rss = |m: &PoleResidueModel| weighted_rss(m, freq_hz, h, weights);
     let mut model = model;
     loop {
         let base = rss(&model);
@@ -907,9 +912,7 @@ mod tests {
             let w = vec![1.0 / (noise * noise); freq.len()];
             let strong = PoleResidueModel::from_modes(&[(3000.0, 0.03, 1.0)]);
             let start = refit_kept(&freq, &h, &w, &strong, &[true]).unwrap();
-            let rss = |m: &PoleResidueModel| -> f64 {
-                freq.iter().zip(&h).zip(&w).map(|((f, h), w)| w * (m.frf(*f) - h).norm_sqr()).sum()
-            };
+            let rss = |m: &PoleResidueModel| weighted_rss(m, &freq, &h, &w);
             let points = 2.0 * freq.len() as f64;
             let before = rss(&start) / 0.5 / points;
             let (seeded_model, seeded) = seed_unfitted_modes(&freq, &h, &w, start, 0.5, (0.0, SEED_RESOLVED_LINES));
