@@ -25,10 +25,17 @@
 //! is the exact inverse above the band (`design --above-band inverse`); with
 //! `--no-drop` the fits keep the pairs the lines do not support
 //! ([`dynocomp::fit::vf::VfOptions::drop_unsupported`]).
+//! `--lag=L` designs every image at latency L instead of choosing it (and
+//! so without the fit up to Nyquist the choice can add); `--force-spectrum`
+//! and `--force-level` choose q for a representative record's force
+//! (`design --force-prior spectrum|level`).
 //! `--from=K` runs seeds K..K+N (seeds 100-199 were first run to check the
 //! seeding, before any result on them was seen).
 //!
-//! usage: cargo run --release -p dynocomp --example sweep -- [N] [--from=K] [--exact-frf] [--no-refine] [--no-seed] [--no-drop] [--above-band=inverse]   (default 100)
+//! Each row ends with the image's latency, the axis's predicted in-band
+//! error and its filter's shape (pairs + real poles + FIR taps).
+//!
+//! usage: cargo run --release -p dynocomp --example sweep -- [N] [--from=K] [--lag=L] [--exact-frf] [--no-refine] [--no-seed] [--no-drop] [--above-band=inverse] [--force-spectrum|--force-level]   (default 100)
 use anyhow::Result;
 use dynocomp::design::image::build_image;
 use dynocomp::eval::rates::{design_options, run_case, scoring_band_hz, CaseResult, RateCase, RunOptions};
@@ -48,7 +55,20 @@ fn main() -> Result<()> {
     let seed_fit = !args.iter().any(|a| a == "--no-seed");
     let drop_unsupported = !args.iter().any(|a| a == "--no-drop");
     let from: u64 = args.iter().find_map(|a| a.strip_prefix("--from=")).map(|v| v.parse()).transpose()?.unwrap_or(0);
-    let run = RunOptions { exact_frf, refine_fit, seed_fit, drop_unsupported, above_band, ..RunOptions::default() };
+    let lag: Option<usize> = args.iter().find_map(|a| a.strip_prefix("--lag=")).map(|v| v.parse()).transpose()?;
+    let force_level_only = args.iter().any(|a| a == "--force-level");
+    let force_spectrum = force_level_only || args.iter().any(|a| a == "--force-spectrum");
+    let run = RunOptions {
+        exact_frf,
+        refine_fit,
+        seed_fit,
+        drop_unsupported,
+        above_band,
+        lag,
+        force_spectrum,
+        force_level_only,
+        ..RunOptions::default()
+    };
     let (mut with_image, mut axes, mut within_13, mut within_2, mut written) = (0, 0, 0, 0, 0);
     // Axes warned of a non-minimum-phase zero (design::phase_limit), and
     // axes whose box output is worse than raw: [warned][worse].
@@ -117,8 +137,18 @@ fn main() -> Result<()> {
                 })
                 .collect();
             let seeded = if seeded.is_empty() { String::new() } else { format!("; seeded {}", seeded.join(", ")) };
+            let shape = a.shape.map_or(String::new(), |s| {
+                format!(
+                    "; latency {}, predicted {:.3} %, {}+{}r+{} taps",
+                    res.latency,
+                    100.0 * a.predicted_error,
+                    s.pairs,
+                    s.reals,
+                    s.taps
+                )
+            });
             let row = format!(
-                "seed {seed} {} ({kind}, {fs} Hz, {} Hz lines): {what}, {ratio:.2}x{written}; raw {:.2} %{warned}{seeded}",
+                "seed {seed} {} ({kind}, {fs} Hz, {} Hz lines): {what}, {ratio:.2}x{written}; raw {:.2} %{warned}{seeded}{shape}",
                 axis_name(a.axis),
                 case.frf_df_hz,
                 100.0 * a.raw_nrmse
