@@ -17,18 +17,39 @@ fn design_states_how_the_latency_was_chosen() {
     assert!(ok, "{err}");
     let j: serde_json::Value = serde_json::from_str(&out).unwrap();
     // The bundled example is flat to its band's top at 4 samples on every
-    // axis: 4 is kept and no longer latency is designed.
-    assert_eq!(j["latency_samples"], 4, "{}", j["latency_choice"]);
+    // axis, but each axis writes more noise above the band than its in-band
+    // error (`latency::ABOVE_BAND_SHORT`): 6 and 8 are designed too, the
+    // reason names the noise, and no discrete model is refitted up to
+    // Nyquist (nothing fell short in the band).
     let c = &j["latency_choice"];
-    assert_eq!(c["chosen"], 4, "{c}");
-    assert_eq!(c["tried"].as_array().unwrap().len(), 1, "{c}");
-    assert_eq!(c["reason"], "", "{c}");
-    // Nothing fell short, so no discrete model was refitted up to Nyquist.
+    assert_eq!(c["tried"].as_array().unwrap().len(), 3, "{c}");
+    assert!(c["reason"].as_str().unwrap().contains("of noise above the band, more than its"), "{c}");
     assert_eq!(c["fit_to_nyquist"], serde_json::json!([false, false, false]), "{c}");
-    let pred = c["tried"][0]["predicted_error"].as_array().unwrap();
-    for (p, ax) in pred.iter().zip(j["axes"].as_array().unwrap()) {
+    assert_eq!(j["latency_samples"], c["chosen"], "{c}");
+    let kept = c["tried"].as_array().unwrap().iter().find(|t| t["latency"] == c["chosen"]).unwrap();
+    for (p, ax) in kept["predicted_error"].as_array().unwrap().iter().zip(j["axes"].as_array().unwrap()) {
         assert_eq!(p, &ax["predicted_error"], "{c}");
     }
+    // The criterion q is chosen for holds the in-band error and the noise
+    // above the band: never below the in-band error.
+    for t in c["tried"].as_array().unwrap() {
+        for (e, k) in t["predicted_error"].as_array().unwrap().iter().zip(t["predicted_criterion"].as_array().unwrap())
+        {
+            assert!(k.as_f64().unwrap() >= e.as_f64().unwrap(), "{t}");
+        }
+    }
+    // Control: with the exact inverse above the band (no noise above it in
+    // the criterion) 4 is kept after one round.
+    let mut inverse = base.to_vec();
+    inverse.extend(["--above-band", "inverse"]);
+    let (ok, out, err) = dynocomp(&inverse);
+    assert!(ok, "{err}");
+    let j: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let c = &j["latency_choice"];
+    assert_eq!(j["latency_samples"], 4, "{c}");
+    assert_eq!(c["tried"].as_array().unwrap().len(), 1, "{c}");
+    assert_eq!(c["reason"], "", "{c}");
+    assert_eq!(c["tried"][0]["predicted_error"], c["tried"][0]["predicted_criterion"], "{c}");
     // A given latency is the image's, and nothing is chosen.
     let mut given = base.to_vec();
     given.extend(["--latency", "6"]);

@@ -184,6 +184,11 @@ pub struct AxisDesign {
     /// Its distortion part alone, √J with the noise term left out
     /// (fraction): what a longer look-ahead can lower ([`crate::design::latency`]).
     pub predicted_distortion: f64,
+    /// √ of the q criterion at the chosen q: the in-band J plus, for a
+    /// design quiet above its band, the noise it writes above the band
+    /// ([`crate::design::above_band::out_of_band_j`]); the figure q was
+    /// chosen for. Equal to `predicted_error` for an in-band criterion.
+    pub predicted_criterion: f64,
     /// Evaluations of the q criterion during the search: (q, J), J plus
     /// the noise written above the band for a quiet design
     /// ([`crate::design::above_band`]).
@@ -873,7 +878,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
     let design_fn = |q: f64| p.kalman_design(discrete.as_ref(), q, prewarp_hz, opts);
     let obj = p.objective(&design_fn, lag, &grid_hz, opts);
     let mut q_trace = Vec::new();
-    let (kal, _criterion, ng) = p.choose_kalman(&obj, opts, &mut q_trace)?;
+    let (kal, criterion, ng) = p.choose_kalman(&obj, opts, &mut q_trace)?;
     let h = kal.compensator.freq_responses(&grid_hz, opts.fs_hz);
     let j = obj.j_of(&h, false);
     let raw_j = obj.raw();
@@ -905,6 +910,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
         predicted_error: j.sqrt(),
         fit_uncertainty,
         predicted_distortion,
+        predicted_criterion: criterion.sqrt(),
         q_trace,
         bands: opts.bands.clone(),
         fit_nrmse_out_of_band: p.fit_nrmse_out_of_band,

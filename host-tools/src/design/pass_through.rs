@@ -82,6 +82,7 @@ pub fn pass_through(frf: &AxisFrf, r: f64, opts: &DesignOptions, reason: String)
         predicted_error: f64::NAN,
         fit_uncertainty: f64::NAN,
         predicted_distortion: f64::NAN,
+        predicted_criterion: f64::NAN,
         q_trace: Vec::new(),
         bands: Vec::new(),
         fit_nrmse_out_of_band: f64::NAN,
