@@ -175,53 +175,54 @@ fn design_round(
     .collect()
 }
 
+/// The reasons `why` gives for the axes of `designs` (each labelled by its
+/// name in `axis_names`), joined ("" if it gives none).
+fn axes_falling_short(
+    designs: &[TimedDesign],
+    axis_names: &[String],
+    why: impl Fn(&Result<AxisDesign>, &str) -> Option<String>,
+) -> String {
+    let why: Vec<String> = designs.iter().zip(axis_names).filter_map(|((d, _), name)| why(d, name)).collect();
+    why.join(", ")
+}
+
 /// Why the designs at the default latency fall short in their band ("" if
 /// they do not): a flat band short of the band's top, a failed axis, or
 /// more than [`PREDICTED_SHORT`] of distortion.
 fn shortfall(designs: &[TimedDesign], axis_names: &[String]) -> String {
-    let why: Vec<String> = designs
-        .iter()
-        .zip(axis_names)
-        .filter_map(|((d, _), name)| match d {
-            Err(_) => Some(format!("axis {name} failed")),
-            Ok(d) => {
-                let (flat, comp) = (d.flat_band_hz.1, d.compensated_band_hz.1);
-                if flat < FLAT_BAND_SHORT * comp {
-                    Some(format!("axis {name} flat to {flat:.0} of {comp:.0} Hz"))
-                } else {
-                    (d.predicted_distortion > PREDICTED_SHORT).then(|| {
-                        format!(
-                            "axis {name} predicts {:.2} % of distortion (> {:.1} %)",
-                            100.0 * d.predicted_distortion,
-                            100.0 * PREDICTED_SHORT
-                        )
-                    })
-                }
+    axes_falling_short(designs, axis_names, |d, name| match d {
+        Err(_) => Some(format!("axis {name} failed")),
+        Ok(d) => {
+            let (flat, comp) = (d.flat_band_hz.1, d.compensated_band_hz.1);
+            if flat < FLAT_BAND_SHORT * comp {
+                Some(format!("axis {name} flat to {flat:.0} of {comp:.0} Hz"))
+            } else {
+                (d.predicted_distortion > PREDICTED_SHORT).then(|| {
+                    format!(
+                        "axis {name} predicts {:.2} % of distortion (> {:.1} %)",
+                        100.0 * d.predicted_distortion,
+                        100.0 * PREDICTED_SHORT
+                    )
+                })
             }
-        })
-        .collect();
-    why.join(", ")
+        }
+    })
 }
 
 /// The axes of `designs` whose noise written above the band exceeds
 /// [`ABOVE_BAND_SHORT`] times their in-band error ("" if none).
 fn noisy_above_band(designs: &[TimedDesign], axis_names: &[String]) -> String {
-    let why: Vec<String> = designs
-        .iter()
-        .zip(axis_names)
-        .filter_map(|((d, _), name)| {
-            let d = d.as_ref().ok()?;
-            let above = (d.predicted_criterion.powi(2) - d.predicted_error.powi(2)).max(0.0).sqrt();
-            (above > ABOVE_BAND_SHORT * d.predicted_error).then(|| {
-                format!(
-                    "axis {name} writes {:.2} % of noise above the band, more than its {:.2} % in it",
-                    100.0 * above,
-                    100.0 * d.predicted_error
-                )
-            })
+    axes_falling_short(designs, axis_names, |d, name| {
+        let d = d.as_ref().ok()?;
+        let above = (d.predicted_criterion.powi(2) - d.predicted_error.powi(2)).max(0.0).sqrt();
+        (above > ABOVE_BAND_SHORT * d.predicted_error).then(|| {
+            format!(
+                "axis {name} writes {:.2} % of noise above the band, more than its {:.2} % in it",
+                100.0 * above,
+                100.0 * d.predicted_error
+            )
         })
-        .collect();
-    why.join(", ")
+    })
 }
 
 /// Predicted box load (‰ of the period, pessimistic) of `designs`, if all succeeded.
@@ -467,16 +468,13 @@ pub fn describe(c: &LatencyChoice, axis_names: &[&str]) -> String {
     if c.reason.is_empty() {
         return format!("latency {} samples (default: on every axis the flat band reaches the compensated band's top, the predicted distortion is within {:.1} % and the noise written above the band within the in-band error)", c.chosen, 100.0 * PREDICTED_SHORT);
     }
+    let pct = |v: &[Option<f64>]| -> String {
+        v.iter().map(|e| e.map_or("failed".into(), |e| format!("{:.2}", 100.0 * e))).collect::<Vec<_>>().join("/")
+    };
     let per: Vec<String> = c
         .tried
         .iter()
         .map(|t| {
-            let pct = |v: &[Option<f64>]| -> String {
-                v.iter()
-                    .map(|e| e.map_or("failed".into(), |e| format!("{:.2}", 100.0 * e)))
-                    .collect::<Vec<_>>()
-                    .join("/")
-            };
             let load = t.load_permille.map_or(String::new(), |p| format!(", load {:.1} %", f64::from(p) / 10.0));
             let with_above = match t.predicted_criterion == t.predicted_error {
                 true => String::new(),
