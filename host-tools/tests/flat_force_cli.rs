@@ -15,7 +15,8 @@ fn the_prediction_holds_on_the_flat_force_it_is_for() {
     std::fs::create_dir_all(&dir).unwrap();
     let p = |n: &str| dir.join(n).display().to_string();
     let sim = |out: &str, extra: &[&str]| {
-        let mut a = vec!["simulate", "--out", out, "--fs", "25600", "--duration", "0.5", "--seed", "1"];
+        let mut a =
+            vec!["simulate", "--dyno", "diagonal", "--out", out, "--fs", "25600", "--duration", "0.5", "--seed", "1"];
         a.extend(extra);
         let (ok, _, err) = dynocomp(&a);
         assert!(ok, "{err}");

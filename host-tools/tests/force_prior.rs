@@ -273,6 +273,8 @@ fn design_and_offline_compensate_with_the_prior() {
     let sim = |out: &std::path::Path, rpm: &str| {
         let (ok, _, err) = dynocomp(&[
             "simulate",
+            "--dyno",
+            "diagonal",
             "--out",
             out.to_str().unwrap(),
             "--fs",

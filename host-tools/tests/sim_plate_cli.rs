@@ -71,10 +71,10 @@ fn plate_files_hold_the_nine_frfs_the_records_and_the_model() {
 }
 
 #[test]
-fn the_per_axis_model_stays_the_default_and_plate_flags_need_it() {
+fn the_per_axis_model_writes_the_direct_frfs_and_plate_flags_need_the_plate() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("d");
-    let args = parse(&[], &out);
+    let args = parse(&["--dyno", "diagonal"], &out);
     dynocomp::cli::simulate::run(&args).unwrap();
     let frf = dynocomp::io::read_frf(&out.join("frf.csv")).unwrap();
     assert_eq!(frf.matrix_status().kind(), MatrixKind::DirectOnly);
@@ -84,9 +84,11 @@ fn the_per_axis_model_stays_the_default_and_plate_flags_need_it() {
     let err = |extra: &[&str]| {
         format!("{:#}", dynocomp::cli::simulate::run(&parse(extra, &dir.path().join("x"))).unwrap_err())
     };
-    assert!(err(&["--dyno-preset", "tall"]).contains("add --dyno plate"));
-    assert!(err(&["--cut-offset", "10:0:0"]).contains("add --dyno plate"));
+    assert!(err(&["--dyno", "diagonal", "--dyno-preset", "tall"]).contains("not --dyno diagonal"));
+    assert!(err(&["--dyno", "diagonal", "--cut-offset", "10:0:0"]).contains("not --dyno diagonal"));
     assert!(err(&["--dyno", "plate", "--preset", "cut-1"]).contains("use --dyno-preset"));
+    assert!(err(&["--preset", "cut-1", "--dyno-preset", "flat"]).contains("use --dyno-preset"));
+    assert!(err(&["--drift-percent", "3", "--cut-offset", "10:0:0"]).contains("add --dyno diagonal"));
     assert!(err(&["--dyno", "plate", "--drift-percent", "3"]).contains("not simulated yet"));
     assert!(err(&["--dyno", "plate", "--dyno-preset", "cube"]).contains("flat, offcentre, tall"));
     assert!(
@@ -95,10 +97,29 @@ fn the_per_axis_model_stays_the_default_and_plate_flags_need_it() {
     assert!(!dir.path().join("x").exists(), "no output after an error");
     let bad = Cli::try_parse_from(["simulate", "--out", "o", "--dyno", "plate", "--cut-offset", "1:2"]);
     assert!(bad.err().unwrap().to_string().contains("DX:DY:DZ"));
-    // A random plate from the seed.
-    let r = dir.path().join("r");
-    dynocomp::cli::simulate::run(&parse(&["--dyno", "plate"], &r)).unwrap();
-    let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(r.join("truth.json")).unwrap()).unwrap();
-    assert!(j.get("dyno_preset").is_none());
-    assert_eq!(dynocomp::io::read_frf(&r.join("frf.uff")).unwrap().entries().count(), 9);
+    // A random plate from the seed, also without --dyno: the default.
+    for (flags, name) in [(&["--dyno", "plate"][..], "r"), (&[][..], "default")] {
+        let r = dir.path().join(name);
+        dynocomp::cli::simulate::run(&parse(flags, &r)).unwrap();
+        let j: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(r.join("truth.json")).unwrap()).unwrap();
+        assert!(j.get("dyno_preset").is_none());
+        assert_eq!(dynocomp::io::read_frf(&r.join("frf.uff")).unwrap().entries().count(), 9, "{flags:?}");
+    }
+}
+
+/// Without --dyno, `simulate` is the plate, as a real dynamometer has
+/// crosstalk; a paper preset or a drift keeps its per-axis dynamometer, and
+/// --dyno diagonal asks for it (its files: the test above).
+#[test]
+fn the_plate_is_the_default_and_the_per_axis_dynamometer_a_choice() {
+    use dynocomp::cli::simulate::DynoModel::{Diagonal, Plate};
+    let dir = tempfile::tempdir().unwrap();
+    let o = dir.path();
+    assert_eq!(parse(&[], o).dyno_model(), Plate);
+    assert_eq!(parse(&["--dyno-preset", "flat"], o).dyno_model(), Plate);
+    assert_eq!(parse(&["--preset", "cut-1"], o).dyno_model(), Diagonal);
+    assert_eq!(parse(&["--drift-percent", "3"], o).dyno_model(), Diagonal);
+    assert_eq!(parse(&["--dyno", "plate", "--drift-percent", "3"], o).dyno_model(), Plate);
+    assert_eq!(parse(&["--dyno", "diagonal"], o).dyno_model(), Diagonal);
 }

@@ -496,6 +496,8 @@ fn run_writes_all_files_readable_by_the_io_layer() {
     let out = dir.path().join("sim");
     let cli = Cli::parse_from([
         "simulate",
+        "--dyno",
+        "diagonal",
         "--out",
         out.to_str().unwrap(),
         "--seed",

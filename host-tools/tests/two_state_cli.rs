@@ -153,11 +153,14 @@ fn two_state_design_and_drifting_smoother_follow_the_change() {
 fn two_state_errors_are_clear() {
     let dir = cli_common::tmp("two-state-cli", "err");
     let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
-    let (ok, _, err) = dynocomp(&["simulate", "--out", &d(""), "--duration", "0.05", "--idle-duration", "0.05"]);
+    let (ok, _, err) =
+        dynocomp(&["simulate", "--dyno", "diagonal", "--out", &d(""), "--duration", "0.05", "--idle-duration", "0.05"]);
     assert!(ok, "{err}");
     let other = cli_common::tmp("two-state-cli", "other");
     let (ok, _, err) = dynocomp(&[
         "simulate",
+        "--dyno",
+        "diagonal",
         "--out",
         other.to_str().unwrap(),
         "--duration",
@@ -222,6 +225,8 @@ fn design_reports_the_joint_fit_of_modes_above_the_band() {
     let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
     let (ok, _, err) = dynocomp(&[
         "simulate",
+        "--dyno",
+        "diagonal",
         "--out",
         &d(""),
         "--seed",

@@ -128,18 +128,20 @@ pub struct SimulateArgs {
     /// End of the drift (s) [default: the end of the record].
     #[arg(long, requires = "drift_percent")]
     pub drift_end: Option<f64>,
-    /// The dynamometer model: `diagonal` (one independent modal model per
-    /// axis, no crosstalk) or `plate` (a rigid plate and workpiece on four
+    /// The dynamometer model: `plate` (a rigid plate and workpiece on four
     /// 3-component sensors and a base on the table: every channel responds
-    /// to every force direction; the impact test measures all nine FRFs).
-    #[arg(long, value_enum, default_value_t = DynoModel::Diagonal)]
-    pub dyno: DynoModel,
-    /// With --dyno plate: a named set-up instead of a random one: `flat`
+    /// to every force direction, as on a real dynamometer; the impact tests
+    /// measure all nine FRFs) or `diagonal` (one independent modal model per
+    /// axis, no crosstalk) [default: plate; diagonal with --preset or
+    /// --drift-percent, which simulate per-axis set-ups].
+    #[arg(long, value_enum)]
+    pub dyno: Option<DynoModel>,
+    /// With the plate: a named set-up instead of a random one: `flat`
     /// (flat centred plate), `offcentre` (block off the centre), `tall`
     /// (tall part, force 90 mm above the sensors).
     #[arg(long, value_name = "NAME")]
     pub dyno_preset: Option<String>,
-    /// With --dyno plate: where the cutting force acts, from the impact point,
+    /// With the plate: where the cutting force acts, from the impact point,
     /// as DX:DY:DZ in mm (e.g. 20:0:0); the FRF is measured at the impact point.
     #[arg(long, value_name = "DX:DY:DZ", allow_hyphen_values = true, value_parser = parse_offset_mm)]
     pub cut_offset: Option<[f64; 3]>,
@@ -169,6 +171,18 @@ fn parse_offset_mm(s: &str) -> Result<[f64; 3]> {
 }
 
 impl SimulateArgs {
+    /// The dynamometer simulated: `--dyno`; without it the plate, except
+    /// that a paper `--preset` brings its own per-axis dynamometer and
+    /// `--drift-percent` drifts only the per-axis one.
+    pub fn dyno_model(&self) -> DynoModel {
+        let plate_options = self.dyno_preset.is_some() || self.cut_offset.is_some();
+        match self.dyno {
+            Some(m) => m,
+            None if !plate_options && (self.preset.is_some() || self.drift_percent.is_some()) => DynoModel::Diagonal,
+            None => DynoModel::Plate,
+        }
+    }
+
     /// The simulation parameters these arguments select (from the
     /// preset's, or [`SimParams::default`]).
     pub fn params(&self) -> Result<SimParams> {
@@ -256,10 +270,17 @@ fn announce(p: &SimParams, what: &str) -> Result<()> {
 /// `dynocomp simulate`: simulate and write the files into `args.out`; a
 /// summary goes to stderr.
 pub fn run(args: &SimulateArgs) -> Result<()> {
-    if args.dyno == DynoModel::Plate {
+    if args.dyno_model() == DynoModel::Plate {
         return run_plate(args);
     }
     let options = DiagonalOptions::new(args)?;
+    if args.dyno.is_none() {
+        let why = if args.preset.is_some() { "--preset" } else { "--drift-percent" };
+        eprintln!(
+            "simulate: {why} simulates the per-axis dynamometer (no crosstalk), not the default plate \
+             (same as --dyno diagonal)"
+        );
+    }
     let out = simulate_and_write(&options)?;
     for line in summary(&out, options.preset(), &options.out) {
         eprintln!("{line}");
@@ -291,7 +312,7 @@ impl DiagonalOptions {
     /// paper preset, are refused.
     fn new(args: &SimulateArgs) -> Result<Self> {
         if args.dyno_preset.is_some() || args.cut_offset.is_some() {
-            anyhow::bail!("--dyno-preset and --cut-offset describe the plate dynamometer: add --dyno plate");
+            anyhow::bail!("--dyno-preset and --cut-offset describe the plate dynamometer, not --dyno diagonal");
         }
         let params = args.params()?;
         let preset = args.preset.as_deref().map(crate::simulate::presets::preset).transpose()?;
@@ -381,6 +402,7 @@ fn summary(out: &SimOutput, preset: Option<&Preset>, dir: &std::path::Path) -> V
     ));
     let d = dir.display();
     lines.push(format!("  wrote {d}/{{frf.uff, frf.csv, measured.csv, true_force.csv, idle.csv, truth.json}}"));
+    lines.push(next_steps(dir, p.fs_hz));
     if let Some(pr) = preset {
         lines.push(format!(
             "  design as the paper did: dynocomp design --frf {d}/frf.uff --idle {d}/idle.csv --fs {} --method paper \
@@ -425,12 +447,15 @@ fn run_plate(args: &SimulateArgs) -> Result<()> {
     use crate::simulate::plate::{output, simulate_plate, PlateSetup, PlateSim};
     if args.preset.is_some() {
         anyhow::bail!(
-            "--preset with --dyno plate: the paper presets bring their own per-axis dynamometer; \
-             use --dyno-preset for a plate set-up"
+            "--preset with the plate dynamometer (--dyno plate, --dyno-preset, --cut-offset): the paper presets \
+             bring their own per-axis dynamometer; use --dyno-preset for a plate set-up"
         );
     }
     if args.drift_percent.is_some() {
-        anyhow::bail!("--drift-percent with --dyno plate: a drifting plate dynamometer is not simulated yet");
+        anyhow::bail!(
+            "--drift-percent with the plate dynamometer: a drifting plate is not simulated yet; add --dyno diagonal \
+             for a drifting per-axis dynamometer"
+        );
     }
     let params = args.params()?;
     let setup = match &args.dyno_preset {
@@ -470,5 +495,17 @@ fn run_plate(args: &SimulateArgs) -> Result<()> {
     );
     let files = "frf.uff, frf.csv, measured.csv, true_force.csv, idle.csv, truth.json";
     eprintln!("  wrote {}/{{{files}}}", args.out.display());
+    eprintln!("{}", next_steps(&args.out, p.fs_hz));
     Ok(())
+}
+
+/// The commands that design a compensator for the files written into
+/// `dir` and score it against the true force.
+fn next_steps(dir: &std::path::Path, fs_hz: f64) -> String {
+    let d = dir.display();
+    format!(
+        "  next: dynocomp design --frf {d}/frf.uff --idle {d}/idle.csv --fs {fs_hz} --out {d}/box.dcimg && \
+         dynocomp compensate --coeffs {d}/box.dcimg --input {d}/measured.csv --output {d}/compensated.csv \
+         --truth {d}/true_force.csv"
+    )
 }
