@@ -768,6 +768,18 @@ fn rank_rounds(mut rounds: Vec<Round>) -> (Vec<Round>, Vec<LatencyRound>) {
     (ranked, latency_rounds)
 }
 
+/// Whether the latency rule ([`rank_rounds`]) between rounds `a` and `b`
+/// chooses `a`: the shorter latency where it is within [`GAIN_NOT_WORTH`]
+/// of the better of the two on every axis, else the longer where it is,
+/// else the one with the smaller worst ratio.
+fn rule_prefers(a: &Round, b: &Round) -> bool {
+    let best: [f64; 3] = std::array::from_fn(|i| a.axes[i].chosen.error.min(b.axes[i].chosen.error));
+    let ratio = |rd: &Round| (0..3).map(|i| rd.axes[i].chosen.error / best[i]).fold(0.0, f64::max);
+    let (short_is_a, short, long) = if a.lag <= b.lag { (true, a, b) } else { (false, b, a) };
+    let short_wins = ratio(short) <= GAIN_NOT_WORTH || (ratio(long) > GAIN_NOT_WORTH && ratio(short) <= ratio(long));
+    short_wins == short_is_a
+}
+
 /// Never worse than no compensation: refuse the design where an axis's
 /// chosen row does not beat it (or is over [`MAX_PREDICTED_ERROR`]).
 fn refuse_unless_better_than_raw(chosen: &Round) -> Result<()> {
@@ -1311,9 +1323,13 @@ struct Chosen {
 /// 2. where its 3x3 rows do not verify (or need more sections than the
 ///    kernel holds), the rule's choice with its 3x3 block reduced by
 ///    balancing ([`reduce::reduce_to_realize`]), where every 3x3 row still
-///    beats its per-axis row;
+///    beats its per-axis row, within the box's load limit;
 /// 3. else the next round (latency) by the rule whose 3x3 rows verify and
-///    that beats no compensation, with a note;
+///    that beats no compensation, with a note, where the box runs it;
+///    where it is over the load limit too (the image is offline-only at
+///    any latency), the rule's choice reduced to the highest order that
+///    verifies, unless the latency rule prefers the next round's filter to
+///    that reduction ([`rule_prefers`], on their predictions);
 /// 4. else the choice with every axis on its per-axis row, with a note,
 ///    and why the 3x3 rows were dropped.
 fn realize_chosen(ranked: Vec<Round>, notes: &mut Vec<String>, crits: &Criteria, at: reduce::LoadAt) -> Result<Chosen> {
@@ -1325,20 +1341,65 @@ fn realize_chosen(ranked: Vec<Round>, notes: &mut Vec<String>, crits: &Criteria,
         Err(e) if rd.rows.contains(&RowSource::Matrix) => e,
         Err(e) => return Err(e),
     };
-    match reduce::reduce_to_realize(&mut rd, crits, at, format!("{err:#}"))? {
+    let boxed = match reduce::reduce_to_realize(&mut rd, crits, at, format!("{err:#}"))? {
         Ok((realized, fig, full)) => {
             return Ok(Chosen { round: rd, realized, dropped: None, reduced: Some((fig, full)) });
         }
-        Err(fig) => notes.extend(fig.map(|f| f.line())),
-    }
-    for alt in ranked.filter(|a| a.rows.contains(&RowSource::Matrix) && refuse_unless_better_than_raw(a).is_ok()) {
-        if let Ok(r) = realize_round(&alt, fs, f_band) {
-            notes.push(format!(
-                "latency {}: {err:#}; latency {} is used instead, the next by the latency rule whose 3x3 rows verify",
-                rd.lag, alt.lag
-            ));
-            return Ok(Chosen { round: alt, realized: r, dropped: None, reduced: None });
+        Err(fig) => fig,
+    };
+    let alt = ranked
+        .filter(|a| a.rows.contains(&RowSource::Matrix) && refuse_unless_better_than_raw(a).is_ok())
+        .find_map(|a| realize_round(&a, fs, f_band).ok().map(|r| (a, r)));
+    let alt_on_the_box = alt.as_ref().is_some_and(|(_, r)| reduce::filter_load(&r.1 .1, fs) <= at.limit);
+    let mut reduced_lost = None;
+    if let Some(boxed) = boxed.as_ref().filter(|_| !alt_on_the_box && at.limit < u32::MAX) {
+        // The image is offline-only whichever latency it holds: the rule's
+        // choice reduced to the highest order that verifies (`compensate`),
+        // where the latency rule prefers it to the next latency's filter.
+        let offline = reduce::LoadAt { limit: u32::MAX, ..at };
+        if let Ok((realized, fig, full)) = reduce::reduce_to_realize(&mut rd, crits, offline, format!("{err:#}"))? {
+            let three = |rd: &Round| {
+                rd.axes.iter().map(|a| format!("{:.3}", 100.0 * a.chosen.error)).collect::<Vec<_>>().join(" / ")
+            };
+            let reduced = format!(
+                "latency {}'s 3x3 block reduced to {} states for an offline-only image predicts {} %",
+                rd.lag,
+                fig.states,
+                three(&rd)
+            );
+            match &alt {
+                Some((a, _)) if rule_prefers(a, &rd) => {
+                    reduced_lost = Some(format!("{reduced}, latency {} {} %", a.lag, three(a)));
+                }
+                _ => {
+                    notes.push(format!(
+                        "the box runs no reduction of latency {}'s 3x3 block that beats the alternatives ({} states: \
+                         {} %){}: the image, offline-only, holds the highest-order reduction that verifies in f32",
+                        rd.lag,
+                        boxed.states,
+                        boxed.predicted.map(|e| format!("{:.3}", 100.0 * e)).join(" / "),
+                        alt.as_ref().map_or(String::new(), |(a, _)| format!(
+                            "; latency {}'s filter, over the load limit too, predicts {} % against {} % by the \
+                             latency rule",
+                            a.lag,
+                            three(a),
+                            three(&rd)
+                        ))
+                    ));
+                    return Ok(Chosen { round: rd, realized, dropped: None, reduced: Some((fig, full)) });
+                }
+            }
         }
+    }
+    notes.extend(boxed.map(|f| f.line()));
+    if let Some((alt, r)) = alt {
+        notes.push(format!(
+            "latency {}: {err:#}; latency {} is used instead, the next by the latency rule whose 3x3 rows verify{}",
+            rd.lag,
+            alt.lag,
+            reduced_lost.map_or(String::new(), |r| format!(" (by the same rule: {r})"))
+        ));
+        return Ok(Chosen { round: alt, realized: r, dropped: None, reduced: None });
     }
     if !rd.per_axis.iter().all(Option::is_some) {
         return Err(err);
