@@ -78,7 +78,11 @@ pub fn run(args: &DesignArgs, s: &DesignSetup, t0: Instant) -> Result<MatrixOutc
         load_limit_permille: (!args.full_order).then_some(s.limit_permille),
         ..Default::default()
     };
-    eprintln!("designing the 3x3 compensator ({} lines, nine FRFs; several seconds)…", s.frf.freq_hz.len());
+    eprintln!(
+        "designing the 3x3 compensator ({} lines, nine FRFs; 10-60 s on two cores, each step below; \
+         --per-axis: the direct FRFs alone, crosstalk not compensated, in under a second)…",
+        s.frf.freq_hz.len()
+    );
     let md = match design_matrix(&s.frf, r, &opts) {
         Ok(md) => md,
         Err(e) if e.downcast_ref::<NotVerified>().is_some() => {
