@@ -774,12 +774,7 @@ fn cli_a_choice_that_does_not_verify_is_reduced_for_an_offline_only_image() {
         let args = ["compensate", "--coeffs", &p(image), "--input", &p("measured.csv"), "--output", &p(&c)];
         let (ok, _, err) = dynocomp(&[&args[..], &["--truth", &p("true_force.csv")]].concat());
         assert!(ok, "{err}");
-        let at = |a: &str| -> f64 {
-            let line = err.lines().find(|l| l.starts_with(&format!("f{a}: NRMSE"))).expect("NRMSE line");
-            let v = line.split("compensated ").nth(1).unwrap().split(' ').next().unwrap();
-            v.parse::<f64>().unwrap() / 100.0
-        };
-        ["x", "y", "z"].map(at)
+        cli_common::compensated_nrmse(&err)
     };
     let reduced = nrmse("reduced.dcimg", &[]);
     let before = nrmse("latency6.dcimg", &["--latency", "6"]);
@@ -1103,7 +1098,12 @@ fn a_3x3_filter_the_kernel_cannot_hold_is_reduced_for_the_image() {
     }
     // The full filter, in f64 (offline: the kernel cannot hold it).
     let lag = md.summary.latency;
-    let full_nrmse = |c: &MimoStateSpace| f64_nrmse(c, &out, lag);
+    let full_nrmse = |c: &MimoStateSpace| -> [f64; 3] {
+        let n = out.measured[0].len();
+        let input: Vec<DVector<f64>> = (0..n).map(|k| DVector::from_fn(3, |i, _| out.measured[i][k])).collect();
+        let y = c.simulate(&input);
+        std::array::from_fn(|i| score(&y.iter().map(|v| v[i]).collect::<Vec<_>>(), &out, i, lag))
+    };
     let full_compensator = md.full_compensator.as_ref().expect("the full filter beside the reduced one");
     let full = full_nrmse(full_compensator);
     eprintln!(
@@ -1123,15 +1123,6 @@ fn a_3x3_filter_the_kernel_cannot_hold_is_reduced_for_the_image() {
     let third = full_nrmse(&bal.reduce(reduction.states / 3, reduction.method).unwrap());
     eprintln!("a third of the order (f64): {third:?}");
     assert!((0..3).any(|i| md.rows[i] == RowSource::Matrix && third[i] > 1.2 * full[i]), "{third:?} against {full:?}");
-}
-
-/// NRMSE per axis of the compensator `c` run in f64 on the record (the
-/// filter no image holds), its output delayed by `lag`.
-fn f64_nrmse(c: &MimoStateSpace, out: &PlateSimOutput, lag: usize) -> [f64; 3] {
-    let n = out.measured[0].len();
-    let input: Vec<DVector<f64>> = (0..n).map(|k| DVector::from_fn(3, |i, _| out.measured[i][k])).collect();
-    let y = c.simulate(&input);
-    std::array::from_fn(|i| score(&y.iter().map(|v| v[i]).collect::<Vec<_>>(), out, i, lag))
 }
 
 /// The rows judged under flat forces and under a record's force spectrum,
