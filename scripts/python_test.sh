@@ -36,9 +36,14 @@ export PATH="$venv/bin:$PATH"
 # build time (pip and maturin pass the environment on to cargo).
 # PYTHON_EXT_PROFILE=package keeps it.
 t0=$(date +%s)
-fast=(CARGO_PROFILE_RELEASE_LTO=false CARGO_PROFILE_RELEASE_CODEGEN_UNITS=16)
-[ "${PYTHON_EXT_PROFILE:-fast}" = package ] && fast=()
-env ${fast[@]+"${fast[@]}"} CARGO_TARGET_DIR="$tgt" "$venv/bin/python" -m pip install -q --disable-pip-version-check \
+# Called from scripts/test.sh, it also drops the test build's debug
+# assertions and overflow checks (the package's profile has neither), and
+# CI's clippy wrapper (.ci/run lints the root workspace, not the extension).
+fast=(CARGO_PROFILE_RELEASE_LTO=false CARGO_PROFILE_RELEASE_CODEGEN_UNITS=16
+    CARGO_PROFILE_RELEASE_DEBUG_ASSERTIONS=false CARGO_PROFILE_RELEASE_OVERFLOW_CHECKS=false)
+[ "${PYTHON_EXT_PROFILE:-fast}" = package ] && fast=(-u CARGO_PROFILE_RELEASE_DEBUG_ASSERTIONS -u CARGO_PROFILE_RELEASE_OVERFLOW_CHECKS
+    -u CARGO_PROFILE_RELEASE_LTO -u CARGO_PROFILE_RELEASE_CODEGEN_UNITS -u CARGO_PROFILE_RELEASE_DEBUG)
+env -u RUSTC_WORKSPACE_WRAPPER -u CLIPPY_ARGS "${fast[@]}" CARGO_TARGET_DIR="$tgt" "$venv/bin/python" -m pip install -q --disable-pip-version-check \
     --no-build-isolation --force-reinstall --no-deps ./python
 echo "python: built and installed the extension in $(( $(date +%s) - t0 )) s"
 

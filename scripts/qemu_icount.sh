@@ -9,7 +9,9 @@ cd "$(dirname "$0")/../qemu"
 target_dir="${CARGO_TARGET_DIR:-$PWD/../target}/qemu"
 # The firmware's code generation (qemu/'s release profile, fat LTO): a fast
 # host build's CARGO_PROFILE_* overrides (CI sets them) would count another.
+# CI's clippy wrapper (.ci/run) lints the repository's host build, not this.
 while read -r v; do unset "$v"; done < <(env | sed -n 's/^\(CARGO_PROFILE_[A-Z0-9_]*\)=.*/\1/p')
+unset RUSTC_WORKSPACE_WRAPPER CLIPPY_ARGS
 # RUSTFLAGS replaces the repository's firmware link flags (.cargo/config.toml
 # adds defmt.x, which these programs do not use): only cortex-m-rt's link.x.
 CARGO_TARGET_DIR="$target_dir" RUSTFLAGS="-C link-arg=-Tlink.x" \

@@ -32,13 +32,16 @@ fn firmware_elf() -> PathBuf {
     // The `cargo firmware` alias (.cargo/config.toml), spelled out.
     // The layout checked is that of the repository's release profile (LTO):
     // a developer's CARGO_PROFILE_* overrides (a fast local build without
-    // LTO) would check a different firmware.
+    // LTO) would check a different firmware. CI's clippy wrapper (.ci/run)
+    // lints the host build, not the firmware's.
     let mut build = Command::new(cargo);
     build
         .current_dir(root)
         .args(["build", "--release", "--target", "thumbv7em-none-eabihf", "-p", "dynocomp-core"])
         .args(["--features", "firmware", "--bin", "dynocomp-box"])
-        .env_remove("CARGO_ENCODED_RUSTFLAGS");
+        .env_remove("CARGO_ENCODED_RUSTFLAGS")
+        .env_remove("RUSTC_WORKSPACE_WRAPPER")
+        .env_remove("CLIPPY_ARGS");
     for (k, _) in std::env::vars_os() {
         if k.to_str().is_some_and(|k| k.starts_with("CARGO_PROFILE_")) {
             build.env_remove(k);

@@ -198,9 +198,12 @@ fn build_target_program() -> PathBuf {
         .env("CARGO_TARGET_DIR", &target_dir)
         // Replaces the repository's firmware link flags (defmt.x), see scripts/qemu_icount.sh.
         .env("RUSTFLAGS", "-C link-arg=-Tlink.x")
-        .env_remove("CARGO_ENCODED_RUSTFLAGS");
+        .env_remove("CARGO_ENCODED_RUSTFLAGS")
+        .env_remove("RUSTC_WORKSPACE_WRAPPER")
+        .env_remove("CLIPPY_ARGS");
     // The firmware's code generation (qemu/'s release profile, fat LTO), not
-    // a fast host build's CARGO_PROFILE_* overrides (CI sets them).
+    // a fast host build's CARGO_PROFILE_* overrides (CI sets them), nor
+    // CI's clippy wrapper (.ci/run), which lints the host build.
     for (k, _) in std::env::vars_os() {
         if k.to_str().is_some_and(|k| k.starts_with("CARGO_PROFILE_")) {
             build.env_remove(k);
