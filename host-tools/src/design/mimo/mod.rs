@@ -353,6 +353,24 @@ struct Round {
     rows: [RowSource; 3],
 }
 
+impl Round {
+    /// The predicted in-band error of each axis's chosen row (fractions).
+    fn predicted(&self) -> [f64; 3] {
+        std::array::from_fn(|i| self.axes[i].chosen.error)
+    }
+
+    /// The largest ratio, over the axes, of this round's predicted error to
+    /// `best` (the latency rule's measure).
+    fn worst_ratio(&self, best: &[f64; 3]) -> f64 {
+        self.predicted().iter().zip(best).map(|(e, b)| e / b).fold(0.0, f64::max)
+    }
+}
+
+/// Three predicted errors as percentages, "x / y / z" to 0.001 %.
+fn percent_xyz(v: &[f64; 3]) -> String {
+    v.map(|e| format!("{:.3}", 100.0 * e)).join(" / ")
+}
+
 /// Design the 3x3 compensator of the complete FRF matrix `frf` for the
 /// measurement noise variances `r` (N², per channel).
 ///
@@ -751,19 +769,16 @@ fn latency_rounds(
 /// axis, the one of least worst ratio to them; then the others by that
 /// ratio (what [`realize_chosen`] falls back on).
 fn rank_rounds(mut rounds: Vec<Round>) -> (Vec<Round>, Vec<LatencyRound>) {
-    let latency_rounds: Vec<LatencyRound> = rounds
-        .iter()
-        .map(|rd| LatencyRound { latency: rd.lag, predicted: std::array::from_fn(|i| Some(rd.axes[i].chosen.error)) })
-        .collect();
+    let latency_rounds: Vec<LatencyRound> =
+        rounds.iter().map(|rd| LatencyRound { latency: rd.lag, predicted: rd.predicted().map(Some) }).collect();
     let best: [f64; 3] =
-        std::array::from_fn(|i| rounds.iter().map(|rd| rd.axes[i].chosen.error).fold(f64::INFINITY, f64::min));
-    let worst_ratio = |rd: &Round| (0..3).map(|i| rd.axes[i].chosen.error / best[i]).fold(0.0, f64::max);
-    let first = rounds.iter().position(|rd| worst_ratio(rd) <= GAIN_NOT_WORTH);
+        std::array::from_fn(|i| rounds.iter().map(|rd| rd.predicted()[i]).fold(f64::INFINITY, f64::min));
+    let first = rounds.iter().position(|rd| rd.worst_ratio(&best) <= GAIN_NOT_WORTH);
     let mut ranked = Vec::with_capacity(rounds.len());
     if let Some(k) = first {
         ranked.push(rounds.remove(k));
     }
-    rounds.sort_by(|a, b| worst_ratio(a).total_cmp(&worst_ratio(b)));
+    rounds.sort_by(|a, b| a.worst_ratio(&best).total_cmp(&b.worst_ratio(&best)));
     ranked.extend(rounds);
     (ranked, latency_rounds)
 }
@@ -773,10 +788,11 @@ fn rank_rounds(mut rounds: Vec<Round>) -> (Vec<Round>, Vec<LatencyRound>) {
 /// of the better of the two on every axis, else the longer where it is,
 /// else the one with the smaller worst ratio.
 fn rule_prefers(a: &Round, b: &Round) -> bool {
-    let best: [f64; 3] = std::array::from_fn(|i| a.axes[i].chosen.error.min(b.axes[i].chosen.error));
-    let ratio = |rd: &Round| (0..3).map(|i| rd.axes[i].chosen.error / best[i]).fold(0.0, f64::max);
+    let (pa, pb) = (a.predicted(), b.predicted());
+    let best: [f64; 3] = std::array::from_fn(|i| pa[i].min(pb[i]));
     let (short_is_a, short, long) = if a.lag <= b.lag { (true, a, b) } else { (false, b, a) };
-    let short_wins = ratio(short) <= GAIN_NOT_WORTH || (ratio(long) > GAIN_NOT_WORTH && ratio(short) <= ratio(long));
+    let (short_ratio, long_ratio) = (short.worst_ratio(&best), long.worst_ratio(&best));
+    let short_wins = short_ratio <= GAIN_NOT_WORTH || (long_ratio > GAIN_NOT_WORTH && short_ratio <= long_ratio);
     short_wins == short_is_a
 }
 
@@ -1358,9 +1374,7 @@ fn realize_chosen(ranked: Vec<Round>, notes: &mut Vec<String>, crits: &Criteria,
         // where the latency rule prefers it to the next latency's filter.
         let offline = reduce::LoadAt { limit: u32::MAX, ..at };
         if let Ok((realized, fig, full)) = reduce::reduce_to_realize(&mut rd, crits, offline, format!("{err:#}"))? {
-            let three = |rd: &Round| {
-                rd.axes.iter().map(|a| format!("{:.3}", 100.0 * a.chosen.error)).collect::<Vec<_>>().join(" / ")
-            };
+            let three = |rd: &Round| percent_xyz(&rd.predicted());
             let reduced = format!(
                 "latency {}'s 3x3 block reduced to {} states for an offline-only image predicts {} %",
                 rd.lag,
@@ -1377,7 +1391,7 @@ fn realize_chosen(ranked: Vec<Round>, notes: &mut Vec<String>, crits: &Criteria,
                          {} %){}: the image, offline-only, holds the highest-order reduction that verifies in f32",
                         rd.lag,
                         boxed.states,
-                        boxed.predicted.map(|e| format!("{:.3}", 100.0 * e)).join(" / "),
+                        percent_xyz(&boxed.predicted),
                         alt.as_ref().map_or(String::new(), |(a, _)| format!(
                             "; latency {}'s filter, over the load limit too, predicts {} % against {} % by the \
                              latency rule",
@@ -1496,6 +1510,75 @@ fn finish(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A round at latency `lag` whose axes predict `percent` (no designs).
+    fn round_predicting(lag: usize, percent: [f64; 3]) -> Round {
+        let row = |p: f64| RowError { error: p / 100.0, distortion: p / 100.0, fit: f64::NAN };
+        let axes = (0..3)
+            .map(|i| AxisPrediction {
+                axis: ["x", "y", "z"][i],
+                band_hz: (0.0, 4000.0),
+                raw: row(50.0),
+                per_axis: None,
+                per_axis_direct_only: None,
+                matrix: Some(row(percent[i])),
+                per_axis_judged: None,
+                matrix_judged: None,
+                source: RowSource::Matrix,
+                chosen: row(percent[i]),
+                reason: String::new(),
+                noise_gain: 1.0,
+            })
+            .collect();
+        Round {
+            lag,
+            per_axis: vec![None, None, None],
+            matrix: None,
+            matrix_error: None,
+            axes,
+            rows: [RowSource::Matrix; 3],
+        }
+    }
+
+    fn first_ranked(rounds: Vec<Round>) -> usize {
+        rank_rounds(rounds).0[0].lag
+    }
+
+    /// The latency rule, on rounds whose ratios are worked out by hand
+    /// (GAIN_NOT_WORTH = 1.1): the shortest latency within 1.1x of every
+    /// axis's best; else the least worst ratio. `rule_prefers` on two
+    /// rounds chooses as `rank_rounds` does on them, either way round.
+    #[test]
+    fn the_latency_rule_ranks_and_compares_rounds_alike() {
+        // Latency 6 within 1.1x everywhere (1.05x on y): kept, though 8 is better.
+        let r = || (round_predicting(6, [0.30, 0.42, 0.50]), round_predicting(8, [0.30, 0.40, 0.50]));
+        let (a, b) = r();
+        assert_eq!(first_ranked(vec![a, b]), 6);
+        let (a, b) = r();
+        assert!(rule_prefers(&a, &b) && !rule_prefers(&b, &a));
+        // Control: 1.2x on y buys latency 8.
+        let r = || (round_predicting(6, [0.30, 0.48, 0.50]), round_predicting(8, [0.30, 0.40, 0.50]));
+        let (a, b) = r();
+        assert_eq!(first_ranked(vec![a, b]), 8);
+        let (a, b) = r();
+        assert!(!rule_prefers(&a, &b) && rule_prefers(&b, &a));
+        // Bests on different latencies, neither within 1.1x everywhere:
+        // 6 is 1.5x off on y, 8 is 1.2x off on x, so 8.
+        let r = || (round_predicting(6, [0.30, 0.60, 0.50]), round_predicting(8, [0.36, 0.40, 0.50]));
+        let (a, b) = r();
+        assert_eq!(first_ranked(vec![a, b]), 8);
+        let (a, b) = r();
+        assert!(!rule_prefers(&a, &b) && rule_prefers(&b, &a));
+        // Three rounds: 6 is 1.3x off, 8 within 1.1x of 10 (1.08x): 8.
+        let rounds = vec![
+            round_predicting(6, [0.52, 0.40, 0.40]),
+            round_predicting(8, [0.43, 0.40, 0.40]),
+            round_predicting(10, [0.40, 0.40, 0.40]),
+        ];
+        let ranked: Vec<usize> = rank_rounds(rounds).0.iter().map(|rd| rd.lag).collect();
+        assert_eq!(ranked, [8, 10, 6], "then by worst ratio");
+        assert_eq!(percent_xyz(&round_predicting(8, [0.43, 0.4, 0.0126]).predicted()), "0.430 / 0.400 / 0.013");
+    }
 
     /// The level prior's caveat: for `--force-prior level` quiet above the
     /// band only; not for a record's spectrum, a flat force, or a design

@@ -13,7 +13,7 @@ use dynocomp_core::mimo::MimoFilter;
 use serde::{Deserialize, Serialize};
 
 use super::criterion::RowError;
-use super::{blocks_of, Criteria, Realized, Round, RowSource};
+use super::{blocks_of, percent_xyz, Criteria, Realized, Round, RowSource};
 use crate::numeric::balanced::{balance, Balanced, Reduction};
 use crate::numeric::lti::MimoStateSpace;
 use crate::numeric::parallel::map_on_threads;
@@ -62,7 +62,6 @@ impl ReductionFigures {
     /// One line of what the reduction to the box's load limit did, with its
     /// cost in predicted in-band error.
     pub fn line(&self) -> String {
-        let three = |v: &[f64; 3]| v.map(|e| format!("{:.3}", 100.0 * e)).join(" / ");
         let method = match self.method {
             Reduction::SingularPerturbation => "balanced singular perturbation, exact at DC",
             Reduction::Truncation => "balanced truncation",
@@ -86,8 +85,8 @@ impl ReductionFigures {
             "3x3 block {} -> {} states ({method}; {load}); predicted in-band error x / y / z {} % full -> {} % reduced",
             self.full_states,
             self.states,
-            three(&self.full_predicted),
-            three(&self.predicted)
+            percent_xyz(&self.full_predicted),
+            percent_xyz(&self.predicted)
         );
         match self.used {
             true => format!("reduced {purpose}: {what}; compensate --offline keeps the full model"),
@@ -227,7 +226,7 @@ fn reduce_block(
     let (blocks, full) = blocks_of(rd)?;
     let Some((matrix_block, other)) = blocks.split_first() else { return Ok(None) };
     let for_image = full_not_realized.is_some();
-    let full_predicted: [f64; 3] = std::array::from_fn(|i| rd.axes[i].chosen.error);
+    let full_predicted = rd.predicted();
     let mut fig = ReductionFigures {
         used: false,
         reason: String::new(),
