@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Short smoke run of every fuzz target (CI, .ci/run): SECONDS per target
-# (default 15) from the committed seeds, failing on any crash, timeout or
-# out-of-memory. Needs a nightly toolchain, not cargo-fuzz: the targets are
+# (default 15) from the committed seeds, one target per core at a time
+# (SMOKE_JOBS=N to change), failing on any crash, timeout or
+# out-of-memory. SMOKE_BUILD_ONLY=1 builds the targets and stops (CI builds
+# them in the background while the tests run). Needs a nightly toolchain, not cargo-fuzz: the targets are
 # built with the flags `cargo fuzz build -s none` passes to cargo (rust-fuzz/
 # cargo-fuzz, src/project.rs: SanitizerCoverage with inline 8-bit counters,
 # PC table, compare tracing and stack depth, `--cfg fuzzing`, debug
@@ -40,25 +42,44 @@ flags=(
 # caller off build scripts and proc macros (as cargo-fuzz does).
 DYNOCOMP_FUZZ_FLAGS="${flags[*]}" RUSTC_WRAPPER="$PWD/instrument.sh" cargo +nightly build --manifest-path Cargo.toml --release \
     --config 'profile.release.debug="line-tables-only"' --target "$triple" --target-dir "$tgt" --bins
+[ "${SMOKE_BUILD_ONLY:-0}" = 1 ] && { echo "fuzz smoke: targets built"; exit 0; }
 targets=$(sed -n 's/^name = "\(.*\)"$/\1/p' Cargo.toml | grep -v '^dynocomp-fuzz$')
 [ -n "$targets" ] || { echo "fuzz smoke: no [[bin]] targets found in fuzz/Cargo.toml" >&2; exit 1; }
-for t in $targets; do
-    echo "-- fuzz smoke: $t (${secs} s)"
+# One libFuzzer process per core at a time (each is single-threaded); each
+# target's summary is printed when it ends, in the order of Cargo.toml.
+jobs="${SMOKE_JOBS:-$(nproc)}"
+logs="$(mktemp -d)"
+run_one() {
+    local t="$1" work status
     work="$(mktemp -d)"
     mkdir -p "artifacts/$t"
     # Seeds are read-only input; new corpus entries go to a scratch dir.
     set +e
     "$tgt/$triple/release/$t" -artifact_prefix="artifacts/$t/" "$work" "seeds/$t" \
-        -max_total_time="$secs" -rss_limit_mb=2048 -timeout=10 -print_final_stats=1 >"$work.log" 2>&1
+        -max_total_time="$secs" -rss_limit_mb=2048 -timeout=10 -print_final_stats=1 >"$logs/$t.log" 2>&1
     status=$?
     set -e
-    grep -E "^(#[0-9]+[[:space:]]+DONE|==[0-9]+== ERROR|SUMMARY|stat::number_of_executed_units)" "$work.log" || true
-    if [ "$status" -ne 0 ]; then
-        tail -n 40 "$work.log" >&2
-        echo "fuzz target $t FAILED (exit $status); the input is in fuzz/artifacts/$t/" >&2
-        rm -rf "$work" "$work.log"
-        exit 1
-    fi
-    rm -rf "$work" "$work.log"
+    rm -rf "$work"
+    echo "$status" >"$logs/$t.status"
+}
+running=0
+for t in $targets; do
+    run_one "$t" &
+    running=$((running + 1))
+    if [ "$running" -ge "$jobs" ]; then wait -n || true; running=$((running - 1)); fi
 done
+wait
+failed=0
+for t in $targets; do
+    echo "-- fuzz smoke: $t (${secs} s)"
+    grep -E "^(#[0-9]+[[:space:]]+DONE|==[0-9]+== ERROR|SUMMARY|stat::number_of_executed_units)" "$logs/$t.log" || true
+    status="$(cat "$logs/$t.status" 2>/dev/null || echo 1)"
+    if [ "$status" -ne 0 ]; then
+        tail -n 40 "$logs/$t.log" >&2
+        echo "fuzz target $t FAILED (exit $status); the input is in fuzz/artifacts/$t/" >&2
+        failed=1
+    fi
+done
+rm -rf "$logs"
+[ "$failed" = 0 ] || exit 1
 echo "fuzz smoke: all targets passed"
