@@ -22,31 +22,20 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+mod common;
+
 const CCM: std::ops::Range<u64> = 0x1000_0000..0x1000_8000;
 /// Code flash below the coefficient slots (memory.x).
 const FLASH: std::ops::Range<u64> = 0x0800_0000..0x0807_C000;
 
 fn firmware_elf() -> PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    // The `cargo firmware` alias (.cargo/config.toml), spelled out.
-    // The layout checked is that of the repository's release profile (LTO):
-    // a developer's CARGO_PROFILE_* overrides (a fast local build without
-    // LTO) would check a different firmware. CI's clippy wrapper (.ci/run)
-    // lints the host build, not the firmware's.
-    let mut build = Command::new(cargo);
-    build
-        .current_dir(root)
-        .args(["build", "--release", "--target", "thumbv7em-none-eabihf", "-p", "dynocomp-core"])
-        .args(["--features", "firmware", "--bin", "dynocomp-box"])
-        .env_remove("CARGO_ENCODED_RUSTFLAGS")
-        .env_remove("RUSTC_WORKSPACE_WRAPPER")
-        .env_remove("CLIPPY_ARGS");
-    for (k, _) in std::env::vars_os() {
-        if k.to_str().is_some_and(|k| k.starts_with("CARGO_PROFILE_")) {
-            build.env_remove(k);
-        }
-    }
+    // The `cargo firmware` alias (.cargo/config.toml), spelled out, in the
+    // repository's release profile (LTO): a developer's CARGO_PROFILE_*
+    // overrides (a fast local build without LTO) would check a different
+    // firmware.
+    let mut build = common::firmware_cargo_build(root);
+    build.args(["-p", "dynocomp-core", "--features", "firmware", "--bin", "dynocomp-box"]);
     let out = build.output().expect("run cargo to build the firmware");
     assert!(
         out.status.success(),

@@ -190,25 +190,12 @@ fn require_qemu() {
 fn build_target_program() -> PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let target_dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("qemu-target");
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let mut build = Command::new(cargo);
+    let mut build = common::firmware_cargo_build(&root.join("qemu"));
     build
-        .current_dir(root.join("qemu"))
-        .args(["build", "--release", "--target", "thumbv7em-none-eabihf", "--bin", "kernel_io"])
+        .args(["--bin", "kernel_io"])
         .env("CARGO_TARGET_DIR", &target_dir)
         // Replaces the repository's firmware link flags (defmt.x), see scripts/qemu_icount.sh.
-        .env("RUSTFLAGS", "-C link-arg=-Tlink.x")
-        .env_remove("CARGO_ENCODED_RUSTFLAGS")
-        .env_remove("RUSTC_WORKSPACE_WRAPPER")
-        .env_remove("CLIPPY_ARGS");
-    // The firmware's code generation (qemu/'s release profile, fat LTO), not
-    // a fast host build's CARGO_PROFILE_* overrides (CI sets them), nor
-    // CI's clippy wrapper (.ci/run), which lints the host build.
-    for (k, _) in std::env::vars_os() {
-        if k.to_str().is_some_and(|k| k.starts_with("CARGO_PROFILE_")) {
-            build.env_remove(k);
-        }
-    }
+        .env("RUSTFLAGS", "-C link-arg=-Tlink.x");
     let out = build.output().expect("run cargo to build qemu/");
     assert!(
         out.status.success(),

@@ -3,6 +3,30 @@
 
 use dynocomp_core::image::{AxisImage, AxisScaling, AxisSummary, CoeffImage, DesignMethod};
 use dynocomp_core::kernel::{AxisFilter, Section};
+use std::path::Path;
+use std::process::Command;
+
+/// `cargo build --release --target thumbv7em-none-eabihf` in `dir`, with the
+/// firmware's own code generation (the release profile of `dir`'s
+/// workspace, fat LTO): without a fast host build's CARGO_PROFILE_*
+/// overrides or encoded RUSTFLAGS (scripts/test.sh and CI set them), and
+/// without CI's clippy wrapper (.ci/run), which lints the host build.
+pub fn firmware_cargo_build(dir: &Path) -> Command {
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let mut build = Command::new(cargo);
+    build
+        .current_dir(dir)
+        .args(["build", "--release", "--target", "thumbv7em-none-eabihf"])
+        .env_remove("CARGO_ENCODED_RUSTFLAGS")
+        .env_remove("RUSTC_WORKSPACE_WRAPPER")
+        .env_remove("CLIPPY_ARGS");
+    for (k, _) in std::env::vars_os() {
+        if k.to_str().is_some_and(|k| k.starts_with("CARGO_PROFILE_")) {
+            build.env_remove(k);
+        }
+    }
+    build
+}
 
 /// A 2x2 modal block in f64: A (not A − I), b, c.
 #[derive(Clone, Copy, Debug)]
