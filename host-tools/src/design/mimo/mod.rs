@@ -6,6 +6,7 @@
 
 #![allow(clippy::needless_range_loop)] // axis indices index several per-axis arrays at once
 
+mod choose;
 pub mod combine;
 pub mod criterion;
 pub mod discrete;
@@ -20,6 +21,7 @@ use dynocomp_core::mimo::MimoFilter;
 use num_complex::Complex64;
 use serde::Serialize;
 
+use self::choose::{realize_chosen, Chosen, InF32};
 use self::combine::combine;
 pub use self::combine::RowSource;
 use self::criterion::{choose_q, ForceWeights, MatrixCriterion, QSearch, RowError};
@@ -467,7 +469,8 @@ fn design(
     refuse_unless_better_than_raw(&ranked[0])?;
     let f_band = bands.iter().map(|b| b.1).fold(0.0, f64::max);
     let at = reduce::LoadAt { fs: d.fs_hz, limit: opts.load_limit_permille.unwrap_or(u32::MAX), f_band };
-    let Chosen { round: mut chosen, realized, dropped, reduced } = realize_chosen(ranked, &mut notes, &criterion, at)?;
+    let Chosen { round: mut chosen, realized, dropped, reduced } =
+        realize_chosen(&InF32 { crits: &criterion, fs: d.fs_hz, f_band }, ranked, &mut notes, at)?;
     if let (Some(err), Some(unsplit)) = (dropped, prep.as_mut().and_then(|p| p.unsplit.take())) {
         // The 3x3 rows of the model with close modes split do not verify
         // (or do not fit the kernel): the order search's model, once.
@@ -1321,117 +1324,6 @@ fn blocks_of(rd: &Round) -> Result<(Vec<MimoStateSpace>, MimoStateSpace)> {
     combine(rd.rows, rd.matrix.as_ref().map(|m| &m.0.compensator), per_axis_ss)
 }
 
-/// The round chosen and its realization ([`realize_chosen`]).
-struct Chosen {
-    round: Round,
-    realized: Realized,
-    /// Why the 3x3 rows were dropped, where they were.
-    dropped: Option<String>,
-    /// Where the full compensator of the rule's choice cannot go into an
-    /// image but a reduction of its 3x3 block can: the reduction's figures
-    /// and the full compensator (`realized` is the reduced one).
-    reduced: Option<(reduce::ReductionFigures, MimoStateSpace)>,
-}
-
-/// The first of the `ranked` rounds ([`rank_rounds`]) whose compensator is
-/// realized and verified in f32 up to `at.f_band`, never an unverified one:
-/// 1. the rule's choice;
-/// 2. where its 3x3 rows do not verify (or need more sections than the
-///    kernel holds), the rule's choice with its 3x3 block reduced by
-///    balancing ([`reduce::reduce_to_realize`]), where every 3x3 row still
-///    beats its per-axis row, within the box's load limit;
-/// 3. else the next round (latency) by the rule whose 3x3 rows verify and
-///    that beats no compensation, with a note, where the box runs it;
-///    where it is over the load limit too (the image is offline-only at
-///    any latency), the rule's choice reduced to the highest order that
-///    verifies, unless the latency rule prefers the next round's filter to
-///    that reduction ([`rule_prefers`], on their predictions);
-/// 4. else the choice with every axis on its per-axis row, with a note,
-///    and why the 3x3 rows were dropped.
-fn realize_chosen(ranked: Vec<Round>, notes: &mut Vec<String>, crits: &Criteria, at: reduce::LoadAt) -> Result<Chosen> {
-    let (fs, f_band) = (at.fs, at.f_band);
-    let mut ranked = ranked.into_iter();
-    let mut rd = ranked.next().context("no latency round")?;
-    let err = match realize_round(&rd, fs, f_band) {
-        Ok(realized) => return Ok(Chosen { round: rd, realized, dropped: None, reduced: None }),
-        Err(e) if rd.rows.contains(&RowSource::Matrix) => e,
-        Err(e) => return Err(e),
-    };
-    let boxed = match reduce::reduce_to_realize(&mut rd, crits, at, format!("{err:#}"))? {
-        Ok((realized, fig, full)) => {
-            return Ok(Chosen { round: rd, realized, dropped: None, reduced: Some((fig, full)) });
-        }
-        Err(fig) => fig,
-    };
-    let alt = ranked
-        .filter(|a| a.rows.contains(&RowSource::Matrix) && refuse_unless_better_than_raw(a).is_ok())
-        .find_map(|a| realize_round(&a, fs, f_band).ok().map(|r| (a, r)));
-    let alt_on_the_box = alt.as_ref().is_some_and(|(_, r)| reduce::filter_load(&r.1 .1, fs) <= at.limit);
-    let mut reduced_lost = None;
-    if let Some(boxed) = boxed.as_ref().filter(|_| !alt_on_the_box && at.limit < u32::MAX) {
-        // The image is offline-only whichever latency it holds: the rule's
-        // choice reduced to the highest order that verifies (`compensate`),
-        // where the latency rule prefers it to the next latency's filter.
-        let offline = reduce::LoadAt { limit: u32::MAX, ..at };
-        if let Ok((realized, fig, full)) = reduce::reduce_to_realize(&mut rd, crits, offline, format!("{err:#}"))? {
-            let three = |rd: &Round| percent_xyz(&rd.predicted());
-            let reduced = format!(
-                "latency {}'s 3x3 block reduced to {} states for an offline-only image predicts {} %",
-                rd.lag,
-                fig.states,
-                three(&rd)
-            );
-            match &alt {
-                Some((a, _)) if rule_prefers(a, &rd) => {
-                    reduced_lost = Some(format!("{reduced}, latency {} {} %", a.lag, three(a)));
-                }
-                _ => {
-                    notes.push(format!(
-                        "the box runs no reduction of latency {}'s 3x3 block that beats the alternatives ({} states: \
-                         {} %){}: the image, offline-only, holds the highest-order reduction that verifies in f32",
-                        rd.lag,
-                        boxed.states,
-                        percent_xyz(&boxed.predicted),
-                        alt.as_ref().map_or(String::new(), |(a, _)| format!(
-                            "; latency {}'s filter, over the load limit too, predicts {} % against {} % by the \
-                             latency rule",
-                            a.lag,
-                            three(a),
-                            three(&rd)
-                        ))
-                    ));
-                    return Ok(Chosen { round: rd, realized, dropped: None, reduced: Some((fig, full)) });
-                }
-            }
-        }
-    }
-    notes.extend(boxed.map(|f| f.line()));
-    if let Some((alt, r)) = alt {
-        notes.push(format!(
-            "latency {}: {err:#}; latency {} is used instead, the next by the latency rule whose 3x3 rows verify{}",
-            rd.lag,
-            alt.lag,
-            reduced_lost.map_or(String::new(), |r| format!(" (by the same rule: {r})"))
-        ));
-        return Ok(Chosen { round: alt, realized: r, dropped: None, reduced: None });
-    }
-    if !rd.per_axis.iter().all(Option::is_some) {
-        return Err(err);
-    }
-    notes.push(format!("the 3x3 rows were not used: {err:#}; every axis is designed per axis"));
-    for (a, d) in rd.axes.iter_mut().zip(&rd.per_axis) {
-        if a.source == RowSource::Matrix {
-            a.noise_gain = d.as_ref().map_or(f64::NAN, |d| d.noise_gain);
-            a.source = RowSource::PerAxis;
-            a.chosen = a.per_axis.expect("per-axis design present");
-            a.reason = "per-axis row: the 3x3 compensator does not verify in f32".to_string();
-        }
-    }
-    rd.rows = [RowSource::PerAxis; 3];
-    let realized = realize_round(&rd, fs, f_band)?;
-    Ok(Chosen { round: rd, realized, dropped: Some(format!("{err:#}")), reduced: None })
-}
-
 /// The combined compensator of the chosen round, realized and verified.
 #[allow(clippy::too_many_arguments)]
 fn finish(
@@ -1512,7 +1404,7 @@ mod tests {
     use super::*;
 
     /// A round at latency `lag` whose axes predict `percent` (no designs).
-    fn round_predicting(lag: usize, percent: [f64; 3]) -> Round {
+    pub(super) fn round_predicting(lag: usize, percent: [f64; 3]) -> Round {
         let row = |p: f64| RowError { error: p / 100.0, distortion: p / 100.0, fit: f64::NAN };
         let axes = (0..3)
             .map(|i| AxisPrediction {
