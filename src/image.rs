@@ -1433,8 +1433,11 @@ fn read_matrix3(r: &mut Reader<'_>, bad_len: ImageError) -> Result<Matrix3, Imag
 /// identity. The structure (finite, stable, modal) holds for every
 /// [`MimoFilter`].
 // `!(x <= limit)` on purpose: a NaN bound or gain must fail the check.
+///
+/// Public so that the design applies the same check to every realization
+/// it may choose, before an image is built from it.
 #[allow(clippy::neg_cmp_op_on_partial_ord)]
-fn validate_mimo(filter: &MimoFilter) -> Result<(), ImageError> {
+pub fn validate_mimo(filter: &MimoFilter) -> Result<(), ImageError> {
     if !filter.d().iter().flatten().all(|v| in_range(*v)) {
         return Err(ImageError::MatrixCoefficientOutOfRange { section: 255 });
     }
