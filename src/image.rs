@@ -918,8 +918,11 @@ fn in_range(v: f32) -> bool {
 /// gain bound and DC gain. The filter's structure (finite, stable, modal)
 /// has been checked.
 // `!(x <= limit)` on purpose: a NaN bound or gain must fail the check.
+///
+/// Public so that the design applies the same check to every realization
+/// it may choose (its errors then name `axis`).
 #[allow(clippy::neg_cmp_op_on_partial_ord)]
-fn validate_filter(axis: u8, filter: &AxisFilter) -> Result<(), ImageError> {
+pub fn validate_filter(axis: u8, filter: &AxisFilter) -> Result<(), ImageError> {
     if !in_range(filter.d()) {
         return Err(ImageError::CoefficientOutOfRange { axis, section: 255 });
     }

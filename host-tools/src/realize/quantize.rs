@@ -201,6 +201,14 @@ pub fn quantize(real: &ModalRealization, reference: &Reference) -> Result<(AxisF
     if !(max_shift <= MAX_POLE_SHIFT) {
         bail!("rounding to f32 moves a compensator pole by {max_shift:.1e} of its distance from z = 1 (limit {MAX_POLE_SHIFT:e})");
     }
+    // The checks the box repeats on the image it runs (coefficients bounded,
+    // the gain bound, the DC gain): a realization that fails them is never
+    // chosen, rather than refused when the image is written. The axis is
+    // not known here; the caller's context names it.
+    if let Err(e) = dynocomp_core::image::validate_filter(0, &filter) {
+        let e = e.to_string();
+        bail!("the f32 compensator fails the box's image check: {}", e.strip_prefix("axis 0: ").unwrap_or(&e));
+    }
     // frequency response over the band (and a little beyond)
     let worst = grid.iter().map(|(f, h64)| (filter_response(&filter, *f, fs_hz) - h64).norm()).fold(0.0, f64::max);
     let freq_error = worst / peak;
@@ -227,4 +235,46 @@ pub fn quantize(real: &ModalRealization, reference: &Reference) -> Result<(AxisF
             term_growth: term_growth(&filter),
         },
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::realize::modal::Section64;
+    use nalgebra::{DMatrix, DVector};
+
+    /// One real pole at 0.5, output gain 0.25, direct term `d`: DC gain
+    /// `d + 0.5`. Its realization and the f64 compensator it realizes.
+    fn first_order(d: f64) -> (ModalRealization, StateSpace) {
+        let real = ModalRealization {
+            sections: vec![Section64 { delta: [-0.5, 0.0, 0.0, -1.0], b: [1.0, 0.0], c: [0.25, 0.0] }],
+            d,
+            fir: Vec::new(),
+            poles: vec![Complex64::new(0.5, 0.0)],
+            modal_condition: 1.0,
+            decoupling_norm: 1.0,
+            fir_truncation: 0.0,
+        };
+        let ss = StateSpace {
+            a: DMatrix::from_element(1, 1, 0.5),
+            b: DVector::from_element(1, 1.0),
+            c: DVector::from_element(1, 0.25),
+            d,
+        };
+        (real, ss)
+    }
+
+    /// A realization that matches its design in f32 but whose DC gain the
+    /// box's image check refuses (200.5, limit ±100) is refused at
+    /// verification; the calibrated one (DC gain 1, the control) verifies.
+    #[test]
+    fn a_filter_the_image_check_refuses_does_not_verify() {
+        let (real, ss) = first_order(0.5);
+        let (filter, v) = quantize(&real, &Reference::of(&ss, 51_200.0, 4000.0)).unwrap();
+        assert!(v.freq_error < 1e-6 && (filter.dc_gain() - 1.0).abs() < 1e-6, "{v:?}");
+
+        let (real, ss) = first_order(200.0);
+        let e = format!("{:#}", quantize(&real, &Reference::of(&ss, 51_200.0, 4000.0)).unwrap_err());
+        assert!(e.starts_with("the f32 compensator fails the box's image check: DC gain"), "{e}");
+    }
 }
