@@ -488,6 +488,12 @@ fn out_of_range_parameters_are_refused_at_once() {
         (&["--fs", "51200", "--force-rms", "-5"][..], "--force-rms -5"),
         (&["--fs", "51200", "--force-rms=-5"][..], "--force-rms -5"),
         (&["--fs", "-51200"][..], "--fs -51200"),
+        // Used to design for seconds, then fail to encode the image.
+        (&["--fs", "51200", "--full-scale", "0"][..], "--full-scale 0"),
+        (&["--fs", "51200", "--full-scale=-5000"][..], "--full-scale -5000"),
+        (&["--fs", "51200", "--full-scale", "NaN"][..], "--full-scale NaN"),
+        (&["--fs", "51200", "--full-scale", "1e30"][..], "--full-scale 1000000000000000000000000000000"),
+        (&["--fs", "51200", "--frf", &frf, "--full-scale", "0"][..], "--full-scale 0"),
         (&["--fs", "51200", "--spindle-rpm", "0", "--teeth", "4"][..], "--spindle-rpm 0"),
         (&["--fs", "51200", "--spindle-rpm", "5000", "--teeth", "0"][..], "--teeth 0"),
         (
@@ -512,6 +518,9 @@ fn out_of_range_parameters_are_refused_at_once() {
         assert!(!ok && err.contains(want), "{extra:?}: {err}");
         assert!(!img.exists(), "{extra:?} wrote an image");
     }
+    // Control: a full scale within the range designs.
+    let (done, ok, err) = dynocomp_within(&[&base[..], &["--fs", "51200", "--full-scale", "20000"][..]].concat(), 120);
+    assert!(done && ok && img.exists(), "control: {err}");
 }
 
 /// Random `simulate` arguments from a fixed seed (values in and far out of

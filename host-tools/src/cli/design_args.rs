@@ -287,7 +287,8 @@ pub struct DesignArgs {
     /// Highest model order the fit may use.
     #[arg(long, default_value_t = 24)]
     pub max_order: usize,
-    /// Force at ADC/DAC full scale (N): ±full scale maps to codes 0..4095.
+    /// Force at ADC/DAC full scale (N, 0.01 to 1e7): ±full scale maps to
+    /// codes 0..4095.
     #[arg(long, default_value_t = 5000.0)]
     pub full_scale: f64,
     /// Design method: `vf` (default: vector fitting, fixed-lag Kalman
@@ -486,9 +487,22 @@ pub fn check_outputs_are_not_inputs(args: &DesignArgs) -> Result<()> {
     crate::io::atomic::ensure_not_an_input(&outputs, &inputs)
 }
 
-/// Check the force-prior flags against the rest (before anything is read).
+/// Range of `--full-scale` (N): from a micro-dynamometer's few newtons to
+/// far beyond any table dynamometer; the image's f32 scaling holds both.
+pub const FULL_SCALE_RANGE_N: std::ops::RangeInclusive<f64> = 0.01..=1.0e7;
+
+/// Check the force-prior flags against the rest, and `--full-scale`
+/// (before anything is read).
 pub fn check_prior_flags(args: &DesignArgs) -> Result<()> {
     args.input.check_values(&args.bands)?;
+    if !FULL_SCALE_RANGE_N.contains(&args.full_scale) {
+        bail!(
+            "--full-scale {}: the force at the box's ADC and DAC full scale must be a number of N in {}..={:e}",
+            args.full_scale,
+            FULL_SCALE_RANGE_N.start(),
+            FULL_SCALE_RANGE_N.end()
+        );
+    }
     match args.prior.force_prior {
         ForcePrior::Harmonics => check_prior_args(args),
         ForcePrior::Spectrum | ForcePrior::Level => check_spectrum_args(args),
