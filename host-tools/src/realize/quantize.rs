@@ -201,14 +201,6 @@ pub fn quantize(real: &ModalRealization, reference: &Reference) -> Result<(AxisF
     if !(max_shift <= MAX_POLE_SHIFT) {
         bail!("rounding to f32 moves a compensator pole by {max_shift:.1e} of its distance from z = 1 (limit {MAX_POLE_SHIFT:e})");
     }
-    // The checks the box repeats on the image it runs (coefficients bounded,
-    // the gain bound, the DC gain): a realization that fails them is never
-    // chosen, rather than refused when the image is written. The axis is
-    // not known here; the caller's context names it.
-    if let Err(e) = dynocomp_core::image::validate_filter(0, &filter) {
-        let e = e.to_string();
-        bail!("the f32 compensator fails the box's image check: {}", e.strip_prefix("axis 0: ").unwrap_or(&e));
-    }
     // frequency response over the band (and a little beyond)
     let worst = grid.iter().map(|(f, h64)| (filter_response(&filter, *f, fs_hz) - h64).norm()).fold(0.0, f64::max);
     let freq_error = worst / peak;
@@ -224,6 +216,14 @@ pub fn quantize(real: &ModalRealization, reference: &Reference) -> Result<(AxisF
         bail!(
             "f32 kernel output deviates from the f64 design by {time_error:.1e} of its RMS (limit {MAX_TIME_ERROR:e})"
         );
+    }
+    // The checks the box repeats on the image it runs (coefficients bounded,
+    // the gain bound, the DC gain): a realization that matches its design
+    // but fails them is never chosen, rather than refused when the image is
+    // written. The axis is not known here; the caller's context names it.
+    if let Err(e) = dynocomp_core::image::validate_filter(0, &filter) {
+        let e = e.to_string();
+        bail!("the f32 compensator fails the box's image check: {}", e.strip_prefix("axis 0: ").unwrap_or(&e));
     }
     Ok((
         filter,
