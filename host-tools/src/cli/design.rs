@@ -14,7 +14,7 @@ use crate::cli::design_args::{
 use crate::cli::design_matrix::MatrixOutcome;
 use crate::design::axis::AxisDesign;
 use crate::design::image::build_image;
-use crate::design::latency::LatencyChoice;
+use crate::design::latency::{LatencyChoice, LONGER_LATENCIES};
 use crate::design::progress::Progress;
 use crate::design::versus_default::VersusDefault;
 use crate::frf::axis_name;
@@ -114,9 +114,11 @@ fn design_axes(args: &DesignArgs, s: &DesignSetup) -> Result<Designed> {
             // methods and priors keep their refusals (their messages say what
             // to drop), and so does `--strict`.
             Err(e) if args.strict || compensated == 0 || !default_design(args, s) => {
+                let e = beyond_the_chosen_latencies(e, s);
                 return Err(e.context(format!("{}: no image written", args.input.frf().display())));
             }
             Err(e) => {
+                let e = beyond_the_chosen_latencies(e, s);
                 let opts = crate::design::axis::DesignOptions { lag: latency, ..s.opts.clone() };
                 crate::design::pass_through::pass_through_warned(a, *r, &opts, format!("{e:#}"))?
             }
@@ -363,4 +365,20 @@ fn design_json(
         box_load,
         axes,
     }
+}
+
+/// An axis's refusal at a declared latency above the longest the design
+/// chooses by itself ([`LONGER_LATENCIES`]), where its compensator does not
+/// verify in f32 (a longer smoother lag has more states to round): the
+/// error with what to do instead.
+fn beyond_the_chosen_latencies(e: anyhow::Error, s: &DesignSetup) -> anyhow::Error {
+    let longest = LONGER_LATENCIES[LONGER_LATENCIES.len() - 1];
+    if s.auto_latency || s.latency <= longest || !format!("{e:#}").contains("quantization") {
+        return e;
+    }
+    e.context(format!(
+        "--latency {}: above the {longest} samples the design chooses by itself, this axis's compensator does not \
+         verify in f32; omit --latency or give {longest} or less",
+        s.latency
+    ))
 }
