@@ -916,11 +916,9 @@ fn in_range(v: f32) -> bool {
 /// What the design verified, checked again on what will run (steps 19-22
 /// of `docs/image-format.md` §8): coefficients bounded, pole margin, ℓ1
 /// gain bound and DC gain. The filter's structure (finite, stable, modal)
-/// has been checked.
+/// has been checked. Public so that the design applies the same check to
+/// every realization it may choose (its errors then name `axis`).
 // `!(x <= limit)` on purpose: a NaN bound or gain must fail the check.
-///
-/// Public so that the design applies the same check to every realization
-/// it may choose (its errors then name `axis`).
 #[allow(clippy::neg_cmp_op_on_partial_ord)]
 pub fn validate_filter(axis: u8, filter: &AxisFilter) -> Result<(), ImageError> {
     if !in_range(filter.d()) {
@@ -1436,11 +1434,8 @@ fn read_matrix3(r: &mut Reader<'_>, bad_len: ImageError) -> Result<Matrix3, Imag
 /// identity. The structure (finite, stable, modal) holds for every
 /// [`MimoFilter`].
 // `!(x <= limit)` on purpose: a NaN bound or gain must fail the check.
-///
-/// Public so that the design applies the same check to every realization
-/// it may choose, before an image is built from it.
 #[allow(clippy::neg_cmp_op_on_partial_ord)]
-pub fn validate_mimo(filter: &MimoFilter) -> Result<(), ImageError> {
+fn validate_mimo(filter: &MimoFilter) -> Result<(), ImageError> {
     if !filter.d().iter().flatten().all(|v| in_range(*v)) {
         return Err(ImageError::MatrixCoefficientOutOfRange { section: 255 });
     }

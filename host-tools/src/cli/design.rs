@@ -14,7 +14,7 @@ use crate::cli::design_args::{
 use crate::cli::design_matrix::MatrixOutcome;
 use crate::design::axis::AxisDesign;
 use crate::design::image::build_image;
-use crate::design::latency::{LatencyChoice, LONGER_LATENCIES};
+use crate::design::latency::{LatencyChoice, LONGEST_LATENCY};
 use crate::design::progress::Progress;
 use crate::design::versus_default::VersusDefault;
 use crate::frf::axis_name;
@@ -368,11 +368,11 @@ fn design_json(
 }
 
 /// An axis's refusal at a declared latency above the longest the design
-/// chooses by itself ([`LONGER_LATENCIES`]), where its compensator does not
+/// chooses by itself ([`LONGEST_LATENCY`]), where its compensator does not
 /// verify in f32 (a longer smoother lag has more states to round): the
 /// error with what to do instead.
 fn beyond_the_chosen_latencies(e: anyhow::Error, s: &DesignSetup) -> anyhow::Error {
-    let longest = LONGER_LATENCIES[LONGER_LATENCIES.len() - 1];
+    let longest = LONGEST_LATENCY;
     if s.auto_latency || s.latency <= longest || !format!("{e:#}").contains("quantization") {
         return e;
     }

@@ -23,6 +23,8 @@ use crate::numeric::parallel::map_on_threads;
 pub const DEFAULT_LATENCY: usize = 4;
 /// Latencies tried when the default falls short (samples; at most 8).
 pub const LONGER_LATENCIES: [usize; 2] = [6, 8];
+/// The longest latency the design chooses by itself (samples).
+pub const LONGEST_LATENCY: usize = LONGER_LATENCIES[LONGER_LATENCIES.len() - 1];
 /// A flat band whose top is below this fraction of the compensated band's top
 /// falls short.
 pub const FLAT_BAND_SHORT: f64 = 0.95;

@@ -35,7 +35,7 @@ use crate::design::axis::{
 };
 use crate::design::discretize::{Discretization, MATCH_BAND_FRACTION};
 use crate::design::kalman::ForceShape;
-use crate::design::latency::{DEFAULT_LATENCY, GAIN_NOT_WORTH, LONGER_LATENCIES, PREDICTED_SHORT};
+use crate::design::latency::{DEFAULT_LATENCY, GAIN_NOT_WORTH, LONGER_LATENCIES, LONGEST_LATENCY, PREDICTED_SHORT};
 use crate::fit::matrix::{matrix_fit_stages, MatrixData, MatrixFitStages, MatrixModel};
 use crate::fit::refine::FitCovariance;
 use crate::fit::relative_rms_error;
@@ -807,7 +807,6 @@ fn refuse_unless_better_than_raw(chosen: &Round) -> Result<()> {
         if !worse && a.chosen.error < MAX_PREDICTED_ERROR {
             continue;
         }
-        let longest = LONGER_LATENCIES[LONGER_LATENCIES.len() - 1];
         let why = match worse {
             true => "beats no compensation".to_string(),
             false => format!(
@@ -818,7 +817,7 @@ fn refuse_unless_better_than_raw(chosen: &Round) -> Result<()> {
         bail!(
             "axis {}: neither the 3x3 nor the per-axis compensator at latency {} {why} in its band ({:.0}–{:.0} Hz): \
              predicted {:.2} % against {:.2} % uncompensated (crosstalk counted); no image written. A longer \
-             --latency gives the smoother more samples (without --latency the tool chooses up to {longest}); \
+             --latency gives the smoother more samples (without --latency the tool chooses up to {LONGEST_LATENCY}); \
              otherwise check the FRF (coherence, units N/N, resolution)",
             a.axis,
             chosen.lag,
@@ -1485,9 +1484,6 @@ mod tests {
         assert_eq!(percent_xyz(&round_predicting(8, [0.43, 0.4, 0.0126]).predicted()), "0.430 / 0.400 / 0.013");
     }
 
-    /// The level prior's caveat: for `--force-prior level` quiet above the
-    /// band only; not for a record's spectrum, a flat force, or a design
-    /// that is the inverse above the band.
     /// A refusal says which limit the axis misses: no better than raw, or
     /// better than raw but over the 50 % any image may predict; and what
     /// to try. Control: 49 % against 614 % raw is accepted.
@@ -1513,6 +1509,9 @@ mod tests {
         assert!(refuse_unless_better_than_raw(&with_raw(0, 49.0, 614.0)).is_ok());
     }
 
+    /// The level prior's caveat: for `--force-prior level` quiet above the
+    /// band only; not for a record's spectrum, a flat force, or a design
+    /// that is the inverse above the band.
     #[test]
     fn the_level_prior_s_caveat_goes_with_quiet_rows_only() {
         let level = DesignOptions { force_record_level_only: true, ..Default::default() };
