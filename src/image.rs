@@ -1433,9 +1433,12 @@ fn read_matrix3(r: &mut Reader<'_>, bad_len: ImageError) -> Result<Matrix3, Imag
 /// pole margin, ℓ1 gain bound per output row, DC gain rows near the
 /// identity. The structure (finite, stable, modal) holds for every
 /// [`MimoFilter`].
+///
+/// Public so that the design holds every whole filter it may choose to the
+/// same check before an image is built from it.
 // `!(x <= limit)` on purpose: a NaN bound or gain must fail the check.
 #[allow(clippy::neg_cmp_op_on_partial_ord)]
-fn validate_mimo(filter: &MimoFilter) -> Result<(), ImageError> {
+pub fn validate_mimo(filter: &MimoFilter) -> Result<(), ImageError> {
     if !filter.d().iter().flatten().all(|v| in_range(*v)) {
         return Err(ImageError::MatrixCoefficientOutOfRange { section: 255 });
     }

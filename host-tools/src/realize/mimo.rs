@@ -635,7 +635,17 @@ pub fn realize_blocks_by(
                     break;
                 }
             }
-            match quantize(&c, &reference) {
+            // A block that is the whole filter is judged as the image will
+            // be: a realization the box's image check refuses is never
+            // chosen (another split or reduction may pass).
+            let verified = quantize(&c, &reference).and_then(|(filter, v)| {
+                if blocks.len() == 1 {
+                    image_check(&filter).map(|()| (filter, v))
+                } else {
+                    Ok((filter, v))
+                }
+            });
+            match verified {
                 Ok((filter, v)) => {
                     let cost = c.sections.len() + c.fir.len();
                     let better = best.as_ref().is_none_or(|(s, b, ..)| match prefer {
@@ -669,10 +679,22 @@ pub fn realize_blocks_by(
         Some(fv) => fv,
         None => {
             let reference = MimoReference::of(&block_sum(blocks), fs_hz, f_band_hz);
-            quantize(&total, &reference).context("3x3 compensator: the f32 image is refused")?
+            let (filter, v) = quantize(&total, &reference).context("3x3 compensator: the f32 image is refused")?;
+            image_check(&filter).context("3x3 compensator: the f32 image is refused")?;
+            (filter, v)
         }
     };
     Ok((total, filter, v))
+}
+
+/// The checks the box repeats on the image it runs
+/// (`docs/image-format.md` §13.5: coefficient range, pole margin, ℓ1 gain
+/// bound per row, DC gain rows near the identity), on a whole 3x3 filter.
+/// Only a whole filter is judged so: a block of a mixed image (the 3x3 rows
+/// alone) has no identity DC gain.
+fn image_check(filter: &MimoFilter) -> Result<()> {
+    dynocomp_core::image::validate_mimo(filter)
+        .map_err(|e| anyhow::anyhow!("the f32 3x3 compensator fails the box's image check: {e}"))
 }
 
 /// The sum of `blocks` (3-in, 3-out each) as one block-diagonal state space.
@@ -690,4 +712,38 @@ pub fn block_sum(blocks: &[MimoStateSpace]) -> MimoStateSpace {
         o += m;
     }
     MimoStateSpace { a, b, c, d }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Three first-order rows, poles 0.5 / 0.4 / 0.3, direct term `d` on
+    /// the diagonal, each row's DC gain `dc` (C (I − A)⁻¹ B + D).
+    fn rows(d: f64, dc: f64) -> MimoStateSpace {
+        let poles = [0.5, 0.4, 0.3];
+        let a = DMatrix::from_diagonal(&nalgebra::DVector::from_row_slice(&poles));
+        let c =
+            DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(3, poles.iter().map(|p| (dc - d) * (1.0 - p))));
+        MimoStateSpace { a, b: DMatrix::identity(3, 3), c, d: DMatrix::identity(3, 3) * d }
+    }
+
+    /// A whole filter whose DC gain rows are 0.7 from the identity matches
+    /// its design in f32 but is refused, as the box would refuse its image;
+    /// the same block as one of two whose sum has the identity DC gain (a
+    /// mixed image's 3x3 rows) verifies, and so does the whole filter with
+    /// the identity DC gain (the controls).
+    #[test]
+    fn only_the_whole_filter_is_held_to_the_image_check() {
+        let (fs, band) = (51_200.0, 4000.0);
+        let e = format!("{:#}", realize_blocks(&[rows(-0.2, 0.3)], fs, band).unwrap_err());
+        assert!(e.contains("fails the box's image check") && e.contains("row 0's DC gain"), "{e}");
+
+        let (_, filter, _) = realize_blocks(&[rows(-0.2, 0.3), rows(0.0, 0.7)], fs, band).unwrap();
+        assert!(filter.dc_gain().iter().enumerate().all(|(i, g)| (g[i] - 1.0).abs() < 1e-5), "{:?}", filter.dc_gain());
+        realize_blocks(&[rows(0.5, 1.0)], fs, band).unwrap();
+
+        let e = format!("{:#}", realize_blocks(&[rows(-0.2, 0.3), rows(0.0, 0.1)], fs, band).unwrap_err());
+        assert!(e.contains("the f32 image is refused") && e.contains("DC gain"), "{e}");
+    }
 }
