@@ -693,8 +693,9 @@ pub fn realize_blocks_by(
 /// Only a whole filter is judged so: a block of a mixed image (the 3x3 rows
 /// alone) has no identity DC gain.
 fn image_check(filter: &MimoFilter) -> Result<()> {
-    dynocomp_core::image::validate_mimo(filter)
-        .map_err(|e| anyhow::anyhow!("the f32 3x3 compensator fails the box's image check: {e}"))
+    dynocomp_core::image::validate_mimo(filter).map_err(|e| {
+        anyhow::anyhow!("the f32 3x3 compensator fails the box's image check: {}", super::image_check_refusal(&e))
+    })
 }
 
 /// The sum of `blocks` (3-in, 3-out each) as one block-diagonal state space.

@@ -222,7 +222,7 @@ pub fn quantize(real: &ModalRealization, reference: &Reference) -> Result<(AxisF
     // but fails them is never chosen, rather than refused when the image is
     // written. The axis is not known here; the caller's context names it.
     if let Err(e) = dynocomp_core::image::validate_filter(0, &filter) {
-        let e = e.to_string();
+        let e = super::image_check_refusal(&e);
         bail!("the f32 compensator fails the box's image check: {}", e.strip_prefix("axis 0: ").unwrap_or(&e));
     }
     Ok((
