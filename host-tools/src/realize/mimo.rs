@@ -638,13 +638,10 @@ pub fn realize_blocks_by(
             // A block that is the whole filter is judged as the image will
             // be: a realization the box's image check refuses is never
             // chosen (another split or reduction may pass).
-            let verified = quantize(&c, &reference).and_then(|(filter, v)| {
-                if blocks.len() == 1 {
-                    image_check(&filter).map(|()| (filter, v))
-                } else {
-                    Ok((filter, v))
-                }
-            });
+            let verified = match blocks.len() {
+                1 => quantize_whole(&c, &reference),
+                _ => quantize(&c, &reference),
+            };
             match verified {
                 Ok((filter, v)) => {
                     let cost = c.sections.len() + c.fir.len();
@@ -679,23 +676,23 @@ pub fn realize_blocks_by(
         Some(fv) => fv,
         None => {
             let reference = MimoReference::of(&block_sum(blocks), fs_hz, f_band_hz);
-            let (filter, v) = quantize(&total, &reference).context("3x3 compensator: the f32 image is refused")?;
-            image_check(&filter).context("3x3 compensator: the f32 image is refused")?;
-            (filter, v)
+            quantize_whole(&total, &reference).context("3x3 compensator: the f32 image is refused")?
         }
     };
     Ok((total, filter, v))
 }
 
-/// The checks the box repeats on the image it runs
-/// (`docs/image-format.md` §13.5: coefficient range, pole margin, ℓ1 gain
-/// bound per row, DC gain rows near the identity), on a whole 3x3 filter.
-/// Only a whole filter is judged so: a block of a mixed image (the 3x3 rows
-/// alone) has no identity DC gain.
-fn image_check(filter: &MimoFilter) -> Result<()> {
-    dynocomp_core::image::validate_mimo(filter).map_err(|e| {
+/// [`quantize`] of a whole 3x3 filter, which must also pass the checks the
+/// box repeats on the image it runs (`docs/image-format.md` §13.5:
+/// coefficient range, pole margin, ℓ1 gain bound per row, DC gain rows near
+/// the identity). Only a whole filter is judged so: a block of a mixed image
+/// (the 3x3 rows alone) has no identity DC gain.
+fn quantize_whole(real: &MimoRealization, reference: &MimoReference) -> Result<(MimoFilter, MimoVerification)> {
+    let (filter, v) = quantize(real, reference)?;
+    dynocomp_core::image::validate_mimo(&filter).map_err(|e| {
         anyhow::anyhow!("the f32 3x3 compensator fails the box's image check: {}", super::image_check_refusal(&e))
-    })
+    })?;
+    Ok((filter, v))
 }
 
 /// The sum of `blocks` (3-in, 3-out each) as one block-diagonal state space.
@@ -723,9 +720,8 @@ mod tests {
     /// the diagonal, each row's DC gain `dc` (C (I − A)⁻¹ B + D).
     fn rows(d: f64, dc: f64) -> MimoStateSpace {
         let poles = [0.5, 0.4, 0.3];
-        let a = DMatrix::from_diagonal(&nalgebra::DVector::from_row_slice(&poles));
-        let c =
-            DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(3, poles.iter().map(|p| (dc - d) * (1.0 - p))));
+        let a = DMatrix::from_diagonal(&DVector::from_row_slice(&poles));
+        let c = DMatrix::from_diagonal(&DVector::from_iterator(3, poles.iter().map(|p| (dc - d) * (1.0 - p))));
         MimoStateSpace { a, b: DMatrix::identity(3, 3), c, d: DMatrix::identity(3, 3) * d }
     }
 

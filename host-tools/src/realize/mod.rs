@@ -20,11 +20,15 @@ pub mod quantize;
 /// design's terms: the box's wording blames a corrupted image, which a
 /// filter the design has just made is not; the check and its figures stay.
 pub(crate) fn image_check_refusal(e: &dynocomp_core::image::ImageError) -> String {
-    let s = e.to_string();
-    ["(image corrupted or not a force compensator)", "(image corrupted)", ": image corrupted or unstable"]
+    let mut s = e.to_string();
+    let kept = ["(image corrupted or not a force compensator)", "(image corrupted)", ": image corrupted or unstable"]
         .iter()
         .find_map(|tail| s.strip_suffix(tail))
-        .map_or(s.clone(), |t| t.trim_end().to_string())
+        .map(|t| t.trim_end().len());
+    if let Some(n) = kept {
+        s.truncate(n);
+    }
+    s
 }
 
 #[cfg(test)]
