@@ -48,6 +48,9 @@ pub fn design(args: &DesignArgs) -> Result<String> {
     if args.full_order && !matrix {
         eprintln!("note: --full-order applies to the 3x3 design only; this design is per axis");
     }
+    if args.free_residues && !matrix {
+        eprintln!("note: --free-residues applies to the 3x3 design only; this design is per axis");
+    }
     if matrix {
         match crate::cli::design_matrix::run(args, &setup, t0)? {
             MatrixOutcome::Written(summary) => return Ok(summary),

@@ -328,6 +328,12 @@ pub struct DesignArgs {
     /// `compensate --offline` uses the full model either way.
     #[arg(long)]
     pub full_order: bool,
+    /// 3x3 design: fit each entry's residues freely instead of holding each
+    /// mode's nine residues to one mode shape (rank one) where the lines
+    /// allow it. For comparison, or for a structure whose repeated modes the
+    /// fit does not catch (docs/frf-matrix.md).
+    #[arg(long)]
+    pub free_residues: bool,
     /// Design each axis from its direct FRF alone even when the FRF file
     /// holds all nine entries: crosstalk is not compensated. Without it a
     /// complete matrix gets the 3x3 design (README "Crosstalk").
@@ -379,7 +385,11 @@ impl DesignArgs {
             lag: latency,
             force_rms: self.input.force_rms,
             max_noise_gain: self.input.max_noise_gain,
-            vf: crate::fit::vf::VfOptions { max_order: self.max_order, ..Default::default() },
+            vf: crate::fit::vf::VfOptions {
+                max_order: self.max_order,
+                rank_one_residues: !self.free_residues,
+                ..Default::default()
+            },
             discretization: self.input.discretization.into(),
             above_band: self.above_band.into(),
             ..Default::default()

@@ -199,9 +199,11 @@ fn summary_text(args: &DesignArgs, md: &MatrixDesign, id: u32, load: &LoadReport
             (0..3).map(|i| format!("{}{} {}", axis_name(i), axis_name(i), pct(Some(f.entry_error[i][i])))).collect();
         let _ = writeln!(
             t,
-            "matrix fit: order {} ({} modes, common to all nine FRFs); relative RMS error of the direct FRFs: {}",
+            "matrix fit: order {} ({} modes, common to all nine FRFs; {} of them one mode shape each, rank one); \
+             relative RMS error of the direct FRFs: {}",
             f.order,
             f.modes.len(),
+            f.rank_one_pairs,
             rows.join(", ")
         );
         if !f.seeded_hz.is_empty() {

@@ -315,6 +315,8 @@ pub struct MatrixFitStages {
     splits: usize,
     seeded_hz: Vec<f64>,
     order_trace: Vec<(usize, f64)>,
+    /// The order search's noise scale σ̂² ([`MatrixData::bic`]).
+    sigma2: f64,
 }
 
 /// [`matrix_vector_fit`] up to the refinement.
@@ -374,12 +376,14 @@ pub fn matrix_fit_stages(data: &MatrixData, opts: &VfOptions) -> Result<MatrixFi
     };
     // The seeded pairs the model still holds (a later drop may take one).
     let seeded_hz = seeded.iter().filter(|s| term_of_pole(&model, s.1).is_some()).map(|s| s.0).collect();
-    Ok(MatrixFitStages { model, dropped_hz, unsplit, splits, seeded_hz, order_trace: trace })
+    Ok(MatrixFitStages { model, dropped_hz, unsplit, splits, seeded_hz, order_trace: trace, sigma2 })
 }
 
 impl MatrixFitStages {
     /// The fit: refined where `opts.refine` ([`refined`]), a pair above the
-    /// lines swapped in where `opts.above_band_swap` ([`above_band_swap`]).
+    /// lines swapped in where `opts.above_band_swap` ([`above_band_swap`]),
+    /// rank-one residues where `opts.rank_one_residues`
+    /// ([`super::rank_one::rank_one_residues`]).
     pub fn finish(&self, data: &MatrixData, opts: &VfOptions) -> Result<MatrixFit> {
         let (unsplit, unsplit_dropped_hz) = match &self.unsplit {
             None => (None, Vec::new()),
@@ -387,6 +391,16 @@ impl MatrixFitStages {
         };
         let model = refined(data, self.model.clone(), opts)?;
         let model = if opts.above_band_swap { above_band_swap(data, model, opts)? } else { model };
+        let (model, unsplit) = if opts.rank_one_residues {
+            let lines = super::rank_one::Lines { freq_hz: data.freq_hz, h: data.h, w: data.w };
+            let held = |m: &MatrixModel| {
+                super::rank_one::rank_one_residues(&lines, &m.entries, self.sigma2)
+                    .map(|r| MatrixModel { entries: r.entries })
+            };
+            (held(&model)?, unsplit.as_ref().map(held).transpose()?)
+        } else {
+            (model, unsplit)
+        };
         if !model.is_stable() {
             bail!("matrix vector fitting: the fitted model is unstable");
         }
@@ -1007,6 +1021,32 @@ fn skim(data: &MatrixData, f_identified_hz: f64, model: MatrixModel) -> Result<M
     }
 }
 
+/// `truth` on the lines `freq` (Hz) with complex noise of RMS `noise`
+/// (uniform, seeded by `seed`), weights 1/noise²: the tests' impact test.
+#[cfg(test)]
+pub(crate) fn noisy_lines(
+    truth: &MatrixModel,
+    noise: f64,
+    freq: Vec<f64>,
+    seed: u64,
+) -> (Vec<f64>, Vec<Vec<Complex64>>, Vec<f64>) {
+    use rand::{RngExt, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut uniform = move || rng.random_range(-0.5..0.5);
+    let h: Vec<Vec<Complex64>> = (0..ENTRIES)
+        .map(|e| {
+            freq.iter()
+                .map(|f| {
+                    let n = Complex64::new(uniform(), uniform()) * (noise * 12f64.sqrt() / 2f64.sqrt());
+                    truth.frf(*f)[(e / 3, e % 3)] + n
+                })
+                .collect()
+        })
+        .collect();
+    let w = vec![1.0 / (noise * noise); freq.len()];
+    (freq, h, w)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1049,22 +1089,7 @@ mod tests {
     /// `truth` measured on 1 Hz lines to 1 kHz with complex noise of RMS
     /// `noise` (deterministic), weights 1/noise².
     fn measured(truth: &MatrixModel, noise: f64) -> (Vec<f64>, Vec<Vec<Complex64>>, Vec<f64>) {
-        let freq: Vec<f64> = (1..=1000).map(f64::from).collect();
-        use rand::{RngExt, SeedableRng};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        let mut uniform = move || rng.random_range(-0.5..0.5);
-        let h: Vec<Vec<Complex64>> = (0..ENTRIES)
-            .map(|e| {
-                freq.iter()
-                    .map(|f| {
-                        let n = Complex64::new(uniform(), uniform()) * (noise * 12f64.sqrt() / 2f64.sqrt());
-                        truth.frf(*f)[(e / 3, e % 3)] + n
-                    })
-                    .collect()
-            })
-            .collect();
-        let w = vec![1.0 / (noise * noise); freq.len()];
-        (freq, h, w)
+        noisy_lines(truth, noise, (1..=1000).map(f64::from).collect(), 7)
     }
 
     /// The close modes' truth with a third pair at 600 Hz (2 % damping) of

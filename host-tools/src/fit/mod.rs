@@ -7,6 +7,7 @@
 pub mod linalg;
 pub mod matrix;
 pub mod modes;
+pub mod rank_one;
 pub mod refine;
 pub mod rfp;
 pub mod seed;

@@ -54,6 +54,10 @@ pub struct VfOptions {
     /// Lines a pair seeded per axis must span with its half-power bandwidth
     /// 2ζ·f ([`super::seed::Seeding::resolved_lines`]; 0: any damping tried).
     pub seed_resolved_lines: f64,
+    /// The 3x3 fit holds each pole pair's residue matrix to rank one (a
+    /// mode's output column times its input row) where the lines allow it
+    /// ([`super::rank_one`]). Off for controls.
+    pub rank_one_residues: bool,
 }
 
 impl Default for VfOptions {
@@ -70,6 +74,7 @@ impl Default for VfOptions {
             seed_unfitted: true,
             drop_unsupported: true,
             seed_resolved_lines: SEED_RESOLVED_LINES,
+            rank_one_residues: true,
         }
     }
 }

@@ -110,6 +110,9 @@ pub struct MatrixFitFigures {
     /// Frequencies (Hz) where the fit added a pair because its residual
     /// exceeded the noise there ([`crate::fit::matrix::MatrixFit::seeded_hz`]).
     pub seeded_hz: Vec<f64>,
+    /// Pairs whose residues are one mode shape, c·bᵀ
+    /// ([`crate::fit::rank_one`]; σ₂/σ₁ of the residue under 10⁻⁹).
+    pub rank_one_pairs: usize,
 }
 
 /// The peak crosstalk |G_ij|/|G_ii| over the compensated band (coherent
@@ -1101,8 +1104,19 @@ fn prepare_model(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, threshold: f64, gi
     let lines: Vec<(f64, CMatrix3)> = grid.iter().map(|f| (*f, model.frf(*f))).collect();
     let plant = plant_states(&dm, &lines).context("plant of the 3x3 model")?;
     let modes = model.modes();
-    let figures =
-        MatrixFitFigures { order: model.order(), weighted_rms, order_trace, entry_error, modes, dropped_hz, seeded_hz };
+    let rank_one_pairs = (0..model.terms())
+        .filter(|&k| model.pole(k).1 && crate::fit::rank_one::rank_two_share(&model.residue(k)) < 1e-9)
+        .count();
+    let figures = MatrixFitFigures {
+        order: model.order(),
+        weighted_rms,
+        order_trace,
+        entry_error,
+        modes,
+        dropped_hz,
+        seeded_hz,
+        rank_one_pairs,
+    };
     Ok(MatrixPrep { fit: figures, model, dm, matching, plant, unsplit: None, plain: None })
 }
 
