@@ -5,6 +5,7 @@
 //! s in rad/s, G in N/N.
 
 pub mod linalg;
+pub mod line_noise;
 pub mod matrix;
 pub mod modes;
 pub mod rank_one;

@@ -58,6 +58,10 @@ pub struct VfOptions {
     /// mode's output column times its input row) where the lines allow it
     /// ([`super::rank_one`]). Off for controls.
     pub rank_one_residues: bool,
+    /// How the 3x3 fit weights its lines ([`super::line_noise::LineWeights`]):
+    /// per line by default; averaged over lines for studies (BENCHMARKS.md,
+    /// "The impact test's noise, averaged over lines").
+    pub line_weights: super::line_noise::LineWeights,
 }
 
 impl Default for VfOptions {
@@ -75,6 +79,7 @@ impl Default for VfOptions {
             drop_unsupported: true,
             seed_resolved_lines: SEED_RESOLVED_LINES,
             rank_one_residues: true,
+            line_weights: super::line_noise::LineWeights::PerLine,
         }
     }
 }

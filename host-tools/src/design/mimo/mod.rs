@@ -36,6 +36,7 @@ use crate::design::axis::{
 use crate::design::discretize::{Discretization, MATCH_BAND_FRACTION};
 use crate::design::kalman::ForceShape;
 use crate::design::latency::{DEFAULT_LATENCY, GAIN_NOT_WORTH, LONGER_LATENCIES, LONGEST_LATENCY, PREDICTED_SHORT};
+pub use crate::fit::line_noise::LineWeights;
 use crate::fit::matrix::{matrix_fit_stages, MatrixData, MatrixFitStages, MatrixModel};
 use crate::fit::refine::FitCovariance;
 use crate::fit::relative_rms_error;
@@ -312,6 +313,8 @@ struct MatrixPrep {
     /// the refinement, for a design whose 3x3 rows lose to per-axis rows on
     /// the refined one ([`retry_unrefined`]).
     plain: Option<Unrefined>,
+    /// How the fit weighted its lines, for its covariance.
+    line_weights: LineWeights,
 }
 
 /// The order search of a refined 3x3 fit, kept to finish it without the
@@ -953,16 +956,26 @@ fn crosstalk_of(frf: &Frf, bands: &[(f64, f64); 3], threshold: f64) -> Crosstalk
 }
 
 /// `use_data` on the nine entries of the matrix `frf` with their coherence
-/// weights ([`coherence_weights`]), as the common-pole fit takes them; an
-/// error naming the first entry missing.
+/// weights ([`coherence_weights`]), as the common-pole fit takes them by
+/// default; an error naming the first entry missing.
 pub fn with_weighted_matrix<R>(frf: &Frf, use_data: impl FnOnce(&MatrixData) -> R) -> Result<R> {
+    with_matrix_weighted_by(frf, LineWeights::PerLine, use_data)
+}
+
+/// [`with_weighted_matrix`] with the lines weighted as `weights` says.
+pub fn with_matrix_weighted_by<R>(
+    frf: &Frf,
+    weights: LineWeights,
+    use_data: impl FnOnce(&MatrixData) -> R,
+) -> Result<R> {
     let entries = (0..9)
         .map(|e| {
             let (i, j) = (e / 3, e % 3);
             frf.entry(i, j).ok_or_else(|| anyhow::anyhow!("the FRF matrix has no G_{}", entry_name(i, j)))
         })
         .collect::<Result<Vec<_>>>()?;
-    let weights: Vec<Vec<f64>> = entries.iter().map(|e| coherence_weights(e.frf, e.coherence)).collect();
+    let weights: Vec<Vec<f64>> =
+        entries.iter().map(|e| weights.apply(&frf.freq_hz, coherence_weights(e.frf, e.coherence))).collect();
     let data = MatrixData {
         freq_hz: &frf.freq_hz,
         h: std::array::from_fn(|e| entries[e].frf),
@@ -977,7 +990,7 @@ pub fn with_weighted_matrix<R>(frf: &Frf, use_data: impl FnOnce(&MatrixData) -> 
 /// lines (no model, or a model from elsewhere).
 fn fit_covariance(frf: &Frf, prep: Option<&MatrixPrep>, freqs: &[f64]) -> Option<FitCovariance> {
     let p = prep.filter(|p| p.fit.weighted_rms.is_finite())?;
-    with_weighted_matrix(frf, |data| {
+    with_matrix_weighted_by(frf, p.line_weights, |data| {
         let entries: Vec<(&[Complex64], &[f64])> = (0..9).map(|e| (data.h[e], data.w[e])).collect();
         crate::fit::refine::fit_covariance(data.freq_hz, &entries, &p.model.entries, freqs)
     })
@@ -991,7 +1004,8 @@ fn fit_covariance(frf: &Frf, prep: Option<&MatrixPrep>, freqs: &[f64]) -> Option
 fn matrix_stages(frf: &Frf, bands: &[(f64, f64); 3], vf: &VfOptions) -> Result<(MatrixFitStages, VfOptions)> {
     // A real pole below the first coherent line of the bands is not kept.
     let vf = VfOptions { f_identified_hz: bands.iter().map(|b| b.0).fold(f64::INFINITY, f64::min), ..vf.clone() };
-    let stages = with_weighted_matrix(frf, |data| matrix_fit_stages(data, &vf))?.context("fit of the 3x3 matrix")?;
+    let stages = with_matrix_weighted_by(frf, vf.line_weights, |data| matrix_fit_stages(data, &vf))?
+        .context("fit of the 3x3 matrix")?;
     Ok((stages, vf))
 }
 
@@ -1007,9 +1021,11 @@ fn prepare_matrix(
     threshold: f64,
     prepared: &[Result<PreparedAxis>],
 ) -> Result<MatrixPrep> {
+    // The fit's covariance weights the lines as the fit did.
+    let weighted = |prep: Result<MatrixPrep>| prep.map(|p| MatrixPrep { line_weights: vf.line_weights, ..p });
     let (split, unsplit) = finished_models(frf, stages, vf)?;
     let Some(unsplit) = unsplit else {
-        return prepare_model(frf, bands, fs, threshold, split);
+        return weighted(prepare_model(frf, bands, fs, threshold, split));
     };
     // The split model only where its direct entries are nearer the
     // independent per-axis fits than the unsplit model's, and the chain
@@ -1019,17 +1035,18 @@ fn prepare_matrix(
         let order_trace = split.order_trace.clone();
         if let Ok(mut prep) = prepare_model(frf, bands, fs, threshold, split) {
             prep.unsplit = Some(unsplit);
-            return Ok(prep);
+            return weighted(Ok(prep));
         }
-        return prepare_model(frf, bands, fs, threshold, GivenModel { order_trace, ..unsplit });
+        return weighted(prepare_model(frf, bands, fs, threshold, GivenModel { order_trace, ..unsplit }));
     }
-    prepare_model(frf, bands, fs, threshold, unsplit)
+    weighted(prepare_model(frf, bands, fs, threshold, unsplit))
 }
 
 /// `stages` finished with `vf`: its model, and where close modes were split
 /// the order search's own model beside it, each with its weighted error.
 fn finished_models(frf: &Frf, stages: &MatrixFitStages, vf: &VfOptions) -> Result<(GivenModel, Option<GivenModel>)> {
-    let fit = with_weighted_matrix(frf, |data| stages.finish(data, vf))?.context("fit of the 3x3 matrix")?;
+    let fit = with_matrix_weighted_by(frf, vf.line_weights, |data| stages.finish(data, vf))?
+        .context("fit of the 3x3 matrix")?;
     let split = GivenModel {
         model: fit.model,
         weighted_rms: fit.weighted_rms,
@@ -1040,7 +1057,7 @@ fn finished_models(frf: &Frf, stages: &MatrixFitStages, vf: &VfOptions) -> Resul
     let Some(unsplit) = fit.unsplit else {
         return Ok((split, None));
     };
-    let rms = with_weighted_matrix(frf, |data| data.weighted_rms(&unsplit))?;
+    let rms = with_matrix_weighted_by(frf, vf.line_weights, |data| data.weighted_rms(&unsplit))?;
     let unsplit = GivenModel {
         model: unsplit,
         weighted_rms: rms,
@@ -1117,7 +1134,16 @@ fn prepare_model(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, threshold: f64, gi
         seeded_hz,
         rank_one_pairs,
     };
-    Ok(MatrixPrep { fit: figures, model, dm, matching, plant, unsplit: None, plain: None })
+    Ok(MatrixPrep {
+        fit: figures,
+        model,
+        dm,
+        matching,
+        plant,
+        unsplit: None,
+        plain: None,
+        line_weights: LineWeights::PerLine,
+    })
 }
 
 /// The criterion on the 3x3 model Ĝ (the predictions, and the q search),
