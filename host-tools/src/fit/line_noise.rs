@@ -12,6 +12,8 @@
 //! over a window of lines that widens with frequency, as the noise's own
 //! features do.
 
+use super::seed::line_spacing_hz;
+
 /// Most lines each side of a line that [`smoothed_weights`] averages over:
 /// 15 lines in all, about 180 degrees of freedom from 7 impacts.
 pub const MAX_HALF_WIDTH: usize = 7;
@@ -52,19 +54,20 @@ impl LineWeights {
 /// 1/mean(1/w). Lines of weight 0 keep it (they carry no data).
 pub fn smoothed_weights(freq_hz: &[f64], w: &[f64]) -> Vec<f64> {
     let n = w.len().min(freq_hz.len());
-    let mut gaps: Vec<f64> = freq_hz[..n].windows(2).map(|p| p[1] - p[0]).filter(|d| *d > 0.0).collect();
-    gaps.sort_by(f64::total_cmp);
-    let Some(&df) = gaps.get(gaps.len() / 2) else { return w.to_vec() };
+    let df = line_spacing_hz(&freq_hz[..n]);
+    if !(df > 0.0) {
+        return w.to_vec();
+    }
+    let carries = |v: f64| v > 0.0 && v.is_finite();
     // Prefix sums of the variance and of the lines that carry one.
     let (mut sum, mut count) = (vec![0.0; n + 1], vec![0usize; n + 1]);
     for k in 0..n {
-        let carries = w[k] > 0.0 && w[k].is_finite();
-        sum[k + 1] = sum[k] + if carries { 1.0 / w[k] } else { 0.0 };
-        count[k + 1] = count[k] + usize::from(carries);
+        sum[k + 1] = sum[k] + if carries(w[k]) { 1.0 / w[k] } else { 0.0 };
+        count[k + 1] = count[k] + usize::from(carries(w[k]));
     }
     (0..w.len())
         .map(|k| {
-            if k >= n || !(w[k] > 0.0 && w[k].is_finite()) {
+            if k >= n || !carries(w[k]) {
                 return w[k];
             }
             let m = ((RELATIVE_HALF_WIDTH * freq_hz[k].abs() / df).floor() as usize).min(MAX_HALF_WIDTH);

@@ -117,7 +117,7 @@ pub(crate) struct Seeding<'a, M> {
 }
 
 /// Median spacing (Hz) of the lines `freq_hz`; 0 for fewer than two.
-fn line_spacing_hz(freq_hz: &[f64]) -> f64 {
+pub(crate) fn line_spacing_hz(freq_hz: &[f64]) -> f64 {
     let mut d: Vec<f64> = freq_hz.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
     d.sort_by(f64::total_cmp);
     d.get(d.len() / 2).copied().unwrap_or(0.0)
