@@ -31,7 +31,8 @@
 //! (`VfOptions::above_band_swap`), `MIMO_NO_REFINE`, `MIMO_NO_SEED`
 //! (`VfOptions::seed_unfitted` off), `MIMO_NO_RANK_ONE`
 //! (`VfOptions::rank_one_residues` off), `MIMO_LINE_WEIGHTS=averaged`
-//! (`VfOptions::line_weights`), `MIMO_FULL_ORDER`.
+//! (`VfOptions::line_weights`), `MIMO_FULL_ORDER`, `MIMO_STUDY_NOISE=own`
+//! (each random set-up its own noise draw, [`noise_seed`]).
 
 #![allow(clippy::needless_range_loop)] // axis indices index several arrays at once
 #![allow(clippy::neg_cmp_op_on_partial_ord)] // a negative control asserts a bound is not met, NaN included
@@ -131,6 +132,15 @@ fn record(name: &str, fs: f64) -> PlateSimOutput {
 
 /// [`record`], of [`flat_force`] where `flat`, else of the milling cut.
 fn record_with(name: &str, fs: f64, flat: bool) -> PlateSimOutput {
+    // MIMO_STUDY_IMPACTS=N: N impacts per direction (averaged), for the
+    // fit's bias against its variance.
+    let impacts = std::env::var("MIMO_STUDY_IMPACTS").ok().and_then(|v| v.parse().ok());
+    record_drawn(name, fs, flat, impacts, noise_seed(name))
+}
+
+/// [`record_with`] from the random streams of `seed`, with `impacts` per
+/// hammer direction where given (else the simulator's default, 7).
+fn record_drawn(name: &str, fs: f64, flat: bool, impacts: Option<usize>, seed: u64) -> PlateSimOutput {
     let mut params = SimParams { fs_hz: fs, duration_s: 0.4, idle_duration_s: 0.3, ..Default::default() };
     if flat {
         params.excitation = Some(flat_force(fs));
@@ -140,12 +150,27 @@ fn record_with(name: &str, fs: f64, flat: bool) -> PlateSimOutput {
         params.measurement.adc_range_n = 32_000.0;
         params.measurement.adc_bits = 20;
     }
-    // MIMO_STUDY_IMPACTS=N: N impacts per direction (averaged), for the
-    // fit's bias against its variance.
-    if let Some(n) = std::env::var("MIMO_STUDY_IMPACTS").ok().and_then(|v| v.parse().ok()) {
+    if let Some(n) = impacts {
         params.impact.n_impacts = n;
     }
-    simulate_plate(7, &params, &PlateSim { setup: setup(name), cut_offset_m: [0.0; 3] }).unwrap()
+    simulate_plate(seed, &params, &PlateSim { setup: setup(name), cut_offset_m: [0.0; 3] }).unwrap()
+}
+
+/// The seed of a record's random streams (impact test, noise, idle): 7,
+/// the draw every regression case here was found on; with
+/// `MIMO_STUDY_NOISE=own`, a random set-up's own draw (its seed plus 10^6),
+/// so that a study's set-ups do not share the impact test's noise line by
+/// line.
+fn noise_seed(name: &str) -> u64 {
+    match (std::env::var("MIMO_STUDY_NOISE").as_deref(), name.parse::<u64>()) {
+        (Ok("own"), Ok(seed)) => own_noise_seed(seed),
+        _ => 7,
+    }
+}
+
+/// Random set-up `seed`'s own draw of [`noise_seed`].
+fn own_noise_seed(seed: u64) -> u64 {
+    1_000_000 + seed
 }
 
 /// The force the default design's prediction assumes: a flat spectrum over
@@ -1660,6 +1685,30 @@ fn the_impact_tests_noise_averaged_over_lines_weights_the_fit() {
     for i in [0, 2] {
         assert!(a[i] <= p[i], "row {i}: averaged {a:?} against per line {p:?}");
     }
+}
+
+/// The impact test's information, not the design, holds plate 78 at
+/// 102.4 kHz (its own noise draw, `MIMO_STUDY_NOISE=own`) far from its floor.
+/// With 7 impacts per direction (the simulator's default) the fit leaves out
+/// the machine modes at 309 and 437 Hz (ζ = 0.052) and y is 19.9x the exact
+/// inverse's floor; with 28 the fit resolves 309 Hz and y is 1.4x. The
+/// control is the 7-impact design of the same set-up and draw.
+#[test]
+#[ignore = "3x3 designs take seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
+fn more_impacts_resolve_the_machine_mode_seven_leave_out() {
+    let fs = 102_400.0;
+    let y_over_floor = |impacts: usize| {
+        let out = record_drawn("78", fs, false, Some(impacts), own_noise_seed(78));
+        let md = design(&out.frf, &out).unwrap();
+        let fig = evaluate(&md, &out);
+        eprintln!("{} impacts: {}", impacts, fig.line("78", fs));
+        let fitted = md.model.as_ref().is_some_and(|m| m.modes().iter().any(|(f, _)| (f - 309.0).abs() < 6.0));
+        (fig.used[1] / fig.floor[1], fitted)
+    };
+    let (many, resolved) = y_over_floor(28);
+    assert!(many < 2.0 && resolved, "28 impacts: y {many:.2}x the floor, 309 Hz fitted: {resolved}");
+    let (few, resolved) = y_over_floor(7);
+    assert!(few > 5.0 && !resolved, "control, 7 impacts: y {few:.2}x the floor, 309 Hz fitted: {resolved}");
 }
 
 fn opts_vf() -> VfOptions {
