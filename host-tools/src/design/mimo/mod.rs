@@ -348,6 +348,8 @@ struct GivenModel {
     order_trace: Vec<(usize, f64)>,
     dropped_hz: Vec<f64>,
     seeded_hz: Vec<f64>,
+    /// How its fit weighted the lines, for its covariance.
+    line_weights: LineWeights,
 }
 
 /// One latency's designs.
@@ -432,6 +434,7 @@ pub fn design_matrix_with_model(
             order_trace: Vec::new(),
             dropped_hz: Vec::new(),
             seeded_hz: Vec::new(),
+            line_weights: LineWeights::PerLine,
         }),
         Vec::new(),
     )
@@ -1021,11 +1024,9 @@ fn prepare_matrix(
     threshold: f64,
     prepared: &[Result<PreparedAxis>],
 ) -> Result<MatrixPrep> {
-    // The fit's covariance weights the lines as the fit did.
-    let weighted = |prep: Result<MatrixPrep>| prep.map(|p| MatrixPrep { line_weights: vf.line_weights, ..p });
     let (split, unsplit) = finished_models(frf, stages, vf)?;
     let Some(unsplit) = unsplit else {
-        return weighted(prepare_model(frf, bands, fs, threshold, split));
+        return prepare_model(frf, bands, fs, threshold, split);
     };
     // The split model only where its direct entries are nearer the
     // independent per-axis fits than the unsplit model's, and the chain
@@ -1035,11 +1036,11 @@ fn prepare_matrix(
         let order_trace = split.order_trace.clone();
         if let Ok(mut prep) = prepare_model(frf, bands, fs, threshold, split) {
             prep.unsplit = Some(unsplit);
-            return weighted(Ok(prep));
+            return Ok(prep);
         }
-        return weighted(prepare_model(frf, bands, fs, threshold, GivenModel { order_trace, ..unsplit }));
+        return prepare_model(frf, bands, fs, threshold, GivenModel { order_trace, ..unsplit });
     }
-    weighted(prepare_model(frf, bands, fs, threshold, unsplit))
+    prepare_model(frf, bands, fs, threshold, unsplit)
 }
 
 /// `stages` finished with `vf`: its model, and where close modes were split
@@ -1053,6 +1054,7 @@ fn finished_models(frf: &Frf, stages: &MatrixFitStages, vf: &VfOptions) -> Resul
         order_trace: fit.order_trace,
         dropped_hz: fit.dropped_hz,
         seeded_hz: fit.seeded_hz,
+        line_weights: vf.line_weights,
     };
     let Some(unsplit) = fit.unsplit else {
         return Ok((split, None));
@@ -1064,6 +1066,7 @@ fn finished_models(frf: &Frf, stages: &MatrixFitStages, vf: &VfOptions) -> Resul
         order_trace: split.order_trace.clone(),
         dropped_hz: fit.unsplit_dropped_hz,
         seeded_hz: Vec::new(),
+        line_weights: vf.line_weights,
     };
     Ok((split, Some(unsplit)))
 }
@@ -1092,7 +1095,7 @@ fn direct_distance(
 /// [`prepare_matrix`] from the model: its error against the measurement,
 /// the discrete model and the plant.
 fn prepare_model(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, threshold: f64, given: GivenModel) -> Result<MatrixPrep> {
-    let GivenModel { model, weighted_rms, order_trace, dropped_hz, seeded_hz } = given;
+    let GivenModel { model, weighted_rms, order_trace, dropped_hz, seeded_hz, line_weights } = given;
     let entries: Vec<_> = (0..9).map(|e| frf.entry(e / 3, e % 3).expect("complete")).collect();
     let mut entry_error = [[f64::NAN; 3]; 3];
     for (e, ent) in entries.iter().enumerate() {
@@ -1134,16 +1137,7 @@ fn prepare_model(frf: &Frf, bands: &[(f64, f64); 3], fs: f64, threshold: f64, gi
         seeded_hz,
         rank_one_pairs,
     };
-    Ok(MatrixPrep {
-        fit: figures,
-        model,
-        dm,
-        matching,
-        plant,
-        unsplit: None,
-        plain: None,
-        line_weights: LineWeights::PerLine,
-    })
+    Ok(MatrixPrep { fit: figures, model, dm, matching, plant, unsplit: None, plain: None, line_weights })
 }
 
 /// The criterion on the 3x3 model Ĝ (the predictions, and the q search),
