@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use crate::cli::design_args::{DesignArgs, DesignSetup, ForcePrior, Method};
 use crate::design::mimo::image::build_matrix_image;
-use crate::design::mimo::{design_matrix, MatrixDesign, MatrixOptions, MatrixSummary, Progress, RowSource};
+use crate::design::mimo::{design_matrix, MatrixDesign, MatrixOptions, MatrixSummary, Progress, RowSource, FLAT_FORCE};
 use crate::frf::{axis_name, Frf};
 use crate::realize::load::LoadReport;
 use crate::realize::mimo::NotVerified;
@@ -324,6 +324,35 @@ fn crosstalk_and_predictions(s: &MatrixSummary) -> String {
             t,
             "  fit uncertainty (the impact tests' noise left in Ĝ, which these predictions cannot see; more impacts lower it): {}",
             fit.join(", ")
+        );
+    }
+    let offline: Vec<String> = s
+        .axes
+        .iter()
+        .filter(|a| a.source == RowSource::Matrix)
+        .filter_map(|a| {
+            a.offline.map(|o| match o.fit.is_finite() {
+                true => format!(
+                    "{} {} (with the fit's uncertainty {})",
+                    a.axis,
+                    pct(Some(o.error)),
+                    pct(Some(o.with_fit()))
+                ),
+                false => format!("{} {}", a.axis, pct(Some(o.error))),
+            })
+        })
+        .collect();
+    if !offline.is_empty() {
+        let _ = writeln!(
+            t,
+            "  compensate --offline on this image (zero-lag smoother of the full 3x3 model, same q): {}{}",
+            offline.join(", "),
+            match s.forces == FLAT_FORCE {
+                true =>
+                    "; for a flat force: a cut, its power at low harmonics, gains less (`--force-prior spectrum \
+                         --force-record CUT.csv` predicts for it)",
+                false => "",
+            }
         );
     }
     for a in &s.axes {

@@ -505,6 +505,47 @@ mod tests {
         }
     }
 
+    /// The smoother's response that the design predicts `compensate
+    /// --offline` by ([`crate::design::mimo::response::smoother_responses`],
+    /// the Wiener formula) is the smoother's own: an impulse on each
+    /// channel, in the middle of a record long enough for both passes to
+    /// settle, run through [`MatrixSmoother::smooth`] (an advance, an FIR
+    /// tap, a shaped force and coupled channels), its output's DFT on a few
+    /// lines. Negative control: the formula with another q differs.
+    #[test]
+    fn the_predicted_response_is_the_smoothers_own() {
+        use crate::design::mimo::response::smoother_responses;
+        use num_complex::Complex64;
+        let c = [[0.3, 0.2, -0.15], [0.25, 0.2, 0.1], [-0.1, 0.2, 0.4]];
+        let d = [[1.0, 0.5, 0.4], [0.6, 1.0, -0.5], [0.4, 0.5, 1.0]];
+        let mut m = model([0.6, 0.4, 0.2], c, d, diag([0.1, -0.05, 0.2]), 2);
+        m.force_shape[1] = Some(ForceShape { corner_hz: 5000.0, order: 4 });
+        let plant = m.plant(FS, "test").unwrap();
+        let sm = MatrixSmoother::new(&plant, m.q, m.r, m.advance).unwrap();
+        let (len, mid) = (4096, 2048);
+        let lines = [0.0, 37.5, 400.0, 2100.0, 5000.0, 9000.0, 12_700.0].map(|f: f64| f.max(1.0));
+        let predicted = smoother_responses(&plant, m.q, m.r, &lines, FS);
+        let mut worst: f64 = 0.0;
+        for j in 0..3 {
+            let mut y = vec![vec![0.0; len]; 3];
+            y[j][mid] = 1.0;
+            let out = sm.smooth([&y[0], &y[1], &y[2]]);
+            for (k, f) in lines.iter().enumerate() {
+                let w = 2.0 * std::f64::consts::PI * f / FS;
+                for i in 0..3 {
+                    let h: Complex64 =
+                        (0..len).map(|t| out[i][t] * Complex64::from_polar(1.0, -w * (t as f64 - mid as f64))).sum();
+                    let p = predicted[k][(i, j)];
+                    worst = worst.max((h - p).norm() / (1.0 + p.norm()));
+                }
+            }
+        }
+        assert!(worst < 1e-6, "the Wiener formula differs from the smoother's response by {worst:e}");
+        let other = smoother_responses(&plant, m.q.map(|q| 3.0 * q), m.r, &lines, FS);
+        let moved = other.iter().zip(&predicted).map(|(a, b)| (a - b).norm() / (1.0 + b.norm())).fold(0.0, f64::max);
+        assert!(moved > 1e-3, "negative control: q tripled moved the response by only {moved:e}");
+    }
+
     /// Spoils a valid sidecar model in place.
     type Spoil = Box<dyn Fn(&mut MatrixModelJson)>;
 

@@ -156,6 +156,9 @@ pub struct AxisPrediction {
     pub reason: String,
     /// White-noise gain of the row used (RMS ratio for unit noise on every input).
     pub noise_gain: f64,
+    /// What `compensate --offline` on the image predicts for the 3x3 row
+    /// ([`offline_prediction`]; `None` where there is no 3x3 design).
+    pub offline: Option<RowError>,
 }
 
 /// The 3x3 Kalman design's figures.
@@ -505,15 +508,24 @@ fn design(
         }
         _ => (realized, None, None),
     };
+    let offline = prep.as_ref().zip(chosen.matrix.as_ref()).and_then(|(p, (k, _, _))| {
+        opts.say("predicting compensate --offline on the image…");
+        offline_prediction(p, &criterion.model, k.q, r, d)
+    });
+    if let Some(off) = offline {
+        chosen.axes.iter_mut().zip(off).for_each(|(a, o)| a.offline = Some(o));
+    }
     if flat {
         notes.extend(moderate_crosstalk_caveat(&chosen.axes, &crosstalk));
+    } else {
+        notes.extend(offline_note(&chosen.axes, chosen.lag));
     }
     notes.extend(level_prior_caveat(d, flat));
     let shapes = force_shapes(&criterion.model, d);
     let mut md = finish(shapes, chosen, realized, prep, crosstalk, latency_rounds, notes, d.fs_hz, f_band)?;
     md.summary.reduction = reduction;
     md.summary.forces = match (flat, d.force_record_level_only) {
-        (true, _) => "a flat force",
+        (true, _) => FLAT_FORCE,
         (false, true) => "the record's force level and mean force",
         (false, false) => "the record's force spectrum and mean force",
     }
@@ -1272,7 +1284,66 @@ fn axis_prediction(
         chosen,
         reason,
         noise_gain,
+        offline: None,
     }
+}
+
+/// [`MatrixSummary::forces`] for predictions on a flat force spectrum.
+pub const FLAT_FORCE: &str = "a flat force";
+
+/// Below this ratio of the offline smoother's predicted error to the
+/// real-time row's, both with the fit's uncertainty, the summary points to
+/// `compensate --offline` (for a force record's spectrum only).
+pub const OFFLINE_MUCH_BETTER: f64 = 0.5;
+
+/// The note on the 3x3 rows whose offline prediction is under
+/// [`OFFLINE_MUCH_BETTER`] of the full real-time filter's at latency `lag`
+/// (before any reduction for the box, which the summary states apart),
+/// each with the fit's uncertainty ([`RowError::with_fit`]). Only for
+/// predictions on a cut's record: for a flat force nearly every row
+/// qualifies, while a cut, its power at low harmonics, gains little
+/// (BENCHMARKS.md, "What `compensate --offline` reaches on a 3x3 image").
+fn offline_note(axes: &[AxisPrediction], lag: usize) -> Option<String> {
+    let much_better: Vec<(&str, f64, f64)> = axes
+        .iter()
+        .filter(|a| a.source == RowSource::Matrix)
+        .filter_map(|a| Some((a.axis, a.offline?.with_fit(), a.matrix?.with_fit())))
+        .filter(|(_, off, rt)| *off < OFFLINE_MUCH_BETTER * rt)
+        .collect();
+    if much_better.is_empty() {
+        return None;
+    }
+    let list = |k: fn(&(&str, f64, f64)) -> f64| {
+        much_better.iter().map(|a| format!("{} {:.3} %", a.0, 100.0 * k(a))).collect::<Vec<_>>().join(", ")
+    };
+    Some(format!(
+        "for this cut, `compensate --offline` on this image predicts {} against {} for its real-time 3x3 filter at \
+         latency {lag} (full model, the fit's uncertainty counted): the difference is what {lag} samples of latency \
+         cost, and the zero-lag smoother is not bound by them; use it where the record can be processed after the cut",
+        list(|a| a.1),
+        list(|a| a.2)
+    ))
+}
+
+/// What `compensate --offline` on the image predicts for each 3x3 row: the
+/// fixed-interval smoother of the same model (the augmented plant at
+/// latency 0, the design's force shapes) with the 3x3 design's q
+/// ([`response::smoother_responses`], the smoother's steady-state response),
+/// by the criterion at latency 0. A line at 0 Hz (the mean force's) is
+/// taken at 10⁻⁶·fs, where the random-walk force's pole at z = 1 leaves the
+/// resolvent finite. `None` where a line's response is not finite.
+fn offline_prediction(
+    p: &MatrixPrep,
+    crit: &MatrixCriterion,
+    q: [f64; 3],
+    r: [f64; 3],
+    d: &DesignOptions,
+) -> Option<[RowError; 3]> {
+    let plant = augmented_plant_shaped(&p.dm, &p.plant, 0, force_shapes(crit, d));
+    let lines: Vec<f64> = crit.all_freqs().iter().map(|f| f.max(1e-6 * d.fs_hz)).collect();
+    let h = response::smoother_responses(&plant, q, r, &lines, d.fs_hz);
+    let rows: [RowError; 3] = std::array::from_fn(|i| crit.row_error(i, 0, &h));
+    rows.iter().all(|e| e.error.is_finite()).then_some(rows)
 }
 
 /// The 3x3 Kalman design at latency `lag` with q chosen by the criterion
@@ -1424,7 +1495,7 @@ fn finish(
         },
         worse_than_raw: Vec::new(),
         reduction: None,
-        forces: "a flat force".to_string(),
+        forces: FLAT_FORCE.to_string(),
         notes,
     };
     let (model, discrete) = match prep {
@@ -1466,6 +1537,7 @@ mod tests {
                 chosen: row(percent[i]),
                 reason: String::new(),
                 noise_gain: 1.0,
+                offline: None,
             })
             .collect();
         Round {
@@ -1480,6 +1552,31 @@ mod tests {
 
     fn first_ranked(rounds: Vec<Round>) -> usize {
         rank_rounds(rounds).0[0].lag
+    }
+
+    /// The summary points to `compensate --offline` on the 3x3 rows whose
+    /// offline prediction is under half the full real-time filter's (y:
+    /// 0.10 against 0.30 %), not on a row at 0.6 of it (x), a per-axis row
+    /// (z), nor on a row whose reduced filter alone is that far behind.
+    #[test]
+    fn the_offline_note_names_the_rows_the_smoother_halves() {
+        let mut rd = round_predicting(8, [0.20, 0.30, 0.50]);
+        let row = |p: f64| RowError { error: p / 100.0, distortion: p / 100.0, fit: f64::NAN };
+        rd.axes[0].offline = Some(row(0.12));
+        rd.axes[1].offline = Some(row(0.10));
+        rd.axes[2].offline = Some(row(0.01));
+        rd.axes[2].source = RowSource::PerAxis;
+        let note = offline_note(&rd.axes, 8).expect("a note for y");
+        assert!(note.contains("predicts y 0.100 % against y 0.300 %"), "{note}");
+        assert!(note.contains("latency 8") && !note.contains("x 0.") && !note.contains("z 0."), "{note}");
+        // Controls: at 0.6 of the full filter no note; a reduced filter
+        // (chosen) far behind while the full one is close: no note.
+        rd.axes[1].offline = Some(row(0.18));
+        assert_eq!(offline_note(&rd.axes, 8), None);
+        rd.axes[1].chosen = row(0.9);
+        assert_eq!(offline_note(&rd.axes, 8), None);
+        rd.axes[1].offline = Some(row(0.14));
+        assert!(offline_note(&rd.axes, 8).is_some(), "0.14 against 0.30 % is under half");
     }
 
     /// The latency rule, on rounds whose ratios are worked out by hand

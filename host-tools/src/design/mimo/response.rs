@@ -11,6 +11,7 @@
 //!
 //! so per line only 3×n by n×3 products and one 3x3 solve, where the direct
 //! evaluation ([`MimoStateSpace::freq_responses`]) eliminates an n×n system.
+//! [`smoother_responses`] is the same for the offline smoother.
 
 use nalgebra::{DMatrix, Matrix3};
 use num_complex::Complex64;
@@ -105,6 +106,49 @@ impl PlantResolvent {
             })
             .collect()
     }
+}
+
+/// The response (3x3 per line, from ỹ to F̂) of the steady-state
+/// fixed-interval smoother of `plant` ([`crate::offline::matrix_smoother`],
+/// `compensate --offline`) for process noise Q = diag(`q`) (N²/sample) and
+/// measurement noise R = diag(`r`) (N²), on the lines `f_hz` (Hz), its
+/// estimate the state at [`MatrixAugmentedPlant::output_index`] (so that
+/// [`super::criterion::MatrixCriterion::row_error`] judges it at latency
+/// 0, as the box's filter at its own). In steady state the smoother is the
+/// non-causal Wiener filter of the model's spectra (Kailath, Sayed &
+/// Hassibi, *Linear Estimation*, 2000): with Φ = (zI − A)⁻¹, T_y = CΦΓ and T_F = EΦΓ,
+///
+/// H(z) = T_F Q T_yᴴ · (T_y Q T_yᴴ + R)⁻¹.
+///
+/// NaN on a line where zI − A or the bracket is singular (z = 1 for a
+/// random-walk force).
+pub fn smoother_responses(
+    plant: &MatrixAugmentedPlant,
+    q: [f64; 3],
+    r: [f64; 3],
+    f_hz: &[f64],
+    fs_hz: f64,
+) -> Vec<DMatrix<Complex64>> {
+    let n = plant.a.nrows();
+    let out = plant.output_index();
+    let sel = DMatrix::from_fn(6, n, |i, j| if i < 3 { plant.c[(i, j)] } else { f64::from(j == out + i - 3) });
+    let gamma = plant.g.map(|v| Complex64::new(v, 0.0));
+    let qm = Matrix3::from_diagonal(&nalgebra::Vector3::from(q.map(|v| Complex64::new(v, 0.0))));
+    let rm = Matrix3::from_diagonal(&nalgebra::Vector3::from(r.map(|v| Complex64::new(v, 0.0))));
+    left_resolvent(&plant.a, &sel, f_hz, fs_hz)
+        .iter()
+        .map(|rows| {
+            let t = rows * &gamma;
+            let ty = Matrix3::from_fn(|i, j| t[(i, j)]);
+            let tf = Matrix3::from_fn(|i, j| t[(i + 3, j)]);
+            let cross = qm * ty.adjoint();
+            let h = (ty * cross + rm)
+                .try_inverse()
+                .map(|inv| tf * cross * inv)
+                .unwrap_or_else(|| Matrix3::from_element(Complex64::new(f64::NAN, f64::NAN)));
+            DMatrix::from_fn(3, 3, |i, j| h[(i, j)])
+        })
+        .collect()
 }
 
 /// A real 3×3 matrix as a complex `Matrix3`.
