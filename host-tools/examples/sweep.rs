@@ -33,9 +33,11 @@
 //! seeding, before any result on them was seen).
 //!
 //! Each row ends with the image's latency, the axis's predicted in-band
-//! error and its filter's shape (pairs + real poles + FIR taps).
+//! error and its filter's shape (pairs + real poles + FIR taps); with
+//! `--offline`, also `compensate --offline`'s NRMSE and the design's
+//! prediction of it.
 //!
-//! usage: cargo run --release -p dynocomp --example sweep -- [N] [--from=K] [--lag=L] [--exact-frf] [--no-refine] [--no-seed] [--no-drop] [--above-band=inverse] [--force-spectrum|--force-level]   (default 100)
+//! usage: cargo run --release -p dynocomp --example sweep -- [N] [--from=K] [--lag=L] [--exact-frf] [--no-refine] [--no-seed] [--no-drop] [--above-band=inverse] [--force-spectrum|--force-level] [--offline]   (default 100)
 use anyhow::Result;
 use dynocomp::design::image::build_image;
 use dynocomp::eval::rates::{design_options, run_case, scoring_band_hz, CaseResult, RateCase, RunOptions};
@@ -67,6 +69,7 @@ fn main() -> Result<()> {
         lag,
         force_spectrum,
         force_level_only,
+        score_offline: args.iter().any(|a| a == "--offline"),
         ..RunOptions::default()
     };
     let (mut with_image, mut axes, mut within_13, mut within_2, mut written) = (0, 0, 0, 0, 0);
@@ -147,8 +150,16 @@ fn main() -> Result<()> {
                     s.taps
                 )
             });
+            let offline = match a.offline_nrmse.is_finite() {
+                true => format!(
+                    "; offline {:.3} % (predicted {:.3} %)",
+                    100.0 * a.offline_nrmse,
+                    100.0 * a.offline_predicted
+                ),
+                false => String::new(),
+            };
             let row = format!(
-                "seed {seed} {} ({kind}, {fs} Hz, {} Hz lines): {what}, {ratio:.2}x{written}; raw {:.2} %{warned}{seeded}{shape}",
+                "seed {seed} {} ({kind}, {fs} Hz, {} Hz lines): {what}, {ratio:.2}x{written}; raw {:.2} %{warned}{seeded}{shape}{offline}",
                 axis_name(a.axis),
                 case.frf_df_hz,
                 100.0 * a.raw_nrmse

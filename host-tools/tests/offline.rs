@@ -302,3 +302,42 @@ fn spilled_smoother_equals_the_in_memory_one_bit_for_bit() {
     // the temporary files are gone
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
 }
+
+/// What `design` predicts `compensate --offline` reaches per axis rests on
+/// the smoother's steady-state response
+/// ([`dynocomp::design::kalman::smoother_response`], the Wiener formula):
+/// it is the smoother's own, an impulse in the middle of a record long
+/// enough for both passes to settle, run through [`Smoother::shaped`] (the
+/// fitted discrete model with its advance and FIR taps, and a band-limited
+/// force), its output's DFT on a few lines. Control: the formula with
+/// another q differs.
+#[test]
+fn the_predicted_offline_response_is_the_smoothers_own() {
+    use dynocomp::design::kalman::{augmented_plant_shaped, smoother_response, ForceShape};
+    use num_complex::Complex64;
+    let model = two_mode_model();
+    let dm = discretize(&model, FS, Discretization::Fit, (0.0, 0.4 * FS)).unwrap().0;
+    assert!(dm.advance > 0 && !dm.fir.is_empty(), "advance {} and {} FIR taps", dm.advance, dm.fir.len());
+    let shape = Some(ForceShape { corner_hz: 0.3 * FS, order: 4 });
+    let (q, r) = (2.0, 0.05);
+    let sm = Smoother::shaped(&dm, q, r, shape).unwrap();
+    let (len, mid) = (16_384, 8_192);
+    let mut y = vec![0.0; len];
+    y[mid] = 1.0;
+    let out = sm.smooth(&y);
+    let lines = [3.0, 150.0, 0.05 * FS, 0.2 * FS, 0.35 * FS, 0.49 * FS];
+    let plant = augmented_plant_shaped(&dm, 0, shape);
+    let predicted = smoother_response(&plant, q, r, &lines, FS);
+    let measured: Vec<Complex64> = lines
+        .iter()
+        .map(|f| {
+            let w = 2.0 * PI * f / FS;
+            (0..len).map(|t| out[t] * Complex64::from_polar(1.0, -w * (t as f64 - mid as f64))).sum()
+        })
+        .collect();
+    let worst = predicted.iter().zip(&measured).map(|(p, m)| (p - m).norm() / (1.0 + p.norm())).fold(0.0, f64::max);
+    assert!(worst < 1e-6, "the Wiener formula differs from the smoother's response by {worst:e}");
+    let other = smoother_response(&plant, 3.0 * q, r, &lines, FS);
+    let moved = other.iter().zip(&predicted).map(|(a, b)| (a - b).norm() / (1.0 + b.norm())).fold(0.0, f64::max);
+    assert!(moved > 1e-3, "negative control: q tripled moved the response by only {moved:e}");
+}

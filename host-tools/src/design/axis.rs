@@ -226,9 +226,26 @@ pub struct AxisDesign {
     /// the box output is further from the force than the raw measurement
     /// ([`crate::design::phase_limit`]).
     pub phase_limits: Vec<crate::design::phase_limit::PhaseLimit>,
+    /// What `compensate --offline` on the image predicts for the axis: √J
+    /// of the zero-lag smoother of the same discrete model, force shape and
+    /// q ([`kalman::smoother_response`]) on the criterion's lines and
+    /// forces, and its fit uncertainty in the same terms as
+    /// `fit_uncertainty`. NaN where not known (the paper's method, an axis
+    /// passed through).
+    pub offline_predicted: (f64, f64),
 }
 
 impl AxisDesign {
+    /// What `compensate --offline` is predicted to reach, with the fit's
+    /// uncertainty counted where it is known ([`Self::offline_predicted`]).
+    pub fn offline_predicted_with_fit(&self) -> f64 {
+        let (e, fit) = self.offline_predicted;
+        match fit.is_finite() {
+            true => e.hypot(fit),
+            false => e,
+        }
+    }
+
     /// The predicted in-band error with the fit's uncertainty counted,
     /// √(J + J_fit) ([`AxisDesign::fit_uncertainty`]); `predicted_error`
     /// where that is not known.
@@ -895,6 +912,17 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
         Some(_) => Vec::new(),
         None => crate::design::phase_limit::phase_limit(&p.fitted.model, &kal.compensator, lag, fs, p.lines.comp_band),
     };
+    let offline_predicted = match (&p.fitted.paper, &discrete) {
+        (None, Some((dm, _))) => {
+            let plant = kalman::augmented_plant_shaped(dm, 0, kal.force_shape);
+            let lines: Vec<f64> = grid_hz.iter().map(|f| f.max(1e-6 * fs)).collect();
+            let h_off = kalman::smoother_response(&plant, kal.q, kal.r, &lines, fs);
+            let obj0 = p.objective(&design_fn, 0, &grid_hz, opts);
+            let fit = p.fit_variance.as_ref().map_or(f64::NAN, |v| obj0.fit_part(&h_off, v).sqrt());
+            (obj0.j_of(&h_off, false).sqrt(), fit)
+        }
+        _ => (f64::NAN, f64::NAN),
+    };
     Ok(AxisDesign {
         axis: p.axis,
         model: p.fitted.model.clone(),
@@ -924,6 +952,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
         force_spectrum,
         pass_through: None,
         phase_limits,
+        offline_predicted,
     })
 }
 

@@ -223,6 +223,33 @@ pub fn dare_residual(a: &DMatrix<f64>, c: &DVector<f64>, q: &DMatrix<f64>, r: f6
     (p - (apa - corr + q)).norm() / scale.max(f64::MIN_POSITIVE)
 }
 
+/// The response (from ỹ to F̂, per line of `f_hz` in Hz) of the
+/// steady-state fixed-interval smoother of `plant`
+/// ([`crate::offline::smoother`], `compensate --offline`) for process noise
+/// `q` (N²/sample) and measurement noise `r` (N²), its estimate the state at
+/// [`AugmentedPlant::output_index`], so that the criterion judges it at
+/// latency 0 as it judges the box's filter at its own. In steady state the
+/// smoother is the non-causal Wiener filter of the model's spectra: with
+/// Φ = (zI − A)⁻¹, T_y = cᵀΦγ and T_F = eᵀΦγ,
+///
+/// H(z) = q·T_F·conj(T_y) / (q·|T_y|² + r)
+///
+/// (the 3x3 form: [`crate::design::mimo::response::smoother_responses`]).
+/// NaN where zI − A is singular (z = 1 for a random-walk force).
+pub fn smoother_response(plant: &AugmentedPlant, q: f64, r: f64, f_hz: &[f64], fs_hz: f64) -> Vec<Complex64> {
+    let n = plant.a.nrows();
+    let out = plant.output_index();
+    let sel = DMatrix::from_fn(2, n, |i, j| if i == 0 { plant.c[j] } else { f64::from(j == out) });
+    crate::numeric::lti::left_resolvent(&plant.a, &sel, f_hz, fs_hz)
+        .iter()
+        .map(|rows| {
+            let t = |i: usize| (0..n).map(|k| rows[(i, k)] * plant.g[k]).sum::<Complex64>();
+            let (ty, tf) = (t(0), t(1));
+            tf * ty.conj() * q / (ty.norm_sqr() * q + r)
+        })
+        .collect()
+}
+
 /// The structured doubling iteration (Chu, Fan & Lin 2005) of the DARE in
 /// its dual form, from Â₀ = `ak`, G₀ = `gk`, H₀ = `hk`: at most 200 steps,
 /// stopping when H changes by less than 10⁻¹⁴ of its norm. Returns H (the

@@ -96,6 +96,7 @@ pub fn pass_through(frf: &AxisFrf, r: f64, opts: &DesignOptions, reason: String)
         force_spectrum: None,
         pass_through: Some(reason),
         phase_limits: Vec::new(),
+        offline_predicted: (f64::NAN, f64::NAN),
     })
 }
 

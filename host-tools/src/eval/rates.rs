@@ -233,6 +233,9 @@ pub struct RunOptions {
     pub drop_unsupported: bool,
     /// Lines a seeded pair must span ([`crate::fit::vf::VfOptions::seed_resolved_lines`]).
     pub seed_resolved_lines: f64,
+    /// Also run `compensate --offline`'s smoother on each axis and score it
+    /// ([`AxisScore::offline_nrmse`]).
+    pub score_offline: bool,
 }
 
 impl Default for RunOptions {
@@ -249,6 +252,7 @@ impl Default for RunOptions {
             seed_fit: true,
             drop_unsupported: true,
             seed_resolved_lines: crate::fit::vf::SEED_RESOLVED_LINES,
+            score_offline: false,
         }
     }
 }
@@ -308,6 +312,14 @@ pub struct AxisScore {
     /// The design's non-minimum-phase zeros where the box is worse than raw
     /// ([`crate::design::phase_limit`]; empty if the design failed).
     pub phase_limits: Vec<crate::design::phase_limit::PhaseLimit>,
+    /// NRMSE of `compensate --offline`'s smoother of the image
+    /// (with [`RunOptions::score_offline`]; NaN otherwise or if the design
+    /// failed).
+    pub offline_nrmse: f64,
+    /// The design's prediction of it, with the fit's uncertainty
+    /// ([`crate::design::axis::AxisDesign::offline_predicted`]; NaN if the
+    /// design failed).
+    pub offline_predicted: f64,
 }
 
 /// Results of one case at one rate.
@@ -434,13 +446,21 @@ fn score_sim_with(
         let phase_limits = designed.as_ref().map(|d| d.phase_limits.clone()).unwrap_or_default();
         let seeded_hz = designed.as_ref().map(|d| d.seeded_hz.clone()).unwrap_or_default();
         let predicted_with_fit = designed.as_ref().map_or(f64::NAN, |d| d.predicted_error_with_fit());
+        let offline_predicted = designed.as_ref().map_or(f64::NAN, |d| d.offline_predicted_with_fit());
+        let mut offline_nrmse = f64::NAN;
         let (comp_nrmse, predicted_error, flat_band_hz) = match designed {
             Err(e) => (Err(format!("{e:#}")), f64::NAN, (f64::NAN, f64::NAN)),
             Ok(d) => {
-                let comp = build_image(std::slice::from_ref(&d), fs as u32, latency, 5000.0, [0; 32]).and_then(|img| {
-                    let rec = SignalRecord { t_s: None, channels: vec![(a, s.measured[a].clone())] };
-                    compensate_record(&img, &rec, false, "rates")
-                });
+                let image = build_image(std::slice::from_ref(&d), fs as u32, latency, 5000.0, [0; 32]);
+                let rec = SignalRecord { t_s: None, channels: vec![(a, s.measured[a].clone())] };
+                if let (true, Ok(img)) = (run.score_offline, &image) {
+                    let sidecar = crate::offline::sidecar::ModelSidecar::of_designs(img, std::slice::from_ref(&d));
+                    offline_nrmse = crate::offline::smoother::smooth_record(img, &sidecar, &rec, "rates")
+                        .ok()
+                        .and_then(|out| out.channel(a).map(|c| accuracy(c, &s.truth[a], fs, band).nrmse))
+                        .unwrap_or(f64::NAN);
+                }
+                let comp = image.and_then(|img| compensate_record(&img, &rec, false, "rates"));
                 let nrmse = comp
                     .and_then(|out| {
                         let c = out.channel(a).ok_or_else(|| anyhow::anyhow!("axis {a} missing"))?;
@@ -464,6 +484,8 @@ fn score_sim_with(
             as_written,
             seeded_hz,
             phase_limits,
+            offline_nrmse,
+            offline_predicted,
         });
     }
     CaseResult { case: name, fs_hz: fs, band_hz: band, axes, latency }

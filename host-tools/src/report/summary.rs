@@ -6,6 +6,7 @@ use std::fmt::Write as _;
 
 use crate::design::axis::AxisDesign;
 use crate::design::bands::{self, Band};
+use crate::design::mimo::OFFLINE_MUCH_BETTER;
 use crate::design::paper::PaperDiagnostics;
 use crate::design::sensitivity::Sensitivity;
 use crate::frf::axis_name;
@@ -41,6 +42,10 @@ pub struct AxisJson {
     /// √(predicted_error² + fit_uncertainty²): the error to expect with
     /// what the FRF's noise leaves unknown in the model counted.
     pub predicted_error_with_fit: f64,
+    /// What `compensate --offline` on the image is predicted to reach, the
+    /// fit's uncertainty counted (`AxisDesign::offline_predicted_with_fit`;
+    /// null where not known).
+    pub offline_predicted_error: Option<f64>,
     /// Predicted in-band relative error of the uncompensated force; the
     /// design is refused unless `predicted_error` is below it.
     pub raw_predicted_error: f64,
@@ -124,6 +129,7 @@ impl AxisJson {
             predicted_error: d.predicted_error,
             fit_uncertainty: d.fit_uncertainty.is_finite().then_some(d.fit_uncertainty),
             predicted_error_with_fit: d.predicted_error_with_fit(),
+            offline_predicted_error: Some(d.offline_predicted_with_fit()).filter(|v| v.is_finite()),
             raw_predicted_error: d.raw_predicted_error,
             compensated_band_hz: d.compensated_band_hz,
             discretization: d.discrete.as_ref().map(|x| x.0.method.name()),
@@ -257,6 +263,9 @@ pub fn render_summary(
     if let Some(line) = fit_uncertainty_line(designs) {
         s.push_str(&line);
     }
+    if let Some(line) = offline_line(designs).filter(|_| range.is_none()) {
+        s.push_str(&line);
+    }
     for d in designs {
         if let Some(why) = &d.pass_through {
             let _ = writeln!(
@@ -364,6 +373,49 @@ fn fit_uncertainty_line(designs: &[AxisDesign]) -> Option<String> {
             parts.join(", ")
         )
     })
+}
+
+/// What `compensate --offline` on the image predicts per axis
+/// (`AxisDesign::offline_predicted`, with the fit's uncertainty), where any
+/// axis has it. For a flat force the line says that a cut gains less than
+/// it shows; for a record's force spectrum it names the axes where the
+/// smoother predicts under [`OFFLINE_MUCH_BETTER`] of the box filter's
+/// error (BENCHMARKS.md, "What `compensate --offline` reaches per axis").
+fn offline_line(designs: &[AxisDesign]) -> Option<String> {
+    let known: Vec<&AxisDesign> =
+        designs.iter().filter(|d| d.pass_through.is_none() && d.offline_predicted.0.is_finite()).collect();
+    if known.is_empty() {
+        return None;
+    }
+    let parts: Vec<String> = known
+        .iter()
+        .map(|d| format!("{} {:.2} %", axis_name(d.axis), 100.0 * d.offline_predicted_with_fit()))
+        .collect();
+    let tail = match designs.iter().all(|d| d.force_spectrum.is_none()) {
+        true => "; for a flat force: a cut, its power at low harmonics, gains less (`--force-prior spectrum \
+                 --force-record CUT.csv` predicts for it)"
+            .to_string(),
+        false => {
+            let better: Vec<String> = known
+                .iter()
+                .filter(|d| d.offline_predicted_with_fit() < OFFLINE_MUCH_BETTER * d.predicted_error_with_fit())
+                .map(|d| axis_name(d.axis).to_string())
+                .collect();
+            match better.is_empty() {
+                true => String::new(),
+                false => format!(
+                    "; for this cut, under half the box filter's error on {}: use it where the record can be \
+                     processed after the cut",
+                    better.join(", ")
+                ),
+            }
+        }
+    };
+    Some(format!(
+        "compensate --offline on this image (zero-lag smoother of the same model and q, the fit's uncertainty \
+         counted): {}{tail}\n",
+        parts.join(", ")
+    ))
 }
 
 /// The line of an axis's discrete model (none for the paper's Tustin).
