@@ -289,6 +289,16 @@ fn summary_text_lists_its_parts_in_order() {
         "fit uncertainty (the impact test's noise left in Ĝ, which pred. cannot see; more impacts lower it): {}",
         fit.join(", ")
     ));
+    let offline: Vec<String> = designs
+        .iter()
+        .map(|d| format!("{} {:.2} %", ["x", "y"][d.axis], 100.0 * d.offline_predicted_with_fit()))
+        .collect();
+    want.push(format!(
+        "compensate --offline on this image (zero-lag smoother of the same model and q, the fit's uncertainty \
+         counted): {}; for a flat force: a cut, its power at low harmonics, gains less (`--force-prior spectrum \
+         --force-record CUT.csv` predicts for it)",
+        offline.join(", ")
+    ));
     for d in &designs {
         let (dm, fd) = d.discrete.as_ref().expect("the default design has a discrete model");
         let above = fd.modes_above_nyquist;
