@@ -11,7 +11,9 @@ use std::time::Instant;
 
 use crate::cli::design_args::{DesignArgs, DesignSetup, ForcePrior, Method};
 use crate::design::mimo::image::build_matrix_image;
-use crate::design::mimo::{design_matrix, MatrixDesign, MatrixOptions, MatrixSummary, Progress, RowSource, FLAT_FORCE};
+use crate::design::mimo::{
+    design_matrix, MatrixDesign, MatrixOptions, MatrixSummary, Progress, RowSource, FLAT_FORCE, OFFLINE_FLAT_CAVEAT,
+};
 use crate::frf::{axis_name, Frf};
 use crate::realize::load::LoadReport;
 use crate::realize::mimo::NotVerified;
@@ -348,10 +350,8 @@ fn crosstalk_and_predictions(s: &MatrixSummary) -> String {
             "  compensate --offline on this image (zero-lag smoother of the full 3x3 model, same q): {}{}",
             offline.join(", "),
             match s.forces == FLAT_FORCE {
-                true =>
-                    "; for a flat force: a cut, its power at low harmonics, gains less (`--force-prior spectrum \
-                         --force-record CUT.csv` predicts for it)",
-                false => "",
+                true => format!("; {OFFLINE_FLAT_CAVEAT}"),
+                false => String::new(),
             }
         );
     }

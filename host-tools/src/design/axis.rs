@@ -12,7 +12,9 @@ use num_complex::Complex64;
 
 use crate::design::above_band::{out_of_band_j, AboveBand};
 use crate::design::bands::{band_mask, Band};
-use crate::design::criterion::{criterion_cells, criterion_grid, criterion_j_weighted, criterion_ranges, flat_band};
+use crate::design::criterion::{
+    criterion_cells, criterion_grid, criterion_j_weighted, criterion_ranges, flat_band, with_fit_uncertainty,
+};
 use crate::design::discretize::{discretize_to, DiscreteModel, Discretization, FitDiagnostics, MATCH_BAND_FRACTION};
 use crate::design::kalman::{self, KalmanDesign};
 use crate::design::paper::{self, PaperDiagnostics};
@@ -239,21 +241,14 @@ impl AxisDesign {
     /// What `compensate --offline` is predicted to reach, with the fit's
     /// uncertainty counted where it is known ([`Self::offline_predicted`]).
     pub fn offline_predicted_with_fit(&self) -> f64 {
-        let (e, fit) = self.offline_predicted;
-        match fit.is_finite() {
-            true => e.hypot(fit),
-            false => e,
-        }
+        with_fit_uncertainty(self.offline_predicted.0, self.offline_predicted.1)
     }
 
     /// The predicted in-band error with the fit's uncertainty counted,
     /// √(J + J_fit) ([`AxisDesign::fit_uncertainty`]); `predicted_error`
     /// where that is not known.
     pub fn predicted_error_with_fit(&self) -> f64 {
-        match self.fit_uncertainty.is_finite() {
-            true => self.predicted_error.hypot(self.fit_uncertainty),
-            false => self.predicted_error,
-        }
+        with_fit_uncertainty(self.predicted_error, self.fit_uncertainty)
     }
 
     /// Fitted response Ĝ(j2πf): the paper's B/A itself, else the pole-residue model.

@@ -76,6 +76,16 @@ pub fn longest_flat_run(freq_hz: &[f64], e: &[Complex64], band: (f64, f64)) -> O
     best.map(|(a, b)| (freq_hz[a], freq_hz[b]))
 }
 
+/// √(J + J_fit) from √J = `error` and √J_fit = `fit`: a predicted error with
+/// the fitted model's own uncertainty counted; `error` where `fit` is not
+/// known (NaN).
+pub fn with_fit_uncertainty(error: f64, fit: f64) -> f64 {
+    match fit.is_finite() {
+        true => error.hypot(fit),
+        false => error,
+    }
+}
+
 /// The noise factor of J ([`criterion_j`]): (2R/fs)·(f_hi − f_lo)/force_rms², the
 /// in-band noise variance relative to the force's, for `band_width_hz` = the
 /// summed width of the criterion's bands.

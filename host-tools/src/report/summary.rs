@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 
 use crate::design::axis::AxisDesign;
 use crate::design::bands::{self, Band};
-use crate::design::mimo::OFFLINE_MUCH_BETTER;
+use crate::design::mimo::{OFFLINE_FLAT_CAVEAT, OFFLINE_MUCH_BETTER};
 use crate::design::paper::PaperDiagnostics;
 use crate::design::sensitivity::Sensitivity;
 use crate::frf::axis_name;
@@ -392,9 +392,7 @@ fn offline_line(designs: &[AxisDesign]) -> Option<String> {
         .map(|d| format!("{} {:.2} %", axis_name(d.axis), 100.0 * d.offline_predicted_with_fit()))
         .collect();
     let tail = match designs.iter().all(|d| d.force_spectrum.is_none()) {
-        true => "; for a flat force: a cut, its power at low harmonics, gains less (`--force-prior spectrum \
-                 --force-record CUT.csv` predicts for it)"
-            .to_string(),
+        true => format!("; {OFFLINE_FLAT_CAVEAT}"),
         false => {
             let better: Vec<String> = known
                 .iter()

@@ -10,7 +10,7 @@ use std::f64::consts::PI;
 
 use super::discrete::CMatrix3;
 use crate::design::above_band::{out_of_band_lines, out_of_band_noise_factor};
-use crate::design::criterion::{criterion_cells, criterion_grid};
+use crate::design::criterion::{criterion_cells, criterion_grid, with_fit_uncertainty};
 use crate::design::force_spectrum::{estimate_matrix, mean_force_matrix, CellSpectrum, ForceRecord};
 use crate::fit::refine::FitCovariance;
 use crate::frf::axis_name;
@@ -184,10 +184,7 @@ impl RowError {
     /// √(J + J_fit): the predicted error with the fit's uncertainty
     /// counted; `error` where that is not known.
     pub fn with_fit(&self) -> f64 {
-        match self.fit.is_finite() {
-            true => self.error.hypot(self.fit),
-            false => self.error,
-        }
+        with_fit_uncertainty(self.error, self.fit)
     }
 }
 

@@ -1291,6 +1291,12 @@ fn axis_prediction(
 /// [`MatrixSummary::forces`] for predictions on a flat force spectrum.
 pub const FLAT_FORCE: &str = "a flat force";
 
+/// What the summaries add to a flat-force offline prediction: a cut gains
+/// less than it shows (BENCHMARKS.md, "What `compensate --offline` reaches
+/// on a 3x3 image").
+pub const OFFLINE_FLAT_CAVEAT: &str = "for a flat force: a cut, its power at low harmonics, gains less \
+                                       (`--force-prior spectrum --force-record CUT.csv` predicts for it)";
+
 /// Below this ratio of the offline smoother's predicted error to the
 /// real-time row's, both with the fit's uncertainty, the summary points to
 /// `compensate --offline` (for a force record's spectrum only).
