@@ -158,8 +158,17 @@ fn main() -> Result<()> {
                 ),
                 false => String::new(),
             };
+            let look: Vec<String> = a
+                .look_ahead
+                .iter()
+                .map(|(l, p, m)| format!("{l}: {:.3} % (predicted {:.3} %)", 100.0 * m, 100.0 * p))
+                .collect();
+            let look = match look.is_empty() {
+                true => String::new(),
+                false => format!("; look-ahead: box f64 {:.3} %, {}", 100.0 * a.box_f64_nrmse, look.join(", ")),
+            };
             let row = format!(
-                "seed {seed} {} ({kind}, {fs} Hz, {} Hz lines): {what}, {ratio:.2}x{written}; raw {:.2} %{warned}{seeded}{shape}{offline}",
+                "seed {seed} {} ({kind}, {fs} Hz, {} Hz lines): {what}, {ratio:.2}x{written}; raw {:.2} %{warned}{seeded}{shape}{offline}{look}",
                 axis_name(a.axis),
                 case.frf_df_hz,
                 100.0 * a.raw_nrmse

@@ -83,3 +83,47 @@ fn a_latency_beyond_the_chosen_ones_that_does_not_verify_says_what_to_do() {
     let (ok, out, err) = run("8");
     assert!(ok && !err.contains("NOT COMPENSATED") && !err.contains(hint), "{err}\n{out}");
 }
+
+/// The random sweep's seed 26 (clustered machine modes, 10.24 kHz), written
+/// as the simulator's files and designed through the binary for its cut's
+/// spectrum: the summary says what a look-ahead past the box's would reach
+/// on x, and `--json` carries it (`latency_choice.look_ahead`; the figures
+/// against the truth are in `sweep_cases.rs`). Control: the same design for
+/// a flat force says nothing of longer look-aheads.
+#[test]
+fn a_cut_the_box_cannot_follow_gets_the_look_ahead_it_would_need() {
+    use dynocomp::simulate::{files::write_outputs, simulate_with};
+    let (case, fs, kind) = dynocomp::eval::sweep::draw(26);
+    assert_eq!((kind, fs), ("machine-cluster", 10_240.0), "the sweep's seed 26 changed");
+    let params = case.sim_params(fs);
+    let sim = simulate_with(case.seed, &params, case.dynamometer(&params).unwrap()).unwrap();
+    let dir = cli_common::tmp("latency-cli", "seed26");
+    std::fs::create_dir_all(&dir).unwrap();
+    write_outputs(&dir, &sim).unwrap();
+    let file = |n: &str| dir.join(n).to_str().unwrap().to_string();
+    let (frf, idle, rec, img) = (file("frf.uff"), file("idle.csv"), file("measured.csv"), file("c.dcimg"));
+    let base = ["design", "--frf", &frf, "--fs", "10240", "--idle", &idle, "--out", &img];
+    let cut = [&base[..], &["--force-prior", "spectrum", "--force-record", &rec]].concat();
+    let (ok, out, err) = dynocomp(&cut);
+    assert!(ok, "{err}");
+    let line = out
+        .lines()
+        .chain(err.lines())
+        .find(|l| l.starts_with("axis x: the box filter (latency"))
+        .unwrap_or_else(|| panic!("no look-ahead line:\n{out}\n{err}"));
+    assert!(
+        line.contains("would predict") && line.contains("is 32 samples (3.12 ms), past the 8 the box runs"),
+        "{line}"
+    );
+    let (ok, out, err) = dynocomp(&[&cut[..], &["--json"]].concat());
+    assert!(ok, "{err}");
+    let j: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let l = &j["latency_choice"]["look_ahead"];
+    assert_eq!(l.as_array().map(Vec::len), Some(1), "{l}");
+    assert_eq!(l[0]["axis"], 0, "{l}");
+    assert_eq!(l[0]["tried"][1][0], 32, "{l}");
+    // Control: a flat force.
+    let (ok, out, err) = dynocomp(&base);
+    assert!(ok, "{err}");
+    assert!(!out.contains("longer look-ahead") && !err.contains("longer look-ahead"), "{out}\n{err}");
+}

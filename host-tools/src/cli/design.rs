@@ -301,6 +301,10 @@ fn summary_text(
         let names: Vec<&str> = designs.iter().map(|d| axis_name(d.axis)).collect();
         summary.push_str(&crate::design::latency::describe(c, &names));
         summary.push('\n');
+        for l in &c.look_ahead {
+            summary.push_str(&crate::design::look_ahead::note(l, args.input.fs));
+            summary.push('\n');
+        }
     }
     for (d, p) in designs.iter().zip(priors) {
         if let Some(p) = p {

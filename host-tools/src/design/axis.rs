@@ -951,6 +951,26 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
     })
 }
 
+/// The in-band error (fraction) the Kalman design at `opts.lag` predicts,
+/// with the fit's uncertainty counted ([`with_fit_uncertainty`]), and the
+/// design itself: [`design_prepared`]'s q search without the realization,
+/// the f32 verification or the refusals, for look-aheads the box cannot run
+/// ([`crate::design::look_ahead`]). The default method only.
+pub fn predict_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<(f64, KalmanDesign)> {
+    if p.fitted.paper.is_some() {
+        bail!("axis {}: the paper's method has no look-ahead", p.name);
+    }
+    let grid_hz: Vec<f64> = p.grid.iter().map(|g| g.0).collect();
+    let discrete = p.discrete_for(opts)?;
+    let prewarp_hz = p.prewarp_hz(opts);
+    let design_fn = |q: f64| p.kalman_design(discrete.as_ref(), q, prewarp_hz, opts);
+    let obj = p.objective(&design_fn, opts.lag, &grid_hz, opts);
+    let (kal, _, _) = p.choose_kalman(&obj, opts, &mut Vec::new())?;
+    let h = kal.compensator.freq_responses(&grid_hz, opts.fs_hz);
+    let fit = p.fit_variance.as_ref().map_or(f64::NAN, |v| obj.fit_part(&h, v).sqrt());
+    Ok((with_fit_uncertainty(obj.j_of(&h, false).sqrt(), fit), kal))
+}
+
 impl PreparedAxis {
     /// The discrete model of the Kalman design (default method), matched to
     /// the sampled-data relation over the compensated band, once per axis

@@ -76,6 +76,12 @@ pub fn longest_flat_run(freq_hz: &[f64], e: &[Complex64], band: (f64, f64)) -> O
     best.map(|(a, b)| (freq_hz[a], freq_hz[b]))
 }
 
+/// Below this ratio of a better estimate's predicted error to the box
+/// filter's, both with the fit's uncertainty, the summaries point to it:
+/// `compensate --offline`, or a longer look-ahead
+/// ([`crate::design::look_ahead`]), for a force record's spectrum only.
+pub const OFFLINE_MUCH_BETTER: f64 = 0.5;
+
 /// √(J + J_fit) from √J = `error` and √J_fit = `fit`: a predicted error with
 /// the fitted model's own uncertainty counted; `error` where `fit` is not
 /// known (NaN).

@@ -14,6 +14,7 @@ use std::time::Instant;
 
 use crate::design::axis::{design_prepared, prepare_axis, AxisDesign, DesignOptions, PreparedAxis};
 use crate::design::discretize::{Discretization, NYQUIST_FIT_FRACTION};
+use crate::design::look_ahead::{self, LookAhead};
 use crate::design::paper_orders::design_axis;
 use crate::design::progress::Progress;
 use crate::frf::{axis_name, AxisFrf};
@@ -71,6 +72,10 @@ pub struct LatencyChoice {
     /// ([`crate::design::discretize::NYQUIST_FIT_FRACTION`]) instead of 0.45 fs,
     /// because that predicted a smaller error at the chosen latency.
     pub fit_to_nyquist: Vec<bool>,
+    /// The axes whose box filter predicts over twice `compensate
+    /// --offline`'s error, with what longer look-aheads would predict
+    /// ([`crate::design::look_ahead`]).
+    pub look_ahead: Vec<LookAhead>,
 }
 
 /// One latency designed.
@@ -321,7 +326,46 @@ pub fn design_axes_choosing_latency(
     if short_in_band && opts.discretization == Discretization::Fit {
         (designs, fit_to_nyquist) = fitted_to_nyquist_where_better(&rounds, designs, trials[i].latency, limit_permille);
     }
-    (designs, LatencyChoice { chosen: trials[i].latency, tried: trials, reason, fit_to_nyquist })
+    let lag = trials[i].latency;
+    let look_ahead = looked_further(&rounds, &designs, lag, &fit_to_nyquist);
+    (designs, LatencyChoice { chosen: lag, tried: trials, reason, fit_to_nyquist, look_ahead })
+}
+
+/// Beside the chosen designs (at `lag`, each fitted up to Nyquist where
+/// `fit_to_nyquist`), the longer look-aheads of the axes the box leaves
+/// far behind `--offline` ([`crate::design::look_ahead`]).
+fn looked_further(rounds: &Rounds, designs: &[TimedDesign], lag: usize, fit_to_nyquist: &[bool]) -> Vec<LookAhead> {
+    let wanted: Vec<(&TimedPrepared, &AxisDesign, bool)> = rounds
+        .prepared
+        .iter()
+        .zip(designs)
+        .zip(fit_to_nyquist)
+        .filter_map(|((p, (d, _)), n)| {
+            d.as_ref().ok().filter(|d| look_ahead::wanted(d, rounds.opts)).map(|d| (p, d, *n))
+        })
+        .collect();
+    if wanted.is_empty() {
+        return Vec::new();
+    }
+    let names: Vec<&str> = wanted.iter().map(|w| axis_name(w.1.axis)).collect();
+    rounds.progress.say(&format!(
+        "axis {}: the box filter predicts over twice compensate --offline's error: predicting longer look-aheads…",
+        names.join(", ")
+    ));
+    let at_top = |n: bool| match n {
+        true => NYQUIST_FIT_FRACTION,
+        false => rounds.opts.discrete_fit_top,
+    };
+    let t = Instant::now();
+    let found: Vec<LookAhead> = on_threads(wanted.into_iter(), |((p, _), d, n)| {
+        let o = DesignOptions { lag, discrete_fit_top: at_top(n), ..rounds.opts.clone() };
+        p.as_ref().ok().and_then(|p| look_ahead::look_ahead(p, &o, d, LONGEST_LATENCY))
+    })
+    .into_iter()
+    .filter_map(|(l, _)| l)
+    .collect();
+    rounds.progress.say(&format!("longer look-aheads predicted in {:.0} ms", 1e3 * t.elapsed().as_secs_f64()));
+    found
 }
 
 /// The axes of [`design_axes_choosing_latency`], designed a round at a time:
@@ -539,6 +583,7 @@ mod tests {
             tried: vec![trial(4, None), trial(8, z8)],
             reason: "axis z failed".into(),
             fit_to_nyquist: vec![false; 3],
+            look_ahead: Vec::new(),
         };
         let text = describe(&choice(None), &["x", "y", "z"]);
         assert!(text.contains("longer latencies were tried because at 4: axis z failed"), "{text}");

@@ -22,6 +22,7 @@ pub mod force_spectrum;
 pub mod image;
 pub mod kalman;
 pub mod latency;
+pub mod look_ahead;
 pub mod mimo;
 pub mod noise;
 pub mod paper;

@@ -14,6 +14,7 @@ use std::time::Instant;
 
 use crate::design::axis::DesignOptions;
 use crate::design::image::build_image;
+use crate::design::kalman::KalmanDesign;
 use crate::io::signal_csv::SignalRecord;
 use crate::metrics::{accuracy, accuracy_as_written, sample_variance, AsWritten};
 use crate::offline::compensate::compensate_record;
@@ -320,6 +321,26 @@ pub struct AxisScore {
     /// ([`crate::design::axis::AxisDesign::offline_predicted`]; NaN if the
     /// design failed).
     pub offline_predicted: f64,
+    /// Where the design predicted longer look-aheads
+    /// ([`crate::design::look_ahead`]): each latency tried (samples), its
+    /// prediction with the fit's uncertainty, and the NRMSE of its f64
+    /// fixed-lag smoother against the truth ([`f64_smoother_nrmse`]; NaN
+    /// where no design).
+    pub look_ahead: Vec<(usize, f64, f64)>,
+    /// The box design's own f64 filter scored the same way (NaN unless the
+    /// axis has `look_ahead`): the control that the f64 scoring agrees with
+    /// the image's `comp_nrmse`.
+    pub box_f64_nrmse: f64,
+}
+
+/// NRMSE against `truth` (band-limited to `band_hz`) of the f64 fixed-lag
+/// smoother `kal` run on the measurement `y` (N): its output at k is the
+/// force at k − L ([`crate::design::kalman::design`]), scored over the
+/// samples whose look-ahead the record holds (the last L are left out).
+pub fn f64_smoother_nrmse(kal: &KalmanDesign, y: &[f64], truth: &[f64], fs_hz: f64, band_hz: f64) -> f64 {
+    let out = kal.compensator.simulate(y);
+    let n = y.len().saturating_sub(kal.lag);
+    accuracy(&out[kal.lag..kal.lag + n], &truth[..n], fs_hz, band_hz).nrmse
 }
 
 /// Results of one case at one rate.
@@ -414,7 +435,7 @@ fn score_sim_with(
     let frfs: Vec<_> = (0..3).filter_map(|a| s.frf.axis(a).cloned()).collect();
     let r: Vec<f64> = frfs.iter().map(|f| sample_variance(&s.idle[f.axis])).collect();
     let (designs, latency) = match run.lag {
-        Some(l) => (crate::design::latency::design_axes(&s.frf.freq_hz, &frfs, &r, &opts), l),
+        Some(l) => (crate::design::latency::design_axes(&s.frf.freq_hz, &frfs, &r, &opts), (l, Vec::new())),
         None => {
             let (d, c) = crate::design::latency::design_axes_choosing_latency(
                 &s.frf.freq_hz,
@@ -424,9 +445,10 @@ fn score_sim_with(
                 Some(BOX_LOAD_LIMIT_PERMILLE),
                 &crate::design::progress::Progress::none(),
             );
-            (d, c.chosen)
+            (d, (c.chosen, c.look_ahead))
         }
     };
+    let (latency, look_ahead) = latency;
     // Per axis: its share of the wall time (the axes run on parallel threads).
     let design_s = t0.elapsed().as_secs_f64() / frfs.len().max(1) as f64;
     let mut designs = designs.into_iter();
@@ -448,6 +470,14 @@ fn score_sim_with(
         let predicted_with_fit = designed.as_ref().map_or(f64::NAN, |d| d.predicted_error_with_fit());
         let offline_predicted = designed.as_ref().map_or(f64::NAN, |d| d.offline_predicted_with_fit());
         let mut offline_nrmse = f64::NAN;
+        let (mut look, mut box_f64_nrmse) = (Vec::new(), f64::NAN);
+        if let (Some(l), Ok(d)) = (look_ahead.iter().find(|l| l.axis == a), &designed) {
+            box_f64_nrmse = f64_smoother_nrmse(&d.kalman, &s.measured[a], &s.truth[a], fs, band);
+            for ((lag, e), k) in l.tried.iter().zip(&l.designs) {
+                let m = k.as_ref().map_or(f64::NAN, |k| f64_smoother_nrmse(k, &s.measured[a], &s.truth[a], fs, band));
+                look.push((*lag, e.unwrap_or(f64::NAN), m));
+            }
+        }
         let (comp_nrmse, predicted_error, flat_band_hz) = match designed {
             Err(e) => (Err(format!("{e:#}")), f64::NAN, (f64::NAN, f64::NAN)),
             Ok(d) => {
@@ -486,6 +516,8 @@ fn score_sim_with(
             phase_limits,
             offline_nrmse,
             offline_predicted,
+            look_ahead: look,
+            box_f64_nrmse,
         });
     }
     CaseResult { case: name, fs_hz: fs, band_hz: band, axes, latency }

@@ -1297,10 +1297,7 @@ pub const FLAT_FORCE: &str = "a flat force";
 pub const OFFLINE_FLAT_CAVEAT: &str = "for a flat force: a cut, its power at low harmonics, gains less \
                                        (`--force-prior spectrum --force-record CUT.csv` predicts for it)";
 
-/// Below this ratio of the offline smoother's predicted error to the
-/// real-time row's, both with the fit's uncertainty, the summary points to
-/// `compensate --offline` (for a force record's spectrum only).
-pub const OFFLINE_MUCH_BETTER: f64 = 0.5;
+pub use crate::design::criterion::OFFLINE_MUCH_BETTER;
 
 /// The note on the 3x3 rows whose offline prediction is under
 /// [`OFFLINE_MUCH_BETTER`] of the full real-time filter's at latency `lag`
