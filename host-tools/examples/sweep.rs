@@ -35,9 +35,12 @@
 //! Each row ends with the image's latency, the axis's predicted in-band
 //! error and its filter's shape (pairs + real poles + FIR taps); with
 //! `--offline`, also `compensate --offline`'s NRMSE and the design's
-//! prediction of it.
+//! prediction of it. Where the design predicted longer look-aheads than the
+//! box's (`design::look_ahead`: a force record's spectrum, the box far
+//! behind `--offline`), or on every axis with `--look-ahead=12,16`, the row
+//! ends with each one's f64 fixed-lag smoother's NRMSE and its prediction.
 //!
-//! usage: cargo run --release -p dynocomp --example sweep -- [N] [--from=K] [--lag=L] [--exact-frf] [--no-refine] [--no-seed] [--no-drop] [--above-band=inverse] [--force-spectrum|--force-level] [--offline]   (default 100)
+//! usage: cargo run --release -p dynocomp --example sweep -- [N] [--from=K] [--lag=L] [--exact-frf] [--no-refine] [--no-seed] [--no-drop] [--above-band=inverse] [--force-spectrum|--force-level] [--offline] [--look-ahead=12,16]   (default 100)
 use anyhow::Result;
 use dynocomp::design::image::build_image;
 use dynocomp::eval::rates::{design_options, run_case, scoring_band_hz, CaseResult, RateCase, RunOptions};
@@ -70,6 +73,10 @@ fn main() -> Result<()> {
         force_spectrum,
         force_level_only,
         score_offline: args.iter().any(|a| a == "--offline"),
+        look_ahead_every_axis: match args.iter().find_map(|a| a.strip_prefix("--look-ahead=")) {
+            Some(v) => v.split(',').map(str::parse).collect::<Result<_, _>>()?,
+            None => Vec::new(),
+        },
         ..RunOptions::default()
     };
     let (mut with_image, mut axes, mut within_13, mut within_2, mut written) = (0, 0, 0, 0, 0);

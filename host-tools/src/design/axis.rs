@@ -82,6 +82,10 @@ pub struct DesignOptions {
     /// quiet). Band-fitted and paper-method designs, and designs with a
     /// force record, keep the in-band criterion and the random-walk force.
     pub above_band: AboveBand,
+    /// For studies (`examples/sweep.rs --look-ahead=12,16`): predict these
+    /// look-aheads on every axis, whatever [`crate::design::look_ahead::wanted`]
+    /// says. Empty (the default): its rule and [`crate::design::look_ahead::LOOK_AHEADS`].
+    pub look_ahead_every_axis: Vec<usize>,
 }
 
 /// Largest accepted fit error: relative RMS of Ĝ against the coherent
@@ -144,6 +148,7 @@ impl Default for DesignOptions {
             force_record_level_only: false,
             order_search_progress: None,
             above_band: AboveBand::Quiet,
+            look_ahead_every_axis: Vec::new(),
         }
     }
 }

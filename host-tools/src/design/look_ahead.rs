@@ -71,6 +71,9 @@ impl LookAhead {
 /// 1/[`OFFLINE_MUCH_BETTER`] times `--offline`'s (both with the fit's
 /// uncertainty).
 pub fn wanted(d: &AxisDesign, opts: &DesignOptions) -> bool {
+    if !opts.look_ahead_every_axis.is_empty() {
+        return d.pass_through.is_none();
+    }
     let (rt, off) = (d.predicted_error_with_fit(), d.offline_predicted_with_fit());
     let for_the_cut = opts.force_record.is_some() && !opts.force_record_level_only && d.force_spectrum.is_some();
     for_the_cut && d.pass_through.is_none() && rt > BOX_FALLS_SHORT && off < OFFLINE_MUCH_BETTER * rt
@@ -79,18 +82,21 @@ pub fn wanted(d: &AxisDesign, opts: &DesignOptions) -> bool {
 /// The predictions of `p` at each of [`LOOK_AHEADS`] beside `d`, its box
 /// design at `opts.lag`, on a box that runs at most `box_longest` samples
 /// (`None` unless [`wanted`]). Stops at the first
-/// within [`CLOSE_TO_OFFLINE`] of `--offline`.
+/// within [`CLOSE_TO_OFFLINE`] of `--offline`. With
+/// `opts.look_ahead_every_axis`, each of those instead, to the last.
 pub fn look_ahead(p: &PreparedAxis, opts: &DesignOptions, d: &AxisDesign, box_longest: usize) -> Option<LookAhead> {
     if !wanted(d, opts) {
         return None;
     }
     let offline = d.offline_predicted_with_fit();
     let (mut tried, mut designs) = (Vec::new(), Vec::new());
-    for lag in LOOK_AHEADS {
+    let study = !opts.look_ahead_every_axis.is_empty();
+    let lags = if study { opts.look_ahead_every_axis.as_slice() } else { &LOOK_AHEADS[..] };
+    for &lag in lags {
         let (e, k) = predict_prepared(p, &DesignOptions { lag, ..opts.clone() }).ok().unzip();
         tried.push((lag, e));
         designs.push(k);
-        if e.is_some_and(|e| e <= CLOSE_TO_OFFLINE * offline) {
+        if !study && e.is_some_and(|e| e <= CLOSE_TO_OFFLINE * offline) {
             break;
         }
     }

@@ -237,6 +237,9 @@ pub struct RunOptions {
     /// Also run `compensate --offline`'s smoother on each axis and score it
     /// ([`AxisScore::offline_nrmse`]).
     pub score_offline: bool,
+    /// Predict and score these look-aheads on every axis
+    /// ([`DesignOptions::look_ahead_every_axis`]); empty: the design's rule.
+    pub look_ahead_every_axis: Vec<usize>,
 }
 
 impl Default for RunOptions {
@@ -254,6 +257,7 @@ impl Default for RunOptions {
             drop_unsupported: true,
             seed_resolved_lines: crate::fit::vf::SEED_RESOLVED_LINES,
             score_offline: false,
+            look_ahead_every_axis: Vec::new(),
         }
     }
 }
@@ -269,6 +273,7 @@ pub fn design_options(fs_hz: f64, run: &RunOptions) -> DesignOptions {
         discretization: run.discretization,
         discrete_static_gain: run.static_gain,
         above_band: run.above_band,
+        look_ahead_every_axis: run.look_ahead_every_axis.clone(),
         vf: crate::fit::vf::VfOptions {
             refine: run.refine_fit,
             seed_unfitted: run.seed_fit,
