@@ -88,8 +88,9 @@ fn a_latency_beyond_the_chosen_ones_that_does_not_verify_says_what_to_do() {
 /// as the simulator's files and designed through the binary for its cut's
 /// spectrum: the summary says what a look-ahead past the box's would reach
 /// on x, and `--json` carries it (`latency_choice.look_ahead`; the figures
-/// against the truth are in `sweep_cases.rs`). Control: the same design for
-/// a flat force says nothing of longer look-aheads.
+/// against the truth are in `sweep_cases.rs`), and the report draws it.
+/// Control: the same design for a flat force says nothing of longer
+/// look-aheads.
 #[test]
 fn a_cut_the_box_cannot_follow_gets_the_look_ahead_it_would_need() {
     use dynocomp::simulate::{files::write_outputs, simulate_with};
@@ -115,6 +116,15 @@ fn a_cut_the_box_cannot_follow_gets_the_look_ahead_it_would_need() {
         line.contains("would predict") && line.contains("is 32 samples (3.12 ms), past the 8 the box runs"),
         "{line}"
     );
+    // The report draws it (x only).
+    let report = file("report");
+    let (ok, _, err) = dynocomp(&[&cut[..], &["--report", &report]].concat());
+    assert!(ok, "{err}");
+    let svg = std::fs::read_to_string(dir.join("report/x_look_ahead.svg")).unwrap();
+    assert!(svg.contains("predicted error against look-ahead"), "x_look_ahead.svg");
+    assert!(!dir.join("report/y_look_ahead.svg").exists(), "control: y has no look-ahead figure");
+    let index = std::fs::read_to_string(dir.join("report/index.html")).unwrap();
+    assert!(index.contains("x_look_ahead.svg") && index.contains("is 32 samples (3.12 ms)"), "index.html");
     let (ok, out, err) = dynocomp(&[&cut[..], &["--json"]].concat());
     assert!(ok, "{err}");
     let j: serde_json::Value = serde_json::from_str(&out).unwrap();

@@ -267,8 +267,25 @@ fn render(
     crate::design::sensitivity::set_line_spacing(&mut sensitivities, &s.frf.freq_hz);
     let summary = summary_text(args, d, priors, image, &box_load, &sensitivities);
     if let Some(dir) = &args.report {
+        let fs = args.input.fs;
+        let look_ahead = d.latency_choice.as_ref().map_or(&[][..], |c| c.look_ahead.as_slice());
+        let extra = |axis: usize| -> Result<Vec<crate::report::design::Plot>> {
+            look_ahead
+                .iter()
+                .filter(|l| l.axis == axis)
+                .map(|l| {
+                    let name = axis_name(axis);
+                    Ok((
+                        format!("{name}_look_ahead.svg"),
+                        format!("Axis {name}: what a longer look-ahead would reach"),
+                        crate::report::look_ahead::plot_caption(l, fs),
+                        crate::report::look_ahead::plot(l, fs)?,
+                    ))
+                })
+                .collect()
+        };
         let files =
-            crate::report::design::write_report(dir, &s.frf, &d.designs, &sensitivities, args.input.fs, &summary)?;
+            crate::report::design::write_report_with(dir, &s.frf, &d.designs, &sensitivities, fs, &summary, &extra)?;
         eprintln!("report: {} files in {} (open index.html)", files.len(), dir.display());
     }
     if !args.json {

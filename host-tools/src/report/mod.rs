@@ -12,6 +12,7 @@ pub mod compensation;
 pub mod design;
 pub mod force_spectrum;
 pub mod inspect;
+pub mod look_ahead;
 pub mod matrix;
 pub mod page;
 pub mod plot;

@@ -444,6 +444,16 @@ pub fn mesh<'a>(
         .map_err(perr)
 }
 
+/// A tick of a log10 % axis: the value 10^v (%), one decimal from 1 %, two below.
+pub fn log_pct_tick(v: &f64) -> String {
+    let p = 10f64.powf(*v);
+    if p >= 1.0 {
+        format!("{p:.1}")
+    } else {
+        format!("{p:.2}")
+    }
+}
+
 pub fn hz(v: &f64) -> String {
     format!("{v:.0}")
 }

@@ -3,7 +3,7 @@
 
 use crate::design::sensitivity::{Sensitivity, SHIFTS_PCT};
 use crate::fit::modes::SENSOR_FRACTION;
-use crate::report::plot::{build_chart, draw_line, legend_off_data, mesh, perr, FONT};
+use crate::report::plot::{build_chart, draw_line, legend_off_data, log_pct_tick, mesh, perr, FONT};
 
 /// Caption of the report's sensitivity plot.
 pub fn plot_caption(s: &Sensitivity) -> String {
@@ -43,15 +43,7 @@ pub fn plot(axis: &str, s: &Sensitivity) -> anyhow::Result<String> {
         );
         let root = root.titled(&title, (FONT, 16)).map_err(perr)?;
         let mut c = build_chart(&root, "Predicted in-band RMS error (% of the force's std, log scale)", xr, yr)?;
-        let ytick = |v: &f64| {
-            let p = 10f64.powf(*v);
-            if p >= 1.0 {
-                format!("{p:.1}")
-            } else {
-                format!("{p:.2}")
-            }
-        };
-        mesh(&mut c, "Sensor-mode shift δ (%)", "Predicted error (%)", &|v| format!("{v:+.1}"), &ytick, 8)?;
+        mesh(&mut c, "Sensor-mode shift δ (%)", "Predicted error (%)", &|v| format!("{v:+.1}"), &log_pct_tick, 8)?;
         draw_line(&mut c, &pts, yr, f64::INFINITY, RGBColor(214, 39, 40), 2, false, "predicted error, this filter")?;
         let twice = [(xr.0, lg(2.0 * nominal)), (xr.1, lg(2.0 * nominal))];
         draw_line(&mut c, &twice, yr, f64::INFINITY, RGBColor(127, 127, 127), 1, true, "twice the nominal error")?;
