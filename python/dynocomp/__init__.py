@@ -216,19 +216,20 @@ class Design:
         if s.get("kind") == "3x3":
             return _matrix_html(s, self.report)
         rows = "".join(
-            "<tr>" + "".join(f"<td>{html.escape(str(a.get(k, '')))}</td>" for k in _SUMMARY_KEYS) + "</tr>"
+            "<tr>" + "".join(f"<td>{html.escape(str(cell(a)))}</td>" for _, cell in _SUMMARY_COLUMNS) + "</tr>"
             for a in s.get("axes", [])
         )
-        head = "".join(f"<th>{k}</th>" for k in _SUMMARY_KEYS)
+        head = "".join(f"<th>{k}</th>" for k, _ in _SUMMARY_COLUMNS)
         plots = "".join(
             _FIGURE.format(svg, html.escape(name))
             for name, svg in self.report.items()
-            if name.endswith(("_frf_fit.svg", "_compensated.svg"))
+            if name.endswith(("_frf_fit.svg", "_compensated.svg", "_look_ahead.svg"))
         )
+        looks = "".join(f"<p>{html.escape(line)}</p>" for line in _look_ahead_lines(s, s.get("fs_hz")))
         return (
             f"<div><b>dynocomp design</b>: image {s.get('image_id')}, fs {s.get('fs_hz')} Hz, "
             f"latency {s.get('latency_samples')} samples, method {s.get('method')}"
-            f"<table><tr>{head}</tr>{rows}</table>{plots}</div>"
+            f"<table><tr>{head}</tr>{rows}</table>{looks}{plots}</div>"
         )
 
     def __repr__(self):
@@ -236,7 +237,35 @@ class Design:
         return f"Design(image_id={s.get('image_id')}, fs_hz={s.get('fs_hz')}, axes={len(s.get('axes', []))})"
 
 
-_SUMMARY_KEYS = ("axis", "model_order", "q", "flat_band_hz", "noise_gain")
+# The notebook view's columns: (heading, cell of an axis's summary). The
+# predictions count the fit's uncertainty, as the text summary does.
+_SUMMARY_COLUMNS = (
+    ("axis", lambda a: a.get("axis", "")),
+    ("model_order", lambda a: a.get("model_order", "")),
+    ("q", lambda a: a.get("q", "")),
+    ("flat_band_hz", lambda a: a.get("flat_band_hz", "")),
+    ("noise_gain", lambda a: a.get("noise_gain", "")),
+    ("predicted", lambda a: _pct(a.get("predicted_error_with_fit"))),
+    ("compensate --offline", lambda a: _pct(a.get("offline_predicted_error"))),
+    ("raw", lambda a: _pct(a.get("raw_predicted_error"))),
+)
+
+
+def _look_ahead_lines(s, fs_hz):
+    """One line per axis whose longer look-aheads the design predicted
+    (``summary['latency_choice']['look_ahead']``, a design for a cut's
+    record whose box filter is far behind ``--offline``)."""
+    lines = []
+    for la in (s.get("latency_choice") or {}).get("look_ahead", []):
+        tried = ", ".join(f"{_pct(e)} at {n}" for n, e in la.get("tried", []))
+        ms = f" ({1e3 * la['box_latency'] / fs_hz:.2f} ms)" if fs_hz else ""
+        lines.append(
+            f"axis {'xyz'[la['axis']]}: the box filter predicts {_pct(la.get('box_predicted'))} at "
+            f"{la.get('box_latency')} samples{ms}, compensate --offline {_pct(la.get('offline_predicted'))}; "
+            f"a longer look-ahead, which the box ({la.get('box_longest')} samples at most) cannot run, would "
+            f"predict {tried} samples"
+        )
+    return lines
 
 # One plot of the notebook view: the SVG and its file name.
 _FIGURE = "<figure style='display:inline-block;margin:4px'>{}<figcaption>{}</figcaption></figure>"

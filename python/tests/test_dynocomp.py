@@ -139,6 +139,21 @@ def test_design_summary_and_image_equal_the_cli(cli_design, measured):
     assert strip_times(changed) != strip_times(d.summary)
     html = d._repr_html_()
     assert "<svg" in html and d.summary["image_id"] in html
+    # The notebook table shows each axis's predictions, the fit's
+    # uncertainty counted, and what compensate --offline would reach.
+    for a in d.summary["axes"]:
+        for key in ("predicted_error_with_fit", "offline_predicted_error"):
+            assert f"<td>{100.0 * a[key]:.3f} %</td>" in html, key
+    # The example is designed for a flat force: no look-ahead lines.
+    assert d.summary["latency_choice"]["look_ahead"] == [] and "longer look-ahead" not in html
+    # A design for a cut that the box cannot follow (`latency_cli.rs`, seed
+    # 26) carries them: the view states each one.
+    s = json.loads(json.dumps(d.summary))
+    s["latency_choice"]["look_ahead"] = [{"axis": 0, "box_latency": 6, "box_longest": 8, "box_predicted": 0.1716,
+                                          "offline_predicted": 0.0119, "tried": [[16, 0.1243], [32, 0.0713], [64, None]]}]
+    (line,) = dynocomp._look_ahead_lines(s, 10240.0)
+    assert line.startswith("axis x: the box filter predicts 17.160 % at 6 samples (0.59 ms), compensate --offline 1.190 %")
+    assert "would predict 12.430 % at 16, 7.130 % at 32, - at 64 samples" in line, line
     h = d.frequency_response([100.0, 1000.0])
     assert h.shape == (2, 3) and np.all(np.isfinite(h))
 
