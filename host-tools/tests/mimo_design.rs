@@ -1066,6 +1066,7 @@ fn seed_1_for_its_record_spectrum() {
     let fs = 25_600.0;
     let out = record("1", fs);
     let md = design_with_prior(&out.frf, &out, force_record("1", fs), false).unwrap();
+    assert!(!md.summary.flat_force, "predicted for {}", md.summary.forces);
     let fig = evaluate(&md, &out);
     eprintln!("{}", fig.line("1-rec", fs));
     for i in 0..3 {
@@ -1428,6 +1429,7 @@ fn cli_offcentre_3x3_image_beats_per_axis() {
     }
     let j: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(j["kind"], "3x3", "{json}");
+    assert_eq!(j["design"]["flat_force"], true, "the default predicts for a flat force");
     let peak = j["design"]["crosstalk"]["peak"].as_array().unwrap();
     let largest = (0..9).filter(|e| e / 3 != e % 3).map(|e| peak[e / 3][e % 3].as_f64().unwrap()).fold(0.0, f64::max);
     assert!(largest > 0.5, "crosstalk peak {largest}");

@@ -12,7 +12,7 @@ use std::time::Instant;
 use crate::cli::design_args::{DesignArgs, DesignSetup, ForcePrior, Method};
 use crate::design::mimo::image::build_matrix_image;
 use crate::design::mimo::{
-    design_matrix, MatrixDesign, MatrixOptions, MatrixSummary, Progress, RowSource, FLAT_FORCE, OFFLINE_FLAT_CAVEAT,
+    design_matrix, MatrixDesign, MatrixOptions, MatrixSummary, Progress, RowSource, OFFLINE_FLAT_CAVEAT,
 };
 use crate::frf::{axis_name, Frf};
 use crate::realize::load::LoadReport;
@@ -349,7 +349,7 @@ fn crosstalk_and_predictions(s: &MatrixSummary) -> String {
             t,
             "  compensate --offline on this image (zero-lag smoother of the full 3x3 model, same q): {}{}",
             offline.join(", "),
-            match s.forces == FLAT_FORCE {
+            match s.flat_force {
                 true => format!("; {OFFLINE_FLAT_CAVEAT}"),
                 false => String::new(),
             }

@@ -264,6 +264,9 @@ pub struct MatrixSummary {
     /// The forces the predictions are for: "a flat force", or the
     /// record's spectrum or level with its mean force.
     pub forces: String,
+    /// Whether the predictions are for a flat force (`forces` is
+    /// [`FLAT_FORCE`]), not a record's.
+    pub flat_force: bool,
     /// Notes for the user.
     pub notes: Vec<String>,
 }
@@ -524,6 +527,7 @@ fn design(
     let shapes = force_shapes(&criterion.model, d);
     let mut md = finish(shapes, chosen, realized, prep, crosstalk, latency_rounds, notes, d.fs_hz, f_band)?;
     md.summary.reduction = reduction;
+    md.summary.flat_force = flat;
     md.summary.forces = match (flat, d.force_record_level_only) {
         (true, _) => FLAT_FORCE,
         (false, true) => "the record's force level and mean force",
@@ -1499,6 +1503,7 @@ fn finish(
         worse_than_raw: Vec::new(),
         reduction: None,
         forces: FLAT_FORCE.to_string(),
+        flat_force: true,
         notes,
     };
     let (model, discrete) = match prep {
