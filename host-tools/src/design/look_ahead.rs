@@ -111,10 +111,12 @@ pub fn look_ahead(p: &PreparedAxis, opts: &DesignOptions, d: &AxisDesign, box_lo
     })
 }
 
-/// The summary's line on `l` at `fs_hz`: "axis y: the box filter (latency
-/// 8, 0.31 ms) predicts 13.70 % and compensate --offline 0.14 %; a longer
-/// look-ahead would predict 5.20 % at 16 and 0.90 % at 32 samples; the
-/// shortest under half the box's is 32 samples (1.25 ms), past the box's 8".
+/// The summary's line on `l` at `fs_hz`: "axis x: the box filter (latency
+/// 6, 0.59 ms) predicts 17.16 % and compensate --offline 1.19 %; a longer
+/// look-ahead would predict 12.43 % at 16, 7.13 % at 32, 2.44 % at 64
+/// samples; the shortest under half the box's error is 32 samples (3.12 ms),
+/// past the 8 the box runs, so only compensate --offline gets there" (the
+/// random sweep's seed 26), or that none up to the longest tried halves it.
 pub fn note(l: &LookAhead, fs_hz: f64) -> String {
     let ms = |n: usize| 1e3 * n as f64 / fs_hz;
     let pct = |e: f64| format!("{:.2} %", 100.0 * e);
