@@ -906,7 +906,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
             .with_context(|| format!("axis {}", p.name))?;
     let flat = p.flat_band(&filter, lag, fs);
     let predicted_distortion = obj.distortion_of(&h).sqrt();
-    let fit_uncertainty = p.fit_variance.as_ref().map_or(f64::NAN, |v| obj.fit_part(&h, v).sqrt());
+    let fit_uncertainty = p.fit_uncertainty(&obj, &h);
     let force_spectrum = p.force_spectrum(&obj, &h, j, opts);
     let phase_limits = match p.fitted.paper {
         Some(_) => Vec::new(),
@@ -918,7 +918,7 @@ pub fn design_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<AxisDes
             let lines: Vec<f64> = grid_hz.iter().map(|f| f.max(1e-6 * fs)).collect();
             let h_off = kalman::smoother_response(&plant, kal.q, kal.r, &lines, fs);
             let obj0 = p.objective(&design_fn, 0, &grid_hz, opts);
-            let fit = p.fit_variance.as_ref().map_or(f64::NAN, |v| obj0.fit_part(&h_off, v).sqrt());
+            let fit = p.fit_uncertainty(&obj0, &h_off);
             (obj0.j_of(&h_off, false).sqrt(), fit)
         }
         _ => (f64::NAN, f64::NAN),
@@ -972,11 +972,17 @@ pub fn predict_prepared(p: &PreparedAxis, opts: &DesignOptions) -> Result<(f64, 
     let obj = p.objective(&design_fn, opts.lag, &grid_hz, opts);
     let (kal, _, _) = p.choose_kalman(&obj, opts, &mut Vec::new())?;
     let h = kal.compensator.freq_responses(&grid_hz, opts.fs_hz);
-    let fit = p.fit_variance.as_ref().map_or(f64::NAN, |v| obj.fit_part(&h, v).sqrt());
-    Ok((with_fit_uncertainty(obj.j_of(&h, false).sqrt(), fit), kal))
+    Ok((with_fit_uncertainty(obj.j_of(&h, false).sqrt(), p.fit_uncertainty(&obj, &h)), kal))
 }
 
 impl PreparedAxis {
+    /// √J_fit of the response `h` on the grid under `obj`'s force
+    /// ([`AxisDesign::fit_uncertainty`]); NaN where the fit's variance is
+    /// not known.
+    fn fit_uncertainty(&self, obj: &Objective, h: &[Complex64]) -> f64 {
+        self.fit_variance.as_ref().map_or(f64::NAN, |v| obj.fit_part(h, v).sqrt())
+    }
+
     /// The discrete model of the Kalman design (default method), matched to
     /// the sampled-data relation over the compensated band, once per axis
     /// and fit top: the prepared one if it is for `opts.discrete_fit_top`.

@@ -439,7 +439,7 @@ fn score_sim_with(
     let t0 = Instant::now();
     let frfs: Vec<_> = (0..3).filter_map(|a| s.frf.axis(a).cloned()).collect();
     let r: Vec<f64> = frfs.iter().map(|f| sample_variance(&s.idle[f.axis])).collect();
-    let (designs, latency) = match run.lag {
+    let (designs, (latency, look_ahead)) = match run.lag {
         Some(l) => (crate::design::latency::design_axes(&s.frf.freq_hz, &frfs, &r, &opts), (l, Vec::new())),
         None => {
             let (d, c) = crate::design::latency::design_axes_choosing_latency(
@@ -453,7 +453,6 @@ fn score_sim_with(
             (d, (c.chosen, c.look_ahead))
         }
     };
-    let (latency, look_ahead) = latency;
     // Per axis: its share of the wall time (the axes run on parallel threads).
     let design_s = t0.elapsed().as_secs_f64() / frfs.len().max(1) as f64;
     let mut designs = designs.into_iter();
