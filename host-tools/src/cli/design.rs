@@ -93,7 +93,7 @@ fn design_axes(args: &DesignArgs, s: &DesignSetup) -> Result<Designed> {
     eprintln!("designing {} axes ({} lines each)…", frf.axes.len(), frf.freq_hz.len());
     let rv: Vec<f64> = frf.axes.iter().map(|a| s.r[a.axis].expect("R set for every FRF axis")).collect();
     let progress = Progress::stderr();
-    let (results, latency_choice) = if s.auto_latency {
+    let (results, mut latency_choice) = if s.auto_latency {
         let (d, c) = crate::design::latency::design_axes_choosing_latency(
             &frf.freq_hz,
             &frf.axes,
@@ -142,6 +142,14 @@ fn design_axes(args: &DesignArgs, s: &DesignSetup) -> Result<Designed> {
         designs.push(d);
     }
     let versus = against_default(args, s, &mut designs, latency, &rv);
+    if let Some(c) = latency_choice.as_mut() {
+        let replaced: Vec<usize> = designs
+            .iter()
+            .filter(|d| versus.iter().any(|(v, replaced)| *replaced && v.axis == axis_name(d.axis)))
+            .map(|d| d.axis)
+            .collect();
+        crate::design::look_ahead::retain_current(&mut c.look_ahead, &replaced);
+    }
     Ok(Designed { designs, times, latency_choice, latency, versus })
 }
 

@@ -156,6 +156,15 @@ pub fn note(l: &LookAhead, fs_hz: f64) -> String {
     )
 }
 
+/// Keep only the look-aheads of axes whose box design is still the one
+/// they were predicted beside: an axis replaced after the latency choice
+/// (a band-fitted axis by the default design,
+/// `crate::design::versus_default`) is in `replaced`, and its
+/// look-ahead, predicted beside the design it no longer has, goes.
+pub fn retain_current(look_ahead: &mut Vec<LookAhead>, replaced: &[usize]) {
+    look_ahead.retain(|l| !replaced.contains(&l.axis));
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -189,5 +198,16 @@ mod tests {
         let n = note(&b, 25_600.0);
         assert!(n.contains("no design at 32"), "{n}");
         assert!(n.contains("no look-ahead up to 64 samples (2.50 ms) halves"), "{n}");
+    }
+
+    #[test]
+    fn a_replaced_axis_loses_the_look_ahead_of_the_design_it_no_longer_has() {
+        let mut all = vec![LookAhead { axis: 0, ..l(Vec::new()) }, l(Vec::new())];
+        retain_current(&mut all, &[0]);
+        assert_eq!(all.iter().map(|l| l.axis).collect::<Vec<_>>(), [1]);
+        // Control: nothing replaced, nothing dropped.
+        let mut all = vec![LookAhead { axis: 0, ..l(Vec::new()) }, l(Vec::new())];
+        retain_current(&mut all, &[]);
+        assert_eq!(all.len(), 2);
     }
 }
