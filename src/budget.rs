@@ -316,9 +316,10 @@ impl MimoShape {
 ///
 /// `fixed` is [`CostModel::fixed`] (the same interrupt around either kind
 /// of image); `matrix` is the 3x3 path's own work per sample (three
-/// scalings, the 3x3 direct term, the runaway guard, three DAC codes). The
-/// compiled section and tap loops run two sections (taps) per pass, hence
-/// the even/odd terms.
+/// scalings, the 3x3 direct term, the runaway guard, three DAC codes). A
+/// loop that runs two sections (taps) per pass shows in the even/odd
+/// terms; the assembly step (`mimo_m4.rs`) runs one section per pass and
+/// its odd last tap costs a tap, so its are 0.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MimoCostModel {
     /// Per sample, whatever the image (as [`CostModel::fixed`]).
@@ -344,45 +345,56 @@ pub struct MimoCostModel {
 impl MimoCostModel {
     /// Instructions per call of `SamplePath::tick` with a 3x3 image on the
     /// Cortex-M4F, fitted to the QEMU counts (`mimo P D T …` lines of
-    /// `scripts/qemu_icount.sh`; `tests/qemu_cost_model.rs`): 49.5 per pair
-    /// (16 coefficient and 2 state `vldr`, 12 `vmla`, 4 `vmul`, 4 `vadd`, 2
-    /// `vstr`, the pair/diagonal test), 46.5 per diagonal section, 29.5 per
-    /// tap. low = high: the count is exact per shape.
+    /// `scripts/qemu_icount.sh`; `tests/qemu_cost_model.rs`) of the assembly
+    /// step (`mimo_m4.rs`): 42 per pair (2 `vldmia`, 2 `vmov`, 16 `vmul`,
+    /// 16 `vadd`, the pair/diagonal test on the bits, `vstmia`, the loop),
+    /// 39 per diagonal section (4 float operations fewer, 2 branches more),
+    /// 22 per tap (two per pass: `vldmia` of 9 coefficients and 3 past
+    /// inputs, `vstmia` of 3, 9 `vmul` + 9 `vadd`; an odd last tap is one
+    /// instruction fewer, which the model does not subtract). The sections
+    /// run one per pass and the taps' odd remainder costs what a tap does,
+    /// so the even/odd terms are 0. low = high: the count is exact per
+    /// shape.
     pub const QEMU_INSNS: MimoCostModel = MimoCostModel {
         fixed: CostModel::QEMU_INSNS.fixed,
-        matrix: Cost::new(12_985, 12_985),
-        pair: Cost::new(4_950, 4_950),
-        diagonal: Cost::new(4_650, 4_650),
-        section_setup: Cost::new(350, 350),
-        even_sections: Cost::new(550, 550),
-        tap: Cost::new(2_950, 2_950),
-        fir_setup: Cost::new(550, 550),
-        even_taps: Cost::new(150, 150),
+        matrix: Cost::new(11_185, 11_185),
+        pair: Cost::new(4_200, 4_200),
+        diagonal: Cost::new(3_900, 3_900),
+        section_setup: Cost::new(300, 300),
+        even_sections: Cost::new(0, 0),
+        tap: Cost::new(2_200, 2_200),
+        fir_setup: Cost::new(0, 0),
+        even_taps: Cost::new(0, 0),
     };
 
     /// Cycles on the STM32G474 at 170 MHz, code in CCM SRAM: each part's
-    /// instruction mix at the Cortex-M4 TRM timings (`vldr`/`vstr` 2, `vmla`
-    /// 3, `vmul`/`vadd`/`vcmp`/`vmrs` 1, branches 2-4), plus the interrupt
-    /// shell in `fixed` ([`CostModel::CORTEX_M4`]).
+    /// instruction mix at the Cortex-M4 TRM timings (`vldm`/`vstm` of N
+    /// registers 1 + N, `vmul`/`vadd`/`vmov` 1, integer ALU 1, branches 1
+    /// not taken and 2-4 taken), plus the interrupt shell in `fixed`
+    /// ([`CostModel::CORTEX_M4`]).
     ///
-    /// * pair: 18 `vldr` (36), 12 `vmla` (36), 8 `vmul`/`vadd` (8), 2
-    ///   `vstr` (4), test and loop (8-13): 95-100 by the table, 102 with a
-    ///   `vmrs` stall; low 78 if back-to-back `vldr`s pipeline to one cycle;
-    /// * diagonal section: two `vmla` fewer: 70-92;
-    /// * tap: 12 `vldr` (24), 9 `vmla` (27), 3 `vstr` (6), history shift and
-    ///   loop (6-9): 50-66 (low again with pipelined loads);
+    /// * pair: `vldmia` of 16 (17) and of 2 (3), 2 `vmov` (2), 32
+    ///   `vmul`/`vadd` (32), the test (3), `vstmia` of 2 (3), loop (3-5):
+    ///   63-65 by the table; high 72 for stalls the table does not show;
+    /// * diagonal section: 4 float operations fewer, two taken branches more:
+    ///   62-68, high 72;
+    /// * tap, per two: 2 × (`vldmia` of 9 (10) and of 3 (4), `vstmia` of 3
+    ///   (4), 18 `vmul`/`vadd`) and the loop (3-5): 37.5-38.5 per tap, high
+    ///   42;
     /// * the 3x3 path's scalar part and set-ups: 1.0-1.5 cycles per
-    ///   instruction (its direct term is 9 multiply-adds).
+    ///   instruction, plus 31 for the multi-register transfers one
+    ///   instruction each does not count (`vldmia` of `d`, of `u`, `vstmia`
+    ///   of `y`, and the saving and restoring of `s16-s23`).
     pub const CORTEX_M4: MimoCostModel = MimoCostModel {
         fixed: CostModel::CORTEX_M4.fixed,
-        matrix: Cost::new(12_985, 19_478),
-        pair: Cost::new(7_800, 10_200),
-        diagonal: Cost::new(7_000, 9_200),
-        section_setup: Cost::new(350, 473),
-        even_sections: Cost::new(550, 743),
-        tap: Cost::new(5_000, 6_600),
-        fir_setup: Cost::new(550, 743),
-        even_taps: Cost::new(150, 203),
+        matrix: Cost::new(14_285, 19_878),
+        pair: Cost::new(6_300, 7_200),
+        diagonal: Cost::new(6_200, 7_200),
+        section_setup: Cost::new(300, 450),
+        even_sections: Cost::new(0, 0),
+        tap: Cost::new(3_750, 4_200),
+        fir_setup: Cost::new(0, 0),
+        even_taps: Cost::new(0, 0),
     };
 
     /// Cost of one sample with a 3x3 filter of shape `s`, rounded up to

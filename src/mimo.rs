@@ -25,6 +25,14 @@
 
 use crate::kernel::{FilterError, Section, RUNAWAY_LIMIT_N};
 
+// `MimoFilter::step` in assembly for the Cortex-M4F (one `vldm` per
+// section's coefficients, multiply-adds as `vmul` + `vadd`); every other
+// target runs the Rust loops.
+#[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
+#[allow(unsafe_code)]
+#[path = "mimo_m4.rs"]
+mod m4;
+
 /// Inputs and outputs of the 3x3 filter: the axes x, y, z.
 pub const MIMO_AXES: usize = 3;
 
@@ -202,6 +210,23 @@ impl MimoFilter {
     /// allocation, no panics, O(sections + 9·taps).
     #[inline]
     pub fn step(&self, state: &mut MimoState, u: [f32; MIMO_AXES]) -> [f32; MIMO_AXES] {
+        // Cortex-M4F: the whole step in one block of hand-scheduled
+        // assembly, bit-identical (mimo_m4.rs).
+        #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
+        {
+            m4::step(self, state, u)
+        }
+        #[cfg(not(all(target_arch = "arm", target_os = "none", target_abi = "eabihf")))]
+        {
+            self.step_rust(state, u)
+        }
+    }
+
+    /// [`step`](Self::step) in Rust: the definition the Cortex-M4F's
+    /// assembly (`mimo_m4.rs`) matches bit for bit.
+    #[cfg(not(all(target_arch = "arm", target_os = "none", target_abi = "eabihf")))]
+    #[inline]
+    fn step_rust(&self, state: &mut MimoState, u: [f32; MIMO_AXES]) -> [f32; MIMO_AXES] {
         let mut y = [0.0f32; MIMO_AXES];
         for (yi, di) in y.iter_mut().zip(&self.d) {
             *yi = di[0] * u[0];
@@ -255,6 +280,7 @@ impl MimoFilter {
 }
 
 /// `b·u` for one state's input row, in the module's order.
+#[cfg(not(all(target_arch = "arm", target_os = "none", target_abi = "eabihf")))]
 #[inline(always)]
 fn input_term(b: &[f32; MIMO_AXES], u: &[f32; MIMO_AXES]) -> f32 {
     (b[0] * u[0] + b[1] * u[1]) + b[2] * u[2]
@@ -262,6 +288,7 @@ fn input_term(b: &[f32; MIMO_AXES], u: &[f32; MIMO_AXES]) -> f32 {
 
 /// One sample of a section (module equation): adds its outputs to `y` and
 /// returns the next state.
+#[cfg(not(all(target_arch = "arm", target_os = "none", target_abi = "eabihf")))]
 #[inline(always)]
 fn section_update(s: &MimoSection, [x1, x2]: [f32; 2], u: [f32; MIMO_AXES], y: &mut [f32; MIMO_AXES]) -> [f32; 2] {
     for (yi, ci) in y.iter_mut().zip(&s.c) {

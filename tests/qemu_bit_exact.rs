@@ -289,38 +289,62 @@ fn host_mimo_outputs(filter: &MimoFilter, input: &[[f32; AXES]]) -> Vec<[f32; AX
     input.iter().map(|u| filter.step(&mut state, *u)).collect()
 }
 
+/// The 3x3 filters of the bit-exactness test: `mimo_test_filter`'s pairs
+/// and diagonal sections, the diagonals moved to every `spread`-th place
+/// (the assembly's out-of-line diagonal path between pairs, `src/mimo_m4.rs`).
+fn mimo_filter_interleaved(pairs: usize, diagonals: usize, taps: usize, spread: usize, seed: u64) -> MimoFilter {
+    let f = mimo_test_filter(FS_HZ, pairs, diagonals, taps, seed);
+    let (pair_secs, diag_secs) = f.sections().split_at(pairs);
+    let mut secs = pair_secs.to_vec();
+    for (i, d) in diag_secs.iter().enumerate() {
+        secs.insert(((i + 1) * spread).min(secs.len()), *d);
+    }
+    MimoFilter::new(&secs, *f.d(), f.fir()).expect("a reordered valid filter is valid")
+}
+
 #[test]
 fn the_3x3_kernel_on_cortex_m4f_is_bit_identical_to_the_host() {
-    // A realistic 3x3 compensator (common::mimo_test_filter): 20
-    // normal-form pairs (100 Hz … 22 kHz, 1-5 % damping), 2 diagonal
-    // sections, 8 taps, every B, C and tap entry non-zero; the same varied
-    // input as the per-axis test (tones, step, impulses, noise, silence).
+    // Realistic 3x3 compensators (common::mimo_test_filter): normal-form
+    // pairs (100 Hz … 22 kHz, 1-5 % damping), diagonal sections, every B,
+    // C and tap entry non-zero; the same varied input as the per-axis test
+    // (tones, step, impulses, noise, silence). The shapes cover each path of
+    // the Cortex-M4F's assembly: diagonals after the pairs and between them,
+    // even and odd tap counts, the most sections (48) and taps (24), and no
+    // taps at all.
     require_qemu();
     let elf = build_target_program();
-    let image = matrix_image(mimo_test_filter(FS_HZ, 20, 2, 8, 0xB17E), FS_HZ as u32);
     let input = test_input();
-    let dir = fresh_dir("qemu-bit-exact-3x3");
-    std::fs::write(dir.join("image.dcimg"), encode_matrix(&image)).unwrap();
-    std::fs::write(dir.join("input.bin"), frames_to_bytes(&input)).unwrap();
-    let (ok, log) = run_qemu(&elf, &dir);
-    assert!(ok, "kernel_io failed on the emulated Cortex-M4F:\n{log}");
-    let target = bytes_to_frames(&std::fs::read(dir.join("output.bin")).expect("kernel_io wrote output.bin"));
-    assert_eq!(target.len(), input.len());
-    let host = host_mimo_outputs(&image.filter, &input);
-    if let Some((k, axis, t, h)) = first_mismatch(&target, &host) {
-        panic!(
-            "first differing sample: output {axis}, index {k}: Cortex-M4F {t:e} ({:#010x}), x86-64 {h:e} ({:#010x})",
-            t.to_bits(),
-            h.to_bits()
-        );
+    let filters = [
+        ("20 pairs, 2 diagonals last, 8 taps", mimo_test_filter(FS_HZ, 20, 2, 8, 0xB17E)),
+        ("13 pairs, 3 diagonals between, 5 taps", mimo_filter_interleaved(13, 3, 5, 4, 0x5EC7)),
+        ("44 pairs, 4 diagonals between, 24 taps", mimo_filter_interleaved(44, 4, 24, 9, 0x48)),
+        ("7 pairs, 1 diagonal first, no taps", mimo_filter_interleaved(7, 1, 0, 0, 0x70)),
+    ];
+    for (what, filter) in filters {
+        let image = matrix_image(filter, FS_HZ as u32);
+        let dir = fresh_dir("qemu-bit-exact-3x3");
+        std::fs::write(dir.join("image.dcimg"), encode_matrix(&image)).unwrap();
+        std::fs::write(dir.join("input.bin"), frames_to_bytes(&input)).unwrap();
+        let (ok, log) = run_qemu(&elf, &dir);
+        assert!(ok, "{what}: kernel_io failed on the emulated Cortex-M4F:\n{log}");
+        let target = bytes_to_frames(&std::fs::read(dir.join("output.bin")).expect("kernel_io wrote output.bin"));
+        assert_eq!(target.len(), input.len());
+        let host = host_mimo_outputs(&image.filter, &input);
+        if let Some((k, axis, t, h)) = first_mismatch(&target, &host) {
+            panic!(
+                "{what}: first differing sample: output {axis}, index {k}: Cortex-M4F {t:e} ({:#010x}), x86-64 {h:e} ({:#010x})",
+                t.to_bits(),
+                h.to_bits()
+            );
+        }
+        // It compensated (not a copy of the input), and every output reads
+        // every input: a force on x alone moves y and z.
+        assert!(host.iter().zip(&input).any(|(y, u)| y[0] != u[0]), "{what}");
+        let mut st = MimoState::default();
+        let y: Vec<[f32; 3]> =
+            (0..64).map(|k| image.filter.step(&mut st, [if k == 0 { 1.0 } else { 0.0 }, 0.0, 0.0])).collect();
+        assert!(y.iter().any(|v| v[1] != 0.0) && y.iter().any(|v| v[2] != 0.0), "{what}");
     }
-    // It compensated (not a copy of the input), and every output reads
-    // every input: a force on x alone moves y and z.
-    assert!(host.iter().zip(&input).any(|(y, u)| y[0] != u[0]));
-    let mut st = MimoState::default();
-    let y: Vec<[f32; 3]> =
-        (0..64).map(|k| image.filter.step(&mut st, [if k == 0 { 1.0 } else { 0.0 }, 0.0, 0.0])).collect();
-    assert!(y.iter().any(|v| v[1] != 0.0) && y.iter().any(|v| v[2] != 0.0));
 }
 
 #[test]

@@ -780,12 +780,20 @@ fn quiet_3x3_rows_above_the_band() {
 /// latency 6's filter with latency 8's reduced to verify
 /// ([`cli_a_choice_that_does_not_verify_is_reduced_for_an_offline_only_image`]:
 /// here the rule prefers latency 6); the image beats per-axis compensation
-/// and stays within the floor factor.
+/// and stays within the floor factor. Designed with a load limit of 42 %
+/// (`design --max-load 42`), where no reduction that fits beats the
+/// per-axis rows: within the box's 60 %, latency 8's block reduced to fit
+/// verifies and is used
+/// (`a_3x3_filter_over_the_load_limit_is_reduced_to_fit_where_it_stays_accurate`).
 #[test]
 #[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
 fn a_latency_that_does_not_verify_gives_way_to_the_next() {
     let shared = free_residues_offcentre_51k();
-    let (out, md) = (&shared.0, &shared.1);
+    let out = &shared.0;
+    let design = DesignOptions { fs_hz: out.params.fs_hz, above_band: study_above_band(), ..Default::default() };
+    let matrix_vf = Some(VfOptions { rank_one_residues: false, ..opts_vf() });
+    let opts = MatrixOptions { design, load_limit_permille: Some(420), matrix_vf, ..Default::default() };
+    let md = &design_matrix(&out.frf, noise(out), &opts).unwrap();
     let fig = evaluate(md, out);
     eprintln!("{}  latency {}", fig.line("offcentre", 51_200.0), md.summary.latency);
     let note = md.summary.notes.iter().find(|n| n.contains("is used instead"));
@@ -1503,12 +1511,22 @@ fn cli_offcentre_3x3_image_beats_per_axis() {
 /// (`VfOptions::f_identified_hz`). Checked against the simulator's true
 /// G(0) and true force; negative control: the same fit with the lowest
 /// line as its limit keeps the pole and misses G_zx(0) by more than half.
+/// Scored on the full filter (`design --full-order`), which is the fit's:
+/// the box's image is reduced to fit its load limit, and z loses 2x to that
+/// (1.72 % against the full filter's 0.83 % and the floor's 0.68 %; per
+/// axis 18.3 %).
 #[test]
 #[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
 fn a_pole_below_the_first_coherent_line_does_not_bias_the_mean_force() {
     let fs = 51_200.0;
     let out = record("9", fs);
-    let md = design(&out.frf, &out).unwrap();
+    let full = MatrixOptions {
+        design: DesignOptions { fs_hz: fs, above_band: study_above_band(), ..Default::default() },
+        load_limit_permille: None,
+        matrix_vf: Some(opts_vf()),
+        ..Default::default()
+    };
+    let md = design_matrix(&out.frf, noise(&out), &full).unwrap();
     let fig = evaluate(&md, &out);
     eprintln!("{}", fig.line("9", fs));
     assert!(
@@ -1658,7 +1676,7 @@ fn a_3x3_row_lost_on_the_refined_fit_is_designed_again_on_the_plain_one() {
 /// pole at any order, and x / y were 1.69 / 0.96 % against floors of 0.291 /
 /// 0.101 %. The fit's residual exceeds the noise there, and a pair seeded
 /// at its peak line is kept by the BIC (`fit::matrix::seed_unfitted_modes`):
-/// x / y 0.62 / 0.13 %. The control is the same design without the seeding.
+/// x / y 0.70 / 0.205 %. The control is the same design without the seeding.
 #[test]
 #[ignore = "3x3 designs take seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
 fn a_mode_the_impact_test_barely_supports_is_seeded_where_the_residual_exceeds_the_noise() {
@@ -1670,9 +1688,11 @@ fn a_mode_the_impact_test_barely_supports_is_seeded_where_the_residual_exceeds_t
         matrix_vf: Some(VfOptions { seed_unfitted, ..opts_vf() }),
         ..Default::default()
     };
-    // x and y within these factors of their floors (0.62 against 0.291 %,
-    // 0.13 against 0.101 %); the control is 5.8x and 9.5x.
-    const WITHIN: [f64; 2] = [3.0, 2.0];
+    // x and y within these factors of their floors (0.70 against 0.291 %,
+    // 0.205 against 0.101 % with the full filter, which fits the box since
+    // the 3x3 step runs in assembly; 0.62 and 0.13 % reduced to the budget
+    // before); the control is 5.8x and 9.5x.
+    const WITHIN: [f64; 2] = [3.0, 2.5];
     let md = design_matrix(&out.frf, noise(&out), &opts(true)).unwrap();
     let fig = evaluate(&md, &out);
     eprintln!("{}", fig.line("35", fs));
@@ -1879,17 +1899,19 @@ fn short_offcentre(name: &str, fs: &str) -> (std::path::PathBuf, impl Fn(&str) -
     (dir, move |n: &str| d.join(n).display().to_string())
 }
 
-/// At 51.2 kHz a 3x3 image of the off-centre plate is over the box's load
+/// At 102.4 kHz a 3x3 image of the off-centre plate is over the box's load
 /// limit: `design` writes it offline-only and says how to get an image the
 /// box runs (`--per-axis`, with what each axis loses), and the highest rate
-/// for this filter. Control: the same set-up at 10.24 kHz fits and says
-/// neither (`cli_offcentre_3x3_image_beats_per_axis`).
+/// for this filter. Controls: the same set-up at 10.24 kHz fits and says
+/// neither (`cli_offcentre_3x3_image_beats_per_axis`); at 51.2 kHz it is
+/// reduced to fit (`cli_a_3x3_image_over_the_load_limit_is_reduced_to_one_the_box_runs`).
 #[test]
 #[ignore = "a 3x3 design takes seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
 fn cli_a_3x3_image_over_the_load_limit_says_how_to_get_one_the_box_runs() {
     use cli_common::dynocomp;
-    let (_, p) = short_offcentre("over-limit", "51200");
-    let (ok, out, err) = cli_common::design(&p("frf.uff"), &p("idle.csv"), "51200", &p("c.dcimg"), &["--latency", "4"]);
+    let (_, p) = short_offcentre("over-limit", "102400");
+    let (ok, out, err) =
+        cli_common::design(&p("frf.uff"), &p("idle.csv"), "102400", &p("c.dcimg"), &["--latency", "4"]);
     assert!(ok, "{err}");
     for text in [&out, &err] {
         assert!(text.contains("for an image the box can run, design with --per-axis"), "{text}");
@@ -1902,8 +1924,8 @@ fn cli_a_3x3_image_over_the_load_limit_says_how_to_get_one_the_box_runs() {
     assert!(ok && inspect.contains("offline only"), "{inspect}{err}");
 }
 
-/// At 25.6 kHz the off-centre plate's full 3x3 filter is over the box's
-/// load limit (81 %): `design` writes the reduced filter, which the box
+/// At 51.2 kHz the off-centre plate's full 3x3 filter is over the box's
+/// load limit: `design` writes the reduced filter, which the box
 /// runs, and says what the reduction costs; `--json` has the figures, and
 /// `inspect` tells the reduced image from the full one by its sidecar.
 /// Controls: `--max-load 20`, where no reduction that fits beats the
@@ -1913,8 +1935,8 @@ fn cli_a_3x3_image_over_the_load_limit_says_how_to_get_one_the_box_runs() {
 #[ignore = "a 3x3 design takes seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
 fn cli_a_3x3_image_over_the_load_limit_is_reduced_to_one_the_box_runs() {
     use cli_common::dynocomp;
-    let (dir, p) = short_offcentre("reduced", "25600");
-    let (ok, out, err) = cli_common::design(&p("frf.uff"), &p("idle.csv"), "25600", &p("c.dcimg"), &["--json"]);
+    let (dir, p) = short_offcentre("reduced", "51200");
+    let (ok, out, err) = cli_common::design(&p("frf.uff"), &p("idle.csv"), "51200", &p("c.dcimg"), &["--json"]);
     assert!(ok, "{err}");
     let j: serde_json::Value = serde_json::from_str(&out).expect("JSON");
     let r = &j["design"]["reduction"];
@@ -1945,20 +1967,20 @@ fn cli_a_3x3_image_over_the_load_limit_is_reduced_to_one_the_box_runs() {
     let (ok, old, _) = dynocomp(&["inspect", &p("old.dcimg")]);
     assert!(ok && old.contains("predates the record of reductions"), "{old}");
     let (ok, out, err) =
-        cli_common::design(&p("frf.uff"), &p("idle.csv"), "25600", &p("c.dcimg"), &["--report", &p("report")]);
+        cli_common::design(&p("frf.uff"), &p("idle.csv"), "51200", &p("c.dcimg"), &["--report", &p("report")]);
     assert!(ok && out.contains("reduced for the box: 3x3 block "), "{out}{err}");
     // The report draws the full filter beside the reduced one.
     let rows = std::fs::read_to_string(dir.join("report").join("matrix_rows.svg")).unwrap();
     assert!(rows.contains("full filter (--full-order)"), "no full-filter trace in the report");
 
     let (ok, out, err) =
-        cli_common::design(&p("frf.uff"), &p("idle.csv"), "25600", &p("low.dcimg"), &["--max-load", "20"]);
+        cli_common::design(&p("frf.uff"), &p("idle.csv"), "51200", &p("low.dcimg"), &["--max-load", "20"]);
     assert!(ok, "{err}");
     assert!(out.contains("not reduced for the box") && err.contains("WARNING: OFFLINE-ONLY IMAGE"), "{out}{err}");
     let (ok, out, err) = cli_common::design(
         &p("frf.uff"),
         &p("idle.csv"),
-        "25600",
+        "51200",
         &p("full.dcimg"),
         &["--full-order", "--report", &p("full-report")],
     );
@@ -2047,15 +2069,21 @@ fn a_3x3_filter_over_the_load_limit_is_reduced_to_fit_where_it_stays_accurate() 
     let below = reduced_filter_by(&full, r.states, r.method, Prefer::LoadWithin(load - 1));
     assert!(below.is_err_and(|e| format!("{e:#}").contains("over the limit")), "load {load}");
 
+    // At 51.2 kHz, half the cycles per sample: the reduction that fits is
+    // used too, and beats the per-axis rows (what the box ran before) on
+    // every axis against the truth, within the floor factor.
     let shared = free_residues_offcentre_51k();
     let (out, md) = (&shared.0, &shared.1);
     let r = md.summary.reduction.as_ref().expect("reduction figures");
-    assert!(!r.used && r.states > 0, "{r:?}");
-    assert!(filter_load(&md.filter, 51_200.0) > limit);
-    let mut refused = md.clone();
-    refused.filter = reduced_filter(md, r.states, r.method);
-    assert!(filter_load(&refused.filter, 51_200.0) <= limit);
-    let f = evaluate(&refused, out);
-    eprintln!("refused {}", f.line("offcentre", 51_200.0));
-    assert!((0..3).any(|i| f.used[i] > f.per_axis[i]), "{:?} vs per axis {:?}", f.used, f.per_axis);
+    assert!(r.used && r.states < r.full_states, "{r:?}");
+    // The full filter does not go on the box: over the limit, or (here) not
+    // verified in f32 at all.
+    assert!(r.full_load_permille > limit || r.full_not_realized.is_some(), "{r:?}");
+    assert!(filter_load(&md.filter, 51_200.0) <= limit, "{r:?}");
+    let f = evaluate(md, out);
+    eprintln!("51.2 kHz reduced {} ({} states)", f.line("offcentre", 51_200.0), r.states);
+    for i in 0..3 {
+        assert!(f.used[i] < f.per_axis[i], "axis {i}: {:?} vs per axis {:?}", f.used, f.per_axis);
+    }
+    check_no_worse_and_floor(&f, "offcentre 51.2 kHz, reduced");
 }
