@@ -19,9 +19,9 @@
 //!
 //! The crate is `no_std` and allocation-free, so the same code runs on the
 //! STM32G474 and under `std` in the host tests. It is free of `unsafe`
-//! except, on bare-metal ARM with hardware float only, the one `asm!` block
-//! of the kernel's Cortex-M4F pair loop (`src/kernel_m4.rs`); every other
-//! target forbids `unsafe` outright.
+//! except, on bare-metal ARM with hardware float only, the two `asm!`
+//! blocks of the Cortex-M4F's sample step, per axis (`src/kernel_m4.rs`) and
+//! 3x3 (`src/mimo_m4.rs`); every other target forbids `unsafe` outright.
 #![no_std]
 #![cfg_attr(not(all(target_arch = "arm", target_os = "none", target_abi = "eabihf")), forbid(unsafe_code))]
 #![cfg_attr(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"), deny(unsafe_code))]
