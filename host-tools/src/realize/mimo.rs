@@ -16,7 +16,7 @@ use std::f64::consts::PI;
 use crate::fit::linalg::sweeps;
 use crate::numeric::lti::MimoStateSpace;
 use crate::realize::modal::{
-    schur_slow_first, section_poles, thresholds, triangular_eigenvectors, FIR_TAIL_TOL, FIR_TAIL_TOL_FULL,
+    section_poles, thresholds, triangular_eigenvectors, ComplexSchur, FIR_TAIL_TOL, FIR_TAIL_TOL_FULL,
 };
 use crate::realize::quantize::{
     test_signal, MAX_FREQ_ERROR, MAX_POLE_SHIFT, MAX_TIME_ERROR, POLE_MARGIN, VERIFY_GRID, VERIFY_SAMPLES,
@@ -171,11 +171,11 @@ impl std::fmt::Display for NotVerified {
     }
 }
 
-/// The complex Schur form of `a` with the eigenvalues of modulus ≥ `rho`
-/// first: (Q, T, number of slow eigenvalues).
-fn ordered_schur(a: &DMatrix<f64>, rho: f64) -> Result<(DMatrix<Complex64>, DMatrix<Complex64>, usize)> {
+/// The complex Schur form of `a` (iteration-limited), computed once for
+/// every fast/slow threshold of [`block_candidates`].
+fn complex_schur(a: &DMatrix<f64>) -> Result<ComplexSchur> {
     let n = a.nrows();
-    schur_slow_first(a, rho, f64::EPSILON, sweeps(n), || {
+    ComplexSchur::new(a, f64::EPSILON, sweeps(n), || {
         anyhow::anyhow!(
             "realization: the Schur decomposition of the {n}x{n} compensator did not converge within {} sweeps",
             sweeps(n)
@@ -253,7 +253,8 @@ fn fast_taps(
 /// Realize one block (a 3-in, 3-out state space) with the fast/slow
 /// threshold `rho`, all f64: the steps of [`crate::realize::modal`] with
 /// matrices for the input column and the output row:
-/// 1. complex Schur form A = Q T Qᴴ (iteration-limited);
+/// 1. complex Schur form A = Q T Qᴴ (iteration-limited; `schur`, one for
+///    every threshold, [`complex_schur`]);
 /// 2. the slow eigenvalues (|λ| ≥ ρ) moved to the front by adjacent swaps;
 /// 3. the clusters decoupled by T11 X − X T22 = −T12, and
 ///    B̃ = S⁻¹QᴴB, C̃ = CQS with S = [[I, X], [0, I]];
@@ -264,9 +265,9 @@ fn fast_taps(
 ///    substitution; cond(W) checked): each eigenvalue λ gets an input row
 ///    β = (W⁻¹B̃₁)_λ (1x3) and an output column γ = (C̃₁W)_λ (3x1), its term
 ///    γβ/(z − λ), realized by [`sections_of`].
-fn realize_split(ss: &MimoStateSpace, rho: f64) -> Result<MimoRealization> {
+fn realize_split(ss: &MimoStateSpace, schur: &ComplexSchur, rho: f64) -> Result<MimoRealization> {
     let c64 = |m: &DMatrix<f64>| m.map(|v| Complex64::new(v, 0.0));
-    let (q, t, m) = ordered_schur(&ss.a, rho)?;
+    let (q, t, m) = schur.slow_first(rho)?;
     let n = t.nrows();
     let nf = n - m;
     let x = decouple(&t, m);
@@ -520,10 +521,11 @@ fn block_candidates(ss: &MimoStateSpace) -> Result<Vec<MimoRealization>> {
     }
     let moduli: Vec<f64> =
         crate::fit::linalg::eigenvalues(&ss.a, "the compensator's state matrix")?.iter().map(|z| z.norm()).collect();
+    let schur = complex_schur(&ss.a)?;
     let mut out = Vec::new();
     let mut last_err = None;
     for rho in thresholds(&moduli) {
-        match realize_split(ss, rho) {
+        match realize_split(ss, &schur, rho) {
             Ok(r) => out.push(r),
             Err(e) => last_err = Some(e),
         }

@@ -154,10 +154,11 @@ pub(crate) fn thresholds(moduli: &[f64]) -> Vec<f64> {
 pub fn realize_candidates(ss: &StateSpace) -> Result<Vec<ModalRealization>> {
     let eig = crate::fit::linalg::eigenvalues(&ss.a, "realization: the compensator's state matrix A")?;
     let moduli: Vec<f64> = eig.iter().map(|z| z.norm()).collect();
+    let schur = complex_schur(ss)?;
     let mut out: Vec<ModalRealization> = Vec::new();
     let mut last_err = None;
     for rho in thresholds(&moduli) {
-        match realize_split(ss, rho) {
+        match realize_split(ss, &schur, rho) {
             Ok(r) => out.push(r),
             Err(e) => last_err = Some(e),
         }
@@ -189,7 +190,8 @@ pub fn realize(ss: &StateSpace) -> Result<ModalRealization> {
 
 /// Realize with a given fast/slow threshold `rho` on the pole modulus, in
 /// five steps (all f64):
-/// 1. complex Schur form A = Q T Qᴴ (nalgebra);
+/// 1. complex Schur form A = Q T Qᴴ (nalgebra; `schur`, [`complex_schur`],
+///    computed once for every threshold);
 /// 2. reorder T by Givens swaps of adjacent eigenvalues so the slow poles
 ///    (|λ| ≥ ρ) come first, the fast ones (|λ| < ρ) last ([`ordered_schur`]);
 /// 3. decouple the two clusters with the triangular Sylvester equation
@@ -201,8 +203,8 @@ pub fn realize(ss: &StateSpace) -> Result<ModalRealization> {
 ///    (the modal transform; its condition number is checked), residues
 ///    ρ_i = ĉ_i·b̂_i ([`slow_modes`]), and one real 2x2 section per conjugate
 ///    pair, real poles two to a diagonal section ([`sections_of`]).
-fn realize_split(ss: &StateSpace, rho: f64) -> Result<ModalRealization> {
-    let schur = ordered_schur(ss, rho)?;
+fn realize_split(ss: &StateSpace, schur: &ComplexSchur, rho: f64) -> Result<ModalRealization> {
+    let schur = ordered_schur(schur, rho)?;
     let (t, m) = (&schur.t, schur.slow);
     let x = decouple(t, m);
     let decoupling_norm = 1.0 + x.norm();
@@ -231,51 +233,74 @@ struct OrderedSchur {
     slow: usize,
 }
 
-/// Steps 1-2 of [`realize_split`]: the complex Schur form of `ss.a`, its
-/// slow eigenvalues (|λ| ≥ `rho`) bubbled to the front by adjacent swaps
-/// (the order otherwise kept).
-fn ordered_schur(ss: &StateSpace, rho: f64) -> Result<OrderedSchur> {
+/// Step 1 of [`realize_split`]: the complex Schur form of `ss.a`.
+fn complex_schur(ss: &StateSpace) -> Result<ComplexSchur> {
     let no_convergence = || anyhow::anyhow!("realization: Schur decomposition did not converge");
-    let (q, t, slow) = schur_slow_first(&ss.a, rho, 1e-15, 10_000, no_convergence)?;
+    ComplexSchur::new(&ss.a, 1e-15, 10_000, no_convergence)
+}
+
+/// Step 2 of [`realize_split`]: the slow eigenvalues (|λ| ≥ `rho`) of
+/// `schur` bubbled to the front by adjacent swaps (the order otherwise
+/// kept).
+fn ordered_schur(schur: &ComplexSchur, rho: f64) -> Result<OrderedSchur> {
+    let (q, t, slow) = schur.slow_first(rho)?;
     Ok(OrderedSchur { q, t, slow })
 }
 
-/// The complex Schur form A = Q·T·Qᴴ of `a` (tolerance `eps`, at most
-/// `max_sweeps` sweeps, else the error `no_convergence` makes) with the
-/// eigenvalues of modulus ≥ `rho` bubbled to the front of T's diagonal by
-/// adjacent swaps, the order otherwise kept: (Q, T, their number).
-pub(crate) fn schur_slow_first(
-    a: &DMatrix<f64>,
-    rho: f64,
-    eps: f64,
-    max_sweeps: usize,
-    no_convergence: impl FnOnce() -> anyhow::Error,
-) -> Result<(DMatrix<Complex64>, DMatrix<Complex64>, usize)> {
-    let n = a.nrows();
-    let schur = Schur::try_new(a.map(|v| Complex64::new(v, 0.0)), eps, max_sweeps).ok_or_else(no_convergence)?;
-    let (mut q, mut t) = schur.unpack();
-    for i in 0..n {
-        for j in 0..i {
-            t[(i, j)] = Complex64::new(0.0, 0.0);
-        }
-    }
-    for _ in 0..n {
-        let mut swapped = false;
-        for i in 0..n.saturating_sub(1) {
-            if t[(i, i)].norm() < rho && t[(i + 1, i + 1)].norm() >= rho {
-                swap_adjacent(&mut t, &mut q, i);
-                swapped = true;
+/// The complex Schur form A = Q·T·Qᴴ of a compensator's state matrix, T
+/// upper triangular, in nalgebra's order of the eigenvalues: computed once
+/// and reordered for each fast/slow threshold ([`Self::slow_first`]), since
+/// the decomposition does not depend on the threshold.
+pub(crate) struct ComplexSchur {
+    q: DMatrix<Complex64>,
+    t: DMatrix<Complex64>,
+}
+
+impl ComplexSchur {
+    /// The form of `a` (tolerance `eps`, at most `max_sweeps` sweeps, else
+    /// the error `no_convergence` makes); T's entries below the diagonal,
+    /// rounding left by the iteration, set to zero.
+    pub(crate) fn new(
+        a: &DMatrix<f64>,
+        eps: f64,
+        max_sweeps: usize,
+        no_convergence: impl FnOnce() -> anyhow::Error,
+    ) -> Result<Self> {
+        let n = a.nrows();
+        let schur = Schur::try_new(a.map(|v| Complex64::new(v, 0.0)), eps, max_sweeps).ok_or_else(no_convergence)?;
+        let (q, mut t) = schur.unpack();
+        for i in 0..n {
+            for j in 0..i {
+                t[(i, j)] = Complex64::new(0.0, 0.0);
             }
         }
-        if !swapped {
-            break;
+        Ok(ComplexSchur { q, t })
+    }
+
+    /// The form with the eigenvalues of modulus ≥ `rho` bubbled to the
+    /// front of T's diagonal by adjacent swaps, the order otherwise kept:
+    /// (Q, T, their number).
+    pub(crate) fn slow_first(&self, rho: f64) -> Result<(DMatrix<Complex64>, DMatrix<Complex64>, usize)> {
+        let (mut q, mut t) = (self.q.clone(), self.t.clone());
+        let n = t.nrows();
+        for _ in 0..n {
+            let mut swapped = false;
+            for i in 0..n.saturating_sub(1) {
+                if t[(i, i)].norm() < rho && t[(i + 1, i + 1)].norm() >= rho {
+                    swap_adjacent(&mut t, &mut q, i);
+                    swapped = true;
+                }
+            }
+            if !swapped {
+                break;
+            }
         }
+        let slow = (0..n).take_while(|&i| t[(i, i)].norm() >= rho).count();
+        if (slow..n).any(|i| t[(i, i)].norm() >= rho) {
+            bail!("realization: eigenvalue reordering failed");
+        }
+        Ok((q, t, slow))
     }
-    let slow = (0..n).take_while(|&i| t[(i, i)].norm() >= rho).count();
-    if (slow..n).any(|i| t[(i, i)].norm() >= rho) {
-        bail!("realization: eigenvalue reordering failed");
-    }
-    Ok((q, t, slow))
 }
 
 /// Step 3 of [`realize_split`]: X of T11 X − X T22 = −T12 for the first `m`
