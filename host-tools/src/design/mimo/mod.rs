@@ -1372,12 +1372,25 @@ fn design_3x3(
     // `compensate --offline` solves the same equation at latency 0
     // (`offline::matrix_smoother`): a q it cannot take is not chosen.
     let smoother = (lag > 0).then(|| augmented_plant_shaped(&p.dm, &p.plant, 0, shapes));
-    let offline_solves = |q: [f64; 3]| smoother.as_ref().is_none_or(|s| kalman::solve_dare_refined(s, q, r).is_ok());
+    // Where that equation is the filter's own (the FIR taps reach past the
+    // latency: the delay line has no stage more), a q whose design solved it
+    // needs no second solve of the same deterministic doubling.
+    let same_equation = smoother.as_ref().is_some_and(|s| (&s.a, &s.g, &s.c) == (&aug.a, &aug.g, &aug.c));
+    let solved = std::sync::Mutex::new(Vec::<[f64; 3]>::new());
+    let offline_solves = |q: [f64; 3]| {
+        smoother.as_ref().is_none_or(|s| {
+            (same_equation && solved.lock().is_ok_and(|v| v.contains(&q)))
+                || kalman::solve_dare_refined(s, q, r).is_ok()
+        })
+    };
     let in_band = crit.all_freqs();
     let lines = [in_band.clone(), crit.above_freqs()].concat();
     let resolvent = PlantResolvent::new(&aug, &lines, d.fs_hz);
     let evaluate = |q: [f64; 3]| -> Option<Candidate> {
         let k = kalman::design(&aug, q, r, lag).ok()?;
+        if same_equation {
+            solved.lock().ok()?.push(q);
+        }
         let ng = k.compensator.white_noise_gains()?;
         let h = resolvent.responses(&k);
         let (h_in, h_above) = h.split_at(in_band.len());
