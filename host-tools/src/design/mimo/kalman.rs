@@ -414,4 +414,22 @@ mod tests {
         let (a, b) = (augmented_plant(&dm, &plant, lag), augmented_plant_shaped(&dm, &plant, lag, [None; 3]));
         assert_eq!((a.a, a.g, a.c, a.lag), (b.a, b.g, b.c, b.lag));
     }
+
+    /// The premise of the q search's shortcut ([`crate::design::mimo`]'s
+    /// `design_3x3`): where the FIR taps reach past the latency, the box
+    /// filter's augmented plant and the offline smoother's (latency 0)
+    /// have the same A, Γ and C, so one Riccati equation. Negative control:
+    /// one sample more of latency adds a delay stage, and the equations differ.
+    #[test]
+    fn the_filter_s_equation_is_the_smoother_s_where_the_taps_reach_past_the_latency() {
+        let (mut dm, plant) = diagonal(25_600.0, [0.9, 0.5, 0.2], [0.2, -0.4, 0.6], [1.0, 2.0, 0.5]);
+        dm.fir = vec![Matrix3::identity() * 0.3; 3];
+        dm.advance = 1;
+        let same = |lag: usize| {
+            let (box_filter, smoother) = (augmented_plant(&dm, &plant, lag), augmented_plant(&dm, &plant, 0));
+            (box_filter.a, box_filter.g, box_filter.c) == (smoother.a, smoother.g, smoother.c)
+        };
+        assert!(same(1) && same(2), "the taps reach past latencies 1 and 2");
+        assert!(!same(3), "control: latency 3 has a delay stage more");
+    }
 }
