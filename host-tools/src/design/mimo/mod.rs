@@ -1375,7 +1375,7 @@ fn design_3x3(
     // Where that equation is the filter's own (the FIR taps reach past the
     // latency: the delay line has no stage more), a q whose design solved it
     // needs no second solve of the same deterministic doubling.
-    let same_equation = smoother.as_ref().is_some_and(|s| (&s.a, &s.g, &s.c) == (&aug.a, &aug.g, &aug.c));
+    let same_equation = smoother.as_ref().is_some_and(|s| s.same_riccati_equation(&aug));
     let solved = std::sync::Mutex::new(Vec::<[f64; 3]>::new());
     let offline_solves = |q: [f64; 3]| {
         smoother.as_ref().is_none_or(|s| {
