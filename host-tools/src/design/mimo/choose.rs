@@ -126,12 +126,16 @@ pub(super) fn realize_chosen<Z: Realizing>(
                     reduced_lost = Some(format!("{reduced}, latency {} {} %", a.lag, three(a)));
                 }
                 _ => {
+                    // No order at all within the limit leaves no figures to
+                    // compare: say what the limit leaves instead.
+                    let why_not = match boxed.states {
+                        0 => format!("none fits the load limit of {:.1} %", f64::from(at.limit) / 10.0),
+                        n => format!("{n} states: {} %", percent_xyz(&boxed.predicted)),
+                    };
                     notes.push(format!(
-                        "the box runs no reduction of latency {}'s 3x3 block that beats the alternatives ({} states: \
-                         {} %){}: the image, offline-only, holds the highest-order reduction that verifies in f32",
+                        "the box runs no reduction of latency {}'s 3x3 block that beats the alternatives ({why_not}){}: \
+                         the image, offline-only, holds the highest-order reduction that verifies in f32",
                         rd.lag,
-                        boxed.states,
-                        percent_xyz(&boxed.predicted),
                         alt.as_ref().map_or(String::new(), |(a, _)| format!(
                             "; latency {}'s filter, over the load limit too, predicts {} % against {} % by the \
                              latency rule",
@@ -194,6 +198,9 @@ mod tests {
         realize: HashMap<usize, std::result::Result<u32, &'static str>>,
         box_reduced: HashMap<usize, (usize, f64)>,
         offline_reduced: HashMap<usize, (usize, f64)>,
+        /// Where the box gets no reduction: whether no order at all is
+        /// within the load limit (else a 24-state one is worse than per axis).
+        box_fits_no_order: bool,
     }
 
     fn figures(states: usize, used: bool) -> ReductionFigures {
@@ -235,7 +242,7 @@ mod tests {
                     }
                     Ok(((rd.lag, 550), figures(states, true), rd.lag))
                 }
-                None => Err(Some(figures(24, false))),
+                None => Err(Some(figures(if self.box_fits_no_order { 0 } else { 24 }, false))),
             })
         }
 
@@ -348,6 +355,12 @@ mod tests {
         let n = notes.iter().find(|n| n.starts_with("the box runs no reduction")).expect("offline-only note");
         assert!(n.contains("latency 6's filter, over the load limit too, predicts 0.400 / 0.400 / 0.400 %"), "{n}");
         assert!(!notes.iter().any(|n| n.contains("is used instead")), "{notes:?}");
+        assert!(n.contains("beats the alternatives (24 states: 0.400 / 0.400 / 0.400 %)"), "{n}");
+        // Where no order of the block is within the limit, the note says so
+        // (it gave "0 states: NaN / NaN / NaN %").
+        let (_, notes) = choose(&Outcomes { box_fits_no_order: true, ..z(0.33) }, eight_then_six());
+        let n = notes.iter().find(|n| n.starts_with("the box runs no reduction")).expect("offline-only note");
+        assert!(n.contains("beats the alternatives (none fits the load limit of 60.0 %)"), "{n}");
 
         // Control: reduced, latency 8 predicts 0.60 %: latency 6 is used, and
         // the note says the rule preferred it to the reduction.
