@@ -229,10 +229,8 @@ fn shared_design(name: &str, fs: f64, above_band: AboveBand) -> Arc<(PlateSimOut
 
 /// The off-centre plate at 51.2 kHz designed on the free fit
 /// (`VfOptions::rank_one_residues` off), once for the tests that share it:
-/// its latency-8 3x3 block does not verify in f32 and the next latency is
-/// used. On this record the rank-one fit's latency-8 block is reduced for an
-/// offline-only image instead; the paths these tests check are the
-/// realization's, not the fit's.
+/// its latency-8 3x3 block does not verify in f32 (1.5e-4 of its RMS against
+/// 1e-4). The paths these tests check are the realization's, not the fit's.
 fn free_residues_offcentre_51k() -> Arc<(PlateSimOutput, MatrixDesign)> {
     static FREE: OnceLock<Arc<(PlateSimOutput, MatrixDesign)>> = OnceLock::new();
     FREE.get_or_init(|| {
@@ -770,24 +768,28 @@ fn quiet_3x3_rows_above_the_band() {
     }
 }
 
-/// Where the latency rule's choice does not verify in f32, the next latency
-/// by the rule whose 3x3 rows do is used, with a note, rather than giving up
-/// the crosstalk compensation: on the off-centre plate at 51.2 kHz latency 8's
-/// 3x3 block deviates by 2.3e-4 of its RMS in f32 (limit 1e-4), and the image
-/// used to fall back to per-axis rows (worst axis 12.8 %). The note carries
-/// the failed verification (the control that the first choice did fail) and,
-/// as both are over the box's load limit, the latency rule's comparison of
-/// latency 6's filter with latency 8's reduced to verify
-/// ([`cli_a_choice_that_does_not_verify_is_reduced_for_an_offline_only_image`]:
-/// here the rule prefers latency 6); the image beats per-axis compensation
-/// and stays within the floor factor. Designed with a load limit of 42 %
-/// (`design --max-load 42`), where no reduction that fits beats the
-/// per-axis rows: within the box's 60 %, latency 8's block reduced to fit
-/// verifies and is used
+/// Where the latency rule's choice does not verify in f32, the design does
+/// not give up the crosstalk compensation: on the off-centre plate at 51.2
+/// kHz (`--free-residues`) latency 8's 3x3 block deviates by 1.5e-4 of its
+/// RMS in f32 (limit 1e-4), and the image used to fall back to per-axis rows
+/// (worst axis 12.8 %). Designed with a load limit of 42 % (`design
+/// --max-load 42`), where neither a reduction of it that fits nor latency
+/// 6's filter is on the box, the latency rule chooses, on their
+/// predictions, between the next latency whose 3x3 rows verify and latency
+/// 8 reduced to the highest order that verifies; the note carries that
+/// comparison either way (the unit tests of `design::mimo::choose` take
+/// each branch on outcomes set by hand). On this record it took latency 6 with the
+/// golden-section q search and takes the reduction with Brent's (latency 8
+/// reduced predicts 0.20 / 0.63 / 0.23 % against latency 6's 0.36 / 0.45 /
+/// 0.16 %; measured 0.28 / 0.39 / 0.89 % against 0.26 / 0.38 / 0.93 %).
+/// The control that the first choice did fail is the reduction's own
+/// record of the full filter's f32 deviation. The image beats per-axis
+/// compensation and stays within the floor factor. Within the box's 60 %,
+/// latency 8's block reduced to fit verifies and is used
 /// (`a_3x3_filter_over_the_load_limit_is_reduced_to_fit_where_it_stays_accurate`).
 #[test]
 #[ignore = "minutes in a debug build: scripts/test.sh runs it with --release --ignored"]
-fn a_latency_that_does_not_verify_gives_way_to_the_next() {
+fn a_latency_that_does_not_verify_gives_way_by_the_latency_rule() {
     let shared = free_residues_offcentre_51k();
     let out = &shared.0;
     let design = DesignOptions { fs_hz: out.params.fs_hz, above_band: study_above_band(), ..Default::default() };
@@ -796,8 +798,22 @@ fn a_latency_that_does_not_verify_gives_way_to_the_next() {
     let md = &design_matrix(&out.frf, noise(out), &opts).unwrap();
     let fig = evaluate(md, out);
     eprintln!("{}  latency {}", fig.line("offcentre", 51_200.0), md.summary.latency);
-    let note = md.summary.notes.iter().find(|n| n.contains("is used instead"));
-    assert!(note.is_some_and(|n| n.contains("verif") && n.contains("by the same rule")), "{:?}", md.summary.notes);
+    let notes = &md.summary.notes;
+    let next = notes.iter().find(|n| n.contains("is used instead"));
+    let reduced = notes.iter().find(|n| n.starts_with("the box runs no reduction"));
+    match (next, reduced) {
+        (Some(n), None) => {
+            assert!(n.starts_with("latency 8: ") && n.contains("verif") && n.contains("by the same rule"), "{n}");
+        }
+        (None, Some(n)) => {
+            assert!(md.summary.latency == 8 && n.contains("latency 6's filter, over the load limit too"), "{n}");
+            assert!(n.contains("by the latency rule"), "{n}");
+            let r = md.summary.reduction.as_ref().expect("the reduction's figures");
+            let why = r.full_not_realized.as_deref().unwrap_or_default();
+            assert!(why.contains("deviates from the f64 design by"), "{why}");
+        }
+        _ => panic!("one note of the latency rule's choice: {notes:?}"),
+    }
     assert!(md.rows.iter().all(|r| *r == RowSource::Matrix), "{:?}", md.rows);
     assert!(crosstalk_compensated(&fig), "{fig:?}");
     check_no_worse_and_floor(&fig, "offcentre 51.2 kHz");
@@ -808,45 +824,52 @@ fn a_latency_that_does_not_verify_gives_way_to_the_next() {
 /// latency's filter, the image is offline-only at any latency: it holds
 /// the rule's choice reduced by balancing to the highest order that
 /// verifies, where the latency rule, on the predictions, prefers that to
-/// the next latency's filter. `simulate --dyno-preset offcentre` at 102.4
-/// kHz (0.5 s): latency 8's 3x3 block deviates by 1.6e-4 of its RMS in f32
-/// (limit 1e-4), and latency 6, which the image held before, predicts
-/// 5.4 % on y. Against the simulator's true force (`compensate --truth`)
-/// the image is no worse than 1.05 times the latency-6 image on any axis;
-/// the control is that image, which is worse by more than 1.3x on y. Both
-/// with `--free-residues`: on this record the rank-one fit's latency-8
-/// block verifies (8.1e-5), and the path is the realization's, not the
-/// fit's.
+/// the next latency's filter. `simulate --dyno-preset offcentre` at 51.2
+/// kHz (0.5 s), `--free-residues`, `--max-load 20`: latency 8's 3x3 block
+/// deviates by 1.5e-4 of its RMS in f32 (limit 1e-4), no order of it is
+/// within 20 %, and latency 6's filter (131 %) is not either. Against the
+/// simulator's true force (`compensate --truth`) the image is no worse
+/// than 1.05 times the latency-6 image on any axis (they are within 3 %
+/// of each other); the control is that the same comparison fails for the
+/// image the box could run, `--per-axis`, which leaves the crosstalk (1.8x
+/// worse on y, 5.9x on x, 9.2x on z). The f32 deviation is a property of this q's
+/// realization, not of the set-up: the 102.4 kHz off-centre record this
+/// test used before deviated by 1.6e-4 with the golden-section q search
+/// and verifies (8.6e-5) with Brent's, at q within 0.1 %.
 #[test]
 #[ignore = "a 3x3 design takes seconds in release, minutes in debug: scripts/test.sh runs it with --release --ignored"]
 fn cli_a_choice_that_does_not_verify_is_reduced_for_an_offline_only_image() {
     use cli_common::dynocomp;
     let dir = cli_common::tmp("mimo", "reduced-offline");
     let p = |n: &str| dir.join(n).display().to_string();
-    let (ok, _, err) = cli_common::simulate_plate(&p(""), "offcentre", "102400", &["--duration", "0.5"]);
+    let (ok, _, err) = cli_common::simulate_plate(&p(""), "offcentre", "51200", &["--duration", "0.5"]);
     assert!(ok, "{err}");
-    let nrmse = |image: &str, extra: &[&str]| -> [f64; 3] {
-        let extra = [&["--free-residues"], extra].concat();
-        let (ok, out, err) = cli_common::design(&p("frf.uff"), &p("idle.csv"), "102400", &p(image), &extra);
+    let design = |image: &str, extra: &[&str]| -> (String, String) {
+        let (ok, out, err) = cli_common::design(&p("frf.uff"), &p("idle.csv"), "51200", &p(image), extra);
         assert!(ok, "{err}");
-        if extra.len() == 1 {
-            assert!(out.contains("latency 8 samples") && out.contains("reduced for the image"), "{out}");
-            assert!(out.contains("the box runs no reduction") && out.contains("by the latency rule"), "{out}");
-            assert!(err.contains("OFFLINE-ONLY IMAGE"), "{err}");
-        }
+        (out, err)
+    };
+    let nrmse = |image: &str| -> [f64; 3] {
         let c = format!("{image}.csv");
         let args = ["compensate", "--coeffs", &p(image), "--input", &p("measured.csv"), "--output", &p(&c)];
         let (ok, _, err) = dynocomp(&[&args[..], &["--truth", &p("true_force.csv")]].concat());
         assert!(ok, "{err}");
         cli_common::compensated_nrmse(&err)
     };
-    let reduced = nrmse("reduced.dcimg", &[]);
-    let before = nrmse("latency6.dcimg", &["--latency", "6"]);
-    eprintln!("reduced latency 8: {reduced:?}\nlatency 6: {before:?}");
+    let offline = ["--free-residues", "--max-load", "20"];
+    let (out, err) = design("reduced.dcimg", &offline);
+    assert!(out.contains("latency 8 samples") && out.contains("reduced for the image"), "{out}");
+    assert!(out.contains("the box runs no reduction") && out.contains("none fits the load limit of 20.0 %"), "{out}");
+    assert!(out.contains("by the latency rule") && !out.contains("NaN"), "{out}");
+    assert!(err.contains("OFFLINE-ONLY IMAGE"), "{err}");
+    design("latency6.dcimg", &[&offline[..], &["--latency", "6"]].concat());
+    design("per_axis.dcimg", &["--per-axis"]);
+    let [reduced, before, per_axis] = ["reduced.dcimg", "latency6.dcimg", "per_axis.dcimg"].map(nrmse);
+    eprintln!("reduced latency 8: {reduced:?}\nlatency 6: {before:?}\nper axis: {per_axis:?}");
     for i in 0..3 {
         assert!(reduced[i] <= 1.05 * before[i], "axis {i}: {reduced:?} against {before:?}");
+        assert!(!(per_axis[i] <= 1.05 * reduced[i]), "control, axis {i}: per axis {per_axis:?} against {reduced:?}");
     }
-    assert!(before[1] > 1.3 * reduced[1], "control: latency 6 {before:?} against {reduced:?}");
 }
 
 /// The f32 filter of a 3x3 design verifies against its f64 compensator, a

@@ -15,7 +15,7 @@ use crate::design::force_spectrum::{estimate_matrix, mean_force_matrix, CellSpec
 use crate::fit::refine::FitCovariance;
 use crate::frf::axis_name;
 use crate::numeric::parallel::map_on_threads;
-use crate::numeric::search::golden_section;
+use crate::numeric::search::brent_min;
 
 /// The lines of one output axis's criterion.
 #[derive(Clone, Debug)]
@@ -387,8 +387,14 @@ pub struct QSearch {
 pub const MAX_PASSES: usize = 4;
 /// A pass that moves no log10 q_i by more than this (decades) ends the search.
 pub const STEP_TOL_DECADES: f64 = 0.02;
-/// Golden-section reductions per coordinate and pass.
-const GOLDEN_ITERS: usize = 10;
+/// The line search's resolution per coordinate and pass, relative to its
+/// half-width: Brent's method ([`brent_min`]) stops when the bracket around
+/// the best point is about 4/3 of this, 0.016 of the half-width, as 10
+/// golden-section reductions left it.
+const LINE_TOL: f64 = 0.012;
+/// Most evaluations per coordinate and pass: the 12 of those 10 golden
+/// reductions.
+const LINE_EVALS: usize = 12;
 /// The predicted error (√J, relative) an axis without a finite one counts
 /// as in [`search_merit`]: far above any compensator worth having (raw
 /// errors are 0.2-2).
@@ -411,11 +417,11 @@ pub fn search_merit(j: &[f64; 3]) -> f64 {
 /// 1. A joint scan q = R·10^k (k = −2..14, the per-axis scan's decades, on
 ///    threads), and the combination of each axis's best decade in it.
 /// 2. From the best of these by [`search_merit`], coordinate descent: each
-///    log10 q_i in turn, with the others fixed, is refined by golden section
-///    of the merit on ±1 decade (±0.5, ±0.25 in later passes). Where the
+///    log10 q_i in turn, with the others fixed, is refined by Brent's method
+///    ([`brent_min`]) on the merit on ±1 decade (±0.5, ±0.25 in later passes). Where the
 ///    best is a point of the joint scan, an axis's own best may lie many
 ///    decades away, so the first pass scans each log10 q_i over the same
-///    decades (on threads) before its golden section.
+///    decades (on threads) before its line search.
 /// 3. The search keeps the best candidate it has evaluated, so it never
 ///    ends on a point worse than its start: the combination of per-axis
 ///    decades is itself only a candidate, since q_j (j ≠ i) moves J_i
@@ -485,13 +491,14 @@ pub fn choose_q(
                     best.offer(lq, j);
                 }
             }
-            let centre = best.lq;
+            let (centre, at_centre) = (best.lq, best.merit);
             let mut f = |x: f64| {
                 let mut t = centre;
                 t[i] = x;
                 run(t, &mut best)
             };
-            golden_section(&mut f, centre[i] - width, centre[i] + width, GOLDEN_ITERS);
+            let bracket = (centre[i] - width, centre[i] + width);
+            brent_min(&mut f, bracket, (centre[i], at_centre), LINE_TOL * width, LINE_EVALS);
         }
         width *= 0.5;
         out.passes = pass;
