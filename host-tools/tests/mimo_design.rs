@@ -778,10 +778,10 @@ fn quiet_3x3_rows_above_the_band() {
 /// predictions, between the next latency whose 3x3 rows verify and latency
 /// 8 reduced to the highest order that verifies; the note carries that
 /// comparison either way (the unit tests of `design::mimo::choose` take
-/// each branch on outcomes set by hand). On this record it took latency 6 with the
-/// golden-section q search and takes the reduction with Brent's (latency 8
-/// reduced predicts 0.20 / 0.63 / 0.23 % against latency 6's 0.36 / 0.45 /
-/// 0.16 %; measured 0.28 / 0.39 / 0.89 % against 0.26 / 0.38 / 0.93 %).
+/// each branch on outcomes set by hand). On this record it took latency 6
+/// with the golden-section q search and takes the reduction with Brent's
+/// (latency 8 reduced predicts 0.20 / 0.63 / 0.23 % against latency 6's
+/// 0.36 / 0.45 / 0.16 %; measured 0.28 / 0.39 / 0.89 % against 0.26 / 0.38 / 0.93 %).
 /// The control that the first choice did fail is the reduction's own
 /// record of the full filter's f32 deviation. The image beats per-axis
 /// compensation and stays within the floor factor. Within the box's 60 %,
@@ -832,8 +832,8 @@ fn a_latency_that_does_not_verify_gives_way_by_the_latency_rule() {
 /// than 1.05 times the latency-6 image on any axis (they are within 3 %
 /// of each other); the control is that the same comparison fails for the
 /// image the box could run, `--per-axis`, which leaves the crosstalk (1.8x
-/// worse on y, 5.9x on x, 9.2x on z). The f32 deviation is a property of this q's
-/// realization, not of the set-up: the 102.4 kHz off-centre record this
+/// worse on y, 5.9x on x, 9.2x on z). The f32 deviation is a property of
+/// this q's realization, not of the set-up: the 102.4 kHz off-centre record this
 /// test used before deviated by 1.6e-4 with the golden-section q search
 /// and verifies (8.6e-5) with Brent's, at q within 0.1 %.
 #[test]
